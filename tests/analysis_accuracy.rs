@@ -87,7 +87,11 @@ fn injected_error_um(phase_deg: f64, rng: &mut Rng) -> Vec<f64> {
             (0.0, u)
         }
     };
-    let (p1, p2, p3) = (rng.uniform() * 6.0, rng.uniform() * 6.0, rng.uniform() * 6.0);
+    let (p1, p2, p3) = (
+        rng.uniform() * 6.0,
+        rng.uniform() * 6.0,
+        rng.uniform() * 6.0,
+    );
     let mut raw = Vec::with_capacity(N);
     let mut w_col = Vec::with_capacity(N);
     let mut wh_col = Vec::with_capacity(N);
@@ -96,7 +100,8 @@ fn injected_error_um(phase_deg: f64, rng: &mut Rng) -> Vec<f64> {
         let psi = k as f64 * 360.0 / N as f64;
         let (w, u) = window(psi);
         let t = std::f64::consts::TAU * u;
-        let g = 2.0 * (2.0 * t + p1).sin() + 1.5 * (3.0 * t + p2).cos() + 0.8 * (5.0 * t + p3).sin();
+        let g =
+            2.0 * (2.0 * t + p1).sin() + 1.5 * (3.0 * t + p2).cos() + 0.8 * (5.0 * t + p3).sin();
         let dh = cam(psi - phase_deg).1;
         raw.push(w * g);
         w_col.push(w);
@@ -106,7 +111,11 @@ fn injected_error_um(phase_deg: f64, rng: &mut Rng) -> Vec<f64> {
     let ones = vec![1.0; N];
     // Solve for α, β: ⟨raw + α·w + β·w·h', 1⟩ = 0 and ⟨…, h'⟩ = 0.
     let (a11, a12, b1) = (dot(&w_col, &ones), dot(&wh_col, &ones), -dot(&raw, &ones));
-    let (a21, a22, b2) = (dot(&w_col, &slope), dot(&wh_col, &slope), -dot(&raw, &slope));
+    let (a21, a22, b2) = (
+        dot(&w_col, &slope),
+        dot(&wh_col, &slope),
+        -dot(&raw, &slope),
+    );
     let det = a11 * a22 - a12 * a21;
     let alpha = (b1 * a22 - a12 * b2) / det;
     let beta = (a11 * b2 - a21 * b1) / det;
@@ -115,7 +124,10 @@ fn injected_error_um(phase_deg: f64, rng: &mut Rng) -> Vec<f64> {
         .collect();
     // The construction itself, checked: orthogonal to rounding.
     assert!(dot(&e, &ones).abs() < 1e-9, "injected error has a mean");
-    assert!(dot(&e, &slope).abs() < 1e-9, "injected error has a phase part");
+    assert!(
+        dot(&e, &slope).abs() < 1e-9,
+        "injected error has a phase part"
+    );
     e
 }
 
@@ -199,11 +211,17 @@ fn recovers_phase_offset_and_profile_error_and_drops_the_corrupted_revolution() 
         assert_eq!(report.revolutions_used, used, "seed {seed}");
 
         let profile_rms = rms(&report.profile_error_um, &case.error_um);
-        assert!(profile_rms < 0.3, "seed {seed}: profile error off by {profile_rms} µm RMS");
+        assert!(
+            profile_rms < 0.3,
+            "seed {seed}: profile error off by {profile_rms} µm RMS"
+        );
         let phase_off = (report.phase_error_deg - case.phase_deg).abs();
         assert!(phase_off < 0.02, "seed {seed}: phase off by {phase_off}°");
         let offset_off = (report.base_radius_error_um - case.offset_um).abs();
-        assert!(offset_off < 0.2, "seed {seed}: offset off by {offset_off} µm");
+        assert!(
+            offset_off < 0.2,
+            "seed {seed}: offset off by {offset_off} µm"
+        );
 
         // error_um has nothing fitted: it is h(ψ − φ) − h(ψ) + δ + e, up to the same noise.
         let expected_raw: Vec<f64> = (0..N)
@@ -215,12 +233,18 @@ fn recovers_phase_offset_and_profile_error_and_drops_the_corrupted_revolution() 
             })
             .collect();
         let raw_rms = rms(&report.error_um, &expected_raw);
-        assert!(raw_rms < 0.3, "seed {seed}: error_um off by {raw_rms} µm RMS");
+        assert!(
+            raw_rms < 0.3,
+            "seed {seed}: error_um off by {raw_rms} µm RMS"
+        );
 
         // No eccentricity was injected and the injected error is zero on the base circle:
         // the fitted first harmonic there is noise, about 2·0.17 µm·sqrt(2/220) ≈ 0.05 µm.
         let runout = report.runout_um.expect("base circle spans about 220°");
-        assert!(runout < 0.2, "seed {seed}: runout {runout} µm from noise alone");
+        assert!(
+            runout < 0.2,
+            "seed {seed}: runout {runout} µm from noise alone"
+        );
 
         // Repeatability of the 3 good revolutions: the sample σ of 3 values from σ = 0.3 µm
         // noise averages about 0.27 µm over 360 angles (c4(3) ≈ 0.886).
