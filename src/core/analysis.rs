@@ -189,7 +189,7 @@ pub struct LobeReport {
     pub fit_iterations: u32,
 }
 
-/// The nominal lift: angle ψ in degrees (called with ψ in [0, 360)) → (lift mm,
+/// The nominal lift: angle ψ in degrees (called with ψ in [0, 360]) → (lift mm,
 /// d lift/dψ in mm per degree).
 pub type NominalLift<'a> = &'a dyn Fn(f64) -> (f64, f64);
 
@@ -227,8 +227,8 @@ pub fn analyse_lobe(
     let step_deg = 360.0 / n as f64;
     let velocity_error_um_per_deg = (0..n)
         .map(|k| {
-            let next = profile_error_um[(k + 1) % n];
-            let prev = profile_error_um[(k + n - 1) % n];
+            let next = profile_error_um[if k + 1 == n { 0 } else { k + 1 }];
+            let prev = profile_error_um[if k == 0 { n - 1 } else { k - 1 }];
             (next - prev) / (2.0 * step_deg)
         })
         .collect();
@@ -242,7 +242,7 @@ pub fn analyse_lobe(
         .fold(f64::INFINITY, f64::min);
     let rms = (profile_error_um.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt();
     let base = base_circle::fit(
-        &angle_deg,
+        &table,
         &profile_error_um,
         &fit.at.nominal_mm,
         options.base_circle_max_lift_mm,
@@ -366,7 +366,7 @@ fn evaluate(
     let mut nominal_mm = Vec::with_capacity(n);
     let mut slope_mm_per_deg = Vec::with_capacity(n);
     for (&psi, &m) in angle_deg.iter().zip(lift_mm) {
-        let at_deg = (psi - phase_deg).rem_euclid(360.0);
+        let at_deg = wrap_360(psi - phase_deg);
         let (h, dh) = nominal(at_deg);
         if !(h.is_finite() && dh.is_finite()) {
             return Err(AnalysisError::NonFiniteNominal {
@@ -404,6 +404,23 @@ impl Evaluation {
         }
         // Below a nanometre per degree of slope variation the phase is not defined.
         (den > n * 1e-18).then(|| -num / den)
+    }
+}
+
+/// An angle brought into [0, 360) degrees; cheap for the usual case of one turn off.
+fn wrap_360(angle_deg: f64) -> f64 {
+    let a = if angle_deg < 0.0 {
+        angle_deg + 360.0
+    } else if angle_deg >= 360.0 {
+        angle_deg - 360.0
+    } else {
+        angle_deg
+    };
+    // Far-off angles, and −1e-17 + 360 rounding to 360.
+    if (0.0..360.0).contains(&a) {
+        a
+    } else {
+        a.rem_euclid(360.0)
     }
 }
 

@@ -24,11 +24,20 @@ pub struct DftTable {
 }
 
 impl DftTable {
-    /// Table for `n` equally spaced points.
+    /// Table for `n` equally spaced points. Only the first half is computed; the second
+    /// mirrors it (`cos(2π − x) = cos x`, `sin(2π − x) = −sin x`), which is also exact.
     pub fn new(n: usize) -> Self {
-        let (sin, cos) = (0..n)
-            .map(|m| (std::f64::consts::TAU * m as f64 / n as f64).sin_cos())
-            .unzip();
+        let mut cos = vec![0.0; n];
+        let mut sin = vec![0.0; n];
+        for m in 0..(n / 2 + 1).min(n) {
+            let (s, c) = (std::f64::consts::TAU * m as f64 / n as f64).sin_cos();
+            cos[m] = c;
+            sin[m] = s;
+            if m > 0 && m < n - m {
+                cos[n - m] = c;
+                sin[n - m] = -s;
+            }
+        }
         Self { cos, sin }
     }
 
@@ -68,22 +77,71 @@ impl DftTable {
         Some((a * scale, b * scale))
     }
 
+    /// `(cos ψ_k, sin ψ_k)` of grid angle `k`; `None` past the grid.
+    pub fn cos_sin(&self, k: usize) -> Option<(f64, f64)> {
+        Some((*self.cos.get(k)?, *self.sin.get(k)?))
+    }
+
     /// Orders `1..=min(max_order, N/2)` of `values`, in the values' unit (named µm in the
-    /// result because that is what the core feeds it).
+    /// result because that is what the core feeds it). Empty when `values.len()` differs
+    /// from the table.
+    ///
+    /// All orders in one sweep each: `e^{i·j·ψ_k}` for order `j + 1` is the element-wise
+    /// complex product of order `j` with order 1, which vectorises (unlike the table gather
+    /// of [`Self::coefficients`]); rounding grows linearly with the order, ~1e-14 at
+    /// order 50. Sums run in four independent lanes so the additions pipeline.
     pub fn harmonics(&self, values: &[f64], max_order: u32) -> Vec<Harmonic> {
-        let top = (max_order as usize).min(self.len() / 2);
-        (1..=top)
-            .filter_map(|j| {
-                let (a, b) = self.coefficients(values, j)?;
-                Some(Harmonic {
-                    order: j as u32,
-                    amplitude_um: a.hypot(b),
-                    phase_deg: wrap_deg(b.atan2(a).to_degrees()),
-                })
-            })
-            .collect()
+        let n = self.len();
+        if values.len() != n {
+            return Vec::new();
+        }
+        let top = (max_order as usize).min(n / 2);
+        // Padded to whole lanes with zeros, which add nothing to the sums.
+        let padded = n.div_ceil(LANES) * LANES;
+        let pad = |v: &[f64]| {
+            let mut p = v.to_vec();
+            p.resize(padded, 0.0);
+            p
+        };
+        let (x, cos_1, sin_1) = (pad(values), pad(&self.cos), pad(&self.sin));
+        let (mut cos_j, mut sin_j) = (cos_1.clone(), sin_1.clone());
+        let mut out = Vec::with_capacity(top);
+        for j in 1..=top {
+            if j > 1 {
+                let rows = cos_j.iter_mut().zip(sin_j.iter_mut());
+                for ((c, s), (c1, s1)) in rows.zip(cos_1.iter().zip(&sin_1)) {
+                    let next_c = *c * c1 - *s * s1;
+                    *s = *s * c1 + *c * s1;
+                    *c = next_c;
+                }
+            }
+            let mut acc_a = [0.0; LANES];
+            let mut acc_b = [0.0; LANES];
+            let lanes = cos_j
+                .chunks_exact(LANES)
+                .zip(sin_j.chunks_exact(LANES))
+                .zip(x.chunks_exact(LANES));
+            for ((c, s), x) in lanes {
+                for i in 0..LANES {
+                    acc_a[i] += x[i] * c[i];
+                    acc_b[i] += x[i] * s[i];
+                }
+            }
+            let scale = if 2 * j == n { 1.0 } else { 2.0 } / n as f64;
+            let a = scale * ((acc_a[0] + acc_a[1]) + (acc_a[2] + acc_a[3]));
+            let b = scale * ((acc_b[0] + acc_b[1]) + (acc_b[2] + acc_b[3]));
+            out.push(Harmonic {
+                order: j as u32,
+                amplitude_um: a.hypot(b),
+                phase_deg: wrap_deg(b.atan2(a).to_degrees()),
+            });
+        }
+        out
     }
 }
+
+/// Independent partial sums in [`DftTable::harmonics`].
+const LANES: usize = 4;
 
 /// Harmonics `1..=min(max_order, N/2)` of per-angle values on an equally spaced grid.
 pub fn harmonics_um(values_um: &[f64], max_order: u32) -> Vec<Harmonic> {

@@ -1,6 +1,6 @@
 //! Base-circle runout and roundness of a lobe's profile error.
 
-use crate::core::harmonics::wrap_deg;
+use crate::core::harmonics::{DftTable, wrap_deg};
 
 pub(super) struct BaseCircle {
     pub(super) runout_um: Option<f64>,
@@ -13,18 +13,23 @@ pub(super) struct BaseCircle {
 /// squares. A flat probe sees a part displaced by `ε` towards `θ` as `ε·cos(ψ − θ)` added
 /// to its support function, exactly; so `2·hypot(a, b)` is the total indicated runout. The
 /// nominal is flat there, so the phase fit does not leak into it.
+/// `table` is the grid's DFT table (its cosines and sines are those of the grid angles).
 pub(super) fn fit(
-    angle_deg: &[f64],
+    table: &DftTable,
     profile_error_um: &[f64],
     nominal_mm: &[f64],
     max_lift_mm: f64,
 ) -> BaseCircle {
-    let picked: Vec<(f64, f64)> = angle_deg
+    // (cos ψ, sin ψ, error µm) of the base-circle angles
+    let picked: Vec<(f64, f64, f64)> = profile_error_um
         .iter()
-        .zip(profile_error_um)
         .zip(nominal_mm)
-        .filter(|&(_, &h)| h <= max_lift_mm)
-        .map(|((&psi, &e), _)| (psi.to_radians(), e))
+        .enumerate()
+        .filter(|&(_, (_, &h))| h <= max_lift_mm)
+        .filter_map(|(k, (&e, _))| {
+            let (c, s) = table.cos_sin(k)?;
+            Some((c, s, e))
+        })
         .collect();
     let points = picked.len() as u32;
     let none = BaseCircle {
@@ -33,14 +38,14 @@ pub(super) fn fit(
         roundness_um: None,
         points,
     };
-    if 4 * picked.len() < angle_deg.len() {
+    if 4 * picked.len() < profile_error_um.len() {
         return none;
     }
     // Normal equations in the basis (1, cos, sin).
     let mut ata = [[0.0; 3]; 3];
     let mut atb = [0.0; 3];
-    for &(psi, e) in &picked {
-        let row = [1.0, psi.cos(), psi.sin()];
+    for &(c, s, e) in &picked {
+        let row = [1.0, c, s];
         for i in 0..3 {
             for j in 0..3 {
                 ata[i][j] += row[i] * row[j];
@@ -51,12 +56,13 @@ pub(super) fn fit(
     let Some([c, a, b]) = solve3(ata, atb) else {
         return none;
     };
-    let (lo, hi) = picked
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &(psi, e)| {
-            let r = e - c - a * psi.cos() - b * psi.sin();
+    let (lo, hi) = picked.iter().fold(
+        (f64::INFINITY, f64::NEG_INFINITY),
+        |(lo, hi), &(cos, sin, e)| {
+            let r = e - c - a * cos - b * sin;
             (lo.min(r), hi.max(r))
-        });
+        },
+    );
     BaseCircle {
         runout_um: Some(2.0 * a.hypot(b)),
         runout_phase_deg: Some(wrap_deg(b.atan2(a).to_degrees())),
