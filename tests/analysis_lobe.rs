@@ -374,3 +374,30 @@ fn json_field_names_are_the_interface() {
     assert_eq!(json["repeatability_um"].as_array().map(Vec::len), Some(360));
     assert!((json["repeatability_max_um"].as_f64().expect("number") - 0.559).abs() < 1e-12);
 }
+
+#[test]
+fn judge_fails_a_non_finite_value_and_counts_unchecked_angles() {
+    use camloop::core::analysis::judge;
+    let band = ToleranceBand {
+        from_deg: 90.0,
+        to_deg: 180.0,
+        lower_um: -1.0,
+        upper_um: 1.0,
+    };
+    let angles = [0.0, 90.0, 135.0, 180.0, 270.0];
+    let verdict = judge(&angles, &[9.0, 0.5, f64::NAN, -0.25, 9.0], &[band]).expect("valid");
+    assert!(!verdict.pass);
+    let worst = verdict.worst_violation.expect("NaN is outside");
+    assert_eq!(worst.angle_index, 2);
+    assert_eq!(
+        verdict.unchecked_points, 2,
+        "0° and 270° lie outside 90°–180°"
+    );
+
+    let verdict = judge(&angles, &[9.0, 0.5, 0.0, -0.25, 9.0], &[band]).expect("valid");
+    assert!(verdict.pass && verdict.worst_violation.is_none());
+    assert!(
+        (verdict.margin_um - 0.5).abs() < 1e-12,
+        "0.5 µm at 90° is 0.5 from +1"
+    );
+}
