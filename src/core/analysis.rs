@@ -224,22 +224,8 @@ pub fn analyse_lobe(
         .map(|r| (r - offset_mm) * 1000.0)
         .collect();
 
-    let step_deg = 360.0 / n as f64;
-    let velocity_error_um_per_deg = (0..n)
-        .map(|k| {
-            let next = profile_error_um[if k + 1 == n { 0 } else { k + 1 }];
-            let prev = profile_error_um[if k == 0 { n - 1 } else { k - 1 }];
-            (next - prev) / (2.0 * step_deg)
-        })
-        .collect();
-    let max = profile_error_um
-        .iter()
-        .copied()
-        .fold(f64::NEG_INFINITY, f64::max);
-    let min = profile_error_um
-        .iter()
-        .copied()
-        .fold(f64::INFINITY, f64::min);
+    let velocity_error_um_per_deg = periodic_derivative_per_deg(&profile_error_um);
+    let (min, max) = extremes(&profile_error_um);
     let rms = (profile_error_um.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt();
     let base = base_circle::fit(
         &table,
@@ -273,6 +259,29 @@ pub fn analyse_lobe(
         profile_error_um,
         angle_deg,
     })
+}
+
+/// Periodic central difference `(v[k+1] − v[k−1]) / (2·Δψ)` on an N-point grid, per degree.
+/// For a harmonic of order j it returns the exact derivative times `sin(jΔ)/(jΔ)`.
+fn periodic_derivative_per_deg(values: &[f64]) -> Vec<f64> {
+    let n = values.len();
+    let two_steps_deg = 2.0 * 360.0 / n as f64;
+    (0..n)
+        .map(|k| {
+            let next = values[if k + 1 == n { 0 } else { k + 1 }];
+            let prev = values[if k == 0 { n - 1 } else { k - 1 }];
+            (next - prev) / two_steps_deg
+        })
+        .collect()
+}
+
+/// (min, max) of finite values.
+fn extremes(values: &[f64]) -> (f64, f64) {
+    values
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        })
 }
 
 impl LobeOptions {
