@@ -2,4 +2,5 @@
 //! rendering. No I/O, no clock, no logging: inputs arrive as values, failures leave as data.
 
 pub mod measure;
+pub mod program;
 pub mod table;
