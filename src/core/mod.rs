@@ -3,4 +3,5 @@
 
 pub mod measure;
 pub mod program;
+pub mod svg;
 pub mod table;
