@@ -478,6 +478,22 @@ fn bad_points_and_segments_are_refused() {
         })
     ));
 
+    // A small C gap is refused even when it is below the written resolution.
+    let mut segs = hermite_segments(30.0, false);
+    segs[8].c_start_deg += 0.3;
+    let whole_degrees = ProgramSettings {
+        c_decimals: 0,
+        ..ProgramSettings::default()
+    };
+    assert!(matches!(
+        render_poly_table(&segs, &whole_degrees),
+        Err(TableError::CGap {
+            index: 7,
+            next_index: 8,
+            ..
+        })
+    ));
+
     let mut segs = hermite_segments(30.0, false);
     segs[2].c_end_deg = segs[2].c_start_deg;
     assert!(matches!(

@@ -154,8 +154,8 @@ pub fn render_g1_table(
 /// the ½-unit rounding of the knots themselves.
 ///
 /// Errors: invalid settings, no segments, non-finite values, a segment whose end is not
-/// beyond its start, segments that do not join within half a unit of the last decimal (C and
-/// X) over exactly one period, and C values equal after rounding.
+/// beyond its start, segments that do not join over exactly one period (C within 1e-6°, X
+/// within half a unit of the last decimal), and C values equal after rounding.
 pub fn render_poly_table(
     segments: &[PolySegment],
     settings: &super::ProgramSettings,
@@ -320,10 +320,13 @@ fn check_increasing(knots: &[Knot], first_c_deg: f64, cd: usize) -> Result<Strin
     Ok(close.c_text)
 }
 
-/// Consecutive segments (cyclically, the last joining the first + 360°) must meet within
-/// half a unit of the last written decimal, so the written table is the fitted one.
+/// Consecutive segments (cyclically, the last joining the first + 360°) must meet, so the
+/// written table is the fitted one. X may differ by half a unit of the last decimal: the
+/// written knot is then within half a unit of both. C must agree to 1e-6° (or half a unit,
+/// if smaller): a C gap would stretch a cubic over a different range, moving X by
+/// slope × gap everywhere in the segment.
 fn check_joins(mapped: &[Mapped], c_decimals: u8, x_decimals: u8) -> Result<(), TableError> {
-    let c_tol = 0.5 * 10f64.powi(-i32::from(c_decimals));
+    let c_tol = (0.5 * 10f64.powi(-i32::from(c_decimals))).min(1e-6);
     let x_tol = 0.5 * 10f64.powi(-i32::from(x_decimals));
     for (i, m) in mapped.iter().enumerate() {
         let (next, period) = match mapped.get(i + 1) {
