@@ -1,7 +1,12 @@
 //! The pure core: lift tables, exact wheel-centre geometry, curve-table fitting and program
 //! rendering. No I/O, no clock, no logging: inputs arrive as values, failures leave as data.
 
+pub mod fit;
+pub mod geometry;
+pub mod lift;
 pub mod measure;
 pub mod program;
+pub mod smooth;
+pub mod spline;
 pub mod svg;
 pub mod table;
