@@ -3,6 +3,7 @@
 
 mod output;
 mod part;
+mod program_args;
 mod table;
 
 use clap::{Parser, Subcommand};

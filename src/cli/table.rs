@@ -2,7 +2,11 @@
 
 use super::output::Outputs;
 use super::part::{LoadedPart, PartKindArgs, load_part};
+use super::program_args::ProgramArgs;
 use crate::core::fit::{self, Deviation, Motion, TableForm};
+use crate::core::program::{render_g1_table, render_main_program, render_poly_table};
+use crate::core::setup::setup_view;
+use crate::core::svg::render_setup_svg;
 use crate::core::table::TablePoint;
 use clap::{Args, ValueEnum};
 use std::fmt::Write as _;
@@ -40,6 +44,8 @@ pub struct TableArgs {
     /// segments that exceed it are split.
     #[arg(long, global = true, value_name = "UM", default_value_t = 0.1)]
     pub poly_tolerance_um: f64,
+    #[command(flatten)]
+    pub program: ProgramArgs,
 }
 
 #[derive(Debug, Args)]
@@ -86,6 +92,36 @@ pub fn run_table(args: TableArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.csv {
         outputs.add(path, table_csv(table_points));
     }
+    if let Some(path) = &args.program.program {
+        let comments = vec![
+            printable_ascii(&loaded.description),
+            format!(
+                "{} points, G1 chords stray up to {:.3} um, POLY cubics up to {:.4} um",
+                points.len(),
+                g1_dev.max_um,
+                poly_dev.max_um
+            ),
+        ];
+        let settings = args.program.table_settings(comments);
+        let text = match form {
+            TableForm::G1 => render_g1_table(&points, &settings),
+            TableForm::Poly => render_poly_table(&segments, &settings),
+        }
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        outputs.add(path, text);
+        if let (Some(main_path), Some(main)) = (
+            &args.program.main_program,
+            args.program.main_settings(args.c_speed_rpm),
+        ) {
+            let text = render_main_program(&main, &settings)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", main_path.display()))?;
+            outputs.add(main_path, text);
+        }
+    }
+    if let Some(path) = &args.svg {
+        let view = setup_view(part, &[0.0, 90.0, 180.0, 270.0], &loaded.description)?;
+        outputs.add(path, render_setup_svg(&view));
+    }
     let mut report = summary(&loaded, &points, form, segments.len());
     writeln!(
         report,
@@ -118,9 +154,31 @@ pub fn run_table(args: TableArgs) -> anyhow::Result<()> {
 }
 
 pub fn run_plot(args: PlotArgs) -> anyhow::Result<()> {
+    if let Some(bad) = args.angles.iter().find(|a| !a.is_finite()) {
+        anyhow::bail!("--angles: {bad} is not a finite angle");
+    }
     let loaded = load_part(&args.part)?;
-    let _ = (&loaded, &args.angles, &args.svg);
-    anyhow::bail!("plot: not wired yet")
+    let view = setup_view(&loaded.part, &args.angles, &loaded.description)?;
+    let mut outputs = Outputs::default();
+    outputs.add(&args.svg, render_setup_svg(&view));
+    for path in outputs.commit()? {
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// Program comments must be printable ASCII: replace anything else.
+fn printable_ascii(text: &str) -> String {
+    text.chars()
+        .map(|c| {
+            if c.is_ascii_graphic() || c == ' ' {
+                c
+            } else {
+                '?'
+            }
+        })
+        .take(200)
+        .collect()
 }
 
 fn summary(loaded: &LoadedPart, points: &[TablePoint], form: TableForm, segments: usize) -> String {

@@ -181,6 +181,22 @@ impl Part {
         }
     }
 
+    /// A circle worth drawing for orientation: the base circle of a cam, the main journal
+    /// axis orbit of a crankpin's centre. Centre, radius (mm) and a label.
+    pub fn reference_circle(&self) -> Option<([f64; 2], f64, String)> {
+        match &self.kind {
+            Kind::Cam { geometry, .. } => Some((
+                [0.0, 0.0],
+                geometry.base_radius_mm,
+                "base circle".to_string(),
+            )),
+            Kind::Crankpin(g) if g.throw_mm > 0.0 => {
+                Some(([0.0, 0.0], g.throw_mm, "pin-centre orbit".to_string()))
+            }
+            Kind::Crankpin(_) => None,
+        }
+    }
+
     /// The same part with another wheel radius (after dressing), checked again.
     pub fn with_wheel_radius(&self, wheel_radius_mm: f64) -> Result<Self, GeometryError> {
         match &self.kind {

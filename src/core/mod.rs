@@ -6,6 +6,7 @@ pub mod geometry;
 pub mod lift;
 pub mod measure;
 pub mod program;
+pub mod setup;
 pub mod smooth;
 pub mod spline;
 pub mod svg;
