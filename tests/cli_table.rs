@@ -278,3 +278,121 @@ fn bad_input_gives_one_clear_line_and_keeps_existing_outputs() {
         );
     }
 }
+
+#[test]
+fn program_main_program_and_svg_are_written_together() {
+    let dir = tempfile::tempdir().unwrap();
+    let lift = repo("config/parts/demo-intake-lobe.csv");
+    let out = camloop(
+        &[
+            "table",
+            "cam",
+            "--lift",
+            &lift,
+            "--follower",
+            "flat",
+            "--base-radius",
+            "20",
+            "--wheel-radius",
+            "250",
+            "--form",
+            "poly",
+            "--program",
+            "nc/CAM_T2.SPF",
+            "--table-number",
+            "2",
+            "--main-program",
+            "nc/CAM_GRIND.MPF",
+            "--svg",
+            "setup.svg",
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let spf = std::fs::read_to_string(dir.path().join("nc/CAM_T2.SPF")).unwrap();
+    let lines: Vec<&str> = spf.lines().collect();
+    assert_eq!(lines[0], "%_N_CAM_T2_SPF");
+    assert_eq!(lines[1], ";$PATH=/_N_SPF_DIR");
+    assert!(lines.contains(&"PROC CAM_T2"));
+    assert!(lines.contains(&"CTABDEF(X,C,2,1)"));
+    // The demo lobe needs no refinement: one POLY block per table point, the last one
+    // closing the period at 360°.
+    let blocks: Vec<&&str> = lines.iter().filter(|l| l.starts_with("PO[C]=")).collect();
+    assert_eq!(blocks.len(), 360);
+    assert!(
+        blocks[359].starts_with("PO[C]=(360.0000) PO[X]=(0.0000,"),
+        "{}",
+        blocks[359]
+    );
+    let mpf = std::fs::read_to_string(dir.path().join("nc/CAM_GRIND.MPF")).unwrap();
+    assert!(mpf.starts_with("%_N_CAM_GRIND_MPF\n"));
+    assert!(mpf.contains("LEADON(X,C,2)") && mpf.contains("LEADOF(X,C)"));
+    let svg = std::fs::read_to_string(dir.path().join("setup.svg")).unwrap();
+    assert!(
+        svg.starts_with("<?xml") || svg.starts_with("<svg"),
+        "{}",
+        &svg[..40]
+    );
+}
+
+#[test]
+fn invalid_program_name_writes_nothing_at_all() {
+    let dir = tempfile::tempdir().unwrap();
+    let lift = repo("config/parts/demo-intake-lobe.csv");
+    let out = camloop(
+        &[
+            "table",
+            "cam",
+            "--lift",
+            &lift,
+            "--follower",
+            "flat",
+            "--base-radius",
+            "20",
+            "--wheel-radius",
+            "250",
+            "--csv",
+            "t.csv",
+            "--program",
+            "CYCLE_CAM.SPF",
+        ],
+        dir.path(),
+    );
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.contains("CYCLE_CAM.SPF") && err.contains("CYCLE"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        0,
+        "nothing written"
+    );
+}
+
+#[test]
+fn plot_draws_the_crankpin_with_four_wheels() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = camloop(
+        &[
+            "plot",
+            "crankpin",
+            "--throw",
+            "45",
+            "--pin-radius",
+            "30",
+            "--wheel-radius",
+            "300",
+            "--svg",
+            "pin.svg",
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let svg = std::fs::read_to_string(dir.path().join("pin.svg")).unwrap();
+    for label in ["c = 0°", "c = 90°", "c = 180°", "c = 270°"] {
+        assert!(svg.contains(label), "{label} missing");
+    }
+}
