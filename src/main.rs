@@ -1,5 +1,8 @@
 //! The `camloop` binary: argument parsing and exit codes; the work lives in the library.
 
+// No unwrap() in shipped code: bad input must become an error, not a panic (tests may).
+#![warn(clippy::unwrap_used)]
+
 use clap::Parser;
 use std::process::ExitCode;
 

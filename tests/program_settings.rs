@@ -2,7 +2,6 @@
 //! numbering and the main-program fragment.
 
 // Helpers outside #[test] functions unwrap too: a panic is the test failing.
-#![allow(clippy::unwrap_used)]
 
 use camloop::core::program::{
     AxisNameError, CDirection, MainProgramSettings, ProgramNameError, ProgramSettings,

@@ -2,7 +2,6 @@
 //! realistic cam setup, fitting of both panels, robustness to bad input.
 
 // Helpers outside #[test] functions unwrap too: a panic is the test failing.
-#![allow(clippy::unwrap_used)]
 
 use camloop::core::svg::{SetupCircle, SetupView, WheelPosition, render_setup_svg};
 

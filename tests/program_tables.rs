@@ -2,7 +2,6 @@
 //! rendering checks (C monotonic after rounding, finite values, joined segments).
 
 // Helpers outside #[test] functions unwrap too: a panic is the test failing.
-#![allow(clippy::unwrap_used)]
 
 use camloop::core::program::{
     CDirection, ProgramSettings, TableError, TableMemory, render_g1_table, render_poly_table,
