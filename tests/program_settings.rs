@@ -1,8 +1,6 @@
 //! Program settings: name and axis rules, validation, configuration parsing, table
 //! numbering and the main-program fragment.
 
-// Helpers outside #[test] functions unwrap too: a panic is the test failing.
-
 use camloop::core::program::{
     AxisNameError, CDirection, MainProgramSettings, ProgramNameError, ProgramSettings,
     SettingError, TableMemory, TablePairError, check_table_pair, next_table_number,

@@ -1,8 +1,6 @@
 //! SVG of the setup: golden file of a small view, XML well-formedness and structure of a
 //! realistic cam setup, fitting of both panels, robustness to bad input.
 
-// Helpers outside #[test] functions unwrap too: a panic is the test failing.
-
 use camloop::core::svg::{SetupCircle, SetupView, WheelPosition, render_setup_svg};
 
 const RB_MM: f64 = 20.0;

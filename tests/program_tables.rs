@@ -1,8 +1,6 @@
 //! Curve-table programs: golden files, round trips through a small test-only parser, and the
 //! rendering checks (C monotonic after rounding, finite values, joined segments).
 
-// Helpers outside #[test] functions unwrap too: a panic is the test failing.
-
 use camloop::core::program::{
     CDirection, ProgramSettings, TableError, TableMemory, render_g1_table, render_poly_table,
 };
