@@ -1,5 +1,10 @@
 //! The pure core: lift tables, exact wheel-centre geometry, curve-table fitting and program
 //! rendering. No I/O, no clock, no logging: inputs arrive as values, failures leave as data.
 
+pub mod fit;
+pub mod geometry;
+pub mod lift;
 pub mod measure;
+pub mod smooth;
+pub mod spline;
 pub mod table;
