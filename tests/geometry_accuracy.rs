@@ -345,3 +345,32 @@ fn geometry_is_exact_for_the_spline_it_is_given() {
         assert!(worst.0 <= 1e-9, "{}: {worst:?}", case.name);
     }
 }
+
+/// After dressing the wheel is smaller: the regenerated table must be the exact envelope for
+/// the new radius (a wheel-radius error moves d by the full difference, so this also shows
+/// the new radius is really used).
+#[test]
+fn table_after_dressing_matches_the_oracle_for_the_new_wheel() {
+    let case = roller_case();
+    let (_, lifts) = case.lobe.table_1deg();
+    let dressed_mm = 241.37;
+    let part = library_part(&case, lifts)
+        .with_wheel_radius(dressed_mm)
+        .expect("a smaller wheel still grinds this cam");
+    let lobe = case.lobe;
+    let oracle = CamOracle::new(
+        |psi| lobe.lift_at_rad(psi),
+        case.base_radius_mm,
+        case.oracle_follower,
+        dressed_mm,
+    );
+    let table = part.wheel_table(360).expect("table");
+    let (err, c) = check_table(&table, 360, dressed_mm + case.base_radius_mm, |c| {
+        oracle.d_mm(c)
+    });
+    println!(
+        "roller cam, dressed wheel: max |d − oracle| = {:.4} µm at c = {c}°",
+        err * 1e3
+    );
+    assert!(err <= REQUIRED_MM, "dressed wheel: {err} mm at {c}°");
+}

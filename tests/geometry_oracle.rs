@@ -28,7 +28,10 @@ fn c_values(step_deg: f64) -> Vec<f64> {
 fn worst(cs: &[f64], oracle: impl Fn(f64) -> f64, expected: impl Fn(f64) -> f64) -> (f64, f64) {
     cs.iter()
         .map(|&c| ((oracle(c) - expected(c)).abs(), c))
-        .fold((0.0, f64::NAN), |a, b| if b.0 > a.0 { b } else { a })
+        .fold(
+            (f64::NEG_INFINITY, f64::NAN),
+            |a, b| if b.0 > a.0 { b } else { a },
+        )
 }
 
 fn assert_within(what: &str, (err_mm, c_deg): (f64, f64)) {

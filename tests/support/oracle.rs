@@ -15,9 +15,10 @@
 //!   p·e + sqrt(R² − (p·e⊥)²), e = u(c).
 //!
 //! Every minimum and maximum is found by a dense scan followed by golden-section refinement of
-//! the best sample's bracket down to 1e-10 rad. Near a smooth optimum the value error is
-//! ½·|f''|·δ², far below 1e-12 mm for the curvatures met here, so the oracle's own error is
-//! dominated by floating-point rounding (~1e-13 mm).
+//! the best sample's bracket down to δ = 1e-8 rad. Near a smooth optimum the value error is
+//! ½·|f''|·δ² ≤ 1e-13 mm for |f''| ≤ 2000 mm/rad² (the sharpest nose met here is far
+//! gentler), so the oracle's own error is at the level of floating-point rounding
+//! (~1e-13 mm), as its self-tests show.
 
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
@@ -25,10 +26,12 @@ use std::f64::consts::{FRAC_PI_2, PI, TAU};
 pub const OUTLINE_SAMPLES: usize = 7200;
 
 /// Golden-section refinement stops when the bracket is this narrow, rad.
-const ARG_TOL_RAD: f64 = 1e-10;
+const ARG_TOL_RAD: f64 = 1e-8;
 
-/// Coarse scan step over a follower window, rad (0.25°).
-const COARSE_STEP_RAD: f64 = 0.25 * PI / 180.0;
+/// Coarse scan step over a follower window, rad (0.5°). The bound along a ray has one basin
+/// per face or roller that can touch it, so the coarse scan only has to land in the right
+/// basin; the fine scan and golden section do the rest.
+const COARSE_STEP_RAD: f64 = 0.5 * PI / 180.0;
 
 /// Fine scan step around the coarse optimum and inside narrowed windows, rad (0.01°).
 const FINE_STEP_RAD: f64 = 0.01 * PI / 180.0;
@@ -110,7 +113,7 @@ fn wide_min(f: &impl Fn(f64) -> f64, lo: f64, hi: f64) -> Option<(f64, f64)> {
     if i == 0 || i == n {
         return None;
     }
-    let pad = 2.0 * (hi - lo) / n as f64;
+    let pad = (hi - lo) / n as f64;
     scan_refine_min(f, (x - pad).max(lo), (x + pad).min(hi), FINE_STEP_RAD)
 }
 
@@ -126,25 +129,35 @@ fn reach_mm(p: [f64; 2], cos_c: f64, sin_c: f64, wheel_mm: f64) -> f64 {
     }
 }
 
-/// Radial function of `outline` grown by `wheel_mm` in direction `c_rad`: scan the outline
-/// samples (`sample(k)` is the point at parameter k·2π/n), then refine the best one's bracket
+/// Radial function of an outline grown by `wheel_mm` in direction `c_rad`: scan the outline
+/// samples (`samples[k]` is the point at parameter k·2π/n), then refine the best one's bracket
 /// with `point(s, k)` (the exact point at parameter s, k the bracket's sample index).
 fn envelope_mm(
-    n: usize,
-    sample: impl Fn(usize) -> [f64; 2],
+    samples: &[[f64; 2]],
     point: impl Fn(f64, usize) -> [f64; 2],
     wheel_mm: f64,
     c_rad: f64,
 ) -> f64 {
     let (sin_c, cos_c) = c_rad.sin_cos();
+    // A sparse pass first, so that the full pass can skip most points on the bound
+    // reach ≤ p·e + R without evaluating the square root.
     let mut best = (0, f64::NEG_INFINITY);
-    for k in 0..n {
-        let v = reach_mm(sample(k), cos_c, sin_c, wheel_mm);
+    for (k, &p) in samples.iter().enumerate().step_by(20) {
+        let v = reach_mm(p, cos_c, sin_c, wheel_mm);
         if v > best.1 {
             best = (k, v);
         }
     }
-    let step = TAU / n as f64;
+    for (k, p) in samples.iter().enumerate() {
+        if p[0] * cos_c + p[1] * sin_c + wheel_mm <= best.1 {
+            continue;
+        }
+        let v = reach_mm(*p, cos_c, sin_c, wheel_mm);
+        if v > best.1 {
+            best = (k, v);
+        }
+    }
+    let step = TAU / samples.len() as f64;
     let s_k = step * best.0 as f64;
     let neg_reach = |s: f64| -reach_mm(point(s, best.0), cos_c, sin_c, wheel_mm);
     let (_, neg_v) = golden_min(neg_reach, s_k - step, s_k + step);
@@ -176,8 +189,7 @@ impl<P: Fn(f64) -> [f64; 2]> CurveOracle<P> {
     /// Wheel-centre distance at wheel direction `c_deg`, mm.
     pub fn d_mm(&self, c_deg: f64) -> f64 {
         envelope_mm(
-            OUTLINE_SAMPLES,
-            |k| self.samples[k],
+            &self.samples,
             |s, _| (self.point)(s),
             self.wheel_radius_mm,
             c_deg.to_radians(),
@@ -214,21 +226,16 @@ pub fn crankpin_closed_form_d_mm(
     throw_mm * cos_a + (reach * reach - (throw_mm * sin_a).powi(2)).sqrt()
 }
 
-/// One outline sample of a cam: radius r(θ_k) and the minimising follower position as an
-/// offset ψ* − θ_k (rad; 0 for the knife edge).
-#[derive(Debug, Clone, Copy)]
-struct CamSample {
-    point: [f64; 2],
-    psi_offset_rad: f64,
-}
-
 /// Wheel-centre oracle for a cam given by its lift function and follower.
 pub struct CamOracle<L: Fn(f64) -> f64> {
     lift_mm: L,
     base_radius_mm: f64,
     follower: OracleFollower,
     wheel_radius_mm: f64,
-    samples: Vec<CamSample>,
+    /// Outline points at θ_k = k·2π/n, mm.
+    points: Vec<[f64; 2]>,
+    /// Minimising follower position at θ_k as an offset ψ* − θ_k, rad (0 for the knife edge).
+    psi_offsets_rad: Vec<f64>,
 }
 
 impl<L: Fn(f64) -> f64> CamOracle<L> {
@@ -248,19 +255,16 @@ impl<L: Fn(f64) -> f64> CamOracle<L> {
             base_radius_mm,
             follower,
             wheel_radius_mm,
-            samples: Vec::new(),
+            points: Vec::with_capacity(OUTLINE_SAMPLES),
+            psi_offsets_rad: Vec::with_capacity(OUTLINE_SAMPLES),
         };
         let step = TAU / OUTLINE_SAMPLES as f64;
-        oracle.samples = (0..OUTLINE_SAMPLES)
-            .map(|k| {
-                let theta = step * k as f64;
-                let (r, psi) = oracle.outline_wide(theta);
-                CamSample {
-                    point: polar(r, theta),
-                    psi_offset_rad: psi - theta,
-                }
-            })
-            .collect();
+        for k in 0..OUTLINE_SAMPLES {
+            let theta = step * k as f64;
+            let (r, psi) = oracle.outline_wide(theta);
+            oracle.points.push(polar(r, theta));
+            oracle.psi_offsets_rad.push(psi - theta);
+        }
         oracle
     }
 
@@ -335,8 +339,8 @@ impl<L: Fn(f64) -> f64> CamOracle<L> {
         let theta_k = step * k as f64;
         let n = OUTLINE_SAMPLES as isize;
         let psi_of = |j: isize| {
-            let sample = self.samples[(k as isize + j).rem_euclid(n) as usize];
-            theta_k + step * j as f64 + sample.psi_offset_rad
+            let offset = self.psi_offsets_rad[(k as isize + j).rem_euclid(n) as usize];
+            theta_k + step * j as f64 + offset
         };
         let candidates = [psi_of(-1), psi_of(0), psi_of(1)];
         let pad = 5.0 * FINE_STEP_RAD;
@@ -357,8 +361,7 @@ impl<L: Fn(f64) -> f64> CamOracle<L> {
     /// Wheel-centre distance at wheel direction `c_deg`, mm.
     pub fn d_mm(&self, c_deg: f64) -> f64 {
         envelope_mm(
-            OUTLINE_SAMPLES,
-            |k| self.samples[k].point,
+            &self.points,
             |theta, k| polar(self.outline_near(theta, k), theta),
             self.wheel_radius_mm,
             c_deg.to_radians(),
