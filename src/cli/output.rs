@@ -16,8 +16,8 @@ impl Outputs {
         self.files.push((path.to_path_buf(), contents));
     }
 
-    /// Writes every file to a temporary sibling, syncs it, then renames them all into
-    /// place. On any failure the temporaries are removed and no destination is touched.
+    /// Writes every file to a temporary sibling (creating missing folders), syncs it, then
+    /// renames them all into place. On any failure the temporaries are removed and no destination is touched.
     pub fn commit(self) -> anyhow::Result<Vec<PathBuf>> {
         let mut staged = Vec::with_capacity(self.files.len());
         for (path, contents) in &self.files {
@@ -25,6 +25,8 @@ impl Outputs {
                 Some(p) if !p.as_os_str().is_empty() => p,
                 _ => Path::new("."),
             };
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create folder {}", dir.display()))?;
             let mut tmp = tempfile::Builder::new()
                 .prefix(".camloop-")
                 .tempfile_in(dir)

@@ -32,6 +32,7 @@ pub enum LiftFormat {
 }
 
 #[derive(Debug, Clone, Args)]
+#[command(allow_negative_numbers = true)]
 pub struct CamArgs {
     /// Lift table: CSV `angle_deg,lift_mm` or an OPTICLINE-style nominal file.
     #[arg(long, value_name = "FILE")]
@@ -61,6 +62,7 @@ pub struct CamArgs {
 }
 
 #[derive(Debug, Clone, Args)]
+#[command(allow_negative_numbers = true)]
 pub struct CrankpinArgs {
     /// Distance from the main axis to the pin centre b, mm.
     #[arg(long, value_name = "MM")]

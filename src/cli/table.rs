@@ -17,6 +17,7 @@ pub enum FormArg {
 }
 
 #[derive(Debug, Args)]
+#[command(allow_negative_numbers = true)]
 pub struct TableArgs {
     #[command(subcommand)]
     pub part: PartKindArgs,
@@ -42,6 +43,7 @@ pub struct TableArgs {
 }
 
 #[derive(Debug, Args)]
+#[command(allow_negative_numbers = true)]
 pub struct PlotArgs {
     #[command(subcommand)]
     pub part: PartKindArgs,
@@ -144,7 +146,7 @@ fn summary(loaded: &LoadedPart, points: &[TablePoint], form: TableForm, segments
 }
 
 fn deviation_text(d: Deviation) -> String {
-    format!("up to {:.3} µm (at C = {:.2}°)", d.max_um, d.at_c_deg)
+    format!("up to {:.4} µm (at C = {:.2}°)", d.max_um, d.at_c_deg)
 }
 
 fn motion_text(m: Motion) -> String {

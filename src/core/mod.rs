@@ -5,6 +5,8 @@ pub mod fit;
 pub mod geometry;
 pub mod lift;
 pub mod measure;
+pub mod program;
 pub mod smooth;
 pub mod spline;
+pub mod svg;
 pub mod table;
