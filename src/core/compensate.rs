@@ -239,7 +239,7 @@ mod tests {
                 );
             } else {
                 assert!(
-                    change_mm >= 0.003 - 1e-12 && change_mm < 0.003 * 1.01,
+                    (0.003 - 1e-12..0.003 * 1.01).contains(&change_mm),
                     "{}: {change_mm}",
                     a.c_deg
                 );
