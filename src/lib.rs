@@ -3,5 +3,8 @@
 //! `core` is pure (geometry, measurement math, program rendering); everything that touches
 //! files, buses or the clock lives outside it.
 
+// No unwrap() in shipped code: bad input must become an error, not a panic (tests may).
+#![warn(clippy::unwrap_used)]
+
 pub mod cli;
 pub mod core;

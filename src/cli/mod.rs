@@ -1,1 +1,35 @@
-//! Command-line front end: argument types and the commands behind them.
+//! Command-line front end: argument types and the commands behind them. This is an edge:
+//! it reads files, calls the pure core and writes outputs atomically.
+
+mod output;
+mod part;
+mod program_args;
+mod table;
+
+use clap::{Parser, Subcommand};
+
+pub use part::{PartArgs, PartKindArgs};
+
+/// camloop: closed-loop compensation for X–C following grinding of cams and crankpins.
+#[derive(Debug, Parser)]
+#[command(name = "camloop", version, about, propagate_version = true)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Compute the wheel-head X(C) table of a part and write it as CSV and/or a program.
+    Table(table::TableArgs),
+    /// Draw the grinding setup (outline, wheel, wheel-centre path) as SVG.
+    Plot(table::PlotArgs),
+}
+
+/// Runs a parsed command; the error chain is printed by `main` on one line.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Table(args) => table::run_table(args),
+        Command::Plot(args) => table::run_plot(args),
+    }
+}

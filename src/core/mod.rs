@@ -2,6 +2,15 @@
 //! rendering. No I/O, no clock, no logging: inputs arrive as values, failures leave as data.
 
 pub mod analysis;
+pub mod compensate;
+pub mod fit;
+pub mod geometry;
 pub mod harmonics;
+pub mod lift;
 pub mod measure;
+pub mod program;
+pub mod setup;
+pub mod smooth;
+pub mod spline;
+pub mod svg;
 pub mod table;

@@ -1,0 +1,99 @@
+//! Flags that shape the SINUMERIK programs written by `camloop table`.
+
+use crate::core::program::{CDirection, MainProgramSettings, ProgramSettings, TableMemory};
+use clap::{Args, ValueEnum};
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MemoryArg {
+    Sram,
+    Dram,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct ProgramArgs {
+    /// Write the curve-table subprogram (SINUMERIK 840D sl transfer format).
+    #[arg(long, global = true, value_name = "OUT.SPF")]
+    pub program: Option<PathBuf>,
+    /// Subprogram name (default: the --program file name without extension, upper case).
+    #[arg(long, global = true, value_name = "NAME")]
+    pub program_name: Option<String>,
+    /// Write a main-program fragment that defines the table, couples X to C and grinds.
+    #[arg(long, global = true, value_name = "OUT.MPF", requires = "program")]
+    pub main_program: Option<PathBuf>,
+    /// Curve-table number.
+    #[arg(long, global = true, value_name = "N", default_value_t = 1)]
+    pub table_number: u32,
+    /// Table memory (CTABDEF's 5th argument); default: the control's MD20905.
+    #[arg(long, global = true, value_enum)]
+    pub memory: Option<MemoryArg>,
+    /// Following axis name.
+    #[arg(long, global = true, value_name = "AXIS", default_value = "X")]
+    pub x_axis: String,
+    /// Leading axis name.
+    #[arg(long, global = true, value_name = "AXIS", default_value = "C")]
+    pub c_axis: String,
+    /// Decimals written for X (3 to 9).
+    #[arg(long, global = true, value_name = "N", default_value_t = 4)]
+    pub x_decimals: u8,
+    /// Decimals written for C (0 to 9).
+    #[arg(long, global = true, value_name = "N", default_value_t = 4)]
+    pub c_decimals: u8,
+    /// The machine's C turns against the part frame's angle sense.
+    #[arg(long, global = true)]
+    pub c_reversed: bool,
+    /// Machine C at part angle 0°, degrees.
+    #[arg(long, global = true, value_name = "DEG", default_value_t = 0.0)]
+    pub c_offset_deg: f64,
+    /// Added to every program X, mm.
+    #[arg(long, global = true, value_name = "MM", default_value_t = 0.0)]
+    pub x_offset_mm: f64,
+    /// Revolutions of C in the main program.
+    #[arg(long, global = true, value_name = "N", default_value_t = 3.0)]
+    pub revolutions: f64,
+}
+
+impl ProgramArgs {
+    /// Table settings; the name comes from --program-name or the --program file stem.
+    pub fn table_settings(&self, comment_lines: Vec<String>) -> ProgramSettings {
+        ProgramSettings {
+            name: self
+                .program_name
+                .clone()
+                .or_else(|| self.program.as_deref().and_then(stem_upper))
+                .unwrap_or_else(|| ProgramSettings::default().name),
+            following_axis: self.x_axis.clone(),
+            leading_axis: self.c_axis.clone(),
+            table_number: self.table_number,
+            memory: self.memory.map(|m| match m {
+                MemoryArg::Sram => TableMemory::Sram,
+                MemoryArg::Dram => TableMemory::Dram,
+            }),
+            x_decimals: self.x_decimals,
+            c_decimals: self.c_decimals,
+            c_direction: if self.c_reversed {
+                CDirection::Reversed
+            } else {
+                CDirection::Same
+            },
+            c_offset_deg: self.c_offset_deg,
+            x_offset_mm: self.x_offset_mm,
+            comment_lines,
+        }
+    }
+
+    /// Main-program settings; the name is the --main-program file stem in upper case.
+    pub fn main_settings(&self, c_speed_rpm: f64) -> Option<MainProgramSettings> {
+        let path = self.main_program.as_deref()?;
+        Some(MainProgramSettings {
+            name: stem_upper(path).unwrap_or_else(|| MainProgramSettings::default().name),
+            revolutions: self.revolutions,
+            c_speed_rpm,
+            ..MainProgramSettings::default()
+        })
+    }
+}
+
+fn stem_upper(path: &Path) -> Option<String> {
+    path.file_stem().map(|s| s.to_string_lossy().to_uppercase())
+}

@@ -1,0 +1,137 @@
+//! The main-program fragment that defines the table, puts X on the curve, couples X to C,
+//! turns C for the grinding revolutions and uncouples.
+
+use serde::Deserialize;
+
+use super::ProgramSettings;
+use super::names::validate_program_name;
+use super::settings::{SettingError, SettingsErrors, check_comments, check_positive};
+use super::table::{fmt_fixed, line};
+
+/// How the main-program fragment is written. `Default`: `CAMLOOP_GRIND`, 3 revolutions at
+/// 10 rpm, X onto the curve at 100 mm/min.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MainProgramSettings {
+    /// Main program name (file `<NAME>_MPF`), same rules as the table subprogram's, and
+    /// different from it.
+    pub name: String,
+    /// Revolutions of C while X is coupled, > 0 (fractions allowed).
+    pub revolutions: f64,
+    /// C speed while coupled, rpm, > 0 (written as `FA` in deg/min).
+    pub c_speed_rpm: f64,
+    /// Feed of the X move onto the curve before coupling, mm/min, > 0.
+    pub x_feed_mm_min: f64,
+    /// Comment lines written after the `DEF` line, without `;`. Printable ASCII only.
+    pub comment_lines: Vec<String>,
+}
+
+impl Default for MainProgramSettings {
+    fn default() -> Self {
+        Self {
+            name: "CAMLOOP_GRIND".to_owned(),
+            revolutions: 3.0,
+            c_speed_rpm: 10.0,
+            x_feed_mm_min: 100.0,
+            comment_lines: Vec::new(),
+        }
+    }
+}
+
+/// Render the main-program fragment that runs the table subprogram of `table`.
+///
+/// ```text
+/// %_N_<MAIN>_MPF
+/// ;$PATH=/_N_MPF_DIR
+/// DEF REAL CL_C, CL_X, CL_SLOPE       ; DEF must come first
+/// ; comment lines
+/// <TABLE>                             ; call: defines curve table n
+/// STOPRE                              ; read the actual C after the table is defined
+/// CL_C=$AA_IW[C]
+/// CL_X=CTAB(CL_C,n,CL_SLOPE)          ; X on the curve at the current C
+/// G90 G1 X=CL_X F=<feed>
+/// LEADON(X,C,n)
+/// POS[C]=IC(<360·revs>) FA[C]=<360·rpm>
+/// WAITP(C)
+/// LEADOF(X,C)
+/// M30
+/// ```
+///
+/// The X offset of the table settings is already inside the table, so the X target is
+/// `CTAB(C)` itself; an output offset in SD43106 (or an infeed via `$AA_OFF`) would have to be
+/// added to it, otherwise LEADON makes a synchronising move. Points marked [?] are inferred,
+/// not confirmed on a control:
+/// - `$AA_IW[C]` (actual value, workpiece coordinates) is read after `STOPRE`; that this is
+///   the coordinate the coupling uses for the leading value [?];
+/// - `CTAB` reduces a leading value outside the table's range into the period of a periodic
+///   table [?];
+/// - `FA[C]` is in deg/min for a rotary positioning axis and `POS[C]=IC(…)` turns a modulo
+///   axis by more than 360° [?];
+/// - the X move onto the curve is a plain G1 at the part: approach and infeed are the
+///   machine builder's cycle, this fragment only shows the coupling sequence.
+///
+/// Variable names contain `_`, which axis names cannot, so they never clash with an axis.
+pub fn render_main_program(
+    main: &MainProgramSettings,
+    table: &ProgramSettings,
+) -> Result<String, SettingsErrors> {
+    let mut errors = Vec::new();
+    let resolved = table.resolve().map_err(|e| errors.extend(e.0)).ok();
+    let main_name = validate_program_name(&main.name)
+        .map_err(|e| errors.push(e.into()))
+        .ok();
+    if let (Some(m), Some(r)) = (&main_name, &resolved) {
+        if *m == r.name {
+            errors.push(SettingError::MainSameAsTable { name: m.clone() });
+        }
+    }
+    check_positive(&mut errors, "revolutions", main.revolutions);
+    check_positive(&mut errors, "c_speed_rpm", main.c_speed_rpm);
+    check_positive(&mut errors, "x_feed_mm_min", main.x_feed_mm_min);
+    check_comments(&mut errors, &main.comment_lines);
+    let (Some(main_name), Some(r), true) = (main_name, resolved, errors.is_empty()) else {
+        return Err(SettingsErrors(errors));
+    };
+
+    let (x, c, n) = (&r.following, &r.leading, table.table_number);
+    let cd = usize::from(table.c_decimals);
+    let mut out = String::new();
+    line(&mut out, format_args!("%_N_{main_name}_MPF"));
+    out.push_str(";$PATH=/_N_MPF_DIR\n");
+    out.push_str("DEF REAL CL_C, CL_X, CL_SLOPE\n");
+    for comment in &main.comment_lines {
+        line(&mut out, format_args!("; {comment}"));
+    }
+    line(
+        &mut out,
+        format_args!("{} ; defines curve table {n}", r.name),
+    );
+    line(
+        &mut out,
+        format_args!("STOPRE ; read the actual {c} position below"),
+    );
+    line(&mut out, format_args!("CL_C=$AA_IW[{c}]"));
+    line(
+        &mut out,
+        format_args!("CL_X=CTAB(CL_C,{n},CL_SLOPE) ; {x} on the curve at the current {c}"),
+    );
+    line(
+        &mut out,
+        format_args!("G90 G1 {x}=CL_X F={}", fmt_fixed(main.x_feed_mm_min, 3)),
+    );
+    line(&mut out, format_args!("LEADON({x},{c},{n})"));
+    line(
+        &mut out,
+        format_args!(
+            "POS[{c}]=IC({}) FA[{c}]={} ; {} rev at {} rpm",
+            fmt_fixed(360.0 * main.revolutions, cd),
+            fmt_fixed(360.0 * main.c_speed_rpm, 3),
+            main.revolutions,
+            main.c_speed_rpm
+        ),
+    );
+    line(&mut out, format_args!("WAITP({c})"));
+    line(&mut out, format_args!("LEADOF({x},{c})"));
+    out.push_str("M30\n");
+    Ok(out)
+}

@@ -1,0 +1,57 @@
+//! SINUMERIK 840D sl program text: curve-table subprograms (G1 and POLY form), the
+//! main-program fragment that couples X to C, program/axis name rules and table numbering.
+//!
+//! Everything here is pure: values in, `String` or a typed error out. Syntax follows the
+//! project's SINUMERIK notes; what is inferred rather than confirmed is marked [?] in the
+//! doc comments, never in the generated program.
+//!
+//! Address form: every axis word is written `<AXIS>=<value>` (`C=12.0000 X=3.1416`). For
+//! single-letter axes `C12.0000` would also do, but axis names with several letters or a
+//! digit extension (`C1`, `XA`) require the `=`, and `=` is valid for both.
+
+mod main_program;
+mod names;
+mod settings;
+mod table;
+
+pub use main_program::{MainProgramSettings, render_main_program};
+pub use names::{
+    AxisNameError, MAX_PROGRAM_NAME_CHARS, ProgramNameError, RESERVED_PREFIXES, validate_axis_name,
+    validate_program_name,
+};
+pub use settings::{
+    C_DECIMALS, CDirection, ProgramSettings, SettingError, SettingsErrors, TableMemory, X_DECIMALS,
+};
+pub use table::{TableError, render_g1_table, render_poly_table, reverse_cubic};
+
+/// The table number for the next table version, so that the table in use is never
+/// overwritten (the control redefines a table number without warning).
+///
+/// Returns `pair.1` when `current == pair.0`, otherwise `pair.0` (including when `current`
+/// is neither, e.g. on the first run). `pair` must hold two different numbers, both ≥ 1;
+/// check that once with [`check_table_pair`] when loading configuration.
+pub fn next_table_number(current: u32, pair: (u32, u32)) -> u32 {
+    if current == pair.0 { pair.1 } else { pair.0 }
+}
+
+/// Why a pair of alternating table numbers is unusable.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum TablePairError {
+    #[error(
+        "table numbers ({0}, {1}) must differ so that a new table never overwrites the one in use"
+    )]
+    Same(u32, u32),
+    #[error("table numbers ({0}, {1}) must both be at least 1")]
+    Zero(u32, u32),
+}
+
+/// Check a pair of alternating table numbers: both ≥ 1 and different.
+pub fn check_table_pair(pair: (u32, u32)) -> Result<(), TablePairError> {
+    if pair.0 == 0 || pair.1 == 0 {
+        Err(TablePairError::Zero(pair.0, pair.1))
+    } else if pair.0 == pair.1 {
+        Err(TablePairError::Same(pair.0, pair.1))
+    } else {
+        Ok(())
+    }
+}

@@ -1,0 +1,68 @@
+//! Architecture invariants that a test can hold (see ARCHITECTURE.md).
+
+use std::path::{Path, PathBuf};
+
+fn rust_files(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            out.extend(rust_files(&path));
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            out.push(path);
+        }
+    }
+    out
+}
+
+/// The core is pure: no file system, network, async runtime, database, HTTP, clock or logging.
+#[test]
+fn core_does_no_io() {
+    let core = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/core");
+    let forbidden = [
+        "std::fs",
+        "std::net",
+        "std::io::",
+        "tokio",
+        "sqlx",
+        "axum",
+        "SystemTime",
+        "Instant",
+        "tracing",
+        "println!",
+        "eprintln!",
+        "std::env",
+        "std::process",
+    ];
+    let files = rust_files(&core);
+    assert!(files.len() >= 10, "found only {} core files", files.len());
+    let mut violations = Vec::new();
+    for file in files {
+        let text = std::fs::read_to_string(&file).unwrap();
+        for (n, line) in text.lines().enumerate() {
+            let code = line.split("//").next().unwrap_or("");
+            for word in forbidden {
+                if code.contains(word) {
+                    violations.push(format!("{}:{}: {word}", file.display(), n + 1));
+                }
+            }
+        }
+    }
+    assert!(
+        violations.is_empty(),
+        "I/O in the core:\n{}",
+        violations.join("\n")
+    );
+}
+
+/// Every module says what it owns in a `//!` line at the top.
+#[test]
+fn every_module_starts_with_a_doc_line() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let missing: Vec<String> = rust_files(&src)
+        .into_iter()
+        .filter(|f| !std::fs::read_to_string(f).unwrap().starts_with("//!"))
+        .map(|f| f.display().to_string())
+        .collect();
+    assert!(missing.is_empty(), "no //! line: {missing:?}");
+}
