@@ -2,6 +2,7 @@
 //! average and analyse (the gauge decode is measured elsewhere).
 
 use camloop::core::analysis::{LobeOptions, analyse_lobe};
+use camloop::core::lift::{LiftCurve, LiftTable};
 use camloop::core::measure::{
     AssemblyLimits, MeasurementHeader, RawMeasurement, RawSample, check_and_average,
 };
@@ -80,5 +81,30 @@ fn bench(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, bench);
+/// The same, with the nominal from the real intake table through the periodic spline,
+/// as the service wires it.
+fn bench_spline(c: &mut Criterion) {
+    let text = include_str!("../tests/fixtures/ecn-sandia-h2-intake.csv");
+    let table = LiftTable::parse_csv(text, "intake").expect("fixture parses");
+    let curve = LiftCurve::new(&table);
+    let nominal = |psi_deg: f64| {
+        let s = curve.eval(psi_deg.to_radians());
+        (s.h_mm, s.dh_mm.to_radians())
+    };
+    let mut raw = raw_measurement();
+    for s in &mut raw.samples {
+        let psi = f64::from(s.angle_index);
+        s.lift_mm += nominal(psi - 0.3).0 - cam(psi - 0.3).0;
+    }
+    let limits = AssemblyLimits::default();
+    let options = LobeOptions::default();
+    c.bench_function("assemble+average+analyse 3x360, spline nominal", |b| {
+        b.iter(|| {
+            let avg = check_and_average(black_box(&raw), &limits).expect("valid");
+            analyse_lobe(&avg, &nominal, &options).expect("analysable")
+        })
+    });
+}
+
+criterion_group!(benches, bench, bench_spline);
 criterion_main!(benches);

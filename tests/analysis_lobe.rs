@@ -401,3 +401,34 @@ fn judge_fails_a_non_finite_value_and_counts_unchecked_angles() {
         "0.5 µm at 90° is 0.5 from +1"
     );
 }
+
+#[test]
+fn band_coverage_wraps_and_includes_both_ends() {
+    let band = ToleranceBand {
+        from_deg: 300.0,
+        to_deg: 60.0,
+        lower_um: -1.0,
+        upper_um: 1.0,
+    };
+    for angle in [
+        300.0,
+        0.0,
+        60.0,
+        -30.0,
+        420.0,
+        360.0,
+        299.999_999_999_9,
+        60.000_000_000_1,
+    ] {
+        assert!(band.contains(angle), "{angle}° lies in 300° → 60°");
+    }
+    for angle in [299.9, 60.1, 180.0, -61.0] {
+        assert!(!band.contains(angle), "{angle}° lies outside 300° → 60°");
+    }
+    let whole = ToleranceBand::everywhere(5.0);
+    assert!(
+        [0.0, 359.999, 360.0, -720.0]
+            .iter()
+            .all(|&a| whole.contains(a))
+    );
+}

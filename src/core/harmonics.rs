@@ -86,25 +86,36 @@ impl DftTable {
     /// result because that is what the core feeds it). Empty when `values.len()` differs
     /// from the table.
     ///
-    /// All orders in one sweep each: `e^{i·j·ψ_k}` for order `j + 1` is the element-wise
-    /// complex product of order `j` with order 1, which vectorises (unlike the table gather
-    /// of [`Self::coefficients`]); rounding grows linearly with the order, ~1e-14 at
-    /// order 50. Sums run in four independent lanes so the additions pipeline.
+    /// Real input folds in half: angles `ψ_k` and `ψ_{N−k}` share the cosine and have
+    /// opposite sines, so `a_j` needs `x_k + x_{N−k}` and `b_j` needs `x_k − x_{N−k}` over
+    /// `k = 1 … (N−1)/2` only (plus `x_0`, and `x_{N/2}·(−1)^j` for even N). Each order's
+    /// `e^{i·j·ψ_k}` is the element-wise complex product of the previous order's with order 1,
+    /// which vectorises (unlike the table gather of [`Self::coefficients`]); its rounding
+    /// grows linearly with the order, ~1e-14 relative at order 50. Sums run in four
+    /// independent lanes so the additions pipeline.
     pub fn harmonics(&self, values: &[f64], max_order: u32) -> Vec<Harmonic> {
         let n = self.len();
-        if values.len() != n {
+        if values.len() != n || n == 0 {
             return Vec::new();
         }
         let top = (max_order as usize).min(n / 2);
+        let pairs = (n - 1) / 2;
         // Padded to whole lanes with zeros, which add nothing to the sums.
-        let padded = n.div_ceil(LANES) * LANES;
-        let pad = |v: &[f64]| {
-            let mut p = v.to_vec();
-            p.resize(padded, 0.0);
-            p
+        let padded = pairs.div_ceil(LANES) * LANES;
+        let fold = |f: fn(f64, f64) -> f64| {
+            let mut v: Vec<f64> = (1..=pairs).map(|k| f(values[k], values[n - k])).collect();
+            v.resize(padded, 0.0);
+            v
         };
-        let (x, cos_1, sin_1) = (pad(values), pad(&self.cos), pad(&self.sin));
+        let (even, odd) = (fold(|p, q| p + q), fold(|p, q| p - q));
+        let pad = |t: &[f64]| {
+            let mut v = t[1..=pairs].to_vec();
+            v.resize(padded, 0.0);
+            v
+        };
+        let (cos_1, sin_1) = (pad(&self.cos), pad(&self.sin));
         let (mut cos_j, mut sin_j) = (cos_1.clone(), sin_1.clone());
+        let nyquist = if n % 2 == 0 { values[n / 2] } else { 0.0 };
         let mut out = Vec::with_capacity(top);
         for j in 1..=top {
             if j > 1 {
@@ -120,16 +131,18 @@ impl DftTable {
             let lanes = cos_j
                 .chunks_exact(LANES)
                 .zip(sin_j.chunks_exact(LANES))
-                .zip(x.chunks_exact(LANES));
-            for ((c, s), x) in lanes {
+                .zip(even.chunks_exact(LANES).zip(odd.chunks_exact(LANES)));
+            for ((c, s), (e, o)) in lanes {
                 for i in 0..LANES {
-                    acc_a[i] += x[i] * c[i];
-                    acc_b[i] += x[i] * s[i];
+                    acc_a[i] += e[i] * c[i];
+                    acc_b[i] += o[i] * s[i];
                 }
             }
+            let signed_nyquist = if j % 2 == 0 { nyquist } else { -nyquist };
+            let sum_a = values[0] + signed_nyquist + (acc_a[0] + acc_a[1]) + (acc_a[2] + acc_a[3]);
+            let sum_b = (acc_b[0] + acc_b[1]) + (acc_b[2] + acc_b[3]);
             let scale = if 2 * j == n { 1.0 } else { 2.0 } / n as f64;
-            let a = scale * ((acc_a[0] + acc_a[1]) + (acc_a[2] + acc_a[3]));
-            let b = scale * ((acc_b[0] + acc_b[1]) + (acc_b[2] + acc_b[3]));
+            let (a, b) = (scale * sum_a, scale * sum_b);
             out.push(Harmonic {
                 order: j as u32,
                 amplitude_um: a.hypot(b),

@@ -80,8 +80,32 @@ impl ToleranceBand {
 
     /// Whether the band covers `angle_deg` (any real angle, taken modulo 360°).
     pub fn contains(&self, angle_deg: f64) -> bool {
-        (angle_deg - self.from_deg).rem_euclid(360.0) <= self.span_deg() + ANGLE_SLACK_DEG
-            || (self.from_deg - angle_deg).rem_euclid(360.0) <= ANGLE_SLACK_DEG
+        Arc::of(self).contains(angle_deg.rem_euclid(360.0))
+    }
+}
+
+/// A band's angles, reduced once: start in [0, 360), extent in (0, 360].
+#[derive(Clone, Copy)]
+struct Arc {
+    start_deg: f64,
+    span_deg: f64,
+}
+
+impl Arc {
+    fn of(band: &ToleranceBand) -> Self {
+        Self {
+            start_deg: band.from_deg.rem_euclid(360.0),
+            span_deg: band.span_deg(),
+        }
+    }
+
+    /// `angle_deg` in [0, 360].
+    fn contains(self, angle_deg: f64) -> bool {
+        let mut d = angle_deg - self.start_deg;
+        if d < -ANGLE_SLACK_DEG {
+            d += 360.0;
+        }
+        d <= self.span_deg + ANGLE_SLACK_DEG || d >= 360.0 - ANGLE_SLACK_DEG
     }
 }
 
@@ -110,12 +134,18 @@ pub fn judge(
     bands: &[ToleranceBand],
 ) -> Result<Verdict, AnalysisError> {
     validate(bands)?;
+    let arcs: Vec<(Arc, &ToleranceBand)> = bands.iter().map(|b| (Arc::of(b), b)).collect();
     let mut margin_um = f64::INFINITY;
     let mut worst: Option<Violation> = None;
     let mut unchecked_points = 0u32;
     for (k, (&angle, &value)) in angle_deg.iter().zip(values_um).enumerate() {
         let mut covered = false;
-        for band in bands.iter().filter(|b| b.contains(angle)) {
+        let reduced = if (0.0..=360.0).contains(&angle) {
+            angle
+        } else {
+            angle.rem_euclid(360.0)
+        };
+        for &(_, band) in arcs.iter().filter(|(arc, _)| arc.contains(reduced)) {
             covered = true;
             // A non-finite value is outside every band.
             let m = if value.is_finite() {
