@@ -190,7 +190,9 @@ pub struct LobeReport {
 }
 
 /// The nominal lift: angle ψ in degrees (called with ψ in [0, 360]) → (lift mm,
-/// d lift/dψ in mm per degree).
+/// d lift/dψ in mm per **degree**). A spline giving mm/rad must be scaled by π/180: the fitted
+/// phase does not depend on the slope's scale, but a slope 57× too large makes every
+/// Gauss–Newton step 57× too short and the fit ends in [`AnalysisError::FitNotConverged`].
 pub type NominalLift<'a> = &'a dyn Fn(f64) -> (f64, f64);
 
 /// Analyses an averaged lobe measurement against the nominal lift. See the module docs for

@@ -1,4 +1,5 @@
-//! Gauge measurements as they arrive: raw samples of several revolutions, before checks.
+//! Gauge measurements: raw samples of several revolutions as they arrive, the completeness
+//! checks that accept or reject them, and the per-angle average and spread over revolutions.
 
 /// Who and what a measurement belongs to, as announced by the gauge at the start.
 #[derive(Debug, Clone, PartialEq, Eq)]
