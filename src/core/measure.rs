@@ -365,21 +365,26 @@ impl RevolutionGrid {
         let n = self.points_per_rev as usize;
         let revs = self.revolutions as usize;
         let limit_mm = limits.revolution_limit_um / 1000.0;
-        // (max deviation mm, angle index) per revolution
-        let mut worst = vec![(0.0_f64, 0usize); revs];
         let mut column = vec![0.0; revs];
-        for k in 0..n {
-            for (r, v) in column.iter_mut().enumerate() {
-                *v = self.lift_mm[r * n + k];
-            }
-            let med = median(&mut column);
-            for (r, w) in worst.iter_mut().enumerate() {
-                let d = (self.lift_mm[r * n + k] - med).abs();
-                if d > w.0 {
-                    *w = (d, k);
+        let median_mm: Vec<f64> = (0..n)
+            .map(|k| {
+                for (r, v) in column.iter_mut().enumerate() {
+                    *v = self.lift_mm[r * n + k];
                 }
-            }
-        }
+                median(&mut column)
+            })
+            .collect();
+        // (max deviation mm, angle index) per revolution
+        let worst: Vec<(f64, usize)> = self
+            .lift_mm
+            .chunks_exact(n)
+            .map(|row| {
+                let deviations = row.iter().zip(&median_mm).map(|(v, m)| (v - m).abs());
+                deviations
+                    .enumerate()
+                    .fold((0.0, 0), |w, (k, d)| if d > w.0 { (d, k) } else { w })
+            })
+            .collect();
         let mut used = Vec::with_capacity(revs);
         let mut dropped = Vec::new();
         for (r, &(dev_mm, k)) in worst.iter().enumerate() {
@@ -410,23 +415,34 @@ impl RevolutionGrid {
                 dropped,
             });
         }
-        let mut mean_lift_mm = Vec::with_capacity(n);
-        let mut std_um = Vec::with_capacity(n);
-        let mut range_um = Vec::with_capacity(n);
-        let count = used.len() as f64;
-        for k in 0..n {
-            let values = used.iter().map(|&r| self.lift_mm[r as usize * n + k]);
-            let mean = values.clone().sum::<f64>() / count;
-            let (mut lo, mut hi, mut ss) = (f64::INFINITY, f64::NEG_INFINITY, 0.0);
-            for v in values {
-                lo = lo.min(v);
-                hi = hi.max(v);
-                ss += (v - mean) * (v - mean);
+        // Row by row (each revolution is contiguous), so the loops stream and vectorise.
+        let rows: Vec<&[f64]> = used
+            .iter()
+            .map(|&r| &self.lift_mm[r as usize * n..(r as usize + 1) * n])
+            .collect();
+        let count = rows.len() as f64;
+        let mut mean_lift_mm = vec![0.0; n];
+        let mut lo = vec![f64::INFINITY; n];
+        let mut hi = vec![f64::NEG_INFINITY; n];
+        for row in &rows {
+            for (k, &v) in row.iter().enumerate() {
+                mean_lift_mm[k] += v;
+                lo[k] = lo[k].min(v);
+                hi[k] = hi[k].max(v);
             }
-            mean_lift_mm.push(mean);
-            std_um.push((ss / (count - 1.0)).sqrt() * 1000.0);
-            range_um.push((hi - lo) * 1000.0);
         }
+        mean_lift_mm.iter_mut().for_each(|m| *m /= count);
+        let mut ss = vec![0.0; n];
+        for row in &rows {
+            for ((s, &v), &m) in ss.iter_mut().zip(row.iter()).zip(&mean_lift_mm) {
+                *s += (v - m) * (v - m);
+            }
+        }
+        let std_um: Vec<f64> = ss
+            .iter()
+            .map(|s| (s / (count - 1.0)).sqrt() * 1000.0)
+            .collect();
+        let range_um: Vec<f64> = hi.iter().zip(&lo).map(|(h, l)| (h - l) * 1000.0).collect();
         Ok(AveragedMeasurement {
             origin: self.origin.clone(),
             points_per_rev: self.points_per_rev,
@@ -439,9 +455,16 @@ impl RevolutionGrid {
     }
 }
 
-/// Median of a non-empty slice of finite values (reorders the slice).
+/// Median of a non-empty slice of finite values (reorders the slice). An insertion sort:
+/// the slice is one value per revolution, a handful.
 fn median(values: &mut [f64]) -> f64 {
-    values.sort_unstable_by(f64::total_cmp);
+    for i in 1..values.len() {
+        let mut j = i;
+        while j > 0 && values[j - 1] > values[j] {
+            values.swap(j - 1, j);
+            j -= 1;
+        }
+    }
     let m = values.len() / 2;
     if values.len() % 2 == 1 {
         values[m]
