@@ -107,3 +107,54 @@ pub enum PushError {
     #[error(transparent)]
     State(#[from] StateError),
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Linux errno values: the conditions that cannot be produced in a temporary folder.
+    #[test]
+    fn os_errors_name_the_share_condition() {
+        let share = Path::new("/mnt/nc");
+        let file = Path::new("/mnt/nc/CAM_T1.SPF");
+        let cases = [
+            (
+                2,
+                "share /mnt/nc is missing: No such file or directory (os error 2)",
+            ),
+            (
+                20,
+                "share /mnt/nc is not a folder: Not a directory (os error 20)",
+            ),
+            (
+                30,
+                "share /mnt/nc is read-only or not writable: Read-only file system (os error 30)",
+            ),
+            (
+                13,
+                "share /mnt/nc is read-only or not writable: Permission denied (os error 13)",
+            ),
+            (
+                28,
+                "share /mnt/nc is full: No space left on device (os error 28)",
+            ),
+            (
+                122,
+                "share /mnt/nc is full: Disk quota exceeded (os error 122)",
+            ),
+            (
+                5,
+                "cannot rename to /mnt/nc/CAM_T1.SPF: Input/output error (os error 5)",
+            ),
+        ];
+        for (errno, message) in cases {
+            let error = ShareError::classify(
+                share,
+                "rename to",
+                file,
+                io::Error::from_raw_os_error(errno),
+            );
+            assert_eq!(error.to_string(), message, "errno {errno}");
+        }
+    }
+}

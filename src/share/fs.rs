@@ -15,8 +15,11 @@ use sha2::{Digest, Sha256};
 /// with exactly this prefix.
 pub const TEMP_PREFIX: &str = ".camloop-tmp-";
 
-/// Random characters after [`TEMP_PREFIX`].
-const TEMP_RANDOM_CHARS: usize = 12;
+/// Random hex digits after [`TEMP_PREFIX`].
+const TEMP_RANDOM_CHARS: usize = 16;
+
+/// Attempts at a fresh temporary name before giving up (a clash is a 2⁻⁶⁴ event).
+const TEMP_NAME_ATTEMPTS: usize = 8;
 
 /// File-system operations on the share. Every method is one step of a push, so a fault can
 /// be injected at any of them; [`RealFs`] is the production implementation.
@@ -43,13 +46,12 @@ pub struct RealFs;
 
 impl ShareFs for RealFs {
     fn write_temp(&self, dir: &Path, bytes: &[u8]) -> io::Result<PathBuf> {
-        let tmp = tempfile::Builder::new()
-            .prefix(TEMP_PREFIX)
-            .rand_bytes(TEMP_RANDOM_CHARS)
-            .tempfile_in(dir)?;
-        // Dropping `tmp` on an error below removes the file.
-        write_synced(tmp.as_file(), bytes)?;
-        let (_file, path) = tmp.keep().map_err(|e| e.error)?;
+        let (file, path) = create_temp(dir, |p| File::create_new(p))?;
+        if let Err(e) = write_synced(&file, bytes) {
+            // Best effort: a leftover temporary is removed at the next start.
+            let _ = std::fs::remove_file(&path);
+            return Err(e);
+        }
         Ok(path)
     }
 
@@ -74,6 +76,36 @@ impl ShareFs for RealFs {
             .map(|entry| entry.map(|e| e.file_name()))
             .collect()
     }
+}
+
+/// Create something (a file, a folder) under a fresh temporary name in `dir`, never
+/// replacing an existing entry. The OS error comes back unchanged (no path added to it).
+pub(crate) fn create_temp<T>(
+    dir: &Path,
+    create: impl Fn(&Path) -> io::Result<T>,
+) -> io::Result<(T, PathBuf)> {
+    let mut clash = None;
+    for _ in 0..TEMP_NAME_ATTEMPTS {
+        let path = dir.join(format!("{TEMP_PREFIX}{}", random_hex()));
+        match create(&path) {
+            Ok(made) => return Ok((made, path)),
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => clash = Some(e),
+            Err(e) => return Err(e),
+        }
+    }
+    Err(clash.unwrap_or_else(|| io::Error::from(io::ErrorKind::AlreadyExists)))
+}
+
+/// 16 random hex digits, from the standard library's randomly keyed hasher (seeded from the
+/// OS per thread) over a per-process counter and the process id.
+fn random_hex() -> String {
+    use std::hash::{BuildHasher, Hasher};
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
+    hasher.write_u64(COUNTER.fetch_add(1, Ordering::Relaxed));
+    hasher.write_u32(std::process::id());
+    format!("{:0width$x}", hasher.finish(), width = TEMP_RANDOM_CHARS)
 }
 
 /// Write all of `bytes` to `file` and flush data and metadata to the device.
@@ -153,5 +185,16 @@ mod tests {
             TEMP_PREFIX.len() + TEMP_RANDOM_CHARS
         );
         assert_eq!(std::fs::read(&path).unwrap(), b"hello");
+        let again = RealFs.write_temp(dir.path(), b"hello").unwrap();
+        assert_ne!(again, path);
+    }
+
+    #[test]
+    fn write_temp_in_a_missing_folder_returns_the_plain_os_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let err = RealFs
+            .write_temp(&dir.path().join("gone"), b"x")
+            .unwrap_err();
+        assert_eq!(err.to_string(), "No such file or directory (os error 2)");
     }
 }

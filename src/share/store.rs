@@ -5,7 +5,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use super::error::{PushError, ShareError, StateError};
-use super::fs::{ShareFs, TEMP_PREFIX, is_temp_name, sha256_hex, sync_dir, write_synced};
+use super::fs::{ShareFs, create_temp, is_temp_name, sha256_hex, sync_dir, write_synced};
 use super::manifest::{self, FileRecord, History, Record, VersionRecord, VersionStatus};
 use crate::core::program::{check_table_pair, next_table_number};
 
@@ -367,19 +367,23 @@ impl Share {
             // An orphan from a run killed before its manifest line: never referenced.
             fs::remove_dir_all(&target).map_err(StateError::io("remove orphan", &target))?;
         }
-        let tmp = tempfile::Builder::new()
-            .prefix(TEMP_PREFIX)
-            .tempdir_in(&versions_dir)
+        let ((), tmp) = create_temp(&versions_dir, |p| fs::create_dir(p))
             .map_err(StateError::io("create a folder in", &versions_dir))?;
-        for file in files {
-            let path = tmp.path().join(&file.name);
-            fs::File::create_new(&path)
-                .and_then(|f| write_synced(&f, file.text.as_bytes()))
-                .map_err(StateError::io("write kept text", &path))?;
+        let stored = files
+            .iter()
+            .try_for_each(|file| {
+                let path = tmp.join(&file.name);
+                fs::File::create_new(&path)
+                    .and_then(|f| write_synced(&f, file.text.as_bytes()))
+                    .map_err(StateError::io("write kept text", &path))
+            })
+            .and_then(|()| sync_dir(&tmp).map_err(StateError::io("flush", &tmp)))
+            .and_then(|()| fs::rename(&tmp, &target).map_err(StateError::io("rename", &tmp)));
+        if let Err(e) = stored {
+            // Best effort: a leftover temporary is removed at the next start.
+            let _ = fs::remove_dir_all(&tmp);
+            return Err(e);
         }
-        sync_dir(tmp.path()).map_err(StateError::io("flush", tmp.path()))?;
-        let tmp_path = tmp.keep();
-        fs::rename(&tmp_path, &target).map_err(StateError::io("rename", &tmp_path))?;
         sync_dir(&versions_dir).map_err(StateError::io("flush", &versions_dir))
     }
 
