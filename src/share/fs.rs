@@ -125,11 +125,12 @@ pub(crate) fn sync_dir(dir: &Path) -> io::Result<()> {
     }
 }
 
-/// Append one line (which must end in `\n`) in a single write and flush it to the device.
-pub(crate) fn append_synced(path: &Path, line: &str) -> io::Result<()> {
+/// Append one line (which must end in `\n`) in a single write; with `flush`, flush the
+/// file's data to the device before returning.
+pub(crate) fn append_line(path: &Path, line: &str, flush: bool) -> io::Result<()> {
     let file = OpenOptions::new().create(true).append(true).open(path)?;
     (&file).write_all(line.as_bytes())?;
-    file.sync_data()
+    if flush { file.sync_data() } else { Ok(()) }
 }
 
 /// SHA-256 of `bytes`, lower-case hex (64 characters).

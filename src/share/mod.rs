@@ -11,7 +11,7 @@
 //! 4. Each temporary is renamed over its program file, in request order; the share folder
 //!    is flushed.
 //! 5. Every file is read back and its SHA-256 compared with the manifest; a `pushed` line
-//!    is appended.
+//!    is appended (flushed with the next line: losing it only repeats the delivery).
 //!
 //! A rename within one folder is atomic, so the control sees either the previous complete
 //! file or the new complete file, never a partial one, whenever the process dies. Between

@@ -128,14 +128,16 @@ pub struct ShareQueue {
 /// The loop has stopped; the request was not taken.
 #[derive(Debug, thiserror::Error)]
 #[error("the share loop has stopped")]
-pub struct QueueClosed(pub PushRequest);
+pub struct QueueClosed(pub Box<PushRequest>);
 
 impl ShareQueue {
     /// Queue a request. It is recorded at the next attempt (at once unless pushes are
     /// failing, then at the next retry); a newer request supersedes it if it has not been
     /// delivered by then.
     pub fn push(&self, request: PushRequest) -> Result<(), QueueClosed> {
-        self.tx.send(request).map_err(|e| QueueClosed(e.0))
+        self.tx
+            .send(request)
+            .map_err(|e| QueueClosed(Box::new(e.0)))
     }
 }
 

@@ -196,7 +196,7 @@ impl Share {
             rollback_of: request.rollback_of,
             refused: refused.clone(),
         };
-        self.append(Record::Version(record))?;
+        self.append(Record::Version(record), Flush::Now)?;
         Ok(match refused {
             Some(reason) => Submitted::Refused { version, reason },
             None => Submitted::Accepted { version },
@@ -227,10 +227,15 @@ impl Share {
         match result {
             Ok(paths) => {
                 let at_unix_ms = (self.clock)();
-                self.append(Record::Pushed {
-                    version,
-                    at_unix_ms,
-                })?;
+                // Not flushed on its own: losing this line (power cut) only means one more
+                // delivery of the same version at the next start; the next flush takes it.
+                self.append(
+                    Record::Pushed {
+                        version,
+                        at_unix_ms,
+                    },
+                    Flush::WithNext,
+                )?;
                 let (pruned, prune_error) = self.prune();
                 Ok(Some(Pushed {
                     version,
@@ -416,10 +421,14 @@ impl Share {
         let version = record.version;
         let share = self.config.share_dir.clone();
         let at_unix_ms = (self.clock)();
-        if let Err(e) = self.append(Record::Delivering {
-            version,
-            at_unix_ms,
-        }) {
+        // Flushed before the first rename: the table numbering relies on it.
+        if let Err(e) = self.append(
+            Record::Delivering {
+                version,
+                at_unix_ms,
+            },
+            Flush::Now,
+        ) {
             self.discard(&temps);
             return Err(e.into());
         }
@@ -469,11 +478,15 @@ impl Share {
             return Ok(());
         }
         let at_unix_ms = (self.clock)();
-        self.append(Record::Waiting {
-            version,
-            at_unix_ms,
-            reason,
-        })
+        // Informational: the version record itself keeps the version waiting.
+        self.append(
+            Record::Waiting {
+                version,
+                at_unix_ms,
+                reason,
+            },
+            Flush::WithNext,
+        )
     }
 
     /// Remove the kept text of accepted versions older than the newest `keep_versions`
@@ -492,10 +505,13 @@ impl Share {
             let at_unix_ms = (self.clock)();
             // The record goes first: a kill after it leaves an orphan folder that the next
             // start removes, never a record pointing at a missing text.
-            if let Err(e) = self.append(Record::Pruned {
-                version,
-                at_unix_ms,
-            }) {
+            if let Err(e) = self.append(
+                Record::Pruned {
+                    version,
+                    at_unix_ms,
+                },
+                Flush::Now,
+            ) {
                 return (pruned, Some(e));
             }
             let dir = self.version_dir(version);
@@ -526,9 +542,9 @@ impl Share {
         Ok(removed)
     }
 
-    fn append(&mut self, record: Record) -> Result<(), StateError> {
+    fn append(&mut self, record: Record, flush: Flush) -> Result<(), StateError> {
         let path = self.config.state_dir.join(MANIFEST_FILE);
-        super::fs::append_synced(&path, &manifest::line(&record))
+        super::fs::append_line(&path, &manifest::line(&record), flush == Flush::Now)
             .map_err(StateError::io("append to", &path))?;
         self.history
             .apply(record)
@@ -538,6 +554,14 @@ impl Share {
                 reason,
             })
     }
+}
+
+/// Whether a manifest line must be on the device before the next step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Flush {
+    Now,
+    /// With the next flushed line (`fdatasync` flushes all the file's data).
+    WithNext,
 }
 
 /// `v000042`: six digits so that a listing sorts by version up to 999999.
