@@ -475,3 +475,71 @@ async fn a_version_left_waiting_by_an_earlier_run_goes_when_the_loop_starts() {
     drop(queue);
     handle.await.unwrap();
 }
+
+#[tokio::test(start_paused = true)]
+async fn a_request_the_state_folder_cannot_record_is_kept_and_recorded_later() {
+    let d = dirs();
+    let (share, _) = open(&d, 5);
+    let request = next_request(&share, 1);
+    // The manifest path is a folder: appending fails with EISDIR.
+    let manifest = d.state.join(camloop::share::MANIFEST_FILE);
+    std::fs::create_dir(&manifest).unwrap();
+    let (queue, mut events, handle) = spawn(share, policy());
+    queue.push(request.clone()).unwrap();
+    assert_eq!(
+        events.recv().await.unwrap(),
+        ShareEvent::Alarm {
+            version: None,
+            reason: format!(
+                "cannot append to {}: Is a directory (os error 21)",
+                manifest.display()
+            ),
+            retry_in: Duration::from_secs(1),
+        }
+    );
+    std::fs::remove_dir(&manifest).unwrap();
+    assert!(matches!(
+        events.recv().await.unwrap(),
+        ShareEvent::Pushed { version: 1, .. }
+    ));
+    assert_eq!(
+        events.recv().await.unwrap(),
+        ShareEvent::Recovered { version: 1 }
+    );
+    assert_eq!(
+        std::fs::read_to_string(d.share.join("CAM_T1.SPF")).unwrap(),
+        request.files[0].text
+    );
+    drop(queue);
+    assert!(handle.await.unwrap().unrecorded.is_empty());
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_loop_reports_a_refused_request_and_goes_on() {
+    let d = dirs();
+    let (share, _) = open(&d, 5);
+    let mut wrong = next_request(&share, 1);
+    wrong.table_number = 2;
+    let right = next_request(&share, 2);
+    let (queue, mut events, handle) = spawn(share, policy());
+    queue.push(wrong).unwrap();
+    queue.push(right).unwrap();
+    assert_eq!(
+        events.recv().await.unwrap(),
+        ShareEvent::Refused {
+            version: 1,
+            reason: "table 2 is not the next of the pair (1, 2); the next table is 1".into(),
+        }
+    );
+    assert!(matches!(
+        events.recv().await.unwrap(),
+        ShareEvent::Pushed {
+            version: 2,
+            table_number: 1,
+            ..
+        }
+    ));
+    drop(queue);
+    handle.await.unwrap();
+    assert!(events.recv().await.is_none(), "no alarm, nothing else");
+}
