@@ -108,6 +108,9 @@ impl VersionState {
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct History {
     versions: Vec<VersionState>,
+    /// Index of the one deliverable version, if any (accepting a version supersedes the
+    /// previous deliverable one, so there is never more than one).
+    deliverable: Option<usize>,
 }
 
 /// A manifest read from disk.
@@ -116,6 +119,8 @@ pub struct Loaded {
     pub history: History,
     /// Length of the complete lines; anything after it is a torn last line.
     pub good_len: u64,
+    /// Number of complete lines.
+    pub lines: usize,
     /// Bytes of a torn (unterminated) last line that were ignored.
     pub torn_bytes: u64,
 }
@@ -145,11 +150,7 @@ impl History {
     /// The newest version still to be delivered (at most one: accepting a version supersedes
     /// every older waiting one).
     pub fn waiting(&self) -> Option<&VersionState> {
-        self.versions
-            .iter()
-            .rev()
-            .find(|v| v.record.refused.is_none())
-            .filter(|v| v.is_deliverable())
+        self.deliverable.and_then(|i| self.versions.get(i))
     }
 
     /// The newest version whose files may be on the share (and so whose table the control
@@ -183,11 +184,11 @@ impl History {
                         reason: reason.clone(),
                     },
                     None => {
-                        for older in &mut self.versions {
-                            if older.is_deliverable() {
-                                older.status = VersionStatus::Superseded { by: rec.version };
-                            }
+                        if let Some(older) = self.deliverable.and_then(|i| self.versions.get_mut(i))
+                        {
+                            older.status = VersionStatus::Superseded { by: rec.version };
                         }
+                        self.deliverable = Some(self.versions.len());
                         VersionStatus::Waiting { reason: None }
                     }
                 };
@@ -221,6 +222,7 @@ impl History {
                     return Err(format!("v{version} pushed without delivering"));
                 }
                 v.status = VersionStatus::Pushed { at_unix_ms };
+                self.deliverable = None;
             }
             Record::Pruned { version, .. } => {
                 let v = self
@@ -255,6 +257,7 @@ pub fn load(path: &Path) -> Result<Loaded, StateError> {
     };
     let good_len = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
     let mut history = History::default();
+    let lines = bytes[..good_len].iter().filter(|&&b| b == b'\n').count();
     for (index, line) in bytes[..good_len].split(|&b| b == b'\n').enumerate() {
         if line.is_empty() {
             continue;
@@ -270,6 +273,7 @@ pub fn load(path: &Path) -> Result<Loaded, StateError> {
     Ok(Loaded {
         history,
         good_len: good_len as u64,
+        lines,
         torn_bytes: (bytes.len() - good_len) as u64,
     })
 }
@@ -405,6 +409,7 @@ mod tests {
         let loaded = load(&path).unwrap();
         assert_eq!(loaded.history.versions().len(), 1);
         assert_eq!(loaded.good_len, first.len() as u64);
+        assert_eq!(loaded.lines, 1);
         assert_eq!(loaded.torn_bytes, 15);
 
         std::fs::write(&path, format!("{first}garbage\n{first}")).unwrap();

@@ -99,6 +99,8 @@ pub struct Share {
     fs: Box<dyn ShareFs>,
     clock: Clock,
     history: History,
+    /// Complete lines in the manifest.
+    manifest_lines: usize,
     share_cleaned: bool,
 }
 
@@ -142,6 +144,7 @@ impl Share {
             fs,
             clock,
             history: loaded.history,
+            manifest_lines: loaded.lines,
             share_cleaned: false,
         };
         match share.clean_share() {
@@ -546,10 +549,11 @@ impl Share {
         let path = self.config.state_dir.join(MANIFEST_FILE);
         super::fs::append_line(&path, &manifest::line(&record), flush == Flush::Now)
             .map_err(StateError::io("append to", &path))?;
+        self.manifest_lines += 1;
         self.history
             .apply(record)
             .map_err(|reason| StateError::CorruptManifest {
-                line: self.history.versions().len(),
+                line: self.manifest_lines,
                 path,
                 reason,
             })
