@@ -38,6 +38,7 @@ mod error;
 mod fs;
 mod manifest;
 mod queue;
+mod state;
 mod store;
 
 pub use error::{PushError, ShareError, StateError};

@@ -2,11 +2,12 @@
 //! controller share atomically, verify it, keep the history.
 
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use super::error::{PushError, ShareError, StateError};
-use super::fs::{ShareFs, create_temp, is_temp_name, sha256_hex, sync_dir, write_synced};
+use super::fs::{ShareFs, is_temp_name, sha256_hex};
 use super::manifest::{self, FileRecord, History, Record, VersionRecord, VersionStatus};
+use super::state::{clean_versions_dir, cut_manifest, read_kept, store_text, version_dir};
 use crate::core::program::{check_table_pair, next_table_number};
 
 /// Manifest file name inside the state folder.
@@ -178,7 +179,11 @@ impl Share {
         let version = self.history.next_version();
         let refused = self.refusal(&request);
         if refused.is_none() {
-            self.store_text(version, &request.files)?;
+            store_text(
+                &self.config.state_dir.join(VERSIONS_DIR),
+                version,
+                &request.files,
+            )?;
         }
         let record = VersionRecord {
             version,
@@ -303,35 +308,12 @@ impl Share {
         if !state.text_kept {
             return Err(StateError::NoText(version));
         }
-        let dir = self.version_dir(version);
-        state
-            .record
-            .files
-            .iter()
-            .map(|f| {
-                let path = dir.join(&f.name);
-                let bytes = fs::read(&path).map_err(StateError::io("read kept text", &path))?;
-                let text = String::from_utf8(bytes)
-                    .ok()
-                    .filter(|t| sha256_hex(t.as_bytes()) == f.sha256)
-                    .ok_or_else(|| StateError::TextMismatch {
-                        path: path.clone(),
-                        expected: f.sha256.clone(),
-                    })?;
-                Ok(ProgramFile {
-                    name: f.name.clone(),
-                    text,
-                })
-            })
-            .collect()
+        read_kept(&self.version_dir(version), &state.record.files)
     }
 
     /// Folder of a version's kept text: `<state>/versions/v000042`.
     pub fn version_dir(&self, version: u64) -> PathBuf {
-        self.config
-            .state_dir
-            .join(VERSIONS_DIR)
-            .join(version_dir_name(version))
+        version_dir(&self.config.state_dir.join(VERSIONS_DIR), version)
     }
 
     fn refusal(&self, request: &PushRequest) -> Option<String> {
@@ -366,33 +348,6 @@ impl Share {
             return Some(format!("{why}; the next table is {next}"));
         }
         None
-    }
-
-    fn store_text(&self, version: u64, files: &[ProgramFile]) -> Result<(), StateError> {
-        let versions_dir = self.config.state_dir.join(VERSIONS_DIR);
-        let target = self.version_dir(version);
-        if target.exists() {
-            // An orphan from a run killed before its manifest line: never referenced.
-            fs::remove_dir_all(&target).map_err(StateError::io("remove orphan", &target))?;
-        }
-        let ((), tmp) = create_temp(&versions_dir, |p| fs::create_dir(p))
-            .map_err(StateError::io("create a folder in", &versions_dir))?;
-        let stored = files
-            .iter()
-            .try_for_each(|file| {
-                let path = tmp.join(&file.name);
-                fs::File::create_new(&path)
-                    .and_then(|f| write_synced(&f, file.text.as_bytes()))
-                    .map_err(StateError::io("write kept text", &path))
-            })
-            .and_then(|()| sync_dir(&tmp).map_err(StateError::io("flush", &tmp)))
-            .and_then(|()| fs::rename(&tmp, &target).map_err(StateError::io("rename", &tmp)));
-        if let Err(e) = stored {
-            // Best effort: a leftover temporary is removed at the next start.
-            let _ = fs::remove_dir_all(&tmp);
-            return Err(e);
-        }
-        sync_dir(&versions_dir).map_err(StateError::io("flush", &versions_dir))
     }
 
     fn write_temporaries(&self, files: &[ProgramFile]) -> Result<Vec<PathBuf>, ShareError> {
@@ -568,19 +523,6 @@ enum Flush {
     WithNext,
 }
 
-/// `v000042`: six digits so that a listing sorts by version up to 999999.
-fn version_dir_name(version: u64) -> String {
-    format!("v{version:06}")
-}
-
-fn parse_version_dir(name: &str) -> Option<u64> {
-    let digits = name.strip_prefix('v')?;
-    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
-    }
-    digits.parse().ok()
-}
-
 /// Why a name cannot be a program file on the share, if it cannot.
 fn bad_file_name(name: &str) -> Option<&'static str> {
     if name.is_empty() {
@@ -594,56 +536,9 @@ fn bad_file_name(name: &str) -> Option<&'static str> {
     }
 }
 
-fn cut_manifest(path: &Path, good_len: u64) -> Result<(), StateError> {
-    fs::OpenOptions::new()
-        .write(true)
-        .open(path)
-        .and_then(|f| {
-            f.set_len(good_len)?;
-            f.sync_all()
-        })
-        .map_err(StateError::io("cut the torn last line of", path))
-}
-
-/// Remove temporaries and folders of versions that have no kept text (orphans of a kill,
-/// pruned or refused versions); leave anything else alone.
-fn clean_versions_dir(dir: &Path, history: &History) -> Result<Vec<PathBuf>, StateError> {
-    let mut removed = Vec::new();
-    let entries = fs::read_dir(dir).map_err(StateError::io("list", dir))?;
-    for entry in entries {
-        let entry = entry.map_err(StateError::io("list", dir))?;
-        let name = entry.file_name();
-        let orphan = name
-            .to_str()
-            .and_then(parse_version_dir)
-            .is_some_and(|v| history.get(v).is_none_or(|s| !s.text_kept));
-        if orphan || is_temp_name(&name) {
-            let path = entry.path();
-            let result = if path.is_dir() {
-                fs::remove_dir_all(&path)
-            } else {
-                fs::remove_file(&path)
-            };
-            result.map_err(StateError::io("remove", &path))?;
-            removed.push(path);
-        }
-    }
-    Ok(removed)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn version_folders_sort_and_parse_back() {
-        assert_eq!(version_dir_name(42), "v000042");
-        assert_eq!(parse_version_dir("v000042"), Some(42));
-        assert_eq!(parse_version_dir("v1234567"), Some(1_234_567));
-        assert_eq!(parse_version_dir("v"), None);
-        assert_eq!(parse_version_dir("v12a"), None);
-        assert_eq!(parse_version_dir("x000001"), None);
-    }
 
     #[test]
     fn file_names_must_be_plain_and_not_hidden() {
