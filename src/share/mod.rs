@@ -26,7 +26,10 @@
 //! <state>/versions/v000002/...
 //! <state>/versions/.camloop-tmp-*   a version being stored (removed at start if left over)
 //! ```
-//! The share holds only the current program files.
+//! The share holds only program files: each version's files overwrite the same names, so
+//! with alternating `CAM_T1.SPF` / `CAM_T2.SPF` it holds both tables (the previous one may be
+//! the one the control runs) and the main program. One camloop process per state folder and
+//! per share: start-up cleanup would remove another process's temporaries.
 //!
 //! # Table numbers
 //! A version must define [`Share::next_table_number`]: the other table of the configured
