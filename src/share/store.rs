@@ -117,7 +117,7 @@ impl std::fmt::Debug for Share {
 impl Share {
     /// Open (creating it if needed) the state folder: cut a torn manifest line, remove
     /// temporaries and orphan version folders, and remove camloop temporaries from the share
-    /// (names starting with [`TEMP_PREFIX`] only) if the share is reachable.
+    /// (names starting with [`super::TEMP_PREFIX`] only) if the share is reachable.
     pub fn open(
         config: ShareConfig,
         fs: Box<dyn ShareFs>,
@@ -272,7 +272,7 @@ impl Share {
     }
 
     /// A request that re-pushes the kept text of `version` as a new version, with reason
-    /// "rollback to v<version>" and the original measurement and learning parameters.
+    /// `"rollback to v<version>"` and the original measurement and learning parameters.
     ///
     /// The text defines the table number it was made with. If that is not
     /// [`Self::next_table_number`], submitting the request refuses it (it would redefine the
