@@ -8,3 +8,5 @@
 
 pub mod cli;
 pub mod core;
+pub mod recipe;
+pub mod share;

@@ -3,6 +3,7 @@
 
 use super::fit::{self, Deviation, Motion, TableForm};
 use super::geometry::{CamGeometry, GeometryError, Part};
+use super::learn::{self, LearnError, LearningParams, LearningState, StepOutcome};
 use super::lift::{LiftCurve, LiftTable, LiftTableError};
 use super::spline::PeriodicSpline;
 use super::table::{PolySegment, TablePoint};
@@ -160,6 +161,58 @@ pub fn guarded_part_table(
         motion,
         deviation,
     })
+}
+
+/// What stays fixed in one lobe's loop.
+#[derive(Debug, Clone, Copy)]
+pub struct LobeLoop<'a> {
+    pub nominal: &'a LiftTable,
+    /// Geometry with the wheel radius the control currently believes in.
+    pub geometry: CamGeometry,
+    pub request: TableRequest,
+    pub limits: &'a AxisLimits,
+    pub params: &'a LearningParams,
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CycleError {
+    #[error("learning refused: {0}")]
+    Learn(#[from] LearnError),
+    #[error("table refused: {0}")]
+    Guard(#[from] GuardError),
+}
+
+/// The table for the correction currently in `state` (the nominal one for a new state; after
+/// a dressing, the same correction on the new wheel).
+pub fn current_table(
+    state: &LearningState,
+    lobe: &LobeLoop<'_>,
+) -> Result<GuardedTable, GuardError> {
+    let commanded = commanded_lift(lobe.nominal, &state.correction_um)?;
+    guarded_table(lobe.geometry, &commanded, lobe.request, lobe.limits)
+}
+
+/// One turn of the loop: learn from the part just measured, then regenerate and guard the
+/// next table. `state` changes only when that table passed every guard; otherwise the
+/// previous table stays in force and the error says why.
+pub fn learn_and_regenerate(
+    state: &mut LearningState,
+    error_um: &[f64],
+    repeatability_um: &[f64],
+    revolutions: u32,
+    lobe: &LobeLoop<'_>,
+) -> Result<(StepOutcome, GuardedTable), CycleError> {
+    let mut next = state.clone();
+    let outcome = learn::step(
+        &mut next,
+        error_um,
+        repeatability_um,
+        revolutions,
+        lobe.params,
+    )?;
+    let table = current_table(&next, lobe)?;
+    *state = next;
+    Ok((outcome, table))
 }
 
 /// Largest |acceleration| and |jerk| of X from central differences over uniform table points.

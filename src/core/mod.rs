@@ -6,6 +6,7 @@ pub mod compensate;
 pub mod fit;
 pub mod geometry;
 pub mod harmonics;
+pub mod learn;
 pub mod lift;
 pub mod measure;
 pub mod program;
