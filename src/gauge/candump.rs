@@ -3,7 +3,8 @@
 //!
 //! Line format: `(1700000000.000000) can0 5A1#0011223344556677`, the id as exactly 3 hex
 //! digits (standard) or 8 (extended, at most 29 bits), 0–8 data bytes as hex pairs (a `.`
-//! between bytes is tolerated). CAN FD lines (`ID##F…`) and remote requests (`ID#R`) are
+//! between bytes is tolerated), optionally followed by a direction flag `R` (received) or
+//! `T` (transmitted) as newer can-utils and python-can write it. CAN FD lines (`ID##F…`) and remote requests (`ID#R`) are
 //! rejected explicitly: the gauge protocol is classic CAN data frames.
 
 use crate::core::measure::RawMeasurement;
@@ -59,9 +60,13 @@ pub enum CandumpLineError {
 pub fn parse_candump_line(line: &str) -> Result<CandumpRecord<'_>, CandumpLineError> {
     let shape = || CandumpLineError::Shape { found: clip(line) };
     let mut fields = line.split_ascii_whitespace();
-    let (Some(stamp), Some(interface), Some(frame), None) =
-        (fields.next(), fields.next(), fields.next(), fields.next())
-    else {
+    let (Some(stamp), Some(interface), Some(frame), None | Some("R" | "T"), None) = (
+        fields.next(),
+        fields.next(),
+        fields.next(),
+        fields.next(),
+        fields.next(),
+    ) else {
         return Err(shape());
     };
     let timestamp_s =
@@ -230,12 +235,12 @@ mod tests {
         assert_eq!(r.id, CanId::Standard(0x1a0));
         assert_eq!(r.data(), [0x00, 0x11, 0x22, 0x33, 0x44, 0x55, 0x66, 0x77]);
 
-        let r = parse_candump_line("(1700000000.250000) vcan1 18FF5A01#dead.BEEF").expect("ok");
+        let r = parse_candump_line("(1700000000.250000) vcan1 18FF5A01#dead.BEEF R").expect("ok");
         assert_eq!(r.id, CanId::Extended(0x18ff_5a01));
         assert_eq!(r.data(), [0xde, 0xad, 0xbe, 0xef]);
         assert_eq!(r.timestamp_s, 1_700_000_000.25);
 
-        let r = parse_candump_line("(0.1) can0 5A2#").expect("empty payload");
+        let r = parse_candump_line("(0.1) can0 5A2# T").expect("empty payload, tx flag");
         assert!(r.data().is_empty());
     }
 
