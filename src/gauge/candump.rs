@@ -187,7 +187,7 @@ pub fn read_candump_measurements(text: &str, dbc: &GaugeDbc, origin: &str) -> Ca
     let mut report = CandumpReport::default();
     let mut assembler = Assembler::new(origin);
     let mut last_line = 0;
-    let mut deliver = |report: &mut CandumpReport, line: usize, out: Option<Assembled>| match out {
+    let deliver = |report: &mut CandumpReport, line: usize, out: Option<Assembled>| match out {
         Some(Assembled::Measurement(m)) => report.measurements.push(m),
         Some(Assembled::Problem(problem)) => {
             report.issues.push(CandumpIssue::Assembly { line, problem })
