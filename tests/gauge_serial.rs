@@ -19,8 +19,7 @@ fn fixture(name: &str) -> String {
 /// The formula documented in tools/encode_candump.py.
 fn lift_mm(revolution: u32, angle_index: u32, points_per_rev: u32) -> f64 {
     let theta = 2.0 * std::f64::consts::PI * f64::from(angle_index) / f64::from(points_per_rev);
-    6.2 * ((1.0 - theta.cos()) / 2.0).powi(2)
-        + 0.0015 * (5.0 * theta + f64::from(revolution)).sin()
+    6.2 * ((1.0 - theta.cos()) / 2.0).powi(2) + 0.0015 * (5.0 * theta + f64::from(revolution)).sin()
         - 0.0008
 }
 

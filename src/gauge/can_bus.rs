@@ -81,14 +81,15 @@ impl CanBus {
             source,
         };
         if tokio::runtime::Handle::try_current().is_err() {
-            return Err(fail(io::Error::other("no tokio runtime to drive the socket")));
+            return Err(fail(io::Error::other(
+                "no tokio runtime to drive the socket",
+            )));
         }
         let socket = socketcan::tokio::CanSocket::open(interface).map_err(fail)?;
         let filters = [dbc.start.id, dbc.sample.id, dbc.end.id].map(|id| match id {
-            CanId::Standard(id) => CanFilter::new(
-                u32::from(id),
-                CAN_EFF_FLAG | CAN_RTR_FLAG | CAN_SFF_MASK,
-            ),
+            CanId::Standard(id) => {
+                CanFilter::new(u32::from(id), CAN_EFF_FLAG | CAN_RTR_FLAG | CAN_SFF_MASK)
+            }
             CanId::Extended(id) => CanFilter::new(
                 id | CAN_EFF_FLAG,
                 CAN_EFF_FLAG | CAN_RTR_FLAG | CAN_EFF_MASK,

@@ -156,7 +156,12 @@ pub fn parse_measurement_csv(
     let revolutions = match meta.revolutions {
         Some(r) => r,
         None => {
-            let found = rows.iter().map(|r| u64::from(r.revolution)).max().unwrap_or(0) + 1;
+            let found = rows
+                .iter()
+                .map(|r| u64::from(r.revolution))
+                .max()
+                .unwrap_or(0)
+                + 1;
             u32::try_from(found)
                 .ok()
                 .filter(|r| *r <= MAX_REVOLUTIONS)
@@ -225,16 +230,12 @@ fn parse_row(line: usize, text: &str) -> Result<Row, CsvLineError> {
         .all(|b| b.is_ascii_digit())
         .then(|| rev.parse::<u32>().ok())
         .flatten()
-        .ok_or_else(|| CsvLineError::Revolution {
-            found: clip(rev),
-        })?;
+        .ok_or_else(|| CsvLineError::Revolution { found: clip(rev) })?;
     let angle_deg = angle
         .parse::<f64>()
         .ok()
         .filter(|a| (0.0..360.0).contains(a))
-        .ok_or_else(|| CsvLineError::Angle {
-            found: clip(angle),
-        })?;
+        .ok_or_else(|| CsvLineError::Angle { found: clip(angle) })?;
     let lift_mm = lift
         .parse::<f64>()
         .ok()
@@ -262,9 +263,7 @@ fn read_metadata(comment: &str, meta: &mut Metadata) -> Result<(), CsvLineError>
             .split_once('=')
             .and_then(|(k, v)| KEYS.iter().find(|known| **known == k).map(|k| (*k, v)))
         else {
-            return Err(CsvLineError::MetadataToken {
-                found: clip(token),
-            });
+            return Err(CsvLineError::MetadataToken { found: clip(token) });
         };
         let bad = |expected| CsvLineError::MetadataValue {
             key,
@@ -411,7 +410,13 @@ mod tests {
             .collect();
         assert_eq!(
             got,
-            [(0, 0, 0.0), (0, 1, 1.5), (0, 2, 3.0), (0, 3, 1.5), (1, 0, 0.01)]
+            [
+                (0, 0, 0.0),
+                (0, 1, 1.5),
+                (0, 2, 3.0),
+                (0, 3, 1.5),
+                (1, 0, 0.01)
+            ]
         );
         assert_eq!(m.origin, "drop");
     }
@@ -440,15 +445,27 @@ mod tests {
     fn errors_name_the_line() {
         let name = "M3_P1_L1.csv";
         let cases = [
-            ("0,0,0\n0,1\n", "line 2: expected 3 fields rev,angle_deg,lift_mm, found 2"),
+            (
+                "0,0,0\n0,1\n",
+                "line 2: expected 3 fields rev,angle_deg,lift_mm, found 2",
+            ),
             (
                 "revolution,angle,lift\n0,0,0\n",
                 "line 1: expected the header rev,angle_deg,lift_mm or a data row, found \
                  \"revolution,angle,lift\"",
             ),
-            ("0,0,0\n-1,1,0\n", "line 2: rev \"-1\" is not a whole number ≥ 0"),
-            ("0,360,0\n", "line 1: angle \"360\" is not a number in [0, 360) degrees"),
-            ("0,NaN,0\n", "line 1: angle \"NaN\" is not a number in [0, 360) degrees"),
+            (
+                "0,0,0\n-1,1,0\n",
+                "line 2: rev \"-1\" is not a whole number ≥ 0",
+            ),
+            (
+                "0,360,0\n",
+                "line 1: angle \"360\" is not a number in [0, 360) degrees",
+            ),
+            (
+                "0,NaN,0\n",
+                "line 1: angle \"NaN\" is not a number in [0, 360) degrees",
+            ),
             (
                 "0,0,inf\n",
                 "line 1: lift \"inf\" is not a finite number of mm within ±1000",
@@ -492,9 +509,11 @@ mod tests {
         }
         assert_eq!(
             parse("0,0,0\n", "lobe scan.csv"),
-            Err("machine, part and lobe unknown: add a `# machine=… part=… lobe=…` comment \
+            Err(
+                "machine, part and lobe unknown: add a `# machine=… part=… lobe=…` comment \
                  line or name the file MACHINE_PART_LOBE[_…].csv (file name \"lobe scan.csv\")"
-                .to_owned())
+                    .to_owned()
+            )
         );
     }
 }

@@ -7,6 +7,7 @@
 //! DBC and rename the signals in config.
 
 use std::path::Path;
+use std::sync::LazyLock;
 
 use can_dbc::{Dbc, MessageId, MultiplexIndicator, NumericValue, SignalExtendedValueType};
 
@@ -134,10 +135,13 @@ pub struct GaugeDbc {
 }
 
 impl GaugeDbc {
-    /// The layout of `config/gauge.dbc` with the default names.
+    /// The layout of `config/gauge.dbc` with the default names (compiled once per process).
     pub fn builtin() -> Self {
-        Self::from_dbc_text(BUILTIN_DBC, &GaugeSignalNames::default())
-            .expect("the shipped config/gauge.dbc compiles (checked by tests)")
+        static BUILTIN: LazyLock<GaugeDbc> = LazyLock::new(|| {
+            GaugeDbc::from_dbc_text(BUILTIN_DBC, &GaugeSignalNames::default())
+                .expect("the shipped config/gauge.dbc compiles (checked by tests)")
+        });
+        BUILTIN.clone()
     }
 
     /// Reads and compiles a DBC file.

@@ -138,7 +138,8 @@ impl DropFolder {
             .collect();
         now.sort_by(|a, b| a.0.cmp(&b.0));
         let previous = std::mem::take(&mut self.seen);
-        self.stuck.retain(|path, _| now.iter().any(|(p, _)| p == path));
+        self.stuck
+            .retain(|path, _| now.iter().any(|(p, _)| p == path));
         for (path, stamp) in now {
             if self.stuck.get(&path) == Some(&stamp) {
                 continue;
@@ -262,7 +263,13 @@ mod tests {
 
     #[test]
     fn in_progress_names() {
-        for name in [".M3_P1_L1.csv", "~lock", "a.csv.tmp", "a.CSV.PART", "x.partial"] {
+        for name in [
+            ".M3_P1_L1.csv",
+            "~lock",
+            "a.csv.tmp",
+            "a.CSV.PART",
+            "x.partial",
+        ] {
             assert!(in_progress(name), "{name}");
         }
         for name in ["M3_P1_L1.csv", "a.log", "tmp.csv", "notes.txt"] {

@@ -29,10 +29,11 @@ pub enum GaugeError {
     #[error("measurement file {path}: {source}")]
     Csv { path: String, source: CsvError },
     #[error("candump log {path}: {source}")]
-    Candump { path: String, source: CandumpIssue },
-    #[error(
-        "candump log {path} holds {count} complete measurements; exactly one was expected"
-    )]
+    Candump {
+        path: String,
+        source: Box<CandumpIssue>,
+    },
+    #[error("candump log {path} holds {count} complete measurements; exactly one was expected")]
     NotOneMeasurement { path: String, count: usize },
 }
 
@@ -55,12 +56,17 @@ pub fn read_measurement_file(path: &Path, dbc: &GaugeDbc) -> Result<RawMeasureme
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
-        return parse_measurement_csv(&text, &name, &shown)
-            .map_err(|source| GaugeError::Csv { path: shown, source });
+        return parse_measurement_csv(&text, &name, &shown).map_err(|source| GaugeError::Csv {
+            path: shown,
+            source,
+        });
     }
     let mut report = read_candump_measurements(&text, dbc, &shown);
     if let Some(source) = report.issues.into_iter().next() {
-        return Err(GaugeError::Candump { path: shown, source });
+        return Err(GaugeError::Candump {
+            path: shown,
+            source: Box::new(source),
+        });
     }
     match report.measurements.len() {
         1 => Ok(report.measurements.remove(0)),

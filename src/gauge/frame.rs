@@ -215,7 +215,7 @@ fn count<const N: usize>(
     let whole = match exact {
         Some(v) => u64::try_from(v).ok(),
         // A fractional factor: accept only values that land on a whole number.
-        None if value.fract() == 0.0 && value >= 0.0 && value < 18_446_744_073_709_551_616.0 =>
+        None if value.fract() == 0.0 && (0.0..18_446_744_073_709_551_616.0).contains(&value) =>
         {
             #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
             Some(value as u64)

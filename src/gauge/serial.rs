@@ -25,8 +25,7 @@ use crc32fast::Hasher;
 use crate::core::measure::{MeasurementHeader, RawMeasurement, RawSample};
 
 use super::assemble::{
-    Assembled, AssemblyProblem, DiscardReason, MAX_POINTS_PER_REV, MAX_REVOLUTIONS,
-    OpenMeasurement,
+    Assembled, AssemblyProblem, DiscardReason, MAX_POINTS_PER_REV, MAX_REVOLUTIONS, OpenMeasurement,
 };
 
 /// Longest accepted line, terminator excluded.
@@ -40,7 +39,10 @@ const MAX_ID_CHARS: usize = 32;
 pub enum SerialLine {
     Start(MeasurementHeader),
     Sample(RawSample),
-    End { sample_count: u64, crc32: u32 },
+    End {
+        sample_count: u64,
+        crc32: u32,
+    },
     /// Empty or `#` comment.
     Ignored,
 }
@@ -359,7 +361,10 @@ fn crc_line(crc: &mut Hasher, text: &str) {
 }
 
 fn problem(line: usize, problem: AssemblyProblem) -> Option<SerialEvent> {
-    Some(SerialEvent::Problem(SerialProblem::Assembly { line, problem }))
+    Some(SerialEvent::Problem(SerialProblem::Assembly {
+        line,
+        problem,
+    }))
 }
 
 /// Decodes a whole text (a capture of the line stream).
@@ -380,7 +385,9 @@ pub fn decode_serial_text(text: &str, origin: &str) -> Vec<SerialEvent> {
 pub enum SerialEncodeError {
     #[error("{field} {found:?} must be 1–{MAX_ID_CHARS} characters of A–Z a–z 0–9 . _ -")]
     BadId { field: &'static str, found: String },
-    #[error("lift {lift_mm} mm at revolution {revolution}, index {angle_index} is not finite or beyond ±{MAX_ABS_LIFT_MM} mm")]
+    #[error(
+        "lift {lift_mm} mm at revolution {revolution}, index {angle_index} is not finite or beyond ±{MAX_ABS_LIFT_MM} mm"
+    )]
     BadLift {
         revolution: u32,
         angle_index: u32,
@@ -392,7 +399,11 @@ pub enum SerialEncodeError {
 /// rounded to 1 nm), with its sample count and CRC-32.
 pub fn encode_serial_measurement(m: &RawMeasurement) -> Result<String, SerialEncodeError> {
     let h = &m.header;
-    for (field, value) in [("machine", &h.machine), ("part", &h.part), ("lobe", &h.lobe)] {
+    for (field, value) in [
+        ("machine", &h.machine),
+        ("part", &h.part),
+        ("lobe", &h.lobe),
+    ] {
         id(field, value).map_err(|_| SerialEncodeError::BadId {
             field,
             found: value.clone(),
@@ -413,7 +424,7 @@ pub fn encode_serial_measurement(m: &RawMeasurement) -> Result<String, SerialEnc
         &mut out,
     );
     for s in &m.samples {
-        if !(s.lift_mm.abs() <= MAX_ABS_LIFT_MM) {
+        if !s.lift_mm.is_finite() || s.lift_mm.abs() > MAX_ABS_LIFT_MM {
             return Err(SerialEncodeError::BadLift {
                 revolution: s.revolution,
                 angle_index: s.angle_index,
@@ -504,8 +515,14 @@ mod tests {
                 );
             }
         }
-        assert_eq!(err("END 10 12345"), "checksum \"12345\" is not 8 hex digits");
-        assert_eq!(err("END 10 +2345678"), "checksum \"+2345678\" is not 8 hex digits");
+        assert_eq!(
+            err("END 10 12345"),
+            "checksum \"12345\" is not 8 hex digits"
+        );
+        assert_eq!(
+            err("END 10 +2345678"),
+            "checksum \"+2345678\" is not 8 hex digits"
+        );
         assert_eq!(
             err("SAMPLE 0 1 2"),
             "unknown record \"SAMPLE\" (expected START, S or END)"
@@ -574,28 +591,35 @@ mod tests {
         let flipped = good.replace("0.200000", "0.300000");
         assert_eq!(
             problems(&flipped),
-            ["line 4: measurement of machine M3 part P1234 lobe L2 discarded after 2 samples: \
-              checksum mismatch: end line says 114A8CA3, lines give B73D8717"]
+            [
+                "line 4: measurement of machine M3 part P1234 lobe L2 discarded after 2 samples: \
+              checksum mismatch: end line says 114A8CA3, lines give B73D8717"
+            ]
         );
         // A lost sample line.
         let lost = good.replace("S 0 1 0.200000\n", "");
         assert_eq!(
             problems(&lost),
-            ["line 3: measurement of machine M3 part P1234 lobe L2 discarded after 1 samples: \
-              end line announces 2 samples, 1 were received"]
+            [
+                "line 3: measurement of machine M3 part P1234 lobe L2 discarded after 1 samples: \
+              end line announces 2 samples, 1 were received"
+            ]
         );
         // A garbled line inside: the first reason is kept.
         let garbled = good.replace("S 0 1 0.200000", "S 0 1 0.2x0000");
         assert_eq!(
             problems(&garbled),
-            ["line 4: measurement of machine M3 part P1234 lobe L2 discarded after 1 samples: \
-              line 3: lift \"0.2x0000\" is not a plain decimal number of mm within ±1000"]
+            [
+                "line 4: measurement of machine M3 part P1234 lobe L2 discarded after 1 samples: \
+              line 3: lift \"0.2x0000\" is not a plain decimal number of mm within ±1000"
+            ]
         );
         // A sample off the announced 2 × 2 grid.
         let off = good.replace("S 0 1 0.200000", "S 0 2 0.200000");
-        assert!(problems(&off)[0].ends_with(
-            "sample at revolution 0, angle index 2 is outside the announced grid"
-        ));
+        assert!(
+            problems(&off)[0]
+                .ends_with("sample at revolution 0, angle index 2 is outside the announced grid")
+        );
     }
 
     #[test]
@@ -624,7 +648,9 @@ mod tests {
     fn crlf_line_ends_and_comments_do_not_change_the_checksum() {
         let good = encode_serial_measurement(&measurement(&[(0, 0, 0.1), (1, 1, -0.1)]))
             .expect("encodable");
-        let crlf = good.replace('\n', "\r\n").replacen("\r\nS", "\r\n# note\r\n\r\nS", 1);
+        let crlf = good
+            .replace('\n', "\r\n")
+            .replacen("\r\nS", "\r\n# note\r\n\r\nS", 1);
         assert!(matches!(
             decode_serial_text(&crlf, "pty").as_slice(),
             [SerialEvent::Measurement(m)] if m.samples.len() == 2

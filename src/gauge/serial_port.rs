@@ -76,8 +76,7 @@ impl<R: AsyncRead + Unpin> SerialGauge<R> {
                     }
                 }
                 Some(Ok(())) => {
-                    let text =
-                        std::str::from_utf8(&self.buf).expect("read_line checked the bytes");
+                    let text = std::str::from_utf8(&self.buf).expect("read_line checked the bytes");
                     if let Some(event) = self.decoder.push_line(self.line, text) {
                         return Ok(Some(event));
                     }
@@ -134,7 +133,11 @@ mod tests {
     async fn events(input: &[u8]) -> Vec<SerialEvent> {
         let mut gauge = SerialGauge::new(input, "pipe");
         let mut out = Vec::new();
-        while let Some(e) = gauge.next_event().await.expect("reading a slice cannot fail") {
+        while let Some(e) = gauge
+            .next_event()
+            .await
+            .expect("reading a slice cannot fail")
+        {
             out.push(e);
         }
         out
