@@ -110,6 +110,9 @@ pub struct SignalSpec {
     pub range: Option<(f64, f64)>,
     /// Present only when the multiplexor signal has this value.
     pub multiplexed: Option<(SignalCodec, u64)>,
+    /// `(factor, offset)` as integers when the signal is an integer and both are whole
+    /// numbers below 2^53: counters are then scaled exactly.
+    pub integer_scale: Option<(i64, i64)>,
 }
 
 /// One gauge message: its id, declared size and signals in a fixed order.
@@ -286,6 +289,11 @@ fn compile_message<const N: usize>(
         };
         let (min, max) = (numeric(signal.min), numeric(signal.max));
         let codec = compile(signal)?;
+        let whole = |x: f64| x.fract() == 0.0 && x.abs() < 9.0e15;
+        // Whole and below 2^53 in magnitude, so the casts are exact.
+        #[allow(clippy::cast_possible_truncation)]
+        let integer_scale = (codec.is_integer() && whole(signal.factor) && whole(signal.offset))
+            .then_some((signal.factor as i64, signal.offset as i64));
         specs.push(SignalSpec {
             name: signal.name.clone(),
             codec,
@@ -293,6 +301,7 @@ fn compile_message<const N: usize>(
             offset: signal.offset,
             range: (min != 0.0 || max != 0.0).then_some((min, max)),
             multiplexed,
+            integer_scale,
         });
     }
     let signals: [SignalSpec; N] = specs

@@ -154,17 +154,7 @@ fn physical<const N: usize>(
     s: &SignalSpec,
     words: PayloadWords,
 ) -> Result<f64, FrameError> {
-    if let Some((mux, expected)) = s.multiplexed {
-        let found = mux.raw_bits(words);
-        if found != expected {
-            return Err(FrameError::Multiplexed {
-                message: m.name.clone(),
-                signal: s.name.clone(),
-                expected,
-                found,
-            });
-        }
-    }
+    check_multiplexor(m, s, words)?;
     // Precision: raw values above 2^53 lose their last bits here; the counting signals take
     // the exact path in `count` instead.
     #[allow(clippy::cast_precision_loss)]
@@ -181,6 +171,33 @@ fn physical<const N: usize>(
             value,
         });
     }
+    check_range(m, s, value)?;
+    Ok(value)
+}
+
+#[inline]
+fn check_multiplexor<const N: usize>(
+    m: &MessageSpec<N>,
+    s: &SignalSpec,
+    words: PayloadWords,
+) -> Result<(), FrameError> {
+    match s.multiplexed {
+        Some((mux, expected)) if mux.raw_bits(words) != expected => Err(FrameError::Multiplexed {
+            message: m.name.clone(),
+            signal: s.name.clone(),
+            expected,
+            found: mux.raw_bits(words),
+        }),
+        _ => Ok(()),
+    }
+}
+
+#[inline]
+fn check_range<const N: usize>(
+    m: &MessageSpec<N>,
+    s: &SignalSpec,
+    value: f64,
+) -> Result<(), FrameError> {
     if let Some((min, max)) = s.range {
         // Half a raw step of slack so a bound that is not a multiple of the factor in binary
         // (0.0001 · 2 000 000 vs 200) does not reject the raw value that encodes it.
@@ -195,53 +212,53 @@ fn physical<const N: usize>(
             });
         }
     }
-    Ok(value)
+    Ok(())
 }
 
-/// A whole, non-negative physical value in `0..=max`. Integer scaling (factor and offset
-/// whole numbers, the usual case for counters) is evaluated exactly in integers.
+/// A whole, non-negative physical value in `0..=max`. Integer signals with whole factor and
+/// offset (the usual case for counters) are scaled exactly in integers; otherwise the value
+/// must land on a whole number.
+#[inline]
 fn count<const N: usize>(
     m: &MessageSpec<N>,
     s: &SignalSpec,
     words: PayloadWords,
     max: u64,
 ) -> Result<u64, FrameError> {
-    let value = physical(m, s, words)?;
-    let exact = match s.codec.raw_value(words) {
-        RawValue::Unsigned(v) => exact_scaled(i128::from(v), s),
-        RawValue::Signed(v) => exact_scaled(i128::from(v), s),
-        RawValue::Float(_) => None,
+    let not_a_count = |value: f64| FrameError::NotACount {
+        message: m.name.clone(),
+        signal: s.name.clone(),
+        value,
+        max,
     };
-    let whole = match exact {
-        Some(v) => u64::try_from(v).ok(),
-        // A fractional factor: accept only values that land on a whole number.
-        None if value.fract() == 0.0 && (0.0..18_446_744_073_709_551_616.0).contains(&value) =>
-        {
-            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-            Some(value as u64)
+    if let Some((factor, offset)) = s.integer_scale {
+        let raw = match s.codec.raw_value(words) {
+            RawValue::Unsigned(v) => Some(i128::from(v)),
+            RawValue::Signed(v) => Some(i128::from(v)),
+            RawValue::Float(_) => None, // integer_scale is only set for integer signals
+        };
+        if let Some(raw) = raw {
+            check_multiplexor(m, s, words)?;
+            // |raw| < 2^64 and |factor|, |offset| < 2^54: no overflow in i128.
+            let value = raw * i128::from(factor) + i128::from(offset);
+            #[allow(clippy::cast_precision_loss)]
+            let shown = value as f64;
+            check_range(m, s, shown)?;
+            return match u64::try_from(value) {
+                Ok(v) if v <= max => Ok(v),
+                _ => Err(not_a_count(shown)),
+            };
         }
-        None => None,
-    };
-    match whole {
-        Some(v) if v <= max => Ok(v),
-        _ => Err(FrameError::NotACount {
-            message: m.name.clone(),
-            signal: s.name.clone(),
-            value,
-            max,
-        }),
     }
-}
-
-fn exact_scaled(raw: i128, s: &SignalSpec) -> Option<i128> {
-    let whole = |x: f64| x.fract() == 0.0 && x.abs() < 9.0e15;
-    if whole(s.factor) && whole(s.offset) {
-        #[allow(clippy::cast_possible_truncation)]
-        let (factor, offset) = (s.factor as i128, s.offset as i128);
-        raw.checked_mul(factor)?.checked_add(offset)
-    } else {
-        None
+    let value = physical(m, s, words)?;
+    if value.fract() == 0.0 && (0.0..18_446_744_073_709_551_616.0).contains(&value) {
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let v = value as u64;
+        if v <= max {
+            return Ok(v);
+        }
     }
+    Err(not_a_count(value))
 }
 
 fn count_u32<const N: usize>(

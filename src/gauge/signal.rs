@@ -122,6 +122,11 @@ impl SignalCodec {
         })
     }
 
+    /// Whether the raw bits are an integer (not an IEEE float).
+    pub fn is_integer(&self) -> bool {
+        matches!(self.kind, RawKind::Unsigned | RawKind::Signed)
+    }
+
     /// The signal's raw bits, right-aligned. `words` is the payload (zero-padded to 8
     /// bytes) read as `(little-endian u64, big-endian u64)`.
     #[inline]
@@ -209,7 +214,11 @@ mod tests {
                 let mut pos = start;
                 for _ in 0..len {
                     value = (value << 1) | bit(pos);
-                    pos = if pos % 8 == 0 { pos + 15 } else { pos - 1 };
+                    pos = if pos.is_multiple_of(8) {
+                        pos + 15
+                    } else {
+                        pos - 1
+                    };
                 }
             }
         }
