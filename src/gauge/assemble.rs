@@ -172,7 +172,9 @@ impl OpenMeasurement {
                 revolutions: header.revolutions,
                 points_per_rev: header.points_per_rev,
             });
-        let reserve = if spoiled.is_some() { 0 } else { capacity };
+        // Reserve for a typical measurement only: a header announcing a huge grid must not
+        // cost memory before samples actually arrive.
+        let reserve = if spoiled.is_some() { 0 } else { capacity.min(4096) };
         Self {
             header,
             samples: Vec::with_capacity(usize::try_from(reserve).unwrap_or(0)),
