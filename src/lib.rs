@@ -8,5 +8,6 @@
 
 pub mod cli;
 pub mod core;
+pub mod gauge;
 pub mod recipe;
 pub mod share;

@@ -1,0 +1,30 @@
+//! Gauge interfaces: CAN (live SocketCAN and candump logs, decoded from a DBC), a serial line
+//! protocol, a watched drop folder of CSV files, and a reader for one measurement file.
+//!
+//! Each interface ends in the same value, [`crate::core::measure::RawMeasurement`]: header,
+//! samples in arrival order, origin. Codecs (frame decoder, line parsers, assembler) are pure
+//! functions and state machines over bytes and lines; the adapters around them own the bus,
+//! the port, the folder and the clock. Completeness checks and averaging belong to `core`.
+
+pub mod assemble;
+pub mod can_bus;
+pub mod candump;
+pub mod csv_file;
+pub mod dbc;
+pub mod drop_folder;
+pub mod file;
+pub mod frame;
+pub mod serial;
+pub mod serial_port;
+pub mod signal;
+
+pub use assemble::{Assembled, Assembler, AssemblyProblem, DiscardReason};
+pub use can_bus::{CanBus, CanEvent, CanGauge, CanOpenError, CandumpReplay, FrameSource};
+pub use candump::{CandumpIssue, CandumpReport, read_candump_measurements};
+pub use csv_file::{CsvError, parse_measurement_csv};
+pub use dbc::{DbcLoadError, GaugeDbc, GaugeSignalNames};
+pub use drop_folder::{DropEvent, DropFolder, watch_drop_folder};
+pub use file::{GaugeError, read_measurement_file};
+pub use frame::{CanId, FrameError, GaugeFrame, GaugeStart};
+pub use serial::{SerialDecoder, SerialEvent, SerialProblem, decode_serial_text};
+pub use serial_port::{SerialGauge, SerialOpenError, open_serial_port};

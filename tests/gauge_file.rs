@@ -1,0 +1,128 @@
+//! `read_measurement_file`: one measurement from a `.csv` or candump `.log`, errors naming
+//! the file. Fixtures come from tools/encode_candump.py and tools/encode_text_fixtures.py.
+
+use std::path::{Path, PathBuf};
+
+use camloop::gauge::{GaugeDbc, read_measurement_file};
+
+fn fixture(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
+}
+
+/// The formula documented in tools/encode_candump.py.
+fn lift_mm(revolution: u32, angle_index: u32, points_per_rev: u32) -> f64 {
+    let theta = 2.0 * std::f64::consts::PI * f64::from(angle_index) / f64::from(points_per_rev);
+    6.2 * ((1.0 - theta.cos()) / 2.0).powi(2) + 0.0015 * (5.0 * theta + f64::from(revolution)).sin()
+        - 0.0008
+}
+
+fn read(path: &Path) -> Result<camloop::core::measure::RawMeasurement, String> {
+    read_measurement_file(path, &GaugeDbc::builtin()).map_err(|e| e.to_string())
+}
+
+#[test]
+fn csv_fixtures_read_with_identity_and_grid() {
+    for (name, ppr) in [
+        ("M3_P1234_L2_20240501T101500.csv", 360),
+        ("lobe_scan_720.csv", 720),
+    ] {
+        let m = read(&fixture(name)).expect("valid fixture");
+        assert_eq!(
+            (
+                m.header.machine.as_str(),
+                m.header.part.as_str(),
+                m.header.lobe.as_str()
+            ),
+            ("M3", "P1234", "L2"),
+            "{name}"
+        );
+        assert_eq!((m.header.revolutions, m.header.points_per_rev), (3, ppr));
+        assert_eq!(m.samples.len(), 3 * ppr as usize);
+        assert_eq!(m.origin, fixture(name).display().to_string());
+        for (n, s) in m.samples.iter().enumerate() {
+            let n = u32::try_from(n).expect("small");
+            assert_eq!((s.revolution, s.angle_index), (n / ppr, n % ppr));
+            // Written with 6 decimals: within half a nm (+1e-12 for binary parsing).
+            let expected = lift_mm(s.revolution, s.angle_index, ppr);
+            assert!(
+                (s.lift_mm - expected).abs() <= 0.5e-6 + 1e-12,
+                "{name} sample {n}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_candump_log_with_one_measurement_reads() {
+    let m = read(&fixture("gauge_3x360.log")).expect("one clean measurement");
+    assert_eq!(m.header.lobe, "2");
+    assert_eq!(m.samples.len(), 1080);
+    // cantools rounding to 0.0001 mm: within half a step.
+    let worst = m
+        .samples
+        .iter()
+        .map(|s| (s.lift_mm - lift_mm(s.revolution, s.angle_index, 360)).abs())
+        .fold(0.0, f64::max);
+    assert!(worst <= 0.00005 + 1e-12, "{worst}");
+}
+
+#[test]
+fn errors_name_the_file() {
+    let cutoff = fixture("gauge_cutoff.log");
+    assert_eq!(
+        read(&cutoff),
+        Err(format!(
+            "candump log {}: line 4: 2 samples arrived with no measurement started",
+            cutoff.display()
+        ))
+    );
+    let dir = tempfile::tempdir().expect("tempdir");
+    let two = dir.path().join("two.log");
+    let one = std::fs::read_to_string(fixture("gauge_3x360.log")).expect("read");
+    std::fs::write(&two, format!("{one}{one}")).expect("write");
+    assert_eq!(
+        read(&two),
+        Err(format!(
+            "candump log {} holds 2 complete measurements; exactly one was expected",
+            two.display()
+        ))
+    );
+    let empty = dir.path().join("empty.log");
+    std::fs::write(&empty, "").expect("write");
+    assert_eq!(
+        read(&empty),
+        Err(format!(
+            "candump log {} holds 0 complete measurements; exactly one was expected",
+            empty.display()
+        ))
+    );
+    let missing = dir.path().join("M1_P1_L1.csv");
+    let err = read(&missing).expect_err("missing");
+    assert!(
+        err.starts_with(&format!(
+            "cannot read measurement file {}: ",
+            missing.display()
+        )),
+        "{err}"
+    );
+    let txt = dir.path().join("m.txt");
+    assert_eq!(
+        read(&txt),
+        Err(format!(
+            "measurement file {} has no .csv or .log extension",
+            txt.display()
+        ))
+    );
+    let anonymous = dir.path().join("scan.CSV");
+    std::fs::write(&anonymous, "0,0,0\n").expect("write");
+    let err = read(&anonymous).expect_err("no identity");
+    assert!(
+        err.starts_with(&format!(
+            "measurement file {}: machine, part and lobe unknown",
+            anonymous.display()
+        )),
+        "{err}"
+    );
+}
