@@ -115,7 +115,11 @@ impl DftTable {
         };
         let (cos_1, sin_1) = (pad(&self.cos), pad(&self.sin));
         let (mut cos_j, mut sin_j) = (cos_1.clone(), sin_1.clone());
-        let nyquist = if n % 2 == 0 { values[n / 2] } else { 0.0 };
+        let nyquist = if n.is_multiple_of(2) {
+            values[n / 2]
+        } else {
+            0.0
+        };
         let mut out = Vec::with_capacity(top);
         for j in 1..=top {
             if j > 1 {

@@ -174,7 +174,11 @@ impl OpenMeasurement {
             });
         // Reserve for a typical measurement only: a header announcing a huge grid must not
         // cost memory before samples actually arrive.
-        let reserve = if spoiled.is_some() { 0 } else { capacity.min(4096) };
+        let reserve = if spoiled.is_some() {
+            0
+        } else {
+            capacity.min(4096)
+        };
         Self {
             header,
             samples: Vec::with_capacity(usize::try_from(reserve).unwrap_or(0)),

@@ -328,10 +328,10 @@ impl Share {
                 return Some(format!("file name {:?} appears twice", file.name));
             }
         }
-        if let Some(of) = request.rollback_of {
-            if self.history.get(of).is_none() {
-                return Some(format!("rollback to v{of}, which does not exist"));
-            }
+        if let Some(of) = request.rollback_of
+            && self.history.get(of).is_none()
+        {
+            return Some(format!("rollback to v{of}, which does not exist"));
         }
         let next = self.next_table_number();
         if request.table_number != next {

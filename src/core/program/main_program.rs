@@ -80,10 +80,10 @@ pub fn render_main_program(
     let main_name = validate_program_name(&main.name)
         .map_err(|e| errors.push(e.into()))
         .ok();
-    if let (Some(m), Some(r)) = (&main_name, &resolved) {
-        if *m == r.name {
-            errors.push(SettingError::MainSameAsTable { name: m.clone() });
-        }
+    if let (Some(m), Some(r)) = (&main_name, &resolved)
+        && *m == r.name
+    {
+        errors.push(SettingError::MainSameAsTable { name: m.clone() });
     }
     check_positive(&mut errors, "revolutions", main.revolutions);
     check_positive(&mut errors, "c_speed_rpm", main.c_speed_rpm);

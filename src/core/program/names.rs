@@ -158,13 +158,13 @@ pub fn validate_axis_name(role: &'static str, name: &str) -> Result<String, Axis
     }
     let upper = name.to_ascii_uppercase();
     let mut chars = upper.chars();
-    if let (Some(only), None) = (chars.next(), chars.next()) {
-        if FIXED_ADDRESS_LETTERS.contains(&only) {
-            return Err(AxisNameError::FixedAddress {
-                role,
-                name: name.to_owned(),
-            });
-        }
+    if let (Some(only), None) = (chars.next(), chars.next())
+        && FIXED_ADDRESS_LETTERS.contains(&only)
+    {
+        return Err(AxisNameError::FixedAddress {
+            role,
+            name: name.to_owned(),
+        });
     }
     Ok(upper)
 }

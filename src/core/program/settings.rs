@@ -207,10 +207,10 @@ impl ProgramSettings {
         let leading = validate_axis_name("leading", &self.leading_axis)
             .map_err(|e| errors.push(e.into()))
             .ok();
-        if let (Some(f), Some(l)) = (&following, &leading) {
-            if f == l {
-                errors.push(SettingError::SameAxis { name: f.clone() });
-            }
+        if let (Some(f), Some(l)) = (&following, &leading)
+            && f == l
+        {
+            errors.push(SettingError::SameAxis { name: f.clone() });
         }
         if self.table_number == 0 {
             errors.push(SettingError::TableNumberZero);
