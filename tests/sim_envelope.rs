@@ -21,8 +21,11 @@ const PROBE_ANGLES_DEG: [f64; 10] = [
     10.0, 100.7, 110.3, 143.2, 170.0, 179.73, 180.5, 185.25, 215.9, 259.4,
 ];
 
-/// Agreement demanded between the simulator and the brute force: 0.01 µm.
-const BRUTE_TOLERANCE_MM: f64 = 1e-5;
+/// Agreement demanded between the simulator and the brute force: 0.001 µm (the brief asks
+/// for 0.01 µm). The simulator's Hermite reading errs by < 1e-9 mm with 1° tables and about
+/// 1.5e-7 mm (polar radius) with the 10° facets of a 36-point table; the brute force's own
+/// error is below 1e-8 mm (see its docs). Observed: ≤ 1.5e-7 mm, mostly ~1e-11 mm.
+const BRUTE_TOLERANCE_MM: f64 = 1e-6;
 
 /// A perfect machine only follows the POLY cubics' departure from the exact path, which the
 /// 1° periodic spline keeps far below 0.05 µm for this smooth lobe.

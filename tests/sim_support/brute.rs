@@ -11,10 +11,12 @@
 //!   max over θ of (p·e + sqrt(r² − (p·e⊥)²)), p = r(θ)·u(θ), e = u(ψ).
 //!
 //! Each optimum: a coarse scan (c every 0.25°, θ every 1°), a fine scan twelve times finer
-//! around every coarse local optimum, then golden-section refinement of every fine local
-//! optimum down to a 1e-11 rad bracket, keeping the best. At the nose of a lobe ground from
-//! a 1° G1 table the two wheel positions that meet at a corner of the outline are about
-//! 0.8° of c apart, so the fine scan (0.02°) separates them. At a smooth optimum the
+//! over ±4 coarse steps around every coarse local optimum, then golden-section refinement of
+//! every fine local optimum down to a 1e-11 rad bracket, keeping the best. Where two wheel
+//! positions meet at a corner of the outline they are up to about 0.8° of c apart (nose of
+//! a lobe, or a crankpin, from a 1° G1 table): the coarse scan may see them as one basin,
+//! the ±1° fine scan separates them. (With ±1.5 coarse steps it missed one of them on a
+//! crankpin flank and read the outline 0.01 µm too far out.) At a smooth optimum the
 //! refinement leaves ½·|f''|·(1e-11)² (nothing); at a kink (a corner, a wheel position at a
 //! table point) |f'|·1e-11 < 1e-8 mm.
 
@@ -152,7 +154,7 @@ impl BrutePath {
 }
 
 /// Minimum (or maximum) of `f` on `[lo, hi]`: a coarse scan at `coarse`, a fine scan at
-/// `coarse / 12` over ±1.5 coarse steps around every local optimum of the coarse scan,
+/// `coarse / 12` over ±4 coarse steps around every local optimum of the coarse scan,
 /// golden-section refinement of every local optimum of the fine scans; the best wins.
 /// Panics if the best coarse sample sits on the window edge.
 pub fn optimum(f: impl Fn(f64) -> f64, lo: f64, hi: f64, coarse: f64, maximise: bool) -> f64 {
@@ -171,8 +173,8 @@ pub fn optimum(f: impl Fn(f64) -> f64, lo: f64, hi: f64, coarse: f64, maximise: 
     for i in local_minima(&vs) {
         let (fx, fv) = scan(
             &g,
-            xs[i] - 1.5 * coarse,
-            xs[i] + 1.5 * coarse,
+            xs[i] - 4.0 * coarse,
+            xs[i] + 4.0 * coarse,
             coarse / 12.0,
         );
         for j in local_minima(&fv) {
