@@ -26,12 +26,15 @@
 //! deflection are not modelled.
 //!
 //! **Ground part.** What a disc of radius R_act leaves as its centre runs along W, computed
-//! exactly (no small-angle model): between table points the outline is the envelope
-//! p = W − R_act·N, N the path's unit outward normal; at table points where the path's
-//! normal jumps (every G1 point) the neighbouring envelope pieces are cut at their
-//! crossing (a corner) or joined by an arc of the wheel (see the `envelope` module). The
-//! outline is sampled at `samples_per_segment` points per table segment plus its corners
-//! and arcs, each node a point with its outward normal.
+//! exactly (no small-angle model; see the `envelope` module): the outline is a chain of
+//! envelope pieces p = W − R_act·N (N the path's unit outward normal) of the smooth
+//! stretches between table points, concave arcs of the wheel standing at table points, and
+//! corners where neighbours cross. At the nose of a lobe ground from a 1° G1 table the
+//! corners trim most of each piece: leaving them untrimmed would read the nose 0.9 µm too
+//! high, hiding the G1 chord error. Stretches where the path turns tighter than the wheel
+//! (a G1 crankpin's far side, where d < R) contribute only through their end discs. Nodes:
+//! `samples_per_segment` per table segment plus corners and arcs (0.25° apart), each a
+//! point with its outward normal.
 //!
 //! **Gauge.** It reads the outline as the part's follower: a flat face (support function
 //! minus Rb), a roller of radius r (pitch radius minus Rb + r), a knife edge (polar radius
