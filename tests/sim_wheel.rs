@@ -231,3 +231,25 @@ fn bad_tables_are_refused_naming_the_entry() {
         assert!(message.starts_with(expected), "`{message}`");
     }
 }
+
+#[test]
+fn bad_workpieces_are_refused_naming_the_parameter() {
+    let mut geometry = demo_geometry(Follower::Flat);
+    geometry.base_radius_mm = -1.0;
+    let message = SimGrinder::new(GrinderConfig::default(), Workpiece::Cam(geometry), 1)
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        message,
+        "base radius = -1 is invalid: must be a finite number > 0"
+    );
+    // A wheel-size error that leaves no wheel.
+    let config = GrinderConfig {
+        wheel_size_error_um: -300_000.0,
+        ..GrinderConfig::default()
+    };
+    let message = SimGrinder::new(config, Workpiece::Cam(demo_geometry(Follower::Flat)), 1)
+        .unwrap_err()
+        .to_string();
+    assert!(message.starts_with("true wheel radius = -50"), "{message}");
+}
