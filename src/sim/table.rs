@@ -18,6 +18,7 @@ const POLY_X_JUMP_MM: f64 = 1e-6;
 #[derive(Debug, Clone, PartialEq)]
 pub enum TableShape {
     /// G1: X runs straight (linear in C) from each point to the next, the last to the first.
+    /// Only `c_deg` and `x_mm` are used (the control knows nothing of `d_mm`).
     G1(Vec<TablePoint>),
     /// POLY: each segment's cubic in its own C range; the segments must tile one turn.
     Poly(Vec<PolySegment>),
