@@ -9,4 +9,6 @@
 
 pub mod cli;
 pub mod core;
+pub mod recipe;
+pub mod share;
 pub mod sim;

@@ -1,8 +1,12 @@
 //! The pure core: lift tables, exact wheel-centre geometry, curve-table fitting and program
 //! rendering. No I/O, no clock, no logging: inputs arrive as values, failures leave as data.
 
+pub mod analysis;
+pub mod compensate;
 pub mod fit;
 pub mod geometry;
+pub mod harmonics;
+pub mod learn;
 pub mod lift;
 pub mod measure;
 pub mod program;

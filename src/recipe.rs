@@ -1,0 +1,296 @@
+//! Part recipes: a camshaft's lobes or a crankshaft's pins with their geometry, the wheel,
+//! table and program settings, tolerance bands, learning parameters and axis limits, in one
+//! TOML file. Unknown keys are errors; every problem is reported at once.
+
+use crate::core::analysis::ToleranceBand;
+use crate::core::compensate::AxisLimits;
+use crate::core::fit::TableForm;
+use crate::core::geometry::{CamGeometry, CrankpinGeometry, Follower};
+use crate::core::learn::LearningParams;
+use crate::core::program::ProgramSettings;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ShaftKind {
+    Camshaft,
+    Crankshaft,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FollowerKind {
+    Flat,
+    Roller,
+    Knife,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FormKind {
+    G1,
+    Poly,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Recipe {
+    /// Part name (drawing number), for history and program comments.
+    pub name: String,
+    pub kind: ShaftKind,
+    pub wheel: Wheel,
+    #[serde(default)]
+    pub table: TableSettings,
+    #[serde(default)]
+    pub program: ProgramSettings,
+    #[serde(default)]
+    pub learning: LearningParams,
+    #[serde(default)]
+    pub axis_limits: AxisLimits,
+    #[serde(default)]
+    pub lobes: Vec<Lobe>,
+    #[serde(default)]
+    pub pins: Vec<Pin>,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Wheel {
+    /// Wheel radius as last dressed, mm.
+    pub radius_mm: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TableSettings {
+    /// Table points per revolution, 36 to 36000.
+    pub points: usize,
+    pub form: FormKind,
+    /// Largest deviation of a POLY table from the exact path between points, µm.
+    pub poly_tolerance_um: f64,
+    /// The two table numbers used in turn, so the table in use is never redefined.
+    pub table_numbers: (u32, u32),
+}
+
+impl Default for TableSettings {
+    fn default() -> Self {
+        Self {
+            points: 360,
+            form: FormKind::Poly,
+            poly_tolerance_um: 0.1,
+            table_numbers: (1, 2),
+        }
+    }
+}
+
+impl TableSettings {
+    pub fn form(&self) -> TableForm {
+        match self.form {
+            FormKind::G1 => TableForm::G1,
+            FormKind::Poly => TableForm::Poly,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Lobe {
+    pub name: String,
+    /// Lift table file, relative to the recipe file.
+    pub lift: PathBuf,
+    pub follower: FollowerKind,
+    #[serde(default)]
+    pub roller_radius_mm: Option<f64>,
+    pub base_radius_mm: f64,
+    /// Angle of the lobe's 0° on the shaft, degrees: added to the program's C offset.
+    #[serde(default)]
+    pub phase_deg: f64,
+    /// Tolerance bands on the profile error; none: the analysis default.
+    #[serde(default)]
+    pub tolerance: Vec<ToleranceBand>,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Pin {
+    pub name: String,
+    pub throw_mm: f64,
+    pub pin_radius_mm: f64,
+    #[serde(default)]
+    pub phase_deg: f64,
+    #[serde(default)]
+    pub tolerance: Vec<ToleranceBand>,
+}
+
+/// A recipe that could not be used: every problem found, one per line.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{file}: {}", .problems.join("; "))]
+pub struct RecipeError {
+    pub file: String,
+    pub problems: Vec<String>,
+}
+
+impl Recipe {
+    /// Parses and checks a recipe; `file` names it in errors.
+    pub fn parse(text: &str, file: &str) -> Result<Self, RecipeError> {
+        let error = |problems: Vec<String>| RecipeError {
+            file: file.to_string(),
+            problems,
+        };
+        let recipe: Recipe = toml::from_str(text).map_err(|e| {
+            let line = e
+                .span()
+                .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
+            let at = line.map(|l| format!("line {l}: ")).unwrap_or_default();
+            error(vec![format!("{at}{}", e.message().trim_end())])
+        })?;
+        let problems = recipe.problems();
+        if problems.is_empty() {
+            Ok(recipe)
+        } else {
+            Err(error(problems))
+        }
+    }
+
+    fn problems(&self) -> Vec<String> {
+        let mut p = Vec::new();
+        let positive = |p: &mut Vec<String>, field: String, v: f64| {
+            if !(v.is_finite() && v > 0.0) {
+                p.push(format!("{field} = {v}: must be a number > 0"));
+            }
+        };
+        positive(&mut p, "wheel.radius_mm".into(), self.wheel.radius_mm);
+        match self.kind {
+            ShaftKind::Camshaft if self.lobes.is_empty() => {
+                p.push("a camshaft needs at least one [[lobes]]".into())
+            }
+            ShaftKind::Crankshaft if self.pins.is_empty() => {
+                p.push("a crankshaft needs at least one [[pins]]".into())
+            }
+            ShaftKind::Camshaft if !self.pins.is_empty() => {
+                p.push("a camshaft has lobes, not [[pins]]".into())
+            }
+            ShaftKind::Crankshaft if !self.lobes.is_empty() => {
+                p.push("a crankshaft has pins, not [[lobes]]".into())
+            }
+            _ => {}
+        }
+        if !crate::core::geometry::POINTS_RANGE.contains(&self.table.points) {
+            p.push(format!(
+                "table.points = {}: must be 36 to 36000",
+                self.table.points
+            ));
+        }
+        if let Err(e) = crate::core::program::check_table_pair(self.table.table_numbers) {
+            p.push(format!("table.table_numbers: {e}"));
+        }
+        if let Err(e) = self.program.validate() {
+            p.extend(e.0.iter().map(|e| format!("program: {e}")));
+        }
+        if let Err(e) = self.learning.validate() {
+            p.extend(e);
+        }
+        let mut names = std::collections::HashSet::new();
+        for lobe in &self.lobes {
+            let at = format!("lobes.{}", lobe.name);
+            if !names.insert(lobe.name.clone()) {
+                p.push(format!("{at}: duplicate name"));
+            }
+            if !valid_name(&lobe.name) {
+                p.push(format!(
+                    "{at}: name must be 1–32 letters, digits, '-' or '_'"
+                ));
+            }
+            positive(&mut p, format!("{at}.base_radius_mm"), lobe.base_radius_mm);
+            match (lobe.follower, lobe.roller_radius_mm) {
+                (FollowerKind::Roller, None) => {
+                    p.push(format!("{at}: roller follower needs roller_radius_mm"))
+                }
+                (FollowerKind::Roller, Some(r)) => {
+                    positive(&mut p, format!("{at}.roller_radius_mm"), r)
+                }
+                (_, Some(_)) => p.push(format!(
+                    "{at}: roller_radius_mm is only for a roller follower"
+                )),
+                _ => {}
+            }
+        }
+        for pin in &self.pins {
+            let at = format!("pins.{}", pin.name);
+            if !names.insert(pin.name.clone()) {
+                p.push(format!("{at}: duplicate name"));
+            }
+            if !valid_name(&pin.name) {
+                p.push(format!(
+                    "{at}: name must be 1–32 letters, digits, '-' or '_'"
+                ));
+            }
+            positive(&mut p, format!("{at}.pin_radius_mm"), pin.pin_radius_mm);
+            if !(pin.throw_mm.is_finite() && pin.throw_mm >= 0.0) {
+                p.push(format!("{at}.throw_mm = {}: must be ≥ 0", pin.throw_mm));
+            }
+        }
+        p
+    }
+
+    pub fn lobe(&self, name: &str) -> Option<&Lobe> {
+        self.lobes.iter().find(|l| l.name == name)
+    }
+
+    pub fn pin(&self, name: &str) -> Option<&Pin> {
+        self.pins.iter().find(|l| l.name == name)
+    }
+
+    /// Names of all lobes or pins, for messages.
+    pub fn feature_names(&self) -> Vec<&str> {
+        self.lobes
+            .iter()
+            .map(|l| l.name.as_str())
+            .chain(self.pins.iter().map(|p| p.name.as_str()))
+            .collect()
+    }
+}
+
+impl Lobe {
+    pub fn geometry(&self, wheel_radius_mm: f64) -> CamGeometry {
+        let follower = match self.follower {
+            FollowerKind::Flat => Follower::Flat,
+            FollowerKind::Knife => Follower::Knife,
+            FollowerKind::Roller => Follower::Roller {
+                radius_mm: self.roller_radius_mm.unwrap_or(0.0),
+            },
+        };
+        CamGeometry {
+            base_radius_mm: self.base_radius_mm,
+            follower,
+            wheel_radius_mm,
+        }
+    }
+
+    /// The lift file's path, resolved against the recipe's folder.
+    pub fn lift_path(&self, recipe_path: &Path) -> PathBuf {
+        recipe_path
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join(&self.lift)
+    }
+}
+
+impl Pin {
+    pub fn geometry(&self, wheel_radius_mm: f64) -> CrankpinGeometry {
+        CrankpinGeometry {
+            throw_mm: self.throw_mm,
+            pin_radius_mm: self.pin_radius_mm,
+            wheel_radius_mm,
+        }
+    }
+}
+
+/// Names become parts of file names and URLs: keep them plain.
+fn valid_name(name: &str) -> bool {
+    (1..=32).contains(&name.len())
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+}

@@ -1,0 +1,419 @@
+//! The version manifest: an append-only JSON-lines file of records, folded into the
+//! history of every version (status, table number, checksums).
+//!
+//! Each line is one [`Record`], written in a single `write` and flushed (`fsync`) before the
+//! step it announces. History is only ever appended: a status is a new line, and
+//! "superseded" is derived (a waiting version is superseded by the next accepted one), so no
+//! line is rewritten. A kill can only tear the last line; an unterminated last line is
+//! ignored on reading and cut off when the state folder is opened for writing.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::error::StateError;
+
+/// One line of the manifest.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "record", rename_all = "snake_case")]
+pub enum Record {
+    /// A new version (accepted or refused), written after its text is stored.
+    Version(VersionRecord),
+    /// A push attempt failed; the version waits. Written when the reason changes.
+    Waiting {
+        version: u64,
+        at_unix_ms: u64,
+        reason: String,
+    },
+    /// Temporaries are on the share and the renames begin: from here on the control may
+    /// see this version's files.
+    Delivering { version: u64, at_unix_ms: u64 },
+    /// All files renamed, the folder flushed, every file read back and verified.
+    Pushed { version: u64, at_unix_ms: u64 },
+    /// The kept text was removed (older than the kept versions); the record stays.
+    Pruned { version: u64, at_unix_ms: u64 },
+}
+
+/// A version as requested: what it contains and why it was made.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct VersionRecord {
+    /// 1, 2, 3, … without gaps.
+    pub version: u64,
+    /// Given by the caller, Unix time in milliseconds (UTC).
+    pub created_at_unix_ms: u64,
+    /// The curve-table number the program defines.
+    pub table_number: u32,
+    /// The program files, in rename order.
+    pub files: Vec<FileRecord>,
+    /// Why it was made (e.g. "learned from measurement 42", "rollback to v3").
+    pub reason: String,
+    /// The measurement the correction was learned from, if any.
+    pub measurement_id: Option<String>,
+    /// Learning parameters, free-form.
+    pub learning: serde_json::Value,
+    /// The version whose text this one re-pushes.
+    pub rollback_of: Option<u64>,
+    /// Set when the version was refused; it is then never pushed and has no kept text.
+    pub refused: Option<String>,
+}
+
+/// One program file of a version.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FileRecord {
+    /// Plain file name on the share (no folder).
+    pub name: String,
+    /// SHA-256 of the file's bytes, lower-case hex.
+    pub sha256: String,
+    /// Length in bytes.
+    pub bytes: u64,
+}
+
+/// Where a version stands.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum VersionStatus {
+    /// Not delivered yet; `reason` is the last failure, if an attempt was made.
+    Waiting { reason: Option<String> },
+    /// Renames began but were not confirmed (a kill or a failure during them).
+    Delivering,
+    /// On the share and verified.
+    Pushed { at_unix_ms: u64 },
+    /// Never pushed, for this reason.
+    Refused { reason: String },
+    /// Not delivered before a newer version was accepted.
+    Superseded { by: u64 },
+}
+
+/// A version and what happened to it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VersionState {
+    pub record: VersionRecord,
+    pub status: VersionStatus,
+    /// A `Delivering` record exists: the control may have seen this version's files.
+    pub reached_share: bool,
+    /// The text is in the state folder (accepted and not pruned).
+    pub text_kept: bool,
+}
+
+impl VersionState {
+    /// Still to be delivered (waiting, or renames not confirmed).
+    pub fn is_deliverable(&self) -> bool {
+        matches!(
+            self.status,
+            VersionStatus::Waiting { .. } | VersionStatus::Delivering
+        )
+    }
+}
+
+/// Every version, in order, as the manifest tells.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct History {
+    versions: Vec<VersionState>,
+    /// Index of the one deliverable version, if any (accepting a version supersedes the
+    /// previous deliverable one, so there is never more than one).
+    deliverable: Option<usize>,
+}
+
+/// A manifest read from disk.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Loaded {
+    pub history: History,
+    /// Length of the complete lines; anything after it is a torn last line.
+    pub good_len: u64,
+    /// Number of complete lines.
+    pub lines: usize,
+    /// Bytes of a torn (unterminated) last line that were ignored.
+    pub torn_bytes: u64,
+}
+
+impl History {
+    /// All versions, version 1 first.
+    pub fn versions(&self) -> &[VersionState] {
+        &self.versions
+    }
+
+    /// One version, if it exists.
+    pub fn get(&self, version: u64) -> Option<&VersionState> {
+        let index = usize::try_from(version.checked_sub(1)?).ok()?;
+        self.versions.get(index)
+    }
+
+    fn get_mut(&mut self, version: u64) -> Option<&mut VersionState> {
+        let index = usize::try_from(version.checked_sub(1)?).ok()?;
+        self.versions.get_mut(index)
+    }
+
+    /// The number the next version gets.
+    pub fn next_version(&self) -> u64 {
+        self.versions.len() as u64 + 1
+    }
+
+    /// The newest version still to be delivered (at most one: accepting a version supersedes
+    /// every older waiting one).
+    pub fn waiting(&self) -> Option<&VersionState> {
+        self.deliverable.and_then(|i| self.versions.get(i))
+    }
+
+    /// The newest version whose files may be on the share (and so whose table the control
+    /// may be using): the newest that reached the renames, confirmed or not.
+    pub fn on_share(&self) -> Option<&VersionState> {
+        self.versions.iter().rev().find(|v| v.reached_share)
+    }
+
+    /// The newest version that was pushed and verified.
+    pub fn last_pushed(&self) -> Option<&VersionState> {
+        self.versions
+            .iter()
+            .rev()
+            .find(|v| matches!(v.status, VersionStatus::Pushed { .. }))
+    }
+
+    /// Fold one record in, checking that it follows from what came before.
+    pub fn apply(&mut self, record: Record) -> Result<(), String> {
+        match record {
+            Record::Version(rec) => {
+                if rec.version != self.next_version() {
+                    return Err(format!(
+                        "version v{} follows v{}, expected v{}",
+                        rec.version,
+                        self.versions.len(),
+                        self.next_version()
+                    ));
+                }
+                let status = match &rec.refused {
+                    Some(reason) => VersionStatus::Refused {
+                        reason: reason.clone(),
+                    },
+                    None => {
+                        if let Some(older) = self.deliverable.and_then(|i| self.versions.get_mut(i))
+                        {
+                            older.status = VersionStatus::Superseded { by: rec.version };
+                        }
+                        self.deliverable = Some(self.versions.len());
+                        VersionStatus::Waiting { reason: None }
+                    }
+                };
+                let text_kept = rec.refused.is_none();
+                self.versions.push(VersionState {
+                    record: rec,
+                    status,
+                    reached_share: false,
+                    text_kept,
+                });
+            }
+            Record::Waiting {
+                version, reason, ..
+            } => {
+                let v = self.deliverable_mut(version, "waiting")?;
+                v.status = VersionStatus::Waiting {
+                    reason: Some(reason),
+                };
+            }
+            Record::Delivering { version, .. } => {
+                let v = self.deliverable_mut(version, "delivering")?;
+                v.status = VersionStatus::Delivering;
+                v.reached_share = true;
+            }
+            Record::Pushed {
+                version,
+                at_unix_ms,
+            } => {
+                let v = self.deliverable_mut(version, "pushed")?;
+                if v.status != VersionStatus::Delivering {
+                    return Err(format!("v{version} pushed without delivering"));
+                }
+                v.status = VersionStatus::Pushed { at_unix_ms };
+                self.deliverable = None;
+            }
+            Record::Pruned { version, .. } => {
+                let v = self
+                    .get_mut(version)
+                    .ok_or_else(|| format!("pruned v{version}, which does not exist"))?;
+                if !v.text_kept {
+                    return Err(format!("pruned v{version}, which has no kept text"));
+                }
+                v.text_kept = false;
+            }
+        }
+        Ok(())
+    }
+
+    fn deliverable_mut(&mut self, version: u64, what: &str) -> Result<&mut VersionState, String> {
+        let v = self
+            .get_mut(version)
+            .ok_or_else(|| format!("{what} for v{version}, which does not exist"))?;
+        if !v.is_deliverable() {
+            return Err(format!("{what} for v{version}, which is {:?}", v.status));
+        }
+        Ok(v)
+    }
+}
+
+/// Read and fold a manifest without changing it. A missing file is an empty history.
+pub fn load(path: &Path) -> Result<Loaded, StateError> {
+    let bytes = match std::fs::read(path) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => return Err(StateError::io("read manifest", path)(e)),
+    };
+    let good_len = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+    let mut history = History::default();
+    let lines = bytes[..good_len].iter().filter(|&&b| b == b'\n').count();
+    for (index, line) in bytes[..good_len].split(|&b| b == b'\n').enumerate() {
+        if line.is_empty() {
+            continue;
+        }
+        let corrupt = |reason: String| StateError::CorruptManifest {
+            path: path.to_path_buf(),
+            line: index + 1,
+            reason,
+        };
+        let record: Record = serde_json::from_slice(line).map_err(|e| corrupt(e.to_string()))?;
+        history.apply(record).map_err(corrupt)?;
+    }
+    Ok(Loaded {
+        history,
+        good_len: good_len as u64,
+        lines,
+        torn_bytes: (bytes.len() - good_len) as u64,
+    })
+}
+
+/// One record as a manifest line, ending in `\n`.
+pub(crate) fn line(record: &Record) -> String {
+    // A Record holds only strings, numbers and a JSON value: serializing cannot fail.
+    let mut line = serde_json::to_string(record).expect("a manifest record serializes to JSON");
+    line.push('\n');
+    line
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn version(n: u64, refused: Option<&str>) -> Record {
+        Record::Version(VersionRecord {
+            version: n,
+            created_at_unix_ms: 1000 * n,
+            table_number: 1,
+            files: vec![FileRecord {
+                name: "CAM_T1.SPF".into(),
+                sha256: "00".repeat(32),
+                bytes: 5,
+            }],
+            reason: "test".into(),
+            measurement_id: None,
+            learning: serde_json::json!({"gain": 0.5}),
+            rollback_of: None,
+            refused: refused.map(str::to_owned),
+        })
+    }
+
+    fn fold(records: Vec<Record>) -> Result<History, String> {
+        let mut h = History::default();
+        for r in records {
+            h.apply(r)?;
+        }
+        Ok(h)
+    }
+
+    #[test]
+    fn a_record_round_trips_through_one_json_line() {
+        let r = version(1, None);
+        let text = line(&r);
+        assert!(text.ends_with('\n') && text.matches('\n').count() == 1);
+        assert!(
+            text.starts_with(r#"{"record":"version","version":1,"#),
+            "{text}"
+        );
+        assert_eq!(serde_json::from_str::<Record>(&text).unwrap(), r);
+        let w = Record::Waiting {
+            version: 1,
+            at_unix_ms: 7,
+            reason: "share /x is missing".into(),
+        };
+        assert_eq!(
+            line(&w),
+            "{\"record\":\"waiting\",\"version\":1,\"at_unix_ms\":7,\"reason\":\"share /x is missing\"}\n"
+        );
+    }
+
+    #[test]
+    fn a_newer_accepted_version_supersedes_older_waiting_ones_but_not_refused_or_pushed() {
+        let h = fold(vec![
+            version(1, None),
+            Record::Delivering {
+                version: 1,
+                at_unix_ms: 1,
+            },
+            Record::Pushed {
+                version: 1,
+                at_unix_ms: 2,
+            },
+            version(2, None),
+            version(3, Some("table 1 is in use")),
+            version(4, None),
+        ])
+        .unwrap();
+        let status = |n| h.get(n).unwrap().status.clone();
+        assert_eq!(status(1), VersionStatus::Pushed { at_unix_ms: 2 });
+        assert_eq!(status(2), VersionStatus::Superseded { by: 4 });
+        assert!(matches!(status(3), VersionStatus::Refused { .. }));
+        assert_eq!(status(4), VersionStatus::Waiting { reason: None });
+        assert_eq!(h.waiting().unwrap().record.version, 4);
+        assert_eq!(h.on_share().unwrap().record.version, 1);
+        assert!(!h.get(3).unwrap().text_kept);
+    }
+
+    #[test]
+    fn records_that_do_not_follow_are_refused() {
+        assert!(
+            fold(vec![version(2, None)])
+                .unwrap_err()
+                .contains("expected v1")
+        );
+        let pushed = Record::Pushed {
+            version: 1,
+            at_unix_ms: 0,
+        };
+        assert!(
+            fold(vec![version(1, None), pushed.clone()])
+                .unwrap_err()
+                .contains("without delivering")
+        );
+        let delivering = Record::Delivering {
+            version: 1,
+            at_unix_ms: 0,
+        };
+        assert!(
+            fold(vec![version(1, Some("no")), delivering])
+                .unwrap_err()
+                .contains("Refused")
+        );
+        let pruned = Record::Pruned {
+            version: 1,
+            at_unix_ms: 0,
+        };
+        assert!(
+            fold(vec![version(1, None), pruned.clone(), pruned])
+                .unwrap_err()
+                .contains("no kept text")
+        );
+    }
+
+    #[test]
+    fn a_torn_last_line_is_ignored_and_a_corrupt_middle_line_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("manifest.jsonl");
+        let first = line(&version(1, None));
+        std::fs::write(&path, format!("{first}{{\"record\":\"vers")).unwrap();
+        let loaded = load(&path).unwrap();
+        assert_eq!(loaded.history.versions().len(), 1);
+        assert_eq!(loaded.good_len, first.len() as u64);
+        assert_eq!(loaded.lines, 1);
+        assert_eq!(loaded.torn_bytes, 15);
+
+        std::fs::write(&path, format!("{first}garbage\n{first}")).unwrap();
+        let err = load(&path).unwrap_err().to_string();
+        assert!(err.contains("manifest.jsonl:2: expected value"), "{err}");
+    }
+}

@@ -1,0 +1,84 @@
+//! Part recipes: the shipped ones parse, and a bad one is refused with every problem named.
+
+use camloop::recipe::{Recipe, ShaftKind};
+use std::path::Path;
+
+#[test]
+fn every_shipped_recipe_parses_and_its_lift_files_exist() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts");
+    let mut count = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "toml") {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).unwrap();
+        let recipe =
+            Recipe::parse(&text, &path.display().to_string()).unwrap_or_else(|e| panic!("{e}"));
+        for lobe in &recipe.lobes {
+            assert!(
+                lobe.lift_path(&path).exists(),
+                "{}: {} missing",
+                path.display(),
+                lobe.lift.display()
+            );
+        }
+        count += 1;
+    }
+    assert!(count >= 1, "no recipe in {}", dir.display());
+}
+
+#[test]
+fn demo_recipe_has_the_documented_values() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let recipe = Recipe::parse(&std::fs::read_to_string(&path).unwrap(), "demo").unwrap();
+    assert_eq!(recipe.kind, ShaftKind::Camshaft);
+    assert_eq!(recipe.wheel.radius_mm, 250.0);
+    let lobe = recipe.lobe("IN1").unwrap();
+    assert_eq!(lobe.base_radius_mm, 20.0);
+    assert_eq!(lobe.tolerance.len(), 1);
+    assert_eq!(recipe.table.table_numbers, (1, 2));
+    assert_eq!(recipe.learning.gain, 0.8);
+}
+
+#[test]
+fn a_bad_recipe_lists_every_problem() {
+    let text = r#"
+name = "X"
+kind = "camshaft"
+[wheel]
+radius_mm = -1
+[table]
+points = 10
+table_numbers = [3, 3]
+[learning]
+gain = 1.5
+[[lobes]]
+name = "L 1"
+lift = "a.csv"
+follower = "roller"
+base_radius_mm = 20
+"#;
+    let e = Recipe::parse(text, "bad.toml").unwrap_err().to_string();
+    for expected in [
+        "bad.toml: ",
+        "wheel.radius_mm = -1",
+        "table.points = 10",
+        "table.table_numbers",
+        "learning.gain = 1.5",
+        "lobes.L 1: name must be",
+        "lobes.L 1: roller follower needs roller_radius_mm",
+    ] {
+        assert!(e.contains(expected), "`{expected}` missing from `{e}`");
+    }
+}
+
+#[test]
+fn unknown_keys_are_errors() {
+    let text = "name = \"X\"\nkind = \"camshaft\"\ncolour = \"red\"\n[wheel]\nradius_mm = 250\n";
+    let e = Recipe::parse(text, "bad.toml").unwrap_err().to_string();
+    assert!(
+        e.starts_with("bad.toml: line 3: unknown field `colour`"),
+        "{e}"
+    );
+}
