@@ -190,3 +190,50 @@ fn roller_gauge_reads_from_the_base_circle() {
     let (worst, at) = max_abs(&error_um(&readings[3], &nominal));
     assert!(worst < 0.05, "{worst} µm at {at}°");
 }
+
+/// The simulated gauge feeds the core's real checks: a clean measurement is accepted whole,
+/// a probe slip of 8 µm on one revolution is caught by the 5 µm revolution limit (good
+/// revolutions deviate from the median by at most ~4σ ≈ 1.2 µm over 360 angles), and a
+/// gauge set to 2 revolutions is refused.
+#[test]
+fn measurements_pass_through_the_core_checks() {
+    use camloop::core::measure::{AssemblyLimits, MeasurementError, check_and_average};
+    let limits = AssemblyLimits::default();
+
+    let (mut sim, ground) = ground_and_sim(GrinderConfig::default(), 21);
+    let averaged = check_and_average(&sim.measure(&ground, &labels()), &limits).unwrap();
+    assert_eq!(averaged.revolutions_used, [0, 1, 2, 3]);
+    let truth = ground.lift_on_grid(360);
+    let (worst, _) = max_abs(&error_um(&averaged.mean_lift_mm, &truth));
+    assert!(worst < 0.6, "mean off by {worst} µm (4σ/√4 = 0.6)");
+
+    let slipped = GrinderConfig {
+        gauge: GaugeConfig {
+            faults: vec![GaugeFault::Offset {
+                revolution: 1,
+                offset_um: 8.0,
+            }],
+            ..GaugeConfig::default()
+        },
+        ..GrinderConfig::default()
+    };
+    let (mut sim, ground) = ground_and_sim(slipped, 21);
+    let averaged = check_and_average(&sim.measure(&ground, &labels()), &limits).unwrap();
+    assert_eq!(averaged.revolutions_used, [0, 2, 3]);
+    assert_eq!(averaged.dropped_revolutions.len(), 1);
+    assert_eq!(averaged.dropped_revolutions[0].revolution, 1);
+
+    let short = GrinderConfig {
+        gauge: GaugeConfig {
+            revolutions: 2,
+            ..GaugeConfig::default()
+        },
+        ..GrinderConfig::default()
+    };
+    let (mut sim, ground) = ground_and_sim(short, 21);
+    let refused = check_and_average(&sim.measure(&ground, &labels()), &limits).unwrap_err();
+    assert!(matches!(
+        refused,
+        MeasurementError::TooFewRevolutions { announced: 2, .. }
+    ));
+}

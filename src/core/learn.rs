@@ -249,13 +249,13 @@ pub fn step(
             })
             .collect();
         next.correction_um = low_pass(&learned, params.cutoff_order, params.rolloff_orders);
-        let (max_um, j) = next
-            .correction_um
-            .iter()
-            .enumerate()
-            .fold((0.0f64, 0), |(m, jm), (j, u)| {
-                if u.abs() > m { (u.abs(), j) } else { (m, jm) }
-            });
+        let (max_um, j) =
+            next.correction_um
+                .iter()
+                .enumerate()
+                .fold((0.0f64, 0), |(m, jm), (j, u)| {
+                    if u.abs() > m { (u.abs(), j) } else { (m, jm) }
+                });
         if max_um > params.max_correction_um {
             return Err(LearnError::CorrectionTooLarge {
                 max_um,
