@@ -30,7 +30,8 @@
 //! can grind (a piece loses R·θ/2 at each end out of about (d − R)·Δc).
 
 use super::SimError;
-use super::table::{TablePath, wrap_pi};
+use super::path::{MachinePath, add, angle, cross, dot, norm, scale, sub};
+use super::table::wrap_pi;
 
 /// Normal jumps up to this (radians) at a table point count as smooth.
 pub const SMOOTH_KINK_RAD: f64 = 1e-6;
@@ -48,70 +49,6 @@ const CORNER_MATCH_MM: f64 = 1e-10;
 pub struct Node {
     pub p: [f64; 2],
     pub n: [f64; 2],
-}
-
-/// The machine's real wheel-centre path: d(c) = X_table(c − lag) + x_zero + Σ harmonics,
-/// W(c) = d(c)·u(c), and the wheel radius that runs along it.
-#[derive(Debug, Clone)]
-pub(crate) struct MachinePath<'a> {
-    pub table: &'a TablePath,
-    pub lag_rad: f64,
-    pub x_zero_mm: f64,
-    /// (order k, amplitude mm, phase rad).
-    pub harmonics: Vec<(f64, f64, f64)>,
-    pub wheel_radius_mm: f64,
-}
-
-/// Path and envelope at one parameter c (radians).
-#[derive(Debug, Clone, Copy)]
-struct PathSample {
-    w: [f64; 2],
-    /// Path curvature, 1/mm (positive where the path turns about the axis' side).
-    kappa: f64,
-    /// Unit outward normal of the path (and of the envelope).
-    n: [f64; 2],
-    /// Envelope point W − R·N.
-    p: [f64; 2],
-    /// dp/dc = W'·(1 − R·κ), mm/rad.
-    dp: [f64; 2],
-}
-
-impl MachinePath<'_> {
-    /// The path of table segment `i` at `c` (radians; the segment's own C range shifted by
-    /// the lag, or slightly beyond it as its analytic continuation).
-    fn at(&self, i: usize, c: f64) -> PathSample {
-        let xs = self.table.eval(i, c - self.lag_rad);
-        let (mut d, mut d1, mut d2) = (xs.x + self.x_zero_mm, xs.x1, xs.x2);
-        for &(k, a, phi) in &self.harmonics {
-            let (s, co) = (k * c + phi).sin_cos();
-            d += a * co;
-            d1 -= a * k * s;
-            d2 -= a * k * k * co;
-        }
-        let (sin, cos) = c.sin_cos();
-        let u = [cos, sin];
-        let up = [-sin, cos];
-        let w = scale(u, d);
-        let dw = add(scale(u, d1), scale(up, d));
-        let speed2 = d * d + d1 * d1;
-        let speed = speed2.sqrt();
-        let kappa = (speed2 + d1 * d1 - d * d2) / (speed2 * speed);
-        let n = scale(sub(scale(u, d), scale(up, d1)), 1.0 / speed);
-        let r = self.wheel_radius_mm;
-        PathSample {
-            w,
-            kappa,
-            n,
-            p: sub(w, scale(n, r)),
-            dp: scale(dw, 1.0 - r * kappa),
-        }
-    }
-
-    /// C range of segment `i` of the real path (the table's, shifted by the lag), radians.
-    fn range(&self, i: usize) -> (f64, f64) {
-        let (a, b) = self.table.range_rad(i);
-        (a + self.lag_rad, b + self.lag_rad)
-    }
 }
 
 /// A candidate element of the outline chain.
@@ -614,32 +551,4 @@ fn element_c_deg(elem: &Elem) -> f64 {
         Elem::Disc { c, .. } => c,
     };
     c.to_degrees().rem_euclid(360.0)
-}
-
-fn angle(v: [f64; 2]) -> f64 {
-    v[1].atan2(v[0])
-}
-
-fn add(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
-    [a[0] + b[0], a[1] + b[1]]
-}
-
-fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
-    [a[0] - b[0], a[1] - b[1]]
-}
-
-fn scale(a: [f64; 2], k: f64) -> [f64; 2] {
-    [a[0] * k, a[1] * k]
-}
-
-fn dot(a: [f64; 2], b: [f64; 2]) -> f64 {
-    a[0] * b[0] + a[1] * b[1]
-}
-
-fn cross(a: [f64; 2], b: [f64; 2]) -> f64 {
-    a[0] * b[1] - a[1] * b[0]
-}
-
-fn norm(a: [f64; 2]) -> f64 {
-    a[0].hypot(a[1])
 }

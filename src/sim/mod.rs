@@ -83,6 +83,7 @@ mod config;
 mod envelope;
 mod gauge;
 mod ground;
+mod path;
 mod rng;
 mod table;
 
@@ -94,8 +95,8 @@ pub use rng::SimRng;
 pub use table::{CommandedTable, TableShape};
 
 use crate::core::measure::RawMeasurement;
-use envelope::MachinePath;
 use ground::Probe;
+use path::MachinePath;
 use std::f64::consts::TAU;
 use table::TablePath;
 
