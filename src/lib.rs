@@ -1,7 +1,8 @@
 //! camloop: closed-loop compensation for X–C following grinding of cam lobes and crankpins.
 //!
 //! `core` is pure (geometry, measurement math, program rendering); everything that touches
-//! files, buses or the clock lives outside it.
+//! files, buses or the clock lives outside it. `sim` is a simulated grinder and gauge (pure
+//! as well, seeded) to run the loop and the demo without a machine.
 
 // No unwrap() in shipped code: bad input must become an error, not a panic (tests may).
 #![warn(clippy::unwrap_used)]
@@ -11,3 +12,4 @@ pub mod core;
 pub mod gauge;
 pub mod recipe;
 pub mod share;
+pub mod sim;

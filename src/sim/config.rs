@@ -1,0 +1,256 @@
+//! Simulator settings: the machine's errors, the wheel's life (wear, dressing), the envelope
+//! sampling and the gauge. Every field has a default; the defaults give an uncompensated
+//! maximum profile error of about 16 µm on the demo lobe, like the published 840D case.
+
+use serde::{Deserialize, Serialize};
+
+/// Everything the simulated grinder and gauge can be told. Deserialises from a TOML table
+/// (unknown keys are errors); missing keys take the defaults below.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GrinderConfig {
+    /// Constant C speed while grinding, rpm (revolutions per minute). Default 30.
+    pub c_speed_rpm: f64,
+    /// X servo following error as a pure time delay, ms: the actual X at C = c is the
+    /// commanded X at c − ω·τ. Default 0.45 ms (0.081° at 30 rpm).
+    pub servo_lag_ms: f64,
+    /// Geometric error of the machine, added to the wheel-centre distance as
+    /// Σ A·cos(k·c + φ). Default: order 2, 2 µm at 30°; order 3, 1 µm at 100°.
+    pub harmonics: Vec<Harmonic>,
+    /// Initial wheel-size error: true radius minus the radius the control believes, µm
+    /// (positive: the wheel is bigger than believed and grinds the part smaller). Default 3.
+    pub wheel_size_error_um: f64,
+    /// Radius the wheel loses per part ground, µm. Default 0.1.
+    pub wear_um_per_part: f64,
+    /// Dress after every this many parts (0: never on a schedule). Default 50.
+    pub dress_every_parts: u32,
+    /// Also dress after these part numbers (1-based count of parts ground). Default none.
+    pub dress_at_parts: Vec<u32>,
+    /// Radius removed by one dressing, µm. Default 20.
+    pub dress_depth_um: f64,
+    /// Systematic error of the radius the control is told after dressing (told minus true),
+    /// µm. Default 2.
+    pub dressing_error_um: f64,
+    /// Standard deviation of a random part of that error, drawn per dressing, µm. Default 1.
+    pub dressing_error_sigma_um: f64,
+    /// Envelope samples per table segment (the part between two table points). Default 16.
+    pub samples_per_segment: usize,
+    pub gauge: GaugeConfig,
+}
+
+/// One harmonic of the machine's geometric error in the wheel-centre distance.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Harmonic {
+    /// Order k (cycles per revolution of C), ≥ 1.
+    pub order: u32,
+    pub amplitude_um: f64,
+    pub phase_deg: f64,
+}
+
+/// The in-process gauge.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GaugeConfig {
+    /// Revolutions measured per part. Default 4 (the analysis wants at least 3; fewer can be
+    /// configured to test that it refuses them).
+    pub revolutions: u32,
+    /// Readings per revolution, index 0 at 0° of the part frame. Default 360.
+    pub points_per_rev: u32,
+    /// Standard deviation of the independent Gaussian noise on every reading, µm. Default 0.3.
+    pub noise_sigma_um: f64,
+    /// Faults injected into every measurement (for tests of the analysis). Default none.
+    pub faults: Vec<GaugeFault>,
+}
+
+/// A deliberate gauge fault, to check that the analysis notices it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum GaugeFault {
+    /// One reading off by `size_um`.
+    Spike {
+        revolution: u32,
+        angle_index: u32,
+        size_um: f64,
+    },
+    /// A whole revolution off by `offset_um` (a probe that slipped).
+    Offset { revolution: u32, offset_um: f64 },
+}
+
+impl Default for GrinderConfig {
+    fn default() -> Self {
+        Self {
+            c_speed_rpm: 30.0,
+            servo_lag_ms: 0.45,
+            harmonics: vec![
+                Harmonic {
+                    order: 2,
+                    amplitude_um: 2.0,
+                    phase_deg: 30.0,
+                },
+                Harmonic {
+                    order: 3,
+                    amplitude_um: 1.0,
+                    phase_deg: 100.0,
+                },
+            ],
+            wheel_size_error_um: 3.0,
+            wear_um_per_part: 0.1,
+            dress_every_parts: 50,
+            dress_at_parts: Vec::new(),
+            dress_depth_um: 20.0,
+            dressing_error_um: 2.0,
+            dressing_error_sigma_um: 1.0,
+            samples_per_segment: 16,
+            gauge: GaugeConfig::default(),
+        }
+    }
+}
+
+impl Default for GaugeConfig {
+    fn default() -> Self {
+        Self {
+            revolutions: 4,
+            points_per_rev: 360,
+            noise_sigma_um: 0.3,
+            faults: Vec::new(),
+        }
+    }
+}
+
+impl GrinderConfig {
+    /// A machine without errors: no lag, no harmonics, exact wheel size, no wear, no
+    /// dressing, a noiseless gauge. Other settings (C speed, sampling, gauge grid) default.
+    pub fn perfect() -> Self {
+        Self {
+            servo_lag_ms: 0.0,
+            harmonics: Vec::new(),
+            wheel_size_error_um: 0.0,
+            wear_um_per_part: 0.0,
+            dress_every_parts: 0,
+            dress_depth_um: 0.0,
+            dressing_error_um: 0.0,
+            dressing_error_sigma_um: 0.0,
+            gauge: GaugeConfig {
+                noise_sigma_um: 0.0,
+                ..GaugeConfig::default()
+            },
+            ..Self::default()
+        }
+    }
+
+    /// The servo lag as an angle of C, radians: ω·τ.
+    pub fn lag_rad(&self) -> f64 {
+        (self.c_speed_rpm * 6.0 * self.servo_lag_ms * 1e-3).to_radians()
+    }
+
+    /// Every problem with the settings, each naming its field; empty when all is well.
+    pub fn problems(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        let mut need = |ok: bool, field: &str, value: f64, rule: &str| {
+            if !ok {
+                out.push(format!("{field} = {value} {rule}"));
+            }
+        };
+        let finite = |v: f64| v.is_finite();
+        need(
+            finite(self.c_speed_rpm) && self.c_speed_rpm > 0.0,
+            "c_speed_rpm",
+            self.c_speed_rpm,
+            "must be a finite number > 0",
+        );
+        for (name, value) in [
+            ("servo_lag_ms", self.servo_lag_ms),
+            ("wear_um_per_part", self.wear_um_per_part),
+            ("dress_depth_um", self.dress_depth_um),
+            ("dressing_error_sigma_um", self.dressing_error_sigma_um),
+            ("gauge.noise_sigma_um", self.gauge.noise_sigma_um),
+        ] {
+            need(
+                finite(value) && value >= 0.0,
+                name,
+                value,
+                "must be a finite number ≥ 0",
+            );
+        }
+        for (name, value) in [
+            ("wheel_size_error_um", self.wheel_size_error_um),
+            ("dressing_error_um", self.dressing_error_um),
+        ] {
+            need(finite(value), name, value, "must be a finite number");
+        }
+        need(
+            (2..=1000).contains(&self.samples_per_segment),
+            "samples_per_segment",
+            self.samples_per_segment as f64,
+            "must be within 2..=1000",
+        );
+        for (i, h) in self.harmonics.iter().enumerate() {
+            need(
+                h.order >= 1,
+                &format!("harmonics[{i}].order"),
+                h.order as f64,
+                "must be ≥ 1",
+            );
+            need(
+                finite(h.amplitude_um),
+                &format!("harmonics[{i}].amplitude_um"),
+                h.amplitude_um,
+                "must be a finite number",
+            );
+            need(
+                finite(h.phase_deg),
+                &format!("harmonics[{i}].phase_deg"),
+                h.phase_deg,
+                "must be a finite number",
+            );
+        }
+        let g = &self.gauge;
+        need(
+            g.revolutions >= 1,
+            "gauge.revolutions",
+            g.revolutions as f64,
+            "must be ≥ 1",
+        );
+        need(
+            (36..=36_000).contains(&g.points_per_rev),
+            "gauge.points_per_rev",
+            g.points_per_rev as f64,
+            "must be within 36..=36000",
+        );
+        for (i, fault) in g.faults.iter().enumerate() {
+            let (revolution, size) = match fault {
+                GaugeFault::Spike {
+                    revolution,
+                    angle_index,
+                    size_um,
+                } => {
+                    need(
+                        *angle_index < g.points_per_rev,
+                        &format!("gauge.faults[{i}].angle_index"),
+                        *angle_index as f64,
+                        "must be below gauge.points_per_rev",
+                    );
+                    (*revolution, *size_um)
+                }
+                GaugeFault::Offset {
+                    revolution,
+                    offset_um,
+                } => (*revolution, *offset_um),
+            };
+            need(
+                revolution < g.revolutions,
+                &format!("gauge.faults[{i}].revolution"),
+                revolution as f64,
+                "must be below gauge.revolutions",
+            );
+            need(
+                finite(size),
+                &format!("gauge.faults[{i}] size"),
+                size,
+                "must be a finite number",
+            );
+        }
+        out
+    }
+}
