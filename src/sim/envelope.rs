@@ -227,10 +227,10 @@ fn elements(path: &MachinePath, samples: usize) -> Vec<Elem> {
     }
     // The last piece ends at the first disc.
     let m = elems.len();
-    if let Some(Elem::Piece { end_disc, .. }) = elems.last_mut() {
-        if *end_disc == m {
-            *end_disc = 0;
-        }
+    if let Some(Elem::Piece { end_disc, .. }) = elems.last_mut()
+        && *end_disc == m
+    {
+        *end_disc = 0;
     }
     elems
 }

@@ -306,7 +306,7 @@ impl SimGrinder {
         let n = self.parts_ground;
         let c = &self.config;
         self.wheel_radius_mm -= c.wear_um_per_part * 1e-3;
-        let scheduled = c.dress_every_parts > 0 && n % c.dress_every_parts == 0;
+        let scheduled = c.dress_every_parts > 0 && n.is_multiple_of(c.dress_every_parts);
         if !(scheduled || c.dress_at_parts.contains(&n)) {
             return None;
         }
