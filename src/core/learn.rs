@@ -37,6 +37,9 @@ pub struct LearningParams {
     pub stop_in_tolerance_um: Option<f64>,
     /// Largest |correction| allowed anywhere (µm): a larger one is refused, never pushed.
     pub max_correction_um: f64,
+    /// The max error must grow by more than this on each of two parts in a row to count as
+    /// divergence (µm): slow drift such as wheel wear and gauge noise must not raise it.
+    pub divergence_margin_um: f64,
 }
 
 impl Default for LearningParams {
@@ -48,6 +51,7 @@ impl Default for LearningParams {
             deadband_sigmas: 2.0,
             stop_in_tolerance_um: None,
             max_correction_um: 50.0,
+            divergence_margin_um: 0.5,
         }
     }
 }
@@ -72,6 +76,12 @@ impl LearningParams {
             problems.push(format!(
                 "learning.max_correction_um = {}: must be > 0",
                 self.max_correction_um
+            ));
+        }
+        if !(self.divergence_margin_um.is_finite() && self.divergence_margin_um >= 0.0) {
+            problems.push(format!(
+                "learning.divergence_margin_um = {}: must be ≥ 0",
+                self.divergence_margin_um
             ));
         }
         if let Some(t) = self.stop_in_tolerance_um
@@ -137,7 +147,8 @@ pub enum StepOutcome {
     InTolerance { max_error_um: f64 },
     /// Learning is frozen; the correction is kept as it is.
     Frozen { max_error_um: f64, reason: String },
-    /// The error grew on two parts in a row: back to the best correction, learning frozen.
+    /// The error grew (by more than the divergence margin) on two parts in a row: back to the
+    /// best correction, learning frozen.
     /// An operator must look at the machine (alarm).
     Reverted {
         max_error_um: f64,
@@ -218,8 +229,8 @@ pub fn step(
             reason: reason.clone(),
         }
     } else if let [a, b, c] = next.recent_max_error_um[..]
-        && c > b
-        && b > a
+        && c > b + params.divergence_margin_um
+        && b > a + params.divergence_margin_um
     {
         let best = next.best.clone().expect("set above on the first part");
         let reason = format!(

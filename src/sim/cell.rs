@@ -1,0 +1,295 @@
+//! A simulated grinding cell: the grinder and gauge of this module driven part after part by
+//! camloop's loop (learning in the lift domain through the exact geometry) or by the naive
+//! hand method (each lift error written 1:1 into X at the same table index), with the
+//! figures that judge them.
+
+use super::{
+    CommandedTable, GrinderConfig, PartLabels, SimError, SimGrinder, TableShape, Workpiece,
+};
+use crate::core::analysis::{AnalysisError, LobeOptions, analyse_lobe};
+use crate::core::compensate::{
+    self, AxisLimits, CycleError, GuardError, GuardedTable, LobeLoop, TableRequest,
+};
+use crate::core::fit::{TableForm, fit_poly};
+use crate::core::geometry::{CamGeometry, Part};
+use crate::core::learn::{self, LearningParams, LearningState, StepOutcome};
+use crate::core::lift::{LiftCurve, LiftTable};
+use crate::core::measure::{
+    AssemblyLimits, AveragedMeasurement, MeasurementError, check_and_average,
+};
+
+/// Points of the fine grid the ground part is judged on (0.1°), not only the gauge's points.
+pub const JUDGE_POINTS: usize = 3600;
+
+/// How the next table is made from the last measurement.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// Learning in the lift domain, table regenerated through the exact geometry.
+    Camloop,
+    /// The published hand method: X_j ← X_j − e_j at the same index, gain 1.
+    NaiveX,
+    /// camloop's learning law (gain, low-pass, deadband) applied in X at the same index,
+    /// as if ΔX = Δlift: isolates what learning in the lift domain is worth.
+    XDomainIlc,
+}
+
+/// What one part came out like.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PartFigures {
+    pub part: u32,
+    /// Max |profile error| on the 0.1° grid after the datum (base-circle offset and phase)
+    /// is fitted, µm: the form error a cam gauge reports.
+    pub max_profile_error_um: f64,
+    /// Max |ground lift − nominal lift| on the 0.1° grid with nothing fitted, µm.
+    pub max_lift_error_um: f64,
+    /// Base-circle radius error from the same fit, µm (positive: oversize).
+    pub base_radius_error_um: f64,
+    /// What the loop did after measuring this part.
+    pub action: String,
+    /// The wheel was dressed after this part.
+    pub dressed: bool,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum CellError {
+    #[error("simulator: {0}")]
+    Sim(#[from] SimError),
+    #[error("measurement: {0}")]
+    Measurement(#[from] MeasurementError),
+    #[error("analysis: {0}")]
+    Analysis(#[from] AnalysisError),
+    #[error("loop: {0}")]
+    Cycle(#[from] CycleError),
+    #[error("table: {0}")]
+    Guard(#[from] GuardError),
+    #[error("geometry: {0}")]
+    Geometry(#[from] crate::core::geometry::GeometryError),
+}
+
+/// The cell's fixed settings.
+#[derive(Debug, Clone)]
+pub struct CellSetup {
+    pub nominal: LiftTable,
+    /// Geometry with the wheel radius the control believes at the start.
+    pub geometry: CamGeometry,
+    pub request: TableRequest,
+    pub params: LearningParams,
+    pub limits: AxisLimits,
+    pub grinder: GrinderConfig,
+    pub seed: u64,
+}
+
+/// The figures of a run, and why it stopped early if it did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CellRun {
+    pub parts: Vec<PartFigures>,
+    pub stopped: Option<String>,
+}
+
+/// Grinds `parts` parts with `method` and returns each part's figures.
+pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, CellError> {
+    let mut geometry = setup.geometry;
+    let mut sim = SimGrinder::new(setup.grinder.clone(), Workpiece::Cam(geometry), setup.seed)?;
+    let nominal_curve = LiftCurve::new(&setup.nominal);
+    let nominal = |psi_deg: f64| {
+        let s = nominal_curve.eval(psi_deg.to_radians());
+        (s.h_mm, s.dh_mm.to_radians())
+    };
+    let labels = PartLabels {
+        machine: "SIM".into(),
+        part: "DEMO".into(),
+        lobe: "IN1".into(),
+    };
+    let points_per_rev = setup.grinder.gauge.points_per_rev;
+    let mut state = LearningState::new(points_per_rev);
+    // The X-domain methods' own memory: the X added at each table point, mm.
+    let mut naive_dx_mm = vec![0.0; setup.request.points];
+    let mut x_state = LearningState::new(points_per_rev);
+    let mut table = make_table(setup, geometry, &state, method, &naive_dx_mm)?;
+    let mut figures = Vec::with_capacity(parts as usize);
+    for part in 1..=parts {
+        let ground = match sim.grind(&table) {
+            Ok(ground) => ground,
+            // The table asks for a wheel path the wheel cannot follow (tighter than the
+            // wheel): that method has failed; report how far it got.
+            Err(e) => {
+                let stopped = Some(format!("part {part}: the table cannot be ground: {e}"));
+                return Ok(CellRun {
+                    parts: figures,
+                    stopped,
+                });
+            }
+        };
+        let (max_profile_error_um, max_lift_error_um, base_radius_error_um) =
+            judge(&ground.lift_on_grid(JUDGE_POINTS), &nominal)?;
+        let raw = sim.measure(&ground, &labels);
+        let avg = check_and_average(&raw, &AssemblyLimits::default())?;
+        let report = analyse_lobe(&avg, &nominal, &LobeOptions::default())?;
+        let revolutions = avg.revolutions_used.len() as u32;
+        let lobe = lobe_loop(setup, geometry);
+        let action = match method {
+            Method::Camloop => {
+                match compensate::learn_and_regenerate(
+                    &mut state,
+                    &report.error_um,
+                    &report.repeatability_um,
+                    revolutions,
+                    &lobe,
+                ) {
+                    Ok((outcome, next)) => {
+                        table = commanded(setup.request.form, &next, geometry);
+                        outcome_text(&outcome)
+                    }
+                    // A refused table is never used: the machine keeps the previous one.
+                    Err(e) => format!("refused, previous table kept: {e}"),
+                }
+            }
+            Method::NaiveX => {
+                let step = setup.request.points / points_per_rev as usize;
+                for (j, e) in report.error_um.iter().enumerate() {
+                    if let Some(dx) = naive_dx_mm.get_mut(j * step.max(1)) {
+                        *dx -= e / 1000.0;
+                    }
+                }
+                table = make_table(setup, geometry, &state, method, &naive_dx_mm)?;
+                "X -= e at each index".to_string()
+            }
+            Method::XDomainIlc => {
+                let outcome = learn::step(
+                    &mut x_state,
+                    &report.error_um,
+                    &report.repeatability_um,
+                    revolutions,
+                    &setup.params,
+                );
+                let step = setup.request.points / points_per_rev as usize;
+                for (j, u) in x_state.correction_um.iter().enumerate() {
+                    if let Some(dx) = naive_dx_mm.get_mut(j * step.max(1)) {
+                        *dx = u / 1000.0;
+                    }
+                }
+                table = make_table(setup, geometry, &state, method, &naive_dx_mm)?;
+                match outcome {
+                    Ok(o) => outcome_text(&o),
+                    Err(e) => format!("refused: {e}"),
+                }
+            }
+        };
+        let dressed = match sim.after_part() {
+            Some(event) => {
+                geometry.wheel_radius_mm = event.believed_wheel_radius_mm;
+                learn::after_dressing(&mut state);
+                learn::after_dressing(&mut x_state);
+                let mean = naive_dx_mm.iter().sum::<f64>() / naive_dx_mm.len() as f64;
+                naive_dx_mm.iter_mut().for_each(|d| *d -= mean);
+                table = make_table(setup, geometry, &state, method, &naive_dx_mm)?;
+                true
+            }
+            None => false,
+        };
+        figures.push(PartFigures {
+            part,
+            max_profile_error_um,
+            max_lift_error_um,
+            base_radius_error_um,
+            action,
+            dressed,
+        });
+    }
+    Ok(CellRun {
+        parts: figures,
+        stopped: None,
+    })
+}
+
+fn lobe_loop(setup: &CellSetup, geometry: CamGeometry) -> LobeLoop<'_> {
+    LobeLoop {
+        nominal: &setup.nominal,
+        geometry,
+        request: setup.request,
+        limits: &setup.limits,
+        params: &setup.params,
+    }
+}
+
+fn make_table(
+    setup: &CellSetup,
+    geometry: CamGeometry,
+    state: &LearningState,
+    method: Method,
+    naive_dx_mm: &[f64],
+) -> Result<CommandedTable, CellError> {
+    match method {
+        Method::Camloop => {
+            let table = compensate::current_table(state, &lobe_loop(setup, geometry))?;
+            Ok(commanded(setup.request.form, &table, geometry))
+        }
+        Method::NaiveX | Method::XDomainIlc => {
+            let part = Part::cam(geometry, LiftCurve::new(&setup.nominal))?;
+            let mut points = part.wheel_table(setup.request.points)?;
+            for (p, dx) in points.iter_mut().zip(naive_dx_mm) {
+                p.x_mm += dx;
+                p.d_mm += dx;
+            }
+            let shape = match setup.request.form {
+                TableForm::G1 => TableShape::G1(points),
+                TableForm::Poly => TableShape::Poly(fit_poly(&points)),
+            };
+            Ok(CommandedTable {
+                shape,
+                x_zero_mm: part.x_zero_mm(),
+                wheel_radius_mm: geometry.wheel_radius_mm,
+            })
+        }
+    }
+}
+
+fn commanded(form: TableForm, table: &GuardedTable, geometry: CamGeometry) -> CommandedTable {
+    let shape = match (form, &table.segments) {
+        (TableForm::Poly, Some(segments)) => TableShape::Poly(segments.clone()),
+        _ => TableShape::G1(table.points.clone()),
+    };
+    CommandedTable {
+        shape,
+        x_zero_mm: geometry.wheel_radius_mm + geometry.base_radius_mm,
+        wheel_radius_mm: geometry.wheel_radius_mm,
+    }
+}
+
+/// Max |profile error| (datum fitted), max |lift error| (nothing fitted) and the base-circle
+/// radius error, from the true ground lift on the fine grid.
+fn judge(
+    lift_mm: &[f64],
+    nominal: &dyn Fn(f64) -> (f64, f64),
+) -> Result<(f64, f64, f64), AnalysisError> {
+    let n = lift_mm.len();
+    let truth = AveragedMeasurement {
+        origin: "ground part".to_string(),
+        points_per_rev: n as u32,
+        mean_lift_mm: lift_mm.to_vec(),
+        repeatability_std_um: vec![0.0; n],
+        repeatability_range_um: vec![0.0; n],
+        revolutions_used: vec![0],
+        dropped_revolutions: Vec::new(),
+    };
+    let report = analyse_lobe(&truth, nominal, &LobeOptions::default())?;
+    let max_abs = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    Ok((
+        max_abs(&report.profile_error_um),
+        max_abs(&report.error_um),
+        report.base_radius_error_um,
+    ))
+}
+
+fn outcome_text(outcome: &StepOutcome) -> String {
+    match outcome {
+        StepOutcome::Updated {
+            max_correction_um, ..
+        } => format!("learned, correction ≤ {max_correction_um:.2} µm"),
+        StepOutcome::InTolerance { .. } => "in tolerance, table kept".to_string(),
+        StepOutcome::Frozen { .. } => "frozen".to_string(),
+        StepOutcome::Reverted { to_iteration, .. } => {
+            format!("ALARM: reverted to iteration {to_iteration}")
+        }
+    }
+}
