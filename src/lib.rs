@@ -13,3 +13,4 @@ pub mod gauge;
 pub mod recipe;
 pub mod share;
 pub mod sim;
+pub mod store;
