@@ -625,3 +625,70 @@ async fn unknown_url_scheme_is_invalid() {
         "invalid database url: scheme `mysql` is not sqlite: or postgres://"
     );
 }
+
+/// Writers in parallel (the daemon's gauge tasks): every measurement lands once, and table
+/// versions either get distinct numbers or a clean `Conflict`, never a duplicate.
+async fn concurrent_writers(store: &Store) {
+    // Each measurement inserted by two tasks at once: idempotence under concurrency.
+    let mut set = tokio::task::JoinSet::new();
+    for n in (0..16u32).chain(0..16) {
+        let store = store.clone();
+        set.spawn(async move {
+            let m = measurement("MC", "in1", n, i64::from(n));
+            (n, store.insert_measurement(&m).await.unwrap())
+        });
+    }
+    let mut ids = std::collections::BTreeMap::new();
+    while let Some(done) = set.join_next().await {
+        let (n, id) = done.unwrap();
+        if let Some(first) = ids.insert(n, id) {
+            assert_eq!(first, id, "measurement {n} stored under two ids");
+        }
+    }
+    assert_eq!(ids.len(), 16);
+    let listed = store
+        .measurement_history(&HistoryFilter {
+            limit: 100,
+            ..filter("MC")
+        })
+        .await
+        .unwrap();
+    assert_eq!(listed.items.len(), 16);
+
+    let mut set = tokio::task::JoinSet::new();
+    for n in 0..8 {
+        let store = store.clone();
+        set.spawn(async move {
+            let mut t = table("in1", None, &format!("v{n}"), TableStatus::Waiting);
+            t.machine = "MC".into();
+            store.insert_table_version(&t).await
+        });
+    }
+    let mut versions = Vec::new();
+    while let Some(done) = set.join_next().await {
+        match done.unwrap() {
+            Ok(v) => versions.push(v),
+            Err(StoreError::Conflict { .. }) => {}
+            Err(e) => panic!("unexpected {e:?}"),
+        }
+    }
+    versions.sort();
+    let expected: Vec<i64> = (1..=versions.len() as i64).collect();
+    assert_eq!(versions, expected, "numbers are distinct and without gaps");
+    let stored = store.table_versions("MC", "in1", 100).await.unwrap();
+    assert_eq!(stored.len(), versions.len());
+}
+
+#[tokio::test]
+async fn concurrent_writers_on_sqlite() {
+    let t = store_support::sqlite().await;
+    concurrent_writers(&t.store).await;
+}
+
+#[tokio::test]
+async fn concurrent_writers_on_postgres() {
+    let Some(t) = store_support::postgres("concurrent_writers_on_postgres").await else {
+        return;
+    };
+    concurrent_writers(&t.store).await;
+}

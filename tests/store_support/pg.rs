@@ -1,6 +1,7 @@
 //! A throwaway PostgreSQL server: `initdb` into a tempdir, `pg_ctl start` on a free port on
 //! 127.0.0.1 with the unix socket in the tempdir, one database `camloop`; stopped on drop.
 //! As root, the server binaries run as the `postgres` OS user (initdb refuses root).
+//! [`TempPostgres::start_at`] keeps the data folder for reuse (the benchmark's cache).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -17,7 +18,8 @@ pub struct TempPostgres {
     data: PathBuf,
     as_postgres: bool,
     port: u16,
-    _dir: tempfile::TempDir,
+    root: PathBuf,
+    _dir: Option<tempfile::TempDir>,
 }
 
 fn find_bin_dir() -> Option<PathBuf> {
@@ -55,18 +57,31 @@ fn free_port() -> std::io::Result<u16> {
 }
 
 impl TempPostgres {
+    /// A server in a fresh tempdir, removed on drop.
     pub fn start() -> Result<Self, StartError> {
+        let dir = tempfile::tempdir().map_err(|e| StartError::Failed(format!("tempdir: {e}")))?;
+        let root = dir.path().to_path_buf();
+        Self::start_in(root, Some(dir))
+    }
+
+    /// A server whose folder `root` is kept: initdb only when it holds no cluster yet.
+    pub fn start_at(root: &Path) -> Result<Self, StartError> {
+        std::fs::create_dir_all(root)
+            .map_err(|e| StartError::Failed(format!("create {}: {e}", root.display())))?;
+        Self::start_in(root.to_path_buf(), None)
+    }
+
+    fn start_in(root: PathBuf, dir: Option<tempfile::TempDir>) -> Result<Self, StartError> {
         let bin = find_bin_dir().ok_or_else(|| {
             StartError::NoBinaries("no initdb and pg_ctl under /usr/lib/postgresql/*/bin".into())
         })?;
         let failed =
             |what: &str, e: &dyn std::fmt::Display| StartError::Failed(format!("{what}: {e}"));
-        let dir = tempfile::tempdir().map_err(|e| failed("tempdir", &e))?;
         let as_postgres = is_root();
-        let data = dir.path().join("data");
+        let data = root.join("data");
         if as_postgres {
-            run(Command::new("chown").arg("postgres:").arg(dir.path()))
-                .map_err(|e| failed("chown tempdir to postgres", &e))?;
+            run(Command::new("chown").arg("-R").arg("postgres:").arg(&root))
+                .map_err(|e| failed("chown folder to postgres", &e))?;
         }
         let port = free_port().map_err(|e| failed("free port", &e))?;
         let me = TempPostgres {
@@ -74,28 +89,32 @@ impl TempPostgres {
             data,
             as_postgres,
             port,
+            root,
             _dir: dir,
         };
-        me.run_bin(
-            "initdb",
-            &[
-                "-D",
-                path_str(&me.data),
-                "-A",
-                "trust",
-                "-U",
-                "postgres",
-                "-E",
-                "UTF8",
-                "--no-sync",
-            ],
-        )
-        .map_err(|e| failed("initdb", &e))?;
-        let socket_dir = me._dir.path().display().to_string();
+        let fresh = !me.data.join("PG_VERSION").is_file();
+        if fresh {
+            me.run_bin(
+                "initdb",
+                &[
+                    "-D",
+                    path_str(&me.data),
+                    "-A",
+                    "trust",
+                    "-U",
+                    "postgres",
+                    "-E",
+                    "UTF8",
+                    "--no-sync",
+                ],
+            )
+            .map_err(|e| failed("initdb", &e))?;
+        }
+        let socket_dir = me.root.display().to_string();
         let opts = format!(
             "-p {port} -h 127.0.0.1 -k {socket_dir} -F -c fsync=off -c full_page_writes=off"
         );
-        let log = me._dir.path().join("server.log");
+        let log = me.root.join("server.log");
         me.run_bin(
             "pg_ctl",
             &[
@@ -113,19 +132,14 @@ impl TempPostgres {
             let tail = std::fs::read_to_string(&log).unwrap_or_default();
             failed("pg_ctl start", &format!("{e}\n{tail}"))
         })?;
-        me.run_bin(
-            "createdb",
-            &[
-                "-h",
-                "127.0.0.1",
-                "-p",
-                &port.to_string(),
-                "-U",
-                "postgres",
-                "camloop",
-            ],
-        )
-        .map_err(|e| failed("createdb", &e))?;
+        if fresh {
+            let port = port.to_string();
+            me.run_bin(
+                "createdb",
+                &["-h", "127.0.0.1", "-p", &port, "-U", "postgres", "camloop"],
+            )
+            .map_err(|e| failed("createdb", &e))?;
+        }
         Ok(me)
     }
 
