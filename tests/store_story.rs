@@ -410,12 +410,13 @@ async fn story(store: &Store) {
         (dressings[0].old_radius_mm, dressings[0].new_radius_mm),
         (249.95, 249.9)
     );
+    let mut event_ids = Vec::new();
     for (at, level, kind) in [
         (1, EventLevel::Info, "started"),
         (2, EventLevel::Error, "gauge_down"),
         (3, EventLevel::Warn, "table_refused"),
     ] {
-        store
+        let id = store
             .insert_event(&NewEvent {
                 machine: "M1".into(),
                 at_ms: at,
@@ -425,6 +426,7 @@ async fn story(store: &Store) {
             })
             .await
             .unwrap();
+        event_ids.push(id);
     }
     let events = store
         .events(&EventFilter {
@@ -436,6 +438,8 @@ async fn story(store: &Store) {
         .unwrap();
     let kinds: Vec<_> = events.iter().map(|e| e.kind.as_str()).collect();
     assert_eq!(kinds, ["table_refused", "gauge_down", "started"]);
+    event_ids.reverse();
+    assert_eq!(events.iter().map(|e| e.id).collect::<Vec<_>>(), event_ids);
     let errors = store
         .events(&EventFilter {
             level: Some(EventLevel::Error),

@@ -4,8 +4,9 @@ use super::codec::{check_finite, check_json, check_limit, check_name, sha256_hex
 use super::error::db_error;
 use super::measurements::{Bind, Conditions, fetch_all_dynamic};
 use super::{
-    Dressing, Event, EventFilter, EventLevel, Feature, FeatureKind, LearningState, Machine,
-    NewDressing, NewEvent, NewRecipeSnapshot, RecipeSnapshotId, Store, StoreError, col, with_pool,
+    Dressing, DressingId, Event, EventFilter, EventId, EventLevel, Feature, FeatureKind,
+    LearningState, Machine, NewDressing, NewEvent, NewRecipeSnapshot, RecipeSnapshotId, Store,
+    StoreError, col, with_pool,
 };
 
 const ENSURE_MACHINE: &str =
@@ -111,7 +112,7 @@ impl Store {
     }
 
     /// Appends a wheel dressing; returns its row id.
-    pub async fn insert_dressing(&self, d: &NewDressing) -> Result<i64, StoreError> {
+    pub async fn insert_dressing(&self, d: &NewDressing) -> Result<DressingId, StoreError> {
         check_name("machine", &d.machine)?;
         check_finite("old_radius_mm", d.old_radius_mm)?;
         check_finite("new_radius_mm", d.new_radius_mm)?;
@@ -137,7 +138,7 @@ impl Store {
             .await
             .map_err(db_error(OP))?;
             tx.commit().await.map_err(db_error(OP))?;
-            Ok(id)
+            Ok(DressingId(id))
         })
     }
 
@@ -157,7 +158,7 @@ impl Store {
             Ok(rows
                 .into_iter()
                 .map(|(id, machine, at_ms, old_radius_mm, new_radius_mm, source)| Dressing {
-                    id,
+                    id: DressingId(id),
                     machine,
                     at_ms,
                     old_radius_mm,
@@ -169,7 +170,7 @@ impl Store {
     }
 
     /// Appends an alarm or event; returns its row id.
-    pub async fn insert_event(&self, e: &NewEvent) -> Result<i64, StoreError> {
+    pub async fn insert_event(&self, e: &NewEvent) -> Result<EventId, StoreError> {
         check_name("machine", &e.machine)?;
         check_name("kind", &e.kind)?;
         const OP: &str = "inserting an event";
@@ -194,7 +195,7 @@ impl Store {
             .await
             .map_err(db_error(OP))?;
             tx.commit().await.map_err(db_error(OP))?;
-            Ok(id)
+            Ok(EventId(id))
         })
     }
 
@@ -228,7 +229,7 @@ impl Store {
                 .map(|row| {
                     let level: String = col!(row, "level", "reading an event");
                     Ok(Event {
-                        id: col!(row, "id", "reading an event"),
+                        id: EventId(col!(row, "id", "reading an event")),
                         machine: col!(row, "machine", "reading an event"),
                         at_ms: col!(row, "at_ms", "reading an event"),
                         level: EventLevel::parse(&level)?,

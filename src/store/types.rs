@@ -11,6 +11,14 @@ pub struct MeasurementId(pub i64);
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct RecipeSnapshotId(pub i64);
 
+/// Row id of a wheel dressing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct DressingId(pub i64);
+
+/// Row id of an event.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct EventId(pub i64);
+
 macro_rules! text_enum {
     ($(#[$m:meta])* $name:ident, $field:literal { $($variant:ident => $text:literal),+ $(,)? }) => {
         $(#[$m])*
@@ -224,7 +232,7 @@ pub struct NewDressing {
 /// A stored dressing.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Dressing {
-    pub id: i64,
+    pub id: DressingId,
     pub machine: String,
     pub at_ms: i64,
     pub old_radius_mm: f64,
@@ -246,7 +254,7 @@ pub struct NewEvent {
 /// A stored event.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Event {
-    pub id: i64,
+    pub id: EventId,
     pub machine: String,
     pub at_ms: i64,
     pub level: EventLevel,
