@@ -109,7 +109,10 @@ impl Store {
             // History pages touch rows spread over the file: map it and cache more than the
             // 2 MiB default so a 1,000-row page is served without a syscall per page.
             .pragma("mmap_size", SQLITE_MMAP_BYTES.to_string())
-            .pragma("cache_size", format!("-{SQLITE_CACHE_KIB}"));
+            .pragma("cache_size", format!("-{SQLITE_CACHE_KIB}"))
+            // Rows cross from sqlx's SQLite worker thread to the task through a channel: let a
+            // whole history page through without the worker waiting on the task.
+            .row_buffer_size(1024);
         let path = options.get_filename().to_path_buf();
         let target = path.display().to_string();
         if let Some(parent) = path.parent()
