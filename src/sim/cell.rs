@@ -257,8 +257,8 @@ fn commanded(form: TableForm, table: &GuardedTable, geometry: CamGeometry) -> Co
 }
 
 /// Max |profile error| (datum fitted), max |lift error| (nothing fitted) and the base-circle
-/// radius error, from the true ground lift on the fine grid.
-fn judge(
+/// radius error (all µm), from the true ground lift on the fine grid.
+pub fn judge(
     lift_mm: &[f64],
     nominal: &dyn Fn(f64) -> (f64, f64),
 ) -> Result<(f64, f64, f64), AnalysisError> {
