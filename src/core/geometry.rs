@@ -11,9 +11,10 @@ use std::f64::consts::{FRAC_PI_2, TAU};
 
 /// Table sizes accepted per revolution.
 pub const POINTS_RANGE: std::ops::RangeInclusive<usize> = 36..=36_000;
-/// Angular step of the grindability scan (degrees): fine enough to see any stretch that
-/// spans a fraction of a 1° table step, since the spline's curvature is linear between knots.
-const SCAN_STEP_DEG: f64 = 0.05;
+/// Largest angular step of the grindability scan (degrees). Every knot is scanned too: the
+/// spline's h'' is linear between knots, so its extremes sit at knots, and 0.1° between them
+/// sees any bad stretch of a tenth of a 1° table step.
+const SCAN_STEP_DEG: f64 = 0.1;
 
 /// The cam follower the lift table was designed for (and the gauge reads with).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -245,6 +246,15 @@ impl Part {
         Ok(self.wheel_at_c_deg(c_deg)?.0)
     }
 
+    /// Exact wheel-centre distance (mm) at table angle `c_deg`, starting the search from the
+    /// path parameter of a nearby solution (`guess_rad`, e.g. the previous point of a walk).
+    /// Returns d and the parameter found, to pass on as the next guess. Same result as
+    /// [`Part::d_at_c_deg`]; only faster when the guess is close.
+    pub fn d_at_c_deg_near(&self, c_deg: f64, guess_rad: f64) -> Result<(f64, f64), GeometryError> {
+        let (s, d, _) = self.wheel_at(c_deg, guess_rad)?;
+        Ok((d, s))
+    }
+
     /// Wheel centre and contact point (part frame, mm) with the wheel at table angle `c_deg`.
     pub fn contact_at_c_deg(&self, c_deg: f64) -> Result<([f64; 2], [f64; 2]), GeometryError> {
         let (_, p) = self.wheel_at_c_deg(c_deg)?;
@@ -289,8 +299,8 @@ impl Part {
     ///
     /// Newton on the analytic dc/dψ, safeguarded by bisection on a bracket: c(ψ) is strictly
     /// increasing on a checked part, and |c − ψ| < π/2 brackets the root. It stops once the
-    /// Newton step is below 1e-12 rad; d then differs from its value at the root by at most
-    /// |dd/dψ|·1e-12, below 1e-9 µm for any real part.
+    /// Newton step is below 1e-11 rad; d then differs from its value at the root by at most
+    /// |dd/dψ|·1e-11, below 1e-6 µm for any real part (|dd/dψ| < 100 mm/rad).
     fn solve_psi(&self, c_target: f64, guess: f64) -> Option<(f64, PathPoint)> {
         let (mut lo, mut hi) = (c_target - FRAC_PI_2, c_target + FRAC_PI_2);
         let mut psi = guess.clamp(lo, hi);
@@ -304,7 +314,7 @@ impl Part {
             }
             let dc = cross(p.w, p.dw) / dot(p.w, p.w);
             let step = f / dc;
-            if dc > 0.0 && step.abs() < 1e-12 {
+            if dc > 0.0 && step.abs() < 1e-11 {
                 return Some((psi, p));
             }
             let newton = psi - step;
@@ -377,13 +387,16 @@ impl Part {
             return Ok(());
         };
         let (rb, big_r) = (geometry.base_radius_mm, geometry.wheel_radius_mm);
-        let steps = (360.0 / SCAN_STEP_DEG).round() as usize;
-        let mut samples: Vec<f64> = (0..steps)
-            .map(|k| (k as f64 * SCAN_STEP_DEG).to_radians())
-            .collect();
-        // Knots are where the spline's curvature is extreme piecewise; include them.
-        samples.extend(lift.knots_rad().iter().map(|k| k.rem_euclid(TAU)));
-        samples.sort_by(f64::total_cmp);
+        // Each knot interval from its start knot, split into steps of at most SCAN_STEP_DEG:
+        // ascending without sorting, every knot included.
+        let knots = lift.knots_rad();
+        let step_max = SCAN_STEP_DEG.to_radians();
+        let mut samples = Vec::with_capacity(knots.len() * 11);
+        for (i, &k0) in knots.iter().enumerate() {
+            let k1 = knots.get(i + 1).copied().unwrap_or(knots[0] + TAU);
+            let parts = ((k1 - k0) / step_max).ceil().max(1.0) as usize;
+            samples.extend((0..parts).map(|j| k0 + (k1 - k0) * j as f64 / parts as f64));
+        }
         let offset = match geometry.follower {
             Follower::Roller { radius_mm } => radius_mm,
             _ => 0.0,
@@ -496,7 +509,38 @@ fn worst_bad_stretch(
     let Some((_, start, end, error)) = worst else {
         return Ok(());
     };
-    let (from_deg, to_deg) = (samples[start].to_degrees(), samples[end].to_degrees());
+    // Refine both ends between the last passing and first failing sample, so the range is
+    // exact to 1e-6° whatever the scan step.
+    let n = samples.len();
+    let unwrap = |a: f64, b: f64| if b < a { b + TAU } else { b };
+    let refine = |good: f64, bad: f64| {
+        let (mut good, mut bad) = (good, bad);
+        while (bad - good).abs() > 1e-8 {
+            let mid = 0.5 * (good + bad);
+            if check(mid).is_some() {
+                bad = mid
+            } else {
+                good = mid
+            }
+        }
+        bad
+    };
+    let before = samples[(start + n - 1) % n];
+    let after = samples[(end + 1) % n];
+    let from = if flags[(start + n - 1) % n].is_none() {
+        refine(before, unwrap(before, samples[start]))
+    } else {
+        samples[start]
+    };
+    let to = if flags[(end + 1) % n].is_none() {
+        refine(unwrap(samples[end], after), samples[end])
+    } else {
+        samples[end]
+    };
+    let (from_deg, to_deg) = (
+        from.to_degrees().rem_euclid(360.0),
+        to.to_degrees().rem_euclid(360.0),
+    );
     Err(match error {
         GeometryError::NegativeCurvature { min_radius_mm, .. } => {
             GeometryError::NegativeCurvature {
