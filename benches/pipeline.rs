@@ -6,7 +6,7 @@
 //!   manifest (target under 2 ms), on tmpfs and on the state disk.
 
 use camloop::core::analysis::{LobeOptions, analyse_lobe};
-use camloop::core::compensate::{self, AxisLimits, LobeLoop, TableRequest};
+use camloop::core::compensate::{self, AxisLimits, Feature, LobeLoop, TableRequest};
 use camloop::core::fit::TableForm;
 use camloop::core::geometry::{CamGeometry, Follower};
 use camloop::core::learn::{LearningParams, LearningState};
@@ -77,11 +77,11 @@ fn loop_turn(c: &mut Criterion) {
     };
     let lobe = LobeLoop {
         nominal: &nominal,
-        geometry: CamGeometry {
+        feature: Feature::Cam(CamGeometry {
             base_radius_mm: 20.0,
             follower: Follower::Flat,
             wheel_radius_mm: 250.0,
-        },
+        }),
         request: TableRequest {
             points: 360,
             form: TableForm::Poly,

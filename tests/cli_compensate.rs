@@ -275,8 +275,46 @@ fn a_new_state_needs_the_nominal_run_first_and_a_state_belongs_to_one_part() {
         d,
     );
     assert!(
-        stderr(&out).contains("no lobe EX9 (lobes: IN1)"),
+        stderr(&out).contains("no lobe or pin EX9 (has: IN1)"),
         "{}",
         stderr(&out)
+    );
+}
+
+#[test]
+fn a_crankpin_by_flags_gets_its_round_table_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = camloop(
+        &[
+            "compensate",
+            "crankpin",
+            "--throw",
+            "45",
+            "--pin-radius",
+            "30",
+            "--wheel-radius",
+            "300",
+            "--state",
+            "st",
+            "--program",
+            "PIN.SPF",
+            "--form",
+            "poly",
+        ],
+        d,
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    // The nominal table of a round pin: X = d − R − r_p swings between −b and +b.
+    let parsed = parse_table_program(&std::fs::read_to_string(d.join("PIN.SPF")).unwrap()).unwrap();
+    let ParsedShape::Poly(segments) = parsed.shape else {
+        panic!("POLY expected")
+    };
+    let (lo, hi) = segments.iter().fold((f64::MAX, f64::MIN), |(lo, hi), s| {
+        (lo.min(s.x0_mm), hi.max(s.x0_mm))
+    });
+    assert!(
+        (hi - 45.0).abs() < 1e-4 && (lo + 45.0).abs() < 1e-3,
+        "{lo} .. {hi}"
     );
 }

@@ -4,16 +4,19 @@
 //! - `learning.json`: the learning state, the part's fingerprint, the wheel radius and the
 //!   last measurement used (so a measurement is never learned from twice);
 //! - `share/`: the program versions and their manifest (see `share`), the program itself
-//!   delivered atomically to the folder of `--program`.
+//!   delivered atomically to the folder of `--program`;
+//! - `refusals.jsonl`: every table a guard refused, with the measurement and the reason.
 
 use super::analyze::{averaged_measurement, load_dbc};
 use super::output::Outputs;
-use super::part::{CamArgs, PartKindArgs, load_cam_table};
+use super::part::{CamArgs, CrankpinArgs, PartKindArgs, load_cam_table};
 use super::table::{FormArg, table_csv};
 use crate::core::analysis::{LobeOptions, ToleranceBand, analyse_lobe};
-use crate::core::compensate::{self, AxisLimits, GuardedTable, LobeLoop, TableRequest};
+use crate::core::compensate::{
+    self, AxisLimits, Feature, GuardedTable, LobeLoop, TableRequest, pin_nominal_lift,
+};
 use crate::core::fit::TableForm;
-use crate::core::geometry::CamGeometry;
+use crate::core::geometry::CrankpinGeometry;
 use crate::core::learn::{self, LearningParams, LearningState, StepOutcome};
 use crate::core::lift::LiftTable;
 use crate::core::measure::AssemblyLimits;
@@ -63,7 +66,7 @@ pub struct CompensateArgs {
 struct LobeSetup {
     label: String,
     nominal: LiftTable,
-    geometry: CamGeometry,
+    feature: Feature,
     program: ProgramSettings,
     params: LearningParams,
     limits: AxisLimits,
@@ -84,6 +87,8 @@ struct SavedState {
 }
 
 const STATE_FILE: &str = "learning.json";
+/// Tables refused by a guard, one JSON line each: when, from which measurement, why.
+const REFUSALS_FILE: &str = "refusals.jsonl";
 
 pub fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
     let (Some(state_dir), Some(program)) = (args.state.clone(), args.program.clone()) else {
@@ -121,7 +126,7 @@ pub fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
             SavedState {
                 part_fingerprint: fingerprint,
                 part_label: setup.label.clone(),
-                wheel_radius_mm: setup.geometry.wheel_radius_mm,
+                wheel_radius_mm: setup.feature.wheel_radius_mm(),
                 learning: LearningState::new(360),
                 last_measurement_sha256: None,
             }
@@ -129,17 +134,18 @@ pub fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
         Err(e) => return Err(e).with_context(|| format!("cannot read {}", state_path.display())),
     };
     let mut report = Vec::new();
-    if (saved.wheel_radius_mm - setup.geometry.wheel_radius_mm).abs() > 1e-9 {
+    if (saved.wheel_radius_mm - setup.feature.wheel_radius_mm()).abs() > 1e-9 {
         report.push(format!(
             "wheel radius {} → {} mm: dressing, learned size reset, shape kept",
-            saved.wheel_radius_mm, setup.geometry.wheel_radius_mm
+            saved.wheel_radius_mm,
+            setup.feature.wheel_radius_mm()
         ));
         learn::after_dressing(&mut saved.learning);
-        saved.wheel_radius_mm = setup.geometry.wheel_radius_mm;
+        saved.wheel_radius_mm = setup.feature.wheel_radius_mm();
     }
     let lobe = LobeLoop {
         nominal: &setup.nominal,
-        geometry: setup.geometry,
+        feature: setup.feature,
         request: setup.request,
         limits: &setup.limits,
         params: &setup.params,
@@ -155,8 +161,14 @@ pub fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
             (table, reason.to_string(), None)
         }
         Some(path) => {
-            let (table, reason, id) =
-                learn_from(path, args.dbc.as_deref(), &setup, &lobe, &mut saved)?;
+            let (table, reason, id) = learn_from(
+                &dirs.state,
+                path,
+                args.dbc.as_deref(),
+                &setup,
+                &lobe,
+                &mut saved,
+            )?;
             report.push(reason.clone());
             (table, reason, Some(id))
         }
@@ -194,6 +206,7 @@ pub fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
 /// Reads, checks and analyses the measurement, then learns; returns the next table, the
 /// reason to record and the measurement's id.
 fn learn_from(
+    state_dir: &Path,
     path: &Path,
     dbc_path: Option<&Path>,
     setup: &LobeSetup,
@@ -235,14 +248,28 @@ fn learn_from(
     };
     let analysis = analyse_lobe(&avg, &nominal, &options)?;
     let revolutions = avg.revolutions_used.len() as u32;
-    let (outcome, table) = compensate::learn_and_regenerate(
+    let (outcome, table) = match compensate::learn_and_regenerate(
         &mut saved.learning,
         &analysis.error_um,
         &analysis.repeatability_um,
         revolutions,
         lobe,
-    )
-    .with_context(|| format!("{}: the previous table stays in force", path.display()))?;
+    ) {
+        Ok(done) => done,
+        Err(refused) => {
+            // Nothing is delivered; the refusal is kept with the measurement it came from.
+            let record = serde_json::json!({
+                "at_unix_ms": now_unix_ms(),
+                "measurement": path.display().to_string(),
+                "measurement_sha256": id,
+                "iteration": saved.learning.iteration,
+                "reason": refused.to_string(),
+            });
+            append_line(&state_dir.join(REFUSALS_FILE), &record.to_string())?;
+            return Err(anyhow::Error::new(refused))
+                .with_context(|| format!("{}: the previous table stays in force", path.display()));
+        }
+    };
     let reason = match outcome {
         StepOutcome::Updated {
             max_error_um,
@@ -349,9 +376,7 @@ fn lobe_setup(args: &CompensateArgs) -> anyhow::Result<LobeSetup> {
             bail!("give the part either by --part RECIPE.toml or by flags, not both")
         }
         (None, None) => bail!("give the part: `cam …` flags or --part RECIPE.toml --lobe NAME"),
-        (None, Some(PartKindArgs::Crankpin(_))) => {
-            bail!("compensate learns on cam lobes; crankpin learning is not available yet")
-        }
+        (None, Some(PartKindArgs::Crankpin(pin))) => Ok(from_pin_flags(pin, form_override)),
         (None, Some(PartKindArgs::Cam(cam))) => from_flags(cam, form_override),
         (Some(path), None) => from_recipe(path, args.lobe.as_deref(), form_override),
     }
@@ -359,14 +384,47 @@ fn lobe_setup(args: &CompensateArgs) -> anyhow::Result<LobeSetup> {
 
 fn from_flags(cam: &CamArgs, form: Option<TableForm>) -> anyhow::Result<LobeSetup> {
     let (nominal, geometry) = load_cam_table(cam)?;
+    Ok(flag_setup(
+        format!("lobe {}", cam.lift.display()),
+        nominal,
+        Feature::Cam(geometry),
+        form,
+    ))
+}
+
+fn from_pin_flags(pin: &CrankpinArgs, form: Option<TableForm>) -> LobeSetup {
+    let geometry = CrankpinGeometry {
+        throw_mm: pin.throw,
+        pin_radius_mm: pin.pin_radius,
+        wheel_radius_mm: pin.wheel_radius,
+    };
+    let label = format!(
+        "crankpin throw {} mm, pin radius {} mm",
+        pin.throw, pin.pin_radius
+    );
+    flag_setup(
+        label,
+        pin_nominal_lift(&geometry),
+        Feature::Pin(geometry),
+        form,
+    )
+}
+
+/// A setup from part flags: the defaults of the recipe's sections.
+fn flag_setup(
+    label: String,
+    nominal: LiftTable,
+    feature: Feature,
+    form: Option<TableForm>,
+) -> LobeSetup {
     let program = ProgramSettings {
         name: "CAMLOOP_TABLE".to_string(),
         ..ProgramSettings::default()
     };
-    Ok(LobeSetup {
-        label: format!("lobe {}", cam.lift.display()),
+    LobeSetup {
+        label,
         nominal,
-        geometry,
+        feature,
         program,
         params: LearningParams::default(),
         limits: AxisLimits::default(),
@@ -377,7 +435,7 @@ fn from_flags(cam: &CamArgs, form: Option<TableForm>) -> anyhow::Result<LobeSetu
         },
         table_pair: (1, 2),
         bands: Vec::new(),
-    })
+    }
 }
 
 fn from_recipe(
@@ -390,27 +448,46 @@ fn from_recipe(
     let recipe = Recipe::parse(&text, &path.display().to_string())?;
     let Some(name) = lobe_name else {
         bail!(
-            "--lobe is required with --part (lobes: {})",
+            "--lobe is required with --part (has: {})",
             recipe.feature_names().join(", ")
         );
     };
-    let Some(lobe) = recipe.lobe(name) else {
+    let (label, nominal, feature, phase_deg, bands) = if let Some(lobe) = recipe.lobe(name) {
+        let lift_path = lobe.lift_path(path);
+        let lift_text = std::fs::read_to_string(&lift_path)
+            .with_context(|| format!("cannot read lift table {}", lift_path.display()))?;
+        let nominal = LiftTable::parse_csv(&lift_text, &lift_path.display().to_string())?;
+        let feature = Feature::Cam(lobe.geometry(recipe.wheel.radius_mm));
+        (
+            format!("{} lobe {}", recipe.name, lobe.name),
+            nominal,
+            feature,
+            lobe.phase_deg,
+            lobe.tolerance.clone(),
+        )
+    } else if let Some(pin) = recipe.pin(name) {
+        let geometry = pin.geometry(recipe.wheel.radius_mm);
+        let nominal = pin_nominal_lift(&geometry);
+        (
+            format!("{} pin {}", recipe.name, pin.name),
+            nominal,
+            Feature::Pin(geometry),
+            pin.phase_deg,
+            pin.tolerance.clone(),
+        )
+    } else {
         bail!(
-            "{}: no lobe {name} (lobes: {})",
+            "{}: no lobe or pin {name} (has: {})",
             path.display(),
             recipe.feature_names().join(", ")
         );
     };
-    let lift_path = lobe.lift_path(path);
-    let lift_text = std::fs::read_to_string(&lift_path)
-        .with_context(|| format!("cannot read lift table {}", lift_path.display()))?;
-    let nominal = LiftTable::parse_csv(&lift_text, &lift_path.display().to_string())?;
     let mut program = recipe.program.clone();
-    program.c_offset_deg += lobe.phase_deg;
+    program.c_offset_deg += phase_deg;
     Ok(LobeSetup {
-        label: format!("{} lobe {}", recipe.name, lobe.name),
+        label,
         nominal,
-        geometry: lobe.geometry(recipe.wheel.radius_mm),
+        feature,
         program,
         params: recipe.learning.clone(),
         limits: recipe.axis_limits.clone(),
@@ -420,15 +497,13 @@ fn from_recipe(
             poly_tolerance_um: recipe.table.poly_tolerance_um,
         },
         table_pair: recipe.table.table_numbers,
-        bands: lobe.tolerance.clone(),
+        bands,
     })
 }
 
 fn part_fingerprint(setup: &LobeSetup) -> String {
-    let mut text = format!(
-        "{:?} {} ",
-        setup.geometry.follower, setup.geometry.base_radius_mm
-    );
+    // The wheel radius changes with every dressing; everything else names the part.
+    let mut text = format!("{:?} ", setup.feature.with_wheel_radius(0.0));
     for (a, l) in setup
         .nominal
         .angles_deg()
@@ -438,6 +513,22 @@ fn part_fingerprint(setup: &LobeSetup) -> String {
         text.push_str(&format!("{a:.9},{l:.9};"));
     }
     sha256_hex(text.as_bytes())
+}
+
+/// Appends one line and flushes it to disk before returning.
+fn append_line(path: &Path, line: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    let mut file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .with_context(|| format!("cannot open {}", path.display()))?;
+    file.write_all(format!("{line}\n").as_bytes())
+        .and_then(|()| file.sync_all())
+        .with_context(|| format!("cannot write {}", path.display()))
 }
 
 fn printable(text: &str) -> String {

@@ -115,9 +115,12 @@ struct PathPoint {
 
 #[derive(Debug, Clone)]
 enum Kind {
+    /// A cam lobe; with `pin` set, a crankpin described by its support function as the lift
+    /// of a flat follower (see [`Part::shaped_pin`]).
     Cam {
         geometry: CamGeometry,
         lift: LiftCurve,
+        pin: Option<CrankpinGeometry>,
     },
     Crankpin(CrankpinGeometry),
 }
@@ -138,7 +141,34 @@ impl Part {
             positive("roller radius", radius_mm)?;
         }
         let part = Self {
-            kind: Kind::Cam { geometry, lift },
+            kind: Kind::Cam {
+                geometry,
+                lift,
+                pin: None,
+            },
+        };
+        part.check_cam()?;
+        Ok(part)
+    }
+
+    /// A crankpin ground to a corrected shape. Seen from the main axis its support function
+    /// is `b·cos ψ + r_p + u(ψ)`, which is the lift `h = b·(1 + cos ψ) + u` of a flat follower
+    /// on a base radius `r_p − b` (negative when the pin does not surround the axis; the flat
+    /// follower's geometry holds all the same). `lift` is that h. Program X stays
+    /// `d − R − r_p`, as for the round pin.
+    pub fn shaped_pin(pin: CrankpinGeometry, lift: LiftCurve) -> Result<Self, GeometryError> {
+        Self::crankpin(pin)?;
+        let geometry = CamGeometry {
+            base_radius_mm: pin.pin_radius_mm - pin.throw_mm,
+            follower: Follower::Flat,
+            wheel_radius_mm: pin.wheel_radius_mm,
+        };
+        let part = Self {
+            kind: Kind::Cam {
+                geometry,
+                lift,
+                pin: Some(pin),
+            },
         };
         part.check_cam()?;
         Ok(part)
@@ -177,8 +207,10 @@ impl Part {
     /// Program X is `d − x_zero_mm`: `R + Rb` for cams, `R + r_p` for crankpins.
     pub fn x_zero_mm(&self) -> f64 {
         match &self.kind {
+            Kind::Cam { pin: Some(g), .. } | Kind::Crankpin(g) => {
+                g.wheel_radius_mm + g.pin_radius_mm
+            }
             Kind::Cam { geometry, .. } => geometry.wheel_radius_mm + geometry.base_radius_mm,
-            Kind::Crankpin(g) => g.wheel_radius_mm + g.pin_radius_mm,
         }
     }
 
@@ -186,6 +218,9 @@ impl Part {
     /// axis orbit of a crankpin's centre. Centre, radius (mm) and a label.
     pub fn reference_circle(&self) -> Option<([f64; 2], f64, String)> {
         match &self.kind {
+            Kind::Cam { pin: Some(g), .. } => {
+                Some(([0.0, 0.0], g.throw_mm, "pin-centre orbit".to_string()))
+            }
             Kind::Cam { geometry, .. } => Some((
                 [0.0, 0.0],
                 geometry.base_radius_mm,
@@ -201,7 +236,16 @@ impl Part {
     /// The same part with another wheel radius (after dressing), checked again.
     pub fn with_wheel_radius(&self, wheel_radius_mm: f64) -> Result<Self, GeometryError> {
         match &self.kind {
-            Kind::Cam { geometry, lift } => Self::cam(
+            Kind::Cam {
+                pin: Some(g), lift, ..
+            } => Self::shaped_pin(
+                CrankpinGeometry {
+                    wheel_radius_mm,
+                    ..*g
+                },
+                lift.clone(),
+            ),
+            Kind::Cam { geometry, lift, .. } => Self::cam(
                 CamGeometry {
                     wheel_radius_mm,
                     ..*geometry
@@ -357,7 +401,7 @@ impl Part {
                     u,
                 }
             }
-            Kind::Cam { geometry, lift } => {
+            Kind::Cam { geometry, lift, .. } => {
                 let l = lift.eval(s);
                 let (h, h1, h2) = (l.h_mm, l.dh_mm, l.d2h_mm);
                 let (rb, big_r) = (geometry.base_radius_mm, geometry.wheel_radius_mm);
@@ -383,7 +427,7 @@ impl Part {
 
     /// Scans the whole revolution for stretches the wheel cannot grind and reports the first.
     fn check_cam(&self) -> Result<(), GeometryError> {
-        let Kind::Cam { geometry, lift } = &self.kind else {
+        let Kind::Cam { geometry, lift, .. } = &self.kind else {
             return Ok(());
         };
         let (rb, big_r) = (geometry.base_radius_mm, geometry.wheel_radius_mm);
@@ -397,9 +441,13 @@ impl Part {
             let parts = ((k1 - k0) / step_max).ceil().max(1.0) as usize;
             samples.extend((0..parts).map(|j| k0 + (k1 - k0) * j as f64 / parts as f64));
         }
+        // The polar profile of a roller or knife follower must stay outside the axis; a flat
+        // follower only needs the wheel centre ahead of the contact line (support + R > 0),
+        // which also holds for a pin that does not surround the axis.
         let offset = match geometry.follower {
             Follower::Roller { radius_mm } => radius_mm,
-            _ => 0.0,
+            Follower::Knife => 0.0,
+            Follower::Flat => big_r,
         };
         for &s in &samples {
             if rb + offset + lift.eval(s).h_mm <= 0.0 {
@@ -638,4 +686,48 @@ fn dot(a: [f64; 2], b: [f64; 2]) -> f64 {
 
 fn cross(a: [f64; 2], b: [f64; 2]) -> f64 {
     a[0] * b[1] - a[1] * b[0]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::lift::LiftTable;
+
+    /// A shaped pin with no correction is the round pin: its table must match the crankpin
+    /// closed form d(c) = b·cos c + √((R + r_p)² − (b·sin c)²). The lift b·(1 + cos ψ) is
+    /// sampled at 0.5° and splined (error ≤ 5/384·h⁴·b ≈ 5e-8 µm), so 1e-6 mm is generous.
+    /// b > r_p: the pin does not surround the axis, the base radius r_p − b is negative.
+    #[test]
+    fn uncorrected_shaped_pin_is_the_round_pin() {
+        let pin = CrankpinGeometry {
+            throw_mm: 45.0,
+            pin_radius_mm: 30.0,
+            wheel_radius_mm: 300.0,
+        };
+        let angles: Vec<f64> = (0..720).map(|k| k as f64 * 0.5).collect();
+        let lifts = angles
+            .iter()
+            .map(|a| 45.0 * (1.0 + a.to_radians().cos()))
+            .collect();
+        let table = LiftTable::from_points(angles, lifts, "pin").unwrap();
+        let shaped = Part::shaped_pin(pin, LiftCurve::new(&table)).unwrap();
+        let round = Part::crankpin(pin).unwrap();
+        assert_eq!(shaped.x_zero_mm(), round.x_zero_mm());
+        for (a, b) in shaped
+            .wheel_table(360)
+            .unwrap()
+            .iter()
+            .zip(round.wheel_table(360).unwrap())
+        {
+            let c = a.c_deg.to_radians();
+            let exact = 45.0 * c.cos() + (330.0f64.powi(2) - (45.0 * c.sin()).powi(2)).sqrt();
+            assert!(
+                (a.d_mm - exact).abs() < 1e-6,
+                "{}: {} vs {exact}",
+                a.c_deg,
+                a.d_mm
+            );
+            assert!((a.x_mm - b.x_mm).abs() < 1e-6);
+        }
+    }
 }
