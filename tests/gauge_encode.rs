@@ -332,7 +332,7 @@ fn a_float_lift_site_layout_round_trips_to_single_precision() {
     };
     let (id, data) = dbc.encode(&GaugeFrame::Sample(sample)).expect("encodes");
     assert_eq!(id, CanId::Extended(0x18ff_5a01));
-    assert_eq!(&data[3..7], &(6.123_456_789f32).to_le_bytes());
+    assert_eq!(&data[3..7], &(sample.lift_mm as f32).to_le_bytes());
     let Ok(GaugeFrame::Sample(back)) = dbc.decode(id, &data) else {
         panic!("decodes")
     };
