@@ -14,3 +14,4 @@ pub mod gauge;
 pub mod recipe;
 pub mod share;
 pub mod sim;
+pub mod store;

@@ -1,0 +1,160 @@
+//! Compact encodings of the store: lifts as i32 little-endian in 0.1 µm units, the opaque
+//! history cursor, SHA-256 hex, and the input checks shared by the writers.
+//!
+//! Blob layout: `raw_revolutions` is revolution-major (revolution 0's `points_per_rev`
+//! values, then revolution 1's, …); `averaged_profile` is one revolution. Each value is
+//! `round(lift_mm · 10⁴)` as i32 LE, so a stored lift is within 0.05 µm of the given one.
+
+use sha2::{Digest, Sha256};
+
+use super::error::StoreError;
+
+/// Lift units per mm in blobs: 0.1 µm.
+pub const UNITS_PER_MM: f64 = 10_000.0;
+
+/// Encodes lifts (mm) for a blob; rejects NaN, infinities and values beyond ±214 m.
+pub fn encode_lifts_mm(
+    lifts_mm: impl IntoIterator<Item = f64>,
+    out: &mut Vec<u8>,
+) -> Result<(), StoreError> {
+    for (i, lift_mm) in lifts_mm.into_iter().enumerate() {
+        let units = (lift_mm * UNITS_PER_MM).round();
+        if !units.is_finite() || units < f64::from(i32::MIN) || units > f64::from(i32::MAX) {
+            return Err(StoreError::invalid(
+                "lift_mm",
+                format!("value {lift_mm} at index {i} is not a finite lift within ±214 m"),
+            ));
+        }
+        // In range by the check above, so the cast is exact.
+        out.extend_from_slice(&(units as i32).to_le_bytes());
+    }
+    Ok(())
+}
+
+/// Decodes a lift blob into mm; a length not a multiple of 4 is a corrupt row.
+pub fn decode_lifts_mm(blob: &[u8]) -> Result<Vec<f64>, StoreError> {
+    if !blob.len().is_multiple_of(4) {
+        return Err(StoreError::invalid(
+            "lift blob",
+            format!("length {} is not a multiple of 4", blob.len()),
+        ));
+    }
+    Ok(blob
+        .chunks_exact(4)
+        .map(|c| f64::from(i32::from_le_bytes([c[0], c[1], c[2], c[3]])) / UNITS_PER_MM)
+        .collect())
+}
+
+/// SHA-256 of `bytes` as 64 lower-case hex digits.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// Cursor text for the position after the row (received_at_ms, id).
+pub(crate) fn encode_cursor(received_at_ms: i64, id: i64) -> String {
+    format!("{received_at_ms}_{id}")
+}
+
+/// Parses a cursor made by [`encode_cursor`].
+pub(crate) fn decode_cursor(cursor: &str) -> Result<(i64, i64), StoreError> {
+    let bad = || StoreError::invalid("cursor", "not a cursor returned by this store");
+    let (at, id) = cursor.split_once('_').ok_or_else(bad)?;
+    Ok((
+        at.parse().map_err(|_| bad())?,
+        id.parse().map_err(|_| bad())?,
+    ))
+}
+
+pub(crate) fn check_name(field: &'static str, value: &str) -> Result<(), StoreError> {
+    if value.trim().is_empty() {
+        return Err(StoreError::invalid(field, "must not be empty"));
+    }
+    Ok(())
+}
+
+pub(crate) fn check_json(field: &'static str, text: &str) -> Result<(), StoreError> {
+    serde_json::from_str::<serde::de::IgnoredAny>(text)
+        .map(|_| ())
+        .map_err(|e| StoreError::invalid(field, format!("not JSON: {e}")))
+}
+
+pub(crate) fn check_finite(field: &'static str, value: f64) -> Result<(), StoreError> {
+    if !value.is_finite() {
+        return Err(StoreError::invalid(field, format!("{value} is not finite")));
+    }
+    Ok(())
+}
+
+pub(crate) fn check_limit(limit: u32) -> Result<i64, StoreError> {
+    if limit == 0 || limit > super::types::MAX_PAGE {
+        return Err(StoreError::invalid(
+            "limit",
+            format!("{limit} is outside 1..={}", super::types::MAX_PAGE),
+        ));
+    }
+    Ok(i64::from(limit))
+}
+
+pub(crate) fn check_sha256(field: &'static str, hex: &str) -> Result<(), StoreError> {
+    if hex.len() != 64
+        || !hex
+            .bytes()
+            .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+    {
+        return Err(StoreError::invalid(
+            field,
+            "must be 64 lower-case hex digits",
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lifts_round_trip_within_half_a_unit() {
+        let lifts = [0.0, 1.234_567_89, -0.000_04, 12.5, 214_748.0];
+        let mut blob = Vec::new();
+        encode_lifts_mm(lifts, &mut blob).unwrap();
+        assert_eq!(blob.len(), 4 * lifts.len());
+        let back = decode_lifts_mm(&blob).unwrap();
+        for (a, b) in lifts.iter().zip(&back) {
+            // Quantisation to 0.1 µm = 1e-4 mm: error at most half a unit.
+            assert!((a - b).abs() <= 0.5e-4 + 1e-12, "{a} vs {b}");
+        }
+        // Little-endian layout of 1.2345679 mm = 12346 units.
+        assert_eq!(&blob[4..8], &12_346_i32.to_le_bytes());
+    }
+
+    #[test]
+    fn bad_lifts_and_blobs_are_refused() {
+        let mut blob = Vec::new();
+        assert_eq!(
+            encode_lifts_mm([f64::NAN], &mut blob).unwrap_err().code(),
+            "invalid"
+        );
+        assert!(encode_lifts_mm([300_000.0], &mut blob).is_err());
+        assert!(decode_lifts_mm(&[1, 2, 3]).is_err());
+    }
+
+    #[test]
+    fn cursor_round_trips_and_rejects_garbage() {
+        assert_eq!(decode_cursor(&encode_cursor(-5, 42)).unwrap(), (-5, 42));
+        assert!(decode_cursor("12").is_err());
+        assert!(decode_cursor("a_1").is_err());
+    }
+
+    #[test]
+    fn sha256_matches_the_published_vector() {
+        // FIPS 180-2 test vector for "abc".
+        assert_eq!(
+            sha256_hex(b"abc"),
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+        );
+    }
+}

@@ -1,0 +1,299 @@
+//! Machines, recipe snapshots, wheel dressings, events and learning-state snapshots.
+
+use super::codec::{check_finite, check_json, check_limit, check_name, sha256_hex};
+use super::error::db_error;
+use super::measurements::{Bind, Conditions, fetch_all_dynamic};
+use super::{
+    Dressing, DressingId, Event, EventFilter, EventId, EventLevel, Feature, FeatureKind,
+    LearningState, Machine, NewDressing, NewEvent, NewRecipeSnapshot, RecipeSnapshotId, Store,
+    StoreError, col, with_pool,
+};
+
+const ENSURE_MACHINE: &str =
+    "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) ON CONFLICT (name) DO NOTHING";
+
+impl Store {
+    /// Keeps a recipe snapshot of one lobe or pin. When the newest snapshot of that
+    /// (machine, part, lobe) has the same JSON text, returns its id and writes nothing.
+    pub async fn insert_recipe_snapshot(
+        &self,
+        r: &NewRecipeSnapshot,
+    ) -> Result<RecipeSnapshotId, StoreError> {
+        check_name("machine", &r.machine)?;
+        check_name("part", &r.part)?;
+        check_name("lobe", &r.lobe)?;
+        check_json("recipe_json", &r.recipe_json)?;
+        let sha256 = sha256_hex(r.recipe_json.as_bytes());
+        const OP: &str = "inserting a recipe snapshot";
+        with_pool!(self, pool => {
+            let mut tx = pool.begin().await.map_err(db_error(OP))?;
+            sqlx::query(ENSURE_MACHINE)
+                .bind(&r.machine)
+                .bind(r.created_at_ms)
+                .execute(&mut *tx)
+                .await
+                .map_err(db_error(OP))?;
+            let newest: Option<(i64, String)> = sqlx::query_as(
+                "SELECT id, sha256 FROM recipe_snapshots WHERE machine = $1 AND part = $2 \
+                 AND lobe = $3 ORDER BY id DESC LIMIT 1",
+            )
+            .bind(&r.machine)
+            .bind(&r.part)
+            .bind(&r.lobe)
+            .fetch_optional(&mut *tx)
+            .await
+            .map_err(db_error(OP))?;
+            if let Some((id, stored)) = newest
+                && stored == sha256
+            {
+                return Ok(RecipeSnapshotId(id));
+            }
+            let id: i64 = sqlx::query_scalar(
+                "INSERT INTO recipe_snapshots (machine, part, lobe, kind, recipe_json, sha256, \
+                 created_at_ms) VALUES ($1, $2, $3, $4, $5, $6, $7) RETURNING id",
+            )
+            .bind(&r.machine)
+            .bind(&r.part)
+            .bind(&r.lobe)
+            .bind(r.kind.as_str())
+            .bind(&r.recipe_json)
+            .bind(&sha256)
+            .bind(r.created_at_ms)
+            .fetch_one(&mut *tx)
+            .await
+            .map_err(db_error(OP))?;
+            tx.commit().await.map_err(db_error(OP))?;
+            Ok(RecipeSnapshotId(id))
+        })
+    }
+
+    /// Machines seen by the store, by name.
+    pub async fn machines(&self) -> Result<Vec<Machine>, StoreError> {
+        with_pool!(self, pool => {
+            let rows: Vec<(String, i64)> =
+                sqlx::query_as("SELECT name, first_seen_ms FROM machines ORDER BY name")
+                    .fetch_all(pool)
+                    .await
+                    .map_err(db_error("listing machines"))?;
+            Ok(rows
+                .into_iter()
+                .map(|(name, first_seen_ms)| Machine { name, first_seen_ms })
+                .collect())
+        })
+    }
+
+    /// Lobes and pins of a machine with their newest recipe snapshot, by part then lobe.
+    pub async fn features(&self, machine: &str) -> Result<Vec<Feature>, StoreError> {
+        with_pool!(self, pool => {
+            let rows = sqlx::query(
+                "SELECT r.id, r.part, r.lobe, r.kind, r.recipe_json, r.created_at_ms \
+                 FROM recipe_snapshots r WHERE r.machine = $1 AND r.id = \
+                 (SELECT MAX(r2.id) FROM recipe_snapshots r2 WHERE r2.machine = r.machine \
+                  AND r2.part = r.part AND r2.lobe = r.lobe) ORDER BY r.part, r.lobe",
+            )
+            .bind(machine)
+            .fetch_all(pool)
+            .await
+            .map_err(db_error("listing features"))?;
+            rows.iter()
+                .map(|row| {
+                    let kind: String = col!(row, "kind", "reading a feature");
+                    Ok(Feature {
+                        recipe_snapshot: RecipeSnapshotId(col!(row, "id", "reading a feature")),
+                        part: col!(row, "part", "reading a feature"),
+                        lobe: col!(row, "lobe", "reading a feature"),
+                        kind: FeatureKind::parse(&kind)?,
+                        recipe_json: col!(row, "recipe_json", "reading a feature"),
+                        created_at_ms: col!(row, "created_at_ms", "reading a feature"),
+                    })
+                })
+                .collect()
+        })
+    }
+
+    /// Appends a wheel dressing; returns its row id.
+    pub async fn insert_dressing(&self, d: &NewDressing) -> Result<DressingId, StoreError> {
+        check_name("machine", &d.machine)?;
+        check_finite("old_radius_mm", d.old_radius_mm)?;
+        check_finite("new_radius_mm", d.new_radius_mm)?;
+        const OP: &str = "inserting a dressing";
+        with_pool!(self, pool => {
+            let mut tx = pool.begin().await.map_err(db_error(OP))?;
+            sqlx::query(ENSURE_MACHINE)
+                .bind(&d.machine)
+                .bind(d.at_ms)
+                .execute(&mut *tx)
+                .await
+                .map_err(db_error(OP))?;
+            let id: i64 = sqlx::query_scalar(
+                "INSERT INTO dressings (machine, at_ms, old_radius_mm, new_radius_mm, source) \
+                 VALUES ($1, $2, $3, $4, $5) RETURNING id",
+            )
+            .bind(&d.machine)
+            .bind(d.at_ms)
+            .bind(d.old_radius_mm)
+            .bind(d.new_radius_mm)
+            .bind(&d.source)
+            .fetch_one(&mut *tx)
+            .await
+            .map_err(db_error(OP))?;
+            tx.commit().await.map_err(db_error(OP))?;
+            Ok(DressingId(id))
+        })
+    }
+
+    /// The newest `limit` dressings of a machine, newest first.
+    pub async fn dressings(&self, machine: &str, limit: u32) -> Result<Vec<Dressing>, StoreError> {
+        let limit = check_limit(limit)?;
+        with_pool!(self, pool => {
+            let rows: Vec<(i64, String, i64, f64, f64, String)> = sqlx::query_as(
+                "SELECT id, machine, at_ms, old_radius_mm, new_radius_mm, source FROM dressings \
+                 WHERE machine = $1 ORDER BY at_ms DESC, id DESC LIMIT $2",
+            )
+            .bind(machine)
+            .bind(limit)
+            .fetch_all(pool)
+            .await
+            .map_err(db_error("listing dressings"))?;
+            Ok(rows
+                .into_iter()
+                .map(|(id, machine, at_ms, old_radius_mm, new_radius_mm, source)| Dressing {
+                    id: DressingId(id),
+                    machine,
+                    at_ms,
+                    old_radius_mm,
+                    new_radius_mm,
+                    source,
+                })
+                .collect())
+        })
+    }
+
+    /// Appends an alarm or event; returns its row id.
+    pub async fn insert_event(&self, e: &NewEvent) -> Result<EventId, StoreError> {
+        check_name("machine", &e.machine)?;
+        check_name("kind", &e.kind)?;
+        const OP: &str = "inserting an event";
+        with_pool!(self, pool => {
+            let mut tx = pool.begin().await.map_err(db_error(OP))?;
+            sqlx::query(ENSURE_MACHINE)
+                .bind(&e.machine)
+                .bind(e.at_ms)
+                .execute(&mut *tx)
+                .await
+                .map_err(db_error(OP))?;
+            let id: i64 = sqlx::query_scalar(
+                "INSERT INTO events (machine, at_ms, level, kind, message) \
+                 VALUES ($1, $2, $3, $4, $5) RETURNING id",
+            )
+            .bind(&e.machine)
+            .bind(e.at_ms)
+            .bind(e.level.as_str())
+            .bind(&e.kind)
+            .bind(&e.message)
+            .fetch_one(&mut *tx)
+            .await
+            .map_err(db_error(OP))?;
+            tx.commit().await.map_err(db_error(OP))?;
+            Ok(EventId(id))
+        })
+    }
+
+    /// Events matching `filter`, newest first.
+    pub async fn events(&self, filter: &EventFilter) -> Result<Vec<Event>, StoreError> {
+        let limit = check_limit(filter.limit)?;
+        let mut c = Conditions::default();
+        if let Some(machine) = &filter.machine {
+            c.push("machine = ?", [Bind::Text(machine.clone())]);
+        }
+        if let Some(since) = filter.since_ms {
+            c.push("at_ms >= ?", [Bind::I64(since)]);
+        }
+        if let Some(until) = filter.until_ms {
+            c.push("at_ms < ?", [Bind::I64(until)]);
+        }
+        if let Some(level) = filter.level {
+            c.push("level = ?", [Bind::Text(level.as_str().to_owned())]);
+        }
+        let sql = format!(
+            "SELECT id, machine, at_ms, level, kind, message FROM events {} \
+             ORDER BY at_ms DESC, id DESC LIMIT {}",
+            c.where_clause(),
+            c.next_placeholder()
+        );
+        let mut binds = c.binds;
+        binds.push(Bind::I64(limit));
+        with_pool!(self, pool => {
+            let rows = fetch_all_dynamic!(pool, &sql, binds, "listing events");
+            rows.iter()
+                .map(|row| {
+                    let level: String = col!(row, "level", "reading an event");
+                    Ok(Event {
+                        id: EventId(col!(row, "id", "reading an event")),
+                        machine: col!(row, "machine", "reading an event"),
+                        at_ms: col!(row, "at_ms", "reading an event"),
+                        level: EventLevel::parse(&level)?,
+                        kind: col!(row, "kind", "reading an event"),
+                        message: col!(row, "message", "reading an event"),
+                    })
+                })
+                .collect()
+        })
+    }
+
+    /// Appends a learning-state snapshot of (machine, lobe); the newest one wins on load.
+    pub async fn save_learning_state(
+        &self,
+        machine: &str,
+        lobe: &str,
+        state_json: &str,
+        saved_at_ms: i64,
+    ) -> Result<(), StoreError> {
+        check_name("machine", machine)?;
+        check_name("lobe", lobe)?;
+        check_json("state_json", state_json)?;
+        const OP: &str = "saving learning state";
+        with_pool!(self, pool => {
+            let mut tx = pool.begin().await.map_err(db_error(OP))?;
+            sqlx::query(ENSURE_MACHINE)
+                .bind(machine)
+                .bind(saved_at_ms)
+                .execute(&mut *tx)
+                .await
+                .map_err(db_error(OP))?;
+            sqlx::query(
+                "INSERT INTO learning_states (machine, lobe, state_json, saved_at_ms) \
+                 VALUES ($1, $2, $3, $4)",
+            )
+            .bind(machine)
+            .bind(lobe)
+            .bind(state_json)
+            .bind(saved_at_ms)
+            .execute(&mut *tx)
+            .await
+            .map_err(db_error(OP))?;
+            tx.commit().await.map_err(db_error(OP))?;
+            Ok(())
+        })
+    }
+
+    /// The newest learning-state snapshot of (machine, lobe), or `None` before the first save.
+    pub async fn load_learning_state(
+        &self,
+        machine: &str,
+        lobe: &str,
+    ) -> Result<Option<LearningState>, StoreError> {
+        with_pool!(self, pool => {
+            let row: Option<(String, i64)> = sqlx::query_as(
+                "SELECT state_json, saved_at_ms FROM learning_states \
+                 WHERE machine = $1 AND lobe = $2 ORDER BY id DESC LIMIT 1",
+            )
+            .bind(machine)
+            .bind(lobe)
+            .fetch_optional(pool)
+            .await
+            .map_err(db_error("loading learning state"))?;
+            Ok(row.map(|(state_json, saved_at_ms)| LearningState { state_json, saved_at_ms }))
+        })
+    }
+}

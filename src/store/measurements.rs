@@ -1,0 +1,374 @@
+//! Measurements: idempotent append, the keyset-paginated history query, detail, export and
+//! raw-blob retention.
+
+use super::codec::{
+    check_finite, check_json, check_limit, check_name, check_sha256, decode_cursor,
+    decode_lifts_mm, encode_cursor, encode_lifts_mm,
+};
+use super::error::db_error;
+use super::{
+    HistoryFilter, MeasurementDetail, MeasurementId, MeasurementSummary, NewMeasurement, Page,
+    RecipeSnapshotId, Store, StoreError, Verdict, col, with_pool,
+};
+
+const SUMMARY_COLUMNS: &str = "m.id, m.machine, m.part, m.lobe, m.received_at_ms, m.verdict, \
+     m.max_profile_error_um, m.base_radius_error_um, m.phase_error_deg, m.revolutions_used, \
+     m.points_per_rev, m.origin, m.sha256, m.recipe_snapshot_id";
+
+/// A value bound to a dynamically built query.
+pub(crate) enum Bind {
+    I64(i64),
+    Text(String),
+}
+
+/// Builds `WHERE` clauses with numbered placeholders accepted by both backends.
+#[derive(Default)]
+pub(crate) struct Conditions {
+    pub(crate) sql: Vec<String>,
+    pub(crate) binds: Vec<Bind>,
+}
+
+impl Conditions {
+    /// Adds `clause`, where each `?` is replaced by the next placeholder, bound in order.
+    pub(crate) fn push(&mut self, clause: &str, binds: impl IntoIterator<Item = Bind>) {
+        let mut text = String::new();
+        let mut binds = binds.into_iter();
+        for piece in clause.split_inclusive('?') {
+            if let Some(head) = piece.strip_suffix('?') {
+                let b = binds.next().expect("one bind per placeholder in store SQL");
+                self.binds.push(b);
+                text.push_str(head);
+                text.push_str(&format!("${}", self.binds.len()));
+            } else {
+                text.push_str(piece);
+            }
+        }
+        self.sql.push(text);
+    }
+
+    pub(crate) fn where_clause(&self) -> String {
+        if self.sql.is_empty() {
+            String::new()
+        } else {
+            format!("WHERE {}", self.sql.join(" AND "))
+        }
+    }
+
+    pub(crate) fn next_placeholder(&self) -> String {
+        format!("${}", self.binds.len() + 1)
+    }
+}
+
+/// Runs a dynamically built query returning rows, binding `$binds` in order.
+macro_rules! fetch_all_dynamic {
+    ($pool:expr, $sql:expr, $binds:expr, $op:literal) => {{
+        let mut q = sqlx::query($sql);
+        for b in $binds {
+            q = match b {
+                $crate::store::measurements::Bind::I64(v) => q.bind(v),
+                $crate::store::measurements::Bind::Text(v) => q.bind(v),
+            };
+        }
+        q.fetch_all($pool)
+            .await
+            .map_err($crate::store::error::db_error($op))?
+    }};
+}
+pub(crate) use fetch_all_dynamic;
+
+macro_rules! summary_from_row {
+    ($row:expr) => {{
+        let row = $row;
+        let verdict: String = col!(row, "verdict", "reading a measurement");
+        let revolutions_used: i64 = col!(row, "revolutions_used", "reading a measurement");
+        let points_per_rev: i64 = col!(row, "points_per_rev", "reading a measurement");
+        let recipe: Option<i64> = col!(row, "recipe_snapshot_id", "reading a measurement");
+        MeasurementSummary {
+            id: MeasurementId(col!(row, "id", "reading a measurement")),
+            machine: col!(row, "machine", "reading a measurement"),
+            part: col!(row, "part", "reading a measurement"),
+            lobe: col!(row, "lobe", "reading a measurement"),
+            received_at_ms: col!(row, "received_at_ms", "reading a measurement"),
+            verdict: Verdict::parse(&verdict)?,
+            max_profile_error_um: col!(row, "max_profile_error_um", "reading a measurement"),
+            base_radius_error_um: col!(row, "base_radius_error_um", "reading a measurement"),
+            phase_error_deg: col!(row, "phase_error_deg", "reading a measurement"),
+            revolutions_used: to_u32("revolutions_used", revolutions_used)?,
+            points_per_rev: to_u32("points_per_rev", points_per_rev)?,
+            origin: col!(row, "origin", "reading a measurement"),
+            sha256: col!(row, "sha256", "reading a measurement"),
+            recipe_snapshot: recipe.map(RecipeSnapshotId),
+        }
+    }};
+}
+
+macro_rules! detail_from_row {
+    ($row:expr) => {{
+        let row = $row;
+        let summary = summary_from_row!(row);
+        let raw: Option<Vec<u8>> = col!(row, "raw_revolutions", "reading a measurement");
+        let averaged: Vec<u8> = col!(row, "averaged_profile", "reading a measurement");
+        let raw_lift_mm = match raw {
+            None => None,
+            Some(blob) => Some(split_revolutions(
+                decode_lifts_mm(&blob)?,
+                summary.points_per_rev,
+            )?),
+        };
+        MeasurementDetail {
+            averaged_lift_mm: decode_lifts_mm(&averaged)?,
+            analysis_json: col!(row, "analysis_json", "reading a measurement"),
+            raw_lift_mm,
+            summary,
+        }
+    }};
+}
+
+fn to_u32(field: &'static str, value: i64) -> Result<u32, StoreError> {
+    u32::try_from(value)
+        .map_err(|_| StoreError::invalid(field, format!("stored value {value} out of range")))
+}
+
+fn split_revolutions(lifts: Vec<f64>, points_per_rev: u32) -> Result<Vec<Vec<f64>>, StoreError> {
+    let n = points_per_rev as usize;
+    if n == 0 || !lifts.len().is_multiple_of(n) {
+        return Err(StoreError::invalid(
+            "raw blob",
+            format!("{} values are not whole revolutions of {n}", lifts.len()),
+        ));
+    }
+    Ok(lifts.chunks_exact(n).map(<[f64]>::to_vec).collect())
+}
+
+fn check_measurement(m: &NewMeasurement) -> Result<(), StoreError> {
+    check_name("machine", &m.machine)?;
+    check_name("part", &m.part)?;
+    check_name("lobe", &m.lobe)?;
+    check_sha256("sha256", &m.sha256)?;
+    check_json("analysis_json", &m.analysis_json)?;
+    check_finite("max_profile_error_um", m.max_profile_error_um)?;
+    check_finite("base_radius_error_um", m.base_radius_error_um)?;
+    check_finite("phase_error_deg", m.phase_error_deg)?;
+    let n = m.points_per_rev as usize;
+    if n == 0 {
+        return Err(StoreError::invalid("points_per_rev", "must be at least 1"));
+    }
+    if m.averaged_lift_mm.len() != n {
+        return Err(StoreError::invalid(
+            "averaged_lift_mm",
+            format!(
+                "{} values, expected points_per_rev = {n}",
+                m.averaged_lift_mm.len()
+            ),
+        ));
+    }
+    if let Some((i, rev)) = m.raw_lift_mm.iter().enumerate().find(|(_, r)| r.len() != n) {
+        return Err(StoreError::invalid(
+            "raw_lift_mm",
+            format!("revolution {i} has {} values, expected {n}", rev.len()),
+        ));
+    }
+    Ok(())
+}
+
+impl Store {
+    /// Appends a measurement with its blobs and report. Idempotent on `sha256`: inserting a
+    /// measurement whose hash is stored returns the stored id and changes nothing.
+    pub async fn insert_measurement(
+        &self,
+        m: &NewMeasurement,
+    ) -> Result<MeasurementId, StoreError> {
+        check_measurement(m)?;
+        let raw = if m.raw_lift_mm.is_empty() {
+            None
+        } else {
+            let mut blob = Vec::with_capacity(4 * m.raw_lift_mm.len() * m.averaged_lift_mm.len());
+            encode_lifts_mm(m.raw_lift_mm.iter().flatten().copied(), &mut blob)?;
+            Some(blob)
+        };
+        let mut averaged = Vec::with_capacity(4 * m.averaged_lift_mm.len());
+        encode_lifts_mm(m.averaged_lift_mm.iter().copied(), &mut averaged)?;
+        const OP: &str = "inserting a measurement";
+        with_pool!(self, pool => {
+            let mut tx = pool.begin().await.map_err(db_error(OP))?;
+            sqlx::query(
+                "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) \
+                 ON CONFLICT (name) DO NOTHING",
+            )
+            .bind(&m.machine)
+            .bind(m.received_at_ms)
+            .execute(&mut *tx)
+            .await
+            .map_err(db_error(OP))?;
+            let inserted: Option<i64> = sqlx::query_scalar(
+                "INSERT INTO measurements (machine, part, lobe, received_at_ms, verdict, \
+                 max_profile_error_um, base_radius_error_um, phase_error_deg, revolutions_used, \
+                 points_per_rev, origin, sha256, recipe_snapshot_id) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13) \
+                 ON CONFLICT (sha256) DO NOTHING RETURNING id",
+            )
+            .bind(&m.machine)
+            .bind(&m.part)
+            .bind(&m.lobe)
+            .bind(m.received_at_ms)
+            .bind(m.verdict.as_str())
+            .bind(m.max_profile_error_um)
+            .bind(m.base_radius_error_um)
+            .bind(m.phase_error_deg)
+            .bind(i64::from(m.revolutions_used))
+            .bind(i64::from(m.points_per_rev))
+            .bind(&m.origin)
+            .bind(&m.sha256)
+            .bind(m.recipe_snapshot.map(|r| r.0))
+            .fetch_optional(&mut *tx)
+            .await
+            .map_err(db_error(OP))?;
+            let id = match inserted {
+                Some(id) => {
+                    sqlx::query(
+                        "INSERT INTO measurement_data (measurement_id, raw_revolutions, \
+                         averaged_profile, analysis_json) VALUES ($1, $2, $3, $4)",
+                    )
+                    .bind(id)
+                    .bind(raw)
+                    .bind(averaged)
+                    .bind(&m.analysis_json)
+                    .execute(&mut *tx)
+                    .await
+                    .map_err(db_error(OP))?;
+                    id
+                }
+                None => sqlx::query_scalar("SELECT id FROM measurements WHERE sha256 = $1")
+                    .bind(&m.sha256)
+                    .fetch_one(&mut *tx)
+                    .await
+                    .map_err(db_error(OP))?,
+            };
+            tx.commit().await.map_err(db_error(OP))?;
+            Ok(MeasurementId(id))
+        })
+    }
+
+    /// Lists measurements of one machine, newest first (by `received_at_ms`, then id), one
+    /// page at a time. Pass the returned `next_cursor` to get the next page; pages stay
+    /// consistent while new measurements arrive (keyset pagination, not offsets).
+    pub async fn measurement_history(
+        &self,
+        filter: &HistoryFilter,
+    ) -> Result<Page<MeasurementSummary>, StoreError> {
+        check_name("machine", &filter.machine)?;
+        let limit = check_limit(filter.limit)?;
+        let mut c = Conditions::default();
+        c.push("m.machine = ?", [Bind::Text(filter.machine.clone())]);
+        if let Some(lobe) = &filter.lobe {
+            c.push("m.lobe = ?", [Bind::Text(lobe.clone())]);
+        }
+        if let Some(since) = filter.since_ms {
+            c.push("m.received_at_ms >= ?", [Bind::I64(since)]);
+        }
+        if let Some(until) = filter.until_ms {
+            c.push("m.received_at_ms < ?", [Bind::I64(until)]);
+        }
+        if let Some(verdict) = filter.verdict {
+            c.push("m.verdict = ?", [Bind::Text(verdict.as_str().to_owned())]);
+        }
+        if let Some(cursor) = &filter.cursor {
+            let (at, id) = decode_cursor(cursor)?;
+            // The first term bounds the index range; the second picks up ties on the time.
+            c.push("m.received_at_ms <= ?", [Bind::I64(at)]);
+            c.push(
+                "(m.received_at_ms < ? OR (m.received_at_ms = ? AND m.id < ?))",
+                [Bind::I64(at), Bind::I64(at), Bind::I64(id)],
+            );
+        }
+        let sql = format!(
+            "SELECT {SUMMARY_COLUMNS} FROM measurements m {} \
+             ORDER BY m.received_at_ms DESC, m.id DESC LIMIT {}",
+            c.where_clause(),
+            c.next_placeholder()
+        );
+        let mut binds = c.binds;
+        binds.push(Bind::I64(limit + 1));
+        let mut items = with_pool!(self, pool => {
+            let rows = fetch_all_dynamic!(pool, &sql, binds, "listing measurement history");
+            rows.iter().map(|row| Ok(summary_from_row!(row))).collect::<Result<Vec<_>, StoreError>>()?
+        });
+        let next_cursor = if items.len() > filter.limit as usize {
+            items.truncate(filter.limit as usize);
+            items
+                .last()
+                .map(|s| encode_cursor(s.received_at_ms, s.id.0))
+        } else {
+            None
+        };
+        Ok(Page { items, next_cursor })
+    }
+
+    /// One measurement with its profiles and report, or `None` when no such id.
+    pub async fn measurement(
+        &self,
+        id: MeasurementId,
+    ) -> Result<Option<MeasurementDetail>, StoreError> {
+        let sql = format!(
+            "SELECT {SUMMARY_COLUMNS}, d.raw_revolutions, d.averaged_profile, d.analysis_json \
+             FROM measurements m JOIN measurement_data d ON d.measurement_id = m.id WHERE m.id = $1"
+        );
+        with_pool!(self, pool => {
+            let row = sqlx::query(&sql)
+                .bind(id.0)
+                .fetch_optional(pool)
+                .await
+                .map_err(db_error("reading a measurement"))?;
+            match row {
+                None => Ok(None),
+                Some(row) => Ok(Some(detail_from_row!(&row))),
+            }
+        })
+    }
+
+    /// Measurements received in `[since_ms, until_ms)` with their profiles, oldest id first,
+    /// after `after` (exclusive), at most `limit`: call again with the last id to continue.
+    pub async fn export(
+        &self,
+        since_ms: i64,
+        until_ms: i64,
+        after: Option<MeasurementId>,
+        limit: u32,
+    ) -> Result<Vec<MeasurementDetail>, StoreError> {
+        let limit = check_limit(limit)?;
+        let sql = format!(
+            "SELECT {SUMMARY_COLUMNS}, d.raw_revolutions, d.averaged_profile, d.analysis_json \
+             FROM measurements m JOIN measurement_data d ON d.measurement_id = m.id \
+             WHERE m.received_at_ms >= $1 AND m.received_at_ms < $2 AND m.id > $3 \
+             ORDER BY m.id LIMIT $4"
+        );
+        with_pool!(self, pool => {
+            let rows = sqlx::query(&sql)
+                .bind(since_ms)
+                .bind(until_ms)
+                .bind(after.map_or(i64::MIN, |a| a.0))
+                .bind(limit)
+                .fetch_all(pool)
+                .await
+                .map_err(db_error("exporting measurements"))?;
+            rows.iter().map(|row| Ok(detail_from_row!(row))).collect()
+        })
+    }
+
+    /// Retention: drops the raw revolutions of measurements received before `cutoff_ms`,
+    /// keeping their summaries, averaged profiles and reports. Returns how many were pruned.
+    pub async fn prune_raw_older_than(&self, cutoff_ms: i64) -> Result<u64, StoreError> {
+        with_pool!(self, pool => {
+            let done = sqlx::query(
+                "UPDATE measurement_data SET raw_revolutions = NULL \
+                 WHERE raw_revolutions IS NOT NULL AND measurement_id IN \
+                 (SELECT id FROM measurements WHERE received_at_ms < $1)",
+            )
+            .bind(cutoff_ms)
+            .execute(pool)
+            .await
+            .map_err(db_error("pruning raw revolutions"))?;
+            Ok(done.rows_affected())
+        })
+    }
+}

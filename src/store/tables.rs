@@ -1,0 +1,208 @@
+//! Table versions: each regenerated curve-table program, numbered per (machine, lobe), with
+//! its status kept as appended rows (the newest row is the current status).
+
+use super::codec::{check_json, check_limit, check_name, sha256_hex};
+use super::error::db_error;
+use super::{NewTableVersion, Store, StoreError, TableStatus, TableVersion, col, with_pool};
+
+const SELECT_VERSION: &str = "SELECT t.machine, t.lobe, t.version, t.parent_version, \
+     t.table_number, t.program_text, t.sha256, t.learning_params_json, t.reason, \
+     t.created_at_ms, s.status, s.why, s.at_ms \
+     FROM table_versions t JOIN table_version_status s ON s.id = \
+     (SELECT MAX(s2.id) FROM table_version_status s2 WHERE s2.table_version_id = t.id) \
+     WHERE t.machine = $1 AND t.lobe = $2";
+
+macro_rules! version_from_row {
+    ($row:expr) => {{
+        let row = $row;
+        let status: String = col!(row, "status", "reading a table version");
+        let table_number: i64 = col!(row, "table_number", "reading a table version");
+        TableVersion {
+            machine: col!(row, "machine", "reading a table version"),
+            lobe: col!(row, "lobe", "reading a table version"),
+            version: col!(row, "version", "reading a table version"),
+            parent_version: col!(row, "parent_version", "reading a table version"),
+            table_number: u32::try_from(table_number).map_err(|_| {
+                StoreError::invalid(
+                    "table_number",
+                    format!("stored value {table_number} out of range"),
+                )
+            })?,
+            program_text: col!(row, "program_text", "reading a table version"),
+            sha256: col!(row, "sha256", "reading a table version"),
+            learning_params_json: col!(row, "learning_params_json", "reading a table version"),
+            reason: col!(row, "reason", "reading a table version"),
+            created_at_ms: col!(row, "created_at_ms", "reading a table version"),
+            status: TableStatus::parse(&status)?,
+            status_why: col!(row, "why", "reading a table version"),
+            status_at_ms: col!(row, "at_ms", "reading a table version"),
+        }
+    }};
+}
+
+impl Store {
+    /// Appends a table version and its first status; returns its version number, one more
+    /// than the highest stored for this (machine, lobe), starting at 1. Two writers racing
+    /// for the same number get [`StoreError::Conflict`] for the loser.
+    pub async fn insert_table_version(&self, t: &NewTableVersion) -> Result<i64, StoreError> {
+        check_name("machine", &t.machine)?;
+        check_name("lobe", &t.lobe)?;
+        check_json("learning_params_json", &t.learning_params_json)?;
+        let sha256 = sha256_hex(t.program_text.as_bytes());
+        const OP: &str = "inserting a table version";
+        with_pool!(self, pool => {
+            let mut tx = pool.begin().await.map_err(db_error(OP))?;
+            sqlx::query(
+                "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) \
+                 ON CONFLICT (name) DO NOTHING",
+            )
+            .bind(&t.machine)
+            .bind(t.created_at_ms)
+            .execute(&mut *tx)
+            .await
+            .map_err(db_error(OP))?;
+            if let Some(parent) = t.parent_version {
+                let found: Option<i64> = sqlx::query_scalar(
+                    "SELECT id FROM table_versions WHERE machine = $1 AND lobe = $2 AND version = $3",
+                )
+                .bind(&t.machine)
+                .bind(&t.lobe)
+                .bind(parent)
+                .fetch_optional(&mut *tx)
+                .await
+                .map_err(db_error(OP))?;
+                if found.is_none() {
+                    return Err(StoreError::NotFound {
+                        what: format!(
+                            "parent table version {parent} of machine {} lobe {}",
+                            t.machine, t.lobe
+                        ),
+                    });
+                }
+            }
+            let (id, version): (i64, i64) = sqlx::query_as(
+                "INSERT INTO table_versions (machine, lobe, version, parent_version, \
+                 table_number, program_text, sha256, learning_params_json, reason, created_at_ms) \
+                 SELECT $1, $2, COALESCE(MAX(version), 0) + 1, $3, $4, $5, $6, $7, $8, $9 \
+                 FROM table_versions WHERE machine = $1 AND lobe = $2 \
+                 RETURNING id, version",
+            )
+            .bind(&t.machine)
+            .bind(&t.lobe)
+            .bind(t.parent_version)
+            .bind(i64::from(t.table_number))
+            .bind(&t.program_text)
+            .bind(&sha256)
+            .bind(&t.learning_params_json)
+            .bind(&t.reason)
+            .bind(t.created_at_ms)
+            .fetch_one(&mut *tx)
+            .await
+            .map_err(db_error(OP))?;
+            sqlx::query(
+                "INSERT INTO table_version_status (table_version_id, status, why, at_ms) \
+                 VALUES ($1, $2, $3, $4)",
+            )
+            .bind(id)
+            .bind(t.status.as_str())
+            .bind(&t.status_why)
+            .bind(t.created_at_ms)
+            .execute(&mut *tx)
+            .await
+            .map_err(db_error(OP))?;
+            tx.commit().await.map_err(db_error(OP))?;
+            Ok(version)
+        })
+    }
+
+    /// Appends a status for a stored table version (e.g. waiting → pushed).
+    pub async fn set_table_status(
+        &self,
+        machine: &str,
+        lobe: &str,
+        version: i64,
+        status: TableStatus,
+        why: &str,
+        at_ms: i64,
+    ) -> Result<(), StoreError> {
+        with_pool!(self, pool => {
+            let done = sqlx::query(
+                "INSERT INTO table_version_status (table_version_id, status, why, at_ms) \
+                 SELECT id, $4, $5, $6 FROM table_versions \
+                 WHERE machine = $1 AND lobe = $2 AND version = $3",
+            )
+            .bind(machine)
+            .bind(lobe)
+            .bind(version)
+            .bind(status.as_str())
+            .bind(why)
+            .bind(at_ms)
+            .execute(pool)
+            .await
+            .map_err(db_error("recording a table status"))?;
+            if done.rows_affected() == 0 {
+                return Err(StoreError::NotFound {
+                    what: format!("table version {version} of machine {machine} lobe {lobe}"),
+                });
+            }
+            Ok(())
+        })
+    }
+
+    /// The highest-numbered table version of (machine, lobe), whatever its status.
+    pub async fn latest_table_version(
+        &self,
+        machine: &str,
+        lobe: &str,
+    ) -> Result<Option<TableVersion>, StoreError> {
+        Ok(self
+            .table_versions(machine, lobe, 1)
+            .await?
+            .into_iter()
+            .next())
+    }
+
+    /// The newest `limit` table versions of (machine, lobe), highest version first.
+    pub async fn table_versions(
+        &self,
+        machine: &str,
+        lobe: &str,
+        limit: u32,
+    ) -> Result<Vec<TableVersion>, StoreError> {
+        let limit = check_limit(limit)?;
+        let sql = format!("{SELECT_VERSION} ORDER BY t.version DESC LIMIT $3");
+        with_pool!(self, pool => {
+            let rows = sqlx::query(&sql)
+                .bind(machine)
+                .bind(lobe)
+                .bind(limit)
+                .fetch_all(pool)
+                .await
+                .map_err(db_error("listing table versions"))?;
+            rows.iter().map(|row| Ok(version_from_row!(row))).collect()
+        })
+    }
+
+    /// One table version, or `None`.
+    pub async fn table_version(
+        &self,
+        machine: &str,
+        lobe: &str,
+        version: i64,
+    ) -> Result<Option<TableVersion>, StoreError> {
+        let sql = format!("{SELECT_VERSION} AND t.version = $3");
+        with_pool!(self, pool => {
+            let row = sqlx::query(&sql)
+                .bind(machine)
+                .bind(lobe)
+                .bind(version)
+                .fetch_optional(pool)
+                .await
+                .map_err(db_error("reading a table version"))?;
+            match row {
+                None => Ok(None),
+                Some(row) => Ok(Some(version_from_row!(&row))),
+            }
+        })
+    }
+}

@@ -1,0 +1,283 @@
+//! The store's vocabulary: id newtypes, what callers write (`New*`), what they read back,
+//! and the filters of the history queries. Times are unix milliseconds, lifts mm, errors µm.
+
+use super::error::StoreError;
+
+/// Row id of a measurement. Stable for the life of the store.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct MeasurementId(pub i64);
+
+/// Row id of a recipe snapshot (a part's lobe or pin definition as it was at that time).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct RecipeSnapshotId(pub i64);
+
+/// Row id of a wheel dressing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct DressingId(pub i64);
+
+/// Row id of an event.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct EventId(pub i64);
+
+macro_rules! text_enum {
+    ($(#[$m:meta])* $name:ident, $field:literal { $($variant:ident => $text:literal),+ $(,)? }) => {
+        $(#[$m])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        pub enum $name { $($variant),+ }
+
+        impl $name {
+            /// The text stored in the database and used in APIs.
+            pub fn as_str(self) -> &'static str {
+                match self { $($name::$variant => $text),+ }
+            }
+
+            /// Parses the stored text.
+            pub fn parse(text: &str) -> Result<Self, StoreError> {
+                match text {
+                    $($text => Ok($name::$variant),)+
+                    other => Err(StoreError::invalid($field, format!("unknown value `{other}`"))),
+                }
+            }
+        }
+    };
+}
+
+text_enum!(
+    /// Whether a measured lobe or pin was within tolerance.
+    Verdict, "verdict" { Pass => "pass", Fail => "fail" }
+);
+text_enum!(
+    /// What happened to a table version: waiting for a decision, pushed to the control, or
+    /// refused (by a check or by the operator).
+    TableStatus, "table status" { Waiting => "waiting", Pushed => "pushed", Refused => "refused" }
+);
+text_enum!(
+    /// Severity of an event; `Error` means an operator must act.
+    EventLevel, "event level" { Info => "info", Warn => "warn", Error => "error" }
+);
+text_enum!(
+    /// A camshaft lobe or a crankshaft pin.
+    FeatureKind, "feature kind" { Lobe => "lobe", Pin => "pin" }
+);
+
+/// A recipe snapshot to keep: the definition of one lobe or pin of a part, as JSON text.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NewRecipeSnapshot {
+    pub machine: String,
+    pub part: String,
+    /// Lobe or pin name within the part.
+    pub lobe: String,
+    pub kind: FeatureKind,
+    /// Must parse as JSON; kept verbatim.
+    pub recipe_json: String,
+    pub created_at_ms: i64,
+}
+
+/// A lobe or pin known on a machine, with its latest recipe snapshot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Feature {
+    pub part: String,
+    pub lobe: String,
+    pub kind: FeatureKind,
+    pub recipe_snapshot: RecipeSnapshotId,
+    pub recipe_json: String,
+    pub created_at_ms: i64,
+}
+
+/// A machine the store has seen (created by its first write).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Machine {
+    pub name: String,
+    pub first_seen_ms: i64,
+}
+
+/// One analysed measurement to append.
+///
+/// Lifts are stored as i32 little-endian in 0.1 µm units (see [`super::codec`]), so they
+/// come back within 0.05 µm and must lie within ±214 m.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NewMeasurement {
+    pub machine: String,
+    pub part: String,
+    pub lobe: String,
+    pub received_at_ms: i64,
+    pub verdict: Verdict,
+    pub max_profile_error_um: f64,
+    pub base_radius_error_um: f64,
+    pub phase_error_deg: f64,
+    pub revolutions_used: u32,
+    /// Readings per revolution (≥ 1); every revolution and the averaged profile have this many.
+    pub points_per_rev: u32,
+    /// Where the measurement came from ("can0", a file path, …).
+    pub origin: String,
+    /// SHA-256 of the measurement as received, 64 lower-case hex digits. Inserting the same
+    /// hash again returns the stored id and writes nothing.
+    pub sha256: String,
+    pub recipe_snapshot: Option<RecipeSnapshotId>,
+    /// Raw lifts per revolution as received, mm. Empty when not kept.
+    pub raw_lift_mm: Vec<Vec<f64>>,
+    /// Averaged lift per angle index, mm.
+    pub averaged_lift_mm: Vec<f64>,
+    /// The analysis report; must parse as JSON.
+    pub analysis_json: String,
+}
+
+/// The summary columns of a measurement, as listed by the history query.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasurementSummary {
+    pub id: MeasurementId,
+    pub machine: String,
+    pub part: String,
+    pub lobe: String,
+    pub received_at_ms: i64,
+    pub verdict: Verdict,
+    pub max_profile_error_um: f64,
+    pub base_radius_error_um: f64,
+    pub phase_error_deg: f64,
+    pub revolutions_used: u32,
+    pub points_per_rev: u32,
+    pub origin: String,
+    pub sha256: String,
+    pub recipe_snapshot: Option<RecipeSnapshotId>,
+}
+
+/// A measurement with its profiles and report.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasurementDetail {
+    pub summary: MeasurementSummary,
+    /// Raw lifts per revolution, mm; `None` once pruned by retention (or never kept).
+    pub raw_lift_mm: Option<Vec<Vec<f64>>>,
+    pub averaged_lift_mm: Vec<f64>,
+    pub analysis_json: String,
+}
+
+/// Which measurements the history query lists, newest first.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct HistoryFilter {
+    pub machine: String,
+    pub lobe: Option<String>,
+    /// Inclusive lower bound on `received_at_ms`.
+    pub since_ms: Option<i64>,
+    /// Exclusive upper bound on `received_at_ms`.
+    pub until_ms: Option<i64>,
+    pub verdict: Option<Verdict>,
+    /// Page size, 1 to [`MAX_PAGE`].
+    pub limit: u32,
+    /// `next_cursor` of the previous page; `None` for the first page.
+    pub cursor: Option<String>,
+}
+
+/// Largest page the list queries return.
+pub const MAX_PAGE: u32 = 10_000;
+
+/// One page of a keyset-paginated list.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Page<T> {
+    pub items: Vec<T>,
+    /// Opaque cursor for the next page; `None` when this page is the last.
+    pub next_cursor: Option<String>,
+}
+
+/// A regenerated curve-table program to append.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NewTableVersion {
+    pub machine: String,
+    pub lobe: String,
+    /// The version it was derived from, if any; must exist for this machine and lobe.
+    pub parent_version: Option<i64>,
+    /// SINUMERIK curve-table number used by this version.
+    pub table_number: u32,
+    pub program_text: String,
+    /// Learning parameters in force; must parse as JSON.
+    pub learning_params_json: String,
+    /// Why the version was made ("learned from part 1234", "wheel dressed", …).
+    pub reason: String,
+    pub status: TableStatus,
+    /// Why it has that status ("waiting for operator", "pushed to share", "step too large").
+    pub status_why: String,
+    pub created_at_ms: i64,
+}
+
+/// A stored table version with its latest status.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TableVersion {
+    pub machine: String,
+    pub lobe: String,
+    /// 1, 2, 3, … per (machine, lobe).
+    pub version: i64,
+    pub parent_version: Option<i64>,
+    pub table_number: u32,
+    pub program_text: String,
+    /// SHA-256 of `program_text` (UTF-8), lower-case hex, computed by the store.
+    pub sha256: String,
+    pub learning_params_json: String,
+    pub reason: String,
+    pub created_at_ms: i64,
+    pub status: TableStatus,
+    pub status_why: String,
+    pub status_at_ms: i64,
+}
+
+/// A wheel dressing: the wheel radius camloop believed before and after.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NewDressing {
+    pub machine: String,
+    pub at_ms: i64,
+    pub old_radius_mm: f64,
+    pub new_radius_mm: f64,
+    /// Who reported it ("plc", "operator", "sim").
+    pub source: String,
+}
+
+/// A stored dressing.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dressing {
+    pub id: DressingId,
+    pub machine: String,
+    pub at_ms: i64,
+    pub old_radius_mm: f64,
+    pub new_radius_mm: f64,
+    pub source: String,
+}
+
+/// An alarm or event to append.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NewEvent {
+    pub machine: String,
+    pub at_ms: i64,
+    pub level: EventLevel,
+    /// Short stable kind ("gauge_down", "table_refused", …).
+    pub kind: String,
+    pub message: String,
+}
+
+/// A stored event.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Event {
+    pub id: EventId,
+    pub machine: String,
+    pub at_ms: i64,
+    pub level: EventLevel,
+    pub kind: String,
+    pub message: String,
+}
+
+/// Which events to list, newest first.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct EventFilter {
+    pub machine: Option<String>,
+    /// Inclusive.
+    pub since_ms: Option<i64>,
+    /// Exclusive.
+    pub until_ms: Option<i64>,
+    pub level: Option<EventLevel>,
+    /// 1 to [`MAX_PAGE`].
+    pub limit: u32,
+}
+
+/// The newest learning-state snapshot of a (machine, lobe).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LearningState {
+    pub state_json: String,
+    pub saved_at_ms: i64,
+}

@@ -1,0 +1,52 @@
+//! Both migration folders hold the same versions, and the binary embeds exactly those.
+
+use std::collections::BTreeSet;
+use std::path::Path;
+
+fn versions(backend: &str) -> BTreeSet<(i64, String)> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("migrations")
+        .join(backend);
+    std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter(|name| name.ends_with(".sql"))
+        .map(|name| {
+            let (version, rest) = name.split_once('_').expect("NNNN_description.sql");
+            let description = rest.trim_end_matches(".sql").to_owned();
+            (version.parse().expect("numeric version"), description)
+        })
+        .collect()
+}
+
+fn tables(sql: &str) -> BTreeSet<String> {
+    sql.lines()
+        .filter_map(|l| l.trim().strip_prefix("CREATE TABLE "))
+        .map(|rest| rest.split_whitespace().next().unwrap().to_owned())
+        .collect()
+}
+
+#[test]
+fn both_backends_list_the_same_versions_and_the_binary_embeds_them() {
+    let sqlite = versions("sqlite");
+    let postgres = versions("postgres");
+    assert!(!sqlite.is_empty());
+    assert_eq!(sqlite, postgres);
+    let embedded: BTreeSet<(i64, String)> = camloop::store::MIGRATIONS
+        .iter()
+        .map(|(v, d, _, _)| (*v, (*d).to_owned()))
+        .collect();
+    assert_eq!(embedded, sqlite);
+}
+
+#[test]
+fn both_backends_create_the_same_tables() {
+    for (_, _, sqlite, postgres) in camloop::store::MIGRATIONS {
+        let t = tables(sqlite);
+        assert!(
+            t.contains("measurements") && t.contains("table_versions"),
+            "{t:?}"
+        );
+        assert_eq!(t, tables(postgres));
+    }
+}

@@ -1,0 +1,53 @@
+//! Test backends for the history store: a SQLite file in a tempdir, and a throwaway
+//! PostgreSQL server started from the machine's own binaries.
+
+#![allow(dead_code)]
+
+pub mod pg;
+
+use camloop::store::Store;
+
+/// A store and whatever keeps it alive (tempdir, server). Dropped in field order: the store
+/// pool first, then the server.
+pub struct TestStore {
+    pub store: Store,
+    pub server: Option<pg::TempPostgres>,
+    pub dir: tempfile::TempDir,
+}
+
+pub async fn sqlite() -> TestStore {
+    let dir = tempfile::tempdir().unwrap();
+    // A parent folder that does not exist yet: connect must create it.
+    let url = format!(
+        "sqlite://{}?mode=rwc",
+        dir.path().join("var").join("camloop.db").display()
+    );
+    let store = Store::connect(&url).await.unwrap();
+    TestStore {
+        store,
+        server: None,
+        dir,
+    }
+}
+
+/// A fresh PostgreSQL database, or `None` (with a skip line) when the server binaries are
+/// missing and `CAMLOOP_REQUIRE_POSTGRES` is not `1`.
+pub async fn postgres(test: &str) -> Option<TestStore> {
+    let server = match pg::TempPostgres::start() {
+        Ok(server) => server,
+        Err(pg::StartError::NoBinaries(why)) => {
+            if std::env::var("CAMLOOP_REQUIRE_POSTGRES").as_deref() == Ok("1") {
+                panic!("CAMLOOP_REQUIRE_POSTGRES=1 but {why}");
+            }
+            eprintln!("SKIP {test} on postgres: {why} (set CAMLOOP_REQUIRE_POSTGRES=1 to fail)");
+            return None;
+        }
+        Err(pg::StartError::Failed(why)) => panic!("temporary postgres failed: {why}"),
+    };
+    let store = Store::connect(&server.url()).await.unwrap();
+    Some(TestStore {
+        store,
+        server: Some(server),
+        dir: tempfile::tempdir().unwrap(),
+    })
+}
