@@ -42,7 +42,10 @@ pub struct ServiceSection {
 
 impl Default for ServiceSection {
     fn default() -> Self {
-        Self { var_dir: PathBuf::from("../var"), log_format: LogFormat::Plain }
+        Self {
+            var_dir: PathBuf::from("../var"),
+            log_format: LogFormat::Plain,
+        }
     }
 }
 
@@ -64,7 +67,10 @@ pub struct DatabaseSection {
 
 impl Default for DatabaseSection {
     fn default() -> Self {
-        Self { url: "sqlite://../var/camloop.db?mode=rwc".into(), raw_retention_days: 90 }
+        Self {
+            url: "sqlite://../var/camloop.db?mode=rwc".into(),
+            raw_retention_days: 90,
+        }
     }
 }
 
@@ -88,7 +94,9 @@ pub struct HttpSection {
 
 impl Default for HttpSection {
     fn default() -> Self {
-        Self { listen: SocketAddr::from(([127, 0, 0, 1], 8080)) }
+        Self {
+            listen: SocketAddr::from(([127, 0, 0, 1], 8080)),
+        }
     }
 }
 
@@ -167,10 +175,19 @@ pub struct ConfigError {
 impl Config {
     /// Parses the text of `file`, applies the environment (`env` looks a variable up), and
     /// checks everything, reporting every problem at once.
-    pub fn parse(text: &str, file: &Path, env: impl Fn(&str) -> Option<String>) -> Result<Self, ConfigError> {
-        let error = |problems: Vec<String>| ConfigError { file: file.display().to_string(), problems };
+    pub fn parse(
+        text: &str,
+        file: &Path,
+        env: impl Fn(&str) -> Option<String>,
+    ) -> Result<Self, ConfigError> {
+        let error = |problems: Vec<String>| ConfigError {
+            file: file.display().to_string(),
+            problems,
+        };
         let mut config: Config = toml::from_str(text).map_err(|e| {
-            let line = e.span().map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
+            let line = e
+                .span()
+                .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
             let at = line.map(|l| format!("line {l}: ")).unwrap_or_default();
             error(vec![format!("{at}{}", e.message().trim_end())])
         })?;
@@ -180,7 +197,11 @@ impl Config {
         }
         config.api_token = env(ENV_API_TOKEN).filter(|t| !t.is_empty()).map(Secret);
         let problems = config.problems();
-        if problems.is_empty() { Ok(config) } else { Err(error(problems)) }
+        if problems.is_empty() {
+            Ok(config)
+        } else {
+            Err(error(problems))
+        }
     }
 
     fn problems(&self) -> Vec<String> {
@@ -189,25 +210,42 @@ impl Config {
             p.push("at least one [[machines]] is needed".to_string());
         }
         let url = &self.database.url;
-        if !(url.starts_with("sqlite:") || url.starts_with("postgres://") || url.starts_with("postgresql://")) {
+        if !(url.starts_with("sqlite:")
+            || url.starts_with("postgres://")
+            || url.starts_with("postgresql://"))
+        {
             p.push("database.url: must start with sqlite: or postgres://".to_string());
         }
         let mut names = std::collections::HashSet::new();
         for m in &self.machines {
             let at = format!("machines.{}", m.name);
             if !(1..=32).contains(&m.name.len())
-                || !m.name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+                || !m
+                    .name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
             {
-                p.push(format!("{at}: name must be 1–32 letters, digits, '-' or '_'"));
+                p.push(format!(
+                    "{at}: name must be 1–32 letters, digits, '-' or '_'"
+                ));
             }
             if !names.insert(m.name.clone()) {
                 p.push(format!("{at}: duplicate machine name"));
             }
-            if let GaugeSection::Sim { part_interval_ms: 0, .. } = m.gauge {
+            if let GaugeSection::Sim {
+                part_interval_ms: 0,
+                ..
+            } = m.gauge
+            {
                 p.push(format!("{at}.gauge.part_interval_ms: must be > 0"));
             }
             if let GaugeSection::Sim { grinder, .. } = &m.gauge {
-                p.extend(grinder.problems().into_iter().map(|e| format!("{at}.gauge.grinder: {e}")));
+                p.extend(
+                    grinder
+                        .problems()
+                        .into_iter()
+                        .map(|e| format!("{at}.gauge.grinder: {e}")),
+                );
             }
         }
         p
@@ -215,7 +253,11 @@ impl Config {
 
     /// A path from the file, resolved against the config file's folder.
     pub fn resolve(&self, path: &Path) -> PathBuf {
-        if path.is_absolute() { path.to_path_buf() } else { self.base_dir.join(path) }
+        if path.is_absolute() {
+            path.to_path_buf()
+        } else {
+            self.base_dir.join(path)
+        }
     }
 
     /// The database URL with a relative SQLite path resolved against the config's folder.
@@ -259,14 +301,23 @@ kind = "sim"
         assert_eq!(c.database.url, "postgres://camloop:hunter2@db/camloop");
         assert_eq!(c.api_token.as_ref().map(Secret::expose), Some("s3cret"));
         let shown = format!("{c:?}");
-        assert!(!shown.contains("hunter2") && !shown.contains("s3cret"), "{shown}");
+        assert!(
+            !shown.contains("hunter2") && !shown.contains("s3cret"),
+            "{shown}"
+        );
     }
 
     #[test]
     fn relative_paths_resolve_against_the_config_folder() {
         let c = Config::parse(MINIMAL, Path::new("config/camloop.toml"), |_| None).unwrap();
-        assert_eq!(c.database_url(), "sqlite://config/../var/camloop.db?mode=rwc");
-        assert_eq!(c.resolve(Path::new("parts/x.toml")), PathBuf::from("config/parts/x.toml"));
+        assert_eq!(
+            c.database_url(),
+            "sqlite://config/../var/camloop.db?mode=rwc"
+        );
+        assert_eq!(
+            c.resolve(Path::new("parts/x.toml")),
+            PathBuf::from("config/parts/x.toml")
+        );
     }
 
     #[test]
@@ -291,11 +342,23 @@ share = "s"
 kind = "drop"
 folder = "in"
 "#;
-        let e = Config::parse(text, Path::new("c.toml"), |_| None).unwrap_err().to_string();
-        for expected in ["database.url", "name must be", "duplicate machine name", "part_interval_ms: must be > 0"] {
+        let e = Config::parse(text, Path::new("c.toml"), |_| None)
+            .unwrap_err()
+            .to_string();
+        for expected in [
+            "database.url",
+            "name must be",
+            "duplicate machine name",
+            "part_interval_ms: must be > 0",
+        ] {
             assert!(e.contains(expected), "`{expected}` missing from `{e}`");
         }
-        let e = Config::parse("colour = 1\n", Path::new("c.toml"), |_| None).unwrap_err().to_string();
-        assert!(e.starts_with("c.toml: line 1: unknown field `colour`"), "{e}");
+        let e = Config::parse("colour = 1\n", Path::new("c.toml"), |_| None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("c.toml: line 1: unknown field `colour`"),
+            "{e}"
+        );
     }
 }

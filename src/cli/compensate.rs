@@ -11,7 +11,7 @@ use super::analyze::{averaged_measurement, load_dbc};
 use super::output::Outputs;
 use super::part::{CamArgs, CrankpinArgs, PartKindArgs, load_cam_table};
 use super::table::{FormArg, table_csv};
-use crate::core::analysis::{LobeOptions, ToleranceBand, analyse_lobe};
+use crate::core::analysis::{LobeOptions, analyse_lobe};
 use crate::core::compensate::{
     self, AxisLimits, Feature, GuardedTable, LobeLoop, TableRequest, pin_nominal_lift,
 };
@@ -63,17 +63,7 @@ pub struct CompensateArgs {
 }
 
 /// One lobe's loop as the command sees it.
-struct LobeSetup {
-    label: String,
-    nominal: LiftTable,
-    feature: Feature,
-    program: ProgramSettings,
-    params: LearningParams,
-    limits: AxisLimits,
-    request: TableRequest,
-    table_pair: (u32, u32),
-    bands: Vec<ToleranceBand>,
-}
+use crate::recipe::FeatureSetup as LobeSetup;
 
 #[derive(Debug, Serialize, Deserialize)]
 struct SavedState {
@@ -443,62 +433,18 @@ fn from_recipe(
     lobe_name: Option<&str>,
     form: Option<TableForm>,
 ) -> anyhow::Result<LobeSetup> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read recipe {}", path.display()))?;
-    let recipe = Recipe::parse(&text, &path.display().to_string())?;
+    let recipe = Recipe::load(path)?;
     let Some(name) = lobe_name else {
         bail!(
             "--lobe is required with --part (has: {})",
             recipe.feature_names().join(", ")
         );
     };
-    let (label, nominal, feature, phase_deg, bands) = if let Some(lobe) = recipe.lobe(name) {
-        let lift_path = lobe.lift_path(path);
-        let lift_text = std::fs::read_to_string(&lift_path)
-            .with_context(|| format!("cannot read lift table {}", lift_path.display()))?;
-        let nominal = LiftTable::parse_csv(&lift_text, &lift_path.display().to_string())?;
-        let feature = Feature::Cam(lobe.geometry(recipe.wheel.radius_mm));
-        (
-            format!("{} lobe {}", recipe.name, lobe.name),
-            nominal,
-            feature,
-            lobe.phase_deg,
-            lobe.tolerance.clone(),
-        )
-    } else if let Some(pin) = recipe.pin(name) {
-        let geometry = pin.geometry(recipe.wheel.radius_mm);
-        let nominal = pin_nominal_lift(&geometry);
-        (
-            format!("{} pin {}", recipe.name, pin.name),
-            nominal,
-            Feature::Pin(geometry),
-            pin.phase_deg,
-            pin.tolerance.clone(),
-        )
-    } else {
-        bail!(
-            "{}: no lobe or pin {name} (has: {})",
-            path.display(),
-            recipe.feature_names().join(", ")
-        );
-    };
-    let mut program = recipe.program.clone();
-    program.c_offset_deg += phase_deg;
-    Ok(LobeSetup {
-        label,
-        nominal,
-        feature,
-        program,
-        params: recipe.learning.clone(),
-        limits: recipe.axis_limits.clone(),
-        request: TableRequest {
-            points: recipe.table.points,
-            form: form.unwrap_or(recipe.table.form()),
-            poly_tolerance_um: recipe.table.poly_tolerance_um,
-        },
-        table_pair: recipe.table.table_numbers,
-        bands,
-    })
+    let mut setup = recipe.feature_setup(path, name)?;
+    if let Some(form) = form {
+        setup.request.form = form;
+    }
+    Ok(setup)
 }
 
 fn part_fingerprint(setup: &LobeSetup) -> String {
