@@ -1,12 +1,13 @@
 //! Gauge decoding speed: raw frame decoding (id + payload → GaugeFrame), decode + assemble
-//! of a 3 × 360 measurement, and candump log replay. Target: ≥ 5 million frames/s on one
-//! core for raw decoding.
+//! of a 3 × 360 measurement, candump log replay, and the inverse: encoding a 3 × 360
+//! measurement into its 1082 frames. Target: ≥ 5 million frames/s on one core for raw
+//! decoding.
 
 use std::hint::black_box;
 use std::path::PathBuf;
 
 use camloop::gauge::candump::parse_candump_line;
-use camloop::gauge::{Assembler, CanId, GaugeDbc, read_candump_measurements};
+use camloop::gauge::{Assembler, CanId, GaugeDbc, encode_measurement, read_candump_measurements};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 
 fn fixture_log() -> String {
@@ -59,6 +60,13 @@ fn bench(c: &mut Criterion) {
     });
     group.bench_function("candump_replay_3x360", |b| {
         b.iter(|| read_candump_measurements(black_box(&log), &dbc, "bench"));
+    });
+    let measurement = read_candump_measurements(&log, &dbc, "bench")
+        .measurements
+        .pop()
+        .expect("the fixture holds one measurement");
+    group.bench_function("encode_measurement_3x360", |b| {
+        b.iter(|| encode_measurement(&dbc, black_box(&measurement), 0).map(|f| f.len()));
     });
     group.finish();
 }

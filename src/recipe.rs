@@ -3,11 +3,13 @@
 //! TOML file. Unknown keys are errors; every problem is reported at once.
 
 use crate::core::analysis::ToleranceBand;
-use crate::core::compensate::AxisLimits;
+use crate::core::compensate::{AxisLimits, Feature, TableRequest, pin_nominal_lift};
 use crate::core::fit::TableForm;
 use crate::core::geometry::{CamGeometry, CrankpinGeometry, Follower};
 use crate::core::learn::LearningParams;
+use crate::core::lift::LiftTable;
 use crate::core::program::ProgramSettings;
+use anyhow::{Context, bail};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -131,7 +133,81 @@ pub struct RecipeError {
     pub problems: Vec<String>,
 }
 
+/// Everything the loop needs about one lobe or pin of a recipe, lift table loaded.
+#[derive(Debug, Clone)]
+pub struct FeatureSetup {
+    /// "PART lobe NAME" or "PART pin NAME", for messages and program comments.
+    pub label: String,
+    pub nominal: LiftTable,
+    pub feature: Feature,
+    /// Program settings, with the lobe's phase added to the C offset.
+    pub program: ProgramSettings,
+    pub params: LearningParams,
+    pub limits: AxisLimits,
+    pub request: TableRequest,
+    pub table_pair: (u32, u32),
+    pub bands: Vec<ToleranceBand>,
+}
+
 impl Recipe {
+    /// Reads and checks the recipe at `path`.
+    pub fn load(path: &Path) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read recipe {}", path.display()))?;
+        Ok(Self::parse(&text, &path.display().to_string())?)
+    }
+
+    /// The lobe or pin `name` ready for the loop; lift files are read relative to `path`.
+    pub fn feature_setup(&self, path: &Path, name: &str) -> anyhow::Result<FeatureSetup> {
+        let (label, nominal, feature, phase_deg, bands) = if let Some(lobe) = self.lobe(name) {
+            let lift_path = lobe.lift_path(path);
+            let lift_text = std::fs::read_to_string(&lift_path)
+                .with_context(|| format!("cannot read lift table {}", lift_path.display()))?;
+            let nominal = LiftTable::parse_csv(&lift_text, &lift_path.display().to_string())?;
+            let feature = Feature::Cam(lobe.geometry(self.wheel.radius_mm));
+            (
+                format!("{} lobe {}", self.name, lobe.name),
+                nominal,
+                feature,
+                lobe.phase_deg,
+                lobe.tolerance.clone(),
+            )
+        } else if let Some(pin) = self.pin(name) {
+            let geometry = pin.geometry(self.wheel.radius_mm);
+            let nominal = pin_nominal_lift(&geometry);
+            (
+                format!("{} pin {}", self.name, pin.name),
+                nominal,
+                Feature::Pin(geometry),
+                pin.phase_deg,
+                pin.tolerance.clone(),
+            )
+        } else {
+            bail!(
+                "{}: no lobe or pin {name} (has: {})",
+                path.display(),
+                self.feature_names().join(", ")
+            );
+        };
+        let mut program = self.program.clone();
+        program.c_offset_deg += phase_deg;
+        Ok(FeatureSetup {
+            label,
+            nominal,
+            feature,
+            program,
+            params: self.learning.clone(),
+            limits: self.axis_limits.clone(),
+            request: TableRequest {
+                points: self.table.points,
+                form: self.table.form(),
+                poly_tolerance_um: self.table.poly_tolerance_um,
+            },
+            table_pair: self.table.table_numbers,
+            bands,
+        })
+    }
+
     /// Parses and checks a recipe; `file` names it in errors.
     pub fn parse(text: &str, file: &str) -> Result<Self, RecipeError> {
         let error = |problems: Vec<String>| RecipeError {

@@ -56,7 +56,7 @@ fn quantised_engine_lift_is_refused_with_the_angle_range_and_nothing_written() {
     assert_eq!(err.lines().count(), 1, "one line on stderr: {err}");
     assert!(err.contains("ecn-sandia-h2-intake.csv"), "{err}");
     assert!(err.contains("negative radius of curvature"), "{err}");
-    assert!(err.contains("between 254.60° and 255.55°"), "{err}");
+    assert!(err.contains("between 254.56° and 255.59°"), "{err}");
     assert!(!dir.path().join("t.csv").exists());
     assert_eq!(
         std::fs::read_dir(dir.path()).unwrap().count(),

@@ -1,6 +1,8 @@
 //! Command-line front end: argument types and the commands behind them. This is an edge:
 //! it reads files, calls the pure core and writes outputs atomically.
 
+mod analyze;
+mod compensate;
 mod output;
 mod part;
 mod program_args;
@@ -24,6 +26,10 @@ pub enum Command {
     Table(table::TableArgs),
     /// Draw the grinding setup (outline, wheel, wheel-centre path) as SVG.
     Plot(table::PlotArgs),
+    /// Check and analyse a gauge measurement against the nominal part.
+    Analyze(analyze::AnalyzeArgs),
+    /// One turn of the learning loop: learn from a measurement, write the next table.
+    Compensate(compensate::CompensateArgs),
 }
 
 /// Runs a parsed command; the error chain is printed by `main` on one line.
@@ -31,5 +37,19 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Table(args) => table::run_table(args),
         Command::Plot(args) => table::run_plot(args),
+        Command::Analyze(args) => analyze::run_analyze(args),
+        Command::Compensate(args) => compensate::run_compensate(args),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Cli;
+    use clap::CommandFactory;
+
+    /// clap checks the argument definitions only when a command is built: do it for all.
+    #[test]
+    fn argument_definitions_are_consistent() {
+        Cli::command().debug_assert();
     }
 }

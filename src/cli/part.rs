@@ -107,11 +107,41 @@ pub fn load_part(args: &PartKindArgs) -> anyhow::Result<LoadedPart> {
                 smoothed: None,
             })
         }
-        PartKindArgs::Cam(a) => load_cam(a),
+        PartKindArgs::Cam(a) => load_cam_part(a),
     }
 }
 
-fn load_cam(a: &CamArgs) -> anyhow::Result<LoadedPart> {
+/// The lift table and geometry given by cam flags (with --smooth applied when asked).
+pub fn load_cam_table(a: &CamArgs) -> anyhow::Result<(LiftTable, CamGeometry)> {
+    let loaded = load_cam(a)?;
+    Ok((loaded.table, loaded.geometry))
+}
+
+struct LoadedCam {
+    table: LiftTable,
+    geometry: CamGeometry,
+    smoothed: Option<Smoothed>,
+    part: Part,
+}
+
+fn load_cam_part(a: &CamArgs) -> anyhow::Result<LoadedPart> {
+    let origin = a.lift.display().to_string();
+    let loaded = load_cam(a)?;
+    let g = loaded.geometry;
+    let description = format!(
+        "cam: {origin}, {} follower, base radius {} mm, wheel radius {} mm",
+        g.follower.name(),
+        g.base_radius_mm,
+        g.wheel_radius_mm
+    );
+    Ok(LoadedPart {
+        part: loaded.part,
+        description,
+        smoothed: loaded.smoothed,
+    })
+}
+
+fn load_cam(a: &CamArgs) -> anyhow::Result<LoadedCam> {
     let origin = a.lift.display().to_string();
     let text = std::fs::read_to_string(&a.lift)
         .with_context(|| format!("cannot read lift table {origin}"))?;
@@ -144,20 +174,15 @@ fn load_cam(a: &CamArgs) -> anyhow::Result<LoadedPart> {
         follower,
         wheel_radius_mm: a.wheel_radius,
     };
-    let description = format!(
-        "cam: {origin}, {} follower, base radius {} mm, wheel radius {} mm",
-        follower.name(),
-        a.base_radius,
-        a.wheel_radius
-    );
     if !a.smooth {
         let part = Part::cam(geometry, LiftCurve::new(&table)).map_err(|e| {
             anyhow::anyhow!("{origin}: {e} (see --smooth for quantised or noisy tables)")
         })?;
-        return Ok(LoadedPart {
-            part,
-            description,
+        return Ok(LoadedCam {
+            table,
+            geometry,
             smoothed: None,
+            part,
         });
     }
     let smoothed = smooth::smooth_until_grindable(&table, a.smooth_max_um / 1000.0, |t| {
@@ -165,9 +190,10 @@ fn load_cam(a: &CamArgs) -> anyhow::Result<LoadedPart> {
     })
     .with_context(|| format!("{origin}: cannot smooth"))?;
     let part = Part::cam(geometry, LiftCurve::new(&smoothed.table))?;
-    Ok(LoadedPart {
-        part,
-        description,
+    Ok(LoadedCam {
+        table: smoothed.table.clone(),
+        geometry,
         smoothed: Some(smoothed),
+        part,
     })
 }

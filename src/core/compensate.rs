@@ -2,13 +2,72 @@
 //! guards a table must pass before it may go to the control.
 
 use super::fit::{self, Deviation, Motion, TableForm};
-use super::geometry::{CamGeometry, GeometryError, Part};
+use super::geometry::{CamGeometry, CrankpinGeometry, GeometryError, Part};
 use super::learn::{self, LearnError, LearningParams, LearningState, StepOutcome};
 use super::lift::{LiftCurve, LiftTable, LiftTableError};
 use super::spline::PeriodicSpline;
 use super::table::{PolySegment, TablePoint};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
+
+/// What is ground: a cam lobe, or a crankpin (learned through its support function, which a
+/// flat probe reads as lift, see [`Part::shaped_pin`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Feature {
+    Cam(CamGeometry),
+    Pin(CrankpinGeometry),
+}
+
+impl Feature {
+    pub fn wheel_radius_mm(&self) -> f64 {
+        match self {
+            Feature::Cam(g) => g.wheel_radius_mm,
+            Feature::Pin(g) => g.wheel_radius_mm,
+        }
+    }
+
+    /// The same feature on a wheel of another radius (after dressing).
+    pub fn with_wheel_radius(self, wheel_radius_mm: f64) -> Self {
+        match self {
+            Feature::Cam(g) => Feature::Cam(CamGeometry {
+                wheel_radius_mm,
+                ..g
+            }),
+            Feature::Pin(g) => Feature::Pin(CrankpinGeometry {
+                wheel_radius_mm,
+                ..g
+            }),
+        }
+    }
+
+    /// Program X zero: `R + Rb` for cams, `R + r_p` for pins.
+    pub fn x_zero_mm(&self) -> f64 {
+        match self {
+            Feature::Cam(g) => g.wheel_radius_mm + g.base_radius_mm,
+            Feature::Pin(g) => g.wheel_radius_mm + g.pin_radius_mm,
+        }
+    }
+
+    /// The part ground from a commanded lift.
+    pub fn part(&self, commanded: &LiftTable) -> Result<Part, GeometryError> {
+        match self {
+            Feature::Cam(g) => Part::cam(*g, LiftCurve::new(commanded)),
+            Feature::Pin(g) => Part::shaped_pin(*g, LiftCurve::new(commanded)),
+        }
+    }
+}
+
+/// A round pin's nominal lift as a flat probe on the main axis reads it, index at 0°:
+/// `b·(1 + cos ψ)` (support `b·cos ψ + r_p` minus its minimum `r_p − b`), at 0.5° steps.
+pub fn pin_nominal_lift(pin: &CrankpinGeometry) -> LiftTable {
+    let angles: Vec<f64> = (0..720).map(|k| f64::from(k) * 0.5).collect();
+    let lifts = angles
+        .iter()
+        .map(|a| pin.throw_mm * (1.0 + a.to_radians().cos()))
+        .collect();
+    LiftTable::from_points(angles, lifts, "round pin")
+        .expect("720 finite, non-negative points on a uniform grid form a valid table")
+}
 
 /// X-axis limits the table's motion must respect at the configured C speed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -100,12 +159,12 @@ pub fn commanded_lift(
 /// and jerk are judged by the second and third differences of X over the points, which is the
 /// motion of the smooth path the table samples.
 pub fn guarded_table(
-    geometry: CamGeometry,
+    feature: Feature,
     commanded: &LiftTable,
     request: TableRequest,
     limits: &AxisLimits,
 ) -> Result<GuardedTable, GuardError> {
-    let part = Part::cam(geometry, LiftCurve::new(commanded))?;
+    let part = feature.part(commanded)?;
     guarded_part_table(&part, request, limits)
 }
 
@@ -168,7 +227,7 @@ pub fn guarded_part_table(
 pub struct LobeLoop<'a> {
     pub nominal: &'a LiftTable,
     /// Geometry with the wheel radius the control currently believes in.
-    pub geometry: CamGeometry,
+    pub feature: Feature,
     pub request: TableRequest,
     pub limits: &'a AxisLimits,
     pub params: &'a LearningParams,
@@ -189,7 +248,7 @@ pub fn current_table(
     lobe: &LobeLoop<'_>,
 ) -> Result<GuardedTable, GuardError> {
     let commanded = commanded_lift(lobe.nominal, &state.correction_um)?;
-    guarded_table(lobe.geometry, &commanded, lobe.request, lobe.limits)
+    guarded_table(lobe.feature, &commanded, lobe.request, lobe.limits)
 }
 
 /// One turn of the loop: learn from the part just measured, then regenerate and guard the
@@ -274,9 +333,21 @@ mod tests {
             form: TableForm::Poly,
             poly_tolerance_um: 0.1,
         };
-        let plain = guarded_table(geometry, &nominal(), request, &AxisLimits::default()).unwrap();
+        let plain = guarded_table(
+            Feature::Cam(geometry),
+            &nominal(),
+            request,
+            &AxisLimits::default(),
+        )
+        .unwrap();
         let cmd = commanded_lift(&nominal(), &vec![-3.0; 360]).unwrap();
-        let shrunk = guarded_table(geometry, &cmd, request, &AxisLimits::default()).unwrap();
+        let shrunk = guarded_table(
+            Feature::Cam(geometry),
+            &cmd,
+            request,
+            &AxisLimits::default(),
+        )
+        .unwrap();
         // A uniform lift change grows the outline uniformly. Where the wheel rests on the
         // base circle (the lobe spans 100°–260°) d moves by it exactly; on the lobe the wheel
         // centre is off the contact normal by γ (a few degrees), so d moves by δ/cos γ,
@@ -316,7 +387,7 @@ mod tests {
             velocity_mm_s: 20.0,
             ..AxisLimits::default()
         };
-        let e = guarded_table(geometry, &nominal(), request, &limits).unwrap_err();
+        let e = guarded_table(Feature::Cam(geometry), &nominal(), request, &limits).unwrap_err();
         assert!(
             e.to_string()
                 .starts_with("X velocity 30.9 mm/s exceeds the axis limit 20 mm/s"),

@@ -11,9 +11,10 @@ use std::f64::consts::{FRAC_PI_2, TAU};
 
 /// Table sizes accepted per revolution.
 pub const POINTS_RANGE: std::ops::RangeInclusive<usize> = 36..=36_000;
-/// Angular step of the grindability scan (degrees): fine enough to see any stretch that
-/// spans a fraction of a 1° table step, since the spline's curvature is linear between knots.
-const SCAN_STEP_DEG: f64 = 0.05;
+/// Largest angular step of the grindability scan (degrees). Every knot is scanned too: the
+/// spline's h'' is linear between knots, so its extremes sit at knots, and 0.1° between them
+/// sees any bad stretch of a tenth of a 1° table step.
+const SCAN_STEP_DEG: f64 = 0.1;
 
 /// The cam follower the lift table was designed for (and the gauge reads with).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -114,9 +115,12 @@ struct PathPoint {
 
 #[derive(Debug, Clone)]
 enum Kind {
+    /// A cam lobe; with `pin` set, a crankpin described by its support function as the lift
+    /// of a flat follower (see [`Part::shaped_pin`]).
     Cam {
         geometry: CamGeometry,
         lift: LiftCurve,
+        pin: Option<CrankpinGeometry>,
     },
     Crankpin(CrankpinGeometry),
 }
@@ -137,7 +141,34 @@ impl Part {
             positive("roller radius", radius_mm)?;
         }
         let part = Self {
-            kind: Kind::Cam { geometry, lift },
+            kind: Kind::Cam {
+                geometry,
+                lift,
+                pin: None,
+            },
+        };
+        part.check_cam()?;
+        Ok(part)
+    }
+
+    /// A crankpin ground to a corrected shape. Seen from the main axis its support function
+    /// is `b·cos ψ + r_p + u(ψ)`, which is the lift `h = b·(1 + cos ψ) + u` of a flat follower
+    /// on a base radius `r_p − b` (negative when the pin does not surround the axis; the flat
+    /// follower's geometry holds all the same). `lift` is that h. Program X stays
+    /// `d − R − r_p`, as for the round pin.
+    pub fn shaped_pin(pin: CrankpinGeometry, lift: LiftCurve) -> Result<Self, GeometryError> {
+        Self::crankpin(pin)?;
+        let geometry = CamGeometry {
+            base_radius_mm: pin.pin_radius_mm - pin.throw_mm,
+            follower: Follower::Flat,
+            wheel_radius_mm: pin.wheel_radius_mm,
+        };
+        let part = Self {
+            kind: Kind::Cam {
+                geometry,
+                lift,
+                pin: Some(pin),
+            },
         };
         part.check_cam()?;
         Ok(part)
@@ -176,8 +207,10 @@ impl Part {
     /// Program X is `d − x_zero_mm`: `R + Rb` for cams, `R + r_p` for crankpins.
     pub fn x_zero_mm(&self) -> f64 {
         match &self.kind {
+            Kind::Cam { pin: Some(g), .. } | Kind::Crankpin(g) => {
+                g.wheel_radius_mm + g.pin_radius_mm
+            }
             Kind::Cam { geometry, .. } => geometry.wheel_radius_mm + geometry.base_radius_mm,
-            Kind::Crankpin(g) => g.wheel_radius_mm + g.pin_radius_mm,
         }
     }
 
@@ -185,6 +218,9 @@ impl Part {
     /// axis orbit of a crankpin's centre. Centre, radius (mm) and a label.
     pub fn reference_circle(&self) -> Option<([f64; 2], f64, String)> {
         match &self.kind {
+            Kind::Cam { pin: Some(g), .. } => {
+                Some(([0.0, 0.0], g.throw_mm, "pin-centre orbit".to_string()))
+            }
             Kind::Cam { geometry, .. } => Some((
                 [0.0, 0.0],
                 geometry.base_radius_mm,
@@ -200,7 +236,16 @@ impl Part {
     /// The same part with another wheel radius (after dressing), checked again.
     pub fn with_wheel_radius(&self, wheel_radius_mm: f64) -> Result<Self, GeometryError> {
         match &self.kind {
-            Kind::Cam { geometry, lift } => Self::cam(
+            Kind::Cam {
+                pin: Some(g), lift, ..
+            } => Self::shaped_pin(
+                CrankpinGeometry {
+                    wheel_radius_mm,
+                    ..*g
+                },
+                lift.clone(),
+            ),
+            Kind::Cam { geometry, lift, .. } => Self::cam(
                 CamGeometry {
                     wheel_radius_mm,
                     ..*geometry
@@ -243,6 +288,15 @@ impl Part {
     /// Exact wheel-centre distance (mm) at table angle `c_deg`.
     pub fn d_at_c_deg(&self, c_deg: f64) -> Result<f64, GeometryError> {
         Ok(self.wheel_at_c_deg(c_deg)?.0)
+    }
+
+    /// Exact wheel-centre distance (mm) at table angle `c_deg`, starting the search from the
+    /// path parameter of a nearby solution (`guess_rad`, e.g. the previous point of a walk).
+    /// Returns d and the parameter found, to pass on as the next guess. Same result as
+    /// [`Part::d_at_c_deg`]; only faster when the guess is close.
+    pub fn d_at_c_deg_near(&self, c_deg: f64, guess_rad: f64) -> Result<(f64, f64), GeometryError> {
+        let (s, d, _) = self.wheel_at(c_deg, guess_rad)?;
+        Ok((d, s))
     }
 
     /// Wheel centre and contact point (part frame, mm) with the wheel at table angle `c_deg`.
@@ -289,8 +343,8 @@ impl Part {
     ///
     /// Newton on the analytic dc/dψ, safeguarded by bisection on a bracket: c(ψ) is strictly
     /// increasing on a checked part, and |c − ψ| < π/2 brackets the root. It stops once the
-    /// Newton step is below 1e-12 rad; d then differs from its value at the root by at most
-    /// |dd/dψ|·1e-12, below 1e-9 µm for any real part.
+    /// Newton step is below 1e-11 rad; d then differs from its value at the root by at most
+    /// |dd/dψ|·1e-11, below 1e-6 µm for any real part (|dd/dψ| < 100 mm/rad).
     fn solve_psi(&self, c_target: f64, guess: f64) -> Option<(f64, PathPoint)> {
         let (mut lo, mut hi) = (c_target - FRAC_PI_2, c_target + FRAC_PI_2);
         let mut psi = guess.clamp(lo, hi);
@@ -304,7 +358,7 @@ impl Part {
             }
             let dc = cross(p.w, p.dw) / dot(p.w, p.w);
             let step = f / dc;
-            if dc > 0.0 && step.abs() < 1e-12 {
+            if dc > 0.0 && step.abs() < 1e-11 {
                 return Some((psi, p));
             }
             let newton = psi - step;
@@ -347,7 +401,7 @@ impl Part {
                     u,
                 }
             }
-            Kind::Cam { geometry, lift } => {
+            Kind::Cam { geometry, lift, .. } => {
                 let l = lift.eval(s);
                 let (h, h1, h2) = (l.h_mm, l.dh_mm, l.d2h_mm);
                 let (rb, big_r) = (geometry.base_radius_mm, geometry.wheel_radius_mm);
@@ -373,20 +427,27 @@ impl Part {
 
     /// Scans the whole revolution for stretches the wheel cannot grind and reports the first.
     fn check_cam(&self) -> Result<(), GeometryError> {
-        let Kind::Cam { geometry, lift } = &self.kind else {
+        let Kind::Cam { geometry, lift, .. } = &self.kind else {
             return Ok(());
         };
         let (rb, big_r) = (geometry.base_radius_mm, geometry.wheel_radius_mm);
-        let steps = (360.0 / SCAN_STEP_DEG).round() as usize;
-        let mut samples: Vec<f64> = (0..steps)
-            .map(|k| (k as f64 * SCAN_STEP_DEG).to_radians())
-            .collect();
-        // Knots are where the spline's curvature is extreme piecewise; include them.
-        samples.extend(lift.knots_rad().iter().map(|k| k.rem_euclid(TAU)));
-        samples.sort_by(f64::total_cmp);
+        // Each knot interval from its start knot, split into steps of at most SCAN_STEP_DEG:
+        // ascending without sorting, every knot included.
+        let knots = lift.knots_rad();
+        let step_max = SCAN_STEP_DEG.to_radians();
+        let mut samples = Vec::with_capacity(knots.len() * 11);
+        for (i, &k0) in knots.iter().enumerate() {
+            let k1 = knots.get(i + 1).copied().unwrap_or(knots[0] + TAU);
+            let parts = ((k1 - k0) / step_max).ceil().max(1.0) as usize;
+            samples.extend((0..parts).map(|j| k0 + (k1 - k0) * j as f64 / parts as f64));
+        }
+        // The polar profile of a roller or knife follower must stay outside the axis; a flat
+        // follower only needs the wheel centre ahead of the contact line (support + R > 0),
+        // which also holds for a pin that does not surround the axis.
         let offset = match geometry.follower {
             Follower::Roller { radius_mm } => radius_mm,
-            _ => 0.0,
+            Follower::Knife => 0.0,
+            Follower::Flat => big_r,
         };
         for &s in &samples {
             if rb + offset + lift.eval(s).h_mm <= 0.0 {
@@ -496,7 +557,38 @@ fn worst_bad_stretch(
     let Some((_, start, end, error)) = worst else {
         return Ok(());
     };
-    let (from_deg, to_deg) = (samples[start].to_degrees(), samples[end].to_degrees());
+    // Refine both ends between the last passing and first failing sample, so the range is
+    // exact to 1e-6° whatever the scan step.
+    let n = samples.len();
+    let unwrap = |a: f64, b: f64| if b < a { b + TAU } else { b };
+    let refine = |good: f64, bad: f64| {
+        let (mut good, mut bad) = (good, bad);
+        while (bad - good).abs() > 1e-8 {
+            let mid = 0.5 * (good + bad);
+            if check(mid).is_some() {
+                bad = mid
+            } else {
+                good = mid
+            }
+        }
+        bad
+    };
+    let before = samples[(start + n - 1) % n];
+    let after = samples[(end + 1) % n];
+    let from = if flags[(start + n - 1) % n].is_none() {
+        refine(before, unwrap(before, samples[start]))
+    } else {
+        samples[start]
+    };
+    let to = if flags[(end + 1) % n].is_none() {
+        refine(unwrap(samples[end], after), samples[end])
+    } else {
+        samples[end]
+    };
+    let (from_deg, to_deg) = (
+        from.to_degrees().rem_euclid(360.0),
+        to.to_degrees().rem_euclid(360.0),
+    );
     Err(match error {
         GeometryError::NegativeCurvature { min_radius_mm, .. } => {
             GeometryError::NegativeCurvature {
@@ -594,4 +686,48 @@ fn dot(a: [f64; 2], b: [f64; 2]) -> f64 {
 
 fn cross(a: [f64; 2], b: [f64; 2]) -> f64 {
     a[0] * b[1] - a[1] * b[0]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::lift::LiftTable;
+
+    /// A shaped pin with no correction is the round pin: its table must match the crankpin
+    /// closed form d(c) = b·cos c + √((R + r_p)² − (b·sin c)²). The lift b·(1 + cos ψ) is
+    /// sampled at 0.5° and splined (error ≤ 5/384·h⁴·b ≈ 5e-8 µm), so 1e-6 mm is generous.
+    /// b > r_p: the pin does not surround the axis, the base radius r_p − b is negative.
+    #[test]
+    fn uncorrected_shaped_pin_is_the_round_pin() {
+        let pin = CrankpinGeometry {
+            throw_mm: 45.0,
+            pin_radius_mm: 30.0,
+            wheel_radius_mm: 300.0,
+        };
+        let angles: Vec<f64> = (0..720).map(|k| k as f64 * 0.5).collect();
+        let lifts = angles
+            .iter()
+            .map(|a| 45.0 * (1.0 + a.to_radians().cos()))
+            .collect();
+        let table = LiftTable::from_points(angles, lifts, "pin").unwrap();
+        let shaped = Part::shaped_pin(pin, LiftCurve::new(&table)).unwrap();
+        let round = Part::crankpin(pin).unwrap();
+        assert_eq!(shaped.x_zero_mm(), round.x_zero_mm());
+        for (a, b) in shaped
+            .wheel_table(360)
+            .unwrap()
+            .iter()
+            .zip(round.wheel_table(360).unwrap())
+        {
+            let c = a.c_deg.to_radians();
+            let exact = 45.0 * c.cos() + (330.0f64.powi(2) - (45.0 * c.sin()).powi(2)).sqrt();
+            assert!(
+                (a.d_mm - exact).abs() < 1e-6,
+                "{}: {} vs {exact}",
+                a.c_deg,
+                a.d_mm
+            );
+            assert!((a.x_mm - b.x_mm).abs() < 1e-6);
+        }
+    }
 }

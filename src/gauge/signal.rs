@@ -9,7 +9,7 @@
 //!
 //! Both are reduced to a shift of the payload read as one 64-bit integer (little-endian read
 //! for Intel, big-endian read for Motorola), so decoding costs a shift, a mask and a sign
-//! extension.
+//! extension, and encoding ([`SignalCodec::write_bits`]) the same shift and mask the other way.
 
 /// How the raw bits are turned into a number.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -136,6 +136,74 @@ impl SignalCodec {
             ByteOrder::Motorola => words.be,
         };
         (word >> self.shift) & self.mask
+    }
+
+    /// How the raw bits are read (integer or float).
+    pub fn kind(&self) -> RawKind {
+        self.kind
+    }
+
+    /// The signal's length in bits (1..=64).
+    pub fn length(&self) -> u32 {
+        self.length
+    }
+
+    /// The smallest and largest raw integer the signal holds: `0..=2^len − 1` unsigned,
+    /// `−2^(len−1)..=2^(len−1) − 1` signed; `None` for float signals.
+    pub fn integer_range(&self) -> Option<(i128, i128)> {
+        let len = self.length;
+        match self.kind {
+            RawKind::Unsigned => Some((0, (1i128 << len) - 1)),
+            RawKind::Signed => Some((-(1i128 << (len - 1)), (1i128 << (len - 1)) - 1)),
+            RawKind::Float32 | RawKind::Float64 => None,
+        }
+    }
+
+    /// The bit pattern of `raw` for this signal, right-aligned, or `None` when it does not
+    /// fit: an integer outside [`SignalCodec::integer_range`], a float for an integer
+    /// signal or the other way round, or a finite value that overflows a 32-bit float.
+    /// The inverse of [`SignalCodec::raw_value`].
+    pub fn bits_of(&self, raw: RawValue) -> Option<u64> {
+        match (self.kind, raw) {
+            (RawKind::Unsigned | RawKind::Signed, RawValue::Unsigned(v)) => {
+                let (_, hi) = self.integer_range()?;
+                (i128::from(v) <= hi).then_some(v)
+            }
+            (RawKind::Unsigned | RawKind::Signed, RawValue::Signed(v)) => {
+                let (lo, hi) = self.integer_range()?;
+                // Two's complement, cut to the signal's length: the cast keeps the bits.
+                #[allow(clippy::cast_sign_loss)]
+                let bits = (v as u64) & self.mask;
+                (lo..=hi).contains(&i128::from(v)).then_some(bits)
+            }
+            (RawKind::Float32, RawValue::Float(v)) => {
+                // Rounding to single precision is the point of a 32-bit float signal.
+                #[allow(clippy::cast_possible_truncation)]
+                let single = v as f32;
+                (single.is_finite() || !v.is_finite()).then_some(u64::from(single.to_bits()))
+            }
+            (RawKind::Float64, RawValue::Float(v)) => Some(v.to_bits()),
+            _ => None,
+        }
+    }
+
+    /// Writes the signal's raw bits (right-aligned; bits above the length are ignored) into
+    /// an 8-byte payload buffer, leaving every other bit as it was. The inverse of
+    /// [`SignalCodec::raw_bits`]: reading back gives `bits` masked to the length.
+    #[inline]
+    pub fn write_bits(&self, data: &mut [u8; 8], bits: u64) {
+        let field = self.mask << self.shift;
+        let placed = (bits & self.mask) << self.shift;
+        match self.order {
+            ByteOrder::Intel => {
+                let word = u64::from_le_bytes(*data);
+                *data = ((word & !field) | placed).to_le_bytes();
+            }
+            ByteOrder::Motorola => {
+                let word = u64::from_be_bytes(*data);
+                *data = ((word & !field) | placed).to_be_bytes();
+            }
+        }
     }
 
     /// The raw value as a number, before factor and offset.
@@ -269,6 +337,101 @@ mod tests {
         }
         // Intel: 64·65/2 valid layouts; Motorola the same count.
         assert_eq!(checked, 3 * 2 * 2080);
+    }
+
+    /// Independent reference writer: sets the bits one at a time in the DBC numbering.
+    fn reference_write(data: &mut [u8; 8], start: u64, len: u64, order: ByteOrder, value: u64) {
+        let mut set = |pos: u64, bit: u64| {
+            let (byte, shift) = ((pos / 8) as usize, pos % 8);
+            data[byte] = (data[byte] & !(1 << shift)) | ((bit as u8) << shift);
+        };
+        match order {
+            ByteOrder::Intel => {
+                for i in 0..len {
+                    set(start + i, value >> i & 1);
+                }
+            }
+            ByteOrder::Motorola => {
+                let mut pos = start;
+                for i in (0..len).rev() {
+                    set(pos, value >> i & 1);
+                    pos = if pos.is_multiple_of(8) {
+                        pos + 15
+                    } else {
+                        pos - 1
+                    };
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn writing_matches_the_bitwise_reference_and_leaves_other_bits_alone() {
+        // Every valid layout, written over two backgrounds with a value that sets bits
+        // above the length (which must be ignored).
+        let backgrounds = [[0u8; 8], [0xff, 0x00, 0xa5, 0x5a, 0x81, 0x7e, 0x3c, 0xc3]];
+        let value = 0x9e37_79b9_7f4a_7c15u64;
+        let mut checked = 0;
+        for background in backgrounds {
+            for order in [ByteOrder::Intel, ByteOrder::Motorola] {
+                for start in 0..64 {
+                    for len in 1..=64 {
+                        let Ok(c) = SignalCodec::new(start, len, order, RawKind::Unsigned, 8)
+                        else {
+                            continue;
+                        };
+                        let mut ours = background;
+                        c.write_bits(&mut ours, value);
+                        let mut reference = background;
+                        let masked = if len == 64 {
+                            value
+                        } else {
+                            value & ((1 << len) - 1)
+                        };
+                        reference_write(&mut reference, start, len, order, masked);
+                        assert_eq!(ours, reference, "{order:?} start {start} len {len}");
+                        assert_eq!(c.raw_bits(PayloadWords::new(&ours)), masked);
+                        checked += 1;
+                    }
+                }
+            }
+        }
+        assert_eq!(checked, 2 * 2 * 2080);
+    }
+
+    #[test]
+    fn bits_of_is_the_inverse_of_raw_value() {
+        let s4 = codec(0, 4, ByteOrder::Intel, RawKind::Signed);
+        assert_eq!(s4.integer_range(), Some((-8, 7)));
+        for v in -8..=7 {
+            let bits = s4.bits_of(RawValue::Signed(v)).expect("fits");
+            let mut data = [0u8; 8];
+            s4.write_bits(&mut data, bits);
+            assert_eq!(s4.raw_value(PayloadWords::new(&data)), RawValue::Signed(v));
+        }
+        assert_eq!(s4.bits_of(RawValue::Signed(8)), None);
+        assert_eq!(s4.bits_of(RawValue::Signed(-9)), None);
+        assert_eq!(s4.bits_of(RawValue::Unsigned(7)), Some(7));
+        assert_eq!(s4.bits_of(RawValue::Unsigned(8)), None);
+        assert_eq!(s4.bits_of(RawValue::Float(1.0)), None);
+        let u64_sig = codec(0, 64, ByteOrder::Intel, RawKind::Unsigned);
+        assert_eq!(
+            u64_sig.bits_of(RawValue::Unsigned(u64::MAX)),
+            Some(u64::MAX)
+        );
+        assert_eq!(u64_sig.bits_of(RawValue::Signed(-1)), None);
+        let f32_sig = codec(0, 32, ByteOrder::Intel, RawKind::Float32);
+        assert_eq!(
+            f32_sig.bits_of(RawValue::Float(1.25)),
+            Some(u64::from(1.25f32.to_bits()))
+        );
+        // 1e300 overflows single precision; an infinity asked for stays one.
+        assert_eq!(f32_sig.bits_of(RawValue::Float(1e300)), None);
+        assert_eq!(
+            f32_sig.bits_of(RawValue::Float(f64::INFINITY)),
+            Some(u64::from(f32::INFINITY.to_bits()))
+        );
+        assert_eq!(f32_sig.bits_of(RawValue::Signed(1)), None);
     }
 
     #[test]

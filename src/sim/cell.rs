@@ -8,10 +8,9 @@ use super::{
 };
 use crate::core::analysis::{AnalysisError, LobeOptions, analyse_lobe};
 use crate::core::compensate::{
-    self, AxisLimits, CycleError, GuardError, GuardedTable, LobeLoop, TableRequest,
+    self, AxisLimits, CycleError, Feature, GuardError, GuardedTable, LobeLoop, TableRequest,
 };
 use crate::core::fit::{TableForm, fit_poly};
-use crate::core::geometry::{CamGeometry, Part};
 use crate::core::learn::{self, LearningParams, LearningState, StepOutcome};
 use crate::core::lift::{LiftCurve, LiftTable};
 use crate::core::measure::{
@@ -70,8 +69,9 @@ pub enum CellError {
 #[derive(Debug, Clone)]
 pub struct CellSetup {
     pub nominal: LiftTable,
-    /// Geometry with the wheel radius the control believes at the start.
-    pub geometry: CamGeometry,
+    /// What is ground, with the wheel radius the control believes at the start. For a pin,
+    /// `nominal` is its lift as the gauge reads it (`compensate::pin_nominal_lift`).
+    pub feature: Feature,
     pub request: TableRequest,
     pub params: LearningParams,
     pub limits: AxisLimits,
@@ -88,8 +88,12 @@ pub struct CellRun {
 
 /// Grinds `parts` parts with `method` and returns each part's figures.
 pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, CellError> {
-    let mut geometry = setup.geometry;
-    let mut sim = SimGrinder::new(setup.grinder.clone(), Workpiece::Cam(geometry), setup.seed)?;
+    let mut feature = setup.feature;
+    let workpiece = match feature {
+        Feature::Cam(g) => Workpiece::Cam(g),
+        Feature::Pin(g) => Workpiece::Crankpin(g),
+    };
+    let mut sim = SimGrinder::new(setup.grinder.clone(), workpiece, setup.seed)?;
     let nominal_curve = LiftCurve::new(&setup.nominal);
     let nominal = |psi_deg: f64| {
         let s = nominal_curve.eval(psi_deg.to_radians());
@@ -105,7 +109,7 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
     // The X-domain methods' own memory: the X added at each table point, mm.
     let mut naive_dx_mm = vec![0.0; setup.request.points];
     let mut x_state = LearningState::new(points_per_rev);
-    let mut table = make_table(setup, geometry, &state, method, &naive_dx_mm)?;
+    let mut table = make_table(setup, feature, &state, method, &naive_dx_mm)?;
     let mut figures = Vec::with_capacity(parts as usize);
     for part in 1..=parts {
         let ground = match sim.grind(&table) {
@@ -126,7 +130,7 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
         let avg = check_and_average(&raw, &AssemblyLimits::default())?;
         let report = analyse_lobe(&avg, &nominal, &LobeOptions::default())?;
         let revolutions = avg.revolutions_used.len() as u32;
-        let lobe = lobe_loop(setup, geometry);
+        let lobe = lobe_loop(setup, feature);
         let action = match method {
             Method::Camloop => {
                 match compensate::learn_and_regenerate(
@@ -137,7 +141,7 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                     &lobe,
                 ) {
                     Ok((outcome, next)) => {
-                        table = commanded(setup.request.form, &next, geometry);
+                        table = commanded(setup.request.form, &next, feature);
                         outcome_text(&outcome)
                     }
                     // A refused table is never used: the machine keeps the previous one.
@@ -151,7 +155,7 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                         *dx -= e / 1000.0;
                     }
                 }
-                table = make_table(setup, geometry, &state, method, &naive_dx_mm)?;
+                table = make_table(setup, feature, &state, method, &naive_dx_mm)?;
                 "X -= e at each index".to_string()
             }
             Method::XDomainIlc => {
@@ -168,7 +172,7 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                         *dx = u / 1000.0;
                     }
                 }
-                table = make_table(setup, geometry, &state, method, &naive_dx_mm)?;
+                table = make_table(setup, feature, &state, method, &naive_dx_mm)?;
                 match outcome {
                     Ok(o) => outcome_text(&o),
                     Err(e) => format!("refused: {e}"),
@@ -177,12 +181,12 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
         };
         let dressed = match sim.after_part() {
             Some(event) => {
-                geometry.wheel_radius_mm = event.believed_wheel_radius_mm;
+                feature = feature.with_wheel_radius(event.believed_wheel_radius_mm);
                 learn::after_dressing(&mut state);
                 learn::after_dressing(&mut x_state);
                 let mean = naive_dx_mm.iter().sum::<f64>() / naive_dx_mm.len() as f64;
                 naive_dx_mm.iter_mut().for_each(|d| *d -= mean);
-                table = make_table(setup, geometry, &state, method, &naive_dx_mm)?;
+                table = make_table(setup, feature, &state, method, &naive_dx_mm)?;
                 true
             }
             None => false,
@@ -202,10 +206,10 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
     })
 }
 
-fn lobe_loop(setup: &CellSetup, geometry: CamGeometry) -> LobeLoop<'_> {
+fn lobe_loop(setup: &CellSetup, feature: Feature) -> LobeLoop<'_> {
     LobeLoop {
         nominal: &setup.nominal,
-        geometry,
+        feature,
         request: setup.request,
         limits: &setup.limits,
         params: &setup.params,
@@ -214,18 +218,18 @@ fn lobe_loop(setup: &CellSetup, geometry: CamGeometry) -> LobeLoop<'_> {
 
 fn make_table(
     setup: &CellSetup,
-    geometry: CamGeometry,
+    feature: Feature,
     state: &LearningState,
     method: Method,
     naive_dx_mm: &[f64],
 ) -> Result<CommandedTable, CellError> {
     match method {
         Method::Camloop => {
-            let table = compensate::current_table(state, &lobe_loop(setup, geometry))?;
-            Ok(commanded(setup.request.form, &table, geometry))
+            let table = compensate::current_table(state, &lobe_loop(setup, feature))?;
+            Ok(commanded(setup.request.form, &table, feature))
         }
         Method::NaiveX | Method::XDomainIlc => {
-            let part = Part::cam(geometry, LiftCurve::new(&setup.nominal))?;
+            let part = feature.part(&setup.nominal)?;
             let mut points = part.wheel_table(setup.request.points)?;
             for (p, dx) in points.iter_mut().zip(naive_dx_mm) {
                 p.x_mm += dx;
@@ -238,27 +242,27 @@ fn make_table(
             Ok(CommandedTable {
                 shape,
                 x_zero_mm: part.x_zero_mm(),
-                wheel_radius_mm: geometry.wheel_radius_mm,
+                wheel_radius_mm: feature.wheel_radius_mm(),
             })
         }
     }
 }
 
-fn commanded(form: TableForm, table: &GuardedTable, geometry: CamGeometry) -> CommandedTable {
+fn commanded(form: TableForm, table: &GuardedTable, feature: Feature) -> CommandedTable {
     let shape = match (form, &table.segments) {
         (TableForm::Poly, Some(segments)) => TableShape::Poly(segments.clone()),
         _ => TableShape::G1(table.points.clone()),
     };
     CommandedTable {
         shape,
-        x_zero_mm: geometry.wheel_radius_mm + geometry.base_radius_mm,
-        wheel_radius_mm: geometry.wheel_radius_mm,
+        x_zero_mm: feature.x_zero_mm(),
+        wheel_radius_mm: feature.wheel_radius_mm(),
     }
 }
 
 /// Max |profile error| (datum fitted), max |lift error| (nothing fitted) and the base-circle
-/// radius error, from the true ground lift on the fine grid.
-fn judge(
+/// radius error (all µm), from the true ground lift on the fine grid.
+pub fn judge(
     lift_mm: &[f64],
     nominal: &dyn Fn(f64) -> (f64, f64),
 ) -> Result<(f64, f64, f64), AnalysisError> {

@@ -82,6 +82,7 @@
 pub mod cell;
 mod config;
 mod envelope;
+pub mod frames;
 mod gauge;
 mod ground;
 mod path;
@@ -90,6 +91,7 @@ mod table;
 
 pub use config::{GaugeConfig, GaugeFault, GrinderConfig, Harmonic};
 pub use envelope::SMOOTH_KINK_RAD;
+pub use frames::measurement_frames;
 pub use gauge::{ORIGIN, PartLabels};
 pub use ground::{GroundPart, Workpiece};
 pub use rng::SimRng;

@@ -11,6 +11,7 @@
 
 mod main_program;
 mod names;
+mod parse;
 mod settings;
 mod table;
 
@@ -19,6 +20,7 @@ pub use names::{
     AxisNameError, MAX_PROGRAM_NAME_CHARS, ProgramNameError, RESERVED_PREFIXES, validate_axis_name,
     validate_program_name,
 };
+pub use parse::{ParseError, ParsedShape, ParsedTable, parse_table_program};
 pub use settings::{
     C_DECIMALS, CDirection, ProgramSettings, SettingError, SettingsErrors, TableMemory, X_DECIMALS,
 };

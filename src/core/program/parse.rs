@@ -1,0 +1,226 @@
+//! Reading back the curve-table programs camloop writes: what the control will run, for
+//! verification, diffs between versions and the simulator. It reads our own output form
+//! (`AXIS=value` words, `POLY` with `PO[…]=(…)`), not arbitrary part programs.
+
+use super::super::table::PolySegment;
+
+/// A curve table as written in a program, in machine axis values.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParsedTable {
+    pub name: String,
+    pub table_number: u32,
+    pub following_axis: String,
+    pub leading_axis: String,
+    pub shape: ParsedShape,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum ParsedShape {
+    /// (C, X) of every G1 block, the closing block at first C + 360 included.
+    G1(Vec<(f64, f64)>),
+    /// The cubic segments, a1 derived from each end point as the control does.
+    Poly(Vec<PolySegment>),
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("line {line}: {reason}")]
+pub struct ParseError {
+    pub line: usize,
+    pub reason: String,
+}
+
+/// Parses a curve-table subprogram written by `render_g1_table` or `render_poly_table`.
+pub fn parse_table_program(text: &str) -> Result<ParsedTable, ParseError> {
+    let err = |line: usize, reason: String| ParseError { line, reason };
+    let mut name = None;
+    let mut def: Option<(String, String, u32)> = None;
+    let mut in_table = false;
+    let mut poly = false;
+    let mut points: Vec<(f64, f64)> = Vec::new();
+    let mut segments: Vec<PolySegment> = Vec::new();
+    let mut ended = false;
+    for (index, raw) in text.lines().enumerate() {
+        let line = index + 1;
+        let code = raw.split(';').next().unwrap_or("").trim();
+        if code.is_empty() {
+            continue;
+        }
+        if let Some(rest) = code.strip_prefix("PROC ") {
+            name = Some(rest.trim().to_string());
+        } else if let Some(args) = code
+            .strip_prefix("CTABDEF(")
+            .and_then(|r| r.strip_suffix(')'))
+        {
+            let parts: Vec<&str> = args.split(',').map(str::trim).collect();
+            if parts.len() < 4 {
+                return Err(err(
+                    line,
+                    format!("CTABDEF needs at least 4 arguments, found {}", parts.len()),
+                ));
+            }
+            let n = parts[2].parse().map_err(|_| {
+                err(
+                    line,
+                    format!("table number `{}` is not a whole number", parts[2]),
+                )
+            })?;
+            def = Some((parts[0].to_string(), parts[1].to_string(), n));
+            in_table = true;
+        } else if code == "CTABEND" {
+            in_table = false;
+            ended = true;
+        } else if in_table && code == "POLY" {
+            poly = true;
+        } else if in_table {
+            let (following, leading, _) = def.as_ref().expect("in_table is set only after CTABDEF");
+            if poly {
+                let c_end = tuple(code, &format!("PO[{leading}]"), line)?;
+                let x = tuple(code, &format!("PO[{following}]"), line)?;
+                let (&[c1], &[x_end, a2, a3]) = (c_end.as_slice(), x.as_slice()) else {
+                    return Err(err(
+                        line,
+                        "expected PO[C]=(c_end) PO[X]=(x_end,a2,a3)".to_string(),
+                    ));
+                };
+                let (c0, x0) = match (segments.last(), points.last()) {
+                    (Some(s), _) => (s.c_end_deg, s.x_end_mm()),
+                    (None, Some(&p)) => p,
+                    (None, None) => {
+                        return Err(err(line, "POLY block before the start point".to_string()));
+                    }
+                };
+                segments.push(PolySegment {
+                    c_start_deg: c0,
+                    c_end_deg: c1,
+                    x0_mm: x0,
+                    a1_mm: x_end - x0 - a2 - a3,
+                    a2_mm: a2,
+                    a3_mm: a3,
+                });
+            } else {
+                let c = word(code, leading, line)?;
+                let x = word(code, following, line)?;
+                points.push((c, x));
+            }
+        }
+    }
+    let Some((following_axis, leading_axis, table_number)) = def else {
+        return Err(err(1, "no CTABDEF in the program".to_string()));
+    };
+    if !ended {
+        return Err(err(
+            text.lines().count(),
+            "CTABEND missing: the program is incomplete".to_string(),
+        ));
+    }
+    let shape = if poly {
+        ParsedShape::Poly(segments)
+    } else {
+        ParsedShape::G1(points)
+    };
+    Ok(ParsedTable {
+        name: name.unwrap_or_default(),
+        table_number,
+        following_axis,
+        leading_axis,
+        shape,
+    })
+}
+
+/// The value of `AXIS=value` in a block.
+fn word(code: &str, axis: &str, line: usize) -> Result<f64, ParseError> {
+    code.split_whitespace()
+        .filter_map(|w| w.split_once('='))
+        .find(|(a, _)| *a == axis)
+        .ok_or_else(|| ParseError {
+            line,
+            reason: format!("no {axis}= word"),
+        })?
+        .1
+        .parse()
+        .map_err(|_| ParseError {
+            line,
+            reason: format!("{axis} value is not a number"),
+        })
+}
+
+/// The numbers of `KEY=(a,b,…)` in a block.
+fn tuple(code: &str, key: &str, line: usize) -> Result<Vec<f64>, ParseError> {
+    let start = code.find(&format!("{key}=(")).ok_or_else(|| ParseError {
+        line,
+        reason: format!("no {key}=(…)"),
+    })?;
+    let rest = &code[start + key.len() + 2..];
+    let inner = rest.split(')').next().unwrap_or("");
+    inner
+        .split(',')
+        .map(|v| {
+            v.trim().parse().map_err(|_| ParseError {
+                line,
+                reason: format!("{key}: `{v}` is not a number"),
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::program::{ProgramSettings, render_g1_table, render_poly_table};
+    use crate::core::table::TablePoint;
+
+    fn points() -> Vec<TablePoint> {
+        (0..36)
+            .map(|k| {
+                let c_deg = k as f64 * 10.0;
+                let x_mm = 2.0 + (c_deg.to_radians()).cos();
+                TablePoint {
+                    c_deg,
+                    d_mm: x_mm + 270.0,
+                    x_mm,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn reads_back_a_g1_table_within_the_written_resolution() {
+        let text = render_g1_table(&points(), &ProgramSettings::default()).unwrap();
+        let parsed = parse_table_program(&text).unwrap();
+        assert_eq!(parsed.table_number, 1);
+        let ParsedShape::G1(read) = parsed.shape else {
+            panic!("G1 expected")
+        };
+        assert_eq!(read.len(), 37, "36 points and the closing block");
+        for (p, (c, x)) in points().iter().zip(&read) {
+            assert!((p.c_deg - c).abs() < 5e-5 && (p.x_mm - x).abs() < 5e-5);
+        }
+        assert!((read[36].0 - 360.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn reads_back_poly_segments_as_the_control_does() {
+        let segments = crate::core::fit::fit_poly(&points());
+        let text = render_poly_table(&segments, &ProgramSettings::default()).unwrap();
+        let ParsedShape::Poly(read) = parse_table_program(&text).unwrap().shape else {
+            panic!("POLY expected")
+        };
+        assert_eq!(read.len(), 36);
+        for (a, b) in segments.iter().zip(&read) {
+            for u in [0.25, 0.5, 0.75] {
+                let xa = a.x0_mm + u * (a.a1_mm + u * (a.a2_mm + u * a.a3_mm));
+                let xb = b.x0_mm + u * (b.a1_mm + u * (b.a2_mm + u * b.a3_mm));
+                // X end points are written with 4 decimals (±5e-5 mm), a2/a3 with 6.
+                assert!((xa - xb).abs() < 1e-4, "{xa} vs {xb}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_truncated_program_is_refused() {
+        let text = render_g1_table(&points(), &ProgramSettings::default()).unwrap();
+        let cut = &text[..text.len() / 2];
+        let e = parse_table_program(cut).unwrap_err();
+        assert!(e.reason.contains("CTABEND missing"), "{e}");
+    }
+}
