@@ -1,108 +1,17 @@
 //! The history store's story, run on SQLite and on a throwaway PostgreSQL server: machine →
 //! recipe snapshot → measurements → table versions → history with filters and cursor paging
 //! → learning state → dressings and events → export → retention keeps summaries. Plus
-//! idempotent insert, refused input and a database that is down.
+//! idempotent insert, refused input and concurrent writers.
 
 mod store_support;
 
+use store_support::data::{LIFT_TOL_MM, all_pages, filter, measurement, sha_of, table};
+
 use camloop::store::{
     EventFilter, EventLevel, FeatureKind, HistoryFilter, MeasurementId, MeasurementSummary,
-    NewDressing, NewEvent, NewMeasurement, NewRecipeSnapshot, NewTableVersion, Store, StoreError,
-    TableStatus, Verdict,
+    NewDressing, NewEvent, NewMeasurement, NewRecipeSnapshot, Store, StoreError, TableStatus,
+    Verdict,
 };
-use sha2::{Digest, Sha256};
-
-/// Blob quantisation is 0.1 µm = 1e-4 mm, so a stored lift is within half of that.
-const LIFT_TOL_MM: f64 = 0.5e-4 + 1e-12;
-
-fn sha_of(text: &str) -> String {
-    Sha256::digest(text.as_bytes())
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
-}
-
-/// A measurement whose values all derive from `n`, so the test can predict every column.
-fn measurement(machine: &str, lobe: &str, n: u32, received_at_ms: i64) -> NewMeasurement {
-    let points = 36;
-    let lift = |rev: u32, i: u32| {
-        let a = f64::from(i) * 10.0_f64.to_radians();
-        4.0 * (1.0 - a.cos()) + 1e-3 * f64::from(n) + 1e-4 * f64::from(rev)
-    };
-    let raw: Vec<Vec<f64>> = (0..3)
-        .map(|rev| (0..points).map(|i| lift(rev, i)).collect())
-        .collect();
-    let averaged = (0..points).map(|i| lift(1, i)).collect();
-    NewMeasurement {
-        machine: machine.into(),
-        part: format!("P-{n:05}"),
-        lobe: lobe.into(),
-        received_at_ms,
-        verdict: if n.is_multiple_of(4) {
-            Verdict::Fail
-        } else {
-            Verdict::Pass
-        },
-        max_profile_error_um: 1.5 + f64::from(n) * 0.25,
-        base_radius_error_um: -0.5,
-        phase_error_deg: 0.01 * f64::from(n),
-        revolutions_used: 3,
-        points_per_rev: points,
-        origin: "test".into(),
-        sha256: sha_of(&format!("{machine}/{lobe}/{n}")),
-        recipe_snapshot: None,
-        raw_lift_mm: raw,
-        averaged_lift_mm: averaged,
-        analysis_json: format!(
-            r#"{{"part":{n},"max_error_um":{}}}"#,
-            1.5 + f64::from(n) * 0.25
-        ),
-    }
-}
-
-fn filter(machine: &str) -> HistoryFilter {
-    HistoryFilter {
-        machine: machine.into(),
-        limit: 7,
-        ..HistoryFilter::default()
-    }
-}
-
-/// Follows cursors to the end; checks each page's size against the limit.
-async fn all_pages(store: &Store, mut f: HistoryFilter) -> Vec<MeasurementSummary> {
-    let mut out = Vec::new();
-    loop {
-        let page = store.measurement_history(&f).await.unwrap();
-        assert!(page.items.len() <= f.limit as usize);
-        if page.next_cursor.is_some() {
-            assert_eq!(
-                page.items.len(),
-                f.limit as usize,
-                "only the last page is short"
-            );
-        }
-        out.extend(page.items);
-        match page.next_cursor {
-            Some(c) => f.cursor = Some(c),
-            None => return out,
-        }
-    }
-}
-
-fn table(lobe: &str, parent: Option<i64>, text: &str, status: TableStatus) -> NewTableVersion {
-    NewTableVersion {
-        machine: "M1".into(),
-        lobe: lobe.into(),
-        parent_version: parent,
-        table_number: 11,
-        program_text: text.into(),
-        learning_params_json: r#"{"gain":0.6}"#.into(),
-        reason: "learned".into(),
-        status,
-        status_why: "checks passed".into(),
-        created_at_ms: 5_000,
-    }
-}
 
 async fn story(store: &Store) {
     assert!(store.machines().await.unwrap().is_empty());
@@ -571,63 +480,6 @@ async fn idempotent_insert_on_postgres() {
         return;
     };
     idempotent(&t.store).await;
-}
-
-#[tokio::test]
-async fn sqlite_reopens_with_its_data() {
-    let t = store_support::sqlite().await;
-    let id = t
-        .store
-        .insert_measurement(&measurement("M1", "in1", 1, 1))
-        .await
-        .unwrap();
-    t.store.close().await;
-    assert_eq!(
-        t.store.machines().await.unwrap_err().code(),
-        "store_unavailable",
-        "a closed pool reports the store unavailable"
-    );
-    let url = format!("sqlite://{}", t.dir.path().join("var/camloop.db").display());
-    let again = Store::connect(&url).await.unwrap();
-    assert!(again.measurement(id).await.unwrap().is_some());
-}
-
-#[tokio::test]
-async fn postgres_down_is_unavailable_without_the_password() {
-    // A port that was free a moment ago and has no listener now.
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let url = format!("postgres://camloop:s3cret@127.0.0.1:{port}/camloop");
-    let e = Store::connect(&url).await.unwrap_err();
-    assert_eq!(e.code(), "store_unavailable");
-    assert_eq!(
-        e.to_string(),
-        format!("store unavailable at 127.0.0.1:{port}/camloop: connection refused")
-    );
-    assert!(!format!("{e:?}").contains("s3cret"));
-}
-
-#[tokio::test]
-async fn sqlite_in_an_impossible_place_is_unavailable() {
-    let dir = tempfile::tempdir().unwrap();
-    let file = dir.path().join("a-file");
-    std::fs::write(&file, "not a folder").unwrap();
-    let url = format!("sqlite://{}?mode=rwc", file.join("camloop.db").display());
-    let e = Store::connect(&url).await.unwrap_err();
-    assert_eq!(e.code(), "store_unavailable");
-    assert!(e.to_string().contains("cannot create folder"), "{e}");
-}
-
-#[tokio::test]
-async fn unknown_url_scheme_is_invalid() {
-    let e = Store::connect("mysql://u:p@h/db").await.unwrap_err();
-    assert_eq!(
-        e.to_string(),
-        "invalid database url: scheme `mysql` is not sqlite: or postgres://"
-    );
 }
 
 /// Writers in parallel (the daemon's gauge tasks): every measurement lands once, and table
