@@ -12,6 +12,7 @@ pub mod config;
 pub mod core;
 pub mod gauge;
 pub mod recipe;
+pub mod service;
 pub mod share;
 pub mod sim;
 pub mod store;

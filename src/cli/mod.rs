@@ -6,6 +6,7 @@ mod compensate;
 mod output;
 mod part;
 mod program_args;
+mod run;
 mod table;
 
 use clap::{Parser, Subcommand};
@@ -30,6 +31,8 @@ pub enum Command {
     Analyze(analyze::AnalyzeArgs),
     /// One turn of the learning loop: learn from a measurement, write the next table.
     Compensate(compensate::CompensateArgs),
+    /// The service: gauges in, learning, tables to the controller share, history, HTTP API.
+    Run(run::RunArgs),
 }
 
 /// Runs a parsed command; the error chain is printed by `main` on one line.
@@ -39,6 +42,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Plot(args) => table::run_plot(args),
         Command::Analyze(args) => analyze::run_analyze(args),
         Command::Compensate(args) => compensate::run_compensate(args),
+        Command::Run(args) => run::run_service(args),
     }
 }
 

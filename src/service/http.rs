@@ -1,0 +1,296 @@
+//! The HTTP side of the service: health, Prometheus metrics, and the engineers' read API on
+//! the history store (JSON). Errors carry a stable code and a message, never SQL text.
+
+use super::machine::StoreHandle;
+use super::metrics::Metrics;
+use crate::store::{EventFilter, HistoryFilter, MeasurementId, Store, StoreError, Verdict};
+use axum::extract::{Path, Query, State};
+use axum::http::{StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use axum::routing::get;
+use axum::{Json, Router};
+use serde::Deserialize;
+use serde_json::{Value, json};
+use std::sync::Arc;
+
+#[derive(Clone)]
+pub struct AppState {
+    pub store: StoreHandle,
+    pub metrics: Arc<Metrics>,
+    pub machines: Arc<Vec<String>>,
+}
+
+pub fn router(state: AppState) -> Router {
+    Router::new()
+        .route("/healthz", get(healthz))
+        .route("/metrics", get(metrics))
+        .route("/openapi.json", get(openapi))
+        .route("/api/v1/machines", get(machines))
+        .route("/api/v1/machines/{machine}/measurements", get(history))
+        .route("/api/v1/machines/{machine}/events", get(events))
+        .route(
+            "/api/v1/machines/{machine}/lobes/{lobe}/tables",
+            get(tables),
+        )
+        .route(
+            "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program",
+            get(program),
+        )
+        .route("/api/v1/measurements/{id}", get(measurement))
+        .with_state(state)
+}
+
+/// An API error: HTTP status, stable code, message.
+pub struct ApiError(StatusCode, &'static str, String);
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        (self.0, Json(json!({ "code": self.1, "message": self.2 }))).into_response()
+    }
+}
+
+impl From<StoreError> for ApiError {
+    fn from(e: StoreError) -> Self {
+        let status = match e {
+            StoreError::NotFound { .. } => StatusCode::NOT_FOUND,
+            StoreError::Invalid { .. } => StatusCode::BAD_REQUEST,
+            StoreError::Conflict { .. } => StatusCode::CONFLICT,
+            StoreError::Unavailable { .. } => StatusCode::SERVICE_UNAVAILABLE,
+            _ => StatusCode::INTERNAL_SERVER_ERROR,
+        };
+        // Display never carries SQL text or credentials (see StoreError).
+        ApiError(status, e.code(), e.to_string())
+    }
+}
+
+async fn store(state: &AppState) -> Result<Store, ApiError> {
+    state.store.read().await.clone().ok_or(ApiError(
+        StatusCode::SERVICE_UNAVAILABLE,
+        "store_unavailable",
+        "the history database is not reachable; measurements are kept in the journal".into(),
+    ))
+}
+
+fn check_name(what: &'static str, name: &str) -> Result<(), ApiError> {
+    let ok = (1..=64).contains(&name.len())
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+    if ok {
+        Ok(())
+    } else {
+        Err(ApiError(
+            StatusCode::BAD_REQUEST,
+            "invalid_name",
+            format!("{what}: 1–64 letters, digits, '-' or '_'"),
+        ))
+    }
+}
+
+async fn healthz(State(state): State<AppState>) -> Json<Value> {
+    let database = if state.store.read().await.is_some() {
+        "up"
+    } else {
+        "down"
+    };
+    Json(json!({ "status": "ok", "database": database, "machines": state.machines.len() }))
+}
+
+async fn metrics(State(state): State<AppState>) -> Response {
+    (
+        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        state.metrics.render(),
+    )
+        .into_response()
+}
+
+async fn machines(State(state): State<AppState>) -> Result<Json<Value>, ApiError> {
+    let store = store(&state).await?;
+    let mut out = Vec::new();
+    for m in store.machines().await? {
+        let features = store.features(&m.name).await?;
+        let lobes: Vec<Value> = features
+            .iter()
+            .map(|f| json!({ "part": f.part, "lobe": f.lobe, "kind": f.kind.as_str() }))
+            .collect();
+        out.push(json!({ "name": m.name, "first_seen_ms": m.first_seen_ms, "lobes": lobes }));
+    }
+    Ok(Json(
+        json!({ "machines": out, "configured": *state.machines }),
+    ))
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HistoryQuery {
+    lobe: Option<String>,
+    since_ms: Option<i64>,
+    until_ms: Option<i64>,
+    verdict: Option<String>,
+    limit: Option<u32>,
+    cursor: Option<String>,
+}
+
+async fn history(
+    State(state): State<AppState>,
+    Path(machine): Path<String>,
+    Query(q): Query<HistoryQuery>,
+) -> Result<Json<Value>, ApiError> {
+    check_name("machine", &machine)?;
+    if let Some(l) = &q.lobe {
+        check_name("lobe", l)?;
+    }
+    if let (Some(a), Some(b)) = (q.since_ms, q.until_ms)
+        && a >= b
+    {
+        return Err(ApiError(
+            StatusCode::BAD_REQUEST,
+            "invalid_range",
+            "since_ms must be before until_ms".into(),
+        ));
+    }
+    let verdict = match q.verdict.as_deref() {
+        None => None,
+        Some(v) => Some(Verdict::parse(v).map_err(ApiError::from)?),
+    };
+    let filter = HistoryFilter {
+        machine,
+        lobe: q.lobe,
+        since_ms: q.since_ms,
+        until_ms: q.until_ms,
+        verdict,
+        limit: q.limit.unwrap_or(100),
+        cursor: q.cursor,
+    };
+    let page = store(&state).await?.measurement_history(&filter).await?;
+    let items: Vec<Value> = page
+        .items
+        .iter()
+        .map(|m| {
+            json!({
+                "id": m.id.0, "machine": m.machine, "part": m.part, "lobe": m.lobe,
+                "received_at_ms": m.received_at_ms, "verdict": m.verdict.as_str(),
+                "max_profile_error_um": m.max_profile_error_um, "base_radius_error_um": m.base_radius_error_um,
+                "phase_error_deg": m.phase_error_deg, "revolutions_used": m.revolutions_used,
+                "points_per_rev": m.points_per_rev, "origin": m.origin,
+            })
+        })
+        .collect();
+    Ok(Json(
+        json!({ "items": items, "next_cursor": page.next_cursor }),
+    ))
+}
+
+async fn measurement(
+    State(state): State<AppState>,
+    Path(id): Path<i64>,
+) -> Result<Json<Value>, ApiError> {
+    let detail = store(&state)
+        .await?
+        .measurement(MeasurementId(id))
+        .await?
+        .ok_or(ApiError(
+            StatusCode::NOT_FOUND,
+            "measurement_not_found",
+            format!("measurement {id} not found"),
+        ))?;
+    let analysis: Value = serde_json::from_str(&detail.analysis_json).unwrap_or(Value::Null);
+    Ok(Json(json!({
+        "id": id,
+        "machine": detail.summary.machine,
+        "lobe": detail.summary.lobe,
+        "received_at_ms": detail.summary.received_at_ms,
+        "averaged_lift_mm": detail.averaged_lift_mm,
+        "raw_kept": detail.raw_lift_mm.is_some(),
+        "analysis": analysis,
+    })))
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LimitQuery {
+    limit: Option<u32>,
+}
+
+async fn tables(
+    State(state): State<AppState>,
+    Path((machine, lobe)): Path<(String, String)>,
+    Query(q): Query<LimitQuery>,
+) -> Result<Json<Value>, ApiError> {
+    check_name("machine", &machine)?;
+    check_name("lobe", &lobe)?;
+    let versions = store(&state)
+        .await?
+        .table_versions(&machine, &lobe, q.limit.unwrap_or(50))
+        .await?;
+    let items: Vec<Value> = versions
+        .iter()
+        .map(|t| {
+            json!({
+                "version": t.version, "parent_version": t.parent_version, "table_number": t.table_number,
+                "sha256": t.sha256, "reason": t.reason, "status": t.status.as_str(), "status_why": t.status_why,
+                "created_at_ms": t.created_at_ms,
+            })
+        })
+        .collect();
+    Ok(Json(json!({ "items": items })))
+}
+
+async fn program(
+    State(state): State<AppState>,
+    Path((machine, lobe, version)): Path<(String, String, i64)>,
+) -> Result<Response, ApiError> {
+    check_name("machine", &machine)?;
+    check_name("lobe", &lobe)?;
+    let t = store(&state)
+        .await?
+        .table_version(&machine, &lobe, version)
+        .await?
+        .ok_or(ApiError(
+            StatusCode::NOT_FOUND,
+            "table_version_not_found",
+            format!("version {version} not found"),
+        ))?;
+    Ok((
+        [(header::CONTENT_TYPE, "text/plain; charset=utf-8")],
+        t.program_text,
+    )
+        .into_response())
+}
+
+async fn events(
+    State(state): State<AppState>,
+    Path(machine): Path<String>,
+    Query(q): Query<LimitQuery>,
+) -> Result<Json<Value>, ApiError> {
+    check_name("machine", &machine)?;
+    let filter = EventFilter {
+        machine: Some(machine),
+        limit: q.limit.unwrap_or(100),
+        ..EventFilter::default()
+    };
+    let events = store(&state).await?.events(&filter).await?;
+    let items: Vec<Value> = events
+        .iter()
+        .map(|e| json!({ "at_ms": e.at_ms, "level": e.level.as_str(), "kind": e.kind, "message": e.message }))
+        .collect();
+    Ok(Json(json!({ "items": items })))
+}
+
+async fn openapi() -> Json<Value> {
+    let get = |summary: &str| json!({ "get": { "summary": summary, "responses": { "200": { "description": "OK" }, "4XX": { "description": "error: {code, message}" }, "503": { "description": "store unavailable" } } } });
+    Json(json!({
+        "openapi": "3.0.3",
+        "info": { "title": "camloop", "version": env!("CARGO_PKG_VERSION") },
+        "paths": {
+            "/healthz": get("service and database health"),
+            "/metrics": get("Prometheus metrics"),
+            "/api/v1/machines": get("machines and their lobes or pins"),
+            "/api/v1/machines/{machine}/measurements": get("measurement history, newest first; filters lobe, since_ms, until_ms, verdict, limit, cursor"),
+            "/api/v1/machines/{machine}/events": get("alarms and events, newest first"),
+            "/api/v1/machines/{machine}/lobes/{lobe}/tables": get("table versions, newest first"),
+            "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program": get("program text of a table version"),
+            "/api/v1/measurements/{id}": get("one measurement with its averaged profile and analysis"),
+        }
+    }))
+}

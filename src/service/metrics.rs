@@ -1,0 +1,147 @@
+//! Prometheus metrics of the service, kept per machine and rendered in the text exposition
+//! format at `/metrics`.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::sync::Mutex;
+
+/// Counters and gauges of one machine.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct MachineMetrics {
+    pub parts_total: u64,
+    pub measurements_rejected_total: u64,
+    pub tables_pushed_total: u64,
+    pub tables_refused_total: u64,
+    pub alarms_total: u64,
+    /// Versions waiting for the share.
+    pub share_waiting: u64,
+    /// Records in the journal not yet in the database.
+    pub journal_pending: u64,
+    pub last_max_error_um: f64,
+    pub processing_seconds_sum: f64,
+    pub processing_seconds_count: u64,
+}
+
+/// Name, type, help and value of one metric family.
+type Family = (
+    &'static str,
+    &'static str,
+    &'static str,
+    fn(&MachineMetrics) -> f64,
+);
+
+#[derive(Debug, Default)]
+pub struct Metrics {
+    machines: Mutex<BTreeMap<String, MachineMetrics>>,
+}
+
+impl Metrics {
+    /// Changes one machine's metrics.
+    pub fn update(&self, machine: &str, f: impl FnOnce(&mut MachineMetrics)) {
+        let mut map = self.machines.lock().unwrap_or_else(|p| p.into_inner());
+        f(map.entry(machine.to_string()).or_default());
+    }
+
+    pub fn snapshot(&self) -> BTreeMap<String, MachineMetrics> {
+        self.machines
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
+    }
+
+    /// The text exposition format (version 0.0.4).
+    pub fn render(&self) -> String {
+        let map = self.snapshot();
+        let mut s = String::new();
+        let families: [Family; 10] = [
+            (
+                "camloop_parts_total",
+                "counter",
+                "Parts measured and processed.",
+                |m| m.parts_total as f64,
+            ),
+            (
+                "camloop_measurements_rejected_total",
+                "counter",
+                "Measurements refused by the checks.",
+                |m| m.measurements_rejected_total as f64,
+            ),
+            (
+                "camloop_tables_pushed_total",
+                "counter",
+                "Table versions delivered to the share.",
+                |m| m.tables_pushed_total as f64,
+            ),
+            (
+                "camloop_tables_refused_total",
+                "counter",
+                "Tables refused by a guard.",
+                |m| m.tables_refused_total as f64,
+            ),
+            ("camloop_alarms_total", "counter", "Alarms raised.", |m| {
+                m.alarms_total as f64
+            }),
+            (
+                "camloop_share_waiting",
+                "gauge",
+                "Table versions waiting for the share.",
+                |m| m.share_waiting as f64,
+            ),
+            (
+                "camloop_journal_pending",
+                "gauge",
+                "Records waiting for the database.",
+                |m| m.journal_pending as f64,
+            ),
+            (
+                "camloop_last_max_error_um",
+                "gauge",
+                "Max lift error of the last part, micrometres.",
+                |m| m.last_max_error_um,
+            ),
+            (
+                "camloop_part_processing_seconds_sum",
+                "counter",
+                "Time from measurement to table delivered and recorded.",
+                |m| m.processing_seconds_sum,
+            ),
+            (
+                "camloop_part_processing_seconds_count",
+                "counter",
+                "Parts timed.",
+                |m| m.processing_seconds_count as f64,
+            ),
+        ];
+        for (name, kind, help, value) in families {
+            let _ = writeln!(s, "# HELP {name} {help}\n# TYPE {name} {kind}");
+            for (machine, m) in &map {
+                let _ = writeln!(s, "{name}{{machine=\"{machine}\"}} {}", value(m));
+            }
+        }
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn renders_every_family_per_machine() {
+        let m = Metrics::default();
+        m.update("M1", |x| {
+            x.parts_total = 3;
+            x.last_max_error_um = 0.5;
+        });
+        let text = m.render();
+        assert!(
+            text.contains("camloop_parts_total{machine=\"M1\"} 3\n"),
+            "{text}"
+        );
+        assert!(
+            text.contains("camloop_last_max_error_um{machine=\"M1\"} 0.5\n"),
+            "{text}"
+        );
+        assert_eq!(text.matches("# TYPE").count(), 10);
+    }
+}

@@ -1,0 +1,320 @@
+//! `camloop run`: the shop-floor service. Builds the adapters and wires the tasks: per
+//! machine a gauge source and the machine's loop; a store connector; the HTTP listener; and a
+//! graceful shutdown on SIGINT/SIGTERM that lets every machine finish the part in hand.
+
+pub mod http;
+pub mod journal;
+pub mod machine;
+pub mod metrics;
+pub mod sim_source;
+
+use crate::config::{Config, GaugeSection};
+use crate::recipe::Recipe;
+use crate::store::Store;
+use anyhow::Context;
+use machine::{MachineLoop, SourceEvent, StoreHandle};
+use metrics::Metrics;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::sync::{mpsc, watch};
+use tracing::{error, info, warn};
+
+/// How often waiting tables and journal records are retried, and the database reconnected.
+const RETRY_EVERY: Duration = Duration::from_secs(2);
+
+/// Options of one run.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// Stop after this many parts per simulated machine in this run (demos, tests); `None`:
+    /// run until a signal.
+    pub parts: Option<u64>,
+}
+
+/// A started service.
+pub struct Running {
+    /// Where the HTTP API listens (useful with port 0).
+    pub http_addr: std::net::SocketAddr,
+    shutdown: watch::Sender<bool>,
+    machines_done: Option<tokio::task::JoinHandle<()>>,
+    server: tokio::task::JoinHandle<()>,
+    connector: tokio::task::JoinHandle<()>,
+    store: StoreHandle,
+}
+
+impl Running {
+    /// Waits until every machine has finished its parts (only ends with `parts` set).
+    pub async fn machines_done(&mut self) {
+        if let Some(handle) = self.machines_done.take() {
+            let _ = handle.await;
+        }
+    }
+
+    /// Asks every machine to finish the part in hand, then stops everything.
+    pub async fn stop(self) {
+        let _ = self.shutdown.send(true);
+        if let Some(handle) = self.machines_done {
+            let _ = handle.await;
+        }
+        let _ = self.server.await;
+        let _ = self.connector.await;
+        if let Some(s) = self.store.read().await.as_ref() {
+            s.close().await;
+        }
+        info!("camloop stopped");
+    }
+}
+
+/// Runs the service until a signal (or, with `parts`, until every simulated machine is done).
+pub async fn run(config: Config, options: RunOptions) -> anyhow::Result<()> {
+    let mut running = start(config, options).await?;
+    tokio::select! {
+        _ = running.machines_done() => info!("every machine finished its parts"),
+        _ = shutdown_signal() => info!("signal received: finishing the parts in hand"),
+    }
+    running.stop().await;
+    Ok(())
+}
+
+/// Starts every task of the service and returns at once.
+pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Running> {
+    let (shutdown_tx, shutdown_rx) = watch::channel(false);
+    let metrics = Arc::new(Metrics::default());
+    let store: StoreHandle = Arc::new(tokio::sync::RwLock::new(None));
+    connect_store(&config, &store).await;
+    let connector = tokio::spawn(keep_store_connected(
+        config.database_url(),
+        store.clone(),
+        shutdown_rx.clone(),
+    ));
+
+    let var = config.var_dir();
+    let mut machine_tasks = Vec::new();
+    for m in &config.machines {
+        let recipe_path = config.resolve(&m.recipe);
+        let recipe = Recipe::load(&recipe_path).with_context(|| format!("machine {}", m.name))?;
+        let setup = recipe
+            .feature_setup(&recipe_path, &m.lobe)
+            .with_context(|| format!("machine {}", m.name))?;
+        let state_dir = var.join("machines").join(&m.name);
+        let machine = MachineLoop::start(
+            m.name.clone(),
+            setup,
+            config.resolve(&m.share),
+            state_dir,
+            store.clone(),
+            metrics.clone(),
+        )
+        .await?;
+        let (tx, rx) = mpsc::channel::<SourceEvent>(16);
+        match &m.gauge {
+            GaugeSection::Sim {
+                part_interval_ms,
+                seed,
+                grinder,
+            } => {
+                let source = sim_source::SimSource {
+                    machine: m.name.clone(),
+                    grinder: grinder.clone(),
+                    seed: *seed,
+                    feature: machine.feature(),
+                    program: machine.program_path(),
+                    table_wheel_radius_bits: machine.table_wheel_radius(),
+                    part_interval: Duration::from_millis(*part_interval_ms),
+                    parts: options.parts,
+                };
+                tokio::spawn(source.run(tx, shutdown_rx.clone()));
+            }
+            GaugeSection::Drop { folder, poll_ms } => {
+                tokio::spawn(drop_source(
+                    m.name.clone(),
+                    config.resolve(folder),
+                    *poll_ms,
+                    tx,
+                    shutdown_rx.clone(),
+                ));
+            }
+            GaugeSection::Can { interface, .. }
+            | GaugeSection::Serial {
+                port: interface, ..
+            } => {
+                // The adapters exist (gauge::CanGauge, gauge::SerialGauge) but are not wired
+                // into the service yet: say so instead of pretending to listen.
+                error!(machine = %m.name, source = %interface, "this gauge kind is not wired into camloop run yet; use kind = \"drop\" or \"sim\"");
+                drop(tx);
+            }
+        }
+        machine_tasks.push(tokio::spawn(machine_task(machine, rx, shutdown_rx.clone())));
+    }
+
+    let app = http::router(http::AppState {
+        store: store.clone(),
+        metrics: metrics.clone(),
+        machines: Arc::new(config.machines.iter().map(|m| m.name.clone()).collect()),
+    });
+    let listener = tokio::net::TcpListener::bind(config.http.listen)
+        .await
+        .with_context(|| format!("cannot listen on {}", config.http.listen))?;
+    let http_addr = listener.local_addr()?;
+    info!(listen = %http_addr, machines = config.machines.len(), "camloop started");
+    let mut http_shutdown = shutdown_rx.clone();
+    let server = tokio::spawn(async move {
+        let _ = axum::serve(listener, app)
+            .with_graceful_shutdown(async move {
+                let _ = http_shutdown.changed().await;
+            })
+            .await;
+    });
+
+    let machines_done = tokio::spawn(async move {
+        for t in machine_tasks {
+            let _ = t.await;
+        }
+    });
+    Ok(Running {
+        http_addr,
+        shutdown: shutdown_tx,
+        machines_done: Some(machines_done),
+        server,
+        connector,
+        store,
+    })
+}
+
+/// One machine: events in order, retries on a timer, stops on shutdown after the part in hand.
+async fn machine_task(
+    mut machine: MachineLoop,
+    mut rx: mpsc::Receiver<SourceEvent>,
+    mut shutdown: watch::Receiver<bool>,
+) {
+    let mut retry = tokio::time::interval(RETRY_EVERY);
+    loop {
+        tokio::select! {
+            biased;
+            event = rx.recv() => match event {
+                Some(e) => machine.handle(e).await,
+                None => break,
+            },
+            _ = retry.tick() => machine.retry().await,
+            _ = shutdown.changed() => break,
+        }
+    }
+    // Whatever is still waiting gets one more try before the process ends.
+    machine.retry().await;
+}
+
+async fn connect_store(config: &Config, store: &StoreHandle) {
+    match Store::connect(&config.database_url()).await {
+        Ok(s) => {
+            info!(backend = s.backend(), "history store connected");
+            *store.write().await = Some(s);
+        }
+        Err(e) => {
+            error!(error = %e, "history store unavailable: measurements are kept in the journal until it is back")
+        }
+    }
+}
+
+async fn keep_store_connected(
+    url: String,
+    store: StoreHandle,
+    mut shutdown: watch::Receiver<bool>,
+) {
+    let mut tick = tokio::time::interval(RETRY_EVERY);
+    loop {
+        tokio::select! {
+            _ = tick.tick() => {}
+            _ = shutdown.changed() => return,
+        }
+        if store.read().await.is_some() {
+            continue;
+        }
+        match Store::connect(&url).await {
+            Ok(s) => {
+                info!(
+                    backend = s.backend(),
+                    "history store back: writing the journal"
+                );
+                *store.write().await = Some(s);
+            }
+            Err(e) => warn!(error = %e, "history store still unavailable"),
+        }
+    }
+}
+
+/// Measurement files dropped into a folder (taken when complete, moved to processed/ or
+/// rejected/ with a reason).
+async fn drop_source(
+    machine: String,
+    folder: std::path::PathBuf,
+    poll_ms: u64,
+    tx: mpsc::Sender<SourceEvent>,
+    mut shutdown: watch::Receiver<bool>,
+) {
+    let dbc = crate::gauge::GaugeDbc::builtin();
+    if let Err(e) = std::fs::create_dir_all(&folder) {
+        error!(machine = %machine, folder = %folder.display(), error = %e, "drop folder unusable");
+        return;
+    }
+    let mut drop_folder = match crate::gauge::DropFolder::open(&folder, dbc) {
+        Ok(d) => d,
+        Err(e) => {
+            error!(machine = %machine, folder = %folder.display(), error = %e, "drop folder unusable");
+            return;
+        }
+    };
+    let mut tick = tokio::time::interval(Duration::from_millis(poll_ms.max(10)));
+    loop {
+        tokio::select! {
+            _ = tick.tick() => {}
+            _ = shutdown.changed() => return,
+        }
+        // File work off the async threads.
+        let (df, events) = match tokio::task::spawn_blocking(move || {
+            let events = drop_folder.poll();
+            (drop_folder, events)
+        })
+        .await
+        {
+            Ok(done) => done,
+            Err(_) => return,
+        };
+        drop_folder = df;
+        for event in events {
+            match event {
+                crate::gauge::DropEvent::Accepted { measurement, .. } => {
+                    if tx
+                        .send(SourceEvent::Measurement(measurement, None))
+                        .await
+                        .is_err()
+                    {
+                        return;
+                    }
+                }
+                other => warn!(machine = %machine, event = ?other, "drop folder"),
+            }
+        }
+    }
+}
+
+async fn shutdown_signal() {
+    let ctrl_c = tokio::signal::ctrl_c();
+    #[cfg(unix)]
+    {
+        let mut term =
+            match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+                Ok(s) => s,
+                Err(_) => {
+                    let _ = ctrl_c.await;
+                    return;
+                }
+            };
+        tokio::select! {
+            _ = ctrl_c => {}
+            _ = term.recv() => {}
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = ctrl_c.await;
+    }
+}

@@ -1,0 +1,151 @@
+//! The simulated machine as a gauge source: it grinds whatever program is on the share (read
+//! back as the control would), measures the part, and sends the measurement as CAN frames
+//! through the real DBC decoder and assembler in memory, exactly as a bus would deliver it.
+
+use super::machine::SourceEvent;
+use crate::core::compensate::Feature;
+use crate::core::program::{ParsedShape, parse_table_program};
+use crate::gauge::{Assembled, Assembler, GaugeDbc};
+use crate::sim::{
+    CommandedTable, GrinderConfig, PartLabels, SimGrinder, TableShape, Workpiece,
+    measurement_frames,
+};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+use tokio::sync::{mpsc, watch};
+use tracing::{error, warn};
+
+pub struct SimSource {
+    pub machine: String,
+    pub grinder: GrinderConfig,
+    pub seed: u64,
+    pub feature: Feature,
+    pub program: PathBuf,
+    /// Wheel radius the program on the share was made for.
+    pub table_wheel_radius_bits: Arc<AtomicU64>,
+    pub part_interval: Duration,
+    /// Stop after this many parts (None: until shutdown).
+    pub parts: Option<u64>,
+}
+
+impl SimSource {
+    /// Runs until shutdown (or the part count); each part goes out as one event.
+    pub async fn run(self, tx: mpsc::Sender<SourceEvent>, mut shutdown: watch::Receiver<bool>) {
+        let workpiece = match self.feature {
+            Feature::Cam(g) => Workpiece::Cam(g),
+            Feature::Pin(g) => Workpiece::Crankpin(g),
+        };
+        let mut sim = match SimGrinder::new(self.grinder.clone(), workpiece, self.seed) {
+            Ok(sim) => sim,
+            Err(e) => {
+                error!(machine = %self.machine, error = %e, "simulator cannot start");
+                return;
+            }
+        };
+        let dbc = GaugeDbc::builtin();
+        let x_zero_offset = self.feature.x_zero_mm() - self.feature.wheel_radius_mm();
+        let mut interval = tokio::time::interval(self.part_interval);
+        interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        let mut made = 0u64;
+        loop {
+            tokio::select! {
+                _ = interval.tick() => {}
+                _ = shutdown.changed() => return,
+            }
+            if *shutdown.borrow() || self.parts.is_some_and(|n| made >= n) {
+                return;
+            }
+            let text = match std::fs::read_to_string(&self.program) {
+                Ok(t) => t,
+                Err(e) => {
+                    warn!(machine = %self.machine, error = %e, "simulator: no program on the share yet");
+                    continue;
+                }
+            };
+            let shape = match parse_table_program(&text) {
+                Ok(p) => match p.shape {
+                    ParsedShape::Poly(s) => TableShape::Poly(s),
+                    ParsedShape::G1(points) => TableShape::G1(
+                        points
+                            .iter()
+                            .take(points.len().saturating_sub(1))
+                            .map(|&(c_deg, x_mm)| crate::core::table::TablePoint {
+                                c_deg,
+                                d_mm: 0.0,
+                                x_mm,
+                            })
+                            .collect(),
+                    ),
+                },
+                Err(e) => {
+                    warn!(machine = %self.machine, error = %e, "simulator: program unreadable");
+                    continue;
+                }
+            };
+            let table_r = f64::from_bits(self.table_wheel_radius_bits.load(Ordering::SeqCst));
+            let table = CommandedTable {
+                shape,
+                x_zero_mm: table_r + x_zero_offset,
+                wheel_radius_mm: table_r,
+            };
+            let ground = match sim.grind(&table) {
+                Ok(g) => g,
+                Err(e) => {
+                    error!(machine = %self.machine, error = %e, "simulator: the table cannot be ground");
+                    continue;
+                }
+            };
+            // The CAN layout carries numeric ids.
+            let labels = PartLabels {
+                machine: "1".into(),
+                part: (made + 1).to_string(),
+                lobe: "1".into(),
+            };
+            let raw = sim.measure(&ground, &labels);
+            let measurement = match measurement_frames(&dbc, &raw) {
+                Ok(frames) => {
+                    let mut assembler = Assembler::new(format!("sim:{}", self.machine));
+                    let mut out = None;
+                    for (id, data) in frames {
+                        if let Ok(frame) = dbc.decode(id, &data)
+                            && let Some(Assembled::Measurement(m)) = assembler.push(frame)
+                        {
+                            out = Some(m);
+                        }
+                    }
+                    out
+                }
+                Err(e) => {
+                    error!(machine = %self.machine, error = %e, "simulator: measurement not encodable");
+                    None
+                }
+            };
+            made += 1;
+            if let Some(m) = measurement {
+                let (done, processed) = tokio::sync::oneshot::channel();
+                if tx
+                    .send(SourceEvent::Measurement(m, Some(done)))
+                    .await
+                    .is_err()
+                {
+                    return;
+                }
+                // Wait for the next table, as the machine does between parts.
+                let _ = processed.await;
+            }
+            if let Some(d) = sim.after_part()
+                && tx
+                    .send(SourceEvent::Dressing {
+                        wheel_radius_mm: d.believed_wheel_radius_mm,
+                        source: "sim".into(),
+                    })
+                    .await
+                    .is_err()
+            {
+                return;
+            }
+        }
+    }
+}

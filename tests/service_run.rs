@@ -1,0 +1,197 @@
+//! The service end to end: simulated machine → CAN frames through the real decoder → loop →
+//! share → SQLite history → the HTTP API on a real listener (port 0). Also: a database that
+//! is down keeps every record in the journal and the service running; a restart resumes.
+
+use camloop::config::Config;
+use camloop::service::{self, RunOptions};
+use std::path::Path;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+fn config(dir: &Path, database_url: &str) -> Config {
+    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let text = format!(
+        r#"
+[service]
+var_dir = "var"
+[database]
+url = "{database_url}"
+[http]
+listen = "127.0.0.1:0"
+[[machines]]
+name = "SIM1"
+recipe = "{}"
+lobe = "IN1"
+share = "share/SIM1"
+[machines.gauge]
+kind = "sim"
+part_interval_ms = 20
+seed = 5
+"#,
+        recipe.display()
+    );
+    Config::parse(&text, &dir.join("camloop.toml"), |_| None).unwrap()
+}
+
+/// A plain HTTP/1.1 GET on the service's listener; returns status and body.
+async fn get(addr: std::net::SocketAddr, path: &str) -> (u16, String) {
+    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
+    let request = format!("GET {path} HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n");
+    stream.write_all(request.as_bytes()).await.unwrap();
+    let mut response = String::new();
+    stream.read_to_string(&mut response).await.unwrap();
+    let status = response
+        .split(' ')
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    let body = response
+        .split_once("\r\n\r\n")
+        .map(|(_, b)| b.to_string())
+        .unwrap_or_default();
+    (status, body)
+}
+
+/// Bodies may come chunked; the JSON ones here are small, so take the JSON object inside.
+fn json(body: &str) -> serde_json::Value {
+    let start = body.find('{').unwrap();
+    let end = body.rfind('}').unwrap();
+    serde_json::from_str(&body[start..=end]).unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn parts_flow_from_the_simulated_gauge_to_the_api() {
+    let dir = tempfile::tempdir().unwrap();
+    let url = format!("sqlite://{}/var/camloop.db?mode=rwc", dir.path().display());
+    let mut running = service::start(config(dir.path(), &url), RunOptions { parts: Some(5) })
+        .await
+        .unwrap();
+    running.machines_done().await;
+    let addr = running.http_addr;
+
+    let (status, body) = get(addr, "/healthz").await;
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(json(&body)["database"], "up");
+
+    let (status, body) = get(addr, "/api/v1/machines/SIM1/measurements?lobe=IN1&limit=10").await;
+    assert_eq!(status, 200, "{body}");
+    let history = json(&body);
+    let items = history["items"].as_array().unwrap();
+    assert_eq!(items.len(), 5, "{body}");
+    // Newest first; the loop converges: the 5th part is far better than the 1st.
+    let first = items[4]["max_profile_error_um"].as_f64().unwrap();
+    let last = items[0]["max_profile_error_um"].as_f64().unwrap();
+    assert!(last < first, "{first} → {last}");
+
+    let id = items[0]["id"].as_i64().unwrap();
+    let (status, body) = get(addr, &format!("/api/v1/measurements/{id}")).await;
+    assert_eq!(status, 200);
+    assert_eq!(
+        json(&body)["averaged_lift_mm"].as_array().unwrap().len(),
+        360
+    );
+
+    // Nominal table plus one per part; the newest is the program on the share.
+    let (status, body) = get(addr, "/api/v1/machines/SIM1/lobes/IN1/tables?limit=10").await;
+    assert_eq!(status, 200, "{body}");
+    let tables = json(&body);
+    let versions = tables["items"].as_array().unwrap();
+    assert_eq!(versions.len(), 6, "{body}");
+    assert!(versions.iter().all(|v| v["status"] == "pushed"));
+    let newest = versions[0]["version"].as_i64().unwrap();
+    let (status, program) = get(
+        addr,
+        &format!("/api/v1/machines/SIM1/lobes/IN1/tables/{newest}/program"),
+    )
+    .await;
+    assert_eq!(status, 200);
+    let on_share =
+        std::fs::read_to_string(dir.path().join("share/SIM1/DEMO_CAM_TABLE.SPF")).unwrap();
+    assert!(
+        program.contains(on_share.lines().nth(7).unwrap()),
+        "program differs from the share"
+    );
+
+    let (status, body) = get(addr, "/metrics").await;
+    assert_eq!(status, 200);
+    assert!(
+        body.contains("camloop_parts_total{machine=\"SIM1\"} 5"),
+        "{body}"
+    );
+
+    // Errors carry a stable code, never SQL.
+    let (status, body) = get(addr, "/api/v1/measurements/999999").await;
+    assert_eq!(status, 404);
+    assert_eq!(json(&body)["code"], "measurement_not_found");
+    let (status, body) = get(addr, "/api/v1/machines/bad%20name/measurements").await;
+    assert_eq!(status, 400, "{body}");
+    running.stop().await;
+
+    // A restart resumes from the stored learning state: part 6 is not an uncompensated part.
+    let mut running = service::start(config(dir.path(), &url), RunOptions { parts: Some(1) })
+        .await
+        .unwrap();
+    running.machines_done().await;
+    let (_, body) = get(
+        running.http_addr,
+        "/api/v1/machines/SIM1/measurements?limit=1",
+    )
+    .await;
+    let newest = json(&body)["items"][0]["max_profile_error_um"]
+        .as_f64()
+        .unwrap();
+    assert!(
+        newest < first / 2.0,
+        "after restart {newest} vs uncompensated {first}"
+    );
+    running.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_database_that_is_down_loses_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    // Nothing listens on port 1 of localhost: the database is down for the whole run.
+    let down = "postgres://camloop@127.0.0.1:1/camloop";
+    let mut running = service::start(config(dir.path(), down), RunOptions { parts: Some(3) })
+        .await
+        .unwrap();
+    running.machines_done().await;
+    let (status, body) = get(running.http_addr, "/healthz").await;
+    assert_eq!(status, 200);
+    assert_eq!(json(&body)["database"], "down");
+    let (status, body) = get(running.http_addr, "/api/v1/machines").await;
+    assert_eq!(status, 503);
+    assert_eq!(json(&body)["code"], "store_unavailable");
+    running.stop().await;
+    // Every record waits in the journal: 3 measurements, 4 tables (nominal + 3).
+    let journal =
+        camloop::service::journal::Journal::open(&dir.path().join("var/machines/SIM1")).unwrap();
+    let pending = journal.pending().unwrap();
+    let count = |kind: &str| {
+        pending
+            .iter()
+            .filter(|p| format!("{p:?}").starts_with(kind))
+            .count()
+    };
+    assert_eq!(count("Measurement"), 3);
+    assert_eq!(count("Table"), 4);
+    // When a database is there, the journal goes into it and empties.
+    let url = format!("sqlite://{}/late.db?mode=rwc", dir.path().display());
+    let store = camloop::store::Store::connect(&url).await.unwrap();
+    let written = journal.flush(&store).await.unwrap();
+    assert_eq!(written, pending.len());
+    assert!(journal.pending().unwrap().is_empty());
+    let filter = camloop::store::HistoryFilter {
+        machine: "SIM1".into(),
+        limit: 10,
+        ..Default::default()
+    };
+    assert_eq!(
+        store
+            .measurement_history(&filter)
+            .await
+            .unwrap()
+            .items
+            .len(),
+        3
+    );
+}
