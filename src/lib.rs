@@ -8,6 +8,7 @@
 #![warn(clippy::unwrap_used)]
 
 pub mod cli;
+pub mod clock;
 pub mod config;
 pub mod core;
 pub mod gauge;

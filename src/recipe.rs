@@ -136,6 +136,8 @@ pub struct RecipeError {
 /// Everything the loop needs about one lobe or pin of a recipe, lift table loaded.
 #[derive(Debug, Clone)]
 pub struct FeatureSetup {
+    /// The lobe's or pin's name in the recipe.
+    pub name: String,
     /// "PART lobe NAME" or "PART pin NAME", for messages and program comments.
     pub label: String,
     pub nominal: LiftTable,
@@ -192,6 +194,7 @@ impl Recipe {
         let mut program = self.program.clone();
         program.c_offset_deg += phase_deg;
         Ok(FeatureSetup {
+            name: name.to_string(),
             label,
             nominal,
             feature,

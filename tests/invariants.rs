@@ -66,3 +66,48 @@ fn every_module_starts_with_a_doc_line() {
         .collect();
     assert!(missing.is_empty(), "no //! line: {missing:?}");
 }
+
+/// Every shipped service configuration parses and names recipes and lobes that exist.
+#[test]
+fn shipped_service_configurations_parse() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for file in ["config/camloop.toml", "docker/camloop.toml"] {
+        let path = root.join(file);
+        let text = std::fs::read_to_string(&path).unwrap();
+        let config = camloop::config::Config::parse(&text, &path, |_| None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        for m in &config.machines {
+            // The docker file expects the recipes copied beside it, as the image does.
+            let recipe = root.join("config").join(&m.recipe);
+            let r = camloop::recipe::Recipe::load(&recipe).unwrap();
+            assert!(
+                r.lobe(&m.lobe).is_some() || r.pin(&m.lobe).is_some(),
+                "{file}: {}",
+                m.lobe
+            );
+        }
+    }
+}
+
+/// Nothing in the tree names the machine it was developed on.
+#[test]
+fn no_paths_of_the_development_machine() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut offenders = Vec::new();
+    for dir in ["src", "tests", "benches", "config", "docker", "tools"] {
+        let mut stack = vec![root.join(dir)];
+        while let Some(d) = stack.pop() {
+            for entry in std::fs::read_dir(&d).unwrap() {
+                let p = entry.unwrap().path();
+                if p.is_dir() {
+                    stack.push(p);
+                } else if let Ok(text) = std::fs::read_to_string(&p)
+                    && text.contains(concat!("/wo", "rk/"))
+                {
+                    offenders.push(p.display().to_string());
+                }
+            }
+        }
+    }
+    assert!(offenders.is_empty(), "{offenders:?}");
+}

@@ -11,6 +11,7 @@ use super::analyze::{averaged_measurement, load_dbc};
 use super::output::Outputs;
 use super::part::{CamArgs, CrankpinArgs, PartKindArgs, load_cam_table};
 use super::table::{FormArg, table_csv};
+use crate::clock::now_ms_u64;
 use crate::core::analysis::{LobeOptions, analyse_lobe};
 use crate::core::compensate::{
     self, AxisLimits, Feature, GuardedTable, LobeLoop, TableRequest, pin_nominal_lift,
@@ -20,7 +21,7 @@ use crate::core::geometry::CrankpinGeometry;
 use crate::core::learn::{self, LearningParams, LearningState, StepOutcome};
 use crate::core::lift::LiftTable;
 use crate::core::measure::AssemblyLimits;
-use crate::core::program::{ProgramSettings, render_g1_table, render_poly_table};
+use crate::core::program::{ProgramSettings, comment_text, render_g1_table, render_poly_table};
 use crate::recipe::Recipe;
 use crate::share::{ProgramFile, PushRequest, RealFs, Share, ShareConfig, sha256_hex};
 use anyhow::{Context, bail};
@@ -249,7 +250,7 @@ fn learn_from(
         Err(refused) => {
             // Nothing is delivered; the refusal is kept with the measurement it came from.
             let record = serde_json::json!({
-                "at_unix_ms": now_unix_ms(),
+                "at_unix_ms": now_ms_u64(),
                 "measurement": path.display().to_string(),
                 "measurement_sha256": id,
                 "iteration": saved.learning.iteration,
@@ -320,13 +321,13 @@ fn push(
         table_pair: setup.table_pair,
         keep_versions: 50,
     };
-    let (mut share, _report) = Share::open(config, Box::new(RealFs), Box::new(now_unix_ms))
+    let (mut share, _report) = Share::open(config, Box::new(RealFs), Box::new(now_ms_u64))
         .context("cannot open the program share")?;
     let mut settings = setup.program.clone();
     settings.table_number = share.next_table_number();
     settings.comment_lines = vec![
-        printable(&setup.label),
-        printable(reason),
+        comment_text(&setup.label),
+        comment_text(reason),
         format!("learning iteration {}", saved.learning.iteration),
     ];
     let text = match &table.segments {
@@ -348,7 +349,7 @@ fn push(
             "max_correction_um": saved.learning.correction_um.iter().fold(0.0f64, |m, u| m.max(u.abs())),
         }),
         rollback_of: None,
-        created_at_unix_ms: now_unix_ms(),
+        created_at_unix_ms: now_ms_u64(),
     };
     let pushed = share
         .push_once(request)
@@ -412,6 +413,7 @@ fn flag_setup(
         ..ProgramSettings::default()
     };
     LobeSetup {
+        name: "LOBE".to_string(),
         label,
         nominal,
         feature,
@@ -475,24 +477,4 @@ fn append_line(path: &Path, line: &str) -> anyhow::Result<()> {
     file.write_all(format!("{line}\n").as_bytes())
         .and_then(|()| file.sync_all())
         .with_context(|| format!("cannot write {}", path.display()))
-}
-
-fn printable(text: &str) -> String {
-    text.chars()
-        .map(|c| {
-            if c.is_ascii_graphic() || c == ' ' {
-                c
-            } else {
-                '?'
-            }
-        })
-        .take(200)
-        .collect()
-}
-
-fn now_unix_ms() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_millis() as u64)
-        .unwrap_or(0)
 }

@@ -3,6 +3,7 @@
 
 mod analyze;
 mod compensate;
+mod history;
 mod output;
 mod part;
 mod program_args;
@@ -33,6 +34,10 @@ pub enum Command {
     Compensate(compensate::CompensateArgs),
     /// The service: gauges in, learning, tables to the controller share, history, HTTP API.
     Run(run::RunArgs),
+    /// Measurement history of a machine from the store.
+    History(history::HistoryArgs),
+    /// Export the measurement history of a time range as CSV or JSON.
+    Export(history::ExportArgs),
 }
 
 /// Runs a parsed command; the error chain is printed by `main` on one line.
@@ -43,6 +48,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Analyze(args) => analyze::run_analyze(args),
         Command::Compensate(args) => compensate::run_compensate(args),
         Command::Run(args) => run::run_service(args),
+        Command::History(args) => history::run_history(args),
+        Command::Export(args) => history::run_export(args),
     }
 }
 

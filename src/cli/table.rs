@@ -4,7 +4,7 @@ use super::output::Outputs;
 use super::part::{LoadedPart, PartKindArgs, load_part};
 use super::program_args::ProgramArgs;
 use crate::core::fit::{self, Deviation, Motion, TableForm};
-use crate::core::program::{render_g1_table, render_main_program, render_poly_table};
+use crate::core::program::{comment_text, render_g1_table, render_main_program, render_poly_table};
 use crate::core::setup::setup_view;
 use crate::core::svg::render_setup_svg;
 use crate::core::table::TablePoint;
@@ -94,7 +94,7 @@ pub fn run_table(args: TableArgs) -> anyhow::Result<()> {
     }
     if let Some(path) = &args.program.program {
         let comments = vec![
-            printable_ascii(&loaded.description),
+            comment_text(&loaded.description),
             format!(
                 "{} points, G1 chords stray up to {:.3} um, POLY cubics up to {:.4} um",
                 points.len(),
@@ -165,20 +165,6 @@ pub fn run_plot(args: PlotArgs) -> anyhow::Result<()> {
         println!("wrote {}", path.display());
     }
     Ok(())
-}
-
-/// Program comments must be printable ASCII: replace anything else.
-fn printable_ascii(text: &str) -> String {
-    text.chars()
-        .map(|c| {
-            if c.is_ascii_graphic() || c == ' ' {
-                c
-            } else {
-                '?'
-            }
-        })
-        .take(200)
-        .collect()
 }
 
 fn summary(loaded: &LoadedPart, points: &[TablePoint], form: TableForm, segments: usize) -> String {

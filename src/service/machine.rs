@@ -3,12 +3,13 @@
 
 use super::journal::{Journal, Pending};
 use super::metrics::Metrics;
+use crate::clock::{now_ms, now_ms_u64};
 use crate::core::analysis::{LobeOptions, analyse_lobe};
 use crate::core::compensate::{self, GuardedTable, LobeLoop};
 use crate::core::learn::{self, LearningState, StepOutcome};
 use crate::core::lift::LiftCurve;
 use crate::core::measure::{AssemblyLimits, RawMeasurement, check_and_average};
-use crate::core::program::{render_g1_table, render_poly_table};
+use crate::core::program::{comment_text, render_g1_table, render_poly_table};
 use crate::recipe::FeatureSetup;
 use crate::share::{ProgramFile, PushRequest, RealFs, Share, ShareConfig, sha256_hex};
 use crate::store::Store;
@@ -367,7 +368,7 @@ impl MachineLoop {
         let at_ms = now_ms();
         let mut settings = self.setup.program.clone();
         settings.table_number = self.share.next_table_number();
-        settings.comment_lines = vec![printable(&self.setup.label), printable(reason)];
+        settings.comment_lines = vec![comment_text(&self.setup.label), comment_text(reason)];
         let text = match &table.segments {
             Some(s) => render_poly_table(s, &settings),
             None => render_g1_table(&table.points, &settings),
@@ -518,7 +519,7 @@ impl MachineLoop {
 }
 
 fn lobe_name(setup: &FeatureSetup) -> String {
-    setup.label.rsplit(' ').next().unwrap_or("lobe").to_string()
+    setup.name.clone()
 }
 
 fn event(machine: &str, at_ms: i64, level: &str, kind: &str, message: String) -> Pending {
@@ -575,28 +576,4 @@ pub fn measurement_sha(raw: &RawMeasurement) -> String {
     }
     text.push_str(&raw.origin);
     sha256_hex(text.as_bytes())
-}
-
-fn printable(text: &str) -> String {
-    text.chars()
-        .map(|c| {
-            if c.is_ascii_graphic() || c == ' ' {
-                c
-            } else {
-                '?'
-            }
-        })
-        .take(200)
-        .collect()
-}
-
-pub fn now_ms() -> i64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_millis() as i64)
-        .unwrap_or(0)
-}
-
-fn now_ms_u64() -> u64 {
-    now_ms().max(0) as u64
 }

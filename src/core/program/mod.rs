@@ -26,6 +26,21 @@ pub use settings::{
 };
 pub use table::{TableError, render_g1_table, render_poly_table, reverse_cubic};
 
+/// Text made safe for a program comment line: printable ASCII only (anything else becomes
+/// `?`), at most 200 characters.
+pub fn comment_text(text: &str) -> String {
+    text.chars()
+        .map(|c| {
+            if c.is_ascii_graphic() || c == ' ' {
+                c
+            } else {
+                '?'
+            }
+        })
+        .take(200)
+        .collect()
+}
+
 /// The table number for the next table version, so that the table in use is never
 /// overwritten (the control redefines a table number without warning).
 ///

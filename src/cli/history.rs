@@ -1,0 +1,349 @@
+//! `camloop history` and `camloop export`: the measurement history from the same store the
+//! service writes, as a table, CSV or JSON.
+
+use super::output::Outputs;
+use crate::clock::now_ms;
+use crate::config::{Config, ENV_DATABASE_URL};
+use crate::store::{HistoryFilter, MeasurementSummary, Store};
+use anyhow::{Context, bail};
+use clap::{Args, ValueEnum};
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Format {
+    Table,
+    Csv,
+    Json,
+}
+
+/// Where the store is: --database, else CAMLOOP_DATABASE_URL, else the service config's URL.
+#[derive(Debug, Args)]
+pub struct StoreArgs {
+    /// Database URL (sqlite://… or postgres://…).
+    #[arg(long, value_name = "URL")]
+    pub database: Option<String>,
+    /// Service configuration whose database to read.
+    #[arg(long, value_name = "FILE", default_value = "config/camloop.toml")]
+    pub config: PathBuf,
+}
+
+#[derive(Debug, Args)]
+pub struct HistoryArgs {
+    #[arg(long)]
+    pub machine: String,
+    #[arg(long)]
+    pub lobe: Option<String>,
+    /// From this time: `2026-11-21`, `2026-11-21T10:00:00Z`, Unix ms, or an age like `24h`, `7d`.
+    #[arg(long, value_name = "TIME")]
+    pub since: Option<String>,
+    /// The newest N measurements.
+    #[arg(long, value_name = "N", default_value_t = 20)]
+    pub last: u32,
+    #[arg(long, value_enum, default_value_t = Format::Table)]
+    pub format: Format,
+    #[command(flatten)]
+    pub store: StoreArgs,
+}
+
+#[derive(Debug, Args)]
+pub struct ExportArgs {
+    #[arg(long, value_enum, default_value_t = Format::Csv)]
+    pub format: Format,
+    /// From this time (see `history --since`); default: everything.
+    #[arg(long, value_name = "TIME")]
+    pub since: Option<String>,
+    /// Up to this time (exclusive); default: now.
+    #[arg(long, value_name = "TIME")]
+    pub until: Option<String>,
+    /// Write here instead of stdout.
+    #[arg(long, value_name = "FILE")]
+    pub out: Option<PathBuf>,
+    #[command(flatten)]
+    pub store: StoreArgs,
+}
+
+pub fn run_history(args: HistoryArgs) -> anyhow::Result<()> {
+    let now = now_ms();
+    let since = args
+        .since
+        .as_deref()
+        .map(|t| parse_time(t, now))
+        .transpose()?;
+    let runtime = runtime()?;
+    let page = runtime.block_on(async {
+        let store = connect(&args.store).await?;
+        let filter = HistoryFilter {
+            machine: args.machine.clone(),
+            lobe: args.lobe.clone(),
+            since_ms: since,
+            limit: args.last.clamp(1, 10_000),
+            ..HistoryFilter::default()
+        };
+        let page = store.measurement_history(&filter).await?;
+        store.close().await;
+        anyhow::Ok(page)
+    })?;
+    print!("{}", render(&page.items, args.format)?);
+    Ok(())
+}
+
+pub fn run_export(args: ExportArgs) -> anyhow::Result<()> {
+    let now = now_ms();
+    let since = args
+        .since
+        .as_deref()
+        .map(|t| parse_time(t, now))
+        .transpose()?
+        .unwrap_or(0);
+    let until = args
+        .until
+        .as_deref()
+        .map(|t| parse_time(t, now))
+        .transpose()?
+        .unwrap_or(now + 1);
+    if since >= until {
+        bail!("--since must be before --until");
+    }
+    let runtime = runtime()?;
+    let rows = runtime.block_on(async {
+        let store = connect(&args.store).await?;
+        let mut rows = Vec::new();
+        let mut after = None;
+        loop {
+            let batch = store.export(since, until, after, 1000).await?;
+            let Some(last) = batch.last() else { break };
+            after = Some(last.summary.id);
+            rows.extend(batch.into_iter().map(|d| d.summary));
+        }
+        store.close().await;
+        anyhow::Ok(rows)
+    })?;
+    let text = render(&rows, args.format)?;
+    match &args.out {
+        Some(path) => {
+            let mut outputs = Outputs::default();
+            outputs.add(path, text);
+            outputs.commit()?;
+            println!("exported {} measurements to {}", rows.len(), path.display());
+        }
+        None => print!("{text}"),
+    }
+    Ok(())
+}
+
+fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")
+}
+
+async fn connect(args: &StoreArgs) -> anyhow::Result<Store> {
+    let url = match (&args.database, std::env::var(ENV_DATABASE_URL).ok()) {
+        (Some(url), _) => url.clone(),
+        (None, Some(url)) => url,
+        (None, None) => {
+            let text = std::fs::read_to_string(&args.config).with_context(|| {
+                format!(
+                    "cannot read configuration {} (or give --database)",
+                    args.config.display()
+                )
+            })?;
+            Config::parse(&text, &args.config, |_| None)?.database_url()
+        }
+    };
+    Ok(Store::connect(&url).await?)
+}
+
+fn render(rows: &[MeasurementSummary], format: Format) -> anyhow::Result<String> {
+    let mut s = String::new();
+    match format {
+        Format::Table => {
+            let _ = writeln!(
+                s,
+                "{:>8}  {:<13}  {:<8} {:<8} {:<6} {:>10} {:>10} {:>9}",
+                "id",
+                "received (UTC)",
+                "machine",
+                "lobe",
+                "verdict",
+                "profile µm",
+                "size µm",
+                "phase °"
+            );
+            for m in rows {
+                let _ = writeln!(
+                    s,
+                    "{:>8}  {:<13}  {:<8} {:<8} {:<6} {:>10.2} {:>10.2} {:>9.4}",
+                    m.id.0,
+                    format_time(m.received_at_ms),
+                    m.machine,
+                    m.lobe,
+                    m.verdict.as_str(),
+                    m.max_profile_error_um,
+                    m.base_radius_error_um,
+                    m.phase_error_deg
+                );
+            }
+        }
+        Format::Csv => {
+            s.push_str("id,received_at_ms,machine,part,lobe,verdict,max_profile_error_um,base_radius_error_um,phase_error_deg,revolutions_used,points_per_rev,origin,sha256\n");
+            for m in rows {
+                let _ = writeln!(
+                    s,
+                    "{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                    m.id.0,
+                    m.received_at_ms,
+                    csv_field(&m.machine),
+                    csv_field(&m.part),
+                    csv_field(&m.lobe),
+                    m.verdict.as_str(),
+                    m.max_profile_error_um,
+                    m.base_radius_error_um,
+                    m.phase_error_deg,
+                    m.revolutions_used,
+                    m.points_per_rev,
+                    csv_field(&m.origin),
+                    m.sha256
+                );
+            }
+        }
+        Format::Json => {
+            let items: Vec<serde_json::Value> = rows
+                .iter()
+                .map(|m| {
+                    serde_json::json!({
+                        "id": m.id.0, "received_at_ms": m.received_at_ms, "machine": m.machine, "part": m.part,
+                        "lobe": m.lobe, "verdict": m.verdict.as_str(), "max_profile_error_um": m.max_profile_error_um,
+                        "base_radius_error_um": m.base_radius_error_um, "phase_error_deg": m.phase_error_deg,
+                        "revolutions_used": m.revolutions_used, "points_per_rev": m.points_per_rev,
+                        "origin": m.origin, "sha256": m.sha256,
+                    })
+                })
+                .collect();
+            s = serde_json::to_string_pretty(&items)? + "\n";
+        }
+    }
+    Ok(s)
+}
+
+fn csv_field(text: &str) -> String {
+    if text.contains([',', '"', '\n']) {
+        format!("\"{}\"", text.replace('"', "\"\""))
+    } else {
+        text.to_string()
+    }
+}
+
+/// `2026-11-21`, `2026-11-21T10:00:00Z`, Unix ms, or an age (`90s`, `30m`, `24h`, `7d`).
+pub fn parse_time(text: &str, now_ms: i64) -> anyhow::Result<i64> {
+    let t = text.trim();
+    let bad = || {
+        anyhow::anyhow!(
+            "time `{text}`: use 2026-11-21, 2026-11-21T10:00:00Z, Unix ms, or an age like 24h or 7d"
+        )
+    };
+    if let Some((digits, unit)) = t.char_indices().last().map(|(i, c)| (&t[..i], c))
+        && let Some(scale) = match unit {
+            's' => Some(1_000),
+            'm' => Some(60_000),
+            'h' => Some(3_600_000),
+            'd' => Some(86_400_000),
+            _ => None,
+        }
+        && let Ok(n) = digits.parse::<i64>()
+    {
+        return Ok(now_ms - n * scale);
+    }
+    if t.chars().all(|c| c.is_ascii_digit()) && t.len() > 8 {
+        return t.parse().map_err(|_| bad());
+    }
+    let (date, time) = match t.split_once('T') {
+        Some((d, rest)) => (d, rest.trim_end_matches('Z')),
+        None => (t, "00:00:00"),
+    };
+    let ymd: Vec<i64> = date
+        .split('-')
+        .map(|p| p.parse().map_err(|_| bad()))
+        .collect::<Result<_, _>>()?;
+    let hms: Vec<i64> = time
+        .split(':')
+        .map(|p| p.parse().map_err(|_| bad()))
+        .collect::<Result<_, _>>()?;
+    let (&[y, mo, d], &[h, mi, sec]) = (ymd.as_slice(), hms.as_slice()) else {
+        return Err(bad());
+    };
+    if !(1..=12).contains(&mo)
+        || !(1..=31).contains(&d)
+        || !(0..24).contains(&h)
+        || !(0..60).contains(&mi)
+        || !(0..61).contains(&sec)
+    {
+        return Err(bad());
+    }
+    Ok(((days_from_civil(y, mo, d) * 24 + h) * 60 + mi) * 60_000 + sec * 1000)
+}
+
+/// Days since 1970-01-01 of a proleptic Gregorian date (Howard Hinnant's algorithm).
+fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
+    let y = if m <= 2 { y - 1 } else { y };
+    let era = y.div_euclid(400);
+    let yoe = y - era * 400;
+    let doy = (153 * (m + if m > 2 { -3 } else { 9 }) + 2) / 5 + d - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    era * 146_097 + doe - 719_468
+}
+
+/// `MM-DD HH:MM:SS` in UTC, enough to tell parts apart in a terminal.
+fn format_time(ms: i64) -> String {
+    let secs = ms.div_euclid(1000);
+    let (days, rem) = (secs.div_euclid(86_400), secs.rem_euclid(86_400));
+    // Inverse of days_from_civil for the month and day.
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    format!(
+        "{m:02}-{d:02} {:02}:{:02}:{:02}",
+        rem / 3600,
+        rem / 60 % 60,
+        rem % 60
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn times_parse_in_every_documented_form() {
+        // 2026-11-21T00:00:00Z is 1795219200 s after the epoch (20778 days).
+        assert_eq!(parse_time("2026-11-21", 0).unwrap(), 1_795_219_200_000);
+        assert_eq!(
+            parse_time("2026-11-21T10:30:00Z", 0).unwrap(),
+            1_795_219_200_000 + 37_800_000
+        );
+        assert_eq!(parse_time("1795219200123", 0).unwrap(), 1_795_219_200_123);
+        assert_eq!(
+            parse_time("24h", 100_000_000).unwrap(),
+            100_000_000 - 86_400_000
+        );
+        assert_eq!(parse_time("7d", 0).unwrap(), -7 * 86_400_000);
+        assert!(
+            parse_time("yesterday", 0)
+                .unwrap_err()
+                .to_string()
+                .contains("time `yesterday`")
+        );
+        assert!(parse_time("2026-13-01", 0).is_err());
+        assert_eq!(
+            format_time(1_795_219_200_000 + 37_800_000),
+            "11-21 10:30:00"
+        );
+    }
+}

@@ -1,0 +1,123 @@
+//! `camloop run` as an operator starts it (the real binary, a config file, a port of its own),
+//! then `camloop history` and `camloop export` on the store it wrote.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn camloop(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_camloop"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("camloop runs")
+}
+
+#[test]
+fn the_service_runs_its_parts_and_the_history_shows_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let config = format!(
+        "[database]\nurl = \"sqlite://var/camloop.db?mode=rwc\"\n[service]\nvar_dir = \"var\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
+         [[machines]]\nname = \"M7\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/M7\"\n[machines.gauge]\nkind = \"sim\"\npart_interval_ms = 10\n",
+        recipe.display()
+    );
+    std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
+    let out = camloop(
+        &["run", "--config", "camloop.toml", "--parts", "4"],
+        dir.path(),
+    );
+    let log = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{log}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // One line per part: machine, lobe, max error, table version pushed.
+    let parts: Vec<&str> = log.lines().filter(|l| l.contains("M7 IN1 part")).collect();
+    assert_eq!(parts.len(), 4, "{log}");
+    assert!(
+        parts[3].contains("max error") && parts[3].contains("(T") && parts[3].contains("pushed"),
+        "{}",
+        parts[3]
+    );
+    assert!(dir.path().join("share/M7/DEMO_CAM_TABLE.SPF").exists());
+
+    let db = "sqlite://var/camloop.db";
+    let out = camloop(
+        &[
+            "history",
+            "--machine",
+            "M7",
+            "--format",
+            "csv",
+            "--database",
+            db,
+        ],
+        dir.path(),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(csv.lines().count(), 5, "{csv}");
+    assert!(csv.starts_with("id,received_at_ms,machine,part,lobe,verdict,"));
+
+    let out = camloop(
+        &[
+            "export",
+            "--format",
+            "json",
+            "--since",
+            "1h",
+            "--database",
+            db,
+            "--out",
+            "all.json",
+        ],
+        dir.path(),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("all.json")).unwrap())
+            .unwrap();
+    assert_eq!(json.as_array().unwrap().len(), 4);
+
+    let out = camloop(
+        &[
+            "history",
+            "--machine",
+            "M7",
+            "--since",
+            "soon",
+            "--database",
+            db,
+        ],
+        dir.path(),
+    );
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("time `soon`"));
+}
+
+#[test]
+fn a_bad_configuration_is_refused_with_every_problem() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("bad.toml"),
+        "[database]\nurl = \"mysql://x\"\n[[machines]]\nname = \"a b\"\nrecipe = \"r.toml\"\nlobe = \"L\"\nshare = \"s\"\n[machines.gauge]\nkind = \"sim\"\n",
+    )
+    .unwrap();
+    let out = camloop(&["run", "--config", "bad.toml"], dir.path());
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.contains("bad.toml") && err.contains("database.url") && err.contains("name must be"),
+        "{err}"
+    );
+}
