@@ -103,7 +103,17 @@ impl PeriodicSpline {
     /// Interval index and offset into it for `x`.
     fn locate(&self, x: f64) -> (usize, f64) {
         let x0 = self.knots[0];
-        let r = (x - x0).rem_euclid(self.period);
+        // Callers are almost always within one period of the first knot: wrap by one add or
+        // subtract and keep the (slow, software) remainder for the rest.
+        let mut r = x - x0;
+        if r < 0.0 {
+            r += self.period;
+        } else if r >= self.period {
+            r -= self.period;
+        }
+        if !(0.0..self.period).contains(&r) {
+            r = (x - x0).rem_euclid(self.period);
+        }
         let n = self.knots.len();
         let i = match self.uniform_step {
             Some(step) => ((r / step) as usize).min(n - 1),
