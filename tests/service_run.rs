@@ -195,3 +195,29 @@ async fn a_database_that_is_down_loses_nothing() {
         3
     );
 }
+
+/// A CAN gauge on an interface that cannot be opened (this kernel has no SocketCAN at all):
+/// the service starts, reports the machine's gauge as unavailable, keeps serving and stops
+/// cleanly. Nothing panics.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_unavailable_can_bus_is_reported_not_fatal() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = format!(
+        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://{}/db.sqlite?mode=rwc\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
+         [[machines]]\nname = \"CAN1\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/CAN1\"\n\
+         [machines.gauge]\nkind = \"can\"\ninterface = \"camloopcan9\"\ndbc = \"{}\"\n",
+        dir.path().display(),
+        root.join("config/parts/demo-camshaft.toml").display(),
+        root.join("config/gauge.dbc").display()
+    );
+    let config = Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
+    let running = service::start(config, RunOptions { parts: None })
+        .await
+        .unwrap();
+    let (status, body) = get(running.http_addr, "/healthz").await;
+    assert_eq!(status, 200, "{body}");
+    // The nominal table is on the share even though no part has been measured.
+    assert!(dir.path().join("share/CAN1/DEMO_CAM_TABLE.SPF").exists());
+    running.stop().await;
+}

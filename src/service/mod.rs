@@ -133,13 +133,22 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
                     shutdown_rx.clone(),
                 ));
             }
-            GaugeSection::Can { interface, .. }
-            | GaugeSection::Serial {
-                port: interface, ..
-            } => {
-                // The adapters exist (gauge::CanGauge, gauge::SerialGauge) but are not wired
-                // into the service yet: say so instead of pretending to listen.
-                error!(machine = %m.name, source = %interface, "this gauge kind is not wired into camloop run yet; use kind = \"drop\" or \"sim\"");
+            GaugeSection::Can { interface, dbc } => {
+                let names = crate::gauge::GaugeSignalNames::default();
+                let dbc = crate::gauge::GaugeDbc::load(&config.resolve(dbc), &names)
+                    .with_context(|| format!("machine {}: gauge DBC", m.name))?;
+                tokio::spawn(can_source(
+                    m.name.clone(),
+                    interface.clone(),
+                    dbc,
+                    tx,
+                    shutdown_rx.clone(),
+                ));
+            }
+            GaugeSection::Serial { port, .. } => {
+                // The serial adapter exists (gauge::SerialGauge) but is not wired into the
+                // service yet: say so instead of pretending to listen.
+                error!(machine = %m.name, port = %port, "serial gauges are not wired into camloop run yet; use kind = \"can\", \"drop\" or \"sim\"");
                 drop(tx);
             }
         }
@@ -292,6 +301,50 @@ async fn drop_source(
                 }
                 other => warn!(machine = %machine, event = ?other, "drop folder"),
             }
+        }
+    }
+}
+
+/// A live SocketCAN bus through the DBC. An interface that cannot be opened (missing, down,
+/// or a kernel without SocketCAN) is an ERROR naming it, retried every 10 s; never a panic.
+async fn can_source(
+    machine: String,
+    interface: String,
+    dbc: crate::gauge::GaugeDbc,
+    tx: mpsc::Sender<SourceEvent>,
+    mut shutdown: watch::Receiver<bool>,
+) {
+    loop {
+        match crate::gauge::CanGauge::open(&interface, dbc.clone()) {
+            Ok(mut gauge) => {
+                info!(machine = %machine, interface = %interface, "CAN gauge listening");
+                loop {
+                    let event = tokio::select! {
+                        e = gauge.next_event() => e,
+                        _ = shutdown.changed() => return,
+                    };
+                    match event {
+                        Ok(Some(crate::gauge::CanEvent::Measurement(m))) => {
+                            if tx.send(SourceEvent::Measurement(m, None)).await.is_err() {
+                                return;
+                            }
+                        }
+                        Ok(Some(other)) => warn!(machine = %machine, event = ?other, "CAN gauge"),
+                        Ok(None) => break,
+                        Err(e) => {
+                            error!(machine = %machine, interface = %interface, error = %e, "CAN bus read failed");
+                            break;
+                        }
+                    }
+                }
+            }
+            Err(e) => {
+                error!(machine = %machine, error = %e, "CAN gauge unavailable; retrying in 10 s")
+            }
+        }
+        tokio::select! {
+            _ = tokio::time::sleep(Duration::from_secs(10)) => {}
+            _ = shutdown.changed() => return,
         }
     }
 }
