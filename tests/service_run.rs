@@ -221,3 +221,89 @@ async fn an_unavailable_can_bus_is_reported_not_fatal() {
     assert!(dir.path().join("share/CAN1/DEMO_CAM_TABLE.SPF").exists());
     running.stop().await;
 }
+
+/// A serial gauge on a real pseudo-terminal: the measurement written on the other end is
+/// learned from, recorded and shows in the history.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_serial_gauge_feeds_the_loop_through_a_pseudo_terminal() {
+    use camloop::core::geometry::{CamGeometry, Follower};
+    use camloop::sim::{CommandedTable, GrinderConfig, PartLabels, SimGrinder, Workpiece};
+    use tokio_serial::SerialPort;
+
+    let (mut master, slave) = tokio_serial::SerialStream::pair().expect("pty pair");
+    let port = slave.name().expect("the slave end has a device path");
+    // pair() locks the slave end; the service opens the device by its path instead.
+    drop(slave);
+    let dir = tempfile::tempdir().unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = format!(
+        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://{}/db.sqlite?mode=rwc\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
+         [[machines]]\nname = \"TTY1\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/TTY1\"\n\
+         [machines.gauge]\nkind = \"serial\"\nport = \"{port}\"\nbaud = 115200\n",
+        dir.path().display(),
+        root.join("config/parts/demo-camshaft.toml").display(),
+    );
+    let config = Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
+    let running = service::start(config, RunOptions { parts: None })
+        .await
+        .unwrap();
+
+    // One simulated part of the demo lobe, sent in the serial line protocol.
+    let lift = camloop::core::lift::LiftTable::parse_csv(
+        &std::fs::read_to_string(root.join("config/parts/demo-intake-lobe.csv")).unwrap(),
+        "demo",
+    )
+    .unwrap();
+    let geometry = CamGeometry {
+        base_radius_mm: 20.0,
+        follower: Follower::Flat,
+        wheel_radius_mm: 250.0,
+    };
+    let part =
+        camloop::core::geometry::Part::cam(geometry, camloop::core::lift::LiftCurve::new(&lift))
+            .unwrap();
+    let mut sim = SimGrinder::new(GrinderConfig::default(), Workpiece::Cam(geometry), 2).unwrap();
+    let table = CommandedTable::nominal(&part, 360, camloop::core::fit::TableForm::Poly).unwrap();
+    let ground = sim.grind(&table).unwrap();
+    let raw = sim.measure(
+        &ground,
+        &PartLabels {
+            machine: "TTY1".into(),
+            part: "77".into(),
+            lobe: "IN1".into(),
+        },
+    );
+    let wire = camloop::gauge::serial::encode_serial_measurement(&raw).unwrap();
+    let writer = tokio::spawn(async move {
+        master.write_all(wire.as_bytes()).await.unwrap();
+        master.flush().await.unwrap();
+        master
+    });
+
+    // Poll the API (bounded) until the part's records are all in: the learned table is
+    // written after the measurement, so wait for it.
+    let mut tables = 0;
+    for _ in 0..200 {
+        let (status, body) = get(running.http_addr, "/api/v1/machines/TTY1/lobes/IN1/tables").await;
+        tables = if status == 200 {
+            json(&body)["items"].as_array().map_or(0, Vec::len)
+        } else {
+            0
+        };
+        if tables == 2 {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    assert_eq!(tables, 2, "nominal + learned table within 10 s");
+    let (_, body) = get(
+        running.http_addr,
+        "/api/v1/machines/TTY1/measurements?limit=5",
+    )
+    .await;
+    let history = json(&body);
+    assert_eq!(history["items"].as_array().unwrap().len(), 1, "{body}");
+    assert_eq!(history["items"][0]["part"], "77");
+    drop(writer.await.unwrap());
+    running.stop().await;
+}

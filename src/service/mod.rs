@@ -137,19 +137,18 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
                 let names = crate::gauge::GaugeSignalNames::default();
                 let dbc = crate::gauge::GaugeDbc::load(&config.resolve(dbc), &names)
                     .with_context(|| format!("machine {}: gauge DBC", m.name))?;
-                tokio::spawn(can_source(
-                    m.name.clone(),
-                    interface.clone(),
-                    dbc,
-                    tx,
-                    shutdown_rx.clone(),
-                ));
+                let spec = LiveSpec::Can {
+                    interface: interface.clone(),
+                    dbc: Box::new(dbc),
+                };
+                tokio::spawn(live_source(m.name.clone(), spec, tx, shutdown_rx.clone()));
             }
-            GaugeSection::Serial { port, .. } => {
-                // The serial adapter exists (gauge::SerialGauge) but is not wired into the
-                // service yet: say so instead of pretending to listen.
-                error!(machine = %m.name, port = %port, "serial gauges are not wired into camloop run yet; use kind = \"can\", \"drop\" or \"sim\"");
-                drop(tx);
+            GaugeSection::Serial { port, baud } => {
+                let spec = LiveSpec::Serial {
+                    port: port.clone(),
+                    baud: *baud,
+                };
+                tokio::spawn(live_source(m.name.clone(), spec, tx, shutdown_rx.clone()));
             }
         }
         machine_tasks.push(tokio::spawn(machine_task(machine, rx, shutdown_rx.clone())));
@@ -305,42 +304,101 @@ async fn drop_source(
     }
 }
 
-/// A live SocketCAN bus through the DBC. An interface that cannot be opened (missing, down,
-/// or a kernel without SocketCAN) is an ERROR naming it, retried every 10 s; never a panic.
-async fn can_source(
+/// A live gauge connection: a SocketCAN bus through the DBC, or a serial port speaking the
+/// line protocol.
+enum LiveGauge {
+    Can(Box<crate::gauge::CanGauge<crate::gauge::CanBus>>),
+    Serial(Box<crate::gauge::SerialGauge<tokio_serial::SerialStream>>),
+}
+
+/// How to open a live gauge again after it failed.
+#[derive(Clone)]
+enum LiveSpec {
+    Can {
+        interface: String,
+        dbc: Box<crate::gauge::GaugeDbc>,
+    },
+    Serial {
+        port: String,
+        baud: u32,
+    },
+}
+
+impl LiveSpec {
+    fn name(&self) -> &str {
+        match self {
+            LiveSpec::Can { interface, .. } => interface,
+            LiveSpec::Serial { port, .. } => port,
+        }
+    }
+
+    fn open(&self) -> Result<LiveGauge, String> {
+        match self {
+            LiveSpec::Can { interface, dbc } => {
+                crate::gauge::CanGauge::open(interface, (**dbc).clone())
+                    .map(|g| LiveGauge::Can(Box::new(g)))
+                    .map_err(|e| e.to_string())
+            }
+            LiveSpec::Serial { port, baud } => crate::gauge::SerialGauge::open(port, *baud)
+                .map(|g| LiveGauge::Serial(Box::new(g)))
+                .map_err(|e| e.to_string()),
+        }
+    }
+}
+
+impl LiveGauge {
+    /// The next measurement, a problem to log, or `None` when the connection ended.
+    async fn next(
+        &mut self,
+    ) -> std::io::Result<Option<Result<crate::core::measure::RawMeasurement, String>>> {
+        Ok(match self {
+            LiveGauge::Can(g) => g.next_event().await?.map(|e| match e {
+                crate::gauge::CanEvent::Measurement(m) => Ok(m),
+                other => Err(format!("{other:?}")),
+            }),
+            LiveGauge::Serial(g) => g.next_event().await?.map(|e| match e {
+                crate::gauge::SerialEvent::Measurement(m) => Ok(m),
+                crate::gauge::SerialEvent::Problem(p) => Err(format!("{p:?}")),
+            }),
+        })
+    }
+}
+
+/// A live gauge. One that cannot be opened (missing device, a kernel without SocketCAN) or
+/// that fails is an ERROR naming it, retried every 10 s; never a panic, never fatal.
+async fn live_source(
     machine: String,
-    interface: String,
-    dbc: crate::gauge::GaugeDbc,
+    spec: LiveSpec,
     tx: mpsc::Sender<SourceEvent>,
     mut shutdown: watch::Receiver<bool>,
 ) {
     loop {
-        match crate::gauge::CanGauge::open(&interface, dbc.clone()) {
+        match spec.open() {
             Ok(mut gauge) => {
-                info!(machine = %machine, interface = %interface, "CAN gauge listening");
+                info!(machine = %machine, gauge = %spec.name(), "gauge listening");
                 loop {
                     let event = tokio::select! {
-                        e = gauge.next_event() => e,
+                        e = gauge.next() => e,
                         _ = shutdown.changed() => return,
                     };
                     match event {
-                        Ok(Some(crate::gauge::CanEvent::Measurement(m))) => {
+                        Ok(Some(Ok(m))) => {
                             if tx.send(SourceEvent::Measurement(m, None)).await.is_err() {
                                 return;
                             }
                         }
-                        Ok(Some(other)) => warn!(machine = %machine, event = ?other, "CAN gauge"),
+                        Ok(Some(Err(problem))) => {
+                            warn!(machine = %machine, problem = %problem, "gauge data discarded")
+                        }
                         Ok(None) => break,
                         Err(e) => {
-                            error!(machine = %machine, interface = %interface, error = %e, "CAN bus read failed");
+                            error!(machine = %machine, gauge = %spec.name(), error = %e, "gauge read failed");
                             break;
                         }
                     }
                 }
             }
-            Err(e) => {
-                error!(machine = %machine, error = %e, "CAN gauge unavailable; retrying in 10 s")
-            }
+            Err(e) => error!(machine = %machine, error = %e, "gauge unavailable; retrying in 10 s"),
         }
         tokio::select! {
             _ = tokio::time::sleep(Duration::from_secs(10)) => {}
