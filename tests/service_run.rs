@@ -111,6 +111,20 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
         "program differs from the share"
     );
 
+    // The diff to the parent: the learned correction, a few µm at most, never zero.
+    let (status, body) = get(
+        addr,
+        &format!("/api/v1/machines/SIM1/lobes/IN1/tables/{newest}/diff"),
+    )
+    .await;
+    assert_eq!(status, 200, "{body}");
+    let diff = json(&body);
+    let max = diff["max_abs_delta_x_um"].as_f64().unwrap();
+    assert!(max > 0.0 && max < 20.0, "{max}");
+    assert_eq!(diff["points"].as_array().unwrap().len(), 360);
+    let (status, _) = get(addr, "/api/v1/machines/SIM1/lobes/IN1/tables/1/diff").await;
+    assert_eq!(status, 404, "the first version has no parent");
+
     let (status, body) = get(addr, "/metrics").await;
     assert_eq!(status, 200);
     assert!(

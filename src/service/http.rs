@@ -36,6 +36,10 @@ pub fn router(state: AppState) -> Router {
             "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program",
             get(program),
         )
+        .route(
+            "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/diff",
+            get(diff),
+        )
         .route("/api/v1/measurements/{id}", get(measurement))
         .with_state(state)
 }
@@ -258,6 +262,74 @@ async fn program(
         .into_response())
 }
 
+/// How a table version differs from its parent: X (as the control interpolates it) at every
+/// point of the newer table, newer minus older, µm.
+async fn diff(
+    State(state): State<AppState>,
+    Path((machine, lobe, version)): Path<(String, String, i64)>,
+) -> Result<Json<Value>, ApiError> {
+    check_name("machine", &machine)?;
+    check_name("lobe", &lobe)?;
+    let store = store(&state).await?;
+    let not_found = |v: i64| {
+        ApiError(
+            StatusCode::NOT_FOUND,
+            "table_version_not_found",
+            format!("version {v} not found"),
+        )
+    };
+    let newer = store
+        .table_version(&machine, &lobe, version)
+        .await?
+        .ok_or_else(|| not_found(version))?;
+    let Some(parent) = newer.parent_version else {
+        return Err(ApiError(
+            StatusCode::NOT_FOUND,
+            "no_parent_version",
+            format!("version {version} is the first"),
+        ));
+    };
+    let older = store
+        .table_version(&machine, &lobe, parent)
+        .await?
+        .ok_or_else(|| not_found(parent))?;
+    let parse = |text: &str, v: i64| {
+        crate::core::program::parse_table_program(text).map_err(|e| {
+            ApiError(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                "program_unreadable",
+                format!("version {v}: {e}"),
+            )
+        })
+    };
+    let (new_t, old_t) = (
+        parse(&newer.program_text, version)?,
+        parse(&older.program_text, parent)?,
+    );
+    let points: Vec<(f64, f64)> = new_t
+        .c_knots_deg()
+        .into_iter()
+        .filter_map(|c| Some((c, (new_t.x_at(c)? - old_t.x_at(c)?) * 1000.0)))
+        .collect();
+    let (at, max) = points.iter().fold((0.0, 0.0f64), |(a, m), &(c, d)| {
+        if d.abs() > m { (c, d.abs()) } else { (a, m) }
+    });
+    let rms = (points.iter().map(|p| p.1 * p.1).sum::<f64>() / points.len().max(1) as f64).sqrt();
+    let delta: Vec<Value> = points
+        .iter()
+        .map(|(c, d)| json!({ "c_deg": c, "delta_x_um": d }))
+        .collect();
+    Ok(Json(json!({
+        "version": version,
+        "parent_version": parent,
+        "table_numbers": [older.table_number, newer.table_number],
+        "max_abs_delta_x_um": max,
+        "at_c_deg": at,
+        "rms_delta_x_um": rms,
+        "points": delta,
+    })))
+}
+
 async fn events(
     State(state): State<AppState>,
     Path(machine): Path<String>,
@@ -290,6 +362,7 @@ async fn openapi() -> Json<Value> {
             "/api/v1/machines/{machine}/events": get("alarms and events, newest first"),
             "/api/v1/machines/{machine}/lobes/{lobe}/tables": get("table versions, newest first"),
             "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program": get("program text of a table version"),
+            "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/diff": get("X difference to the parent version at every table point, µm"),
             "/api/v1/measurements/{id}": get("one measurement with its averaged profile and analysis"),
         }
     }))

@@ -29,6 +29,45 @@ pub struct ParseError {
     pub reason: String,
 }
 
+impl ParsedTable {
+    /// The C values of the table's points (the closing point at first C + 360° excluded).
+    pub fn c_knots_deg(&self) -> Vec<f64> {
+        match &self.shape {
+            ParsedShape::G1(points) => points
+                .iter()
+                .take(points.len().saturating_sub(1))
+                .map(|p| p.0)
+                .collect(),
+            ParsedShape::Poly(segments) => segments.iter().map(|s| s.c_start_deg).collect(),
+        }
+    }
+
+    /// X as the control interpolates it at leading value `c_deg` (reduced into the table's
+    /// period); `None` for an empty table.
+    pub fn x_at(&self, c_deg: f64) -> Option<f64> {
+        let start = self.c_knots_deg().first().copied()?;
+        let c = start + (c_deg - start).rem_euclid(360.0);
+        match &self.shape {
+            ParsedShape::G1(points) => {
+                points
+                    .windows(2)
+                    .find(|w| c >= w[0].0 && c <= w[1].0)
+                    .map(|w| {
+                        let u = (c - w[0].0) / (w[1].0 - w[0].0);
+                        w[0].1 + u * (w[1].1 - w[0].1)
+                    })
+            }
+            ParsedShape::Poly(segments) => segments
+                .iter()
+                .find(|s| c >= s.c_start_deg && c <= s.c_end_deg)
+                .map(|s| {
+                    let u = (c - s.c_start_deg) / (s.c_end_deg - s.c_start_deg);
+                    s.x0_mm + u * (s.a1_mm + u * (s.a2_mm + u * s.a3_mm))
+                }),
+        }
+    }
+}
+
 /// Parses a curve-table subprogram written by `render_g1_table` or `render_poly_table`.
 pub fn parse_table_program(text: &str) -> Result<ParsedTable, ParseError> {
     let err = |line: usize, reason: String| ParseError { line, reason };
@@ -213,6 +252,22 @@ mod tests {
                 // X end points are written with 4 decimals (±5e-5 mm), a2/a3 with 6.
                 assert!((xa - xb).abs() < 1e-4, "{xa} vs {xb}");
             }
+        }
+    }
+
+    #[test]
+    fn x_is_interpolated_as_the_control_does_between_points() {
+        let text = render_g1_table(&points(), &ProgramSettings::default()).unwrap();
+        let parsed = parse_table_program(&text).unwrap();
+        assert_eq!(parsed.c_knots_deg().len(), 36);
+        // Halfway between 10° and 20° on a chord; and one turn later the same.
+        let (x10, x20) = (
+            2.0 + 10f64.to_radians().cos(),
+            2.0 + 20f64.to_radians().cos(),
+        );
+        for c in [15.0, 375.0, -345.0] {
+            let x = parsed.x_at(c).unwrap();
+            assert!((x - 0.5 * (x10 + x20)).abs() < 1e-4, "{c}: {x}");
         }
     }
 
