@@ -29,7 +29,40 @@ seed = 5
 "#,
         recipe.display()
     );
-    Config::parse(&text, &dir.join("camloop.toml"), |_| None).unwrap()
+    let env = |k: &str| (k == camloop::config::ENV_API_TOKEN).then(|| TOKEN.to_string());
+    Config::parse(&text, &dir.join("camloop.toml"), env).unwrap()
+}
+
+const TOKEN: &str = "let-me-write";
+
+/// A plain HTTP/1.1 POST of a JSON body, with an optional bearer token.
+async fn post(
+    addr: std::net::SocketAddr,
+    path: &str,
+    body: &str,
+    token: Option<&str>,
+) -> (u16, String) {
+    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
+    let auth = token
+        .map(|t| format!("Authorization: Bearer {t}\r\n"))
+        .unwrap_or_default();
+    let request = format!(
+        "POST {path} HTTP/1.1\r\nHost: localhost\r\nContent-Type: application/json\r\n{auth}Content-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        body.len()
+    );
+    stream.write_all(request.as_bytes()).await.unwrap();
+    let mut response = String::new();
+    stream.read_to_string(&mut response).await.unwrap();
+    let status = response
+        .split(' ')
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    let body = response
+        .split_once("\r\n\r\n")
+        .map(|(_, b)| b.to_string())
+        .unwrap_or_default();
+    (status, body)
 }
 
 /// A plain HTTP/1.1 GET on the service's listener; returns status and body.
@@ -124,6 +157,38 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
     assert_eq!(diff["points"].as_array().unwrap().len(), 360);
     let (status, _) = get(addr, "/api/v1/machines/SIM1/lobes/IN1/tables/1/diff").await;
     assert_eq!(status, 404, "the first version has no parent");
+
+    // Rollback to the nominal table (version 1): refused without the token, then delivered as
+    // a new version whose program matches version 1 but for the table number.
+    let path = "/api/v1/machines/SIM1/lobes/IN1/rollback";
+    assert_eq!(post(addr, path, r#"{"version":1}"#, None).await.0, 401);
+    assert_eq!(
+        post(addr, path, r#"{"version":1}"#, Some("wrong")).await.0,
+        401
+    );
+    assert_eq!(
+        post(addr, path, r#"{"version":999}"#, Some(TOKEN)).await.0,
+        409
+    );
+    let (status, body) = post(addr, path, r#"{"version":1}"#, Some(TOKEN)).await;
+    assert_eq!(status, 200, "{body}");
+    let (_, body) = get(addr, "/api/v1/machines/SIM1/lobes/IN1/tables?limit=1").await;
+    let rolled = json(&body)["items"][0].clone();
+    assert_eq!(rolled["reason"], "rollback to v1", "{body}");
+    let (_, v1) = get(addr, "/api/v1/machines/SIM1/lobes/IN1/tables/1/program").await;
+    let on_share =
+        std::fs::read_to_string(dir.path().join("share/SIM1/DEMO_CAM_TABLE.SPF")).unwrap();
+    let blocks = |t: &str| {
+        t.lines()
+            .filter(|l| l.starts_with("PO["))
+            .map(str::to_string)
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(
+        blocks(&on_share),
+        blocks(&v1),
+        "the rolled-back program is version 1's table"
+    );
 
     let (status, body) = get(addr, "/metrics").await;
     assert_eq!(status, 200);

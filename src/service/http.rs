@@ -18,6 +18,18 @@ pub struct AppState {
     pub store: StoreHandle,
     pub metrics: Arc<Metrics>,
     pub machines: Arc<Vec<String>>,
+    /// Per machine, the channel to its loop for write requests.
+    pub commands: Arc<std::collections::HashMap<String, tokio::sync::mpsc::Sender<Command>>>,
+    /// Write requests need it (`Authorization: Bearer …`); none configured: writes refused.
+    pub token: Option<crate::config::Secret>,
+}
+
+/// A write request handed to a machine's loop, answered when done.
+pub enum Command {
+    Rollback {
+        version: i64,
+        reply: tokio::sync::oneshot::Sender<Result<String, String>>,
+    },
 }
 
 pub fn router(state: AppState) -> Router {
@@ -39,6 +51,10 @@ pub fn router(state: AppState) -> Router {
         .route(
             "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/diff",
             get(diff),
+        )
+        .route(
+            "/api/v1/machines/{machine}/lobes/{lobe}/rollback",
+            axum::routing::post(rollback),
         )
         .route("/api/v1/measurements/{id}", get(measurement))
         .with_state(state)
@@ -330,6 +346,92 @@ async fn diff(
     })))
 }
 
+/// The configured token must be presented as `Authorization: Bearer <token>`. Compared in
+/// constant time; never logged.
+fn authorize(state: &AppState, headers: &axum::http::HeaderMap) -> Result<(), ApiError> {
+    let Some(token) = &state.token else {
+        return Err(ApiError(
+            StatusCode::FORBIDDEN,
+            "writes_disabled",
+            "no API token is configured (CAMLOOP_API_TOKEN)".into(),
+        ));
+    };
+    let given = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "))
+        .unwrap_or("");
+    let expected = token.expose().as_bytes();
+    let same = given.len() == expected.len()
+        && given
+            .bytes()
+            .zip(expected)
+            .fold(0u8, |acc, (a, b)| acc | (a ^ b))
+            == 0;
+    if same {
+        Ok(())
+    } else {
+        Err(ApiError(
+            StatusCode::UNAUTHORIZED,
+            "unauthorized",
+            "missing or wrong API token".into(),
+        ))
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RollbackBody {
+    version: i64,
+}
+
+/// Deliver a stored table version again (as a new version, under the table number not in use).
+async fn rollback(
+    State(state): State<AppState>,
+    Path((machine, lobe)): Path<(String, String)>,
+    headers: axum::http::HeaderMap,
+    Json(body): Json<RollbackBody>,
+) -> Result<Json<Value>, ApiError> {
+    authorize(&state, &headers)?;
+    check_name("machine", &machine)?;
+    check_name("lobe", &lobe)?;
+    if body.version < 1 {
+        return Err(ApiError(
+            StatusCode::BAD_REQUEST,
+            "invalid_version",
+            "version must be ≥ 1".into(),
+        ));
+    }
+    let sender = state.commands.get(&machine).ok_or(ApiError(
+        StatusCode::NOT_FOUND,
+        "machine_not_found",
+        format!("machine {machine} is not configured"),
+    ))?;
+    let (reply, answer) = tokio::sync::oneshot::channel();
+    sender
+        .send(Command::Rollback {
+            version: body.version,
+            reply,
+        })
+        .await
+        .map_err(|_| {
+            ApiError(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "machine_stopped",
+                format!("machine {machine} is not running"),
+            )
+        })?;
+    match answer.await {
+        Ok(Ok(message)) => Ok(Json(json!({ "status": "ok", "message": message }))),
+        Ok(Err(message)) => Err(ApiError(StatusCode::CONFLICT, "rollback_refused", message)),
+        Err(_) => Err(ApiError(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "machine_stopped",
+            format!("machine {machine} stopped"),
+        )),
+    }
+}
+
 async fn events(
     State(state): State<AppState>,
     Path(machine): Path<String>,
@@ -364,6 +466,7 @@ async fn openapi() -> Json<Value> {
             "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program": get("program text of a table version"),
             "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/diff": get("X difference to the parent version at every table point, µm"),
             "/api/v1/measurements/{id}": get("one measurement with its averaged profile and analysis"),
+            "/api/v1/machines/{machine}/lobes/{lobe}/rollback": { "post": { "summary": "deliver a stored version again; body {\"version\": N}; needs Authorization: Bearer <CAMLOOP_API_TOKEN>", "responses": { "200": { "description": "delivered" }, "401": { "description": "unauthorized" }, "403": { "description": "writes disabled" }, "409": { "description": "refused" } } } },
         }
     }))
 }

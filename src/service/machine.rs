@@ -377,6 +377,8 @@ impl MachineLoop {
             "iteration": self.memory.learning.iteration,
             "params": self.setup.params,
             "wheel_radius_mm": self.memory.wheel_radius_mm,
+            // Kept with every version so a rollback restores the correction it was made from.
+            "correction_um": self.memory.learning.correction_um,
         })
         .to_string();
         let request = PushRequest {
@@ -437,6 +439,79 @@ impl MachineLoop {
             created_at_ms: at_ms,
         });
         Ok((version, settings.table_number, pushed, records))
+    }
+
+    /// Delivers the program of stored version `version` again, as a new version under the
+    /// table number not in use, and restores the correction it was made from. History is
+    /// appended: the rollback is a new version with the reason "rollback to vN".
+    pub async fn rollback(&mut self, version: i64) -> anyhow::Result<String> {
+        let at_ms = now_ms();
+        let lobe = lobe_name(&self.setup);
+        let store = self
+            .store
+            .read()
+            .await
+            .clone()
+            .context("history store unavailable: cannot read the stored version")?;
+        let old = store
+            .table_version(&self.name, &lobe, version)
+            .await?
+            .with_context(|| format!("version {version} of {} {lobe} not found", self.name))?;
+        let number = self.share.next_table_number();
+        let text = renumber_table(&old.program_text, old.table_number, number)
+            .with_context(|| format!("version {version}: no CTABDEF line to renumber"))?;
+        if let Ok(learning) = serde_json::from_str::<serde_json::Value>(&old.learning_params_json)
+            && let Some(correction) = learning["correction_um"].as_array()
+            && correction.len() == self.memory.learning.correction_um.len()
+        {
+            self.memory.learning.correction_um = correction
+                .iter()
+                .map(|v| v.as_f64().unwrap_or(0.0))
+                .collect();
+            self.memory.learning.recent_max_error_um.clear();
+        }
+        let reason = format!("rollback to v{version}");
+        let request = PushRequest {
+            files: vec![ProgramFile {
+                name: self.program_file.clone(),
+                text: text.clone(),
+            }],
+            table_number: number,
+            reason: reason.clone(),
+            measurement_id: None,
+            learning: serde_json::from_str(&old.learning_params_json)
+                .unwrap_or(serde_json::Value::Null),
+            rollback_of: None,
+            created_at_unix_ms: now_ms_u64(),
+        };
+        let (status, why) = match self.share.push_once(request) {
+            Ok(_) => ("pushed", "pushed to the share".to_string()),
+            Err(e) => ("waiting", format!("waiting: {e}")),
+        };
+        info!(machine = %self.name, lobe = %lobe, version, table_number = number, status, "rollback");
+        let records = vec![
+            event(
+                &self.name,
+                at_ms,
+                "info",
+                "rollback",
+                format!("{reason} as table {number}: {why}"),
+            ),
+            Pending::Table {
+                machine: self.name.clone(),
+                lobe,
+                table_number: number,
+                program_text: text,
+                learning_params_json: old.learning_params_json.clone(),
+                reason: reason.clone(),
+                status: status.to_string(),
+                status_why: why.clone(),
+                created_at_ms: at_ms,
+            },
+            self.learning_record(at_ms)?,
+        ];
+        self.record(records).await?;
+        Ok(format!("{reason} delivered as table {number} ({why})"))
     }
 
     /// Retries what waits: a version for the share, records for the database.
@@ -516,6 +591,26 @@ impl MachineLoop {
         )?;
         Ok(())
     }
+}
+
+/// The same program defining table `to` instead of `from` (the CTABDEF line only).
+fn renumber_table(text: &str, from: u32, to: u32) -> Option<String> {
+    let mut found = false;
+    let lines: Vec<String> = text
+        .lines()
+        .map(|line| {
+            if let Some(args) = line.strip_prefix("CTABDEF(") {
+                let mut parts: Vec<String> = args.split(',').map(str::to_string).collect();
+                if parts.len() >= 4 && parts[2].trim() == from.to_string() {
+                    parts[2] = to.to_string();
+                    found = true;
+                    return format!("CTABDEF({}", parts.join(","));
+                }
+            }
+            line.to_string()
+        })
+        .collect();
+    found.then(|| lines.join("\n") + "\n")
 }
 
 fn lobe_name(setup: &FeatureSetup) -> String {

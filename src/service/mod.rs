@@ -36,13 +36,15 @@ pub struct Running {
     pub http_addr: std::net::SocketAddr,
     shutdown: watch::Sender<bool>,
     machines_done: Option<tokio::task::JoinHandle<()>>,
+    machine_tasks: Vec<tokio::task::JoinHandle<()>>,
     server: tokio::task::JoinHandle<()>,
     connector: tokio::task::JoinHandle<()>,
     store: StoreHandle,
 }
 
 impl Running {
-    /// Waits until every machine has finished its parts (only ends with `parts` set).
+    /// Waits until every machine's source has finished its parts (only ends with `parts`
+    /// set); the machines keep serving requests until [`Running::stop`].
     pub async fn machines_done(&mut self) {
         if let Some(handle) = self.machines_done.take() {
             let _ = handle.await;
@@ -53,7 +55,10 @@ impl Running {
     pub async fn stop(self) {
         let _ = self.shutdown.send(true);
         if let Some(handle) = self.machines_done {
-            let _ = handle.await;
+            handle.abort();
+        }
+        for task in self.machine_tasks {
+            let _ = task.await;
         }
         let _ = self.server.await;
         let _ = self.connector.await;
@@ -89,6 +94,8 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
 
     let var = config.var_dir();
     let mut machine_tasks = Vec::new();
+    let mut commands = std::collections::HashMap::new();
+    let mut sources_done = Vec::new();
     for m in &config.machines {
         let recipe_path = config.resolve(&m.recipe);
         let recipe = Recipe::load(&recipe_path).with_context(|| format!("machine {}", m.name))?;
@@ -106,6 +113,8 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
         )
         .await?;
         let (tx, rx) = mpsc::channel::<SourceEvent>(16);
+        let (command_tx, command_rx) = mpsc::channel::<http::Command>(4);
+        commands.insert(m.name.clone(), command_tx);
         match &m.gauge {
             GaugeSection::Sim {
                 part_interval_ms,
@@ -151,13 +160,23 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
                 tokio::spawn(live_source(m.name.clone(), spec, tx, shutdown_rx.clone()));
             }
         }
-        machine_tasks.push(tokio::spawn(machine_task(machine, rx, shutdown_rx.clone())));
+        let (done_tx, done_rx) = tokio::sync::oneshot::channel();
+        sources_done.push(done_rx);
+        machine_tasks.push(tokio::spawn(machine_task(
+            machine,
+            rx,
+            command_rx,
+            done_tx,
+            shutdown_rx.clone(),
+        )));
     }
 
     let app = http::router(http::AppState {
         store: store.clone(),
         metrics: metrics.clone(),
         machines: Arc::new(config.machines.iter().map(|m| m.name.clone()).collect()),
+        commands: Arc::new(commands),
+        token: config.api_token.clone(),
     });
     let listener = tokio::net::TcpListener::bind(config.http.listen)
         .await
@@ -174,14 +193,15 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
     });
 
     let machines_done = tokio::spawn(async move {
-        for t in machine_tasks {
-            let _ = t.await;
+        for done in sources_done {
+            let _ = done.await;
         }
     });
     Ok(Running {
         http_addr,
         shutdown: shutdown_tx,
         machines_done: Some(machines_done),
+        machine_tasks,
         server,
         connector,
         store,
@@ -189,18 +209,33 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
 }
 
 /// One machine: events in order, retries on a timer, stops on shutdown after the part in hand.
+/// The machine keeps serving write requests and retries after its source has ended (a
+/// simulated run with a part count); `source_done` says when that happened.
 async fn machine_task(
     mut machine: MachineLoop,
     mut rx: mpsc::Receiver<SourceEvent>,
+    mut commands: mpsc::Receiver<http::Command>,
+    source_done: tokio::sync::oneshot::Sender<()>,
     mut shutdown: watch::Receiver<bool>,
 ) {
     let mut retry = tokio::time::interval(RETRY_EVERY);
+    let mut source_done = Some(source_done);
     loop {
         tokio::select! {
             biased;
-            event = rx.recv() => match event {
+            event = rx.recv(), if source_done.is_some() => match event {
                 Some(e) => machine.handle(e).await,
-                None => break,
+                None => {
+                    if let Some(done) = source_done.take() {
+                        let _ = done.send(());
+                    }
+                }
+            },
+            Some(command) = commands.recv() => match command {
+                http::Command::Rollback { version, reply } => {
+                    let result = machine.rollback(version).await.map_err(|e| format!("{e:#}"));
+                    let _ = reply.send(result);
+                }
             },
             _ = retry.tick() => machine.retry().await,
             _ = shutdown.changed() => break,
