@@ -24,6 +24,9 @@ use tracing::{error, info, warn};
 /// The database, once it can be reached (a background task connects and reconnects).
 pub type StoreHandle = Arc<tokio::sync::RwLock<Option<Store>>>;
 
+/// The loop's memory beside the journal, for restarts while the database is down.
+const MEMORY_FILE: &str = "memory.json";
+
 /// What a gauge adapter hands the machine.
 #[derive(Debug)]
 pub enum SourceEvent {
@@ -73,17 +76,25 @@ impl MachineLoop {
     ) -> anyhow::Result<Self> {
         let journal = Journal::open(&state_dir)?;
         let lobe = lobe_name(&setup);
-        let saved = match store.read().await.as_ref() {
-            Some(s) => s.load_learning_state(&name, &lobe).await.ok().flatten(),
-            None => None,
+        // The local snapshot is written after every part, so it is the newest even when the
+        // database was down; the store's copy serves a fresh working folder.
+        let local = std::fs::read_to_string(state_dir.join(MEMORY_FILE))
+            .ok()
+            .and_then(|t| serde_json::from_str::<LoopMemory>(&t).ok());
+        let stored = match (&local, store.read().await.as_ref()) {
+            (None, Some(s)) => s
+                .load_learning_state(&name, &lobe)
+                .await
+                .ok()
+                .flatten()
+                .and_then(|s| serde_json::from_str::<LoopMemory>(&s.state_json).ok()),
+            _ => None,
         };
-        let memory = saved
-            .and_then(|s| serde_json::from_str::<LoopMemory>(&s.state_json).ok())
-            .unwrap_or_else(|| LoopMemory {
-                learning: LearningState::new(360),
-                wheel_radius_mm: setup.feature.wheel_radius_mm(),
-                parts: 0,
-            });
+        let memory = local.or(stored).unwrap_or_else(|| LoopMemory {
+            learning: LearningState::new(360),
+            wheel_radius_mm: setup.feature.wheel_radius_mm(),
+            parts: 0,
+        });
         std::fs::create_dir_all(&share_dir).ok();
         let config = ShareConfig {
             share_dir: share_dir.clone(),
@@ -551,7 +562,27 @@ impl MachineLoop {
             .update(&self.name, |m| m.journal_pending = pending);
     }
 
+    /// Writes the loop's memory beside the journal (temporary file, flush, rename).
+    fn save_memory(&self) -> anyhow::Result<()> {
+        let dir = self
+            .share
+            .config()
+            .state_dir
+            .parent()
+            .unwrap_or(Path::new("."))
+            .to_path_buf();
+        let mut tmp = tempfile::Builder::new()
+            .prefix(".memory-")
+            .tempfile_in(&dir)?;
+        std::io::Write::write_all(&mut tmp, serde_json::to_string(&self.memory)?.as_bytes())?;
+        tmp.as_file().sync_all()?;
+        tmp.persist(dir.join(MEMORY_FILE))
+            .context("cannot save the loop's memory")?;
+        Ok(())
+    }
+
     fn learning_record(&self, at_ms: i64) -> anyhow::Result<Pending> {
+        self.save_memory()?;
         Ok(Pending::Learning {
             machine: self.name.clone(),
             lobe: lobe_name(&self.setup),
