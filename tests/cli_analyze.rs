@@ -1,17 +1,11 @@
 //! `camloop analyze` as a user runs it, on the cantools-encoded CAN fixture and on a crankpin
 //! CSV: figures checked against the formulas the fixtures were made from.
 
+mod cli_support;
+
+use cli_support::camloop;
 use std::fmt::Write as _;
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn camloop(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_camloop"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("camloop runs")
-}
 
 fn fixture(name: &str) -> String {
     Path::new(env!("CARGO_MANIFEST_DIR"))

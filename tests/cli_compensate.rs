@@ -2,26 +2,16 @@
 //! the simulated grinder grinds what the program says, its gauge writes a measurement file,
 //! and the next run learns from it. Also: guards, idempotence, dressing.
 
+mod cli_support;
+
 use camloop::core::geometry::{CamGeometry, Follower};
 use camloop::core::lift::{LiftCurve, LiftTable};
 use camloop::core::program::{ParsedShape, parse_table_program};
 use camloop::sim::cell::{JUDGE_POINTS, judge};
 use camloop::sim::{CommandedTable, GrinderConfig, PartLabels, SimGrinder, TableShape, Workpiece};
+use cli_support::{camloop, stderr};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn camloop(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_camloop"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("camloop runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// A copy of the demo recipe and its lift table in `dir`, with the wheel radius given.
 fn recipe_in(dir: &Path, wheel_radius_mm: f64) -> PathBuf {

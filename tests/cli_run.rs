@@ -1,16 +1,10 @@
 //! `camloop run` as an operator starts it (the real binary, a config file, a port of its own),
 //! then `camloop history` and `camloop export` on the store it wrote.
 
-use std::path::Path;
-use std::process::{Command, Output};
+mod cli_support;
 
-fn camloop(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_camloop"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("camloop runs")
-}
+use cli_support::camloop;
+use std::path::Path;
 
 #[test]
 fn the_service_runs_its_parts_and_the_history_shows_them() {

@@ -1,22 +1,9 @@
 //! `camloop table` as a user runs it: real binary, real files, exit codes and stderr.
 
+mod cli_support;
+
+use cli_support::{camloop, repo, stderr};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn camloop(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_camloop"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("the camloop binary runs")
-}
-
-fn repo(path: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join(path)
-        .display()
-        .to_string()
-}
 
 /// The real engine lift shipped with the project docs; looked for beside the repo.
 fn ecn_fixture() -> PathBuf {
@@ -24,10 +11,6 @@ fn ecn_fixture() -> PathBuf {
     let local = manifest.join("tests/fixtures/ecn-sandia-h2-intake.csv");
     assert!(local.exists(), "fixture missing: {}", local.display());
     local
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 #[test]

@@ -15,6 +15,30 @@ fn rust_files(dir: &Path) -> Vec<PathBuf> {
     out
 }
 
+/// Places in the Rust files under `dir` (comments aside) that use one of `forbidden`.
+fn uses_of(dir: &Path, forbidden: &[&str], min_files: usize) -> Vec<String> {
+    let files = rust_files(dir);
+    assert!(
+        files.len() >= min_files,
+        "found only {} files in {}",
+        files.len(),
+        dir.display()
+    );
+    let mut violations = Vec::new();
+    for file in files {
+        let text = std::fs::read_to_string(&file).unwrap();
+        for (n, line) in text.lines().enumerate() {
+            let code = line.split("//").next().unwrap_or("");
+            for word in forbidden {
+                if code.contains(word) {
+                    violations.push(format!("{}:{}: {word}", file.display(), n + 1));
+                }
+            }
+        }
+    }
+    violations
+}
+
 /// The core is pure: no file system, network, async runtime, database, HTTP, clock or logging.
 #[test]
 fn core_does_no_io() {
@@ -34,23 +58,37 @@ fn core_does_no_io() {
         "std::env",
         "std::process",
     ];
-    let files = rust_files(&core);
-    assert!(files.len() >= 10, "found only {} core files", files.len());
-    let mut violations = Vec::new();
-    for file in files {
-        let text = std::fs::read_to_string(&file).unwrap();
-        for (n, line) in text.lines().enumerate() {
-            let code = line.split("//").next().unwrap_or("");
-            for word in forbidden {
-                if code.contains(word) {
-                    violations.push(format!("{}:{}: {word}", file.display(), n + 1));
-                }
-            }
-        }
-    }
+    let violations = uses_of(&core, &forbidden, 10);
     assert!(
         violations.is_empty(),
         "I/O in the core:\n{}",
+        violations.join("\n")
+    );
+}
+
+/// The simulator is pure like the core (no file system, network, clock, environment or
+/// logging), so that a seed and the inputs fix every result.
+#[test]
+fn sim_does_no_io_and_reads_no_clock() {
+    let sim = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/sim");
+    let forbidden = [
+        "std::fs",
+        "std::net",
+        "std::io::",
+        "tokio",
+        "SystemTime",
+        "Instant",
+        "thread_rng",
+        "tracing",
+        "println!",
+        "eprintln!",
+        "std::env",
+        "std::process",
+    ];
+    let violations = uses_of(&sim, &forbidden, 7);
+    assert!(
+        violations.is_empty(),
+        "I/O in the simulator:\n{}",
         violations.join("\n")
     );
 }
