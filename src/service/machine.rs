@@ -150,10 +150,6 @@ impl MachineLoop {
         self.setup.feature
     }
 
-    pub fn parts(&self) -> u64 {
-        self.memory.parts
-    }
-
     fn lobe_loop(&self) -> LobeLoop<'_> {
         LobeLoop {
             nominal: &self.setup.nominal,
