@@ -248,7 +248,6 @@ async fn a_database_that_is_down_loses_nothing() {
         camloop::service::journal::Journal::open(&dir.path().join("var/machines/SIM1")).unwrap();
     let profile_errors: Vec<f64> = journal
         .pending()
-        .unwrap()
         .iter()
         .filter_map(|p| match p {
             camloop::service::journal::Pending::Measurement {
@@ -264,9 +263,9 @@ async fn a_database_that_is_down_loses_nothing() {
         "{profile_errors:?}"
     );
     // Every record waits in the journal: 4 measurements, 5 tables (nominal + 4).
-    let journal =
+    let mut journal =
         camloop::service::journal::Journal::open(&dir.path().join("var/machines/SIM1")).unwrap();
-    let pending = journal.pending().unwrap();
+    let pending = journal.pending().to_vec();
     let count = |kind: &str| {
         pending
             .iter()
@@ -280,7 +279,11 @@ async fn a_database_that_is_down_loses_nothing() {
     let store = camloop::store::Store::connect(&url).await.unwrap();
     let written = journal.flush(&store).await.unwrap();
     assert_eq!(written, pending.len());
-    assert!(journal.pending().unwrap().is_empty());
+    assert!(journal.pending().is_empty());
+    // Emptied on disk too, not only in memory.
+    let reopened =
+        camloop::service::journal::Journal::open(&dir.path().join("var/machines/SIM1")).unwrap();
+    assert!(reopened.pending().is_empty());
     let filter = camloop::store::HistoryFilter {
         machine: "SIM1".into(),
         limit: 10,

@@ -59,32 +59,43 @@ pub enum Pending {
     },
 }
 
-/// The journal of one machine: `<dir>/journal.jsonl`.
+/// The journal of one machine: `<dir>/journal.jsonl`, mirrored in memory so a part's flush
+/// does not read and parse the file again. The file is the truth after a crash; the mirror is
+/// loaded from it at open and changed only together with it.
 #[derive(Debug)]
 pub struct Journal {
     path: PathBuf,
+    pending: Vec<Pending>,
 }
 
 impl Journal {
     /// Opens the journal in `dir`, cutting off a torn last line left by a crash mid-append
-    /// (otherwise the next record would be glued onto it and lost).
+    /// (otherwise the next record would be glued onto it and lost), and loads what waits.
     pub fn open(dir: &Path) -> anyhow::Result<Self> {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         let path = dir.join("journal.jsonl");
-        if let Ok(bytes) = std::fs::read(&path)
-            && !bytes.is_empty()
-            && bytes.last() != Some(&b'\n')
-        {
-            let keep = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+        let bytes = match std::fs::read(&path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+            Err(e) => {
+                return Err(e).with_context(|| format!("cannot read journal {}", path.display()));
+            }
+        };
+        let keep = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+        if keep < bytes.len() {
             let file = std::fs::OpenOptions::new().write(true).open(&path)?;
             file.set_len(keep as u64)?;
             file.sync_all()?;
         }
-        Ok(Self { path })
+        let pending = String::from_utf8_lossy(&bytes[..keep])
+            .lines()
+            .filter_map(|l| serde_json::from_str(l).ok())
+            .collect();
+        Ok(Self { path, pending })
     }
 
     /// Appends the records and flushes them to disk before returning.
-    pub fn append(&self, records: &[Pending]) -> anyhow::Result<()> {
+    pub fn append(&mut self, records: &[Pending]) -> anyhow::Result<()> {
         let mut text = String::new();
         for r in records {
             text.push_str(&serde_json::to_string(r)?);
@@ -96,33 +107,23 @@ impl Journal {
             .open(&self.path)
             .with_context(|| format!("cannot open journal {}", self.path.display()))?;
         file.write_all(text.as_bytes())
-            .and_then(|()| file.sync_all())
-            .with_context(|| format!("cannot write journal {}", self.path.display()))
+            .and_then(|()| file.sync_data())
+            .with_context(|| format!("cannot write journal {}", self.path.display()))?;
+        self.pending.extend_from_slice(records);
+        Ok(())
     }
 
-    /// Records not yet in the database. A torn last line (a crash mid-append) is skipped.
-    pub fn pending(&self) -> anyhow::Result<Vec<Pending>> {
-        let text = match std::fs::read_to_string(&self.path) {
-            Ok(t) => t,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-            Err(e) => {
-                return Err(e)
-                    .with_context(|| format!("cannot read journal {}", self.path.display()));
-            }
-        };
-        Ok(text
-            .lines()
-            .filter_map(|l| serde_json::from_str(l).ok())
-            .collect())
+    /// Records not yet in the database, oldest first.
+    pub fn pending(&self) -> &[Pending] {
+        &self.pending
     }
 
     /// Writes pending records to the store in order. Returns how many went; those that went
     /// leave the journal, the rest stay for the next attempt (e.g. the database is down).
-    pub async fn flush(&self, store: &Store) -> anyhow::Result<usize> {
-        let pending = self.pending()?;
+    pub async fn flush(&mut self, store: &Store) -> anyhow::Result<usize> {
         let mut done = 0;
         let mut failure = None;
-        for record in &pending {
+        for record in &self.pending {
             match apply(store, record).await {
                 Ok(()) => done += 1,
                 Err(e) => {
@@ -132,7 +133,7 @@ impl Journal {
             }
         }
         if done > 0 {
-            self.rewrite(&pending[done..])?;
+            self.forget(done)?;
         }
         match failure {
             Some(e) if done == 0 => {
@@ -143,18 +144,30 @@ impl Journal {
         }
     }
 
-    /// Replaces the journal with `rest`, atomically (temporary file, rename).
-    fn rewrite(&self, rest: &[Pending]) -> anyhow::Result<()> {
-        let dir = self.path.parent().unwrap_or(Path::new("."));
-        let mut tmp = tempfile::Builder::new()
-            .prefix(".journal-")
-            .tempfile_in(dir)?;
-        for r in rest {
-            writeln!(tmp, "{}", serde_json::to_string(r)?)?;
+    /// Drops the first `done` records from the file and the mirror. All of them (the usual
+    /// case, one part's records): the file is cut to nothing. Some: the rest replaces the
+    /// file atomically (temporary file, rename), so a crash leaves the old or the new list.
+    fn forget(&mut self, done: usize) -> anyhow::Result<()> {
+        let rest = &self.pending[done..];
+        if rest.is_empty() {
+            let file = std::fs::OpenOptions::new()
+                .write(true)
+                .open(&self.path)
+                .and_then(|f| f.set_len(0).and_then(|()| f.sync_data()));
+            file.with_context(|| format!("cannot empty journal {}", self.path.display()))?;
+        } else {
+            let dir = self.path.parent().unwrap_or(Path::new("."));
+            let mut tmp = tempfile::Builder::new()
+                .prefix(".journal-")
+                .tempfile_in(dir)?;
+            for r in rest {
+                writeln!(tmp, "{}", serde_json::to_string(r)?)?;
+            }
+            tmp.as_file().sync_all()?;
+            tmp.persist(&self.path)
+                .with_context(|| format!("cannot replace journal {}", self.path.display()))?;
         }
-        tmp.as_file().sync_all()?;
-        tmp.persist(&self.path)
-            .with_context(|| format!("cannot replace journal {}", self.path.display()))?;
+        self.pending.drain(..done);
         Ok(())
     }
 }
@@ -267,7 +280,7 @@ mod tests {
     #[test]
     fn records_survive_a_torn_last_line() {
         let dir = tempfile::tempdir().unwrap();
-        let j = Journal::open(dir.path()).unwrap();
+        let mut j = Journal::open(dir.path()).unwrap();
         let e = Pending::Event {
             machine: "M1".into(),
             at_ms: 5,
@@ -281,10 +294,10 @@ mod tests {
             .open(dir.path().join("journal.jsonl"))
             .unwrap();
         f.write_all(b"{\"record\":\"event\",\"mach").unwrap();
-        assert_eq!(j.pending().unwrap(), vec![e.clone(), e.clone()]);
         // Reopened after the crash: the torn tail is cut, so the next record stands alone.
-        let j = Journal::open(dir.path()).unwrap();
+        let mut j = Journal::open(dir.path()).unwrap();
+        assert_eq!(j.pending(), [e.clone(), e.clone()]);
         j.append(std::slice::from_ref(&e)).unwrap();
-        assert_eq!(j.pending().unwrap().len(), 3);
+        assert_eq!(Journal::open(dir.path()).unwrap().pending().len(), 3);
     }
 }

@@ -11,7 +11,7 @@ use crate::core::lift::LiftCurve;
 use crate::core::measure::{AssemblyLimits, RawMeasurement, check_and_average};
 use crate::core::program::{comment_text, render_g1_table, render_poly_table};
 use crate::recipe::FeatureSetup;
-use crate::share::{ProgramFile, PushRequest, RealFs, Share, ShareConfig, sha256_hex};
+use crate::share::{ProgramFile, PushRequest, RealFs, Share, ShareConfig, lower_hex};
 use crate::store::Store;
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
@@ -553,7 +553,7 @@ impl MachineLoop {
         {
             warn!(machine = %self.name, error = format!("{e:#}"), "database unavailable: records kept in the journal");
         }
-        let pending = self.journal.pending().map(|p| p.len() as u64).unwrap_or(0);
+        let pending = self.journal.pending().len() as u64;
         self.metrics
             .update(&self.name, |m| m.journal_pending = pending);
     }
@@ -683,19 +683,74 @@ fn raw_revolutions(raw: &RawMeasurement) -> Vec<Vec<f64>> {
     out
 }
 
-/// SHA-256 of a measurement as received (header and samples in order).
+/// SHA-256 of a measurement as received: header fields (length-prefixed, so no two headers
+/// hash alike), every sample's revolution, index and exact lift bits in order, then the
+/// origin. Binary rather than text: formatting 1,000+ floats per part cost more than the
+/// rest of the identity check.
 pub fn measurement_sha(raw: &RawMeasurement) -> String {
+    use sha2::Digest as _;
     let h = &raw.header;
-    let mut text = format!(
-        "{} {} {} {} {}\n",
-        h.machine, h.part, h.lobe, h.revolutions, h.points_per_rev
-    );
-    for s in &raw.samples {
-        text.push_str(&format!(
-            "{} {} {:.7}\n",
-            s.revolution, s.angle_index, s.lift_mm
-        ));
+    let mut hasher = sha2::Sha256::new();
+    for field in [&h.machine, &h.part, &h.lobe] {
+        hasher.update((field.len() as u64).to_le_bytes());
+        hasher.update(field.as_bytes());
     }
-    text.push_str(&raw.origin);
-    sha256_hex(text.as_bytes())
+    hasher.update(h.revolutions.to_le_bytes());
+    hasher.update(h.points_per_rev.to_le_bytes());
+    let mut samples = Vec::with_capacity(raw.samples.len() * 16);
+    for s in &raw.samples {
+        samples.extend_from_slice(&s.revolution.to_le_bytes());
+        samples.extend_from_slice(&s.angle_index.to_le_bytes());
+        samples.extend_from_slice(&s.lift_mm.to_bits().to_le_bytes());
+    }
+    hasher.update((raw.samples.len() as u64).to_le_bytes());
+    hasher.update(&samples);
+    hasher.update(raw.origin.as_bytes());
+    lower_hex(&hasher.finalize())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::measure::{MeasurementHeader, RawSample};
+
+    fn measurement(machine: &str, part: &str, lifts: &[f64]) -> RawMeasurement {
+        RawMeasurement {
+            header: MeasurementHeader {
+                machine: machine.into(),
+                part: part.into(),
+                lobe: "IN1".into(),
+                revolutions: 1,
+                points_per_rev: lifts.len() as u32,
+            },
+            samples: lifts
+                .iter()
+                .enumerate()
+                .map(|(i, &lift_mm)| RawSample {
+                    revolution: 0,
+                    angle_index: i as u32,
+                    lift_mm,
+                })
+                .collect(),
+            origin: "test".into(),
+        }
+    }
+
+    /// The identity that makes measurements idempotent in the store: equal for the same
+    /// reading, different for any change a gauge could make, including the smallest lift
+    /// change a float can carry and a character moved from one header field to the next.
+    #[test]
+    fn measurement_identity_tells_apart_every_change() {
+        let base = measurement("M1", "P7", &[0.0, 1.25, 2.5]);
+        let sha = measurement_sha(&base);
+        assert_eq!(sha.len(), 64);
+        assert_eq!(sha, measurement_sha(&base.clone()));
+        let nudged = measurement("M1", "P7", &[0.0, 1.25f64.next_up(), 2.5]);
+        assert_ne!(sha, measurement_sha(&nudged));
+        let moved = measurement("M1P", "7", &[0.0, 1.25, 2.5]);
+        assert_ne!(sha, measurement_sha(&moved));
+        let mut other_origin = base.clone();
+        other_origin.origin = "can0".into();
+        assert_ne!(sha, measurement_sha(&other_origin));
+    }
 }

@@ -6,8 +6,6 @@ use std::fs::{File, OpenOptions};
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
-use sha2::{Digest, Sha256};
-
 /// Name prefix of every temporary camloop writes, on the share and in the state folder.
 ///
 /// It starts with a dot (hidden on the control's file views, and not a valid SINUMERIK
@@ -133,17 +131,7 @@ pub(crate) fn append_line(path: &Path, line: &str, flush: bool) -> io::Result<()
     if flush { file.sync_data() } else { Ok(()) }
 }
 
-/// SHA-256 of `bytes`, lower-case hex (64 characters).
-pub fn sha256_hex(bytes: &[u8]) -> String {
-    Sha256::digest(bytes)
-        .iter()
-        .fold(String::with_capacity(64), |mut hex, b| {
-            use std::fmt::Write as _;
-            // Writing to a String cannot fail.
-            let _ = write!(hex, "{b:02x}");
-            hex
-        })
-}
+pub use crate::digest::{lower_hex, sha256_hex};
 
 /// Whether a folder entry is one of camloop's temporaries.
 pub(crate) fn is_temp_name(name: &std::ffi::OsStr) -> bool {
@@ -153,19 +141,6 @@ pub(crate) fn is_temp_name(name: &std::ffi::OsStr) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Known answers from FIPS 180-2 (empty string and "abc").
-    #[test]
-    fn sha256_hex_matches_published_vectors() {
-        assert_eq!(
-            sha256_hex(b""),
-            "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855"
-        );
-        assert_eq!(
-            sha256_hex(b"abc"),
-            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
-        );
-    }
 
     #[test]
     fn temp_names_are_recognised_by_exact_prefix() {

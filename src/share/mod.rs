@@ -45,7 +45,7 @@ mod state;
 mod store;
 
 pub use error::{PushError, ShareError, StateError};
-pub use fs::{RealFs, ShareFs, TEMP_PREFIX, sha256_hex};
+pub use fs::{RealFs, ShareFs, TEMP_PREFIX, lower_hex, sha256_hex};
 pub use manifest::{
     FileRecord, History, Loaded, Record, VersionRecord, VersionState, VersionStatus,
     load as load_manifest,

@@ -5,8 +5,6 @@
 //! values, then revolution 1's, …); `averaged_profile` is one revolution. Each value is
 //! `round(lift_mm · 10⁴)` as i32 LE, so a stored lift is within 0.05 µm of the given one.
 
-use sha2::{Digest, Sha256};
-
 use super::error::StoreError;
 
 /// Lift units per mm in blobs: 0.1 µm.
@@ -45,13 +43,7 @@ pub fn decode_lifts_mm(blob: &[u8]) -> Result<Vec<f64>, StoreError> {
         .collect())
 }
 
-/// SHA-256 of `bytes` as 64 lower-case hex digits.
-pub fn sha256_hex(bytes: &[u8]) -> String {
-    Sha256::digest(bytes)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
-}
+pub use crate::digest::sha256_hex;
 
 /// Cursor text for the position after the row (received_at_ms, id).
 pub(crate) fn encode_cursor(received_at_ms: i64, id: i64) -> String {
@@ -147,14 +139,5 @@ mod tests {
         assert_eq!(decode_cursor(&encode_cursor(-5, 42)).unwrap(), (-5, 42));
         assert!(decode_cursor("12").is_err());
         assert!(decode_cursor("a_1").is_err());
-    }
-
-    #[test]
-    fn sha256_matches_the_published_vector() {
-        // FIPS 180-2 test vector for "abc".
-        assert_eq!(
-            sha256_hex(b"abc"),
-            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
-        );
     }
 }
