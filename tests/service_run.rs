@@ -263,8 +263,8 @@ async fn a_database_that_is_down_loses_nothing() {
         "{profile_errors:?}"
     );
     // Every record waits in the journal: 4 measurements, 5 tables (nominal + 4).
-    let mut journal =
-        camloop::service::journal::Journal::open(&dir.path().join("var/machines/SIM1")).unwrap();
+    let journal_dir = dir.path().join("var/machines/SIM1");
+    let mut journal = camloop::service::journal::Journal::open(&journal_dir).unwrap();
     let pending = journal.pending().to_vec();
     let count = |kind: &str| {
         pending
@@ -274,30 +274,58 @@ async fn a_database_that_is_down_loses_nothing() {
     };
     assert_eq!(count("Measurement"), 4);
     assert_eq!(count("Table"), 5);
-    // When a database is there, the journal goes into it and empties.
+    // When a database is there, the journal goes into it.
     let url = format!("sqlite://{}/late.db?mode=rwc", dir.path().display());
     let store = camloop::store::Store::connect(&url).await.unwrap();
     let written = journal.flush(&store).await.unwrap();
     assert_eq!(written, pending.len());
     assert!(journal.pending().is_empty());
-    // Emptied on disk too, not only in memory.
-    let reopened =
-        camloop::service::journal::Journal::open(&dir.path().join("var/machines/SIM1")).unwrap();
-    assert!(reopened.pending().is_empty());
-    let filter = camloop::store::HistoryFilter {
-        machine: "SIM1".into(),
-        limit: 10,
-        ..Default::default()
-    };
+    let stored = stored_counts(&store).await;
     assert_eq!(
-        store
-            .measurement_history(&filter)
-            .await
-            .unwrap()
-            .items
-            .len(),
-        4
+        stored,
+        [4, 5, count("Event"), count("Learning")],
+        "measurements, tables, events, learning states"
     );
+    assert!(count("Learning") >= 4);
+    // A crash before the database confirmed durability: the reopened journal still holds
+    // every record, and replaying it writes nothing twice.
+    let mut replayed = camloop::service::journal::Journal::open(&journal_dir).unwrap();
+    assert_eq!(replayed.pending().len(), pending.len());
+    assert_eq!(replayed.flush(&store).await.unwrap(), pending.len());
+    assert_eq!(stored_counts(&store).await, stored);
+    // Once the database says its copy is durable, the journal empties, on disk too.
+    assert_eq!(
+        replayed.release_durable(&store).await.unwrap(),
+        pending.len()
+    );
+    let reopened = camloop::service::journal::Journal::open(&journal_dir).unwrap();
+    assert!(reopened.records().is_empty());
+}
+
+/// Rows of machine SIM1 in the store: measurements, table versions, events, learning states.
+async fn stored_counts(store: &camloop::store::Store) -> [usize; 4] {
+    let camloop::store::Store::Sqlite(pool) = store else {
+        panic!("a SQLite store")
+    };
+    let mut counts = [0; 4];
+    for (i, table) in [
+        "measurements",
+        "table_versions",
+        "events",
+        "learning_states",
+    ]
+    .iter()
+    .enumerate()
+    {
+        let n: i64 = sqlx::query_scalar(&format!(
+            "SELECT COUNT(*) FROM {table} WHERE machine = 'SIM1'"
+        ))
+        .fetch_one(pool)
+        .await
+        .unwrap();
+        counts[i] = n as usize;
+    }
+    counts
 }
 
 /// A CAN gauge on an interface that cannot be opened (this kernel has no SocketCAN at all):

@@ -1,6 +1,8 @@
 //! The local journal every record passes through on its way to the database: appended and
 //! flushed to disk first (from then on it is acknowledged and cannot be lost), written to the
-//! store when it can be, and kept while the database is down.
+//! store when it can be, kept while the database is down, and dropped only once the store
+//! says its copy is durable. Records read back after a crash may already be in the store;
+//! they are checked before being written again, so a replay never duplicates history.
 
 use crate::store::{
     EventLevel, NewEvent, NewMeasurement, NewTableVersion, Store, StoreError, TableStatus, Verdict,
@@ -62,15 +64,21 @@ pub enum Pending {
 /// The journal of one machine: `<dir>/journal.jsonl`, mirrored in memory so a part's flush
 /// does not read and parse the file again. The file is the truth after a crash; the mirror is
 /// loaded from it at open and changed only together with it.
+///
+/// The mirror's records are, in order: `written` ones already in the store (kept until the
+/// store says they are durable), then those waiting. The first `replayed` were read from the
+/// file at open and may be in the store already.
 #[derive(Debug)]
 pub struct Journal {
     path: PathBuf,
-    pending: Vec<Pending>,
+    records: Vec<Pending>,
+    written: usize,
+    replayed: usize,
 }
 
 impl Journal {
     /// Opens the journal in `dir`, cutting off a torn last line left by a crash mid-append
-    /// (otherwise the next record would be glued onto it and lost), and loads what waits.
+    /// (otherwise the next record would be glued onto it and lost), and loads what it holds.
     pub fn open(dir: &Path) -> anyhow::Result<Self> {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         let path = dir.join("journal.jsonl");
@@ -87,11 +95,16 @@ impl Journal {
             file.set_len(keep as u64)?;
             file.sync_all()?;
         }
-        let pending = String::from_utf8_lossy(&bytes[..keep])
+        let records: Vec<Pending> = String::from_utf8_lossy(&bytes[..keep])
             .lines()
             .filter_map(|l| serde_json::from_str(l).ok())
             .collect();
-        Ok(Self { path, pending })
+        Ok(Self {
+            path,
+            replayed: records.len(),
+            records,
+            written: 0,
+        })
     }
 
     /// Appends the records and flushes them to disk before returning.
@@ -109,22 +122,34 @@ impl Journal {
         file.write_all(text.as_bytes())
             .and_then(|()| file.sync_data())
             .with_context(|| format!("cannot write journal {}", self.path.display()))?;
-        self.pending.extend_from_slice(records);
+        self.records.extend_from_slice(records);
         Ok(())
     }
 
-    /// Records not yet in the database, oldest first.
+    /// Records not yet written to the database, oldest first.
     pub fn pending(&self) -> &[Pending] {
-        &self.pending
+        &self.records[self.written..]
     }
 
-    /// Writes pending records to the store in order. Returns how many went; those that went
-    /// leave the journal, the rest stay for the next attempt (e.g. the database is down).
+    /// Every record the journal holds: those waiting and those written but not yet known to
+    /// be durable, oldest first. The newest learning state of a machine is found here first.
+    pub fn records(&self) -> &[Pending] {
+        &self.records
+    }
+
+    /// Writes pending records to the store in order. Returns how many went; the rest stay
+    /// for the next attempt (e.g. the database is down). Records that went stay in the file
+    /// until [`Journal::release_durable`] finds the store's copy durable.
     pub async fn flush(&mut self, store: &Store) -> anyhow::Result<usize> {
         let mut done = 0;
         let mut failure = None;
-        for record in &self.pending {
-            match apply(store, record).await {
+        for (i, record) in self.records.iter().enumerate().skip(self.written) {
+            let result = if i < self.replayed {
+                apply_once(store, record).await
+            } else {
+                apply(store, record).await
+            };
+            match result {
                 Ok(()) => done += 1,
                 Err(e) => {
                     failure = Some(e);
@@ -132,9 +157,7 @@ impl Journal {
                 }
             }
         }
-        if done > 0 {
-            self.forget(done)?;
-        }
+        self.written += done;
         match failure {
             Some(e) if done == 0 => {
                 Err(anyhow::Error::new(e)
@@ -144,11 +167,23 @@ impl Journal {
         }
     }
 
+    /// Drops the written records from the journal once the store answers that everything
+    /// committed so far is durable ([`Store::checkpoint`]). Returns how many were dropped.
+    pub async fn release_durable(&mut self, store: &Store) -> anyhow::Result<usize> {
+        let written = self.written;
+        if written == 0 || !store.checkpoint().await? {
+            return Ok(0);
+        }
+        self.forget(written)?;
+        Ok(written)
+    }
+
     /// Drops the first `done` records from the file and the mirror. All of them (the usual
-    /// case, one part's records): the file is cut to nothing. Some: the rest replaces the
-    /// file atomically (temporary file, rename), so a crash leaves the old or the new list.
+    /// case): the file is cut to nothing. Some: the rest replaces the file atomically
+    /// (temporary file, rename), so a crash leaves the old or the new list. Either way a
+    /// crash before this reaches the disk only means a replay, which writes nothing twice.
     fn forget(&mut self, done: usize) -> anyhow::Result<()> {
-        let rest = &self.pending[done..];
+        let rest = &self.records[done..];
         if rest.is_empty() {
             let file = std::fs::OpenOptions::new()
                 .write(true)
@@ -167,8 +202,61 @@ impl Journal {
             tmp.persist(&self.path)
                 .with_context(|| format!("cannot replace journal {}", self.path.display()))?;
         }
-        self.pending.drain(..done);
+        self.records.drain(..done);
+        self.written -= done;
+        self.replayed = self.replayed.saturating_sub(done);
         Ok(())
+    }
+}
+
+/// [`apply`] for a record read back after a crash: skipped when the store already holds it
+/// (measurements are idempotent by their SHA-256 anyway).
+async fn apply_once(store: &Store, record: &Pending) -> Result<(), StoreError> {
+    let present = match record {
+        Pending::Measurement { .. } => false,
+        Pending::Table {
+            machine,
+            lobe,
+            program_text,
+            created_at_ms,
+            ..
+        } => {
+            store
+                .table_version_exists(machine, lobe, *created_at_ms, program_text)
+                .await?
+        }
+        Pending::Event {
+            machine,
+            at_ms,
+            level,
+            kind,
+            message,
+        } => {
+            store
+                .event_exists(&NewEvent {
+                    machine: machine.clone(),
+                    at_ms: *at_ms,
+                    level: EventLevel::parse(level)?,
+                    kind: kind.clone(),
+                    message: message.clone(),
+                })
+                .await?
+        }
+        Pending::Learning {
+            machine,
+            lobe,
+            state_json,
+            saved_at_ms,
+        } => {
+            store
+                .learning_state_exists(machine, lobe, state_json, *saved_at_ms)
+                .await?
+        }
+    };
+    if present {
+        Ok(())
+    } else {
+        apply(store, record).await
     }
 }
 
@@ -299,5 +387,61 @@ mod tests {
         assert_eq!(j.pending(), [e.clone(), e.clone()]);
         j.append(std::slice::from_ref(&e)).unwrap();
         assert_eq!(Journal::open(dir.path()).unwrap().pending().len(), 3);
+    }
+
+    /// Every kind of record replayed after a crash (written, not yet released) is recognised
+    /// in the store and not written again; a second event that differs only in its message
+    /// still goes in.
+    #[tokio::test]
+    async fn a_replay_writes_nothing_twice() {
+        let dir = tempfile::tempdir().unwrap();
+        let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
+        let store = Store::connect(&url).await.unwrap();
+        let event = |message: &str| Pending::Event {
+            machine: "M1".into(),
+            at_ms: 7,
+            level: "info".into(),
+            kind: "wheel_dressed".into(),
+            message: message.into(),
+        };
+        let records = [
+            event("a"),
+            Pending::Table {
+                machine: "M1".into(),
+                lobe: "IN1".into(),
+                table_number: 1,
+                program_text: "CTABDEF(X,C,1,1)\nCTABEND\n".into(),
+                learning_params_json: "{}".into(),
+                reason: "nominal table".into(),
+                status: "pushed".into(),
+                status_why: "pushed to the share".into(),
+                created_at_ms: 7,
+            },
+            Pending::Learning {
+                machine: "M1".into(),
+                lobe: "IN1".into(),
+                state_json: "{}".into(),
+                saved_at_ms: 7,
+            },
+        ];
+        let mut j = Journal::open(dir.path()).unwrap();
+        j.append(&records).unwrap();
+        assert_eq!(j.flush(&store).await.unwrap(), 3);
+        // The crash: the journal is read back with every record still in it.
+        let mut j = Journal::open(dir.path()).unwrap();
+        j.append(&[event("b")]).unwrap();
+        assert_eq!(j.flush(&store).await.unwrap(), 4);
+        let Store::Sqlite(pool) = &store else {
+            panic!("a SQLite store")
+        };
+        for (table, rows) in [("events", 2), ("table_versions", 1), ("learning_states", 1)] {
+            let n: i64 = sqlx::query_scalar(&format!("SELECT COUNT(*) FROM {table}"))
+                .fetch_one(pool)
+                .await
+                .unwrap();
+            assert_eq!(n, rows, "{table}");
+        }
+        assert_eq!(j.release_durable(&store).await.unwrap(), 4);
+        assert!(Journal::open(dir.path()).unwrap().records().is_empty());
     }
 }

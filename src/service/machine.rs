@@ -24,9 +24,6 @@ use tracing::{error, info, warn};
 /// The database, once it can be reached (a background task connects and reconnects).
 pub type StoreHandle = Arc<tokio::sync::RwLock<Option<Store>>>;
 
-/// The loop's memory beside the journal, for restarts while the database is down.
-const MEMORY_FILE: &str = "memory.json";
-
 /// What a gauge adapter hands the machine.
 #[derive(Debug)]
 pub enum SourceEvent {
@@ -76,11 +73,20 @@ impl MachineLoop {
     ) -> anyhow::Result<Self> {
         let journal = Journal::open(&state_dir)?;
         let lobe = lobe_name(&setup);
-        // The local snapshot is written after every part, so it is the newest even when the
-        // database was down; the store's copy serves a fresh working folder.
-        let local = std::fs::read_to_string(state_dir.join(MEMORY_FILE))
-            .ok()
-            .and_then(|t| serde_json::from_str::<LoopMemory>(&t).ok());
+        // The journal holds every record the store may not have durably, so its newest
+        // learning state is the newest there is, even after parts made while the database was
+        // down; otherwise the store's copy is.
+        let local = journal.records().iter().rev().find_map(|r| match r {
+            Pending::Learning {
+                machine,
+                lobe: l,
+                state_json,
+                ..
+            } if *machine == name && *l == lobe => {
+                serde_json::from_str::<LoopMemory>(state_json).ok()
+            }
+            _ => None,
+        });
         let stored = match (&local, store.read().await.as_ref()) {
             (None, Some(s)) => s
                 .load_learning_state(&name, &lobe)
@@ -521,7 +527,8 @@ impl MachineLoop {
         Ok(format!("{reason} delivered as table {number} ({why})"))
     }
 
-    /// Retries what waits: a version for the share, records for the database.
+    /// Retries what waits: a version for the share, records for the database; and drops
+    /// from the journal what the database now holds durably.
     pub async fn retry(&mut self) {
         match self.share.deliver() {
             Ok(Some(p)) => {
@@ -537,6 +544,12 @@ impl MachineLoop {
             Err(e) => warn!(machine = %self.name, error = %e, "controller share still unavailable"),
         }
         self.flush_journal().await;
+        let store = self.store.read().await.clone();
+        if let Some(store) = store
+            && let Err(e) = self.journal.release_durable(&store).await
+        {
+            warn!(machine = %self.name, error = format!("{e:#}"), "database not confirmed durable: records stay in the journal");
+        }
     }
 
     /// Appends records to the journal (durable), then tries to write them to the store.
@@ -558,27 +571,9 @@ impl MachineLoop {
             .update(&self.name, |m| m.journal_pending = pending);
     }
 
-    /// Writes the loop's memory beside the journal (temporary file, flush, rename).
-    fn save_memory(&self) -> anyhow::Result<()> {
-        let dir = self
-            .share
-            .config()
-            .state_dir
-            .parent()
-            .unwrap_or(Path::new("."))
-            .to_path_buf();
-        let mut tmp = tempfile::Builder::new()
-            .prefix(".memory-")
-            .tempfile_in(&dir)?;
-        std::io::Write::write_all(&mut tmp, serde_json::to_string(&self.memory)?.as_bytes())?;
-        tmp.as_file().sync_all()?;
-        tmp.persist(dir.join(MEMORY_FILE))
-            .context("cannot save the loop's memory")?;
-        Ok(())
-    }
-
+    /// The loop's memory as a record; through the journal it is also what a restart resumes
+    /// from.
     fn learning_record(&self, at_ms: i64) -> anyhow::Result<Pending> {
-        self.save_memory()?;
         Ok(Pending::Learning {
             machine: self.name.clone(),
             lobe: lobe_name(&self.setup),

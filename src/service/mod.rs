@@ -19,7 +19,8 @@ use std::time::Duration;
 use tokio::sync::{mpsc, watch};
 use tracing::{error, info, warn};
 
-/// How often waiting tables and journal records are retried, and the database reconnected.
+/// How often waiting tables and journal records are retried, the database reconnected, and
+/// the journal released of what the database holds durably (a checkpoint on SQLite).
 const RETRY_EVERY: Duration = Duration::from_secs(2);
 
 /// Options of one run.

@@ -199,6 +199,25 @@ impl Store {
         })
     }
 
+    /// Whether this event (same machine, time, kind and message) is stored: how a journal
+    /// replayed after a crash recognises what it had already written.
+    pub async fn event_exists(&self, e: &NewEvent) -> Result<bool, StoreError> {
+        with_pool!(self, pool => {
+            let found: Option<i64> = sqlx::query_scalar(
+                "SELECT id FROM events WHERE machine = $1 AND at_ms = $2 AND kind = $3 \
+                 AND message = $4 LIMIT 1",
+            )
+            .bind(&e.machine)
+            .bind(e.at_ms)
+            .bind(&e.kind)
+            .bind(&e.message)
+            .fetch_optional(pool)
+            .await
+            .map_err(db_error("looking up an event"))?;
+            Ok(found.is_some())
+        })
+    }
+
     /// Events matching `filter`, newest first.
     pub async fn events(&self, filter: &EventFilter) -> Result<Vec<Event>, StoreError> {
         let limit = check_limit(filter.limit)?;
@@ -274,6 +293,31 @@ impl Store {
             .map_err(db_error(OP))?;
             tx.commit().await.map_err(db_error(OP))?;
             Ok(())
+        })
+    }
+
+    /// Whether this learning-state snapshot of (machine, lobe) is stored: how a journal
+    /// replayed after a crash recognises what it had already written.
+    pub async fn learning_state_exists(
+        &self,
+        machine: &str,
+        lobe: &str,
+        state_json: &str,
+        saved_at_ms: i64,
+    ) -> Result<bool, StoreError> {
+        with_pool!(self, pool => {
+            let found: Option<i64> = sqlx::query_scalar(
+                "SELECT id FROM learning_states WHERE machine = $1 AND lobe = $2 \
+                 AND saved_at_ms = $3 AND state_json = $4 LIMIT 1",
+            )
+            .bind(machine)
+            .bind(lobe)
+            .bind(saved_at_ms)
+            .bind(state_json)
+            .fetch_optional(pool)
+            .await
+            .map_err(db_error("looking up a learning state"))?;
+            Ok(found.is_some())
         })
     }
 

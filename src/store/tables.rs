@@ -149,6 +149,33 @@ impl Store {
         })
     }
 
+    /// Whether a table version of (machine, lobe) made at `created_at_ms` with exactly this
+    /// program is stored: how a journal replayed after a crash recognises what it had already
+    /// written.
+    pub async fn table_version_exists(
+        &self,
+        machine: &str,
+        lobe: &str,
+        created_at_ms: i64,
+        program_text: &str,
+    ) -> Result<bool, StoreError> {
+        let sha256 = sha256_hex(program_text.as_bytes());
+        with_pool!(self, pool => {
+            let found: Option<i64> = sqlx::query_scalar(
+                "SELECT id FROM table_versions WHERE machine = $1 AND lobe = $2 \
+                 AND created_at_ms = $3 AND sha256 = $4 LIMIT 1",
+            )
+            .bind(machine)
+            .bind(lobe)
+            .bind(created_at_ms)
+            .bind(&sha256)
+            .fetch_optional(pool)
+            .await
+            .map_err(db_error("looking up a table version"))?;
+            Ok(found.is_some())
+        })
+    }
+
     /// The highest-numbered table version of (machine, lobe), whatever its status.
     pub async fn latest_table_version(
         &self,
