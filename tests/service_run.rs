@@ -1,6 +1,7 @@
 //! The service end to end: simulated machine → CAN frames through the real decoder → loop →
 //! share → SQLite history → the HTTP API on a real listener (port 0). Also: a database that
-//! is down keeps every record in the journal and the service running; a restart resumes.
+//! is down keeps every record in the journal and the service running; a restart resumes; a
+//! wheel dressing reported through the API or a dropped file regenerates the table.
 
 use camloop::config::Config;
 use camloop::service::{self, RunOptions};
@@ -153,6 +154,52 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
     let (status, _) = get(addr, "/api/v1/machines/SIM1/lobes/IN1/tables/1/diff").await;
     assert_eq!(status, 404, "the first version has no parent");
 
+    let (status, body) = get(addr, "/metrics").await;
+    assert_eq!(status, 200);
+    assert!(
+        body.contains("camloop_parts_total{machine=\"SIM1\"} 5"),
+        "{body}"
+    );
+
+    // Errors carry a stable code, never SQL.
+    let (status, body) = get(addr, "/api/v1/measurements/999999").await;
+    assert_eq!(status, 404);
+    assert_eq!(json(&body)["code"], "measurement_not_found");
+    let (status, body) = get(addr, "/api/v1/machines/bad%20name/measurements").await;
+    assert_eq!(status, 400, "{body}");
+    let (status, body) = get(addr, "/api/v1/measurements/abc").await;
+    assert_eq!(
+        (status, json(&body)["code"].clone()),
+        (400, "invalid_path".into())
+    );
+    let (status, body) = get(addr, "/api/v1/machines/SIM1/events?limit=many").await;
+    assert_eq!(
+        (status, json(&body)["code"].clone()),
+        (400, "invalid_query".into())
+    );
+    running.stop().await;
+
+    // A restart resumes from the stored learning state: part 6 is not an uncompensated part
+    // (and is a new measurement, not a repeat of part 1 that the store would skip).
+    let mut running = service::start(config(dir.path(), &url), RunOptions { parts: Some(1) })
+        .await
+        .unwrap();
+    running.machines_done().await;
+    let (_, body) = get(
+        running.http_addr,
+        "/api/v1/machines/SIM1/measurements?limit=10",
+    )
+    .await;
+    assert_eq!(json(&body)["items"].as_array().unwrap().len(), 6, "{body}");
+    let newest = json(&body)["items"][0]["max_profile_error_um"]
+        .as_f64()
+        .unwrap();
+    assert!(
+        newest < first / 2.0,
+        "after restart {newest} vs uncompensated {first}"
+    );
+    let addr = running.http_addr;
+
     // Rollback to the nominal table (version 1): refused without the token, then delivered as
     // a new version whose program matches version 1 but for the table number.
     let path = "/api/v1/machines/SIM1/lobes/IN1/rollback";
@@ -185,38 +232,48 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
         "the rolled-back program is version 1's table"
     );
 
-    let (status, body) = get(addr, "/metrics").await;
-    assert_eq!(status, 200);
-    assert!(
-        body.contains("camloop_parts_total{machine=\"SIM1\"} 5"),
-        "{body}"
+    // A wheel dressing reported through the API: refused without the token or with an
+    // implausible radius, then recorded and the table regenerated for the new radius.
+    let path = "/api/v1/machines/SIM1/dressings";
+    assert_eq!(
+        post(addr, path, r#"{"wheel_radius_mm":249.95}"#, None)
+            .await
+            .0,
+        401
     );
-
-    // Errors carry a stable code, never SQL.
-    let (status, body) = get(addr, "/api/v1/measurements/999999").await;
-    assert_eq!(status, 404);
-    assert_eq!(json(&body)["code"], "measurement_not_found");
-    let (status, body) = get(addr, "/api/v1/machines/bad%20name/measurements").await;
+    let (status, body) = post(addr, path, r#"{"wheel_radius_mm":0.25}"#, Some(TOKEN)).await;
     assert_eq!(status, 400, "{body}");
-    running.stop().await;
-
-    // A restart resumes from the stored learning state: part 6 is not an uncompensated part.
-    let mut running = service::start(config(dir.path(), &url), RunOptions { parts: Some(1) })
-        .await
-        .unwrap();
-    running.machines_done().await;
-    let (_, body) = get(
-        running.http_addr,
-        "/api/v1/machines/SIM1/measurements?limit=1",
+    assert_eq!(json(&body)["code"], "invalid_wheel_radius");
+    let (status, body) = post(addr, path, r#"{"radius":249.95}"#, Some(TOKEN)).await;
+    assert!((400..500).contains(&status), "{status} {body}");
+    assert_eq!(json(&body)["code"], "invalid_body", "{body}");
+    let (status, body) = post(addr, path, r#"{"wheel_radius_mm":249.95}"#, Some(TOKEN)).await;
+    assert_eq!(status, 200, "{body}");
+    let (_, body) = get(addr, path).await;
+    let dressing = json(&body)["items"][0].clone();
+    assert_eq!(dressing["new_radius_mm"], 249.95, "{body}");
+    assert_eq!(dressing["old_radius_mm"], 250.0, "{body}");
+    assert_eq!(dressing["source"], "api");
+    let (_, body) = get(addr, "/api/v1/machines/SIM1/lobes/IN1/tables?limit=1").await;
+    let dressed = json(&body)["items"][0].clone();
+    assert_eq!(dressed["reason"], "wheel dressed to 249.95 mm", "{body}");
+    // Same correction as the rolled-back parent, wheel 50 µm smaller. Program X is
+    // d − R − Rb (0 on the base circle), so the new radius cancels where the wheel touches
+    // on the X line and X moves only where it touches off it, by 50 µm · (1/cos φ − 1) for a
+    // contact angle φ: with a 250 mm wheel on this 20 mm lobe φ stays a few degrees, so
+    // more than nothing and well under 1 µm.
+    let (status, body) = get(
+        addr,
+        &format!(
+            "/api/v1/machines/SIM1/lobes/IN1/tables/{}/diff",
+            dressed["version"]
+        ),
     )
     .await;
-    let newest = json(&body)["items"][0]["max_profile_error_um"]
-        .as_f64()
-        .unwrap();
-    assert!(
-        newest < first / 2.0,
-        "after restart {newest} vs uncompensated {first}"
-    );
+    assert_eq!(status, 200, "{body}");
+    let max = json(&body)["max_abs_delta_x_um"].as_f64().unwrap();
+    assert!(max > 0.01 && max < 1.0, "{max}");
+
     running.stop().await;
 }
 
@@ -437,5 +494,54 @@ async fn a_serial_gauge_feeds_the_loop_through_a_pseudo_terminal() {
     assert_eq!(history["items"].as_array().unwrap().len(), 1, "{body}");
     assert_eq!(history["items"][0]["part"], "77");
     drop(writer.await.unwrap());
+    running.stop().await;
+}
+
+/// A wheel dressing reported by a file dropped into the machine's drop folder: recorded with
+/// its source, the table regenerated for the new radius, the file moved to processed/.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dropped_dressing_report_regenerates_the_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = format!(
+        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://{}/db.sqlite?mode=rwc\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
+         [[machines]]\nname = \"DROP1\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/DROP1\"\n\
+         [machines.gauge]\nkind = \"drop\"\nfolder = \"inbox\"\npoll_ms = 20\n",
+        dir.path().display(),
+        root.join("config/parts/demo-camshaft.toml").display(),
+    );
+    let config = Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
+    let running = service::start(config, RunOptions { parts: None })
+        .await
+        .unwrap();
+    let inbox = dir.path().join("inbox");
+    std::fs::create_dir_all(&inbox).unwrap();
+    // Written under a temporary name and renamed, as the drop-folder rules ask.
+    std::fs::write(inbox.join(".dress.tmp"), "wheel_radius_mm = 249.9\n").unwrap();
+    std::fs::rename(inbox.join(".dress.tmp"), inbox.join("dress.dressing.toml")).unwrap();
+
+    // Poll the API (bounded) until the dressing and its table are in.
+    let mut dressings = serde_json::Value::Null;
+    let mut tables = 0;
+    for _ in 0..200 {
+        let (_, body) = get(running.http_addr, "/api/v1/machines/DROP1/dressings").await;
+        dressings = json(&body);
+        let (_, body) = get(running.http_addr, "/api/v1/machines/DROP1/lobes/IN1/tables").await;
+        tables = json(&body)["items"].as_array().map_or(0, Vec::len);
+        if tables == 2 {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    assert_eq!(tables, 2, "nominal + dressed table within 10 s");
+    let d = &dressings["items"][0];
+    assert_eq!(d["new_radius_mm"], 249.9, "{dressings}");
+    let processed = inbox.join("processed/dress.dressing.toml");
+    assert_eq!(
+        d["source"].as_str().unwrap(),
+        format!("drop file {}", processed.display())
+    );
+    assert!(processed.exists());
+    assert!(!inbox.join("dress.dressing.toml").exists());
     running.stop().await;
 }

@@ -18,6 +18,29 @@ pub enum Feature {
     Pin(CrankpinGeometry),
 }
 
+/// Wheel radii a dressing report may carry, mm: grinding wheels of X–C machines sit well
+/// inside this; a value outside is a typo or a wrong unit, refused before the geometry.
+pub const WHEEL_RADIUS_RANGE_MM: std::ops::RangeInclusive<f64> = 5.0..=1000.0;
+
+/// A dressing report whose wheel radius cannot be right.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error(
+    "wheel radius {0} mm is not a plausible dressed radius ({min}–{max} mm)",
+    min = WHEEL_RADIUS_RANGE_MM.start(),
+    max = WHEEL_RADIUS_RANGE_MM.end()
+)]
+pub struct WheelRadiusError(pub f64);
+
+/// Checks a dressed wheel radius from the control's feed, a dropped file or the API. Whether
+/// the part can be ground with it is the regenerated table's guards' call.
+pub fn check_wheel_radius(wheel_radius_mm: f64) -> Result<f64, WheelRadiusError> {
+    if WHEEL_RADIUS_RANGE_MM.contains(&wheel_radius_mm) {
+        Ok(wheel_radius_mm)
+    } else {
+        Err(WheelRadiusError(wheel_radius_mm))
+    }
+}
+
 impl Feature {
     pub fn wheel_radius_mm(&self) -> f64 {
         match self {

@@ -9,8 +9,9 @@
 //! - A file is taken when two consecutive polls see the same size and modification time
 //!   (so a renamed-in file is taken at the second poll that sees it, and a file written in
 //!   place once it has been still for a whole poll interval).
-//! - `.csv` and `.log` files are read by [`read_measurement_file`]; anything else is
-//!   rejected with that reason.
+//! - `.csv` and `.log` files are read by [`read_measurement_file`]; `.dressing.toml` files
+//!   are wheel-dressing reports ([`read_dressing_file`]); anything else is rejected with that
+//!   reason.
 //! - A name already present in `processed/` or `rejected/` gets a suffix `-1`, `-2`, …
 //!   before the extension.
 
@@ -30,12 +31,64 @@ pub const PROCESSED_DIR: &str = "processed";
 /// Subfolder for files that are not measurements.
 pub const REJECTED_DIR: &str = "rejected";
 
+/// Suffix of a wheel-dressing report (any case).
+pub const DRESSING_SUFFIX: &str = ".dressing.toml";
+
+/// Largest dressing report read, bytes (a report is one line).
+const MAX_DRESSING_BYTES: u64 = 64 * 1024;
+
+/// A wheel-dressing report, written by the control's dressing cycle (or whoever dresses)
+/// into the drop folder, one line:
+///
+/// ```toml
+/// wheel_radius_mm = 249.998
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DressingReport {
+    /// The wheel radius after dressing, as the control now believes it, mm.
+    pub wheel_radius_mm: f64,
+}
+
+/// Reads a dressing report; errors name the file and, for syntax, the line.
+pub fn read_dressing_file(path: &Path) -> Result<DressingReport, String> {
+    let shown = path.display();
+    let len = std::fs::metadata(path)
+        .map_err(|e| format!("cannot read dressing report {shown}: {e}"))?
+        .len();
+    if len > MAX_DRESSING_BYTES {
+        return Err(format!(
+            "dressing report {shown} is larger than the {MAX_DRESSING_BYTES} bytes allowed"
+        ));
+    }
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read dressing report {shown}: {e}"))?;
+    let report: DressingReport = toml::from_str(&text).map_err(|e| {
+        let line = e
+            .span()
+            .map(|s| format!(" line {}", text[..s.start].matches('\n').count() + 1))
+            .unwrap_or_default();
+        format!(
+            "dressing report {shown}{line}: {}",
+            e.message().trim_end_matches('\n')
+        )
+    })?;
+    crate::core::compensate::check_wheel_radius(report.wheel_radius_mm)
+        .map_err(|e| format!("dressing report {shown}: {e}"))?;
+    Ok(report)
+}
+
 /// What happened to one file (or the folder) at a poll.
 #[derive(Debug, Clone, PartialEq)]
 pub enum DropEvent {
     /// Parsed and moved; the measurement's origin is its new path.
     Accepted {
         measurement: RawMeasurement,
+        moved_to: PathBuf,
+    },
+    /// A wheel-dressing report, parsed and moved to `processed/`.
+    Dressing {
+        report: DressingReport,
         moved_to: PathBuf,
     },
     /// Not a measurement; moved with a reason file beside it.
@@ -157,9 +210,16 @@ impl DropFolder {
 
     fn take(&mut self, path: &Path, stamp: Stamp) -> Option<DropEvent> {
         let name = path.file_name()?.to_string_lossy().into_owned();
-        let (target_dir, outcome) = match read_measurement_file(path, &self.dbc) {
-            Ok(m) => (self.processed.clone(), Ok(m)),
-            Err(e) => (self.rejected.clone(), Err(e.to_string())),
+        let outcome = if name.to_ascii_lowercase().ends_with(DRESSING_SUFFIX) {
+            read_dressing_file(path).map(Taken::Dressing)
+        } else {
+            read_measurement_file(path, &self.dbc)
+                .map(|m| Taken::Measurement(Box::new(m)))
+                .map_err(|e| e.to_string())
+        };
+        let target_dir = match outcome {
+            Ok(_) => self.processed.clone(),
+            Err(_) => self.rejected.clone(),
         };
         let moved_to = free_name(&target_dir, &name);
         if let Err(e) = std::fs::rename(path, &moved_to) {
@@ -170,13 +230,14 @@ impl DropFolder {
             });
         }
         Some(match outcome {
-            Ok(mut measurement) => {
+            Ok(Taken::Measurement(mut measurement)) => {
                 measurement.origin = moved_to.display().to_string();
                 DropEvent::Accepted {
-                    measurement,
+                    measurement: *measurement,
                     moved_to,
                 }
             }
+            Ok(Taken::Dressing(report)) => DropEvent::Dressing { report, moved_to },
             Err(reason) => {
                 let reason_file = reason_path(&moved_to);
                 if let Err(e) = std::fs::write(&reason_file, format!("{reason}\n")) {
@@ -193,6 +254,12 @@ impl DropFolder {
             }
         })
     }
+}
+
+/// What a taken file turned out to be.
+enum Taken {
+    Measurement(Box<RawMeasurement>),
+    Dressing(DressingReport),
 }
 
 /// Names of files still being written (see the module rules).
@@ -275,6 +342,59 @@ mod tests {
         for name in ["M3_P1_L1.csv", "a.log", "tmp.csv", "notes.txt"] {
             assert!(!in_progress(name), "{name}");
         }
+    }
+
+    /// A dressing report goes to processed/ with its radius; a bad one to rejected/ with a
+    /// reason naming the file and, for syntax, the line.
+    #[test]
+    fn dressing_reports_are_read_or_rejected_with_the_line() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let inbox = dir.path();
+        let mut folder = DropFolder::open(inbox, GaugeDbc::builtin()).expect("open");
+        std::fs::write(
+            inbox.join("d1.dressing.toml"),
+            "wheel_radius_mm = 249.998\n",
+        )
+        .expect("write");
+        std::fs::write(
+            inbox.join("d2.DRESSING.TOML"),
+            "# after dressing\nwheel_radius_mm = 249,99\n",
+        )
+        .expect("write");
+        std::fs::write(inbox.join("d3.dressing.toml"), "wheel_radius_mm = 0.25\n").expect("write");
+        std::fs::write(inbox.join("d4.dressing.toml"), "radius = 249.9\n").expect("write");
+        assert!(
+            folder.poll().is_empty(),
+            "files are taken at the second poll"
+        );
+        let events = folder.poll();
+        assert_eq!(events.len(), 4, "{events:?}");
+        match &events[0] {
+            DropEvent::Dressing { report, moved_to } => {
+                assert_eq!(report.wheel_radius_mm, 249.998);
+                assert_eq!(moved_to, &inbox.join("processed/d1.dressing.toml"));
+            }
+            other => panic!("{other:?}"),
+        }
+        let reasons: Vec<&str> = events[1..]
+            .iter()
+            .map(|e| match e {
+                DropEvent::Rejected { reason, .. } => reason.as_str(),
+                other => panic!("{other:?}"),
+            })
+            .collect();
+        assert!(
+            reasons[0].contains("d2.DRESSING.TOML line 2"),
+            "{}",
+            reasons[0]
+        );
+        assert!(
+            reasons[1].contains("0.25 mm is not a plausible"),
+            "{}",
+            reasons[1]
+        );
+        assert!(reasons[2].contains("radius"), "{}", reasons[2]);
+        assert!(inbox.join("rejected/d3.dressing.toml.reason.txt").exists());
     }
 
     #[test]

@@ -30,6 +30,11 @@ pub enum Command {
         version: i64,
         reply: tokio::sync::oneshot::Sender<Result<String, String>>,
     },
+    /// The wheel was dressed to this radius: regenerate the table.
+    Dressing {
+        wheel_radius_mm: f64,
+        reply: tokio::sync::oneshot::Sender<Result<String, String>>,
+    },
 }
 
 pub fn router(state: AppState) -> Router {
@@ -56,8 +61,64 @@ pub fn router(state: AppState) -> Router {
             "/api/v1/machines/{machine}/lobes/{lobe}/rollback",
             axum::routing::post(rollback),
         )
+        .route(
+            "/api/v1/machines/{machine}/dressings",
+            get(dressings).post(dress),
+        )
         .route("/api/v1/measurements/{id}", get(measurement))
         .with_state(state)
+}
+
+/// axum's JSON body extractor, its rejections as the API's `{code, message}` errors.
+pub struct ApiJson<T>(pub T);
+
+impl<S: Send + Sync, T: serde::de::DeserializeOwned> axum::extract::FromRequest<S> for ApiJson<T> {
+    type Rejection = ApiError;
+
+    async fn from_request(req: axum::extract::Request, state: &S) -> Result<Self, ApiError> {
+        Json::<T>::from_request(req, state)
+            .await
+            .map(|Json(v)| ApiJson(v))
+            .map_err(|r| ApiError(r.status(), "invalid_body", r.body_text()))
+    }
+}
+
+/// axum's query extractor, its rejections as the API's `{code, message}` errors.
+pub struct ApiQuery<T>(pub T);
+
+impl<S: Send + Sync, T: serde::de::DeserializeOwned> axum::extract::FromRequestParts<S>
+    for ApiQuery<T>
+{
+    type Rejection = ApiError;
+
+    async fn from_request_parts(
+        parts: &mut axum::http::request::Parts,
+        state: &S,
+    ) -> Result<Self, ApiError> {
+        Query::<T>::from_request_parts(parts, state)
+            .await
+            .map(|Query(v)| ApiQuery(v))
+            .map_err(|r| ApiError(r.status(), "invalid_query", r.body_text()))
+    }
+}
+
+/// axum's path extractor, its rejections as the API's `{code, message}` errors.
+pub struct ApiPath<T>(pub T);
+
+impl<S: Send + Sync, T: serde::de::DeserializeOwned + Send> axum::extract::FromRequestParts<S>
+    for ApiPath<T>
+{
+    type Rejection = ApiError;
+
+    async fn from_request_parts(
+        parts: &mut axum::http::request::Parts,
+        state: &S,
+    ) -> Result<Self, ApiError> {
+        Path::<T>::from_request_parts(parts, state)
+            .await
+            .map(|Path(v)| ApiPath(v))
+            .map_err(|r| ApiError(r.status(), "invalid_path", r.body_text()))
+    }
 }
 
 /// An API error: HTTP status, stable code, message.
@@ -153,8 +214,8 @@ pub struct HistoryQuery {
 
 async fn history(
     State(state): State<AppState>,
-    Path(machine): Path<String>,
-    Query(q): Query<HistoryQuery>,
+    ApiPath(machine): ApiPath<String>,
+    ApiQuery(q): ApiQuery<HistoryQuery>,
 ) -> Result<Json<Value>, ApiError> {
     check_name("machine", &machine)?;
     if let Some(l) = &q.lobe {
@@ -203,7 +264,7 @@ async fn history(
 
 async fn measurement(
     State(state): State<AppState>,
-    Path(id): Path<i64>,
+    ApiPath(id): ApiPath<i64>,
 ) -> Result<Json<Value>, ApiError> {
     let detail = store(&state)
         .await?
@@ -234,8 +295,8 @@ pub struct LimitQuery {
 
 async fn tables(
     State(state): State<AppState>,
-    Path((machine, lobe)): Path<(String, String)>,
-    Query(q): Query<LimitQuery>,
+    ApiPath((machine, lobe)): ApiPath<(String, String)>,
+    ApiQuery(q): ApiQuery<LimitQuery>,
 ) -> Result<Json<Value>, ApiError> {
     check_name("machine", &machine)?;
     check_name("lobe", &lobe)?;
@@ -258,7 +319,7 @@ async fn tables(
 
 async fn program(
     State(state): State<AppState>,
-    Path((machine, lobe, version)): Path<(String, String, i64)>,
+    ApiPath((machine, lobe, version)): ApiPath<(String, String, i64)>,
 ) -> Result<Response, ApiError> {
     check_name("machine", &machine)?;
     check_name("lobe", &lobe)?;
@@ -282,7 +343,7 @@ async fn program(
 /// point of the newer table, newer minus older, µm.
 async fn diff(
     State(state): State<AppState>,
-    Path((machine, lobe, version)): Path<(String, String, i64)>,
+    ApiPath((machine, lobe, version)): ApiPath<(String, String, i64)>,
 ) -> Result<Json<Value>, ApiError> {
     check_name("machine", &machine)?;
     check_name("lobe", &lobe)?;
@@ -388,9 +449,9 @@ pub struct RollbackBody {
 /// Deliver a stored table version again (as a new version, under the table number not in use).
 async fn rollback(
     State(state): State<AppState>,
-    Path((machine, lobe)): Path<(String, String)>,
+    ApiPath((machine, lobe)): ApiPath<(String, String)>,
     headers: axum::http::HeaderMap,
-    Json(body): Json<RollbackBody>,
+    ApiJson(body): ApiJson<RollbackBody>,
 ) -> Result<Json<Value>, ApiError> {
     authorize(&state, &headers)?;
     check_name("machine", &machine)?;
@@ -402,40 +463,95 @@ async fn rollback(
             "version must be ≥ 1".into(),
         ));
     }
-    let sender = state.commands.get(&machine).ok_or(ApiError(
+    let message = command(&state, &machine, |reply| Command::Rollback {
+        version: body.version,
+        reply,
+    })
+    .await?;
+    message
+        .map(|message| Json(json!({ "status": "ok", "message": message })))
+        .map_err(|message| ApiError(StatusCode::CONFLICT, "rollback_refused", message))
+}
+
+/// Hands a write request to the machine's loop and waits for its answer.
+async fn command(
+    state: &AppState,
+    machine: &str,
+    make: impl FnOnce(tokio::sync::oneshot::Sender<Result<String, String>>) -> Command,
+) -> Result<Result<String, String>, ApiError> {
+    let stopped = |what: &str| {
+        ApiError(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "machine_stopped",
+            format!("machine {machine} {what}"),
+        )
+    };
+    let sender = state.commands.get(machine).ok_or(ApiError(
         StatusCode::NOT_FOUND,
         "machine_not_found",
         format!("machine {machine} is not configured"),
     ))?;
     let (reply, answer) = tokio::sync::oneshot::channel();
     sender
-        .send(Command::Rollback {
-            version: body.version,
-            reply,
-        })
+        .send(make(reply))
         .await
-        .map_err(|_| {
+        .map_err(|_| stopped("is not running"))?;
+    answer.await.map_err(|_| stopped("stopped"))
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DressingBody {
+    wheel_radius_mm: f64,
+}
+
+/// A wheel dressing reported by the operator or a cell controller: the table is regenerated
+/// for the new radius.
+async fn dress(
+    State(state): State<AppState>,
+    ApiPath(machine): ApiPath<String>,
+    headers: axum::http::HeaderMap,
+    ApiJson(body): ApiJson<DressingBody>,
+) -> Result<Json<Value>, ApiError> {
+    authorize(&state, &headers)?;
+    check_name("machine", &machine)?;
+    let radius =
+        crate::core::compensate::check_wheel_radius(body.wheel_radius_mm).map_err(|e| {
             ApiError(
-                StatusCode::SERVICE_UNAVAILABLE,
-                "machine_stopped",
-                format!("machine {machine} is not running"),
+                StatusCode::BAD_REQUEST,
+                "invalid_wheel_radius",
+                e.to_string(),
             )
         })?;
-    match answer.await {
-        Ok(Ok(message)) => Ok(Json(json!({ "status": "ok", "message": message }))),
-        Ok(Err(message)) => Err(ApiError(StatusCode::CONFLICT, "rollback_refused", message)),
-        Err(_) => Err(ApiError(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "machine_stopped",
-            format!("machine {machine} stopped"),
-        )),
-    }
+    let message = command(&state, &machine, |reply| Command::Dressing {
+        wheel_radius_mm: radius,
+        reply,
+    })
+    .await?;
+    message
+        .map(|message| Json(json!({ "status": "ok", "message": message })))
+        .map_err(|message| ApiError(StatusCode::CONFLICT, "dressing_refused", message))
+}
+
+async fn dressings(
+    State(state): State<AppState>,
+    ApiPath(machine): ApiPath<String>,
+    ApiQuery(q): ApiQuery<LimitQuery>,
+) -> Result<Json<Value>, ApiError> {
+    check_name("machine", &machine)?;
+    let limit = q.limit.unwrap_or(100);
+    let dressings = store(&state).await?.dressings(&machine, limit).await?;
+    let items: Vec<Value> = dressings
+        .iter()
+        .map(|d| json!({ "at_ms": d.at_ms, "old_radius_mm": d.old_radius_mm, "new_radius_mm": d.new_radius_mm, "source": d.source }))
+        .collect();
+    Ok(Json(json!({ "items": items })))
 }
 
 async fn events(
     State(state): State<AppState>,
-    Path(machine): Path<String>,
-    Query(q): Query<LimitQuery>,
+    ApiPath(machine): ApiPath<String>,
+    ApiQuery(q): ApiQuery<LimitQuery>,
 ) -> Result<Json<Value>, ApiError> {
     check_name("machine", &machine)?;
     let filter = EventFilter {
@@ -466,6 +582,10 @@ async fn openapi() -> Json<Value> {
             "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program": get("program text of a table version"),
             "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/diff": get("X difference to the parent version at every table point, µm"),
             "/api/v1/measurements/{id}": get("one measurement with its averaged profile and analysis"),
+            "/api/v1/machines/{machine}/dressings": {
+                "get": get("wheel dressings, newest first")["get"],
+                "post": { "summary": "report a wheel dressing; body {\"wheel_radius_mm\": R}; regenerates the table for the new radius; needs Authorization: Bearer <CAMLOOP_API_TOKEN>", "responses": { "200": { "description": "recorded, table regenerated" }, "400": { "description": "implausible radius" }, "401": { "description": "unauthorized" }, "403": { "description": "writes disabled" }, "409": { "description": "refused" } } }
+            },
             "/api/v1/machines/{machine}/lobes/{lobe}/rollback": { "post": { "summary": "deliver a stored version again; body {\"version\": N}; needs Authorization: Bearer <CAMLOOP_API_TOKEN>", "responses": { "200": { "description": "delivered" }, "401": { "description": "unauthorized" }, "403": { "description": "writes disabled" }, "409": { "description": "refused" } } } },
         }
     }))

@@ -5,7 +5,8 @@
 //! they are checked before being written again, so a replay never duplicates history.
 
 use crate::store::{
-    EventLevel, NewEvent, NewMeasurement, NewTableVersion, Store, StoreError, TableStatus, Verdict,
+    EventLevel, NewDressing, NewEvent, NewMeasurement, NewTableVersion, Store, StoreError,
+    TableStatus, Verdict,
 };
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
@@ -59,6 +60,36 @@ pub enum Pending {
         state_json: String,
         saved_at_ms: i64,
     },
+    Dressing {
+        machine: String,
+        at_ms: i64,
+        old_radius_mm: f64,
+        new_radius_mm: f64,
+        /// Who reported it: "sim", "drop file <path>", "api".
+        source: String,
+    },
+}
+
+impl Pending {
+    /// The dressing to store, for a [`Pending::Dressing`].
+    fn dressing(&self) -> Option<NewDressing> {
+        match self {
+            Pending::Dressing {
+                machine,
+                at_ms,
+                old_radius_mm,
+                new_radius_mm,
+                source,
+            } => Some(NewDressing {
+                machine: machine.clone(),
+                at_ms: *at_ms,
+                old_radius_mm: *old_radius_mm,
+                new_radius_mm: *new_radius_mm,
+                source: source.clone(),
+            }),
+            _ => None,
+        }
+    }
 }
 
 /// The journal of one machine: `<dir>/journal.jsonl`, mirrored in memory so a part's flush
@@ -252,6 +283,10 @@ async fn apply_once(store: &Store, record: &Pending) -> Result<(), StoreError> {
                 .learning_state_exists(machine, lobe, state_json, *saved_at_ms)
                 .await?
         }
+        Pending::Dressing { .. } => match record.dressing() {
+            Some(d) => store.dressing_exists(&d).await?,
+            None => false,
+        },
     };
     if present {
         Ok(())
@@ -358,6 +393,10 @@ async fn apply(store: &Store, record: &Pending) -> Result<(), StoreError> {
                 .save_learning_state(&machine, &lobe, &state_json, saved_at_ms)
                 .await
         }
+        Pending::Dressing { .. } => match record.dressing() {
+            Some(d) => store.insert_dressing(&d).await.map(|_| ()),
+            None => Ok(()),
+        },
     }
 }
 
@@ -423,25 +462,37 @@ mod tests {
                 state_json: "{}".into(),
                 saved_at_ms: 7,
             },
+            Pending::Dressing {
+                machine: "M1".into(),
+                at_ms: 7,
+                old_radius_mm: 250.0,
+                new_radius_mm: 249.998,
+                source: "api".into(),
+            },
         ];
         let mut j = Journal::open(dir.path()).unwrap();
         j.append(&records).unwrap();
-        assert_eq!(j.flush(&store).await.unwrap(), 3);
+        assert_eq!(j.flush(&store).await.unwrap(), 4);
         // The crash: the journal is read back with every record still in it.
         let mut j = Journal::open(dir.path()).unwrap();
         j.append(&[event("b")]).unwrap();
-        assert_eq!(j.flush(&store).await.unwrap(), 4);
+        assert_eq!(j.flush(&store).await.unwrap(), 5);
         let Store::Sqlite(pool) = &store else {
             panic!("a SQLite store")
         };
-        for (table, rows) in [("events", 2), ("table_versions", 1), ("learning_states", 1)] {
+        for (table, rows) in [
+            ("events", 2),
+            ("table_versions", 1),
+            ("learning_states", 1),
+            ("dressings", 1),
+        ] {
             let n: i64 = sqlx::query_scalar(&format!("SELECT COUNT(*) FROM {table}"))
                 .fetch_one(pool)
                 .await
                 .unwrap();
             assert_eq!(n, rows, "{table}");
         }
-        assert_eq!(j.release_durable(&store).await.unwrap(), 4);
+        assert_eq!(j.release_durable(&store).await.unwrap(), 5);
         assert!(Journal::open(dir.path()).unwrap().records().is_empty());
     }
 }

@@ -181,7 +181,7 @@ impl MachineLoop {
             SourceEvent::Dressing {
                 wheel_radius_mm,
                 source,
-            } => self.on_dressing(wheel_radius_mm, &source).await,
+            } => self.dress(wheel_radius_mm, &source).await.map(|_| ()),
         };
         if let Err(e) = result {
             error!(machine = %self.name, error = format!("{e:#}"), "part not processed");
@@ -328,36 +328,67 @@ impl MachineLoop {
         Ok(())
     }
 
-    async fn on_dressing(&mut self, wheel_radius_mm: f64, source: &str) -> anyhow::Result<()> {
+    /// A wheel dressing, from the gauge/controller feed, a dropped report or the API: the
+    /// dressing is recorded and the table regenerated from the same correction for the new
+    /// radius (the learned size is dropped). Returns what happened, for the API's answer; a
+    /// radius outside [`compensate::WHEEL_RADIUS_RANGE_MM`] changes nothing.
+    pub async fn dress(&mut self, wheel_radius_mm: f64, source: &str) -> anyhow::Result<String> {
+        let wheel_radius_mm = compensate::check_wheel_radius(wheel_radius_mm)?;
         let at_ms = now_ms();
         let old = self.memory.wheel_radius_mm;
         info!(machine = %self.name, old_radius_mm = old, new_radius_mm = wheel_radius_mm, source, "wheel dressed: table regenerated for the new radius");
         self.memory.wheel_radius_mm = wheel_radius_mm;
         self.setup.feature = self.setup.feature.with_wheel_radius(wheel_radius_mm);
         learn::after_dressing(&mut self.memory.learning);
-        let mut records = vec![event(
-            &self.name,
-            at_ms,
-            "info",
-            "wheel_dressed",
-            format!("wheel radius {old} → {wheel_radius_mm} mm ({source})"),
-        )];
-        match compensate::current_table(&self.memory.learning, &self.lobe_loop()) {
-            Ok(table) => {
-                let reason = format!("wheel dressed to {wheel_radius_mm} mm");
-                let (_, _, _, mut more) = self.deliver_records(&table, &reason, None).await?;
-                records.append(&mut more);
-            }
-            Err(e) => records.push(event(
+        let mut records = vec![
+            Pending::Dressing {
+                machine: self.name.clone(),
+                at_ms,
+                old_radius_mm: old,
+                new_radius_mm: wheel_radius_mm,
+                source: source.to_string(),
+            },
+            event(
                 &self.name,
                 at_ms,
-                "error",
-                "table_refused",
-                e.to_string(),
-            )),
-        }
+                "info",
+                "wheel_dressed",
+                format!("wheel radius {old} → {wheel_radius_mm} mm ({source})"),
+            ),
+        ];
+        let outcome = match compensate::current_table(&self.memory.learning, &self.lobe_loop()) {
+            Ok(table) => {
+                let reason = format!("wheel dressed to {wheel_radius_mm} mm");
+                let (version, number, pushed, mut more) =
+                    self.deliver_records(&table, &reason, None).await?;
+                records.append(&mut more);
+                format!(
+                    "wheel radius {old} → {wheel_radius_mm} mm: table v{version} (T{number}) {}",
+                    if pushed {
+                        "pushed"
+                    } else {
+                        "waiting for the share"
+                    }
+                )
+            }
+            Err(e) => {
+                error!(machine = %self.name, reason = %e, "no table for the dressed wheel: previous table stays in force");
+                self.metrics.update(&self.name, |m| m.alarms_total += 1);
+                records.push(event(
+                    &self.name,
+                    at_ms,
+                    "error",
+                    "table_refused",
+                    e.to_string(),
+                ));
+                format!(
+                    "wheel radius {old} → {wheel_radius_mm} mm recorded; table refused, previous kept: {e}"
+                )
+            }
+        };
         records.push(self.learning_record(at_ms)?);
-        self.record(records).await
+        self.record(records).await?;
+        Ok(outcome)
     }
 
     async fn deliver(

@@ -237,6 +237,10 @@ async fn machine_task(
                     let result = machine.rollback(version).await.map_err(|e| format!("{e:#}"));
                     let _ = reply.send(result);
                 }
+                http::Command::Dressing { wheel_radius_mm, reply } => {
+                    let result = machine.dress(wheel_radius_mm, "api").await.map_err(|e| format!("{e:#}"));
+                    let _ = reply.send(result);
+                }
             },
             _ = retry.tick() => machine.retry().await,
             _ = shutdown.changed() => break,
@@ -331,6 +335,15 @@ async fn drop_source(
                         .await
                         .is_err()
                     {
+                        return;
+                    }
+                }
+                crate::gauge::DropEvent::Dressing { report, moved_to } => {
+                    let event = SourceEvent::Dressing {
+                        wheel_radius_mm: report.wheel_radius_mm,
+                        source: format!("drop file {}", moved_to.display()),
+                    };
+                    if tx.send(event).await.is_err() {
                         return;
                     }
                 }

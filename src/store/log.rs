@@ -142,6 +142,24 @@ impl Store {
         })
     }
 
+    /// Whether this dressing (same machine, time and new radius) is stored: how a journal
+    /// replayed after a crash recognises what it had already written.
+    pub async fn dressing_exists(&self, d: &NewDressing) -> Result<bool, StoreError> {
+        with_pool!(self, pool => {
+            let found: Option<i64> = sqlx::query_scalar(
+                "SELECT id FROM dressings WHERE machine = $1 AND at_ms = $2 \
+                 AND new_radius_mm = $3 LIMIT 1",
+            )
+            .bind(&d.machine)
+            .bind(d.at_ms)
+            .bind(d.new_radius_mm)
+            .fetch_optional(pool)
+            .await
+            .map_err(db_error("looking up a dressing"))?;
+            Ok(found.is_some())
+        })
+    }
+
     /// The newest `limit` dressings of a machine, newest first.
     pub async fn dressings(&self, machine: &str, limit: u32) -> Result<Vec<Dressing>, StoreError> {
         let limit = check_limit(limit)?;
