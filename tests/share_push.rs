@@ -5,7 +5,7 @@ mod share_support;
 
 use camloop::share::{
     MANIFEST_FILE, ProgramFile, PushError, PushRequest, StateError, Submitted, VERSIONS_DIR,
-    VersionStatus,
+    VersionStatus, load_manifest,
 };
 use sha2::{Digest, Sha256};
 use share_support::{dirs, names, next_request, open, table_program};
@@ -284,8 +284,25 @@ fn only_the_newest_kept_versions_keep_their_text() {
         share.rollback_request(2, 0),
         Err(StateError::NoText(2))
     ));
-    // The records stay: four versions, all pushed.
-    assert_eq!(share.history().versions().len(), 4);
+    // The records stay in the manifest: four versions, all pushed. In memory the share
+    // holds only the two with kept text; the pruned ones are settled and forgotten.
+    assert_eq!(share.history().next_version(), 5);
+    let held: Vec<u64> = share
+        .history()
+        .versions()
+        .iter()
+        .map(|v| v.record.version)
+        .collect();
+    assert_eq!(held, [3, 4]);
+    assert!(share.history().is_forgotten(1) && share.history().is_forgotten(2));
+    assert_eq!(
+        load_manifest(&d.state.join(MANIFEST_FILE))
+            .unwrap()
+            .history
+            .versions()
+            .len(),
+        4
+    );
     let kinds: Vec<serde_json::Value> = manifest_lines(&d.state)
         .into_iter()
         .filter(|l| l["record"] == "pruned")

@@ -433,7 +433,7 @@ impl MachineLoop {
             table_number: settings.table_number,
             reason: reason.to_string(),
             measurement_id: measurement,
-            learning: serde_json::from_str(&learning_json)?,
+            learning: manifest_learning(&learning_json),
             rollback_of: None,
             created_at_unix_ms: at_ms as u64,
         };
@@ -523,8 +523,7 @@ impl MachineLoop {
             table_number: number,
             reason: reason.clone(),
             measurement_id: None,
-            learning: serde_json::from_str(&old.learning_params_json)
-                .unwrap_or(serde_json::Value::Null),
+            learning: manifest_learning(&old.learning_params_json),
             rollback_of: None,
             created_at_unix_ms: now_ms_u64(),
         };
@@ -664,6 +663,18 @@ fn renumber_table(text: &str, from: u32, to: u32) -> Option<String> {
         })
         .collect();
     found.then(|| lines.join("\n") + "\n")
+}
+
+/// What the share's manifest keeps of a version's learning: everything but the correction
+/// itself (360+ numbers per version; the history store keeps it, and rollback takes it
+/// from there), so the manifest and the share's memory stay small.
+fn manifest_learning(learning_json: &str) -> serde_json::Value {
+    let mut value: serde_json::Value =
+        serde_json::from_str(learning_json).unwrap_or(serde_json::Value::Null);
+    if let Some(map) = value.as_object_mut() {
+        map.remove("correction_um");
+    }
+    value
 }
 
 fn lobe_name(setup: &FeatureSetup) -> String {

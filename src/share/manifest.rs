@@ -104,15 +104,21 @@ impl VersionState {
     }
 }
 
-/// Every version, in order, as the manifest tells.
+/// The versions the manifest tells of, in order. Folded as read by [`load`], it holds
+/// every version; [`History::forget_settled`] drops the versions nothing can need any more,
+/// so a long-running service's memory stays bounded while the manifest keeps every record.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct History {
+    /// Ascending by version; without gaps until versions are forgotten.
     versions: Vec<VersionState>,
-    /// Index of the one deliverable version, if any (accepting a version supersedes the
-    /// previous deliverable one, so there is never more than one).
-    deliverable: Option<usize>,
+    /// Versions told of so far (the highest version number).
+    told: u64,
+    /// The one deliverable version, if any (accepting a version supersedes the previous
+    /// deliverable one, so there is never more than one).
+    deliverable: Option<u64>,
+    /// Versions dropped by [`History::forget_settled`].
+    forgotten: u64,
 }
-
 /// A manifest read from disk.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Loaded {
@@ -126,31 +132,68 @@ pub struct Loaded {
 }
 
 impl History {
-    /// All versions, version 1 first.
+    /// The versions held, oldest first: all of them as loaded, the relevant ones after
+    /// [`History::forget_settled`].
     pub fn versions(&self) -> &[VersionState] {
         &self.versions
     }
 
-    /// One version, if it exists.
+    /// One version, if it is held.
     pub fn get(&self, version: u64) -> Option<&VersionState> {
-        let index = usize::try_from(version.checked_sub(1)?).ok()?;
-        self.versions.get(index)
+        let i = self.index(version)?;
+        self.versions.get(i)
     }
 
     fn get_mut(&mut self, version: u64) -> Option<&mut VersionState> {
-        let index = usize::try_from(version.checked_sub(1)?).ok()?;
-        self.versions.get_mut(index)
+        let i = self.index(version)?;
+        self.versions.get_mut(i)
+    }
+
+    fn index(&self, version: u64) -> Option<usize> {
+        self.versions
+            .binary_search_by_key(&version, |v| v.record.version)
+            .ok()
+    }
+
+    /// Whether `version` was told of but is no longer held (settled, no kept text).
+    pub fn is_forgotten(&self, version: u64) -> bool {
+        version >= 1 && version <= self.told && self.get(version).is_none()
     }
 
     /// The number the next version gets.
     pub fn next_version(&self) -> u64 {
-        self.versions.len() as u64 + 1
+        self.told + 1
+    }
+
+    /// How many versions were dropped from memory so far.
+    pub fn forgotten_count(&self) -> u64 {
+        self.forgotten
     }
 
     /// The newest version still to be delivered (at most one: accepting a version supersedes
     /// every older waiting one).
     pub fn waiting(&self) -> Option<&VersionState> {
-        self.deliverable.and_then(|i| self.versions.get(i))
+        self.deliverable.and_then(|v| self.get(v))
+    }
+
+    /// Drops the versions nothing can need: no kept text, not deliverable, and neither the
+    /// newest version that reached the share nor the newest pushed one (table numbers and
+    /// the share's contents are judged by those). Their records stay in the manifest.
+    pub fn forget_settled(&mut self) {
+        let newest_reached = self
+            .versions
+            .iter()
+            .rposition(|v| v.reached_share)
+            .map(|i| self.versions[i].record.version);
+        let newest_pushed = self.last_pushed().map(|v| v.record.version);
+        let before = self.versions.len();
+        self.versions.retain(|v| {
+            v.text_kept
+                || v.is_deliverable()
+                || Some(v.record.version) == newest_reached
+                || Some(v.record.version) == newest_pushed
+        });
+        self.forgotten += (before - self.versions.len()) as u64;
     }
 
     /// The newest version whose files may be on the share (and so whose table the control
@@ -175,7 +218,7 @@ impl History {
                     return Err(format!(
                         "version v{} follows v{}, expected v{}",
                         rec.version,
-                        self.versions.len(),
+                        self.told,
                         self.next_version()
                     ));
                 }
@@ -184,15 +227,15 @@ impl History {
                         reason: reason.clone(),
                     },
                     None => {
-                        if let Some(older) = self.deliverable.and_then(|i| self.versions.get_mut(i))
-                        {
+                        if let Some(older) = self.deliverable.and_then(|v| self.get_mut(v)) {
                             older.status = VersionStatus::Superseded { by: rec.version };
                         }
-                        self.deliverable = Some(self.versions.len());
+                        self.deliverable = Some(rec.version);
                         VersionStatus::Waiting { reason: None }
                     }
                 };
                 let text_kept = rec.refused.is_none();
+                self.told = rec.version;
                 self.versions.push(VersionState {
                     record: rec,
                     status,
@@ -248,8 +291,19 @@ impl History {
     }
 }
 
-/// Read and fold a manifest without changing it. A missing file is an empty history.
+/// Read and fold a manifest without changing it, holding every version. A missing file is
+/// an empty history.
 pub fn load(path: &Path) -> Result<Loaded, StateError> {
+    fold_file(path, false)
+}
+
+/// [`load`], forgetting settled versions as it goes ([`History::forget_settled`]), so a
+/// long manifest never sits whole in memory.
+pub fn load_settled(path: &Path) -> Result<Loaded, StateError> {
+    fold_file(path, true)
+}
+
+fn fold_file(path: &Path, forget: bool) -> Result<Loaded, StateError> {
     let bytes = match std::fs::read(path) {
         Ok(b) => b,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
@@ -268,7 +322,11 @@ pub fn load(path: &Path) -> Result<Loaded, StateError> {
             reason,
         };
         let record: Record = serde_json::from_slice(line).map_err(|e| corrupt(e.to_string()))?;
+        let is_version = matches!(record, Record::Version(_));
         history.apply(record).map_err(corrupt)?;
+        if forget && is_version {
+            history.forget_settled();
+        }
     }
     Ok(Loaded {
         history,
@@ -314,6 +372,65 @@ mod tests {
             h.apply(r)?;
         }
         Ok(h)
+    }
+
+    /// While the share is down, the last pushed version is what the control runs: it stays
+    /// held (table numbers are judged by it) though its text was pruned; the superseded
+    /// versions after it are forgotten. Once a newer one is pushed, the old one goes too.
+    #[test]
+    fn settled_versions_are_forgotten_but_not_the_one_on_the_share() {
+        let at = |version| Record::Pruned {
+            version,
+            at_unix_ms: 0,
+        };
+        let mut h = fold(vec![
+            version(1, None),
+            Record::Delivering {
+                version: 1,
+                at_unix_ms: 1,
+            },
+            Record::Pushed {
+                version: 1,
+                at_unix_ms: 2,
+            },
+            version(2, None),
+            version(3, Some("guard")),
+            version(4, None),
+            version(5, None),
+            at(1),
+            at(2),
+            at(4),
+        ])
+        .unwrap();
+        h.forget_settled();
+        let held = |h: &History| {
+            h.versions()
+                .iter()
+                .map(|v| v.record.version)
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(held(&h), [1, 5]);
+        assert_eq!(h.forgotten_count(), 3);
+        assert!(h.is_forgotten(2) && h.is_forgotten(3) && h.is_forgotten(4));
+        assert!(!h.is_forgotten(1) && !h.is_forgotten(6));
+        assert_eq!(h.on_share().map(|v| v.record.version), Some(1));
+        assert_eq!(h.waiting().map(|v| v.record.version), Some(5));
+        assert_eq!(h.next_version(), 6);
+        for r in [
+            Record::Delivering {
+                version: 5,
+                at_unix_ms: 3,
+            },
+            Record::Pushed {
+                version: 5,
+                at_unix_ms: 4,
+            },
+        ] {
+            h.apply(r).unwrap();
+        }
+        h.forget_settled();
+        assert_eq!(held(&h), [5]);
+        assert_eq!(h.last_pushed().map(|v| v.record.version), Some(5));
     }
 
     #[test]

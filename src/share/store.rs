@@ -131,7 +131,8 @@ impl Share {
         fs::create_dir_all(&versions_dir)
             .map_err(StateError::io("create state folder", &versions_dir))?;
         let manifest_path = config.state_dir.join(MANIFEST_FILE);
-        let loaded = manifest::load(&manifest_path)?;
+        let mut loaded = manifest::load_settled(&manifest_path)?;
+        loaded.history.forget_settled();
         let mut report = OpenReport {
             torn_manifest_bytes: loaded.torn_bytes,
             ..OpenReport::default()
@@ -283,10 +284,7 @@ impl Share {
         version: u64,
         created_at_unix_ms: u64,
     ) -> Result<PushRequest, StateError> {
-        let kept = self
-            .history
-            .get(version)
-            .ok_or(StateError::UnknownVersion(version))?;
+        let kept = self.held(version)?;
         let record = kept.record.clone();
         Ok(PushRequest {
             files: self.kept_files(version)?,
@@ -301,14 +299,21 @@ impl Share {
 
     /// The kept text of a version, each file checked against its manifest SHA-256.
     pub fn kept_files(&self, version: u64) -> Result<Vec<ProgramFile>, StateError> {
-        let state = self
-            .history
-            .get(version)
-            .ok_or(StateError::UnknownVersion(version))?;
+        let state = self.held(version)?;
         if !state.text_kept {
             return Err(StateError::NoText(version));
         }
         read_kept(&self.version_dir(version), &state.record.files)
+    }
+
+    /// A version the history holds; a forgotten one (settled, so without kept text) is
+    /// [`StateError::NoText`].
+    fn held(&self, version: u64) -> Result<&manifest::VersionState, StateError> {
+        match self.history.get(version) {
+            Some(v) => Ok(v),
+            None if self.history.is_forgotten(version) => Err(StateError::NoText(version)),
+            None => Err(StateError::UnknownVersion(version)),
+        }
     }
 
     /// Folder of a version's kept text: `<state>/versions/v000042`.
@@ -331,7 +336,11 @@ impl Share {
         if let Some(of) = request.rollback_of
             && self.history.get(of).is_none()
         {
-            return Some(format!("rollback to v{of}, which does not exist"));
+            return Some(if self.history.is_forgotten(of) {
+                format!("rollback to v{of}, whose text is no longer kept")
+            } else {
+                format!("rollback to v{of}, which does not exist")
+            });
         }
         let next = self.next_table_number();
         if request.table_number != next {
@@ -511,7 +520,10 @@ impl Share {
                 line: self.manifest_lines,
                 path,
                 reason,
-            })
+            })?;
+        // Keeps memory bounded in a service that pushes for months; the manifest keeps all.
+        self.history.forget_settled();
+        Ok(())
     }
 }
 
