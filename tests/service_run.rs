@@ -3,6 +3,8 @@
 //! is down keeps every record in the journal and the service running; a restart resumes; a
 //! wheel dressing reported through the API or a dropped file regenerates the table.
 
+mod store_support;
+
 use camloop::config::Config;
 use camloop::service::{self, RunOptions};
 use std::path::Path;
@@ -544,4 +546,67 @@ async fn a_dropped_dressing_report_regenerates_the_table() {
     assert!(processed.exists());
     assert!(!inbox.join("dress.dressing.toml").exists());
     running.stop().await;
+}
+
+/// Raw-revolution retention runs in the service: at start, measurements older than
+/// `raw_retention_days` lose their raw revolutions and keep everything else; newer ones keep
+/// theirs.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn raw_revolutions_past_the_retention_are_dropped() {
+    let dir = tempfile::tempdir().unwrap();
+    let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
+    let store = camloop::store::Store::connect(&url).await.unwrap();
+    let now = camloop::clock::now_ms();
+    let day_ms = 86_400_000;
+    let old = store
+        .insert_measurement(&store_support::data::measurement(
+            "OLD1",
+            "in1",
+            1,
+            now - 3 * day_ms,
+        ))
+        .await
+        .unwrap();
+    let recent = store
+        .insert_measurement(&store_support::data::measurement(
+            "OLD1",
+            "in1",
+            2,
+            now - day_ms,
+        ))
+        .await
+        .unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    // A machine whose gauge never delivers (no SocketCAN here): only retention writes.
+    let text = format!(
+        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"{url}\"\nraw_retention_days = 2\n[http]\nlisten = \"127.0.0.1:0\"\n\
+         [[machines]]\nname = \"CAN1\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/CAN1\"\n\
+         [machines.gauge]\nkind = \"can\"\ninterface = \"camloopcan9\"\ndbc = \"{}\"\n",
+        root.join("config/parts/demo-camshaft.toml").display(),
+        root.join("config/gauge.dbc").display()
+    );
+    let config = Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
+    let running = service::start(config, RunOptions { parts: None })
+        .await
+        .unwrap();
+    // Poll (bounded) until the start-up pass has run.
+    let mut pruned = false;
+    for _ in 0..200 {
+        let detail = store.measurement(old).await.unwrap().unwrap();
+        if detail.raw_lift_mm.is_none() {
+            pruned = true;
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    running.stop().await;
+    assert!(pruned, "the 3-day-old raw data is still there after 10 s");
+    let old = store.measurement(old).await.unwrap().unwrap();
+    assert_eq!(
+        old.averaged_lift_mm.len(),
+        36,
+        "the summary and profile stay"
+    );
+    let recent = store.measurement(recent).await.unwrap().unwrap();
+    assert_eq!(recent.raw_lift_mm.map(|r| r.len()), Some(3));
 }

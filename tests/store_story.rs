@@ -482,6 +482,105 @@ async fn idempotent_insert_on_postgres() {
     idempotent(&t.store).await;
 }
 
+/// What a journal replayed after a crash asks the store: is this record already in? Each
+/// look-up finds the stored record and nothing that differs in one identifying field; and
+/// the durability call answers yes on an idle store.
+async fn replay_lookups(store: &Store) {
+    let t = table(
+        "in1",
+        None,
+        "CTABDEF(X,C,11,1)\nCTABEND\n",
+        TableStatus::Pushed,
+    );
+    store.insert_table_version(&t).await.unwrap();
+    assert!(
+        store
+            .table_version_exists("M1", "in1", 5_000, &t.program_text)
+            .await
+            .unwrap()
+    );
+    assert!(
+        !store
+            .table_version_exists("M1", "in1", 5_001, &t.program_text)
+            .await
+            .unwrap()
+    );
+    assert!(
+        !store
+            .table_version_exists("M1", "in1", 5_000, "other")
+            .await
+            .unwrap()
+    );
+    assert!(
+        !store
+            .table_version_exists("M1", "ex1", 5_000, &t.program_text)
+            .await
+            .unwrap()
+    );
+
+    let e = NewEvent {
+        machine: "M1".into(),
+        at_ms: 7_000,
+        level: EventLevel::Warn,
+        kind: "table_refused".into(),
+        message: "grindability".into(),
+    };
+    store.insert_event(&e).await.unwrap();
+    assert!(store.event_exists(&e).await.unwrap());
+    let other = NewEvent {
+        message: "axis limits".into(),
+        ..e.clone()
+    };
+    assert!(!store.event_exists(&other).await.unwrap());
+
+    store
+        .save_learning_state("M1", "in1", r#"{"i":1}"#, 8_000)
+        .await
+        .unwrap();
+    assert!(
+        store
+            .learning_state_exists("M1", "in1", r#"{"i":1}"#, 8_000)
+            .await
+            .unwrap()
+    );
+    assert!(
+        !store
+            .learning_state_exists("M1", "in1", r#"{"i":2}"#, 8_000)
+            .await
+            .unwrap()
+    );
+
+    let d = NewDressing {
+        machine: "M1".into(),
+        at_ms: 9_000,
+        old_radius_mm: 250.0,
+        new_radius_mm: 249.98,
+        source: "api".into(),
+    };
+    store.insert_dressing(&d).await.unwrap();
+    assert!(store.dressing_exists(&d).await.unwrap());
+    let later = NewDressing {
+        at_ms: 9_001,
+        ..d.clone()
+    };
+    assert!(!store.dressing_exists(&later).await.unwrap());
+
+    assert!(store.checkpoint().await.unwrap());
+}
+
+#[tokio::test]
+async fn replay_lookups_on_sqlite() {
+    replay_lookups(&store_support::sqlite().await.store).await;
+}
+
+#[tokio::test]
+async fn replay_lookups_on_postgres() {
+    let Some(t) = store_support::postgres("replay_lookups_on_postgres").await else {
+        return;
+    };
+    replay_lookups(&t.store).await;
+}
+
 /// Writers in parallel (the daemon's gauge tasks): every measurement lands once, and table
 /// versions either get distinct numbers or a clean `Conflict`, never a duplicate.
 async fn concurrent_writers(store: &Store) {

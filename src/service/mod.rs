@@ -23,6 +23,9 @@ use tracing::{error, info, warn};
 /// the journal released of what the database holds durably (a checkpoint on SQLite).
 const RETRY_EVERY: Duration = Duration::from_secs(2);
 
+/// How often raw revolutions older than the retention are dropped (also once at start).
+const RETENTION_EVERY: Duration = Duration::from_secs(600);
+
 /// Options of one run.
 #[derive(Debug, Clone, Default)]
 pub struct RunOptions {
@@ -40,6 +43,7 @@ pub struct Running {
     machine_tasks: Vec<tokio::task::JoinHandle<()>>,
     server: tokio::task::JoinHandle<()>,
     connector: tokio::task::JoinHandle<()>,
+    retention: tokio::task::JoinHandle<()>,
     store: StoreHandle,
 }
 
@@ -63,6 +67,7 @@ impl Running {
         }
         let _ = self.server.await;
         let _ = self.connector.await;
+        let _ = self.retention.await;
         if let Some(s) = self.store.read().await.as_ref() {
             s.close().await;
         }
@@ -89,6 +94,12 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
     connect_store(&config, &store).await;
     let connector = tokio::spawn(keep_store_connected(
         config.database_url(),
+        store.clone(),
+        shutdown_rx.clone(),
+    ));
+
+    let retention = tokio::spawn(keep_raw_retention(
+        config.database.raw_retention_days,
         store.clone(),
         shutdown_rx.clone(),
     ));
@@ -205,6 +216,7 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
         machine_tasks,
         server,
         connector,
+        retention,
         store,
     })
 }
@@ -285,6 +297,35 @@ async fn keep_store_connected(
                 *store.write().await = Some(s);
             }
             Err(e) => warn!(error = %e, "history store still unavailable"),
+        }
+    }
+}
+
+/// Raw-revolution retention: at start and every [`RETENTION_EVERY`], drops the raw
+/// revolutions of measurements older than `days` (summaries, averaged profiles and analyses
+/// stay). 0 days: raw data is kept forever. A database that is down is tried next time.
+async fn keep_raw_retention(days: u32, store: StoreHandle, mut shutdown: watch::Receiver<bool>) {
+    if days == 0 {
+        return;
+    }
+    let mut tick = tokio::time::interval(RETENTION_EVERY);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tokio::select! {
+            _ = tick.tick() => {}
+            _ = shutdown.changed() => return,
+        }
+        let Some(s) = store.read().await.clone() else {
+            continue;
+        };
+        let cutoff_ms = crate::clock::now_ms() - i64::from(days) * 86_400_000;
+        match s.prune_raw_older_than(cutoff_ms).await {
+            Ok(0) => {}
+            Ok(n) => info!(
+                measurements = n,
+                days, "raw revolutions older than the retention dropped"
+            ),
+            Err(e) => warn!(error = %e, "raw-data retention failed, tried again later"),
         }
     }
 }
