@@ -94,6 +94,16 @@ fn main() {
         .await
         .expect("count");
         store.close().await;
+        let db_bytes: u64 = ["load.db", "load.db-wal"]
+            .iter()
+            .filter_map(|f| std::fs::metadata(dir.path().join(f)).ok())
+            .map(|m| m.len())
+            .sum();
+        println!(
+            "load: database {:.0} MiB, {:.0} KiB per part (measurement with raw revolutions and analysis, table version, learning state, events)",
+            db_bytes as f64 / (1 << 20) as f64,
+            db_bytes as f64 / 1024.0 / counts.iter().map(|(_, n)| *n as f64).sum::<f64>().max(1.0)
+        );
         let samples = samples.lock().unwrap_or_else(|p| p.into_inner()).clone();
         (counts, samples, elapsed_s)
     });
