@@ -38,6 +38,30 @@ seed = 5
 
 const TOKEN: &str = "let-me-write";
 
+/// A service with one machine `name` on the demo lobe, its database in `dir` (plus any
+/// `database_extra` keys), and the gauge section `gauge` (TOML lines).
+fn one_machine(dir: &Path, name: &str, database_extra: &str, gauge: &str) -> Config {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = format!(
+        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://{}/db.sqlite?mode=rwc\"\n{database_extra}\n\
+         [http]\nlisten = \"127.0.0.1:0\"\n\
+         [[machines]]\nname = \"{name}\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/{name}\"\n\
+         [machines.gauge]\n{gauge}\n",
+        dir.display(),
+        root.join("config/parts/demo-camshaft.toml").display(),
+    );
+    Config::parse(&text, &dir.join("camloop.toml"), |_| None).unwrap()
+}
+
+/// The gauge section of a CAN gauge on an interface this kernel cannot have.
+fn unavailable_can() -> String {
+    let dbc = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/gauge.dbc");
+    format!(
+        "kind = \"can\"\ninterface = \"camloopcan9\"\ndbc = \"{}\"",
+        dbc.display()
+    )
+}
+
 /// A plain HTTP/1.1 POST of a JSON body, with an optional bearer token.
 async fn post(
     addr: std::net::SocketAddr,
@@ -393,16 +417,7 @@ async fn stored_counts(store: &camloop::store::Store) -> [usize; 4] {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_unavailable_can_bus_is_reported_not_fatal() {
     let dir = tempfile::tempdir().unwrap();
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let text = format!(
-        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://{}/db.sqlite?mode=rwc\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
-         [[machines]]\nname = \"CAN1\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/CAN1\"\n\
-         [machines.gauge]\nkind = \"can\"\ninterface = \"camloopcan9\"\ndbc = \"{}\"\n",
-        dir.path().display(),
-        root.join("config/parts/demo-camshaft.toml").display(),
-        root.join("config/gauge.dbc").display()
-    );
-    let config = Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
+    let config = one_machine(dir.path(), "CAN1", "", &unavailable_can());
     let running = service::start(config, RunOptions { parts: None })
         .await
         .unwrap();
@@ -427,14 +442,12 @@ async fn a_serial_gauge_feeds_the_loop_through_a_pseudo_terminal() {
     drop(slave);
     let dir = tempfile::tempdir().unwrap();
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let text = format!(
-        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://{}/db.sqlite?mode=rwc\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
-         [[machines]]\nname = \"TTY1\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/TTY1\"\n\
-         [machines.gauge]\nkind = \"serial\"\nport = \"{port}\"\nbaud = 115200\n",
-        dir.path().display(),
-        root.join("config/parts/demo-camshaft.toml").display(),
+    let config = one_machine(
+        dir.path(),
+        "TTY1",
+        "",
+        &format!("kind = \"serial\"\nport = \"{port}\"\nbaud = 115200"),
     );
-    let config = Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
     let running = service::start(config, RunOptions { parts: None })
         .await
         .unwrap();
@@ -504,15 +517,12 @@ async fn a_serial_gauge_feeds_the_loop_through_a_pseudo_terminal() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_dropped_dressing_report_regenerates_the_table() {
     let dir = tempfile::tempdir().unwrap();
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let text = format!(
-        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://{}/db.sqlite?mode=rwc\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
-         [[machines]]\nname = \"DROP1\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/DROP1\"\n\
-         [machines.gauge]\nkind = \"drop\"\nfolder = \"inbox\"\npoll_ms = 20\n",
-        dir.path().display(),
-        root.join("config/parts/demo-camshaft.toml").display(),
+    let config = one_machine(
+        dir.path(),
+        "DROP1",
+        "",
+        "kind = \"drop\"\nfolder = \"inbox\"\npoll_ms = 20",
     );
-    let config = Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
     let running = service::start(config, RunOptions { parts: None })
         .await
         .unwrap();
@@ -576,16 +586,13 @@ async fn raw_revolutions_past_the_retention_are_dropped() {
         ))
         .await
         .unwrap();
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     // A machine whose gauge never delivers (no SocketCAN here): only retention writes.
-    let text = format!(
-        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"{url}\"\nraw_retention_days = 2\n[http]\nlisten = \"127.0.0.1:0\"\n\
-         [[machines]]\nname = \"CAN1\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/CAN1\"\n\
-         [machines.gauge]\nkind = \"can\"\ninterface = \"camloopcan9\"\ndbc = \"{}\"\n",
-        root.join("config/parts/demo-camshaft.toml").display(),
-        root.join("config/gauge.dbc").display()
+    let config = one_machine(
+        dir.path(),
+        "CAN1",
+        "raw_retention_days = 2",
+        &unavailable_can(),
     );
-    let config = Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
     let running = service::start(config, RunOptions { parts: None })
         .await
         .unwrap();

@@ -71,6 +71,26 @@ pub enum Pending {
 }
 
 impl Pending {
+    /// The event to store, for a [`Pending::Event`] (its level checked).
+    fn event(&self) -> Option<Result<NewEvent, StoreError>> {
+        match self {
+            Pending::Event {
+                machine,
+                at_ms,
+                level,
+                kind,
+                message,
+            } => Some(EventLevel::parse(level).map(|level| NewEvent {
+                machine: machine.clone(),
+                at_ms: *at_ms,
+                level,
+                kind: kind.clone(),
+                message: message.clone(),
+            })),
+            _ => None,
+        }
+    }
+
     /// The dressing to store, for a [`Pending::Dressing`].
     fn dressing(&self) -> Option<NewDressing> {
         match self {
@@ -256,23 +276,10 @@ async fn apply_once(store: &Store, record: &Pending) -> Result<(), StoreError> {
                 .table_version_exists(machine, lobe, *created_at_ms, program_text)
                 .await?
         }
-        Pending::Event {
-            machine,
-            at_ms,
-            level,
-            kind,
-            message,
-        } => {
-            store
-                .event_exists(&NewEvent {
-                    machine: machine.clone(),
-                    at_ms: *at_ms,
-                    level: EventLevel::parse(level)?,
-                    kind: kind.clone(),
-                    message: message.clone(),
-                })
-                .await?
-        }
+        Pending::Event { .. } => match record.event() {
+            Some(e) => store.event_exists(&e?).await?,
+            None => false,
+        },
         Pending::Learning {
             machine,
             lobe,
@@ -364,25 +371,10 @@ async fn apply(store: &Store, record: &Pending) -> Result<(), StoreError> {
             };
             store.insert_table_version(&t).await.map(|_| ())
         }
-        Pending::Event {
-            machine,
-            at_ms,
-            level,
-            kind,
-            message,
-        } => {
-            let level = EventLevel::parse(&level)?;
-            store
-                .insert_event(&NewEvent {
-                    machine,
-                    at_ms,
-                    level,
-                    kind,
-                    message,
-                })
-                .await
-                .map(|_| ())
-        }
+        Pending::Event { .. } => match record.event() {
+            Some(e) => store.insert_event(&e?).await.map(|_| ()),
+            None => Ok(()),
+        },
         Pending::Learning {
             machine,
             lobe,
