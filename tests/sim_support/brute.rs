@@ -200,27 +200,7 @@ fn local_minima(vs: &[f64]) -> Vec<usize> {
         .collect()
 }
 
-/// Minimum value of `f` on `[a, b]` by golden-section search.
+/// Minimum value of `f` on `[a, b]`, to [`GOLDEN_TOL`] in the argument.
 pub fn golden_min(f: impl Fn(f64) -> f64, a: f64, b: f64) -> f64 {
-    let inv_phi = (5f64.sqrt() - 1.0) / 2.0;
-    let (mut lo, mut hi) = (a, b);
-    let mut x1 = hi - inv_phi * (hi - lo);
-    let mut x2 = lo + inv_phi * (hi - lo);
-    let (mut f1, mut f2) = (f(x1), f(x2));
-    while hi - lo > GOLDEN_TOL {
-        if f1 <= f2 {
-            hi = x2;
-            x2 = x1;
-            f2 = f1;
-            x1 = hi - inv_phi * (hi - lo);
-            f1 = f(x1);
-        } else {
-            lo = x1;
-            x1 = x2;
-            f1 = f2;
-            x2 = lo + inv_phi * (hi - lo);
-            f2 = f(x2);
-        }
-    }
-    f1.min(f2)
+    super::golden::golden_min(f, a, b, GOLDEN_TOL).1
 }

@@ -3,6 +3,8 @@
 #![allow(dead_code)]
 
 pub mod brute;
+#[path = "../support/golden.rs"]
+pub mod golden;
 
 use camloop::core::fit::TableForm;
 use camloop::core::geometry::{CamGeometry, CrankpinGeometry, Follower, Part};

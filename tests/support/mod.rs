@@ -5,5 +5,6 @@
 //! dead-code warnings for the unused rest are expected and silenced here.
 #![allow(dead_code)]
 
+pub mod golden;
 pub mod lobes;
 pub mod oracle;

@@ -52,31 +52,9 @@ pub enum OracleFollower {
     Knife,
 }
 
-/// Minimum of `f` on `[a, b]` by golden-section search, assuming one basin in the bracket.
-/// Returns (argument, value).
+/// Minimum of `f` on `[a, b]` to [`ARG_TOL_RAD`]: (argument, value).
 pub fn golden_min(f: impl Fn(f64) -> f64, a: f64, b: f64) -> (f64, f64) {
-    let inv_phi = (5f64.sqrt() - 1.0) / 2.0;
-    let (mut lo, mut hi) = (a, b);
-    let mut x1 = hi - inv_phi * (hi - lo);
-    let mut x2 = lo + inv_phi * (hi - lo);
-    let mut f1 = f(x1);
-    let mut f2 = f(x2);
-    while hi - lo > ARG_TOL_RAD {
-        if f1 <= f2 {
-            hi = x2;
-            x2 = x1;
-            f2 = f1;
-            x1 = hi - inv_phi * (hi - lo);
-            f1 = f(x1);
-        } else {
-            lo = x1;
-            x1 = x2;
-            f1 = f2;
-            x2 = lo + inv_phi * (hi - lo);
-            f2 = f(x2);
-        }
-    }
-    if f1 <= f2 { (x1, f1) } else { (x2, f2) }
+    super::golden::golden_min(f, a, b, ARG_TOL_RAD)
 }
 
 /// Best sample of `f` on `n + 1` evenly spaced points of `[lo, hi]`: (index, argument, value).
