@@ -27,30 +27,33 @@ fn write_fixture_nominal(dir: &Path) -> String {
     "nominal.csv".to_string()
 }
 
+/// `camloop analyze cam` of `log` against `lift` on the fixture's cam (flat follower,
+/// base radius 20 mm, wheel 250 mm), with `extra` arguments.
+fn analyze_demo_cam(lift: &str, log: &str, extra: &[&str], dir: &Path) -> std::process::Output {
+    let mut args = vec![
+        "analyze",
+        "cam",
+        "--lift",
+        lift,
+        "--follower",
+        "flat",
+        "--base-radius",
+        "20",
+        "--wheel-radius",
+        "250",
+        "--measurement",
+        log,
+    ];
+    args.extend_from_slice(extra);
+    camloop(&args, dir)
+}
+
 #[test]
 fn can_log_is_analysed_against_its_nominal() {
     let dir = tempfile::tempdir().unwrap();
     let lift = write_fixture_nominal(dir.path());
     let log = fixture("gauge_3x360.log");
-    let out = camloop(
-        &[
-            "analyze",
-            "cam",
-            "--lift",
-            &lift,
-            "--follower",
-            "flat",
-            "--base-radius",
-            "20",
-            "--wheel-radius",
-            "250",
-            "--measurement",
-            &log,
-            "--json",
-            "report.json",
-        ],
-        dir.path(),
-    );
+    let out = analyze_demo_cam(&lift, &log, &["--json", "report.json"], dir.path());
     assert!(
         out.status.success(),
         "{}",
@@ -105,23 +108,7 @@ fn a_log_with_a_cut_off_measurement_is_refused_naming_the_file() {
     let dir = tempfile::tempdir().unwrap();
     let lift = write_fixture_nominal(dir.path());
     let log = fixture("gauge_cutoff.log");
-    let out = camloop(
-        &[
-            "analyze",
-            "cam",
-            "--lift",
-            &lift,
-            "--follower",
-            "flat",
-            "--base-radius",
-            "20",
-            "--wheel-radius",
-            "250",
-            "--measurement",
-            &log,
-        ],
-        dir.path(),
-    );
+    let out = analyze_demo_cam(&lift, &log, &[], dir.path());
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(err.lines().count(), 1, "{err}");
