@@ -180,48 +180,44 @@ fn a_script_drives_the_loop_to_below_1_3_um_and_guards_hold() {
     );
 }
 
+/// `camloop compensate` of `lobe` from the recipe, with its state in `state` and the program
+/// `P.SPF`, plus `extra` arguments.
+fn compensate_part(
+    recipe: &str,
+    lobe: &str,
+    state: &str,
+    extra: &[&str],
+    d: &Path,
+) -> std::process::Output {
+    let mut args = vec![
+        "compensate",
+        "--part",
+        recipe,
+        "--lobe",
+        lobe,
+        "--state",
+        state,
+        "--program",
+        "P.SPF",
+    ];
+    args.extend_from_slice(extra);
+    camloop(&args, d)
+}
+
 #[test]
 fn a_new_state_needs_the_nominal_run_first_and_a_state_belongs_to_one_part() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let recipe = recipe_in(d, 250.0).display().to_string();
     std::fs::write(d.join("m.csv"), "rev,angle_deg,lift_mm\n0,0,0\n").unwrap();
-    let out = camloop(
-        &[
-            "compensate",
-            "--part",
-            &recipe,
-            "--lobe",
-            "IN1",
-            "--state",
-            "st",
-            "--program",
-            "P.SPF",
-            "--measurement",
-            "m.csv",
-        ],
-        d,
-    );
+    let out = compensate_part(&recipe, "IN1", "st", &["--measurement", "m.csv"], d);
     assert!(!out.status.success());
     assert!(
         stderr(&out).contains("no learning state yet"),
         "{}",
         stderr(&out)
     );
-    let out = camloop(
-        &[
-            "compensate",
-            "--part",
-            &recipe,
-            "--lobe",
-            "IN1",
-            "--state",
-            "st",
-            "--program",
-            "P.SPF",
-        ],
-        d,
-    );
+    let out = compensate_part(&recipe, "IN1", "st", &[], d);
     assert!(out.status.success(), "{}", stderr(&out));
     // The same state folder with another part (other base radius) is refused.
     let lift = d.join("demo-intake-lobe.csv").display().to_string();
@@ -250,20 +246,7 @@ fn a_new_state_needs_the_nominal_run_first_and_a_state_belongs_to_one_part() {
         "{}",
         stderr(&out)
     );
-    let out = camloop(
-        &[
-            "compensate",
-            "--part",
-            &recipe,
-            "--lobe",
-            "EX9",
-            "--state",
-            "st2",
-            "--program",
-            "P.SPF",
-        ],
-        d,
-    );
+    let out = compensate_part(&recipe, "EX9", "st2", &[], d);
     assert!(
         stderr(&out).contains("no lobe or pin EX9 (has: IN1)"),
         "{}",
