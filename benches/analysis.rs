@@ -1,33 +1,16 @@
 //! Cost of turning one 3 × 360-point raw lobe measurement into a report: assemble,
 //! average and analyse (the gauge decode is measured elsewhere).
 
+#[path = "../tests/common/cycloid_cam.rs"]
+mod cycloid_cam;
 use camloop::core::analysis::{LobeOptions, analyse_lobe};
 use camloop::core::lift::{LiftCurve, LiftTable};
 use camloop::core::measure::{
     AssemblyLimits, MeasurementHeader, RawMeasurement, RawSample, check_and_average,
 };
 use criterion::{Criterion, criterion_group, criterion_main};
+use cycloid_cam::cam;
 use std::hint::black_box;
-
-/// Cycloidal rise and return, 9 mm over 140°: an analytic stand-in for the lift spline.
-fn cam(angle_deg: f64) -> (f64, f64) {
-    let psi = angle_deg.rem_euclid(360.0);
-    let cycloid = |u: f64| {
-        let w = std::f64::consts::TAU * u;
-        (
-            9.0 * (u - w.sin() / std::f64::consts::TAU),
-            9.0 * (1.0 - w.cos()) / 70.0,
-        )
-    };
-    if (110.0..=180.0).contains(&psi) {
-        cycloid((psi - 110.0) / 70.0)
-    } else if psi > 180.0 && psi <= 250.0 {
-        let (h, dh) = cycloid((250.0 - psi) / 70.0);
-        (h, -dh)
-    } else {
-        (0.0, 0.0)
-    }
-}
 
 fn raw_measurement() -> RawMeasurement {
     let mut state = 0x1234_5678_u64;

@@ -15,39 +15,17 @@
 //! - phase within 0.02°: the noise moves φ by about 0.17 µm / sqrt(Σ h'²) ≈ 1e-4°.
 //! - base-circle offset within 0.2 µm: the noise moves δ by about 0.17 µm / √360 ≈ 0.01 µm.
 
+#[path = "common/cycloid_cam.rs"]
+mod cycloid_cam;
 use camloop::core::analysis::{LobeOptions, analyse_lobe};
 use camloop::core::measure::{
     AssemblyLimits, MeasurementHeader, RawMeasurement, RawSample, check_and_average,
 };
+use cycloid_cam::{RISE_DEG, RISE_FROM_DEG, cam};
 
 const N: usize = 360;
 const REVS: u32 = 4;
-const LIFT_MM: f64 = 9.0;
-const RISE_FROM_DEG: f64 = 110.0;
-const RISE_DEG: f64 = 70.0;
 const NOISE_UM: f64 = 0.3;
-
-/// Cycloidal rise over 70°, immediate cycloidal return over 70° (C2: acceleration is
-/// continuous and zero at the ends), 9 mm lift, nose at 180°. Returns (lift mm, mm/°).
-fn cam(angle_deg: f64) -> (f64, f64) {
-    let psi = angle_deg.rem_euclid(360.0);
-    let cycloid = |u: f64| {
-        let w = std::f64::consts::TAU * u;
-        (
-            LIFT_MM * (u - w.sin() / std::f64::consts::TAU),
-            LIFT_MM * (1.0 - w.cos()) / RISE_DEG,
-        )
-    };
-    let top = RISE_FROM_DEG + RISE_DEG;
-    if (RISE_FROM_DEG..=top).contains(&psi) {
-        cycloid((psi - RISE_FROM_DEG) / RISE_DEG)
-    } else if psi > top && psi <= top + RISE_DEG {
-        let (h, dh) = cycloid((top + RISE_DEG - psi) / RISE_DEG);
-        (h, -dh)
-    } else {
-        (0.0, 0.0)
-    }
-}
 
 /// splitmix64 with Box–Muller: a seeded Gaussian source, independent of any crate.
 struct Rng(u64);

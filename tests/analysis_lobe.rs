@@ -2,30 +2,13 @@
 //! absorbs (checked against a linear least-squares projection computed here), runout,
 //! velocity error, statistics, the JSON field names and the input errors.
 
+#[path = "common/cycloid_cam.rs"]
+mod cycloid_cam;
 use camloop::core::analysis::{AnalysisError, LobeOptions, ToleranceBand, analyse_lobe};
 use camloop::core::measure::{AveragedMeasurement, DroppedRevolution};
+use cycloid_cam::cam;
 
 const N: usize = 360;
-
-/// Cycloidal rise 110°→180°, return 180°→250°, 9 mm lift (as in the accuracy test).
-fn cam(angle_deg: f64) -> (f64, f64) {
-    let psi = angle_deg.rem_euclid(360.0);
-    let cycloid = |u: f64| {
-        let w = std::f64::consts::TAU * u;
-        (
-            9.0 * (u - w.sin() / std::f64::consts::TAU),
-            9.0 * (1.0 - w.cos()) / 70.0,
-        )
-    };
-    if (110.0..=180.0).contains(&psi) {
-        cycloid((psi - 110.0) / 70.0)
-    } else if psi > 180.0 && psi <= 250.0 {
-        let (h, dh) = cycloid((250.0 - psi) / 70.0);
-        (h, -dh)
-    } else {
-        (0.0, 0.0)
-    }
-}
 
 fn grid() -> Vec<f64> {
     (0..N).map(|k| k as f64 * 360.0 / N as f64).collect()
