@@ -10,7 +10,7 @@
 
 use camloop::core::measure::RawMeasurement;
 use camloop::recipe::Recipe;
-use camloop::service::machine::{MachineLoop, SourceEvent, StoreHandle};
+use camloop::service::machine::{MachineLoop, MachinePaths, SourceEvent, StoreHandle};
 use camloop::service::metrics::Metrics;
 use camloop::sim::{CommandedTable, GrinderConfig, PartLabels, SimGrinder, Workpiece};
 use camloop::store::Store;
@@ -77,8 +77,10 @@ fn per_part(c: &mut Criterion) {
             MachineLoop::start(
                 "BENCH".into(),
                 setup,
-                dir.path().join("share"),
-                dir.path().join("state"),
+                MachinePaths {
+                    share_dir: dir.path().join("share"),
+                    state_dir: dir.path().join("state"),
+                },
                 store,
                 Arc::new(Metrics::default()),
             )
@@ -98,7 +100,7 @@ fn per_part(c: &mut Criterion) {
                     raw.origin = format!("bench-{count}");
                     count += 1;
                     let started = Instant::now();
-                    runtime.block_on(machine.handle(SourceEvent::Measurement(raw, None)));
+                    runtime.block_on(machine.handle(SourceEvent::Measurement { raw, ground_with: None, done: None }));
                     let took = started.elapsed();
                     samples.push(took);
                     total += took;

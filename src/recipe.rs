@@ -3,6 +3,9 @@
 //! TOML file. Unknown keys are errors; every problem is reported at once.
 
 use crate::core::analysis::ToleranceBand;
+use crate::core::compensate::LobeLoop;
+use crate::core::measure::AssemblyLimits;
+use crate::core::turn::TurnSetup;
 use crate::core::compensate::{AxisLimits, Feature, TableRequest, pin_nominal_lift};
 use crate::core::fit::TableForm;
 use crate::core::geometry::{CamGeometry, CrankpinGeometry, Follower};
@@ -149,6 +152,28 @@ pub struct FeatureSetup {
     pub request: TableRequest,
     pub table_pair: (u32, u32),
     pub bands: Vec<ToleranceBand>,
+}
+
+impl FeatureSetup {
+    /// What stays fixed in this feature's loop, with the wheel the control believes in.
+    pub fn lobe_loop(&self) -> LobeLoop<'_> {
+        LobeLoop {
+            nominal: &self.nominal,
+            feature: self.feature,
+            request: self.request,
+            limits: &self.limits,
+            params: &self.params,
+        }
+    }
+
+    /// The setup of one loop turn for this feature.
+    pub fn turn_setup(&self) -> TurnSetup<'_> {
+        TurnSetup {
+            lobe: self.lobe_loop(),
+            bands: &self.bands,
+            assembly: AssemblyLimits::default(),
+        }
+    }
 }
 
 impl Recipe {

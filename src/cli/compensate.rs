@@ -7,20 +7,20 @@
 //!   delivered atomically to the folder of `--program`;
 //! - `refusals.jsonl`: every table a guard refused, with the measurement and the reason.
 
-use super::analyze::{averaged_measurement, load_dbc};
+use super::analyze::load_dbc;
 use super::output::Outputs;
 use super::part::{CamArgs, CrankpinArgs, PartKindArgs, load_cam_table};
 use super::table::{FormArg, table_csv};
 use crate::clock::now_ms_u64;
-use crate::core::analysis::{LobeOptions, analyse_lobe};
 use crate::core::compensate::{
-    self, AxisLimits, Feature, GuardedTable, LobeLoop, TableRequest, pin_nominal_lift,
+    self, AxisLimits, Feature, GuardedTable, TableRequest, pin_nominal_lift,
 };
 use crate::core::fit::TableForm;
 use crate::core::geometry::CrankpinGeometry;
 use crate::core::learn::{self, LearningParams, LearningState, StepOutcome};
 use crate::core::lift::LiftTable;
-use crate::core::measure::AssemblyLimits;
+use crate::core::turn::{Decision, measurement_sha256, turn};
+use crate::gauge::read_measurement_file;
 use crate::core::program::{ProgramSettings, comment_text, render_g1_table, render_poly_table};
 use crate::recipe::Recipe;
 use crate::share::{ProgramFile, PushRequest, RealFs, Share, ShareConfig, sha256_hex};
@@ -134,13 +134,7 @@ pub fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
         learn::after_dressing(&mut saved.learning);
         saved.wheel_radius_mm = setup.feature.wheel_radius_mm();
     }
-    let lobe = LobeLoop {
-        nominal: &setup.nominal,
-        feature: setup.feature,
-        request: setup.request,
-        limits: &setup.limits,
-        params: &setup.params,
-    };
+    let lobe = setup.lobe_loop();
     let (table, reason, measurement_id) = match &args.measurement {
         None => {
             let table = compensate::current_table(&saved.learning, &lobe)?;
@@ -152,14 +146,8 @@ pub fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
             (table, reason.to_string(), None)
         }
         Some(path) => {
-            let (table, reason, id) = learn_from(
-                &dirs.state,
-                path,
-                args.dbc.as_deref(),
-                &setup,
-                &lobe,
-                &mut saved,
-            )?;
+            let (table, reason, id) =
+                learn_from(&dirs.state, path, args.dbc.as_deref(), &setup, &mut saved)?;
             report.push(reason.clone());
             (table, reason, Some(id))
         }
@@ -194,19 +182,18 @@ pub fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Reads, checks and analyses the measurement, then learns; returns the next table, the
-/// reason to record and the measurement's id.
+/// Reads the measurement and runs one loop turn on it; returns the next table, the reason
+/// to record and the measurement's id.
 fn learn_from(
     state_dir: &Path,
     path: &Path,
     dbc_path: Option<&Path>,
     setup: &LobeSetup,
-    lobe: &LobeLoop<'_>,
     saved: &mut SavedState,
 ) -> anyhow::Result<(GuardedTable, String, String)> {
-    let bytes = std::fs::read(path)
-        .with_context(|| format!("cannot read measurement {}", path.display()))?;
-    let id = sha256_hex(&bytes);
+    let dbc = load_dbc(dbc_path)?;
+    let raw = read_measurement_file(path, &dbc)?;
+    let id = measurement_sha256(&raw);
     if saved.last_measurement_sha256.as_deref() == Some(id.as_str()) {
         bail!(
             "{}: this measurement was already learned from (iteration {})",
@@ -214,53 +201,30 @@ fn learn_from(
             saved.learning.iteration
         );
     }
-    let dbc = load_dbc(dbc_path)?;
-    let avg = averaged_measurement(path, &dbc, &AssemblyLimits::default())?;
-    if avg.points_per_rev != saved.learning.points_per_rev {
-        if saved.learning.iteration == 0 {
-            saved.learning = LearningState::new(avg.points_per_rev);
-        } else {
-            bail!(
-                "{}: {} points per revolution, the loop learned on {}",
-                path.display(),
-                avg.points_per_rev,
-                saved.learning.points_per_rev
-            );
-        }
-    }
-    let curve = crate::core::lift::LiftCurve::new(&setup.nominal);
-    let nominal = |psi_deg: f64| {
-        let s = curve.eval(psi_deg.to_radians());
-        (s.h_mm, s.dh_mm.to_radians())
-    };
-    let options = LobeOptions {
-        bands: setup.bands.clone(),
-        ..LobeOptions::default()
-    };
-    let analysis = analyse_lobe(&avg, &nominal, &options)?;
-    let revolutions = avg.revolutions_used.len() as u32;
-    let (outcome, table) = match compensate::learn_and_regenerate(
-        &mut saved.learning,
-        &analysis.error_um,
-        &analysis.repeatability_um,
-        revolutions,
-        lobe,
-    ) {
-        Ok(done) => done,
-        Err(refused) => {
+    let done = turn(&setup.turn_setup(), &saved.learning, &raw, None)
+        .with_context(|| format!("measurement {}", path.display()))?;
+    let (outcome, next, table) = match done.decision {
+        Decision::Table {
+            outcome,
+            next,
+            table,
+        } => (outcome, next, table),
+        Decision::Refused(refused) => {
             // Nothing is delivered; the refusal is kept with the measurement it came from.
-            let record = serde_json::json!({
-                "at_unix_ms": now_ms_u64(),
-                "measurement": path.display().to_string(),
-                "measurement_sha256": id,
-                "iteration": saved.learning.iteration,
-                "reason": refused.to_string(),
-            });
-            append_line(&state_dir.join(REFUSALS_FILE), &record.to_string())?;
+            let record = Refusal {
+                at_unix_ms: now_ms_u64(),
+                measurement: path.display().to_string(),
+                measurement_sha256: id,
+                iteration: saved.learning.iteration,
+                reason: refused.to_string(),
+            };
+            append_line(&state_dir.join(REFUSALS_FILE), &serde_json::to_string(&record)?)?;
             return Err(anyhow::Error::new(refused))
                 .with_context(|| format!("{}: the previous table stays in force", path.display()));
         }
+        Decision::Held(reason) => bail!("{}: not learned: {reason}", path.display()),
     };
+    saved.learning = *next;
     let reason = match outcome {
         StepOutcome::Updated {
             max_error_um,
@@ -286,7 +250,17 @@ fn learn_from(
         }
         StepOutcome::Reverted { reason, .. } => format!("ALARM {}: {reason}", path.display()),
     };
-    Ok((table, reason, id))
+    Ok((*table, reason, id))
+}
+
+/// A refused table as kept in `refusals.jsonl`.
+#[derive(Debug, Serialize)]
+struct Refusal {
+    at_unix_ms: u64,
+    measurement: String,
+    measurement_sha256: String,
+    iteration: u32,
+    reason: String,
 }
 
 /// Renders the program with the next table number and delivers it through the share.

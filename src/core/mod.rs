@@ -15,3 +15,4 @@ pub mod smooth;
 pub mod spline;
 pub mod svg;
 pub mod table;
+pub mod turn;

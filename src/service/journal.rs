@@ -4,6 +4,7 @@
 //! says its copy is durable. Records read back after a crash may already be in the store;
 //! they are checked before being written again, so a replay never duplicates history.
 
+use super::machine::memory::{LoopMemory, TableLearning};
 use crate::store::{
     EventLevel, NewDressing, NewEvent, NewMeasurement, NewTableVersion, Store, StoreError,
     TableStatus, Verdict,
@@ -22,14 +23,18 @@ pub enum Pending {
         part: String,
         lobe: String,
         received_at_ms: i64,
-        pass: bool,
+        verdict: Verdict,
         max_profile_error_um: f64,
         base_radius_error_um: f64,
         phase_error_deg: f64,
         revolutions_used: u32,
         points_per_rev: u32,
         origin: String,
+        /// Content identity (see `core::turn::measurement_sha256`).
         sha256: String,
+        /// Version of the table on the control when the part was ground (0: none known).
+        #[serde(default)]
+        ground_with_version: u64,
         raw_lift_mm: Vec<Vec<f64>>,
         averaged_lift_mm: Vec<f64>,
         analysis_json: String,
@@ -37,27 +42,38 @@ pub enum Pending {
     Table {
         machine: String,
         lobe: String,
+        /// The share's version number (the one version counter).
+        version: u64,
+        /// The version in force when this one was made.
+        parent_version: Option<u64>,
         table_number: u32,
         program_text: String,
-        learning_params_json: String,
+        learning: TableLearning,
         reason: String,
-        /// "pushed", "waiting" or "refused".
-        status: String,
+        status: TableStatus,
         status_why: String,
         created_at_ms: i64,
+    },
+    /// A later status of a recorded version (e.g. waiting → pushed once the share is back).
+    TableStatus {
+        machine: String,
+        lobe: String,
+        version: u64,
+        status: TableStatus,
+        why: String,
+        at_ms: i64,
     },
     Event {
         machine: String,
         at_ms: i64,
-        /// "info", "warn" or "error".
-        level: String,
-        kind: String,
+        level: EventLevel,
+        kind: EventKind,
         message: String,
     },
     Learning {
         machine: String,
         lobe: String,
-        state_json: String,
+        state: LoopMemory,
         saved_at_ms: i64,
     },
     Dressing {
@@ -70,9 +86,44 @@ pub enum Pending {
     },
 }
 
+/// What an event is about; stored as its snake_case name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EventKind {
+    MeasurementRejected,
+    MeasurementRepeated,
+    TableRefused,
+    LearningReverted,
+    LearningHeld,
+    LearningResumed,
+    ShareUnavailable,
+    ShareBack,
+    WheelDressed,
+    Rollback,
+    JournalQuarantined,
+}
+
+impl EventKind {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            EventKind::MeasurementRejected => "measurement_rejected",
+            EventKind::MeasurementRepeated => "measurement_repeated",
+            EventKind::TableRefused => "table_refused",
+            EventKind::LearningReverted => "learning_reverted",
+            EventKind::LearningHeld => "learning_held",
+            EventKind::LearningResumed => "learning_resumed",
+            EventKind::ShareUnavailable => "share_unavailable",
+            EventKind::ShareBack => "share_back",
+            EventKind::WheelDressed => "wheel_dressed",
+            EventKind::Rollback => "rollback",
+            EventKind::JournalQuarantined => "journal_quarantined",
+        }
+    }
+}
+
 impl Pending {
-    /// The event to store, for a [`Pending::Event`] (its level checked).
-    fn event(&self) -> Option<Result<NewEvent, StoreError>> {
+    /// The event to store, for a [`Pending::Event`].
+    fn event(&self) -> Option<NewEvent> {
         match self {
             Pending::Event {
                 machine,
@@ -80,13 +131,13 @@ impl Pending {
                 level,
                 kind,
                 message,
-            } => Some(EventLevel::parse(level).map(|level| NewEvent {
+            } => Some(NewEvent {
                 machine: machine.clone(),
                 at_ms: *at_ms,
-                level,
-                kind: kind.clone(),
+                level: *level,
+                kind: kind.as_str().to_string(),
                 message: message.clone(),
-            })),
+            }),
             _ => None,
         }
     }
@@ -125,6 +176,7 @@ pub struct Journal {
     records: Vec<Pending>,
     written: usize,
     replayed: usize,
+    quarantined: Vec<Quarantined>,
 }
 
 impl Journal {
@@ -146,16 +198,58 @@ impl Journal {
             file.set_len(keep as u64)?;
             file.sync_all()?;
         }
-        let records: Vec<Pending> = String::from_utf8_lossy(&bytes[..keep])
-            .lines()
-            .filter_map(|l| serde_json::from_str(l).ok())
-            .collect();
-        Ok(Self {
+        let mut records = Vec::new();
+        let mut bad = Vec::new();
+        for (i, line) in String::from_utf8_lossy(&bytes[..keep]).lines().enumerate() {
+            match serde_json::from_str::<Pending>(line) {
+                Ok(r) => records.push(r),
+                Err(e) => bad.push(Quarantined {
+                    line: i + 1,
+                    reason: e.to_string(),
+                    text: line.to_string(),
+                }),
+            }
+        }
+        let mut journal = Self {
             path,
             replayed: records.len(),
             records,
             written: 0,
-        })
+            quarantined: Vec::new(),
+        };
+        if !bad.is_empty() {
+            journal.quarantine(bad)?;
+        }
+        Ok(journal)
+    }
+
+    /// Moves lines that do not parse into `journal.quarantine.jsonl` beside the journal
+    /// (kept, never dropped: a newer camloop or a person may still read them), then rewrites
+    /// the journal without them, so they are reported once.
+    fn quarantine(&mut self, bad: Vec<Quarantined>) -> anyhow::Result<()> {
+        let qpath = self.path.with_file_name(QUARANTINE_FILE);
+        let mut text = String::new();
+        for q in &bad {
+            text.push_str(&q.text);
+            text.push('\n');
+        }
+        let mut file = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&qpath)
+            .with_context(|| format!("cannot open {}", qpath.display()))?;
+        file.write_all(text.as_bytes())
+            .and_then(|()| file.sync_data())
+            .with_context(|| format!("cannot write {}", qpath.display()))?;
+        self.rewrite(&self.records)?;
+        self.quarantined = bad;
+        Ok(())
+    }
+
+    /// Lines found unreadable at open and moved to the quarantine file (for the caller to
+    /// report), with their line numbers in the journal as it was.
+    pub fn quarantined(&self) -> &[Quarantined] {
+        &self.quarantined
     }
 
     /// Appends the records and flushes them to disk before returning.
@@ -233,31 +327,65 @@ impl Journal {
     /// case): the file is cut to nothing. Some: the rest replaces the file atomically
     /// (temporary file, rename), so a crash leaves the old or the new list. Either way a
     /// crash before this reaches the disk only means a replay, which writes nothing twice.
+    ///
+    /// The newest learning state among the dropped records stays (at the front, as written)
+    /// when the rest holds none: a restart then finds the loop's memory here even while the
+    /// database is down, and never mistakes an unreachable database for a new machine.
     fn forget(&mut self, done: usize) -> anyhow::Result<()> {
         let rest = &self.records[done..];
-        if rest.is_empty() {
+        let keep = if rest.iter().any(|r| matches!(r, Pending::Learning { .. })) {
+            None
+        } else {
+            self.records[..done]
+                .iter()
+                .rev()
+                .find(|r| matches!(r, Pending::Learning { .. }))
+                .cloned()
+        };
+        let next: Vec<Pending> = keep.iter().cloned().chain(rest.iter().cloned()).collect();
+        if next.is_empty() {
             let file = std::fs::OpenOptions::new()
                 .write(true)
                 .open(&self.path)
                 .and_then(|f| f.set_len(0).and_then(|()| f.sync_data()));
             file.with_context(|| format!("cannot empty journal {}", self.path.display()))?;
         } else {
-            let dir = self.path.parent().unwrap_or(Path::new("."));
-            let mut tmp = tempfile::Builder::new()
-                .prefix(".journal-")
-                .tempfile_in(dir)?;
-            for r in rest {
-                writeln!(tmp, "{}", serde_json::to_string(r)?)?;
-            }
-            tmp.as_file().sync_all()?;
-            tmp.persist(&self.path)
-                .with_context(|| format!("cannot replace journal {}", self.path.display()))?;
+            self.rewrite(&next)?;
         }
-        self.records.drain(..done);
-        self.written -= done;
+        let kept = usize::from(keep.is_some());
+        self.records = next;
+        self.written = self.written - done + kept;
         self.replayed = self.replayed.saturating_sub(done);
         Ok(())
     }
+
+    /// Replaces the journal file with `records` atomically (temporary file, rename), so a
+    /// crash leaves the old or the new list.
+    fn rewrite(&self, records: &[Pending]) -> anyhow::Result<()> {
+        let dir = self.path.parent().unwrap_or(Path::new("."));
+        let mut tmp = tempfile::Builder::new()
+            .prefix(".journal-")
+            .tempfile_in(dir)?;
+        for r in records {
+            writeln!(tmp, "{}", serde_json::to_string(r)?)?;
+        }
+        tmp.as_file().sync_all()?;
+        tmp.persist(&self.path)
+            .with_context(|| format!("cannot replace journal {}", self.path.display()))?;
+        Ok(())
+    }
+}
+
+/// The quarantine file beside the journal.
+pub const QUARANTINE_FILE: &str = "journal.quarantine.jsonl";
+
+/// A journal line that could not be read back.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Quarantined {
+    /// 1-based line number in the journal as it was found.
+    pub line: usize,
+    pub reason: String,
+    pub text: String,
 }
 
 /// [`apply`] for a record read back after a crash: skipped when the store already holds it
@@ -268,26 +396,34 @@ async fn apply_once(store: &Store, record: &Pending) -> Result<(), StoreError> {
         Pending::Table {
             machine,
             lobe,
-            program_text,
-            created_at_ms,
+            version,
             ..
-        } => {
-            store
-                .table_version_exists(machine, lobe, *created_at_ms, program_text)
-                .await?
-        }
+        } => store
+            .table_version(machine, lobe, *version as i64)
+            .await?
+            .is_some(),
+        Pending::TableStatus {
+            machine,
+            lobe,
+            version,
+            status,
+            ..
+        } => store
+            .table_version(machine, lobe, *version as i64)
+            .await?
+            .is_some_and(|t| t.status == *status),
         Pending::Event { .. } => match record.event() {
-            Some(e) => store.event_exists(&e?).await?,
+            Some(e) => store.event_exists(&e).await?,
             None => false,
         },
         Pending::Learning {
             machine,
             lobe,
-            state_json,
+            state,
             saved_at_ms,
         } => {
             store
-                .learning_state_exists(machine, lobe, state_json, *saved_at_ms)
+                .learning_state_exists(machine, lobe, &state_json(state)?, *saved_at_ms)
                 .await?
         }
         Pending::Dressing { .. } => match record.dressing() {
@@ -302,6 +438,10 @@ async fn apply_once(store: &Store, record: &Pending) -> Result<(), StoreError> {
     }
 }
 
+fn state_json(state: &LoopMemory) -> Result<String, StoreError> {
+    serde_json::to_string(state).map_err(|e| StoreError::invalid("learning state", e.to_string()))
+}
+
 async fn apply(store: &Store, record: &Pending) -> Result<(), StoreError> {
     match record.clone() {
         Pending::Measurement {
@@ -309,7 +449,7 @@ async fn apply(store: &Store, record: &Pending) -> Result<(), StoreError> {
             part,
             lobe,
             received_at_ms,
-            pass,
+            verdict,
             max_profile_error_um,
             base_radius_error_um,
             phase_error_deg,
@@ -317,6 +457,7 @@ async fn apply(store: &Store, record: &Pending) -> Result<(), StoreError> {
             points_per_rev,
             origin,
             sha256,
+            ground_with_version: _,
             raw_lift_mm,
             averaged_lift_mm,
             analysis_json,
@@ -326,7 +467,7 @@ async fn apply(store: &Store, record: &Pending) -> Result<(), StoreError> {
                 part,
                 lobe,
                 received_at_ms,
-                verdict: if pass { Verdict::Pass } else { Verdict::Fail },
+                verdict,
                 max_profile_error_um,
                 base_radius_error_um,
                 phase_error_deg,
@@ -344,22 +485,30 @@ async fn apply(store: &Store, record: &Pending) -> Result<(), StoreError> {
         Pending::Table {
             machine,
             lobe,
+            version,
+            parent_version,
             table_number,
             program_text,
-            learning_params_json,
+            learning,
             reason,
             status,
             status_why,
             created_at_ms,
         } => {
-            let status = TableStatus::parse(&status)?;
-            let parent_version = store
-                .latest_table_version(&machine, &lobe)
-                .await?
-                .map(|t| t.version);
+            // A parent the store never saw (history from before one version counter) is
+            // left out rather than blocking every later record.
+            let parent_version = match parent_version {
+                Some(p) if store.table_version(&machine, &lobe, p as i64).await?.is_some() => {
+                    Some(p as i64)
+                }
+                _ => None,
+            };
+            let learning_params_json = serde_json::to_string(&learning)
+                .map_err(|e| StoreError::invalid("table learning", e.to_string()))?;
             let t = NewTableVersion {
                 machine,
                 lobe,
+                version: Some(version as i64),
                 parent_version,
                 table_number,
                 program_text,
@@ -371,18 +520,30 @@ async fn apply(store: &Store, record: &Pending) -> Result<(), StoreError> {
             };
             store.insert_table_version(&t).await.map(|_| ())
         }
+        Pending::TableStatus {
+            machine,
+            lobe,
+            version,
+            status,
+            why,
+            at_ms,
+        } => {
+            store
+                .set_table_status(&machine, &lobe, version as i64, status, &why, at_ms)
+                .await
+        }
         Pending::Event { .. } => match record.event() {
-            Some(e) => store.insert_event(&e?).await.map(|_| ()),
+            Some(e) => store.insert_event(&e).await.map(|_| ()),
             None => Ok(()),
         },
         Pending::Learning {
             machine,
             lobe,
-            state_json,
+            state,
             saved_at_ms,
         } => {
             store
-                .save_learning_state(&machine, &lobe, &state_json, saved_at_ms)
+                .save_learning_state(&machine, &lobe, &state_json(&state)?, saved_at_ms)
                 .await
         }
         Pending::Dressing { .. } => match record.dressing() {
@@ -395,18 +556,34 @@ async fn apply(store: &Store, record: &Pending) -> Result<(), StoreError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::core::learn::LearningParams;
+
+    fn event(message: &str) -> Pending {
+        Pending::Event {
+            machine: "M1".into(),
+            at_ms: 7,
+            level: EventLevel::Info,
+            kind: EventKind::WheelDressed,
+            message: message.into(),
+        }
+    }
+
+    fn learning(parts: u64) -> Pending {
+        let mut state = LoopMemory::new(250.0);
+        state.parts = parts;
+        Pending::Learning {
+            machine: "M1".into(),
+            lobe: "IN1".into(),
+            state,
+            saved_at_ms: 7 + parts as i64,
+        }
+    }
 
     #[test]
     fn records_survive_a_torn_last_line() {
         let dir = tempfile::tempdir().unwrap();
         let mut j = Journal::open(dir.path()).unwrap();
-        let e = Pending::Event {
-            machine: "M1".into(),
-            at_ms: 5,
-            level: "warn".into(),
-            kind: "k".into(),
-            message: "m".into(),
-        };
+        let e = event("m");
         j.append(&[e.clone(), e.clone()]).unwrap();
         let mut f = std::fs::OpenOptions::new()
             .append(true)
@@ -416,44 +593,72 @@ mod tests {
         // Reopened after the crash: the torn tail is cut, so the next record stands alone.
         let mut j = Journal::open(dir.path()).unwrap();
         assert_eq!(j.pending(), [e.clone(), e.clone()]);
+        assert!(j.quarantined().is_empty(), "a torn tail is cut, not quarantined");
         j.append(std::slice::from_ref(&e)).unwrap();
         assert_eq!(Journal::open(dir.path()).unwrap().pending().len(), 3);
     }
 
+    /// A whole line that does not parse (a newer layout, a disk error) is moved to the
+    /// quarantine file and reported with its line number; the records around it stay.
+    #[test]
+    fn unreadable_lines_are_quarantined_not_dropped() {
+        let dir = tempfile::tempdir().unwrap();
+        let good = serde_json::to_string(&event("a")).unwrap();
+        let bad = r#"{"record":"measurement","machine":"M1","pass":true}"#;
+        std::fs::write(
+            dir.path().join("journal.jsonl"),
+            format!("{good}\n{bad}\n{good}\n"),
+        )
+        .unwrap();
+        let j = Journal::open(dir.path()).unwrap();
+        assert_eq!(j.pending(), [event("a"), event("a")]);
+        assert_eq!(j.quarantined().len(), 1);
+        assert_eq!(j.quarantined()[0].line, 2);
+        let kept = std::fs::read_to_string(dir.path().join(QUARANTINE_FILE)).unwrap();
+        assert_eq!(kept, format!("{bad}\n"));
+        // Reported once: the journal no longer holds the line.
+        assert!(Journal::open(dir.path()).unwrap().quarantined().is_empty());
+    }
+
     /// Every kind of record replayed after a crash (written, not yet released) is recognised
     /// in the store and not written again; a second event that differs only in its message
-    /// still goes in.
+    /// still goes in. After the release the newest learning state stays in the journal, so
+    /// a restart with the database down still finds the loop's memory.
     #[tokio::test]
     async fn a_replay_writes_nothing_twice() {
         let dir = tempfile::tempdir().unwrap();
         let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
         let store = Store::connect(&url).await.unwrap();
-        let event = |message: &str| Pending::Event {
-            machine: "M1".into(),
-            at_ms: 7,
-            level: "info".into(),
-            kind: "wheel_dressed".into(),
-            message: message.into(),
+        let table = TableLearning {
+            iteration: 0,
+            params: LearningParams::default(),
+            wheel_radius_mm: 250.0,
+            correction_um: vec![0.0; 4],
         };
         let records = [
             event("a"),
             Pending::Table {
                 machine: "M1".into(),
                 lobe: "IN1".into(),
+                version: 3,
+                parent_version: None,
                 table_number: 1,
                 program_text: "CTABDEF(X,C,1,1)\nCTABEND\n".into(),
-                learning_params_json: "{}".into(),
+                learning: table,
                 reason: "nominal table".into(),
-                status: "pushed".into(),
-                status_why: "pushed to the share".into(),
+                status: TableStatus::Waiting,
+                status_why: "waiting: share full".into(),
                 created_at_ms: 7,
             },
-            Pending::Learning {
+            Pending::TableStatus {
                 machine: "M1".into(),
                 lobe: "IN1".into(),
-                state_json: "{}".into(),
-                saved_at_ms: 7,
+                version: 3,
+                status: TableStatus::Pushed,
+                why: "pushed on retry".into(),
+                at_ms: 8,
             },
+            learning(1),
             Pending::Dressing {
                 machine: "M1".into(),
                 at_ms: 7,
@@ -464,17 +669,18 @@ mod tests {
         ];
         let mut j = Journal::open(dir.path()).unwrap();
         j.append(&records).unwrap();
-        assert_eq!(j.flush(&store).await.unwrap(), 4);
+        assert_eq!(j.flush(&store).await.unwrap(), 5);
         // The crash: the journal is read back with every record still in it.
         let mut j = Journal::open(dir.path()).unwrap();
         j.append(&[event("b")]).unwrap();
-        assert_eq!(j.flush(&store).await.unwrap(), 5);
+        assert_eq!(j.flush(&store).await.unwrap(), 6);
         let Store::Sqlite(pool) = &store else {
             panic!("a SQLite store")
         };
         for (table, rows) in [
             ("events", 2),
             ("table_versions", 1),
+            ("table_version_status", 2),
             ("learning_states", 1),
             ("dressings", 1),
         ] {
@@ -484,7 +690,11 @@ mod tests {
                 .unwrap();
             assert_eq!(n, rows, "{table}");
         }
-        assert_eq!(j.release_durable(&store).await.unwrap(), 5);
-        assert!(Journal::open(dir.path()).unwrap().records().is_empty());
+        // The version keeps the share's number, and its newest status is the retry's.
+        let v = store.table_version("M1", "IN1", 3).await.unwrap().unwrap();
+        assert_eq!((v.version, v.status), (3, TableStatus::Pushed));
+        assert_eq!(j.release_durable(&store).await.unwrap(), 6);
+        let reopened = Journal::open(dir.path()).unwrap();
+        assert_eq!(reopened.records(), [learning(1)]);
     }
 }

@@ -18,6 +18,11 @@ pub struct MachineMetrics {
     /// Records in the journal not yet in the database.
     pub journal_pending: u64,
     pub last_max_error_um: f64,
+    /// 1 while learning holds: a table waits for the share, or a measurement could not be
+    /// recorded.
+    pub learning_held: u64,
+    /// 1 while the journal cannot be written (e.g. the disk is full).
+    pub journal_failing: u64,
     pub processing_seconds_sum: f64,
     pub processing_seconds_count: u64,
 }
@@ -53,7 +58,7 @@ impl Metrics {
     pub fn render(&self) -> String {
         let map = self.snapshot();
         let mut s = String::new();
-        let families: [Family; 10] = [
+        let families: [Family; 12] = [
             (
                 "camloop_parts_total",
                 "counter",
@@ -86,6 +91,18 @@ impl Metrics {
                 "gauge",
                 "Table versions waiting for the share.",
                 |m| m.share_waiting as f64,
+            ),
+            (
+                "camloop_learning_held",
+                "gauge",
+                "1 while learning holds (a table waits for the share, or a part could not be recorded).",
+                |m| m.learning_held as f64,
+            ),
+            (
+                "camloop_journal_failing",
+                "gauge",
+                "1 while the journal cannot be written (e.g. disk full).",
+                |m| m.journal_failing as f64,
             ),
             (
                 "camloop_journal_pending",
@@ -142,6 +159,10 @@ mod tests {
             text.contains("camloop_last_max_error_um{machine=\"M1\"} 0.5\n"),
             "{text}"
         );
-        assert_eq!(text.matches("# TYPE").count(), 10);
+        assert_eq!(text.matches("# TYPE").count(), 12);
+        assert!(
+            text.contains("camloop_learning_held{machine=\"M1\"} 0\n"),
+            "{text}"
+        );
     }
 }

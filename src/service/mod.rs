@@ -114,16 +114,13 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
         let setup = recipe
             .feature_setup(&recipe_path, &m.lobe)
             .with_context(|| format!("machine {}", m.name))?;
-        let state_dir = var.join("machines").join(&m.name);
-        let machine = MachineLoop::start(
-            m.name.clone(),
-            setup,
-            config.resolve(&m.share),
-            state_dir,
-            store.clone(),
-            metrics.clone(),
-        )
-        .await?;
+        let paths = machine::MachinePaths {
+            share_dir: config.resolve(&m.share),
+            state_dir: var.join("machines").join(&m.name),
+        };
+        let machine =
+            MachineLoop::start(m.name.clone(), setup, paths, store.clone(), metrics.clone())
+                .await?;
         let (tx, rx) = mpsc::channel::<SourceEvent>(16);
         let (command_tx, command_rx) = mpsc::channel::<http::Command>(4);
         commands.insert(m.name.clone(), command_tx);
@@ -139,6 +136,7 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
                     seed: *seed,
                     feature: machine.feature(),
                     program: machine.program_path(),
+                    main_program: machine.main_program_path(),
                     table_wheel_radius_bits: machine.table_wheel_radius(),
                     part_interval: Duration::from_millis(*part_interval_ms),
                     parts: options.parts,
@@ -246,11 +244,15 @@ async fn machine_task(
             },
             Some(command) = commands.recv() => match command {
                 http::Command::Rollback { version, reply } => {
-                    let result = machine.rollback(version).await.map_err(|e| format!("{e:#}"));
+                    let lobe = machine.feature_name().to_string();
+                    let result = match u64::try_from(version) {
+                        Ok(v) => machine.rollback(&lobe, v).await.map(|r| r.summary).map_err(|e| format!("{e:#}")),
+                        Err(_) => Err(format!("version {version} not found")),
+                    };
                     let _ = reply.send(result);
                 }
                 http::Command::Dressing { wheel_radius_mm, reply } => {
-                    let result = machine.dress(wheel_radius_mm, "api").await.map_err(|e| format!("{e:#}"));
+                    let result = machine.dress(wheel_radius_mm, "api").await.map(|d| d.summary).map_err(|e| format!("{e:#}"));
                     let _ = reply.send(result);
                 }
             },
@@ -372,7 +374,11 @@ async fn drop_source(
             match event {
                 crate::gauge::DropEvent::Accepted { measurement, .. } => {
                     if tx
-                        .send(SourceEvent::Measurement(measurement, None))
+                        .send(SourceEvent::Measurement {
+                            raw: measurement,
+                            ground_with: None,
+                            done: None,
+                        })
                         .await
                         .is_err()
                     {
@@ -473,7 +479,7 @@ async fn live_source(
                     };
                     match event {
                         Ok(Some(Ok(m))) => {
-                            if tx.send(SourceEvent::Measurement(m, None)).await.is_err() {
+                            if tx.send(SourceEvent::Measurement { raw: m, ground_with: None, done: None }).await.is_err() {
                                 return;
                             }
                         }

@@ -23,6 +23,8 @@ pub struct SimSource {
     pub seed: u64,
     pub feature: Feature,
     pub program: PathBuf,
+    /// The main program that calls it (what the control runs).
+    pub main_program: PathBuf,
     /// Wheel radius the program on the share was made for.
     pub table_wheel_radius_bits: Arc<AtomicU64>,
     pub part_interval: Duration,
@@ -64,6 +66,7 @@ impl SimSource {
                     continue;
                 }
             };
+            let ground_with = provenance_version(&text);
             let shape = match parse_table_program(&text) {
                 Ok(p) => match p.shape {
                     ParsedShape::Poly(s) => TableShape::Poly(s),
@@ -126,7 +129,11 @@ impl SimSource {
             if let Some(m) = measurement {
                 let (done, processed) = tokio::sync::oneshot::channel();
                 if tx
-                    .send(SourceEvent::Measurement(m, Some(done)))
+                    .send(SourceEvent::Measurement {
+                        raw: m,
+                        ground_with,
+                        done: Some(done),
+                    })
                     .await
                     .is_err()
                 {
@@ -148,4 +155,13 @@ impl SimSource {
             }
         }
     }
+}
+
+/// The table version a program's provenance names (`; table version vN, …`), as the control
+/// would report it with the part.
+fn provenance_version(text: &str) -> Option<u64> {
+    text.lines().find_map(|l| {
+        let rest = l.strip_prefix(';')?.trim().strip_prefix("table version v")?;
+        rest.split(|c: char| !c.is_ascii_digit()).next()?.parse().ok()
+    })
 }

@@ -13,9 +13,8 @@ use crate::core::compensate::{
 use crate::core::fit::{TableForm, fit_poly};
 use crate::core::learn::{self, LearningParams, LearningState, StepOutcome};
 use crate::core::lift::{LiftCurve, LiftTable};
-use crate::core::measure::{
-    AssemblyLimits, AveragedMeasurement, MeasurementError, check_and_average,
-};
+use crate::core::measure::{AssemblyLimits, AveragedMeasurement, MeasurementError};
+use crate::core::turn::{self, Decision, TurnError, TurnSetup};
 
 /// Points of the fine grid the ground part is judged on (0.1°), not only the gauge's points.
 pub const JUDGE_POINTS: usize = 3600;
@@ -57,6 +56,8 @@ pub enum CellError {
     Measurement(#[from] MeasurementError),
     #[error("analysis: {0}")]
     Analysis(#[from] AnalysisError),
+    #[error("{0}")]
+    Turn(#[from] TurnError),
     #[error("loop: {0}")]
     Cycle(#[from] CycleError),
     #[error("table: {0}")]
@@ -127,28 +128,34 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
         let (max_profile_error_um, max_lift_error_um, base_radius_error_um) =
             judge(&ground.lift_on_grid(JUDGE_POINTS), &nominal)?;
         let raw = sim.measure(&ground, &labels);
-        let avg = check_and_average(&raw, &AssemblyLimits::default())?;
-        let report = analyse_lobe(&avg, &nominal, &LobeOptions::default())?;
-        let revolutions = avg.revolutions_used.len() as u32;
         let lobe = lobe_loop(setup, feature);
+        let turn_setup = TurnSetup {
+            lobe,
+            bands: &[],
+            assembly: AssemblyLimits::default(),
+        };
         let action = match method {
             Method::Camloop => {
-                match compensate::learn_and_regenerate(
-                    &mut state,
-                    &report.error_um,
-                    &report.repeatability_um,
-                    revolutions,
-                    &lobe,
-                ) {
-                    Ok((outcome, next)) => {
-                        table = commanded(setup.request.form, &next, feature);
+                // The cell delivers every table at once, so the part just measured was always
+                // ground with the table of `state`: the turn learns from it.
+                let done = turn::turn(&turn_setup, &state, &raw, None)?;
+                match done.decision {
+                    Decision::Table {
+                        outcome,
+                        next,
+                        table: next_table,
+                    } => {
+                        state = *next;
+                        table = commanded(setup.request.form, &next_table, feature);
                         outcome_text(&outcome)
                     }
                     // A refused table is never used: the machine keeps the previous one.
-                    Err(e) => format!("refused, previous table kept: {e}"),
+                    Decision::Refused(e) => format!("refused, previous table kept: {e}"),
+                    Decision::Held(reason) => format!("held: {reason}"),
                 }
             }
             Method::NaiveX => {
+                let report = turn::measure(&turn_setup, &raw)?.report;
                 let step = setup.request.points / points_per_rev as usize;
                 for (j, e) in report.error_um.iter().enumerate() {
                     if let Some(dx) = naive_dx_mm.get_mut(j * step.max(1)) {
@@ -159,11 +166,12 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                 "X -= e at each index".to_string()
             }
             Method::XDomainIlc => {
+                let measured = turn::measure(&turn_setup, &raw)?;
                 let outcome = learn::step(
                     &mut x_state,
-                    &report.error_um,
-                    &report.repeatability_um,
-                    revolutions,
+                    &measured.report.error_um,
+                    &measured.report.repeatability_um,
+                    measured.averaged.revolutions_used.len() as u32,
                     &setup.params,
                 );
                 let step = setup.request.points / points_per_rev as usize;

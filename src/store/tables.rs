@@ -83,7 +83,7 @@ impl Store {
             let (id, version): (i64, i64) = sqlx::query_as(
                 "INSERT INTO table_versions (machine, lobe, version, parent_version, \
                  table_number, program_text, sha256, learning_params_json, reason, created_at_ms) \
-                 SELECT $1, $2, COALESCE(MAX(version), 0) + 1, $3, $4, $5, $6, $7, $8, $9 \
+                 SELECT $1, $2, COALESCE($10, COALESCE(MAX(version), 0) + 1), $3, $4, $5, $6, $7, $8, $9 \
                  FROM table_versions WHERE machine = $1 AND lobe = $2 \
                  RETURNING id, version",
             )
@@ -96,6 +96,7 @@ impl Store {
             .bind(&t.learning_params_json)
             .bind(&t.reason)
             .bind(t.created_at_ms)
+            .bind(t.version)
             .fetch_one(&mut *tx)
             .await
             .map_err(db_error(OP))?;

@@ -22,7 +22,8 @@ pub struct EventId(pub i64);
 macro_rules! text_enum {
     ($(#[$m:meta])* $name:ident, $field:literal { $($variant:ident => $text:literal),+ $(,)? }) => {
         $(#[$m])*
-        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+        #[serde(rename_all = "lowercase")]
         pub enum $name { $($variant),+ }
 
         impl $name {
@@ -183,6 +184,9 @@ pub struct Page<T> {
 pub struct NewTableVersion {
     pub machine: String,
     pub lobe: String,
+    /// Its number: the share's version (camloop keeps one version counter, the share's), or
+    /// `None` for one more than the highest stored.
+    pub version: Option<i64>,
     /// The version it was derived from, if any; must exist for this machine and lobe.
     pub parent_version: Option<i64>,
     /// SINUMERIK curve-table number used by this version.

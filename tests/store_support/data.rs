@@ -85,6 +85,7 @@ pub async fn all_pages(store: &Store, mut f: HistoryFilter) -> Vec<MeasurementSu
 
 pub fn table(lobe: &str, parent: Option<i64>, text: &str, status: TableStatus) -> NewTableVersion {
     NewTableVersion {
+        version: None,
         machine: "M1".into(),
         lobe: lobe.into(),
         parent_version: parent,

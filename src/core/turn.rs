@@ -1,0 +1,261 @@
+//! One turn of the loop, the same for the service, `camloop compensate` and the simulator:
+//! a raw measurement and the learning state of the table that ground the part go in; the
+//! checks, the analysis, the learning step and the guarded next table come out as one typed
+//! [`Turn`]. Nothing here decides whether the table reaches the control: the caller adopts
+//! the returned state only once the table is delivered, so a step never builds on a
+//! correction the control has not run.
+
+use super::analysis::{AnalysisError, LobeOptions, LobeReport, ToleranceBand, analyse_lobe};
+use super::compensate::{self, CycleError, GuardedTable, LobeLoop};
+use super::learn::{LearnError, LearningState, StepOutcome};
+use super::lift::LiftCurve;
+use super::measure::{AssemblyLimits, AveragedMeasurement, MeasurementError, RawMeasurement};
+
+/// What stays fixed between turns of one feature's loop.
+#[derive(Debug, Clone, Copy)]
+pub struct TurnSetup<'a> {
+    pub lobe: LobeLoop<'a>,
+    /// Tolerance bands on the profile error (empty: the analysis default).
+    pub bands: &'a [ToleranceBand],
+    pub assembly: AssemblyLimits,
+}
+
+/// Why a turn analyses but does not learn.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum HoldReason {
+    /// The measurement could not be recorded durably (e.g. the disk is full): a table
+    /// learned from it could not be traced to its evidence.
+    #[error("the measurement could not be recorded: {reason}")]
+    NotRecorded { reason: String },
+    /// The part was ground with another table than the one the learning state belongs to.
+    #[error("part was ground with table v{ground_with}, the learning state belongs to v{in_force}")]
+    OtherTable { ground_with: u64, in_force: u64 },
+}
+
+/// The outcome of the learning half of a turn.
+#[derive(Debug, Clone)]
+pub enum Decision {
+    /// A new table passed every guard; `next` is the state to adopt once it is delivered.
+    Table {
+        outcome: StepOutcome,
+        next: Box<LearningState>,
+        table: Box<GuardedTable>,
+    },
+    /// Learning or a guard refused: the table in force stays, the state is unchanged.
+    Refused(CycleError),
+    /// Evidence only: analysed and recorded, not learned from.
+    Held(HoldReason),
+}
+
+/// A measurement that passed the checks and was analysed.
+#[derive(Debug, Clone)]
+pub struct Measured {
+    pub averaged: AveragedMeasurement,
+    pub report: LobeReport,
+    /// Largest |lift error| with nothing fitted, µm.
+    pub max_error_um: f64,
+    /// Largest |profile error| after the datum fit, µm.
+    pub max_profile_error_um: f64,
+}
+
+/// A measured part and what the loop decided from it.
+#[derive(Debug, Clone)]
+pub struct Turn {
+    pub measured: Measured,
+    pub decision: Decision,
+}
+
+/// Why a measurement went no further than the checks.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TurnError {
+    #[error("measurement rejected: {0}")]
+    Measurement(#[from] MeasurementError),
+    #[error("analysis failed: {0}")]
+    Analysis(#[from] AnalysisError),
+}
+
+/// One turn: checks and averaging, analysis against the nominal, then (unless `hold` says
+/// why not) one learning step from `in_force` and the guarded table for it.
+///
+/// A measurement on another grid than the state's is learned from a fresh state while
+/// nothing was learned yet (the first part sets the grid); afterwards it is refused with
+/// [`LearnError::GridMismatch`], the same for every caller.
+pub fn turn(
+    setup: &TurnSetup<'_>,
+    in_force: &LearningState,
+    raw: &RawMeasurement,
+    hold: Option<HoldReason>,
+) -> Result<Turn, TurnError> {
+    let measured = measure(setup, raw)?;
+    let decision = match hold {
+        Some(reason) => Decision::Held(reason),
+        None => learn(setup, in_force, &measured.averaged, &measured.report),
+    };
+    Ok(Turn { measured, decision })
+}
+
+/// The first half of a turn: checks, averaging and analysis against the nominal.
+pub fn measure(setup: &TurnSetup<'_>, raw: &RawMeasurement) -> Result<Measured, TurnError> {
+    let averaged = super::measure::check_and_average(raw, &setup.assembly)?;
+    let report = analyse(setup, &averaged)?;
+    let max_error_um = max_abs(&report.error_um);
+    let max_profile_error_um = report
+        .profile_error_max_um
+        .abs()
+        .max(report.profile_error_min_um.abs());
+    Ok(Measured {
+        averaged,
+        report,
+        max_error_um,
+        max_profile_error_um,
+    })
+}
+
+fn analyse(setup: &TurnSetup<'_>, averaged: &AveragedMeasurement) -> Result<LobeReport, AnalysisError> {
+    let curve = LiftCurve::new(setup.lobe.nominal);
+    let nominal = |psi_deg: f64| {
+        let s = curve.eval(psi_deg.to_radians());
+        (s.h_mm, s.dh_mm.to_radians())
+    };
+    let options = LobeOptions {
+        bands: setup.bands.to_vec(),
+        ..LobeOptions::default()
+    };
+    analyse_lobe(averaged, &nominal, &options)
+}
+
+fn learn(
+    setup: &TurnSetup<'_>,
+    in_force: &LearningState,
+    averaged: &AveragedMeasurement,
+    report: &LobeReport,
+) -> Decision {
+    let mut next = if averaged.points_per_rev != in_force.points_per_rev {
+        if in_force.iteration != 0 {
+            return Decision::Refused(CycleError::Learn(LearnError::GridMismatch {
+                expected: in_force.points_per_rev,
+                got: averaged.points_per_rev as usize,
+            }));
+        }
+        LearningState::new(averaged.points_per_rev)
+    } else {
+        in_force.clone()
+    };
+    let revolutions = averaged.revolutions_used.len() as u32;
+    match compensate::learn_and_regenerate(
+        &mut next,
+        &report.error_um,
+        &report.repeatability_um,
+        revolutions,
+        &setup.lobe,
+    ) {
+        Ok((outcome, table)) => Decision::Table {
+            outcome,
+            next: Box::new(next),
+            table: Box::new(table),
+        },
+        Err(e) => Decision::Refused(e),
+    }
+}
+
+fn max_abs(values: &[f64]) -> f64 {
+    values.iter().fold(0.0f64, |m, v| m.max(v.abs()))
+}
+
+/// SHA-256 of what a measurement says, independent of how it arrived: machine, part and
+/// lobe (length-prefixed, so no two headers hash alike), then every sample's revolution,
+/// index and exact lift bits in order. The origin (a path, a bus) is left out, so the same
+/// file dropped twice, or under another name, is recognised as the same measurement.
+/// Binary rather than text: formatting 1,000+ floats per part cost more than the rest of
+/// the turn's bookkeeping.
+pub fn measurement_sha256(raw: &RawMeasurement) -> String {
+    use sha2::Digest as _;
+    let h = &raw.header;
+    let mut hasher = sha2::Sha256::new();
+    for field in [&h.machine, &h.part, &h.lobe] {
+        hasher.update((field.len() as u64).to_le_bytes());
+        hasher.update(field.as_bytes());
+    }
+    hasher.update(h.revolutions.to_le_bytes());
+    hasher.update(h.points_per_rev.to_le_bytes());
+    let mut samples = Vec::with_capacity(raw.samples.len() * 16);
+    for s in &raw.samples {
+        samples.extend_from_slice(&s.revolution.to_le_bytes());
+        samples.extend_from_slice(&s.angle_index.to_le_bytes());
+        samples.extend_from_slice(&s.lift_mm.to_bits().to_le_bytes());
+    }
+    hasher.update((raw.samples.len() as u64).to_le_bytes());
+    hasher.update(&samples);
+    hasher
+        .finalize()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// SHA-256 of a correction (µm per gauge angle, exact bits), as written into each table
+/// program's provenance so an operator can tell two tables' corrections apart.
+pub fn correction_sha256(correction_um: &[f64]) -> String {
+    use sha2::Digest as _;
+    let mut hasher = sha2::Sha256::new();
+    for u in correction_um {
+        hasher.update(u.to_bits().to_le_bytes());
+    }
+    hasher
+        .finalize()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::measure::{MeasurementHeader, RawSample};
+
+    fn measurement(machine: &str, part: &str, lifts: &[f64]) -> RawMeasurement {
+        RawMeasurement {
+            header: MeasurementHeader {
+                machine: machine.into(),
+                part: part.into(),
+                lobe: "IN1".into(),
+                revolutions: 1,
+                points_per_rev: lifts.len() as u32,
+            },
+            samples: lifts
+                .iter()
+                .enumerate()
+                .map(|(i, &lift_mm)| RawSample {
+                    revolution: 0,
+                    angle_index: i as u32,
+                    lift_mm,
+                })
+                .collect(),
+            origin: "test".into(),
+        }
+    }
+
+    /// The identity that makes measurements idempotent: equal for the same reading whatever
+    /// its origin, different for any change a gauge could make, including the smallest lift
+    /// change a float can carry and a character moved from one header field to the next.
+    #[test]
+    fn measurement_identity_is_the_content() {
+        let base = measurement("M1", "P7", &[0.0, 1.25, 2.5]);
+        let sha = measurement_sha256(&base);
+        assert_eq!(sha.len(), 64);
+        let mut elsewhere = base.clone();
+        elsewhere.origin = "drop/processed/copy.csv".into();
+        assert_eq!(sha, measurement_sha256(&elsewhere));
+        let nudged = measurement("M1", "P7", &[0.0, 1.25f64.next_up(), 2.5]);
+        assert_ne!(sha, measurement_sha256(&nudged));
+        let moved = measurement("M1P", "7", &[0.0, 1.25, 2.5]);
+        assert_ne!(sha, measurement_sha256(&moved));
+    }
+
+    #[test]
+    fn correction_identity_tells_apart_the_smallest_change() {
+        let a = correction_sha256(&[0.0, -1.5, 2.0]);
+        assert_eq!(a, correction_sha256(&[0.0, -1.5, 2.0]));
+        assert_ne!(a, correction_sha256(&[0.0, (-1.5f64).next_up(), 2.0]));
+    }
+}

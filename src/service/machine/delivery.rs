@@ -1,0 +1,244 @@
+//! Tables to the control: rendering with provenance, the push, the main program beside the
+//! table program, retries, and which version is in force.
+
+use super::super::journal::{EventKind, Pending};
+use super::memory::{TableLearning, WaitingTable};
+use super::records::event;
+use super::{MachineLoop, now_ms, now_ms_u64};
+use crate::core::compensate::GuardedTable;
+use crate::core::learn::LearningState;
+use crate::core::program::{
+    MainProgramSettings, comment_text, render_g1_table, render_main_program, render_poly_table,
+};
+use crate::recipe::FeatureSetup;
+use crate::share::{ProgramFile, PushError, PushRequest};
+use crate::store::{EventLevel, TableStatus};
+use anyhow::Context;
+use std::sync::atomic::Ordering;
+use tracing::{error, info, warn};
+
+/// The main program's settings for a feature: its C speed is the recipe's, the one the
+/// axis-limit guards checked the table at.
+pub(super) fn main_settings(setup: &FeatureSetup) -> MainProgramSettings {
+    MainProgramSettings {
+        c_speed_rpm: setup.limits.c_speed_rpm,
+        comment_lines: vec![comment_text(&format!(
+            "camloop {}: couples the table {} defines",
+            env!("CARGO_PKG_VERSION"),
+            setup.program.name
+        ))],
+        ..MainProgramSettings::default()
+    }
+}
+
+/// The main program's file name on the share.
+pub(super) fn main_program_file(setup: &FeatureSetup) -> String {
+    format!("{}.MPF", main_settings(setup).name)
+}
+
+impl MachineLoop {
+    /// Renders `table` for the next table number with its provenance and delivers it (with
+    /// the main program when the share's copy differs). `next` is the learning state the
+    /// table was made from: it is in force once the share confirms the table, waiting
+    /// otherwise. Returns the records to keep; an error means nothing was recorded as a
+    /// version (the state folder could not be written).
+    pub(super) async fn deliver(
+        &mut self,
+        table: &GuardedTable,
+        next: LearningState,
+        reason: &str,
+        measurement: Option<String>,
+    ) -> anyhow::Result<Vec<Pending>> {
+        let at_ms = now_ms();
+        let parent = self.memory.in_force_version;
+        let version = self.share.history().next_version();
+        let learning = TableLearning {
+            iteration: next.iteration,
+            params: self.setup.params.clone(),
+            wheel_radius_mm: self.memory.wheel_radius_mm,
+            correction_um: next.correction_um.clone(),
+        };
+        let mut settings = self.setup.program.clone();
+        settings.table_number = self.share.next_table_number();
+        settings.comment_lines = self.provenance_lines(version, parent, reason, &learning);
+        let text = match &table.segments {
+            Some(s) => render_poly_table(s, &settings),
+            None => render_g1_table(&table.points, &settings),
+        }?;
+        let mut files = vec![ProgramFile {
+            name: self.program_file.clone(),
+            text: text.clone(),
+        }];
+        files.extend(self.main_program_if_changed()?);
+        let request = PushRequest {
+            files,
+            table_number: settings.table_number,
+            reason: reason.to_string(),
+            measurement_id: measurement,
+            learning: serde_json::to_value(learning.summary())?,
+            rollback_of: None,
+            created_at_unix_ms: at_ms as u64,
+        };
+        let (version, status, why, mut records) = self.push(request, next, at_ms)?;
+        records.push(Pending::Table {
+            machine: self.name.clone(),
+            lobe: self.setup.name.clone(),
+            version,
+            parent_version: (parent > 0).then_some(parent),
+            table_number: settings.table_number,
+            program_text: text,
+            learning,
+            reason: reason.to_string(),
+            status,
+            status_why: why,
+            created_at_ms: at_ms,
+        });
+        Ok(records)
+    }
+
+    /// One push attempt; the state in force follows what the share confirmed.
+    pub(super) fn push(
+        &mut self,
+        request: PushRequest,
+        next: LearningState,
+        at_ms: i64,
+    ) -> anyhow::Result<(u64, TableStatus, String, Vec<Pending>)> {
+        let mut records = Vec::new();
+        match self.share.push_once(request) {
+            Ok(p) => {
+                self.memory.waiting = None;
+                self.memory.learning = next;
+                self.memory.in_force_version = p.version;
+                self.on_delivered(self.memory.wheel_radius_mm);
+                Ok((p.version, TableStatus::Pushed, "pushed to the share".into(), records))
+            }
+            Err(PushError::Refused { version, reason }) => {
+                error!(machine = %self.name, version, reason = %reason, "table version refused by the share");
+                Ok((version, TableStatus::Refused, reason, records))
+            }
+            Err(PushError::Share { version, error: e }) => {
+                if self.memory.waiting.is_none() {
+                    // Said once per outage, not per part.
+                    error!(machine = %self.name, error = %e, in_force = self.memory.in_force_version, "controller share: table not delivered; learning holds on the table in force");
+                    let message = format!(
+                        "{e}: parts are ground with v{} and learned from it alone until the share takes v{version} or a newer table",
+                        self.memory.in_force_version
+                    );
+                    records.push(event(&self.name, at_ms, EventLevel::Error, EventKind::ShareUnavailable, message));
+                    self.metrics.update(&self.name, |m| m.alarms_total += 1);
+                }
+                self.memory.waiting = Some(WaitingTable {
+                    version,
+                    learning: next,
+                    wheel_radius_mm: self.memory.wheel_radius_mm,
+                });
+                self.metrics.update(&self.name, |m| {
+                    m.share_waiting = 1;
+                    m.learning_held = 1;
+                });
+                Ok((version, TableStatus::Waiting, format!("waiting: {e}"), records))
+            }
+            Err(PushError::State(e)) => Err(e).context("share state folder"),
+        }
+    }
+
+    fn on_delivered(&self, wheel_radius_mm: f64) {
+        self.table_wheel_radius_bits
+            .store(wheel_radius_mm.to_bits(), Ordering::SeqCst);
+        self.metrics.update(&self.name, |m| {
+            m.tables_pushed_total += 1;
+            m.share_waiting = 0;
+            m.learning_held = 0;
+        });
+    }
+
+    /// The log's word on the newest delivery.
+    pub(super) fn delivery_line(&self) -> String {
+        match &self.memory.waiting {
+            Some(w) => format!(
+                "table v{} waiting for the share (v{} in force)",
+                w.version, self.memory.in_force_version
+            ),
+            None => format!("table v{} pushed", self.memory.in_force_version),
+        }
+    }
+
+    /// Comment lines that say what the program is, for the operator reading it on the
+    /// control.
+    fn provenance_lines(
+        &self,
+        version: u64,
+        parent: u64,
+        reason: &str,
+        learning: &TableLearning,
+    ) -> Vec<String> {
+        let p = &self.setup.program;
+        [
+            format!("{} made by camloop {}", self.setup.label, env!("CARGO_PKG_VERSION")),
+            format!(
+                "table version v{version}, parent {}",
+                if parent > 0 { format!("v{parent}") } else { "none".into() }
+            ),
+            format!("created {} UTC", crate::clock::utc_text(now_ms_u64())),
+            format!(
+                "correction sha256 {}",
+                crate::core::turn::correction_sha256(&learning.correction_um)
+            ),
+            format!(
+                "C offset {} deg, C direction {}, wheel radius {} mm",
+                p.c_offset_deg,
+                if matches!(p.c_direction, crate::core::program::CDirection::Reversed) { -1 } else { 1 },
+                learning.wheel_radius_mm
+            ),
+            format!("reason: {reason}"),
+        ]
+        .iter()
+        .map(|l| comment_text(l))
+        .collect()
+    }
+
+    /// The main program, when the share's copy is not this text (written again only when it
+    /// changes, so the control runs what camloop tested).
+    fn main_program_if_changed(&self) -> anyhow::Result<Option<ProgramFile>> {
+        let main = main_settings(&self.setup);
+        let text = render_main_program(&main, &self.setup.program)?;
+        let name = main_program_file(&self.setup);
+        let on_share = std::fs::read_to_string(self.share.config().share_dir.join(&name)).ok();
+        Ok((on_share.as_deref() != Some(text.as_str())).then_some(ProgramFile { name, text }))
+    }
+
+    /// Retries what waits: a version for the share, records for the database; and drops
+    /// from the journal what the database now holds durably.
+    pub async fn retry(&mut self) {
+        match self.share.deliver() {
+            Ok(Some(p)) => {
+                info!(machine = %self.name, version = p.version, "controller share back: waiting table delivered, learning resumes from it");
+                let at_ms = now_ms();
+                let radius = self.memory.delivered(p.version);
+                self.on_delivered(radius.unwrap_or(self.memory.wheel_radius_mm));
+                let records = vec![
+                    Pending::TableStatus {
+                        machine: self.name.clone(),
+                        lobe: self.setup.name.clone(),
+                        version: p.version,
+                        status: TableStatus::Pushed,
+                        why: "pushed to the share on retry".into(),
+                        at_ms,
+                    },
+                    event(&self.name, at_ms, EventLevel::Info, EventKind::ShareBack, format!("share back: v{} delivered, learning resumes from it", p.version)),
+                    self.learning_record(at_ms),
+                ];
+                self.record(records).await;
+            }
+            Ok(None) => {}
+            Err(e) => warn!(machine = %self.name, error = %e, "controller share still unavailable"),
+        }
+        self.flush_journal().await;
+        let store = self.store.read().await.clone();
+        if let Some(store) = store
+            && let Err(e) = self.journal.release_durable(&store).await
+        {
+            warn!(machine = %self.name, error = format!("{e:#}"), "database not confirmed durable: records stay in the journal");
+        }
+    }
+}

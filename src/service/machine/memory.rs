@@ -1,0 +1,175 @@
+//! What a machine's loop remembers between parts, as one typed, versioned record: the
+//! learning state of the table on the control, the table waiting for the share if any, the
+//! wheel, and the identities of the newest measurements. It travels through the journal into
+//! the store, and a restart resumes from the newest copy.
+
+use crate::core::learn::{LearningParams, LearningState};
+use serde::{Deserialize, Serialize};
+
+/// Layout of [`LoopMemory`] written by this build. Records without the field are layout 1
+/// (one learning state, no version attribution) and are read as such.
+pub const MEMORY_SCHEMA: u32 = 2;
+
+/// How many measurement identities are remembered to recognise a repeat.
+const RECENT_MEASUREMENTS: usize = 256;
+
+/// A table computed and recorded but not yet on the control (the share refused it).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WaitingTable {
+    /// Its version on the share.
+    pub version: u64,
+    /// The state to adopt once it is delivered.
+    pub learning: LearningState,
+    /// Wheel radius it was made for, mm.
+    pub wheel_radius_mm: f64,
+}
+
+/// The loop's memory (see the module doc).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LoopMemory {
+    #[serde(default = "layout_one")]
+    pub schema: u32,
+    /// The learning state of the table on the control: its correction ground the parts now
+    /// being measured, so every learning step starts from it.
+    pub learning: LearningState,
+    /// Version of the table on the control (0: none delivered yet).
+    #[serde(default)]
+    pub in_force_version: u64,
+    /// A newer table that has not reached the control.
+    #[serde(default)]
+    pub waiting: Option<WaitingTable>,
+    /// Wheel radius the control believes (after the last dressing), mm.
+    pub wheel_radius_mm: f64,
+    /// Parts measured so far.
+    pub parts: u64,
+    /// Content identities (SHA-256) of the newest measurements, oldest first.
+    #[serde(default)]
+    pub recent_measurements: Vec<String>,
+}
+
+fn layout_one() -> u32 {
+    1
+}
+
+impl LoopMemory {
+    /// A new loop: the nominal table, nothing measured.
+    pub fn new(wheel_radius_mm: f64) -> Self {
+        Self {
+            schema: MEMORY_SCHEMA,
+            learning: LearningState::new(360),
+            in_force_version: 0,
+            waiting: None,
+            wheel_radius_mm,
+            parts: 0,
+            recent_measurements: Vec::new(),
+        }
+    }
+
+    /// The learning state of the newest table made, delivered or not (what a dressing or a
+    /// restart regenerates from).
+    pub fn newest_learning(&self) -> &LearningState {
+        self.waiting
+            .as_ref()
+            .map_or(&self.learning, |w| &w.learning)
+    }
+
+    /// Whether this measurement identity was seen among the newest ones.
+    pub fn has_seen(&self, sha256: &str) -> bool {
+        self.recent_measurements.iter().any(|s| s == sha256)
+    }
+
+    pub fn remember(&mut self, sha256: String) {
+        self.recent_measurements.push(sha256);
+        let excess = self
+            .recent_measurements
+            .len()
+            .saturating_sub(RECENT_MEASUREMENTS);
+        self.recent_measurements.drain(..excess);
+    }
+
+    /// Version `version` reached the control: if it is the waiting one, its state is now
+    /// the one in force, and the wheel radius it was made for is returned.
+    pub fn delivered(&mut self, version: u64) -> Option<f64> {
+        self.in_force_version = version;
+        let w = self.waiting.take_if(|w| w.version == version)?;
+        self.learning = w.learning;
+        Some(w.wheel_radius_mm)
+    }
+}
+
+/// What a table version keeps of the learning that made it: enough to restore the
+/// correction on a rollback and to tell, later, what the loop knew. The share's manifest
+/// keeps [`TableLearningSummary`] (without the 360+ numbers).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TableLearning {
+    pub iteration: u32,
+    pub params: LearningParams,
+    pub wheel_radius_mm: f64,
+    pub correction_um: Vec<f64>,
+}
+
+/// [`TableLearning`] without the correction.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TableLearningSummary {
+    pub iteration: u32,
+    pub params: LearningParams,
+    pub wheel_radius_mm: f64,
+    pub correction_sha256: String,
+}
+
+impl TableLearning {
+    pub fn summary(&self) -> TableLearningSummary {
+        TableLearningSummary {
+            iteration: self.iteration,
+            params: self.params.clone(),
+            wheel_radius_mm: self.wheel_radius_mm,
+            correction_sha256: crate::core::turn::correction_sha256(&self.correction_um),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A memory written before version attribution existed still loads, as layout 1 with
+    /// nothing waiting.
+    #[test]
+    fn layout_one_records_load() {
+        let old = r#"{"learning":{"points_per_rev":2,"correction_um":[0.5,-0.5],"iteration":3,
+            "recent_max_error_um":[],"best":null,"frozen":null},"wheel_radius_mm":250.0,"parts":3}"#;
+        let m: LoopMemory = serde_json::from_str(old).expect("layout 1 parses");
+        assert_eq!(m.schema, 1);
+        assert_eq!(m.learning.correction_um, vec![0.5, -0.5]);
+        assert_eq!(m.in_force_version, 0);
+        assert!(m.waiting.is_none());
+    }
+
+    #[test]
+    fn delivering_the_waiting_table_puts_its_state_in_force() {
+        let mut m = LoopMemory::new(250.0);
+        let mut next = m.learning.clone();
+        next.correction_um[0] = -2.0;
+        m.waiting = Some(WaitingTable {
+            version: 7,
+            learning: next.clone(),
+            wheel_radius_mm: 249.98,
+        });
+        assert_eq!(m.delivered(6), None);
+        assert_eq!(m.in_force_version, 6);
+        assert!(m.waiting.is_some(), "an older version does not settle the waiting one");
+        assert_eq!(m.delivered(7), Some(249.98));
+        assert_eq!(m.learning, next);
+        assert!(m.waiting.is_none());
+    }
+
+    #[test]
+    fn remembers_a_bounded_number_of_identities() {
+        let mut m = LoopMemory::new(250.0);
+        for i in 0..300 {
+            m.remember(format!("{i}"));
+        }
+        assert_eq!(m.recent_measurements.len(), RECENT_MEASUREMENTS);
+        assert!(m.has_seen("299") && m.has_seen("44") && !m.has_seen("43"));
+    }
+}

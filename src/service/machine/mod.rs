@@ -1,0 +1,326 @@
+//! One machine's loop in the service. Each part takes one [`crate::core::turn`]: checks,
+//! analysis, a learning step from the table that ground the part, the guarded next table;
+//! the machine then records it through the journal and delivers the table to the share.
+//!
+//! - `ingest`: a measurement in (identity, repeats, the turn, its records);
+//! - `delivery`: rendering with provenance, the push, retries, the version in force;
+//! - `rollback`, `dressing`: the operator's and the wheel's events;
+//! - `records`: the journal records and the reject folder;
+//! - `memory`: what the loop remembers between parts.
+//!
+//! The version in force is the newest one the share confirmed. A step always starts from its
+//! learning state: a table computed while the share refused it never becomes the base of the
+//! next step, so an outage cannot wind the correction up.
+
+mod delivery;
+mod dressing;
+mod ingest;
+pub mod memory;
+mod records;
+mod rollback;
+
+use super::journal::{EventKind, Journal, Pending};
+use super::metrics::Metrics;
+use crate::clock::{now_ms, now_ms_u64};
+use crate::core::compensate::{self, LobeLoop};
+use crate::recipe::FeatureSetup;
+use crate::share::{RealFs, Share, ShareConfig};
+use crate::store::{EventLevel, Store};
+use anyhow::Context;
+use memory::LoopMemory;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+use tracing::{error, info, warn};
+
+pub use ingest::GaugeIds;
+
+/// The database, once it can be reached (a background task connects and reconnects).
+pub type StoreHandle = Arc<tokio::sync::RwLock<Option<Store>>>;
+
+/// What a gauge adapter hands the machine.
+#[derive(Debug)]
+pub enum SourceEvent {
+    /// A measurement. `ground_with` is the table version the control reports having ground
+    /// the part with, where it can say (the simulated control reads it from the program's
+    /// provenance); otherwise the delivery record decides. `done` is answered once the next
+    /// table is out, so a simulated machine grinds the next part with it, as a real one does
+    /// between parts.
+    Measurement {
+        raw: crate::core::measure::RawMeasurement,
+        ground_with: Option<u64>,
+        done: Option<tokio::sync::oneshot::Sender<()>>,
+    },
+    /// The wheel was dressed; the control now believes this radius.
+    Dressing {
+        wheel_radius_mm: f64,
+        source: String,
+    },
+}
+
+/// Where a machine's files are.
+#[derive(Debug, Clone)]
+pub struct MachinePaths {
+    pub share_dir: PathBuf,
+    pub state_dir: PathBuf,
+}
+
+/// The machine's loop with everything it owns.
+pub struct MachineLoop {
+    pub name: String,
+    setup: FeatureSetup,
+    ids: GaugeIds,
+    memory: LoopMemory,
+    share: Share,
+    program_file: String,
+    journal: Journal,
+    store: StoreHandle,
+    metrics: Arc<Metrics>,
+    /// Wheel radius the program on the share was made for (the simulator reads it).
+    table_wheel_radius_bits: Arc<AtomicU64>,
+}
+
+impl MachineLoop {
+    /// Sets the machine up: its journal, memory (newest from the journal, else the store:
+    /// a restart resumes where the loop was), and share. Delivers the table of the current
+    /// correction (and the main program) when the share lacks them.
+    pub async fn start(
+        name: String,
+        setup: FeatureSetup,
+        paths: MachinePaths,
+        store: StoreHandle,
+        metrics: Arc<Metrics>,
+    ) -> anyhow::Result<Self> {
+        let journal = Journal::open(&paths.state_dir)
+            .with_context(|| format!("machine {name}: journal"))?;
+        let memory = load_memory(&name, &setup, &journal, &store).await?;
+        if let Err(e) = std::fs::create_dir_all(&paths.share_dir) {
+            // Not fatal: the share may be a mount that comes back; deliveries wait for it.
+            error!(machine = %name, folder = %paths.share_dir.display(), error = %e, "controller share folder cannot be created: tables wait until it can");
+        }
+        let config = ShareConfig {
+            share_dir: paths.share_dir.clone(),
+            state_dir: paths.state_dir.join("share"),
+            table_pair: setup.table_pair,
+            keep_versions: 50,
+        };
+        let (share, report) = Share::open(config, Box::new(RealFs), Box::new(now_ms_u64))
+            .with_context(|| format!("machine {name}: cannot open the share state"))?;
+        if let Some(e) = &report.share_unavailable {
+            error!(machine = %name, error = %e, "controller share unavailable; tables wait until it is back");
+        }
+        let program_file = format!("{}.SPF", setup.program.name);
+        let ids = GaugeIds::for_machine(&name, &setup.name);
+        let mut machine = Self {
+            name,
+            setup,
+            ids,
+            memory,
+            share,
+            program_file,
+            journal,
+            store,
+            metrics,
+            table_wheel_radius_bits: Arc::new(AtomicU64::new(0)),
+        };
+        machine.after_start(&report).await?;
+        Ok(machine)
+    }
+
+    /// Reconciles the memory with the share, reports a quarantined journal, and makes sure
+    /// the share holds a table.
+    async fn after_start(&mut self, report: &crate::share::OpenReport) -> anyhow::Result<()> {
+        let at_ms = now_ms();
+        self.setup.feature = self
+            .setup
+            .feature
+            .with_wheel_radius(self.memory.wheel_radius_mm);
+        self.table_wheel_radius_bits
+            .store(self.memory.wheel_radius_mm.to_bits(), Ordering::SeqCst);
+        if let Some(pushed) = self.share.history().last_pushed().map(|v| v.record.version)
+            && pushed != self.memory.in_force_version
+        {
+            // Killed between the push and the record of it: the share is the authority.
+            info!(machine = %self.name, share_version = pushed, memory_version = self.memory.in_force_version, "version in force taken from the share's manifest");
+            self.memory.delivered(pushed);
+        }
+        let mut records = Vec::new();
+        for q in self.journal.quarantined() {
+            error!(machine = %self.name, line = q.line, reason = %q.reason, "journal line unreadable: moved to the quarantine file");
+            records.push(records::event(
+                &self.name,
+                at_ms,
+                EventLevel::Error,
+                EventKind::JournalQuarantined,
+                format!(
+                    "journal line {} unreadable ({}): kept in {}",
+                    q.line,
+                    q.reason,
+                    super::journal::QUARANTINE_FILE
+                ),
+            ));
+        }
+        self.record(records).await;
+        let _ = report;
+        if !self.program_path().exists() && self.memory.waiting.is_none() {
+            let table = compensate::current_table(self.memory.newest_learning(), &self.lobe_loop())?;
+            let reason = if self.memory.parts == 0 {
+                "nominal table"
+            } else {
+                "table restored at start"
+            };
+            let next = self.memory.newest_learning().clone();
+            let mut records = self.deliver(&table, next, reason, None).await?;
+            records.push(self.learning_record(at_ms));
+            self.record(records).await;
+        }
+        Ok(())
+    }
+
+    pub fn program_path(&self) -> PathBuf {
+        self.share.config().share_dir.join(&self.program_file)
+    }
+
+    /// The main program's file on the share.
+    pub fn main_program_path(&self) -> PathBuf {
+        self.share
+            .config()
+            .share_dir
+            .join(delivery::main_program_file(&self.setup))
+    }
+
+    pub fn table_wheel_radius(&self) -> Arc<AtomicU64> {
+        self.table_wheel_radius_bits.clone()
+    }
+
+    pub fn feature(&self) -> compensate::Feature {
+        self.setup.feature
+    }
+
+    /// The lobe or pin this machine grinds.
+    pub fn feature_name(&self) -> &str {
+        &self.setup.name
+    }
+
+    fn lobe_loop(&self) -> LobeLoop<'_> {
+        self.setup.lobe_loop()
+    }
+
+    /// Handles one event from the gauge side. Errors are logged and recorded, never fatal:
+    /// the machine goes on with the next part.
+    pub async fn handle(&mut self, event: SourceEvent) {
+        let started = Instant::now();
+        let result = match event {
+            SourceEvent::Measurement {
+                raw,
+                ground_with,
+                done,
+            } => {
+                let r = self.on_measurement(raw, ground_with).await;
+                if let Some(done) = done {
+                    let _ = done.send(());
+                }
+                r
+            }
+            SourceEvent::Dressing {
+                wheel_radius_mm,
+                source,
+            } => self.dress(wheel_radius_mm, &source).await.map(|_| ()),
+        };
+        if let Err(e) = result {
+            error!(machine = %self.name, error = format!("{e:#}"), "part not processed");
+        }
+        self.metrics.update(&self.name, |m| {
+            m.processing_seconds_sum += started.elapsed().as_secs_f64();
+            m.processing_seconds_count += 1;
+        });
+    }
+
+    /// Appends records to the journal (durable), then tries to write them to the store.
+    /// Returns whether the journal took them: when it cannot (disk full), the records are
+    /// lost to history, so the caller must not act on what they describe.
+    async fn record(&mut self, records: Vec<Pending>) -> bool {
+        if records.is_empty() {
+            return true;
+        }
+        let kept = match self.journal.append(&records) {
+            Ok(()) => true,
+            Err(e) => {
+                error!(machine = %self.name, error = format!("{e:#}"), "journal cannot be written: records not kept, learning holds");
+                self.metrics.update(&self.name, |m| {
+                    m.alarms_total += 1;
+                    m.journal_failing = 1;
+                });
+                false
+            }
+        };
+        if kept {
+            self.metrics.update(&self.name, |m| m.journal_failing = 0);
+        }
+        self.flush_journal().await;
+        kept
+    }
+
+    async fn flush_journal(&mut self) {
+        let store = self.store.read().await.clone();
+        if let Some(store) = store
+            && let Err(e) = self.journal.flush(&store).await
+        {
+            warn!(machine = %self.name, error = format!("{e:#}"), "database unavailable: records kept in the journal");
+        }
+        let pending = self.journal.pending().len() as u64;
+        self.metrics
+            .update(&self.name, |m| m.journal_pending = pending);
+    }
+
+    /// The loop's memory as a record; through the journal it is also what a restart resumes
+    /// from.
+    fn learning_record(&self, at_ms: i64) -> Pending {
+        Pending::Learning {
+            machine: self.name.clone(),
+            lobe: self.setup.name.clone(),
+            state: self.memory.clone(),
+            saved_at_ms: at_ms,
+        }
+    }
+}
+
+/// The newest memory: the journal's (it holds what the store may not have yet, and always
+/// the newest learning state), else the store's. A store that answers with an error is an
+/// error here, never "no state": starting from nominal would silently forget the loop.
+async fn load_memory(
+    name: &str,
+    setup: &FeatureSetup,
+    journal: &Journal,
+    store: &StoreHandle,
+) -> anyhow::Result<LoopMemory> {
+    let local = journal.records().iter().rev().find_map(|r| match r {
+        Pending::Learning {
+            machine,
+            lobe,
+            state,
+            ..
+        } if machine == name && *lobe == setup.name => Some(state.clone()),
+        _ => None,
+    });
+    if let Some(memory) = local {
+        return Ok(memory);
+    }
+    let Some(store) = store.read().await.clone() else {
+        return Ok(LoopMemory::new(setup.feature.wheel_radius_mm()));
+    };
+    let stored = store
+        .load_learning_state(name, &setup.name)
+        .await
+        .with_context(|| format!("machine {name}: cannot read the stored learning state"))?;
+    match stored {
+        None => Ok(LoopMemory::new(setup.feature.wheel_radius_mm())),
+        Some(s) => serde_json::from_str(&s.state_json).with_context(|| {
+            format!(
+                "machine {name} {}: the stored learning state is unreadable",
+                setup.name
+            )
+        }),
+    }
+}

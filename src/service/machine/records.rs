@@ -1,0 +1,83 @@
+//! The records a machine writes: events, measurements as the journal keeps them, rejects
+//! kept on disk with their reason.
+
+use super::super::journal::{EventKind, Pending};
+use crate::core::learn::StepOutcome;
+use crate::core::measure::RawMeasurement;
+use crate::store::EventLevel;
+use std::path::Path;
+
+pub(super) fn event(
+    machine: &str,
+    at_ms: i64,
+    level: EventLevel,
+    kind: EventKind,
+    message: String,
+) -> Pending {
+    Pending::Event {
+        machine: machine.to_string(),
+        at_ms,
+        level,
+        kind,
+        message,
+    }
+}
+
+pub(super) fn outcome_text(outcome: &StepOutcome) -> String {
+    match outcome {
+        StepOutcome::Updated { max_error_um, .. } => {
+            format!("learned from max error {max_error_um:.2} µm")
+        }
+        StepOutcome::InTolerance { max_error_um } => format!("in tolerance ({max_error_um:.2} µm)"),
+        StepOutcome::Frozen { .. } => "learning frozen".to_string(),
+        StepOutcome::Reverted { to_iteration, .. } => {
+            format!("reverted to iteration {to_iteration}")
+        }
+    }
+}
+
+/// Raw lifts per revolution, in revolution order (samples are complete after the checks).
+pub(super) fn raw_revolutions(raw: &RawMeasurement) -> Vec<Vec<f64>> {
+    let n = raw.header.points_per_rev as usize;
+    let revs = raw.header.revolutions as usize;
+    let mut out = vec![vec![0.0; n]; revs];
+    for s in &raw.samples {
+        if let Some(slot) = out
+            .get_mut(s.revolution as usize)
+            .and_then(|r| r.get_mut(s.angle_index as usize))
+        {
+            *slot = s.lift_mm;
+        }
+    }
+    out
+}
+
+/// A rejected measurement is kept as CSV in `<dir>` with its reason beside it, named by its
+/// content identity (so a repeat overwrites rather than piles up).
+pub(super) fn keep_reject(
+    dir: &Path,
+    raw: &RawMeasurement,
+    sha: &str,
+    reason: &str,
+) -> std::io::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let mut csv = format!(
+        "# machine={} part={} lobe={}\n# points_per_rev={} revolutions={}\n# origin: {}\nrev,angle_deg,lift_mm\n",
+        raw.header.machine,
+        raw.header.part,
+        raw.header.lobe,
+        raw.header.points_per_rev,
+        raw.header.revolutions,
+        raw.origin.replace('\n', " ")
+    );
+    for s in &raw.samples {
+        let angle = f64::from(s.angle_index) * 360.0 / f64::from(raw.header.points_per_rev.max(1));
+        csv.push_str(&format!("{},{angle},{}\n", s.revolution, s.lift_mm));
+    }
+    let stem = &sha[..16.min(sha.len())];
+    std::fs::write(dir.join(format!("{stem}.csv")), csv)?;
+    std::fs::write(
+        dir.join(format!("{stem}.reason.txt")),
+        format!("{reason}\n"),
+    )
+}

@@ -1,0 +1,147 @@
+//! Rollback: a stored version delivered again as a new version under the table number not
+//! in use, its correction restored. History is appended: the rollback is a new version.
+
+use super::super::journal::{EventKind, Pending};
+use super::memory::TableLearning;
+use super::records::event;
+use super::{MachineLoop, now_ms, now_ms_u64};
+use crate::share::{ProgramFile, PushRequest};
+use crate::store::EventLevel;
+use anyhow::Context;
+use tracing::info;
+
+/// Why a rollback could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum RollbackError {
+    #[error("machine {machine} grinds {grinds}, not {asked}")]
+    UnknownFeature {
+        machine: String,
+        grinds: String,
+        asked: String,
+    },
+    #[error("version {version} of {machine} {lobe} not found")]
+    NotFound {
+        machine: String,
+        lobe: String,
+        version: u64,
+    },
+    #[error("history store unavailable: cannot read the stored version")]
+    StoreUnavailable,
+    #[error(transparent)]
+    Other(#[from] anyhow::Error),
+}
+
+/// What a rollback delivered.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RolledBack {
+    pub to_version: u64,
+    pub new_version: u64,
+    pub table_number: u32,
+    pub summary: String,
+}
+
+impl MachineLoop {
+    /// Delivers the program of version `version` of feature `lobe` again. The text comes
+    /// from the share's own kept copy where it still has it (checked against its SHA-256),
+    /// else from the history store; either way it is retargeted to the free table number.
+    pub async fn rollback(&mut self, lobe: &str, version: u64) -> Result<RolledBack, RollbackError> {
+        if lobe != self.setup.name {
+            return Err(RollbackError::UnknownFeature {
+                machine: self.name.clone(),
+                grinds: self.setup.name.clone(),
+                asked: lobe.to_string(),
+            });
+        }
+        let store = self
+            .store
+            .read()
+            .await
+            .clone()
+            .ok_or(RollbackError::StoreUnavailable)?;
+        let old = store
+            .table_version(&self.name, lobe, version as i64)
+            .await
+            .context("reading the stored version")?
+            .ok_or_else(|| RollbackError::NotFound {
+                machine: self.name.clone(),
+                lobe: lobe.to_string(),
+                version,
+            })?;
+        let learning: TableLearning = serde_json::from_str(&old.learning_params_json)
+            .with_context(|| format!("version {version}: its learning record is unreadable"))?;
+        let at_ms = now_ms();
+        let number = self.share.next_table_number();
+        let text = match self.share.rollback_request(version, now_ms_u64()) {
+            Ok(r) => r.files.into_iter().next().map_or(old.program_text.clone(), |f| f.text),
+            Err(_) => old.program_text.clone(),
+        };
+        let reason = format!("rollback to v{version}");
+        let text = retarget(&text, number)
+            .with_context(|| format!("version {version}: no CTABDEF line to retarget to table {number}"))?;
+        let mut next = self.memory.learning.clone();
+        if learning.correction_um.len() == next.correction_um.len() {
+            next.correction_um = learning.correction_um.clone();
+            next.recent_max_error_um.clear();
+        }
+        let request = PushRequest {
+            files: vec![ProgramFile {
+                name: self.program_file.clone(),
+                text: text.clone(),
+            }],
+            table_number: number,
+            reason: reason.clone(),
+            measurement_id: None,
+            learning: serde_json::to_value(learning.summary()).context("learning summary")?,
+            rollback_of: Some(version),
+            created_at_unix_ms: at_ms as u64,
+        };
+        let parent = self.memory.in_force_version;
+        let (new_version, status, why, mut records) = self.push(request, next, at_ms)?;
+        info!(machine = %self.name, lobe, version, new_version, table_number = number, status = status.as_str(), "rollback");
+        records.extend([
+            event(&self.name, at_ms, EventLevel::Info, EventKind::Rollback, format!("{reason} as v{new_version}, table {number}: {why}")),
+            Pending::Table {
+                machine: self.name.clone(),
+                lobe: lobe.to_string(),
+                version: new_version,
+                parent_version: (parent > 0).then_some(parent),
+                table_number: number,
+                program_text: text,
+                learning,
+                reason: reason.clone(),
+                status,
+                status_why: why.clone(),
+                created_at_ms: at_ms,
+            },
+            self.learning_record(at_ms),
+        ]);
+        self.record(records).await;
+        Ok(RolledBack {
+            to_version: version,
+            new_version,
+            table_number: number,
+            summary: format!("{reason} delivered as v{new_version}, table {number} ({why})"),
+        })
+    }
+}
+
+/// The same program defining table `to` (the CTABDEF line and the number the program hands
+/// back to the main program).
+fn retarget(text: &str, to: u32) -> Option<String> {
+    let mut found = false;
+    let lines: Vec<String> = text
+        .lines()
+        .map(|line| {
+            if let Some(args) = line.strip_prefix("CTABDEF(") {
+                let mut parts: Vec<String> = args.split(',').map(str::to_string).collect();
+                if parts.len() >= 4 {
+                    parts[2] = to.to_string();
+                    found = true;
+                    return format!("CTABDEF({}", parts.join(","));
+                }
+            }
+            line.to_string()
+        })
+        .collect();
+    found.then(|| lines.join("\n") + "\n")
+}
