@@ -154,12 +154,24 @@ impl MachineLoop {
 
     /// The log's word on the newest delivery.
     pub(super) fn delivery_line(&self) -> String {
+        let number = |v: u64| {
+            self.share
+                .history()
+                .get(v)
+                .map_or(String::new(), |s| format!(" (T{})", s.record.table_number))
+        };
         match &self.memory.waiting {
             Some(w) => format!(
-                "table v{} waiting for the share (v{} in force)",
-                w.version, self.memory.in_force_version
+                "table v{}{} waiting for the share (v{} in force)",
+                w.version,
+                number(w.version),
+                self.memory.in_force_version
             ),
-            None => format!("table v{} pushed", self.memory.in_force_version),
+            None => format!(
+                "table v{}{} pushed",
+                self.memory.in_force_version,
+                number(self.memory.in_force_version)
+            ),
         }
     }
 
