@@ -3,12 +3,15 @@
 //! is down keeps every record in the journal and the service running; a restart resumes; a
 //! wheel dressing reported through the API or a dropped file regenerates the table.
 
+mod service_support;
 mod store_support;
+
+use service_support::{get, json, post};
 
 use camloop::config::Config;
 use camloop::service::{self, RunOptions};
 use std::path::Path;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::io::AsyncWriteExt;
 
 fn config(dir: &Path, database_url: &str) -> Config {
     let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
@@ -60,57 +63,6 @@ fn unavailable_can() -> String {
         "kind = \"can\"\ninterface = \"camloopcan9\"\ndbc = \"{}\"",
         dbc.display()
     )
-}
-
-/// A plain HTTP/1.1 POST of a JSON body, with an optional bearer token.
-async fn post(
-    addr: std::net::SocketAddr,
-    path: &str,
-    body: &str,
-    token: Option<&str>,
-) -> (u16, String) {
-    let auth = token
-        .map(|t| format!("Authorization: Bearer {t}\r\n"))
-        .unwrap_or_default();
-    let request = format!(
-        "POST {path} HTTP/1.1\r\nHost: localhost\r\nContent-Type: application/json\r\n{auth}Content-Length: {}\r\nConnection: close\r\n\r\n{body}",
-        body.len()
-    );
-    exchange(addr, &request).await
-}
-
-/// A plain HTTP/1.1 GET on the service's listener; returns status and body.
-async fn get(addr: std::net::SocketAddr, path: &str) -> (u16, String) {
-    exchange(
-        addr,
-        &format!("GET {path} HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n"),
-    )
-    .await
-}
-
-/// Sends one request on a new connection and reads the whole response: status and body.
-async fn exchange(addr: std::net::SocketAddr, request: &str) -> (u16, String) {
-    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
-    stream.write_all(request.as_bytes()).await.unwrap();
-    let mut response = String::new();
-    stream.read_to_string(&mut response).await.unwrap();
-    let status = response
-        .split(' ')
-        .nth(1)
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(0);
-    let body = response
-        .split_once("\r\n\r\n")
-        .map(|(_, b)| b.to_string())
-        .unwrap_or_default();
-    (status, body)
-}
-
-/// Bodies may come chunked; the JSON ones here are small, so take the JSON object inside.
-fn json(body: &str) -> serde_json::Value {
-    let start = body.find('{').unwrap();
-    let end = body.rfind('}').unwrap();
-    serde_json::from_str(&body[start..=end]).unwrap()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
