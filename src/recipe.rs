@@ -4,14 +4,14 @@
 
 use crate::core::analysis::ToleranceBand;
 use crate::core::compensate::LobeLoop;
-use crate::core::measure::AssemblyLimits;
-use crate::core::turn::TurnSetup;
 use crate::core::compensate::{AxisLimits, Feature, TableRequest, pin_nominal_lift};
 use crate::core::fit::TableForm;
 use crate::core::geometry::{CamGeometry, CrankpinGeometry, Follower};
 use crate::core::learn::LearningParams;
 use crate::core::lift::LiftTable;
+use crate::core::measure::AssemblyLimits;
 use crate::core::program::ProgramSettings;
+use crate::core::turn::TurnSetup;
 use anyhow::{Context, bail};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};

@@ -50,7 +50,10 @@ async fn parts(addr: std::net::SocketAddr) -> u64 {
 async fn wait_for_parts(addr: std::net::SocketAddr, n: u64) {
     let deadline = Instant::now() + Duration::from_secs(120);
     while parts(addr).await < n {
-        assert!(Instant::now() < deadline, "fewer than {n} parts after 120 s");
+        assert!(
+            Instant::now() < deadline,
+            "fewer than {n} parts after 120 s"
+        );
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
 }
@@ -124,8 +127,16 @@ async fn a_read_only_share_does_not_wind_up_the_learning() {
         .filter(|p| p.0 > back_at_ms)
         .map(|p| p.1)
         .collect();
-    let show = |v: &[f64]| v.iter().map(|e| format!("{e:.2}")).collect::<Vec<_>>().join(" ");
-    eprintln!("before: {}", show(&parts[..16].iter().map(|p| p.1).collect::<Vec<_>>()));
+    let show = |v: &[f64]| {
+        v.iter()
+            .map(|e| format!("{e:.2}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    eprintln!(
+        "before: {}",
+        show(&parts[..16].iter().map(|p| p.1).collect::<Vec<_>>())
+    );
     eprintln!("outage: {}", show(&outage));
     eprintln!("after:  {}", show(&after));
     // Ground with the same table throughout, the outage parts drift only with the wheel's

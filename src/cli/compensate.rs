@@ -19,9 +19,9 @@ use crate::core::fit::TableForm;
 use crate::core::geometry::CrankpinGeometry;
 use crate::core::learn::{self, LearningParams, LearningState, StepOutcome};
 use crate::core::lift::LiftTable;
+use crate::core::program::{ProgramSettings, comment_text, render_g1_table, render_poly_table};
 use crate::core::turn::{Decision, measurement_sha256, turn};
 use crate::gauge::read_measurement_file;
-use crate::core::program::{ProgramSettings, comment_text, render_g1_table, render_poly_table};
 use crate::recipe::Recipe;
 use crate::share::{ProgramFile, PushRequest, RealFs, Share, ShareConfig, sha256_hex};
 use anyhow::{Context, bail};
@@ -218,7 +218,10 @@ fn learn_from(
                 iteration: saved.learning.iteration,
                 reason: refused.to_string(),
             };
-            append_line(&state_dir.join(REFUSALS_FILE), &serde_json::to_string(&record)?)?;
+            append_line(
+                &state_dir.join(REFUSALS_FILE),
+                &serde_json::to_string(&record)?,
+            )?;
             return Err(anyhow::Error::new(refused))
                 .with_context(|| format!("{}: the previous table stays in force", path.display()));
         }

@@ -111,7 +111,10 @@ pub fn measure(setup: &TurnSetup<'_>, raw: &RawMeasurement) -> Result<Measured, 
     })
 }
 
-fn analyse(setup: &TurnSetup<'_>, averaged: &AveragedMeasurement) -> Result<LobeReport, AnalysisError> {
+fn analyse(
+    setup: &TurnSetup<'_>,
+    averaged: &AveragedMeasurement,
+) -> Result<LobeReport, AnalysisError> {
     let curve = LiftCurve::new(setup.lobe.nominal);
     let nominal = |psi_deg: f64| {
         let s = curve.eval(psi_deg.to_radians());

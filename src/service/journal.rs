@@ -498,7 +498,12 @@ async fn apply(store: &Store, record: &Pending) -> Result<(), StoreError> {
             // A parent the store never saw (history from before one version counter) is
             // left out rather than blocking every later record.
             let parent_version = match parent_version {
-                Some(p) if store.table_version(&machine, &lobe, p as i64).await?.is_some() => {
+                Some(p)
+                    if store
+                        .table_version(&machine, &lobe, p as i64)
+                        .await?
+                        .is_some() =>
+                {
                     Some(p as i64)
                 }
                 _ => None,
@@ -593,7 +598,10 @@ mod tests {
         // Reopened after the crash: the torn tail is cut, so the next record stands alone.
         let mut j = Journal::open(dir.path()).unwrap();
         assert_eq!(j.pending(), [e.clone(), e.clone()]);
-        assert!(j.quarantined().is_empty(), "a torn tail is cut, not quarantined");
+        assert!(
+            j.quarantined().is_empty(),
+            "a torn tail is cut, not quarantined"
+        );
         j.append(std::slice::from_ref(&e)).unwrap();
         assert_eq!(Journal::open(dir.path()).unwrap().pending().len(), 3);
     }

@@ -479,7 +479,15 @@ async fn live_source(
                     };
                     match event {
                         Ok(Some(Ok(m))) => {
-                            if tx.send(SourceEvent::Measurement { raw: m, ground_with: None, done: None }).await.is_err() {
+                            if tx
+                                .send(SourceEvent::Measurement {
+                                    raw: m,
+                                    ground_with: None,
+                                    done: None,
+                                })
+                                .await
+                                .is_err()
+                            {
                                 return;
                             }
                         }

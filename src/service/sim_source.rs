@@ -161,7 +161,13 @@ impl SimSource {
 /// would report it with the part.
 fn provenance_version(text: &str) -> Option<u64> {
     text.lines().find_map(|l| {
-        let rest = l.strip_prefix(';')?.trim().strip_prefix("table version v")?;
-        rest.split(|c: char| !c.is_ascii_digit()).next()?.parse().ok()
+        let rest = l
+            .strip_prefix(';')?
+            .trim()
+            .strip_prefix("table version v")?;
+        rest.split(|c: char| !c.is_ascii_digit())
+            .next()?
+            .parse()
+            .ok()
     })
 }

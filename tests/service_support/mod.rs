@@ -55,4 +55,3 @@ pub fn json(body: &str) -> serde_json::Value {
     let end = body.rfind('}').unwrap();
     serde_json::from_str(&body[start..=end]).unwrap()
 }
-

@@ -110,7 +110,12 @@ impl MachineLoop {
                 self.memory.learning = next;
                 self.memory.in_force_version = p.version;
                 self.on_delivered(self.memory.wheel_radius_mm);
-                Ok((p.version, TableStatus::Pushed, "pushed to the share".into(), records))
+                Ok((
+                    p.version,
+                    TableStatus::Pushed,
+                    "pushed to the share".into(),
+                    records,
+                ))
             }
             Err(PushError::Refused { version, reason }) => {
                 error!(machine = %self.name, version, reason = %reason, "table version refused by the share");
@@ -124,7 +129,13 @@ impl MachineLoop {
                         "{e}: parts are ground with v{} and learned from it alone until the share takes v{version} or a newer table",
                         self.memory.in_force_version
                     );
-                    records.push(event(&self.name, at_ms, EventLevel::Error, EventKind::ShareUnavailable, message));
+                    records.push(event(
+                        &self.name,
+                        at_ms,
+                        EventLevel::Error,
+                        EventKind::ShareUnavailable,
+                        message,
+                    ));
                     self.metrics.update(&self.name, |m| m.alarms_total += 1);
                 }
                 self.memory.waiting = Some(WaitingTable {
@@ -136,7 +147,12 @@ impl MachineLoop {
                     m.share_waiting = 1;
                     m.learning_held = 1;
                 });
-                Ok((version, TableStatus::Waiting, format!("waiting: {e}"), records))
+                Ok((
+                    version,
+                    TableStatus::Waiting,
+                    format!("waiting: {e}"),
+                    records,
+                ))
             }
             Err(PushError::State(e)) => Err(e).context("share state folder"),
         }
@@ -186,10 +202,18 @@ impl MachineLoop {
     ) -> Vec<String> {
         let p = &self.setup.program;
         [
-            format!("{} made by camloop {}", self.setup.label, env!("CARGO_PKG_VERSION")),
+            format!(
+                "{} made by camloop {}",
+                self.setup.label,
+                env!("CARGO_PKG_VERSION")
+            ),
             format!(
                 "table version v{version}, parent {}",
-                if parent > 0 { format!("v{parent}") } else { "none".into() }
+                if parent > 0 {
+                    format!("v{parent}")
+                } else {
+                    "none".into()
+                }
             ),
             format!("created {} UTC", crate::clock::utc_text(now_ms_u64())),
             format!(
@@ -199,7 +223,11 @@ impl MachineLoop {
             format!(
                 "C offset {} deg, C direction {}, wheel radius {} mm",
                 p.c_offset_deg,
-                if matches!(p.c_direction, crate::core::program::CDirection::Reversed) { -1 } else { 1 },
+                if matches!(p.c_direction, crate::core::program::CDirection::Reversed) {
+                    -1
+                } else {
+                    1
+                },
                 learning.wheel_radius_mm
             ),
             format!("reason: {reason}"),
@@ -237,7 +265,16 @@ impl MachineLoop {
                         why: "pushed to the share on retry".into(),
                         at_ms,
                     },
-                    event(&self.name, at_ms, EventLevel::Info, EventKind::ShareBack, format!("share back: v{} delivered, learning resumes from it", p.version)),
+                    event(
+                        &self.name,
+                        at_ms,
+                        EventLevel::Info,
+                        EventKind::ShareBack,
+                        format!(
+                            "share back: v{} delivered, learning resumes from it",
+                            p.version
+                        ),
+                    ),
                     self.learning_record(at_ms),
                 ];
                 self.record(records).await;

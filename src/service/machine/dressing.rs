@@ -40,7 +40,13 @@ impl MachineLoop {
                 new_radius_mm: wheel_radius_mm,
                 source: source.to_string(),
             },
-            event(&self.name, at_ms, EventLevel::Info, EventKind::WheelDressed, format!("wheel radius {old} → {wheel_radius_mm} mm ({source})")),
+            event(
+                &self.name,
+                at_ms,
+                EventLevel::Info,
+                EventKind::WheelDressed,
+                format!("wheel radius {old} → {wheel_radius_mm} mm ({source})"),
+            ),
         ];
         // The newest correction made (delivered or waiting) is regenerated: a dressing is not
         // a learning step.
@@ -49,13 +55,24 @@ impl MachineLoop {
             Ok(table) => {
                 let reason = format!("wheel dressed to {wheel_radius_mm} mm");
                 records.extend(self.deliver(&table, next, &reason, None).await?);
-                format!("wheel radius {old} → {wheel_radius_mm} mm: {}", self.delivery_line())
+                format!(
+                    "wheel radius {old} → {wheel_radius_mm} mm: {}",
+                    self.delivery_line()
+                )
             }
             Err(e) => {
                 error!(machine = %self.name, reason = %e, "no table for the dressed wheel: previous table stays in force");
                 self.metrics.update(&self.name, |m| m.alarms_total += 1);
-                records.push(event(&self.name, at_ms, EventLevel::Error, EventKind::TableRefused, e.to_string()));
-                format!("wheel radius {old} → {wheel_radius_mm} mm recorded; table refused, previous kept: {e}")
+                records.push(event(
+                    &self.name,
+                    at_ms,
+                    EventLevel::Error,
+                    EventKind::TableRefused,
+                    e.to_string(),
+                ));
+                format!(
+                    "wheel radius {old} → {wheel_radius_mm} mm recorded; table refused, previous kept: {e}"
+                )
             }
         };
         records.push(self.learning_record(at_ms));

@@ -66,7 +66,13 @@ impl MachineLoop {
                 "part {} from {} repeats a measurement already used",
                 raw.header.part, raw.origin
             );
-            let e = event(&self.name, at_ms, EventLevel::Info, EventKind::MeasurementRepeated, message);
+            let e = event(
+                &self.name,
+                at_ms,
+                EventLevel::Info,
+                EventKind::MeasurementRepeated,
+                message,
+            );
             self.record(vec![e]).await;
             return Ok(());
         }
@@ -134,10 +140,19 @@ impl MachineLoop {
                 if let StepOutcome::Reverted { reason, .. } = &outcome {
                     error!(machine = %self.name, lobe = %self.setup.name, reason = %reason, "learning reverted and frozen: operator action needed");
                     self.metrics.update(&self.name, |m| m.alarms_total += 1);
-                    records.push(event(&self.name, at_ms, EventLevel::Error, EventKind::LearningReverted, reason.clone()));
+                    records.push(event(
+                        &self.name,
+                        at_ms,
+                        EventLevel::Error,
+                        EventKind::LearningReverted,
+                        reason.clone(),
+                    ));
                 }
                 let reason = format!("part {part}: {}", outcome_text(&outcome));
-                match self.deliver(&table, *next, &reason, Some(sha.to_string())).await {
+                match self
+                    .deliver(&table, *next, &reason, Some(sha.to_string()))
+                    .await
+                {
                     Ok(mut more) => {
                         records.append(&mut more);
                         self.delivery_line()
@@ -150,13 +165,26 @@ impl MachineLoop {
             }
             Decision::Refused(e) => {
                 warn!(machine = %self.name, lobe = %self.setup.name, reason = %e, "table refused, previous table stays in force");
-                self.metrics.update(&self.name, |m| m.tables_refused_total += 1);
-                records.push(event(&self.name, at_ms, EventLevel::Warn, EventKind::TableRefused, e.to_string()));
+                self.metrics
+                    .update(&self.name, |m| m.tables_refused_total += 1);
+                records.push(event(
+                    &self.name,
+                    at_ms,
+                    EventLevel::Warn,
+                    EventKind::TableRefused,
+                    e.to_string(),
+                ));
                 "table refused, previous kept".to_string()
             }
             Decision::Held(reason) => {
                 info!(machine = %self.name, reason = %reason, "part analysed, not learned from");
-                records.push(event(&self.name, at_ms, EventLevel::Info, EventKind::LearningHeld, format!("part {part} not learned from: {reason}")));
+                records.push(event(
+                    &self.name,
+                    at_ms,
+                    EventLevel::Info,
+                    EventKind::LearningHeld,
+                    format!("part {part} not learned from: {reason}"),
+                ));
                 format!("not learned from: {reason}")
             }
         };
@@ -206,7 +234,13 @@ impl MachineLoop {
         self.metrics
             .update(&self.name, |m| m.measurements_rejected_total += 1);
         let message = format!("{} (from {})", reason, raw.origin);
-        let e = event(&self.name, at_ms, EventLevel::Warn, EventKind::MeasurementRejected, message);
+        let e = event(
+            &self.name,
+            at_ms,
+            EventLevel::Warn,
+            EventKind::MeasurementRejected,
+            message,
+        );
         self.record(vec![e]).await;
     }
 }

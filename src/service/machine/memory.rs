@@ -157,7 +157,10 @@ mod tests {
         });
         assert_eq!(m.delivered(6), None);
         assert_eq!(m.in_force_version, 6);
-        assert!(m.waiting.is_some(), "an older version does not settle the waiting one");
+        assert!(
+            m.waiting.is_some(),
+            "an older version does not settle the waiting one"
+        );
         assert_eq!(m.delivered(7), Some(249.98));
         assert_eq!(m.learning, next);
         assert!(m.waiting.is_none());

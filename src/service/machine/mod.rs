@@ -92,8 +92,8 @@ impl MachineLoop {
         store: StoreHandle,
         metrics: Arc<Metrics>,
     ) -> anyhow::Result<Self> {
-        let journal = Journal::open(&paths.state_dir)
-            .with_context(|| format!("machine {name}: journal"))?;
+        let journal =
+            Journal::open(&paths.state_dir).with_context(|| format!("machine {name}: journal"))?;
         let memory = load_memory(&name, &setup, &journal, &store).await?;
         if let Err(e) = std::fs::create_dir_all(&paths.share_dir) {
             // Not fatal: the share may be a mount that comes back; deliveries wait for it.
@@ -164,7 +164,8 @@ impl MachineLoop {
         self.record(records).await;
         let _ = report;
         if !self.program_path().exists() && self.memory.waiting.is_none() {
-            let table = compensate::current_table(self.memory.newest_learning(), &self.lobe_loop())?;
+            let table =
+                compensate::current_table(self.memory.newest_learning(), &self.lobe_loop())?;
             let reason = if self.memory.parts == 0 {
                 "nominal table"
             } else {

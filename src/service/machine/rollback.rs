@@ -44,7 +44,11 @@ impl MachineLoop {
     /// Delivers the program of version `version` of feature `lobe` again. The text comes
     /// from the share's own kept copy where it still has it (checked against its SHA-256),
     /// else from the history store; either way it is retargeted to the free table number.
-    pub async fn rollback(&mut self, lobe: &str, version: u64) -> Result<RolledBack, RollbackError> {
+    pub async fn rollback(
+        &mut self,
+        lobe: &str,
+        version: u64,
+    ) -> Result<RolledBack, RollbackError> {
         if lobe != self.setup.name {
             return Err(RollbackError::UnknownFeature {
                 machine: self.name.clone(),
@@ -72,12 +76,17 @@ impl MachineLoop {
         let at_ms = now_ms();
         let number = self.share.next_table_number();
         let text = match self.share.rollback_request(version, now_ms_u64()) {
-            Ok(r) => r.files.into_iter().next().map_or(old.program_text.clone(), |f| f.text),
+            Ok(r) => r
+                .files
+                .into_iter()
+                .next()
+                .map_or(old.program_text.clone(), |f| f.text),
             Err(_) => old.program_text.clone(),
         };
         let reason = format!("rollback to v{version}");
-        let text = retarget(&text, number)
-            .with_context(|| format!("version {version}: no CTABDEF line to retarget to table {number}"))?;
+        let text = retarget(&text, number).with_context(|| {
+            format!("version {version}: no CTABDEF line to retarget to table {number}")
+        })?;
         let mut next = self.memory.learning.clone();
         if learning.correction_um.len() == next.correction_um.len() {
             next.correction_um = learning.correction_um.clone();
@@ -99,7 +108,13 @@ impl MachineLoop {
         let (new_version, status, why, mut records) = self.push(request, next, at_ms)?;
         info!(machine = %self.name, lobe, version, new_version, table_number = number, status = status.as_str(), "rollback");
         records.extend([
-            event(&self.name, at_ms, EventLevel::Info, EventKind::Rollback, format!("{reason} as v{new_version}, table {number}: {why}")),
+            event(
+                &self.name,
+                at_ms,
+                EventLevel::Info,
+                EventKind::Rollback,
+                format!("{reason} as v{new_version}, table {number}: {why}"),
+            ),
             Pending::Table {
                 machine: self.name.clone(),
                 lobe: lobe.to_string(),
