@@ -23,10 +23,9 @@ pub struct TurnSetup<'a> {
 /// Why a turn analyses but does not learn.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum HoldReason {
-    /// The measurement could not be recorded durably (e.g. the disk is full): a table
-    /// learned from it could not be traced to its evidence.
-    #[error("the measurement could not be recorded: {reason}")]
-    NotRecorded { reason: String },
+    /// The disk is full: what is learned could not be kept, so nothing is.
+    #[error("the disk is full: measurements are kept on the journal's reserve, nothing is learned")]
+    DiskFull,
     /// The part was ground with another table than the one the learning state belongs to.
     #[error("part was ground with table v{ground_with}, the learning state belongs to v{in_force}")]
     OtherTable { ground_with: u64, in_force: u64 },

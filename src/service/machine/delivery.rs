@@ -250,6 +250,18 @@ impl MachineLoop {
     /// Retries what waits: a version for the share, records for the database; and drops
     /// from the journal what the database now holds durably.
     pub async fn retry(&mut self) {
+        if self.disk_alarm && self.journal.restore_reserve() {
+            self.disk_alarm = false;
+            info!(machine = %self.name, "disk space back: journal reserve restored, learning resumes");
+            let e = event(
+                &self.name,
+                now_ms(),
+                EventLevel::Info,
+                EventKind::DiskSpaceBack,
+                "disk space back: journal reserve restored, learning resumes".into(),
+            );
+            self.record(vec![e]).await;
+        }
         match self.share.deliver() {
             Ok(Some(p)) => {
                 info!(machine = %self.name, version = p.version, "controller share back: waiting table delivered, learning resumes from it");

@@ -81,7 +81,7 @@ impl MachineLoop {
                 ground_with: v,
                 in_force: self.memory.in_force_version,
             }),
-            _ => None,
+            _ => self.disk_full_hold(at_ms).await,
         };
         let done = match turn::turn(&self.setup.turn_setup(), &self.memory.learning, &raw, hold) {
             Ok(t) => t,
@@ -100,8 +100,12 @@ impl MachineLoop {
             self.metrics.update(&self.name, |m| m.learning_held = 1);
             return Ok(());
         }
+        let held = matches!(done.decision, Decision::Held(_));
         let (mut records, text) = self.decide(done.decision, &sha, part, at_ms).await;
-        records.push(self.learning_record(at_ms));
+        if !held || !self.journal.on_reserve() {
+            // On the reserve only measurements are kept: the memory did not change.
+            records.push(self.learning_record(at_ms));
+        }
         self.record(records).await;
         let max_error_um = done.measured.max_error_um;
         self.metrics.update(&self.name, |m| {

@@ -23,6 +23,7 @@ use super::journal::{EventKind, Journal, Pending};
 use super::metrics::Metrics;
 use crate::clock::{now_ms, now_ms_u64};
 use crate::core::compensate::{self, LobeLoop};
+use crate::core::turn::HoldReason;
 use crate::recipe::FeatureSetup;
 use crate::share::{RealFs, Share, ShareConfig};
 use crate::store::{EventLevel, Store};
@@ -79,6 +80,8 @@ pub struct MachineLoop {
     metrics: Arc<Metrics>,
     /// Wheel radius the program on the share was made for (the simulator reads it).
     table_wheel_radius_bits: Arc<AtomicU64>,
+    /// The disk-full alarm was raised and not yet cleared.
+    disk_alarm: bool,
 }
 
 impl MachineLoop {
@@ -123,6 +126,7 @@ impl MachineLoop {
             store,
             metrics,
             table_wheel_radius_bits: Arc::new(AtomicU64::new(0)),
+            disk_alarm: false,
         };
         machine.after_start(&report).await?;
         Ok(machine)
@@ -256,11 +260,37 @@ impl MachineLoop {
                 false
             }
         };
-        if kept {
-            self.metrics.update(&self.name, |m| m.journal_failing = 0);
-        }
+        let failing = u64::from(!kept || self.journal.on_reserve());
+        self.metrics
+            .update(&self.name, |m| m.journal_failing = failing);
         self.flush_journal().await;
         kept
+    }
+
+    /// Whether learning must hold because the disk is full: the journal runs on its reserve
+    /// (measurements are still kept), or could not write at all. Said once when it starts.
+    async fn disk_full_hold(&mut self, at_ms: i64) -> Option<HoldReason> {
+        if !self.journal.on_reserve() {
+            return None;
+        }
+        if !self.disk_alarm {
+            self.disk_alarm = true;
+            error!(machine = %self.name, "disk full: the journal runs on its reserve; measurements are kept, learning stops until space is freed");
+            self.metrics.update(&self.name, |m| m.alarms_total += 1);
+            let message = format!(
+                "disk full: the journal runs on its {} MiB reserve (about 100 parts); measurements are kept, nothing is learned until space is freed",
+                super::journal::RESERVE_BYTES / (1024 * 1024)
+            );
+            let e = records::event(
+                &self.name,
+                at_ms,
+                EventLevel::Error,
+                EventKind::DiskFull,
+                message,
+            );
+            self.record(vec![e]).await;
+        }
+        Some(HoldReason::DiskFull)
     }
 
     async fn flush_journal(&mut self) {

@@ -1,0 +1,332 @@
+//! The records the journal carries, typed with the store's own enums, and how each goes
+//! into the store (once, even when replayed after a crash).
+
+use super::super::machine::memory::{LoopMemory, TableLearning};
+use crate::store::{
+    EventLevel, NewDressing, NewEvent, NewMeasurement, NewTableVersion, Store, StoreError,
+    TableStatus, Verdict,
+};
+use serde::{Deserialize, Serialize};
+
+/// One record waiting for the database.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "record", rename_all = "snake_case")]
+pub enum Pending {
+    Measurement {
+        machine: String,
+        part: String,
+        lobe: String,
+        received_at_ms: i64,
+        verdict: Verdict,
+        max_profile_error_um: f64,
+        base_radius_error_um: f64,
+        phase_error_deg: f64,
+        revolutions_used: u32,
+        points_per_rev: u32,
+        origin: String,
+        /// Content identity (see `core::turn::measurement_sha256`).
+        sha256: String,
+        /// Version of the table on the control when the part was ground (0: none known).
+        #[serde(default)]
+        ground_with_version: u64,
+        raw_lift_mm: Vec<Vec<f64>>,
+        averaged_lift_mm: Vec<f64>,
+        analysis_json: String,
+    },
+    Table {
+        machine: String,
+        lobe: String,
+        /// The share's version number (the one version counter).
+        version: u64,
+        /// The version in force when this one was made.
+        parent_version: Option<u64>,
+        table_number: u32,
+        program_text: String,
+        learning: TableLearning,
+        reason: String,
+        status: TableStatus,
+        status_why: String,
+        created_at_ms: i64,
+    },
+    /// A later status of a recorded version (e.g. waiting → pushed once the share is back).
+    TableStatus {
+        machine: String,
+        lobe: String,
+        version: u64,
+        status: TableStatus,
+        why: String,
+        at_ms: i64,
+    },
+    Event {
+        machine: String,
+        at_ms: i64,
+        level: EventLevel,
+        kind: EventKind,
+        message: String,
+    },
+    Learning {
+        machine: String,
+        lobe: String,
+        state: LoopMemory,
+        saved_at_ms: i64,
+    },
+    Dressing {
+        machine: String,
+        at_ms: i64,
+        old_radius_mm: f64,
+        new_radius_mm: f64,
+        /// Who reported it: "sim", "drop file <path>", "api".
+        source: String,
+    },
+}
+
+/// What an event is about; stored as its snake_case name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EventKind {
+    MeasurementRejected,
+    MeasurementRepeated,
+    TableRefused,
+    LearningReverted,
+    LearningHeld,
+    LearningResumed,
+    ShareUnavailable,
+    ShareBack,
+    WheelDressed,
+    Rollback,
+    JournalQuarantined,
+    DiskFull,
+    DiskSpaceBack,
+}
+
+impl EventKind {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            EventKind::MeasurementRejected => "measurement_rejected",
+            EventKind::MeasurementRepeated => "measurement_repeated",
+            EventKind::TableRefused => "table_refused",
+            EventKind::LearningReverted => "learning_reverted",
+            EventKind::LearningHeld => "learning_held",
+            EventKind::LearningResumed => "learning_resumed",
+            EventKind::ShareUnavailable => "share_unavailable",
+            EventKind::ShareBack => "share_back",
+            EventKind::WheelDressed => "wheel_dressed",
+            EventKind::Rollback => "rollback",
+            EventKind::JournalQuarantined => "journal_quarantined",
+            EventKind::DiskFull => "disk_full",
+            EventKind::DiskSpaceBack => "disk_space_back",
+        }
+    }
+}
+
+impl Pending {
+    /// The event to store, for a [`Pending::Event`].
+    fn event(&self) -> Option<NewEvent> {
+        match self {
+            Pending::Event {
+                machine,
+                at_ms,
+                level,
+                kind,
+                message,
+            } => Some(NewEvent {
+                machine: machine.clone(),
+                at_ms: *at_ms,
+                level: *level,
+                kind: kind.as_str().to_string(),
+                message: message.clone(),
+            }),
+            _ => None,
+        }
+    }
+
+    /// The dressing to store, for a [`Pending::Dressing`].
+    fn dressing(&self) -> Option<NewDressing> {
+        match self {
+            Pending::Dressing {
+                machine,
+                at_ms,
+                old_radius_mm,
+                new_radius_mm,
+                source,
+            } => Some(NewDressing {
+                machine: machine.clone(),
+                at_ms: *at_ms,
+                old_radius_mm: *old_radius_mm,
+                new_radius_mm: *new_radius_mm,
+                source: source.clone(),
+            }),
+            _ => None,
+        }
+    }
+}
+
+/// [`apply`] for a record read back after a crash: skipped when the store already holds it
+/// (measurements are idempotent by their SHA-256 anyway).
+pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), StoreError> {
+    let present = match record {
+        Pending::Measurement { .. } => false,
+        Pending::Table {
+            machine,
+            lobe,
+            version,
+            ..
+        } => store
+            .table_version(machine, lobe, *version as i64)
+            .await?
+            .is_some(),
+        Pending::TableStatus {
+            machine,
+            lobe,
+            version,
+            status,
+            ..
+        } => store
+            .table_version(machine, lobe, *version as i64)
+            .await?
+            .is_some_and(|t| t.status == *status),
+        Pending::Event { .. } => match record.event() {
+            Some(e) => store.event_exists(&e).await?,
+            None => false,
+        },
+        Pending::Learning {
+            machine,
+            lobe,
+            state,
+            saved_at_ms,
+        } => {
+            store
+                .learning_state_exists(machine, lobe, &state_json(state)?, *saved_at_ms)
+                .await?
+        }
+        Pending::Dressing { .. } => match record.dressing() {
+            Some(d) => store.dressing_exists(&d).await?,
+            None => false,
+        },
+    };
+    if present {
+        Ok(())
+    } else {
+        apply(store, record).await
+    }
+}
+
+fn state_json(state: &LoopMemory) -> Result<String, StoreError> {
+    serde_json::to_string(state).map_err(|e| StoreError::invalid("learning state", e.to_string()))
+}
+
+pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreError> {
+    match record.clone() {
+        Pending::Measurement {
+            machine,
+            part,
+            lobe,
+            received_at_ms,
+            verdict,
+            max_profile_error_um,
+            base_radius_error_um,
+            phase_error_deg,
+            revolutions_used,
+            points_per_rev,
+            origin,
+            sha256,
+            ground_with_version: _,
+            raw_lift_mm,
+            averaged_lift_mm,
+            analysis_json,
+        } => {
+            let m = NewMeasurement {
+                machine,
+                part,
+                lobe,
+                received_at_ms,
+                verdict,
+                max_profile_error_um,
+                base_radius_error_um,
+                phase_error_deg,
+                revolutions_used,
+                points_per_rev,
+                origin,
+                sha256,
+                recipe_snapshot: None,
+                raw_lift_mm,
+                averaged_lift_mm,
+                analysis_json,
+            };
+            store.insert_measurement(&m).await.map(|_| ())
+        }
+        Pending::Table {
+            machine,
+            lobe,
+            version,
+            parent_version,
+            table_number,
+            program_text,
+            learning,
+            reason,
+            status,
+            status_why,
+            created_at_ms,
+        } => {
+            // A parent the store never saw (history from before one version counter) is
+            // left out rather than blocking every later record.
+            let parent_version = match parent_version {
+                Some(p)
+                    if store
+                        .table_version(&machine, &lobe, p as i64)
+                        .await?
+                        .is_some() =>
+                {
+                    Some(p as i64)
+                }
+                _ => None,
+            };
+            let learning_params_json = serde_json::to_string(&learning)
+                .map_err(|e| StoreError::invalid("table learning", e.to_string()))?;
+            let t = NewTableVersion {
+                machine,
+                lobe,
+                version: Some(version as i64),
+                parent_version,
+                table_number,
+                program_text,
+                learning_params_json,
+                reason,
+                status,
+                status_why,
+                created_at_ms,
+            };
+            store.insert_table_version(&t).await.map(|_| ())
+        }
+        Pending::TableStatus {
+            machine,
+            lobe,
+            version,
+            status,
+            why,
+            at_ms,
+        } => {
+            store
+                .set_table_status(&machine, &lobe, version as i64, status, &why, at_ms)
+                .await
+        }
+        Pending::Event { .. } => match record.event() {
+            Some(e) => store.insert_event(&e).await.map(|_| ()),
+            None => Ok(()),
+        },
+        Pending::Learning {
+            machine,
+            lobe,
+            state,
+            saved_at_ms,
+        } => {
+            store
+                .save_learning_state(&machine, &lobe, &state_json(&state)?, saved_at_ms)
+                .await
+        }
+        Pending::Dressing { .. } => match record.dressing() {
+            Some(d) => store.insert_dressing(&d).await.map(|_| ()),
+            None => Ok(()),
+        },
+    }
+}
