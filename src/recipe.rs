@@ -139,6 +139,8 @@ pub struct RecipeError {
 /// Everything the loop needs about one lobe or pin of a recipe, lift table loaded.
 #[derive(Debug, Clone)]
 pub struct FeatureSetup {
+    /// The recipe's part name.
+    pub part: String,
     /// The lobe's or pin's name in the recipe.
     pub name: String,
     /// "PART lobe NAME" or "PART pin NAME", for messages and program comments.
@@ -219,6 +221,7 @@ impl Recipe {
         let mut program = self.program.clone();
         program.c_offset_deg += phase_deg;
         Ok(FeatureSetup {
+            part: self.name.clone(),
             name: name.to_string(),
             label,
             nominal,

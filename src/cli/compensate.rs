@@ -390,6 +390,7 @@ fn flag_setup(
         ..ProgramSettings::default()
     };
     LobeSetup {
+        part: "PART".to_string(),
         name: "LOBE".to_string(),
         label,
         nominal,

@@ -1,6 +1,7 @@
 //! Program delivery to the controller's file share: atomic, verified pushes with a kept,
-//! append-only version history, rollback, and a retry loop that loses nothing while the
-//! share is missing, read-only or full.
+//! append-only version history and rollback. A version that cannot be delivered waits in the
+//! state folder (superseded by a newer one); the service's machine task retries it between
+//! parts, so nothing is lost while the share is missing, read-only or full.
 //!
 //! # Push protocol (per version)
 //! 1. The version's text is stored in the state folder (temporary folder, files flushed,
@@ -40,7 +41,6 @@
 mod error;
 mod fs;
 mod manifest;
-mod queue;
 mod state;
 mod store;
 
@@ -50,7 +50,6 @@ pub use manifest::{
     FileRecord, History, Loaded, Record, VersionRecord, VersionState, VersionStatus,
     load as load_manifest,
 };
-pub use queue::{AlarmState, QueueClosed, RetryPolicy, ShareEvent, ShareQueue, Stopped, spawn};
 pub use store::{
     Clock, MANIFEST_FILE, OpenReport, ProgramFile, PushRequest, Pushed, Share, ShareConfig,
     Submitted, VERSIONS_DIR,

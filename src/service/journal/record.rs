@@ -3,8 +3,8 @@
 
 use super::super::machine::memory::{LoopMemory, TableLearning};
 use crate::store::{
-    EventLevel, NewDressing, NewEvent, NewMeasurement, NewTableVersion, Store, StoreError,
-    TableStatus, Verdict,
+    EventLevel, FeatureKind, NewDressing, NewEvent, NewMeasurement, NewRecipeSnapshot,
+    NewTableVersion, Store, StoreError, TableStatus, Verdict,
 };
 use serde::{Deserialize, Serialize};
 
@@ -69,6 +69,15 @@ pub enum Pending {
         lobe: String,
         state: LoopMemory,
         saved_at_ms: i64,
+    },
+    /// What the machine grinds, kept once per change (the store skips an identical one).
+    RecipeSnapshot {
+        machine: String,
+        part: String,
+        lobe: String,
+        kind: FeatureKind,
+        recipe_json: String,
+        created_at_ms: i64,
     },
     Dressing {
         machine: String,
@@ -165,7 +174,8 @@ impl Pending {
 /// (measurements are idempotent by their SHA-256 anyway).
 pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), StoreError> {
     let present = match record {
-        Pending::Measurement { .. } => false,
+        // Both are idempotent in the store (by content).
+        Pending::Measurement { .. } | Pending::RecipeSnapshot { .. } => false,
         Pending::Table {
             machine,
             lobe,
@@ -323,6 +333,24 @@ pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreEr
             store
                 .save_learning_state(&machine, &lobe, &state_json(&state)?, saved_at_ms)
                 .await
+        }
+        Pending::RecipeSnapshot {
+            machine,
+            part,
+            lobe,
+            kind,
+            recipe_json,
+            created_at_ms,
+        } => {
+            let r = NewRecipeSnapshot {
+                machine,
+                part,
+                lobe,
+                kind,
+                recipe_json,
+                created_at_ms,
+            };
+            store.insert_recipe_snapshot(&r).await.map(|_| ())
         }
         Pending::Dressing { .. } => match record.dressing() {
             Some(d) => store.insert_dressing(&d).await.map(|_| ()),

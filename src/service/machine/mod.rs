@@ -26,7 +26,7 @@ use crate::core::compensate::{self, LobeLoop};
 use crate::core::turn::HoldReason;
 use crate::recipe::FeatureSetup;
 use crate::share::{RealFs, Share, ShareConfig};
-use crate::store::{EventLevel, Store};
+use crate::store::{EventLevel, FeatureKind, Store};
 use anyhow::Context;
 use memory::LoopMemory;
 use std::path::PathBuf;
@@ -149,7 +149,7 @@ impl MachineLoop {
             info!(machine = %self.name, share_version = pushed, memory_version = self.memory.in_force_version, "version in force taken from the share's manifest");
             self.memory.delivered(pushed);
         }
-        let mut records = Vec::new();
+        let mut records = vec![self.recipe_snapshot(at_ms)];
         for q in self.journal.quarantined() {
             error!(machine = %self.name, line = q.line, reason = %q.reason, "journal line unreadable: moved to the quarantine file");
             records.push(records::event(
@@ -181,6 +181,36 @@ impl MachineLoop {
             self.record(records).await;
         }
         Ok(())
+    }
+
+    /// What this machine grinds, as the store keeps it (skipped there when unchanged).
+    fn recipe_snapshot(&self, at_ms: i64) -> Pending {
+        let s = &self.setup;
+        let recipe = RecipeRecord {
+            label: &s.label,
+            nominal_origin: s.nominal.origin(),
+            nominal_points: s.nominal.angles_deg().len(),
+            nominal_sha256: crate::core::turn::correction_sha256(s.nominal.lifts_mm()),
+            wheel_radius_mm: s.feature.wheel_radius_mm(),
+            x_zero_mm: s.feature.x_zero_mm(),
+            program: &s.program.name,
+            table_pair: s.table_pair,
+            table_points: s.request.points,
+            params: &s.params,
+            limits: &s.limits,
+        };
+        let kind = match s.feature {
+            compensate::Feature::Cam(_) => FeatureKind::Lobe,
+            compensate::Feature::Pin(_) => FeatureKind::Pin,
+        };
+        Pending::RecipeSnapshot {
+            machine: self.name.clone(),
+            part: s.part.clone(),
+            lobe: s.name.clone(),
+            kind,
+            recipe_json: serde_json::to_string(&recipe).unwrap_or_else(|_| "{}".into()),
+            created_at_ms: at_ms,
+        }
     }
 
     pub fn program_path(&self) -> PathBuf {
@@ -315,6 +345,23 @@ impl MachineLoop {
             saved_at_ms: at_ms,
         }
     }
+}
+
+/// The recipe snapshot's content: what decides the tables of this feature.
+#[derive(serde::Serialize)]
+struct RecipeRecord<'a> {
+    label: &'a str,
+    nominal_origin: &'a str,
+    nominal_points: usize,
+    /// SHA-256 of the nominal lift values (exact bits).
+    nominal_sha256: String,
+    wheel_radius_mm: f64,
+    x_zero_mm: f64,
+    program: &'a str,
+    table_pair: (u32, u32),
+    table_points: usize,
+    params: &'a crate::core::learn::LearningParams,
+    limits: &'a compensate::AxisLimits,
 }
 
 /// The newest memory: the journal's (it holds what the store may not have yet, and always
