@@ -9,6 +9,7 @@
 pub mod assemble;
 pub mod can_bus;
 pub mod candump;
+mod csv_fields;
 pub mod csv_file;
 pub mod dbc;
 pub mod drop_folder;
@@ -22,7 +23,7 @@ pub mod signal;
 pub use assemble::{Assembled, Assembler, AssemblyProblem, DiscardReason};
 pub use can_bus::{CanBus, CanEvent, CanGauge, CanOpenError, CandumpReplay, FrameSource};
 pub use candump::{CandumpIssue, CandumpReport, read_candump_measurements};
-pub use csv_file::{CsvError, parse_measurement_csv};
+pub use csv_file::{Completeness, CsvError, CsvMeasurement, CsvParser, parse_measurement_csv};
 pub use dbc::{DbcLoadError, GaugeDbc, GaugeSignalNames};
 pub use drop_folder::{DropEvent, DropFolder, watch_drop_folder};
 pub use encode::{EncodeError, candump_line, encode_measurement};
