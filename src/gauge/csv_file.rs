@@ -131,6 +131,9 @@ pub struct Completeness {
     /// Readings a file with every revolution complete holds: declared (or found)
     /// revolutions × points per revolution.
     pub readings_expected: u64,
+    /// The last line ended with a newline. A last line without one may be cut short by a
+    /// writer still at work (`1.2` of `1.234567`), so it does not count as complete.
+    pub last_line_ended: bool,
 }
 
 impl Completeness {
@@ -139,9 +142,10 @@ impl Completeness {
         self.declared_revolutions.is_some() && self.readings_found == self.readings_expected
     }
 
-    /// The file itself says it is whole: an end marker, or the declared count met.
+    /// The file itself says it is whole: an end marker, or the declared count met with the
+    /// last line ended.
     pub fn is_complete(&self) -> bool {
-        self.end_marker || self.declared_count_met()
+        self.end_marker || (self.declared_count_met() && self.last_line_ended)
     }
 }
 
@@ -162,6 +166,7 @@ pub struct CsvParser {
     line: usize,
     seen_data_or_header: bool,
     end_line: Option<usize>,
+    last_line_ended: bool,
 }
 
 impl CsvParser {
@@ -174,9 +179,11 @@ impl CsvParser {
         self.line
     }
 
-    /// Takes the next line, without its line ending (a trailing `\r` is trimmed).
+    /// Takes the next line, with its line ending if it has one (`\n` or `\r\n`): whether the
+    /// last line ended is part of the [`Completeness`].
     pub fn push_line(&mut self, raw: &str) -> Result<(), CsvError> {
         self.line += 1;
+        self.last_line_ended = raw.ends_with('\n');
         let line = self.line;
         let at = |error| CsvError::Line { line, error };
         let raw = if line == 1 {
@@ -226,6 +233,7 @@ impl CsvParser {
             meta,
             rows,
             end_line,
+            last_line_ended,
             ..
         } = self;
         if rows.is_empty() {
@@ -264,6 +272,7 @@ impl CsvParser {
             revolutions_found: u32::try_from(labels.count).unwrap_or(u32::MAX),
             readings_found: distinct_readings(&samples),
             readings_expected: u64::from(revolutions) * u64::from(points_per_rev),
+            last_line_ended,
         };
         Ok(CsvMeasurement {
             measurement: RawMeasurement {
@@ -289,7 +298,7 @@ pub fn parse_measurement_csv(
     origin: &str,
 ) -> Result<RawMeasurement, CsvError> {
     let mut parser = CsvParser::new();
-    for line in text.lines() {
+    for line in text.split_inclusive('\n') {
         parser.push_line(line)?;
     }
     parser.finish(file_name, origin).map(|m| m.measurement)
@@ -553,7 +562,7 @@ mod tests {
 
     fn completeness(text: &str) -> Completeness {
         let mut parser = CsvParser::new();
-        for line in text.lines() {
+        for line in text.split_inclusive('\n') {
             parser.push_line(line).expect("valid line");
         }
         parser.finish("M_P_L.csv", "t").expect("valid").completeness
@@ -572,6 +581,9 @@ mod tests {
         assert!(!c.is_complete(), "one angle of the last revolution missing");
         let c = completeness(&format!("{two_of_three}3,180,0\n3,0,0\n"));
         assert!(c.declared_count_met() && c.is_complete());
+        // The last line may be cut short while the writer is at work.
+        let c = completeness(&format!("{two_of_three}3,180,0\n3,0,0.12"));
+        assert!(c.declared_count_met() && !c.last_line_ended && !c.is_complete());
         // A repeated reading does not stand in for a missing one.
         let c = completeness(&format!("{two_of_three}3,0,0\n3,0,0.1\n"));
         assert_eq!((c.readings_found, c.is_complete()), (5, false));

@@ -149,8 +149,6 @@ fn read_csv(
             path: shown.to_owned(),
             line: number,
         })?;
-        let text = text.strip_suffix('\n').unwrap_or(text);
-        let text = text.strip_suffix('\r').unwrap_or(text);
         parser.push_line(text).map_err(|source| GaugeError::Csv {
             path: shown.to_owned(),
             source,
