@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use camloop::gauge::file::MAX_FILE_BYTES;
 use camloop::gauge::{GaugeDbc, read_measurement_file};
 
 fn fixture(name: &str) -> PathBuf {
@@ -124,5 +125,81 @@ fn errors_name_the_file() {
             anonymous.display()
         )),
         "{err}"
+    );
+}
+
+/// `rev,angle_deg,lift_mm` rows for the revolution labels given, 360 points each, lift by
+/// the fixture formula of the revolution's position (so labels do not change the values).
+fn csv_rows(labels: &[u32]) -> String {
+    let mut text = String::from("rev,angle_deg,lift_mm\n");
+    for (n, label) in labels.iter().enumerate() {
+        let n = u32::try_from(n).expect("few");
+        for k in 0..360 {
+            text.push_str(&format!("{label},{k},{:.6}\n", lift_mm(n, k, 360)));
+        }
+    }
+    text
+}
+
+/// Revolution numbers are labels: a file numbered from 1 reads as revolutions 0, 1, 2 and
+/// passes the completeness checks (it was refused as "revolution 0 missing").
+#[test]
+fn a_csv_numbered_from_one_reads_and_passes_the_checks() {
+    use camloop::core::measure::{AssemblyLimits, check_and_average};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let from_zero = dir.path().join("M3_P1_L1.csv");
+    let from_one = dir.path().join("M3_P1_L2.csv");
+    std::fs::write(&from_zero, csv_rows(&[0, 1, 2])).expect("write");
+    std::fs::write(&from_one, csv_rows(&[1, 2, 3])).expect("write");
+    let zero = read_measurement_file(&from_zero, &GaugeDbc::builtin()).expect("from 0");
+    let one = read_measurement_file(&from_one, &GaugeDbc::builtin()).expect("from 1");
+    assert_eq!(
+        (one.header.revolutions, one.header.points_per_rev),
+        (3, 360)
+    );
+    assert_eq!(one.samples, zero.samples);
+    let averaged = check_and_average(&one, &AssemblyLimits::default()).expect("complete");
+    assert_eq!(averaged.revolutions_used, [0, 1, 2]);
+}
+
+#[test]
+fn a_gap_in_the_revolution_numbers_is_named() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("M3_P1_L1.csv");
+    std::fs::write(&path, csv_rows(&[1, 2, 4])).expect("write");
+    assert_eq!(
+        read(&path),
+        Err(format!(
+            "measurement file {}: revolutions jump from 2 to 4: revolution 3 is missing",
+            path.display()
+        ))
+    );
+}
+
+/// The size comes from the metadata (a sparse file: reading it would be slow and large), and
+/// a line is read through a bounded buffer.
+#[test]
+fn oversized_files_and_lines_are_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let big = dir.path().join("M3_P1_L1.csv");
+    std::fs::File::create(&big)
+        .expect("create")
+        .set_len(MAX_FILE_BYTES + 1)
+        .expect("set_len");
+    assert_eq!(
+        read(&big),
+        Err(format!(
+            "measurement file {} is 16777217 bytes, over the limit of 16777216 bytes",
+            big.display()
+        ))
+    );
+    let long = dir.path().join("M3_P1_L2.csv");
+    std::fs::write(&long, format!("0,0,0\n# {}\n0,1,0\n", "x".repeat(5000))).expect("write");
+    assert_eq!(
+        read(&long),
+        Err(format!(
+            "measurement file {} line 2 is longer than 4096 bytes",
+            long.display()
+        ))
     );
 }

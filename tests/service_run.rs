@@ -486,8 +486,9 @@ async fn a_dropped_dressing_report_regenerates_the_table() {
         .unwrap();
     let inbox = dir.path().join("inbox");
     std::fs::create_dir_all(&inbox).unwrap();
-    // Written under a temporary name and renamed, as the drop-folder rules ask.
-    std::fs::write(inbox.join(".dress.tmp"), "wheel_radius_mm = 249.9\n").unwrap();
+    // Written under a temporary name, ended with the `# end` marker and renamed, as the
+    // drop-folder rules ask (so it is taken at once, not after the stability wait).
+    std::fs::write(inbox.join(".dress.tmp"), "wheel_radius_mm = 249.9\n# end\n").unwrap();
     std::fs::rename(inbox.join(".dress.tmp"), inbox.join("dress.dressing.toml")).unwrap();
 
     // Poll the API (bounded) until the dressing and its table are in.

@@ -1,29 +1,38 @@
 //! Measurement files as CSV (`rev,angle_deg,lift_mm`), as a control or gauge PC writes them
-//! into the drop folder: a pure parser from text (plus the file name) to a measurement.
+//! into the drop folder: a pure, line-at-a-time parser ([`CsvParser`]) from text (plus the
+//! file name) to a measurement and what the file says about its own completeness.
 //!
 //! Rules:
 //! - UTF-8 (a leading BOM is skipped), LF or CRLF, `,` between fields. Blank lines are
 //!   ignored; lines starting with `#` are comments.
 //! - An optional header row `rev,angle_deg,lift_mm` (any case) before the first data row.
-//! - Data rows: `rev` a 0-based whole number, `angle_deg` in [0, 360), `lift_mm` finite with
+//! - Data rows: `rev` a whole number, `angle_deg` in [0, 360), `lift_mm` finite with
 //!   |lift| ≤ 1000. Rows are kept in file order (the arrival order).
+//! - Revolution numbers are labels: any consecutive run (0, 1, 2 or 1, 2, 3 or 17, 18, 19)
+//!   is accepted and mapped to 0-based revolutions in order of their labels. A gap (1, 2, 4)
+//!   is refused, naming the missing revolution.
 //! - Identity: a metadata comment `# machine=M3 part=P1234 lobe=L2` names all three;
 //!   otherwise the file name must be `MACHINE_PART_LOBE[_anything].csv` (fields split on
 //!   `_`). A comment carrying any of the keys `machine part lobe points_per_rev revolutions`
 //!   is a metadata comment and may only hold `key=value` tokens with those keys.
 //! - `points_per_rev` from metadata, else the number of distinct angles in the file. Every
 //!   angle must lie on the grid 360°/points_per_rev within 1e-6°; it becomes the angle index.
-//! - `revolutions` from metadata (then every `rev` must be below it), else highest `rev` + 1.
+//! - `revolutions` from metadata (then the labels may span at most that many), else the
+//!   number of labels found.
+//! - The comment line `# end` (any case) says the writer is done; only blank lines may
+//!   follow it. A file is complete when it has that marker, or when it declares
+//!   `revolutions` and holds every angle of every declared revolution ([`Completeness`]).
 
 use crate::core::measure::{MeasurementHeader, RawMeasurement, RawSample};
 
 use super::assemble::{MAX_POINTS_PER_REV, MAX_REVOLUTIONS, MAX_SAMPLES};
+use super::csv_fields::{
+    Metadata, Row, clip, distinct_angles, identity, is_header, parse_row, read_metadata,
+};
 use super::serial::MAX_ABS_LIFT_MM;
 
 /// How far an angle may lie from its grid point, in degrees.
 pub const GRID_TOLERANCE_DEG: f64 = 1e-6;
-const MAX_ID_CHARS: usize = 32;
-const KEYS: [&str; 5] = ["machine", "part", "lobe", "points_per_rev", "revolutions"];
 
 /// What is wrong with one line.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -47,8 +56,16 @@ pub enum CsvLineError {
         step_deg: f64,
         points_per_rev: u32,
     },
-    #[error("rev {revolution} is not below the {revolutions} revolutions announced")]
-    RevolutionBeyond { revolution: u32, revolutions: u32 },
+    #[error(
+        "rev {revolution} is revolution {count} counting from rev {first}, more than the \
+         {revolutions} revolutions announced"
+    )]
+    RevolutionBeyond {
+        revolution: u32,
+        first: u32,
+        count: u64,
+        revolutions: u32,
+    },
     #[error(
         "metadata token {found:?} is not key=value with a key among machine, part, lobe, \
          points_per_rev, revolutions"
@@ -62,6 +79,8 @@ pub enum CsvLineError {
     },
     #[error("metadata {key} given twice with different values")]
     MetadataConflict { key: &'static str },
+    #[error("found {found:?} after the `# end` marker on line {end_line}")]
+    AfterEnd { end_line: usize, found: String },
 }
 
 /// Why a CSV file is not a measurement.
@@ -84,298 +103,289 @@ pub enum CsvError {
     PointsPerRev { found: u64 },
     #[error("{found} revolutions is outside 1..={MAX_REVOLUTIONS}")]
     Revolutions { found: u64 },
+    /// Labels are not consecutive; `from` and `to` are neighbours among the labels present.
+    #[error("revolutions jump from {from} to {to}: {}", missing_labels(*.from, *.to))]
+    RevolutionGap { from: u32, to: u32 },
 }
 
-#[derive(Debug, Default)]
-struct Metadata {
-    ids: [Option<String>; 3],
-    points_per_rev: Option<u32>,
-    revolutions: Option<u32>,
+fn missing_labels(from: u32, to: u32) -> String {
+    let (first, last) = (from.saturating_add(1), to.saturating_sub(1));
+    if first == last {
+        format!("revolution {first} is missing")
+    } else {
+        format!("revolutions {first} to {last} are missing")
+    }
 }
 
-struct Row {
+/// What a CSV file says about whether its writer had finished.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Completeness {
+    /// The `# end` marker line was present.
+    pub end_marker: bool,
+    /// `revolutions=` from the metadata comment, if given.
+    pub declared_revolutions: Option<u32>,
+    /// Distinct revolution labels present.
+    pub revolutions_found: u32,
+    /// Distinct (revolution, angle) readings present.
+    pub readings_found: u64,
+    /// Readings a file with every revolution complete holds: declared (or found)
+    /// revolutions × points per revolution.
+    pub readings_expected: u64,
+    /// The last line ended with a newline. A last line without one may be cut short by a
+    /// writer still at work (`1.2` of `1.234567`), so it does not count as complete.
+    pub last_line_ended: bool,
+}
+
+impl Completeness {
+    /// Every declared revolution holds every angle.
+    pub fn declared_count_met(&self) -> bool {
+        self.declared_revolutions.is_some() && self.readings_found == self.readings_expected
+    }
+
+    /// The file itself says it is whole: an end marker, or the declared count met with the
+    /// last line ended.
+    pub fn is_complete(&self) -> bool {
+        self.end_marker || (self.declared_count_met() && self.last_line_ended)
+    }
+}
+
+/// A parsed CSV file: the measurement and its completeness.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CsvMeasurement {
+    pub measurement: RawMeasurement,
+    pub completeness: Completeness,
+}
+
+/// A CSV measurement read one line at a time, so a reader holds only the parsed rows (never
+/// the whole text). Feed lines in file order with [`CsvParser::push_line`], then
+/// [`CsvParser::finish`]. The first error ends the parse.
+#[derive(Default)]
+pub struct CsvParser {
+    meta: Metadata,
+    rows: Vec<Row>,
     line: usize,
-    revolution: u32,
-    angle_deg: f64,
-    lift_mm: f64,
+    seen_data_or_header: bool,
+    end_line: Option<usize>,
+    last_line_ended: bool,
 }
 
-/// Parses a CSV measurement. `file_name` (without directories) supplies the identity when
-/// no metadata comment does; `origin` is copied into the measurement.
-pub fn parse_measurement_csv(
-    text: &str,
-    file_name: &str,
-    origin: &str,
-) -> Result<RawMeasurement, CsvError> {
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    let mut meta = Metadata::default();
-    let mut rows: Vec<Row> = Vec::new();
-    let mut seen_data_or_header = false;
-    for (index, raw) in text.lines().enumerate() {
-        let line = index + 1;
+impl CsvParser {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Lines pushed so far (the number of the last one).
+    pub fn line(&self) -> usize {
+        self.line
+    }
+
+    /// Takes the next line, with its line ending if it has one (`\n` or `\r\n`): whether the
+    /// last line ended is part of the [`Completeness`].
+    pub fn push_line(&mut self, raw: &str) -> Result<(), CsvError> {
+        self.line += 1;
+        self.last_line_ended = raw.ends_with('\n');
+        let line = self.line;
         let at = |error| CsvError::Line { line, error };
+        let raw = if line == 1 {
+            raw.strip_prefix('\u{feff}').unwrap_or(raw)
+        } else {
+            raw
+        };
         let trimmed = raw.trim();
         if trimmed.is_empty() {
-            continue;
+            return Ok(());
+        }
+        if let Some(end_line) = self.end_line {
+            return Err(at(CsvLineError::AfterEnd {
+                end_line,
+                found: clip(trimmed),
+            }));
         }
         if let Some(comment) = trimmed.strip_prefix('#') {
-            read_metadata(comment, &mut meta).map_err(at)?;
-            continue;
+            if comment.trim().eq_ignore_ascii_case("end") {
+                self.end_line = Some(line);
+                return Ok(());
+            }
+            return read_metadata(comment, &mut self.meta).map_err(at);
         }
-        let first_row = !seen_data_or_header;
-        seen_data_or_header = true;
+        let first_row = !self.seen_data_or_header;
+        self.seen_data_or_header = true;
         if first_row && trimmed.starts_with(|c: char| c.is_ascii_alphabetic()) {
             if is_header(trimmed) {
-                continue;
+                return Ok(());
             }
             return Err(at(CsvLineError::UnexpectedHeader {
                 found: clip(trimmed),
             }));
         }
-        if rows.len() as u64 >= MAX_SAMPLES {
+        if self.rows.len() as u64 >= MAX_SAMPLES {
             return Err(CsvError::TooManySamples);
         }
-        rows.push(parse_row(line, trimmed).map_err(at)?);
+        self.rows.push(parse_row(line, trimmed).map_err(at)?);
+        Ok(())
     }
-    if rows.is_empty() {
-        return Err(CsvError::NoSamples);
-    }
-    let [machine, part, lobe] = identity(meta.ids, file_name)?;
-    let points_per_rev = match meta.points_per_rev {
-        Some(p) => p,
-        None => {
-            let found = distinct_angles(&rows);
-            u32::try_from(found)
-                .ok()
-                .filter(|p| (1..=MAX_POINTS_PER_REV).contains(p))
-                .ok_or(CsvError::PointsPerRev {
-                    found: found as u64,
-                })?
+
+    /// Checks the whole file and builds the measurement. `file_name` (without directories)
+    /// supplies the identity when no metadata comment does; `origin` is copied into the
+    /// measurement.
+    pub fn finish(self, file_name: &str, origin: &str) -> Result<CsvMeasurement, CsvError> {
+        let Self {
+            meta,
+            rows,
+            end_line,
+            last_line_ended,
+            ..
+        } = self;
+        if rows.is_empty() {
+            return Err(CsvError::NoSamples);
         }
-    };
-    let revolutions = match meta.revolutions {
-        Some(r) => r,
-        None => {
-            let found = rows
-                .iter()
-                .map(|r| u64::from(r.revolution))
-                .max()
-                .unwrap_or(0)
-                + 1;
-            u32::try_from(found)
+        let [machine, part, lobe] = identity(meta.ids, file_name)?;
+        let points_per_rev = match meta.points_per_rev {
+            Some(p) => p,
+            None => {
+                let found = distinct_angles(&rows);
+                u32::try_from(found)
+                    .ok()
+                    .filter(|p| (1..=MAX_POINTS_PER_REV).contains(p))
+                    .ok_or(CsvError::PointsPerRev {
+                        found: found as u64,
+                    })?
+            }
+        };
+        let labels = Labels::of(&rows)?;
+        let revolutions = match meta.revolutions {
+            Some(announced) => {
+                labels.check_within(&rows, announced)?;
+                announced
+            }
+            None => u32::try_from(labels.count)
                 .ok()
                 .filter(|r| *r <= MAX_REVOLUTIONS)
-                .ok_or(CsvError::Revolutions { found })?
+                .ok_or(CsvError::Revolutions {
+                    found: labels.count,
+                })?,
+        };
+        let samples = on_grid(&rows, labels.first, points_per_rev)?;
+        let completeness = Completeness {
+            end_marker: end_line.is_some(),
+            declared_revolutions: meta.revolutions,
+            revolutions_found: u32::try_from(labels.count).unwrap_or(u32::MAX),
+            readings_found: distinct_readings(&samples),
+            readings_expected: u64::from(revolutions) * u64::from(points_per_rev),
+            last_line_ended,
+        };
+        Ok(CsvMeasurement {
+            measurement: RawMeasurement {
+                header: MeasurementHeader {
+                    machine,
+                    part,
+                    lobe,
+                    revolutions,
+                    points_per_rev,
+                },
+                samples,
+                origin: origin.to_owned(),
+            },
+            completeness,
+        })
+    }
+}
+
+/// Parses a CSV measurement held in memory (see [`CsvParser`] for files).
+pub fn parse_measurement_csv(
+    text: &str,
+    file_name: &str,
+    origin: &str,
+) -> Result<RawMeasurement, CsvError> {
+    let mut parser = CsvParser::new();
+    for line in text.split_inclusive('\n') {
+        parser.push_line(line)?;
+    }
+    parser.finish(file_name, origin).map(|m| m.measurement)
+}
+
+/// The revolution labels present: the lowest and how many consecutive ones from it.
+struct Labels {
+    first: u32,
+    count: u64,
+}
+
+impl Labels {
+    fn of(rows: &[Row]) -> Result<Self, CsvError> {
+        let mut labels: Vec<u32> = rows.iter().map(|r| r.revolution).collect();
+        labels.sort_unstable();
+        labels.dedup();
+        if let Some(pair) = labels.windows(2).find(|w| w[1] - w[0] > 1) {
+            return Err(CsvError::RevolutionGap {
+                from: pair[0],
+                to: pair[1],
+            });
         }
-    };
+        Ok(Self {
+            first: labels.first().copied().unwrap_or(0),
+            count: labels.len() as u64,
+        })
+    }
+
+    /// Refuses, at its line, the first row whose label lies beyond `announced` revolutions.
+    fn check_within(&self, rows: &[Row], announced: u32) -> Result<(), CsvError> {
+        match rows
+            .iter()
+            .find(|r| u64::from(r.revolution - self.first) >= u64::from(announced))
+        {
+            Some(row) => Err(CsvError::Line {
+                line: row.line,
+                error: CsvLineError::RevolutionBeyond {
+                    revolution: row.revolution,
+                    first: self.first,
+                    count: u64::from(row.revolution - self.first) + 1,
+                    revolutions: announced,
+                },
+            }),
+            None => Ok(()),
+        }
+    }
+}
+
+/// Samples with 0-based revolutions (label − `first`) and grid indices, in file order.
+fn on_grid(rows: &[Row], first: u32, points_per_rev: u32) -> Result<Vec<RawSample>, CsvError> {
     let step_deg = 360.0 / f64::from(points_per_rev);
     let mut samples = Vec::with_capacity(rows.len());
     for row in rows {
-        let at = |error| CsvError::Line {
-            line: row.line,
-            error,
-        };
-        if row.revolution >= revolutions {
-            return Err(at(CsvLineError::RevolutionBeyond {
-                revolution: row.revolution,
-                revolutions,
-            }));
-        }
         let index = (row.angle_deg / step_deg).round();
         if (row.angle_deg - index * step_deg).abs() > GRID_TOLERANCE_DEG
             || index >= f64::from(points_per_rev)
         {
-            return Err(at(CsvLineError::OffGrid {
-                angle_deg: row.angle_deg,
-                step_deg,
-                points_per_rev,
-            }));
+            return Err(CsvError::Line {
+                line: row.line,
+                error: CsvLineError::OffGrid {
+                    angle_deg: row.angle_deg,
+                    step_deg,
+                    points_per_rev,
+                },
+            });
         }
         // 0 ≤ index < points_per_rev ≤ 100 000 by the checks above.
         #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
         let angle_index = index as u32;
         samples.push(RawSample {
-            revolution: row.revolution,
+            revolution: row.revolution - first,
             angle_index,
             lift_mm: row.lift_mm,
         });
     }
-    Ok(RawMeasurement {
-        header: MeasurementHeader {
-            machine,
-            part,
-            lobe,
-            revolutions,
-            points_per_rev,
-        },
-        samples,
-        origin: origin.to_owned(),
-    })
+    Ok(samples)
 }
 
-fn is_header(line: &str) -> bool {
-    let fields: Vec<String> = line.split(',').map(|f| f.trim().to_lowercase()).collect();
-    fields == ["rev", "angle_deg", "lift_mm"]
-}
-
-fn parse_row(line: usize, text: &str) -> Result<Row, CsvLineError> {
-    let fields: Vec<&str> = text.split(',').map(str::trim).collect();
-    let [rev, angle, lift] = fields.as_slice() else {
-        return Err(CsvLineError::FieldCount {
-            found: fields.len(),
-        });
-    };
-    let revolution = rev
-        .bytes()
-        .all(|b| b.is_ascii_digit())
-        .then(|| rev.parse::<u32>().ok())
-        .flatten()
-        .ok_or_else(|| CsvLineError::Revolution { found: clip(rev) })?;
-    let angle_deg = angle
-        .parse::<f64>()
-        .ok()
-        .filter(|a| (0.0..360.0).contains(a))
-        .ok_or_else(|| CsvLineError::Angle { found: clip(angle) })?;
-    let lift_mm = lift
-        .parse::<f64>()
-        .ok()
-        .filter(|l| l.abs() <= MAX_ABS_LIFT_MM)
-        .ok_or_else(|| CsvLineError::Lift { found: clip(lift) })?;
-    Ok(Row {
-        line,
-        revolution,
-        angle_deg,
-        lift_mm,
-    })
-}
-
-fn read_metadata(comment: &str, meta: &mut Metadata) -> Result<(), CsvLineError> {
-    let tokens: Vec<&str> = comment.split_whitespace().collect();
-    let is_meta = tokens.iter().any(|t| {
-        t.split_once('=')
-            .is_some_and(|(key, _)| KEYS.contains(&key))
-    });
-    if !is_meta {
-        return Ok(());
-    }
-    for token in tokens {
-        let Some((key, value)) = token
-            .split_once('=')
-            .and_then(|(k, v)| KEYS.iter().find(|known| **known == k).map(|k| (*k, v)))
-        else {
-            return Err(CsvLineError::MetadataToken { found: clip(token) });
-        };
-        let bad = |expected| CsvLineError::MetadataValue {
-            key,
-            found: clip(value),
-            expected,
-        };
-        match key {
-            "machine" | "part" | "lobe" => {
-                if !valid_id(value) {
-                    return Err(bad("1–32 characters of A–Z a–z 0–9 . _ -"));
-                }
-                let slot = match key {
-                    "machine" => &mut meta.ids[0],
-                    "part" => &mut meta.ids[1],
-                    _ => &mut meta.ids[2],
-                };
-                set_once(slot, value.to_owned(), key)?;
-            }
-            "points_per_rev" => {
-                let v = whole(value, 1, MAX_POINTS_PER_REV)
-                    .ok_or_else(|| bad("a whole number in 1..=100000"))?;
-                set_once(&mut meta.points_per_rev, v, key)?;
-            }
-            _ => {
-                let v = whole(value, 1, MAX_REVOLUTIONS)
-                    .ok_or_else(|| bad("a whole number in 1..=1000"))?;
-                set_once(&mut meta.revolutions, v, key)?;
-            }
-        }
-    }
-    Ok(())
-}
-
-fn set_once<T: PartialEq>(
-    slot: &mut Option<T>,
-    value: T,
-    key: &'static str,
-) -> Result<(), CsvLineError> {
-    match slot {
-        Some(existing) if *existing != value => Err(CsvLineError::MetadataConflict { key }),
-        _ => {
-            *slot = Some(value);
-            Ok(())
-        }
-    }
-}
-
-fn whole(text: &str, min: u32, max: u32) -> Option<u32> {
-    text.bytes()
-        .all(|b| b.is_ascii_digit())
-        .then(|| text.parse::<u32>().ok())
-        .flatten()
-        .filter(|v| (min..=max).contains(v))
-}
-
-fn valid_id(text: &str) -> bool {
-    (1..=MAX_ID_CHARS).contains(&text.len())
-        && text
-            .bytes()
-            .all(|b| b.is_ascii_alphanumeric() || matches!(b, b'.' | b'_' | b'-'))
-}
-
-fn identity(ids: [Option<String>; 3], file_name: &str) -> Result<[String; 3], CsvError> {
-    const NAMES: [&str; 3] = ["machine", "part", "lobe"];
-    match ids {
-        [Some(m), Some(p), Some(l)] => Ok([m, p, l]),
-        [None, None, None] => {
-            let stem = file_name
-                .rsplit_once('.')
-                .map_or(file_name, |(stem, _)| stem);
-            let fields: Vec<&str> = stem.split('_').collect();
-            match fields.as_slice() {
-                [m, p, l, ..] if [m, p, l].iter().all(|f| valid_id(f)) => {
-                    Ok([(*m).to_owned(), (*p).to_owned(), (*l).to_owned()])
-                }
-                _ => Err(CsvError::NoIdentity {
-                    file_name: file_name.to_owned(),
-                }),
-            }
-        }
-        partial => {
-            let pick = |present: bool| {
-                NAMES
-                    .iter()
-                    .zip(&partial)
-                    .filter(|(_, v)| v.is_some() == present)
-                    .map(|(n, _)| *n)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            };
-            Err(CsvError::PartialIdentity {
-                given: pick(true),
-                missing: pick(false),
-            })
-        }
-    }
-}
-
-/// Distinct angles, treating angles closer than the grid tolerance as one.
-fn distinct_angles(rows: &[Row]) -> usize {
-    let mut angles: Vec<f64> = rows.iter().map(|r| r.angle_deg).collect();
-    angles.sort_by(f64::total_cmp);
-    angles.dedup_by(|a, b| (*a - *b).abs() <= GRID_TOLERANCE_DEG);
-    angles.len()
-}
-
-fn clip(text: &str) -> String {
-    const MAX: usize = 40;
-    match text.char_indices().nth(MAX) {
-        Some((cut, _)) => format!("{}…", &text[..cut]),
-        None => text.to_owned(),
-    }
+/// Distinct (revolution, angle index) pairs.
+fn distinct_readings(samples: &[RawSample]) -> u64 {
+    let mut keys: Vec<u64> = samples
+        .iter()
+        .map(|s| (u64::from(s.revolution) << 32) | u64::from(s.angle_index))
+        .collect();
+    keys.sort_unstable();
+    keys.dedup();
+    keys.len() as u64
 }
 
 #[cfg(test)]
@@ -425,7 +435,7 @@ mod tests {
     fn metadata_comments_override_the_file_name() {
         let m = parse(
             "# machine=G7 part=X-9 lobe=pin.1\n# free text comment\n#points_per_rev=8 revolutions=3\n\
-             0,45,0.5\n2,315,-0.001\n",
+             0,45,0.5\n1,315,-0.001\n",
             "scan.csv",
         )
         .expect("valid");
@@ -481,8 +491,21 @@ mod tests {
                  (tolerance 0.000001°)",
             ),
             (
-                "# revolutions=3\n3,0,0\n",
-                "line 2: rev 3 is not below the 3 revolutions announced",
+                "# revolutions=2\n5,0,0\n6,0,0\n7,0,0\n",
+                "line 4: rev 7 is revolution 3 counting from rev 5, more than the 2 \
+                 revolutions announced",
+            ),
+            (
+                "1,0,0\n2,0,0\n4,0,0\n",
+                "revolutions jump from 2 to 4: revolution 3 is missing",
+            ),
+            (
+                "0,0,0\n3,0,0\n",
+                "revolutions jump from 0 to 3: revolutions 1 to 2 are missing",
+            ),
+            (
+                "0,0,0\n# END\n\n0,1,0\n",
+                "line 4: found \"0,1,0\" after the `# end` marker on line 2",
             ),
             (
                 "# machine=M3 shift=night\n0,0,0\n",
@@ -515,5 +538,58 @@ mod tests {
                     .to_owned()
             )
         );
+    }
+
+    /// Revolution numbers are labels: a file numbered from 1 is the same measurement as one
+    /// numbered from 0.
+    #[test]
+    fn revolutions_numbered_from_any_start_map_to_zero_based() {
+        let from_zero = parse("0,0,1\n0,180,2\n1,0,3\n1,180,4\n", "M_P_L.csv").expect("ok");
+        for first in [1, 7] {
+            let text = format!(
+                "{a},0,1\n{a},180,2\n{b},0,3\n{b},180,4\n",
+                a = first,
+                b = first + 1
+            );
+            let m = parse(&text, "M_P_L.csv").expect("consecutive labels");
+            assert_eq!(m, from_zero, "numbered from {first}");
+        }
+        let m = parse("# revolutions=3\n1,0,1\n2,0,2\n", "M_P_L.csv").expect("ok");
+        assert_eq!(m.header.revolutions, 3);
+        let revs: Vec<u32> = m.samples.iter().map(|s| s.revolution).collect();
+        assert_eq!(revs, [0, 1]);
+    }
+
+    fn completeness(text: &str) -> Completeness {
+        let mut parser = CsvParser::new();
+        for line in text.split_inclusive('\n') {
+            parser.push_line(line).expect("valid line");
+        }
+        parser.finish("M_P_L.csv", "t").expect("valid").completeness
+    }
+
+    #[test]
+    fn completeness_from_the_end_marker_or_the_declared_count() {
+        let two_of_three = "# revolutions=3 points_per_rev=2\n1,0,0\n1,180,0\n2,0,0\n2,180,0\n";
+        let c = completeness(two_of_three);
+        assert_eq!(
+            (c.revolutions_found, c.readings_found, c.readings_expected),
+            (2, 4, 6)
+        );
+        assert!(!c.is_complete());
+        let c = completeness(&format!("{two_of_three}3,0,0\n"));
+        assert!(!c.is_complete(), "one angle of the last revolution missing");
+        let c = completeness(&format!("{two_of_three}3,180,0\n3,0,0\n"));
+        assert!(c.declared_count_met() && c.is_complete());
+        // The last line may be cut short while the writer is at work.
+        let c = completeness(&format!("{two_of_three}3,180,0\n3,0,0.12"));
+        assert!(c.declared_count_met() && !c.last_line_ended && !c.is_complete());
+        // A repeated reading does not stand in for a missing one.
+        let c = completeness(&format!("{two_of_three}3,0,0\n3,0,0.1\n"));
+        assert_eq!((c.readings_found, c.is_complete()), (5, false));
+        let c = completeness("0,0,0\n0,180,0\n");
+        assert_eq!((c.end_marker, c.is_complete()), (false, false));
+        let c = completeness("0,0,0\n0,180,0\n #  End \n\n");
+        assert_eq!((c.end_marker, c.is_complete()), (true, true));
     }
 }

@@ -1,119 +1,134 @@
 //! The drop folder: a directory where the control or gauge PC writes measurement files,
-//! polled (no inotify, so network shares work), each complete file parsed and moved to
-//! `processed/` or `rejected/` (with `<name>.reason.txt` beside it). Nothing is deleted.
+//! polled (no inotify, so network shares work). A complete measurement file is handed out
+//! and stays in the folder, claimed, until the caller settles it into `processed/` or
+//! `rejected/` (with `<name>.reason.txt` beside it). Nothing is deleted.
 //!
 //! Rules:
-//! - Only regular files directly in the folder are considered. Names starting with `.` or
-//!   `~`, or ending in `.tmp`, `.part` or `.partial`, are files still being written and are
-//!   left alone: a writer may write under such a name and rename when done.
-//! - A file is taken when two consecutive polls see the same size and modification time
-//!   (so a renamed-in file is taken at the second poll that sees it, and a file written in
-//!   place once it has been still for a whole poll interval).
-//! - `.csv` and `.log` files are read by [`read_measurement_file`]; `.dressing.toml` files
-//!   are wheel-dressing reports ([`read_dressing_file`]); anything else is rejected with that
-//!   reason.
+//! - Names starting with `.` or `~`, or ending in `.tmp`, `.part` or `.partial`, are files
+//!   still being written and are never opened: a writer writes under such a name and renames
+//!   into place when done.
+//! - Anything else that is not a regular file (symbolic link, named pipe, directory, socket,
+//!   device) is moved unopened and unfollowed to `rejected/` with a reason, except the
+//!   folder's own `processed/` and `rejected/`.
+//! - A file larger than [`DropOptions::max_file_bytes`] (from its metadata) is rejected
+//!   without being read, once it has stopped changing.
+//! - A measurement file is taken as soon as it is complete: it has the `# end` marker line,
+//!   or it declares `revolutions=` in its metadata comment and holds every angle of each
+//!   revolution. One without either is taken once its size and modification time have stayed
+//!   the same for [`DropOptions::stable_ms`]. A file that declares more revolutions than it
+//!   holds waits the same time and is then rejected, saying how many it holds.
+//! - A file that does not parse waits the same time (it may be half-written), then is
+//!   rejected with the parse error.
+//! - `.csv` and `.log` files are read by [`open_measurement_file`]; `.dressing.toml` files
+//!   are wheel-dressing reports ([`open_dressing_file`]), taken by the same rules and moved
+//!   at once (no settling); anything else is rejected with that reason.
+//! - A taken measurement is [`DropEvent::Accepted`] and claimed: it is not handed out again
+//!   until [`DropFolder::settle`] moves it. The claim is held in memory only, so after a
+//!   restart an unsettled file is read and handed out again.
 //! - A name already present in `processed/` or `rejected/` gets a suffix `-1`, `-2`, …
-//!   before the extension.
+//!   before the extension. A name that is not UTF-8 keeps its bytes.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, SystemTime};
+use std::time::{Duration, Instant, SystemTime};
 
 use tokio::sync::mpsc;
 
 use crate::core::measure::RawMeasurement;
 
 use super::dbc::GaugeDbc;
-use super::file::read_measurement_file;
+pub use super::dressing::{
+    DRESSING_SUFFIX, DressingError, DressingReport, open_dressing_file, read_dressing_file,
+};
+use super::drop_names::{EntryKind, free_name, in_progress, reason_path};
+pub use super::drop_reasons::{DropFolderError, Rejection};
+use super::file::{MeasurementFile, open_measurement_file, shown_path};
 
 /// Subfolder for files taken as measurements.
 pub const PROCESSED_DIR: &str = "processed";
 /// Subfolder for files that are not measurements.
 pub const REJECTED_DIR: &str = "rejected";
 
-/// Suffix of a wheel-dressing report (any case).
-pub const DRESSING_SUFFIX: &str = ".dressing.toml";
-
-/// Largest dressing report read, bytes (a report is one line).
-const MAX_DRESSING_BYTES: u64 = 64 * 1024;
-
-/// A wheel-dressing report, written by the control's dressing cycle (or whoever dresses)
-/// into the drop folder, one line:
-///
-/// ```toml
-/// wheel_radius_mm = 249.998
-/// ```
-#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DressingReport {
-    /// The wheel radius after dressing, as the control now believes it, mm.
-    pub wheel_radius_mm: f64,
+/// How the drop folder decides a file is finished and how large one may be.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DropOptions {
+    /// A file with neither an end marker nor a declared revolution count is taken once its
+    /// size and modification time have not changed for this long, ms.
+    pub stable_ms: u64,
+    /// Larger files are rejected without being read, bytes.
+    pub max_file_bytes: u64,
 }
 
-/// Reads a dressing report; errors name the file and, for syntax, the line.
-pub fn read_dressing_file(path: &Path) -> Result<DressingReport, String> {
-    let shown = path.display();
-    let len = std::fs::metadata(path)
-        .map_err(|e| format!("cannot read dressing report {shown}: {e}"))?
-        .len();
-    if len > MAX_DRESSING_BYTES {
-        return Err(format!(
-            "dressing report {shown} is larger than the {MAX_DRESSING_BYTES} bytes allowed"
-        ));
+impl Default for DropOptions {
+    fn default() -> Self {
+        Self {
+            stable_ms: 10_000,
+            max_file_bytes: 16 * 1024 * 1024,
+        }
     }
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("cannot read dressing report {shown}: {e}"))?;
-    let report: DressingReport = toml::from_str(&text).map_err(|e| {
-        let line = e
-            .span()
-            .map(|s| format!(" line {}", text[..s.start].matches('\n').count() + 1))
-            .unwrap_or_default();
-        format!(
-            "dressing report {shown}{line}: {}",
-            e.message().trim_end_matches('\n')
-        )
-    })?;
-    crate::core::compensate::check_wheel_radius(report.wheel_radius_mm)
-        .map_err(|e| format!("dressing report {shown}: {e}"))?;
-    Ok(report)
+}
+
+/// Where a handed-out measurement file goes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Settle {
+    /// Checked and used: to `processed/`.
+    Processed,
+    /// Failed the checks: to `rejected/`, with the reason in `<name>.reason.txt`.
+    Rejected { reason: String },
 }
 
 /// What happened to one file (or the folder) at a poll.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug)]
 pub enum DropEvent {
-    /// Parsed and moved; the measurement's origin is its new path.
+    /// A complete measurement, left in the inbox at `path` and claimed until
+    /// [`DropFolder::settle`] is called for it. Its origin is `path` as shown.
     Accepted {
         measurement: RawMeasurement,
-        moved_to: PathBuf,
+        path: PathBuf,
     },
     /// A wheel-dressing report, parsed and moved to `processed/`.
     Dressing {
         report: DressingReport,
         moved_to: PathBuf,
     },
-    /// Not a measurement; moved with a reason file beside it.
+    /// Not a measurement (or not a file); moved with a reason file beside it.
     Rejected {
         file: PathBuf,
         moved_to: PathBuf,
-        reason: String,
+        reason: Rejection,
     },
+    /// Settled by [`watch_drop_folder`] on request.
+    Settled { path: PathBuf, moved_to: PathBuf },
     /// The folder could not be listed or a file could not be moved; the file stays and is
     /// retried only after it changes.
-    Failed { path: PathBuf, error: String },
-}
-
-/// Why the drop folder cannot be used at all.
-#[derive(Debug, thiserror::Error)]
-#[error("drop folder {path} unusable: {source}")]
-pub struct DropFolderError {
-    pub path: String,
-    pub source: std::io::Error,
+    Failed {
+        path: PathBuf,
+        error: DropFolderError,
+    },
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Stamp {
     len: u64,
     modified: Option<SystemTime>,
+}
+
+/// A file seen and not yet taken.
+#[derive(Debug, Clone, Copy)]
+struct Watch {
+    stamp: Stamp,
+    /// When this stamp was first seen.
+    since: Instant,
+    /// The stamp at which the file was last read and found unfinished.
+    read_at: Option<Stamp>,
+}
+
+/// What reading a candidate gave.
+enum Reading {
+    Measurement(Box<MeasurementFile>),
+    Dressing(DressingReport, bool),
+    Unusable(Rejection),
 }
 
 /// A polled drop folder. [`DropFolder::poll`] is synchronous (blocking file I/O);
@@ -124,18 +139,24 @@ pub struct DropFolder {
     processed: PathBuf,
     rejected: PathBuf,
     dbc: GaugeDbc,
-    /// Stamp of every candidate at the previous poll.
-    seen: HashMap<PathBuf, Stamp>,
+    options: DropOptions,
+    watches: HashMap<PathBuf, Watch>,
+    /// Handed out as accepted, not yet settled.
+    claimed: HashSet<PathBuf>,
     /// Files that could not be moved away, with their stamp then.
     stuck: HashMap<PathBuf, Stamp>,
 }
 
 impl DropFolder {
     /// Uses `inbox` (which must exist) and creates `processed/` and `rejected/` in it.
-    pub fn open(inbox: &Path, dbc: GaugeDbc) -> Result<Self, DropFolderError> {
+    pub fn open(
+        inbox: &Path,
+        dbc: GaugeDbc,
+        options: DropOptions,
+    ) -> Result<Self, DropFolderError> {
         let err = |path: &Path| {
             let path = path.display().to_string();
-            move |source| DropFolderError { path, source }
+            move |source| DropFolderError::Unusable { path, source }
         };
         if !std::fs::metadata(inbox).map_err(err(inbox))?.is_dir() {
             return Err(err(inbox)(std::io::Error::new(
@@ -152,7 +173,9 @@ impl DropFolder {
             processed,
             rejected,
             dbc,
-            seen: HashMap::new(),
+            options,
+            watches: HashMap::new(),
+            claimed: HashSet::new(),
             stuck: HashMap::new(),
         })
     }
@@ -161,159 +184,275 @@ impl DropFolder {
         &self.inbox
     }
 
-    /// One poll: takes every file whose size and mtime did not change since the previous
-    /// poll, in name order.
+    pub fn options(&self) -> DropOptions {
+        self.options
+    }
+
+    /// [`DropFolder::poll_at`] the current instant.
     pub fn poll(&mut self) -> Vec<DropEvent> {
-        let mut events = Vec::new();
+        self.poll_at(Instant::now())
+    }
+
+    /// One poll at `now` (the stability rule measures from the instants of earlier polls, so
+    /// tests pass instants instead of waiting). Events are in name order.
+    pub fn poll_at(&mut self, now: Instant) -> Vec<DropEvent> {
         let entries = match std::fs::read_dir(&self.inbox) {
             Ok(entries) => entries,
-            Err(e) => {
-                events.push(DropEvent::Failed {
+            Err(source) => {
+                return vec![DropEvent::Failed {
                     path: self.inbox.clone(),
-                    error: format!("cannot list drop folder: {e}"),
-                });
-                return events;
+                    error: DropFolderError::List {
+                        path: self.inbox.display().to_string(),
+                        source,
+                    },
+                }];
             }
         };
-        let mut now: Vec<(PathBuf, Stamp)> = entries
+        let mut listed: Vec<(PathBuf, std::fs::FileType)> = entries
             .filter_map(Result::ok)
-            .filter(|entry| !in_progress(&entry.file_name().to_string_lossy()))
-            .filter_map(|entry| {
-                let meta = entry.metadata().ok()?;
-                meta.is_file().then(|| {
-                    let stamp = Stamp {
-                        len: meta.len(),
-                        modified: meta.modified().ok(),
-                    };
-                    (entry.path(), stamp)
-                })
+            .filter(|entry| {
+                let name = entry.file_name();
+                !in_progress(&name) && name != PROCESSED_DIR && name != REJECTED_DIR
             })
+            .filter_map(|entry| Some((entry.path(), entry.file_type().ok()?)))
             .collect();
-        now.sort_by(|a, b| a.0.cmp(&b.0));
-        let previous = std::mem::take(&mut self.seen);
-        self.stuck
-            .retain(|path, _| now.iter().any(|(p, _)| p == path));
-        for (path, stamp) in now {
+        listed.sort_by(|a, b| a.0.cmp(&b.0));
+        let present: HashSet<&PathBuf> = listed.iter().map(|(p, _)| p).collect();
+        self.watches.retain(|p, _| present.contains(p));
+        self.stuck.retain(|p, _| present.contains(p));
+        self.claimed.retain(|p| present.contains(p));
+        let mut events = Vec::new();
+        for (path, file_type) in listed {
+            if self.claimed.contains(&path) {
+                continue;
+            }
+            let Ok(meta) = std::fs::symlink_metadata(&path) else {
+                continue; // gone since the listing
+            };
+            let stamp = Stamp {
+                len: meta.len(),
+                modified: meta.modified().ok(),
+            };
             if self.stuck.get(&path) == Some(&stamp) {
                 continue;
             }
-            if previous.get(&path) == Some(&stamp) {
-                if let Some(event) = self.take(&path, stamp) {
-                    events.push(event);
+            let event = match EntryKind::of(file_type) {
+                Some(kind) => {
+                    let reason = Rejection::NotAFile {
+                        path: shown_path(&path),
+                        kind,
+                    };
+                    Some(self.reject(&path, stamp, reason))
                 }
-            } else {
-                self.seen.insert(path, stamp);
-            }
+                None => self.consider(&path, stamp, now),
+            };
+            events.extend(event);
         }
         events
     }
 
-    fn take(&mut self, path: &Path, stamp: Stamp) -> Option<DropEvent> {
-        let name = path.file_name()?.to_string_lossy().into_owned();
-        let outcome = if name.to_ascii_lowercase().ends_with(DRESSING_SUFFIX) {
-            read_dressing_file(path).map(Taken::Dressing)
-        } else {
-            read_measurement_file(path, &self.dbc)
-                .map(|m| Taken::Measurement(Box::new(m)))
-                .map_err(|e| e.to_string())
-        };
-        let target_dir = match outcome {
-            Ok(_) => self.processed.clone(),
-            Err(_) => self.rejected.clone(),
-        };
-        let moved_to = free_name(&target_dir, &name);
-        if let Err(e) = std::fs::rename(path, &moved_to) {
-            self.stuck.insert(path.to_owned(), stamp);
-            return Some(DropEvent::Failed {
-                path: path.to_owned(),
-                error: format!("cannot move to {}: {e}", moved_to.display()),
-            });
+    /// A regular file: taken if finished, else watched.
+    fn consider(&mut self, path: &Path, stamp: Stamp, now: Instant) -> Option<DropEvent> {
+        let stable_for = Duration::from_millis(self.options.stable_ms);
+        let watch = self.watches.entry(path.to_owned()).or_insert(Watch {
+            stamp,
+            since: now,
+            read_at: None,
+        });
+        if watch.stamp != stamp {
+            *watch = Watch {
+                stamp,
+                since: now,
+                read_at: None,
+            };
         }
-        Some(match outcome {
-            Ok(Taken::Measurement(mut measurement)) => {
-                measurement.origin = moved_to.display().to_string();
-                DropEvent::Accepted {
-                    measurement: *measurement,
-                    moved_to,
-                }
+        let stable = now.saturating_duration_since(watch.since) >= stable_for;
+        let read_already = watch.read_at == Some(stamp);
+        watch.read_at = Some(stamp);
+        if stamp.len > self.options.max_file_bytes {
+            let reason = Rejection::TooLarge {
+                path: shown_path(path),
+                bytes: stamp.len,
+                limit: self.options.max_file_bytes,
+            };
+            return stable.then(|| self.reject(path, stamp, reason));
+        }
+        if read_already && !stable {
+            return None; // read at this stamp and unfinished: nothing new to learn
+        }
+        match self.read(path) {
+            Reading::Measurement(file) => self.decide(path, stamp, *file, stable),
+            Reading::Dressing(report, end_marker) => {
+                (end_marker || stable).then(|| self.take_dressing(path, stamp, report))
             }
-            Ok(Taken::Dressing(report)) => DropEvent::Dressing { report, moved_to },
-            Err(reason) => {
-                let reason_file = reason_path(&moved_to);
-                if let Err(e) = std::fs::write(&reason_file, format!("{reason}\n")) {
-                    return Some(DropEvent::Failed {
-                        path: reason_file,
-                        error: format!("cannot write the reason ({reason}): {e}"),
-                    });
-                }
-                DropEvent::Rejected {
-                    file: path.to_owned(),
-                    moved_to,
-                    reason,
-                }
+            Reading::Unusable(reason) => stable.then(|| self.reject(path, stamp, reason)),
+        }
+    }
+
+    fn read(&self, path: &Path) -> Reading {
+        let name = path.file_name().unwrap_or_default().to_string_lossy();
+        if name.to_ascii_lowercase().ends_with(DRESSING_SUFFIX) {
+            return match open_dressing_file(path) {
+                Ok(d) => Reading::Dressing(d.report, d.end_marker),
+                Err(e) => Reading::Unusable(Rejection::Dressing(e)),
+            };
+        }
+        match open_measurement_file(path, &self.dbc, self.options.max_file_bytes) {
+            Ok(file) => Reading::Measurement(Box::new(file)),
+            Err(e) => Reading::Unusable(Rejection::Measurement(e)),
+        }
+    }
+
+    /// A parsed measurement: handed out when complete, rejected when it declares more than
+    /// it holds and cannot grow any more, else left to wait.
+    fn decide(
+        &mut self,
+        path: &Path,
+        stamp: Stamp,
+        file: MeasurementFile,
+        stable: bool,
+    ) -> Option<DropEvent> {
+        if let Some(c) = file.completeness {
+            if let Some(declared) = c.declared_revolutions
+                && !c.declared_count_met()
+            {
+                let reason = Rejection::Incomplete {
+                    path: shown_path(path),
+                    declared,
+                    points_per_rev: file.measurement.header.points_per_rev,
+                    found: c.revolutions_found,
+                    readings_found: c.readings_found,
+                    readings_expected: c.readings_expected,
+                    end_marker: c.end_marker,
+                    stable_ms: self.options.stable_ms,
+                };
+                return (c.end_marker || stable).then(|| self.reject(path, stamp, reason));
             }
+            if !(c.is_complete() || stable) {
+                return None;
+            }
+        } else if !stable {
+            return None;
+        }
+        self.watches.remove(path);
+        self.claimed.insert(path.to_owned());
+        Some(DropEvent::Accepted {
+            measurement: file.measurement,
+            path: path.to_owned(),
         })
     }
-}
 
-/// What a taken file turned out to be.
-enum Taken {
-    Measurement(Box<RawMeasurement>),
-    Dressing(DressingReport),
-}
-
-/// Names of files still being written (see the module rules).
-fn in_progress(name: &str) -> bool {
-    let lower = name.to_ascii_lowercase();
-    name.starts_with(['.', '~'])
-        || [".tmp", ".part", ".partial"]
-            .iter()
-            .any(|ext| lower.ends_with(ext))
-}
-
-fn reason_path(moved_to: &Path) -> PathBuf {
-    let mut name = moved_to.file_name().unwrap_or_default().to_os_string();
-    name.push(".reason.txt");
-    moved_to.with_file_name(name)
-}
-
-/// `dir/name`, or `dir/stem-N.ext` with the smallest N ≥ 1 such that neither it nor its
-/// reason file exists.
-fn free_name(dir: &Path, name: &str) -> PathBuf {
-    let taken = |p: &Path| p.exists() || reason_path(p).exists();
-    let first = dir.join(name);
-    if !taken(&first) {
-        return first;
+    fn take_dressing(&mut self, path: &Path, stamp: Stamp, report: DressingReport) -> DropEvent {
+        let processed = self.processed.clone();
+        match self.move_into(path, &processed) {
+            Ok(moved_to) => DropEvent::Dressing { report, moved_to },
+            Err(error) => self.stuck_at(path, stamp, error),
+        }
     }
-    let (stem, ext) = match name.rsplit_once('.') {
-        Some((stem, ext)) if !stem.is_empty() => (stem, format!(".{ext}")),
-        _ => (name, String::new()),
-    };
-    (1u64..)
-        .map(|n| dir.join(format!("{stem}-{n}{ext}")))
-        .find(|p| !taken(p))
-        .expect("some suffix is free")
+
+    fn reject(&mut self, path: &Path, stamp: Stamp, reason: Rejection) -> DropEvent {
+        let rejected = self.rejected.clone();
+        let moved_to = match self.move_into(path, &rejected) {
+            Ok(moved_to) => moved_to,
+            Err(error) => return self.stuck_at(path, stamp, error),
+        };
+        if let Err(error) = write_reason(&moved_to, &reason.to_string()) {
+            return DropEvent::Failed {
+                path: moved_to,
+                error,
+            };
+        }
+        DropEvent::Rejected {
+            file: path.to_owned(),
+            moved_to,
+            reason,
+        }
+    }
+
+    fn stuck_at(&mut self, path: &Path, stamp: Stamp, error: DropFolderError) -> DropEvent {
+        self.stuck.insert(path.to_owned(), stamp);
+        DropEvent::Failed {
+            path: path.to_owned(),
+            error,
+        }
+    }
+
+    /// Moves `path` (never following a link) to a free name in `dir`; forgets its watch.
+    fn move_into(&mut self, path: &Path, dir: &Path) -> Result<PathBuf, DropFolderError> {
+        let name: &OsStr = path.file_name().unwrap_or_default();
+        let to = free_name(dir, name);
+        std::fs::rename(path, &to).map_err(|source| DropFolderError::Move {
+            from: shown_path(path),
+            to: shown_path(&to),
+            source,
+        })?;
+        self.watches.remove(path);
+        Ok(to)
+    }
+
+    /// Moves a file handed out as [`DropEvent::Accepted`] to `processed/`, or to `rejected/`
+    /// with the reason beside it, and returns where it went. A file that cannot be moved
+    /// stays claimed, so the call can be repeated.
+    pub fn settle(&mut self, path: &Path, outcome: Settle) -> Result<PathBuf, DropFolderError> {
+        if !self.claimed.contains(path) {
+            return Err(DropFolderError::NotClaimed {
+                path: shown_path(path),
+            });
+        }
+        let dir = match outcome {
+            Settle::Processed => self.processed.clone(),
+            Settle::Rejected { .. } => self.rejected.clone(),
+        };
+        let moved_to = self.move_into(path, &dir)?;
+        self.claimed.remove(path);
+        if let Settle::Rejected { reason } = outcome {
+            write_reason(&moved_to, &reason)?;
+        }
+        Ok(moved_to)
+    }
 }
 
-/// Polls `folder` every `every` and sends each event; returns when the receiver is gone.
-/// File I/O runs on tokio's blocking pool so a slow network share does not stall the
-/// runtime.
+fn write_reason(moved_to: &Path, reason: &str) -> Result<(), DropFolderError> {
+    let reason_file = reason_path(moved_to);
+    std::fs::write(&reason_file, format!("{reason}\n")).map_err(|source| {
+        DropFolderError::ReasonFile {
+            path: shown_path(&reason_file),
+            reason: reason.to_owned(),
+            source,
+        }
+    })
+}
+
+/// Polls `folder` every `every` and sends each event, and settles each `(path, outcome)`
+/// that arrives on `settle`, reporting it as [`DropEvent::Settled`] or
+/// [`DropEvent::Failed`]; returns when the event receiver is gone. File I/O runs on tokio's
+/// blocking pool so a slow network share does not stall the runtime.
 pub async fn watch_drop_folder(
     mut folder: DropFolder,
     every: Duration,
     events: mpsc::Sender<DropEvent>,
+    mut settle: mpsc::Receiver<(PathBuf, Settle)>,
 ) -> Result<(), tokio::task::JoinError> {
     let mut ticks = tokio::time::interval(every);
     ticks.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
-        ticks.tick().await;
-        let (back, polled) = tokio::task::spawn_blocking(move || {
-            let polled = folder.poll();
-            (folder, polled)
+        let request = tokio::select! {
+            _ = ticks.tick() => None,
+            Some(request) = settle.recv() => Some(request),
+        };
+        let (back, out) = tokio::task::spawn_blocking(move || {
+            let out = match request {
+                None => folder.poll(),
+                Some((path, outcome)) => vec![match folder.settle(&path, outcome) {
+                    Ok(moved_to) => DropEvent::Settled { path, moved_to },
+                    Err(error) => DropEvent::Failed { path, error },
+                }],
+            };
+            (folder, out)
         })
         .await?;
         folder = back;
-        for event in polled {
+        for event in out {
             if events.send(event).await.is_err() {
                 return Ok(());
             }
@@ -321,94 +460,5 @@ pub async fn watch_drop_folder(
         if events.is_closed() {
             return Ok(());
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn in_progress_names() {
-        for name in [
-            ".M3_P1_L1.csv",
-            "~lock",
-            "a.csv.tmp",
-            "a.CSV.PART",
-            "x.partial",
-        ] {
-            assert!(in_progress(name), "{name}");
-        }
-        for name in ["M3_P1_L1.csv", "a.log", "tmp.csv", "notes.txt"] {
-            assert!(!in_progress(name), "{name}");
-        }
-    }
-
-    /// A dressing report goes to processed/ with its radius; a bad one to rejected/ with a
-    /// reason naming the file and, for syntax, the line.
-    #[test]
-    fn dressing_reports_are_read_or_rejected_with_the_line() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let inbox = dir.path();
-        let mut folder = DropFolder::open(inbox, GaugeDbc::builtin()).expect("open");
-        std::fs::write(
-            inbox.join("d1.dressing.toml"),
-            "wheel_radius_mm = 249.998\n",
-        )
-        .expect("write");
-        std::fs::write(
-            inbox.join("d2.DRESSING.TOML"),
-            "# after dressing\nwheel_radius_mm = 249,99\n",
-        )
-        .expect("write");
-        std::fs::write(inbox.join("d3.dressing.toml"), "wheel_radius_mm = 0.25\n").expect("write");
-        std::fs::write(inbox.join("d4.dressing.toml"), "radius = 249.9\n").expect("write");
-        assert!(
-            folder.poll().is_empty(),
-            "files are taken at the second poll"
-        );
-        let events = folder.poll();
-        assert_eq!(events.len(), 4, "{events:?}");
-        match &events[0] {
-            DropEvent::Dressing { report, moved_to } => {
-                assert_eq!(report.wheel_radius_mm, 249.998);
-                assert_eq!(moved_to, &inbox.join("processed/d1.dressing.toml"));
-            }
-            other => panic!("{other:?}"),
-        }
-        let reasons: Vec<&str> = events[1..]
-            .iter()
-            .map(|e| match e {
-                DropEvent::Rejected { reason, .. } => reason.as_str(),
-                other => panic!("{other:?}"),
-            })
-            .collect();
-        assert!(
-            reasons[0].contains("d2.DRESSING.TOML line 2"),
-            "{}",
-            reasons[0]
-        );
-        assert!(
-            reasons[1].contains("0.25 mm is not a plausible"),
-            "{}",
-            reasons[1]
-        );
-        assert!(reasons[2].contains("radius"), "{}", reasons[2]);
-        assert!(inbox.join("rejected/d3.dressing.toml.reason.txt").exists());
-    }
-
-    #[test]
-    fn free_names_get_a_suffix_before_the_extension() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let d = dir.path();
-        assert_eq!(free_name(d, "a.csv"), d.join("a.csv"));
-        std::fs::write(d.join("a.csv"), "").expect("write");
-        assert_eq!(free_name(d, "a.csv"), d.join("a-1.csv"));
-        // A lone reason file also blocks its name.
-        std::fs::write(d.join("a-1.csv.reason.txt"), "").expect("write");
-        assert_eq!(free_name(d, "a.csv"), d.join("a-2.csv"));
-        std::fs::write(d.join("noext"), "").expect("write");
-        assert_eq!(free_name(d, "noext"), d.join("noext-1"));
-        assert_eq!(reason_path(&d.join("a.csv")), d.join("a.csv.reason.txt"));
     }
 }

@@ -346,7 +346,8 @@ async fn drop_source(
         error!(machine = %machine, folder = %folder.display(), error = %e, "drop folder unusable");
         return;
     }
-    let mut drop_folder = match crate::gauge::DropFolder::open(&folder, dbc) {
+    let options = crate::gauge::DropOptions::default();
+    let mut drop_folder = match crate::gauge::DropFolder::open(&folder, dbc, options) {
         Ok(d) => d,
         Err(e) => {
             error!(machine = %machine, folder = %folder.display(), error = %e, "drop folder unusable");
@@ -372,7 +373,7 @@ async fn drop_source(
         drop_folder = df;
         for event in events {
             match event {
-                crate::gauge::DropEvent::Accepted { measurement, .. } => {
+                crate::gauge::DropEvent::Accepted { measurement, path } => {
                     if tx
                         .send(SourceEvent::Measurement {
                             raw: measurement,
@@ -383,6 +384,12 @@ async fn drop_source(
                         .is_err()
                     {
                         return;
+                    }
+                    // Settled as soon as handed over, as before the two-phase drop folder;
+                    // settling by the machine's verdict is the machine loop's to wire.
+                    let settled = drop_folder.settle(&path, crate::gauge::Settle::Processed);
+                    if let Err(e) = settled {
+                        warn!(machine = %machine, error = %e, "drop file not settled");
                     }
                 }
                 crate::gauge::DropEvent::Dressing { report, moved_to } => {

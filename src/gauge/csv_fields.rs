@@ -1,0 +1,188 @@
+//! Field-level rules of the CSV measurement format: data rows, the header row, metadata
+//! comments and identity from the file name. The file-level rules live in `csv_file`.
+
+use super::assemble::{MAX_POINTS_PER_REV, MAX_REVOLUTIONS};
+use super::csv_file::{CsvError, CsvLineError, GRID_TOLERANCE_DEG};
+use super::serial::MAX_ABS_LIFT_MM;
+
+const MAX_ID_CHARS: usize = 32;
+const KEYS: [&str; 5] = ["machine", "part", "lobe", "points_per_rev", "revolutions"];
+
+#[derive(Debug, Default)]
+pub(super) struct Metadata {
+    pub(super) ids: [Option<String>; 3],
+    pub(super) points_per_rev: Option<u32>,
+    pub(super) revolutions: Option<u32>,
+}
+
+pub(super) struct Row {
+    pub(super) line: usize,
+    pub(super) revolution: u32,
+    pub(super) angle_deg: f64,
+    pub(super) lift_mm: f64,
+}
+
+pub(super) fn is_header(line: &str) -> bool {
+    let fields: Vec<String> = line.split(',').map(|f| f.trim().to_lowercase()).collect();
+    fields == ["rev", "angle_deg", "lift_mm"]
+}
+
+pub(super) fn parse_row(line: usize, text: &str) -> Result<Row, CsvLineError> {
+    let fields: Vec<&str> = text.split(',').map(str::trim).collect();
+    let [rev, angle, lift] = fields.as_slice() else {
+        return Err(CsvLineError::FieldCount {
+            found: fields.len(),
+        });
+    };
+    let revolution = rev
+        .bytes()
+        .all(|b| b.is_ascii_digit())
+        .then(|| rev.parse::<u32>().ok())
+        .flatten()
+        .ok_or_else(|| CsvLineError::Revolution { found: clip(rev) })?;
+    let angle_deg = angle
+        .parse::<f64>()
+        .ok()
+        .filter(|a| (0.0..360.0).contains(a))
+        .ok_or_else(|| CsvLineError::Angle { found: clip(angle) })?;
+    let lift_mm = lift
+        .parse::<f64>()
+        .ok()
+        .filter(|l| l.abs() <= MAX_ABS_LIFT_MM)
+        .ok_or_else(|| CsvLineError::Lift { found: clip(lift) })?;
+    Ok(Row {
+        line,
+        revolution,
+        angle_deg,
+        lift_mm,
+    })
+}
+
+pub(super) fn read_metadata(comment: &str, meta: &mut Metadata) -> Result<(), CsvLineError> {
+    let tokens: Vec<&str> = comment.split_whitespace().collect();
+    let is_meta = tokens.iter().any(|t| {
+        t.split_once('=')
+            .is_some_and(|(key, _)| KEYS.contains(&key))
+    });
+    if !is_meta {
+        return Ok(());
+    }
+    for token in tokens {
+        let Some((key, value)) = token
+            .split_once('=')
+            .and_then(|(k, v)| KEYS.iter().find(|known| **known == k).map(|k| (*k, v)))
+        else {
+            return Err(CsvLineError::MetadataToken { found: clip(token) });
+        };
+        let bad = |expected| CsvLineError::MetadataValue {
+            key,
+            found: clip(value),
+            expected,
+        };
+        match key {
+            "machine" | "part" | "lobe" => {
+                if !valid_id(value) {
+                    return Err(bad("1–32 characters of A–Z a–z 0–9 . _ -"));
+                }
+                let slot = match key {
+                    "machine" => &mut meta.ids[0],
+                    "part" => &mut meta.ids[1],
+                    _ => &mut meta.ids[2],
+                };
+                set_once(slot, value.to_owned(), key)?;
+            }
+            "points_per_rev" => {
+                let v = whole(value, 1, MAX_POINTS_PER_REV)
+                    .ok_or_else(|| bad("a whole number in 1..=100000"))?;
+                set_once(&mut meta.points_per_rev, v, key)?;
+            }
+            _ => {
+                let v = whole(value, 1, MAX_REVOLUTIONS)
+                    .ok_or_else(|| bad("a whole number in 1..=1000"))?;
+                set_once(&mut meta.revolutions, v, key)?;
+            }
+        }
+    }
+    Ok(())
+}
+
+pub(super) fn set_once<T: PartialEq>(
+    slot: &mut Option<T>,
+    value: T,
+    key: &'static str,
+) -> Result<(), CsvLineError> {
+    match slot {
+        Some(existing) if *existing != value => Err(CsvLineError::MetadataConflict { key }),
+        _ => {
+            *slot = Some(value);
+            Ok(())
+        }
+    }
+}
+
+pub(super) fn whole(text: &str, min: u32, max: u32) -> Option<u32> {
+    text.bytes()
+        .all(|b| b.is_ascii_digit())
+        .then(|| text.parse::<u32>().ok())
+        .flatten()
+        .filter(|v| (min..=max).contains(v))
+}
+
+pub(super) fn valid_id(text: &str) -> bool {
+    (1..=MAX_ID_CHARS).contains(&text.len())
+        && text
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || matches!(b, b'.' | b'_' | b'-'))
+}
+
+pub(super) fn identity(ids: [Option<String>; 3], file_name: &str) -> Result<[String; 3], CsvError> {
+    const NAMES: [&str; 3] = ["machine", "part", "lobe"];
+    match ids {
+        [Some(m), Some(p), Some(l)] => Ok([m, p, l]),
+        [None, None, None] => {
+            let stem = file_name
+                .rsplit_once('.')
+                .map_or(file_name, |(stem, _)| stem);
+            let fields: Vec<&str> = stem.split('_').collect();
+            match fields.as_slice() {
+                [m, p, l, ..] if [m, p, l].iter().all(|f| valid_id(f)) => {
+                    Ok([(*m).to_owned(), (*p).to_owned(), (*l).to_owned()])
+                }
+                _ => Err(CsvError::NoIdentity {
+                    file_name: file_name.to_owned(),
+                }),
+            }
+        }
+        partial => {
+            let pick = |present: bool| {
+                NAMES
+                    .iter()
+                    .zip(&partial)
+                    .filter(|(_, v)| v.is_some() == present)
+                    .map(|(n, _)| *n)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            Err(CsvError::PartialIdentity {
+                given: pick(true),
+                missing: pick(false),
+            })
+        }
+    }
+}
+
+/// Distinct angles, treating angles closer than the grid tolerance as one.
+pub(super) fn distinct_angles(rows: &[Row]) -> usize {
+    let mut angles: Vec<f64> = rows.iter().map(|r| r.angle_deg).collect();
+    angles.sort_by(f64::total_cmp);
+    angles.dedup_by(|a, b| (*a - *b).abs() <= GRID_TOLERANCE_DEG);
+    angles.len()
+}
+
+pub(super) fn clip(text: &str) -> String {
+    const MAX: usize = 40;
+    match text.char_indices().nth(MAX) {
+        Some((cut, _)) => format!("{}…", &text[..cut]),
+        None => text.to_owned(),
+    }
+}
