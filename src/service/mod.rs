@@ -2,6 +2,7 @@
 //! machine a gauge source and the machine's loop; a store connector; the HTTP listener; and a
 //! graceful shutdown on SIGINT/SIGTERM that lets every machine finish the part in hand.
 
+mod drop_source;
 pub mod http;
 pub mod journal;
 pub mod machine;
@@ -144,7 +145,7 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
                 tokio::spawn(source.run(tx, shutdown_rx.clone()));
             }
             GaugeSection::Drop { folder, poll_ms } => {
-                tokio::spawn(drop_source(
+                tokio::spawn(drop_source::run(
                     m.name.clone(),
                     config.resolve(folder),
                     *poll_ms,
@@ -328,81 +329,6 @@ async fn keep_raw_retention(days: u32, store: StoreHandle, mut shutdown: watch::
                 days, "raw revolutions older than the retention dropped"
             ),
             Err(e) => warn!(error = %e, "raw-data retention failed, tried again later"),
-        }
-    }
-}
-
-/// Measurement files dropped into a folder (taken when complete, moved to processed/ or
-/// rejected/ with a reason).
-async fn drop_source(
-    machine: String,
-    folder: std::path::PathBuf,
-    poll_ms: u64,
-    tx: mpsc::Sender<SourceEvent>,
-    mut shutdown: watch::Receiver<bool>,
-) {
-    let dbc = crate::gauge::GaugeDbc::builtin();
-    if let Err(e) = std::fs::create_dir_all(&folder) {
-        error!(machine = %machine, folder = %folder.display(), error = %e, "drop folder unusable");
-        return;
-    }
-    let options = crate::gauge::DropOptions::default();
-    let mut drop_folder = match crate::gauge::DropFolder::open(&folder, dbc, options) {
-        Ok(d) => d,
-        Err(e) => {
-            error!(machine = %machine, folder = %folder.display(), error = %e, "drop folder unusable");
-            return;
-        }
-    };
-    let mut tick = tokio::time::interval(Duration::from_millis(poll_ms.max(10)));
-    loop {
-        tokio::select! {
-            _ = tick.tick() => {}
-            _ = shutdown.changed() => return,
-        }
-        // File work off the async threads.
-        let (df, events) = match tokio::task::spawn_blocking(move || {
-            let events = drop_folder.poll();
-            (drop_folder, events)
-        })
-        .await
-        {
-            Ok(done) => done,
-            Err(_) => return,
-        };
-        drop_folder = df;
-        for event in events {
-            match event {
-                crate::gauge::DropEvent::Accepted { measurement, path } => {
-                    if tx
-                        .send(SourceEvent::Measurement {
-                            raw: measurement,
-                            ground_with: None,
-                            done: None,
-                        })
-                        .await
-                        .is_err()
-                    {
-                        return;
-                    }
-                    // Settled as soon as handed over, as before the two-phase drop folder;
-                    // settling by the machine's verdict is the machine loop's to wire.
-                    let settled = drop_folder.settle(&path, crate::gauge::Settle::Processed);
-                    if let Err(e) = settled {
-                        warn!(machine = %machine, error = %e, "drop file not settled");
-                    }
-                }
-                crate::gauge::DropEvent::Dressing { report, moved_to } => {
-                    let event = SourceEvent::Dressing {
-                        wheel_radius_mm: report.wheel_radius_mm,
-                        source: format!("drop file {}", moved_to.display()),
-                    };
-                    if tx.send(event).await.is_err() {
-                        return;
-                    }
-                }
-                other => warn!(machine = %machine, event = ?other, "drop folder"),
-            }
         }
     }
 }

@@ -3,7 +3,7 @@
 
 use super::super::journal::{EventKind, Pending};
 use super::records::{event, keep_reject, outcome_text, raw_revolutions};
-use super::{MachineLoop, now_ms};
+use super::{Ingested, MachineLoop, now_ms};
 use crate::core::learn::StepOutcome;
 use crate::core::measure::{MeasurementHeader, RawMeasurement};
 use crate::core::turn::{self, Decision, HoldReason, Measured, TurnError, measurement_sha256};
@@ -53,12 +53,12 @@ impl MachineLoop {
         &mut self,
         raw: RawMeasurement,
         ground_with: Option<u64>,
-    ) -> anyhow::Result<()> {
+    ) -> anyhow::Result<Ingested> {
         let at_ms = now_ms();
         let sha = measurement_sha256(&raw);
         if let Some(reason) = self.ids.mismatch(&raw.header) {
             self.reject(&raw, &sha, &reason, at_ms).await;
-            return Ok(());
+            return Ok(Ingested::Rejected { reason });
         }
         if self.memory.has_seen(&sha) {
             info!(machine = %self.name, part = %raw.header.part, origin = %raw.origin, "measurement already learned from: not learned again");
@@ -74,7 +74,7 @@ impl MachineLoop {
                 message,
             );
             self.record(vec![e]).await;
-            return Ok(());
+            return Ok(Ingested::Repeated);
         }
         let hold = match ground_with {
             Some(v) if v != self.memory.in_force_version => Some(HoldReason::OtherTable {
@@ -86,8 +86,9 @@ impl MachineLoop {
         let done = match turn::turn(&self.setup.turn_setup(), &self.memory.learning, &raw, hold) {
             Ok(t) => t,
             Err(TurnError::Measurement(e)) => {
-                self.reject(&raw, &sha, &e.to_string(), at_ms).await;
-                return Ok(());
+                let reason = e.to_string();
+                self.reject(&raw, &sha, &reason, at_ms).await;
+                return Ok(Ingested::Rejected { reason });
             }
             Err(e) => return Err(e.into()),
         };
@@ -98,7 +99,9 @@ impl MachineLoop {
         if !self.record(vec![record]).await {
             warn!(machine = %self.name, part, "part not learned from: its measurement could not be recorded");
             self.metrics.update(&self.name, |m| m.learning_held = 1);
-            return Ok(());
+            return Ok(Ingested::Failed {
+                reason: "the journal cannot be written (disk full)".into(),
+            });
         }
         let held = matches!(done.decision, Decision::Held(_));
         let (mut records, text) = self.decide(done.decision, &sha, part, at_ms).await;
@@ -123,7 +126,7 @@ impl MachineLoop {
             self.name,
             self.setup.name
         );
-        Ok(())
+        Ok(Ingested::Recorded)
     }
 
     /// Acts on the turn's decision; returns the records and a line for the log.

@@ -51,13 +51,27 @@ pub enum SourceEvent {
     Measurement {
         raw: crate::core::measure::RawMeasurement,
         ground_with: Option<u64>,
-        done: Option<tokio::sync::oneshot::Sender<()>>,
+        done: Option<tokio::sync::oneshot::Sender<Ingested>>,
     },
     /// The wheel was dressed; the control now believes this radius.
     Dressing {
         wheel_radius_mm: f64,
         source: String,
     },
+}
+
+/// What became of a measurement, for the source that sent it (a drop file is moved to
+/// `processed/` or `rejected/` by it).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Ingested {
+    /// Checked, analysed and recorded (learned from, or held with a reason in the history).
+    Recorded,
+    /// A reading already used: not learned again.
+    Repeated,
+    /// Not this machine's, or failed the checks: never learned from.
+    Rejected { reason: String },
+    /// Could not be processed (e.g. the analysis failed); the reason is logged.
+    Failed { reason: String },
 }
 
 /// Where a machine's files are.
@@ -254,9 +268,15 @@ impl MachineLoop {
             } => {
                 let r = self.on_measurement(raw, ground_with).await;
                 if let Some(done) = done {
-                    let _ = done.send(());
+                    let outcome = match &r {
+                        Ok(i) => i.clone(),
+                        Err(e) => Ingested::Failed {
+                            reason: format!("{e:#}"),
+                        },
+                    };
+                    let _ = done.send(outcome);
                 }
-                r
+                r.map(|_| ())
             }
             SourceEvent::Dressing {
                 wheel_radius_mm,

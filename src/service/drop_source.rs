@@ -1,0 +1,98 @@
+//! The drop folder as a gauge source: complete measurement files go to the machine one by
+//! one, and each is moved by the machine's verdict (processed, or rejected with its reason).
+
+use super::machine::{Ingested, SourceEvent};
+use crate::gauge::Settle;
+use std::time::Duration;
+use tokio::sync::{mpsc, watch};
+use tracing::{error, warn};
+
+/// Measurement files dropped into a folder (taken when complete, moved to processed/ or
+/// rejected/ with a reason).
+pub(super) async fn run(
+    machine: String,
+    folder: std::path::PathBuf,
+    poll_ms: u64,
+    tx: mpsc::Sender<SourceEvent>,
+    mut shutdown: watch::Receiver<bool>,
+) {
+    let dbc = crate::gauge::GaugeDbc::builtin();
+    if let Err(e) = std::fs::create_dir_all(&folder) {
+        error!(machine = %machine, folder = %folder.display(), error = %e, "drop folder unusable");
+        return;
+    }
+    let options = crate::gauge::DropOptions::default();
+    let mut drop_folder = match crate::gauge::DropFolder::open(&folder, dbc, options) {
+        Ok(d) => d,
+        Err(e) => {
+            error!(machine = %machine, folder = %folder.display(), error = %e, "drop folder unusable");
+            return;
+        }
+    };
+    let mut tick = tokio::time::interval(Duration::from_millis(poll_ms.max(10)));
+    loop {
+        tokio::select! {
+            _ = tick.tick() => {}
+            _ = shutdown.changed() => return,
+        }
+        // File work off the async threads.
+        let (df, events) = match tokio::task::spawn_blocking(move || {
+            let events = drop_folder.poll();
+            (drop_folder, events)
+        })
+        .await
+        {
+            Ok(done) => done,
+            Err(_) => return,
+        };
+        drop_folder = df;
+        for event in events {
+            match event {
+                crate::gauge::DropEvent::Accepted { measurement, path } => {
+                    let (done, verdict) = tokio::sync::oneshot::channel();
+                    let event = SourceEvent::Measurement {
+                        raw: measurement,
+                        ground_with: None,
+                        done: Some(done),
+                    };
+                    if tx.send(event).await.is_err() {
+                        return;
+                    }
+                    // The file moves by the machine's verdict: rejected/ with the reason
+                    // beside it, or processed/. A machine gone (shutdown) leaves it in the
+                    // inbox, read again at the next start.
+                    let settle = match verdict.await {
+                        Ok(Ingested::Rejected { reason } | Ingested::Failed { reason }) => {
+                            Settle::Rejected { reason }
+                        }
+                        Ok(Ingested::Recorded | Ingested::Repeated) => Settle::Processed,
+                        Err(_) => return,
+                    };
+                    let (df, settled) = match tokio::task::spawn_blocking(move || {
+                        let settled = drop_folder.settle(&path, settle);
+                        (drop_folder, settled)
+                    })
+                    .await
+                    {
+                        Ok(done) => done,
+                        Err(_) => return,
+                    };
+                    drop_folder = df;
+                    if let Err(e) = settled {
+                        warn!(machine = %machine, error = %e, "drop file not settled");
+                    }
+                }
+                crate::gauge::DropEvent::Dressing { report, moved_to } => {
+                    let event = SourceEvent::Dressing {
+                        wheel_radius_mm: report.wheel_radius_mm,
+                        source: format!("drop file {}", moved_to.display()),
+                    };
+                    if tx.send(event).await.is_err() {
+                        return;
+                    }
+                }
+                other => warn!(machine = %machine, event = ?other, "drop folder"),
+            }
+        }
+    }
+}
