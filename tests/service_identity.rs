@@ -112,3 +112,102 @@ async fn the_same_reading_twice_is_learned_once() {
     feed(&mut m, measurement("DROP1", "P1", "IN1", 2)).await;
     assert_eq!(of(&metrics).parts_total, 2);
 }
+
+/// The same through a drop folder under the real service: a file for another machine and a
+/// file that fails the checks end in `rejected/` with the reason beside them; a good file in
+/// `processed/`; the good file dropped again under another name is processed but not learned
+/// from twice.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn drop_files_are_moved_by_the_verdict_and_learned_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let text = format!(
+        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://{}/db.sqlite?mode=rwc\"\n\
+         [http]\nlisten = \"127.0.0.1:0\"\n[[machines]]\nname = \"DROP1\"\nrecipe = \"{}\"\n\
+         lobe = \"IN1\"\nshare = \"share/DROP1\"\n[machines.gauge]\nkind = \"drop\"\nfolder = \"inbox\"\npoll_ms = 20\n",
+        dir.path().display(),
+        recipe.display()
+    );
+    let config =
+        camloop::config::Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
+    let running = camloop::service::start(config, camloop::service::RunOptions { parts: None })
+        .await
+        .unwrap();
+    let inbox = dir.path().join("inbox");
+    let good = csv(&measurement("DROP1", "P1", "IN1", 1));
+    let write = |name: &str, text: &str| std::fs::write(inbox.join(name), text).unwrap();
+    write("a_other_machine.csv", &csv(&measurement("SIM1", "P2", "IN1", 2)));
+    let mut short = measurement("DROP1", "P3", "IN1", 3);
+    short.samples.retain(|s| s.revolution < 1);
+    short.header.revolutions = 1;
+    write("b_one_revolution.csv", &csv(&short));
+    write("c_good.csv", &good);
+    wait_for(|| moved(&inbox, "processed").len() + moved(&inbox, "rejected").len() >= 5).await;
+    write("d_good_again.csv", &good);
+    wait_for(|| moved(&inbox, "processed").len() >= 2).await;
+    running.stop().await;
+    assert_eq!(
+        moved(&inbox, "processed"),
+        ["c_good.csv", "d_good_again.csv"]
+    );
+    let rejected = moved(&inbox, "rejected");
+    assert_eq!(
+        rejected,
+        [
+            "a_other_machine.csv",
+            "a_other_machine.csv.reason.txt",
+            "b_one_revolution.csv",
+            "b_one_revolution.csv.reason.txt"
+        ]
+    );
+    let reason = std::fs::read_to_string(inbox.join("rejected/a_other_machine.csv.reason.txt"))
+        .unwrap();
+    assert!(reason.contains("machine \"SIM1\""), "{reason}");
+    let url = format!("sqlite://{}/db.sqlite", dir.path().display());
+    let store = Store::connect(&url).await.unwrap();
+    let history = store
+        .measurement_history(&camloop::store::HistoryFilter {
+            machine: "DROP1".into(),
+            limit: 100,
+            ..Default::default()
+        })
+        .await
+        .unwrap();
+    assert_eq!(history.items.len(), 1, "learned from once");
+}
+
+/// A measurement as a drop-folder CSV, marked complete with `# end`.
+fn csv(raw: &RawMeasurement) -> String {
+    let h = &raw.header;
+    let mut text = format!(
+        "# machine={} part={} lobe={}\n# points_per_rev={} revolutions={}\nrev,angle_deg,lift_mm\n",
+        h.machine, h.part, h.lobe, h.points_per_rev, h.revolutions
+    );
+    for s in &raw.samples {
+        let angle = f64::from(s.angle_index) * 360.0 / f64::from(h.points_per_rev);
+        text.push_str(&format!("{},{angle},{}\n", s.revolution, s.lift_mm));
+    }
+    text.push_str("# end\n");
+    text
+}
+
+/// File names in `inbox/<sub>`, sorted.
+fn moved(inbox: &Path, sub: &str) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(inbox.join(sub))
+        .map(|d| {
+            d.filter_map(|e| e.ok())
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect()
+        })
+        .unwrap_or_default();
+    names.sort();
+    names
+}
+
+async fn wait_for(done: impl Fn() -> bool) {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    while !done() {
+        assert!(std::time::Instant::now() < deadline, "timed out");
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+}
