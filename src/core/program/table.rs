@@ -4,7 +4,8 @@ use std::fmt::Write as _;
 
 use thiserror::Error;
 
-use super::settings::{Resolved, SettingsErrors};
+use super::provenance::{TABLE_COMMENT, provenance_lines};
+use super::settings::{ProgramSettings, Resolved, SettingsErrors};
 use crate::core::table::{PolySegment, TablePoint};
 
 /// Why a table cannot be rendered. Indices are positions in the caller's slice; angles named
@@ -30,7 +31,7 @@ pub enum TableError {
         c_end_deg: f64,
     },
     #[error(
-        "{first} (c = {c_first_deg} deg) and {second} (c = {c_second_deg} deg) give C={c_first_prog} and C={c_second_prog} after rounding: the leading value must increase in every block (alarm 10949)"
+        "{first} (c = {c_first_deg} deg) and {second} (c = {c_second_deg} deg) give C={c_first_prog} and C={c_second_prog} after rounding to the control's resolution: the leading value must increase in every block (alarm 10949)"
     )]
     CNotIncreasing {
         /// "point 3", "segment 3 end", "period end" (first value + 360).
@@ -74,7 +75,7 @@ pub enum TableError {
 /// consecutive C values (including the period end) equal after rounding.
 pub fn render_g1_table(
     points: &[TablePoint],
-    settings: &super::ProgramSettings,
+    settings: &ProgramSettings,
 ) -> Result<String, TableError> {
     let r = settings.resolve()?;
     if points.len() < 2 {
@@ -109,7 +110,7 @@ pub fn render_g1_table(
             c_text: fmt_fixed(c, cd),
         })
         .collect();
-    let close_text = check_increasing(&knots, points[mapped[0].0].c_deg, cd)?;
+    let close_text = check_increasing(&knots, points[mapped[0].0].c_deg, settings)?;
 
     let mut out = header(
         &r,
@@ -133,7 +134,7 @@ pub fn render_g1_table(
         &mut out,
         format_args!("{}={close_text} {}={first_x}", r.leading, r.following),
     );
-    out.push_str("CTABEND\nRET\n");
+    out.push_str(TABLE_END);
     Ok(out)
 }
 
@@ -144,7 +145,8 @@ pub fn render_g1_table(
 /// After mapping to program axes (reversed C reverses the segment order and re-parameterises
 /// each cubic with u' = 1 − u) the program has a start block `G1 C=<c0> X=<x0>`, `POLY`, one
 /// block per segment `PO[C]=(<c_end>) PO[X]=(<x_end>,<a2>,<a3>)` ending at C0 + 360° with the
-/// first X, `CTABEND`, and `G1` to leave linear interpolation modal again. The control derives
+/// first X, and `CTABEND`, which restores the modal state from before `CTABDEF` (so `POLY`
+/// does not leak to the caller) [M]. The control derives
 /// a1 from the end point, so the written cubic passes exactly through the rounded knots.
 ///
 /// a2 and a3 are written with X decimals + 2: with both end points fixed, rounding a2 and a3
@@ -158,7 +160,7 @@ pub fn render_g1_table(
 /// within half a unit of the last decimal), and C values equal after rounding.
 pub fn render_poly_table(
     segments: &[PolySegment],
-    settings: &super::ProgramSettings,
+    settings: &ProgramSettings,
 ) -> Result<String, TableError> {
     let r = settings.resolve()?;
     if segments.is_empty() {
@@ -228,7 +230,7 @@ pub fn render_poly_table(
             c_text: fmt_fixed(w[1].c_start, cd),
         });
     }
-    let close_text = check_increasing(&knots, knots[0].c_deg, cd)?;
+    let close_text = check_increasing(&knots, knots[0].c_deg, settings)?;
 
     let mut out = header(&r, &format!("{} cubic (POLY) segments", segments.len()));
     let first_x = fmt_fixed(mapped[0].x0, xd);
@@ -256,7 +258,7 @@ pub fn render_poly_table(
             ),
         );
     }
-    out.push_str("CTABEND\nG1 ; POLY is modal: back to linear interpolation\nRET\n");
+    out.push_str(TABLE_END);
     Ok(out)
 }
 
@@ -294,9 +296,18 @@ struct Knot {
     c_text: String,
 }
 
-/// Check that the written C values increase strictly, up to and including the period end
-/// (first + 360°), and return the period end as written.
-fn check_increasing(knots: &[Knot], first_c_deg: f64, cd: usize) -> Result<String, TableError> {
+/// Check that the written C values increase strictly at the control's resolution (each
+/// rounded to `c_increments_per_deg`, as the control rounds them), up to and including the
+/// period end (first + 360°), and return the period end as written. Decimals finer than the
+/// resolution are refused by the settings, so today two different written values never
+/// round to the same increment; the check is made at the resolution all the same, because
+/// that is what the control compares.
+fn check_increasing(
+    knots: &[Knot],
+    first_c_deg: f64,
+    settings: &ProgramSettings,
+) -> Result<String, TableError> {
+    let cd = usize::from(settings.c_decimals);
     let first_back = parse_back(&knots[0].c_text);
     let close = Knot {
         label: "period end (first value + 360 deg)".to_owned(),
@@ -305,7 +316,8 @@ fn check_increasing(knots: &[Knot], first_c_deg: f64, cd: usize) -> Result<Strin
     };
     let mut prev = &knots[0];
     for k in knots[1..].iter().chain(std::iter::once(&close)) {
-        if parse_back(&k.c_text) <= parse_back(&prev.c_text) {
+        let at_resolution = |text: &str| settings.c_increments(parse_back(text));
+        if at_resolution(&k.c_text) <= at_resolution(&prev.c_text) {
             return Err(TableError::CNotIncreasing {
                 first: prev.label.clone(),
                 c_first_deg: prev.c_deg,
@@ -355,7 +367,22 @@ fn check_joins(mapped: &[Mapped], c_decimals: u8, x_decimals: u8) -> Result<(), 
     Ok(())
 }
 
-/// Transfer header, `PROC`, comments and `CTABDEF` of a table subprogram.
+/// The variable through which a table program returns the number it defines (its `VAR INT`
+/// parameter); the main program couples that variable, never a literal.
+pub(crate) const NUMBER_VAR: &str = "CL_TNO";
+
+/// The last lines of every table program.
+const TABLE_END: &str = "CTABEND ; the control restores the modal state from before CTABDEF\nRET\n";
+
+/// Transfer header, `PROC`, provenance, comments, the number assignment and `CTABDEF` of a
+/// table subprogram.
+///
+/// `PROC <NAME>(VAR INT CL_TNO) SAVE`: the caller passes a variable by reference and reads
+/// the defined number from it, so `CTAB` and `LEADON` use the table just defined. `SAVE`
+/// restores the caller's modal G functions at `RET` [?] (Siemens' frames manual confirms
+/// that `SAVE` restores frames at the end of a subprogram [M]; the same for G functions is
+/// our reading). `G90 G71` are set inside because the table relies on absolute, metric
+/// values whatever the caller left active [M].
 fn header(r: &Resolved<'_>, what: &str) -> String {
     let s = r.settings;
     let cd = usize::from(s.c_decimals);
@@ -363,14 +390,22 @@ fn header(r: &Resolved<'_>, what: &str) -> String {
     let mut out = String::new();
     line(&mut out, format_args!("%_N_{}_SPF", r.name));
     out.push_str(";$PATH=/_N_SPF_DIR\n");
-    line(&mut out, format_args!("PROC {}", r.name));
+    line(
+        &mut out,
+        format_args!("PROC {}(VAR INT {NUMBER_VAR}) SAVE", r.name),
+    );
+    if let Some(p) = &s.provenance {
+        for l in provenance_lines(p) {
+            line(&mut out, format_args!("; {l}"));
+        }
+    }
     for c in &s.comment_lines {
         line(&mut out, format_args!("; {c}"));
     }
     line(
         &mut out,
         format_args!(
-            "; curve table {}: {} follows {}, periodic over 360 deg, {what}",
+            "{TABLE_COMMENT}{}: {} follows {}, periodic over 360 deg, {what}",
             s.table_number, r.following, r.leading
         ),
     );
@@ -386,6 +421,14 @@ fn header(r: &Resolved<'_>, what: &str) -> String {
             fmt_fixed(s.c_offset_deg, cd),
             r.following,
             fmt_fixed(s.x_offset_mm, xd)
+        ),
+    );
+    out.push_str("G90 G71 ; absolute, metric: the table sets what it relies on, not the caller\n");
+    line(
+        &mut out,
+        format_args!(
+            "{NUMBER_VAR}={} ; the number this program defines, read by the caller for CTAB and LEADON",
+            s.table_number
         ),
     );
     let memory = s
