@@ -284,6 +284,14 @@ mod tests {
         let text = render_g1_table(&points(), &ProgramSettings::default()).unwrap();
         let parsed = parse_table_program(&text).unwrap();
         assert_eq!(parsed.table_number, 1);
+        // `PROC CAMLOOP_TABLE(VAR INT CL_TNO) SAVE`: the name alone.
+        assert_eq!(parsed.name, "CAMLOOP_TABLE");
+        assert_eq!(
+            parse_table_program(&text.replace("(VAR INT CL_TNO) SAVE", ""))
+                .unwrap()
+                .name,
+            "CAMLOOP_TABLE"
+        );
         let ParsedShape::G1(read) = parsed.shape else {
             panic!("G1 expected")
         };

@@ -314,9 +314,9 @@ fn check_increasing(
         c_deg: first_c_deg,
         c_text: fmt_fixed(first_back + 360.0, cd),
     };
+    let at_resolution = |text: &str| settings.c_increments(parse_back(text));
     let mut prev = &knots[0];
     for k in knots[1..].iter().chain(std::iter::once(&close)) {
-        let at_resolution = |text: &str| settings.c_increments(parse_back(text));
         if at_resolution(&k.c_text) <= at_resolution(&prev.c_text) {
             return Err(TableError::CNotIncreasing {
                 first: prev.label.clone(),
@@ -490,6 +490,37 @@ mod tests {
         for (a, b) in c.iter().zip(rr) {
             assert!((a - b).abs() < 1e-12);
         }
+    }
+
+    #[test]
+    fn c_is_compared_at_the_control_resolution_not_at_the_written_decimals() {
+        let knot = |c_text: &str| Knot {
+            label: format!("at {c_text}"),
+            c_deg: 0.0,
+            c_text: c_text.to_owned(),
+        };
+        let knots = [knot("10.0000"), knot("10.0004"), knot("20.0000")];
+        // Settings refuse 4 decimals at 1000 increments/deg; the check itself must still
+        // compare what the control keeps: 10.0000 and 10.0004 are both 10000 increments.
+        let coarse = ProgramSettings {
+            c_increments_per_deg: 1000,
+            ..ProgramSettings::default()
+        };
+        match check_increasing(&knots, 10.0, &coarse) {
+            Err(TableError::CNotIncreasing { first, second, .. }) => {
+                assert_eq!(
+                    (first.as_str(), second.as_str()),
+                    ("at 10.0000", "at 10.0004")
+                );
+            }
+            other => panic!("unexpected {other:?}"),
+        }
+        let fine = ProgramSettings::default();
+        assert_eq!(
+            check_increasing(&knots, 10.0, &fine).unwrap(),
+            "370.0000",
+            "the period end, as written"
+        );
     }
 
     #[test]
