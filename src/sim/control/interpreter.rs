@@ -1,5 +1,5 @@
 //! The interpreter: runs one program level statement by statement, resolves subprogram
-//! calls, and keeps the curve tables and the coupling in the [`Control`].
+//! calls, and keeps the curve tables and the coupling in the [`super::Control`].
 
 use super::statements::{
     End, Frame, Halt, Run, Step, Value, args, check_increasing, declare, define, int_arg, invalid,
