@@ -255,6 +255,12 @@ fn an_unknown_statement_is_an_error_naming_program_and_line() {
         err.to_string(),
         "T line 4: `M3 S1000` is not in the subset camloop writes"
     );
+    // A keyword out of place is a statement outside the subset, not a program to look up.
+    let err = run_with(&mut Control::new(), "%_N_T_MPF\nCTABEND\nM30\n", "").unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "T line 2: `CTABEND` is not in the subset camloop writes"
+    );
     // Inside the table program, the error names the table program and its line.
     let table = table_program(1, 1).replace("G90 G71", "G91 G71");
     let err = run_with(&mut Control::new(), &main_program(), &table).unwrap_err();

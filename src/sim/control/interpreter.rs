@@ -11,6 +11,12 @@ use super::{
 };
 use crate::core::program::{ParsedTable, TableBlocks, parse_ctabdef};
 
+/// Words that are statements, never subprogram names: out of place, they are refused as
+/// statements rather than looked up as programs.
+const KEYWORDS: [&str; 8] = [
+    "CTABEND", "POLY", "ENDIF", "ELSE", "M17", "M2", "SAVE", "CTABDEL",
+];
+
 impl Run<'_> {
     /// Runs `text` in `frame` to its `M30` (depth 0) or `RET`; returns that line.
     pub(super) fn program(
@@ -358,7 +364,7 @@ impl Run<'_> {
             }
             None => (code, None),
         };
-        if !is_name(name) || argument.is_some_and(|v| !is_name(v)) {
+        if !is_name(name) || KEYWORDS.contains(&name) || argument.is_some_and(|v| !is_name(v)) {
             return Err(unsupported(code).into());
         }
         let declared = frame.externs.get(name).copied().unwrap_or(0);
