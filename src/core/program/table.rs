@@ -146,7 +146,7 @@ pub fn render_g1_table(
 /// each cubic with u' = 1 − u) the program has a start block `G1 C=<c0> X=<x0>`, `POLY`, one
 /// block per segment `PO[C]=(<c_end>) PO[X]=(<x_end>,<a2>,<a3>)` ending at C0 + 360° with the
 /// first X, and `CTABEND`, which restores the modal state from before `CTABDEF` (so `POLY`
-/// does not leak to the caller) [M]. The control derives
+/// does not leak to the caller) [M-old]. The control derives
 /// a1 from the end point, so the written cubic passes exactly through the rounded knots.
 ///
 /// a2 and a3 are written with X decimals + 2: with both end points fixed, rounding a2 and a3
@@ -377,12 +377,17 @@ const TABLE_END: &str = "CTABEND ; the control restores the modal state from bef
 /// Transfer header, `PROC`, provenance, comments, the number assignment and `CTABDEF` of a
 /// table subprogram.
 ///
-/// `PROC <NAME>(VAR INT CL_TNO) SAVE`: the caller passes a variable by reference and reads
-/// the defined number from it, so `CTAB` and `LEADON` use the table just defined. `SAVE`
-/// restores the caller's modal G functions at `RET` [?] (Siemens' frames manual confirms
-/// that `SAVE` restores frames at the end of a subprogram [M]; the same for G functions is
-/// our reading). `G90 G71` are set inside because the table relies on absolute, metric
-/// values whatever the caller left active [M].
+/// `PROC <NAME>(VAR INT CL_TNO) SAVE`: the caller passes a variable by reference (`VAR`,
+/// declared in the caller with `EXTERN <NAME>(VAR INT)`) and reads the defined number from
+/// it, so `CTAB` and `LEADON` use the table just defined. Points not in the project's notes:
+/// - `VAR` passes by reference, and a subprogram with parameters needs `EXTERN` in the
+///   caller [?];
+/// - `SAVE` restores the caller's modal G functions at `RET` [?]; Siemens' frames function
+///   manual (K2) describes `SAVE` restoring frames at the end of a subprogram [M-old], the
+///   same for G functions is our reading.
+///
+/// `G90 G71` are set inside because the table cannot rely on what the caller left active
+/// (the notes' "modal state" finding).
 fn header(r: &Resolved<'_>, what: &str) -> String {
     let s = r.settings;
     let cd = usize::from(s.c_decimals);
