@@ -167,42 +167,7 @@ pub fn render_poly_table(
         return Err(TableError::NoSegments);
     }
     let reversed = settings.c_direction == super::CDirection::Reversed;
-    let mut mapped = Vec::with_capacity(segments.len());
-    for (index, s) in segments.iter().enumerate() {
-        let values = [
-            s.c_start_deg,
-            s.c_end_deg,
-            s.x0_mm,
-            s.a1_mm,
-            s.a2_mm,
-            s.a3_mm,
-        ];
-        if !values.iter().all(|v| v.is_finite()) {
-            return Err(TableError::NonFiniteSegment { index });
-        }
-        if s.c_end_deg <= s.c_start_deg {
-            return Err(TableError::EmptySegment {
-                index,
-                c_start_deg: s.c_start_deg,
-                c_end_deg: s.c_end_deg,
-            });
-        }
-        let (c_first_deg, cubic) = if reversed {
-            (
-                s.c_end_deg,
-                reverse_cubic([s.x0_mm, s.a1_mm, s.a2_mm, s.a3_mm]),
-            )
-        } else {
-            (s.c_start_deg, [s.x0_mm, s.a1_mm, s.a2_mm, s.a3_mm])
-        };
-        mapped.push(Mapped {
-            index,
-            c_start: settings.c_prog_deg(c_first_deg),
-            len_deg: s.c_end_deg - s.c_start_deg,
-            x0: settings.x_prog_mm(cubic[0]),
-            a: [cubic[1], cubic[2], cubic[3]],
-        });
-    }
+    let mut mapped = map_segments(segments, settings)?;
     mapped.sort_by(|a, b| a.c_start.total_cmp(&b.c_start));
     check_joins(&mapped, settings.c_decimals, settings.x_decimals)?;
 
@@ -260,6 +225,52 @@ pub fn render_poly_table(
     }
     out.push_str(TABLE_END);
     Ok(out)
+}
+
+/// Each segment checked (finite, end beyond start) and mapped to program axes, u running
+/// with increasing C, in the caller's order.
+fn map_segments(
+    segments: &[PolySegment],
+    settings: &ProgramSettings,
+) -> Result<Vec<Mapped>, TableError> {
+    let reversed = settings.c_direction == super::CDirection::Reversed;
+    let mut mapped = Vec::with_capacity(segments.len());
+    for (index, s) in segments.iter().enumerate() {
+        let values = [
+            s.c_start_deg,
+            s.c_end_deg,
+            s.x0_mm,
+            s.a1_mm,
+            s.a2_mm,
+            s.a3_mm,
+        ];
+        if !values.iter().all(|v| v.is_finite()) {
+            return Err(TableError::NonFiniteSegment { index });
+        }
+        if s.c_end_deg <= s.c_start_deg {
+            return Err(TableError::EmptySegment {
+                index,
+                c_start_deg: s.c_start_deg,
+                c_end_deg: s.c_end_deg,
+            });
+        }
+        let (c_first_deg, cubic) = if reversed {
+            (
+                s.c_end_deg,
+                reverse_cubic([s.x0_mm, s.a1_mm, s.a2_mm, s.a3_mm]),
+            )
+        } else {
+            (s.c_start_deg, [s.x0_mm, s.a1_mm, s.a2_mm, s.a3_mm])
+        };
+        mapped.push(Mapped {
+            index,
+            c_start: settings.c_prog_deg(c_first_deg),
+            len_deg: s.c_end_deg - s.c_start_deg,
+            x0: settings.x_prog_mm(cubic[0]),
+            a: [cubic[1], cubic[2], cubic[3]],
+        });
+    }
+    Ok(mapped)
 }
 
 /// Coefficients `[x0, a1, a2, a3]` of the same cubic with the parameter reversed,
