@@ -296,8 +296,9 @@ fn program_main_program_and_svg_are_written_together() {
     let lines: Vec<&str> = spf.lines().collect();
     assert_eq!(lines[0], "%_N_CAM_T2_SPF");
     assert_eq!(lines[1], ";$PATH=/_N_SPF_DIR");
-    assert!(lines.contains(&"PROC CAM_T2"));
+    assert!(lines.contains(&"PROC CAM_T2(VAR INT CL_TNO) SAVE"));
     assert!(lines.contains(&"CTABDEF(X,C,2,1)"));
+    assert!(lines.iter().any(|l| l.starts_with("CL_TNO=2 ")));
     // The demo lobe needs no refinement: one POLY block per table point, the last one
     // closing the period at 360°.
     let blocks: Vec<&&str> = lines.iter().filter(|l| l.starts_with("PO[C]=")).collect();
@@ -309,7 +310,9 @@ fn program_main_program_and_svg_are_written_together() {
     );
     let mpf = std::fs::read_to_string(dir.path().join("nc/CAM_GRIND.MPF")).unwrap();
     assert!(mpf.starts_with("%_N_CAM_GRIND_MPF\n"));
-    assert!(mpf.contains("LEADON(X,C,2)") && mpf.contains("LEADOF(X,C)"));
+    // The main program couples the number the table program returns, never a literal.
+    assert!(mpf.contains("\nCAM_T2(CL_TNO) ;") && mpf.contains("\nLEADON(X,C,CL_TNO)\n"));
+    assert!(mpf.contains("LEADOF(X,C)") && !mpf.contains("LEADON(X,C,2)"));
     let svg = std::fs::read_to_string(dir.path().join("setup.svg")).unwrap();
     assert!(
         svg.starts_with("<?xml") || svg.starts_with("<svg"),

@@ -131,6 +131,24 @@ fn program_name_rules() {
 }
 
 #[test]
+fn reserved_device_names_are_refused_whatever_the_case() {
+    let refused = ["con", "PRN", "Aux", "NUL", "COM1", "com9", "LPT1", "lpt9"];
+    for name in refused {
+        assert_eq!(
+            validate_program_name(name),
+            Err(ProgramNameError::ReservedDeviceName {
+                name: name.to_owned()
+            }),
+            "name {name:?}"
+        );
+    }
+    // Only the exact device names: COM0, COM10 and longer names are ordinary names.
+    for name in ["COM0", "COM10", "LPT", "CONE", "NUL_TABLE", "AUX2"] {
+        assert_eq!(validate_program_name(name), Ok(name.to_owned()), "{name}");
+    }
+}
+
+#[test]
 fn program_name_messages_say_which_rule_failed() {
     let msg = |n: &str| validate_program_name(n).unwrap_err().to_string();
     assert_eq!(
@@ -142,6 +160,10 @@ fn program_name_messages_say_which_rule_failed() {
         "program name `CAM.1` has `.` at position 4: only letters A-Z, digits and `_` are allowed"
     );
     assert_eq!(msg("A1"), "program name `A1` must start with two letters");
+    assert_eq!(
+        msg("lpt3"),
+        "program name `lpt3` is a reserved device name (CON, PRN, AUX, NUL, COM1-COM9, LPT1-LPT9)"
+    );
     assert_eq!(
         msg("ABCDEFGHIJKLMNOPQRSTUVWXYZ"),
         "program name `ABCDEFGHIJKLMNOPQRSTUVWXYZ` has 26 characters: at most 24 are allowed"
@@ -184,6 +206,22 @@ fn axis_name_rules() {
     );
     // A fixed address letter with an extension is an ordinary axis name.
     assert_eq!(validate_axis_name("leading", "S1"), Ok(s("S1")));
+    // At most 8 characters.
+    assert_eq!(validate_axis_name("leading", "CSPINDLE"), Ok(s("CSPINDLE")));
+    assert_eq!(
+        validate_axis_name("leading", "CSPINDLE1"),
+        Err(E::TooLong {
+            role: "leading",
+            name: s("CSPINDLE1"),
+            chars: 9
+        })
+    );
+    assert_eq!(
+        validate_axis_name("following", "WHEELHEAD")
+            .unwrap_err()
+            .to_string(),
+        "following axis name `WHEELHEAD` has 9 characters: at most 8 are allowed"
+    );
 }
 
 #[test]
@@ -195,6 +233,11 @@ fn defaults_are_valid_and_as_documented() {
         ("X", "C")
     );
     assert_eq!((s.table_number, s.x_decimals, s.c_decimals), (1, 4, 4));
+    assert_eq!(
+        (s.x_increments_per_mm, s.c_increments_per_deg),
+        (10_000, 10_000)
+    );
+    assert_eq!(s.provenance, None);
     assert_eq!(
         (s.c_direction, s.c_offset_deg, s.x_offset_mm),
         (CDirection::Same, 0.0, 0.0)
@@ -245,6 +288,68 @@ fn validation_reports_every_problem() {
 }
 
 #[test]
+fn decimals_finer_than_the_control_resolution_are_refused_with_the_rest() {
+    let s = ProgramSettings {
+        name: "CON".to_owned(),
+        following_axis: "WHEELHEAD".to_owned(),
+        x_decimals: 6,
+        c_decimals: 4,
+        c_increments_per_deg: 1000,
+        ..ProgramSettings::default()
+    };
+    let messages: Vec<String> = s
+        .validate()
+        .unwrap_err()
+        .0
+        .iter()
+        .map(|e| e.to_string())
+        .collect();
+    assert_eq!(
+        messages,
+        [
+            "program name `CON` is a reserved device name (CON, PRN, AUX, NUL, COM1-COM9, LPT1-LPT9)",
+            "following axis name `WHEELHEAD` has 9 characters: at most 8 are allowed",
+            "x_decimals is 6, finer than the control's resolution (x_increments_per_mm is 10000): the control would round the written values",
+            "c_decimals is 4, finer than the control's resolution (c_increments_per_deg is 1000): the control would round the written values",
+        ]
+    );
+    assert_eq!(
+        s.validate().unwrap_err().0[2],
+        SettingError::FinerThanResolution {
+            decimals_field: "x_decimals",
+            decimals: 6,
+            resolution_field: "x_increments_per_mm",
+            increments: 10_000
+        }
+    );
+    // Equal to the resolution, or coarser (also with a resolution that is not a power of
+    // ten), is fine.
+    let fine =
+        |x_decimals, x_increments_per_mm, c_decimals, c_increments_per_deg| ProgramSettings {
+            x_decimals,
+            x_increments_per_mm,
+            c_decimals,
+            c_increments_per_deg,
+            ..ProgramSettings::default()
+        };
+    assert_eq!(fine(6, 1_000_000, 3, 1000).validate(), Ok(()));
+    assert_eq!(fine(3, 2000, 0, 1).validate(), Ok(()));
+    assert!(fine(4, 2000, 0, 1).validate().is_err());
+    let zero = fine(4, 0, 4, 0).validate().unwrap_err();
+    assert_eq!(
+        zero.0,
+        [
+            SettingError::ResolutionZero {
+                field: "x_increments_per_mm"
+            },
+            SettingError::ResolutionZero {
+                field: "c_increments_per_deg"
+            }
+        ]
+    );
+}
+
+#[test]
 fn settings_parse_from_toml() {
     let s: ProgramSettings = toml::from_str(
         r#"
@@ -253,6 +358,9 @@ fn settings_parse_from_toml() {
         table_number = 7
         memory = "SRAM"
         x_decimals = 5
+        x_increments_per_mm = 100000
+        c_increments_per_deg = 1000
+        c_decimals = 3
         c_direction = -1
         c_offset_deg = 12.5
         x_offset_mm = -0.1
@@ -268,6 +376,9 @@ fn settings_parse_from_toml() {
             table_number: 7,
             memory: Some(TableMemory::Sram),
             x_decimals: 5,
+            x_increments_per_mm: 100_000,
+            c_increments_per_deg: 1000,
+            c_decimals: 3,
             c_direction: CDirection::Reversed,
             c_offset_deg: 12.5,
             x_offset_mm: -0.1,
@@ -289,6 +400,12 @@ fn settings_parse_from_toml() {
     let err = toml::from_str::<ProgramSettings>("c_offset = 1.0").unwrap_err();
     assert!(
         err.to_string().contains("unknown field `c_offset`"),
+        "{err}"
+    );
+    // Provenance is set per version by the caller, never read from configuration.
+    let err = toml::from_str::<ProgramSettings>("provenance = \"v1\"").unwrap_err();
+    assert!(
+        err.to_string().contains("unknown field `provenance`"),
         "{err}"
     );
     let err = toml::from_str::<ProgramSettings>("memory = \"FLASH\"").unwrap_err();
@@ -334,10 +451,23 @@ fn main_program_golden() {
     let program = render_main_program(&main, &table_settings()).unwrap();
     let lines: Vec<&str> = program.lines().collect();
     assert!(
-        lines[2].starts_with("DEF REAL"),
+        lines[2].starts_with("DEF REAL") && lines[3] == "DEF INT CL_TNO",
         "DEF must come first after the header"
     );
+    assert_eq!(lines[4], "EXTERN LOBE1_TABLE(VAR INT)");
     insta::assert_snapshot!(program);
+    // The table number is not in the program: the same text for every number (0 included,
+    // since it is never read), so it is delivered once.
+    for table_number in [0, 1, 7] {
+        let other = ProgramSettings {
+            table_number,
+            ..table_settings()
+        };
+        assert_eq!(render_main_program(&main, &other).unwrap(), program);
+    }
+    for literal in ["LEADON(X,C,2)", "CTAB(CL_C,2,", "table 2"] {
+        assert!(!program.contains(literal), "{literal} in\n{program}");
+    }
     // Multi-letter axes flow through every command.
     let multi = ProgramSettings {
         following_axis: "X1".to_owned(),
@@ -348,7 +478,9 @@ fn main_program_golden() {
     for expected in [
         "$AA_IW[C2]",
         "G90 G1 X1=CL_X",
-        "LEADON(X1,C2,2)",
+        "IF $AA_COUP_ACT[X1]<>0 ;",
+        "\nLEADOF(X1,C2)\nENDIF\n",
+        "LEADON(X1,C2,CL_TNO)",
         "POS[C2]=IC(",
         "FA[C2]=",
         "WAITP(C2)",
@@ -371,7 +503,7 @@ fn main_program_settings_are_checked() {
         comment_lines: vec![],
     };
     let bad_table = ProgramSettings {
-        table_number: 0,
+        x_decimals: 5,
         ..table_settings()
     };
     let messages: Vec<String> = render_main_program(&main, &bad_table)
@@ -383,7 +515,7 @@ fn main_program_settings_are_checked() {
     assert_eq!(
         messages,
         [
-            "table_number is 0: curve table numbers start at 1",
+            "x_decimals is 5, finer than the control's resolution (x_increments_per_mm is 10000): the control would round the written values",
             "revolutions is 0: it must be greater than 0",
             "c_speed_rpm is -1: it must be greater than 0",
             "x_feed_mm_min is NaN: it must be a finite number",

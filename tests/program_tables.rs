@@ -219,6 +219,7 @@ fn memory_decimals_and_long_axis_names_golden() {
         table_number: 12,
         memory: Some(TableMemory::Sram),
         x_decimals: 6,
+        x_increments_per_mm: 1_000_000,
         c_decimals: 2,
         ..ProgramSettings::default()
     };

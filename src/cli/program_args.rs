@@ -18,7 +18,8 @@ pub struct ProgramArgs {
     /// Subprogram name (default: the --program file name without extension, upper case).
     #[arg(long, global = true, value_name = "NAME")]
     pub program_name: Option<String>,
-    /// Write a main-program fragment that defines the table, couples X to C and grinds.
+    /// Write a main-program fragment that calls the table subprogram, couples X to C with the
+    /// table it defined and grinds.
     #[arg(long, global = true, value_name = "OUT.MPF", requires = "program")]
     pub main_program: Option<PathBuf>,
     /// Curve-table number.
@@ -39,6 +40,14 @@ pub struct ProgramArgs {
     /// Decimals written for C (0 to 9).
     #[arg(long, global = true, value_name = "N", default_value_t = 4)]
     pub c_decimals: u8,
+    /// The control's linear resolution, increments per mm (MD10200); --x-decimals may not be
+    /// finer.
+    #[arg(long, global = true, value_name = "N", default_value_t = 10_000)]
+    pub x_increments_per_mm: u32,
+    /// The control's angular resolution, increments per degree (MD10210); --c-decimals may
+    /// not be finer.
+    #[arg(long, global = true, value_name = "N", default_value_t = 10_000)]
+    pub c_increments_per_deg: u32,
     /// The machine's C turns against the part frame's angle sense.
     #[arg(long, global = true)]
     pub c_reversed: bool,
@@ -71,6 +80,8 @@ impl ProgramArgs {
             }),
             x_decimals: self.x_decimals,
             c_decimals: self.c_decimals,
+            x_increments_per_mm: self.x_increments_per_mm,
+            c_increments_per_deg: self.c_increments_per_deg,
             c_direction: if self.c_reversed {
                 CDirection::Reversed
             } else {
@@ -79,6 +90,7 @@ impl ProgramArgs {
             c_offset_deg: self.c_offset_deg,
             x_offset_mm: self.x_offset_mm,
             comment_lines,
+            provenance: None,
         }
     }
 

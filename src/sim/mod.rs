@@ -81,6 +81,7 @@
 
 pub mod cell;
 mod config;
+mod control;
 mod envelope;
 pub mod frames;
 mod gauge;
@@ -90,6 +91,7 @@ mod rng;
 mod table;
 
 pub use config::{GaugeConfig, GaugeFault, GrinderConfig, Harmonic};
+pub use control::{Control, ControlError, ControlFault, Coupled, table_shape};
 pub use envelope::SMOOTH_KINK_RAD;
 pub use frames::measurement_frames;
 pub use gauge::{ORIGIN, PartLabels};

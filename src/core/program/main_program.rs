@@ -1,12 +1,12 @@
-//! The main-program fragment that defines the table, puts X on the curve, couples X to C,
-//! turns C for the grinding revolutions and uncouples.
+//! The main-program fragment that defines the table, puts X on the curve, couples X to C
+//! with the table just defined, turns C for the grinding revolutions and uncouples.
 
 use serde::Deserialize;
 
 use super::ProgramSettings;
 use super::names::validate_program_name;
-use super::settings::{SettingError, SettingsErrors, check_comments, check_positive};
-use super::table::{fmt_fixed, line};
+use super::settings::{Resolved, SettingError, SettingsErrors, check_comments, check_positive};
+use super::table::{NUMBER_VAR, fmt_fixed, line};
 
 /// How the main-program fragment is written. `Default`: `CAMLOOP_GRIND`, 3 revolutions at
 /// 10 rpm, X onto the curve at 100 mm/min.
@@ -38,45 +38,70 @@ impl Default for MainProgramSettings {
     }
 }
 
-/// Render the main-program fragment that runs the table subprogram of `table`.
+/// Render the main-program fragment that calls the table subprogram of `table`, couples X
+/// to C with the table it just defined, turns C and uncouples.
 ///
 /// ```text
 /// %_N_<MAIN>_MPF
 /// ;$PATH=/_N_MPF_DIR
-/// DEF REAL CL_C, CL_X, CL_SLOPE       ; DEF must come first
+/// DEF REAL CL_C, CL_X, CL_SLOPE        ; definitions come first
+/// DEF INT CL_TNO
+/// EXTERN <TABLE>(VAR INT)
 /// ; comment lines
-/// <TABLE>                             ; call: defines curve table n
-/// STOPRE                              ; read the actual C after the table is defined
+/// IF $AA_COUP_ACT[X]<>0                ; a coupling left active by an aborted run
+/// LEADOF(X,C)
+/// ENDIF
+/// <TABLE>(CL_TNO)                      ; defines the newest table, returns its number
+/// STOPRE
 /// CL_C=$AA_IW[C]
-/// CL_X=CTAB(CL_C,n,CL_SLOPE)          ; X on the curve at the current C
+/// CL_X=CTAB(CL_C,CL_TNO,CL_SLOPE)
 /// G90 G1 X=CL_X F=<feed>
-/// LEADON(X,C,n)
+/// LEADON(X,C,CL_TNO)
 /// POS[C]=IC(<360·revs>) FA[C]=<360·rpm>
 /// WAITP(C)
 /// LEADOF(X,C)
 /// M30
 /// ```
 ///
+/// **The table number is not in this program.** The table subprogram alternates its number
+/// between versions and returns it in `CL_TNO` (call by reference), and `CTAB` and `LEADON`
+/// use that variable: the control always couples the table just defined, never the previous
+/// one still in its memory. `table.table_number` is neither read nor checked, so the text
+/// depends only on the names, axes and C decimals: deliver it once and rewrite it only when
+/// those settings change.
+///
+/// A coupling left active by an aborted run would make the control refuse to redefine its
+/// table; `$AA_COUP_ACT[X]` reports an active coupling (16 for a master-value coupling) [K],
+/// so the program releases it first.
+///
 /// The X offset of the table settings is already inside the table, so the X target is
 /// `CTAB(C)` itself; an output offset in SD43106 (or an infeed via `$AA_OFF`) would have to be
-/// added to it, otherwise LEADON makes a synchronising move. Points marked [?] are inferred,
-/// not confirmed on a control:
-/// - `$AA_IW[C]` (actual value, workpiece coordinates) is read after `STOPRE`; that this is
-///   the coordinate the coupling uses for the leading value [?];
-/// - `CTAB` reduces a leading value outside the table's range into the period of a periodic
-///   table [?];
+/// added to it, otherwise LEADON makes a synchronising move [M-old].
+///
+/// `$AA_IW[C]` is the **setpoint** of C in workpiece coordinates (without DRF, `$AA_OFF` and
+/// external offsets), not a measured actual value [K]; it is read after `STOPRE` so that it
+/// is current. camloop applies the part's C offset inside the table (`c_offset_deg`), so a C
+/// work offset active on the machine shifts `$AA_IW[C]`, and with it the part, by that
+/// amount: leave it at 0 or account for it in `c_offset_deg`. Still open, inferred rather
+/// than confirmed on a control:
+/// - whether LEADON takes the leading value in machine or in workpiece coordinates, i.e.
+///   whether `CTAB` at `$AA_IW[C]` is exactly where the coupling will put X [?];
 /// - `FA[C]` is in deg/min for a rotary positioning axis and `POS[C]=IC(…)` turns a modulo
 ///   axis by more than 360° [?];
 /// - the X move onto the curve is a plain G1 at the part: approach and infeed are the
 ///   machine builder's cycle, this fragment only shows the coupling sequence.
 ///
+/// `CTAB` reduces a leading value outside a periodic table's range into the period [M-old].
 /// Variable names contain `_`, which axis names cannot, so they never clash with an axis.
 pub fn render_main_program(
     main: &MainProgramSettings,
     table: &ProgramSettings,
 ) -> Result<String, SettingsErrors> {
     let mut errors = Vec::new();
-    let resolved = table.resolve().map_err(|e| errors.extend(e.0)).ok();
+    let resolved = table
+        .resolve_for_main()
+        .map_err(|e| errors.extend(e.0))
+        .ok();
     let main_name = validate_program_name(&main.name)
         .map_err(|e| errors.push(e.into()))
         .ok();
@@ -92,25 +117,36 @@ pub fn render_main_program(
     let (Some(main_name), Some(r), true) = (main_name, resolved, errors.is_empty()) else {
         return Err(SettingsErrors(errors));
     };
+    Ok(main_text(main, &main_name, &r))
+}
 
-    let (x, c, n) = (&r.following, &r.leading, table.table_number);
-    let cd = usize::from(table.c_decimals);
+fn main_text(main: &MainProgramSettings, main_name: &str, r: &Resolved<'_>) -> String {
+    let (x, c, t, n) = (&r.following, &r.leading, &r.name, NUMBER_VAR);
+    let cd = usize::from(r.settings.c_decimals);
     let mut out = String::new();
     line(&mut out, format_args!("%_N_{main_name}_MPF"));
     out.push_str(";$PATH=/_N_MPF_DIR\n");
     out.push_str("DEF REAL CL_C, CL_X, CL_SLOPE\n");
+    line(&mut out, format_args!("DEF INT {n}"));
+    line(&mut out, format_args!("EXTERN {t}(VAR INT)"));
     for comment in &main.comment_lines {
         line(&mut out, format_args!("; {comment}"));
     }
     line(
         &mut out,
-        format_args!("{} ; defines curve table {n}", r.name),
+        format_args!("IF $AA_COUP_ACT[{x}]<>0 ; a coupling left active by an aborted run"),
     );
+    line(&mut out, format_args!("LEADOF({x},{c})"));
+    out.push_str("ENDIF\n");
     line(
         &mut out,
-        format_args!("STOPRE ; read the actual {c} position below"),
+        format_args!("{t}({n}) ; defines the newest curve table, returns its number"),
     );
-    line(&mut out, format_args!("CL_C=$AA_IW[{c}]"));
+    out.push_str("STOPRE ; read C below only after the table is defined\n");
+    line(
+        &mut out,
+        format_args!("CL_C=$AA_IW[{c}] ; setpoint of {c} in workpiece coordinates"),
+    );
     line(
         &mut out,
         format_args!("CL_X=CTAB(CL_C,{n},CL_SLOPE) ; {x} on the curve at the current {c}"),
@@ -133,5 +169,5 @@ pub fn render_main_program(
     line(&mut out, format_args!("WAITP({c})"));
     line(&mut out, format_args!("LEADOF({x},{c})"));
     out.push_str("M30\n");
-    Ok(out)
+    out
 }

@@ -1,6 +1,10 @@
 //! SINUMERIK 840D sl program text: curve-table subprograms (G1 and POLY form), the
 //! main-program fragment that couples X to C, program/axis name rules and table numbering.
 //!
+//! A table subprogram returns the number it defines through its `VAR INT` parameter, and the
+//! main program couples that variable: the numbers alternate between versions (so the table
+//! in use is never redefined) while the main program stays the same text.
+//!
 //! Everything here is pure: values in, `String` or a typed error out. Syntax follows the
 //! project's SINUMERIK notes; what is inferred rather than confirmed is marked [?] in the
 //! doc comments, never in the generated program.
@@ -12,17 +16,21 @@
 mod main_program;
 mod names;
 mod parse;
+mod provenance;
 mod settings;
 mod table;
 
 pub use main_program::{MainProgramSettings, render_main_program};
 pub use names::{
-    AxisNameError, MAX_PROGRAM_NAME_CHARS, ProgramNameError, RESERVED_PREFIXES, validate_axis_name,
-    validate_program_name,
+    AxisNameError, MAX_AXIS_NAME_CHARS, MAX_PROGRAM_NAME_CHARS, ProgramNameError,
+    RESERVED_DEVICE_NAMES, RESERVED_PREFIXES, validate_axis_name, validate_program_name,
 };
 pub use parse::{ParseError, ParsedShape, ParsedTable, parse_table_program};
+pub(crate) use parse::{TableBlocks, parse_ctabdef};
+pub use provenance::{RetargetError, retarget_table_program};
 pub use settings::{
-    C_DECIMALS, CDirection, ProgramSettings, SettingError, SettingsErrors, TableMemory, X_DECIMALS,
+    C_DECIMALS, CDirection, ProgramSettings, Provenance, SettingError, SettingsErrors, TableMemory,
+    X_DECIMALS,
 };
 pub use table::{TableError, render_g1_table, render_poly_table, reverse_cubic};
 

@@ -8,6 +8,13 @@ pub const MAX_PROGRAM_NAME_CHARS: usize = 24;
 /// Prefixes Siemens reserves for its own programs, upper case, in the order they are checked.
 pub const RESERVED_PREFIXES: [&str; 7] = ["CYCLE", "CUST_", "GROUP_", "_", "S_", "E_", "F_"];
 
+/// Longest axis name the control accepts, characters.
+pub const MAX_AXIS_NAME_CHARS: usize = 8;
+
+/// Device names Windows reserves; the control refuses them as program names, whatever the
+/// case. `COM1`–`COM9` and `LPT1`–`LPT9` are checked by [`is_reserved_device_name`].
+pub const RESERVED_DEVICE_NAMES: [&str; 4] = ["CON", "PRN", "AUX", "NUL"];
+
 /// Single-letter addresses with a fixed meaning in a block (feed, G code, spindle, tool, …).
 /// An axis with one of these names would be read as that address, so they are refused.
 /// This is our inference from the block syntax, not a rule quoted from a manual.
@@ -41,6 +48,10 @@ pub enum ProgramNameError {
     ReservedPrefix { name: String, prefix: &'static str },
     #[error("program name `{name}` must start with two letters")]
     FirstTwoNotLetters { name: String },
+    #[error(
+        "program name `{name}` is a reserved device name (CON, PRN, AUX, NUL, COM1-COM9, LPT1-LPT9)"
+    )]
+    ReservedDeviceName { name: String },
 }
 
 /// Check a program name against the control's rules and return it in upper case.
@@ -51,7 +62,9 @@ pub enum ProgramNameError {
 /// 3. at most 24 characters;
 /// 4. no prefix reserved by Siemens (`CYCLE`, `CUST_`, `GROUP_`, `_`, `S_`, `E_`, `F_`),
 ///    compared case-insensitively;
-/// 5. the first two characters are letters.
+/// 5. the first two characters are letters;
+/// 6. not a reserved device name (`CON`, `PRN`, `AUX`, `NUL`, `COM1`–`COM9`, `LPT1`–`LPT9`),
+///    compared case-insensitively [M].
 ///
 /// The manual allows a name to start with `_` + letter but also reserves the prefix `_`.
 /// We resolve the conflict by refusing a leading `_` ([`ProgramNameError::LeadingUnderscore`]):
@@ -106,7 +119,25 @@ pub fn validate_program_name(name: &str) -> Result<String, ProgramNameError> {
             name: name.to_owned(),
         });
     }
+    if is_reserved_device_name(&upper) {
+        return Err(ProgramNameError::ReservedDeviceName {
+            name: name.to_owned(),
+        });
+    }
     Ok(upper)
+}
+
+/// `CON`, `PRN`, `AUX`, `NUL`, `COM1`–`COM9` or `LPT1`–`LPT9`; `upper` in upper case.
+fn is_reserved_device_name(upper: &str) -> bool {
+    if RESERVED_DEVICE_NAMES.contains(&upper) {
+        return true;
+    }
+    match (upper.get(..3), upper.get(3..)) {
+        (Some("COM" | "LPT"), Some(digit)) => {
+            digit.len() == 1 && digit.bytes().all(|b| (b'1'..=b'9').contains(&b))
+        }
+        _ => false,
+    }
 }
 
 /// Why an axis name is refused. `role` is "following" or "leading".
@@ -130,10 +161,19 @@ pub enum AxisNameError {
         "{role} axis name `{name}` is a fixed address letter (feed, G code, spindle, …) and cannot name an axis"
     )]
     FixedAddress { role: &'static str, name: String },
+    #[error(
+        "{role} axis name `{name}` has {chars} characters: at most {MAX_AXIS_NAME_CHARS} are allowed"
+    )]
+    TooLong {
+        role: &'static str,
+        name: String,
+        chars: usize,
+    },
 }
 
 /// Check an axis name (ASCII letters and digits, starting with a letter, not one of the
-/// fixed single-letter addresses D F G H I J K L M N O P R S T) and return it in upper case.
+/// fixed single-letter addresses D F G H I J K L M N O P R S T, at most
+/// [`MAX_AXIS_NAME_CHARS`] characters [M]) and return it in upper case.
 pub fn validate_axis_name(role: &'static str, name: &str) -> Result<String, AxisNameError> {
     let Some(first) = name.chars().next() else {
         return Err(AxisNameError::Empty { role });
@@ -154,6 +194,14 @@ pub fn validate_axis_name(role: &'static str, name: &str) -> Result<String, Axis
             name: name.to_owned(),
             ch,
             position: i + 1,
+        });
+    }
+    // Only ASCII remains, so bytes == characters from here on.
+    if name.len() > MAX_AXIS_NAME_CHARS {
+        return Err(AxisNameError::TooLong {
+            role,
+            name: name.to_owned(),
+            chars: name.len(),
         });
     }
     let upper = name.to_ascii_uppercase();

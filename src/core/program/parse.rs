@@ -69,15 +69,12 @@ impl ParsedTable {
 }
 
 /// Parses a curve-table subprogram written by `render_g1_table` or `render_poly_table`.
+/// Lines outside `CTABDEF … CTABEND` other than `PROC` are not read.
 pub fn parse_table_program(text: &str) -> Result<ParsedTable, ParseError> {
     let err = |line: usize, reason: String| ParseError { line, reason };
     let mut name = None;
-    let mut def: Option<(String, String, u32)> = None;
-    let mut in_table = false;
-    let mut poly = false;
-    let mut points: Vec<(f64, f64)> = Vec::new();
-    let mut segments: Vec<PolySegment> = Vec::new();
-    let mut ended = false;
+    let mut table: Option<(u32, TableBlocks)> = None;
+    let mut done: Option<(u32, String, String, ParsedShape)> = None;
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;
         let code = raw.split(';').next().unwrap_or("").trim();
@@ -85,77 +82,31 @@ pub fn parse_table_program(text: &str) -> Result<ParsedTable, ParseError> {
             continue;
         }
         if let Some(rest) = code.strip_prefix("PROC ") {
-            name = Some(rest.trim().to_string());
-        } else if let Some(args) = code
-            .strip_prefix("CTABDEF(")
-            .and_then(|r| r.strip_suffix(')'))
-        {
-            let parts: Vec<&str> = args.split(',').map(str::trim).collect();
-            if parts.len() < 4 {
-                return Err(err(
-                    line,
-                    format!("CTABDEF needs at least 4 arguments, found {}", parts.len()),
-                ));
-            }
-            let n = parts[2].parse().map_err(|_| {
-                err(
-                    line,
-                    format!("table number `{}` is not a whole number", parts[2]),
-                )
-            })?;
-            def = Some((parts[0].to_string(), parts[1].to_string(), n));
-            in_table = true;
+            // `PROC NAME(VAR INT CL_TNO) SAVE`, or `PROC NAME` in programs written before
+            // the table number was returned to the caller.
+            let end = rest.find(['(', ' ']).unwrap_or(rest.len());
+            name = Some(rest[..end].trim().to_string());
+        } else if code.starts_with("CTABDEF(") {
+            let def = parse_ctabdef(code, line)?;
+            table = Some((def.number, TableBlocks::new(def.following, def.leading)));
         } else if code == "CTABEND" {
-            in_table = false;
-            ended = true;
-        } else if in_table && code == "POLY" {
-            poly = true;
-        } else if in_table {
-            let (following, leading, _) = def.as_ref().expect("in_table is set only after CTABDEF");
-            if poly {
-                let c_end = tuple(code, &format!("PO[{leading}]"), line)?;
-                let x = tuple(code, &format!("PO[{following}]"), line)?;
-                let (&[c1], &[x_end, a2, a3]) = (c_end.as_slice(), x.as_slice()) else {
-                    return Err(err(
-                        line,
-                        "expected PO[C]=(c_end) PO[X]=(x_end,a2,a3)".to_string(),
-                    ));
-                };
-                let (c0, x0) = match (segments.last(), points.last()) {
-                    (Some(s), _) => (s.c_end_deg, s.x_end_mm()),
-                    (None, Some(&p)) => p,
-                    (None, None) => {
-                        return Err(err(line, "POLY block before the start point".to_string()));
-                    }
-                };
-                segments.push(PolySegment {
-                    c_start_deg: c0,
-                    c_end_deg: c1,
-                    x0_mm: x0,
-                    a1_mm: x_end - x0 - a2 - a3,
-                    a2_mm: a2,
-                    a3_mm: a3,
-                });
-            } else {
-                let c = word(code, leading, line)?;
-                let x = word(code, following, line)?;
-                points.push((c, x));
-            }
+            let Some((number, blocks)) = table.take() else {
+                return Err(err(line, "CTABEND without CTABDEF".to_string()));
+            };
+            let (following, leading, shape) = blocks.finish();
+            done = Some((number, following, leading, shape));
+        } else if let Some((_, blocks)) = table.as_mut() {
+            blocks.block(code, line)?;
         }
     }
-    let Some((following_axis, leading_axis, table_number)) = def else {
-        return Err(err(1, "no CTABDEF in the program".to_string()));
-    };
-    if !ended {
-        return Err(err(
-            text.lines().count(),
-            "CTABEND missing: the program is incomplete".to_string(),
-        ));
-    }
-    let shape = if poly {
-        ParsedShape::Poly(segments)
-    } else {
-        ParsedShape::G1(points)
+    let Some((table_number, following_axis, leading_axis, shape)) = done else {
+        return Err(match table {
+            Some(_) => err(
+                text.lines().count(),
+                "CTABEND missing: the program is incomplete".to_string(),
+            ),
+            None => err(1, "no CTABDEF in the program".to_string()),
+        });
     };
     Ok(ParsedTable {
         name: name.unwrap_or_default(),
@@ -164,6 +115,112 @@ pub fn parse_table_program(text: &str) -> Result<ParsedTable, ParseError> {
         leading_axis,
         shape,
     })
+}
+
+/// The arguments of `CTABDEF(<following>,<leading>,<n>,<periodicity>[,<memory>])`.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct CtabDef {
+    pub following: String,
+    pub leading: String,
+    pub number: u32,
+    pub periodicity: String,
+}
+
+/// Reads a `CTABDEF(…)` statement (`code` without comment).
+pub(crate) fn parse_ctabdef(code: &str, line: usize) -> Result<CtabDef, ParseError> {
+    let err = |reason: String| ParseError { line, reason };
+    let args = code
+        .strip_prefix("CTABDEF(")
+        .and_then(|r| r.strip_suffix(')'))
+        .ok_or_else(|| err(format!("`{code}` is not CTABDEF(…)")))?;
+    let parts: Vec<&str> = args.split(',').map(str::trim).collect();
+    if parts.len() < 4 {
+        return Err(err(format!(
+            "CTABDEF needs at least 4 arguments, found {}",
+            parts.len()
+        )));
+    }
+    let number = parts[2]
+        .parse()
+        .map_err(|_| err(format!("table number `{}` is not a whole number", parts[2])))?;
+    Ok(CtabDef {
+        following: parts[0].to_string(),
+        leading: parts[1].to_string(),
+        number,
+        periodicity: parts[3].to_string(),
+    })
+}
+
+/// The blocks between `CTABDEF` and `CTABEND`, read one at a time: `G1 C=… X=…` points, or
+/// a start point, `POLY` and `PO[C]=(…) PO[X]=(…)` segments. Shared by the reader and the
+/// simulated control, so both see the same table.
+#[derive(Debug, Clone)]
+pub(crate) struct TableBlocks {
+    following: String,
+    leading: String,
+    poly: bool,
+    points: Vec<(f64, f64)>,
+    segments: Vec<PolySegment>,
+}
+
+impl TableBlocks {
+    pub(crate) fn new(following: String, leading: String) -> Self {
+        Self {
+            following,
+            leading,
+            poly: false,
+            points: Vec::new(),
+            segments: Vec::new(),
+        }
+    }
+
+    /// One block (`code` without comment, not empty) on `line`.
+    pub(crate) fn block(&mut self, code: &str, line: usize) -> Result<(), ParseError> {
+        let err = |reason: &str| ParseError {
+            line,
+            reason: reason.to_string(),
+        };
+        if code == "POLY" {
+            self.poly = true;
+            return Ok(());
+        }
+        let (following, leading) = (&self.following, &self.leading);
+        if !self.poly {
+            let c = word(code, leading, line)?;
+            let x = word(code, following, line)?;
+            self.points.push((c, x));
+            return Ok(());
+        }
+        let c_end = tuple(code, &format!("PO[{leading}]"), line)?;
+        let x = tuple(code, &format!("PO[{following}]"), line)?;
+        let (&[c1], &[x_end, a2, a3]) = (c_end.as_slice(), x.as_slice()) else {
+            return Err(err("expected PO[C]=(c_end) PO[X]=(x_end,a2,a3)"));
+        };
+        let (c0, x0) = match (self.segments.last(), self.points.last()) {
+            (Some(s), _) => (s.c_end_deg, s.x_end_mm()),
+            (None, Some(&p)) => p,
+            (None, None) => return Err(err("POLY block before the start point")),
+        };
+        self.segments.push(PolySegment {
+            c_start_deg: c0,
+            c_end_deg: c1,
+            x0_mm: x0,
+            a1_mm: x_end - x0 - a2 - a3,
+            a2_mm: a2,
+            a3_mm: a3,
+        });
+        Ok(())
+    }
+
+    /// Following axis, leading axis and the shape read.
+    pub(crate) fn finish(self) -> (String, String, ParsedShape) {
+        let shape = if self.poly {
+            ParsedShape::Poly(self.segments)
+        } else {
+            ParsedShape::G1(self.points)
+        };
+        (self.following, self.leading, shape)
+    }
 }
 
 /// The value of `AXIS=value` in a block.
@@ -227,6 +284,14 @@ mod tests {
         let text = render_g1_table(&points(), &ProgramSettings::default()).unwrap();
         let parsed = parse_table_program(&text).unwrap();
         assert_eq!(parsed.table_number, 1);
+        // `PROC CAMLOOP_TABLE(VAR INT CL_TNO) SAVE`: the name alone.
+        assert_eq!(parsed.name, "CAMLOOP_TABLE");
+        assert_eq!(
+            parse_table_program(&text.replace("(VAR INT CL_TNO) SAVE", ""))
+                .unwrap()
+                .name,
+            "CAMLOOP_TABLE"
+        );
         let ParsedShape::G1(read) = parsed.shape else {
             panic!("G1 expected")
         };

@@ -69,9 +69,32 @@ impl TryFrom<i64> for CDirection {
     }
 }
 
+/// Where a table program came from, written as `; key: value` comment lines right after its
+/// `PROC` line so that a program found on the control can be traced to its version, its
+/// recipe and the correction it carries. Values are made printable with
+/// [`super::comment_text`] when written.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Provenance {
+    /// camloop's version (`CARGO_PKG_VERSION`).
+    pub camloop_version: String,
+    /// Table version number on the share (`v<N>` in the program).
+    pub table_version: u64,
+    /// The version this one was learned from or rolled back to; `None` for the first.
+    pub parent_version: Option<u64>,
+    /// Creation time, RFC 3339 UTC, passed in: the core reads no clock.
+    pub created_utc: String,
+    /// Recipe name.
+    pub recipe: String,
+    /// Lobe or pin of the recipe.
+    pub feature: String,
+    /// SHA-256 (hex) of the correction the table carries.
+    pub correction_sha256: String,
+}
+
 /// How a curve-table subprogram is written. `Default` gives a valid program: `CAMLOOP_TABLE`,
 /// X following C, table 1, control's default memory, 4 decimals for X (0.1 µm) and C
-/// (0.0001°), no axis offsets, no comment lines.
+/// (0.0001°), a control resolution of 10000 increments per mm and per degree, no axis
+/// offsets, no comment lines, no provenance.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ProgramSettings {
@@ -89,6 +112,13 @@ pub struct ProgramSettings {
     pub x_decimals: u8,
     /// Decimals written for C (degrees), in [`C_DECIMALS`].
     pub c_decimals: u8,
+    /// The control's computational resolution of linear axes, increments per mm (MD10200
+    /// `INT_INCR_PER_MM`), ≥ 1. The control rounds positions to it [K]; `x_decimals` may not
+    /// be finer.
+    pub x_increments_per_mm: u32,
+    /// The control's computational resolution of rotary axes, increments per degree (MD10210
+    /// `INT_INCR_PER_DEG`), ≥ 1. The "C changes in every block" check is made at it.
+    pub c_increments_per_deg: u32,
     /// Sense of C relative to the part frame.
     pub c_direction: CDirection,
     /// Added to the (signed) part-frame angle, degrees: `C = wrap360(c_offset_deg ± c)`.
@@ -98,6 +128,10 @@ pub struct ProgramSettings {
     /// Comment lines written after `PROC` (part, source, version, checksum, …), without `;`.
     /// Printable ASCII only.
     pub comment_lines: Vec<String>,
+    /// Provenance block written after `PROC`; set by the caller for each version, never read
+    /// from configuration.
+    #[serde(skip)]
+    pub provenance: Option<Provenance>,
 }
 
 impl Default for ProgramSettings {
@@ -110,10 +144,13 @@ impl Default for ProgramSettings {
             memory: None,
             x_decimals: 4,
             c_decimals: 4,
+            x_increments_per_mm: 10_000,
+            c_increments_per_deg: 10_000,
             c_direction: CDirection::Same,
             c_offset_deg: 0.0,
             x_offset_mm: 0.0,
             comment_lines: Vec::new(),
+            provenance: None,
         }
     }
 }
@@ -150,6 +187,17 @@ pub enum SettingError {
     },
     #[error("main program name `{name}` is the same as the table subprogram's")]
     MainSameAsTable { name: String },
+    #[error("{field} is 0: the control's resolution is at least 1 increment per unit")]
+    ResolutionZero { field: &'static str },
+    #[error(
+        "{decimals_field} is {decimals}, finer than the control's resolution ({resolution_field} is {increments}): the control would round the written values"
+    )]
+    FinerThanResolution {
+        decimals_field: &'static str,
+        decimals: u8,
+        resolution_field: &'static str,
+        increments: u32,
+    },
 }
 
 /// Every problem found in one validation, in field order. Displayed joined by "; ".
@@ -196,7 +244,24 @@ impl ProgramSettings {
         x_mm + self.x_offset_mm
     }
 
+    /// `c_prog` (degrees, as written) in the control's increments, rounded as the control
+    /// rounds it.
+    pub(crate) fn c_increments(&self, c_prog: f64) -> i64 {
+        // A position of 1e9 degrees is far outside any table: saturating is harmless.
+        (c_prog * f64::from(self.c_increments_per_deg)).round() as i64
+    }
+
+    /// Every setting checked, the table number included.
     pub(crate) fn resolve(&self) -> Result<Resolved<'_>, SettingsErrors> {
+        self.resolve_with(true)
+    }
+
+    /// Every setting checked except the table number, which the main program never writes.
+    pub(crate) fn resolve_for_main(&self) -> Result<Resolved<'_>, SettingsErrors> {
+        self.resolve_with(false)
+    }
+
+    fn resolve_with(&self, table_number: bool) -> Result<Resolved<'_>, SettingsErrors> {
         let mut errors = Vec::new();
         let name = validate_program_name(&self.name)
             .map_err(|e| errors.push(e.into()))
@@ -212,11 +277,21 @@ impl ProgramSettings {
         {
             errors.push(SettingError::SameAxis { name: f.clone() });
         }
-        if self.table_number == 0 {
+        if table_number && self.table_number == 0 {
             errors.push(SettingError::TableNumberZero);
         }
         check_decimals(&mut errors, "x_decimals", self.x_decimals, X_DECIMALS);
         check_decimals(&mut errors, "c_decimals", self.c_decimals, C_DECIMALS);
+        check_resolution(
+            &mut errors,
+            ("x_decimals", self.x_decimals, X_DECIMALS),
+            ("x_increments_per_mm", self.x_increments_per_mm),
+        );
+        check_resolution(
+            &mut errors,
+            ("c_decimals", self.c_decimals, C_DECIMALS),
+            ("c_increments_per_deg", self.c_increments_per_deg),
+        );
         check_finite(&mut errors, "c_offset_deg", self.c_offset_deg);
         check_finite(&mut errors, "x_offset_mm", self.x_offset_mm);
         check_comments(&mut errors, &self.comment_lines);
@@ -251,6 +326,28 @@ fn check_decimals(
             value,
             min: *range.start(),
             max: *range.end(),
+        });
+    }
+}
+
+/// A written step of 10^−decimals must not be finer than one increment: 10^decimals ≤
+/// increments per unit. Decimals outside their range are reported by [`check_decimals`]
+/// alone.
+fn check_resolution(
+    errors: &mut Vec<SettingError>,
+    (decimals_field, decimals, range): (&'static str, u8, std::ops::RangeInclusive<u8>),
+    (resolution_field, increments): (&'static str, u32),
+) {
+    if increments == 0 {
+        errors.push(SettingError::ResolutionZero {
+            field: resolution_field,
+        });
+    } else if range.contains(&decimals) && 10f64.powi(i32::from(decimals)) > f64::from(increments) {
+        errors.push(SettingError::FinerThanResolution {
+            decimals_field,
+            decimals,
+            resolution_field,
+            increments,
         });
     }
 }

@@ -4,7 +4,8 @@ use std::fmt::Write as _;
 
 use thiserror::Error;
 
-use super::settings::{Resolved, SettingsErrors};
+use super::provenance::{TABLE_COMMENT, provenance_lines};
+use super::settings::{ProgramSettings, Resolved, SettingsErrors};
 use crate::core::table::{PolySegment, TablePoint};
 
 /// Why a table cannot be rendered. Indices are positions in the caller's slice; angles named
@@ -30,7 +31,7 @@ pub enum TableError {
         c_end_deg: f64,
     },
     #[error(
-        "{first} (c = {c_first_deg} deg) and {second} (c = {c_second_deg} deg) give C={c_first_prog} and C={c_second_prog} after rounding: the leading value must increase in every block (alarm 10949)"
+        "{first} (c = {c_first_deg} deg) and {second} (c = {c_second_deg} deg) give C={c_first_prog} and C={c_second_prog} after rounding to the control's resolution: the leading value must increase in every block (alarm 10949)"
     )]
     CNotIncreasing {
         /// "point 3", "segment 3 end", "period end" (first value + 360).
@@ -74,7 +75,7 @@ pub enum TableError {
 /// consecutive C values (including the period end) equal after rounding.
 pub fn render_g1_table(
     points: &[TablePoint],
-    settings: &super::ProgramSettings,
+    settings: &ProgramSettings,
 ) -> Result<String, TableError> {
     let r = settings.resolve()?;
     if points.len() < 2 {
@@ -109,7 +110,7 @@ pub fn render_g1_table(
             c_text: fmt_fixed(c, cd),
         })
         .collect();
-    let close_text = check_increasing(&knots, points[mapped[0].0].c_deg, cd)?;
+    let close_text = check_increasing(&knots, points[mapped[0].0].c_deg, settings)?;
 
     let mut out = header(
         &r,
@@ -133,7 +134,7 @@ pub fn render_g1_table(
         &mut out,
         format_args!("{}={close_text} {}={first_x}", r.leading, r.following),
     );
-    out.push_str("CTABEND\nRET\n");
+    out.push_str(TABLE_END);
     Ok(out)
 }
 
@@ -144,7 +145,8 @@ pub fn render_g1_table(
 /// After mapping to program axes (reversed C reverses the segment order and re-parameterises
 /// each cubic with u' = 1 − u) the program has a start block `G1 C=<c0> X=<x0>`, `POLY`, one
 /// block per segment `PO[C]=(<c_end>) PO[X]=(<x_end>,<a2>,<a3>)` ending at C0 + 360° with the
-/// first X, `CTABEND`, and `G1` to leave linear interpolation modal again. The control derives
+/// first X, and `CTABEND`, which restores the modal state from before `CTABDEF` (so `POLY`
+/// does not leak to the caller) [M-old]. The control derives
 /// a1 from the end point, so the written cubic passes exactly through the rounded knots.
 ///
 /// a2 and a3 are written with X decimals + 2: with both end points fixed, rounding a2 and a3
@@ -158,12 +160,79 @@ pub fn render_g1_table(
 /// within half a unit of the last decimal), and C values equal after rounding.
 pub fn render_poly_table(
     segments: &[PolySegment],
-    settings: &super::ProgramSettings,
+    settings: &ProgramSettings,
 ) -> Result<String, TableError> {
     let r = settings.resolve()?;
     if segments.is_empty() {
         return Err(TableError::NoSegments);
     }
+    let reversed = settings.c_direction == super::CDirection::Reversed;
+    let mut mapped = map_segments(segments, settings)?;
+    mapped.sort_by(|a, b| a.c_start.total_cmp(&b.c_start));
+    check_joins(&mapped, settings.c_decimals, settings.x_decimals)?;
+
+    let cd = usize::from(settings.c_decimals);
+    let xd = usize::from(settings.x_decimals);
+    let kd = xd + 2;
+    // Knot i is the end of segment i; the start of segment 0 comes first.
+    let part_c_of_start = |m: &Mapped| {
+        let s = &segments[m.index];
+        if reversed { s.c_end_deg } else { s.c_start_deg }
+    };
+    let part_c_of_end = |m: &Mapped| {
+        let s = &segments[m.index];
+        if reversed { s.c_start_deg } else { s.c_end_deg }
+    };
+    let mut knots = vec![Knot {
+        label: format!("segment {} start", mapped[0].index),
+        c_deg: part_c_of_start(&mapped[0]),
+        c_text: fmt_fixed(mapped[0].c_start, cd),
+    }];
+    for w in mapped.windows(2) {
+        knots.push(Knot {
+            label: format!("segment {} end", w[0].index),
+            c_deg: part_c_of_end(&w[0]),
+            c_text: fmt_fixed(w[1].c_start, cd),
+        });
+    }
+    let close_text = check_increasing(&knots, knots[0].c_deg, settings)?;
+
+    let mut out = header(&r, &format!("{} cubic (POLY) segments", segments.len()));
+    let first_x = fmt_fixed(mapped[0].x0, xd);
+    line(
+        &mut out,
+        format_args!(
+            "G1 {}={} {}={first_x}",
+            r.leading, knots[0].c_text, r.following
+        ),
+    );
+    out.push_str("POLY\n");
+    for (i, m) in mapped.iter().enumerate() {
+        let (c_end, x_end) = match (knots.get(i + 1), mapped.get(i + 1)) {
+            (Some(k), Some(next)) => (k.c_text.clone(), fmt_fixed(next.x0, xd)),
+            _ => (close_text.clone(), first_x.clone()),
+        };
+        line(
+            &mut out,
+            format_args!(
+                "PO[{}]=({c_end}) PO[{}]=({x_end},{},{})",
+                r.leading,
+                r.following,
+                fmt_fixed(m.a[1], kd),
+                fmt_fixed(m.a[2], kd)
+            ),
+        );
+    }
+    out.push_str(TABLE_END);
+    Ok(out)
+}
+
+/// Each segment checked (finite, end beyond start) and mapped to program axes, u running
+/// with increasing C, in the caller's order.
+fn map_segments(
+    segments: &[PolySegment],
+    settings: &ProgramSettings,
+) -> Result<Vec<Mapped>, TableError> {
     let reversed = settings.c_direction == super::CDirection::Reversed;
     let mut mapped = Vec::with_capacity(segments.len());
     for (index, s) in segments.iter().enumerate() {
@@ -201,63 +270,7 @@ pub fn render_poly_table(
             a: [cubic[1], cubic[2], cubic[3]],
         });
     }
-    mapped.sort_by(|a, b| a.c_start.total_cmp(&b.c_start));
-    check_joins(&mapped, settings.c_decimals, settings.x_decimals)?;
-
-    let cd = usize::from(settings.c_decimals);
-    let xd = usize::from(settings.x_decimals);
-    let kd = xd + 2;
-    // Knot i is the end of segment i; the start of segment 0 comes first.
-    let part_c_of_start = |m: &Mapped| {
-        let s = &segments[m.index];
-        if reversed { s.c_end_deg } else { s.c_start_deg }
-    };
-    let part_c_of_end = |m: &Mapped| {
-        let s = &segments[m.index];
-        if reversed { s.c_start_deg } else { s.c_end_deg }
-    };
-    let mut knots = vec![Knot {
-        label: format!("segment {} start", mapped[0].index),
-        c_deg: part_c_of_start(&mapped[0]),
-        c_text: fmt_fixed(mapped[0].c_start, cd),
-    }];
-    for w in mapped.windows(2) {
-        knots.push(Knot {
-            label: format!("segment {} end", w[0].index),
-            c_deg: part_c_of_end(&w[0]),
-            c_text: fmt_fixed(w[1].c_start, cd),
-        });
-    }
-    let close_text = check_increasing(&knots, knots[0].c_deg, cd)?;
-
-    let mut out = header(&r, &format!("{} cubic (POLY) segments", segments.len()));
-    let first_x = fmt_fixed(mapped[0].x0, xd);
-    line(
-        &mut out,
-        format_args!(
-            "G1 {}={} {}={first_x}",
-            r.leading, knots[0].c_text, r.following
-        ),
-    );
-    out.push_str("POLY\n");
-    for (i, m) in mapped.iter().enumerate() {
-        let (c_end, x_end) = match (knots.get(i + 1), mapped.get(i + 1)) {
-            (Some(k), Some(next)) => (k.c_text.clone(), fmt_fixed(next.x0, xd)),
-            _ => (close_text.clone(), first_x.clone()),
-        };
-        line(
-            &mut out,
-            format_args!(
-                "PO[{}]=({c_end}) PO[{}]=({x_end},{},{})",
-                r.leading,
-                r.following,
-                fmt_fixed(m.a[1], kd),
-                fmt_fixed(m.a[2], kd)
-            ),
-        );
-    }
-    out.push_str("CTABEND\nG1 ; POLY is modal: back to linear interpolation\nRET\n");
-    Ok(out)
+    Ok(mapped)
 }
 
 /// Coefficients `[x0, a1, a2, a3]` of the same cubic with the parameter reversed,
@@ -294,18 +307,28 @@ struct Knot {
     c_text: String,
 }
 
-/// Check that the written C values increase strictly, up to and including the period end
-/// (first + 360°), and return the period end as written.
-fn check_increasing(knots: &[Knot], first_c_deg: f64, cd: usize) -> Result<String, TableError> {
+/// Check that the written C values increase strictly at the control's resolution (each
+/// rounded to `c_increments_per_deg`, as the control rounds them), up to and including the
+/// period end (first + 360°), and return the period end as written. Decimals finer than the
+/// resolution are refused by the settings, so today two different written values never
+/// round to the same increment; the check is made at the resolution all the same, because
+/// that is what the control compares.
+fn check_increasing(
+    knots: &[Knot],
+    first_c_deg: f64,
+    settings: &ProgramSettings,
+) -> Result<String, TableError> {
+    let cd = usize::from(settings.c_decimals);
     let first_back = parse_back(&knots[0].c_text);
     let close = Knot {
         label: "period end (first value + 360 deg)".to_owned(),
         c_deg: first_c_deg,
         c_text: fmt_fixed(first_back + 360.0, cd),
     };
+    let at_resolution = |text: &str| settings.c_increments(parse_back(text));
     let mut prev = &knots[0];
     for k in knots[1..].iter().chain(std::iter::once(&close)) {
-        if parse_back(&k.c_text) <= parse_back(&prev.c_text) {
+        if at_resolution(&k.c_text) <= at_resolution(&prev.c_text) {
             return Err(TableError::CNotIncreasing {
                 first: prev.label.clone(),
                 c_first_deg: prev.c_deg,
@@ -355,7 +378,27 @@ fn check_joins(mapped: &[Mapped], c_decimals: u8, x_decimals: u8) -> Result<(), 
     Ok(())
 }
 
-/// Transfer header, `PROC`, comments and `CTABDEF` of a table subprogram.
+/// The variable through which a table program returns the number it defines (its `VAR INT`
+/// parameter); the main program couples that variable, never a literal.
+pub(crate) const NUMBER_VAR: &str = "CL_TNO";
+
+/// The last lines of every table program.
+const TABLE_END: &str = "CTABEND ; the control restores the modal state from before CTABDEF\nRET\n";
+
+/// Transfer header, `PROC`, provenance, comments, the number assignment and `CTABDEF` of a
+/// table subprogram.
+///
+/// `PROC <NAME>(VAR INT CL_TNO) SAVE`: the caller passes a variable by reference (`VAR`,
+/// declared in the caller with `EXTERN <NAME>(VAR INT)`) and reads the defined number from
+/// it, so `CTAB` and `LEADON` use the table just defined. Points not in the project's notes:
+/// - `VAR` passes by reference, and a subprogram with parameters needs `EXTERN` in the
+///   caller [?];
+/// - `SAVE` restores the caller's modal G functions at `RET` [?]; Siemens' frames function
+///   manual (K2) describes `SAVE` restoring frames at the end of a subprogram [M-old], the
+///   same for G functions is our reading.
+///
+/// `G90 G71` are set inside because the table cannot rely on what the caller left active
+/// (the notes' "modal state" finding).
 fn header(r: &Resolved<'_>, what: &str) -> String {
     let s = r.settings;
     let cd = usize::from(s.c_decimals);
@@ -363,14 +406,22 @@ fn header(r: &Resolved<'_>, what: &str) -> String {
     let mut out = String::new();
     line(&mut out, format_args!("%_N_{}_SPF", r.name));
     out.push_str(";$PATH=/_N_SPF_DIR\n");
-    line(&mut out, format_args!("PROC {}", r.name));
+    line(
+        &mut out,
+        format_args!("PROC {}(VAR INT {NUMBER_VAR}) SAVE", r.name),
+    );
+    if let Some(p) = &s.provenance {
+        for l in provenance_lines(p) {
+            line(&mut out, format_args!("; {l}"));
+        }
+    }
     for c in &s.comment_lines {
         line(&mut out, format_args!("; {c}"));
     }
     line(
         &mut out,
         format_args!(
-            "; curve table {}: {} follows {}, periodic over 360 deg, {what}",
+            "{TABLE_COMMENT}{}: {} follows {}, periodic over 360 deg, {what}",
             s.table_number, r.following, r.leading
         ),
     );
@@ -386,6 +437,14 @@ fn header(r: &Resolved<'_>, what: &str) -> String {
             fmt_fixed(s.c_offset_deg, cd),
             r.following,
             fmt_fixed(s.x_offset_mm, xd)
+        ),
+    );
+    out.push_str("G90 G71 ; absolute, metric: the table sets what it relies on, not the caller\n");
+    line(
+        &mut out,
+        format_args!(
+            "{NUMBER_VAR}={} ; the number this program defines, read by the caller for CTAB and LEADON",
+            s.table_number
         ),
     );
     let memory = s
@@ -447,6 +506,37 @@ mod tests {
         for (a, b) in c.iter().zip(rr) {
             assert!((a - b).abs() < 1e-12);
         }
+    }
+
+    #[test]
+    fn c_is_compared_at_the_control_resolution_not_at_the_written_decimals() {
+        let knot = |c_text: &str| Knot {
+            label: format!("at {c_text}"),
+            c_deg: 0.0,
+            c_text: c_text.to_owned(),
+        };
+        let knots = [knot("10.0000"), knot("10.0004"), knot("20.0000")];
+        // Settings refuse 4 decimals at 1000 increments/deg; the check itself must still
+        // compare what the control keeps: 10.0000 and 10.0004 are both 10000 increments.
+        let coarse = ProgramSettings {
+            c_increments_per_deg: 1000,
+            ..ProgramSettings::default()
+        };
+        match check_increasing(&knots, 10.0, &coarse) {
+            Err(TableError::CNotIncreasing { first, second, .. }) => {
+                assert_eq!(
+                    (first.as_str(), second.as_str()),
+                    ("at 10.0000", "at 10.0004")
+                );
+            }
+            other => panic!("unexpected {other:?}"),
+        }
+        let fine = ProgramSettings::default();
+        assert_eq!(
+            check_increasing(&knots, 10.0, &fine).unwrap(),
+            "370.0000",
+            "the period end, as written"
+        );
     }
 
     #[test]

@@ -1,0 +1,169 @@
+//! A simulated SINUMERIK control that runs the main program camloop writes as the control
+//! would: it calls the table subprogram, keeps every curve table it defines by number (across
+//! runs, as the NC memory does), and reports the table `LEADON` actually couples.
+//!
+//! It interprets exactly the subset camloop writes, strictly; anything else is an error naming
+//! the program and line. Alarms the real control raises are errors too: `LEADON` or `CTAB` on
+//! an undefined table, redefining the coupled table, programming the coupled axis, a leading
+//! value that does not increase in a table (10949). Table blocks are read by the same reader
+//! as [`crate::core::program::parse_table_program`].
+//!
+//! Not modelled: modal G states (`G90`, `G71`, `SAVE` restore), feeds and timing, the
+//! synchronising move of `LEADON`, work offsets (`$AA_IW` is the programmed setpoint).
+
+mod interpreter;
+mod statements;
+
+use std::collections::BTreeMap;
+
+use super::TableShape;
+use crate::core::program::{ParsedShape, ParsedTable};
+use crate::core::table::TablePoint;
+use statements::{Frame, Run};
+
+/// Deepest subprogram nesting accepted (camloop needs 1).
+const MAX_CALL_DEPTH: usize = 8;
+/// `$AA_COUP_ACT` of a following axis in a master-value coupling [K].
+const COUP_ACT_MASTER_VALUE: i64 = 16;
+
+/// The simulated control: curve tables by number, the active coupling and axis setpoints
+/// persist between runs; variables live for one program run.
+#[derive(Debug, Clone, Default)]
+pub struct Control {
+    tables: BTreeMap<u32, ParsedTable>,
+    coupling: Option<Coupling>,
+    /// Setpoints by axis name (mm or degrees); an axis never moved is at 0.
+    positions: BTreeMap<String, f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct Coupling {
+    following: String,
+    leading: String,
+    table: u32,
+}
+
+/// What one run ground: the table coupled while C turned, and how C turned.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Coupled {
+    pub table_number: u32,
+    /// In program axes, as [`table_shape`] builds it from the table's blocks.
+    pub shape: TableShape,
+    pub c_speed_rpm: f64,
+    pub revolutions: f64,
+}
+
+/// A run stopped at `line` (1-based) of `program` (its name, or `main`).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{program} line {line}: {fault}")]
+pub struct ControlError {
+    pub program: String,
+    pub line: usize,
+    pub fault: ControlFault,
+}
+
+/// What stopped a run. Variants starting with "alarm" are alarms of the real control.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ControlFault {
+    #[error("`{statement}` is not in the subset camloop writes")]
+    Unsupported { statement: String },
+    #[error("{reason}")]
+    Invalid { reason: String },
+    #[error("variable {name} is not defined")]
+    UndefinedVariable { name: String },
+    #[error("program {name} not found")]
+    ProgramNotFound { name: String },
+    #[error("the program ends without {what}")]
+    NoEnd { what: &'static str },
+    #[error("the program ran to its end without turning C while coupled")]
+    NotGround,
+    #[error("alarm: curve table {number} is not defined")]
+    UndefinedTable { number: i64 },
+    #[error("alarm: curve table {number} is active in a coupling and cannot be redefined")]
+    TableInUse { number: u32 },
+    #[error("alarm: {axis} is already coupled")]
+    AlreadyCoupled { axis: String },
+    #[error("alarm: {axis} is coupled and cannot be programmed")]
+    AxisCoupled { axis: String },
+    #[error(
+        "alarm 10949: the leading value does not increase at C={c_deg} in curve table {number}"
+    )]
+    LeadingNotIncreasing { number: u32, c_deg: f64 },
+}
+
+impl ControlFault {
+    /// An alarm of the real control (rather than a statement outside the subset).
+    pub fn is_alarm(&self) -> bool {
+        matches!(
+            self,
+            ControlFault::UndefinedTable { .. }
+                | ControlFault::TableInUse { .. }
+                | ControlFault::AlreadyCoupled { .. }
+                | ControlFault::AxisCoupled { .. }
+                | ControlFault::LeadingNotIncreasing { .. }
+        )
+    }
+}
+
+/// The shape the simulated grinder runs for a table read from a program: POLY segments as
+/// they are, G1 points without the closing point at first C + 360°.
+pub fn table_shape(shape: &ParsedShape) -> TableShape {
+    match shape {
+        ParsedShape::Poly(segments) => TableShape::Poly(segments.clone()),
+        ParsedShape::G1(points) => TableShape::G1(
+            points
+                .iter()
+                .take(points.len().saturating_sub(1))
+                .map(|&(c_deg, x_mm)| TablePoint {
+                    c_deg,
+                    d_mm: 0.0,
+                    x_mm,
+                })
+                .collect(),
+        ),
+    }
+}
+
+impl Control {
+    /// A control with no tables, nothing coupled, every axis at 0.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Runs main program text `main` as the control would; subprogram calls are resolved
+    /// with `load(name)` → the text of that program file (name as called, e.g.
+    /// `DEMO_CAM_TABLE`). Tables defined stay defined, whatever the outcome.
+    pub fn run(
+        &mut self,
+        main: &str,
+        load: &dyn Fn(&str) -> Option<String>,
+    ) -> Result<Coupled, ControlError> {
+        let mut run = Run {
+            control: self,
+            load,
+            ground: None,
+        };
+        let mut frame = Frame::new(program_name(main, "MPF").unwrap_or("main"), None);
+        let end_line = run.program(main, &mut frame, 0)?;
+        run.ground.ok_or(ControlError {
+            program: frame.program,
+            line: end_line,
+            fault: ControlFault::NotGround,
+        })
+    }
+
+    /// Numbers of the curve tables in memory, ascending.
+    pub fn defined_tables(&self) -> Vec<u32> {
+        self.tables.keys().copied().collect()
+    }
+}
+
+/// `NAME` of a first line `%_N_NAME_<kind>`.
+fn program_name<'t>(text: &'t str, kind: &str) -> Option<&'t str> {
+    text.lines()
+        .next()?
+        .trim()
+        .strip_prefix("%_N_")?
+        .strip_suffix(kind)?
+        .strip_suffix('_')
+}

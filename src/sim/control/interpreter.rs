@@ -1,0 +1,405 @@
+//! The interpreter: runs one program level statement by statement, resolves subprogram
+//! calls, and keeps the curve tables and the coupling in the [`super::Control`].
+
+use super::statements::{
+    End, Frame, Halt, Run, Step, Value, args, check_increasing, declare, define, int_arg, invalid,
+    is_name, proc_line, real_var, table_number, undefined_variable, unsupported,
+};
+use super::{
+    COUP_ACT_MASTER_VALUE, ControlError, ControlFault, Coupled, Coupling, MAX_CALL_DEPTH,
+    program_name, table_shape,
+};
+use crate::core::program::{ParsedTable, TableBlocks, parse_ctabdef};
+
+/// Words that are statements, never subprogram names: out of place, they are refused as
+/// statements rather than looked up as programs.
+const KEYWORDS: [&str; 8] = [
+    "CTABEND", "POLY", "ENDIF", "ELSE", "M17", "M2", "SAVE", "CTABDEL",
+];
+
+impl Run<'_> {
+    /// Runs `text` in `frame` to its `M30` (depth 0) or `RET`; returns that line.
+    pub(super) fn program(
+        &mut self,
+        text: &str,
+        frame: &mut Frame,
+        depth: usize,
+    ) -> Result<usize, ControlError> {
+        let lines: Vec<&str> = text.lines().collect();
+        let fail = |frame: &Frame, line: usize, fault| ControlError {
+            program: frame.program.clone(),
+            line,
+            fault,
+        };
+        let (mut i, mut open_if) = (0, false);
+        while i < lines.len() {
+            let line = i + 1;
+            let code = lines[i].split(';').next().unwrap_or("").trim();
+            i += 1;
+            if code.is_empty() || (line == 1 && code.starts_with("%_N_")) {
+                continue;
+            }
+            let step = self.dispatch(code, frame, depth, &lines, &mut i, &mut open_if);
+            match (step, depth) {
+                (Ok(None), _) => {}
+                (Ok(Some(End::M30)), 0) | (Ok(Some(End::Ret)), 1..) if !open_if => return Ok(line),
+                (Ok(Some(_)), _) if open_if => {
+                    return Err(fail(frame, line, invalid("the program ends inside IF")));
+                }
+                (Ok(Some(End::M30)), _) => {
+                    return Err(fail(frame, line, invalid("M30 in a subprogram")));
+                }
+                (Ok(Some(End::Ret)), _) => {
+                    return Err(fail(frame, line, invalid("RET in the main program")));
+                }
+                (Err(Halt::Here(f)), _) => return Err(fail(frame, line, f)),
+                (Err(Halt::Line(f, at)), _) => return Err(fail(frame, at, f)),
+                (Err(Halt::Nested(e)), _) => return Err(e),
+            }
+        }
+        let what = if depth == 0 { "M30" } else { "RET" };
+        Err(fail(frame, lines.len(), ControlFault::NoEnd { what }))
+    }
+
+    /// One statement; `i` is the next line's index, moved on by `IF` and `CTABDEF`.
+    fn dispatch(
+        &mut self,
+        code: &str,
+        frame: &mut Frame,
+        depth: usize,
+        lines: &[&str],
+        i: &mut usize,
+        open_if: &mut bool,
+    ) -> Step {
+        let definition = ["DEF ", "EXTERN ", "PROC "]
+            .iter()
+            .any(|k| code.starts_with(k));
+        if definition && frame.executed {
+            return Err(
+                invalid("DEF, EXTERN and PROC must come before the first statement").into(),
+            );
+        }
+        frame.executed |= !definition;
+        match code {
+            "STOPRE" => Ok(None),
+            "M30" => Ok(Some(End::M30)),
+            "RET" => {
+                if let (Some(name), Some(slot)) = (&frame.param, frame.argument.as_mut())
+                    && let Some(value) = frame.vars.get(name)
+                {
+                    *slot = *value;
+                }
+                Ok(Some(End::Ret))
+            }
+            "ENDIF" if *open_if => {
+                *open_if = false;
+                Ok(None)
+            }
+            "ENDIF" => Err(invalid("ENDIF without IF").into()),
+            _ if code.starts_with("IF ") => self.if_block(code, lines, i, open_if),
+            _ if code.starts_with("CTABDEF(") => self.table(code, *i, lines, i),
+            _ if code.starts_with("DEF ") => define(code, frame),
+            _ if code.starts_with("EXTERN ") => declare(code, frame),
+            _ if code.starts_with("PROC ") => proc_line(code, frame, depth),
+            _ if code.starts_with("LEADON(") => self.leadon(code, frame),
+            _ if code.starts_with("LEADOF(") => self.leadof(code),
+            _ if code.starts_with("WAITP(") => Ok(args(code, "WAITP").map(|_| None)?),
+            _ if code.starts_with("POS[") => self.pos(code),
+            _ if code.starts_with('G') && code[1..].starts_with(|c: char| c.is_ascii_digit()) => {
+                self.motion(code, frame)
+            }
+            _ => self.assignment_or_call(code, frame, depth),
+        }
+    }
+
+    /// `IF $AA_COUP_ACT[X]<>0`: runs on, or skips to the matching `ENDIF`.
+    fn if_block(&mut self, code: &str, lines: &[&str], i: &mut usize, open_if: &mut bool) -> Step {
+        if *open_if {
+            return Err(unsupported(code).into());
+        }
+        let axis = code
+            .strip_prefix("IF $AA_COUP_ACT[")
+            .and_then(|r| r.strip_suffix("]<>0"))
+            .ok_or_else(|| unsupported(code))?;
+        let active = match &self.control.coupling {
+            Some(c) if c.following == axis => COUP_ACT_MASTER_VALUE,
+            _ => 0,
+        };
+        if active != 0 {
+            *open_if = true;
+            return Ok(None);
+        }
+        while let Some(raw) = lines.get(*i) {
+            *i += 1;
+            let inner = raw.split(';').next().unwrap_or("").trim();
+            if inner == "ENDIF" {
+                return Ok(None);
+            }
+            if inner.starts_with("IF ") {
+                return Err(Halt::Line(unsupported(inner), *i));
+            }
+        }
+        Err(invalid("IF without ENDIF").into())
+    }
+
+    /// `CTABDEF(…)` … `CTABEND`: reads the blocks and stores the table under its number.
+    fn table(&mut self, code: &str, line: usize, lines: &[&str], i: &mut usize) -> Step {
+        let def = parse_ctabdef(code, line).map_err(|e| invalid(&e.reason))?;
+        if def.periodicity != "1" {
+            return Err(unsupported(code).into());
+        }
+        if self
+            .control
+            .coupling
+            .as_ref()
+            .is_some_and(|c| c.table == def.number)
+        {
+            return Err(ControlFault::TableInUse { number: def.number }.into());
+        }
+        let mut blocks = TableBlocks::new(def.following.clone(), def.leading.clone());
+        while let Some(raw) = lines.get(*i) {
+            *i += 1;
+            let block = raw.split(';').next().unwrap_or("").trim();
+            if block.is_empty() {
+                continue;
+            }
+            if block == "CTABEND" {
+                let (following_axis, leading_axis, shape) = blocks.finish();
+                check_increasing(def.number, &shape).map_err(|f| Halt::Line(f, *i))?;
+                let table = ParsedTable {
+                    name: String::new(),
+                    table_number: def.number,
+                    following_axis,
+                    leading_axis,
+                    shape,
+                };
+                // An uncoupled table is replaced without warning [M].
+                self.control.tables.insert(def.number, table);
+                return Ok(None);
+            }
+            blocks
+                .block(block, *i)
+                .map_err(|e| Halt::Line(invalid(&e.reason), e.line))?;
+        }
+        Err(invalid("CTABDEF without CTABEND").into())
+    }
+
+    /// `LEADON(X,C,n)` with `n` a literal or an INT variable.
+    fn leadon(&mut self, code: &str, frame: &Frame) -> Step {
+        let a = args(code, "LEADON")?;
+        let [following, leading, number] = a.as_slice() else {
+            return Err(unsupported(code).into());
+        };
+        let number = table_number(int_arg(number, frame)?)?;
+        let table = self
+            .control
+            .tables
+            .get(&number)
+            .ok_or(ControlFault::UndefinedTable {
+                number: i64::from(number),
+            })?;
+        if table.following_axis != *following || table.leading_axis != *leading {
+            return Err(invalid(&format!(
+                "curve table {number} makes {} follow {}, not {following} follow {leading}",
+                table.following_axis, table.leading_axis
+            ))
+            .into());
+        }
+        if self.control.coupling.is_some() {
+            return Err(ControlFault::AlreadyCoupled {
+                axis: (*following).to_owned(),
+            }
+            .into());
+        }
+        self.control.coupling = Some(Coupling {
+            following: (*following).to_owned(),
+            leading: (*leading).to_owned(),
+            table: number,
+        });
+        Ok(None)
+    }
+
+    /// `LEADOF(X,C)`: ends the coupling of X to C, if any.
+    fn leadof(&mut self, code: &str) -> Step {
+        let a = args(code, "LEADOF")?;
+        let [following, leading] = a.as_slice() else {
+            return Err(unsupported(code).into());
+        };
+        if let Some(c) = &self.control.coupling
+            && c.following == *following
+            && c.leading == *leading
+        {
+            self.control.coupling = None;
+        }
+        Ok(None)
+    }
+
+    /// `POS[C]=IC(<deg>) FA[C]=<deg/min>`: turns C; while C leads a coupling, that is the
+    /// grinding the run reports.
+    fn pos(&mut self, code: &str) -> Step {
+        let mut words = code.split_whitespace();
+        let (Some(pos), Some(fa), None) = (words.next(), words.next(), words.next()) else {
+            return Err(unsupported(code).into());
+        };
+        let parsed = pos
+            .strip_prefix("POS[")
+            .and_then(|r| r.split_once("]=IC("))
+            .and_then(|(axis, r)| Some((axis, r.strip_suffix(')')?.parse::<f64>().ok()?)));
+        let feed = fa
+            .strip_prefix("FA[")
+            .and_then(|r| r.split_once("]="))
+            .and_then(|(axis, v)| Some((axis, v.parse::<f64>().ok()?)));
+        let (Some((axis, travel_deg)), Some((fa_axis, feed_deg_min))) = (parsed, feed) else {
+            return Err(unsupported(code).into());
+        };
+        if axis != fa_axis || !(travel_deg.is_finite() && feed_deg_min > 0.0) {
+            return Err(unsupported(code).into());
+        }
+        if let Some(c) = &self.control.coupling
+            && c.leading == axis
+            && let Some(table) = self.control.tables.get(&c.table)
+        {
+            self.ground = Some(Coupled {
+                table_number: c.table,
+                shape: table_shape(&table.shape),
+                c_speed_rpm: feed_deg_min / 360.0,
+                revolutions: travel_deg / 360.0,
+            });
+        }
+        *self.control.positions.entry(axis.to_owned()).or_default() += travel_deg;
+        Ok(None)
+    }
+
+    /// `G90 G71` or `G90 G1 X=<var or number> F=<number>`.
+    fn motion(&mut self, code: &str, frame: &Frame) -> Step {
+        for word in code.split_whitespace() {
+            if matches!(word, "G90" | "G71" | "G1") {
+                continue;
+            }
+            let Some((address, value)) = word.split_once('=') else {
+                return Err(unsupported(code).into());
+            };
+            if address == "F" {
+                value.parse::<f64>().map_err(|_| unsupported(code))?;
+                continue;
+            }
+            if !is_name(address) {
+                return Err(unsupported(code).into());
+            }
+            if self
+                .control
+                .coupling
+                .as_ref()
+                .is_some_and(|c| c.following == address)
+            {
+                return Err(ControlFault::AxisCoupled {
+                    axis: address.to_owned(),
+                }
+                .into());
+            }
+            let target = match value.parse::<f64>() {
+                Ok(v) => v,
+                Err(_) => real_var(value, frame)?,
+            };
+            self.control.positions.insert(address.to_owned(), target);
+        }
+        Ok(None)
+    }
+
+    /// `NAME=<value>` or a subprogram call `NAME` / `NAME(VAR)`.
+    fn assignment_or_call(&mut self, code: &str, frame: &mut Frame, depth: usize) -> Step {
+        let Some((target, value)) = code.split_once('=') else {
+            return self.call(code, frame, depth);
+        };
+        let kind = *frame
+            .vars
+            .get(target)
+            .ok_or_else(|| undefined_variable(target))?;
+        let new = match kind {
+            Value::Int(_) => Value::Int(value.parse().map_err(|_| unsupported(code))?),
+            Value::Real(_) => Value::Real(self.real_value(code, value, frame)?),
+        };
+        frame.vars.insert(target.to_owned(), new);
+        Ok(None)
+    }
+
+    /// `$AA_IW[<axis>]` or `CTAB(<real var>,<n>,<real var>)` (which also sets the slope).
+    fn real_value(&self, code: &str, value: &str, frame: &mut Frame) -> Result<f64, Halt> {
+        if let Some(axis) = value
+            .strip_prefix("$AA_IW[")
+            .and_then(|r| r.strip_suffix(']'))
+        {
+            return Ok(self.control.positions.get(axis).copied().unwrap_or(0.0));
+        }
+        let a = args(value, "CTAB").map_err(|_| unsupported(code))?;
+        let [leading, number, slope] = a.as_slice() else {
+            return Err(unsupported(code).into());
+        };
+        let c_deg = real_var(leading, frame)?;
+        let number = table_number(int_arg(number, frame)?)?;
+        let table = self
+            .control
+            .tables
+            .get(&number)
+            .ok_or(ControlFault::UndefinedTable {
+                number: i64::from(number),
+            })?;
+        real_var(slope, frame)?;
+        let x = |c: f64| table.x_at(c).unwrap_or(f64::NAN);
+        // The slope dX/dC, mm per degree, by a central difference.
+        let h = 1e-4;
+        let gradient = (x(c_deg + h) - x(c_deg - h)) / (2.0 * h);
+        frame
+            .vars
+            .insert((*slope).to_owned(), Value::Real(gradient));
+        Ok(x(c_deg))
+    }
+
+    /// Calls `NAME` (no parameters) or `NAME(VAR)` (one `VAR INT`, declared by `EXTERN`).
+    fn call(&mut self, code: &str, frame: &mut Frame, depth: usize) -> Step {
+        let (name, argument) = match code.split_once('(') {
+            Some((name, rest)) => {
+                let var = rest.strip_suffix(')').ok_or_else(|| unsupported(code))?;
+                (name, Some(var))
+            }
+            None => (code, None),
+        };
+        if !is_name(name) || KEYWORDS.contains(&name) || argument.is_some_and(|v| !is_name(v)) {
+            return Err(unsupported(code).into());
+        }
+        let declared = frame.externs.get(name).copied().unwrap_or(0);
+        if declared != usize::from(argument.is_some()) {
+            return Err(invalid(&format!(
+                "{name} is called with {} arguments but declared with {declared} by EXTERN",
+                usize::from(argument.is_some())
+            ))
+            .into());
+        }
+        let value = match argument {
+            Some(v) => Some(*frame.vars.get(v).ok_or_else(|| undefined_variable(v))?),
+            None => None,
+        };
+        if depth + 1 > MAX_CALL_DEPTH {
+            return Err(invalid("subprograms nested too deep").into());
+        }
+        let text = (self.load)(name).ok_or_else(|| ControlFault::ProgramNotFound {
+            name: name.to_owned(),
+        })?;
+        if program_name(&text, "SPF") != Some(name) {
+            return Err(invalid(&format!(
+                "program {name} does not start with %_N_{name}_SPF"
+            ))
+            .into());
+        }
+        let mut callee = Frame::new(name, value);
+        self.program(&text, &mut callee, depth + 1)
+            .map_err(Halt::Nested)?;
+        if callee.argument.is_some() && callee.param.is_none() {
+            return Err(invalid(&format!("{name} has no parameter for the argument")).into());
+        }
+        if let (Some(var), Some(returned)) = (argument, callee.argument) {
+            frame.vars.insert(var.to_owned(), returned);
+        }
+        Ok(None)
+    }
+}

@@ -1,0 +1,224 @@
+//! The control's program state (variables, the subprogram parameter, how a level ends) and
+//! the statements that need no machine state: definitions, `PROC`, argument reading.
+
+use std::collections::BTreeMap;
+
+use super::{Control, ControlError, ControlFault, Coupled};
+use crate::core::program::ParsedShape;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum Value {
+    Int(i64),
+    Real(f64),
+}
+
+/// One program level: its variables, declared subprograms and, in a subprogram, its `VAR`
+/// parameter (copied in from the caller's variable at the call, back at `RET`).
+pub(super) struct Frame {
+    pub(super) program: String,
+    pub(super) vars: BTreeMap<String, Value>,
+    /// Declared subprograms and how many `VAR INT` parameters each takes.
+    pub(super) externs: BTreeMap<String, usize>,
+    /// The caller's value for the parameter, until `PROC` names it.
+    pub(super) argument: Option<Value>,
+    /// The parameter's name once `PROC` has named it.
+    pub(super) param: Option<String>,
+    /// A statement other than a definition has run: definitions must come first.
+    pub(super) executed: bool,
+}
+
+impl Frame {
+    pub(super) fn new(program: &str, argument: Option<Value>) -> Self {
+        Self {
+            program: program.to_owned(),
+            vars: BTreeMap::new(),
+            externs: BTreeMap::new(),
+            argument,
+            param: None,
+            executed: false,
+        }
+    }
+}
+
+/// How a program level ended.
+pub(super) enum End {
+    M30,
+    Ret,
+}
+
+/// Why a statement stopped the run: a fault at its own line, at another line of the same
+/// program (a table block), or an error already located in a called program.
+pub(super) enum Halt {
+    Here(ControlFault),
+    Line(ControlFault, usize),
+    Nested(ControlError),
+}
+
+impl From<ControlFault> for Halt {
+    fn from(f: ControlFault) -> Self {
+        Halt::Here(f)
+    }
+}
+
+pub(super) type Step = Result<Option<End>, Halt>;
+
+pub(super) struct Run<'c> {
+    pub(super) control: &'c mut Control,
+    pub(super) load: &'c dyn Fn(&str) -> Option<String>,
+    pub(super) ground: Option<Coupled>,
+}
+
+/// `DEF REAL a, b` / `DEF INT a`.
+pub(super) fn define(code: &str, frame: &mut Frame) -> Step {
+    let rest = code.strip_prefix("DEF ").unwrap_or(code);
+    let (value, names) = if let Some(names) = rest.strip_prefix("REAL ") {
+        (Value::Real(0.0), names)
+    } else if let Some(names) = rest.strip_prefix("INT ") {
+        (Value::Int(0), names)
+    } else {
+        return Err(unsupported(code).into());
+    };
+    for name in names.split(',').map(str::trim) {
+        if !is_name(name) || frame.vars.insert(name.to_owned(), value).is_some() {
+            return Err(invalid(&format!("`{name}` cannot be defined here")).into());
+        }
+    }
+    Ok(None)
+}
+
+/// `EXTERN NAME(VAR INT)` or `EXTERN NAME()`.
+pub(super) fn declare(code: &str, frame: &mut Frame) -> Step {
+    let rest = code.strip_prefix("EXTERN ").unwrap_or(code);
+    let (name, params) = rest
+        .strip_suffix(')')
+        .and_then(|r| r.split_once('('))
+        .ok_or_else(|| unsupported(code))?;
+    let count = match params.trim() {
+        "" => 0,
+        "VAR INT" => 1,
+        _ => return Err(unsupported(code).into()),
+    };
+    if !is_name(name) {
+        return Err(unsupported(code).into());
+    }
+    frame.externs.insert(name.to_owned(), count);
+    Ok(None)
+}
+
+/// `PROC NAME` or `PROC NAME(VAR INT p)`, optionally ` SAVE`, first in a subprogram.
+pub(super) fn proc_line(code: &str, frame: &mut Frame, depth: usize) -> Step {
+    let rest = code.strip_prefix("PROC ").unwrap_or(code);
+    let rest = rest.strip_suffix(" SAVE").unwrap_or(rest);
+    let (name, param) = match rest.split_once('(') {
+        Some((name, p)) => {
+            let p = p.strip_suffix(')').ok_or_else(|| unsupported(code))?;
+            let p = p
+                .strip_prefix("VAR INT ")
+                .ok_or_else(|| unsupported(code))?;
+            (name, Some(p.trim()))
+        }
+        None => (rest, None),
+    };
+    if depth == 0 || name != frame.program || param.is_some_and(|p| !is_name(p)) {
+        return Err(unsupported(code).into());
+    }
+    if let Some(p) = param {
+        let value = frame
+            .argument
+            .ok_or_else(|| invalid(&format!("{name} is called without an argument for {p}")))?;
+        if !matches!(value, Value::Int(_)) {
+            return Err(invalid(&format!("the argument for {p} is not an INT variable")).into());
+        }
+        frame.vars.insert(p.to_owned(), value);
+        frame.param = Some(p.to_owned());
+    }
+    Ok(None)
+}
+
+/// The arguments of `KEYWORD(a,b,…)`, trimmed; the whole statement must be the call.
+pub(super) fn args<'t>(code: &'t str, keyword: &str) -> Result<Vec<&'t str>, ControlFault> {
+    code.strip_prefix(keyword)
+        .and_then(|r| r.strip_prefix('('))
+        .and_then(|r| r.strip_suffix(')'))
+        .map(|inner| inner.split(',').map(str::trim).collect())
+        .ok_or_else(|| unsupported(code))
+}
+
+/// An integer literal or the value of an INT variable.
+pub(super) fn int_arg(text: &str, frame: &Frame) -> Result<i64, ControlFault> {
+    if let Ok(n) = text.parse() {
+        return Ok(n);
+    }
+    match frame.vars.get(text) {
+        Some(Value::Int(n)) => Ok(*n),
+        Some(Value::Real(_)) => Err(invalid(&format!("{text} is not an INT variable"))),
+        None => Err(undefined_variable(text)),
+    }
+}
+
+/// The value of a REAL variable.
+pub(super) fn real_var(text: &str, frame: &Frame) -> Result<f64, ControlFault> {
+    match frame.vars.get(text) {
+        Some(Value::Real(v)) => Ok(*v),
+        Some(Value::Int(_)) => Err(invalid(&format!("{text} is not a REAL variable"))),
+        None => Err(undefined_variable(text)),
+    }
+}
+
+/// A curve table number: 1 or more.
+pub(super) fn table_number(n: i64) -> Result<u32, ControlFault> {
+    u32::try_from(n)
+        .ok()
+        .filter(|&n| n >= 1)
+        .ok_or(ControlFault::UndefinedTable { number: n })
+}
+
+/// The leading value must increase in every block (alarm 10949).
+pub(super) fn check_increasing(number: u32, shape: &ParsedShape) -> Result<(), ControlFault> {
+    let leading: Vec<f64> = match shape {
+        ParsedShape::G1(points) => points.iter().map(|p| p.0).collect(),
+        ParsedShape::Poly(segments) => segments
+            .first()
+            .map(|s| s.c_start_deg)
+            .into_iter()
+            .chain(segments.iter().map(|s| s.c_end_deg))
+            .collect(),
+    };
+    if leading.len() < 2 {
+        return Err(invalid(&format!(
+            "curve table {number} has fewer than 2 points"
+        )));
+    }
+    match leading.windows(2).find(|w| w[1] <= w[0]) {
+        Some(w) => Err(ControlFault::LeadingNotIncreasing {
+            number,
+            c_deg: w[1],
+        }),
+        None => Ok(()),
+    }
+}
+
+/// A variable, program or axis name: a letter, then letters, digits and `_`.
+pub(super) fn is_name(text: &str) -> bool {
+    let mut chars = text.chars();
+    chars.next().is_some_and(|c| c.is_ascii_uppercase())
+        && chars.all(|c| c.is_ascii_uppercase() || c.is_ascii_digit() || c == '_')
+}
+
+pub(super) fn undefined_variable(name: &str) -> ControlFault {
+    ControlFault::UndefinedVariable {
+        name: name.to_owned(),
+    }
+}
+
+pub(super) fn unsupported(code: &str) -> ControlFault {
+    ControlFault::Unsupported {
+        statement: code.to_owned(),
+    }
+}
+
+pub(super) fn invalid(reason: &str) -> ControlFault {
+    ControlFault::Invalid {
+        reason: reason.to_owned(),
+    }
+}
