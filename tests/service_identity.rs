@@ -136,7 +136,10 @@ async fn drop_files_are_moved_by_the_verdict_and_learned_once() {
     let inbox = dir.path().join("inbox");
     let good = csv(&measurement("DROP1", "P1", "IN1", 1));
     let write = |name: &str, text: &str| std::fs::write(inbox.join(name), text).unwrap();
-    write("a_other_machine.csv", &csv(&measurement("SIM1", "P2", "IN1", 2)));
+    write(
+        "a_other_machine.csv",
+        &csv(&measurement("SIM1", "P2", "IN1", 2)),
+    );
     let mut short = measurement("DROP1", "P3", "IN1", 3);
     short.samples.retain(|s| s.revolution < 1);
     short.header.revolutions = 1;
@@ -160,8 +163,8 @@ async fn drop_files_are_moved_by_the_verdict_and_learned_once() {
             "b_one_revolution.csv.reason.txt"
         ]
     );
-    let reason = std::fs::read_to_string(inbox.join("rejected/a_other_machine.csv.reason.txt"))
-        .unwrap();
+    let reason =
+        std::fs::read_to_string(inbox.join("rejected/a_other_machine.csv.reason.txt")).unwrap();
     assert!(reason.contains("machine \"SIM1\""), "{reason}");
     let url = format!("sqlite://{}/db.sqlite", dir.path().display());
     let store = Store::connect(&url).await.unwrap();

@@ -1,16 +1,17 @@
-//! The simulated machine as a gauge source: it grinds whatever program is on the share (read
-//! back as the control would), measures the part, and sends the measurement as CAN frames
-//! through the real DBC decoder and assembler in memory, exactly as a bus would deliver it.
+//! The simulated machine as a gauge source: a simulated control runs the main program on the
+//! share (which calls the table program and couples the table it defines, tables kept by
+//! number between parts as on the NC), the grinder grinds the coupled table, and the
+//! measurement goes out as CAN frames through the real DBC decoder and assembler in memory,
+//! exactly as a bus would deliver it.
 
 use super::machine::SourceEvent;
 use crate::core::compensate::Feature;
-use crate::core::program::{ParsedShape, parse_table_program};
 use crate::gauge::{Assembled, Assembler, GaugeDbc};
 use crate::sim::{
-    CommandedTable, GrinderConfig, PartLabels, SimGrinder, TableShape, Workpiece,
+    CommandedTable, Control, GrinderConfig, PartLabels, SimGrinder, TableShape, Workpiece,
     measurement_frames,
 };
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
@@ -51,6 +52,7 @@ impl SimSource {
         let mut interval = tokio::time::interval(self.part_interval);
         interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         let mut made = 0u64;
+        let mut control = Control::new();
         loop {
             tokio::select! {
                 _ = interval.tick() => {}
@@ -59,33 +61,10 @@ impl SimSource {
             if *shutdown.borrow() || self.parts.is_some_and(|n| made >= n) {
                 return;
             }
-            let text = match std::fs::read_to_string(&self.program) {
-                Ok(t) => t,
-                Err(e) => {
-                    warn!(machine = %self.machine, error = %e, "simulator: no program on the share yet");
-                    continue;
-                }
-            };
-            let ground_with = provenance_version(&text);
-            let shape = match parse_table_program(&text) {
-                Ok(p) => match p.shape {
-                    ParsedShape::Poly(s) => TableShape::Poly(s),
-                    ParsedShape::G1(points) => TableShape::G1(
-                        points
-                            .iter()
-                            .take(points.len().saturating_sub(1))
-                            .map(|&(c_deg, x_mm)| crate::core::table::TablePoint {
-                                c_deg,
-                                d_mm: 0.0,
-                                x_mm,
-                            })
-                            .collect(),
-                    ),
-                },
-                Err(e) => {
-                    warn!(machine = %self.machine, error = %e, "simulator: program unreadable");
-                    continue;
-                }
+            // The control runs the main program, which calls the table program: the table
+            // it couples is what gets ground, whatever the files say on their own.
+            let Some((shape, ground_with)) = self.run_control(&mut control) else {
+                continue;
             };
             let table_r = f64::from_bits(self.table_wheel_radius_bits.load(Ordering::SeqCst));
             let table = CommandedTable {
@@ -157,8 +136,40 @@ impl SimSource {
     }
 }
 
-/// The table version a program's provenance names (`; table version vN, …`), as the control
-/// would report it with the part.
+impl SimSource {
+    /// Runs the main program on the share through the simulated control; returns the coupled
+    /// table and the version its program's provenance names (what a control would report
+    /// with the part).
+    fn run_control(&self, control: &mut Control) -> Option<(TableShape, Option<u64>)> {
+        let main = match std::fs::read_to_string(&self.main_program) {
+            Ok(t) => t,
+            Err(e) => {
+                warn!(machine = %self.machine, error = %e, "simulator: no main program on the share yet");
+                return None;
+            }
+        };
+        let dir = self
+            .main_program
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_default();
+        let load = |name: &str| std::fs::read_to_string(dir.join(format!("{name}.SPF"))).ok();
+        match control.run(&main, &load) {
+            Ok(coupled) => {
+                let version = std::fs::read_to_string(&self.program)
+                    .ok()
+                    .and_then(|t| provenance_version(&t));
+                Some((coupled.shape, version))
+            }
+            Err(e) => {
+                error!(machine = %self.machine, error = %e, "simulated control: alarm");
+                None
+            }
+        }
+    }
+}
+
+/// The table version a program's provenance names (`; table version: vN`).
 fn provenance_version(text: &str) -> Option<u64> {
     text.lines().find_map(|l| {
         let rest = l

@@ -8,7 +8,8 @@ use super::{MachineLoop, now_ms, now_ms_u64};
 use crate::core::compensate::GuardedTable;
 use crate::core::learn::LearningState;
 use crate::core::program::{
-    MainProgramSettings, comment_text, render_g1_table, render_main_program, render_poly_table,
+    MainProgramSettings, Provenance, comment_text, render_g1_table, render_main_program,
+    render_poly_table,
 };
 use crate::recipe::FeatureSetup;
 use crate::share::{ProgramFile, PushError, PushRequest};
@@ -60,7 +61,14 @@ impl MachineLoop {
         };
         let mut settings = self.setup.program.clone();
         settings.table_number = self.share.next_table_number();
-        settings.comment_lines = self.provenance_lines(version, parent, reason, &learning);
+        settings.provenance = Some(self.provenance(version, parent, &learning));
+        settings.comment_lines = vec![
+            comment_text(&format!("reason: {reason}")),
+            comment_text(&format!(
+                "wheel radius {} mm, learning iteration {}",
+                learning.wheel_radius_mm, learning.iteration
+            )),
+        ];
         let text = match &table.segments {
             Some(s) => render_poly_table(s, &settings),
             None => render_g1_table(&table.points, &settings),
@@ -191,55 +199,28 @@ impl MachineLoop {
         }
     }
 
-    /// Comment lines that say what the program is, for the operator reading it on the
-    /// control.
-    fn provenance_lines(
+    /// What the program says about itself, for the operator reading it on the control (the
+    /// C offset and direction are on its axes line).
+    pub(super) fn provenance(
         &self,
         version: u64,
         parent: u64,
-        reason: &str,
         learning: &TableLearning,
-    ) -> Vec<String> {
-        let p = &self.setup.program;
-        [
-            format!(
-                "{} made by camloop {}",
-                self.setup.label,
-                env!("CARGO_PKG_VERSION")
-            ),
-            format!(
-                "table version v{version}, parent {}",
-                if parent > 0 {
-                    format!("v{parent}")
-                } else {
-                    "none".into()
-                }
-            ),
-            format!("created {} UTC", crate::clock::utc_text(now_ms_u64())),
-            format!(
-                "correction sha256 {}",
-                crate::core::turn::correction_sha256(&learning.correction_um)
-            ),
-            format!(
-                "C offset {} deg, C direction {}, wheel radius {} mm",
-                p.c_offset_deg,
-                if matches!(p.c_direction, crate::core::program::CDirection::Reversed) {
-                    -1
-                } else {
-                    1
-                },
-                learning.wheel_radius_mm
-            ),
-            format!("reason: {reason}"),
-        ]
-        .iter()
-        .map(|l| comment_text(l))
-        .collect()
+    ) -> Provenance {
+        Provenance {
+            camloop_version: env!("CARGO_PKG_VERSION").to_string(),
+            table_version: version,
+            parent_version: (parent > 0).then_some(parent),
+            created_utc: crate::clock::utc_text(now_ms_u64()),
+            recipe: self.setup.part.clone(),
+            feature: self.setup.name.clone(),
+            correction_sha256: crate::core::turn::correction_sha256(&learning.correction_um),
+        }
     }
 
     /// The main program, when the share's copy is not this text (written again only when it
     /// changes, so the control runs what camloop tested).
-    fn main_program_if_changed(&self) -> anyhow::Result<Option<ProgramFile>> {
+    pub(super) fn main_program_if_changed(&self) -> anyhow::Result<Option<ProgramFile>> {
         let main = main_settings(&self.setup);
         let text = render_main_program(&main, &self.setup.program)?;
         let name = main_program_file(&self.setup);

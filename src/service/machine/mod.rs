@@ -181,7 +181,10 @@ impl MachineLoop {
         }
         self.record(records).await;
         let _ = report;
-        if !self.program_path().exists() && self.memory.waiting.is_none() {
+        // The share lacks the table, or its main program is not the one this camloop writes
+        // (a first start, or an upgrade): the current table goes with the main program.
+        let stale = !self.program_path().exists() || self.main_program_if_changed()?.is_some();
+        if stale && self.memory.waiting.is_none() {
             let table =
                 compensate::current_table(self.memory.newest_learning(), &self.lobe_loop())?;
             let reason = if self.memory.parts == 0 {

@@ -5,6 +5,7 @@ use super::super::journal::{EventKind, Pending};
 use super::memory::TableLearning;
 use super::records::event;
 use super::{MachineLoop, now_ms, now_ms_u64};
+use crate::core::program::retarget_table_program;
 use crate::share::{ProgramFile, PushRequest};
 use crate::store::EventLevel;
 use anyhow::Context;
@@ -84,9 +85,13 @@ impl MachineLoop {
             Err(_) => old.program_text.clone(),
         };
         let reason = format!("rollback to v{version}");
-        let text = retarget(&text, number).with_context(|| {
-            format!("version {version}: no CTABDEF line to retarget to table {number}")
-        })?;
+        let provenance = self.provenance(
+            self.share.history().next_version(),
+            self.memory.in_force_version,
+            &learning,
+        );
+        let text = retarget_table_program(&text, number, Some(&provenance))
+            .with_context(|| format!("version {version}: cannot retarget to table {number}"))?;
         let mut next = self.memory.learning.clone();
         if learning.correction_um.len() == next.correction_um.len() {
             next.correction_um = learning.correction_um.clone();
@@ -138,25 +143,4 @@ impl MachineLoop {
             summary: format!("{reason} delivered as v{new_version}, table {number} ({why})"),
         })
     }
-}
-
-/// The same program defining table `to` (the CTABDEF line and the number the program hands
-/// back to the main program).
-fn retarget(text: &str, to: u32) -> Option<String> {
-    let mut found = false;
-    let lines: Vec<String> = text
-        .lines()
-        .map(|line| {
-            if let Some(args) = line.strip_prefix("CTABDEF(") {
-                let mut parts: Vec<String> = args.split(',').map(str::to_string).collect();
-                if parts.len() >= 4 {
-                    parts[2] = to.to_string();
-                    found = true;
-                    return format!("CTABDEF({}", parts.join(","));
-                }
-            }
-            line.to_string()
-        })
-        .collect();
-    found.then(|| lines.join("\n") + "\n")
 }
