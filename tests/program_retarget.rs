@@ -68,10 +68,11 @@ fn provenance_golden() {
 fn provenance_text_is_made_safe_for_a_comment() {
     let mut p = provenance(3, Some(2));
     p.recipe = "Nocken °1\nCTABDEF(X,C,9,1)".to_owned();
+    // `°` is spelled out; the line break has no spelling and becomes `?`.
     p.feature = "in;take".to_owned();
     let program = render(1, Some(p));
     assert!(
-        program.contains("\n; recipe: Nocken ?1?CTABDEF(X,C,9,1)\n"),
+        program.contains("\n; recipe: Nocken  deg1?CTABDEF(X,C,9,1)\n"),
         "{program}"
     );
     // The line break became `?`: no block was injected, and the program is plain ASCII.

@@ -34,10 +34,13 @@ pub use settings::{
 };
 pub use table::{TableError, render_g1_table, render_poly_table, reverse_cubic};
 
-/// Text made safe for a program comment line: printable ASCII only (anything else becomes
-/// `?`), at most 200 characters.
+/// Text made safe for a program comment line: printable ASCII only (the units camloop writes
+/// spelled in ASCII, `µm` as `um` and `°` as ` deg`; anything else becomes `?`), at most 200
+/// characters.
 pub fn comment_text(text: &str) -> String {
-    text.chars()
+    text.replace('µ', "u")
+        .replace('°', " deg")
+        .chars()
         .map(|c| {
             if c.is_ascii_graphic() || c == ' ' {
                 c

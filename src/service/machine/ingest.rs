@@ -104,6 +104,7 @@ impl MachineLoop {
             });
         }
         let held = matches!(done.decision, Decision::Held(_));
+        let ground_with = self.memory.in_force_version;
         let (mut records, text) = self.decide(done.decision, &sha, part, at_ms).await;
         if !held || !self.journal.on_reserve() {
             // On the reserve only measurements are kept: the memory did not change.
@@ -121,7 +122,7 @@ impl MachineLoop {
             part,
             max_error_um = format!("{max_error_um:.2}"),
             profile_error_um = format!("{:.2}", done.measured.max_profile_error_um),
-            ground_with = self.memory.in_force_version,
+            ground_with,
             "{} {} part {part}: max error {max_error_um:.2} µm → {text}",
             self.name,
             self.setup.name
