@@ -3,12 +3,13 @@
 //! hand method (each lift error written 1:1 into X at the same table index), with the
 //! figures that judge them.
 
+use super::delivered::DeliveredTables;
 use super::{
     CommandedTable, GrinderConfig, PartLabels, SimError, SimGrinder, TableShape, Workpiece,
 };
 use crate::core::analysis::{AnalysisError, LobeOptions, analyse_lobe};
 use crate::core::compensate::{
-    self, AxisLimits, CycleError, Feature, GuardError, GuardedTable, LobeLoop, TableRequest,
+    self, AxisLimits, CycleError, Feature, GuardError, LobeLoop, TableRequest,
 };
 use crate::core::fit::{TableForm, fit_poly};
 use crate::core::learn::{self, LearningParams, LearningState, StepOutcome};
@@ -58,6 +59,8 @@ pub enum CellError {
     Analysis(#[from] AnalysisError),
     #[error("{0}")]
     Turn(#[from] TurnError),
+    #[error("delivery: {0}")]
+    Delivery(#[from] super::DeliveryError),
     #[error("loop: {0}")]
     Cycle(#[from] CycleError),
     #[error("table: {0}")]
@@ -110,7 +113,10 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
     // The X-domain methods' own memory: the X added at each table point, mm.
     let mut naive_dx_mm = vec![0.0; setup.request.points];
     let mut x_state = LearningState::new(points_per_rev);
-    let mut table = make_table(setup, feature, &state, method, &naive_dx_mm)?;
+    // camloop's tables reach the grinder as the service delivers them: rendered, and coupled
+    // by the simulated control running the main program.
+    let mut control = DeliveredTables::default();
+    let mut table = make_table(setup, feature, &state, method, &naive_dx_mm, &mut control)?;
     let mut figures = Vec::with_capacity(parts as usize);
     for part in 1..=parts {
         let ground = match sim.grind(&table) {
@@ -146,7 +152,7 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                         table: next_table,
                     } => {
                         state = *next;
-                        table = commanded(setup.request.form, &next_table, feature);
+                        table = control.deliver(&next_table, feature)?;
                         outcome_text(&outcome)
                     }
                     // A refused table is never used: the machine keeps the previous one.
@@ -162,7 +168,7 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                         *dx -= e / 1000.0;
                     }
                 }
-                table = make_table(setup, feature, &state, method, &naive_dx_mm)?;
+                table = make_table(setup, feature, &state, method, &naive_dx_mm, &mut control)?;
                 "X -= e at each index".to_string()
             }
             Method::XDomainIlc => {
@@ -180,7 +186,7 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                         *dx = u / 1000.0;
                     }
                 }
-                table = make_table(setup, feature, &state, method, &naive_dx_mm)?;
+                table = make_table(setup, feature, &state, method, &naive_dx_mm, &mut control)?;
                 match outcome {
                     Ok(o) => outcome_text(&o),
                     Err(e) => format!("refused: {e}"),
@@ -194,7 +200,7 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                 learn::after_dressing(&mut x_state);
                 let mean = naive_dx_mm.iter().sum::<f64>() / naive_dx_mm.len() as f64;
                 naive_dx_mm.iter_mut().for_each(|d| *d -= mean);
-                table = make_table(setup, feature, &state, method, &naive_dx_mm)?;
+                table = make_table(setup, feature, &state, method, &naive_dx_mm, &mut control)?;
                 true
             }
             None => false,
@@ -230,11 +236,12 @@ fn make_table(
     state: &LearningState,
     method: Method,
     naive_dx_mm: &[f64],
+    control: &mut DeliveredTables,
 ) -> Result<CommandedTable, CellError> {
     match method {
         Method::Camloop => {
             let table = compensate::current_table(state, &lobe_loop(setup, feature))?;
-            Ok(commanded(setup.request.form, &table, feature))
+            Ok(control.deliver(&table, feature)?)
         }
         Method::NaiveX | Method::XDomainIlc => {
             let part = feature.part(&setup.nominal)?;
@@ -253,18 +260,6 @@ fn make_table(
                 wheel_radius_mm: feature.wheel_radius_mm(),
             })
         }
-    }
-}
-
-fn commanded(form: TableForm, table: &GuardedTable, feature: Feature) -> CommandedTable {
-    let shape = match (form, &table.segments) {
-        (TableForm::Poly, Some(segments)) => TableShape::Poly(segments.clone()),
-        _ => TableShape::G1(table.points.clone()),
-    };
-    CommandedTable {
-        shape,
-        x_zero_mm: feature.x_zero_mm(),
-        wheel_radius_mm: feature.wheel_radius_mm(),
     }
 }
 

@@ -82,6 +82,7 @@
 pub mod cell;
 mod config;
 mod control;
+mod delivered;
 mod envelope;
 pub mod frames;
 mod gauge;
@@ -92,6 +93,7 @@ mod table;
 
 pub use config::{GaugeConfig, GaugeFault, GrinderConfig, Harmonic};
 pub use control::{Control, ControlError, ControlFault, Coupled, table_shape};
+pub use delivered::DeliveryError;
 pub use envelope::SMOOTH_KINK_RAD;
 pub use frames::measurement_frames;
 pub use gauge::{ORIGIN, PartLabels};
