@@ -1,0 +1,563 @@
+//! The service configuration (`camloop run --config FILE`): one TOML file, unknown keys are
+//! errors, every problem is reported at once, secrets come from the environment and are
+//! redacted in Debug output.
+
+mod check;
+mod keys;
+
+pub use check::{Checked, CheckedMachine, check, load};
+pub use keys::Lines;
+
+use crate::names::MachineName;
+use crate::sim::GrinderConfig;
+use serde::Deserialize;
+use std::fmt;
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+
+/// Environment variable that overrides `database.url`.
+pub const ENV_DATABASE_URL: &str = "CAMLOOP_DATABASE_URL";
+/// Environment variable holding the API token for write requests.
+pub const ENV_API_TOKEN: &str = "CAMLOOP_API_TOKEN";
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    #[serde(default)]
+    pub service: ServiceSection,
+    #[serde(default)]
+    pub database: DatabaseSection,
+    #[serde(default)]
+    pub http: HttpSection,
+    #[serde(default)]
+    pub machines: Vec<MachineSection>,
+    /// Folder of the config file; relative paths in the file are resolved against it.
+    #[serde(skip)]
+    pub base_dir: PathBuf,
+    /// The API token, from the environment only.
+    #[serde(skip)]
+    pub api_token: Option<Secret>,
+    /// The line of every key in the file, for problems found after parsing.
+    #[serde(skip)]
+    pub lines: Lines,
+    /// The config file, for messages.
+    #[serde(skip)]
+    pub file: PathBuf,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ServiceSection {
+    /// Working folder for the database, journal and machine state (relative to the config).
+    pub var_dir: PathBuf,
+    /// "plain" for a terminal, "json" for log collectors.
+    pub log_format: LogFormat,
+}
+
+impl Default for ServiceSection {
+    fn default() -> Self {
+        Self {
+            var_dir: PathBuf::from("../var"),
+            log_format: LogFormat::Plain,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LogFormat {
+    Plain,
+    Json,
+}
+
+#[derive(Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DatabaseSection {
+    /// `sqlite://…` (the embedded default) or `postgres://…`; CAMLOOP_DATABASE_URL overrides.
+    pub url: String,
+    /// Days raw revolutions are kept; summaries are kept forever. 0: keep raw forever.
+    pub raw_retention_days: u32,
+}
+
+impl Default for DatabaseSection {
+    fn default() -> Self {
+        Self {
+            url: "sqlite://../var/camloop.db?mode=rwc".into(),
+            raw_retention_days: 90,
+        }
+    }
+}
+
+impl fmt::Debug for DatabaseSection {
+    /// The URL may carry a password: show only its scheme.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let scheme = self.url.split("://").next().unwrap_or("?");
+        f.debug_struct("DatabaseSection")
+            .field("url", &format!("{scheme}://…"))
+            .field("raw_retention_days", &self.raw_retention_days)
+            .finish()
+    }
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct HttpSection {
+    /// Address the API listens on; localhost unless you mean otherwise.
+    pub listen: SocketAddr,
+    /// Connections served at once; more wait in the kernel's queue until one ends.
+    pub max_connections: usize,
+    /// A client has this long to send a request's headers (also an idle keep-alive
+    /// connection's limit), ms.
+    pub header_timeout_ms: u64,
+    /// A client has this long to send a request's body once its headers are in, ms.
+    pub body_timeout_ms: u64,
+}
+
+impl Default for HttpSection {
+    fn default() -> Self {
+        Self {
+            listen: SocketAddr::from(([127, 0, 0, 1], 8080)),
+            max_connections: 256,
+            header_timeout_ms: 10_000,
+            body_timeout_ms: 10_000,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MachineSection {
+    /// Machine name: letters, digits, '-' and '_' (it names folders and URLs).
+    pub name: String,
+    /// Part recipe (relative to the config file).
+    pub recipe: PathBuf,
+    /// The lobe or pin of the recipe this machine grinds.
+    pub lobe: String,
+    /// The controller's file share (a mounted folder), relative to the config file.
+    pub share: PathBuf,
+    pub gauge: GaugeSection,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+pub enum GaugeSection {
+    /// The simulated grinder and gauge; frames go through the real CAN codec in memory.
+    Sim {
+        /// Time between parts, ms.
+        #[serde(default = "default_part_interval_ms")]
+        part_interval_ms: u64,
+        #[serde(default)]
+        seed: u64,
+        /// Simulator settings (defaults: about 16 µm uncompensated on the demo lobe).
+        #[serde(default)]
+        grinder: GrinderConfig,
+    },
+    /// A SocketCAN interface read through the DBC.
+    Can { interface: String, dbc: PathBuf },
+    /// A serial line speaking camloop's line protocol.
+    Serial { port: String, baud: u32 },
+    /// A folder the gauge PC drops measurement files into.
+    Drop {
+        folder: PathBuf,
+        #[serde(default = "default_poll_ms")]
+        poll_ms: u64,
+        /// A file is taken once its size and time have not changed for this long, ms.
+        #[serde(default = "default_stable_ms")]
+        stable_ms: u64,
+        /// A bigger file is rejected unread, bytes.
+        #[serde(default = "default_max_file_bytes")]
+        max_file_bytes: u64,
+    },
+}
+
+fn default_part_interval_ms() -> u64 {
+    1000
+}
+
+fn default_poll_ms() -> u64 {
+    500
+}
+
+fn default_stable_ms() -> u64 {
+    10_000
+}
+
+fn default_max_file_bytes() -> u64 {
+    16 * 1024 * 1024
+}
+
+impl HttpSection {
+    fn problems(&self, lines: &Lines) -> Vec<ConfigProblem> {
+        let mut p = Vec::new();
+        if !(1..=65_536).contains(&self.max_connections) {
+            p.push(ConfigProblem::at(
+                lines.of("http.max_connections"),
+                format!(
+                    "http.max_connections = {}: must be 1 to 65536",
+                    self.max_connections
+                ),
+            ));
+        }
+        for (key, ms) in [
+            ("header_timeout_ms", self.header_timeout_ms),
+            ("body_timeout_ms", self.body_timeout_ms),
+        ] {
+            if !(1..=3_600_000).contains(&ms) {
+                p.push(ConfigProblem::at(
+                    lines.of(&format!("http.{key}")),
+                    format!("http.{key} = {ms}: must be 1 to 3600000 ms"),
+                ));
+            }
+        }
+        p
+    }
+}
+
+impl GaugeSection {
+    /// `line` gives the line of a key below the gauge section (`""` for the section).
+    fn problems(&self, label: &str, line: impl Fn(&str) -> Option<usize>) -> Vec<ConfigProblem> {
+        let mut p = Vec::new();
+        let range = |p: &mut Vec<ConfigProblem>,
+                     key: &str,
+                     value: u64,
+                     ok: std::ops::RangeInclusive<u64>| {
+            if !ok.contains(&value) {
+                p.push(ConfigProblem::at(
+                    line(&format!(".{key}")),
+                    format!(
+                        "{label}.gauge.{key} = {value}: must be {} to {}",
+                        ok.start(),
+                        ok.end()
+                    ),
+                ));
+            }
+        };
+        match self {
+            GaugeSection::Sim {
+                part_interval_ms,
+                grinder,
+                ..
+            } => {
+                range(
+                    &mut p,
+                    "part_interval_ms",
+                    *part_interval_ms,
+                    1..=86_400_000,
+                );
+                p.extend(grinder.problems().into_iter().map(|e| {
+                    ConfigProblem::at(line(".grinder"), format!("{label}.gauge.grinder: {e}"))
+                }));
+            }
+            GaugeSection::Drop {
+                poll_ms,
+                stable_ms,
+                max_file_bytes,
+                ..
+            } => {
+                range(&mut p, "poll_ms", *poll_ms, 10..=60_000);
+                range(&mut p, "stable_ms", *stable_ms, 1..=3_600_000);
+                range(&mut p, "max_file_bytes", *max_file_bytes, 1024..=(1 << 30));
+            }
+            GaugeSection::Can { interface, .. } if interface.is_empty() => {
+                p.push(ConfigProblem::at(
+                    line(".interface"),
+                    format!("{label}.gauge.interface: must not be empty"),
+                ));
+            }
+            GaugeSection::Serial { port, baud } => {
+                if port.is_empty() {
+                    p.push(ConfigProblem::at(
+                        line(".port"),
+                        format!("{label}.gauge.port: must not be empty"),
+                    ));
+                }
+                range(&mut p, "baud", u64::from(*baud), 50..=4_000_000);
+            }
+            GaugeSection::Can { .. } => {}
+        }
+        p
+    }
+}
+
+/// A secret that never shows in Debug output or logs.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Secret(String);
+
+impl Secret {
+    pub fn new(secret: impl Into<String>) -> Self {
+        Self(secret.into())
+    }
+
+    pub fn expose(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Debug for Secret {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("Secret(…)")
+    }
+}
+
+/// One problem in the configuration: the line of the config file it is on (when known) and
+/// what is wrong. Problems found in files the config names (recipes, DBC files) carry the
+/// line of the key that names them, and the other file's name and line in the message.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConfigProblem {
+    pub line: Option<usize>,
+    pub message: String,
+}
+
+impl ConfigProblem {
+    fn at(line: Option<usize>, message: impl Into<String>) -> Self {
+        Self {
+            line,
+            message: message.into(),
+        }
+    }
+}
+
+impl fmt::Display for ConfigProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.line {
+            Some(l) => write!(f, "line {l}: {}", self.message),
+            None => f.write_str(&self.message),
+        }
+    }
+}
+
+/// Every problem found, one per entry, each naming the line and the key.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{file}: {}", join(.problems))]
+pub struct ConfigError {
+    pub file: String,
+    pub problems: Vec<ConfigProblem>,
+}
+
+fn join(problems: &[ConfigProblem]) -> String {
+    let texts: Vec<String> = problems.iter().map(ToString::to_string).collect();
+    texts.join("; ")
+}
+
+impl Config {
+    /// Parses the text of `file`, applies the environment (`env` looks a variable up), and
+    /// checks everything that needs no other file, reporting every problem at once. The
+    /// service checks the files the config names, and its listener, with [`check`] or
+    /// [`load`].
+    pub fn parse(
+        text: &str,
+        file: &Path,
+        env: impl Fn(&str) -> Option<String>,
+    ) -> Result<Self, ConfigError> {
+        match Self::read(text, file, env) {
+            (Some(config), problems) if problems.is_empty() => Ok(config),
+            (_, problems) => Err(ConfigError {
+                file: file.display().to_string(),
+                problems,
+            }),
+        }
+    }
+
+    /// Parses as far as possible: the config (when its structure could be read) and every
+    /// problem found.
+    pub(crate) fn read(
+        text: &str,
+        file: &Path,
+        env: impl Fn(&str) -> Option<String>,
+    ) -> (Option<Self>, Vec<ConfigProblem>) {
+        let read = keys::read::<Config>(text);
+        let mut problems = read.problems;
+        let Some(mut config) = read.value else {
+            return (None, problems);
+        };
+        config.lines = read.lines;
+        config.file = file.to_path_buf();
+        config.base_dir = file.parent().map(Path::to_path_buf).unwrap_or_default();
+        if let Some(url) = env(ENV_DATABASE_URL) {
+            config.database.url = url;
+        }
+        config.api_token = env(ENV_API_TOKEN).filter(|t| !t.is_empty()).map(Secret);
+        let machines_dropped = read.dropped.iter().any(|k| k == "machines");
+        problems.extend(config.problems(machines_dropped));
+        problems.sort_by_key(|p| p.line.unwrap_or(usize::MAX));
+        (Some(config), problems)
+    }
+
+    /// The line of `path` (`http.listen`, `machines[0].name`) in the file.
+    pub fn line(&self, path: &str) -> Option<usize> {
+        self.lines.of(path)
+    }
+
+    fn problems(&self, machines_dropped: bool) -> Vec<ConfigProblem> {
+        let mut p = Vec::new();
+        if self.machines.is_empty() && !machines_dropped {
+            p.push(ConfigProblem::at(
+                None,
+                "at least one [[machines]] is needed",
+            ));
+        }
+        let url = &self.database.url;
+        if !(url.starts_with("sqlite:")
+            || url.starts_with("postgres://")
+            || url.starts_with("postgresql://"))
+        {
+            p.push(ConfigProblem::at(
+                self.line("database.url"),
+                "database.url: must start with sqlite: or postgres://",
+            ));
+        }
+        p.extend(self.http.problems(&self.lines));
+        let mut names = std::collections::HashMap::new();
+        for (i, m) in self.machines.iter().enumerate() {
+            let at = |key: &str| self.line(&format!("machines[{i}]{key}"));
+            let label = format!("machines.{}", m.name);
+            if let Err(e) = MachineName::new(&m.name) {
+                p.push(ConfigProblem::at(at(".name"), format!("{label}: {e}")));
+            }
+            if let Some(first) = names.insert(m.name.clone(), i) {
+                let first_line = self.line(&format!("machines[{first}].name"));
+                let first_at = first_line.map(|l| format!(" (first at line {l})"));
+                p.push(ConfigProblem::at(
+                    at(".name"),
+                    format!(
+                        "{label}: duplicate machine name{}",
+                        first_at.unwrap_or_default()
+                    ),
+                ));
+            }
+            p.extend(m.gauge.problems(&label, |key| at(&format!(".gauge{key}"))));
+        }
+        p
+    }
+
+    /// A path from the file, resolved against the config file's folder.
+    pub fn resolve(&self, path: &Path) -> PathBuf {
+        if path.is_absolute() {
+            path.to_path_buf()
+        } else {
+            self.base_dir.join(path)
+        }
+    }
+
+    /// The database URL with a relative SQLite path resolved against the config's folder.
+    pub fn database_url(&self) -> String {
+        let url = &self.database.url;
+        match url.strip_prefix("sqlite://") {
+            Some(rest) if !rest.starts_with('/') && !rest.starts_with(":memory:") => {
+                format!("sqlite://{}", self.base_dir.join(rest).display())
+            }
+            _ => url.clone(),
+        }
+    }
+
+    pub fn var_dir(&self) -> PathBuf {
+        self.resolve(&self.service.var_dir)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MINIMAL: &str = r#"
+[[machines]]
+name = "SIM1"
+recipe = "parts/demo-camshaft.toml"
+lobe = "IN1"
+share = "../var/share/SIM1"
+[machines.gauge]
+kind = "sim"
+"#;
+
+    #[test]
+    fn environment_overrides_the_url_and_supplies_the_token_which_never_shows() {
+        let env = |k: &str| match k {
+            ENV_DATABASE_URL => Some("postgres://camloop:hunter2@db/camloop".to_string()),
+            ENV_API_TOKEN => Some("s3cret".to_string()),
+            _ => None,
+        };
+        let c = Config::parse(MINIMAL, Path::new("config/camloop.toml"), env).unwrap();
+        assert_eq!(c.database.url, "postgres://camloop:hunter2@db/camloop");
+        assert_eq!(c.api_token.as_ref().map(Secret::expose), Some("s3cret"));
+        let shown = format!("{c:?}");
+        assert!(
+            !shown.contains("hunter2") && !shown.contains("s3cret"),
+            "{shown}"
+        );
+    }
+
+    #[test]
+    fn relative_paths_resolve_against_the_config_folder() {
+        let c = Config::parse(MINIMAL, Path::new("config/camloop.toml"), |_| None).unwrap();
+        assert_eq!(
+            c.database_url(),
+            "sqlite://config/../var/camloop.db?mode=rwc"
+        );
+        assert_eq!(
+            c.resolve(Path::new("parts/x.toml")),
+            PathBuf::from("config/parts/x.toml")
+        );
+    }
+
+    #[test]
+    fn every_problem_is_reported_at_once() {
+        let text = r#"
+[database]
+url = "mysql://x"
+[[machines]]
+name = "bad name"
+recipe = "r.toml"
+lobe = "IN1"
+share = "s"
+[machines.gauge]
+kind = "sim"
+part_interval_ms = 0
+[[machines]]
+name = "bad name"
+recipe = "r.toml"
+lobe = "IN1"
+share = "s"
+[machines.gauge]
+kind = "drop"
+folder = "in"
+"#;
+        let e = Config::parse(text, Path::new("c.toml"), |_| None)
+            .unwrap_err()
+            .to_string();
+        for expected in [
+            "database.url",
+            "line 5: machines.bad name: name `bad name` has ` `",
+            "line 13: machines.bad name: duplicate machine name (first at line 5)",
+            "line 11: machines.bad name.gauge.part_interval_ms = 0: must be 1 to",
+        ] {
+            assert!(e.contains(expected), "`{expected}` missing from `{e}`");
+        }
+        let e = Config::parse("colour = 1\n", Path::new("c.toml"), |_| None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("c.toml: line 1: unknown field `colour`"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn every_unknown_key_is_reported_with_its_line() {
+        let text = format!("colour = 1\n{MINIMAL}seed = 2\nflavour = 3\n[http]\nport = 80\n");
+        let e = Config::parse(&text, Path::new("c.toml"), |_| None).unwrap_err();
+        let lines: Vec<(Option<usize>, &str)> = e
+            .problems
+            .iter()
+            .map(|p| (p.line, p.message.split(',').next().unwrap_or("")))
+            .collect();
+        assert_eq!(
+            lines,
+            [
+                (Some(1), "unknown field `colour`"),
+                (Some(11), "unknown field `flavour`"),
+                (Some(13), "unknown field `port`"),
+            ],
+            "{e}"
+        );
+    }
+}
