@@ -247,3 +247,19 @@ fn every_syntax_error_is_reported_with_its_line() {
         problems(&e)
     );
 }
+
+#[test]
+fn the_shipped_config_parses_with_the_documented_http_limits() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/camloop.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let c = config::Config::parse(&text, &path, |_| None).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(c.http.max_connections, 256);
+    assert_eq!(
+        (c.http.header_timeout_ms, c.http.body_timeout_ms),
+        (10_000, 10_000)
+    );
+    assert_eq!(
+        c.line("http.max_connections"),
+        Some(line_of(&text, "max_connections"))
+    );
+}

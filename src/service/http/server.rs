@@ -6,7 +6,9 @@
 //! - a client has `header_timeout` to send a request's headers (hyper's header read timeout,
 //!   which also runs while a kept-alive connection is idle), else the connection is closed;
 //! - a body has `body_timeout` to arrive (enforced where a body is read, see `ApiJson`);
-//! - on shutdown, idle connections close at once and requests in flight finish.
+//! - on shutdown, idle connections close at once and requests in flight finish;
+//! - the cap is lowered to half the process's open-file limit where that is lower, so the
+//!   gauges, the journals, the shares and the database always have descriptors left.
 
 use axum::Router;
 use hyper_util::rt::{TokioIo, TokioTimer};
@@ -47,6 +49,20 @@ pub async fn serve(
     limits: HttpLimits,
     mut shutdown: watch::Receiver<bool>,
 ) {
+    let mut limits = limits;
+    if let Some(files) = open_file_limit() {
+        // Half the descriptors stay for the gauges, the journals, the shares and the database.
+        let cap = usize::try_from(files / 2).unwrap_or(usize::MAX).max(1);
+        if limits.max_connections > cap {
+            warn!(
+                max_connections = limits.max_connections,
+                open_file_limit = files,
+                cap,
+                "http.max_connections lowered to half the open-file limit"
+            );
+            limits.max_connections = cap;
+        }
+    }
     let slots = Arc::new(Semaphore::new(limits.max_connections));
     let mut http = hyper::server::conn::http1::Builder::new();
     http.timer(TokioTimer::new())
@@ -93,4 +109,38 @@ pub async fn serve(
     // Every slot back means every connection has ended.
     let all = u32::try_from(limits.max_connections).unwrap_or(u32::MAX);
     let _ = tokio::time::timeout(DRAIN, slots.acquire_many(all)).await;
+}
+
+/// The process's soft limit on open files (Linux: from /proc/self/limits); `None` where
+/// unknown or unlimited.
+fn open_file_limit() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/self/limits").ok()?;
+    parse_open_file_limit(&text)
+}
+
+/// The soft limit on the `Max open files` line of a /proc/<pid>/limits text.
+fn parse_open_file_limit(limits: &str) -> Option<u64> {
+    let line = limits.lines().find(|l| l.starts_with("Max open files"))?;
+    line["Max open files".len()..]
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_soft_open_file_limit_is_read_from_proc_limits() {
+        let text = "Limit                     Soft Limit           Hard Limit           Units     \n\
+                    Max cpu time              unlimited            unlimited            seconds   \n\
+                    Max open files            1024                 524288               files     \n";
+        assert_eq!(parse_open_file_limit(text), Some(1024));
+        let unlimited =
+            "Max open files            unlimited            unlimited            files\n";
+        assert_eq!(parse_open_file_limit(unlimited), None);
+        assert_eq!(parse_open_file_limit(""), None);
+    }
 }
