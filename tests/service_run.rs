@@ -186,9 +186,11 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
         post(addr, path, r#"{"version":1}"#, Some("wrong")).await.0,
         401
     );
+    // A version that does not exist: the machine's typed answer, 404 with a stable code.
+    let (status, body) = post(addr, path, r#"{"version":999}"#, Some(TOKEN)).await;
     assert_eq!(
-        post(addr, path, r#"{"version":999}"#, Some(TOKEN)).await.0,
-        409
+        (status, json(&body)["code"].clone()),
+        (404, "table_version_not_found".into())
     );
     // A lobe this machine does not grind is not rolled back in its place.
     let (status, body) = post(
@@ -213,6 +215,11 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
     );
     let (status, body) = post(addr, path, r#"{"version":1}"#, Some(TOKEN)).await;
     assert_eq!(status, 200, "{body}");
+    let delivered = json(&body);
+    assert!(
+        delivered["version"].as_i64().is_some_and(|v| v > 1),
+        "{body}"
+    );
     let (_, body) = get(addr, "/api/v1/machines/SIM1/lobes/IN1/tables?limit=1").await;
     let rolled = json(&body)["items"][0].clone();
     assert_eq!(rolled["reason"], "rollback to v1", "{body}");
