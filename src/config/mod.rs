@@ -4,6 +4,7 @@
 
 mod check;
 mod keys;
+mod values;
 
 pub use check::{Checked, CheckedMachine, check, load};
 pub use keys::Lines;
@@ -184,99 +185,6 @@ fn default_stable_ms() -> u64 {
 
 fn default_max_file_bytes() -> u64 {
     16 * 1024 * 1024
-}
-
-impl HttpSection {
-    fn problems(&self, lines: &Lines) -> Vec<ConfigProblem> {
-        let mut p = Vec::new();
-        if !(1..=65_536).contains(&self.max_connections) {
-            p.push(ConfigProblem::at(
-                lines.of("http.max_connections"),
-                format!(
-                    "http.max_connections = {}: must be 1 to 65536",
-                    self.max_connections
-                ),
-            ));
-        }
-        for (key, ms) in [
-            ("header_timeout_ms", self.header_timeout_ms),
-            ("body_timeout_ms", self.body_timeout_ms),
-        ] {
-            if !(1..=3_600_000).contains(&ms) {
-                p.push(ConfigProblem::at(
-                    lines.of(&format!("http.{key}")),
-                    format!("http.{key} = {ms}: must be 1 to 3600000 ms"),
-                ));
-            }
-        }
-        p
-    }
-}
-
-impl GaugeSection {
-    /// `line` gives the line of a key below the gauge section (`""` for the section).
-    fn problems(&self, label: &str, line: impl Fn(&str) -> Option<usize>) -> Vec<ConfigProblem> {
-        let mut p = Vec::new();
-        let range = |p: &mut Vec<ConfigProblem>,
-                     key: &str,
-                     value: u64,
-                     ok: std::ops::RangeInclusive<u64>| {
-            if !ok.contains(&value) {
-                p.push(ConfigProblem::at(
-                    line(&format!(".{key}")),
-                    format!(
-                        "{label}.gauge.{key} = {value}: must be {} to {}",
-                        ok.start(),
-                        ok.end()
-                    ),
-                ));
-            }
-        };
-        match self {
-            GaugeSection::Sim {
-                part_interval_ms,
-                grinder,
-                ..
-            } => {
-                range(
-                    &mut p,
-                    "part_interval_ms",
-                    *part_interval_ms,
-                    1..=86_400_000,
-                );
-                p.extend(grinder.problems().into_iter().map(|e| {
-                    ConfigProblem::at(line(".grinder"), format!("{label}.gauge.grinder: {e}"))
-                }));
-            }
-            GaugeSection::Drop {
-                poll_ms,
-                stable_ms,
-                max_file_bytes,
-                ..
-            } => {
-                range(&mut p, "poll_ms", *poll_ms, 10..=60_000);
-                range(&mut p, "stable_ms", *stable_ms, 1..=3_600_000);
-                range(&mut p, "max_file_bytes", *max_file_bytes, 1024..=(1 << 30));
-            }
-            GaugeSection::Can { interface, .. } if interface.is_empty() => {
-                p.push(ConfigProblem::at(
-                    line(".interface"),
-                    format!("{label}.gauge.interface: must not be empty"),
-                ));
-            }
-            GaugeSection::Serial { port, baud } => {
-                if port.is_empty() {
-                    p.push(ConfigProblem::at(
-                        line(".port"),
-                        format!("{label}.gauge.port: must not be empty"),
-                    ));
-                }
-                range(&mut p, "baud", u64::from(*baud), 50..=4_000_000);
-            }
-            GaugeSection::Can { .. } => {}
-        }
-        p
-    }
 }
 
 /// A secret that never shows in Debug output or logs.
@@ -537,6 +445,38 @@ folder = "in"
             .to_string();
         assert!(
             e.starts_with("c.toml: line 1: unknown field `colour`"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_bad_value_drops_only_its_own_section_and_the_rest_is_still_checked() {
+        let text = format!(
+            "[http]\nlisten = \"nowhere\"\n[database]\nurl = \"mysql://x\"\n\
+             [[machines]]\nname = \"NOGAUGE\"\nrecipe = \"r.toml\"\nlobe = \"IN1\"\nshare = \"s\"\n\
+             {MINIMAL}colour = 2\n"
+        );
+        let e = Config::parse(&text, Path::new("c.toml"), |_| None).unwrap_err();
+        let shown: Vec<String> = e.problems.iter().map(ToString::to_string).collect();
+        assert_eq!(e.problems.len(), 4, "{shown:?}");
+        assert!(
+            shown[0].starts_with("line 2: invalid socket address"),
+            "{shown:?}"
+        );
+        assert!(shown[1].starts_with("line 4: database.url"), "{shown:?}");
+        assert!(
+            shown[2].starts_with("line 5: missing field `gauge`"),
+            "{shown:?}"
+        );
+        assert!(
+            shown[3].starts_with("line 18: unknown field `colour`"),
+            "{shown:?}"
+        );
+        let e = Config::parse("machines = 5\n", Path::new("c.toml"), |_| None).unwrap_err();
+        assert_eq!(e.problems.len(), 1, "{e}");
+        assert!(
+            e.to_string()
+                .starts_with("c.toml: line 1: invalid type: integer `5`"),
             "{e}"
         );
     }
