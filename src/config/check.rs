@@ -98,7 +98,7 @@ pub fn check(config: Config) -> Result<Checked, ConfigError> {
         }
     }
     problems.extend(shared_folders(&config));
-    let listener = match std::net::TcpListener::bind(config.http.listen) {
+    let listener = match bind(config.http.listen) {
         Ok(l) => Some(l),
         Err(e) => {
             problems.push(ConfigProblem::at(
@@ -122,6 +122,22 @@ pub fn check(config: Config) -> Result<Checked, ConfigError> {
             })
         }
     }
+}
+
+/// Connections the kernel queues while every slot is taken (`http.max_connections`), as
+/// many as tokio's own bind would allow.
+const BACKLOG: i32 = 1024;
+
+/// Binds the API's listener (address reuse as std and tokio set it, a backlog of
+/// [`BACKLOG`]) without needing a runtime.
+fn bind(addr: std::net::SocketAddr) -> std::io::Result<std::net::TcpListener> {
+    use socket2::{Domain, Protocol, Socket, Type};
+    let socket = Socket::new(Domain::for_address(addr), Type::STREAM, Some(Protocol::TCP))?;
+    #[cfg(unix)]
+    socket.set_reuse_address(true)?;
+    socket.bind(&addr.into())?;
+    socket.listen(BACKLOG)?;
+    Ok(socket.into())
 }
 
 /// Two machines writing one share (or reading one drop folder) overwrite each other's
