@@ -31,6 +31,22 @@ impl HttpSection {
 }
 
 impl GaugeSection {
+    /// A drop gauge's `stable_ms` and `max_file_bytes`, as the drop folder takes them;
+    /// `None` for other gauges.
+    pub fn drop_options(&self) -> Option<crate::gauge::DropOptions> {
+        match self {
+            GaugeSection::Drop {
+                stable_ms,
+                max_file_bytes,
+                ..
+            } => Some(crate::gauge::DropOptions {
+                stable_ms: *stable_ms,
+                max_file_bytes: *max_file_bytes,
+            }),
+            _ => None,
+        }
+    }
+
     /// `line` gives the line of a key below the gauge section (`""` for the section).
     pub(super) fn problems(
         &self,
