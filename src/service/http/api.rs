@@ -158,7 +158,7 @@ impl FromRequestParts<AppState> for Authorized {
         let given = parts
             .headers
             .get(header::AUTHORIZATION)
-            .and_then(|v| v.strip_prefix_bytes(b"Bearer "))
+            .and_then(|v| v.as_bytes().strip_prefix(b"Bearer "))
             .unwrap_or_default();
         if same_secret(given, token.expose().as_bytes()) {
             Ok(Authorized)
@@ -169,17 +169,6 @@ impl FromRequestParts<AppState> for Authorized {
                 "missing or wrong API token".into(),
             ))
         }
-    }
-}
-
-/// `Authorization` header bytes after a prefix.
-trait StripPrefixBytes {
-    fn strip_prefix_bytes(&self, prefix: &[u8]) -> Option<&[u8]>;
-}
-
-impl StripPrefixBytes for axum::http::HeaderValue {
-    fn strip_prefix_bytes(&self, prefix: &[u8]) -> Option<&[u8]> {
-        self.as_bytes().strip_prefix(prefix)
     }
 }
 
