@@ -13,6 +13,7 @@ pub mod config;
 pub mod core;
 pub mod digest;
 pub mod gauge;
+pub mod names;
 pub mod recipe;
 pub mod service;
 pub mod share;

@@ -111,7 +111,77 @@ fn a_bad_configuration_is_refused_with_every_problem() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(
-        err.contains("bad.toml") && err.contains("database.url") && err.contains("name must be"),
+        err.contains("bad.toml: line 2: database.url")
+            && err.contains("line 4: machines.a b: name `a b`"),
         "{err}"
     );
+}
+
+/// Unknown keys, a bad name, a duplicate, two missing recipes, two machines on one share
+/// and a port in use: all in one line on stderr, each with its line, a non-zero exit, and
+/// neither the database nor a share created.
+#[test]
+fn every_problem_is_reported_before_the_database_or_a_share_is_touched() {
+    let dir = tempfile::tempdir().unwrap();
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port();
+    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let machine = |name: &str, recipe: &str, share: &str| {
+        format!(
+            "[[machines]]\nname = \"{name}\"\nrecipe = \"{recipe}\"\nlobe = \"IN1\"\nshare = \"{share}\"\n[machines.gauge]\nkind = \"sim\"\n"
+        )
+    };
+    let good = recipe.display().to_string();
+    let config = format!(
+        "[service]\nvar_dir = \"var\"\ncolor = 1\n[database]\nurl = \"sqlite://var/camloop.db?mode=rwc\"\n\
+         [http]\nlisten = \"127.0.0.1:{port}\"\nlisten_backlog = 9\n{}{}{}{}{}",
+        machine("M 1", "nope-a.toml", "share/1"),
+        machine("M2", "nope-b.toml", "share/2"),
+        machine("M2", &good, "share/3"),
+        machine("M4", &good, "share/5"),
+        machine("M5", &good, "share/./5"),
+    );
+    std::fs::write(dir.path().join("camloop.toml"), &config).unwrap();
+    let out = camloop(
+        &["run", "--config", "camloop.toml", "--parts", "1"],
+        dir.path(),
+    );
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    let line = |marker: &str| config.lines().position(|l| l.contains(marker)).unwrap() + 1;
+    let second_m2 = config
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| l.contains("\"M2\""))
+        .nth(1)
+        .unwrap()
+        .0
+        + 1;
+    for expected in [
+        format!("line {}: unknown field `color`", line("color")),
+        format!(
+            "line {}: unknown field `listen_backlog`",
+            line("listen_backlog")
+        ),
+        format!("line {}: machines.M 1: name `M 1`", line("\"M 1\"")),
+        format!(
+            "line {}: machines.M 1.recipe: cannot read recipe",
+            line("nope-a")
+        ),
+        format!(
+            "line {}: machines.M2.recipe: cannot read recipe",
+            line("nope-b")
+        ),
+        format!("line {second_m2}: machines.M2: duplicate machine name"),
+        format!("line {}: machines.M5.share", line("share/./5")),
+        format!(
+            "line {}: http.listen: cannot listen on 127.0.0.1:{port}",
+            line("listen =")
+        ),
+    ] {
+        assert!(err.contains(&expected), "`{expected}` missing from {err}");
+    }
+    assert!(!dir.path().join("var").exists(), "the database was created");
+    assert!(!dir.path().join("share").exists(), "a share was written");
 }

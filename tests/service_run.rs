@@ -186,12 +186,40 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
         post(addr, path, r#"{"version":1}"#, Some("wrong")).await.0,
         401
     );
+    // A version that does not exist: the machine's typed answer, 404 with a stable code.
+    let (status, body) = post(addr, path, r#"{"version":999}"#, Some(TOKEN)).await;
     assert_eq!(
-        post(addr, path, r#"{"version":999}"#, Some(TOKEN)).await.0,
-        409
+        (status, json(&body)["code"].clone()),
+        (404, "table_version_not_found".into())
+    );
+    // A lobe this machine does not grind is not rolled back in its place.
+    let (status, body) = post(
+        addr,
+        "/api/v1/machines/SIM1/lobes/EX9/rollback",
+        r#"{"version":1}"#,
+        Some(TOKEN),
+    )
+    .await;
+    assert_eq!(
+        (status, json(&body)["code"].clone()),
+        (404, "lobe_not_found".into())
+    );
+    // The machine list names the lobe the machine grinds.
+    let (status, body) = get(addr, "/api/v1/machines").await;
+    assert_eq!(status, 200, "{body}");
+    let lobes = json(&body)["machines"][0]["lobes"].clone();
+    assert_eq!(lobes.as_array().map(Vec::len), Some(1), "{body}");
+    assert_eq!(
+        (lobes[0]["lobe"].clone(), lobes[0]["configured"].clone()),
+        ("IN1".into(), true.into())
     );
     let (status, body) = post(addr, path, r#"{"version":1}"#, Some(TOKEN)).await;
     assert_eq!(status, 200, "{body}");
+    let delivered = json(&body);
+    assert!(
+        delivered["version"].as_i64().is_some_and(|v| v > 1),
+        "{body}"
+    );
     let (_, body) = get(addr, "/api/v1/machines/SIM1/lobes/IN1/tables?limit=1").await;
     let rolled = json(&body)["items"][0].clone();
     assert_eq!(rolled["reason"], "rollback to v1", "{body}");

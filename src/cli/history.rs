@@ -4,7 +4,7 @@
 use super::output::Outputs;
 use crate::clock::now_ms;
 use crate::config::{Config, ENV_DATABASE_URL};
-use crate::store::{HistoryFilter, MeasurementSummary, Store};
+use crate::store::{HistoryFilter, MAX_PAGE, MeasurementSummary, Store};
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use std::fmt::Write as _;
@@ -37,7 +37,7 @@ pub struct HistoryArgs {
     /// From this time: `2026-11-21`, `2026-11-21T10:00:00Z`, Unix ms, or an age like `24h`, `7d`.
     #[arg(long, value_name = "TIME")]
     pub since: Option<String>,
-    /// The newest N measurements.
+    /// The newest N measurements (any number: the store is read page by page).
     #[arg(long, value_name = "N", default_value_t = 20)]
     pub last: u32,
     #[arg(long, value_enum, default_value_t = Format::Table)]
@@ -71,21 +71,43 @@ pub fn run_history(args: HistoryArgs) -> anyhow::Result<()> {
         .map(|t| parse_time(t, now))
         .transpose()?;
     let runtime = runtime()?;
-    let page = runtime.block_on(async {
+    let rows = runtime.block_on(async {
         let store = connect(&args.store).await?;
         let filter = HistoryFilter {
             machine: args.machine.clone(),
             lobe: args.lobe.clone(),
             since_ms: since,
-            limit: args.last.clamp(1, 10_000),
             ..HistoryFilter::default()
         };
-        let page = store.measurement_history(&filter).await?;
+        let rows = newest(&store, filter, args.last, MAX_PAGE).await;
         store.close().await;
-        anyhow::Ok(page)
+        anyhow::Ok(rows?)
     })?;
-    print!("{}", render(&page.items, args.format)?);
+    print!("{}", render(&rows, args.format)?);
     Ok(())
+}
+
+/// The newest `last` measurements matching `filter` (newest first), read `page` rows at a
+/// time (the store serves at most [`MAX_PAGE`] per query), so `--last` is never capped.
+pub async fn newest(
+    store: &Store,
+    mut filter: HistoryFilter,
+    last: u32,
+    page: u32,
+) -> anyhow::Result<Vec<MeasurementSummary>> {
+    let page = page.clamp(1, MAX_PAGE);
+    let mut rows = Vec::new();
+    filter.cursor = None;
+    while let Some(wanted) = last.checked_sub(rows.len() as u32).filter(|&n| n > 0) {
+        filter.limit = wanted.min(page);
+        let batch = store.measurement_history(&filter).await?;
+        rows.extend(batch.items);
+        match batch.next_cursor {
+            Some(cursor) => filter.cursor = Some(cursor),
+            None => break,
+        }
+    }
+    Ok(rows)
 }
 
 pub fn run_export(args: ExportArgs) -> anyhow::Result<()> {

@@ -3,7 +3,7 @@
 
 mod analyze;
 mod compensate;
-mod history;
+pub mod history;
 mod output;
 mod part;
 mod program_args;

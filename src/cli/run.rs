@@ -1,6 +1,6 @@
 //! `camloop run`: loads the configuration, sets up logging and starts the service.
 
-use crate::config::{Config, LogFormat};
+use crate::config::LogFormat;
 use crate::service::{self, RunOptions};
 use anyhow::Context;
 use clap::Args;
@@ -19,13 +19,15 @@ pub struct RunArgs {
 pub fn run_service(args: RunArgs) -> anyhow::Result<()> {
     let text = std::fs::read_to_string(&args.config)
         .with_context(|| format!("cannot read configuration {}", args.config.display()))?;
-    let config = Config::parse(&text, &args.config, |k| std::env::var(k).ok())?;
-    init_logging(config.service.log_format);
+    // Everything is checked, recipes, DBC files, folders and the listener included, before
+    // the database or a share is touched; every problem is reported in one error.
+    let checked = crate::config::load(&text, &args.config, |k| std::env::var(k).ok())?;
+    init_logging(checked.config.service.log_format);
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
         .context("cannot start the async runtime")?;
-    runtime.block_on(service::run(config, RunOptions { parts: args.parts }))
+    runtime.block_on(service::run(checked, RunOptions { parts: args.parts }))
 }
 
 /// Plain lines for a terminal, JSON lines for collectors; RUST_LOG filters (default info).

@@ -9,7 +9,7 @@ pub mod machine;
 pub mod metrics;
 pub mod sim_source;
 
-use crate::config::{Config, GaugeSection};
+use crate::config::{Checked, Config, GaugeSection};
 use crate::recipe::Recipe;
 use crate::store::Store;
 use anyhow::Context;
@@ -77,8 +77,8 @@ impl Running {
 }
 
 /// Runs the service until a signal (or, with `parts`, until every simulated machine is done).
-pub async fn run(config: Config, options: RunOptions) -> anyhow::Result<()> {
-    let mut running = start(config, options).await?;
+pub async fn run(checked: Checked, options: RunOptions) -> anyhow::Result<()> {
+    let mut running = start_checked(checked, options).await?;
     tokio::select! {
         _ = running.machines_done() => info!("every machine finished its parts"),
         _ = shutdown_signal() => info!("signal received: finishing the parts in hand"),
@@ -87,8 +87,26 @@ pub async fn run(config: Config, options: RunOptions) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Starts every task of the service and returns at once.
+/// Checks the config and everything it names (see [`crate::config::check`]), then starts
+/// every task of the service and returns at once.
 pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Running> {
+    start_checked(crate::config::check(config)?, options).await
+}
+
+/// Starts every task of a service whose config passed every check (so nothing below
+/// touches the database or a share before the whole config is known good) and returns at
+/// once.
+pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Result<Running> {
+    let Checked {
+        config,
+        machines: checked_machines,
+        listener,
+    } = checked;
+    listener
+        .set_nonblocking(true)
+        .context("cannot set up the HTTP listener")?;
+    let listener =
+        tokio::net::TcpListener::from_std(listener).context("cannot set up the HTTP listener")?;
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let metrics = Arc::new(Metrics::default());
     let store: StoreHandle = Arc::new(tokio::sync::RwLock::new(None));
@@ -144,7 +162,9 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
                 };
                 tokio::spawn(source.run(tx, shutdown_rx.clone()));
             }
-            GaugeSection::Drop { folder, poll_ms } => {
+            GaugeSection::Drop {
+                folder, poll_ms, ..
+            } => {
                 tokio::spawn(drop_source::run(
                     m.name.clone(),
                     config.resolve(folder),
@@ -182,26 +202,23 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
         )));
     }
 
+    let limits = http::HttpLimits::from_config(&config.http);
     let app = http::router(http::AppState {
         store: store.clone(),
         metrics: metrics.clone(),
-        machines: Arc::new(config.machines.iter().map(|m| m.name.clone()).collect()),
+        machines: Arc::new(
+            checked_machines
+                .into_iter()
+                .map(|m| (m.name, vec![m.setup.name]))
+                .collect(),
+        ),
         commands: Arc::new(commands),
         token: config.api_token.clone(),
+        body_timeout: limits.body_timeout,
     });
-    let listener = tokio::net::TcpListener::bind(config.http.listen)
-        .await
-        .with_context(|| format!("cannot listen on {}", config.http.listen))?;
     let http_addr = listener.local_addr()?;
     info!(listen = %http_addr, machines = config.machines.len(), "camloop started");
-    let mut http_shutdown = shutdown_rx.clone();
-    let server = tokio::spawn(async move {
-        let _ = axum::serve(listener, app)
-            .with_graceful_shutdown(async move {
-                let _ = http_shutdown.changed().await;
-            })
-            .await;
-    });
+    let server = tokio::spawn(http::serve(listener, app, limits, shutdown_rx.clone()));
 
     let machines_done = tokio::spawn(async move {
         for done in sources_done {
@@ -244,17 +261,12 @@ async fn machine_task(
                 }
             },
             Some(command) = commands.recv() => match command {
-                http::Command::Rollback { version, reply } => {
-                    let lobe = machine.feature_name().to_string();
-                    let result = match u64::try_from(version) {
-                        Ok(v) => machine.rollback(&lobe, v).await.map(|r| r.summary).map_err(|e| format!("{e:#}")),
-                        Err(_) => Err(format!("version {version} not found")),
-                    };
-                    let _ = reply.send(result);
+                http::Command::Rollback { lobe, version, reply } => {
+                    let _ = reply.send(rollback_result(&mut machine, &lobe, version).await);
                 }
                 http::Command::Dressing { wheel_radius_mm, reply } => {
-                    let result = machine.dress(wheel_radius_mm, "api").await.map(|d| d.summary).map_err(|e| format!("{e:#}"));
-                    let _ = reply.send(result);
+                    let result = machine.dress(wheel_radius_mm, "api").await;
+                    let _ = reply.send(dressing_result(result));
                 }
             },
             _ = retry.tick() => machine.retry().await,
@@ -263,6 +275,47 @@ async fn machine_task(
     }
     // Whatever is still waiting gets one more try before the process ends.
     machine.retry().await;
+}
+
+/// A rollback asked for through the API, its outcome as the HTTP side wants it.
+async fn rollback_result(
+    machine: &mut MachineLoop,
+    lobe: &str,
+    version: i64,
+) -> Result<http::CommandDone, http::CommandError> {
+    use http::CommandError;
+    let not_found = || CommandError::VersionNotFound {
+        lobe: lobe.to_string(),
+        version,
+    };
+    let v = u64::try_from(version).map_err(|_| not_found())?;
+    match machine.rollback(lobe, v).await {
+        Ok(done) => Ok(http::CommandDone {
+            version: i64::try_from(done.new_version).ok(),
+            message: done.summary,
+        }),
+        Err(machine::RollbackError::NotFound { .. }) => Err(not_found()),
+        Err(e @ machine::RollbackError::StoreUnavailable) => Err(CommandError::StoreUnavailable {
+            reason: e.to_string(),
+        }),
+        Err(e) => Err(CommandError::Refused {
+            reason: format!("{e:#}"),
+        }),
+    }
+}
+
+/// A dressing reported through the API, its outcome as the HTTP side wants it.
+fn dressing_result(
+    result: anyhow::Result<machine::Dressed>,
+) -> Result<http::CommandDone, http::CommandError> {
+    result
+        .map(|d| http::CommandDone {
+            version: None,
+            message: d.summary,
+        })
+        .map_err(|e| http::CommandError::Refused {
+            reason: format!("{e:#}"),
+        })
 }
 
 async fn connect_store(config: &Config, store: &StoreHandle) {

@@ -35,7 +35,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 use tracing::{error, info, warn};
 
+pub use dressing::Dressed;
 pub use ingest::GaugeIds;
+pub use rollback::{RollbackError, RolledBack};
 
 /// The database, once it can be reached (a background task connects and reconnects).
 pub type StoreHandle = Arc<tokio::sync::RwLock<Option<Store>>>;

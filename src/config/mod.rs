@@ -2,6 +2,14 @@
 //! errors, every problem is reported at once, secrets come from the environment and are
 //! redacted in Debug output.
 
+mod check;
+mod keys;
+mod values;
+
+pub use check::{Checked, CheckedMachine, check, load};
+pub use keys::Lines;
+
+use crate::names::MachineName;
 use crate::sim::GrinderConfig;
 use serde::Deserialize;
 use std::fmt;
@@ -22,6 +30,7 @@ pub struct Config {
     pub database: DatabaseSection,
     #[serde(default)]
     pub http: HttpSection,
+    #[serde(default)]
     pub machines: Vec<MachineSection>,
     /// Folder of the config file; relative paths in the file are resolved against it.
     #[serde(skip)]
@@ -29,6 +38,12 @@ pub struct Config {
     /// The API token, from the environment only.
     #[serde(skip)]
     pub api_token: Option<Secret>,
+    /// The line of every key in the file, for problems found after parsing.
+    #[serde(skip)]
+    pub lines: Lines,
+    /// The config file, for messages.
+    #[serde(skip)]
+    pub file: PathBuf,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -90,12 +105,22 @@ impl fmt::Debug for DatabaseSection {
 pub struct HttpSection {
     /// Address the API listens on; localhost unless you mean otherwise.
     pub listen: SocketAddr,
+    /// Connections served at once; more wait in the kernel's queue until one ends.
+    pub max_connections: usize,
+    /// A client has this long to send a request's headers (also an idle keep-alive
+    /// connection's limit), ms.
+    pub header_timeout_ms: u64,
+    /// A client has this long to send a request's body once its headers are in, ms.
+    pub body_timeout_ms: u64,
 }
 
 impl Default for HttpSection {
     fn default() -> Self {
         Self {
             listen: SocketAddr::from(([127, 0, 0, 1], 8080)),
+            max_connections: 256,
+            header_timeout_ms: 10_000,
+            body_timeout_ms: 10_000,
         }
     }
 }
@@ -137,6 +162,12 @@ pub enum GaugeSection {
         folder: PathBuf,
         #[serde(default = "default_poll_ms")]
         poll_ms: u64,
+        /// A file is taken once its size and time have not changed for this long, ms.
+        #[serde(default = "default_stable_ms")]
+        stable_ms: u64,
+        /// A bigger file is rejected unread, bytes.
+        #[serde(default = "default_max_file_bytes")]
+        max_file_bytes: u64,
     },
 }
 
@@ -148,11 +179,23 @@ fn default_poll_ms() -> u64 {
     500
 }
 
+fn default_stable_ms() -> u64 {
+    10_000
+}
+
+fn default_max_file_bytes() -> u64 {
+    16 * 1024 * 1024
+}
+
 /// A secret that never shows in Debug output or logs.
 #[derive(Clone, PartialEq, Eq)]
 pub struct Secret(String);
 
 impl Secret {
+    pub fn new(secret: impl Into<String>) -> Self {
+        Self(secret.into())
+    }
+
     pub fn expose(&self) -> &str {
         &self.0
     }
@@ -164,89 +207,133 @@ impl fmt::Debug for Secret {
     }
 }
 
-/// Every problem found, one per entry, each naming the file and the key.
+/// One problem in the configuration: the line of the config file it is on (when known) and
+/// what is wrong. Problems found in files the config names (recipes, DBC files) carry the
+/// line of the key that names them, and the other file's name and line in the message.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConfigProblem {
+    pub line: Option<usize>,
+    pub message: String,
+}
+
+impl ConfigProblem {
+    fn at(line: Option<usize>, message: impl Into<String>) -> Self {
+        Self {
+            line,
+            message: message.into(),
+        }
+    }
+}
+
+impl fmt::Display for ConfigProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.line {
+            Some(l) => write!(f, "line {l}: {}", self.message),
+            None => f.write_str(&self.message),
+        }
+    }
+}
+
+/// Every problem found, one per entry, each naming the line and the key.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{file}: {}", .problems.join("; "))]
+#[error("{file}: {}", join(.problems))]
 pub struct ConfigError {
     pub file: String,
-    pub problems: Vec<String>,
+    pub problems: Vec<ConfigProblem>,
+}
+
+fn join(problems: &[ConfigProblem]) -> String {
+    let texts: Vec<String> = problems.iter().map(ToString::to_string).collect();
+    texts.join("; ")
 }
 
 impl Config {
     /// Parses the text of `file`, applies the environment (`env` looks a variable up), and
-    /// checks everything, reporting every problem at once.
+    /// checks everything that needs no other file, reporting every problem at once. The
+    /// service checks the files the config names, and its listener, with [`check`] or
+    /// [`load`].
     pub fn parse(
         text: &str,
         file: &Path,
         env: impl Fn(&str) -> Option<String>,
     ) -> Result<Self, ConfigError> {
-        let error = |problems: Vec<String>| ConfigError {
-            file: file.display().to_string(),
-            problems,
+        match Self::read(text, file, env) {
+            (Some(config), problems) if problems.is_empty() => Ok(config),
+            (_, problems) => Err(ConfigError {
+                file: file.display().to_string(),
+                problems,
+            }),
+        }
+    }
+
+    /// Parses as far as possible: the config (when its structure could be read) and every
+    /// problem found.
+    pub(crate) fn read(
+        text: &str,
+        file: &Path,
+        env: impl Fn(&str) -> Option<String>,
+    ) -> (Option<Self>, Vec<ConfigProblem>) {
+        let read = keys::read::<Config>(text);
+        let mut problems = read.problems;
+        let Some(mut config) = read.value else {
+            return (None, problems);
         };
-        let mut config: Config = toml::from_str(text).map_err(|e| {
-            let line = e
-                .span()
-                .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
-            let at = line.map(|l| format!("line {l}: ")).unwrap_or_default();
-            error(vec![format!("{at}{}", e.message().trim_end())])
-        })?;
+        config.lines = read.lines;
+        config.file = file.to_path_buf();
         config.base_dir = file.parent().map(Path::to_path_buf).unwrap_or_default();
         if let Some(url) = env(ENV_DATABASE_URL) {
             config.database.url = url;
         }
         config.api_token = env(ENV_API_TOKEN).filter(|t| !t.is_empty()).map(Secret);
-        let problems = config.problems();
-        if problems.is_empty() {
-            Ok(config)
-        } else {
-            Err(error(problems))
-        }
+        let machines_dropped = read.dropped.iter().any(|k| k == "machines");
+        problems.extend(config.problems(machines_dropped));
+        problems.sort_by_key(|p| p.line.unwrap_or(usize::MAX));
+        (Some(config), problems)
     }
 
-    fn problems(&self) -> Vec<String> {
+    /// The line of `path` (`http.listen`, `machines[0].name`) in the file.
+    pub fn line(&self, path: &str) -> Option<usize> {
+        self.lines.of(path)
+    }
+
+    fn problems(&self, machines_dropped: bool) -> Vec<ConfigProblem> {
         let mut p = Vec::new();
-        if self.machines.is_empty() {
-            p.push("at least one [[machines]] is needed".to_string());
+        if self.machines.is_empty() && !machines_dropped {
+            p.push(ConfigProblem::at(
+                None,
+                "at least one [[machines]] is needed",
+            ));
         }
         let url = &self.database.url;
         if !(url.starts_with("sqlite:")
             || url.starts_with("postgres://")
             || url.starts_with("postgresql://"))
         {
-            p.push("database.url: must start with sqlite: or postgres://".to_string());
+            p.push(ConfigProblem::at(
+                self.line("database.url"),
+                "database.url: must start with sqlite: or postgres://",
+            ));
         }
-        let mut names = std::collections::HashSet::new();
-        for m in &self.machines {
-            let at = format!("machines.{}", m.name);
-            if !(1..=32).contains(&m.name.len())
-                || !m
-                    .name
-                    .chars()
-                    .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
-            {
-                p.push(format!(
-                    "{at}: name must be 1–32 letters, digits, '-' or '_'"
+        p.extend(self.http.problems(&self.lines));
+        let mut names = std::collections::HashMap::new();
+        for (i, m) in self.machines.iter().enumerate() {
+            let at = |key: &str| self.line(&format!("machines[{i}]{key}"));
+            let label = format!("machines.{}", m.name);
+            if let Err(e) = MachineName::new(&m.name) {
+                p.push(ConfigProblem::at(at(".name"), format!("{label}: {e}")));
+            }
+            if let Some(first) = names.insert(m.name.clone(), i) {
+                let first_line = self.line(&format!("machines[{first}].name"));
+                let first_at = first_line.map(|l| format!(" (first at line {l})"));
+                p.push(ConfigProblem::at(
+                    at(".name"),
+                    format!(
+                        "{label}: duplicate machine name{}",
+                        first_at.unwrap_or_default()
+                    ),
                 ));
             }
-            if !names.insert(m.name.clone()) {
-                p.push(format!("{at}: duplicate machine name"));
-            }
-            if let GaugeSection::Sim {
-                part_interval_ms: 0,
-                ..
-            } = m.gauge
-            {
-                p.push(format!("{at}.gauge.part_interval_ms: must be > 0"));
-            }
-            if let GaugeSection::Sim { grinder, .. } = &m.gauge {
-                p.extend(
-                    grinder
-                        .problems()
-                        .into_iter()
-                        .map(|e| format!("{at}.gauge.grinder: {e}")),
-                );
-            }
+            p.extend(m.gauge.problems(&label, |key| at(&format!(".gauge{key}"))));
         }
         p
     }
@@ -347,9 +434,9 @@ folder = "in"
             .to_string();
         for expected in [
             "database.url",
-            "name must be",
-            "duplicate machine name",
-            "part_interval_ms: must be > 0",
+            "line 5: machines.bad name: name `bad name` has ` `",
+            "line 13: machines.bad name: duplicate machine name (first at line 5)",
+            "line 11: machines.bad name.gauge.part_interval_ms = 0: must be 1 to",
         ] {
             assert!(e.contains(expected), "`{expected}` missing from `{e}`");
         }
@@ -358,6 +445,58 @@ folder = "in"
             .to_string();
         assert!(
             e.starts_with("c.toml: line 1: unknown field `colour`"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_bad_value_drops_only_its_own_section_and_the_rest_is_still_checked() {
+        let text = format!(
+            "[http]\nlisten = \"nowhere\"\n[database]\nurl = \"mysql://x\"\n\
+             [[machines]]\nname = \"NOGAUGE\"\nrecipe = \"r.toml\"\nlobe = \"IN1\"\nshare = \"s\"\n\
+             {MINIMAL}colour = 2\n"
+        );
+        let e = Config::parse(&text, Path::new("c.toml"), |_| None).unwrap_err();
+        let shown: Vec<String> = e.problems.iter().map(ToString::to_string).collect();
+        assert_eq!(e.problems.len(), 4, "{shown:?}");
+        assert!(
+            shown[0].starts_with("line 2: invalid socket address"),
+            "{shown:?}"
+        );
+        assert!(shown[1].starts_with("line 4: database.url"), "{shown:?}");
+        assert!(
+            shown[2].starts_with("line 5: missing field `gauge`"),
+            "{shown:?}"
+        );
+        assert!(
+            shown[3].starts_with("line 18: unknown field `colour`"),
+            "{shown:?}"
+        );
+        let e = Config::parse("machines = 5\n", Path::new("c.toml"), |_| None).unwrap_err();
+        assert_eq!(e.problems.len(), 1, "{e}");
+        assert!(
+            e.to_string()
+                .starts_with("c.toml: line 1: invalid type: integer `5`"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn every_unknown_key_is_reported_with_its_line() {
+        let text = format!("colour = 1\n{MINIMAL}seed = 2\nflavour = 3\n[http]\nport = 80\n");
+        let e = Config::parse(&text, Path::new("c.toml"), |_| None).unwrap_err();
+        let lines: Vec<(Option<usize>, &str)> = e
+            .problems
+            .iter()
+            .map(|p| (p.line, p.message.split(',').next().unwrap_or("")))
+            .collect();
+        assert_eq!(
+            lines,
+            [
+                (Some(1), "unknown field `colour`"),
+                (Some(11), "unknown field `flavour`"),
+                (Some(13), "unknown field `port`"),
+            ],
             "{e}"
         );
     }

@@ -1,0 +1,211 @@
+//! The service's start-up check, before it touches the database or a share: every file the
+//! config names (recipes with their lift tables, DBC files) is read and validated, no two
+//! machines share a folder, and the HTTP listener is bound (and kept, for the server). Every
+//! problem is reported at once, with the config line that names the file or folder.
+
+use super::{Config, ConfigError, ConfigProblem, GaugeSection};
+use crate::names::MachineName;
+use crate::recipe::{FeatureSetup, Recipe};
+use std::collections::HashMap;
+use std::path::{Component, Path, PathBuf};
+
+/// A configuration that passed every check, with what the checks produced.
+#[derive(Debug)]
+pub struct Checked {
+    pub config: Config,
+    /// One per `[[machines]]`, in the file's order.
+    pub machines: Vec<CheckedMachine>,
+    /// The API's listener, already bound (so a port in use is found before anything starts).
+    pub listener: std::net::TcpListener,
+}
+
+/// One machine: its checked name and the lobe or pin it grinds, loaded from its recipe.
+#[derive(Debug, Clone)]
+pub struct CheckedMachine {
+    pub name: MachineName,
+    pub recipe_path: PathBuf,
+    pub setup: FeatureSetup,
+}
+
+/// Parses `text` (the file `file`) and checks everything, config and named files and
+/// listener, reporting every problem at once.
+pub fn load(
+    text: &str,
+    file: &Path,
+    env: impl Fn(&str) -> Option<String>,
+) -> Result<Checked, ConfigError> {
+    let (config, mut problems) = Config::read(text, file, env);
+    let error = |problems| ConfigError {
+        file: file.display().to_string(),
+        problems,
+    };
+    let Some(config) = config else {
+        return Err(error(problems));
+    };
+    match check(config) {
+        Ok(checked) if problems.is_empty() => Ok(checked),
+        Ok(_) => Err(error(problems)),
+        Err(e) => {
+            problems.extend(e.problems);
+            problems.sort_by_key(|p| p.line.unwrap_or(usize::MAX));
+            Err(error(problems))
+        }
+    }
+}
+
+/// Checks what a parsed config names: recipes, lobes, DBC files, folders, the listener.
+pub fn check(config: Config) -> Result<Checked, ConfigError> {
+    let mut problems = Vec::new();
+    let mut machines = Vec::new();
+    for (i, m) in config.machines.iter().enumerate() {
+        let line = |key: &str| config.line(&format!("machines[{i}].{key}"));
+        let label = format!("machines.{}", m.name);
+        let recipe_path = config.resolve(&m.recipe);
+        let setup = match Recipe::load(&recipe_path) {
+            Ok(recipe) => match recipe.feature_setup(&recipe_path, &m.lobe) {
+                Ok(setup) => Some(setup),
+                Err(e) => {
+                    problems.push(ConfigProblem::at(
+                        line("lobe"),
+                        format!("{label}.lobe: {e:#}"),
+                    ));
+                    None
+                }
+            },
+            Err(e) => {
+                problems.push(ConfigProblem::at(
+                    line("recipe"),
+                    format!("{label}.recipe: {e:#}"),
+                ));
+                None
+            }
+        };
+        if let GaugeSection::Can { dbc, .. } = &m.gauge {
+            let names = crate::gauge::GaugeSignalNames::default();
+            if let Err(e) = crate::gauge::GaugeDbc::load(&config.resolve(dbc), &names) {
+                problems.push(ConfigProblem::at(
+                    line("gauge.dbc"),
+                    format!("{label}.gauge.dbc: {e}"),
+                ));
+            }
+        }
+        if let (Ok(name), Some(setup)) = (MachineName::new(&m.name), setup) {
+            machines.push(CheckedMachine {
+                name,
+                recipe_path,
+                setup,
+            });
+        }
+    }
+    problems.extend(shared_folders(&config));
+    let listener = match bind(config.http.listen) {
+        Ok(l) => Some(l),
+        Err(e) => {
+            problems.push(ConfigProblem::at(
+                config.line("http.listen"),
+                format!("http.listen: cannot listen on {}: {e}", config.http.listen),
+            ));
+            None
+        }
+    };
+    match listener {
+        Some(listener) if problems.is_empty() => Ok(Checked {
+            config,
+            machines,
+            listener,
+        }),
+        _ => {
+            problems.sort_by_key(|p| p.line.unwrap_or(usize::MAX));
+            Err(ConfigError {
+                file: config.file.display().to_string(),
+                problems,
+            })
+        }
+    }
+}
+
+/// Connections the kernel queues while every slot is taken (`http.max_connections`), as
+/// many as tokio's own bind would allow.
+const BACKLOG: i32 = 1024;
+
+/// Binds the API's listener (address reuse as std and tokio set it, a backlog of
+/// [`BACKLOG`]) without needing a runtime.
+fn bind(addr: std::net::SocketAddr) -> std::io::Result<std::net::TcpListener> {
+    use socket2::{Domain, Protocol, Socket, Type};
+    let socket = Socket::new(Domain::for_address(addr), Type::STREAM, Some(Protocol::TCP))?;
+    #[cfg(unix)]
+    socket.set_reuse_address(true)?;
+    socket.bind(&addr.into())?;
+    socket.listen(BACKLOG)?;
+    Ok(socket.into())
+}
+
+/// Two machines writing one share (or reading one drop folder) overwrite each other's
+/// programs (or steal each other's files): refused, naming both and the folder.
+fn shared_folders(config: &Config) -> Vec<ConfigProblem> {
+    let mut claims: HashMap<PathBuf, (String, &str)> = HashMap::new();
+    let mut problems = Vec::new();
+    for (i, m) in config.machines.iter().enumerate() {
+        let mut folders = vec![("share", &m.share)];
+        if let GaugeSection::Drop { folder, .. } = &m.gauge {
+            folders.push(("gauge.folder", folder));
+        }
+        for (key, folder) in folders {
+            let resolved = config.resolve(folder);
+            let normal = normalise(&resolved);
+            let what = match key {
+                "share" => "share",
+                _ => "drop folder",
+            };
+            if let Some((other, other_what)) = claims.get(&normal) {
+                problems.push(ConfigProblem::at(
+                    config.line(&format!("machines[{i}].{key}")),
+                    format!(
+                        "machines.{}.{key}: {} is also the {other_what} of machine {other}; \
+                         each machine needs a folder of its own",
+                        m.name,
+                        resolved.display(),
+                    ),
+                ));
+            } else {
+                claims.insert(normal, (m.name.clone(), what));
+            }
+        }
+    }
+    problems
+}
+
+/// The folder as the file system will see it: absolute, `.` and `..` resolved, and symbolic
+/// links in the part that exists followed.
+fn normalise(path: &Path) -> PathBuf {
+    let absolute = if path.is_absolute() {
+        path.to_path_buf()
+    } else {
+        std::env::current_dir().unwrap_or_default().join(path)
+    };
+    let mut clean = PathBuf::new();
+    for c in absolute.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                clean.pop();
+            }
+            other => clean.push(other),
+        }
+    }
+    // Follow links in the longest part that exists; the rest is taken as written.
+    let mut existing = clean.clone();
+    let mut rest = Vec::new();
+    while !existing.exists() {
+        match existing.file_name() {
+            Some(name) => rest.push(name.to_owned()),
+            None => return clean,
+        }
+        if !existing.pop() {
+            return clean;
+        }
+    }
+    let mut real = existing.canonicalize().unwrap_or(existing);
+    real.extend(rest.iter().rev());
+    real
+}

@@ -1,0 +1,120 @@
+//! Machine names: one rule for the config, the HTTP API and the store. A name becomes a
+//! folder name (`var/machines/<name>/`), a URL path segment and a database key, so it is
+//! kept plain: 1–32 ASCII letters, digits, `-` or `_`.
+
+use std::fmt;
+
+/// Longest machine name, in characters.
+pub const MAX_NAME_LEN: usize = 32;
+
+/// A machine name that passed [`MachineName::new`]; the only way to make one.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
+#[serde(transparent)]
+pub struct MachineName(String);
+
+/// Why a name was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum NameError {
+    #[error("name is empty")]
+    Empty,
+    #[error("name `{name}` has {len} characters, at most {MAX_NAME_LEN} are allowed")]
+    TooLong { name: String, len: usize },
+    #[error(
+        "name `{name}` has `{ch}` at character {position}: only letters, digits, '-' or '_' are allowed"
+    )]
+    BadCharacter {
+        name: String,
+        ch: char,
+        /// 1-based.
+        position: usize,
+    },
+}
+
+impl MachineName {
+    /// Checks `name` against the rule.
+    pub fn new(name: &str) -> Result<Self, NameError> {
+        check_plain_name(name)?;
+        Ok(Self(name.to_string()))
+    }
+
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Display for MachineName {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl AsRef<str> for MachineName {
+    fn as_ref(&self) -> &str {
+        &self.0
+    }
+}
+
+impl std::str::FromStr for MachineName {
+    type Err = NameError;
+    fn from_str(s: &str) -> Result<Self, NameError> {
+        Self::new(s)
+    }
+}
+
+/// The rule itself, for names that are not machines but live in the same places (lobes and
+/// pins in URLs and folders; recipes apply the same rule).
+pub fn check_plain_name(name: &str) -> Result<(), NameError> {
+    if name.is_empty() {
+        return Err(NameError::Empty);
+    }
+    if let Some((i, ch)) = name
+        .chars()
+        .enumerate()
+        .find(|(_, c)| !(c.is_ascii_alphanumeric() || *c == '-' || *c == '_'))
+    {
+        return Err(NameError::BadCharacter {
+            name: name.to_string(),
+            ch,
+            position: i + 1,
+        });
+    }
+    if name.len() > MAX_NAME_LEN {
+        return Err(NameError::TooLong {
+            name: name.to_string(),
+            len: name.len(),
+        });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_rule_accepts_plain_names_and_says_what_is_wrong_with_others() {
+        for ok in ["SIM1", "line-3_grinder", "a", &"x".repeat(32)] {
+            assert_eq!(MachineName::new(ok).unwrap().as_str(), ok);
+        }
+        assert_eq!(MachineName::new(""), Err(NameError::Empty));
+        assert_eq!(
+            MachineName::new(&"x".repeat(33)),
+            Err(NameError::TooLong {
+                name: "x".repeat(33),
+                len: 33
+            })
+        );
+        assert_eq!(
+            MachineName::new("bad name").unwrap_err().to_string(),
+            "name `bad name` has ` ` at character 4: only letters, digits, '-' or '_' are allowed"
+        );
+        assert!(matches!(
+            MachineName::new("Grinder/1"),
+            Err(NameError::BadCharacter {
+                ch: '/',
+                position: 8,
+                ..
+            })
+        ));
+    }
+}

@@ -1,0 +1,196 @@
+//! The API's error (`{code, message}` with a status), axum's extractors wrapped so their
+//! rejections keep that shape, the name checks, and the token check that every write runs
+//! before it reads a byte of the body.
+
+use super::AppState;
+use crate::names::{MachineName, check_plain_name};
+use axum::Json;
+use axum::extract::{FromRequest, FromRequestParts, Path, Query, Request};
+use axum::http::request::Parts;
+use axum::http::{StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::Serialize;
+use sha2::{Digest, Sha256};
+
+/// Largest request body read, bytes: the writes take a few dozen.
+const BODY_LIMIT: usize = 64 * 1024;
+
+/// An API error: HTTP status, stable code, message.
+#[derive(Debug)]
+pub struct ApiError(pub StatusCode, pub &'static str, pub String);
+
+/// The body of every error reply.
+#[derive(Debug, Serialize)]
+struct ErrorBody<'a> {
+    code: &'a str,
+    message: &'a str,
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let body = ErrorBody {
+            code: self.1,
+            message: &self.2,
+        };
+        (self.0, Json(body)).into_response()
+    }
+}
+
+impl From<crate::store::StoreError> for ApiError {
+    fn from(e: crate::store::StoreError) -> Self {
+        use crate::store::StoreError;
+        let status = match e {
+            StoreError::NotFound { .. } => StatusCode::NOT_FOUND,
+            StoreError::Invalid { .. } => StatusCode::BAD_REQUEST,
+            StoreError::Conflict { .. } => StatusCode::CONFLICT,
+            StoreError::Unavailable { .. } => StatusCode::SERVICE_UNAVAILABLE,
+            _ => StatusCode::INTERNAL_SERVER_ERROR,
+        };
+        // Display never carries SQL text or credentials (see StoreError).
+        ApiError(status, e.code(), e.to_string())
+    }
+}
+
+/// A machine name from a path or query, by the one rule ([`MachineName`]).
+pub fn machine_name(name: &str) -> Result<MachineName, ApiError> {
+    MachineName::new(name).map_err(|e| {
+        ApiError(
+            StatusCode::BAD_REQUEST,
+            "invalid_name",
+            format!("machine: {e}"),
+        )
+    })
+}
+
+/// A lobe or pin name from a path or query: the same rule as machine names.
+pub fn feature_name(name: &str) -> Result<(), ApiError> {
+    check_plain_name(name).map_err(|e| {
+        ApiError(
+            StatusCode::BAD_REQUEST,
+            "invalid_name",
+            format!("lobe: {e}"),
+        )
+    })
+}
+
+/// axum's JSON body extractor, its rejections as the API's `{code, message}` errors. The body
+/// must arrive within the configured body timeout and be at most 64 KiB.
+pub struct ApiJson<T>(pub T);
+
+impl<T: serde::de::DeserializeOwned> FromRequest<AppState> for ApiJson<T> {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &AppState) -> Result<Self, ApiError> {
+        let (parts, body) = req.into_parts();
+        let bytes =
+            tokio::time::timeout(state.body_timeout, axum::body::to_bytes(body, BODY_LIMIT))
+                .await
+                .map_err(|_| {
+                    ApiError(
+                        StatusCode::REQUEST_TIMEOUT,
+                        "body_timeout",
+                        format!(
+                            "the request body did not arrive within {} ms",
+                            state.body_timeout.as_millis()
+                        ),
+                    )
+                })?
+                .map_err(|e| {
+                    ApiError(
+                        StatusCode::PAYLOAD_TOO_LARGE,
+                        "invalid_body",
+                        format!("request body unreadable or over {BODY_LIMIT} bytes: {e}"),
+                    )
+                })?;
+        let req = Request::from_parts(parts, axum::body::Body::from(bytes));
+        Json::<T>::from_request(req, state)
+            .await
+            .map(|Json(v)| ApiJson(v))
+            .map_err(|r| ApiError(r.status(), "invalid_body", r.body_text()))
+    }
+}
+
+/// axum's query extractor, its rejections as the API's `{code, message}` errors.
+pub struct ApiQuery<T>(pub T);
+
+impl<S: Send + Sync, T: serde::de::DeserializeOwned> FromRequestParts<S> for ApiQuery<T> {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, ApiError> {
+        Query::<T>::from_request_parts(parts, state)
+            .await
+            .map(|Query(v)| ApiQuery(v))
+            .map_err(|r| ApiError(r.status(), "invalid_query", r.body_text()))
+    }
+}
+
+/// axum's path extractor, its rejections as the API's `{code, message}` errors.
+pub struct ApiPath<T>(pub T);
+
+impl<S: Send + Sync, T: serde::de::DeserializeOwned + Send> FromRequestParts<S> for ApiPath<T> {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, ApiError> {
+        Path::<T>::from_request_parts(parts, state)
+            .await
+            .map(|Path(v)| ApiPath(v))
+            .map_err(|r| ApiError(r.status(), "invalid_path", r.body_text()))
+    }
+}
+
+/// Proof that the request carries the configured token as `Authorization: Bearer <token>`.
+/// Handlers take it as their first argument, so it is checked from the headers alone, before
+/// the path, the query or a byte of the body. No token configured: 403; missing or wrong:
+/// 401. Tokens are never logged.
+pub struct Authorized;
+
+impl FromRequestParts<AppState> for Authorized {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, ApiError> {
+        let Some(token) = &state.token else {
+            return Err(ApiError(
+                StatusCode::FORBIDDEN,
+                "writes_disabled",
+                "no API token is configured (CAMLOOP_API_TOKEN)".into(),
+            ));
+        };
+        let given = parts
+            .headers
+            .get(header::AUTHORIZATION)
+            .and_then(|v| v.as_bytes().strip_prefix(b"Bearer "))
+            .unwrap_or_default();
+        if same_secret(given, token.expose().as_bytes()) {
+            Ok(Authorized)
+        } else {
+            Err(ApiError(
+                StatusCode::UNAUTHORIZED,
+                "unauthorized",
+                "missing or wrong API token".into(),
+            ))
+        }
+    }
+}
+
+/// Compares the SHA-256 digests of both in constant time: neither the position of the first
+/// difference nor the token's length shows in the time taken.
+fn same_secret(given: &[u8], expected: &[u8]) -> bool {
+    let (a, b) = (Sha256::digest(given), Sha256::digest(expected));
+    a.iter()
+        .zip(b.iter())
+        .fold(0u8, |acc, (x, y)| acc | (x ^ y))
+        == 0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn secrets_compare_equal_only_when_equal() {
+        assert!(same_secret(b"let-me-write", b"let-me-write"));
+        assert!(!same_secret(b"let-me-writ", b"let-me-write"));
+        assert!(!same_secret(b"", b"let-me-write"));
+        assert!(!same_secret(b"let-me-writE", b"let-me-write"));
+    }
+}

@@ -1,0 +1,143 @@
+//! The HTTP side of the service: health, Prometheus metrics, the engineers' read API on the
+//! history store (JSON), and the two writes (rollback, dressing), which go as [`Command`]s to
+//! the machine's loop. Errors carry a stable code and a message, never SQL text.
+//!
+//! - `api.rs`: the `{code, message}` error, the extractors that keep it, the token check.
+//! - `routes.rs`: the read handlers and their typed replies.
+//! - `writes.rs`: the write handlers and the command hand-over.
+//! - `server.rs`: the listener loop: header and body timeouts, the connection cap.
+//! - `openapi.rs`: the API description.
+
+mod api;
+mod openapi;
+mod routes;
+mod server;
+mod writes;
+
+pub use api::{ApiError, ApiJson, ApiPath, ApiQuery, Authorized};
+pub use routes::{LobeInfo, MachineInfo, MachinesReply};
+pub use server::{HttpLimits, serve};
+pub use writes::CommandReply;
+
+use super::machine::StoreHandle;
+use super::metrics::Metrics;
+use crate::names::MachineName;
+use axum::Router;
+use axum::routing::{get, post};
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
+use tokio::sync::{mpsc, oneshot};
+
+#[derive(Clone)]
+pub struct AppState {
+    pub store: StoreHandle,
+    pub metrics: Arc<Metrics>,
+    /// Every configured machine with the names of the lobes or pins it grinds (today one:
+    /// the `lobe` of its `[[machines]]` entry).
+    pub machines: Arc<BTreeMap<MachineName, Vec<String>>>,
+    /// Per machine (by name), the channel to its loop for write requests.
+    pub commands: Arc<HashMap<String, mpsc::Sender<Command>>>,
+    /// Write requests need it (`Authorization: Bearer …`); none configured: writes refused.
+    pub token: Option<crate::config::Secret>,
+    /// How long a request body may take to arrive once its headers are in.
+    pub body_timeout: std::time::Duration,
+}
+
+/// Where a machine's loop sends its answer to a [`Command`].
+pub type Reply = oneshot::Sender<Result<CommandDone, CommandError>>;
+
+/// A write request handed to a machine's loop, answered on `reply` when done. The HTTP
+/// side has already checked the token, the machine, the lobe (it is one the machine
+/// grinds), and the values' ranges.
+pub enum Command {
+    /// Deliver stored table `version` of `lobe` again, as a new version under the table
+    /// number not in use, and restore the correction it was made from.
+    Rollback {
+        lobe: String,
+        version: i64,
+        reply: Reply,
+    },
+    /// The wheel was dressed to this radius (mm, already within 5–1000): regenerate the
+    /// table.
+    Dressing { wheel_radius_mm: f64, reply: Reply },
+}
+
+/// A write the machine's loop carried out.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct CommandDone {
+    /// The table version the write made, when it made one.
+    pub version: Option<i64>,
+    /// One line for the operator ("rollback to v1 delivered as v7 (T2)").
+    pub message: String,
+}
+
+/// Why a machine's loop did not carry out a write. Each maps to one HTTP status and one
+/// stable code (see [`CommandError::status`] and [`CommandError::code`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CommandError {
+    /// The version asked for does not exist for the lobe: 404 `table_version_not_found`.
+    #[error("version {version} of {lobe} not found")]
+    VersionNotFound { lobe: String, version: i64 },
+    /// The history database is needed and not reachable: 503 `store_unavailable`.
+    #[error("the history database is not reachable: {reason}")]
+    StoreUnavailable { reason: String },
+    /// The loop refused (a guard failed, the stored program is unusable, …): 409
+    /// `rollback_refused` or `dressing_refused`.
+    #[error("{reason}")]
+    Refused { reason: String },
+    /// Anything else that went wrong on the machine's side: 500 `command_failed`.
+    #[error("{reason}")]
+    Failed { reason: String },
+}
+
+impl CommandError {
+    pub fn status(&self) -> axum::http::StatusCode {
+        use axum::http::StatusCode;
+        match self {
+            CommandError::VersionNotFound { .. } => StatusCode::NOT_FOUND,
+            CommandError::StoreUnavailable { .. } => StatusCode::SERVICE_UNAVAILABLE,
+            CommandError::Refused { .. } => StatusCode::CONFLICT,
+            CommandError::Failed { .. } => StatusCode::INTERNAL_SERVER_ERROR,
+        }
+    }
+
+    /// The stable code; `refused` is the command's own (`rollback_refused`, …).
+    pub fn code(&self, refused: &'static str) -> &'static str {
+        match self {
+            CommandError::VersionNotFound { .. } => "table_version_not_found",
+            CommandError::StoreUnavailable { .. } => "store_unavailable",
+            CommandError::Refused { .. } => refused,
+            CommandError::Failed { .. } => "command_failed",
+        }
+    }
+}
+
+pub fn router(state: AppState) -> Router {
+    let m = "/api/v1/machines/{machine}";
+    Router::new()
+        .route("/healthz", get(routes::healthz))
+        .route("/metrics", get(routes::metrics))
+        .route("/openapi.json", get(openapi::openapi))
+        .route("/api/v1/machines", get(routes::machines))
+        .route(&format!("{m}/measurements"), get(routes::history))
+        .route(&format!("{m}/events"), get(routes::events))
+        .route(&format!("{m}/lobes/{{lobe}}/tables"), get(routes::tables))
+        .route(
+            &format!("{m}/lobes/{{lobe}}/tables/{{version}}/program"),
+            get(routes::program),
+        )
+        .route(
+            &format!("{m}/lobes/{{lobe}}/tables/{{version}}/diff"),
+            get(routes::diff),
+        )
+        .route(
+            &format!("{m}/lobes/{{lobe}}/rollback"),
+            post(writes::rollback),
+        )
+        .route(
+            &format!("{m}/dressings"),
+            get(routes::dressings).post(writes::dress),
+        )
+        .route("/api/v1/measurements/{id}", get(routes::measurement))
+        .with_state(state)
+}

@@ -1,0 +1,43 @@
+//! The API description served at `/openapi.json` (OpenAPI 3.0).
+
+use axum::Json;
+use serde_json::{Value, json};
+
+pub(super) async fn openapi() -> Json<Value> {
+    let get = |summary: &str| json!({ "get": { "summary": summary, "responses": { "200": { "description": "OK" }, "4XX": { "description": "error: {code, message}" }, "503": { "description": "store unavailable" } } } });
+    let write = |summary: &str, ok: &str, extra: Value| {
+        let mut responses = json!({
+            "200": { "description": ok },
+            "401": { "description": "missing or wrong token (checked before the body is read)" },
+            "403": { "description": "writes disabled" },
+            "404": { "description": "machine_not_found, lobe_not_found or table_version_not_found" },
+            "408": { "description": "body_timeout" },
+            "409": { "description": "refused" },
+            "503": { "description": "machine_stopped or store_unavailable" }
+        });
+        if let (Some(r), Some(e)) = (responses.as_object_mut(), extra.as_object()) {
+            r.extend(e.clone());
+        }
+        json!({ "summary": summary, "responses": responses })
+    };
+    Json(json!({
+        "openapi": "3.0.3",
+        "info": { "title": "camloop", "version": env!("CARGO_PKG_VERSION") },
+        "paths": {
+            "/healthz": get("service and database health"),
+            "/metrics": get("Prometheus metrics"),
+            "/api/v1/machines": get("machines and their lobes or pins: configured ones and those in the history"),
+            "/api/v1/machines/{machine}/measurements": get("measurement history, newest first; filters lobe, since_ms, until_ms, verdict, limit, cursor"),
+            "/api/v1/machines/{machine}/events": get("alarms and events, newest first"),
+            "/api/v1/machines/{machine}/lobes/{lobe}/tables": get("table versions, newest first"),
+            "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program": get("program text of a table version"),
+            "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/diff": get("X difference to the parent version at every table point, µm"),
+            "/api/v1/measurements/{id}": get("one measurement with its averaged profile and analysis"),
+            "/api/v1/machines/{machine}/dressings": {
+                "get": get("wheel dressings, newest first")["get"],
+                "post": write("report a wheel dressing; body {\"wheel_radius_mm\": R}; regenerates the table for the new radius; needs Authorization: Bearer <CAMLOOP_API_TOKEN>", "recorded, table regenerated: {status, version, message}", json!({ "400": { "description": "implausible radius" } }))
+            },
+            "/api/v1/machines/{machine}/lobes/{lobe}/rollback": { "post": write("deliver a stored version again; body {\"version\": N}; needs Authorization: Bearer <CAMLOOP_API_TOKEN>", "delivered: {status, version, message}", json!({})) },
+        }
+    }))
+}

@@ -1,0 +1,488 @@
+//! The read handlers: health, metrics, machines, measurements, tables, dressings, events.
+//! Each reply is a typed record serialised as JSON; errors are `{code, message}`.
+
+use super::AppState;
+use super::api::{ApiError, ApiPath, ApiQuery, feature_name, machine_name};
+use crate::store::{EventFilter, HistoryFilter, MeasurementId, Store, Verdict};
+use axum::Json;
+use axum::extract::State;
+use axum::http::{StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::{Deserialize, Serialize};
+
+async fn store(state: &AppState) -> Result<Store, ApiError> {
+    state.store.read().await.clone().ok_or(ApiError(
+        StatusCode::SERVICE_UNAVAILABLE,
+        "store_unavailable",
+        "the history database is not reachable; measurements are kept in the journal".into(),
+    ))
+}
+
+#[derive(Debug, Serialize)]
+pub(super) struct Health {
+    status: &'static str,
+    /// "up" or "down".
+    database: &'static str,
+    /// Configured machines.
+    machines: usize,
+}
+
+pub(super) async fn healthz(State(state): State<AppState>) -> Json<Health> {
+    let up = state.store.read().await.is_some();
+    Json(Health {
+        status: "ok",
+        database: if up { "up" } else { "down" },
+        machines: state.machines.len(),
+    })
+}
+
+pub(super) async fn metrics(State(state): State<AppState>) -> Response {
+    (
+        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        state.metrics.render(),
+    )
+        .into_response()
+}
+
+/// `GET /api/v1/machines`.
+#[derive(Debug, Serialize)]
+pub struct MachinesReply {
+    /// Configured machines first (in name order), then machines only the store knows.
+    pub machines: Vec<MachineInfo>,
+    /// Names of the configured machines.
+    pub configured: Vec<String>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct MachineInfo {
+    pub name: String,
+    /// In this service's configuration (else only in the history).
+    pub configured: bool,
+    /// When the store first saw it; `None` before its first record.
+    pub first_seen_ms: Option<i64>,
+    pub lobes: Vec<LobeInfo>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct LobeInfo {
+    pub lobe: String,
+    /// The part (recipe) name, once the store has a record of it.
+    pub part: Option<String>,
+    /// "lobe" or "pin", once the store has a record of it.
+    pub kind: Option<&'static str>,
+    /// Ground by this service's configuration (else only in the history).
+    pub configured: bool,
+}
+
+pub(super) async fn machines(
+    State(state): State<AppState>,
+) -> Result<Json<MachinesReply>, ApiError> {
+    let store = store(&state).await?;
+    let mut out: Vec<MachineInfo> = state
+        .machines
+        .iter()
+        .map(|(name, lobes)| MachineInfo {
+            name: name.to_string(),
+            configured: true,
+            first_seen_ms: None,
+            lobes: lobes
+                .iter()
+                .map(|l| LobeInfo {
+                    lobe: l.clone(),
+                    part: None,
+                    kind: None,
+                    configured: true,
+                })
+                .collect(),
+        })
+        .collect();
+    for m in store.machines().await? {
+        let i = match out.iter().position(|o| o.name == m.name) {
+            Some(i) => i,
+            None => {
+                out.push(MachineInfo {
+                    name: m.name.clone(),
+                    configured: false,
+                    first_seen_ms: None,
+                    lobes: Vec::new(),
+                });
+                out.len() - 1
+            }
+        };
+        out[i].first_seen_ms = Some(m.first_seen_ms);
+        for f in store.features(&m.name).await? {
+            let lobes = &mut out[i].lobes;
+            let j = match lobes
+                .iter()
+                .position(|l| l.lobe == f.lobe && l.part.is_none())
+            {
+                Some(j) => j,
+                None => {
+                    lobes.push(LobeInfo {
+                        lobe: f.lobe.clone(),
+                        part: None,
+                        kind: None,
+                        configured: false,
+                    });
+                    lobes.len() - 1
+                }
+            };
+            lobes[j].part = Some(f.part.clone());
+            lobes[j].kind = Some(f.kind.as_str());
+        }
+    }
+    let configured = state.machines.keys().map(ToString::to_string).collect();
+    Ok(Json(MachinesReply {
+        machines: out,
+        configured,
+    }))
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct HistoryQuery {
+    lobe: Option<String>,
+    since_ms: Option<i64>,
+    until_ms: Option<i64>,
+    verdict: Option<String>,
+    limit: Option<u32>,
+    cursor: Option<String>,
+}
+
+#[derive(Debug, Serialize)]
+pub(super) struct Items<T> {
+    items: Vec<T>,
+}
+
+#[derive(Debug, Serialize)]
+pub(super) struct HistoryPage {
+    items: Vec<MeasurementItem>,
+    next_cursor: Option<String>,
+}
+
+#[derive(Debug, Serialize)]
+pub(super) struct MeasurementItem {
+    id: i64,
+    machine: String,
+    part: String,
+    lobe: String,
+    received_at_ms: i64,
+    verdict: &'static str,
+    max_profile_error_um: f64,
+    base_radius_error_um: f64,
+    phase_error_deg: f64,
+    revolutions_used: u32,
+    points_per_rev: u32,
+    origin: String,
+}
+
+impl From<crate::store::MeasurementSummary> for MeasurementItem {
+    fn from(m: crate::store::MeasurementSummary) -> Self {
+        Self {
+            id: m.id.0,
+            verdict: m.verdict.as_str(),
+            machine: m.machine,
+            part: m.part,
+            lobe: m.lobe,
+            received_at_ms: m.received_at_ms,
+            max_profile_error_um: m.max_profile_error_um,
+            base_radius_error_um: m.base_radius_error_um,
+            phase_error_deg: m.phase_error_deg,
+            revolutions_used: m.revolutions_used,
+            points_per_rev: m.points_per_rev,
+            origin: m.origin,
+        }
+    }
+}
+
+pub(super) async fn history(
+    State(state): State<AppState>,
+    ApiPath(machine): ApiPath<String>,
+    ApiQuery(q): ApiQuery<HistoryQuery>,
+) -> Result<Json<HistoryPage>, ApiError> {
+    machine_name(&machine)?;
+    if let Some(l) = &q.lobe {
+        feature_name(l)?;
+    }
+    if let (Some(a), Some(b)) = (q.since_ms, q.until_ms)
+        && a >= b
+    {
+        return Err(ApiError(
+            StatusCode::BAD_REQUEST,
+            "invalid_range",
+            "since_ms must be before until_ms".into(),
+        ));
+    }
+    let verdict = match q.verdict.as_deref() {
+        None => None,
+        Some(v) => Some(Verdict::parse(v).map_err(ApiError::from)?),
+    };
+    let filter = HistoryFilter {
+        machine,
+        lobe: q.lobe,
+        since_ms: q.since_ms,
+        until_ms: q.until_ms,
+        verdict,
+        limit: q.limit.unwrap_or(100),
+        cursor: q.cursor,
+    };
+    let page = store(&state).await?.measurement_history(&filter).await?;
+    Ok(Json(HistoryPage {
+        items: page.items.into_iter().map(Into::into).collect(),
+        next_cursor: page.next_cursor,
+    }))
+}
+
+#[derive(Debug, Serialize)]
+pub(super) struct MeasurementReply {
+    id: i64,
+    machine: String,
+    lobe: String,
+    received_at_ms: i64,
+    averaged_lift_mm: Vec<f64>,
+    raw_kept: bool,
+    /// The analysis report as stored (error curve, spectrum, …).
+    analysis: serde_json::Value,
+}
+
+pub(super) async fn measurement(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+) -> Result<Json<MeasurementReply>, ApiError> {
+    let detail = store(&state)
+        .await?
+        .measurement(MeasurementId(id))
+        .await?
+        .ok_or(ApiError(
+            StatusCode::NOT_FOUND,
+            "measurement_not_found",
+            format!("measurement {id} not found"),
+        ))?;
+    // The store checks it is JSON on the way in.
+    let analysis = serde_json::from_str(&detail.analysis_json).unwrap_or_default();
+    Ok(Json(MeasurementReply {
+        id,
+        machine: detail.summary.machine,
+        lobe: detail.summary.lobe,
+        received_at_ms: detail.summary.received_at_ms,
+        averaged_lift_mm: detail.averaged_lift_mm,
+        raw_kept: detail.raw_lift_mm.is_some(),
+        analysis,
+    }))
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct LimitQuery {
+    limit: Option<u32>,
+}
+
+#[derive(Debug, Serialize)]
+pub(super) struct TableItem {
+    version: i64,
+    parent_version: Option<i64>,
+    table_number: u32,
+    sha256: String,
+    reason: String,
+    status: &'static str,
+    status_why: String,
+    created_at_ms: i64,
+}
+
+pub(super) async fn tables(
+    State(state): State<AppState>,
+    ApiPath((machine, lobe)): ApiPath<(String, String)>,
+    ApiQuery(q): ApiQuery<LimitQuery>,
+) -> Result<Json<Items<TableItem>>, ApiError> {
+    machine_name(&machine)?;
+    feature_name(&lobe)?;
+    let versions = store(&state)
+        .await?
+        .table_versions(&machine, &lobe, q.limit.unwrap_or(50))
+        .await?;
+    let items = versions
+        .into_iter()
+        .map(|t| TableItem {
+            version: t.version,
+            parent_version: t.parent_version,
+            table_number: t.table_number,
+            sha256: t.sha256,
+            reason: t.reason,
+            status: t.status.as_str(),
+            status_why: t.status_why,
+            created_at_ms: t.created_at_ms,
+        })
+        .collect();
+    Ok(Json(Items { items }))
+}
+
+pub(super) async fn program(
+    State(state): State<AppState>,
+    ApiPath((machine, lobe, version)): ApiPath<(String, String, i64)>,
+) -> Result<Response, ApiError> {
+    machine_name(&machine)?;
+    feature_name(&lobe)?;
+    let t = store(&state)
+        .await?
+        .table_version(&machine, &lobe, version)
+        .await?
+        .ok_or_else(|| version_not_found(version))?;
+    Ok((
+        [(header::CONTENT_TYPE, "text/plain; charset=utf-8")],
+        t.program_text,
+    )
+        .into_response())
+}
+
+fn version_not_found(version: i64) -> ApiError {
+    ApiError(
+        StatusCode::NOT_FOUND,
+        "table_version_not_found",
+        format!("version {version} not found"),
+    )
+}
+
+#[derive(Debug, Serialize)]
+pub(super) struct DiffReply {
+    version: i64,
+    parent_version: i64,
+    /// Table numbers of the parent and of this version.
+    table_numbers: [u32; 2],
+    max_abs_delta_x_um: f64,
+    at_c_deg: f64,
+    rms_delta_x_um: f64,
+    points: Vec<DiffPoint>,
+}
+
+#[derive(Debug, Serialize)]
+pub(super) struct DiffPoint {
+    c_deg: f64,
+    delta_x_um: f64,
+}
+
+/// How a table version differs from its parent: X (as the control interpolates it) at every
+/// point of the newer table, newer minus older, µm.
+pub(super) async fn diff(
+    State(state): State<AppState>,
+    ApiPath((machine, lobe, version)): ApiPath<(String, String, i64)>,
+) -> Result<Json<DiffReply>, ApiError> {
+    machine_name(&machine)?;
+    feature_name(&lobe)?;
+    let store = store(&state).await?;
+    let newer = store
+        .table_version(&machine, &lobe, version)
+        .await?
+        .ok_or_else(|| version_not_found(version))?;
+    let Some(parent) = newer.parent_version else {
+        return Err(ApiError(
+            StatusCode::NOT_FOUND,
+            "no_parent_version",
+            format!("version {version} is the first"),
+        ));
+    };
+    let older = store
+        .table_version(&machine, &lobe, parent)
+        .await?
+        .ok_or_else(|| version_not_found(parent))?;
+    let parse = |text: &str, v: i64| {
+        crate::core::program::parse_table_program(text).map_err(|e| {
+            ApiError(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                "program_unreadable",
+                format!("version {v}: {e}"),
+            )
+        })
+    };
+    let (new_t, old_t) = (
+        parse(&newer.program_text, version)?,
+        parse(&older.program_text, parent)?,
+    );
+    let points: Vec<DiffPoint> = new_t
+        .c_knots_deg()
+        .into_iter()
+        .filter_map(|c| {
+            Some(DiffPoint {
+                c_deg: c,
+                delta_x_um: (new_t.x_at(c)? - old_t.x_at(c)?) * 1000.0,
+            })
+        })
+        .collect();
+    let (at, max) = points.iter().fold((0.0, 0.0f64), |(a, m), p| {
+        if p.delta_x_um.abs() > m {
+            (p.c_deg, p.delta_x_um.abs())
+        } else {
+            (a, m)
+        }
+    });
+    let sum_sq: f64 = points.iter().map(|p| p.delta_x_um * p.delta_x_um).sum();
+    let rms = (sum_sq / points.len().max(1) as f64).sqrt();
+    Ok(Json(DiffReply {
+        version,
+        parent_version: parent,
+        table_numbers: [older.table_number, newer.table_number],
+        max_abs_delta_x_um: max,
+        at_c_deg: at,
+        rms_delta_x_um: rms,
+        points,
+    }))
+}
+
+#[derive(Debug, Serialize)]
+pub(super) struct DressingItem {
+    at_ms: i64,
+    old_radius_mm: f64,
+    new_radius_mm: f64,
+    source: String,
+}
+
+pub(super) async fn dressings(
+    State(state): State<AppState>,
+    ApiPath(machine): ApiPath<String>,
+    ApiQuery(q): ApiQuery<LimitQuery>,
+) -> Result<Json<Items<DressingItem>>, ApiError> {
+    machine_name(&machine)?;
+    let limit = q.limit.unwrap_or(100);
+    let dressings = store(&state).await?.dressings(&machine, limit).await?;
+    let items = dressings
+        .into_iter()
+        .map(|d| DressingItem {
+            at_ms: d.at_ms,
+            old_radius_mm: d.old_radius_mm,
+            new_radius_mm: d.new_radius_mm,
+            source: d.source,
+        })
+        .collect();
+    Ok(Json(Items { items }))
+}
+
+#[derive(Debug, Serialize)]
+pub(super) struct EventItem {
+    at_ms: i64,
+    level: &'static str,
+    kind: String,
+    message: String,
+}
+
+pub(super) async fn events(
+    State(state): State<AppState>,
+    ApiPath(machine): ApiPath<String>,
+    ApiQuery(q): ApiQuery<LimitQuery>,
+) -> Result<Json<Items<EventItem>>, ApiError> {
+    machine_name(&machine)?;
+    let filter = EventFilter {
+        machine: Some(machine),
+        limit: q.limit.unwrap_or(100),
+        ..EventFilter::default()
+    };
+    let events = store(&state).await?.events(&filter).await?;
+    let items = events
+        .into_iter()
+        .map(|e| EventItem {
+            at_ms: e.at_ms,
+            level: e.level.as_str(),
+            kind: e.kind,
+            message: e.message,
+        })
+        .collect();
+    Ok(Json(Items { items }))
+}
