@@ -13,6 +13,7 @@ pub(super) async fn run(
     machine: String,
     folder: std::path::PathBuf,
     poll_ms: u64,
+    options: crate::gauge::DropOptions,
     tx: mpsc::Sender<SourceEvent>,
     mut shutdown: watch::Receiver<bool>,
 ) {
@@ -21,7 +22,6 @@ pub(super) async fn run(
         error!(machine = %machine, folder = %folder.display(), error = %e, "drop folder unusable");
         return;
     }
-    let options = crate::gauge::DropOptions::default();
     let mut drop_folder = match crate::gauge::DropFolder::open(&folder, dbc, options) {
         Ok(d) => d,
         Err(e) => {

@@ -8,9 +8,9 @@ pub mod journal;
 pub mod machine;
 pub mod metrics;
 pub mod sim_source;
+mod sources;
 
-use crate::config::{Checked, Config, GaugeSection};
-use crate::recipe::Recipe;
+use crate::config::{Checked, Config};
 use crate::store::Store;
 use anyhow::Context;
 use machine::{MachineLoop, SourceEvent, StoreHandle};
@@ -123,95 +123,34 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
         shutdown_rx.clone(),
     ));
 
-    let var = config.var_dir();
     let mut machine_tasks = Vec::new();
     let mut commands = std::collections::HashMap::new();
     let mut sources_done = Vec::new();
-    for m in &config.machines {
-        let recipe_path = config.resolve(&m.recipe);
-        let recipe = Recipe::load(&recipe_path).with_context(|| format!("machine {}", m.name))?;
-        let setup = recipe
-            .feature_setup(&recipe_path, &m.lobe)
-            .with_context(|| format!("machine {}", m.name))?;
-        let paths = machine::MachinePaths {
-            share_dir: config.resolve(&m.share),
-            state_dir: var.join("machines").join(&m.name),
-        };
-        let machine =
-            MachineLoop::start(m.name.clone(), setup, paths, store.clone(), metrics.clone())
-                .await?;
-        let (tx, rx) = mpsc::channel::<SourceEvent>(16);
-        let (command_tx, command_rx) = mpsc::channel::<http::Command>(4);
-        commands.insert(m.name.clone(), command_tx);
-        match &m.gauge {
-            GaugeSection::Sim {
-                part_interval_ms,
-                seed,
-                grinder,
-            } => {
-                let source = sim_source::SimSource {
-                    machine: m.name.clone(),
-                    grinder: grinder.clone(),
-                    seed: *seed,
-                    feature: machine.feature(),
-                    program: machine.program_path(),
-                    main_program: machine.main_program_path(),
-                    table_wheel_radius_bits: machine.table_wheel_radius(),
-                    part_interval: Duration::from_millis(*part_interval_ms),
-                    parts: options.parts,
-                };
-                tokio::spawn(source.run(tx, shutdown_rx.clone()));
-            }
-            GaugeSection::Drop {
-                folder, poll_ms, ..
-            } => {
-                tokio::spawn(drop_source::run(
-                    m.name.clone(),
-                    config.resolve(folder),
-                    *poll_ms,
-                    tx,
-                    shutdown_rx.clone(),
-                ));
-            }
-            GaugeSection::Can { interface, dbc } => {
-                let names = crate::gauge::GaugeSignalNames::default();
-                let dbc = crate::gauge::GaugeDbc::load(&config.resolve(dbc), &names)
-                    .with_context(|| format!("machine {}: gauge DBC", m.name))?;
-                let spec = LiveSpec::Can {
-                    interface: interface.clone(),
-                    dbc: Box::new(dbc),
-                };
-                tokio::spawn(live_source(m.name.clone(), spec, tx, shutdown_rx.clone()));
-            }
-            GaugeSection::Serial { port, baud } => {
-                let spec = LiveSpec::Serial {
-                    port: port.clone(),
-                    baud: *baud,
-                };
-                tokio::spawn(live_source(m.name.clone(), spec, tx, shutdown_rx.clone()));
-            }
-        }
-        let (done_tx, done_rx) = tokio::sync::oneshot::channel();
-        sources_done.push(done_rx);
-        machine_tasks.push(tokio::spawn(machine_task(
-            machine,
-            rx,
-            command_rx,
-            done_tx,
-            shutdown_rx.clone(),
-        )));
+    let mut features = std::collections::BTreeMap::new();
+    let shared = Shared {
+        store: store.clone(),
+        metrics: metrics.clone(),
+        shutdown: shutdown_rx.clone(),
+        parts: options.parts,
+    };
+    for m in checked_machines {
+        let section = config
+            .machines
+            .iter()
+            .find(|c| c.name == m.name.as_str())
+            .context("a checked machine is in the config")?;
+        features.insert(m.name.clone(), vec![m.setup.name.clone()]);
+        let wired = wire_machine(&config, section, m.setup, &shared).await?;
+        commands.insert(section.name.clone(), wired.commands);
+        sources_done.push(wired.source_done);
+        machine_tasks.push(wired.task);
     }
 
     let limits = http::HttpLimits::from_config(&config.http);
     let app = http::router(http::AppState {
         store: store.clone(),
         metrics: metrics.clone(),
-        machines: Arc::new(
-            checked_machines
-                .into_iter()
-                .map(|m| (m.name, vec![m.setup.name]))
-                .collect(),
-        ),
+        machines: Arc::new(features),
         commands: Arc::new(commands),
         token: config.api_token.clone(),
         body_timeout: limits.body_timeout,
@@ -234,6 +173,65 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
         connector,
         retention,
         store,
+    })
+}
+
+/// What every machine's tasks share.
+struct Shared {
+    store: StoreHandle,
+    metrics: Arc<Metrics>,
+    shutdown: watch::Receiver<bool>,
+    parts: Option<u64>,
+}
+
+/// A machine's running tasks and how to reach them.
+struct Wired {
+    commands: mpsc::Sender<http::Command>,
+    source_done: tokio::sync::oneshot::Receiver<()>,
+    task: tokio::task::JoinHandle<()>,
+}
+
+/// Starts one machine: its loop, its gauge source and the task that feeds the loop.
+async fn wire_machine(
+    config: &Config,
+    m: &crate::config::MachineSection,
+    setup: crate::recipe::FeatureSetup,
+    shared: &Shared,
+) -> anyhow::Result<Wired> {
+    let paths = machine::MachinePaths {
+        share_dir: config.resolve(&m.share),
+        state_dir: config.var_dir().join("machines").join(&m.name),
+    };
+    let machine = MachineLoop::start(
+        m.name.clone(),
+        setup,
+        paths,
+        shared.store.clone(),
+        shared.metrics.clone(),
+    )
+    .await?;
+    let (tx, rx) = mpsc::channel::<SourceEvent>(16);
+    let (command_tx, command_rx) = mpsc::channel::<http::Command>(4);
+    sources::spawn(
+        config,
+        m,
+        &machine,
+        tx,
+        shared.parts,
+        shared.shutdown.clone(),
+    )?;
+    let (done_tx, done_rx) = tokio::sync::oneshot::channel();
+    let task = tokio::spawn(machine_task(
+        machine,
+        rx,
+        command_rx,
+        done_tx,
+        shared.shutdown.clone(),
+    ));
+    Ok(Wired {
+        commands: command_tx,
+        source_done: done_rx,
+        task,
     })
 }
 
@@ -382,117 +380,6 @@ async fn keep_raw_retention(days: u32, store: StoreHandle, mut shutdown: watch::
                 days, "raw revolutions older than the retention dropped"
             ),
             Err(e) => warn!(error = %e, "raw-data retention failed, tried again later"),
-        }
-    }
-}
-
-/// A live gauge connection: a SocketCAN bus through the DBC, or a serial port speaking the
-/// line protocol.
-enum LiveGauge {
-    Can(Box<crate::gauge::CanGauge<crate::gauge::CanBus>>),
-    Serial(Box<crate::gauge::SerialGauge<tokio_serial::SerialStream>>),
-}
-
-/// How to open a live gauge again after it failed.
-#[derive(Clone)]
-enum LiveSpec {
-    Can {
-        interface: String,
-        dbc: Box<crate::gauge::GaugeDbc>,
-    },
-    Serial {
-        port: String,
-        baud: u32,
-    },
-}
-
-impl LiveSpec {
-    fn name(&self) -> &str {
-        match self {
-            LiveSpec::Can { interface, .. } => interface,
-            LiveSpec::Serial { port, .. } => port,
-        }
-    }
-
-    fn open(&self) -> Result<LiveGauge, String> {
-        match self {
-            LiveSpec::Can { interface, dbc } => {
-                crate::gauge::CanGauge::open(interface, (**dbc).clone())
-                    .map(|g| LiveGauge::Can(Box::new(g)))
-                    .map_err(|e| e.to_string())
-            }
-            LiveSpec::Serial { port, baud } => crate::gauge::SerialGauge::open(port, *baud)
-                .map(|g| LiveGauge::Serial(Box::new(g)))
-                .map_err(|e| e.to_string()),
-        }
-    }
-}
-
-impl LiveGauge {
-    /// The next measurement, a problem to log, or `None` when the connection ended.
-    async fn next(
-        &mut self,
-    ) -> std::io::Result<Option<Result<crate::core::measure::RawMeasurement, String>>> {
-        Ok(match self {
-            LiveGauge::Can(g) => g.next_event().await?.map(|e| match e {
-                crate::gauge::CanEvent::Measurement(m) => Ok(m),
-                other => Err(format!("{other:?}")),
-            }),
-            LiveGauge::Serial(g) => g.next_event().await?.map(|e| match e {
-                crate::gauge::SerialEvent::Measurement(m) => Ok(m),
-                crate::gauge::SerialEvent::Problem(p) => Err(format!("{p:?}")),
-            }),
-        })
-    }
-}
-
-/// A live gauge. One that cannot be opened (missing device, a kernel without SocketCAN) or
-/// that fails is an ERROR naming it, retried every 10 s; never a panic, never fatal.
-async fn live_source(
-    machine: String,
-    spec: LiveSpec,
-    tx: mpsc::Sender<SourceEvent>,
-    mut shutdown: watch::Receiver<bool>,
-) {
-    loop {
-        match spec.open() {
-            Ok(mut gauge) => {
-                info!(machine = %machine, gauge = %spec.name(), "gauge listening");
-                loop {
-                    let event = tokio::select! {
-                        e = gauge.next() => e,
-                        _ = shutdown.changed() => return,
-                    };
-                    match event {
-                        Ok(Some(Ok(m))) => {
-                            if tx
-                                .send(SourceEvent::Measurement {
-                                    raw: m,
-                                    ground_with: None,
-                                    done: None,
-                                })
-                                .await
-                                .is_err()
-                            {
-                                return;
-                            }
-                        }
-                        Ok(Some(Err(problem))) => {
-                            warn!(machine = %machine, problem = %problem, "gauge data discarded")
-                        }
-                        Ok(None) => break,
-                        Err(e) => {
-                            error!(machine = %machine, gauge = %spec.name(), error = %e, "gauge read failed");
-                            break;
-                        }
-                    }
-                }
-            }
-            Err(e) => error!(machine = %machine, error = %e, "gauge unavailable; retrying in 10 s"),
-        }
-        tokio::select! {
-            _ = tokio::time::sleep(Duration::from_secs(10)) => {}
-            _ = shutdown.changed() => return,
         }
     }
 }

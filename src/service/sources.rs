@@ -1,0 +1,182 @@
+//! The gauge sources a machine can have: the simulated machine, a drop folder, a live CAN bus
+//! or serial port. Each runs as its own task and hands the machine [`SourceEvent`]s.
+
+use super::machine::{MachineLoop, SourceEvent};
+use super::{drop_source, sim_source};
+use crate::config::{Config, GaugeSection, MachineSection};
+use anyhow::Context;
+use std::time::Duration;
+use tokio::sync::{mpsc, watch};
+use tracing::{error, info, warn};
+
+/// Starts the source of machine `m` feeding `tx`.
+pub(super) fn spawn(
+    config: &Config,
+    m: &MachineSection,
+    machine: &MachineLoop,
+    tx: mpsc::Sender<SourceEvent>,
+    parts: Option<u64>,
+    shutdown: watch::Receiver<bool>,
+) -> anyhow::Result<()> {
+    match &m.gauge {
+        GaugeSection::Sim {
+            part_interval_ms,
+            seed,
+            grinder,
+        } => {
+            let source = sim_source::SimSource {
+                machine: m.name.clone(),
+                grinder: grinder.clone(),
+                seed: *seed,
+                feature: machine.feature(),
+                program: machine.program_path(),
+                main_program: machine.main_program_path(),
+                table_wheel_radius_bits: machine.table_wheel_radius(),
+                part_interval: Duration::from_millis(*part_interval_ms),
+                parts,
+            };
+            tokio::spawn(source.run(tx, shutdown));
+        }
+        GaugeSection::Drop {
+            folder, poll_ms, ..
+        } => {
+            tokio::spawn(drop_source::run(
+                m.name.clone(),
+                config.resolve(folder),
+                *poll_ms,
+                m.gauge.drop_options().unwrap_or_default(),
+                tx,
+                shutdown,
+            ));
+        }
+        GaugeSection::Can { interface, dbc } => {
+            let names = crate::gauge::GaugeSignalNames::default();
+            let dbc = crate::gauge::GaugeDbc::load(&config.resolve(dbc), &names)
+                .with_context(|| format!("machine {}: gauge DBC", m.name))?;
+            let spec = LiveSpec::Can {
+                interface: interface.clone(),
+                dbc: Box::new(dbc),
+            };
+            tokio::spawn(live_source(m.name.clone(), spec, tx, shutdown));
+        }
+        GaugeSection::Serial { port, baud } => {
+            let spec = LiveSpec::Serial {
+                port: port.clone(),
+                baud: *baud,
+            };
+            tokio::spawn(live_source(m.name.clone(), spec, tx, shutdown));
+        }
+    }
+    Ok(())
+}
+
+/// A live gauge connection: a SocketCAN bus through the DBC, or a serial port speaking the
+/// line protocol.
+enum LiveGauge {
+    Can(Box<crate::gauge::CanGauge<crate::gauge::CanBus>>),
+    Serial(Box<crate::gauge::SerialGauge<tokio_serial::SerialStream>>),
+}
+
+/// How to open a live gauge again after it failed.
+#[derive(Clone)]
+enum LiveSpec {
+    Can {
+        interface: String,
+        dbc: Box<crate::gauge::GaugeDbc>,
+    },
+    Serial {
+        port: String,
+        baud: u32,
+    },
+}
+
+impl LiveSpec {
+    fn name(&self) -> &str {
+        match self {
+            LiveSpec::Can { interface, .. } => interface,
+            LiveSpec::Serial { port, .. } => port,
+        }
+    }
+
+    fn open(&self) -> Result<LiveGauge, String> {
+        match self {
+            LiveSpec::Can { interface, dbc } => {
+                crate::gauge::CanGauge::open(interface, (**dbc).clone())
+                    .map(|g| LiveGauge::Can(Box::new(g)))
+                    .map_err(|e| e.to_string())
+            }
+            LiveSpec::Serial { port, baud } => crate::gauge::SerialGauge::open(port, *baud)
+                .map(|g| LiveGauge::Serial(Box::new(g)))
+                .map_err(|e| e.to_string()),
+        }
+    }
+}
+
+impl LiveGauge {
+    /// The next measurement, a problem to log, or `None` when the connection ended.
+    async fn next(
+        &mut self,
+    ) -> std::io::Result<Option<Result<crate::core::measure::RawMeasurement, String>>> {
+        Ok(match self {
+            LiveGauge::Can(g) => g.next_event().await?.map(|e| match e {
+                crate::gauge::CanEvent::Measurement(m) => Ok(m),
+                other => Err(format!("{other:?}")),
+            }),
+            LiveGauge::Serial(g) => g.next_event().await?.map(|e| match e {
+                crate::gauge::SerialEvent::Measurement(m) => Ok(m),
+                crate::gauge::SerialEvent::Problem(p) => Err(format!("{p:?}")),
+            }),
+        })
+    }
+}
+
+/// A live gauge. One that cannot be opened (missing device, a kernel without SocketCAN) or
+/// that fails is an ERROR naming it, retried every 10 s; never a panic, never fatal.
+async fn live_source(
+    machine: String,
+    spec: LiveSpec,
+    tx: mpsc::Sender<SourceEvent>,
+    mut shutdown: watch::Receiver<bool>,
+) {
+    loop {
+        match spec.open() {
+            Ok(mut gauge) => {
+                info!(machine = %machine, gauge = %spec.name(), "gauge listening");
+                loop {
+                    let event = tokio::select! {
+                        e = gauge.next() => e,
+                        _ = shutdown.changed() => return,
+                    };
+                    match event {
+                        Ok(Some(Ok(m))) => {
+                            if tx
+                                .send(SourceEvent::Measurement {
+                                    raw: m,
+                                    ground_with: None,
+                                    done: None,
+                                })
+                                .await
+                                .is_err()
+                            {
+                                return;
+                            }
+                        }
+                        Ok(Some(Err(problem))) => {
+                            warn!(machine = %machine, problem = %problem, "gauge data discarded")
+                        }
+                        Ok(None) => break,
+                        Err(e) => {
+                            error!(machine = %machine, gauge = %spec.name(), error = %e, "gauge read failed");
+                            break;
+                        }
+                    }
+                }
+            }
+            Err(e) => error!(machine = %machine, error = %e, "gauge unavailable; retrying in 10 s"),
+        }
+        tokio::select! {
+            _ = tokio::time::sleep(Duration::from_secs(10)) => {}
+            _ = shutdown.changed() => return,
+        }
+    }
+}
