@@ -2,7 +2,7 @@
 //! one, and each is moved by the machine's verdict (processed, or rejected with its reason).
 
 use super::machine::{Ingested, SourceEvent};
-use crate::gauge::Settle;
+use crate::gauge::{DropFolder, Settle};
 use std::time::Duration;
 use tokio::sync::{mpsc, watch};
 use tracing::{error, warn};
@@ -49,37 +49,9 @@ pub(super) async fn run(
         for event in events {
             match event {
                 crate::gauge::DropEvent::Accepted { measurement, path } => {
-                    let (done, verdict) = tokio::sync::oneshot::channel();
-                    let event = SourceEvent::Measurement {
-                        raw: measurement,
-                        ground_with: None,
-                        done: Some(done),
-                    };
-                    if tx.send(event).await.is_err() {
-                        return;
-                    }
-                    // The file moves by the machine's verdict: rejected/ with the reason
-                    // beside it, or processed/. A machine gone (shutdown) leaves it in the
-                    // inbox, read again at the next start.
-                    let settle = match verdict.await {
-                        Ok(Ingested::Rejected { reason } | Ingested::Failed { reason }) => {
-                            Settle::Rejected { reason }
-                        }
-                        Ok(Ingested::Recorded | Ingested::Repeated) => Settle::Processed,
-                        Err(_) => return,
-                    };
-                    let (df, settled) = match tokio::task::spawn_blocking(move || {
-                        let settled = drop_folder.settle(&path, settle);
-                        (drop_folder, settled)
-                    })
-                    .await
-                    {
-                        Ok(done) => done,
-                        Err(_) => return,
-                    };
-                    drop_folder = df;
-                    if let Err(e) = settled {
-                        warn!(machine = %machine, error = %e, "drop file not settled");
+                    match hand_over(&machine, drop_folder, measurement, path, &tx).await {
+                        Some(df) => drop_folder = df,
+                        None => return,
                     }
                 }
                 crate::gauge::DropEvent::Dressing { report, moved_to } => {
@@ -95,4 +67,37 @@ pub(super) async fn run(
             }
         }
     }
+}
+
+/// Sends one complete file's measurement to the machine and moves the file by its verdict:
+/// `rejected/` with the reason beside it, or `processed/`. `None` when the machine is gone
+/// (shutdown): the file stays in the inbox and is read again at the next start.
+async fn hand_over(
+    machine: &str,
+    mut drop_folder: DropFolder,
+    measurement: crate::core::measure::RawMeasurement,
+    path: std::path::PathBuf,
+    tx: &mpsc::Sender<SourceEvent>,
+) -> Option<DropFolder> {
+    let (done, verdict) = tokio::sync::oneshot::channel();
+    let event = SourceEvent::Measurement {
+        raw: measurement,
+        ground_with: None,
+        done: Some(done),
+    };
+    tx.send(event).await.ok()?;
+    let settle = match verdict.await.ok()? {
+        Ingested::Rejected { reason } | Ingested::Failed { reason } => Settle::Rejected { reason },
+        Ingested::Recorded | Ingested::Repeated => Settle::Processed,
+    };
+    let (df, settled) = tokio::task::spawn_blocking(move || {
+        let settled = drop_folder.settle(&path, settle);
+        (drop_folder, settled)
+    })
+    .await
+    .ok()?;
+    if let Err(e) = settled {
+        warn!(machine = %machine, error = %e, "drop file not settled");
+    }
+    Some(df)
 }

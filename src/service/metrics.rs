@@ -35,6 +35,79 @@ type Family = (
     fn(&MachineMetrics) -> f64,
 );
 
+/// Every metric family, in the order rendered.
+const FAMILIES: [Family; 12] = [
+    (
+        "camloop_parts_total",
+        "counter",
+        "Parts measured and processed.",
+        |m| m.parts_total as f64,
+    ),
+    (
+        "camloop_measurements_rejected_total",
+        "counter",
+        "Measurements refused by the checks.",
+        |m| m.measurements_rejected_total as f64,
+    ),
+    (
+        "camloop_tables_pushed_total",
+        "counter",
+        "Table versions delivered to the share.",
+        |m| m.tables_pushed_total as f64,
+    ),
+    (
+        "camloop_tables_refused_total",
+        "counter",
+        "Tables refused by a guard.",
+        |m| m.tables_refused_total as f64,
+    ),
+    ("camloop_alarms_total", "counter", "Alarms raised.", |m| {
+        m.alarms_total as f64
+    }),
+    (
+        "camloop_share_waiting",
+        "gauge",
+        "Table versions waiting for the share.",
+        |m| m.share_waiting as f64,
+    ),
+    (
+        "camloop_learning_held",
+        "gauge",
+        "1 while learning holds (a table waits for the share, or a part could not be recorded).",
+        |m| m.learning_held as f64,
+    ),
+    (
+        "camloop_journal_failing",
+        "gauge",
+        "1 while the journal cannot be written (e.g. disk full).",
+        |m| m.journal_failing as f64,
+    ),
+    (
+        "camloop_journal_pending",
+        "gauge",
+        "Records waiting for the database.",
+        |m| m.journal_pending as f64,
+    ),
+    (
+        "camloop_last_max_error_um",
+        "gauge",
+        "Max lift error of the last part, micrometres.",
+        |m| m.last_max_error_um,
+    ),
+    (
+        "camloop_part_processing_seconds_sum",
+        "counter",
+        "Time from measurement to table delivered and recorded.",
+        |m| m.processing_seconds_sum,
+    ),
+    (
+        "camloop_part_processing_seconds_count",
+        "counter",
+        "Parts timed.",
+        |m| m.processing_seconds_count as f64,
+    ),
+];
+
 #[derive(Debug, Default)]
 pub struct Metrics {
     machines: Mutex<BTreeMap<String, MachineMetrics>>,
@@ -58,78 +131,7 @@ impl Metrics {
     pub fn render(&self) -> String {
         let map = self.snapshot();
         let mut s = String::new();
-        let families: [Family; 12] = [
-            (
-                "camloop_parts_total",
-                "counter",
-                "Parts measured and processed.",
-                |m| m.parts_total as f64,
-            ),
-            (
-                "camloop_measurements_rejected_total",
-                "counter",
-                "Measurements refused by the checks.",
-                |m| m.measurements_rejected_total as f64,
-            ),
-            (
-                "camloop_tables_pushed_total",
-                "counter",
-                "Table versions delivered to the share.",
-                |m| m.tables_pushed_total as f64,
-            ),
-            (
-                "camloop_tables_refused_total",
-                "counter",
-                "Tables refused by a guard.",
-                |m| m.tables_refused_total as f64,
-            ),
-            ("camloop_alarms_total", "counter", "Alarms raised.", |m| {
-                m.alarms_total as f64
-            }),
-            (
-                "camloop_share_waiting",
-                "gauge",
-                "Table versions waiting for the share.",
-                |m| m.share_waiting as f64,
-            ),
-            (
-                "camloop_learning_held",
-                "gauge",
-                "1 while learning holds (a table waits for the share, or a part could not be recorded).",
-                |m| m.learning_held as f64,
-            ),
-            (
-                "camloop_journal_failing",
-                "gauge",
-                "1 while the journal cannot be written (e.g. disk full).",
-                |m| m.journal_failing as f64,
-            ),
-            (
-                "camloop_journal_pending",
-                "gauge",
-                "Records waiting for the database.",
-                |m| m.journal_pending as f64,
-            ),
-            (
-                "camloop_last_max_error_um",
-                "gauge",
-                "Max lift error of the last part, micrometres.",
-                |m| m.last_max_error_um,
-            ),
-            (
-                "camloop_part_processing_seconds_sum",
-                "counter",
-                "Time from measurement to table delivered and recorded.",
-                |m| m.processing_seconds_sum,
-            ),
-            (
-                "camloop_part_processing_seconds_count",
-                "counter",
-                "Parts timed.",
-                |m| m.processing_seconds_count as f64,
-            ),
-        ];
-        for (name, kind, help, value) in families {
+        for (name, kind, help, value) in FAMILIES {
             let _ = writeln!(s, "# HELP {name} {help}\n# TYPE {name} {kind}");
             for (machine, m) in &map {
                 let _ = writeln!(s, "{name}{{machine=\"{machine}\"}} {}", value(m));

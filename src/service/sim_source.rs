@@ -36,16 +36,8 @@ pub struct SimSource {
 impl SimSource {
     /// Runs until shutdown (or the part count); each part goes out as one event.
     pub async fn run(self, tx: mpsc::Sender<SourceEvent>, mut shutdown: watch::Receiver<bool>) {
-        let workpiece = match self.feature {
-            Feature::Cam(g) => Workpiece::Cam(g),
-            Feature::Pin(g) => Workpiece::Crankpin(g),
-        };
-        let mut sim = match SimGrinder::new(self.grinder.clone(), workpiece, self.seed) {
-            Ok(sim) => sim,
-            Err(e) => {
-                error!(machine = %self.machine, error = %e, "simulator cannot start");
-                return;
-            }
+        let Some(mut sim) = self.grinder() else {
+            return;
         };
         let dbc = GaugeDbc::builtin();
         let x_zero_offset = self.feature.x_zero_mm() - self.feature.wheel_radius_mm();
@@ -86,24 +78,7 @@ impl SimSource {
                 lobe: "1".into(),
             };
             let raw = sim.measure(&ground, &labels);
-            let measurement = match measurement_frames(&dbc, &raw) {
-                Ok(frames) => {
-                    let mut assembler = Assembler::new(format!("sim:{}", self.machine));
-                    let mut out = None;
-                    for (id, data) in frames {
-                        if let Ok(frame) = dbc.decode(id, &data)
-                            && let Some(Assembled::Measurement(m)) = assembler.push(frame)
-                        {
-                            out = Some(m);
-                        }
-                    }
-                    out
-                }
-                Err(e) => {
-                    error!(machine = %self.machine, error = %e, "simulator: measurement not encodable");
-                    None
-                }
-            };
+            let measurement = self.through_the_bus(&dbc, &raw);
             made += 1;
             if let Some(m) = measurement {
                 let (done, processed) = tokio::sync::oneshot::channel();
@@ -137,6 +112,42 @@ impl SimSource {
 }
 
 impl SimSource {
+    fn grinder(&self) -> Option<SimGrinder> {
+        let workpiece = match self.feature {
+            Feature::Cam(g) => Workpiece::Cam(g),
+            Feature::Pin(g) => Workpiece::Crankpin(g),
+        };
+        SimGrinder::new(self.grinder.clone(), workpiece, self.seed)
+            .map_err(|e| error!(machine = %self.machine, error = %e, "simulator cannot start"))
+            .ok()
+    }
+
+    /// The measurement as the machine receives it: encoded as CAN frames with the gauge's
+    /// DBC, then decoded and assembled by the real decoder.
+    fn through_the_bus(
+        &self,
+        dbc: &GaugeDbc,
+        raw: &crate::core::measure::RawMeasurement,
+    ) -> Option<crate::core::measure::RawMeasurement> {
+        let frames = match measurement_frames(dbc, raw) {
+            Ok(frames) => frames,
+            Err(e) => {
+                error!(machine = %self.machine, error = %e, "simulator: measurement not encodable");
+                return None;
+            }
+        };
+        let mut assembler = Assembler::new(format!("sim:{}", self.machine));
+        let mut out = None;
+        for (id, data) in frames {
+            if let Ok(frame) = dbc.decode(id, &data)
+                && let Some(Assembled::Measurement(m)) = assembler.push(frame)
+            {
+                out = Some(m);
+            }
+        }
+        out
+    }
+
     /// Runs the main program on the share through the simulated control; returns the coupled
     /// table and the version its program's provenance names (what a control would report
     /// with the part).

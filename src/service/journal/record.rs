@@ -227,87 +227,8 @@ fn state_json(state: &LoopMemory) -> Result<String, StoreError> {
 
 pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreError> {
     match record.clone() {
-        Pending::Measurement {
-            machine,
-            part,
-            lobe,
-            received_at_ms,
-            verdict,
-            max_profile_error_um,
-            base_radius_error_um,
-            phase_error_deg,
-            revolutions_used,
-            points_per_rev,
-            origin,
-            sha256,
-            ground_with_version: _,
-            raw_lift_mm,
-            averaged_lift_mm,
-            analysis_json,
-        } => {
-            let m = NewMeasurement {
-                machine,
-                part,
-                lobe,
-                received_at_ms,
-                verdict,
-                max_profile_error_um,
-                base_radius_error_um,
-                phase_error_deg,
-                revolutions_used,
-                points_per_rev,
-                origin,
-                sha256,
-                recipe_snapshot: None,
-                raw_lift_mm,
-                averaged_lift_mm,
-                analysis_json,
-            };
-            store.insert_measurement(&m).await.map(|_| ())
-        }
-        Pending::Table {
-            machine,
-            lobe,
-            version,
-            parent_version,
-            table_number,
-            program_text,
-            learning,
-            reason,
-            status,
-            status_why,
-            created_at_ms,
-        } => {
-            // A parent the store never saw (history from before one version counter) is
-            // left out rather than blocking every later record.
-            let parent_version = match parent_version {
-                Some(p)
-                    if store
-                        .table_version(&machine, &lobe, p as i64)
-                        .await?
-                        .is_some() =>
-                {
-                    Some(p as i64)
-                }
-                _ => None,
-            };
-            let learning_params_json = serde_json::to_string(&learning)
-                .map_err(|e| StoreError::invalid("table learning", e.to_string()))?;
-            let t = NewTableVersion {
-                machine,
-                lobe,
-                version: Some(version as i64),
-                parent_version,
-                table_number,
-                program_text,
-                learning_params_json,
-                reason,
-                status,
-                status_why,
-                created_at_ms,
-            };
-            store.insert_table_version(&t).await.map(|_| ())
-        }
+        record @ Pending::Measurement { .. } => insert_measurement(store, record).await,
+        record @ Pending::Table { .. } => insert_table(store, record).await,
         Pending::TableStatus {
             machine,
             lobe,
@@ -334,27 +255,124 @@ pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreEr
                 .save_learning_state(&machine, &lobe, &state_json(&state)?, saved_at_ms)
                 .await
         }
-        Pending::RecipeSnapshot {
-            machine,
-            part,
-            lobe,
-            kind,
-            recipe_json,
-            created_at_ms,
-        } => {
-            let r = NewRecipeSnapshot {
-                machine,
-                part,
-                lobe,
-                kind,
-                recipe_json,
-                created_at_ms,
-            };
-            store.insert_recipe_snapshot(&r).await.map(|_| ())
-        }
+        record @ Pending::RecipeSnapshot { .. } => insert_snapshot(store, record).await,
         Pending::Dressing { .. } => match record.dressing() {
             Some(d) => store.insert_dressing(&d).await.map(|_| ()),
             None => Ok(()),
         },
     }
+}
+
+async fn insert_measurement(store: &Store, record: Pending) -> Result<(), StoreError> {
+    let Pending::Measurement {
+        machine,
+        part,
+        lobe,
+        received_at_ms,
+        verdict,
+        max_profile_error_um,
+        base_radius_error_um,
+        phase_error_deg,
+        revolutions_used,
+        points_per_rev,
+        origin,
+        sha256,
+        ground_with_version: _,
+        raw_lift_mm,
+        averaged_lift_mm,
+        analysis_json,
+    } = record
+    else {
+        return Ok(());
+    };
+    let m = NewMeasurement {
+        machine,
+        part,
+        lobe,
+        received_at_ms,
+        verdict,
+        max_profile_error_um,
+        base_radius_error_um,
+        phase_error_deg,
+        revolutions_used,
+        points_per_rev,
+        origin,
+        sha256,
+        recipe_snapshot: None,
+        raw_lift_mm,
+        averaged_lift_mm,
+        analysis_json,
+    };
+    store.insert_measurement(&m).await.map(|_| ())
+}
+
+async fn insert_table(store: &Store, record: Pending) -> Result<(), StoreError> {
+    let Pending::Table {
+        machine,
+        lobe,
+        version,
+        parent_version,
+        table_number,
+        program_text,
+        learning,
+        reason,
+        status,
+        status_why,
+        created_at_ms,
+    } = record
+    else {
+        return Ok(());
+    };
+    // A parent the store never saw (history from before one version counter) is
+    // left out rather than blocking every later record.
+    let parent_version = match parent_version {
+        Some(p)
+            if store
+                .table_version(&machine, &lobe, p as i64)
+                .await?
+                .is_some() =>
+        {
+            Some(p as i64)
+        }
+        _ => None,
+    };
+    let learning_params_json = serde_json::to_string(&learning)
+        .map_err(|e| StoreError::invalid("table learning", e.to_string()))?;
+    let t = NewTableVersion {
+        machine,
+        lobe,
+        version: Some(version as i64),
+        parent_version,
+        table_number,
+        program_text,
+        learning_params_json,
+        reason,
+        status,
+        status_why,
+        created_at_ms,
+    };
+    store.insert_table_version(&t).await.map(|_| ())
+}
+
+async fn insert_snapshot(store: &Store, record: Pending) -> Result<(), StoreError> {
+    let Pending::RecipeSnapshot {
+        machine,
+        part,
+        lobe,
+        kind,
+        recipe_json,
+        created_at_ms,
+    } = record
+    else {
+        return Ok(());
+    };
+    let r = NewRecipeSnapshot {
+        machine,
+        part,
+        lobe,
+        kind,
+        recipe_json,
+        created_at_ms,
+    };
+    store.insert_recipe_snapshot(&r).await.map(|_| ())
 }

@@ -57,41 +57,9 @@ impl MachineLoop {
                 asked: lobe.to_string(),
             });
         }
-        let store = self
-            .store
-            .read()
-            .await
-            .clone()
-            .ok_or(RollbackError::StoreUnavailable)?;
-        let old = store
-            .table_version(&self.name, lobe, version as i64)
-            .await
-            .context("reading the stored version")?
-            .ok_or_else(|| RollbackError::NotFound {
-                machine: self.name.clone(),
-                lobe: lobe.to_string(),
-                version,
-            })?;
-        let learning: TableLearning = serde_json::from_str(&old.learning_params_json)
-            .with_context(|| format!("version {version}: its learning record is unreadable"))?;
+        let (text, learning, number) = self.rollback_program(lobe, version).await?;
         let at_ms = now_ms();
-        let number = self.share.next_table_number();
-        let text = match self.share.rollback_request(version, now_ms_u64()) {
-            Ok(r) => r
-                .files
-                .into_iter()
-                .next()
-                .map_or(old.program_text.clone(), |f| f.text),
-            Err(_) => old.program_text.clone(),
-        };
         let reason = format!("rollback to v{version}");
-        let provenance = self.provenance(
-            self.share.history().next_version(),
-            self.memory.in_force_version,
-            &learning,
-        );
-        let text = retarget_table_program(&text, number, Some(&provenance))
-            .with_context(|| format!("version {version}: cannot retarget to table {number}"))?;
         let mut next = self.memory.learning.clone();
         if learning.correction_um.len() == next.correction_um.len() {
             next.correction_um = learning.correction_um.clone();
@@ -142,5 +110,47 @@ impl MachineLoop {
             table_number: number,
             summary: format!("{reason} delivered as v{new_version}, table {number} ({why})"),
         })
+    }
+
+    /// The program of `version` retargeted to the free table number, with its learning.
+    async fn rollback_program(
+        &mut self,
+        lobe: &str,
+        version: u64,
+    ) -> Result<(String, TableLearning, u32), RollbackError> {
+        let store = self
+            .store
+            .read()
+            .await
+            .clone()
+            .ok_or(RollbackError::StoreUnavailable)?;
+        let old = store
+            .table_version(&self.name, lobe, version as i64)
+            .await
+            .context("reading the stored version")?
+            .ok_or_else(|| RollbackError::NotFound {
+                machine: self.name.clone(),
+                lobe: lobe.to_string(),
+                version,
+            })?;
+        let learning: TableLearning = serde_json::from_str(&old.learning_params_json)
+            .with_context(|| format!("version {version}: its learning record is unreadable"))?;
+        let number = self.share.next_table_number();
+        let text = match self.share.rollback_request(version, now_ms_u64()) {
+            Ok(r) => r
+                .files
+                .into_iter()
+                .next()
+                .map_or(old.program_text.clone(), |f| f.text),
+            Err(_) => old.program_text.clone(),
+        };
+        let provenance = self.provenance(
+            self.share.history().next_version(),
+            self.memory.in_force_version,
+            &learning,
+        );
+        let text = retarget_table_program(&text, number, Some(&provenance))
+            .with_context(|| format!("version {version}: cannot retarget to table {number}"))?;
+        Ok((text, learning, number))
     }
 }
