@@ -104,6 +104,12 @@ impl VersionState {
     }
 }
 
+/// A manifest record that does not follow from the ones before it (the manifest was edited
+/// or damaged); the text says which version and what.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct RecordOutOfOrder(pub String);
+
 /// The versions the manifest tells of, in order. Folded as read by [`load`], it holds
 /// every version; [`History::forget_settled`] drops the versions nothing can need any more,
 /// so a long-running service's memory stays bounded while the manifest keeps every record.
@@ -211,16 +217,16 @@ impl History {
     }
 
     /// Fold one record in, checking that it follows from what came before.
-    pub fn apply(&mut self, record: Record) -> Result<(), String> {
+    pub fn apply(&mut self, record: Record) -> Result<(), RecordOutOfOrder> {
         match record {
             Record::Version(rec) => {
                 if rec.version != self.next_version() {
-                    return Err(format!(
+                    return Err(RecordOutOfOrder(format!(
                         "version v{} follows v{}, expected v{}",
                         rec.version,
                         self.told,
                         self.next_version()
-                    ));
+                    )));
                 }
                 let status = match &rec.refused {
                     Some(reason) => VersionStatus::Refused {
@@ -262,17 +268,21 @@ impl History {
             } => {
                 let v = self.deliverable_mut(version, "pushed")?;
                 if v.status != VersionStatus::Delivering {
-                    return Err(format!("v{version} pushed without delivering"));
+                    return Err(RecordOutOfOrder(format!(
+                        "v{version} pushed without delivering"
+                    )));
                 }
                 v.status = VersionStatus::Pushed { at_unix_ms };
                 self.deliverable = None;
             }
             Record::Pruned { version, .. } => {
-                let v = self
-                    .get_mut(version)
-                    .ok_or_else(|| format!("pruned v{version}, which does not exist"))?;
+                let v = self.get_mut(version).ok_or_else(|| {
+                    RecordOutOfOrder(format!("pruned v{version}, which does not exist"))
+                })?;
                 if !v.text_kept {
-                    return Err(format!("pruned v{version}, which has no kept text"));
+                    return Err(RecordOutOfOrder(format!(
+                        "pruned v{version}, which has no kept text"
+                    )));
                 }
                 v.text_kept = false;
             }
@@ -280,12 +290,19 @@ impl History {
         Ok(())
     }
 
-    fn deliverable_mut(&mut self, version: u64, what: &str) -> Result<&mut VersionState, String> {
-        let v = self
-            .get_mut(version)
-            .ok_or_else(|| format!("{what} for v{version}, which does not exist"))?;
+    fn deliverable_mut(
+        &mut self,
+        version: u64,
+        what: &str,
+    ) -> Result<&mut VersionState, RecordOutOfOrder> {
+        let v = self.get_mut(version).ok_or_else(|| {
+            RecordOutOfOrder(format!("{what} for v{version}, which does not exist"))
+        })?;
         if !v.is_deliverable() {
-            return Err(format!("{what} for v{version}, which is {:?}", v.status));
+            return Err(RecordOutOfOrder(format!(
+                "{what} for v{version}, which is {:?}",
+                v.status
+            )));
         }
         Ok(v)
     }
@@ -323,7 +340,7 @@ fn fold_file(path: &Path, forget: bool) -> Result<Loaded, StateError> {
         };
         let record: Record = serde_json::from_slice(line).map_err(|e| corrupt(e.to_string()))?;
         let is_version = matches!(record, Record::Version(_));
-        history.apply(record).map_err(corrupt)?;
+        history.apply(record).map_err(|e| corrupt(e.0))?;
         if forget && is_version {
             history.forget_settled();
         }
@@ -366,7 +383,7 @@ mod tests {
         })
     }
 
-    fn fold(records: Vec<Record>) -> Result<History, String> {
+    fn fold(records: Vec<Record>) -> Result<History, RecordOutOfOrder> {
         let mut h = History::default();
         for r in records {
             h.apply(r)?;
@@ -486,6 +503,7 @@ mod tests {
         assert!(
             fold(vec![version(2, None)])
                 .unwrap_err()
+                .0
                 .contains("expected v1")
         );
         let pushed = Record::Pushed {
@@ -495,6 +513,7 @@ mod tests {
         assert!(
             fold(vec![version(1, None), pushed.clone()])
                 .unwrap_err()
+                .0
                 .contains("without delivering")
         );
         let delivering = Record::Delivering {
@@ -504,6 +523,7 @@ mod tests {
         assert!(
             fold(vec![version(1, Some("no")), delivering])
                 .unwrap_err()
+                .0
                 .contains("Refused")
         );
         let pruned = Record::Pruned {
@@ -513,6 +533,7 @@ mod tests {
         assert!(
             fold(vec![version(1, None), pruned.clone(), pruned])
                 .unwrap_err()
+                .0
                 .contains("no kept text")
         );
     }

@@ -516,10 +516,10 @@ impl Share {
         self.manifest_lines += 1;
         self.history
             .apply(record)
-            .map_err(|reason| StateError::CorruptManifest {
+            .map_err(|e| StateError::CorruptManifest {
                 line: self.manifest_lines,
                 path,
-                reason,
+                reason: e.0,
             })?;
         // Keeps memory bounded in a service that pushes for months; the manifest keeps all.
         self.history.forget_settled();
