@@ -398,16 +398,22 @@ async fn load_memory(
     journal: &Journal,
     store: &StoreHandle,
 ) -> anyhow::Result<LoopMemory> {
-    let local = journal.records().iter().rev().find_map(|r| match r {
-        Pending::Learning {
-            machine,
-            lobe,
-            state,
-            ..
-        } if machine == name && *lobe == setup.name => Some(state.clone()),
-        _ => None,
+    let records = journal.records();
+    let newest = records.iter().rposition(|r| {
+        matches!(r, Pending::Learning { machine, lobe, .. } if machine == name && *lobe == setup.name)
     });
-    if let Some(memory) = local {
+    if let Some(i) = newest
+        && let Pending::Learning { state, .. } = &records[i]
+    {
+        // Measurements recorded after it (the process died before their learning record)
+        // still count, and are still known, so a replay does not learn them again.
+        let mut memory = state.clone();
+        for r in &records[i + 1..] {
+            if let Pending::Measurement { sha256, .. } = r {
+                memory.parts += 1;
+                memory.remember(sha256.clone());
+            }
+        }
         return Ok(memory);
     }
     let Some(store) = store.read().await.clone() else {
