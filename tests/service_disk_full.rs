@@ -8,7 +8,7 @@ mod service_support;
 
 use camloop::config::Config;
 use camloop::service::{self, RunOptions};
-use service_support::get;
+use service_support::{get, sim_config};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -40,29 +40,8 @@ impl Drop for Tmpfs {
 }
 
 fn config(dir: &Path) -> Config {
-    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
-    let text = format!(
-        r#"
-[service]
-var_dir = "var"
-[database]
-url = "sqlite://{}/var/db.sqlite?mode=rwc"
-[http]
-listen = "127.0.0.1:0"
-[[machines]]
-name = "SIM1"
-recipe = "{}"
-lobe = "IN1"
-share = "share/SIM1"
-[machines.gauge]
-kind = "sim"
-part_interval_ms = 20
-seed = 3
-"#,
-        dir.display(),
-        recipe.display()
-    );
-    Config::parse(&text, &dir.join("camloop.toml"), |_| None).unwrap()
+    let url = format!("sqlite://{}/var/db.sqlite?mode=rwc", dir.display());
+    sim_config(dir, &url, 20, 3, |_| None)
 }
 
 async fn metric(addr: std::net::SocketAddr, name: &str) -> f64 {

@@ -7,35 +7,14 @@ mod service_support;
 use camloop::config::Config;
 use camloop::service::journal::{Journal, Pending};
 use camloop::service::{self, RunOptions};
-use service_support::get;
+use service_support::{get, sim_config};
 use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-fn config(dir: &Path, parts_interval_ms: u32) -> Config {
-    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
-    let text = format!(
-        r#"
-[service]
-var_dir = "var"
-[database]
-url = "sqlite://{}/db.sqlite?mode=rwc"
-[http]
-listen = "127.0.0.1:0"
-[[machines]]
-name = "SIM1"
-recipe = "{}"
-lobe = "IN1"
-share = "share/SIM1"
-[machines.gauge]
-kind = "sim"
-part_interval_ms = {parts_interval_ms}
-seed = 11
-"#,
-        dir.display(),
-        recipe.display()
-    );
-    Config::parse(&text, &dir.join("camloop.toml"), |_| None).unwrap()
+fn config(dir: &Path, part_interval_ms: u32) -> Config {
+    let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.display());
+    sim_config(dir, &url, part_interval_ms, 11, |_| None)
 }
 
 /// Parts the machine has processed, from `/metrics`.

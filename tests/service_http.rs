@@ -2,9 +2,12 @@
 //! connection cap; the token checked before the body; writes that name an unknown lobe or
 //! machine; typed command answers mapped to status and code; the machine list.
 
+mod service_support;
+
 use camloop::config::Secret;
 use camloop::names::MachineName;
 use camloop::service::http::{self, AppState, Command, CommandDone, CommandError, HttpLimits};
+use service_support::exchange;
 use std::collections::{BTreeMap, HashMap};
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -90,24 +93,6 @@ fn limits(max_connections: usize, header_ms: u64, body_ms: u64) -> HttpLimits {
         header_timeout: Duration::from_millis(header_ms),
         body_timeout: Duration::from_millis(body_ms),
     }
-}
-
-/// Writes `request` and reads until the server closes: status and body.
-async fn exchange(addr: SocketAddr, request: &str) -> (u16, String) {
-    let mut stream = TcpStream::connect(addr).await.unwrap();
-    stream.write_all(request.as_bytes()).await.unwrap();
-    let mut response = String::new();
-    let _ = stream.read_to_string(&mut response).await;
-    let status = response
-        .split(' ')
-        .nth(1)
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(0);
-    let body = response
-        .split_once("\r\n\r\n")
-        .map(|(_, b)| b.to_string())
-        .unwrap_or_default();
-    (status, body)
 }
 
 fn post_request(path: &str, body: &str, token: Option<&str>) -> String {

@@ -6,7 +6,7 @@
 mod service_support;
 mod store_support;
 
-use service_support::{get, json, post};
+use service_support::{get, json, post, sim_config};
 
 use camloop::config::Config;
 use camloop::service::{self, RunOptions};
@@ -14,29 +14,8 @@ use std::path::Path;
 use tokio::io::AsyncWriteExt;
 
 fn config(dir: &Path, database_url: &str) -> Config {
-    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
-    let text = format!(
-        r#"
-[service]
-var_dir = "var"
-[database]
-url = "{database_url}"
-[http]
-listen = "127.0.0.1:0"
-[[machines]]
-name = "SIM1"
-recipe = "{}"
-lobe = "IN1"
-share = "share/SIM1"
-[machines.gauge]
-kind = "sim"
-part_interval_ms = 20
-seed = 5
-"#,
-        recipe.display()
-    );
     let env = |k: &str| (k == camloop::config::ENV_API_TOKEN).then(|| TOKEN.to_string());
-    Config::parse(&text, &dir.join("camloop.toml"), env).unwrap()
+    sim_config(dir, database_url, 20, 5, env)
 }
 
 const TOKEN: &str = "let-me-write";

@@ -319,23 +319,8 @@ fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
 
 /// `MM-DD HH:MM:SS` in UTC, enough to tell parts apart in a terminal.
 fn format_time(ms: i64) -> String {
-    let secs = ms.div_euclid(1000);
-    let (days, rem) = (secs.div_euclid(86_400), secs.rem_euclid(86_400));
-    // Inverse of days_from_civil for the month and day.
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    format!(
-        "{m:02}-{d:02} {:02}:{:02}:{:02}",
-        rem / 3600,
-        rem / 60 % 60,
-        rem % 60
-    )
+    let full = crate::clock::utc_text(u64::try_from(ms).unwrap_or(0));
+    format!("{} {}", &full[5..10], &full[11..19])
 }
 
 #[cfg(test)]
