@@ -469,7 +469,7 @@ mod tests {
         let mut j = Journal::open(dir.path()).unwrap();
         j.append(&[event("b")]).unwrap();
         assert_eq!(j.flush(&store).await.unwrap(), 5);
-        let Store::Sqlite(pool) = &store else {
+        let crate::store::RawPool::Sqlite(pool) = store.raw_pool() else {
             panic!("a SQLite store")
         };
         for (table, rows) in [

@@ -7,6 +7,7 @@ pub mod journal;
 pub mod machine;
 pub mod metrics;
 pub mod sim_source;
+mod store_guard;
 
 use crate::config::{Config, GaugeSection};
 use crate::recipe::Recipe;
@@ -92,6 +93,7 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
     let metrics = Arc::new(Metrics::default());
     let store: StoreHandle = Arc::new(tokio::sync::RwLock::new(None));
     connect_store(&config, &store).await;
+    store_guard::guard_start(&store, &config, false).await?;
     let connector = tokio::spawn(keep_store_connected(
         config.database_url(),
         store.clone(),
