@@ -149,6 +149,18 @@ struct Remembered {
     created_at_ms: i64,
     /// Where the store was, for the operator reading the file (not compared).
     database: String,
+    /// When the store was accepted with `--accept-new-database`: how many table versions
+    /// each machine's share was ahead of it then. Its own numbering starts at 1 again, so
+    /// later checks count these as held.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    accepted_behind: Vec<Behind>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct Behind {
+    machine: String,
+    lobe: String,
+    versions: u64,
 }
 
 /// Checks `store` against the identity remembered in `var_dir` and against each machine's
@@ -185,7 +197,16 @@ pub(crate) async fn check_store(
             .await
             .map_err(asked)?
             .map(|t| t.version);
-        let held = newest.unwrap_or(0).max(0) as u64 + e.tables_in_journal;
+        let accepted_behind = remembered
+            .as_ref()
+            .filter(|r| r.store_id == identity.id)
+            .and_then(|r| {
+                r.accepted_behind
+                    .iter()
+                    .find(|b| b.machine == e.machine && b.lobe == e.lobe)
+            })
+            .map_or(0, |b| b.versions);
+        let held = newest.unwrap_or(0).max(0) as u64 + e.tables_in_journal + accepted_behind;
         if held < share_version {
             problems.push(Problem::BehindShare {
                 machine: e.machine.clone(),
@@ -201,24 +222,49 @@ pub(crate) async fn check_store(
     if remembered.is_some() {
         return Ok(StoreCheck::Same(identity));
     }
-    remember(&file, &identity, store.target())?;
+    remember(&file, &identity, store.target(), Vec::new())?;
     Ok(StoreCheck::Remembered(identity))
 }
 
 /// The documented recovery (`--accept-new-database`): remembers `store` as the one camloop
-/// writes from now on, whatever was remembered before. Returns its identity.
+/// writes from now on, whatever was remembered before, together with how far each machine's
+/// share is ahead of it (`expectations`), so later starts check only what comes after.
+/// Returns its identity.
 pub(crate) async fn accept_new_store(
     store: &Store,
     var_dir: &Path,
+    expectations: &[MachineExpectation],
 ) -> Result<StoreIdentity, StoreMismatch> {
-    let identity = store
-        .identity()
-        .await
-        .map_err(|source| StoreMismatch::Store {
-            target: store.target().to_owned(),
-            source,
-        })?;
-    remember(&var_dir.join(IDENTITY_FILE), &identity, store.target())?;
+    let asked = |source| StoreMismatch::Store {
+        target: store.target().to_owned(),
+        source,
+    };
+    let identity = store.identity().await.map_err(asked)?;
+    let mut behind = Vec::new();
+    for e in expectations {
+        let newest = store
+            .latest_table_version(&e.machine, &e.lobe)
+            .await
+            .map_err(asked)?
+            .map_or(0, |t| t.version.max(0) as u64);
+        let ahead = e
+            .newest_share_version
+            .unwrap_or(0)
+            .saturating_sub(newest + e.tables_in_journal);
+        if ahead > 0 {
+            behind.push(Behind {
+                machine: e.machine.clone(),
+                lobe: e.lobe.clone(),
+                versions: ahead,
+            });
+        }
+    }
+    remember(
+        &var_dir.join(IDENTITY_FILE),
+        &identity,
+        store.target(),
+        behind,
+    )?;
     Ok(identity)
 }
 
@@ -269,13 +315,14 @@ pub(crate) async fn guard_start(
         return Ok(());
     };
     let var_dir = config.var_dir();
+    let expected = expectations(config);
     let checked = if accept_new {
-        accept_new_store(&store, &var_dir).await.map(|identity| {
+        accept_new_store(&store, &var_dir, &expected).await.map(|identity| {
             info!(store_id = %identity.id, database = %store.target(), "new database accepted: camloop continues on it");
             StoreCheck::Same(identity)
         })
     } else {
-        check_store(&store, &var_dir, &expectations(config)).await
+        check_store(&store, &var_dir, &expected).await
     };
     match checked {
         Ok(StoreCheck::Same(_)) => Ok(()),
@@ -313,7 +360,12 @@ fn read_remembered(file: &Path) -> Result<Option<Remembered>, StoreMismatch> {
 
 /// Writes the identity file atomically: a temporary beside it, flushed, renamed over it,
 /// and the folder flushed so the rename survives a power cut.
-fn remember(file: &Path, identity: &StoreIdentity, database: &str) -> Result<(), StoreMismatch> {
+fn remember(
+    file: &Path,
+    identity: &StoreIdentity,
+    database: &str,
+    accepted_behind: Vec<Behind>,
+) -> Result<(), StoreMismatch> {
     let bad = |what: &str, e: std::io::Error| StoreMismatch::Remembered {
         path: file.to_path_buf(),
         reason: format!("cannot {what}: {}", e.kind()),
@@ -324,6 +376,7 @@ fn remember(file: &Path, identity: &StoreIdentity, database: &str) -> Result<(),
         store_id: identity.id.clone(),
         created_at_ms: identity.created_at_ms,
         database: database.to_owned(),
+        accepted_behind,
     })
     .expect("a struct of strings and integers serialises");
     let mut temp = tempfile::NamedTempFile::new_in(dir).map_err(|e| bad("write it", e))?;
@@ -337,198 +390,4 @@ fn remember(file: &Path, identity: &StoreIdentity, database: &str) -> Result<(),
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::store::{NewTableVersion, TableStatus};
-
-    struct Site {
-        dir: tempfile::TempDir,
-    }
-
-    impl Site {
-        fn new() -> Self {
-            Site {
-                dir: tempfile::tempdir().unwrap(),
-            }
-        }
-        fn var(&self) -> PathBuf {
-            self.dir.path().join("var")
-        }
-        fn db(&self, name: &str) -> PathBuf {
-            self.var().join(name)
-        }
-        async fn open(&self, name: &str) -> Store {
-            let url = format!("sqlite://{}?mode=rwc", self.db(name).display());
-            Store::connect(&url).await.unwrap()
-        }
-    }
-
-    fn share_at(version: Option<u64>, tables_in_journal: u64) -> Vec<MachineExpectation> {
-        vec![MachineExpectation {
-            machine: "SIM1".into(),
-            lobe: "IN1".into(),
-            newest_share_version: version,
-            tables_in_journal,
-        }]
-    }
-
-    async fn add_table(store: &Store) -> i64 {
-        store
-            .insert_table_version(&NewTableVersion {
-                machine: "SIM1".into(),
-                lobe: "IN1".into(),
-                parent_version: None,
-                table_number: 11,
-                program_text: "CTABDEF\nCTABEND\n".into(),
-                learning_params_json: "{}".into(),
-                reason: "nominal table".into(),
-                status: TableStatus::Pushed,
-                status_why: "pushed to the share".into(),
-                created_at_ms: 1_000,
-            })
-            .await
-            .unwrap()
-    }
-
-    fn mismatch(e: StoreMismatch) -> (String, Vec<Problem>) {
-        let text = e.to_string();
-        match e {
-            StoreMismatch::Mismatch { problems, .. } => (text, problems),
-            other => panic!("expected a mismatch, got {other:?}"),
-        }
-    }
-
-    #[tokio::test]
-    async fn a_fresh_start_passes_and_is_remembered_then_the_same_store_passes() {
-        let site = Site::new();
-        let store = site.open("camloop.db").await;
-        let id = store.identity().await.unwrap();
-        assert_eq!(id.id.len(), 32, "{id:?}");
-        let first = check_store(&store, &site.var(), &share_at(None, 0)).await;
-        assert_eq!(first, Ok(StoreCheck::Remembered(id.clone())));
-        let file = std::fs::read_to_string(site.var().join(IDENTITY_FILE)).unwrap();
-        assert!(file.contains(&id.id), "{file}");
-        add_table(&store).await;
-        let again = check_store(&store, &site.var(), &share_at(Some(1), 0)).await;
-        assert_eq!(again, Ok(StoreCheck::Same(id)));
-    }
-
-    #[tokio::test]
-    async fn a_replaced_database_is_refused_naming_both_ids_and_its_path() {
-        let site = Site::new();
-        let old = site.open("camloop.db").await;
-        let old_id = old.identity().await.unwrap().id;
-        check_store(&old, &site.var(), &[]).await.unwrap();
-        let new = site.open("other.db").await;
-        let new_id = new.identity().await.unwrap().id;
-        assert_ne!(old_id, new_id);
-        let (text, problems) = mismatch(check_store(&new, &site.var(), &[]).await.unwrap_err());
-        assert_eq!(problems.len(), 1);
-        let path = site.db("other.db").display().to_string();
-        assert!(
-            text.starts_with(&format!("database {path} does not match")),
-            "{text}"
-        );
-        assert!(
-            text.contains(&format!(
-                "it is store {new_id}, but camloop last wrote store {old_id}"
-            )),
-            "{text}"
-        );
-        assert!(text.contains("--accept-new-database"), "{text}");
-        // The refusal leaves the remembered identity alone: the old database still passes.
-        assert!(matches!(
-            check_store(&old, &site.var(), &[]).await,
-            Ok(StoreCheck::Same(_))
-        ));
-    }
-
-    #[tokio::test]
-    async fn a_truncated_database_is_refused_not_taken_for_a_fresh_start() {
-        let site = Site::new();
-        let store = site.open("camloop.db").await;
-        for _ in 0..3 {
-            add_table(&store).await;
-        }
-        check_store(&store, &site.var(), &share_at(Some(3), 0))
-            .await
-            .unwrap();
-        store.close().await;
-        std::fs::File::options()
-            .write(true)
-            .open(site.db("camloop.db"))
-            .unwrap()
-            .set_len(0)
-            .unwrap();
-        let emptied = site.open("camloop.db").await;
-        let (text, problems) = mismatch(
-            check_store(&emptied, &site.var(), &share_at(Some(42), 0))
-                .await
-                .unwrap_err(),
-        );
-        assert!(matches!(problems[0], Problem::Replaced { .. }), "{text}");
-        assert_eq!(
-            problems[1].to_string(),
-            "it has no table versions for SIM1 IN1 but the share's manifest holds v42"
-        );
-    }
-
-    #[tokio::test]
-    async fn a_store_behind_the_share_is_refused_unless_the_journal_holds_the_gap() {
-        let site = Site::new();
-        let store = site.open("camloop.db").await;
-        add_table(&store).await;
-        let (text, _) = mismatch(
-            check_store(&store, &site.var(), &share_at(Some(3), 1))
-                .await
-                .unwrap_err(),
-        );
-        assert!(
-            text.contains(
-                "its newest table version for SIM1 IN1 is v1 but the share's manifest holds v3"
-            ),
-            "{text}"
-        );
-        assert!(
-            !site.var().join(IDENTITY_FILE).exists(),
-            "a refused store is not remembered"
-        );
-        let two_waiting = check_store(&store, &site.var(), &share_at(Some(3), 2)).await;
-        assert!(
-            matches!(two_waiting, Ok(StoreCheck::Remembered(_))),
-            "{two_waiting:?}"
-        );
-    }
-
-    #[tokio::test]
-    async fn accepting_a_new_database_remembers_it() {
-        let site = Site::new();
-        let old = site.open("camloop.db").await;
-        check_store(&old, &site.var(), &[]).await.unwrap();
-        let new = site.open("new.db").await;
-        assert!(check_store(&new, &site.var(), &[]).await.is_err());
-        let accepted = accept_new_store(&new, &site.var()).await.unwrap();
-        assert_eq!(accepted, new.identity().await.unwrap());
-        assert_eq!(
-            check_store(&new, &site.var(), &[]).await,
-            Ok(StoreCheck::Same(accepted))
-        );
-    }
-
-    #[tokio::test]
-    async fn a_damaged_identity_file_is_reported_not_overwritten() {
-        let site = Site::new();
-        let store = site.open("camloop.db").await;
-        std::fs::write(site.var().join(IDENTITY_FILE), "garbage").unwrap();
-        let e = check_store(&store, &site.var(), &[]).await.unwrap_err();
-        assert_eq!(e.code(), "store_identity_file");
-        assert!(
-            e.to_string().contains("not a remembered store identity"),
-            "{e}"
-        );
-        assert_eq!(
-            std::fs::read_to_string(site.var().join(IDENTITY_FILE)).unwrap(),
-            "garbage"
-        );
-    }
-}
+mod tests;
