@@ -261,13 +261,15 @@ async fn postgres_readers_stuck_behind_a_lock_never_hold_up_a_writer() {
                 .await
         });
     }
-    // Until the first readers are waiting on the lock (polled, at most 10 s).
+    // Until the first readers are waiting on the lock (polled, at most 10 s). Polled from
+    // its own connection: inside the locker's transaction the activity view is a snapshot.
+    let mut watcher = sqlx::PgConnection::connect(&url).await.unwrap();
     let mut waiting = 0;
     for _ in 0..1000 {
         waiting = sqlx::query_scalar::<_, i64>(
             "SELECT COUNT(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock'",
         )
-        .fetch_one(&mut locker)
+        .fetch_one(&mut watcher)
         .await
         .unwrap();
         if let Some(done) = readers.try_join_next() {
@@ -320,4 +322,43 @@ async fn postgres_readers_stuck_behind_a_lock_never_hold_up_a_writer() {
         }
     }
     assert!((2..=4).contains(&served), "{served} reads admitted");
+}
+
+/// A PostgreSQL read that cannot finish is cancelled by the server at the readers' statement
+/// timeout (5 s) and reported as `store_busy`, not left holding its connection.
+#[tokio::test]
+async fn postgres_read_past_its_statement_timeout_is_busy() {
+    use sqlx::Connection;
+    let Some(t) = store_support::postgres("postgres_read_past_its_statement_timeout_is_busy").await
+    else {
+        return;
+    };
+    let url = t.server.as_ref().unwrap().url();
+    let mut locker = sqlx::PgConnection::connect(&url).await.unwrap();
+    sqlx::query("BEGIN").execute(&mut locker).await.unwrap();
+    sqlx::query("LOCK TABLE events IN ACCESS EXCLUSIVE MODE")
+        .execute(&mut locker)
+        .await
+        .unwrap();
+    let started = std::time::Instant::now();
+    let e = t
+        .store
+        .events(&camloop::store::EventFilter {
+            limit: 10,
+            ..Default::default()
+        })
+        .await
+        .unwrap_err();
+    let waited = started.elapsed();
+    assert_eq!(e.code(), "store_busy", "{e}");
+    assert!(
+        (4.5..10.0).contains(&waited.as_secs_f64()),
+        "cancelled after {waited:?}"
+    );
+    assert!(
+        e.to_string()
+            .ends_with("the read ran past its statement timeout"),
+        "{e}"
+    );
+    sqlx::query("ROLLBACK").execute(&mut locker).await.unwrap();
 }
