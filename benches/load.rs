@@ -84,7 +84,7 @@ fn main() {
             camloop::store::Store::connect(&format!("sqlite://{}/load.db", dir.path().display()))
                 .await
                 .expect("store");
-        let camloop::store::Store::Sqlite(pool) = &store else {
+        let camloop::store::RawPool::Sqlite(pool) = store.raw_pool() else {
             unreachable!("a sqlite url")
         };
         let counts: Vec<(String, i64)> = sqlx::query_as(

@@ -7,13 +7,17 @@
 //! retries what waits and releases from the journal what the database holds durably, which on
 //! SQLite is a checkpoint of its write-ahead log. The bench runs that same step after every
 //! part, outside the timed region, and reports its time separately.
+//!
+//! The 360-point case runs a second time with 200 history readers on the same store, to show
+//! that reads do not hold up the part path (the store's separate writer pool and bounded
+//! reads). The core count is printed with it: the readers compete with the loop for cores.
 
 use camloop::core::measure::RawMeasurement;
 use camloop::recipe::Recipe;
 use camloop::service::machine::{MachineLoop, MachinePaths, SourceEvent, StoreHandle};
 use camloop::service::metrics::Metrics;
 use camloop::sim::{CommandedTable, GrinderConfig, PartLabels, SimGrinder, Workpiece};
-use camloop::store::Store;
+use camloop::store::{EventFilter, HistoryFilter, Store};
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -57,82 +61,155 @@ fn scratch_root() -> PathBuf {
     }
 }
 
+/// History readers hammering the store while parts are made, as 200 HTTP clients on the
+/// database-backed routes do: each loops over a page of the machine's measurements and of its
+/// events. They run on their own two-thread runtime, as the service's HTTP tasks run beside
+/// the machine tasks. Dropping it stops them.
+struct Readers {
+    runtime: tokio::runtime::Runtime,
+    served: Arc<std::sync::atomic::AtomicU64>,
+    refused: Arc<std::sync::atomic::AtomicU64>,
+}
+
+impl Readers {
+    fn start(store: &Store, clients: usize) -> Self {
+        use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+            .expect("reader runtime");
+        let served = Arc::new(AtomicU64::new(0));
+        let refused = Arc::new(AtomicU64::new(0));
+        for i in 0..clients {
+            let (store, served, refused) = (store.clone(), served.clone(), refused.clone());
+            runtime.spawn(async move {
+                let history = HistoryFilter {
+                    machine: "BENCH".into(),
+                    limit: 100,
+                    ..HistoryFilter::default()
+                };
+                let events = EventFilter {
+                    machine: Some("BENCH".into()),
+                    limit: 100,
+                    ..EventFilter::default()
+                };
+                loop {
+                    let ok = if i % 2 == 0 {
+                        store.measurement_history(&history).await.is_ok()
+                    } else {
+                        store.events(&events).await.is_ok()
+                    };
+                    let counter = if ok { &served } else { &refused };
+                    counter.fetch_add(1, Relaxed);
+                    tokio::task::yield_now().await;
+                }
+            });
+        }
+        Readers {
+            runtime,
+            served,
+            refused,
+        }
+    }
+}
+
 fn per_part(c: &mut Criterion) {
+    for (points, readers) in [(360u32, 0usize), (360, 200), (3600, 0)] {
+        per_part_case(c, points, readers);
+    }
+}
+
+fn per_part_case(c: &mut Criterion, points: u32, clients: usize) {
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .expect("runtime");
-    for points in [360u32, 3600] {
-        let dir = tempfile::tempdir_in(scratch_root()).expect("temp dir");
-        let recipe_path =
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
-        let recipe = Recipe::load(&recipe_path).expect("demo recipe");
-        let mut setup = recipe.feature_setup(&recipe_path, "IN1").expect("lobe");
-        setup.request.points = points as usize;
-        let url = format!("sqlite://{}/bench.db?mode=rwc", dir.path().display());
-        let mut machine = runtime.block_on(async {
-            let store: StoreHandle = Arc::new(tokio::sync::RwLock::new(Some(
-                Store::connect(&url).await.expect("store"),
-            )));
-            MachineLoop::start(
-                "BENCH".into(),
-                setup,
-                MachinePaths {
-                    share_dir: dir.path().join("share"),
-                    state_dir: dir.path().join("state"),
-                },
-                store,
-                Arc::new(Metrics::default()),
-            )
-            .await
-            .expect("machine")
-        });
-        let raws = measurements(points);
-        let mut count = 0usize;
-        let mut samples: Vec<Duration> = Vec::new();
-        let mut between: Vec<Duration> = Vec::new();
-        c.bench_function(&format!("per_part_path_{points}_points_sqlite"), |b| {
-            b.iter_custom(|iters| {
-                let mut total = Duration::ZERO;
-                for _ in 0..iters {
-                    let mut raw = raws[count % raws.len()].clone();
-                    // A new part number makes every measurement new (identity is the content,
-                    // so a repeat would be skipped, not processed).
-                    raw.header.part = format!("bench-{count}");
-                    count += 1;
-                    let started = Instant::now();
-                    runtime.block_on(machine.handle(SourceEvent::Measurement {
-                        raw,
-                        ground_with: None,
-                        done: None,
-                    }));
-                    let took = started.elapsed();
-                    samples.push(took);
-                    total += took;
-                    let started = Instant::now();
-                    runtime.block_on(machine.retry());
-                    between.push(started.elapsed());
-                }
-                total
-            })
-        });
-        if samples.is_empty() {
-            // `--profile-time` runs without collecting samples.
-            continue;
-        }
-        if samples.is_empty() {
-            // `--profile-time` runs without collecting samples.
-            continue;
-        }
+    let dir = tempfile::tempdir_in(scratch_root()).expect("temp dir");
+    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let recipe = Recipe::load(&recipe_path).expect("demo recipe");
+    let mut setup = recipe.feature_setup(&recipe_path, "IN1").expect("lobe");
+    setup.request.points = points as usize;
+    let url = format!("sqlite://{}/bench.db?mode=rwc", dir.path().display());
+    let store = runtime.block_on(Store::connect(&url)).expect("store");
+    let mut machine = runtime.block_on(async {
+        let handle: StoreHandle = Arc::new(tokio::sync::RwLock::new(Some(store.clone())));
+        MachineLoop::start(
+            "BENCH".into(),
+            setup,
+            MachinePaths {
+                share_dir: dir.path().join("share"),
+                state_dir: dir.path().join("state"),
+            },
+            handle,
+            Arc::new(Metrics::default()),
+        )
+        .await
+        .expect("machine")
+    });
+    let readers = (clients > 0).then(|| Readers::start(&store, clients));
+    let raws = measurements(points);
+    let mut count = 0usize;
+    let mut samples: Vec<Duration> = Vec::new();
+    let mut between: Vec<Duration> = Vec::new();
+    let name = match clients {
+        0 => format!("per_part_path_{points}_points_sqlite"),
+        n => format!("per_part_path_{points}_points_sqlite_{n}_readers"),
+    };
+    let reads_before = readers
+        .as_ref()
+        .map(|r| r.served.load(std::sync::atomic::Ordering::Relaxed));
+    let started_all = Instant::now();
+    c.bench_function(&name, |b| {
+        b.iter_custom(|iters| {
+            let mut total = Duration::ZERO;
+            for _ in 0..iters {
+                let mut raw = raws[count % raws.len()].clone();
+                // A new part number makes every measurement new (identity is the content,
+                // so a repeat would be skipped, not processed).
+                raw.header.part = format!("bench-{count}");
+                count += 1;
+                let started = Instant::now();
+                runtime.block_on(machine.handle(SourceEvent::Measurement {
+                    raw,
+                    ground_with: None,
+                    done: None,
+                }));
+                let took = started.elapsed();
+                samples.push(took);
+                total += took;
+                let started = Instant::now();
+                runtime.block_on(machine.retry());
+                between.push(started.elapsed());
+            }
+            total
+        })
+    });
+    if samples.is_empty() {
+        // `--profile-time` runs without collecting samples.
+        return;
+    }
+    println!(
+        "{name}: {} parts, {}",
+        samples.len(),
+        percentiles(&mut samples)
+    );
+    println!(
+        "  journal release and checkpoint between parts (not in the path): {}",
+        percentiles(&mut between)
+    );
+    if let (Some(r), Some(before)) = (&readers, reads_before) {
+        use std::sync::atomic::Ordering::Relaxed;
+        let secs = started_all.elapsed().as_secs_f64();
         println!(
-            "per_part_path_{points}_points_sqlite: {} parts, {}",
-            samples.len(),
-            percentiles(&mut samples)
+            "  readers: {clients} clients, {:.0} reads/s served, {} refused busy, {} cores",
+            (r.served.load(Relaxed) - before) as f64 / secs,
+            r.refused.load(Relaxed),
+            std::thread::available_parallelism().map_or(0, |n| n.get())
         );
-        println!(
-            "  journal release and checkpoint between parts (not in the path): {}",
-            percentiles(&mut between)
-        );
+    }
+    if let Some(r) = readers {
+        r.runtime.shutdown_background();
     }
 }
 

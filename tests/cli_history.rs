@@ -17,7 +17,7 @@ async fn store_with(dir: &std::path::Path, n: u32) -> (Store, String) {
         .insert_measurement(&store_support::data::measurement("M1", "IN1", 1, 1_000))
         .await
         .unwrap();
-    let Store::Sqlite(pool) = &store else {
+    let camloop::store::RawPool::Sqlite(pool) = store.raw_pool() else {
         panic!("a SQLite store")
     };
     sqlx::query(

@@ -102,7 +102,7 @@ async fn a_full_disk_keeps_every_measurement_and_stops_learning() {
 
     let url = format!("sqlite://{}/var/db.sqlite", dir.path().display());
     let store = camloop::store::Store::connect(&url).await.unwrap();
-    let camloop::store::Store::Sqlite(pool) = &store else {
+    let camloop::store::RawPool::Sqlite(pool) = store.raw_pool() else {
         panic!("a SQLite store")
     };
     let count = |sql: &'static str| async move {

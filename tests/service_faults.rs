@@ -53,7 +53,7 @@ fn immutable(folder: &Path, on: bool) {
 async fn errors(dir: &Path) -> Vec<(i64, f64)> {
     let url = format!("sqlite://{}/db.sqlite", dir.display());
     let store = camloop::store::Store::connect(&url).await.unwrap();
-    let camloop::store::Store::Sqlite(pool) = &store else {
+    let camloop::store::RawPool::Sqlite(pool) = store.raw_pool() else {
         panic!("a SQLite store")
     };
     let rows: Vec<(i64, String)> = sqlx::query_as(

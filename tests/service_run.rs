@@ -352,7 +352,7 @@ async fn a_database_that_is_down_loses_nothing() {
 
 /// Rows of machine SIM1 in the store: measurements, table versions, events, learning states.
 async fn stored_counts(store: &camloop::store::Store) -> [usize; 4] {
-    let camloop::store::Store::Sqlite(pool) = store else {
+    let camloop::store::RawPool::Sqlite(pool) = store.raw_pool() else {
         panic!("a SQLite store")
     };
     let mut counts = [0; 4];

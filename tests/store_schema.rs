@@ -41,12 +41,14 @@ fn both_backends_list_the_same_versions_and_the_binary_embeds_them() {
 
 #[test]
 fn both_backends_create_the_same_tables() {
-    for (_, _, sqlite, postgres) in camloop::store::MIGRATIONS {
+    let mut all = BTreeSet::new();
+    for (version, _, sqlite, postgres) in camloop::store::MIGRATIONS {
         let t = tables(sqlite);
-        assert!(
-            t.contains("measurements") && t.contains("table_versions"),
-            "{t:?}"
-        );
-        assert_eq!(t, tables(postgres));
+        assert!(!t.is_empty(), "migration {version} creates no table");
+        assert_eq!(t, tables(postgres), "migration {version}");
+        all.extend(t);
+    }
+    for table in ["measurements", "table_versions", "store_identity"] {
+        assert!(all.contains(table), "{table} missing from {all:?}");
     }
 }

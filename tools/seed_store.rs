@@ -10,7 +10,7 @@
 //!
 //! Used by `benches/store.rs` through `#[path]`; not part of the library.
 
-use camloop::store::Store;
+use camloop::store::{RawPool, Store};
 
 /// First `received_at_ms` of the seed (2023-11-14T22:13:20Z).
 pub const SEED_START_MS: i64 = 1_700_000_000_000;
@@ -18,17 +18,17 @@ pub const SEED_START_MS: i64 = 1_700_000_000_000;
 /// Rows in `measurements`.
 pub async fn count(store: &Store) -> Result<i64, sqlx::Error> {
     let q = "SELECT COUNT(*) FROM measurements";
-    match store {
-        Store::Sqlite(pool) => sqlx::query_scalar(q).fetch_one(pool).await,
-        Store::Postgres(pool) => sqlx::query_scalar(q).fetch_one(pool).await,
+    match store.raw_pool() {
+        RawPool::Sqlite(pool) => sqlx::query_scalar(q).fetch_one(pool).await,
+        RawPool::Postgres(pool) => sqlx::query_scalar(q).fetch_one(pool).await,
     }
 }
 
 /// Empties the measurement tables and inserts `n` seeded measurements with their data rows,
 /// then refreshes the planner statistics.
 pub async fn seed(store: &Store, n: i64) -> Result<(), sqlx::Error> {
-    match store {
-        Store::Sqlite(pool) => {
+    match store.raw_pool() {
+        RawPool::Sqlite(pool) => {
             let mut tx = pool.begin().await?;
             for sql in [
                 "DELETE FROM measurement_data",
@@ -67,7 +67,7 @@ pub async fn seed(store: &Store, n: i64) -> Result<(), sqlx::Error> {
                 .execute(pool)
                 .await?;
         }
-        Store::Postgres(pool) => {
+        RawPool::Postgres(pool) => {
             let mut tx = pool.begin().await?;
             for sql in [
                 "TRUNCATE measurement_data, measurements",

@@ -9,6 +9,7 @@ pub mod machine;
 pub mod metrics;
 pub mod sim_source;
 mod sources;
+mod store_guard;
 
 use crate::config::{Checked, Config};
 use crate::store::Store;
@@ -111,6 +112,7 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
     let metrics = Arc::new(Metrics::default());
     let store: StoreHandle = Arc::new(tokio::sync::RwLock::new(None));
     connect_store(&config, &store).await;
+    store_guard::guard_start(&store, &config, false).await?;
     let connector = tokio::spawn(keep_store_connected(
         config.database_url(),
         store.clone(),

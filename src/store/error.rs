@@ -28,6 +28,25 @@ pub enum StoreError {
         reason: String,
         detail: Detail,
     },
+    /// The database file is damaged or is not a database at all. Retrying does not help.
+    #[error(
+        "database file {target} is damaged ({reason}): restore it from a backup, or move it \
+         aside and start once with --accept-new-database to begin a new history"
+    )]
+    Corrupt {
+        target: String,
+        /// SQLite's words: `file is not a database` or `database disk image is malformed`.
+        reason: String,
+        detail: Detail,
+    },
+    /// The disk (or PostgreSQL's tablespace) holding the database is full: nothing more can
+    /// be written until space is freed. Reads may still work.
+    #[error("database {target} is out of disk space: free space on its file system")]
+    Full { target: String, detail: Detail },
+    /// Too many reads at once: a read waited longer than its bound for a turn, or (on
+    /// PostgreSQL) ran past its statement timeout. Writes are not affected; retry later.
+    #[error("store busy at {target}: {reason}")]
+    Busy { target: String, reason: String },
     /// The thing asked for does not exist.
     #[error("{what} not found")]
     NotFound { what: String },
@@ -49,11 +68,14 @@ pub enum StoreError {
 }
 
 impl StoreError {
-    /// Stable code for APIs and logs (`store_unavailable`, `not_found`, `conflict`,
-    /// `invalid`, `migration_failed`, `store_failed`).
+    /// Stable code for APIs and logs (`store_unavailable`, `store_corrupt`, `store_full`,
+    /// `store_busy`, `not_found`, `conflict`, `invalid`, `migration_failed`, `store_failed`).
     pub fn code(&self) -> &'static str {
         match self {
             StoreError::Unavailable { .. } => "store_unavailable",
+            StoreError::Corrupt { .. } => "store_corrupt",
+            StoreError::Full { .. } => "store_full",
+            StoreError::Busy { .. } => "store_busy",
             StoreError::NotFound { .. } => "not_found",
             StoreError::Conflict { .. } => "conflict",
             StoreError::Invalid { .. } => "invalid",
@@ -62,14 +84,30 @@ impl StoreError {
         }
     }
 
+    /// Whether the same call will fail the same way until an operator acts: a damaged
+    /// database file, a schema this camloop cannot apply, or a refused value (including a
+    /// bad database URL). A reconnect loop should report such an error once, as an ERROR,
+    /// and not retry it every few seconds. A full disk is not permanent (space can be freed
+    /// while camloop runs), nor are unavailable, busy or conflicting stores.
+    pub fn is_permanent(&self) -> bool {
+        matches!(
+            self,
+            StoreError::Corrupt { .. } | StoreError::Migration { .. } | StoreError::Invalid { .. }
+        )
+    }
+
     /// Backend detail for logging (may contain SQL error text), if any.
     pub fn detail(&self) -> Option<&str> {
         match self {
             StoreError::Unavailable { detail, .. }
+            | StoreError::Corrupt { detail, .. }
+            | StoreError::Full { detail, .. }
             | StoreError::Conflict { detail, .. }
             | StoreError::Migration { detail, .. }
             | StoreError::Backend { detail, .. } => Some(&detail.0),
-            StoreError::NotFound { .. } | StoreError::Invalid { .. } => None,
+            StoreError::Busy { .. } | StoreError::NotFound { .. } | StoreError::Invalid { .. } => {
+                None
+            }
         }
     }
 
@@ -81,68 +119,140 @@ impl StoreError {
     }
 }
 
-/// Why a driver error means the database is unreachable, in plain words, or `None` when the
-/// database answered.
-fn unavailable_reason(e: &sqlx::Error) -> Option<String> {
+/// What a driver error means for the caller, in plain words.
+enum Kind {
+    /// The database cannot be reached: the reason.
+    Unavailable(String),
+    /// The file is not a database or is malformed: SQLite's reason.
+    Corrupt(&'static str),
+    Full,
+    /// A read ran past its time: the reason.
+    Busy(String),
+    /// The database answered with an error about this statement.
+    Other,
+}
+
+/// SQLite primary result codes (the low byte of an extended code).
+const SQLITE_READONLY: i32 = 8;
+const SQLITE_CORRUPT: i32 = 11;
+const SQLITE_FULL: i32 = 13;
+const SQLITE_CANTOPEN: i32 = 14;
+const SQLITE_NOTADB: i32 = 26;
+
+fn kind_of(e: &sqlx::Error) -> Kind {
     match e {
-        sqlx::Error::Io(io) => Some(io.kind().to_string()),
-        sqlx::Error::Tls(_) => Some("tls handshake failed".to_owned()),
-        sqlx::Error::PoolTimedOut => Some("timed out waiting for a connection".to_owned()),
-        sqlx::Error::PoolClosed => Some("connection pool closed".to_owned()),
-        sqlx::Error::WorkerCrashed => Some("database worker stopped".to_owned()),
-        sqlx::Error::Database(db) => {
-            // PostgreSQL classes 08 (connection), 28 (authorization), 3D (no such database),
-            // 57P (shutdown); SQLite CANTOPEN (14) and READONLY (8).
-            let code = db.code().map(|c| c.into_owned()).unwrap_or_default();
-            let gone = code.starts_with("08")
-                || code.starts_with("28")
-                || code.starts_with("3D")
-                || code.starts_with("57P")
-                || code == "14"
-                || code == "8";
-            gone.then(|| match code.as_str() {
-                c if c.starts_with("28") => "authentication refused".to_owned(),
-                c if c.starts_with("3D") => "database does not exist".to_owned(),
-                "14" => "cannot open the database file".to_owned(),
-                "8" => "database file is read-only".to_owned(),
-                _ => "server closed or refused the connection".to_owned(),
-            })
+        sqlx::Error::Io(io) => Kind::Unavailable(io.kind().to_string()),
+        sqlx::Error::Tls(_) => Kind::Unavailable("tls handshake failed".to_owned()),
+        sqlx::Error::PoolTimedOut => {
+            Kind::Unavailable("timed out waiting for a connection".to_owned())
         }
-        _ => None,
+        sqlx::Error::PoolClosed => Kind::Unavailable("connection pool closed".to_owned()),
+        sqlx::Error::WorkerCrashed => Kind::Unavailable("database worker stopped".to_owned()),
+        sqlx::Error::Database(db) => {
+            if let Some(sqlite) = db.try_downcast_ref::<sqlx::sqlite::SqliteError>() {
+                sqlite_kind(sqlite)
+            } else {
+                postgres_kind(&db.code().map(|c| c.into_owned()).unwrap_or_default())
+            }
+        }
+        _ => Kind::Other,
+    }
+}
+
+fn sqlite_kind(e: &sqlx::sqlite::SqliteError) -> Kind {
+    // sqlx reports the extended result code; its low byte is the primary code.
+    let extended: i32 = sqlx::error::DatabaseError::code(e)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(0);
+    match extended & 0xff {
+        SQLITE_CANTOPEN => Kind::Unavailable("cannot open the database file".to_owned()),
+        SQLITE_READONLY => Kind::Unavailable("database file is read-only".to_owned()),
+        SQLITE_NOTADB => Kind::Corrupt("file is not a database"),
+        SQLITE_CORRUPT => Kind::Corrupt("database disk image is malformed"),
+        SQLITE_FULL => Kind::Full,
+        _ => Kind::Other,
+    }
+}
+
+fn postgres_kind(sqlstate: &str) -> Kind {
+    // Classes 08 (connection), 28 (authorization), 3D (no such database), 57P (shutdown);
+    // 53100 disk_full; 57014 query_canceled, which is how a statement timeout ends.
+    match sqlstate {
+        "53100" => Kind::Full,
+        "57014" => Kind::Busy("the read ran past its statement timeout".to_owned()),
+        c if c.starts_with("28") => Kind::Unavailable("authentication refused".to_owned()),
+        c if c.starts_with("3D") => Kind::Unavailable("database does not exist".to_owned()),
+        c if c.starts_with("08") || c.starts_with("57P") => {
+            Kind::Unavailable("server closed or refused the connection".to_owned())
+        }
+        _ => Kind::Other,
     }
 }
 
 /// Maps a driver error met while connecting to `target`.
 pub(crate) fn connect_error(target: &str, e: sqlx::Error) -> StoreError {
-    let reason = unavailable_reason(&e).unwrap_or_else(|| "cannot connect".to_owned());
-    StoreError::Unavailable {
-        target: target.to_owned(),
-        reason,
-        detail: Detail(e.to_string()),
+    match kind_of(&e) {
+        Kind::Corrupt(reason) => corrupt(target, reason, e.to_string()),
+        Kind::Full => StoreError::Full {
+            target: target.to_owned(),
+            detail: Detail(e.to_string()),
+        },
+        Kind::Unavailable(reason) | Kind::Busy(reason) => StoreError::Unavailable {
+            target: target.to_owned(),
+            reason,
+            detail: Detail(e.to_string()),
+        },
+        Kind::Other => StoreError::Unavailable {
+            target: target.to_owned(),
+            reason: "cannot connect".to_owned(),
+            detail: Detail(e.to_string()),
+        },
     }
 }
 
-/// Maps a driver error met during `operation` (a gerund phrase: "inserting a measurement").
-pub(crate) fn db_error(operation: &'static str) -> impl Fn(sqlx::Error) -> StoreError {
-    move |e| {
-        if let Some(reason) = unavailable_reason(&e) {
-            return StoreError::Unavailable {
-                target: "the database".to_owned(),
-                reason,
-                detail: Detail(format!("{operation}: {e}")),
-            };
-        }
-        if let sqlx::Error::Database(db) = &e
-            && db.is_unique_violation()
-        {
-            return StoreError::Conflict {
+pub(crate) fn corrupt(target: &str, reason: &str, detail: String) -> StoreError {
+    StoreError::Corrupt {
+        target: target.to_owned(),
+        reason: reason.to_owned(),
+        detail: Detail(detail),
+    }
+}
+
+/// Maps a driver error met during `operation` (a gerund phrase: "inserting a measurement")
+/// on a store whose database is named by `target` in messages.
+pub(crate) fn db_error_at<'a>(
+    target: &'a str,
+    operation: &'static str,
+) -> impl Fn(sqlx::Error) -> StoreError + 'a {
+    move |e| match kind_of(&e) {
+        Kind::Unavailable(reason) => StoreError::Unavailable {
+            target: target.to_owned(),
+            reason,
+            detail: Detail(format!("{operation}: {e}")),
+        },
+        Kind::Corrupt(reason) => corrupt(target, reason, format!("{operation}: {e}")),
+        Kind::Full => StoreError::Full {
+            target: target.to_owned(),
+            detail: Detail(format!("{operation}: {e}")),
+        },
+        Kind::Busy(reason) => StoreError::Busy {
+            target: target.to_owned(),
+            reason,
+        },
+        Kind::Other => match &e {
+            sqlx::Error::Database(db) if db.is_unique_violation() => StoreError::Conflict {
                 what: format!("a concurrent write while {operation}"),
                 detail: Detail(e.to_string()),
-            };
-        }
-        StoreError::Backend {
-            operation,
-            detail: Detail(e.to_string()),
-        }
+            },
+            _ => StoreError::Backend {
+                operation,
+                detail: Detail(e.to_string()),
+            },
+        },
     }
+}
+
+/// [`db_error_at`] where the store is not at hand (reading a column of a fetched row).
+pub(crate) fn db_error(operation: &'static str) -> impl Fn(sqlx::Error) -> StoreError {
+    move |e| db_error_at("the database", operation)(e)
 }

@@ -1,12 +1,11 @@
 //! Machines, recipe snapshots, wheel dressings, events and learning-state snapshots.
 
 use super::codec::{check_finite, check_json, check_limit, check_name, sha256_hex};
-use super::error::db_error;
 use super::measurements::{Bind, Conditions, fetch_all_dynamic};
 use super::{
     Dressing, DressingId, Event, EventFilter, EventId, EventLevel, Feature, FeatureKind,
     LearningState, Machine, NewDressing, NewEvent, NewRecipeSnapshot, RecipeSnapshotId, Store,
-    StoreError, col, with_pool,
+    StoreError, col, with_read, with_write,
 };
 
 const ENSURE_MACHINE: &str =
@@ -25,14 +24,14 @@ impl Store {
         check_json("recipe_json", &r.recipe_json)?;
         let sha256 = sha256_hex(r.recipe_json.as_bytes());
         const OP: &str = "inserting a recipe snapshot";
-        with_pool!(self, pool => {
-            let mut tx = pool.begin().await.map_err(db_error(OP))?;
+        with_write!(self, pool => {
+            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
             sqlx::query(ENSURE_MACHINE)
                 .bind(&r.machine)
                 .bind(r.created_at_ms)
                 .execute(&mut *tx)
                 .await
-                .map_err(db_error(OP))?;
+                .map_err(self.db_error(OP))?;
             let newest: Option<(i64, String)> = sqlx::query_as(
                 "SELECT id, sha256 FROM recipe_snapshots WHERE machine = $1 AND part = $2 \
                  AND lobe = $3 ORDER BY id DESC LIMIT 1",
@@ -42,7 +41,7 @@ impl Store {
             .bind(&r.lobe)
             .fetch_optional(&mut *tx)
             .await
-            .map_err(db_error(OP))?;
+            .map_err(self.db_error(OP))?;
             if let Some((id, stored)) = newest
                 && stored == sha256
             {
@@ -61,20 +60,20 @@ impl Store {
             .bind(r.created_at_ms)
             .fetch_one(&mut *tx)
             .await
-            .map_err(db_error(OP))?;
-            tx.commit().await.map_err(db_error(OP))?;
+            .map_err(self.db_error(OP))?;
+            tx.commit().await.map_err(self.db_error(OP))?;
             Ok(RecipeSnapshotId(id))
         })
     }
 
     /// Machines seen by the store, by name.
     pub async fn machines(&self) -> Result<Vec<Machine>, StoreError> {
-        with_pool!(self, pool => {
+        with_read!(self, pool => {
             let rows: Vec<(String, i64)> =
                 sqlx::query_as("SELECT name, first_seen_ms FROM machines ORDER BY name")
                     .fetch_all(pool)
                     .await
-                    .map_err(db_error("listing machines"))?;
+                    .map_err(self.db_error("listing machines"))?;
             Ok(rows
                 .into_iter()
                 .map(|(name, first_seen_ms)| Machine { name, first_seen_ms })
@@ -84,7 +83,7 @@ impl Store {
 
     /// Lobes and pins of a machine with their newest recipe snapshot, by part then lobe.
     pub async fn features(&self, machine: &str) -> Result<Vec<Feature>, StoreError> {
-        with_pool!(self, pool => {
+        with_read!(self, pool => {
             let rows = sqlx::query(
                 "SELECT r.id, r.part, r.lobe, r.kind, r.recipe_json, r.created_at_ms \
                  FROM recipe_snapshots r WHERE r.machine = $1 AND r.id = \
@@ -94,7 +93,7 @@ impl Store {
             .bind(machine)
             .fetch_all(pool)
             .await
-            .map_err(db_error("listing features"))?;
+            .map_err(self.db_error("listing features"))?;
             rows.iter()
                 .map(|row| {
                     let kind: String = col!(row, "kind", "reading a feature");
@@ -117,14 +116,14 @@ impl Store {
         check_finite("old_radius_mm", d.old_radius_mm)?;
         check_finite("new_radius_mm", d.new_radius_mm)?;
         const OP: &str = "inserting a dressing";
-        with_pool!(self, pool => {
-            let mut tx = pool.begin().await.map_err(db_error(OP))?;
+        with_write!(self, pool => {
+            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
             sqlx::query(ENSURE_MACHINE)
                 .bind(&d.machine)
                 .bind(d.at_ms)
                 .execute(&mut *tx)
                 .await
-                .map_err(db_error(OP))?;
+                .map_err(self.db_error(OP))?;
             let id: i64 = sqlx::query_scalar(
                 "INSERT INTO dressings (machine, at_ms, old_radius_mm, new_radius_mm, source) \
                  VALUES ($1, $2, $3, $4, $5) RETURNING id",
@@ -136,8 +135,8 @@ impl Store {
             .bind(&d.source)
             .fetch_one(&mut *tx)
             .await
-            .map_err(db_error(OP))?;
-            tx.commit().await.map_err(db_error(OP))?;
+            .map_err(self.db_error(OP))?;
+            tx.commit().await.map_err(self.db_error(OP))?;
             Ok(DressingId(id))
         })
     }
@@ -145,7 +144,7 @@ impl Store {
     /// Whether this dressing (same machine, time and new radius) is stored: how a journal
     /// replayed after a crash recognises what it had already written.
     pub async fn dressing_exists(&self, d: &NewDressing) -> Result<bool, StoreError> {
-        with_pool!(self, pool => {
+        with_write!(self, pool => {
             let found: Option<i64> = sqlx::query_scalar(
                 "SELECT id FROM dressings WHERE machine = $1 AND at_ms = $2 \
                  AND new_radius_mm = $3 LIMIT 1",
@@ -155,7 +154,7 @@ impl Store {
             .bind(d.new_radius_mm)
             .fetch_optional(pool)
             .await
-            .map_err(db_error("looking up a dressing"))?;
+            .map_err(self.db_error("looking up a dressing"))?;
             Ok(found.is_some())
         })
     }
@@ -163,7 +162,7 @@ impl Store {
     /// The newest `limit` dressings of a machine, newest first.
     pub async fn dressings(&self, machine: &str, limit: u32) -> Result<Vec<Dressing>, StoreError> {
         let limit = check_limit(limit)?;
-        with_pool!(self, pool => {
+        with_read!(self, pool => {
             let rows: Vec<(i64, String, i64, f64, f64, String)> = sqlx::query_as(
                 "SELECT id, machine, at_ms, old_radius_mm, new_radius_mm, source FROM dressings \
                  WHERE machine = $1 ORDER BY at_ms DESC, id DESC LIMIT $2",
@@ -172,7 +171,7 @@ impl Store {
             .bind(limit)
             .fetch_all(pool)
             .await
-            .map_err(db_error("listing dressings"))?;
+            .map_err(self.db_error("listing dressings"))?;
             Ok(rows
                 .into_iter()
                 .map(|(id, machine, at_ms, old_radius_mm, new_radius_mm, source)| Dressing {
@@ -192,14 +191,14 @@ impl Store {
         check_name("machine", &e.machine)?;
         check_name("kind", &e.kind)?;
         const OP: &str = "inserting an event";
-        with_pool!(self, pool => {
-            let mut tx = pool.begin().await.map_err(db_error(OP))?;
+        with_write!(self, pool => {
+            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
             sqlx::query(ENSURE_MACHINE)
                 .bind(&e.machine)
                 .bind(e.at_ms)
                 .execute(&mut *tx)
                 .await
-                .map_err(db_error(OP))?;
+                .map_err(self.db_error(OP))?;
             let id: i64 = sqlx::query_scalar(
                 "INSERT INTO events (machine, at_ms, level, kind, message) \
                  VALUES ($1, $2, $3, $4, $5) RETURNING id",
@@ -211,8 +210,8 @@ impl Store {
             .bind(&e.message)
             .fetch_one(&mut *tx)
             .await
-            .map_err(db_error(OP))?;
-            tx.commit().await.map_err(db_error(OP))?;
+            .map_err(self.db_error(OP))?;
+            tx.commit().await.map_err(self.db_error(OP))?;
             Ok(EventId(id))
         })
     }
@@ -220,7 +219,7 @@ impl Store {
     /// Whether this event (same machine, time, kind and message) is stored: how a journal
     /// replayed after a crash recognises what it had already written.
     pub async fn event_exists(&self, e: &NewEvent) -> Result<bool, StoreError> {
-        with_pool!(self, pool => {
+        with_write!(self, pool => {
             let found: Option<i64> = sqlx::query_scalar(
                 "SELECT id FROM events WHERE machine = $1 AND at_ms = $2 AND kind = $3 \
                  AND message = $4 LIMIT 1",
@@ -231,7 +230,7 @@ impl Store {
             .bind(&e.message)
             .fetch_optional(pool)
             .await
-            .map_err(db_error("looking up an event"))?;
+            .map_err(self.db_error("looking up an event"))?;
             Ok(found.is_some())
         })
     }
@@ -260,8 +259,8 @@ impl Store {
         );
         let mut binds = c.binds;
         binds.push(Bind::I64(limit));
-        with_pool!(self, pool => {
-            let rows = fetch_all_dynamic!(pool, &sql, binds, "listing events");
+        with_read!(self, pool => {
+            let rows = fetch_all_dynamic!(self, pool, &sql, binds, "listing events");
             rows.iter()
                 .map(|row| {
                     let level: String = col!(row, "level", "reading an event");
@@ -290,14 +289,14 @@ impl Store {
         check_name("lobe", lobe)?;
         check_json("state_json", state_json)?;
         const OP: &str = "saving learning state";
-        with_pool!(self, pool => {
-            let mut tx = pool.begin().await.map_err(db_error(OP))?;
+        with_write!(self, pool => {
+            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
             sqlx::query(ENSURE_MACHINE)
                 .bind(machine)
                 .bind(saved_at_ms)
                 .execute(&mut *tx)
                 .await
-                .map_err(db_error(OP))?;
+                .map_err(self.db_error(OP))?;
             sqlx::query(
                 "INSERT INTO learning_states (machine, lobe, state_json, saved_at_ms) \
                  VALUES ($1, $2, $3, $4)",
@@ -308,8 +307,8 @@ impl Store {
             .bind(saved_at_ms)
             .execute(&mut *tx)
             .await
-            .map_err(db_error(OP))?;
-            tx.commit().await.map_err(db_error(OP))?;
+            .map_err(self.db_error(OP))?;
+            tx.commit().await.map_err(self.db_error(OP))?;
             Ok(())
         })
     }
@@ -323,7 +322,7 @@ impl Store {
         state_json: &str,
         saved_at_ms: i64,
     ) -> Result<bool, StoreError> {
-        with_pool!(self, pool => {
+        with_write!(self, pool => {
             let found: Option<i64> = sqlx::query_scalar(
                 "SELECT id FROM learning_states WHERE machine = $1 AND lobe = $2 \
                  AND saved_at_ms = $3 AND state_json = $4 LIMIT 1",
@@ -334,7 +333,7 @@ impl Store {
             .bind(state_json)
             .fetch_optional(pool)
             .await
-            .map_err(db_error("looking up a learning state"))?;
+            .map_err(self.db_error("looking up a learning state"))?;
             Ok(found.is_some())
         })
     }
@@ -345,7 +344,7 @@ impl Store {
         machine: &str,
         lobe: &str,
     ) -> Result<Option<LearningState>, StoreError> {
-        with_pool!(self, pool => {
+        with_write!(self, pool => {
             let row: Option<(String, i64)> = sqlx::query_as(
                 "SELECT state_json, saved_at_ms FROM learning_states \
                  WHERE machine = $1 AND lobe = $2 ORDER BY id DESC LIMIT 1",
@@ -354,7 +353,7 @@ impl Store {
             .bind(lobe)
             .fetch_optional(pool)
             .await
-            .map_err(db_error("loading learning state"))?;
+            .map_err(self.db_error("loading learning state"))?;
             Ok(row.map(|(state_json, saved_at_ms)| LearningState { state_json, saved_at_ms }))
         })
     }

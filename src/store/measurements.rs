@@ -5,10 +5,9 @@ use super::codec::{
     check_finite, check_json, check_limit, check_name, check_sha256, decode_cursor,
     decode_lifts_mm, encode_cursor, encode_lifts_mm,
 };
-use super::error::db_error;
 use super::{
     HistoryFilter, MeasurementDetail, MeasurementId, MeasurementSummary, NewMeasurement, Page,
-    RecipeSnapshotId, Store, StoreError, Verdict, col, with_pool,
+    RecipeSnapshotId, Store, StoreError, Verdict, col, with_read, with_write,
 };
 
 const SUMMARY_COLUMNS: &str = "m.id, m.machine, m.part, m.lobe, m.received_at_ms, m.verdict, \
@@ -59,9 +58,10 @@ impl Conditions {
     }
 }
 
-/// Runs a dynamically built query returning rows, binding `$binds` in order.
+/// Runs a dynamically built query returning rows, binding `$binds` in order; errors name
+/// `$store`'s database.
 macro_rules! fetch_all_dynamic {
-    ($pool:expr, $sql:expr, $binds:expr, $op:literal) => {{
+    ($store:expr, $pool:expr, $sql:expr, $binds:expr, $op:literal) => {{
         let mut q = sqlx::query($sql);
         for b in $binds {
             q = match b {
@@ -69,9 +69,7 @@ macro_rules! fetch_all_dynamic {
                 $crate::store::measurements::Bind::Text(v) => q.bind(v),
             };
         }
-        q.fetch_all($pool)
-            .await
-            .map_err($crate::store::error::db_error($op))?
+        q.fetch_all($pool).await.map_err($store.db_error($op))?
     }};
 }
 pub(crate) use fetch_all_dynamic;
@@ -189,8 +187,8 @@ impl Store {
         let mut averaged = Vec::with_capacity(4 * m.averaged_lift_mm.len());
         encode_lifts_mm(m.averaged_lift_mm.iter().copied(), &mut averaged)?;
         const OP: &str = "inserting a measurement";
-        with_pool!(self, pool => {
-            let mut tx = pool.begin().await.map_err(db_error(OP))?;
+        with_write!(self, pool => {
+            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
             sqlx::query(
                 "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) \
                  ON CONFLICT (name) DO NOTHING",
@@ -199,7 +197,7 @@ impl Store {
             .bind(m.received_at_ms)
             .execute(&mut *tx)
             .await
-            .map_err(db_error(OP))?;
+            .map_err(self.db_error(OP))?;
             let inserted: Option<i64> = sqlx::query_scalar(
                 "INSERT INTO measurements (machine, part, lobe, received_at_ms, verdict, \
                  max_profile_error_um, base_radius_error_um, phase_error_deg, revolutions_used, \
@@ -222,7 +220,7 @@ impl Store {
             .bind(m.recipe_snapshot.map(|r| r.0))
             .fetch_optional(&mut *tx)
             .await
-            .map_err(db_error(OP))?;
+            .map_err(self.db_error(OP))?;
             let id = match inserted {
                 Some(id) => {
                     sqlx::query(
@@ -235,16 +233,16 @@ impl Store {
                     .bind(&m.analysis_json)
                     .execute(&mut *tx)
                     .await
-                    .map_err(db_error(OP))?;
+                    .map_err(self.db_error(OP))?;
                     id
                 }
                 None => sqlx::query_scalar("SELECT id FROM measurements WHERE sha256 = $1")
                     .bind(&m.sha256)
                     .fetch_one(&mut *tx)
                     .await
-                    .map_err(db_error(OP))?,
+                    .map_err(self.db_error(OP))?,
             };
-            tx.commit().await.map_err(db_error(OP))?;
+            tx.commit().await.map_err(self.db_error(OP))?;
             Ok(MeasurementId(id))
         })
     }
@@ -289,8 +287,8 @@ impl Store {
         );
         let mut binds = c.binds;
         binds.push(Bind::I64(limit + 1));
-        let mut items = with_pool!(self, pool => {
-            let rows = fetch_all_dynamic!(pool, &sql, binds, "listing measurement history");
+        let mut items = with_read!(self, pool => {
+            let rows = fetch_all_dynamic!(self, pool, &sql, binds, "listing measurement history");
             rows.iter().map(|row| Ok(summary_from_row!(row))).collect::<Result<Vec<_>, StoreError>>()?
         });
         let next_cursor = if items.len() > filter.limit as usize {
@@ -313,12 +311,12 @@ impl Store {
             "SELECT {SUMMARY_COLUMNS}, d.raw_revolutions, d.averaged_profile, d.analysis_json \
              FROM measurements m JOIN measurement_data d ON d.measurement_id = m.id WHERE m.id = $1"
         );
-        with_pool!(self, pool => {
+        with_read!(self, pool => {
             let row = sqlx::query(&sql)
                 .bind(id.0)
                 .fetch_optional(pool)
                 .await
-                .map_err(db_error("reading a measurement"))?;
+                .map_err(self.db_error("reading a measurement"))?;
             match row {
                 None => Ok(None),
                 Some(row) => Ok(Some(detail_from_row!(&row))),
@@ -342,7 +340,7 @@ impl Store {
              WHERE m.received_at_ms >= $1 AND m.received_at_ms < $2 AND m.id > $3 \
              ORDER BY m.id LIMIT $4"
         );
-        with_pool!(self, pool => {
+        with_read!(self, pool => {
             let rows = sqlx::query(&sql)
                 .bind(since_ms)
                 .bind(until_ms)
@@ -350,7 +348,7 @@ impl Store {
                 .bind(limit)
                 .fetch_all(pool)
                 .await
-                .map_err(db_error("exporting measurements"))?;
+                .map_err(self.db_error("exporting measurements"))?;
             rows.iter().map(|row| Ok(detail_from_row!(row))).collect()
         })
     }
@@ -358,7 +356,7 @@ impl Store {
     /// Retention: drops the raw revolutions of measurements received before `cutoff_ms`,
     /// keeping their summaries, averaged profiles and reports. Returns how many were pruned.
     pub async fn prune_raw_older_than(&self, cutoff_ms: i64) -> Result<u64, StoreError> {
-        with_pool!(self, pool => {
+        with_write!(self, pool => {
             let done = sqlx::query(
                 "UPDATE measurement_data SET raw_revolutions = NULL \
                  WHERE raw_revolutions IS NOT NULL AND measurement_id IN \
@@ -367,7 +365,7 @@ impl Store {
             .bind(cutoff_ms)
             .execute(pool)
             .await
-            .map_err(db_error("pruning raw revolutions"))?;
+            .map_err(self.db_error("pruning raw revolutions"))?;
             Ok(done.rows_affected())
         })
     }

@@ -4,76 +4,111 @@
 //!
 //! [`Store`] is an enum over the two sqlx pools rather than a trait with two impls: the set
 //! of backends is closed, the SQL is written once with `$n` placeholders that both accept,
-//! and the [`with_pool!`] macro expands each method body once per backend, so there is no
+//! and the `with_write!` / `with_read!` macros expand each method body once per backend, so there is no
 //! boxing, no `async_trait` and no second copy of each query to drift apart. A backend that
 //! needs different SQL matches on the variant explicitly.
+//!
+//! Writers and readers never share a connection. Every insert, save, status change,
+//! retention and checkpoint goes through the writer pool (one connection on SQLite, which
+//! serialises writes as SQLite does anyway); queries go through a separate reader pool behind
+//! a semaphore that admits a bounded number at a time and turns a reader away with
+//! [`StoreError::Busy`] when it waited too long. So a burst of history requests can slow
+//! other history requests, but never makes a part wait for a connection. On PostgreSQL the
+//! readers also run under a statement timeout.
 //!
 //! Invariant: history is appended. The only UPDATE is retention
 //! ([`Store::prune_raw_older_than`]) setting a raw blob to NULL; table-version status
 //! changes are appended rows; the newest learning-state row wins.
 
 mod codec;
+mod connect;
 mod error;
+mod identity;
 mod log;
 mod measurements;
 mod tables;
 mod types;
 
-use std::borrow::Cow;
-use std::str::FromStr;
+use std::sync::Arc;
 use std::time::Duration;
 
-use sqlx::migrate::{Migration, MigrationType, Migrator};
-use sqlx::postgres::{PgConnectOptions, PgPool, PgPoolOptions};
-use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions};
-use sqlx::{ConnectOptions, Connection};
+use sqlx::postgres::PgPool;
+use sqlx::sqlite::SqlitePool;
+use tokio::sync::{Semaphore, SemaphorePermit};
 
 pub use codec::{UNITS_PER_MM, decode_lifts_mm, encode_lifts_mm, sha256_hex};
 pub use error::{Detail, StoreError};
+pub use identity::StoreIdentity;
 pub use types::*;
-
-use error::{Detail as D, connect_error};
-
-/// How long an operation waits for a pooled connection before reporting the store unavailable.
-const ACQUIRE_TIMEOUT: Duration = Duration::from_secs(5);
-
-/// SQLite memory map per connection, bytes (256 MiB; the OS shares the pages).
-const SQLITE_MMAP_BYTES: u64 = 256 << 20;
-/// SQLite page cache per connection, KiB (16 MiB; at most 4 connections).
-const SQLITE_CACHE_KIB: u64 = 16 << 10;
-/// WAL size (4 KiB pages) at which a committing writer checkpoints by itself. SQLite's
-/// default of 1,000 pages put a checkpoint into every ~40th part's commit; the service calls
-/// [`Store::checkpoint`] off the per-part path instead, and this larger limit (64 MiB) only
-/// bounds the WAL of programs that never do.
-const SQLITE_AUTOCHECKPOINT_PAGES: u32 = 16_384;
 
 /// Migrations embedded in the binary: (version, description, SQLite SQL, PostgreSQL SQL).
 /// A test checks that this list and both folders under `migrations/` hold the same versions.
-pub const MIGRATIONS: &[(i64, &str, &str, &str)] = &[(
-    1,
-    "history",
-    include_str!("../../migrations/sqlite/0001_history.sql"),
-    include_str!("../../migrations/postgres/0001_history.sql"),
-)];
+pub const MIGRATIONS: &[(i64, &str, &str, &str)] = &[
+    (
+        1,
+        "history",
+        include_str!("../../migrations/sqlite/0001_history.sql"),
+        include_str!("../../migrations/postgres/0001_history.sql"),
+    ),
+    (
+        2,
+        "store_identity",
+        include_str!("../../migrations/sqlite/0002_store_identity.sql"),
+        include_str!("../../migrations/postgres/0002_store_identity.sql"),
+    ),
+];
 
-/// The history store. Cheap to clone (pools are shared handles).
+/// How long a read waits for its turn before it is refused with [`StoreError::Busy`].
+pub const READ_WAIT: Duration = Duration::from_secs(2);
+
+/// The history store. Cheap to clone (pools and the read gate are shared handles).
 #[derive(Debug, Clone)]
-pub enum Store {
-    Sqlite(SqlitePool),
-    Postgres(PgPool),
+pub struct Store {
+    pools: Pools,
+    /// Admits at most as many reads as the reader pool has connections.
+    reads: Arc<Semaphore>,
+    /// The database without credentials, for messages: a file path or `host:port/db`.
+    target: Arc<str>,
 }
 
-/// Runs `$body` with `$pool` bound to the backend's pool; the body is compiled once per
+#[derive(Debug, Clone)]
+enum Pools {
+    Sqlite { write: SqlitePool, read: SqlitePool },
+    Postgres { write: PgPool, read: PgPool },
+}
+
+/// The writer pool of a store, for tools and tests that run their own SQL (seeding a
+/// benchmark, counting rows). The service never needs it.
+#[derive(Debug, Clone, Copy)]
+pub enum RawPool<'a> {
+    Sqlite(&'a SqlitePool),
+    Postgres(&'a PgPool),
+}
+
+/// Runs `$body` with `$pool` bound to the store's writer pool; the body is compiled once per
 /// backend so sqlx infers the database type in each arm.
-macro_rules! with_pool {
+macro_rules! with_write {
     ($store:expr, $pool:ident => $body:expr) => {
-        match $store {
-            $crate::store::Store::Sqlite($pool) => $body,
-            $crate::store::Store::Postgres($pool) => $body,
+        match &$store.pools {
+            $crate::store::Pools::Sqlite { write: $pool, .. } => $body,
+            $crate::store::Pools::Postgres { write: $pool, .. } => $body,
         }
     };
 }
-pub(crate) use with_pool;
+pub(crate) use with_write;
+
+/// Runs `$body` with `$pool` bound to the store's reader pool once the read gate admits it;
+/// returns [`StoreError::Busy`] from the enclosing function when it waited [`READ_WAIT`].
+macro_rules! with_read {
+    ($store:expr, $pool:ident => $body:expr) => {{
+        let _turn = $store.read_turn().await?;
+        match &$store.pools {
+            $crate::store::Pools::Sqlite { read: $pool, .. } => $body,
+            $crate::store::Pools::Postgres { read: $pool, .. } => $body,
+        }
+    }};
+}
+pub(crate) use with_read;
 
 /// Reads a column or returns a `StoreError::Backend` for `$op`.
 macro_rules! col {
@@ -84,100 +119,66 @@ macro_rules! col {
 pub(crate) use col;
 
 impl Store {
-    /// Opens the store at `url` and brings its schema up to date.
-    ///
-    /// `sqlite://path/to/file.db` (query options such as `?mode=rwc` allowed) creates the
-    /// file and its parent folder when missing; `postgres://user:pass@host:port/db` (or
-    /// `postgresql://`) connects to an existing database. Errors never echo the password.
-    pub async fn connect(url: &str) -> Result<Store, StoreError> {
-        if url.starts_with("sqlite:") {
-            Self::connect_sqlite(url).await
-        } else if url.starts_with("postgres://") || url.starts_with("postgresql://") {
-            Self::connect_postgres(url).await
-        } else {
-            let scheme = url.split_once(':').map_or("", |(s, _)| s);
-            Err(StoreError::invalid(
-                "database url",
-                format!("scheme `{scheme}` is not sqlite: or postgres://"),
-            ))
+    fn new(pools: Pools, readers: u32, target: String) -> Self {
+        Store {
+            pools,
+            reads: Arc::new(Semaphore::new(readers as usize)),
+            target: target.into(),
         }
-    }
-
-    async fn connect_sqlite(url: &str) -> Result<Store, StoreError> {
-        let options = SqliteConnectOptions::from_str(url)
-            .map_err(|e| StoreError::invalid("database url", format!("not a sqlite url: {e}")))?
-            .create_if_missing(true)
-            .journal_mode(SqliteJournalMode::Wal)
-            .synchronous(sqlx::sqlite::SqliteSynchronous::Normal)
-            .busy_timeout(ACQUIRE_TIMEOUT)
-            .foreign_keys(true)
-            // History pages touch rows spread over the file: map it and cache more than the
-            // 2 MiB default so a 1,000-row page is served without a syscall per page.
-            .pragma("mmap_size", SQLITE_MMAP_BYTES.to_string())
-            .pragma("cache_size", format!("-{SQLITE_CACHE_KIB}"))
-            .pragma(
-                "wal_autocheckpoint",
-                SQLITE_AUTOCHECKPOINT_PAGES.to_string(),
-            )
-            // Rows cross from sqlx's SQLite worker thread to the task through a channel: let a
-            // whole history page through without the worker waiting on the task.
-            .row_buffer_size(1024);
-        let path = options.get_filename().to_path_buf();
-        let target = path.display().to_string();
-        if let Some(parent) = path.parent()
-            && !parent.as_os_str().is_empty()
-        {
-            std::fs::create_dir_all(parent).map_err(|e| StoreError::Unavailable {
-                target: target.clone(),
-                reason: format!("cannot create folder {}: {}", parent.display(), e.kind()),
-                detail: D(e.to_string()),
-            })?;
-        }
-        let pool = SqlitePoolOptions::new()
-            .max_connections(4)
-            .acquire_timeout(ACQUIRE_TIMEOUT)
-            .connect_with(options)
-            .await
-            .map_err(|e| connect_error(&target, e))?;
-        let store = Store::Sqlite(pool);
-        store.migrate().await?;
-        Ok(store)
-    }
-
-    async fn connect_postgres(url: &str) -> Result<Store, StoreError> {
-        let options = PgConnectOptions::from_str(url).map_err(|_| {
-            StoreError::invalid("database url", "not a valid postgres:// url".to_owned())
-        })?;
-        let target = format!(
-            "{}:{}/{}",
-            options.get_host(),
-            options.get_port(),
-            options.get_database().unwrap_or("")
-        );
-        // One direct attempt first: the pool retries refused connections until its timeout,
-        // which would turn "connection refused" into a vaguer "timed out".
-        let probe = options
-            .connect()
-            .await
-            .map_err(|e| connect_error(&target, e))?;
-        let _ = probe.close().await;
-        let pool = PgPoolOptions::new()
-            .max_connections(8)
-            .acquire_timeout(ACQUIRE_TIMEOUT)
-            .connect_with(options)
-            .await
-            .map_err(|e| connect_error(&target, e))?;
-        let store = Store::Postgres(pool);
-        store.migrate().await?;
-        Ok(store)
     }
 
     /// Backend name for logs: `sqlite` or `postgres`.
     pub fn backend(&self) -> &'static str {
-        match self {
-            Store::Sqlite(_) => "sqlite",
-            Store::Postgres(_) => "postgres",
+        match self.pools {
+            Pools::Sqlite { .. } => "sqlite",
+            Pools::Postgres { .. } => "postgres",
         }
+    }
+
+    /// The database without credentials: the SQLite file path or PostgreSQL's `host:port/db`.
+    pub fn target(&self) -> &str {
+        &self.target
+    }
+
+    /// The writer pool, for tools and tests that run their own SQL.
+    pub fn raw_pool(&self) -> RawPool<'_> {
+        match &self.pools {
+            Pools::Sqlite { write, .. } => RawPool::Sqlite(write),
+            Pools::Postgres { write, .. } => RawPool::Postgres(write),
+        }
+    }
+
+    /// Maps a driver error met during `operation`, naming this store's database.
+    fn db_error(&self, operation: &'static str) -> impl Fn(sqlx::Error) -> StoreError + '_ {
+        error::db_error_at(&self.target, operation)
+    }
+
+    /// Waits for a turn to read, at most [`READ_WAIT`].
+    async fn read_turn(&self) -> Result<SemaphorePermit<'_>, StoreError> {
+        match tokio::time::timeout(READ_WAIT, self.reads.acquire()).await {
+            Ok(Ok(permit)) => Ok(permit),
+            Ok(Err(_closed)) => Err(StoreError::Unavailable {
+                target: self.target.to_string(),
+                reason: "connection pool closed".to_owned(),
+                detail: Detail("the read gate is closed".to_owned()),
+            }),
+            Err(_elapsed) => Err(StoreError::Busy {
+                target: self.target.to_string(),
+                reason: format!(
+                    "{} reads already running, this one waited {} ms for a turn",
+                    self.reads_running(),
+                    READ_WAIT.as_millis()
+                ),
+            }),
+        }
+    }
+
+    fn reads_running(&self) -> usize {
+        let readers = match &self.pools {
+            Pools::Sqlite { read, .. } => read.options().get_max_connections(),
+            Pools::Postgres { read, .. } => read.options().get_max_connections(),
+        };
+        (readers as usize).saturating_sub(self.reads.available_permits())
     }
 
     /// Makes every transaction committed before the call durable and says whether that
@@ -187,56 +188,31 @@ impl Store {
     /// runs it between parts, off the per-part path, and keeps journal records until it
     /// answers `true`. On PostgreSQL every commit is already durable: always `true`.
     pub async fn checkpoint(&self) -> Result<bool, StoreError> {
-        match self {
-            Store::Sqlite(pool) => {
+        match &self.pools {
+            Pools::Sqlite { write, .. } => {
                 let (busy, log, done): (i64, i64, i64) =
                     sqlx::query_as("PRAGMA wal_checkpoint(PASSIVE)")
-                        .fetch_one(pool)
+                        .fetch_one(write)
                         .await
-                        .map_err(error::db_error("checkpointing the write-ahead log"))?;
+                        .map_err(self.db_error("checkpointing the write-ahead log"))?;
                 Ok(busy == 0 && log >= 0 && done == log)
             }
-            Store::Postgres(_) => Ok(true),
+            Pools::Postgres { .. } => Ok(true),
         }
     }
 
-    /// Closes the pool; later calls fail with [`StoreError::Unavailable`].
+    /// Closes the pools; later calls fail with [`StoreError::Unavailable`].
     pub async fn close(&self) {
-        with_pool!(self, pool => pool.close().await)
-    }
-
-    async fn migrate(&self) -> Result<(), StoreError> {
-        let sqlite = matches!(self, Store::Sqlite(_));
-        let migrations = MIGRATIONS
-            .iter()
-            .map(|&(version, description, sqlite_sql, pg_sql)| {
-                Migration::new(
-                    version,
-                    Cow::Borrowed(description),
-                    MigrationType::Simple,
-                    Cow::Borrowed(if sqlite { sqlite_sql } else { pg_sql }),
-                    false,
-                )
-            })
-            .collect::<Vec<_>>();
-        let migrator = Migrator {
-            migrations: Cow::Owned(migrations),
-            ignore_missing: false,
-            locking: true,
-            no_tx: false,
-        };
-        let result = with_pool!(self, pool => migrator.run(pool).await);
-        result.map_err(|e| StoreError::Migration {
-            reason: match &e {
-                sqlx::migrate::MigrateError::VersionMissing(v) => {
-                    format!("database has migration {v} that this camloop does not know")
-                }
-                sqlx::migrate::MigrateError::VersionMismatch(v) => {
-                    format!("migration {v} differs from the one applied to the database")
-                }
-                _ => "could not apply the schema".to_owned(),
-            },
-            detail: D(e.to_string()),
-        })
+        self.reads.close();
+        match &self.pools {
+            Pools::Sqlite { write, read } => {
+                read.close().await;
+                write.close().await;
+            }
+            Pools::Postgres { write, read } => {
+                read.close().await;
+                write.close().await;
+            }
+        }
     }
 }

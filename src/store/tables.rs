@@ -2,8 +2,9 @@
 //! its status kept as appended rows (the newest row is the current status).
 
 use super::codec::{check_json, check_limit, check_name, sha256_hex};
-use super::error::db_error;
-use super::{NewTableVersion, Store, StoreError, TableStatus, TableVersion, col, with_pool};
+use super::{
+    NewTableVersion, Store, StoreError, TableStatus, TableVersion, col, with_read, with_write,
+};
 
 const SELECT_VERSION: &str = "SELECT t.machine, t.lobe, t.version, t.parent_version, \
      t.table_number, t.program_text, t.sha256, t.learning_params_json, t.reason, \
@@ -50,8 +51,8 @@ impl Store {
         check_json("learning_params_json", &t.learning_params_json)?;
         let sha256 = sha256_hex(t.program_text.as_bytes());
         const OP: &str = "inserting a table version";
-        with_pool!(self, pool => {
-            let mut tx = pool.begin().await.map_err(db_error(OP))?;
+        with_write!(self, pool => {
+            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
             sqlx::query(
                 "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) \
                  ON CONFLICT (name) DO NOTHING",
@@ -60,7 +61,7 @@ impl Store {
             .bind(t.created_at_ms)
             .execute(&mut *tx)
             .await
-            .map_err(db_error(OP))?;
+            .map_err(self.db_error(OP))?;
             if let Some(parent) = t.parent_version {
                 let found: Option<i64> = sqlx::query_scalar(
                     "SELECT id FROM table_versions WHERE machine = $1 AND lobe = $2 AND version = $3",
@@ -70,7 +71,7 @@ impl Store {
                 .bind(parent)
                 .fetch_optional(&mut *tx)
                 .await
-                .map_err(db_error(OP))?;
+                .map_err(self.db_error(OP))?;
                 if found.is_none() {
                     return Err(StoreError::NotFound {
                         what: format!(
@@ -99,7 +100,7 @@ impl Store {
             .bind(t.version)
             .fetch_one(&mut *tx)
             .await
-            .map_err(db_error(OP))?;
+            .map_err(self.db_error(OP))?;
             sqlx::query(
                 "INSERT INTO table_version_status (table_version_id, status, why, at_ms) \
                  VALUES ($1, $2, $3, $4)",
@@ -110,8 +111,8 @@ impl Store {
             .bind(t.created_at_ms)
             .execute(&mut *tx)
             .await
-            .map_err(db_error(OP))?;
-            tx.commit().await.map_err(db_error(OP))?;
+            .map_err(self.db_error(OP))?;
+            tx.commit().await.map_err(self.db_error(OP))?;
             Ok(version)
         })
     }
@@ -126,7 +127,7 @@ impl Store {
         why: &str,
         at_ms: i64,
     ) -> Result<(), StoreError> {
-        with_pool!(self, pool => {
+        with_write!(self, pool => {
             let done = sqlx::query(
                 "INSERT INTO table_version_status (table_version_id, status, why, at_ms) \
                  SELECT id, $4, $5, $6 FROM table_versions \
@@ -140,7 +141,7 @@ impl Store {
             .bind(at_ms)
             .execute(pool)
             .await
-            .map_err(db_error("recording a table status"))?;
+            .map_err(self.db_error("recording a table status"))?;
             if done.rows_affected() == 0 {
                 return Err(StoreError::NotFound {
                     what: format!("table version {version} of machine {machine} lobe {lobe}"),
@@ -161,7 +162,7 @@ impl Store {
         program_text: &str,
     ) -> Result<bool, StoreError> {
         let sha256 = sha256_hex(program_text.as_bytes());
-        with_pool!(self, pool => {
+        with_write!(self, pool => {
             let found: Option<i64> = sqlx::query_scalar(
                 "SELECT id FROM table_versions WHERE machine = $1 AND lobe = $2 \
                  AND created_at_ms = $3 AND sha256 = $4 LIMIT 1",
@@ -172,7 +173,7 @@ impl Store {
             .bind(&sha256)
             .fetch_optional(pool)
             .await
-            .map_err(db_error("looking up a table version"))?;
+            .map_err(self.db_error("looking up a table version"))?;
             Ok(found.is_some())
         })
     }
@@ -199,14 +200,14 @@ impl Store {
     ) -> Result<Vec<TableVersion>, StoreError> {
         let limit = check_limit(limit)?;
         let sql = format!("{SELECT_VERSION} ORDER BY t.version DESC LIMIT $3");
-        with_pool!(self, pool => {
+        with_read!(self, pool => {
             let rows = sqlx::query(&sql)
                 .bind(machine)
                 .bind(lobe)
                 .bind(limit)
                 .fetch_all(pool)
                 .await
-                .map_err(db_error("listing table versions"))?;
+                .map_err(self.db_error("listing table versions"))?;
             rows.iter().map(|row| Ok(version_from_row!(row))).collect()
         })
     }
@@ -219,14 +220,14 @@ impl Store {
         version: i64,
     ) -> Result<Option<TableVersion>, StoreError> {
         let sql = format!("{SELECT_VERSION} AND t.version = $3");
-        with_pool!(self, pool => {
+        with_read!(self, pool => {
             let row = sqlx::query(&sql)
                 .bind(machine)
                 .bind(lobe)
                 .bind(version)
                 .fetch_optional(pool)
                 .await
-                .map_err(db_error("reading a table version"))?;
+                .map_err(self.db_error("reading a table version"))?;
             match row {
                 None => Ok(None),
                 Some(row) => Ok(Some(version_from_row!(&row))),

@@ -402,7 +402,7 @@ mod tests {
         let mut j = Journal::open(dir.path()).unwrap();
         j.append(&[event("b")]).unwrap();
         assert_eq!(j.flush(&store).await.unwrap(), 6);
-        let Store::Sqlite(pool) = &store else {
+        let crate::store::RawPool::Sqlite(pool) = store.raw_pool() else {
             panic!("a SQLite store")
         };
         for (table, rows) in [
