@@ -14,6 +14,12 @@ pub struct RunArgs {
     /// Stop after this many parts per simulated machine in this run (demos, tests).
     #[arg(long, value_name = "N")]
     pub parts: Option<u64>,
+    /// Continue on a database that is not the one camloop last wrote (it was replaced,
+    /// emptied or restored from an older backup). Without it such a start is refused, naming
+    /// both databases. Versions then continue from the shares' manifests; the learning state
+    /// from the newest one kept in each machine's journal.
+    #[arg(long)]
+    pub accept_new_database: bool,
 }
 
 pub fn run_service(args: RunArgs) -> anyhow::Result<()> {
@@ -27,7 +33,13 @@ pub fn run_service(args: RunArgs) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("cannot start the async runtime")?;
-    runtime.block_on(service::run(checked, RunOptions { parts: args.parts }))
+    runtime.block_on(service::run(
+        checked,
+        RunOptions {
+            parts: args.parts,
+            accept_new_database: args.accept_new_database,
+        },
+    ))
 }
 
 /// Plain lines for a terminal, JSON lines for collectors; RUST_LOG filters (default info).

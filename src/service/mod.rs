@@ -34,6 +34,9 @@ pub struct RunOptions {
     /// Stop after this many parts per simulated machine in this run (demos, tests); `None`:
     /// run until a signal.
     pub parts: Option<u64>,
+    /// Continue on a database that is not the one camloop last wrote (after the operator
+    /// chose to: see `store_guard`); otherwise such a start is refused.
+    pub accept_new_database: bool,
 }
 
 /// A started service.
@@ -112,9 +115,9 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
     let metrics = Arc::new(Metrics::default());
     let store: StoreHandle = Arc::new(tokio::sync::RwLock::new(None));
     connect_store(&config, &store).await;
-    store_guard::guard_start(&store, &config, false).await?;
+    store_guard::guard_start(&store, &config, options.accept_new_database).await?;
     let connector = tokio::spawn(keep_store_connected(
-        config.database_url(),
+        config.clone(),
         store.clone(),
         shutdown_rx.clone(),
     ));
@@ -331,28 +334,49 @@ async fn connect_store(config: &Config, store: &StoreHandle) {
 }
 
 async fn keep_store_connected(
-    url: String,
+    config: Config,
     store: StoreHandle,
     mut shutdown: watch::Receiver<bool>,
 ) {
+    let url = config.database_url();
     let mut tick = tokio::time::interval(RETRY_EVERY);
+    // A problem is said once (ERROR) until it changes, not every 2 s.
+    let mut said = String::new();
     loop {
         tokio::select! {
             _ = tick.tick() => {}
             _ = shutdown.changed() => return,
         }
         if store.read().await.is_some() {
+            said.clear();
             continue;
         }
-        match Store::connect(&url).await {
-            Ok(s) => {
-                info!(
-                    backend = s.backend(),
-                    "history store back: writing the journal"
-                );
-                *store.write().await = Some(s);
+        let problem = match Store::connect(&url).await {
+            // A database that comes back late is checked as at start: a replaced or emptied
+            // one is never written to.
+            Ok(s) => match store_guard::check_late(&s, &config).await {
+                Ok(()) => {
+                    info!(
+                        backend = s.backend(),
+                        "history store back: writing the journal"
+                    );
+                    *store.write().await = Some(s);
+                    continue;
+                }
+                Err(e) => {
+                    s.close().await;
+                    format!("{e:#}")
+                }
+            },
+            Err(e) if e.is_permanent() => format!("{e}"),
+            Err(e) => {
+                warn!(error = %e, "history store still unavailable");
+                continue;
             }
-            Err(e) => warn!(error = %e, "history store still unavailable"),
+        };
+        if problem != said {
+            error!(error = %problem, "history store refused: records stay in the journal until an operator acts");
+            said = problem;
         }
     }
 }

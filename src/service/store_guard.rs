@@ -344,6 +344,14 @@ pub(crate) async fn guard_start(
     }
 }
 
+/// The start check for a database that connected only after start: the same comparison,
+/// never an acceptance.
+pub(crate) async fn check_late(store: &Store, config: &Config) -> Result<(), StoreMismatch> {
+    check_store(store, &config.var_dir(), &expectations(config))
+        .await
+        .map(|_| ())
+}
+
 fn read_remembered(file: &Path) -> Result<Option<Remembered>, StoreMismatch> {
     let bad = |reason: String| StoreMismatch::Remembered {
         path: file.to_path_buf(),

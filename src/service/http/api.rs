@@ -43,7 +43,12 @@ impl From<crate::store::StoreError> for ApiError {
             StoreError::NotFound { .. } => StatusCode::NOT_FOUND,
             StoreError::Invalid { .. } => StatusCode::BAD_REQUEST,
             StoreError::Conflict { .. } => StatusCode::CONFLICT,
-            StoreError::Unavailable { .. } => StatusCode::SERVICE_UNAVAILABLE,
+            // Readers beyond the store's bound wait, then get this: try again later.
+            StoreError::Unavailable { .. } | StoreError::Busy { .. } => {
+                StatusCode::SERVICE_UNAVAILABLE
+            }
+            // The database cannot serve until an operator acts (its code says why).
+            StoreError::Corrupt { .. } | StoreError::Full { .. } => StatusCode::SERVICE_UNAVAILABLE,
             _ => StatusCode::INTERNAL_SERVER_ERROR,
         };
         // Display never carries SQL text or credentials (see StoreError).
