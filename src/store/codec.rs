@@ -60,9 +60,15 @@ pub(crate) fn decode_cursor(cursor: &str) -> Result<(i64, i64), StoreError> {
     ))
 }
 
+/// A name the store keys by: never empty; a machine name follows the one rule of config and
+/// API ([`crate::names::check_plain_name`]).
 pub(crate) fn check_name(field: &'static str, value: &str) -> Result<(), StoreError> {
     if value.trim().is_empty() {
         return Err(StoreError::invalid(field, "must not be empty"));
+    }
+    if field == "machine" {
+        crate::names::check_plain_name(value)
+            .map_err(|e| StoreError::invalid(field, e.to_string()))?;
     }
     Ok(())
 }

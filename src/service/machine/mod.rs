@@ -115,8 +115,10 @@ impl MachineLoop {
             Journal::open(&paths.state_dir).with_context(|| format!("machine {name}: journal"))?;
         let memory = load_memory(&name, &setup, &journal, &store).await?;
         if let Err(e) = std::fs::create_dir_all(&paths.share_dir) {
-            // Not fatal: the share may be a mount that comes back; deliveries wait for it.
+            // Not fatal: the share may be a mount that comes back; deliveries wait for it. An
+            // alarm all the same: nothing reaches the control until it is there.
             error!(machine = %name, folder = %paths.share_dir.display(), error = %e, "controller share folder cannot be created: tables wait until it can");
+            metrics.update(&name, |m| m.alarms_total += 1);
         }
         let config = ShareConfig {
             share_dir: paths.share_dir.clone(),
