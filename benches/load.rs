@@ -58,10 +58,7 @@ fn main() {
         .expect("runtime");
     let started = Instant::now();
     let (counts, samples, elapsed_s) = runtime.block_on(async {
-        let mut running = service::start(config, RunOptions {
-            parts: Some(parts),
-            ..RunOptions::default()
-        })
+        let mut running = service::start(config, RunOptions::parts(parts))
             .await
             .expect("service");
         let samples = std::sync::Arc::new(std::sync::Mutex::new(vec![(0.0, rss_mib())]));

@@ -72,15 +72,9 @@ fn fill(path: &Path) {
 async fn a_full_disk_keeps_every_measurement_and_stops_learning() {
     let dir = tempfile::tempdir().unwrap();
     let _var = Tmpfs::mount(&dir.path().join("var"), 48);
-    let running = service::start(
-        config(dir.path()),
-        RunOptions {
-            parts: None,
-            ..RunOptions::default()
-        },
-    )
-    .await
-    .unwrap();
+    let running = service::start(config(dir.path()), RunOptions::default())
+        .await
+        .unwrap();
     let addr = running.http_addr;
     wait_until(addr, "camloop_parts_total", 12.0).await;
     let filler = dir.path().join("var/filler");

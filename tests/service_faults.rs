@@ -86,15 +86,9 @@ async fn errors(dir: &Path) -> Vec<(i64, f64)> {
 async fn a_read_only_share_does_not_wind_up_the_learning() {
     let dir = tempfile::tempdir().unwrap();
     let share = dir.path().join("share/SIM1");
-    let mut running = service::start(
-        config(dir.path(), 20),
-        RunOptions {
-            parts: Some(70),
-            ..RunOptions::default()
-        },
-    )
-    .await
-    .unwrap();
+    let mut running = service::start(config(dir.path(), 20), RunOptions::parts(70))
+        .await
+        .unwrap();
     let addr = running.http_addr;
     wait_for_parts(addr, 15).await;
     immutable(&share, true);

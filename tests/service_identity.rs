@@ -130,15 +130,9 @@ async fn drop_files_are_moved_by_the_verdict_and_learned_once() {
     );
     let config =
         camloop::config::Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
-    let running = camloop::service::start(
-        config,
-        camloop::service::RunOptions {
-            parts: None,
-            ..camloop::service::RunOptions::default()
-        },
-    )
-    .await
-    .unwrap();
+    let running = camloop::service::start(config, camloop::service::RunOptions::default())
+        .await
+        .unwrap();
     let inbox = dir.path().join("inbox");
     let good = csv(&measurement("DROP1", "P1", "IN1", 1));
     let write = |name: &str, text: &str| std::fs::write(inbox.join(name), text).unwrap();

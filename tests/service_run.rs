@@ -48,15 +48,9 @@ fn unavailable_can() -> String {
 async fn parts_flow_from_the_simulated_gauge_to_the_api() {
     let dir = tempfile::tempdir().unwrap();
     let url = format!("sqlite://{}/var/camloop.db?mode=rwc", dir.path().display());
-    let mut running = service::start(
-        config(dir.path(), &url),
-        RunOptions {
-            parts: Some(5),
-            ..RunOptions::default()
-        },
-    )
-    .await
-    .unwrap();
+    let mut running = service::start(config(dir.path(), &url), RunOptions::parts(5))
+        .await
+        .unwrap();
     running.machines_done().await;
     let addr = running.http_addr;
 
@@ -144,15 +138,9 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
 
     // A restart resumes from the stored learning state: part 6 is not an uncompensated part
     // (and is a new measurement, not a repeat of part 1 that the store would skip).
-    let mut running = service::start(
-        config(dir.path(), &url),
-        RunOptions {
-            parts: Some(1),
-            ..RunOptions::default()
-        },
-    )
-    .await
-    .unwrap();
+    let mut running = service::start(config(dir.path(), &url), RunOptions::parts(1))
+        .await
+        .unwrap();
     running.machines_done().await;
     let (_, body) = get(
         running.http_addr,
@@ -279,15 +267,9 @@ async fn a_database_that_is_down_loses_nothing() {
     let dir = tempfile::tempdir().unwrap();
     // Nothing listens on port 1 of localhost: the database is down for the whole run.
     let down = "postgres://camloop@127.0.0.1:1/camloop";
-    let mut running = service::start(
-        config(dir.path(), down),
-        RunOptions {
-            parts: Some(3),
-            ..RunOptions::default()
-        },
-    )
-    .await
-    .unwrap();
+    let mut running = service::start(config(dir.path(), down), RunOptions::parts(3))
+        .await
+        .unwrap();
     running.machines_done().await;
     let (status, body) = get(running.http_addr, "/healthz").await;
     assert_eq!(status, 200);
@@ -299,15 +281,9 @@ async fn a_database_that_is_down_loses_nothing() {
     // A restart while the database is still down resumes from the local memory: the 4th
     // part is ground with the learned table (an uncompensated part has about 3 µm of
     // datum-fitted profile error, a compensated one well under 1.5 µm).
-    let mut running = service::start(
-        config(dir.path(), down),
-        RunOptions {
-            parts: Some(1),
-            ..RunOptions::default()
-        },
-    )
-    .await
-    .unwrap();
+    let mut running = service::start(config(dir.path(), down), RunOptions::parts(1))
+        .await
+        .unwrap();
     running.machines_done().await;
     running.stop().await;
     let journal =
@@ -407,15 +383,7 @@ async fn stored_counts(store: &camloop::store::Store) -> [usize; 4] {
 async fn an_unavailable_can_bus_is_reported_not_fatal() {
     let dir = tempfile::tempdir().unwrap();
     let config = one_machine(dir.path(), "CAN1", "", &unavailable_can());
-    let running = service::start(
-        config,
-        RunOptions {
-            parts: None,
-            ..RunOptions::default()
-        },
-    )
-    .await
-    .unwrap();
+    let running = service::start(config, RunOptions::default()).await.unwrap();
     let (status, body) = get(running.http_addr, "/healthz").await;
     assert_eq!(status, 200, "{body}");
     // The nominal table is on the share even though no part has been measured.
@@ -443,15 +411,7 @@ async fn a_serial_gauge_feeds_the_loop_through_a_pseudo_terminal() {
         "",
         &format!("kind = \"serial\"\nport = \"{port}\"\nbaud = 115200"),
     );
-    let running = service::start(
-        config,
-        RunOptions {
-            parts: None,
-            ..RunOptions::default()
-        },
-    )
-    .await
-    .unwrap();
+    let running = service::start(config, RunOptions::default()).await.unwrap();
 
     // One simulated part of the demo lobe, sent in the serial line protocol.
     let lift = camloop::core::lift::LiftTable::parse_csv(
@@ -524,15 +484,7 @@ async fn a_dropped_dressing_report_regenerates_the_table() {
         "",
         "kind = \"drop\"\nfolder = \"inbox\"\npoll_ms = 20",
     );
-    let running = service::start(
-        config,
-        RunOptions {
-            parts: None,
-            ..RunOptions::default()
-        },
-    )
-    .await
-    .unwrap();
+    let running = service::start(config, RunOptions::default()).await.unwrap();
     let inbox = dir.path().join("inbox");
     std::fs::create_dir_all(&inbox).unwrap();
     // Written under a temporary name, ended with the `# end` marker and renamed, as the
@@ -601,15 +553,7 @@ async fn raw_revolutions_past_the_retention_are_dropped() {
         "raw_retention_days = 2",
         &unavailable_can(),
     );
-    let running = service::start(
-        config,
-        RunOptions {
-            parts: None,
-            ..RunOptions::default()
-        },
-    )
-    .await
-    .unwrap();
+    let running = service::start(config, RunOptions::default()).await.unwrap();
     // Poll (bounded) until the start-up pass has run.
     let mut pruned = false;
     for _ in 0..200 {

@@ -39,6 +39,16 @@ pub struct RunOptions {
     pub accept_new_database: bool,
 }
 
+impl RunOptions {
+    /// Stop after `n` parts per simulated machine.
+    pub fn parts(n: u64) -> Self {
+        Self {
+            parts: Some(n),
+            ..Self::default()
+        }
+    }
+}
+
 /// A started service.
 pub struct Running {
     /// Where the HTTP API listens (useful with port 0).

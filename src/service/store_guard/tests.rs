@@ -238,10 +238,7 @@ async fn the_service_refuses_to_start_on_a_truncated_database() {
         recipe.display()
     );
     let config = || Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
-    let options = || super::super::RunOptions {
-        parts: Some(2),
-        ..super::super::RunOptions::default()
-    };
+    let options = || super::super::RunOptions::parts(2);
     let mut running = super::super::start(config(), options()).await.unwrap();
     running.machines_done().await;
     running.stop().await;
