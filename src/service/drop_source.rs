@@ -89,6 +89,8 @@ async fn hand_over(
     let settle = match verdict.await.ok()? {
         Ingested::Rejected { reason } | Ingested::Failed { reason } => Settle::Rejected { reason },
         Ingested::Recorded | Ingested::Repeated => Settle::Processed,
+        // Kept where it is, claimed, and read again at the next start.
+        Ingested::NotRecorded => return Some(drop_folder),
     };
     let (df, settled) = tokio::task::spawn_blocking(move || {
         let settled = drop_folder.settle(&path, settle);

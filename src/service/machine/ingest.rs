@@ -93,16 +93,16 @@ impl MachineLoop {
             Err(e) => return Err(e.into()),
         };
         let record = self.measurement_record(&raw, &sha, &done.measured, at_ms);
+        if !self.record(vec![record]).await {
+            // Not counted and not remembered: the same reading sent again once the journal
+            // can be written is a new measurement, not a repeat.
+            warn!(machine = %self.name, origin = %raw.origin, "part not learned from: its measurement could not be recorded");
+            self.metrics.update(&self.name, |m| m.learning_held = 1);
+            return Ok(Ingested::NotRecorded);
+        }
         self.memory.parts += 1;
         self.memory.remember(sha.clone());
         let part = self.memory.parts;
-        if !self.record(vec![record]).await {
-            warn!(machine = %self.name, part, "part not learned from: its measurement could not be recorded");
-            self.metrics.update(&self.name, |m| m.learning_held = 1);
-            return Ok(Ingested::Failed {
-                reason: "the journal cannot be written (disk full)".into(),
-            });
-        }
         let held = matches!(done.decision, Decision::Held(_));
         let ground_with = self.memory.in_force_version;
         let (mut records, text) = self.decide(done.decision, &sha, part, at_ms).await;

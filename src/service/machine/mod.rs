@@ -72,6 +72,9 @@ pub enum Ingested {
     Repeated,
     /// Not this machine's, or failed the checks: never learned from.
     Rejected { reason: String },
+    /// Could not be recorded (the journal cannot be written): neither learned nor kept by
+    /// camloop, so the sender keeps it (a drop file stays in the inbox).
+    NotRecorded,
     /// Could not be processed (e.g. the analysis failed); the reason is logged.
     Failed { reason: String },
 }
