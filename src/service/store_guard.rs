@@ -20,6 +20,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use tracing::{error, info};
 
+mod rebuild;
+
 use super::journal::{Journal, Pending};
 use super::machine::StoreHandle;
 use crate::config::Config;
@@ -240,6 +242,13 @@ pub(crate) async fn accept_new_store(
         source,
     };
     let identity = store.identity().await.map_err(asked)?;
+    let rebuilt = rebuild::rebuild_versions(store, var_dir, expectations)
+        .await
+        .map_err(asked)?;
+    info!(
+        versions = rebuilt,
+        "table versions the shares keep rebuilt into the new database"
+    );
     let mut behind = Vec::new();
     for e in expectations {
         let newest = store

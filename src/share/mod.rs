@@ -50,6 +50,7 @@ pub use manifest::{
     FileRecord, History, Loaded, Record, VersionRecord, VersionState, VersionStatus,
     load as load_manifest,
 };
+pub(crate) use state::version_dir;
 pub use store::{
     Clock, MANIFEST_FILE, OpenReport, ProgramFile, PushRequest, Pushed, Share, ShareConfig,
     Submitted, VERSIONS_DIR,

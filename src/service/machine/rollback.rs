@@ -133,8 +133,14 @@ impl MachineLoop {
                 lobe: lobe.to_string(),
                 version,
             })?;
-        let learning: TableLearning = serde_json::from_str(&old.learning_params_json)
-            .with_context(|| format!("version {version}: its learning record is unreadable"))?;
+        // A version rebuilt from the share's manifest (after a new database was accepted)
+        // has no correction to restore: refused, naming why.
+        let learning: TableLearning =
+            serde_json::from_str(&old.learning_params_json).with_context(|| {
+                format!(
+                    "version {version} has no stored correction (made before this database, or rebuilt from the share): roll back to a version made since"
+                )
+            })?;
         let number = self.share.next_table_number();
         let text = match self.share.rollback_request(version, now_ms_u64()) {
             Ok(r) => r

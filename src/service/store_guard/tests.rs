@@ -280,6 +280,23 @@ async fn the_service_refuses_to_start_on_a_truncated_database() {
     accept_new_store(&store, &config().var_dir(), &expected)
         .await
         .unwrap();
+    // The version index is rebuilt from the share: its newest version is in the new store
+    // under its own number, with its program text.
+    let newest = store
+        .latest_table_version("SIM1", "IN1")
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(
+        newest.version as u64,
+        expected[0].newest_share_version.unwrap()
+    );
+    assert!(
+        newest.program_text.contains("CTABDEF("),
+        "{}",
+        newest.program_text
+    );
+    assert!(newest.reason.ends_with("(rebuilt from the share)"));
     store.close().await;
     let mut running = super::super::start(config(), options()).await.unwrap();
     running.machines_done().await;

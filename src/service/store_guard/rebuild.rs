@@ -1,0 +1,72 @@
+//! The version index rebuilt from the shares when a new database is accepted: every version
+//! whose text the share's state folder still keeps goes into the store under its own number,
+//! with its reason and status, so history, diffs and program downloads continue where the
+//! share is. (Versions whose text was pruned are only counted; their correction was never in
+//! the manifest, so a rollback to a rebuilt version is refused with a reason.)
+
+use super::MachineExpectation;
+use crate::share::{MANIFEST_FILE, VERSIONS_DIR, VersionStatus, load_manifest, version_dir};
+use crate::store::{NewTableVersion, Store, StoreError, TableStatus};
+use std::path::Path;
+
+/// Inserts the kept versions the store lacks; returns how many went in.
+pub(super) async fn rebuild_versions(
+    store: &Store,
+    var_dir: &Path,
+    expectations: &[MachineExpectation],
+) -> Result<u64, StoreError> {
+    let mut rebuilt = 0;
+    for e in expectations {
+        let state = var_dir.join("machines").join(&e.machine).join("share");
+        let Ok(loaded) = load_manifest(&state.join(MANIFEST_FILE)) else {
+            continue;
+        };
+        for v in loaded.history.versions().iter().filter(|v| v.text_kept) {
+            let r = &v.record;
+            let version = r.version as i64;
+            if store
+                .table_version(&e.machine, &e.lobe, version)
+                .await?
+                .is_some()
+            {
+                continue;
+            }
+            // The table program is the first file of a version (the main program goes last).
+            let Some(file) = r.files.first() else {
+                continue;
+            };
+            let dir = version_dir(&state.join(VERSIONS_DIR), r.version);
+            let Ok(program_text) = std::fs::read_to_string(dir.join(&file.name)) else {
+                continue;
+            };
+            let (status, why) = match &v.status {
+                VersionStatus::Pushed { .. } => {
+                    (TableStatus::Pushed, "pushed (from the share's manifest)")
+                }
+                VersionStatus::Refused { .. } => {
+                    (TableStatus::Refused, "refused (from the share's manifest)")
+                }
+                _ => (
+                    TableStatus::Waiting,
+                    "not confirmed on the share (from its manifest)",
+                ),
+            };
+            let t = NewTableVersion {
+                machine: e.machine.clone(),
+                lobe: e.lobe.clone(),
+                version: Some(version),
+                parent_version: None,
+                table_number: r.table_number,
+                program_text,
+                learning_params_json: r.learning.to_string(),
+                reason: format!("{} (rebuilt from the share)", r.reason),
+                status,
+                status_why: why.to_string(),
+                created_at_ms: r.created_at_unix_ms as i64,
+            };
+            store.insert_table_version(&t).await?;
+            rebuilt += 1;
+        }
+    }
+    Ok(rebuilt)
+}
