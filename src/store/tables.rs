@@ -178,6 +178,31 @@ impl Store {
         })
     }
 
+    /// The newest status of version `version` of (machine, lobe), or `None` when the store
+    /// has no such version. On the writer's connection: the journal asks this for every
+    /// table record, and must never wait behind history readers.
+    pub async fn table_version_status(
+        &self,
+        machine: &str,
+        lobe: &str,
+        version: i64,
+    ) -> Result<Option<TableStatus>, StoreError> {
+        with_write!(self, pool => {
+            let status: Option<String> = sqlx::query_scalar(
+                "SELECT s.status FROM table_versions t JOIN table_version_status s \
+                 ON s.table_version_id = t.id WHERE t.machine = $1 AND t.lobe = $2 \
+                 AND t.version = $3 ORDER BY s.id DESC LIMIT 1",
+            )
+            .bind(machine)
+            .bind(lobe)
+            .bind(version)
+            .fetch_optional(pool)
+            .await
+            .map_err(self.db_error("looking up a table version's status"))?;
+            status.map(|s| TableStatus::parse(&s)).transpose()
+        })
+    }
+
     /// The highest-numbered table version of (machine, lobe), whatever its status.
     pub async fn latest_table_version(
         &self,

@@ -182,7 +182,7 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
             version,
             ..
         } => store
-            .table_version(machine, lobe, *version as i64)
+            .table_version_status(machine, lobe, *version as i64)
             .await?
             .is_some(),
         Pending::TableStatus {
@@ -192,9 +192,9 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
             status,
             ..
         } => store
-            .table_version(machine, lobe, *version as i64)
+            .table_version_status(machine, lobe, *version as i64)
             .await?
-            .is_some_and(|t| t.status == *status),
+            .is_some_and(|s| s == *status),
         Pending::Event { .. } => match record.event() {
             Some(e) => store.event_exists(&e).await?,
             None => false,
@@ -328,7 +328,7 @@ async fn insert_table(store: &Store, record: Pending) -> Result<(), StoreError> 
     let parent_version = match parent_version {
         Some(p)
             if store
-                .table_version(&machine, &lobe, p as i64)
+                .table_version_status(&machine, &lobe, p as i64)
                 .await?
                 .is_some() =>
         {
