@@ -24,6 +24,20 @@ pub struct PolySegment {
 }
 
 impl PolySegment {
+    /// Whether every number of the segment is finite (a table with NaN or ∞ is refused).
+    pub fn is_finite(&self) -> bool {
+        [
+            self.c_start_deg,
+            self.c_end_deg,
+            self.x0_mm,
+            self.a1_mm,
+            self.a2_mm,
+            self.a3_mm,
+        ]
+        .iter()
+        .all(|v| v.is_finite())
+    }
+
     /// X at the end of the segment (u = 1).
     pub fn x_end_mm(&self) -> f64 {
         self.x0_mm + self.a1_mm + self.a2_mm + self.a3_mm

@@ -154,15 +154,7 @@ fn poly_segments(segments: &[PolySegment]) -> Result<Vec<Cubic>, SimError> {
         return Err(SimError::TooFewTableEntries { count: n });
     }
     for (index, s) in segments.iter().enumerate() {
-        let values = [
-            s.c_start_deg,
-            s.c_end_deg,
-            s.x0_mm,
-            s.a1_mm,
-            s.a2_mm,
-            s.a3_mm,
-        ];
-        if values.iter().any(|v| !v.is_finite()) {
+        if !s.is_finite() {
             return Err(SimError::NonFiniteTableEntry {
                 index,
                 c_deg: s.c_start_deg,

@@ -236,15 +236,7 @@ fn map_segments(
     let reversed = settings.c_direction == super::CDirection::Reversed;
     let mut mapped = Vec::with_capacity(segments.len());
     for (index, s) in segments.iter().enumerate() {
-        let values = [
-            s.c_start_deg,
-            s.c_end_deg,
-            s.x0_mm,
-            s.a1_mm,
-            s.a2_mm,
-            s.a3_mm,
-        ];
-        if !values.iter().all(|v| v.is_finite()) {
+        if !s.is_finite() {
             return Err(TableError::NonFiniteSegment { index });
         }
         if s.c_end_deg <= s.c_start_deg {

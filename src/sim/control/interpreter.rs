@@ -18,6 +18,17 @@ const KEYWORDS: [&str; 8] = [
 ];
 
 impl Run<'_> {
+    /// Table `number` from the control's memory; coupling or reading an undefined one is
+    /// the control's alarm.
+    fn defined_table(&self, number: u32) -> Result<&ParsedTable, ControlFault> {
+        self.control
+            .tables
+            .get(&number)
+            .ok_or(ControlFault::UndefinedTable {
+                number: i64::from(number),
+            })
+    }
+
     /// Runs `text` in `frame` to its `M30` (depth 0) or `RET`; returns that line.
     pub(super) fn program(
         &mut self,
@@ -191,13 +202,7 @@ impl Run<'_> {
             return Err(unsupported(code).into());
         };
         let number = table_number(int_arg(number, frame)?)?;
-        let table = self
-            .control
-            .tables
-            .get(&number)
-            .ok_or(ControlFault::UndefinedTable {
-                number: i64::from(number),
-            })?;
+        let table = self.defined_table(number)?;
         if table.following_axis != *following || table.leading_axis != *leading {
             return Err(invalid(&format!(
                 "curve table {number} makes {} follow {}, not {following} follow {leading}",
@@ -337,13 +342,7 @@ impl Run<'_> {
         };
         let c_deg = real_var(leading, frame)?;
         let number = table_number(int_arg(number, frame)?)?;
-        let table = self
-            .control
-            .tables
-            .get(&number)
-            .ok_or(ControlFault::UndefinedTable {
-                number: i64::from(number),
-            })?;
+        let table = self.defined_table(number)?;
         real_var(slope, frame)?;
         let x = |c: f64| table.x_at(c).unwrap_or(f64::NAN);
         // The slope dX/dC, mm per degree, by a central difference.
