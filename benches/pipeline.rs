@@ -9,7 +9,7 @@ use camloop::core::analysis::{LobeOptions, analyse_lobe};
 use camloop::core::compensate::{self, AxisLimits, Feature, LobeLoop, TableRequest};
 use camloop::core::fit::TableForm;
 use camloop::core::geometry::{CamGeometry, Follower};
-use camloop::core::learn::{LearningParams, LearningState};
+use camloop::core::learn::{LearningParams, LearningState, PartError};
 use camloop::core::lift::LiftTable;
 use camloop::core::measure::{AssemblyLimits, check_and_average};
 use camloop::core::program::{ProgramSettings, render_poly_table};
@@ -96,10 +96,17 @@ fn loop_turn(c: &mut Criterion) {
         .collect();
     let repeat = vec![0.1; 360];
     let state = LearningState::new(360);
+    let part = PartError {
+        error_um: &error,
+        repeatability_um: &repeat,
+        revolutions: 4,
+        timing_error_deg: 0.0,
+        previous: None,
+    };
     c.bench_function("loop_learn_and_regenerate_360", |b| {
         b.iter(|| {
             let mut s = state.clone();
-            compensate::learn_and_regenerate(&mut s, black_box(&error), &repeat, 4, &lobe)
+            compensate::learn_and_regenerate(&mut s, black_box(&part), &lobe)
                 .expect("table")
         })
     });
@@ -126,14 +133,8 @@ fn loop_turn(c: &mut Criterion) {
             |b| {
                 b.iter(|| {
                     let mut s = state.clone();
-                    let (_, table) = compensate::learn_and_regenerate(
-                        &mut s,
-                        black_box(&error),
-                        &repeat,
-                        4,
-                        &lobe,
-                    )
-                    .expect("table");
+                    let (_, table) = compensate::learn_and_regenerate(&mut s, black_box(&part), &lobe)
+                        .expect("table");
                     let settings = ProgramSettings {
                         table_number: share.next_table_number(),
                         ..ProgramSettings::default()

@@ -136,7 +136,7 @@ fn per_part_case(c: &mut Criterion, points: u32, clients: usize) {
         let handle: StoreHandle = Arc::new(tokio::sync::RwLock::new(Some(store.clone())));
         MachineLoop::start(
             "BENCH".into(),
-            setup,
+            vec![setup],
             MachinePaths {
                 share_dir: dir.path().join("share"),
                 state_dir: dir.path().join("state"),

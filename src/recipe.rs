@@ -74,7 +74,9 @@ pub struct TableSettings {
     pub form: FormKind,
     /// Largest deviation of a POLY table from the exact path between points, µm.
     pub poly_tolerance_um: f64,
-    /// The two table numbers used in turn, so the table in use is never redefined.
+    /// The first and last table numbers camloop may use. Each feature gets two, used in turn
+    /// so the table in use is never redefined: in recipe order, (first, first + 1),
+    /// (first + 2, first + 3), …; the range must hold them all.
     pub table_numbers: (u32, u32),
 }
 
@@ -108,12 +110,31 @@ pub struct Lobe {
     #[serde(default)]
     pub roller_radius_mm: Option<f64>,
     pub base_radius_mm: f64,
-    /// Angle of the lobe's 0° on the shaft, degrees: added to the program's C offset.
+    /// Angle of the lobe's 0° on the shaft from the shaft datum, degrees: added to the
+    /// program's C offset; the gauge reads from the datum.
     #[serde(default)]
     pub phase_deg: f64,
+    /// Axial station of the lobe from the shaft's Z datum, mm: where the main program moves Z.
+    #[serde(default)]
+    pub z_mm: f64,
     /// Tolerance bands on the profile error; none: the analysis default.
     #[serde(default)]
     pub tolerance: Vec<ToleranceBand>,
+    /// Timing tolerance: largest |phase error| of the lobe against the datum, degrees.
+    #[serde(default = "default_timing_tolerance_deg")]
+    pub timing_tolerance_deg: f64,
+}
+
+fn default_timing_tolerance_deg() -> f64 {
+    0.05
+}
+
+fn default_stroke_tolerance_um() -> f64 {
+    10.0
+}
+
+fn default_roundness_tolerance_um() -> f64 {
+    2.5
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -122,10 +143,24 @@ pub struct Pin {
     pub name: String,
     pub throw_mm: f64,
     pub pin_radius_mm: f64,
+    /// Index angle of the pin on the shaft from the datum, degrees (0/180/180/0 for an
+    /// inline four).
     #[serde(default)]
     pub phase_deg: f64,
+    /// Axial station from the shaft's Z datum, mm.
+    #[serde(default)]
+    pub z_mm: f64,
     #[serde(default)]
     pub tolerance: Vec<ToleranceBand>,
+    /// Largest |index angle error|, degrees.
+    #[serde(default = "default_timing_tolerance_deg")]
+    pub index_tolerance_deg: f64,
+    /// Largest |stroke error| (twice the throw error), µm.
+    #[serde(default = "default_stroke_tolerance_um")]
+    pub stroke_tolerance_um: f64,
+    /// Largest roundness (peak to valley of the profile without its first harmonic), µm.
+    #[serde(default = "default_roundness_tolerance_um")]
+    pub roundness_tolerance_um: f64,
 }
 
 /// A recipe that could not be used: every problem found, one per line.
@@ -154,6 +189,26 @@ pub struct FeatureSetup {
     pub request: TableRequest,
     pub table_pair: (u32, u32),
     pub bands: Vec<ToleranceBand>,
+    /// Position in the recipe, from 1: the gauge's numeric lobe id and the grinding order.
+    pub index: usize,
+    /// Where the feature's 0° is on the shaft, degrees.
+    pub phase_deg: f64,
+    /// Axial station, mm.
+    pub z_mm: f64,
+    pub tolerances: FeatureTolerances,
+}
+
+/// The feature's own characteristics beside the profile bands.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub enum FeatureTolerances {
+    Lobe {
+        timing_deg: f64,
+    },
+    Pin {
+        index_deg: f64,
+        stroke_um: f64,
+        roundness_um: f64,
+    },
 }
 
 impl FeatureSetup {
@@ -174,6 +229,7 @@ impl FeatureSetup {
             lobe: self.lobe_loop(),
             bands: &self.bands,
             assembly: AssemblyLimits::default(),
+            phase_deg: self.phase_deg,
         }
     }
 }
@@ -188,38 +244,50 @@ impl Recipe {
 
     /// The lobe or pin `name` ready for the loop; lift files are read relative to `path`.
     pub fn feature_setup(&self, path: &Path, name: &str) -> anyhow::Result<FeatureSetup> {
-        let (label, nominal, feature, phase_deg, bands) = if let Some(lobe) = self.lobe(name) {
-            let lift_path = lobe.lift_path(path);
-            let lift_text = std::fs::read_to_string(&lift_path)
-                .with_context(|| format!("cannot read lift table {}", lift_path.display()))?;
-            let nominal = LiftTable::parse_csv(&lift_text, &lift_path.display().to_string())?;
-            let feature = Feature::Cam(lobe.geometry(self.wheel.radius_mm));
-            (
-                format!("{} lobe {}", self.name, lobe.name),
-                nominal,
-                feature,
-                lobe.phase_deg,
-                lobe.tolerance.clone(),
-            )
-        } else if let Some(pin) = self.pin(name) {
-            let geometry = pin.geometry(self.wheel.radius_mm);
-            let nominal = pin_nominal_lift(&geometry);
-            (
-                format!("{} pin {}", self.name, pin.name),
-                nominal,
-                Feature::Pin(geometry),
-                pin.phase_deg,
-                pin.tolerance.clone(),
-            )
-        } else {
+        let Some(index) = self.feature_names().iter().position(|n| *n == name) else {
             bail!(
                 "{}: no lobe or pin {name} (has: {})",
                 path.display(),
                 self.feature_names().join(", ")
             );
         };
+        let (label, nominal, feature, phase_deg, z_mm, bands, tolerances) =
+            if let Some(lobe) = self.lobe(name) {
+                let lift_path = lobe.lift_path(path);
+                let lift_text = std::fs::read_to_string(&lift_path)
+                    .with_context(|| format!("cannot read lift table {}", lift_path.display()))?;
+                let nominal = LiftTable::parse_csv(&lift_text, &lift_path.display().to_string())?;
+                (
+                    format!("{} lobe {}", self.name, lobe.name),
+                    nominal,
+                    Feature::Cam(lobe.geometry(self.wheel.radius_mm)),
+                    lobe.phase_deg,
+                    lobe.z_mm,
+                    lobe.tolerance.clone(),
+                    FeatureTolerances::Lobe {
+                        timing_deg: lobe.timing_tolerance_deg,
+                    },
+                )
+            } else {
+                let pin = self.pin(name).expect("a feature name is a lobe's or a pin's");
+                let geometry = pin.geometry(self.wheel.radius_mm);
+                (
+                    format!("{} pin {}", self.name, pin.name),
+                    pin_nominal_lift(&geometry),
+                    Feature::Pin(geometry),
+                    pin.phase_deg,
+                    pin.z_mm,
+                    pin.tolerance.clone(),
+                    FeatureTolerances::Pin {
+                        index_deg: pin.index_tolerance_deg,
+                        stroke_um: pin.stroke_tolerance_um,
+                        roundness_um: pin.roundness_tolerance_um,
+                    },
+                )
+            };
         let mut program = self.program.clone();
         program.c_offset_deg += phase_deg;
+        program.name = self.table_program_name(name);
         Ok(FeatureSetup {
             part: self.name.clone(),
             name: name.to_string(),
@@ -234,9 +302,41 @@ impl Recipe {
                 form: self.table.form(),
                 poly_tolerance_um: self.table.poly_tolerance_um,
             },
-            table_pair: self.table.table_numbers,
+            table_pair: self.table_pair(index),
             bands,
+            index: index + 1,
+            phase_deg,
+            z_mm,
+            tolerances,
         })
+    }
+
+    /// Every lobe or pin in recipe order (the grinding order).
+    pub fn feature_setups(&self, path: &Path) -> anyhow::Result<Vec<FeatureSetup>> {
+        self.feature_names()
+            .iter()
+            .map(|name| self.feature_setup(path, name))
+            .collect()
+    }
+
+    /// The table subprogram of feature `name`: the recipe's program name, with the feature's
+    /// name appended when the recipe has more than one feature.
+    pub fn table_program_name(&self, name: &str) -> String {
+        if self.feature_names().len() > 1 {
+            let suffix: String = name
+                .chars()
+                .map(|c| if c == '-' { '_' } else { c.to_ascii_uppercase() })
+                .collect();
+            format!("{}_{suffix}", self.program.name)
+        } else {
+            self.program.name.clone()
+        }
+    }
+
+    /// The table numbers of the feature at `index` (from 0) in recipe order.
+    fn table_pair(&self, index: usize) -> (u32, u32) {
+        let first = self.table.table_numbers.0 + 2 * index as u32;
+        (first, first + 1)
     }
 
     /// Parses and checks a recipe; `file` names it in errors.
@@ -267,6 +367,11 @@ impl Recipe {
                 p.push(format!("{field} = {v}: must be a number > 0"));
             }
         };
+        let finite = |p: &mut Vec<String>, field: String, v: f64| {
+            if !v.is_finite() {
+                p.push(format!("{field} = {v}: must be a finite number"));
+            }
+        };
         positive(&mut p, "wheel.radius_mm".into(), self.wheel.radius_mm);
         match self.kind {
             ShaftKind::Camshaft if self.lobes.is_empty() => {
@@ -289,8 +394,25 @@ impl Recipe {
                 self.table.points
             ));
         }
-        if let Err(e) = crate::core::program::check_table_pair(self.table.table_numbers) {
-            p.push(format!("table.table_numbers: {e}"));
+        let (first, last) = self.table.table_numbers;
+        let features = self.feature_names().len() as u32;
+        if first == 0 || last < first {
+            p.push(format!(
+                "table.table_numbers = [{first}, {last}]: must be first ≥ 1 and last ≥ first"
+            ));
+        } else if last - first + 1 < 2 * features {
+            p.push(format!(
+                "table.table_numbers = [{first}, {last}]: {features} features need {} table numbers, the range holds {}",
+                2 * features,
+                last - first + 1
+            ));
+        }
+        for name in self.feature_names() {
+            if let Err(e) =
+                crate::core::program::validate_program_name(&self.table_program_name(name))
+            {
+                p.push(format!("program.name with feature {name}: {e}"));
+            }
         }
         if let Err(e) = self.program.validate() {
             p.extend(e.0.iter().map(|e| format!("program: {e}")));
@@ -310,6 +432,13 @@ impl Recipe {
                 ));
             }
             positive(&mut p, format!("{at}.base_radius_mm"), lobe.base_radius_mm);
+            positive(
+                &mut p,
+                format!("{at}.timing_tolerance_deg"),
+                lobe.timing_tolerance_deg,
+            );
+            finite(&mut p, format!("{at}.phase_deg"), lobe.phase_deg);
+            finite(&mut p, format!("{at}.z_mm"), lobe.z_mm);
             match (lobe.follower, lobe.roller_radius_mm) {
                 (FollowerKind::Roller, None) => {
                     p.push(format!("{at}: roller follower needs roller_radius_mm"))
@@ -334,6 +463,15 @@ impl Recipe {
                 ));
             }
             positive(&mut p, format!("{at}.pin_radius_mm"), pin.pin_radius_mm);
+            for (field, v) in [
+                ("index_tolerance_deg", pin.index_tolerance_deg),
+                ("stroke_tolerance_um", pin.stroke_tolerance_um),
+                ("roundness_tolerance_um", pin.roundness_tolerance_um),
+            ] {
+                positive(&mut p, format!("{at}.{field}"), v);
+            }
+            finite(&mut p, format!("{at}.phase_deg"), pin.phase_deg);
+            finite(&mut p, format!("{at}.z_mm"), pin.z_mm);
             if !(pin.throw_mm.is_finite() && pin.throw_mm >= 0.0) {
                 p.push(format!("{at}.throw_mm = {}: must be ≥ 0", pin.throw_mm));
             }

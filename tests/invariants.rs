@@ -105,11 +105,16 @@ fn every_module_starts_with_a_doc_line() {
     assert!(missing.is_empty(), "no //! line: {missing:?}");
 }
 
-/// Every shipped service configuration parses and names recipes and lobes that exist.
+/// Every shipped service configuration parses and names recipes and lobes that exist, and
+/// every feature of them loads.
 #[test]
 fn shipped_service_configurations_parse() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for file in ["config/camloop.toml", "docker/camloop.toml"] {
+    for file in [
+        "config/camloop.toml",
+        "config/crankshaft.toml",
+        "docker/camloop.toml",
+    ] {
         let path = root.join(file);
         let text = std::fs::read_to_string(&path).unwrap();
         let config = camloop::config::Config::parse(&text, &path, |_| None)
@@ -118,11 +123,10 @@ fn shipped_service_configurations_parse() {
             // The docker file expects the recipes copied beside it, as the image does.
             let recipe = root.join("config").join(&m.recipe);
             let r = camloop::recipe::Recipe::load(&recipe).unwrap();
-            assert!(
-                r.lobe(&m.lobe).is_some() || r.pin(&m.lobe).is_some(),
-                "{file}: {}",
-                m.lobe
-            );
+            let features = camloop::config::machine_features(&r, m).unwrap();
+            assert!(!features.is_empty(), "{file}: {}", m.name);
+            r.feature_setups(&recipe)
+                .unwrap_or_else(|e| panic!("{file}: {e:#}"));
         }
     }
 }

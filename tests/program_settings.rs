@@ -447,6 +447,7 @@ fn main_program_golden() {
         c_speed_rpm: 12.5,
         x_feed_mm_min: 50.0,
         comment_lines: vec!["part: TEST-CAM lobe 1".to_owned()],
+        ..MainProgramSettings::default()
     };
     let program = render_main_program(&main, &table_settings()).unwrap();
     let lines: Vec<&str> = program.lines().collect();
@@ -501,6 +502,7 @@ fn main_program_settings_are_checked() {
         c_speed_rpm: -1.0,
         x_feed_mm_min: f64::NAN,
         comment_lines: vec![],
+        ..MainProgramSettings::default()
     };
     let bad_table = ProgramSettings {
         x_decimals: 5,

@@ -45,7 +45,7 @@ async fn machine(dir: &Path, metrics: Arc<Metrics>) -> MachineLoop {
         share_dir: dir.join("share"),
         state_dir: dir.join("state"),
     };
-    MachineLoop::start("DROP1".into(), setup, paths, store, metrics)
+    MachineLoop::start("DROP1".into(), vec![setup], paths, store, metrics)
         .await
         .unwrap()
 }

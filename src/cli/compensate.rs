@@ -17,9 +17,9 @@ use crate::core::compensate::{
 };
 use crate::core::fit::TableForm;
 use crate::core::geometry::CrankpinGeometry;
-use crate::core::learn::{self, LearningParams, LearningState, StepOutcome};
+use crate::core::learn::{self, LearningParams, LearningState, PreviousPart, StepOutcome};
 use crate::core::lift::LiftTable;
-use crate::core::program::{ProgramSettings, comment_text, render_g1_table, render_poly_table};
+use crate::core::program::{ProgramSettings, comment_text};
 use crate::core::turn::{Decision, measurement_sha256, turn};
 use crate::gauge::read_measurement_file;
 use crate::recipe::Recipe;
@@ -75,6 +75,9 @@ struct SavedState {
     learning: LearningState,
     /// SHA-256 of the last measurement learned from.
     last_measurement_sha256: Option<String>,
+    /// What the last measurement measured, learned from or refused.
+    #[serde(default)]
+    previous: Option<PreviousPart>,
 }
 
 const STATE_FILE: &str = "learning.json";
@@ -120,6 +123,7 @@ pub fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
                 wheel_radius_mm: setup.feature.wheel_radius_mm(),
                 learning: LearningState::new(360),
                 last_measurement_sha256: None,
+                previous: None,
             }
         }
         Err(e) => return Err(e).with_context(|| format!("cannot read {}", state_path.display())),
@@ -201,8 +205,9 @@ fn learn_from(
             saved.learning.iteration
         );
     }
-    let done = turn(&setup.turn_setup(), &saved.learning, &raw, None)
+    let done = turn(&setup.turn_setup(), &saved.learning, &raw, None, saved.previous)
         .with_context(|| format!("measurement {}", path.display()))?;
+    saved.previous = Some(done.measured.as_previous());
     let (outcome, next, table) = match done.decision {
         Decision::Table {
             outcome,
@@ -222,6 +227,13 @@ fn learn_from(
                 &state_dir.join(REFUSALS_FILE),
                 &serde_json::to_string(&record)?,
             )?;
+            // The refused part still confirms (or not) the next one's error: keep it.
+            let mut outputs = Outputs::default();
+            outputs.add(
+                &state_dir.join(STATE_FILE),
+                serde_json::to_string_pretty(&*saved)?,
+            );
+            outputs.commit()?;
             return Err(anyhow::Error::new(refused))
                 .with_context(|| format!("{}: the previous table stays in force", path.display()));
         }
@@ -234,6 +246,14 @@ fn learn_from(
             max_correction_um,
         } => format!(
             "learned from {}: max error {max_error_um:.2} µm, correction up to {max_correction_um:.2} µm",
+            path.display()
+        ),
+        StepOutcome::Limited {
+            max_error_um,
+            bound,
+            ..
+        } => format!(
+            "learned from {}: max error {max_error_um:.2} µm, {bound}",
             path.display()
         ),
         StepOutcome::InTolerance { max_error_um } => {
@@ -307,11 +327,9 @@ fn push(
         comment_text(reason),
         format!("learning iteration {}", saved.learning.iteration),
     ];
-    let text = match &table.segments {
-        Some(segments) => render_poly_table(segments, &settings),
-        None => render_g1_table(&table.points, &settings),
-    }
-    .with_context(|| format!("{}: cannot render", args.program.display()))?;
+    let text = table
+        .render(&settings)
+        .with_context(|| format!("{}: cannot render", args.program.display()))?;
     let request = PushRequest {
         files: vec![ProgramFile {
             name: file_name,
@@ -405,6 +423,10 @@ fn flag_setup(
         },
         table_pair: (1, 2),
         bands: Vec::new(),
+        index: 1,
+        phase_deg: 0.0,
+        z_mm: 0.0,
+        tolerances: crate::recipe::FeatureTolerances::Lobe { timing_deg: 0.05 },
     }
 }
 

@@ -3,7 +3,7 @@
 //! machines share a folder, and the HTTP listener is bound (and kept, for the server). Every
 //! problem is reported at once, with the config line that names the file or folder.
 
-use super::{Config, ConfigError, ConfigProblem, GaugeSection};
+use super::{Config, ConfigError, ConfigProblem, GaugeSection, MachineSection};
 use crate::names::MachineName;
 use crate::recipe::{FeatureSetup, Recipe};
 use std::collections::HashMap;
@@ -19,12 +19,69 @@ pub struct Checked {
     pub listener: std::net::TcpListener,
 }
 
-/// One machine: its checked name and the lobe or pin it grinds, loaded from its recipe.
+/// One machine: its checked name and the lobes or pins it grinds, loaded from its recipe,
+/// with the machine's C speed applied.
 #[derive(Debug, Clone)]
 pub struct CheckedMachine {
     pub name: MachineName,
     pub recipe_path: PathBuf,
-    pub setup: FeatureSetup,
+    pub setups: Vec<FeatureSetup>,
+    /// The simulator's C speed is set in the config (else it grinds at the recipe's).
+    pub sim_c_speed_explicit: bool,
+}
+
+/// The features machine `m` grinds, by name, in recipe order: every one of the recipe's,
+/// or those `lobe` / `features` name. A name the recipe lacks is an error.
+pub fn machine_features(recipe: &Recipe, m: &MachineSection) -> Result<Vec<String>, String> {
+    let all = recipe.feature_names();
+    let chosen: Vec<String> = match (&m.lobe, &m.features) {
+        (Some(_), Some(_)) => return Err("give lobe or features, not both".into()),
+        (Some(one), None) => vec![one.clone()],
+        (None, Some(list)) if list.is_empty() => return Err("features is empty".into()),
+        (None, Some(list)) => list.clone(),
+        (None, None) => all.iter().map(|s| s.to_string()).collect(),
+    };
+    if let Some(missing) = chosen.iter().find(|c| !all.contains(&c.as_str())) {
+        return Err(format!(
+            "the recipe has no lobe or pin {missing} (has: {})",
+            all.join(", ")
+        ));
+    }
+    Ok(all
+        .iter()
+        .filter(|n| chosen.iter().any(|c| c == *n))
+        .map(|n| n.to_string())
+        .collect())
+}
+
+/// The feature names of machine `m` as its recipe gives them (empty when the recipe cannot
+/// be read: the start-up check reports that).
+pub fn configured_features(config: &Config, m: &MachineSection) -> Vec<String> {
+    Recipe::load(&config.resolve(&m.recipe))
+        .ok()
+        .and_then(|r| machine_features(&r, m).ok())
+        .unwrap_or_default()
+}
+
+fn machine_setups(
+    recipe: &Recipe,
+    recipe_path: &Path,
+    m: &MachineSection,
+) -> anyhow::Result<Vec<FeatureSetup>> {
+    let names = machine_features(recipe, m).map_err(|e| anyhow::anyhow!(e))?;
+    let mut setups = Vec::with_capacity(names.len());
+    for name in names {
+        let mut setup = recipe.feature_setup(recipe_path, &name)?;
+        if let Some(rpm) = m.c_speed_rpm {
+            anyhow::ensure!(
+                rpm.is_finite() && rpm > 0.0,
+                "c_speed_rpm = {rpm}: must be a number > 0"
+            );
+            setup.limits.c_speed_rpm = rpm;
+        }
+        setups.push(setup);
+    }
+    Ok(setups)
 }
 
 /// Parses `text` (the file `file`) and checks everything, config and named files and
@@ -61,13 +118,14 @@ pub fn check(config: Config) -> Result<Checked, ConfigError> {
         let line = |key: &str| config.line(&format!("machines[{i}].{key}"));
         let label = format!("machines.{}", m.name);
         let recipe_path = config.resolve(&m.recipe);
-        let setup = match Recipe::load(&recipe_path) {
-            Ok(recipe) => match recipe.feature_setup(&recipe_path, &m.lobe) {
-                Ok(setup) => Some(setup),
+        let setups = match Recipe::load(&recipe_path) {
+            Ok(recipe) => match machine_setups(&recipe, &recipe_path, m) {
+                Ok(setups) => Some(setups),
                 Err(e) => {
+                    let key = if m.features.is_some() { "features" } else { "lobe" };
                     problems.push(ConfigProblem::at(
-                        line("lobe"),
-                        format!("{label}.lobe: {e:#}"),
+                        line(key).or(line("recipe")),
+                        format!("{label}: {e:#}"),
                     ));
                     None
                 }
@@ -89,11 +147,12 @@ pub fn check(config: Config) -> Result<Checked, ConfigError> {
                 ));
             }
         }
-        if let (Ok(name), Some(setup)) = (MachineName::new(&m.name), setup) {
+        if let (Ok(name), Some(setups)) = (MachineName::new(&m.name), setups) {
             machines.push(CheckedMachine {
                 name,
                 recipe_path,
-                setup,
+                setups,
+                sim_c_speed_explicit: line("gauge.grinder.c_speed_rpm").is_some(),
             });
         }
     }

@@ -6,7 +6,7 @@ mod check;
 mod keys;
 mod values;
 
-pub use check::{Checked, CheckedMachine, check, load};
+pub use check::{Checked, CheckedMachine, check, configured_features, load, machine_features};
 pub use keys::Lines;
 
 use crate::names::MachineName;
@@ -132,8 +132,16 @@ pub struct MachineSection {
     pub name: String,
     /// Part recipe (relative to the config file).
     pub recipe: PathBuf,
-    /// The lobe or pin of the recipe this machine grinds.
-    pub lobe: String,
+    /// Grind only this lobe or pin of the recipe (default: every feature, in recipe order).
+    #[serde(default)]
+    pub lobe: Option<String>,
+    /// Grind only these lobes or pins, in recipe order (default: every feature).
+    #[serde(default)]
+    pub features: Option<Vec<String>>,
+    /// The grinding C speed on this machine, rpm, instead of the recipe's
+    /// `axis_limits.c_speed_rpm` (the main program, the guards and the simulator use it).
+    #[serde(default)]
+    pub c_speed_rpm: Option<f64>,
     /// The controller's file share (a mounted folder), relative to the config file.
     pub share: PathBuf,
     pub gauge: GaugeSection,

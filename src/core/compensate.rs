@@ -3,7 +3,7 @@
 
 use super::fit::{self, Deviation, Motion, TableForm};
 use super::geometry::{CamGeometry, CrankpinGeometry, GeometryError, Part};
-use super::learn::{self, LearnError, LearningParams, LearningState, StepOutcome};
+use super::learn::{self, LearnError, LearningParams, LearningState, PartError, StepOutcome};
 use super::lift::{LiftCurve, LiftTable, LiftTableError};
 use super::spline::PeriodicSpline;
 use super::table::{PolySegment, TablePoint};
@@ -131,6 +131,25 @@ pub struct GuardedTable {
     pub motion: Motion,
     /// Largest deviation of the table's interpolation from the exact path between points.
     pub deviation: Deviation,
+    /// The learned timing correction, degrees: added to the feature's C offset when the
+    /// table is rendered (the points stay in the part frame).
+    pub timing_offset_deg: f64,
+}
+
+impl GuardedTable {
+    /// The table program for `settings`, with the learned timing added to their C offset:
+    /// the one way a guarded table becomes program text.
+    pub fn render(
+        &self,
+        settings: &super::program::ProgramSettings,
+    ) -> Result<String, super::program::TableError> {
+        let mut settings = settings.clone();
+        settings.c_offset_deg += self.timing_offset_deg;
+        match &self.segments {
+            Some(s) => super::program::render_poly_table(s, &settings),
+            None => super::program::render_g1_table(&self.points, &settings),
+        }
+    }
 }
 
 /// Why a table was refused. A refused table is never pushed; the reason is recorded.
@@ -242,6 +261,7 @@ pub fn guarded_part_table(
         segments,
         motion,
         deviation,
+        timing_offset_deg: 0.0,
     })
 }
 
@@ -271,7 +291,9 @@ pub fn current_table(
     lobe: &LobeLoop<'_>,
 ) -> Result<GuardedTable, GuardError> {
     let commanded = commanded_lift(lobe.nominal, &state.correction_um)?;
-    guarded_table(lobe.feature, &commanded, lobe.request, lobe.limits)
+    let mut table = guarded_table(lobe.feature, &commanded, lobe.request, lobe.limits)?;
+    table.timing_offset_deg = state.timing_correction_deg;
+    Ok(table)
 }
 
 /// One turn of the loop: learn from the part just measured, then regenerate and guard the
@@ -279,19 +301,11 @@ pub fn current_table(
 /// previous table stays in force and the error says why.
 pub fn learn_and_regenerate(
     state: &mut LearningState,
-    error_um: &[f64],
-    repeatability_um: &[f64],
-    revolutions: u32,
+    part: &PartError<'_>,
     lobe: &LobeLoop<'_>,
 ) -> Result<(StepOutcome, GuardedTable), CycleError> {
     let mut next = state.clone();
-    let outcome = learn::step(
-        &mut next,
-        error_um,
-        repeatability_um,
-        revolutions,
-        lobe.params,
-    )?;
+    let outcome = learn::step(&mut next, part, lobe.params)?;
     let table = current_table(&next, lobe)?;
     *state = next;
     Ok((outcome, table))

@@ -25,21 +25,32 @@ use std::f64::consts::PI;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct LearningParams {
-    /// Learning gain L, 0 < L < 1.
+    /// Learning gain L, 0 < L < 1 (lift correction and timing alike).
     pub gain: f64,
     /// Highest harmonic order learned in full.
     pub cutoff_order: u32,
     /// Orders over which Q tapers from 1 to 0 above the cut-off.
     pub rolloff_orders: u32,
-    /// Deadband in units of the standard error σ/√revolutions of the per-angle mean.
+    /// Deadband in units of the standard error of what is learned: of the part's mean for
+    /// the size, of the low-passed error for the shape (see [`step`]).
     pub deadband_sigmas: f64,
     /// Stop learning while the part's max |error| is within this (µm); `None`: always learn.
     pub stop_in_tolerance_um: Option<f64>,
-    /// Largest |correction| allowed anywhere (µm): a larger one is refused, never pushed.
+    /// Largest |correction| allowed anywhere (µm): never exceeded. A repeatable error that
+    /// needs more is learned up to it (bounded steps); a jump that needs more is refused.
     pub max_correction_um: f64,
     /// The max error must grow by more than this on each of two parts in a row to count as
     /// divergence (µm): slow drift such as wheel wear and gauge noise must not raise it.
     pub divergence_margin_um: f64,
+    /// Gain of the size-drift estimate (wheel wear between dressings), 0 ≤ κ < 1: the part's
+    /// mean error integrated into a per-part drift that the next table anticipates. 0: off.
+    pub wear_gain: f64,
+    /// Timing errors within this are not corrected, degrees.
+    pub timing_deadband_deg: f64,
+    /// Largest |timing correction| (the feature's C offset), degrees; never exceeded.
+    pub max_timing_correction_deg: f64,
+    /// Parts in a row that the same guard may refuse or limit before it becomes an alarm.
+    pub blocked_alarm_after_parts: u32,
 }
 
 impl Default for LearningParams {
@@ -52,6 +63,10 @@ impl Default for LearningParams {
             stop_in_tolerance_um: None,
             max_correction_um: 50.0,
             divergence_margin_um: 0.5,
+            wear_gain: 0.2,
+            timing_deadband_deg: 0.001,
+            max_timing_correction_deg: 0.5,
+            blocked_alarm_after_parts: 3,
         }
     }
 }
@@ -66,23 +81,30 @@ impl LearningParams {
         if self.cutoff_order == 0 {
             problems.push("learning.cutoff_order = 0: must be at least 1".to_string());
         }
-        if !(self.deadband_sigmas.is_finite() && self.deadband_sigmas >= 0.0) {
+        let mut at_least_zero = |field: &str, v: f64| {
+            if !(v.is_finite() && v >= 0.0) {
+                problems.push(format!("learning.{field} = {v}: must be ≥ 0"));
+            }
+        };
+        at_least_zero("deadband_sigmas", self.deadband_sigmas);
+        at_least_zero("divergence_margin_um", self.divergence_margin_um);
+        at_least_zero("timing_deadband_deg", self.timing_deadband_deg);
+        for (field, v) in [
+            ("max_correction_um", self.max_correction_um),
+            ("max_timing_correction_deg", self.max_timing_correction_deg),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                problems.push(format!("learning.{field} = {v}: must be > 0"));
+            }
+        }
+        if !(self.wear_gain.is_finite() && (0.0..1.0).contains(&self.wear_gain)) {
             problems.push(format!(
-                "learning.deadband_sigmas = {}: must be ≥ 0",
-                self.deadband_sigmas
+                "learning.wear_gain = {}: must be in [0, 1)",
+                self.wear_gain
             ));
         }
-        if !(self.max_correction_um.is_finite() && self.max_correction_um > 0.0) {
-            problems.push(format!(
-                "learning.max_correction_um = {}: must be > 0",
-                self.max_correction_um
-            ));
-        }
-        if !(self.divergence_margin_um.is_finite() && self.divergence_margin_um >= 0.0) {
-            problems.push(format!(
-                "learning.divergence_margin_um = {}: must be ≥ 0",
-                self.divergence_margin_um
-            ));
+        if self.blocked_alarm_after_parts == 0 {
+            problems.push("learning.blocked_alarm_after_parts = 0: must be at least 1".into());
         }
         if let Some(t) = self.stop_in_tolerance_um
             && !(t.is_finite() && t > 0.0)
@@ -103,15 +125,24 @@ pub struct BestCorrection {
     pub iteration: u32,
     pub max_error_um: f64,
     pub correction_um: Vec<f64>,
+    #[serde(default)]
+    pub timing_correction_deg: f64,
 }
 
 /// Everything the loop must remember between parts (persisted by the caller).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LearningState {
-    /// The gauge grid the correction lives on: index j at j·360/N degrees.
+    /// The gauge grid the correction lives on: index j at j·360/N degrees of the feature's
+    /// own frame.
     pub points_per_rev: u32,
     /// The correction in use (the table currently on the machine was made with it), µm.
     pub correction_um: Vec<f64>,
+    /// The timing correction in use: added to the feature's C offset, degrees.
+    #[serde(default)]
+    pub timing_correction_deg: f64,
+    /// Size drift per part anticipated by the next table (wheel wear), µm per part.
+    #[serde(default)]
+    pub size_drift_um_per_part: f64,
     /// Parts learned from so far.
     pub iteration: u32,
     /// Max |error| of the parts measured with each recent correction, oldest first (≤ 3).
@@ -127,12 +158,92 @@ impl LearningState {
         Self {
             points_per_rev,
             correction_um: vec![0.0; points_per_rev as usize],
+            timing_correction_deg: 0.0,
+            size_drift_um_per_part: 0.0,
             iteration: 0,
             recent_max_error_um: Vec::new(),
             best: None,
             frozen: None,
         }
     }
+}
+
+/// What one measured part tells the learning step.
+#[derive(Debug, Clone, Copy)]
+pub struct PartError<'a> {
+    /// Lift error per gauge angle in the feature's own frame with its timing error taken
+    /// out (profile error plus size), µm.
+    pub error_um: &'a [f64],
+    /// Per-angle standard deviation over the revolutions, µm.
+    pub repeatability_um: &'a [f64],
+    pub revolutions: u32,
+    /// The feature's timing error, degrees, positive when it lags its nominal position.
+    pub timing_error_deg: f64,
+    /// The previous part of this feature, learned from or not: a limit bounds a step only
+    /// when this part confirms that part's error (see [`step`]).
+    pub previous: Option<PreviousPart>,
+}
+
+/// What the previous part of a feature measured.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PreviousPart {
+    pub max_error_um: f64,
+    pub timing_error_deg: f64,
+}
+
+impl PreviousPart {
+    /// This part's error confirms the previous one's: not a jump (no growth beyond the
+    /// divergence margin or 25 %).
+    fn confirms_lift(&self, max_error_um: f64, params: &LearningParams) -> bool {
+        max_error_um <= self.max_error_um + params.divergence_margin_um.max(0.25 * self.max_error_um)
+    }
+
+    /// The same for timing: within 25 % or five deadbands of the previous timing error.
+    fn confirms_timing(&self, timing_error_deg: f64, params: &LearningParams) -> bool {
+        let slack = (0.25 * self.timing_error_deg.abs()).max(5.0 * params.timing_deadband_deg);
+        (timing_error_deg - self.timing_error_deg).abs() <= slack
+    }
+}
+
+/// A limit that bounded a step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Bounded {
+    /// What the step wanted, µm (lift) or degrees (timing), and the limit it was held to.
+    pub wanted: f64,
+    pub limit: f64,
+    /// Where the lift correction wanted the most, degrees of the feature (lift only).
+    pub angle_deg: Option<f64>,
+    pub quantity: BoundedQuantity,
+}
+
+impl std::fmt::Display for Bounded {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match (self.quantity, self.angle_deg) {
+            (BoundedQuantity::Correction, Some(a)) => write!(
+                f,
+                "correction held to its limit of {} µm (it wanted {:.2} µm at {a:.1}°)",
+                self.limit, self.wanted
+            ),
+            (BoundedQuantity::Correction, None) => write!(
+                f,
+                "correction held to its limit of {} µm (it wanted {:.2} µm)",
+                self.limit, self.wanted
+            ),
+            (BoundedQuantity::Timing, _) => write!(
+                f,
+                "timing correction held to its limit of {}° (it wanted {:.4}°)",
+                self.limit, self.wanted
+            ),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BoundedQuantity {
+    /// The lift correction, µm (`max_correction_um`).
+    Correction,
+    /// The timing correction, degrees (`max_timing_correction_deg`).
+    Timing,
 }
 
 /// What one learning step decided.
@@ -142,6 +253,13 @@ pub enum StepOutcome {
     Updated {
         max_error_um: f64,
         max_correction_um: f64,
+    },
+    /// A repeatable error needed more than a limit allows: the new correction goes as far as
+    /// the limit, and no further.
+    Limited {
+        max_error_um: f64,
+        max_correction_um: f64,
+        bound: Bounded,
     },
     /// The part is within `stop_in_tolerance_um`: the correction is kept as it is.
     InTolerance { max_error_um: f64 },
@@ -171,40 +289,45 @@ pub enum LearnError {
         angle_deg: f64,
         limit_um: f64,
     },
+    #[error(
+        "timing correction would reach {wanted_deg:.4}°, above the limit of {limit_deg}° (timing error {timing_error_deg:.4}°)"
+    )]
+    TimingTooLarge {
+        wanted_deg: f64,
+        limit_deg: f64,
+        timing_error_deg: f64,
+    },
+    #[error(
+        "the correction is at its limit of {limit_um} µm at {angle_deg:.1}° (it would need {wanted_um:.2} µm): nothing more can be learned until the machine is checked or the limit raised"
+    )]
+    AtLimit {
+        wanted_um: f64,
+        angle_deg: f64,
+        limit_um: f64,
+    },
 }
 
-/// One learning step from the error of the part just measured (µm per gauge angle, no fit
-/// removed) and its per-angle repeatability (standard deviation over `revolutions`, µm).
-/// On error the state is left exactly as it was.
+/// Corrections closer than this everywhere are the same table, µm (and degrees / 1000).
+const SAME_CORRECTION_UM: f64 = 0.01;
+
+/// One learning step from the part just measured. On error the state is left exactly as it
+/// was.
+///
+/// - **Size** (order 0, the mean error) has a deadband of `deadband_sigmas` standard errors
+///   of a mean over all N angles, and a drift term (wear): `r ← r − κ·e₀`, `u₀ ← u₀ − L·e₀ + r`.
+/// - **Shape** (orders ≥ 1) is low-passed by Q first, then a deadband of `deadband_sigmas`
+///   standard errors *of the low-passed error* is applied per angle: noise above the
+///   cut-off is not what the deadband has to absorb.
+/// - **Timing** moves the C offset: `τ ← τ − L·dead(φ)`.
+/// - A repeatable error (not a jump: the max error did not grow by more than
+///   `divergence_margin_um` or 25 %) that needs more than a limit is learned up to it.
 pub fn step(
     state: &mut LearningState,
-    error_um: &[f64],
-    repeatability_um: &[f64],
-    revolutions: u32,
+    part: &PartError<'_>,
     params: &LearningParams,
 ) -> Result<StepOutcome, LearnError> {
-    let n = state.points_per_rev as usize;
-    for len in [
-        error_um.len(),
-        repeatability_um.len(),
-        state.correction_um.len(),
-    ] {
-        if len != n {
-            return Err(LearnError::GridMismatch {
-                expected: state.points_per_rev,
-                got: len,
-            });
-        }
-    }
-    if let Some(j) = error_um
-        .iter()
-        .chain(repeatability_um)
-        .position(|v| !v.is_finite())
-    {
-        return Err(LearnError::NonFinite {
-            angle_deg: (j % n) as f64 * 360.0 / n as f64,
-        });
-    }
+    check_inputs(state, part)?;
+    let error_um = part.error_um;
     let max_error_um = error_um.iter().fold(0.0f64, |m, e| m.max(e.abs()));
     let mut next = state.clone();
     next.iteration += 1;
@@ -217,6 +340,7 @@ pub fn step(
             iteration: state.iteration,
             max_error_um,
             correction_um: state.correction_um.clone(),
+            timing_correction_deg: state.timing_correction_deg,
         });
     }
     next.recent_max_error_um.push(max_error_um);
@@ -238,6 +362,7 @@ pub fn step(
             best.iteration
         );
         next.correction_um = best.correction_um;
+        next.timing_correction_deg = best.timing_correction_deg;
         next.frozen = Some(reason.clone());
         StepOutcome::Reverted {
             max_error_um,
@@ -250,37 +375,200 @@ pub fn step(
     {
         StepOutcome::InTolerance { max_error_um }
     } else {
-        let learned: Vec<f64> = (0..n)
-            .map(|j| {
-                let band = params.deadband_sigmas * repeatability_um[j]
-                    / f64::from(revolutions.max(1)).sqrt();
-                let e = error_um[j];
-                let e_dead = e.signum() * (e.abs() - band).max(0.0);
-                state.correction_um[j] - params.gain * e_dead
-            })
-            .collect();
-        next.correction_um = low_pass(&learned, params.cutoff_order, params.rolloff_orders);
-        let (max_um, j) =
-            next.correction_um
-                .iter()
-                .enumerate()
-                .fold((0.0f64, 0), |(m, jm), (j, u)| {
-                    if u.abs() > m { (u.abs(), j) } else { (m, jm) }
-                });
-        if max_um > params.max_correction_um {
-            return Err(LearnError::CorrectionTooLarge {
-                max_um,
-                angle_deg: j as f64 * 360.0 / n as f64,
-                limit_um: params.max_correction_um,
-            });
-        }
-        StepOutcome::Updated {
-            max_error_um,
-            max_correction_um: max_um,
-        }
+        learn_correction(state, &mut next, part, params, max_error_um)?
     };
     *state = next;
     Ok(outcome)
+}
+
+fn check_inputs(state: &LearningState, part: &PartError<'_>) -> Result<(), LearnError> {
+    let n = state.points_per_rev as usize;
+    for len in [
+        part.error_um.len(),
+        part.repeatability_um.len(),
+        state.correction_um.len(),
+    ] {
+        if len != n {
+            return Err(LearnError::GridMismatch {
+                expected: state.points_per_rev,
+                got: len,
+            });
+        }
+    }
+    if let Some(j) = part
+        .error_um
+        .iter()
+        .chain(part.repeatability_um)
+        .position(|v| !v.is_finite())
+    {
+        return Err(LearnError::NonFinite {
+            angle_deg: (j % n) as f64 * 360.0 / n as f64,
+        });
+    }
+    if !part.timing_error_deg.is_finite() {
+        return Err(LearnError::NonFinite { angle_deg: 0.0 });
+    }
+    Ok(())
+}
+
+/// The learning law proper (see [`step`]), with the limits; writes `next`.
+fn learn_correction(
+    state: &LearningState,
+    next: &mut LearningState,
+    part: &PartError<'_>,
+    params: &LearningParams,
+    max_error_um: f64,
+) -> Result<StepOutcome, LearnError> {
+    let n = state.points_per_rev as usize;
+    let repeatable = part
+        .previous
+        .is_some_and(|p| p.confirms_lift(max_error_um, params));
+    let (size_band, shape_band) = deadbands(part, params);
+    let mean = part.error_um.iter().sum::<f64>() / n as f64;
+    let shape: Vec<f64> = part.error_um.iter().map(|e| e - mean).collect();
+    let shape = low_pass(&shape, params.cutoff_order, params.rolloff_orders);
+    let size = soft_dead(mean, size_band);
+    next.size_drift_um_per_part = state.size_drift_um_per_part - params.wear_gain * size;
+    let learned: Vec<f64> = (0..n)
+        .map(|j| {
+            state.correction_um[j] - params.gain * (size + soft_dead(shape[j], shape_band))
+                + next.size_drift_um_per_part
+        })
+        .collect();
+    let wanted = low_pass(&learned, params.cutoff_order, params.rolloff_orders);
+    let (wanted_um, j) = max_abs_at(&wanted);
+    let angle_deg = j as f64 * 360.0 / n as f64;
+    let mut bound = None;
+    next.correction_um = if wanted_um <= params.max_correction_um {
+        wanted
+    } else if !repeatable {
+        return Err(LearnError::CorrectionTooLarge {
+            max_um: wanted_um,
+            angle_deg,
+            limit_um: params.max_correction_um,
+        });
+    } else {
+        bound = Some(Bounded {
+            wanted: wanted_um,
+            limit: params.max_correction_um,
+            angle_deg: Some(angle_deg),
+            quantity: BoundedQuantity::Correction,
+        });
+        within_limit(&wanted, params)
+    };
+    let timing = learn_timing(state, part, params)?;
+    next.timing_correction_deg = timing.0;
+    bound = bound.or(timing.1);
+    let unchanged = next
+        .correction_um
+        .iter()
+        .zip(&state.correction_um)
+        .all(|(a, b)| (a - b).abs() < SAME_CORRECTION_UM)
+        && (next.timing_correction_deg - state.timing_correction_deg).abs()
+            < SAME_CORRECTION_UM * 1e-3;
+    let max_correction_um = max_abs_at(&next.correction_um).0;
+    match bound {
+        Some(b) if unchanged => Err(match b.quantity {
+            BoundedQuantity::Correction => LearnError::AtLimit {
+                wanted_um: b.wanted,
+                angle_deg: b.angle_deg.unwrap_or(0.0),
+                limit_um: b.limit,
+            },
+            BoundedQuantity::Timing => LearnError::TimingTooLarge {
+                wanted_deg: b.wanted,
+                limit_deg: b.limit,
+                timing_error_deg: part.timing_error_deg,
+            },
+        }),
+        Some(bound) => Ok(StepOutcome::Limited {
+            max_error_um,
+            max_correction_um,
+            bound,
+        }),
+        None => Ok(StepOutcome::Updated {
+            max_error_um,
+            max_correction_um,
+        }),
+    }
+}
+
+/// The timing step and the limit that bounded it, if one did.
+fn learn_timing(
+    state: &LearningState,
+    part: &PartError<'_>,
+    params: &LearningParams,
+) -> Result<(f64, Option<Bounded>), LearnError> {
+    let repeatable = part
+        .previous
+        .is_some_and(|p| p.confirms_timing(part.timing_error_deg, params));
+    let wanted = state.timing_correction_deg
+        - params.gain * soft_dead(part.timing_error_deg, params.timing_deadband_deg);
+    let limit = params.max_timing_correction_deg;
+    if wanted.abs() <= limit {
+        return Ok((wanted, None));
+    }
+    if !repeatable {
+        return Err(LearnError::TimingTooLarge {
+            wanted_deg: wanted,
+            limit_deg: limit,
+            timing_error_deg: part.timing_error_deg,
+        });
+    }
+    let bound = Bounded {
+        wanted: wanted.abs(),
+        limit,
+        angle_deg: None,
+        quantity: BoundedQuantity::Timing,
+    };
+    Ok((wanted.clamp(-limit, limit), Some(bound)))
+}
+
+/// Deadbands of the size and of the low-passed shape, µm: `deadband_sigmas` standard errors
+/// of each. The per-angle standard error of the mean over the revolutions is σ/√revs; the
+/// mean over N angles has √N less; a low-pass keeping K_eff of the N degrees of freedom
+/// (K_eff = Σ 2·q(k)² over orders ≥ 1) leaves √(K_eff/N) of it per angle.
+fn deadbands(part: &PartError<'_>, params: &LearningParams) -> (f64, f64) {
+    let n = part.error_um.len();
+    let revs = f64::from(part.revolutions.max(1));
+    let sigma = (part.repeatability_um.iter().map(|s| s * s).sum::<f64>() / n as f64).sqrt()
+        / revs.sqrt();
+    let top = ((params.cutoff_order + params.rolloff_orders) as usize).min(n / 2);
+    let k_eff: f64 = (1..=top)
+        .map(|k| {
+            let q = q_gain(k as u32, params.cutoff_order, params.rolloff_orders);
+            if 2 * k == n { q * q } else { 2.0 * q * q }
+        })
+        .sum();
+    let d = params.deadband_sigmas;
+    (
+        d * sigma / (n as f64).sqrt(),
+        d * sigma * (k_eff / n as f64).sqrt(),
+    )
+}
+
+/// The largest correction like `wanted` that stays within the limit: clipped, smoothed by Q
+/// (a clipped curve has corners the wheel cannot follow), and scaled back under the limit.
+fn within_limit(wanted: &[f64], params: &LearningParams) -> Vec<f64> {
+    let limit = params.max_correction_um;
+    let clipped: Vec<f64> = wanted.iter().map(|u| u.clamp(-limit, limit)).collect();
+    let smooth = low_pass(&clipped, params.cutoff_order, params.rolloff_orders);
+    let (max_um, _) = max_abs_at(&smooth);
+    let scale = if max_um > limit { limit / max_um } else { 1.0 };
+    smooth.iter().map(|u| u * scale).collect()
+}
+
+fn soft_dead(value: f64, band: f64) -> f64 {
+    value.signum() * (value.abs() - band).max(0.0)
+}
+
+/// Largest |value| and its index.
+fn max_abs_at(values: &[f64]) -> (f64, usize) {
+    values
+        .iter()
+        .enumerate()
+        .fold((0.0f64, 0), |(m, jm), (j, u)| {
+            if u.abs() > m { (u.abs(), j) } else { (m, jm) }
+        })
 }
 
 /// After a wheel dressing the control gets a new wheel radius, which replaces everything the
@@ -339,6 +627,16 @@ fn q_gain(order: u32, cutoff: u32, rolloff: u32) -> f64 {
 mod tests {
     use super::*;
 
+    fn pe<'a>(error_um: &'a [f64], repeatability_um: &'a [f64], revolutions: u32) -> PartError<'a> {
+        PartError {
+            error_um,
+            repeatability_um,
+            revolutions,
+            timing_error_deg: 0.0,
+            previous: None,
+        }
+    }
+
     fn grid(n: usize, f: impl Fn(f64) -> f64) -> Vec<f64> {
         (0..n)
             .map(|j| f((j as f64 * 360.0 / n as f64).to_radians()))
@@ -368,6 +666,7 @@ mod tests {
     fn converges_on_a_one_to_one_plant() {
         let params = LearningParams {
             deadband_sigmas: 0.0,
+            wear_gain: 0.0,
             ..LearningParams::default()
         };
         let machine = grid(360, |p| 8.0 * (2.0 * p).cos() + 3.0);
@@ -388,47 +687,173 @@ mod tests {
             );
             assert!(max_error < last);
             last = max_error;
-            step(&mut state, &error, &zeros, 4, &params).unwrap();
+            step(&mut state, &pe(&error, &zeros, 4), &params).unwrap();
         }
     }
 
     #[test]
     fn deadband_keeps_noise_level_errors_out() {
-        let params = LearningParams::default();
-        let mut state = LearningState::new(36);
-        // σ = 1 µm over 4 revolutions: standard error 0.5 µm, deadband 1 µm.
-        let error = vec![0.9; 36];
+        let params = LearningParams {
+            wear_gain: 0.0,
+            ..LearningParams::default()
+        };
+        // σ = 1 µm over 4 revolutions: standard error of one angle's mean 0.5 µm; of the mean
+        // over 36 angles 0.5/6 µm, so the size deadband is 2·0.5/6 = 1/6 µm.
         let sigma = vec![1.0; 36];
-        step(&mut state, &error, &sigma, 4, &params).unwrap();
+        let mut state = LearningState::new(36);
+        step(&mut state, &pe(&vec![0.15; 36], &sigma, 4), &params).unwrap();
         assert!(state.correction_um.iter().all(|u| u.abs() < 1e-12));
-        let error = vec![1.5; 36];
-        step(&mut state, &error, &sigma, 4, &params).unwrap();
+        step(&mut state, &pe(&vec![0.5; 36], &sigma, 4), &params).unwrap();
         for u in &state.correction_um {
-            assert!((u + 0.8 * 0.5).abs() < 1e-9, "{u}");
+            assert!((u + 0.8 * (0.5 - 1.0 / 6.0)).abs() < 1e-9, "{u}");
         }
+        // Shape: with 36 points and the cut-off above the Nyquist order, Q passes all 35
+        // degrees of freedom beyond the mean: deadband 2·0.5·√(35/36) µm per angle.
+        let band = 2.0 * 0.5 * (35.0f64 / 36.0).sqrt();
+        let mut state = LearningState::new(36);
+        let below = grid(36, |p| 0.95 * band * (3.0 * p).cos());
+        step(&mut state, &pe(&below, &sigma, 4), &params).unwrap();
+        assert!(state.correction_um.iter().all(|u| u.abs() < 1e-12));
+        let above = grid(36, |p| 2.0 * band * (3.0 * p).cos());
+        step(&mut state, &pe(&above, &sigma, 4), &params).unwrap();
+        // At the crest the soft deadband leaves 2·band − band = band, times the gain (before Q
+        // rounds the clipped shape, which changes the crest by less than 20 %).
+        let crest = state.correction_um[0];
+        assert!((crest + 0.8 * band).abs() < 0.2 * 0.8 * band, "{crest}");
+    }
+
+    /// A part growing by w per part (wheel wear): proportional learning alone lags by w/L;
+    /// the drift term takes the lag out.
+    #[test]
+    fn wear_drift_is_anticipated() {
+        let w = 0.15;
+        let run = |wear_gain: f64| {
+            let params = LearningParams {
+                deadband_sigmas: 0.0,
+                wear_gain,
+                ..LearningParams::default()
+            };
+            let mut state = LearningState::new(36);
+            let zeros = vec![0.0; 36];
+            let mut last = 0.0;
+            for k in 0..40 {
+                let error: Vec<f64> = state
+                    .correction_um
+                    .iter()
+                    .map(|u| 2.0 + w * f64::from(k) + u)
+                    .collect();
+                last = error[0];
+                step(&mut state, &pe(&error, &zeros, 4), &params).unwrap();
+            }
+            last
+        };
+        let proportional = run(0.0);
+        assert!((proportional - w / 0.8).abs() < 1e-6, "{proportional}");
+        let with_drift = run(0.2);
+        assert!(with_drift.abs() < 1e-3, "{with_drift}");
+    }
+
+    /// A repeatable error larger than the limit is learned up to the limit, never beyond;
+    /// once there, the step is refused as "at the limit".
+    #[test]
+    fn a_repeatable_error_beyond_the_limit_is_learned_up_to_it() {
+        let params = LearningParams {
+            deadband_sigmas: 0.0,
+            wear_gain: 0.0,
+            max_correction_um: 20.0,
+            ..LearningParams::default()
+        };
+        let machine = grid(360, |p| 30.0 * (2.0 * p).cos());
+        let zeros = vec![0.0; 360];
+        let mut state = LearningState::new(360);
+        let mut errors: Vec<f64> = Vec::new();
+        let mut at_limit = None;
+        for k in 0..9 {
+            let error: Vec<f64> = machine
+                .iter()
+                .zip(&state.correction_um)
+                .map(|(m, u)| m + u)
+                .collect();
+            let part = PartError {
+                previous: errors.last().map(|&max_error_um| PreviousPart {
+                    max_error_um,
+                    timing_error_deg: 0.0,
+                }),
+                ..pe(&error, &zeros, 4)
+            };
+            errors.push(error.iter().fold(0.0f64, |a, e| a.max(e.abs())));
+            match step(&mut state, &part, &params) {
+                // Nothing confirms the first part's error yet: refused, as a jump would be.
+                Err(LearnError::CorrectionTooLarge { .. }) => assert_eq!(k, 0),
+                Ok(StepOutcome::Limited { bound, .. }) => {
+                    assert_eq!(bound.quantity, BoundedQuantity::Correction);
+                    assert!(bound.wanted > 20.0);
+                }
+                Err(LearnError::AtLimit { .. }) => {
+                    at_limit.get_or_insert(k);
+                }
+                other => panic!("part {k}: {other:?}"),
+            }
+            let max_u = state.correction_um.iter().fold(0.0f64, |a, u| a.max(u.abs()));
+            assert!(max_u <= 20.0 + 1e-9, "part {k}: correction {max_u}");
+        }
+        // 30, 30 (refused), then held to 20 µm of correction: 30 − 20 = 10 µm remain.
+        assert!(errors[2] < errors[1]);
+        assert!((errors[8] - 10.0).abs() < 0.05, "{errors:?}");
+        assert!(at_limit.is_some(), "the limit must end the learning: {errors:?}");
+    }
+
+    #[test]
+    fn timing_is_learned_into_the_c_offset_within_its_limit() {
+        let params = LearningParams {
+            deadband_sigmas: 0.0,
+            ..LearningParams::default()
+        };
+        let zeros = vec![0.0; 36];
+        let mut state = LearningState::new(36);
+        let lag_deg = 0.081;
+        for _ in 0..12 {
+            let part = PartError {
+                timing_error_deg: lag_deg + state.timing_correction_deg,
+                ..pe(&zeros, &zeros, 4)
+            };
+            step(&mut state, &part, &params).unwrap();
+        }
+        // The residual timing error ends within the deadband.
+        let residual = lag_deg + state.timing_correction_deg;
+        assert!(residual.abs() <= params.timing_deadband_deg + 1e-9, "{residual}");
+        // A jump of 2° on a first part is refused, never clamped.
+        let mut fresh = LearningState::new(36);
+        let jump = PartError {
+            timing_error_deg: 2.0,
+            ..pe(&zeros, &zeros, 4)
+        };
+        let e = step(&mut fresh, &jump, &params).unwrap_err();
+        assert!(matches!(e, LearnError::TimingTooLarge { .. }), "{e}");
     }
 
     #[test]
     fn growing_error_twice_reverts_to_the_best_and_freezes() {
         let params = LearningParams {
             deadband_sigmas: 0.0,
+            wear_gain: 0.0,
             ..LearningParams::default()
         };
         let mut state = LearningState::new(36);
         let zeros = vec![0.0; 36];
         // The nominal table (iteration 0) gives 2 µm; its successors give 3 and then 4 µm:
         // the best correction is the one the 2 µm part was ground with, i.e. none.
-        step(&mut state, &vec![2.0; 36], &zeros, 4, &params).unwrap();
+        step(&mut state, &pe(&vec![2.0; 36], &zeros, 4), &params).unwrap();
         assert!(state.correction_um.iter().all(|u| (u + 1.6).abs() < 1e-9));
-        step(&mut state, &vec![3.0; 36], &zeros, 4, &params).unwrap();
-        let outcome = step(&mut state, &vec![4.0; 36], &zeros, 4, &params).unwrap();
+        step(&mut state, &pe(&vec![3.0; 36], &zeros, 4), &params).unwrap();
+        let outcome = step(&mut state, &pe(&vec![4.0; 36], &zeros, 4), &params).unwrap();
         match outcome {
             StepOutcome::Reverted { to_iteration, .. } => assert_eq!(to_iteration, 0),
             other => panic!("expected a revert, got {other:?}"),
         }
         assert_eq!(state.correction_um, zeros);
         assert!(state.frozen.is_some());
-        let outcome = step(&mut state, &vec![1.0; 36], &zeros, 4, &params).unwrap();
+        let outcome = step(&mut state, &pe(&vec![1.0; 36], &zeros, 4), &params).unwrap();
         assert!(matches!(outcome, StepOutcome::Frozen { .. }));
         assert_eq!(state.correction_um, zeros);
     }
@@ -442,7 +867,7 @@ mod tests {
         };
         let mut state = LearningState::new(36);
         let before = state.clone();
-        let e = step(&mut state, &vec![10.0; 36], &vec![0.0; 36], 4, &params).unwrap_err();
+        let e = step(&mut state, &pe(&vec![10.0; 36], &vec![0.0; 36], 4), &params).unwrap_err();
         assert!(matches!(e, LearnError::CorrectionTooLarge { .. }), "{e}");
         assert_eq!(state, before);
     }
@@ -467,7 +892,7 @@ mod tests {
             ..LearningParams::default()
         };
         let mut state = LearningState::new(36);
-        let outcome = step(&mut state, &vec![0.5; 36], &vec![0.0; 36], 4, &params).unwrap();
+        let outcome = step(&mut state, &pe(&vec![0.5; 36], &vec![0.0; 36], 4), &params).unwrap();
         assert!(matches!(outcome, StepOutcome::InTolerance { .. }));
         assert!(state.correction_um.iter().all(|u| *u == 0.0));
     }

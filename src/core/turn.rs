@@ -7,8 +7,9 @@
 
 use super::analysis::{AnalysisError, LobeOptions, LobeReport, ToleranceBand, analyse_lobe};
 use super::compensate::{self, CycleError, GuardedTable, LobeLoop};
-use super::learn::{LearnError, LearningState, StepOutcome};
+use super::learn::{LearnError, LearningState, PartError, PreviousPart, StepOutcome};
 use super::lift::LiftCurve;
+use super::spline::PeriodicSpline;
 use super::measure::{AssemblyLimits, AveragedMeasurement, MeasurementError, RawMeasurement};
 
 /// What stays fixed between turns of one feature's loop.
@@ -18,6 +19,9 @@ pub struct TurnSetup<'a> {
     /// Tolerance bands on the profile error (empty: the analysis default).
     pub bands: &'a [ToleranceBand],
     pub assembly: AssemblyLimits,
+    /// Where the feature's 0° is on the shaft, degrees: the gauge reads in the shaft's frame
+    /// (index 0 at the shaft datum), the nominal and the correction live in the feature's.
+    pub phase_deg: f64,
 }
 
 /// Why a turn analyses but does not learn.
@@ -55,6 +59,20 @@ pub struct Measured {
     pub max_error_um: f64,
     /// Largest |profile error| after the datum fit, µm.
     pub max_profile_error_um: f64,
+    /// Timing (phase) error of the feature against its nominal position on the shaft,
+    /// degrees, positive when it lags: a lobe's timing, a pin's index angle.
+    pub timing_error_deg: f64,
+}
+
+impl Measured {
+    /// What the next learning step needs to know of this part once it is the previous one.
+    pub fn as_previous(&self) -> PreviousPart {
+        PreviousPart {
+            max_error_um: max_abs(&self.report.profile_error_um)
+                + self.report.base_radius_error_um.abs(),
+            timing_error_deg: self.timing_error_deg,
+        }
+    }
 }
 
 /// A measured part and what the loop decided from it.
@@ -74,7 +92,9 @@ pub enum TurnError {
 }
 
 /// One turn: checks and averaging, analysis against the nominal, then (unless `hold` says
-/// why not) one learning step from `in_force` and the guarded table for it.
+/// why not) one learning step from `in_force` and the guarded table for it. `previous` is
+/// what the feature's previous part measured ([`Measured::as_previous`]): a limit bounds a
+/// step only when this part confirms it.
 ///
 /// A measurement on another grid than the state's is learned from a fresh state while
 /// nothing was learned yet (the first part sets the grid); afterwards it is refused with
@@ -84,11 +104,12 @@ pub fn turn(
     in_force: &LearningState,
     raw: &RawMeasurement,
     hold: Option<HoldReason>,
+    previous: Option<PreviousPart>,
 ) -> Result<Turn, TurnError> {
     let measured = measure(setup, raw)?;
     let decision = match hold {
         Some(reason) => Decision::Held(reason),
-        None => learn(setup, in_force, &measured.averaged, &measured.report),
+        None => learn(setup, in_force, &measured, previous),
     };
     Ok(Turn { measured, decision })
 }
@@ -103,6 +124,7 @@ pub fn measure(setup: &TurnSetup<'_>, raw: &RawMeasurement) -> Result<Measured, 
         .abs()
         .max(report.profile_error_min_um.abs());
     Ok(Measured {
+        timing_error_deg: report.phase_error_deg,
         averaged,
         report,
         max_error_um,
@@ -116,7 +138,7 @@ fn analyse(
 ) -> Result<LobeReport, AnalysisError> {
     let curve = LiftCurve::new(setup.lobe.nominal);
     let nominal = |psi_deg: f64| {
-        let s = curve.eval(psi_deg.to_radians());
+        let s = curve.eval((psi_deg - setup.phase_deg).to_radians());
         (s.h_mm, s.dh_mm.to_radians())
     };
     let options = LobeOptions {
@@ -129,9 +151,10 @@ fn analyse(
 fn learn(
     setup: &TurnSetup<'_>,
     in_force: &LearningState,
-    averaged: &AveragedMeasurement,
-    report: &LobeReport,
+    measured: &Measured,
+    previous: Option<PreviousPart>,
 ) -> Decision {
+    let (averaged, report) = (&measured.averaged, &measured.report);
     let mut next = if averaged.points_per_rev != in_force.points_per_rev {
         if in_force.iteration != 0 {
             return Decision::Refused(CycleError::Learn(LearnError::GridMismatch {
@@ -143,14 +166,23 @@ fn learn(
     } else {
         in_force.clone()
     };
-    let revolutions = averaged.revolutions_used.len() as u32;
-    match compensate::learn_and_regenerate(
-        &mut next,
-        &report.error_um,
-        &report.repeatability_um,
-        revolutions,
-        &setup.lobe,
-    ) {
+    // The timing goes to the C offset, so the lift learns the error with it taken out: the
+    // profile error plus the size, carried into the feature's frame.
+    let lift_error: Vec<f64> = report
+        .profile_error_um
+        .iter()
+        .map(|e| e + report.base_radius_error_um)
+        .collect();
+    let error_um = to_feature_frame(&lift_error, setup.phase_deg);
+    let repeatability_um = to_feature_frame(&report.repeatability_um, setup.phase_deg);
+    let part = PartError {
+        error_um: &error_um,
+        repeatability_um: &repeatability_um,
+        revolutions: averaged.revolutions_used.len() as u32,
+        timing_error_deg: measured.timing_error_deg,
+        previous,
+    };
+    match compensate::learn_and_regenerate(&mut next, &part, &setup.lobe) {
         Ok((outcome, table)) => Decision::Table {
             outcome,
             next: Box::new(next),
@@ -158,6 +190,28 @@ fn learn(
         },
         Err(e) => Decision::Refused(e),
     }
+}
+
+/// Values on the shaft's uniform grid (index j at j·360°/N from the datum) carried to the
+/// feature's frame, whose 0° is at `phase_deg` on the shaft: `v_feature(θ) = v_shaft(θ +
+/// phase)`. A phase on the grid is an exact rotation of the indices; any other goes through
+/// the periodic spline of the values.
+pub fn to_feature_frame(values: &[f64], phase_deg: f64) -> Vec<f64> {
+    let n = values.len();
+    if n == 0 {
+        return Vec::new();
+    }
+    let steps = phase_deg.rem_euclid(360.0) * n as f64 / 360.0;
+    let whole = steps.round();
+    if (steps - whole).abs() < 1e-9 {
+        let k = whole as usize % n;
+        return (0..n).map(|j| values[(j + k) % n]).collect();
+    }
+    let grid: Vec<f64> = (0..n).map(|j| j as f64 * 360.0 / n as f64).collect();
+    let spline = PeriodicSpline::new(&grid, values, 360.0);
+    grid.iter()
+        .map(|a| spline.eval(a + phase_deg.rem_euclid(360.0)).value)
+        .collect()
 }
 
 fn max_abs(values: &[f64]) -> f64 {

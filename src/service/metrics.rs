@@ -108,9 +108,64 @@ const FAMILIES: [Family; 12] = [
     ),
 ];
 
+/// The state of one feature (lobe or pin) of a machine, for the API and `/metrics`.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct FeatureStatus {
+    /// Parts of this feature measured by this service since it started.
+    pub parts: u64,
+    /// The shaft (part number) the newest measurement came from.
+    pub last_part: Option<String>,
+    pub last_max_error_um: Option<f64>,
+    pub last_profile_error_um: Option<f64>,
+    pub last_timing_error_deg: Option<f64>,
+    pub last_size_error_um: Option<f64>,
+    /// The newest measurement passed its tolerance bands.
+    pub last_pass: Option<bool>,
+    /// Table version on the control.
+    pub in_force_version: u64,
+    /// A newer version waits for the share.
+    pub waiting_version: Option<u64>,
+    /// Learning is frozen, and why.
+    pub frozen: Option<String>,
+    /// The guard that blocked several parts in a row (the alarm stands), and its reason.
+    pub blocked_by_guard: Option<String>,
+}
+
+/// Gauges per feature: name, help, value (none: not rendered yet).
+type FeatureFamily = (&'static str, &'static str, fn(&FeatureStatus) -> Option<f64>);
+
+const FEATURE_FAMILIES: [FeatureFamily; 5] = [
+    (
+        "camloop_feature_max_error_um",
+        "Max lift error of the feature's last part, micrometres.",
+        |f| f.last_max_error_um,
+    ),
+    (
+        "camloop_feature_timing_error_deg",
+        "Timing (index) error of the feature's last part, degrees.",
+        |f| f.last_timing_error_deg,
+    ),
+    (
+        "camloop_feature_table_version",
+        "Table version on the control.",
+        |f| Some(f.in_force_version as f64),
+    ),
+    (
+        "camloop_blocked_by_guard",
+        "1 while the same guard has refused or limited the feature's parts in a row (alarm).",
+        |f| Some(f64::from(u8::from(f.blocked_by_guard.is_some()))),
+    ),
+    (
+        "camloop_learning_frozen",
+        "1 while the feature's learning is frozen after a revert.",
+        |f| Some(f64::from(u8::from(f.frozen.is_some()))),
+    ),
+];
+
 #[derive(Debug, Default)]
 pub struct Metrics {
     machines: Mutex<BTreeMap<String, MachineMetrics>>,
+    features: Mutex<BTreeMap<(String, String), FeatureStatus>>,
 }
 
 impl Metrics {
@@ -127,6 +182,22 @@ impl Metrics {
             .clone()
     }
 
+    /// Changes one feature's status.
+    pub fn update_feature(&self, machine: &str, feature: &str, f: impl FnOnce(&mut FeatureStatus)) {
+        let mut map = self.features.lock().unwrap_or_else(|p| p.into_inner());
+        f(map
+            .entry((machine.to_string(), feature.to_string()))
+            .or_default());
+    }
+
+    /// Every feature's status, by (machine, feature).
+    pub fn features(&self) -> BTreeMap<(String, String), FeatureStatus> {
+        self.features
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
+    }
+
     /// The text exposition format (version 0.0.4).
     pub fn render(&self) -> String {
         let map = self.snapshot();
@@ -135,6 +206,15 @@ impl Metrics {
             let _ = writeln!(s, "# HELP {name} {help}\n# TYPE {name} {kind}");
             for (machine, m) in &map {
                 let _ = writeln!(s, "{name}{{machine=\"{machine}\"}} {}", value(m));
+            }
+        }
+        let features = self.features();
+        for (name, help, value) in FEATURE_FAMILIES {
+            let _ = writeln!(s, "# HELP {name} {help}\n# TYPE {name} gauge");
+            for ((machine, lobe), f) in &features {
+                if let Some(v) = value(f) {
+                    let _ = writeln!(s, "{name}{{machine=\"{machine}\",lobe=\"{lobe}\"}} {v}");
+                }
             }
         }
         s

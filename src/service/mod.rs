@@ -154,8 +154,11 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
             .iter()
             .find(|c| c.name == m.name.as_str())
             .context("a checked machine is in the config")?;
-        features.insert(m.name.clone(), vec![m.setup.name.clone()]);
-        let wired = wire_machine(&config, section, m.setup, &shared).await?;
+        features.insert(
+            m.name.clone(),
+            m.setups.iter().map(|s| s.name.clone()).collect(),
+        );
+        let wired = wire_machine(&config, section, m, &shared).await?;
         commands.insert(section.name.clone(), wired.commands);
         sources_done.push(wired.source_done);
         machine_tasks.push(wired.task);
@@ -210,7 +213,7 @@ struct Wired {
 async fn wire_machine(
     config: &Config,
     m: &crate::config::MachineSection,
-    setup: crate::recipe::FeatureSetup,
+    checked: crate::config::CheckedMachine,
     shared: &Shared,
 ) -> anyhow::Result<Wired> {
     let paths = machine::MachinePaths {
@@ -219,7 +222,7 @@ async fn wire_machine(
     };
     let machine = MachineLoop::start(
         m.name.clone(),
-        setup,
+        checked.setups,
         paths,
         shared.store.clone(),
         shared.metrics.clone(),
@@ -231,6 +234,7 @@ async fn wire_machine(
         config,
         m,
         &machine,
+        checked.sim_c_speed_explicit,
         tx,
         shared.parts,
         shared.shutdown.clone(),

@@ -1,14 +1,15 @@
 //! The simulated machine as a gauge source: a simulated control runs the main program on the
-//! share (which calls the table program and couples the table it defines, tables kept by
-//! number between parts as on the NC), the grinder grinds the coupled table, and the
-//! measurement goes out as CAN frames through the real DBC decoder and assembler in memory,
-//! exactly as a bus would deliver it.
+//! share (which calls each feature's table program and couples the table it defines, tables
+//! kept by number between parts as on the NC, from the feature the resume point names), the
+//! grinder grinds the coupled table at the station where Z stands, and each measurement goes
+//! out as CAN frames through the real DBC decoder and assembler in memory, exactly as a bus
+//! would deliver it.
 
-use super::machine::SourceEvent;
+use super::machine::{GroundWith, MachineLoop, SourceEvent};
 use crate::core::compensate::Feature;
 use crate::gauge::{Assembled, Assembler, GaugeDbc};
 use crate::sim::{
-    CommandedTable, Control, GrinderConfig, PartLabels, SimGrinder, TableShape, Workpiece,
+    CommandedTable, Control, Coupled, GrinderConfig, PartLabels, SimGrinder, Workpiece,
     measurement_frames,
 };
 use std::path::{Path, PathBuf};
@@ -18,83 +19,92 @@ use std::time::Duration;
 use tokio::sync::{mpsc, watch};
 use tracing::{error, warn};
 
+/// A station ground at a Z this far from a feature's belongs to it, mm.
+const STATION_WINDOW_MM: f64 = 0.5;
+
+/// One feature of the simulated shaft: where it is and what it is.
+pub struct SimStation {
+    pub name: String,
+    pub feature: Feature,
+    pub z_mm: f64,
+    /// Parts of this feature measured before this run (the next shaft's number follows).
+    pub parts_done: u64,
+    /// Wheel radius the feature's program on the share was made for.
+    pub table_wheel_radius_bits: Arc<AtomicU64>,
+}
+
 pub struct SimSource {
     pub machine: String,
     pub grinder: GrinderConfig,
     pub seed: u64,
-    pub feature: Feature,
-    pub program: PathBuf,
-    /// The main program that calls it (what the control runs).
+    pub stations: Vec<SimStation>,
+    /// The main program (what the control runs).
     pub main_program: PathBuf,
-    /// Wheel radius the program on the share was made for.
-    pub table_wheel_radius_bits: Arc<AtomicU64>,
     pub part_interval: Duration,
-    /// Stop after this many parts (None: until shutdown).
+    /// Stop after this many shafts (None: until shutdown).
     pub parts: Option<u64>,
 }
 
 impl SimSource {
-    /// Runs until shutdown (or the part count); each part goes out as one event.
+    /// The simulated shaft of `machine`: its features at their stations.
+    pub fn stations(machine: &MachineLoop) -> Vec<SimStation> {
+        machine
+            .features()
+            .iter()
+            .map(|f| SimStation {
+                name: f.feature_name().to_string(),
+                feature: f.feature(),
+                z_mm: f.setup().z_mm,
+                parts_done: f.memory().parts,
+                table_wheel_radius_bits: f.table_wheel_radius(),
+            })
+            .collect()
+    }
+
+    /// Runs until shutdown (or the shaft count); each feature ground goes out as one event.
     pub async fn run(self, tx: mpsc::Sender<SourceEvent>, mut shutdown: watch::Receiver<bool>) {
-        let Some(mut sim) = self.grinder() else {
+        let Some(first) = self.stations.first() else {
+            return;
+        };
+        let Some(mut sim) = self.grinder(first.feature) else {
             return;
         };
         let dbc = GaugeDbc::builtin();
-        let x_zero_offset = self.feature.x_zero_mm() - self.feature.wheel_radius_mm();
         let mut interval = tokio::time::interval(self.part_interval);
         interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-        let mut made = 0u64;
+        let (mut shafts, mut gauged) = (0u64, 0u64);
+        let mut ground_per_station = vec![0u64; self.stations.len()];
         let mut control = Control::new();
         loop {
             tokio::select! {
                 _ = interval.tick() => {}
                 _ = shutdown.changed() => return,
             }
-            if *shutdown.borrow() || self.parts.is_some_and(|n| made >= n) {
+            if *shutdown.borrow() || self.parts.is_some_and(|n| shafts >= n) {
                 return;
             }
-            // The control runs the main program, which calls the table program: the table
-            // it couples is what gets ground, whatever the files say on their own.
-            let Some((shape, ground_with)) = self.run_control(&mut control) else {
+            // The control runs the main program, which calls the table programs: the tables
+            // it couples are what gets ground, at the stations where Z stands.
+            let Some(grinds) = self.run_control(&mut control) else {
                 continue;
             };
-            let table_r = f64::from_bits(self.table_wheel_radius_bits.load(Ordering::SeqCst));
-            let table = CommandedTable {
-                shape,
-                x_zero_mm: table_r + x_zero_offset,
-                wheel_radius_mm: table_r,
-            };
-            let ground = match sim.grind(&table) {
-                Ok(g) => g,
-                Err(e) => {
-                    error!(machine = %self.machine, error = %e, "simulator: the table cannot be ground");
-                    continue;
+            shafts += 1;
+            let last = grinds.len().saturating_sub(1);
+            for (i, coupled) in grinds.into_iter().enumerate() {
+                if let Some(k) = self.station_at(&coupled) {
+                    ground_per_station[k] += 1;
+                    gauged += 1;
+                    let shaft = self.stations[k].parts_done + ground_per_station[k];
+                    let event = self.grind_and_gauge(&mut sim, &dbc, &coupled, k, shaft, gauged);
+                    if let Some((m, ground_with)) = event
+                        && !send_and_wait(&tx, m, ground_with).await
+                    {
+                        return;
+                    }
                 }
-            };
-            // The CAN layout carries numeric ids.
-            let labels = PartLabels {
-                machine: "1".into(),
-                part: (made + 1).to_string(),
-                lobe: "1".into(),
-            };
-            let raw = sim.measure(&ground, &labels);
-            let measurement = self.through_the_bus(&dbc, &raw);
-            made += 1;
-            if let Some(m) = measurement {
-                let (done, processed) = tokio::sync::oneshot::channel();
-                if tx
-                    .send(SourceEvent::Measurement {
-                        raw: m,
-                        ground_with,
-                        done: Some(done),
-                    })
-                    .await
-                    .is_err()
-                {
-                    return;
+                if i < last {
+                    sim.after_feature();
                 }
-                // Wait for the next table, as the machine does between parts.
-                let _ = processed.await;
             }
             if let Some(d) = sim.after_part()
                 && tx
@@ -109,15 +119,68 @@ impl SimSource {
             }
         }
     }
-}
 
-impl SimSource {
-    fn grinder(&self) -> Option<SimGrinder> {
-        let workpiece = match self.feature {
-            Feature::Cam(g) => Workpiece::Cam(g),
-            Feature::Pin(g) => Workpiece::Crankpin(g),
+    /// The station whose Z the control stood at while grinding.
+    fn station_at(&self, coupled: &Coupled) -> Option<usize> {
+        let k = self
+            .stations
+            .iter()
+            .position(|s| (s.z_mm - coupled.z_mm).abs() <= STATION_WINDOW_MM);
+        if k.is_none() {
+            error!(machine = %self.machine, z_mm = coupled.z_mm, "simulator: the control ground at a Z where the shaft has no feature");
+        }
+        k
+    }
+
+    /// Grinds station `k` with the coupled table and gauges it as part `shaft`; the gauge's
+    /// labels go wrong now and then when the config says so.
+    fn grind_and_gauge(
+        &self,
+        sim: &mut SimGrinder,
+        dbc: &GaugeDbc,
+        coupled: &Coupled,
+        k: usize,
+        shaft: u64,
+        gauged: u64,
+    ) -> Option<(crate::core::measure::RawMeasurement, Option<GroundWith>)> {
+        let station = &self.stations[k];
+        let table_r = f64::from_bits(station.table_wheel_radius_bits.load(Ordering::SeqCst));
+        let feature = station.feature;
+        let table = CommandedTable {
+            shape: coupled.shape.clone(),
+            x_zero_mm: table_r + feature.x_zero_mm() - feature.wheel_radius_mm(),
+            wheel_radius_mm: table_r,
         };
-        SimGrinder::new(self.grinder.clone(), workpiece, self.seed)
+        let errors = self.grinder.shaft.station(k + 1, station.z_mm);
+        let ground = match sim.grind_station(&table, &workpiece(feature), &errors) {
+            Ok(g) => g,
+            Err(e) => {
+                error!(machine = %self.machine, lobe = %station.name, error = %e, "simulator: the table cannot be ground");
+                return None;
+            }
+        };
+        let every = |n: u32| n > 0 && gauged.is_multiple_of(u64::from(n));
+        let n = self.stations.len();
+        let lobe = if every(self.grinder.shaft.unknown_lobe_every) {
+            n + 1
+        } else if every(self.grinder.shaft.wrong_lobe_every) && n > 1 {
+            (k + 1) % n + 1
+        } else {
+            k + 1
+        };
+        // The CAN layout carries numeric ids: machine 1, the lobe's position in the recipe.
+        let labels = PartLabels {
+            machine: "1".into(),
+            part: shaft.to_string(),
+            lobe: lobe.to_string(),
+        };
+        let raw = sim.measure(&ground, &labels);
+        let measurement = self.through_the_bus(dbc, &raw)?;
+        Some((measurement, self.ground_with(&coupled.defined_by)))
+    }
+
+    fn grinder(&self, feature: Feature) -> Option<SimGrinder> {
+        SimGrinder::new(self.grinder.clone(), workpiece(feature), self.seed)
             .map_err(|e| error!(machine = %self.machine, error = %e, "simulator cannot start"))
             .ok()
     }
@@ -148,10 +211,9 @@ impl SimSource {
         out
     }
 
-    /// Runs the main program on the share through the simulated control; returns the coupled
-    /// table and the version its program's provenance names (what a control would report
-    /// with the part).
-    fn run_control(&self, control: &mut Control) -> Option<(TableShape, Option<u64>)> {
+    /// Runs the main program on the share through the simulated control; returns every
+    /// grind (a control alarm is logged and the shaft skipped).
+    fn run_control(&self, control: &mut Control) -> Option<Vec<Coupled>> {
         let main = match std::fs::read_to_string(&self.main_program) {
             Ok(t) => t,
             Err(e) => {
@@ -159,37 +221,69 @@ impl SimSource {
                 return None;
             }
         };
-        let dir = self
-            .main_program
-            .parent()
-            .map(Path::to_path_buf)
-            .unwrap_or_default();
+        let dir = self.share_dir();
         let load = |name: &str| std::fs::read_to_string(dir.join(format!("{name}.SPF"))).ok();
-        match control.run(&main, &load) {
-            Ok(coupled) => {
-                let version = std::fs::read_to_string(&self.program)
-                    .ok()
-                    .and_then(|t| provenance_version(&t));
-                Some((coupled.shape, version))
-            }
+        match control.run_all(&main, &load) {
+            Ok(grinds) => Some(grinds),
             Err(e) => {
                 error!(machine = %self.machine, error = %e, "simulated control: alarm");
                 None
             }
         }
     }
-}
 
-/// The table version a program's provenance names (`; table version: vN`).
-fn provenance_version(text: &str) -> Option<u64> {
-    text.lines().find_map(|l| {
-        let rest = l
-            .strip_prefix(';')?
+    /// What the control reports of the table that ground a part: the feature and version
+    /// its defining program's provenance names.
+    fn ground_with(&self, program: &str) -> Option<GroundWith> {
+        let text = std::fs::read_to_string(self.share_dir().join(format!("{program}.SPF"))).ok()?;
+        let version = provenance_field(&text, "table version:")?
             .trim()
-            .strip_prefix("table version v")?;
-        rest.split(|c: char| !c.is_ascii_digit())
+            .strip_prefix('v')?
+            .split(|c: char| !c.is_ascii_digit())
             .next()?
             .parse()
-            .ok()
-    })
+            .ok()?;
+        let feature = provenance_field(&text, "feature:").map(|f| f.trim().to_string());
+        Some(GroundWith { feature, version })
+    }
+
+    fn share_dir(&self) -> PathBuf {
+        self.main_program
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_default()
+    }
+}
+
+fn workpiece(feature: Feature) -> Workpiece {
+    match feature {
+        Feature::Cam(g) => Workpiece::Cam(g),
+        Feature::Pin(g) => Workpiece::Crankpin(g),
+    }
+}
+
+/// Sends one measurement and waits until the machine has its next table out, as a real
+/// machine waits between parts. False when the machine is gone.
+async fn send_and_wait(
+    tx: &mpsc::Sender<SourceEvent>,
+    raw: crate::core::measure::RawMeasurement,
+    ground_with: Option<GroundWith>,
+) -> bool {
+    let (done, processed) = tokio::sync::oneshot::channel();
+    let event = SourceEvent::Measurement {
+        raw,
+        ground_with,
+        done: Some(done),
+    };
+    if tx.send(event).await.is_err() {
+        return false;
+    }
+    let _ = processed.await;
+    true
+}
+
+/// The rest of the provenance comment line that starts with `key` (`; <key>…`).
+fn provenance_field<'t>(text: &'t str, key: &str) -> Option<&'t str> {
+    text.lines()
+        .find_map(|l| l.strip_prefix(';')?.trim().strip_prefix(key))
 }

@@ -14,6 +14,7 @@ pub(super) fn spawn(
     config: &Config,
     m: &MachineSection,
     machine: &MachineLoop,
+    sim_c_speed_explicit: bool,
     tx: mpsc::Sender<SourceEvent>,
     parts: Option<u64>,
     shutdown: watch::Receiver<bool>,
@@ -24,14 +25,23 @@ pub(super) fn spawn(
             seed,
             grinder,
         } => {
+            let mut grinder = grinder.clone();
+            let recipe_rpm = machine
+                .features()
+                .first()
+                .map_or(grinder.c_speed_rpm, |f| f.setup().limits.c_speed_rpm);
+            if !sim_c_speed_explicit {
+                // One C speed: the simulator grinds at the recipe's (or the machine's).
+                grinder.c_speed_rpm = recipe_rpm;
+            } else if grinder.c_speed_rpm != recipe_rpm {
+                warn!(machine = %m.name, sim_rpm = grinder.c_speed_rpm, recipe_rpm, "the simulator grinds at its own C speed (gauge.grinder.c_speed_rpm), not the recipe's");
+            }
             let source = sim_source::SimSource {
                 machine: m.name.clone(),
-                grinder: grinder.clone(),
+                grinder,
                 seed: *seed,
-                feature: machine.feature(),
-                program: machine.program_path(),
+                stations: sim_source::SimSource::stations(machine),
                 main_program: machine.main_program_path(),
-                table_wheel_radius_bits: machine.table_wheel_radius(),
                 part_interval: Duration::from_millis(*part_interval_ms),
                 parts,
             };

@@ -277,16 +277,16 @@ pub(crate) async fn accept_new_store(
     Ok(identity)
 }
 
-/// What each configured machine's share manifest and journal say its store must hold. The
-/// paths follow the service's layout: `<var>/machines/<name>/` holds the machine's journal,
-/// and its `share/` folder the share's manifest (see `service::start`).
+/// What each configured machine's share manifests and journals say its store must hold. The
+/// paths follow the service's layout: `<var>/machines/<name>/<feature>/` holds a feature's
+/// journal, and its `share/` folder the share's manifest (see `service::start`).
 pub(crate) fn expectations(config: &Config) -> Vec<MachineExpectation> {
     let var = config.var_dir();
-    config
-        .machines
-        .iter()
-        .map(|m| {
-            let state_dir = var.join("machines").join(&m.name);
+    let mut out = Vec::new();
+    for m in &config.machines {
+        let machine_dir = var.join("machines").join(&m.name);
+        for lobe in crate::config::configured_features(config, m) {
+            let state_dir = machine_dir.join(&lobe);
             let manifest = state_dir.join("share").join(crate::share::MANIFEST_FILE);
             let newest_share_version = crate::share::load_manifest(&manifest)
                 .ok()
@@ -296,19 +296,20 @@ pub(crate) fn expectations(config: &Config) -> Vec<MachineExpectation> {
                 j.records()
                     .iter()
                     .filter(|r| {
-                        matches!(r, Pending::Table { machine, lobe, .. }
-                            if *machine == m.name && *lobe == m.lobe)
+                        matches!(r, Pending::Table { machine, lobe: l, .. }
+                            if *machine == m.name && *l == lobe)
                     })
                     .count() as u64
             });
-            MachineExpectation {
+            out.push(MachineExpectation {
                 machine: m.name.clone(),
-                lobe: m.lobe.clone(),
+                lobe,
                 newest_share_version,
                 tables_in_journal,
-            }
-        })
-        .collect()
+            });
+        }
+    }
+    out
 }
 
 /// The start-up step of the service: when the store is connected, checks it against the

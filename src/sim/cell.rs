@@ -113,6 +113,7 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
     // The X-domain methods' own memory: the X added at each table point, mm.
     let mut naive_dx_mm = vec![0.0; setup.request.points];
     let mut x_state = LearningState::new(points_per_rev);
+    let mut previous = None;
     // camloop's tables reach the grinder as the service delivers them: rendered, and coupled
     // by the simulated control running the main program.
     let mut control = DeliveredTables::default();
@@ -139,12 +140,14 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
             lobe,
             bands: &[],
             assembly: AssemblyLimits::default(),
+            phase_deg: 0.0,
         };
         let action = match method {
             Method::Camloop => {
                 // The cell delivers every table at once, so the part just measured was always
                 // ground with the table of `state`: the turn learns from it.
-                let done = turn::turn(&turn_setup, &state, &raw, None)?;
+                let done = turn::turn(&turn_setup, &state, &raw, None, previous)?;
+                previous = Some(done.measured.as_previous());
                 match done.decision {
                     Decision::Table {
                         outcome,
@@ -173,13 +176,15 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
             }
             Method::XDomainIlc => {
                 let measured = turn::measure(&turn_setup, &raw)?;
-                let outcome = learn::step(
-                    &mut x_state,
-                    &measured.report.error_um,
-                    &measured.report.repeatability_um,
-                    measured.averaged.revolutions_used.len() as u32,
-                    &setup.params,
-                );
+                // The raw error, timing and all, as the hand method sees it.
+                let part = learn::PartError {
+                    error_um: &measured.report.error_um,
+                    repeatability_um: &measured.report.repeatability_um,
+                    revolutions: measured.averaged.revolutions_used.len() as u32,
+                    timing_error_deg: 0.0,
+                    previous: None,
+                };
+                let outcome = learn::step(&mut x_state, &part, &setup.params);
                 let step = setup.request.points / points_per_rev as usize;
                 for (j, u) in x_state.correction_um.iter().enumerate() {
                     if let Some(dx) = naive_dx_mm.get_mut(j * step.max(1)) {
@@ -293,6 +298,7 @@ fn outcome_text(outcome: &StepOutcome) -> String {
         StepOutcome::Updated {
             max_correction_um, ..
         } => format!("learned, correction ≤ {max_correction_um:.2} µm"),
+        StepOutcome::Limited { bound, .. } => format!("learned, {bound}"),
         StepOutcome::InTolerance { .. } => "in tolerance, table kept".to_string(),
         StepOutcome::Frozen { .. } => "frozen".to_string(),
         StepOutcome::Reverted { to_iteration, .. } => {

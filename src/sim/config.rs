@@ -36,6 +36,69 @@ pub struct GrinderConfig {
     /// Envelope samples per table segment (the part between two table points). Default 16.
     pub samples_per_segment: usize,
     pub gauge: GaugeConfig,
+    /// Errors that differ from feature to feature of a whole shaft.
+    pub shaft: ShaftErrors,
+}
+
+/// How the features of one shaft differ: the shaft bends and twists along Z under the
+/// grinding force, and each lobe has a harmonic error of its own. Defaults: 0.8 µm oversize
+/// and 0.004° more lag per 100 mm of Z, a ±0.6 µm order-2 harmonic varying by feature, and a
+/// gauge that never mixes up lobes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ShaftErrors {
+    /// Size error (part oversize) growing along Z, µm per 100 mm of Z (deflection).
+    pub size_um_per_100mm: f64,
+    /// Phase lag growing along Z, degrees per 100 mm of Z (torsion: the shaft is driven at
+    /// its Z = 0 end).
+    pub lag_deg_per_100mm: f64,
+    /// Amplitude of a feature's own order-2 error, µm: feature k gets
+    /// `spread · sin(1.7·k)` at a phase of 40°·k, so no two lobes are alike.
+    pub harmonic_spread_um: f64,
+    /// Every this many features gauged, the gauge labels the measurement with the next lobe
+    /// of the shaft instead (0: never).
+    pub wrong_lobe_every: u32,
+    /// Every this many features gauged, the gauge labels it with a lobe the shaft lacks
+    /// (0: never).
+    pub unknown_lobe_every: u32,
+}
+
+impl Default for ShaftErrors {
+    fn default() -> Self {
+        Self {
+            size_um_per_100mm: 0.8,
+            lag_deg_per_100mm: 0.004,
+            harmonic_spread_um: 0.6,
+            wrong_lobe_every: 0,
+            unknown_lobe_every: 0,
+        }
+    }
+}
+
+/// One feature's own errors on top of the machine's.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StationErrors {
+    /// Part oversize, µm.
+    pub size_um: f64,
+    /// Extra lag, degrees.
+    pub lag_deg: f64,
+    pub harmonics: Vec<Harmonic>,
+}
+
+impl ShaftErrors {
+    /// The errors of feature `index` (from 1) at station `z_mm`.
+    pub fn station(&self, index: usize, z_mm: f64) -> StationErrors {
+        let k = index as f64;
+        StationErrors {
+            size_um: self.size_um_per_100mm * z_mm / 100.0,
+            lag_deg: self.lag_deg_per_100mm * z_mm / 100.0,
+            harmonics: vec![Harmonic {
+                order: 2,
+                amplitude_um: self.harmonic_spread_um * (1.7 * k).sin(),
+                phase_deg: 40.0 * k,
+            }],
+        }
+    }
 }
 
 /// One harmonic of the machine's geometric error in the wheel-centre distance.
@@ -103,6 +166,7 @@ impl Default for GrinderConfig {
             dressing_error_sigma_um: 1.0,
             samples_per_segment: 16,
             gauge: GaugeConfig::default(),
+            shaft: ShaftErrors::default(),
         }
     }
 }
@@ -134,6 +198,12 @@ impl GrinderConfig {
             gauge: GaugeConfig {
                 noise_sigma_um: 0.0,
                 ..GaugeConfig::default()
+            },
+            shaft: ShaftErrors {
+                size_um_per_100mm: 0.0,
+                lag_deg_per_100mm: 0.0,
+                harmonic_spread_um: 0.0,
+                ..ShaftErrors::default()
             },
             ..Self::default()
         }
@@ -176,6 +246,9 @@ impl GrinderConfig {
         for (name, value) in [
             ("wheel_size_error_um", self.wheel_size_error_um),
             ("dressing_error_um", self.dressing_error_um),
+            ("shaft.size_um_per_100mm", self.shaft.size_um_per_100mm),
+            ("shaft.lag_deg_per_100mm", self.shaft.lag_deg_per_100mm),
+            ("shaft.harmonic_spread_um", self.shaft.harmonic_spread_um),
         ] {
             need(finite(value), name, value, "must be a finite number");
         }

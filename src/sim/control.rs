@@ -23,6 +23,8 @@ use statements::{Frame, Run};
 
 /// Deepest subprogram nesting accepted (camloop needs 1).
 const MAX_CALL_DEPTH: usize = 8;
+/// The axis along the shaft: its setpoint while grinding names the station ground.
+const AXIAL_AXIS: &str = "Z";
 /// `$AA_COUP_ACT` of a following axis in a master-value coupling [K].
 const COUP_ACT_MASTER_VALUE: i64 = 16;
 
@@ -47,6 +49,10 @@ struct Coupling {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Coupled {
     pub table_number: u32,
+    /// The program that defined the table (its provenance says which version it is).
+    pub defined_by: String,
+    /// Setpoint of the axial axis (`Z`) while grinding, mm: the station ground.
+    pub z_mm: f64,
     /// In program axes, as [`table_shape`] builds it from the table's blocks.
     pub shape: TableShape,
     pub c_speed_rpm: f64,
@@ -132,24 +138,39 @@ impl Control {
 
     /// Runs main program text `main` as the control would; subprogram calls are resolved
     /// with `load(name)` → the text of that program file (name as called, e.g.
-    /// `DEMO_CAM_TABLE`). Tables defined stay defined, whatever the outcome.
+    /// `DEMO_CAM_TABLE`). Tables defined stay defined, whatever the outcome. Returns the
+    /// last grind of the run (a one-feature program grinds once).
     pub fn run(
         &mut self,
         main: &str,
         load: &dyn Fn(&str) -> Option<String>,
     ) -> Result<Coupled, ControlError> {
+        let mut all = self.run_all(main, load)?;
+        Ok(all.pop().expect("run_all returns at least one grind"))
+    }
+
+    /// Runs `main` like [`Control::run`] and returns every grind, in order (a whole shaft:
+    /// one per station the program reaches).
+    pub fn run_all(
+        &mut self,
+        main: &str,
+        load: &dyn Fn(&str) -> Option<String>,
+    ) -> Result<Vec<Coupled>, ControlError> {
         let mut run = Run {
             control: self,
             load,
-            ground: None,
+            ground: Vec::new(),
         };
         let mut frame = Frame::new(program_name(main, "MPF").unwrap_or("main"), None);
         let end_line = run.program(main, &mut frame, 0)?;
-        run.ground.ok_or(ControlError {
-            program: frame.program,
-            line: end_line,
-            fault: ControlFault::NotGround,
-        })
+        if run.ground.is_empty() {
+            return Err(ControlError {
+                program: frame.program,
+                line: end_line,
+                fault: ControlFault::NotGround,
+            });
+        }
+        Ok(run.ground)
     }
 
     /// Numbers of the curve tables in memory, ascending.

@@ -8,7 +8,7 @@ use super::{CommandedTable, Control, ControlError};
 use crate::core::compensate::{Feature, GuardedTable};
 use crate::core::program::{
     MainProgramSettings, ProgramSettings, SettingsErrors, TableError, next_table_number,
-    render_g1_table, render_main_program, render_poly_table,
+    render_main_program,
 };
 use std::collections::BTreeMap;
 
@@ -46,10 +46,7 @@ impl DeliveredTables {
             table_number: next_table_number(self.table_number, TABLE_PAIR),
             ..ProgramSettings::default()
         };
-        let text = match &table.segments {
-            Some(segments) => render_poly_table(segments, &settings)?,
-            None => render_g1_table(&table.points, &settings)?,
-        };
+        let text = table.render(&settings)?;
         let main = render_main_program(&MainProgramSettings::default(), &settings)?;
         self.files.insert(TABLE_PROGRAM.to_string(), text);
         self.table_number = settings.table_number;

@@ -91,7 +91,7 @@ mod path;
 mod rng;
 mod table;
 
-pub use config::{GaugeConfig, GaugeFault, GrinderConfig, Harmonic};
+pub use config::{GaugeConfig, GaugeFault, GrinderConfig, Harmonic, ShaftErrors, StationErrors};
 pub use control::{Control, ControlError, ControlFault, Coupled, table_shape};
 pub use delivered::DeliveryError;
 pub use envelope::SMOOTH_KINK_RAD;
@@ -248,6 +248,18 @@ impl SimGrinder {
     /// Grinds one part with `table` on the machine as it is now. Does not wear the wheel:
     /// call [`SimGrinder::after_part`] once the part is done.
     pub fn grind(&self, table: &CommandedTable) -> Result<GroundPart, SimError> {
+        self.grind_station(table, &self.workpiece, &StationErrors::default())
+    }
+
+    /// Grinds `workpiece` (one feature of a shaft; the wheel is this grinder's) from `table`,
+    /// with the feature's own errors on top of the machine's.
+    pub fn grind_station(
+        &self,
+        table: &CommandedTable,
+        workpiece: &Workpiece,
+        errors: &StationErrors,
+    ) -> Result<GroundPart, SimError> {
+        check_workpiece(workpiece)?;
         finite("table x zero", table.x_zero_mm)?;
         positive("table wheel radius", table.wheel_radius_mm)?;
         positive("true wheel radius", self.wheel_radius_mm)?;
@@ -255,8 +267,8 @@ impl SimGrinder {
         let x_zero_mm = self.x_zero_mm(table);
         let path = MachinePath {
             table: &path_table,
-            lag_rad: self.config.lag_rad(),
-            x_zero_mm,
+            lag_rad: self.config.lag_rad() + errors.lag_deg.to_radians(),
+            x_zero_mm: x_zero_mm + errors.size_um * 1e-3,
             harmonics: self
                 .config
                 .harmonics
@@ -268,11 +280,18 @@ impl SimGrinder {
                         h.phase_deg.to_radians(),
                     )
                 })
+                .chain(errors.harmonics.iter().map(|h| {
+                    (
+                        f64::from(h.order),
+                        h.amplitude_um * 1e-3,
+                        h.phase_deg.to_radians(),
+                    )
+                }))
                 .collect(),
             wheel_radius_mm: self.wheel_radius_mm,
         };
         let nodes = envelope::outline(&path, self.config.samples_per_segment)?;
-        let (probe, zero_mm) = self.workpiece.probe();
+        let (probe, zero_mm) = workpiece.probe();
         let part = GroundPart {
             nodes,
             probe,
@@ -308,6 +327,12 @@ impl SimGrinder {
     /// Ends a part: the wheel wears by `wear_um_per_part`, and if a dressing is due after
     /// this part (every `dress_every_parts`, or listed in `dress_at_parts`), the wheel loses
     /// `dress_depth_um` and the control is told the new radius plus the dressing error.
+    /// The wheel wears by one feature's grinding; the part count and dressing wait for
+    /// [`SimGrinder::after_part`] (a shaft's last feature).
+    pub fn after_feature(&mut self) {
+        self.wheel_radius_mm -= self.config.wear_um_per_part * 1e-3;
+    }
+
     pub fn after_part(&mut self) -> Option<DressingEvent> {
         self.parts_ground += 1;
         let n = self.parts_ground;

@@ -24,6 +24,8 @@ pub struct MainProgramSettings {
     pub x_feed_mm_min: f64,
     /// Comment lines written after the `DEF` line, without `;`. Printable ASCII only.
     pub comment_lines: Vec<String>,
+    /// The axis along the shaft, moved to each feature's station in a shaft program.
+    pub axial_axis: String,
 }
 
 impl Default for MainProgramSettings {
@@ -34,6 +36,7 @@ impl Default for MainProgramSettings {
             c_speed_rpm: 10.0,
             x_feed_mm_min: 100.0,
             comment_lines: Vec::new(),
+            axial_axis: "Z".to_owned(),
         }
     }
 }

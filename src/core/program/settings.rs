@@ -185,6 +185,8 @@ pub enum SettingError {
         column: usize,
         ch: char,
     },
+    #[error("a shaft program needs at least one feature")]
+    NoFeatures,
     #[error("main program name `{name}` is the same as the table subprogram's")]
     MainSameAsTable { name: String },
     #[error("{field} is 0: the control's resolution is at least 1 increment per unit")]

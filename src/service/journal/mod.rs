@@ -362,6 +362,7 @@ mod tests {
             params: LearningParams::default(),
             wheel_radius_mm: 250.0,
             correction_um: vec![0.0; 4],
+            timing_correction_deg: 0.0,
         };
         let records = [
             event("a"),

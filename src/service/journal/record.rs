@@ -106,6 +106,10 @@ pub enum EventKind {
     JournalQuarantined,
     DiskFull,
     DiskSpaceBack,
+    /// The same guard refused or limited several parts in a row.
+    BlockedByGuard,
+    /// A part was learned from again without that guard acting.
+    GuardCleared,
 }
 
 impl EventKind {
@@ -124,6 +128,8 @@ impl EventKind {
             EventKind::JournalQuarantined => "journal_quarantined",
             EventKind::DiskFull => "disk_full",
             EventKind::DiskSpaceBack => "disk_space_back",
+            EventKind::BlockedByGuard => "blocked_by_guard",
+            EventKind::GuardCleared => "guard_cleared",
         }
     }
 }

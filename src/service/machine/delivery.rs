@@ -4,40 +4,18 @@
 use super::super::journal::{EventKind, Pending};
 use super::memory::{TableLearning, WaitingTable};
 use super::records::event;
-use super::{MachineLoop, now_ms, now_ms_u64};
+use super::FeatureLoop;
+use crate::clock::{now_ms, now_ms_u64};
 use crate::core::compensate::GuardedTable;
 use crate::core::learn::LearningState;
-use crate::core::program::{
-    MainProgramSettings, Provenance, comment_text, render_g1_table, render_main_program,
-    render_poly_table,
-};
-use crate::recipe::FeatureSetup;
+use crate::core::program::{Provenance, comment_text};
 use crate::share::{ProgramFile, PushError, PushRequest};
 use crate::store::{EventLevel, TableStatus};
 use anyhow::Context;
 use std::sync::atomic::Ordering;
 use tracing::{error, info, warn};
 
-/// The main program's settings for a feature: its C speed is the recipe's, the one the
-/// axis-limit guards checked the table at.
-pub(super) fn main_settings(setup: &FeatureSetup) -> MainProgramSettings {
-    MainProgramSettings {
-        c_speed_rpm: setup.limits.c_speed_rpm,
-        comment_lines: vec![comment_text(&format!(
-            "camloop {}: couples the table {} defines",
-            env!("CARGO_PKG_VERSION"),
-            setup.program.name
-        ))],
-        ..MainProgramSettings::default()
-    }
-}
-
-/// The main program's file name on the share.
-pub(super) fn main_program_file(setup: &FeatureSetup) -> String {
-    format!("{}.MPF", main_settings(setup).name)
-}
-
-impl MachineLoop {
+impl FeatureLoop {
     /// Renders `table` for the next table number with its provenance and delivers it (with
     /// the main program when the share's copy differs). `next` is the learning state the
     /// table was made from: it is in force once the share confirms the table, waiting
@@ -58,6 +36,7 @@ impl MachineLoop {
             params: self.setup.params.clone(),
             wheel_radius_mm: self.memory.wheel_radius_mm,
             correction_um: next.correction_um.clone(),
+            timing_correction_deg: next.timing_correction_deg,
         };
         let mut settings = self.setup.program.clone();
         settings.table_number = self.share.next_table_number();
@@ -69,10 +48,7 @@ impl MachineLoop {
                 learning.wheel_radius_mm, learning.iteration
             )),
         ];
-        let text = match &table.segments {
-            Some(s) => render_poly_table(s, &settings),
-            None => render_g1_table(&table.points, &settings),
-        }?;
+        let text = table.render(&settings)?;
         let mut files = vec![ProgramFile {
             name: self.program_file.clone(),
             text: text.clone(),
@@ -219,13 +195,24 @@ impl MachineLoop {
     }
 
     /// The main program, when the share's copy is not this text (written again only when it
-    /// changes, so the control runs what camloop tested).
+    /// changes, so the control runs what camloop tested). It calls every feature's table
+    /// program, so it goes with the last of them to reach the share.
     pub(super) fn main_program_if_changed(&self) -> anyhow::Result<Option<ProgramFile>> {
-        let main = main_settings(&self.setup);
-        let text = render_main_program(&main, &self.setup.program)?;
-        let name = main_program_file(&self.setup);
-        let on_share = std::fs::read_to_string(self.share.config().share_dir.join(&name)).ok();
-        Ok((on_share.as_deref() != Some(text.as_str())).then_some(ProgramFile { name, text }))
+        let dir = &self.share.config().share_dir;
+        let on_share = std::fs::read_to_string(dir.join(&self.main.file)).ok();
+        if on_share.as_deref() == Some(self.main.text.as_str()) {
+            return Ok(None);
+        }
+        let others_there = self
+            .main
+            .table_files
+            .iter()
+            .filter(|f| **f != self.program_file)
+            .all(|f| dir.join(f).exists());
+        Ok(others_there.then(|| ProgramFile {
+            name: self.main.file.clone(),
+            text: self.main.text.clone(),
+        }))
     }
 
     /// Retries what waits: a version for the share, records for the database; and drops

@@ -3,7 +3,8 @@
 
 use super::super::journal::{EventKind, Pending};
 use super::records::event;
-use super::{MachineLoop, now_ms};
+use super::FeatureLoop;
+use crate::clock::now_ms;
 use crate::core::compensate;
 use crate::core::learn;
 use crate::store::EventLevel;
@@ -18,10 +19,16 @@ pub struct Dressed {
     pub summary: String,
 }
 
-impl MachineLoop {
+impl FeatureLoop {
     /// A wheel dressing, from the gauge/controller feed, a dropped report or the API. A
-    /// radius outside [`compensate::WHEEL_RADIUS_RANGE_MM`] changes nothing.
-    pub async fn dress(&mut self, wheel_radius_mm: f64, source: &str) -> anyhow::Result<Dressed> {
+    /// radius outside [`compensate::WHEEL_RADIUS_RANGE_MM`] changes nothing. The machine's
+    /// `first` feature records the dressing itself; every feature regenerates its table.
+    pub async fn dress(
+        &mut self,
+        wheel_radius_mm: f64,
+        source: &str,
+        first: bool,
+    ) -> anyhow::Result<Dressed> {
         let wheel_radius_mm = compensate::check_wheel_radius(wheel_radius_mm)?;
         let at_ms = now_ms();
         let old = self.memory.wheel_radius_mm;
@@ -32,22 +39,23 @@ impl MachineLoop {
         if let Some(w) = self.memory.waiting.as_mut() {
             learn::after_dressing(&mut w.learning);
         }
-        let mut records = vec![
-            Pending::Dressing {
+        let mut records = Vec::new();
+        if first {
+            records.push(Pending::Dressing {
                 machine: self.name.clone(),
                 at_ms,
                 old_radius_mm: old,
                 new_radius_mm: wheel_radius_mm,
                 source: source.to_string(),
-            },
-            event(
+            });
+            records.push(event(
                 &self.name,
                 at_ms,
                 EventLevel::Info,
                 EventKind::WheelDressed,
                 format!("wheel radius {old} → {wheel_radius_mm} mm ({source})"),
-            ),
-        ];
+            ));
+        }
         // The newest correction made (delivered or waiting) is regenerated: a dressing is not
         // a learning step.
         let next = self.memory.newest_learning().clone();

@@ -3,63 +3,85 @@
 
 use super::super::journal::{EventKind, Pending};
 use super::records::{event, keep_reject, outcome_text, raw_revolutions};
-use super::{Ingested, MachineLoop, now_ms};
+use super::{FeatureLoop, Ingested};
+use crate::clock::now_ms;
+use super::memory::GuardKind;
 use crate::core::learn::StepOutcome;
 use crate::core::measure::{MeasurementHeader, RawMeasurement};
 use crate::core::turn::{self, Decision, HoldReason, Measured, TurnError, measurement_sha256};
 use crate::store::{EventLevel, Verdict};
 use tracing::{error, info, warn};
 
-/// The names a gauge may use for this machine and its feature: the configured names, or
-/// the numeric id `1` that the built-in CAN layout carries when one gauge serves one
-/// machine.
+/// The names a gauge may use for a machine and its features: the configured names, or the
+/// numeric ids of the built-in CAN layout, where the machine is `1` (one gauge serves one
+/// machine) and a feature is its position in the recipe, from 1.
 #[derive(Debug, Clone)]
 pub struct GaugeIds {
     machine: String,
-    feature: String,
+    features: Vec<String>,
 }
 
 const BUS_ID: &str = "1";
 
 impl GaugeIds {
-    pub fn for_machine(machine: &str, feature: &str) -> Self {
+    pub fn new(machine: &str, setups: &[crate::recipe::FeatureSetup]) -> Self {
         Self {
             machine: machine.to_string(),
-            feature: feature.to_string(),
+            features: setups.iter().map(|s| s.name.clone()).collect(),
         }
     }
 
-    /// Why this header does not belong to this machine and feature, if it does not.
-    pub fn mismatch(&self, header: &MeasurementHeader) -> Option<String> {
-        let ok = |said: &str, ours: &str| said == ours || said == BUS_ID;
-        if !ok(&header.machine, &self.machine) {
-            return Some(format!(
+    /// The index of the feature this measurement belongs to, or why it belongs to none of
+    /// this machine's. A control report of the table that ground the part must name the
+    /// same feature: a gauge that mixes two lobes up is caught here, never learned from.
+    pub fn route(
+        &self,
+        header: &MeasurementHeader,
+        ground_with: Option<&super::GroundWith>,
+    ) -> Result<usize, String> {
+        if header.machine != self.machine && header.machine != BUS_ID {
+            return Err(format!(
                 "measurement names machine {:?}, this is machine {:?}",
                 header.machine, self.machine
             ));
         }
-        if !ok(&header.lobe, &self.feature) {
-            return Some(format!(
-                "measurement names lobe {:?}, machine {:?} grinds {:?}",
-                header.lobe, self.machine, self.feature
+        let by_name = self.features.iter().position(|f| *f == header.lobe);
+        let by_id = header
+            .lobe
+            .parse::<usize>()
+            .ok()
+            .filter(|k| (1..=self.features.len()).contains(k))
+            .map(|k| k - 1);
+        let Some(index) = by_name.or(by_id) else {
+            return Err(format!(
+                "measurement names lobe {:?}, machine {:?} grinds {} (or their positions 1 to {})",
+                header.lobe,
+                self.machine,
+                self.features.join(", "),
+                self.features.len()
+            ));
+        };
+        if let Some(g) = ground_with
+            && let Some(table_feature) = &g.feature
+            && *table_feature != self.features[index]
+        {
+            return Err(format!(
+                "measurement names lobe {} but the control ground that part with the table of {} (v{}): lobes mixed up, not learned from",
+                self.features[index], table_feature, g.version
             ));
         }
-        None
+        Ok(index)
     }
 }
 
-impl MachineLoop {
-    pub(super) async fn on_measurement(
+impl FeatureLoop {
+    pub(crate) async fn on_measurement(
         &mut self,
         raw: RawMeasurement,
         ground_with: Option<u64>,
     ) -> anyhow::Result<Ingested> {
         let at_ms = now_ms();
         let sha = measurement_sha256(&raw);
-        if let Some(reason) = self.ids.mismatch(&raw.header) {
-            self.reject(&raw, &sha, &reason, at_ms).await;
-            return Ok(Ingested::Rejected { reason });
-        }
         if self.memory.has_seen(&sha) {
             info!(machine = %self.name, part = %raw.header.part, origin = %raw.origin, "measurement already learned from: not learned again");
             let message = format!(
@@ -83,7 +105,14 @@ impl MachineLoop {
             }),
             _ => self.disk_full_hold(at_ms).await,
         };
-        let done = match turn::turn(&self.setup.turn_setup(), &self.memory.learning, &raw, hold) {
+        let previous = self.memory.previous;
+        let done = match turn::turn(
+            &self.setup.turn_setup(),
+            &self.memory.learning,
+            &raw,
+            hold,
+            previous,
+        ) {
             Ok(t) => t,
             Err(TurnError::Measurement(e)) => {
                 let reason = e.to_string();
@@ -102,6 +131,7 @@ impl MachineLoop {
         }
         self.memory.parts += 1;
         self.memory.remember(sha.clone());
+        self.memory.previous = Some(done.measured.as_previous());
         let part = self.memory.parts;
         let held = matches!(done.decision, Decision::Held(_));
         let ground_with = self.memory.in_force_version;
@@ -116,6 +146,7 @@ impl MachineLoop {
             m.parts_total += 1;
             m.last_max_error_um = max_error_um;
         });
+        self.publish_status(&raw.header.part, &done.measured);
         info!(
             machine = %self.name,
             lobe = %self.setup.name,
@@ -145,16 +176,26 @@ impl MachineLoop {
                 next,
                 table,
             } => {
-                if let StepOutcome::Reverted { reason, .. } = &outcome {
-                    error!(machine = %self.name, lobe = %self.setup.name, reason = %reason, "learning reverted and frozen: operator action needed");
-                    self.metrics.update(&self.name, |m| m.alarms_total += 1);
-                    records.push(event(
-                        &self.name,
-                        at_ms,
-                        EventLevel::Error,
-                        EventKind::LearningReverted,
-                        reason.clone(),
-                    ));
+                match &outcome {
+                    StepOutcome::Reverted { reason, .. } => {
+                        error!(machine = %self.name, lobe = %self.setup.name, reason = %reason, "learning reverted and frozen: operator action needed");
+                        self.metrics.update(&self.name, |m| m.alarms_total += 1);
+                        records.push(event(
+                            &self.name,
+                            at_ms,
+                            EventLevel::Error,
+                            EventKind::LearningReverted,
+                            reason.clone(),
+                        ));
+                    }
+                    StepOutcome::Limited { bound, .. } => {
+                        let kind = GuardKind::of_bound(bound.quantity);
+                        self.guard_acted(kind, &bound.to_string(), part, at_ms, &mut records);
+                    }
+                    StepOutcome::Updated { .. } | StepOutcome::InTolerance { .. } => {
+                        self.guard_cleared(part, at_ms, &mut records);
+                    }
+                    StepOutcome::Frozen { .. } => {}
                 }
                 let reason = format!("part {part}: {}", outcome_text(&outcome));
                 match self
@@ -172,17 +213,22 @@ impl MachineLoop {
                 }
             }
             Decision::Refused(e) => {
-                warn!(machine = %self.name, lobe = %self.setup.name, reason = %e, "table refused, previous table stays in force");
                 self.metrics
                     .update(&self.name, |m| m.tables_refused_total += 1);
+                let in_a_row =
+                    self.guard_acted(GuardKind::of_refusal(&e), &e.to_string(), part, at_ms, &mut records);
+                if in_a_row == 1 {
+                    warn!(machine = %self.name, lobe = %self.setup.name, reason = %e, "table refused, previous table stays in force");
+                }
+                let level = if in_a_row == 1 { EventLevel::Warn } else { EventLevel::Info };
                 records.push(event(
                     &self.name,
                     at_ms,
-                    EventLevel::Warn,
+                    level,
                     EventKind::TableRefused,
-                    e.to_string(),
+                    format!("{} ({in_a_row} in a row): {e}", self.setup.name),
                 ));
-                "table refused, previous kept".to_string()
+                format!("table refused, previous kept ({in_a_row} in a row)")
             }
             Decision::Held(reason) => {
                 info!(machine = %self.name, reason = %reason, "part analysed, not learned from");
@@ -233,7 +279,7 @@ impl MachineLoop {
 
     /// A measurement that is not this machine's, or fails the checks: kept among the
     /// rejects with the reason, recorded as an event, never learned from.
-    async fn reject(&mut self, raw: &RawMeasurement, sha: &str, reason: &str, at_ms: i64) {
+    pub(super) async fn reject(&mut self, raw: &RawMeasurement, sha: &str, reason: &str, at_ms: i64) {
         warn!(machine = %self.name, lobe = %self.setup.name, origin = %raw.origin, reason = %reason, "measurement rejected");
         let dir = self.share.config().state_dir.with_file_name("rejected");
         if let Err(e) = keep_reject(&dir, raw, sha, reason) {

@@ -3,7 +3,8 @@
 //! wheel, and the identities of the newest measurements. It travels through the journal into
 //! the store, and a restart resumes from the newest copy.
 
-use crate::core::learn::{LearningParams, LearningState};
+use crate::core::compensate::CycleError;
+use crate::core::learn::{BoundedQuantity, LearnError, LearningParams, LearningState, PreviousPart};
 use serde::{Deserialize, Serialize};
 
 /// Layout of [`LoopMemory`] written by this build. Records without the field are layout 1
@@ -45,6 +46,82 @@ pub struct LoopMemory {
     /// Content identities (SHA-256) of the newest measurements, oldest first.
     #[serde(default)]
     pub recent_measurements: Vec<String>,
+    /// What the previous part measured: the next step's evidence that an error repeats.
+    #[serde(default)]
+    pub previous: Option<PreviousPart>,
+    /// The guard that refused or limited the latest parts in a row, if one did.
+    #[serde(default)]
+    pub guard: Option<GuardStreak>,
+}
+
+/// Which guard acted on a part: parts in a row with the same kind make a streak.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GuardKind {
+    /// `max_correction_um`: the lift correction is at or beyond its limit.
+    CorrectionLimit,
+    /// `max_timing_correction_deg`.
+    TimingLimit,
+    /// The X velocity, acceleration or jerk of the table.
+    AxisLimits,
+    /// The corrected part cannot be ground (geometry) or the table not made.
+    Geometry,
+    /// The measurement's grid or values do not fit the learning state.
+    Measurement,
+}
+
+impl GuardKind {
+    pub fn of_refusal(e: &CycleError) -> Self {
+        match e {
+            CycleError::Learn(LearnError::CorrectionTooLarge { .. } | LearnError::AtLimit { .. }) => {
+                GuardKind::CorrectionLimit
+            }
+            CycleError::Learn(LearnError::TimingTooLarge { .. }) => GuardKind::TimingLimit,
+            CycleError::Learn(LearnError::GridMismatch { .. } | LearnError::NonFinite { .. }) => {
+                GuardKind::Measurement
+            }
+            CycleError::Guard(crate::core::compensate::GuardError::Motion { .. }) => {
+                GuardKind::AxisLimits
+            }
+            CycleError::Guard(_) => GuardKind::Geometry,
+        }
+    }
+
+    pub fn of_bound(quantity: BoundedQuantity) -> Self {
+        match quantity {
+            BoundedQuantity::Correction => GuardKind::CorrectionLimit,
+            BoundedQuantity::Timing => GuardKind::TimingLimit,
+        }
+    }
+
+    /// What an operator can do about it.
+    pub fn advice(self) -> &'static str {
+        match self {
+            GuardKind::CorrectionLimit => {
+                "check the machine (servo lag, geometry, wheel), dress the wheel, or raise learning.max_correction_um in the recipe"
+            }
+            GuardKind::TimingLimit => {
+                "check the C datum and clamping of the shaft, or raise learning.max_timing_correction_deg"
+            }
+            GuardKind::AxisLimits => {
+                "lower the C speed (axis_limits.c_speed_rpm) or check the X axis limits in the recipe"
+            }
+            GuardKind::Geometry => "check the wheel radius and the recipe's geometry",
+            GuardKind::Measurement => "check the gauge: its grid or values do not fit this feature",
+        }
+    }
+}
+
+/// A guard acting on parts in a row.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GuardStreak {
+    pub kind: GuardKind,
+    /// Parts in a row.
+    pub parts: u32,
+    /// The newest reason, as the guard said it.
+    pub reason: String,
+    /// The alarm was raised for this streak.
+    pub alarmed: bool,
 }
 
 fn layout_one() -> u32 {
@@ -62,6 +139,8 @@ impl LoopMemory {
             wheel_radius_mm,
             parts: 0,
             recent_measurements: Vec::new(),
+            previous: None,
+            guard: None,
         }
     }
 
@@ -106,6 +185,9 @@ pub struct TableLearning {
     pub params: LearningParams,
     pub wheel_radius_mm: f64,
     pub correction_um: Vec<f64>,
+    /// The timing correction in the table's C offset, degrees.
+    #[serde(default)]
+    pub timing_correction_deg: f64,
 }
 
 /// [`TableLearning`] without the correction.
@@ -115,6 +197,8 @@ pub struct TableLearningSummary {
     pub params: LearningParams,
     pub wheel_radius_mm: f64,
     pub correction_sha256: String,
+    #[serde(default)]
+    pub timing_correction_deg: f64,
 }
 
 impl TableLearning {
@@ -124,6 +208,7 @@ impl TableLearning {
             params: self.params.clone(),
             wheel_radius_mm: self.wheel_radius_mm,
             correction_sha256: crate::core::turn::correction_sha256(&self.correction_um),
+            timing_correction_deg: self.timing_correction_deg,
         }
     }
 }

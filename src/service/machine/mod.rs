@@ -1,12 +1,20 @@
-//! One machine's loop in the service. Each part takes one [`crate::core::turn`]: checks,
-//! analysis, a learning step from the table that ground the part, the guarded next table;
-//! the machine then records it through the journal and delivers the table to the share.
+//! One machine in the service: it grinds every lobe or pin of its recipe, each with its own
+//! loop ([`FeatureLoop`]). A measurement goes to the loop of the feature the gauge names; a
+//! feature the recipe does not have, or a part the control ground with another feature's
+//! table, is rejected with the reason and disturbs nothing. Events of the wheel (dressing)
+//! act on every feature; a rollback on one feature or on the whole part.
 //!
-//! - `ingest`: a measurement in (identity, repeats, the turn, its records);
+//! Each part takes one [`crate::core::turn`] in its feature's loop: checks, analysis, a
+//! learning step from the table that ground the part, the guarded next table; the loop then
+//! records it through its journal and delivers the table to the share.
+//!
+//! - `feature`: one feature's loop and what it owns;
+//! - `ingest`: a measurement in (identity, repeats, the turn, guards in a row, records);
 //! - `delivery`: rendering with provenance, the push, retries, the version in force;
 //! - `rollback`, `dressing`: the operator's and the wheel's events;
 //! - `records`: the journal records and the reject folder;
-//! - `memory`: what the loop remembers between parts.
+//! - `memory`: what a feature's loop remembers between parts;
+//! - `shaft`: the main program of the whole part and the resume point.
 //!
 //! The version in force is the newest one the share confirmed. A step always starts from its
 //! learning state: a table computed while the share refused it never becomes the base of the
@@ -14,45 +22,53 @@
 
 mod delivery;
 mod dressing;
+mod feature;
 mod ingest;
 pub mod memory;
+mod guards;
 mod records;
 mod rollback;
+mod shaft;
 
-use super::journal::{EventKind, Journal, Pending};
 use super::metrics::Metrics;
-use crate::clock::{now_ms, now_ms_u64};
-use crate::core::compensate::{self, LobeLoop};
-use crate::core::turn::HoldReason;
+use crate::clock::now_ms;
+use crate::core::turn::measurement_sha256;
 use crate::recipe::FeatureSetup;
-use crate::share::{RealFs, Share, ShareConfig};
-use crate::store::{EventLevel, FeatureKind, Store};
+use crate::store::Store;
 use anyhow::Context;
-use memory::LoopMemory;
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 use tracing::{error, info, warn};
 
 pub use dressing::Dressed;
+pub use feature::FeatureLoop;
 pub use ingest::GaugeIds;
 pub use rollback::{RollbackError, RolledBack};
+pub(crate) use shaft::MainProgram;
 
 /// The database, once it can be reached (a background task connects and reconnects).
 pub type StoreHandle = Arc<tokio::sync::RwLock<Option<Store>>>;
 
+/// The table a part was ground with, as the control reports it (the simulated control reads
+/// it from the program's provenance).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GroundWith {
+    /// The feature whose table program defined the table, when the report says.
+    pub feature: Option<String>,
+    pub version: u64,
+}
+
 /// What a gauge adapter hands the machine.
 #[derive(Debug)]
 pub enum SourceEvent {
-    /// A measurement. `ground_with` is the table version the control reports having ground
-    /// the part with, where it can say (the simulated control reads it from the program's
-    /// provenance); otherwise the delivery record decides. `done` is answered once the next
-    /// table is out, so a simulated machine grinds the next part with it, as a real one does
-    /// between parts.
+    /// A measurement. `ground_with` is the table the control reports having ground the part
+    /// with, where it can say; otherwise the delivery record decides. `done` is answered once
+    /// the next table is out, so a simulated machine grinds the next part with it, as a real
+    /// one does between parts.
     Measurement {
         raw: crate::core::measure::RawMeasurement,
-        ground_with: Option<u64>,
+        ground_with: Option<GroundWith>,
         done: Option<tokio::sync::oneshot::Sender<Ingested>>,
     },
     /// The wheel was dressed; the control now believes this radius.
@@ -86,184 +102,70 @@ pub struct MachinePaths {
     pub state_dir: PathBuf,
 }
 
-/// The machine's loop with everything it owns.
+/// A machine: the loops of its features and the main program that grinds them in turn.
 pub struct MachineLoop {
     pub name: String,
-    setup: FeatureSetup,
+    features: Vec<FeatureLoop>,
     ids: GaugeIds,
-    memory: LoopMemory,
-    share: Share,
-    program_file: String,
-    journal: Journal,
-    store: StoreHandle,
+    main: Arc<MainProgram>,
     metrics: Arc<Metrics>,
-    /// Wheel radius the program on the share was made for (the simulator reads it).
-    table_wheel_radius_bits: Arc<AtomicU64>,
-    /// The disk-full alarm was raised and not yet cleared.
-    disk_alarm: bool,
 }
 
 impl MachineLoop {
-    /// Sets the machine up: its journal, memory (newest from the journal, else the store:
-    /// a restart resumes where the loop was), and share. Delivers the table of the current
-    /// correction (and the main program) when the share lacks them.
+    /// Sets the machine up: each feature's loop in recipe order (its memory from its journal,
+    /// else the store; a restart resumes where each was), the resume point, and the main
+    /// program once every table is on the share.
     pub async fn start(
         name: String,
-        setup: FeatureSetup,
+        setups: Vec<FeatureSetup>,
         paths: MachinePaths,
         store: StoreHandle,
         metrics: Arc<Metrics>,
     ) -> anyhow::Result<Self> {
-        let journal =
-            Journal::open(&paths.state_dir).with_context(|| format!("machine {name}: journal"))?;
-        let memory = load_memory(&name, &setup, &journal, &store).await?;
-        if let Err(e) = std::fs::create_dir_all(&paths.share_dir) {
-            // Not fatal: the share may be a mount that comes back; deliveries wait for it. An
-            // alarm all the same: nothing reaches the control until it is there.
-            error!(machine = %name, folder = %paths.share_dir.display(), error = %e, "controller share folder cannot be created: tables wait until it can");
-            metrics.update(&name, |m| m.alarms_total += 1);
+        let main = Arc::new(MainProgram::for_features(&setups)?);
+        shaft::adopt_single_feature_layout(&paths.state_dir, &setups);
+        let ids = GaugeIds::new(&name, &setups);
+        let mut features = Vec::with_capacity(setups.len());
+        for setup in setups {
+            let feature_paths = MachinePaths {
+                share_dir: paths.share_dir.clone(),
+                state_dir: paths.state_dir.join(&setup.name),
+            };
+            let feature = FeatureLoop::start(
+                name.clone(),
+                setup,
+                feature_paths,
+                store.clone(),
+                metrics.clone(),
+                main.clone(),
+            )
+            .await
+            .with_context(|| format!("machine {name}"))?;
+            features.push(feature);
         }
-        let config = ShareConfig {
-            share_dir: paths.share_dir.clone(),
-            state_dir: paths.state_dir.join("share"),
-            table_pair: setup.table_pair,
-            keep_versions: 50,
-        };
-        let (share, report) = Share::open(config, Box::new(RealFs), Box::new(now_ms_u64))
-            .with_context(|| format!("machine {name}: cannot open the share state"))?;
-        if let Some(e) = &report.share_unavailable {
-            error!(machine = %name, error = %e, "controller share unavailable; tables wait until it is back");
-        }
-        let program_file = format!("{}.SPF", setup.program.name);
-        let ids = GaugeIds::for_machine(&name, &setup.name);
-        let mut machine = Self {
+        let machine = Self {
             name,
-            setup,
+            features,
             ids,
-            memory,
-            share,
-            program_file,
-            journal,
-            store,
+            main,
             metrics,
-            table_wheel_radius_bits: Arc::new(AtomicU64::new(0)),
-            disk_alarm: false,
         };
-        machine.after_start(&report).await?;
+        machine.write_resume_point_if_missing();
         Ok(machine)
     }
 
-    /// Reconciles the memory with the share, reports a quarantined journal, and makes sure
-    /// the share holds a table.
-    async fn after_start(&mut self, report: &crate::share::OpenReport) -> anyhow::Result<()> {
-        let at_ms = now_ms();
-        self.setup.feature = self
-            .setup
-            .feature
-            .with_wheel_radius(self.memory.wheel_radius_mm);
-        self.table_wheel_radius_bits
-            .store(self.memory.wheel_radius_mm.to_bits(), Ordering::SeqCst);
-        if let Some(pushed) = self.share.history().last_pushed().map(|v| v.record.version)
-            && pushed != self.memory.in_force_version
-        {
-            // Killed between the push and the record of it: the share is the authority.
-            info!(machine = %self.name, share_version = pushed, memory_version = self.memory.in_force_version, "version in force taken from the share's manifest");
-            self.memory.delivered(pushed);
-        }
-        let mut records = vec![self.recipe_snapshot(at_ms)];
-        for q in self.journal.quarantined() {
-            error!(machine = %self.name, line = q.line, reason = %q.reason, "journal line unreadable: moved to the quarantine file");
-            records.push(records::event(
-                &self.name,
-                at_ms,
-                EventLevel::Error,
-                EventKind::JournalQuarantined,
-                format!(
-                    "journal line {} unreadable ({}): kept in {}",
-                    q.line,
-                    q.reason,
-                    super::journal::QUARANTINE_FILE
-                ),
-            ));
-        }
-        self.record(records).await;
-        let _ = report;
-        // The share lacks the table, or its main program is not the one this camloop writes
-        // (a first start, or an upgrade): the current table goes with the main program.
-        let stale = !self.program_path().exists() || self.main_program_if_changed()?.is_some();
-        if stale && self.memory.waiting.is_none() {
-            let table =
-                compensate::current_table(self.memory.newest_learning(), &self.lobe_loop())?;
-            let reason = if self.memory.parts == 0 {
-                "nominal table"
-            } else {
-                "table restored at start"
-            };
-            let next = self.memory.newest_learning().clone();
-            let mut records = self.deliver(&table, next, reason, None).await?;
-            records.push(self.learning_record(at_ms));
-            self.record(records).await;
-        }
-        Ok(())
-    }
-
-    /// What this machine grinds, as the store keeps it (skipped there when unchanged).
-    fn recipe_snapshot(&self, at_ms: i64) -> Pending {
-        let s = &self.setup;
-        let recipe = RecipeRecord {
-            label: &s.label,
-            nominal_origin: s.nominal.origin(),
-            nominal_points: s.nominal.angles_deg().len(),
-            nominal_sha256: crate::core::turn::correction_sha256(s.nominal.lifts_mm()),
-            wheel_radius_mm: s.feature.wheel_radius_mm(),
-            x_zero_mm: s.feature.x_zero_mm(),
-            program: &s.program.name,
-            table_pair: s.table_pair,
-            table_points: s.request.points,
-            params: &s.params,
-            limits: &s.limits,
-        };
-        let kind = match s.feature {
-            compensate::Feature::Cam(_) => FeatureKind::Lobe,
-            compensate::Feature::Pin(_) => FeatureKind::Pin,
-        };
-        Pending::RecipeSnapshot {
-            machine: self.name.clone(),
-            part: s.part.clone(),
-            lobe: s.name.clone(),
-            kind,
-            recipe_json: serde_json::to_string(&recipe).unwrap_or_else(|_| "{}".into()),
-            created_at_ms: at_ms,
-        }
-    }
-
-    pub fn program_path(&self) -> PathBuf {
-        self.share.config().share_dir.join(&self.program_file)
+    /// The loops of the features, in recipe (grinding) order.
+    pub fn features(&self) -> &[FeatureLoop] {
+        &self.features
     }
 
     /// The main program's file on the share.
     pub fn main_program_path(&self) -> PathBuf {
-        self.share
-            .config()
-            .share_dir
-            .join(delivery::main_program_file(&self.setup))
+        self.share_dir().join(&self.main.file)
     }
 
-    pub fn table_wheel_radius(&self) -> Arc<AtomicU64> {
-        self.table_wheel_radius_bits.clone()
-    }
-
-    pub fn feature(&self) -> compensate::Feature {
-        self.setup.feature
-    }
-
-    /// The lobe or pin this machine grinds.
-    pub fn feature_name(&self) -> &str {
-        &self.setup.name
-    }
-
-    fn lobe_loop(&self) -> LobeLoop<'_> {
-        self.setup.lobe_loop()
+    fn share_dir(&self) -> &std::path::Path {
+        self.features[0].share_dir()
     }
 
     /// Handles one event from the gauge side. Errors are logged and recorded, never fatal:
@@ -302,139 +204,119 @@ impl MachineLoop {
         });
     }
 
-    /// Appends records to the journal (durable), then tries to write them to the store.
-    /// Returns whether the journal took them: when it cannot (disk full), the records are
-    /// lost to history, so the caller must not act on what they describe.
-    async fn record(&mut self, records: Vec<Pending>) -> bool {
-        if records.is_empty() {
-            return true;
-        }
-        let kept = match self.journal.append(&records) {
-            Ok(()) => true,
-            Err(e) => {
-                error!(machine = %self.name, error = format!("{e:#}"), "journal cannot be written: records not kept, learning holds");
-                self.metrics.update(&self.name, |m| {
-                    m.alarms_total += 1;
-                    m.journal_failing = 1;
-                });
-                false
+    /// A measurement to the loop of the feature it names; rejected here when the machine or
+    /// the feature is not this one's, or the control ground it with another feature's table.
+    async fn on_measurement(
+        &mut self,
+        raw: crate::core::measure::RawMeasurement,
+        ground_with: Option<GroundWith>,
+    ) -> anyhow::Result<Ingested> {
+        let index = match self.ids.route(&raw.header, ground_with.as_ref()) {
+            Ok(i) => i,
+            Err(reason) => {
+                // Kept and recorded by the first feature's loop: it belongs to none.
+                let sha = measurement_sha256(&raw);
+                let first = &mut self.features[0];
+                first.reject(&raw, &sha, &reason, now_ms()).await;
+                return Ok(Ingested::Rejected { reason });
             }
         };
-        let failing = u64::from(!kept || self.journal.on_reserve());
-        self.metrics
-            .update(&self.name, |m| m.journal_failing = failing);
-        self.flush_journal().await;
-        kept
+        let version = ground_with.map(|g| g.version);
+        let ingested = self.features[index]
+            .on_measurement(raw, version)
+            .await?;
+        if ingested == Ingested::Recorded {
+            self.write_resume_point(index + 2);
+        }
+        Ok(ingested)
     }
 
-    /// Whether learning must hold because the disk is full: the journal runs on its reserve
-    /// (measurements are still kept), or could not write at all. Said once when it starts.
-    async fn disk_full_hold(&mut self, at_ms: i64) -> Option<HoldReason> {
-        if !self.journal.on_reserve() {
-            return None;
+    /// A wheel dressing acts on every feature: each regenerates its table for the new radius.
+    pub async fn dress(&mut self, wheel_radius_mm: f64, source: &str) -> anyhow::Result<Dressed> {
+        let mut summary = Vec::new();
+        let mut dressed = None;
+        for (i, feature) in self.features.iter_mut().enumerate() {
+            let d = feature.dress(wheel_radius_mm, source, i == 0).await?;
+            summary.push(format!("{}: {}", feature.feature_name(), d.summary));
+            dressed.get_or_insert(d);
         }
-        if !self.disk_alarm {
-            self.disk_alarm = true;
-            error!(machine = %self.name, "disk full: the journal runs on its reserve; measurements are kept, learning stops until space is freed");
-            self.metrics.update(&self.name, |m| m.alarms_total += 1);
-            let message = format!(
-                "disk full: the journal runs on its {} MiB reserve (about 100 parts); measurements are kept, nothing is learned until space is freed",
-                super::journal::RESERVE_BYTES / (1024 * 1024)
-            );
-            let e = records::event(
-                &self.name,
-                at_ms,
-                EventLevel::Error,
-                EventKind::DiskFull,
-                message,
-            );
-            self.record(vec![e]).await;
+        let mut d = dressed.context("a machine has at least one feature")?;
+        if self.features.len() > 1 {
+            d.summary = summary.join("; ");
         }
-        Some(HoldReason::DiskFull)
+        Ok(d)
     }
 
-    async fn flush_journal(&mut self) {
-        let store = self.store.read().await.clone();
-        if let Some(store) = store
-            && let Err(e) = self.journal.flush(&store).await
-        {
-            warn!(machine = %self.name, error = format!("{e:#}"), "database unavailable: records kept in the journal");
-        }
-        let pending = self.journal.pending().len() as u64;
-        self.metrics
-            .update(&self.name, |m| m.journal_pending = pending);
+    /// Rolls feature `lobe` back to its `version`.
+    pub async fn rollback(
+        &mut self,
+        lobe: &str,
+        version: u64,
+    ) -> Result<RolledBack, RollbackError> {
+        let Some(feature) = self.features.iter_mut().find(|f| f.feature_name() == lobe) else {
+            return Err(RollbackError::UnknownFeature {
+                machine: self.name.clone(),
+                grinds: self.feature_names().join(", "),
+                asked: lobe.to_string(),
+            });
+        };
+        feature.rollback(lobe, version).await
     }
 
-    /// The loop's memory as a record; through the journal it is also what a restart resumes
-    /// from.
-    fn learning_record(&self, at_ms: i64) -> Pending {
-        Pending::Learning {
-            machine: self.name.clone(),
-            lobe: self.setup.name.clone(),
-            state: self.memory.clone(),
-            saved_at_ms: at_ms,
+    /// Rolls several features back together (a whole part: one version of each). Every
+    /// version is checked first; nothing is pushed unless all of them can be.
+    pub async fn rollback_part(
+        &mut self,
+        versions: &[(String, u64)],
+    ) -> Result<Vec<RolledBack>, RollbackError> {
+        for (lobe, version) in versions {
+            let names = self.feature_names().join(", ");
+            let Some(feature) = self.features.iter_mut().find(|f| f.feature_name() == lobe)
+            else {
+                return Err(RollbackError::UnknownFeature {
+                    machine: self.name.clone(),
+                    grinds: names,
+                    asked: lobe.clone(),
+                });
+            };
+            feature.rollback_program(lobe, *version).await?;
+        }
+        let mut done = Vec::new();
+        for (lobe, version) in versions {
+            done.push(self.rollback(lobe, *version).await?);
+        }
+        Ok(done)
+    }
+
+    pub fn feature_names(&self) -> Vec<&str> {
+        self.features.iter().map(|f| f.feature_name()).collect()
+    }
+
+    /// Retries what waits, feature by feature.
+    pub async fn retry(&mut self) {
+        for feature in &mut self.features {
+            feature.retry().await;
         }
     }
-}
 
-/// The recipe snapshot's content: what decides the tables of this feature.
-#[derive(serde::Serialize)]
-struct RecipeRecord<'a> {
-    label: &'a str,
-    nominal_origin: &'a str,
-    nominal_points: usize,
-    /// SHA-256 of the nominal lift values (exact bits).
-    nominal_sha256: String,
-    wheel_radius_mm: f64,
-    x_zero_mm: f64,
-    program: &'a str,
-    table_pair: (u32, u32),
-    table_points: usize,
-    params: &'a crate::core::learn::LearningParams,
-    limits: &'a compensate::AxisLimits,
-}
+    /// Writes the resume point: `next` is the feature after the one just gauged (from 1;
+    /// past the last, a new shaft starts at 1).
+    fn write_resume_point(&self, next: usize) {
+        let first = if next > self.features.len() { 1 } else { next };
+        if let Err(e) = shaft::write_resume(self.share_dir(), first) {
+            warn!(machine = %self.name, error = %e, "resume point not written to the share");
+        }
+    }
 
-/// The newest memory: the journal's (it holds what the store may not have yet, and always
-/// the newest learning state), else the store's. A store that answers with an error is an
-/// error here, never "no state": starting from nominal would silently forget the loop.
-async fn load_memory(
-    name: &str,
-    setup: &FeatureSetup,
-    journal: &Journal,
-    store: &StoreHandle,
-) -> anyhow::Result<LoopMemory> {
-    let records = journal.records();
-    let newest = records.iter().rposition(|r| {
-        matches!(r, Pending::Learning { machine, lobe, .. } if machine == name && *lobe == setup.name)
-    });
-    if let Some(i) = newest
-        && let Pending::Learning { state, .. } = &records[i]
-    {
-        // Measurements recorded after it (the process died before their learning record)
-        // still count, and are still known, so a replay does not learn them again.
-        let mut memory = state.clone();
-        for r in &records[i + 1..] {
-            if let Pending::Measurement { sha256, .. } = r {
-                memory.parts += 1;
-                memory.remember(sha256.clone());
+    /// A new share gets the resume point of a new shaft; one already there (camloop's, or
+    /// an operator's) is left as it is.
+    fn write_resume_point_if_missing(&self) {
+        let path = shaft::resume_path(self.share_dir());
+        if !path.exists() {
+            match shaft::write_resume(self.share_dir(), 1) {
+                Ok(()) => info!(machine = %self.name, "resume point written: a new shaft starts at the first feature"),
+                Err(e) => warn!(machine = %self.name, error = %e, "resume point not written to the share"),
             }
         }
-        return Ok(memory);
-    }
-    let Some(store) = store.read().await.clone() else {
-        return Ok(LoopMemory::new(setup.feature.wheel_radius_mm()));
-    };
-    let stored = store
-        .load_learning_state(name, &setup.name)
-        .await
-        .with_context(|| format!("machine {name}: cannot read the stored learning state"))?;
-    match stored {
-        None => Ok(LoopMemory::new(setup.feature.wheel_radius_mm())),
-        Some(s) => serde_json::from_str(&s.state_json).with_context(|| {
-            format!(
-                "machine {name} {}: the stored learning state is unreadable",
-                setup.name
-            )
-        }),
     }
 }

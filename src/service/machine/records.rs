@@ -28,6 +28,11 @@ pub(super) fn outcome_text(outcome: &StepOutcome) -> String {
         StepOutcome::Updated { max_error_um, .. } => {
             format!("learned from max error {max_error_um:.2} µm")
         }
+        StepOutcome::Limited {
+            max_error_um,
+            bound,
+            ..
+        } => format!("learned from max error {max_error_um:.2} µm, {bound}"),
         StepOutcome::InTolerance { max_error_um } => format!("in tolerance ({max_error_um:.2} µm)"),
         StepOutcome::Frozen { .. } => "learning frozen".to_string(),
         StepOutcome::Reverted { to_iteration, .. } => {

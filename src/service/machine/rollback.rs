@@ -4,7 +4,8 @@
 use super::super::journal::{EventKind, Pending};
 use super::memory::TableLearning;
 use super::records::event;
-use super::{MachineLoop, now_ms, now_ms_u64};
+use super::FeatureLoop;
+use crate::clock::{now_ms, now_ms_u64};
 use crate::core::program::retarget_table_program;
 use crate::share::{ProgramFile, PushRequest};
 use crate::store::EventLevel;
@@ -41,7 +42,7 @@ pub struct RolledBack {
     pub summary: String,
 }
 
-impl MachineLoop {
+impl FeatureLoop {
     /// Delivers the program of version `version` of feature `lobe` again. The text comes
     /// from the share's own kept copy where it still has it (checked against its SHA-256),
     /// else from the history store; either way it is retargeted to the free table number.
@@ -63,6 +64,7 @@ impl MachineLoop {
         let mut next = self.memory.learning.clone();
         if learning.correction_um.len() == next.correction_um.len() {
             next.correction_um = learning.correction_um.clone();
+            next.timing_correction_deg = learning.timing_correction_deg;
             next.recent_max_error_um.clear();
         }
         let request = PushRequest {
@@ -113,7 +115,7 @@ impl MachineLoop {
     }
 
     /// The program of `version` retargeted to the free table number, with its learning.
-    async fn rollback_program(
+    pub(super) async fn rollback_program(
         &mut self,
         lobe: &str,
         version: u64,

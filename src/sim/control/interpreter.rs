@@ -6,7 +6,7 @@ use super::statements::{
     is_name, proc_line, real_var, table_number, undefined_variable, unsupported,
 };
 use super::{
-    COUP_ACT_MASTER_VALUE, ControlError, ControlFault, Coupled, Coupling, MAX_CALL_DEPTH,
+    AXIAL_AXIS, COUP_ACT_MASTER_VALUE, ControlError, ControlFault, Coupled, Coupling, MAX_CALL_DEPTH,
     program_name, table_shape,
 };
 use crate::core::program::{ParsedTable, TableBlocks, parse_ctabdef};
@@ -107,8 +107,8 @@ impl Run<'_> {
                 Ok(None)
             }
             "ENDIF" => Err(invalid("ENDIF without IF").into()),
-            _ if code.starts_with("IF ") => self.if_block(code, lines, i, open_if),
-            _ if code.starts_with("CTABDEF(") => self.table(code, *i, lines, i),
+            _ if code.starts_with("IF ") => self.if_block(code, frame, lines, i, open_if),
+            _ if code.starts_with("CTABDEF(") => self.table(code, &frame.program, lines, i),
             _ if code.starts_with("DEF ") => define(code, frame),
             _ if code.starts_with("EXTERN ") => declare(code, frame),
             _ if code.starts_with("PROC ") => proc_line(code, frame, depth),
@@ -123,20 +123,36 @@ impl Run<'_> {
         }
     }
 
-    /// `IF $AA_COUP_ACT[X]<>0`: runs on, or skips to the matching `ENDIF`.
-    fn if_block(&mut self, code: &str, lines: &[&str], i: &mut usize, open_if: &mut bool) -> Step {
+    /// `IF $AA_COUP_ACT[X]<>0` or `IF <INT variable><=<integer>`: runs on, or skips to the
+    /// matching `ENDIF`.
+    fn if_block(
+        &mut self,
+        code: &str,
+        frame: &Frame,
+        lines: &[&str],
+        i: &mut usize,
+        open_if: &mut bool,
+    ) -> Step {
         if *open_if {
             return Err(unsupported(code).into());
         }
-        let axis = code
+        let holds = if let Some(axis) = code
             .strip_prefix("IF $AA_COUP_ACT[")
             .and_then(|r| r.strip_suffix("]<>0"))
-            .ok_or_else(|| unsupported(code))?;
-        let active = match &self.control.coupling {
-            Some(c) if c.following == axis => COUP_ACT_MASTER_VALUE,
-            _ => 0,
+        {
+            match &self.control.coupling {
+                Some(c) if c.following == axis => COUP_ACT_MASTER_VALUE != 0,
+                _ => false,
+            }
+        } else {
+            let (var, bound) = code
+                .strip_prefix("IF ")
+                .and_then(|r| r.split_once("<="))
+                .ok_or_else(|| unsupported(code))?;
+            let bound: i64 = bound.trim().parse().map_err(|_| unsupported(code))?;
+            int_arg(var.trim(), frame)? <= bound
         };
-        if active != 0 {
+        if holds {
             *open_if = true;
             return Ok(None);
         }
@@ -154,8 +170,8 @@ impl Run<'_> {
     }
 
     /// `CTABDEF(…)` … `CTABEND`: reads the blocks and stores the table under its number.
-    fn table(&mut self, code: &str, line: usize, lines: &[&str], i: &mut usize) -> Step {
-        let def = parse_ctabdef(code, line).map_err(|e| invalid(&e.reason))?;
+    fn table(&mut self, code: &str, program: &str, lines: &[&str], i: &mut usize) -> Step {
+        let def = parse_ctabdef(code, *i).map_err(|e| invalid(&e.reason))?;
         if def.periodicity != "1" {
             return Err(unsupported(code).into());
         }
@@ -178,7 +194,7 @@ impl Run<'_> {
                 let (following_axis, leading_axis, shape) = blocks.finish();
                 check_increasing(def.number, &shape).map_err(|f| Halt::Line(f, *i))?;
                 let table = ParsedTable {
-                    name: String::new(),
+                    name: program.to_owned(),
                     table_number: def.number,
                     following_axis,
                     leading_axis,
@@ -264,8 +280,15 @@ impl Run<'_> {
             && c.leading == axis
             && let Some(table) = self.control.tables.get(&c.table)
         {
-            self.ground = Some(Coupled {
+            self.ground.push(Coupled {
                 table_number: c.table,
+                defined_by: table.name.clone(),
+                z_mm: self
+                    .control
+                    .positions
+                    .get(AXIAL_AXIS)
+                    .copied()
+                    .unwrap_or(0.0),
                 shape: table_shape(&table.shape),
                 c_speed_rpm: feed_deg_min / 360.0,
                 revolutions: travel_deg / 360.0,
@@ -275,10 +298,10 @@ impl Run<'_> {
         Ok(None)
     }
 
-    /// `G90 G71` or `G90 G1 X=<var or number> F=<number>`.
+    /// `G90 G71`, `G90 G1 X=<var or number> F=<number>` or `G0 <axis>=<number>`.
     fn motion(&mut self, code: &str, frame: &Frame) -> Step {
         for word in code.split_whitespace() {
-            if matches!(word, "G90" | "G71" | "G1") {
+            if matches!(word, "G90" | "G71" | "G1" | "G0") {
                 continue;
             }
             let Some((address, value)) = word.split_once('=') else {

@@ -65,7 +65,8 @@ pub(super) type Step = Result<Option<End>, Halt>;
 pub(super) struct Run<'c> {
     pub(super) control: &'c mut Control,
     pub(super) load: &'c dyn Fn(&str) -> Option<String>,
-    pub(super) ground: Option<Coupled>,
+    /// Every grind of the run, in order.
+    pub(super) ground: Vec<Coupled>,
 }
 
 /// `DEF REAL a, b` / `DEF INT a`.

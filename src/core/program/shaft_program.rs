@@ -1,0 +1,186 @@
+//! The main program of a whole shaft: every lobe or pin in turn (retract, Z to its station,
+//! define its newest table, couple, grind, uncouple), resumable at the first unfinished
+//! feature; and the small resume subprogram camloop rewrites after each gauged feature.
+
+use super::ProgramSettings;
+use super::main_program::MainProgramSettings;
+use super::names::validate_axis_name;
+use super::settings::{SettingError, SettingsErrors, check_comments, check_positive};
+use super::table::{NUMBER_VAR, fmt_fixed, line};
+
+/// The resume subprogram's name (file `CAMLOOP_RESUME.SPF`).
+pub const RESUME_PROGRAM: &str = "CAMLOOP_RESUME";
+/// The variable the resume subprogram sets: the first feature (from 1) to grind.
+const FROM_VAR: &str = "CL_FROM";
+
+/// One feature of the shaft as the main program grinds it.
+#[derive(Debug, Clone)]
+pub struct Station<'a> {
+    /// The feature's table settings (its subprogram name, axes, decimals).
+    pub table: &'a ProgramSettings,
+    /// The feature's name, for the comment.
+    pub label: &'a str,
+    /// Axial position, mm.
+    pub z_mm: f64,
+}
+
+/// Renders the main program of a shaft. The sequence per feature is the one-feature
+/// program's (see [`super::render_main_program`]), wrapped in `IF CL_FROM<=k … ENDIF` so a run
+/// starts at the feature the resume subprogram names, and preceded by a rapid retract of X to
+/// `clear_x_mm` and a rapid move of the axial axis to the station: Z never moves with the
+/// wheel at the part.
+///
+/// ```text
+/// DEF REAL CL_C, CL_X, CL_SLOPE
+/// DEF INT CL_TNO, CL_FROM
+/// EXTERN CAMLOOP_RESUME(VAR INT)
+/// EXTERN <TABLE_k>(VAR INT)            ; one per feature
+/// IF $AA_COUP_ACT[X]<>0 … LEADOF … ENDIF
+/// CAMLOOP_RESUME(CL_FROM)
+/// IF CL_FROM<=k                        ; feature k
+/// G0 X=<clear>
+/// G0 Z=<station k>
+/// <TABLE_k>(CL_TNO)
+/// STOPRE … LEADON(X,C,CL_TNO) POS[C]=IC(…) FA[C]=… WAITP(C) LEADOF(X,C)
+/// ENDIF
+/// G0 X=<clear>
+/// M30
+/// ```
+pub fn render_shaft_program(
+    main: &MainProgramSettings,
+    stations: &[Station<'_>],
+    clear_x_mm: f64,
+) -> Result<String, SettingsErrors> {
+    let mut errors = Vec::new();
+    if stations.is_empty() {
+        errors.push(SettingError::NoFeatures);
+    }
+    let mut resolved = Vec::new();
+    for s in stations {
+        match s.table.resolve_for_main() {
+            Ok(r) => resolved.push(r),
+            Err(e) => errors.extend(e.0),
+        }
+        if !s.z_mm.is_finite() {
+            errors.push(SettingError::NotFinite {
+                field: "z_mm",
+                value: s.z_mm,
+            });
+        }
+    }
+    if let Err(e) = validate_axis_name("axial", &main.axial_axis) {
+        errors.push(e.into());
+    }
+    check_positive(&mut errors, "revolutions", main.revolutions);
+    check_positive(&mut errors, "c_speed_rpm", main.c_speed_rpm);
+    check_positive(&mut errors, "x_feed_mm_min", main.x_feed_mm_min);
+    check_comments(&mut errors, &main.comment_lines);
+    if !clear_x_mm.is_finite() {
+        errors.push(SettingError::NotFinite {
+            field: "clear_x_mm",
+            value: clear_x_mm,
+        });
+    }
+    if !errors.is_empty() {
+        return Err(SettingsErrors(errors));
+    }
+    let first = &resolved[0];
+    let (x, c, n) = (&first.following, &first.leading, NUMBER_VAR);
+    let cd = usize::from(first.settings.c_decimals);
+    let xd = usize::from(first.settings.x_decimals);
+    let z = &main.axial_axis;
+    let mut out = String::new();
+    line(&mut out, format_args!("%_N_{}_MPF", main.name));
+    out.push_str(";$PATH=/_N_MPF_DIR\n");
+    out.push_str("DEF REAL CL_C, CL_X, CL_SLOPE\n");
+    line(&mut out, format_args!("DEF INT {n}, {FROM_VAR}"));
+    line(&mut out, format_args!("EXTERN {RESUME_PROGRAM}(VAR INT)"));
+    for r in &resolved {
+        line(&mut out, format_args!("EXTERN {}(VAR INT)", r.name));
+    }
+    for comment in &main.comment_lines {
+        line(&mut out, format_args!("; {comment}"));
+    }
+    line(
+        &mut out,
+        format_args!("IF $AA_COUP_ACT[{x}]<>0 ; a coupling left active by an aborted run"),
+    );
+    line(&mut out, format_args!("LEADOF({x},{c})"));
+    out.push_str("ENDIF\n");
+    line(
+        &mut out,
+        format_args!(
+            "{RESUME_PROGRAM}({FROM_VAR}) ; first feature to grind: 1 for a new shaft"
+        ),
+    );
+    let clear = fmt_fixed(clear_x_mm, xd);
+    for (k, (s, r)) in stations.iter().zip(&resolved).enumerate() {
+        let t = &r.name;
+        line(
+            &mut out,
+            format_args!("IF {FROM_VAR}<={} ; feature {} {}", k + 1, k + 1, s.label),
+        );
+        line(&mut out, format_args!("G0 {x}={clear} ; clear of the part"));
+        line(
+            &mut out,
+            format_args!("G0 {z}={} ; station of {}", fmt_fixed(s.z_mm, 3), s.label),
+        );
+        line(
+            &mut out,
+            format_args!("{t}({n}) ; defines the newest curve table, returns its number"),
+        );
+        out.push_str("STOPRE\n");
+        line(&mut out, format_args!("CL_C=$AA_IW[{c}]"));
+        line(&mut out, format_args!("CL_X=CTAB(CL_C,{n},CL_SLOPE)"));
+        line(
+            &mut out,
+            format_args!("G90 G1 {x}=CL_X F={}", fmt_fixed(main.x_feed_mm_min, 3)),
+        );
+        line(&mut out, format_args!("LEADON({x},{c},{n})"));
+        line(
+            &mut out,
+            format_args!(
+                "POS[{c}]=IC({}) FA[{c}]={} ; {} rev at {} rpm",
+                fmt_fixed(360.0 * main.revolutions, cd),
+                fmt_fixed(360.0 * main.c_speed_rpm, 3),
+                main.revolutions,
+                main.c_speed_rpm
+            ),
+        );
+        line(&mut out, format_args!("WAITP({c})"));
+        line(&mut out, format_args!("LEADOF({x},{c})"));
+        out.push_str("ENDIF\n");
+    }
+    line(&mut out, format_args!("G0 {x}={clear}"));
+    out.push_str("M30\n");
+    Ok(out)
+}
+
+/// The resume subprogram: hands the main program the first feature to grind (from 1).
+/// camloop rewrites it after every gauged feature; an operator may write it by hand.
+pub fn render_resume_program(first_feature: usize) -> String {
+    let mut out = String::new();
+    line(&mut out, format_args!("%_N_{RESUME_PROGRAM}_SPF"));
+    out.push_str(";$PATH=/_N_SPF_DIR\n");
+    line(
+        &mut out,
+        format_args!("PROC {RESUME_PROGRAM}(VAR INT {FROM_VAR}) SAVE"),
+    );
+    out.push_str("; written by camloop after each gauged feature: the first feature of the shaft\n");
+    out.push_str("; in the machine not yet ground and gauged (1: a new shaft)\n");
+    line(&mut out, format_args!("{FROM_VAR}={first_feature}"));
+    out.push_str("RET\n");
+    out
+}
+
+/// The first feature a resume subprogram names, if `text` is one.
+pub fn parse_resume_program(text: &str) -> Option<usize> {
+    text.lines().find_map(|l| {
+        let code = l.split(';').next()?.trim();
+        code.strip_prefix(FROM_VAR)?
+            .strip_prefix('=')?
+            .trim()
+            .parse()
+            .ok()
+    })
+}

@@ -1,0 +1,350 @@
+//! One feature's loop (a lobe or a pin of the machine's recipe), with everything it owns:
+//! its journal, learning memory, share state, table program and numbers. Features of a
+//! machine share nothing but the share folder and the main program, so no feature's state
+//! can mix with another's.
+
+use super::super::journal::{EventKind, Journal, Pending};
+use super::super::metrics::Metrics;
+use super::memory::LoopMemory;
+use super::{MachinePaths, MainProgram, StoreHandle, records};
+use crate::clock::{now_ms, now_ms_u64};
+use crate::core::compensate::{self, LobeLoop};
+use crate::core::turn::HoldReason;
+use crate::recipe::FeatureSetup;
+use crate::share::{RealFs, Share, ShareConfig};
+use crate::store::{EventLevel, FeatureKind};
+use anyhow::Context;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use tracing::{error, info, warn};
+
+/// One feature's loop with everything it owns.
+pub struct FeatureLoop {
+    /// The machine's name (records and metrics are the machine's, with the feature).
+    pub name: String,
+    pub(super) setup: FeatureSetup,
+    pub(super) memory: LoopMemory,
+    pub(super) share: Share,
+    pub(super) program_file: String,
+    pub(super) journal: Journal,
+    pub(super) store: StoreHandle,
+    pub(super) metrics: Arc<Metrics>,
+    pub(super) main: Arc<MainProgram>,
+    /// Wheel radius the program on the share was made for (the simulator reads it).
+    pub(super) table_wheel_radius_bits: Arc<AtomicU64>,
+    /// The disk-full alarm was raised and not yet cleared.
+    pub(super) disk_alarm: bool,
+}
+
+impl FeatureLoop {
+    /// Sets the machine up: its journal, memory (newest from the journal, else the store:
+    /// a restart resumes where the loop was), and share. Delivers the table of the current
+    /// correction (and the main program) when the share lacks them.
+    pub(super) async fn start(
+        name: String,
+        setup: FeatureSetup,
+        paths: MachinePaths,
+        store: StoreHandle,
+        metrics: Arc<Metrics>,
+        main: Arc<MainProgram>,
+    ) -> anyhow::Result<Self> {
+        let journal =
+            Journal::open(&paths.state_dir).with_context(|| format!("machine {name}: journal"))?;
+        let memory = load_memory(&name, &setup, &journal, &store).await?;
+        if let Err(e) = std::fs::create_dir_all(&paths.share_dir) {
+            // Not fatal: the share may be a mount that comes back; deliveries wait for it. An
+            // alarm all the same: nothing reaches the control until it is there.
+            error!(machine = %name, folder = %paths.share_dir.display(), error = %e, "controller share folder cannot be created: tables wait until it can");
+            metrics.update(&name, |m| m.alarms_total += 1);
+        }
+        let config = ShareConfig {
+            share_dir: paths.share_dir.clone(),
+            state_dir: paths.state_dir.join("share"),
+            table_pair: setup.table_pair,
+            keep_versions: 50,
+        };
+        let (share, report) = Share::open(config, Box::new(RealFs), Box::new(now_ms_u64))
+            .with_context(|| format!("machine {name}: cannot open the share state"))?;
+        if let Some(e) = &report.share_unavailable {
+            error!(machine = %name, error = %e, "controller share unavailable; tables wait until it is back");
+        }
+        let program_file = format!("{}.SPF", setup.program.name);
+        let mut machine = Self {
+            name,
+            setup,
+            memory,
+            share,
+            program_file,
+            journal,
+            store,
+            metrics,
+            main,
+            table_wheel_radius_bits: Arc::new(AtomicU64::new(0)),
+            disk_alarm: false,
+        };
+        machine.after_start(&report).await?;
+        Ok(machine)
+    }
+
+    /// Reconciles the memory with the share, reports a quarantined journal, and makes sure
+    /// the share holds a table.
+    async fn after_start(&mut self, report: &crate::share::OpenReport) -> anyhow::Result<()> {
+        let at_ms = now_ms();
+        self.setup.feature = self
+            .setup
+            .feature
+            .with_wheel_radius(self.memory.wheel_radius_mm);
+        self.table_wheel_radius_bits
+            .store(self.memory.wheel_radius_mm.to_bits(), Ordering::SeqCst);
+        if let Some(pushed) = self.share.history().last_pushed().map(|v| v.record.version)
+            && pushed != self.memory.in_force_version
+        {
+            // Killed between the push and the record of it: the share is the authority.
+            info!(machine = %self.name, share_version = pushed, memory_version = self.memory.in_force_version, "version in force taken from the share's manifest");
+            self.memory.delivered(pushed);
+        }
+        let mut records = vec![self.recipe_snapshot(at_ms)];
+        for q in self.journal.quarantined() {
+            error!(machine = %self.name, line = q.line, reason = %q.reason, "journal line unreadable: moved to the quarantine file");
+            records.push(records::event(
+                &self.name,
+                at_ms,
+                EventLevel::Error,
+                EventKind::JournalQuarantined,
+                format!(
+                    "journal line {} unreadable ({}): kept in {}",
+                    q.line,
+                    q.reason,
+                    super::super::journal::QUARANTINE_FILE
+                ),
+            ));
+        }
+        self.record(records).await;
+        self.publish_start_status();
+        let _ = report;
+        // The share lacks the table, or its main program is not the one this camloop writes
+        // (a first start, or an upgrade): the current table goes with the main program.
+        let stale = !self.program_path().exists() || self.main_program_if_changed()?.is_some();
+        if stale && self.memory.waiting.is_none() {
+            let table =
+                compensate::current_table(self.memory.newest_learning(), &self.lobe_loop())?;
+            let reason = if self.memory.parts == 0 {
+                "nominal table"
+            } else {
+                "table restored at start"
+            };
+            let next = self.memory.newest_learning().clone();
+            let mut records = self.deliver(&table, next, reason, None).await?;
+            records.push(self.learning_record(at_ms));
+            self.record(records).await;
+        }
+        Ok(())
+    }
+
+    /// What this machine grinds, as the store keeps it (skipped there when unchanged).
+    fn recipe_snapshot(&self, at_ms: i64) -> Pending {
+        let s = &self.setup;
+        let recipe = RecipeRecord {
+            label: &s.label,
+            nominal_origin: s.nominal.origin(),
+            nominal_points: s.nominal.angles_deg().len(),
+            nominal_sha256: crate::core::turn::correction_sha256(s.nominal.lifts_mm()),
+            wheel_radius_mm: s.feature.wheel_radius_mm(),
+            x_zero_mm: s.feature.x_zero_mm(),
+            program: &s.program.name,
+            table_pair: s.table_pair,
+            table_points: s.request.points,
+            params: &s.params,
+            limits: &s.limits,
+        };
+        let kind = match s.feature {
+            compensate::Feature::Cam(_) => FeatureKind::Lobe,
+            compensate::Feature::Pin(_) => FeatureKind::Pin,
+        };
+        Pending::RecipeSnapshot {
+            machine: self.name.clone(),
+            part: s.part.clone(),
+            lobe: s.name.clone(),
+            kind,
+            recipe_json: serde_json::to_string(&recipe).unwrap_or_else(|_| "{}".into()),
+            created_at_ms: at_ms,
+        }
+    }
+
+    pub fn program_path(&self) -> PathBuf {
+        self.share.config().share_dir.join(&self.program_file)
+    }
+
+    /// The main program's file on the share.
+    pub fn main_program_path(&self) -> PathBuf {
+        self.share.config().share_dir.join(&self.main.file)
+    }
+
+    /// The share folder.
+    pub fn share_dir(&self) -> &std::path::Path {
+        &self.share.config().share_dir
+    }
+
+    /// What the feature's loop remembers (for status and tests).
+    pub fn memory(&self) -> &LoopMemory {
+        &self.memory
+    }
+
+    pub fn setup(&self) -> &FeatureSetup {
+        &self.setup
+    }
+
+    pub fn table_wheel_radius(&self) -> Arc<AtomicU64> {
+        self.table_wheel_radius_bits.clone()
+    }
+
+    pub fn feature(&self) -> compensate::Feature {
+        self.setup.feature
+    }
+
+    /// The lobe or pin this loop grinds.
+    pub fn feature_name(&self) -> &str {
+        &self.setup.name
+    }
+
+    pub(super) fn lobe_loop(&self) -> LobeLoop<'_> {
+        self.setup.lobe_loop()
+    }
+
+    /// Appends records to the journal (durable), then tries to write them to the store.
+    /// Returns whether the journal took them: when it cannot (disk full), the records are
+    /// lost to history, so the caller must not act on what they describe.
+    pub(super) async fn record(&mut self, records: Vec<Pending>) -> bool {
+        if records.is_empty() {
+            return true;
+        }
+        let kept = match self.journal.append(&records) {
+            Ok(()) => true,
+            Err(e) => {
+                error!(machine = %self.name, error = format!("{e:#}"), "journal cannot be written: records not kept, learning holds");
+                self.metrics.update(&self.name, |m| {
+                    m.alarms_total += 1;
+                    m.journal_failing = 1;
+                });
+                false
+            }
+        };
+        let failing = u64::from(!kept || self.journal.on_reserve());
+        self.metrics
+            .update(&self.name, |m| m.journal_failing = failing);
+        self.flush_journal().await;
+        kept
+    }
+
+    /// Whether learning must hold because the disk is full: the journal runs on its reserve
+    /// (measurements are still kept), or could not write at all. Said once when it starts.
+    pub(super) async fn disk_full_hold(&mut self, at_ms: i64) -> Option<HoldReason> {
+        if !self.journal.on_reserve() {
+            return None;
+        }
+        if !self.disk_alarm {
+            self.disk_alarm = true;
+            error!(machine = %self.name, "disk full: the journal runs on its reserve; measurements are kept, learning stops until space is freed");
+            self.metrics.update(&self.name, |m| m.alarms_total += 1);
+            let message = format!(
+                "disk full: the journal runs on its {} MiB reserve (about 100 parts); measurements are kept, nothing is learned until space is freed",
+                super::super::journal::RESERVE_BYTES / (1024 * 1024)
+            );
+            let e = records::event(
+                &self.name,
+                at_ms,
+                EventLevel::Error,
+                EventKind::DiskFull,
+                message,
+            );
+            self.record(vec![e]).await;
+        }
+        Some(HoldReason::DiskFull)
+    }
+
+    pub(super) async fn flush_journal(&mut self) {
+        let store = self.store.read().await.clone();
+        if let Some(store) = store
+            && let Err(e) = self.journal.flush(&store).await
+        {
+            warn!(machine = %self.name, error = format!("{e:#}"), "database unavailable: records kept in the journal");
+        }
+        let pending = self.journal.pending().len() as u64;
+        self.metrics
+            .update(&self.name, |m| m.journal_pending = pending);
+    }
+
+    /// The loop's memory as a record; through the journal it is also what a restart resumes
+    /// from.
+    pub(super) fn learning_record(&self, at_ms: i64) -> Pending {
+        Pending::Learning {
+            machine: self.name.clone(),
+            lobe: self.setup.name.clone(),
+            state: self.memory.clone(),
+            saved_at_ms: at_ms,
+        }
+    }
+}
+
+/// The recipe snapshot's content: what decides the tables of this feature.
+#[derive(serde::Serialize)]
+struct RecipeRecord<'a> {
+    label: &'a str,
+    nominal_origin: &'a str,
+    nominal_points: usize,
+    /// SHA-256 of the nominal lift values (exact bits).
+    nominal_sha256: String,
+    wheel_radius_mm: f64,
+    x_zero_mm: f64,
+    program: &'a str,
+    table_pair: (u32, u32),
+    table_points: usize,
+    params: &'a crate::core::learn::LearningParams,
+    limits: &'a compensate::AxisLimits,
+}
+
+/// The newest memory: the journal's (it holds what the store may not have yet, and always
+/// the newest learning state), else the store's. A store that answers with an error is an
+/// error here, never "no state": starting from nominal would silently forget the loop.
+async fn load_memory(
+    name: &str,
+    setup: &FeatureSetup,
+    journal: &Journal,
+    store: &StoreHandle,
+) -> anyhow::Result<LoopMemory> {
+    let records = journal.records();
+    let newest = records.iter().rposition(|r| {
+        matches!(r, Pending::Learning { machine, lobe, .. } if machine == name && *lobe == setup.name)
+    });
+    if let Some(i) = newest
+        && let Pending::Learning { state, .. } = &records[i]
+    {
+        // Measurements recorded after it (the process died before their learning record)
+        // still count, and are still known, so a replay does not learn them again.
+        let mut memory = state.clone();
+        for r in &records[i + 1..] {
+            if let Pending::Measurement { sha256, .. } = r {
+                memory.parts += 1;
+                memory.remember(sha256.clone());
+            }
+        }
+        return Ok(memory);
+    }
+    let Some(store) = store.read().await.clone() else {
+        return Ok(LoopMemory::new(setup.feature.wheel_radius_mm()));
+    };
+    let stored = store
+        .load_learning_state(name, &setup.name)
+        .await
+        .with_context(|| format!("machine {name}: cannot read the stored learning state"))?;
+    match stored {
+        None => Ok(LoopMemory::new(setup.feature.wheel_radius_mm())),
+        Some(s) => serde_json::from_str(&s.state_json).with_context(|| {
+            format!(
+                "machine {name} {}: the stored learning state is unreadable",
+                setup.name
+            )
+        }),
+    }
+}
