@@ -171,6 +171,9 @@ pub enum GuardError {
     },
 }
 
+/// Rounding slack below the deepest correction, mm (see [`commanded_lift`]).
+const FLOOR_SLACK_MM: f64 = 1e-6;
+
 /// The commanded lift: nominal plus the correction (µm on a uniform gauge grid), evaluated on
 /// the nominal's knots, or on the gauge grid when that is finer. The correction is carried
 /// between grids by its periodic spline. Lift may go below the base circle by as much as the
@@ -192,7 +195,11 @@ pub fn commanded_lift(
         .iter()
         .map(|a| nominal_curve.lift_mm(*a) + correction.eval(a.to_radians()).value / 1000.0)
         .collect();
-    let floor_mm = -correction_um.iter().fold(0.0f64, |m, u| m.max(u.abs())) / 1000.0;
+    // The largest |correction| is the deepest the lift may go. Where it falls on the base
+    // circle, the nominal spline's value there (0 up to rounding, ±1e-18 mm) must not make
+    // the lift read below it: 1 nm of slack, far below any table's resolution.
+    let floor_mm =
+        -correction_um.iter().fold(0.0f64, |m, u| m.max(u.abs())) / 1000.0 - FLOOR_SLACK_MM;
     LiftTable::from_points_with_floor(angles_deg, lifts, nominal.origin(), floor_mm)
 }
 
@@ -345,6 +352,24 @@ mod tests {
             })
             .collect();
         LiftTable::from_points(angles, lifts, "demo").unwrap()
+    }
+
+    /// The deepest correction anywhere, the base circle included: the corrected lift is a
+    /// valid table at every position of it (the service once refused such a table on the
+    /// demo exhaust lobe, by a rounding hair at 353°; the floor now has 1 nm of slack).
+    #[test]
+    fn the_deepest_correction_on_the_base_circle_is_a_valid_lift() {
+        let text = include_str!("../../config/parts/demo-exhaust-lobe.csv");
+        let nominal = LiftTable::parse_csv(text, "exhaust").unwrap();
+        for at in 0..360 {
+            let correction: Vec<f64> = (0..360)
+                .map(|j| if j == at { -3.7614780203374214 } else { -3.0 })
+                .collect();
+            let cmd = commanded_lift(&nominal, &correction).unwrap_or_else(|e| panic!("{at}°: {e}"));
+            let j = cmd.angles_deg().iter().position(|a| *a == f64::from(at)).unwrap();
+            let expected = nominal.lifts_mm()[j] - 3.7614780203374214e-3;
+            assert!((cmd.lifts_mm()[j] - expected).abs() < 1e-12);
+        }
     }
 
     #[test]

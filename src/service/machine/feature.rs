@@ -31,6 +31,8 @@ pub struct FeatureLoop {
     pub(super) store: StoreHandle,
     pub(super) metrics: Arc<Metrics>,
     pub(super) main: Arc<MainProgram>,
+    /// The newest part's line, for the machine's line per shaft.
+    pub(super) last_line: Option<super::ingest::PartLine>,
     /// Wheel radius the program on the share was made for (the simulator reads it).
     pub(super) table_wheel_radius_bits: Arc<AtomicU64>,
     /// The disk-full alarm was raised and not yet cleared.
@@ -80,6 +82,7 @@ impl FeatureLoop {
             store,
             metrics,
             main,
+            last_line: None,
             table_wheel_radius_bits: Arc::new(AtomicU64::new(0)),
             disk_alarm: false,
         };

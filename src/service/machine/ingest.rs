@@ -10,7 +10,7 @@ use crate::core::learn::StepOutcome;
 use crate::core::measure::{MeasurementHeader, RawMeasurement};
 use crate::core::turn::{self, Decision, HoldReason, Measured, TurnError, measurement_sha256};
 use crate::store::{EventLevel, Verdict};
-use tracing::{error, info, warn};
+use tracing::{debug, error, info, warn};
 
 /// The names a gauge may use for a machine and its features: the configured names, or the
 /// numeric ids of the built-in CAN layout, where the machine is `1` (one gauge serves one
@@ -72,6 +72,23 @@ impl GaugeIds {
         }
         Ok(index)
     }
+}
+
+/// What the newest part of a feature came to, for the machine's line per shaft.
+#[derive(Debug, Clone)]
+pub struct PartLine {
+    pub feature: String,
+    /// The part (shaft) number the gauge gave.
+    pub part: String,
+    pub max_error_um: f64,
+    pub profile_error_um: f64,
+    /// Size (base-circle radius) error, µm, positive oversize.
+    pub size_error_um: f64,
+    pub timing_error_deg: f64,
+    /// Its next table reached the share.
+    pub pushed: bool,
+    /// What the loop did.
+    pub text: String,
 }
 
 impl FeatureLoop {
@@ -147,17 +164,48 @@ impl FeatureLoop {
             m.last_max_error_um = max_error_um;
         });
         self.publish_status(&raw.header.part, &done.measured);
-        info!(
-            machine = %self.name,
-            lobe = %self.setup.name,
-            part,
-            max_error_um = format!("{max_error_um:.2}"),
-            profile_error_um = format!("{:.2}", done.measured.max_profile_error_um),
-            ground_with,
-            "{} {} part {part}: max error {max_error_um:.2} µm → {text}",
-            self.name,
-            self.setup.name
-        );
+        let line = PartLine {
+            feature: self.setup.name.clone(),
+            part: raw.header.part.clone(),
+            max_error_um,
+            profile_error_um: done.measured.max_profile_error_um,
+            size_error_um: done.measured.report.base_radius_error_um,
+            timing_error_deg: done.measured.timing_error_deg,
+            pushed: self.memory.waiting.is_none() && text.ends_with("pushed"),
+            text,
+        };
+        if self.main.table_files.len() == 1 {
+            info!(
+                machine = %self.name,
+                lobe = %self.setup.name,
+                part,
+                max_error_um = format!("{max_error_um:.2}"),
+                profile_error_um = format!("{:.2}", line.profile_error_um),
+                timing_error_deg = format!("{:.4}", line.timing_error_deg),
+                ground_with,
+                "{} {} part {part}: max error {max_error_um:.2} µm → {}",
+                self.name,
+                self.setup.name,
+                line.text
+            );
+        } else {
+            // A whole part: the machine says one line per shaft; each lobe's is detail.
+            debug!(
+                machine = %self.name,
+                lobe = %self.setup.name,
+                part = %line.part,
+                max_error_um = format!("{max_error_um:.2}"),
+                profile_error_um = format!("{:.2}", line.profile_error_um),
+                timing_error_deg = format!("{:.4}", line.timing_error_deg),
+                ground_with,
+                "{} {} part {}: max error {max_error_um:.2} µm → {}",
+                self.name,
+                self.setup.name,
+                line.part,
+                line.text
+            );
+        }
+        self.last_line = Some(line);
         Ok(Ingested::Recorded)
     }
 

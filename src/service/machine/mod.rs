@@ -227,8 +227,62 @@ impl MachineLoop {
             .await?;
         if ingested == Ingested::Recorded {
             self.write_resume_point(index + 2);
+            if index + 1 == self.features.len() && self.features.len() > 1 {
+                self.shaft_line();
+            }
         }
         Ok(ingested)
+    }
+
+    /// One line per shaft, said when its last feature is gauged: the worst feature, and what
+    /// became of the tables.
+    fn shaft_line(&self) {
+        let Some(part) = self.features.last().and_then(|f| f.last_line.as_ref()).map(|l| l.part.clone())
+        else {
+            return;
+        };
+        let lines: Vec<&ingest::PartLine> = self
+            .features
+            .iter()
+            .filter_map(|f| f.last_line.as_ref())
+            .filter(|l| l.part == part)
+            .collect();
+        let Some(worst) = lines
+            .iter()
+            .max_by(|a, b| a.max_error_um.total_cmp(&b.max_error_um))
+        else {
+            return;
+        };
+        let worst_timing = lines
+            .iter()
+            .map(|l| l.timing_error_deg.abs())
+            .fold(0.0f64, f64::max);
+        let pushed = lines.iter().filter(|l| l.pushed).count();
+        let others: Vec<String> = lines
+            .iter()
+            .filter(|l| !l.pushed)
+            .map(|l| format!("{}: {}", l.feature, l.text))
+            .collect();
+        let tables = if others.is_empty() {
+            format!("{pushed} tables pushed")
+        } else {
+            format!("{pushed} tables pushed; {}", others.join("; "))
+        };
+        info!(
+            machine = %self.name,
+            part = %part,
+            worst_lobe = %worst.feature,
+            max_error_um = format!("{:.2}", worst.max_error_um),
+            "{} shaft {part}: {} of {} features, worst {} {:.2} µm (profile {:.2} µm, size {:+.2} µm), worst timing {:.4}° → {tables}",
+            self.name,
+            lines.len(),
+            self.features.len(),
+            worst.feature,
+            worst.max_error_um,
+            worst.profile_error_um,
+            worst.size_error_um,
+            worst_timing,
+        );
     }
 
     /// A wheel dressing acts on every feature: each regenerates its table for the new radius.
