@@ -101,6 +101,7 @@ fn loop_turn(c: &mut Criterion) {
         repeatability_um: &repeat,
         revolutions: 4,
         timing_error_deg: 0.0,
+        parts_since_previous: 1,
         previous: None,
     };
     c.bench_function("loop_learn_and_regenerate_360", |b| {

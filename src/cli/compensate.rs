@@ -135,7 +135,8 @@ pub fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
             saved.wheel_radius_mm,
             setup.feature.wheel_radius_mm()
         ));
-        learn::after_dressing(&mut saved.learning);
+        let own = learn::size_correction_um(&saved.learning);
+        learn::after_dressing(&mut saved.learning, own);
         saved.wheel_radius_mm = setup.feature.wheel_radius_mm();
     }
     let lobe = setup.lobe_loop();

@@ -42,8 +42,9 @@ pub struct LearningParams {
     /// The max error must grow by more than this on each of two parts in a row to count as
     /// divergence (µm): slow drift such as wheel wear and gauge noise must not raise it.
     pub divergence_margin_um: f64,
-    /// Gain of the size-drift estimate (wheel wear between dressings), 0 ≤ κ < 1: the part's
-    /// mean error integrated into a per-part drift that the next table anticipates. 0: off.
+    /// Gain of the size-drift estimate (wheel wear between dressings), 0 ≤ κ < 1: the change
+    /// of the size disturbance from part to part, averaged with this weight into a drift per
+    /// part that the next table anticipates. 0: off.
     pub wear_gain: f64,
     /// Timing errors within this are not corrected, degrees.
     pub timing_deadband_deg: f64,
@@ -140,9 +141,22 @@ pub struct LearningState {
     /// The timing correction in use: added to the feature's C offset, degrees.
     #[serde(default)]
     pub timing_correction_deg: f64,
-    /// Size drift per part anticipated by the next table (wheel wear), µm per part.
+    /// Size drift per part (wheel wear: the part grows oversize by this much per part), µm;
+    /// the next table anticipates one part of it.
     #[serde(default)]
     pub size_drift_um_per_part: f64,
+    /// The size disturbance of the newest part: its size error less the size correction it
+    /// was ground with, µm.
+    #[serde(default)]
+    pub last_size_disturbance_um: Option<f64>,
+    /// The size correction a dressing starts from, µm: learned from the first part after
+    /// each dressing, so a dresser's systematic error is corrected before it is ground.
+    #[serde(default)]
+    pub dressing_offset_um: f64,
+    /// The wheel was dressed since the last step: the next part's size error is the
+    /// dresser's, not drift.
+    #[serde(default)]
+    pub dressed: bool,
     /// Parts learned from so far.
     pub iteration: u32,
     /// Max |error| of the parts measured with each recent correction, oldest first (≤ 3).
@@ -160,6 +174,9 @@ impl LearningState {
             correction_um: vec![0.0; points_per_rev as usize],
             timing_correction_deg: 0.0,
             size_drift_um_per_part: 0.0,
+            last_size_disturbance_um: None,
+            dressing_offset_um: 0.0,
+            dressed: false,
             iteration: 0,
             recent_max_error_um: Vec::new(),
             best: None,
@@ -179,6 +196,10 @@ pub struct PartError<'a> {
     pub revolutions: u32,
     /// The feature's timing error, degrees, positive when it lags its nominal position.
     pub timing_error_deg: f64,
+    /// Parts ground since the one the table in force was learned from (1 when every part
+    /// is measured; more after a part that was not): the drift the table anticipated for
+    /// one part has run on for the others.
+    pub parts_since_previous: u32,
     /// The previous part of this feature, learned from or not: a limit bounds a step only
     /// when this part confirms that part's error (see [`step`]).
     pub previous: Option<PreviousPart>,
@@ -189,6 +210,9 @@ pub struct PartError<'a> {
 pub struct PreviousPart {
     pub max_error_um: f64,
     pub timing_error_deg: f64,
+    /// Its part number, when the gauge gave a number.
+    #[serde(default)]
+    pub part_number: Option<u64>,
 }
 
 impl PreviousPart {
@@ -313,8 +337,11 @@ const SAME_CORRECTION_UM: f64 = 0.01;
 /// One learning step from the part just measured. On error the state is left exactly as it
 /// was.
 ///
-/// - **Size** (order 0, the mean error) has a deadband of `deadband_sigmas` standard errors
-///   of a mean over all N angles, and a drift term (wear): `r ← r − κ·e₀`, `u₀ ← u₀ − L·e₀ + r`.
+/// - **Size** (order 0, the mean error e₀) has a deadband of `deadband_sigmas` standard
+///   errors of a mean over all N angles, and a drift term (wear): the disturbance
+///   `d = e₀ − ū` (ū the size correction the part was ground with) changes by the drift each
+///   part, so `r ← r + κ·((d − d_prev)/gap − r)` and `u₀ ← u₀ − L·e₀ − r`. An offset (the
+///   first part, a dressing) is never taken for drift.
 /// - **Shape** (orders ≥ 1) is low-passed by Q first, then a deadband of `deadband_sigmas`
 ///   standard errors *of the low-passed error* is applied per angle: noise above the
 ///   cut-off is not what the deadband has to absorb.
@@ -428,11 +455,25 @@ fn learn_correction(
     let shape: Vec<f64> = part.error_um.iter().map(|e| e - mean).collect();
     let shape = low_pass(&shape, params.cutoff_order, params.rolloff_orders);
     let size = soft_dead(mean, size_band);
-    next.size_drift_um_per_part = state.size_drift_um_per_part - params.wear_gain * size;
+    // The size disturbance the part saw: its size error less the size correction it was
+    // ground with (the plant is 1:1 in size). Its change from part to part is the drift.
+    let in_force_size = state.correction_um.iter().sum::<f64>() / n as f64;
+    let disturbance = mean - in_force_size;
+    next.dressed = false;
+    next.last_size_disturbance_um = Some(disturbance);
+    if state.dressed {
+        // The dresser's error, not drift: the next dressing starts from what this one needed.
+        next.dressing_offset_um = state.dressing_offset_um - params.gain * size;
+    } else if let Some(before) = state.last_size_disturbance_um {
+        let parts = f64::from(part.parts_since_previous.max(1));
+        let observed = (disturbance - before) / parts;
+        next.size_drift_um_per_part = state.size_drift_um_per_part
+            + params.wear_gain * (observed - state.size_drift_um_per_part);
+    }
     let learned: Vec<f64> = (0..n)
         .map(|j| {
             state.correction_um[j] - params.gain * (size + soft_dead(shape[j], shape_band))
-                + next.size_drift_um_per_part
+                - next.size_drift_um_per_part
         })
         .collect();
     let wanted = low_pass(&learned, params.cutoff_order, params.rolloff_orders);
@@ -573,19 +614,26 @@ fn max_abs_at(values: &[f64]) -> (f64, usize) {
 
 /// After a wheel dressing the control gets a new wheel radius, which replaces everything the
 /// loop learned about the wheel's size (the initial radius error and the wear since). So the
-/// size part (order 0, the mean) of the correction is dropped and the shape is kept; the error
-/// history restarts so the size step after dressing is not taken for divergence.
-pub fn after_dressing(state: &mut LearningState) {
-    remove_mean(&mut state.correction_um);
+/// part of the size correction that was the wheel's, `wheel_size_um` (for one feature, its
+/// whole size correction; for a shaft, what all its features have in common: a lobe's own
+/// size error, such as the shaft's deflection at its station, is not the wheel's), is
+/// replaced by the dressing offset (what the previous dressings needed: a dresser's
+/// systematic error), and the shape is kept. The error history restarts so the size step
+/// after dressing is not taken for divergence, and the next step learns that step into the
+/// offset rather than into the wear rate.
+pub fn after_dressing(state: &mut LearningState, wheel_size_um: f64) {
+    let shift = state.dressing_offset_um - wheel_size_um;
+    state.correction_um.iter_mut().for_each(|u| *u += shift);
     if let Some(best) = state.best.as_mut() {
-        remove_mean(&mut best.correction_um);
+        best.correction_um.iter_mut().for_each(|u| *u += shift);
     }
     state.recent_max_error_um.clear();
+    state.dressed = true;
 }
 
-fn remove_mean(values: &mut [f64]) {
-    let mean = values.iter().sum::<f64>() / values.len().max(1) as f64;
-    values.iter_mut().for_each(|v| *v -= mean);
+/// The size part (order 0, the mean) of a state's correction, µm.
+pub fn size_correction_um(state: &LearningState) -> f64 {
+    state.correction_um.iter().sum::<f64>() / state.correction_um.len().max(1) as f64
 }
 
 /// Zero-phase low-pass Q: keeps orders ≤ `cutoff`, tapers with a half cosine over the next
@@ -633,6 +681,7 @@ mod tests {
             repeatability_um,
             revolutions,
             timing_error_deg: 0.0,
+            parts_since_previous: 1,
             previous: None,
         }
     }
@@ -778,6 +827,7 @@ mod tests {
                 previous: errors.last().map(|&max_error_um| PreviousPart {
                     max_error_um,
                     timing_error_deg: 0.0,
+                    part_number: None,
                 }),
                 ..pe(&error, &zeros, 4)
             };
@@ -878,7 +928,8 @@ mod tests {
         let mut state = LearningState::new(360);
         state.correction_um = grid(360, |p| -4.0 + 2.0 * (3.0 * p).cos());
         state.recent_max_error_um = vec![1.0, 2.0];
-        after_dressing(&mut state);
+        let own = size_correction_um(&state);
+        after_dressing(&mut state, own);
         let shape = grid(360, |p| 2.0 * (3.0 * p).cos());
         for (u, s) in state.correction_um.iter().zip(&shape) {
             assert!((u - s).abs() < 1e-12);

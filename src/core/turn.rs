@@ -62,6 +62,8 @@ pub struct Measured {
     /// Timing (phase) error of the feature against its nominal position on the shaft,
     /// degrees, positive when it lags: a lobe's timing, a pin's index angle.
     pub timing_error_deg: f64,
+    /// The part number the gauge gave, when it is a number.
+    pub part_number: Option<u64>,
 }
 
 impl Measured {
@@ -71,6 +73,7 @@ impl Measured {
             max_error_um: max_abs(&self.report.profile_error_um)
                 + self.report.base_radius_error_um.abs(),
             timing_error_deg: self.timing_error_deg,
+            part_number: self.part_number,
         }
     }
 }
@@ -125,6 +128,7 @@ pub fn measure(setup: &TurnSetup<'_>, raw: &RawMeasurement) -> Result<Measured, 
         .max(report.profile_error_min_um.abs());
     Ok(Measured {
         timing_error_deg: report.phase_error_deg,
+        part_number: raw.header.part.trim().parse().ok(),
         averaged,
         report,
         max_error_um,
@@ -175,11 +179,19 @@ fn learn(
         .collect();
     let error_um = to_feature_frame(&lift_error, setup.phase_deg);
     let repeatability_um = to_feature_frame(&report.repeatability_um, setup.phase_deg);
+    // Parts between the previous one measured and this one (a gap when a measurement was
+    // lost or refused): the drift ran on for them.
+    let parts_since_previous = match (previous.and_then(|p| p.part_number), measured.part_number)
+    {
+        (Some(before), Some(now)) if now > before => (now - before).min(u64::from(u32::MAX)) as u32,
+        _ => 1,
+    };
     let part = PartError {
         error_um: &error_um,
         repeatability_um: &repeatability_um,
         revolutions: averaged.revolutions_used.len() as u32,
         timing_error_deg: measured.timing_error_deg,
+        parts_since_previous,
         previous,
     };
     match compensate::learn_and_regenerate(&mut next, &part, &setup.lobe) {

@@ -58,6 +58,7 @@ pub(super) async fn run(
                     let event = SourceEvent::Dressing {
                         wheel_radius_mm: report.wheel_radius_mm,
                         source: format!("drop file {}", moved_to.display()),
+                        done: None,
                     };
                     if tx.send(event).await.is_err() {
                         return;

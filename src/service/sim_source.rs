@@ -19,6 +19,9 @@ use std::time::Duration;
 use tokio::sync::{mpsc, watch};
 use tracing::{error, warn};
 
+/// The R parameter an operator sets to resume a shaft (the shaft program's default).
+const RESUME_R_PARAM: u32 = 90;
+
 /// A station ground at a Z this far from a feature's belongs to it, mm.
 const STATION_WINDOW_MM: f64 = 0.5;
 
@@ -72,15 +75,20 @@ impl SimSource {
         let dbc = GaugeDbc::builtin();
         let mut interval = tokio::time::interval(self.part_interval);
         interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-        let (mut shafts, mut gauged) = (0u64, 0u64);
-        let mut ground_per_station = vec![0u64; self.stations.len()];
+        let (mut runs, mut gauged) = (0u64, 0u64);
+        // The shaft in the machine: a run that starts at the first feature loads a new one.
+        let mut shaft = self.stations.iter().map(|s| s.parts_done).max().unwrap_or(0);
         let mut control = Control::new();
+        if self.resume_pending() {
+            // The operator resumes the shaft a stop interrupted (see the shaft program).
+            control.set_r_param(RESUME_R_PARAM, -1.0);
+        }
         loop {
             tokio::select! {
                 _ = interval.tick() => {}
                 _ = shutdown.changed() => return,
             }
-            if *shutdown.borrow() || self.parts.is_some_and(|n| shafts >= n) {
+            if *shutdown.borrow() || self.parts.is_some_and(|n| runs >= n) {
                 return;
             }
             // The control runs the main program, which calls the table programs: the tables
@@ -88,15 +96,16 @@ impl SimSource {
             let Some(grinds) = self.run_control(&mut control) else {
                 continue;
             };
-            shafts += 1;
+            runs += 1;
+            if grinds.first().and_then(|(c, _)| self.station_at(c)) == Some(0) || shaft == 0 {
+                shaft += 1;
+            }
             let last = grinds.len().saturating_sub(1);
-            for (i, coupled) in grinds.into_iter().enumerate() {
+            for (i, (coupled, ground_with)) in grinds.into_iter().enumerate() {
                 if let Some(k) = self.station_at(&coupled) {
-                    ground_per_station[k] += 1;
                     gauged += 1;
-                    let shaft = self.stations[k].parts_done + ground_per_station[k];
                     let event = self.grind_and_gauge(&mut sim, &dbc, &coupled, k, shaft, gauged);
-                    if let Some((m, ground_with)) = event
+                    if let Some(m) = event
                         && !send_and_wait(&tx, m, ground_with).await
                     {
                         return;
@@ -106,18 +115,33 @@ impl SimSource {
                     sim.after_feature();
                 }
             }
-            if let Some(d) = sim.after_part()
-                && tx
-                    .send(SourceEvent::Dressing {
-                        wheel_radius_mm: d.believed_wheel_radius_mm,
-                        source: "sim".into(),
-                    })
-                    .await
-                    .is_err()
-            {
-                return;
+            if let Some(d) = sim.after_part() {
+                // The machine regenerates every table before the next shaft, as it would
+                // between parts.
+                let (done, regenerated) = tokio::sync::oneshot::channel();
+                let event = SourceEvent::Dressing {
+                    wheel_radius_mm: d.believed_wheel_radius_mm,
+                    source: "sim".into(),
+                    done: Some(done),
+                };
+                if tx.send(event).await.is_err() {
+                    return;
+                }
+                let _ = regenerated.await;
             }
         }
+    }
+
+    /// The resume point on the share names a feature after the first: a stop interrupted the
+    /// shaft in the machine.
+    fn resume_pending(&self) -> bool {
+        let path = self
+            .share_dir()
+            .join(format!("{}.SPF", crate::core::program::RESUME_PROGRAM));
+        std::fs::read_to_string(path)
+            .ok()
+            .and_then(|t| crate::core::program::parse_resume_program(&t))
+            .is_some_and(|k| k > 1)
     }
 
     /// The station whose Z the control stood at while grinding.
@@ -142,7 +166,7 @@ impl SimSource {
         k: usize,
         shaft: u64,
         gauged: u64,
-    ) -> Option<(crate::core::measure::RawMeasurement, Option<GroundWith>)> {
+    ) -> Option<crate::core::measure::RawMeasurement> {
         let station = &self.stations[k];
         let table_r = f64::from_bits(station.table_wheel_radius_bits.load(Ordering::SeqCst));
         let feature = station.feature;
@@ -175,8 +199,7 @@ impl SimSource {
             lobe: lobe.to_string(),
         };
         let raw = sim.measure(&ground, &labels);
-        let measurement = self.through_the_bus(dbc, &raw)?;
-        Some((measurement, self.ground_with(&coupled.defined_by)))
+        self.through_the_bus(dbc, &raw)
     }
 
     fn grinder(&self, feature: Feature) -> Option<SimGrinder> {
@@ -212,8 +235,9 @@ impl SimSource {
     }
 
     /// Runs the main program on the share through the simulated control; returns every
-    /// grind (a control alarm is logged and the shaft skipped).
-    fn run_control(&self, control: &mut Control) -> Option<Vec<Coupled>> {
+    /// grind with what the control reports of its table (a control alarm is logged and the
+    /// shaft skipped).
+    fn run_control(&self, control: &mut Control) -> Option<Vec<(Coupled, Option<GroundWith>)>> {
         let main = match std::fs::read_to_string(&self.main_program) {
             Ok(t) => t,
             Err(e) => {
@@ -222,9 +246,28 @@ impl SimSource {
             }
         };
         let dir = self.share_dir();
-        let load = |name: &str| std::fs::read_to_string(dir.join(format!("{name}.SPF"))).ok();
+        // The texts the control read, as it read them: the share may change while it grinds.
+        let read = std::cell::RefCell::new(std::collections::HashMap::new());
+        let load = |name: &str| {
+            let text = std::fs::read_to_string(dir.join(format!("{name}.SPF"))).ok();
+            if let Some(t) = &text {
+                read.borrow_mut().insert(name.to_string(), t.clone());
+            }
+            text
+        };
         match control.run_all(&main, &load) {
-            Ok(grinds) => Some(grinds),
+            Ok(grinds) => {
+                let read = read.borrow();
+                Some(
+                    grinds
+                        .into_iter()
+                        .map(|c| {
+                            let g = read.get(&c.defined_by).and_then(|t| ground_with(t));
+                            (c, g)
+                        })
+                        .collect(),
+                )
+            }
             Err(e) => {
                 error!(machine = %self.machine, error = %e, "simulated control: alarm");
                 None
@@ -232,26 +275,27 @@ impl SimSource {
         }
     }
 
-    /// What the control reports of the table that ground a part: the feature and version
-    /// its defining program's provenance names.
-    fn ground_with(&self, program: &str) -> Option<GroundWith> {
-        let text = std::fs::read_to_string(self.share_dir().join(format!("{program}.SPF"))).ok()?;
-        let version = provenance_field(&text, "table version:")?
+    fn share_dir(&self) -> PathBuf {
+        self.main_program
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_default()
+    }
+}
+
+/// What the control reports of the table that ground a part: the feature and version its
+/// defining program's provenance names.
+fn ground_with(text: &str) -> Option<GroundWith> {
+    {
+        let version = provenance_field(text, "table version:")?
             .trim()
             .strip_prefix('v')?
             .split(|c: char| !c.is_ascii_digit())
             .next()?
             .parse()
             .ok()?;
-        let feature = provenance_field(&text, "feature:").map(|f| f.trim().to_string());
+        let feature = provenance_field(text, "feature:").map(|f| f.trim().to_string());
         Some(GroundWith { feature, version })
-    }
-
-    fn share_dir(&self) -> PathBuf {
-        self.main_program
-            .parent()
-            .map(Path::to_path_buf)
-            .unwrap_or_default()
     }
 }
 

@@ -182,6 +182,7 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                     repeatability_um: &measured.report.repeatability_um,
                     revolutions: measured.averaged.revolutions_used.len() as u32,
                     timing_error_deg: 0.0,
+                    parts_since_previous: 1,
                     previous: None,
                 };
                 let outcome = learn::step(&mut x_state, &part, &setup.params);
@@ -201,8 +202,9 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
         let dressed = match sim.after_part() {
             Some(event) => {
                 feature = feature.with_wheel_radius(event.believed_wheel_radius_mm);
-                learn::after_dressing(&mut state);
-                learn::after_dressing(&mut x_state);
+                let (own, x_own) = (learn::size_correction_um(&state), learn::size_correction_um(&x_state));
+                learn::after_dressing(&mut state, own);
+                learn::after_dressing(&mut x_state, x_own);
                 let mean = naive_dx_mm.iter().sum::<f64>() / naive_dx_mm.len() as f64;
                 naive_dx_mm.iter_mut().for_each(|d| *d -= mean);
                 table = make_table(setup, feature, &state, method, &naive_dx_mm, &mut control)?;

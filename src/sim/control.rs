@@ -36,6 +36,17 @@ pub struct Control {
     coupling: Option<Coupling>,
     /// Setpoints by axis name (mm or degrees); an axis never moved is at 0.
     positions: BTreeMap<String, f64>,
+    /// R parameters (`R90` …), kept between runs as the NC keeps them; unset ones are 0.
+    r_params: BTreeMap<u32, f64>,
+}
+
+/// The number of an R parameter written `R<n>`.
+fn r_param(text: &str) -> Option<u32> {
+    text.trim()
+        .strip_prefix('R')
+        .filter(|d| !d.is_empty() && d.chars().all(|c| c.is_ascii_digit()))?
+        .parse()
+        .ok()
 }
 
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -171,6 +182,16 @@ impl Control {
             });
         }
         Ok(run.ground)
+    }
+
+    /// R parameter `n` (0 when never set).
+    pub fn r_param(&self, n: u32) -> f64 {
+        self.r_params.get(&n).copied().unwrap_or(0.0)
+    }
+
+    /// Sets R parameter `n`, as an operator does on the HMI.
+    pub fn set_r_param(&mut self, n: u32, value: f64) {
+        self.r_params.insert(n, value);
     }
 
     /// Numbers of the curve tables in memory, ascending.

@@ -26,6 +26,9 @@ pub struct MainProgramSettings {
     pub comment_lines: Vec<String>,
     /// The axis along the shaft, moved to each feature's station in a shaft program.
     pub axial_axis: String,
+    /// The R parameter through which an operator resumes a shaft program (see
+    /// [`super::render_shaft_program`]).
+    pub resume_r_param: u32,
 }
 
 impl Default for MainProgramSettings {
@@ -37,6 +40,7 @@ impl Default for MainProgramSettings {
             x_feed_mm_min: 100.0,
             comment_lines: Vec::new(),
             axial_axis: "Z".to_owned(),
+            resume_r_param: 90,
         }
     }
 }

@@ -25,10 +25,18 @@ pub struct Station<'a> {
 }
 
 /// Renders the main program of a shaft. The sequence per feature is the one-feature
-/// program's (see [`super::render_main_program`]), wrapped in `IF CL_FROM<=k … ENDIF` so a run
-/// starts at the feature the resume subprogram names, and preceded by a rapid retract of X to
-/// `clear_x_mm` and a rapid move of the axial axis to the station: Z never moves with the
-/// wheel at the part.
+/// program's (see [`super::render_main_program`]), wrapped in `IF CL_FROM<=k … ENDIF`, and
+/// preceded by a rapid retract of X to `clear_x_mm` and a rapid move of the axial axis to the
+/// station: Z never moves with the wheel at the part.
+///
+/// A run grinds the whole shaft unless the operator asks otherwise through R parameter
+/// `resume_r_param` (default R90), which the run resets to 0:
+/// - `R90 < 0`: resume at the first feature camloop has no gauge record of for the shaft in
+///   the machine (the resume subprogram camloop rewrites after every gauged feature);
+/// - `R90 = k > 0`: start at feature k.
+///
+/// A plain start never resumes: a new shaft loaded after an interrupted one must be ground
+/// whole, and only the operator knows which is in the machine.
 ///
 /// ```text
 /// DEF REAL CL_C, CL_X, CL_SLOPE
@@ -36,7 +44,10 @@ pub struct Station<'a> {
 /// EXTERN CAMLOOP_RESUME(VAR INT)
 /// EXTERN <TABLE_k>(VAR INT)            ; one per feature
 /// IF $AA_COUP_ACT[X]<>0 … LEADOF … ENDIF
-/// CAMLOOP_RESUME(CL_FROM)
+/// CL_FROM=1
+/// IF R90<0 CAMLOOP_RESUME(CL_FROM) ENDIF
+/// IF R90>0 CL_FROM=R90 ENDIF
+/// R90=0
 /// IF CL_FROM<=k                        ; feature k
 /// G0 X=<clear>
 /// G0 Z=<station k>
@@ -67,6 +78,12 @@ pub fn render_shaft_program(
                 value: s.z_mm,
             });
         }
+    }
+    if !(1..=999).contains(&main.resume_r_param) {
+        errors.push(SettingError::NotPositive {
+            field: "resume_r_param",
+            value: f64::from(main.resume_r_param),
+        });
     }
     if let Err(e) = validate_axis_name("axial", &main.axial_axis) {
         errors.push(e.into());
@@ -107,12 +124,21 @@ pub fn render_shaft_program(
     );
     line(&mut out, format_args!("LEADOF({x},{c})"));
     out.push_str("ENDIF\n");
+    let r = main.resume_r_param;
+    line(&mut out, format_args!("{FROM_VAR}=1 ; a new shaft: every feature"));
     line(
         &mut out,
-        format_args!(
-            "{RESUME_PROGRAM}({FROM_VAR}) ; first feature to grind: 1 for a new shaft"
-        ),
+        format_args!("IF R{r}<0 ; resume: the first feature without a gauge record"),
     );
+    line(&mut out, format_args!("{RESUME_PROGRAM}({FROM_VAR})"));
+    out.push_str("ENDIF\n");
+    line(
+        &mut out,
+        format_args!("IF R{r}>0 ; the operator names the feature to start at"),
+    );
+    line(&mut out, format_args!("{FROM_VAR}=R{r}"));
+    out.push_str("ENDIF\n");
+    line(&mut out, format_args!("R{r}=0 ; a resume applies to one run"));
     let clear = fmt_fixed(clear_x_mm, xd);
     for (k, (s, r)) in stations.iter().zip(&resolved).enumerate() {
         let t = &r.name;

@@ -23,11 +23,14 @@ impl FeatureLoop {
     /// A wheel dressing, from the gauge/controller feed, a dropped report or the API. A
     /// radius outside [`compensate::WHEEL_RADIUS_RANGE_MM`] changes nothing. The machine's
     /// `first` feature records the dressing itself; every feature regenerates its table.
+    /// `wheel_size_um` is the part of the size correction that was the wheel's (see
+    /// [`learn::after_dressing`]).
     pub async fn dress(
         &mut self,
         wheel_radius_mm: f64,
         source: &str,
         first: bool,
+        wheel_size_um: f64,
     ) -> anyhow::Result<Dressed> {
         let wheel_radius_mm = compensate::check_wheel_radius(wheel_radius_mm)?;
         let at_ms = now_ms();
@@ -35,9 +38,9 @@ impl FeatureLoop {
         info!(machine = %self.name, old_radius_mm = old, new_radius_mm = wheel_radius_mm, source, "wheel dressed: table regenerated for the new radius");
         self.memory.wheel_radius_mm = wheel_radius_mm;
         self.setup.feature = self.setup.feature.with_wheel_radius(wheel_radius_mm);
-        learn::after_dressing(&mut self.memory.learning);
+        learn::after_dressing(&mut self.memory.learning, wheel_size_um);
         if let Some(w) = self.memory.waiting.as_mut() {
-            learn::after_dressing(&mut w.learning);
+            learn::after_dressing(&mut w.learning, wheel_size_um);
         }
         let mut records = Vec::new();
         if first {

@@ -71,10 +71,12 @@ pub enum SourceEvent {
         ground_with: Option<GroundWith>,
         done: Option<tokio::sync::oneshot::Sender<Ingested>>,
     },
-    /// The wheel was dressed; the control now believes this radius.
+    /// The wheel was dressed; the control now believes this radius. `done` is answered once
+    /// every feature's table for it is out.
     Dressing {
         wheel_radius_mm: f64,
         source: String,
+        done: Option<tokio::sync::oneshot::Sender<()>>,
     },
 }
 
@@ -193,7 +195,14 @@ impl MachineLoop {
             SourceEvent::Dressing {
                 wheel_radius_mm,
                 source,
-            } => self.dress(wheel_radius_mm, &source).await.map(|_| ()),
+                done,
+            } => {
+                let r = self.dress(wheel_radius_mm, &source).await.map(|_| ());
+                if let Some(done) = done {
+                    let _ = done.send(());
+                }
+                r
+            }
         };
         if let Err(e) = result {
             error!(machine = %self.name, error = format!("{e:#}"), "part not processed");
@@ -214,6 +223,15 @@ impl MachineLoop {
         let index = match self.ids.route(&raw.header, ground_with.as_ref()) {
             Ok(i) => i,
             Err(reason) => {
+                // The part was ground all the same: when the control says which feature it
+                // was, the resume point moves past it.
+                if let Some(k) = ground_with
+                    .as_ref()
+                    .and_then(|g| g.feature.as_ref())
+                    .and_then(|f| self.features.iter().position(|x| x.feature_name() == f))
+                {
+                    self.write_resume_point(k + 2);
+                }
                 // Kept and recorded by the first feature's loop: it belongs to none.
                 let sha = measurement_sha256(&raw);
                 let first = &mut self.features[0];
@@ -224,12 +242,13 @@ impl MachineLoop {
         let version = ground_with.map(|g| g.version);
         let ingested = self.features[index]
             .on_measurement(raw, version)
-            .await?;
-        if ingested == Ingested::Recorded {
-            self.write_resume_point(index + 2);
-            if index + 1 == self.features.len() && self.features.len() > 1 {
-                self.shaft_line();
-            }
+            .await;
+        // Ground and gauged, whatever the loop made of it.
+        self.write_resume_point(index + 2);
+        let ingested = ingested?;
+        if ingested == Ingested::Recorded && index + 1 == self.features.len() && self.features.len() > 1
+        {
+            self.shaft_line();
         }
         Ok(ingested)
     }
@@ -289,8 +308,17 @@ impl MachineLoop {
     pub async fn dress(&mut self, wheel_radius_mm: f64, source: &str) -> anyhow::Result<Dressed> {
         let mut summary = Vec::new();
         let mut dressed = None;
+        // The wheel's share of the size corrections: what every feature has in common.
+        let wheel_size_um = self
+            .features
+            .iter()
+            .map(|f| crate::core::learn::size_correction_um(f.memory().newest_learning()))
+            .sum::<f64>()
+            / self.features.len() as f64;
         for (i, feature) in self.features.iter_mut().enumerate() {
-            let d = feature.dress(wheel_radius_mm, source, i == 0).await?;
+            let d = feature
+                .dress(wheel_radius_mm, source, i == 0, wheel_size_um)
+                .await?;
             summary.push(format!("{}: {}", feature.feature_name(), d.summary));
             dressed.get_or_insert(d);
         }
@@ -354,8 +382,12 @@ impl MachineLoop {
     }
 
     /// Writes the resume point: `next` is the feature after the one just gauged (from 1;
-    /// past the last, a new shaft starts at 1).
+    /// past the last, the shaft is finished and a resume would start a new one at 1). Only a
+    /// shaft program reads it, and only when the operator asks for a resume.
     fn write_resume_point(&self, next: usize) {
+        if self.features.len() < 2 {
+            return;
+        }
         let first = if next > self.features.len() { 1 } else { next };
         if let Err(e) = shaft::write_resume(self.share_dir(), first) {
             warn!(machine = %self.name, error = %e, "resume point not written to the share");
@@ -365,6 +397,9 @@ impl MachineLoop {
     /// A new share gets the resume point of a new shaft; one already there (camloop's, or
     /// an operator's) is left as it is.
     fn write_resume_point_if_missing(&self) {
+        if self.features.len() < 2 {
+            return;
+        }
         let path = shaft::resume_path(self.share_dir());
         if !path.exists() {
             match shaft::write_resume(self.share_dir(), 1) {

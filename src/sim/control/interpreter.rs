@@ -6,7 +6,7 @@ use super::statements::{
     is_name, proc_line, real_var, table_number, undefined_variable, unsupported,
 };
 use super::{
-    AXIAL_AXIS, COUP_ACT_MASTER_VALUE, ControlError, ControlFault, Coupled, Coupling, MAX_CALL_DEPTH,
+    r_param, AXIAL_AXIS, COUP_ACT_MASTER_VALUE, ControlError, ControlFault, Coupled, Coupling, MAX_CALL_DEPTH,
     program_name, table_shape,
 };
 use crate::core::program::{ParsedTable, TableBlocks, parse_ctabdef};
@@ -145,12 +145,7 @@ impl Run<'_> {
                 _ => false,
             }
         } else {
-            let (var, bound) = code
-                .strip_prefix("IF ")
-                .and_then(|r| r.split_once("<="))
-                .ok_or_else(|| unsupported(code))?;
-            let bound: i64 = bound.trim().parse().map_err(|_| unsupported(code))?;
-            int_arg(var.trim(), frame)? <= bound
+            self.condition(code, frame)?
         };
         if holds {
             *open_if = true;
@@ -167,6 +162,28 @@ impl Run<'_> {
             }
         }
         Err(invalid("IF without ENDIF").into())
+    }
+
+    /// `IF <INT variable or R parameter><op><integer>`, op one of `<=`, `<`, `>`, `==`,
+    /// `<>`.
+    fn condition(&self, code: &str, frame: &Frame) -> Result<bool, Halt> {
+        let rest = code.strip_prefix("IF ").ok_or_else(|| unsupported(code))?;
+        let (left, op, right) = ["<=", "<>", "==", "<", ">"]
+            .iter()
+            .find_map(|op| rest.split_once(op).map(|(l, r)| (l.trim(), *op, r.trim())))
+            .ok_or_else(|| unsupported(code))?;
+        let bound: f64 = right.parse().map_err(|_| unsupported(code))?;
+        let value = match r_param(left) {
+            Some(n) => self.control.r_param(n),
+            None => int_arg(left, frame)? as f64,
+        };
+        Ok(match op {
+            "<=" => value <= bound,
+            "<>" => value != bound,
+            "==" => value == bound,
+            "<" => value < bound,
+            _ => value > bound,
+        })
     }
 
     /// `CTABDEF(…)` … `CTABEND`: reads the blocks and stores the table under its number.
@@ -339,12 +356,21 @@ impl Run<'_> {
         let Some((target, value)) = code.split_once('=') else {
             return self.call(code, frame, depth);
         };
+        if let Some(n) = r_param(target) {
+            let v: f64 = value.trim().parse().map_err(|_| unsupported(code))?;
+            self.control.r_params.insert(n, v);
+            return Ok(None);
+        }
         let kind = *frame
             .vars
             .get(target)
             .ok_or_else(|| undefined_variable(target))?;
         let new = match kind {
-            Value::Int(_) => Value::Int(value.parse().map_err(|_| unsupported(code))?),
+            // A REAL (an R parameter) assigned to an INT is rounded, as the control does.
+            Value::Int(_) => Value::Int(match r_param(value) {
+                Some(n) => self.control.r_param(n).round() as i64,
+                None => value.parse().map_err(|_| unsupported(code))?,
+            }),
             Value::Real(_) => Value::Real(self.real_value(code, value, frame)?),
         };
         frame.vars.insert(target.to_owned(), new);
