@@ -1,0 +1,109 @@
+//! Running LinuxCNC's stand-alone interpreter `rs274` on a program and reading its
+//! canonical moves.
+//!
+//! `rs274 -t <tool table> -g <file>` runs a program in batch mode and prints one canonical
+//! call per line (`STRAIGHT_FEED(x, y, z, a, b, c)` with 4 decimals). Without an INI file
+//! the interpreter's machine units are inches, so the tool table's diameter `D` is written
+//! in inches while the program itself runs in mm (G21).
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+
+/// A canonical move, positions in program units (mm, degrees).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Canon {
+    Rapid {
+        x: f64,
+        y: f64,
+        z: f64,
+        a: f64,
+        c: f64,
+    },
+    Feed {
+        x: f64,
+        y: f64,
+        z: f64,
+        a: f64,
+        c: f64,
+    },
+    Arc,
+}
+
+/// The interpreter, if installed.
+pub fn rs274() -> Option<PathBuf> {
+    ["/usr/bin/rs274", "/usr/local/bin/rs274"]
+        .iter()
+        .map(PathBuf::from)
+        .find(|p| p.exists())
+}
+
+/// Runs `program` with tool 1 loaded (nose radius in mm) and returns the moves; the
+/// interpreter's error text if it stops on one.
+pub fn run_rs274(
+    rs274: &PathBuf,
+    program: &str,
+    nose_radius_mm: f64,
+) -> Result<Vec<Canon>, String> {
+    let dir = tempfile::tempdir().unwrap();
+    let tbl = dir.path().join("tool.tbl");
+    std::fs::write(
+        &tbl,
+        format!("T1 P1 D{:.8} ;\n", 2.0 * nose_radius_mm / 25.4),
+    )
+    .unwrap();
+    // Tool 1 in the spindle before the program, so compensation has its radius.
+    let body = program.replacen("%\n", "", 1);
+    let text = format!("T1 M6\n{body}");
+    let ngc = dir.path().join("prog.ngc");
+    std::fs::write(&ngc, text).unwrap();
+    let out = Command::new(rs274)
+        .arg("-t")
+        .arg(&tbl)
+        .arg("-g")
+        .arg(&ngc)
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    let mut moves = Vec::new();
+    for line in stdout.lines() {
+        let parse = |name: &str| {
+            let start = line.find(&format!("{name}("))? + name.len() + 1;
+            let inner = &line[start..line[start..].find(')')? + start];
+            let v: Vec<f64> = inner
+                .split(',')
+                .map(|s| s.trim().parse().unwrap())
+                .collect();
+            Some(v)
+        };
+        if let Some(v) = parse("STRAIGHT_FEED") {
+            moves.push(Canon::Feed {
+                x: v[0],
+                y: v[1],
+                z: v[2],
+                a: v[3],
+                c: v[5],
+            });
+        } else if let Some(v) = parse("STRAIGHT_TRAVERSE") {
+            moves.push(Canon::Rapid {
+                x: v[0],
+                y: v[1],
+                z: v[2],
+                a: v[3],
+                c: v[5],
+            });
+        } else if line.contains("ARC_FEED(") {
+            moves.push(Canon::Arc);
+        }
+    }
+    let error = stdout.lines().chain(stderr.lines()).find(|l| {
+        let l = l.to_ascii_lowercase();
+        l.contains("error") || l.contains("unknown") || l.contains("bad ")
+    });
+    match error {
+        Some(e) => Err(format!("rs274: {e}\n{stdout}")),
+        None => Ok(moves),
+    }
+}
