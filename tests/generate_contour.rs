@@ -182,20 +182,96 @@ fn with_the_nose_radius_rs274_keeps_the_tool_outside_the_material() {
             .map(|t| (z - ZC - A * t.cos()).hypot(x - XC - B * t.sin()))
             .fold(f64::MAX, f64::min)
     };
+    let feeds: Vec<(f64, f64)> = canon
+        .iter()
+        .filter_map(|c| match *c {
+            Canon::Feed { x, z, .. } => Some((z, x)),
+            _ => None,
+        })
+        .collect();
     let mut checked = 0;
-    for c in &canon {
-        if let Canon::Feed { x, z, .. } = *c {
-            let inside = ((z - ZC) / A).hypot((x - XC) / B) < 1.0;
-            assert!(!inside, "tool in the material at z = {z}, x = {x}");
-            if z < -1.0 && z > -59.0 && x > XC + 3.0 {
-                let d = dist((z, x));
-                // 0.8 mm nose, chord error ≤ 2 µm, dense search step ≤ 0.3 µm, print 0.1 µm.
-                assert!((d - 0.8).abs() < 3e-3, "{d} at z = {z}, x = {x}");
-                checked += 1;
-            }
-        }
+    // The first feed ends the lead-in and the last is the lead-out: every move between
+    // them is on the compensated contour.
+    for &(z, x) in &feeds[1..feeds.len() - 1] {
+        let inside = ((z - ZC) / A).hypot((x - XC) / B) < 1.0;
+        assert!(!inside, "tool in the material at z = {z}, x = {x}");
+        let d = dist((z, x));
+        // 0.8 mm nose, chord error ≤ 2 µm, dense search step ≤ 0.3 µm, print 0.1 µm.
+        assert!((d - 0.8).abs() < 3e-3, "{d} at z = {z}, x = {x}");
+        checked += 1;
     }
     assert!(checked > 100, "{checked}");
+}
+
+#[test]
+fn golden_programs() {
+    let rough = Some(Roughing {
+        stock_mm: 1.0,
+        depth_mm: 0.6,
+        allowance_mm: 0.2,
+    });
+    let mut job = ellipse_job(10e-3, rough);
+    job.curve = Curve::Parabola {
+        vertex_z_mm: -20.0,
+        vertex_x_mm: 5.0,
+        p_mm: 4.0,
+        x_start_mm: 5.0,
+        x_end_mm: 15.0,
+    };
+    job.name = "PARABOLA_TURN".to_owned();
+    let c = generate(&job).unwrap();
+    let d = Decimals::default();
+    insta::assert_snapshot!(
+        "parabola_sinumerik_loop",
+        Dialect::Sinumerik.render(&c.program, Form::Loop, d)
+    );
+    insta::assert_snapshot!(
+        "parabola_iso_loop",
+        Dialect::Iso.render(&c.program, Form::Loop, d)
+    );
+    insta::assert_snapshot!(
+        "parabola_iso_expanded",
+        Dialect::Iso.render(&c.program, Form::Expanded, d)
+    );
+}
+
+#[test]
+fn profile_from_csv_is_placed_within_the_tolerance() {
+    use camloop::core::generate::profile::parse_profile;
+    // A profile sampled from x = 20 + 3·sin(z·18°) every 2 mm: the spline between the
+    // points is the curve the chords must follow.
+    let text: String = std::iter::once("z_mm,x_mm\n".to_owned())
+        .chain((0..=20).map(|i| {
+            let z = -2.0 * f64::from(i);
+            format!("{z},{}\n", 20.0 + 3.0 * (z * 18.0f64).to_radians().sin())
+        }))
+        .collect();
+    let curve = parse_profile(&text, "p.csv").unwrap();
+    let mut job = ellipse_job(2e-3, None);
+    job.curve = curve.clone();
+    job.name = "PROFILE_TURN".to_owned();
+    let c = generate(&job).unwrap();
+    // Dense independent sampling: 400 points per chord against the spline itself.
+    let mut worst: f64 = 0.0;
+    for (w, u) in c.points.windows(2).zip(c.params.windows(2)) {
+        for k in 0..=400 {
+            let j = curve.jet(u[0] + (u[1] - u[0]) * f64::from(k) / 400.0);
+            let (a, b) = (w[0], w[1]);
+            let (dz, dx) = (b.0 - a.0, b.1 - a.1);
+            let t = (((j.z - a.0) * dz + (j.x - a.1) * dx) / (dz * dz + dx * dx)).clamp(0.0, 1.0);
+            worst = worst.max((j.z - a.0 - t * dz).hypot(j.x - a.1 - t * dx));
+        }
+    }
+    eprintln!(
+        "profile: {} chords, worst {:.3} um; fixed step {:?}",
+        c.report.chords,
+        worst * 1e3,
+        c.report.fixed_step_chords
+    );
+    assert!(worst <= 2e-3, "{worst}");
+    let bad = "z_mm,x_mm\n0,20\n-2,20.5\n-1,21\n";
+    let e = parse_profile(bad, "p.csv").unwrap_err().to_string();
+    assert!(e.contains("p.csv line 4"), "{e}");
 }
 
 #[test]

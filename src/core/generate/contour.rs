@@ -432,16 +432,24 @@ fn build_program(
         feed_mm_min: feed,
     };
     let x_far = far_x(job, points);
-    let (z0, x0) = points[0];
-    let xn = points[points.len() - 1].1;
-    let clear = sign * job.clearance_mm;
+    let np = points.len();
+    // Lead-in and lead-out at 45° to the contour, on the tool's side: the compensation
+    // then turns by 45° at the ends, never back on itself.
+    let lead_in = lead_point(points[1], points[0], comp, job.clearance_mm, true);
+    let lead_out = lead_point(
+        points[np - 2],
+        points[np - 1],
+        comp,
+        job.clearance_mm,
+        false,
+    );
     let approach = |feed_label: u16, feed: f64| {
         let mut s = vec![
             mv(Motion::Rapid, vec![(Axis::X, n(x_far))], None),
-            mv(Motion::Rapid, vec![(Axis::Z, n(z0))], None),
+            mv(Motion::Rapid, vec![(Axis::Z, n(lead_in.0))], None),
             mv(
                 Motion::Rapid,
-                vec![(Axis::X, shifted(n(x0 + clear), sign))],
+                vec![(Axis::X, shifted(n(lead_in.1), sign))],
                 None,
             ),
         ];
@@ -456,7 +464,10 @@ fn build_program(
         }
         s.push(mv(
             Motion::Linear,
-            vec![(Axis::X, shifted(n(xn + clear), sign))],
+            vec![
+                (Axis::X, shifted(n(lead_out.1), sign)),
+                (Axis::Z, n(lead_out.0)),
+            ],
             None,
         ));
         s.push(mv(Motion::Rapid, vec![(Axis::X, n(x_far))], None));
@@ -517,6 +528,36 @@ fn build_program(
 const ROUGH_LABEL: u16 = 1;
 const PASS_LABEL: u16 = 3;
 const FINISH_LABEL: u16 = 4;
+
+/// The point `clearance` back along the chord from `end` (`before`) or on beyond it, and
+/// `clearance` off it on the tool's side, rounded as written. Chords run `from` → `end`
+/// in travel order for the lead-out, `end` ← `from` for the lead-in.
+fn lead_point(
+    from: (f64, f64),
+    end: (f64, f64),
+    comp: Compensation,
+    clearance: f64,
+    before: bool,
+) -> (f64, f64) {
+    let (dz, dx) = (end.0 - from.0, end.1 - from.1);
+    let len = dz.hypot(dx);
+    // Travel direction: for the lead-in the chord runs end → from.
+    let (tz, tx) = if before {
+        (-dz / len, -dx / len)
+    } else {
+        (dz / len, dx / len)
+    };
+    // Tool side: left of the travel is (−tx, tz) in (z, x).
+    let (nz, nx) = match comp {
+        Compensation::Left => (-tx, tz),
+        _ => (tx, -tz),
+    };
+    let along = if before { -clearance } else { clearance };
+    (
+        round_to(end.0 + along * tz + clearance * nz, 4),
+        round_to(end.1 + along * tx + clearance * nx, 4),
+    )
+}
 
 /// Retract radius: clear of the blank everywhere.
 fn far_x(job: &ContourJob, points: &[(f64, f64)]) -> f64 {
