@@ -3,6 +3,7 @@
 
 mod analyze;
 mod compensate;
+mod contour;
 pub mod history;
 mod output;
 mod part;
@@ -38,6 +39,9 @@ pub enum Command {
     History(history::HistoryArgs),
     /// Export the measurement history of a time range as CSV or JSON.
     Export(history::ExportArgs),
+    /// A non-circular turning contour (ellipse, parabola, sine, tangent, CSV profile) as a
+    /// program with chords placed by tolerance.
+    Contour(contour::ContourArgs),
 }
 
 /// Runs a parsed command; the error chain is printed by `main` on one line.
@@ -50,6 +54,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Run(args) => run::run_service(args),
         Command::History(args) => history::run_history(args),
         Command::Export(args) => history::run_export(args),
+        Command::Contour(args) => contour::run_contour(args),
     }
 }
 
