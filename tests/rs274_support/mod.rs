@@ -27,7 +27,16 @@ pub enum Canon {
         a: f64,
         c: f64,
     },
-    Arc,
+    /// `ARC_FEED(first end, second end, first centre, second centre, turns, axis end, a, b, c)`
+    /// in the plane's axes (X, Y in G17).
+    Arc {
+        e1: f64,
+        e2: f64,
+        c1: f64,
+        c2: f64,
+        turns: i32,
+        c: f64,
+    },
 }
 
 /// The interpreter, if installed.
@@ -94,8 +103,15 @@ pub fn run_rs274(
                 a: v[3],
                 c: v[5],
             });
-        } else if line.contains("ARC_FEED(") {
-            moves.push(Canon::Arc);
+        } else if let Some(v) = parse("ARC_FEED") {
+            moves.push(Canon::Arc {
+                e1: v[0],
+                e2: v[1],
+                c1: v[2],
+                c2: v[3],
+                turns: v[4] as i32,
+                c: v[8],
+            });
         }
     }
     let error = stdout.lines().chain(stderr.lines()).find(|l| {

@@ -13,3 +13,4 @@ pub mod ir;
 pub mod open_spline;
 pub mod profile;
 pub mod sinumerik_eval;
+pub mod turnmill;
