@@ -37,16 +37,22 @@ fn circle(
 fn job() -> TurnMillJob {
     let mut cheek = circle("cheek", 0.0, 0.0, 60.0, (120.0, 240.0), false);
     cheek.c_deg = Some(17.5);
+    // C away from the phase, so the pins' centres land off the X axis and the phase check
+    // sees real rounding.
+    let mut pin1 = circle("pin 1", 45.0, 30.0, 25.0, (0.0, 360.0), false);
+    pin1.c_deg = Some(12.345);
+    let mut pin2 = circle("pin 2", 45.0, 210.0, 25.0, (0.0, 360.0), false);
+    pin2.c_deg = Some(-47.0);
     TurnMillJob {
         name: "CRANK_TURNMILL".to_owned(),
         tool_radius_mm: TOOL_R,
         clearance_mm: 2.0,
         feed_mm_min: 300.0,
         circles: vec![
-            circle("pin 1", 45.0, 30.0, 25.0, (0.0, 360.0), false),
+            pin1,
             cheek,
             circle("arm fillet", 70.0, 200.0, 8.0, (0.0, 90.0), true),
-            circle("pin 2", 45.0, 210.0, 25.0, (0.0, 360.0), false),
+            pin2,
         ],
     }
 }
