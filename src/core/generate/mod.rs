@@ -11,6 +11,7 @@ pub mod curve;
 pub mod dialect;
 pub mod ir;
 pub mod open_spline;
+pub mod planing;
 pub mod profile;
 pub mod sinumerik_eval;
 pub mod turnmill;
