@@ -55,12 +55,12 @@ fn rs274_keeps_a_on_the_ratio_while_cutting_and_lifts_on_return() {
                 feeds += 1;
             }
             Canon::Rapid { x, z, .. } => {
-                if let Some(Canon::Rapid { x: x0, .. } | Canon::Feed { x: x0, .. }) =
-                    i.checked_sub(1).map(|p| canon[p])
-                {
-                    if (x - x0).abs() > 1e-9 {
-                        assert_eq!(z, 5.0, "X moves in rapid only lifted (move {i})");
-                    }
+                let prev_x = i.checked_sub(1).and_then(|p| match canon[p] {
+                    Canon::Rapid { x, .. } | Canon::Feed { x, .. } => Some(x),
+                    Canon::Arc { .. } => None,
+                });
+                if prev_x.is_some_and(|x0| (x - x0).abs() > 1e-9) {
+                    assert_eq!(z, 5.0, "X moves in rapid only lifted (move {i})");
                 }
             }
             Canon::Arc { .. } => panic!("no arcs in planing"),
@@ -136,13 +136,11 @@ fn interrupted_jobs_resume_at_the_first_unfinished_segment_and_cut_each_once() {
             // The mark is written right after the stroke: a stroke cut is always marked
             // unless the interruption fell between the two, which the control makes one
             // block (the write is the stroke's end); count it as marked here too.
-            if stop < blocks.len() {
-                if let (Some(prev), Stmt::Mark { value, .. }) = (stop.checked_sub(1), &blocks[stop])
-                {
-                    if stroke_segment(&j, &blocks[prev]).is_some() {
-                        done_mark = *value as u32;
-                    }
-                }
+            if stop < blocks.len()
+                && let (Some(prev), Stmt::Mark { value, .. }) = (stop.checked_sub(1), &blocks[stop])
+                && stroke_segment(&j, &blocks[prev]).is_some()
+            {
+                done_mark = *value as u32;
             }
             assert!(runs < 20, "trial {trial} does not finish");
         }
