@@ -167,6 +167,65 @@ fn iso_loop_run_by_rs274_stays_within_the_tolerance() {
 }
 
 #[test]
+fn rs274_roughing_passes_are_the_contour_shifted_by_each_offset() {
+    let Some(rs) = rs274_support::rs274() else {
+        panic!("rs274 (Debian linuxcnc-uspace) is not installed: .ci/run installs it");
+    };
+    let tol = 2e-3;
+    let rough = Some(Roughing {
+        stock_mm: 2.0,
+        depth_mm: 0.7,
+        allowance_mm: 0.2,
+    });
+    let c = generate(&ellipse_job(tol, rough)).unwrap();
+    let text = Dialect::Iso.render(&c.program, Form::Loop, Decimals::default());
+    let canon = run_rs274(&rs, &text, 0.0).unwrap();
+    // Runs of feed moves between rapids: one per pass, each ending with its lead-out.
+    let mut passes: Vec<Vec<(f64, f64)>> = Vec::new();
+    let mut in_run = false;
+    for m in &canon {
+        match *m {
+            Canon::Feed { x, z, .. } => {
+                if !in_run {
+                    passes.push(Vec::new());
+                    in_run = true;
+                }
+                passes.last_mut().unwrap().push((z, x));
+            }
+            _ => in_run = false,
+        }
+    }
+    let mut offsets = c.report.pass_offsets_mm.clone();
+    offsets.push(0.0);
+    assert_eq!(
+        passes.len(),
+        offsets.len(),
+        "3 roughing passes and the finish pass"
+    );
+    // Equal depths of (2.0 − 0.2) / 3 = 0.6 mm: offsets 1.4, 0.8, 0.2, then the finish.
+    for (o, want) in offsets.iter().zip([1.4, 0.8, 0.2, 0.0]) {
+        assert!((o - want).abs() < 1e-9, "{offsets:?}");
+    }
+    let mut worst: f64 = 0.0;
+    for (pass, ofs) in passes.iter().zip(&offsets) {
+        let contour: Vec<(f64, f64)> = pass[..pass.len() - 1]
+            .iter()
+            .map(|&(z, x)| (z, x - ofs))
+            .collect();
+        assert_eq!(contour.len(), c.points.len());
+        for w in contour.windows(2) {
+            worst = worst.max(ellipse_chord_deviation(w[0], w[1]));
+        }
+    }
+    eprintln!(
+        "rs274 roughing + finish: worst deviation {:.4} um",
+        worst * 1e3
+    );
+    // Shifting back by the offset adds one more rounding of X (0.05 µm).
+    assert!(worst <= tol + 1e-7, "{worst}");
+}
+
+#[test]
 fn with_the_nose_radius_rs274_keeps_the_tool_outside_the_material() {
     let Some(rs) = rs274_support::rs274() else {
         panic!("rs274 (Debian linuxcnc-uspace) is not installed: .ci/run installs it");

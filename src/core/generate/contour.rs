@@ -153,6 +153,11 @@ pub fn generate(job: &ContourJob) -> Result<Contour, ContourError> {
     let worst = worst_deviation(&job.curve, &us, &points).1;
     let fixed = fixed_step_for(&job.curve, worst, job.decimals, MAX_CHORDS);
     let compensation = compensation_side(job);
+    if job.side == Side::Inside && far_x(job, &points) < 0.0 {
+        return Err(ContourError::BoreTooSmall {
+            x_mm: far_x(job, &points),
+        });
+    }
     let pass_offsets_mm = pass_offsets(job.roughing);
     let program = build_program(
         job,

@@ -241,6 +241,7 @@ pub fn render_sinumerik_table(
         let _ = writeln!(out, "LEADON(A,X,{table})");
         let _ = writeln!(out, "G1 X={:.4} F{:.1}", job.x_end_mm, job.feed_mm_min);
         let _ = writeln!(out, "LEADOF(A,X)");
+        out.push_str("STOPRE ; the mark waits for the stroke to end\n");
         let _ = writeln!(out, "R{}={} ; segments done: {}", MARK.index, k + 1, k + 1);
         let _ = writeln!(out, "G0 Z={:.4}", job.z_lift_mm);
     }

@@ -1,5 +1,5 @@
 //! A small evaluator of the SINUMERIK subset our loop programs use: `DEF REAL`, R
-//! parameters, assignments, arithmetic with `SIN COS TAN SQRT ABS` (degrees), labels,
+//! parameters, assignments, `STOPRE`, arithmetic with `SIN COS TAN SQRT ABS` (degrees), labels,
 //! `IF <cond> GOTOB/GOTOF <label>` and motion blocks with `<axis>=<expr>` words.
 //!
 //! It reads the program *text*, not the generator's structures, so running a loop program
@@ -71,6 +71,8 @@ pub fn run(text: &str, linear: usize, angle: usize) -> Result<Vec<String>, EvalE
                     label: label.to_owned(),
                 })?;
             }
+        } else if line == "STOPRE" {
+            // Only orders preparation against motion; nothing to evaluate.
         } else if line == "M30" {
             break;
         } else if line.starts_with('G') {
