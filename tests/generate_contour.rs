@@ -82,6 +82,89 @@ fn every_chord_is_within_the_tolerance_and_fewer_than_a_fixed_step_needs() {
     }
 }
 
+/// Largest distance of the exact curve from the written chords, by 400 plain samples per
+/// chord: no refinement, no shared code with the generator's measure.
+fn dense_worst(c: &camloop::core::generate::contour::Contour, curve: &Curve) -> f64 {
+    let mut worst: f64 = 0.0;
+    for (w, u) in c.points.windows(2).zip(c.params.windows(2)) {
+        for k in 0..=400 {
+            let j = curve.jet(u[0] + (u[1] - u[0]) * f64::from(k) / 400.0);
+            let (a, b) = (w[0], w[1]);
+            let (dz, dx) = (b.0 - a.0, b.1 - a.1);
+            let t = (((j.z - a.0) * dz + (j.x - a.1) * dx) / (dz * dz + dx * dx)).clamp(0.0, 1.0);
+            worst = worst.max((j.z - a.0 - t * dz).hypot(j.x - a.1 - t * dx));
+        }
+    }
+    worst
+}
+
+#[test]
+fn parabola_sine_tangent_and_a_slender_ellipse_within_the_tolerance() {
+    let curves = [
+        (
+            "parabola",
+            Curve::Parabola {
+                vertex_z_mm: -20.0,
+                vertex_x_mm: 5.0,
+                p_mm: 4.0,
+                x_start_mm: 5.0,
+                x_end_mm: 25.0,
+            },
+        ),
+        (
+            "sine",
+            Curve::Sine {
+                mean_x_mm: 20.0,
+                amplitude_mm: 2.0,
+                wavelength_mm: 20.0,
+                phase_deg: 0.0,
+                z_start_mm: 0.0,
+                z_end_mm: -40.0,
+            },
+        ),
+        (
+            "tangent",
+            Curve::Tangent {
+                mean_x_mm: 20.0,
+                amplitude_mm: 1.0,
+                rate_deg_per_mm: 4.0,
+                centre_z_mm: -20.0,
+                z_start_mm: 0.0,
+                z_end_mm: -40.0,
+            },
+        ),
+        (
+            "slender ellipse",
+            Curve::Ellipse {
+                centre_z_mm: -40.0,
+                centre_x_mm: 10.0,
+                a_mm: 40.0,
+                b_mm: 8.0,
+                start_deg: 5.0,
+                end_deg: 175.0,
+            },
+        ),
+    ];
+    for (name, curve) in curves {
+        let mut job = ellipse_job(2e-3, None);
+        job.curve = curve.clone();
+        let c = generate(&job).unwrap();
+        let worst = dense_worst(&c, &curve);
+        eprintln!(
+            "{name}: {} chords, worst {:.3} um (dense {:.3} um); fixed step {:?} chords",
+            c.report.chords,
+            c.report.worst_deviation_mm * 1e3,
+            worst * 1e3,
+            c.report.fixed_step_chords
+        );
+        assert!(worst <= 2e-3, "{name}: {worst}");
+        assert!(
+            c.report.chords < c.report.fixed_step_chords.unwrap(),
+            "{name}"
+        );
+    }
+}
+
 #[test]
 fn sinumerik_loop_expands_to_exactly_the_expanded_program() {
     let rough = Some(Roughing {
@@ -311,16 +394,7 @@ fn profile_from_csv_is_placed_within_the_tolerance() {
     job.name = "PROFILE_TURN".to_owned();
     let c = generate(&job).unwrap();
     // Dense independent sampling: 400 points per chord against the spline itself.
-    let mut worst: f64 = 0.0;
-    for (w, u) in c.points.windows(2).zip(c.params.windows(2)) {
-        for k in 0..=400 {
-            let j = curve.jet(u[0] + (u[1] - u[0]) * f64::from(k) / 400.0);
-            let (a, b) = (w[0], w[1]);
-            let (dz, dx) = (b.0 - a.0, b.1 - a.1);
-            let t = (((j.z - a.0) * dz + (j.x - a.1) * dx) / (dz * dz + dx * dx)).clamp(0.0, 1.0);
-            worst = worst.max((j.z - a.0 - t * dz).hypot(j.x - a.1 - t * dx));
-        }
-    }
+    let worst = dense_worst(&c, &curve);
     eprintln!(
         "profile: {} chords, worst {:.3} um; fixed step {:?}",
         c.report.chords,
