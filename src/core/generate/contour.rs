@@ -11,8 +11,11 @@ use thiserror::Error;
 
 use super::chords::{StepLaw, fixed_step_for, round_to, walk, worst_deviation};
 use super::curve::Curve;
-use super::ir::{Axis, Compensation, Cond, Expr, Motion, Plane, Program, Stmt, Var, Vars};
+use super::ir::{Compensation, Expr, Program, Var, Vars};
 use crate::core::program::{ProgramNameError, validate_program_name};
+
+mod program;
+use program::{build_program, far_x};
 
 /// Which side of the contour the material is on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -126,15 +129,15 @@ pub struct Contour {
     pub points: Vec<(f64, f64)>,
 }
 
-const U: Var = Var {
+pub(super) const U: Var = Var {
     index: 1,
     name: "CL_U",
 };
-const DU: Var = Var {
+pub(super) const DU: Var = Var {
     index: 2,
     name: "CL_DU",
 };
-const OFS: Var = Var {
+pub(super) const OFS: Var = Var {
     index: 3,
     name: "CL_OFS",
 };
@@ -228,6 +231,7 @@ fn check_values(job: &ContourJob) -> Result<(), ContourError> {
             min_um: 2.0 * resolution * 1e3,
         });
     }
+    check_curve(&job.curve)?;
     let span = job.curve.span();
     if !(span.is_finite() && span > 0.0) {
         return Err(ContourError::Value {
@@ -235,6 +239,98 @@ fn check_values(job: &ContourJob) -> Result<(), ContourError> {
             value: span,
             rule: "start and end must differ",
         });
+    }
+    Ok(())
+}
+
+/// The curve's own sizes: finite, and positive where they divide or scale.
+fn check_curve(curve: &Curve) -> Result<(), ContourError> {
+    let (positive, finite): (Vec<(&'static str, f64)>, Vec<(&'static str, f64)>) = match *curve {
+        Curve::Ellipse {
+            centre_z_mm,
+            centre_x_mm,
+            a_mm,
+            b_mm,
+            start_deg,
+            end_deg,
+        } => (
+            vec![("ellipse a", a_mm), ("ellipse b", b_mm)],
+            vec![
+                ("centre z", centre_z_mm),
+                ("centre x", centre_x_mm),
+                ("start", start_deg),
+                ("end", end_deg),
+            ],
+        ),
+        Curve::Parabola {
+            vertex_z_mm,
+            vertex_x_mm,
+            p_mm,
+            x_start_mm,
+            x_end_mm,
+        } => (
+            vec![("parabola p", p_mm.abs())],
+            vec![
+                ("vertex z", vertex_z_mm),
+                ("vertex x", vertex_x_mm),
+                ("x start", x_start_mm),
+                ("x end", x_end_mm),
+            ],
+        ),
+        Curve::Sine {
+            mean_x_mm,
+            amplitude_mm,
+            wavelength_mm,
+            phase_deg,
+            z_start_mm,
+            z_end_mm,
+        } => (
+            vec![("wavelength", wavelength_mm)],
+            vec![
+                ("mean x", mean_x_mm),
+                ("amplitude", amplitude_mm),
+                ("phase", phase_deg),
+                ("z start", z_start_mm),
+                ("z end", z_end_mm),
+            ],
+        ),
+        Curve::Tangent {
+            mean_x_mm,
+            amplitude_mm,
+            rate_deg_per_mm,
+            centre_z_mm,
+            z_start_mm,
+            z_end_mm,
+        } => (
+            vec![],
+            vec![
+                ("mean x", mean_x_mm),
+                ("amplitude", amplitude_mm),
+                ("rate", rate_deg_per_mm),
+                ("centre z", centre_z_mm),
+                ("z start", z_start_mm),
+                ("z end", z_end_mm),
+            ],
+        ),
+        Curve::Profile { .. } => (vec![], vec![]),
+    };
+    for (field, value) in finite {
+        if !value.is_finite() {
+            return Err(ContourError::Value {
+                field,
+                value,
+                rule: "it must be a finite number",
+            });
+        }
+    }
+    for (field, value) in positive {
+        if !(value.is_finite() && value > 0.0) {
+            return Err(ContourError::Value {
+                field,
+                value,
+                rule: "it must be a number > 0 (non-zero for p)",
+            });
+        }
     }
     Ok(())
 }
@@ -332,7 +428,7 @@ fn snap(v: f64) -> f64 {
 }
 
 /// The step law's Δu as an expression, and the curve's point as expressions.
-fn du_expr(curve: &Curve, law: StepLaw) -> Option<Expr> {
+pub(super) fn du_expr(curve: &Curve, law: StepLaw) -> Option<Expr> {
     let e = curve.exprs(U)?;
     Some(Expr::num(law.kf).div(e.weight.add(Expr::num(law.c0)).sqrt()))
 }
@@ -407,232 +503,10 @@ fn written_point(
 }
 
 /// X of the contour shifted by the current offset (outwards from the material).
-fn shifted(x: Expr, sign: f64) -> Expr {
+pub(super) fn shifted(x: Expr, sign: f64) -> Expr {
     if sign > 0.0 {
         x.add(Expr::var(OFS))
     } else {
         x.sub(Expr::var(OFS))
     }
-}
-
-/// The job's program: safe start, roughing passes (a loop over the offset), finish pass.
-#[allow(clippy::too_many_arguments)]
-fn build_program(
-    job: &ContourJob,
-    name: String,
-    law: StepLaw,
-    points: &[(f64, f64)],
-    comp: Compensation,
-    offsets: &[f64],
-    span: f64,
-) -> Program {
-    let sign = match job.side {
-        Side::Outside => 1.0,
-        Side::Inside => -1.0,
-    };
-    let n = Expr::num;
-    let mv = |motion, words: Vec<(Axis, Expr)>, feed| Stmt::Move {
-        motion,
-        words,
-        feed_mm_min: feed,
-    };
-    let x_far = far_x(job, points);
-    let np = points.len();
-    // Lead-in and lead-out at 45° to the contour, on the tool's side: the compensation
-    // then turns by 45° at the ends, never back on itself.
-    let lead_in = lead_point(points[1], points[0], comp, job.clearance_mm, true);
-    let lead_out = lead_point(
-        points[np - 2],
-        points[np - 1],
-        comp,
-        job.clearance_mm,
-        false,
-    );
-    let approach = |feed_label: u16, feed: f64| {
-        let mut s = vec![
-            mv(Motion::Rapid, vec![(Axis::X, n(x_far))], None),
-            mv(Motion::Rapid, vec![(Axis::Z, n(lead_in.0))], None),
-            mv(
-                Motion::Rapid,
-                vec![(Axis::X, shifted(n(lead_in.1), sign))],
-                None,
-            ),
-        ];
-        if feed_label == FINISH_LABEL {
-            s.push(Stmt::Comp(comp));
-        }
-        s.extend(contour_stmts(
-            job, law, points, span, sign, feed_label, feed,
-        ));
-        if feed_label == FINISH_LABEL {
-            s.push(Stmt::Comp(Compensation::Off));
-        }
-        s.push(mv(
-            Motion::Linear,
-            vec![
-                (Axis::X, shifted(n(lead_out.1), sign)),
-                (Axis::Z, n(lead_out.0)),
-            ],
-            None,
-        ));
-        s.push(mv(Motion::Rapid, vec![(Axis::X, n(x_far))], None));
-        s
-    };
-    let mut body = Vec::new();
-    if let (Some(r), Some(&first)) = (job.roughing, offsets.first()) {
-        let dd = (r.stock_mm - r.allowance_mm) / offsets.len() as f64;
-        body.push(Stmt::Comment(format!(
-            "roughing: {} passes of {:.4} mm down to the allowance of {:.4} mm",
-            offsets.len(),
-            dd,
-            r.allowance_mm
-        )));
-        body.push(Stmt::Assign(OFS, n(first)));
-        let mut pass = approach(ROUGH_LABEL, job.rough_feed_mm_min);
-        pass.push(Stmt::Assign(OFS, Expr::var(OFS).sub(n(dd))));
-        body.push(Stmt::DoWhile {
-            label: PASS_LABEL,
-            body: pass,
-            cond: Cond {
-                left: Expr::var(OFS),
-                less: false,
-                right: n(r.allowance_mm - dd / 2.0),
-            },
-        });
-    }
-    body.push(Stmt::Comment("finish pass".to_owned()));
-    body.push(Stmt::Assign(OFS, n(0.0)));
-    body.extend(approach(FINISH_LABEL, job.finish_feed_mm_min));
-    let side = match comp {
-        Compensation::Left => "G41 (tool left of the travel)",
-        _ => "G42 (tool right of the travel)",
-    };
-    Program {
-        name,
-        plane: Plane::Zx,
-        vars: vec![U, DU, OFS],
-        comments: vec![
-            format!(
-                "contour: {} chords within {:.2} um of the exact curve",
-                points.len() - 1,
-                job.tolerance_mm * 1e3
-            ),
-            format!(
-                "step law: du = {} / sqrt(w(u) + {}), u from 0 to {}",
-                law.kf, law.c0, span
-            ),
-            format!(
-                "nose radius {:.3} mm, {side} in the Z-X plane seen with Z right and X up",
-                job.nose_radius_mm
-            ),
-        ],
-        body,
-    }
-}
-
-const ROUGH_LABEL: u16 = 1;
-const PASS_LABEL: u16 = 3;
-const FINISH_LABEL: u16 = 4;
-
-/// The point `clearance` back along the chord from `end` (`before`) or on beyond it, and
-/// `clearance` off it on the tool's side, rounded as written. Chords run `from` → `end`
-/// in travel order for the lead-out, `end` ← `from` for the lead-in.
-fn lead_point(
-    from: (f64, f64),
-    end: (f64, f64),
-    comp: Compensation,
-    clearance: f64,
-    before: bool,
-) -> (f64, f64) {
-    let (dz, dx) = (end.0 - from.0, end.1 - from.1);
-    let len = dz.hypot(dx);
-    // Travel direction: for the lead-in the chord runs end → from.
-    let (tz, tx) = if before {
-        (-dz / len, -dx / len)
-    } else {
-        (dz / len, dx / len)
-    };
-    // Tool side: left of the travel is (−tx, tz) in (z, x).
-    let (nz, nx) = match comp {
-        Compensation::Left => (-tx, tz),
-        _ => (tx, -tz),
-    };
-    let along = if before { -clearance } else { clearance };
-    (
-        round_to(end.0 + along * tz + clearance * nz, 4),
-        round_to(end.1 + along * tx + clearance * nx, 4),
-    )
-}
-
-/// Retract radius: clear of the blank everywhere.
-fn far_x(job: &ContourJob, points: &[(f64, f64)]) -> f64 {
-    let stock = job.roughing.map_or(0.0, |r| r.stock_mm);
-    let xs = points.iter().map(|p| p.1);
-    match job.side {
-        Side::Outside => round_to(xs.fold(f64::MIN, f64::max) + stock + job.clearance_mm, 3),
-        Side::Inside => round_to(xs.fold(f64::MAX, f64::min) - stock - job.clearance_mm, 3),
-    }
-}
-
-/// The contour from its first point: the loop the control runs (analytic curves) or the
-/// placed points (profiles); X shifted by the offset.
-fn contour_stmts(
-    job: &ContourJob,
-    law: StepLaw,
-    points: &[(f64, f64)],
-    span: f64,
-    sign: f64,
-    label: u16,
-    feed: f64,
-) -> Vec<Stmt> {
-    let n = Expr::num;
-    let mv = |words: Vec<(Axis, Expr)>, feed| Stmt::Move {
-        motion: Motion::Linear,
-        words,
-        feed_mm_min: feed,
-    };
-    let (Some(e), Some(du)) = (job.curve.exprs(U), du_expr(&job.curve, law)) else {
-        return points
-            .iter()
-            .enumerate()
-            .map(|(i, &(z, x))| {
-                mv(
-                    vec![(Axis::X, shifted(n(x), sign)), (Axis::Z, n(z))],
-                    (i == 0).then_some(feed),
-                )
-            })
-            .collect();
-    };
-    let point = || {
-        vec![
-            (Axis::X, shifted(e.x.clone(), sign)),
-            (Axis::Z, e.z.clone()),
-        ]
-    };
-    vec![
-        Stmt::Assign(U, n(0.0)),
-        mv(point(), Some(feed)),
-        Stmt::DoWhile {
-            label,
-            body: vec![
-                Stmt::Assign(DU, du),
-                Stmt::Assign(U, Expr::var(U).add(Expr::var(DU))),
-                Stmt::If {
-                    label: label + 1,
-                    cond: Cond {
-                        left: Expr::var(U),
-                        less: false,
-                        right: n(span),
-                    },
-                    body: vec![Stmt::Assign(U, n(span))],
-                },
-                mv(point(), None),
-            ],
-            cond: Cond {
-                left: Expr::var(U),
-                less: true,
-                right: n(span),
-            },
-        },
-    ]
 }

@@ -183,17 +183,18 @@ fn circle_stmts(job: &TurnMillJob, c: &EccentricCircle) -> Vec<Stmt> {
     // Machine angles are drawing angles less φ (C turns the part by φ).
     let (from, to) = cut_span_deg(c);
     let pieces = ((to - from) / 180.0).ceil().max(1.0) as usize;
-    let at = |ang: f64, r: f64| {
+    // On the cut the radius is the variable RAD; off it (approach, retract) RAD ± clearance.
+    let at = |ang: f64, r: Expr| {
         let a = n(ang - phi);
         vec![
-            (Axis::X, v(XC).add(n(r).mul(a.clone().cos()))),
-            (Axis::Y, v(YC).add(n(r).mul(a.sin()))),
+            (Axis::X, v(XC).add(r.clone().mul(a.clone().cos()))),
+            (Axis::Y, v(YC).add(r.mul(a.sin()))),
         ]
     };
     let out_r = if c.concave {
-        path_r - job.clearance_mm.min(path_r / 2.0)
+        v(RAD).sub(n(job.clearance_mm.min(path_r / 2.0)))
     } else {
-        path_r + job.clearance_mm
+        v(RAD).add(n(job.clearance_mm))
     };
     let mut s = vec![
         Stmt::Comment(format!(
@@ -232,23 +233,23 @@ fn circle_stmts(job: &TurnMillJob, c: &EccentricCircle) -> Vec<Stmt> {
         },
         Stmt::Move {
             motion: Motion::Rapid,
-            words: at(from, out_r),
+            words: at(from, out_r.clone()),
             feed_mm_min: None,
         },
         Stmt::Move {
             motion: Motion::Linear,
-            words: at(from, path_r),
+            words: at(from, v(RAD)),
             feed_mm_min: Some(job.feed_mm_min),
         },
     ];
     for k in 0..pieces {
         let a0 = from + (to - from) * k as f64 / pieces as f64;
         let a1 = from + (to - from) * (k + 1) as f64 / pieces as f64;
-        let mut words = at(a1, path_r);
+        let mut words = at(a1, v(RAD));
         // Centre relative to the arc's start point.
         let a0m = n(a0 - phi);
-        words.push((Axis::I, n(-path_r).mul(a0m.clone().cos())));
-        words.push((Axis::J, n(-path_r).mul(a0m.sin())));
+        words.push((Axis::I, n(0.0).sub(v(RAD)).mul(a0m.clone().cos())));
+        words.push((Axis::J, n(0.0).sub(v(RAD)).mul(a0m.sin())));
         s.push(Stmt::Move {
             motion: Motion::ArcCcw,
             words,
