@@ -243,9 +243,12 @@ fn check_values(job: &ContourJob) -> Result<(), ContourError> {
     Ok(())
 }
 
+/// A named value of the job, for error messages.
+type Field = (&'static str, f64);
+
 /// The curve's own sizes: finite, and positive where they divide or scale.
 fn check_curve(curve: &Curve) -> Result<(), ContourError> {
-    let (positive, finite): (Vec<(&'static str, f64)>, Vec<(&'static str, f64)>) = match *curve {
+    let (positive, finite): (Vec<Field>, Vec<Field>) = match *curve {
         Curve::Ellipse {
             centre_z_mm,
             centre_x_mm,
