@@ -456,4 +456,23 @@ fn refusals_name_the_reason() {
         generate(&job),
         Err(ContourError::TurnsBack { .. })
     ));
+    job.curve = Curve::Parabola {
+        vertex_z_mm: -20.0,
+        vertex_x_mm: 5.0,
+        p_mm: 0.0,
+        x_start_mm: 5.0,
+        x_end_mm: 15.0,
+    };
+    let e = generate(&job).unwrap_err();
+    assert!(e.to_string().starts_with("parabola p is 0"), "{e}");
+}
+
+#[test]
+fn the_evaluator_refuses_what_it_cannot_read_with_the_line() {
+    let text = "DEF REAL CL_U\nCL_U=1\nG1 X=CL_V Z=0\nM30\n";
+    let e = sinumerik_eval::run(text, 4, 4).unwrap_err().to_string();
+    assert_eq!(e, "line 3: unknown variable `CL_V`");
+    let text = "DEF REAL CL_U\nLOOP_1:\nCL_U=CL_U+1\nIF CL_U<3 GOTOB LOOP_9\n";
+    let e = sinumerik_eval::run(text, 4, 4).unwrap_err().to_string();
+    assert_eq!(e, "line 4: no label `LOOP_9`");
 }
