@@ -85,8 +85,13 @@ fn every_chord_is_within_the_tolerance_and_fewer_than_a_fixed_step_needs() {
 /// Largest distance of the exact curve from the written chords, by 400 plain samples per
 /// chord: no refinement, no shared code with the generator's measure.
 fn dense_worst(c: &camloop::core::generate::contour::Contour, curve: &Curve) -> f64 {
+    dense_worst_of(&c.points, &c.params, curve)
+}
+
+/// The same for any points (z, x) at the curve parameters `params`.
+fn dense_worst_of(points: &[(f64, f64)], params: &[f64], curve: &Curve) -> f64 {
     let mut worst: f64 = 0.0;
-    for (w, u) in c.points.windows(2).zip(c.params.windows(2)) {
+    for (w, u) in points.windows(2).zip(params.windows(2)) {
         for k in 0..=400 {
             let j = curve.jet(u[0] + (u[1] - u[0]) * f64::from(k) / 400.0);
             let (a, b) = (w[0], w[1]);
@@ -158,6 +163,22 @@ fn parabola_sine_tangent_and_a_slender_ellipse_within_the_tolerance() {
             c.report.fixed_step_chords
         );
         assert!(worst <= 2e-3, "{name}: {worst}");
+        // The ISO loop as LinuxCNC interprets it: every move ends where we placed it (to
+        // its printed 0.1 µm) and its chords stay within the tolerance of the exact curve.
+        // Block length: LinuxCNC refuses lines over 256 characters, the 802D over 200; the
+        // 840D sl limit is open, so every form stays within the smaller.
+        for dialect in [Dialect::Sinumerik, Dialect::Iso] {
+            let text = dialect.render(&c.program, Form::Loop, Decimals::default());
+            let longest = text.lines().map(str::len).max().unwrap();
+            assert!(longest <= 200, "{name} {dialect:?}: {longest} characters");
+        }
+        let rs = rs274_support::rs274().expect("rs274 installed (.ci/run installs it)");
+        let text = Dialect::Iso.render(&c.program, Form::Loop, Decimals::default());
+        let pts = finish_points(&run_rs274(&rs, &text, 0.0).unwrap());
+        assert_eq!(pts.len(), c.points.len(), "{name}");
+        let rs_worst = dense_worst_of(&pts, &c.params, &curve);
+        eprintln!("{name}: rs274 moves worst {:.4} um", rs_worst * 1e3);
+        assert!(rs_worst <= 2e-3, "{name}: rs274 {rs_worst}");
         assert!(
             c.report.chords < c.report.fixed_step_chords.unwrap(),
             "{name}"

@@ -9,6 +9,13 @@
 
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
+use std::sync::Mutex;
+
+/// LinuxCNC 2.9 keeps the loaded tool data in shared memory, shared by every `rs274`
+/// process on the machine: two runs at once see each other's tool (a 0.8 mm nose appeared in
+/// a run that loaded none). The tests of one binary run their interpreters one at a time;
+/// cargo runs test binaries one after another.
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 /// A canonical move, positions in program units (mm, degrees).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -66,6 +73,9 @@ pub fn run_rs274(
     let text = format!("T1 M6\n{body}");
     let ngc = dir.path().join("prog.ngc");
     std::fs::write(&ngc, text).unwrap();
+    let _turn = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     let out = Command::new(rs274)
         .arg("-t")
         .arg(&tbl)
@@ -118,8 +128,13 @@ pub fn run_rs274(
         let l = l.to_ascii_lowercase();
         l.contains("error") || l.contains("unknown") || l.contains("bad ")
     });
+    // A program the interpreter ran to its end says so; anything else (its messages, such
+    // as "Command too long", name no "error") is a refusal.
     match error {
         Some(e) => Err(format!("rs274: {e}\n{stdout}")),
+        None if !stdout.contains("PROGRAM_END()") => {
+            Err(format!("rs274 stopped before the end:\n{stdout}\n{stderr}"))
+        }
         None => Ok(moves),
     }
 }

@@ -11,7 +11,7 @@ use thiserror::Error;
 
 use super::chords::{StepLaw, fixed_step_for, round_to, walk, worst_deviation};
 use super::curve::Curve;
-use super::ir::{Compensation, Expr, Program, Var, Vars};
+use super::ir::{Compensation, Expr, Program, Var};
 use crate::core::program::{ProgramNameError, validate_program_name};
 
 mod program;
@@ -136,6 +136,14 @@ pub(super) const U: Var = Var {
 pub(super) const DU: Var = Var {
     index: 2,
     name: "CL_DU",
+};
+pub(super) const T1: Var = Var {
+    index: 4,
+    name: "CL_T1",
+};
+pub(super) const T2: Var = Var {
+    index: 5,
+    name: "CL_T2",
 };
 pub(super) const OFS: Var = Var {
     index: 3,
@@ -430,9 +438,14 @@ fn snap(v: f64) -> f64 {
     format!("{v:.9e}").parse().unwrap_or(v)
 }
 
-/// The step law's Δu as an expression, and the curve's point as expressions.
+/// The curve as the loop evaluates it, on the loop's variables.
+pub(super) fn exprs(curve: &Curve) -> Option<super::curve::CurveExprs> {
+    curve.exprs(U, T1, T2)
+}
+
+/// The step law's Δu as an expression.
 pub(super) fn du_expr(curve: &Curve, law: StepLaw) -> Option<Expr> {
-    let e = curve.exprs(U)?;
+    let e = exprs(curve)?;
     Some(Expr::num(law.kf).div(e.weight.add(Expr::num(law.c0)).sqrt()))
 }
 
@@ -442,7 +455,7 @@ pub(super) fn du_expr(curve: &Curve, law: StepLaw) -> Option<Expr> {
 fn place_chords(job: &ContourJob) -> Result<(StepLaw, Vec<f64>, Vec<(f64, f64)>), ContourError> {
     let curve = &job.curve;
     let span = curve.span();
-    let exprs = curve.exprs(U);
+    let exprs = exprs(curve);
     let (mut k, mut cap) = (1.0, span / 2.0);
     for _ in 0..200 {
         let kf = snap(k * (8.0 * job.tolerance_mm).sqrt());
@@ -450,13 +463,9 @@ fn place_chords(job: &ContourJob) -> Result<(StepLaw, Vec<f64>, Vec<(f64, f64)>)
             kf,
             c0: snap((kf / cap).powi(2)),
         };
-        let du: Box<dyn Fn(f64) -> f64> = match du_expr(curve, law) {
-            Some(e) => Box::new(move |u| {
-                let mut vars = Vars::default();
-                vars.set(U, u);
-                e.eval(&vars)
-            }),
-            None => Box::new(move |u| law.kf / (curve.jet(u).weight() + law.c0).sqrt()),
+        let du: Box<dyn Fn(f64) -> f64> = match (du_expr(curve, law), exprs.as_ref()) {
+            (Some(e), Some(c)) => Box::new(move |u| e.eval(&c.vars_at(U, u))),
+            _ => Box::new(move |u| law.kf / (curve.jet(u).weight() + law.c0).sqrt()),
         };
         let Some(us) = walk(span, &du, MAX_CHORDS) else {
             break;
@@ -493,8 +502,7 @@ fn written_point(
 ) -> (f64, f64) {
     let (z, x) = match exprs {
         Some(e) => {
-            let mut vars = Vars::default();
-            vars.set(U, u);
+            let vars = e.vars_at(U, u);
             (e.z.eval(&vars), e.x.eval(&vars) + 0.0)
         }
         None => {

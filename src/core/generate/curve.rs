@@ -218,11 +218,21 @@ impl Curve {
         }
     }
 
-    /// The point `(z, x)` and the weight as expressions in the loop variable `u`, for the
-    /// loop form; `None` for a profile, which the control cannot evaluate.
-    pub fn exprs(&self, u: Var) -> Option<CurveExprs> {
-        let u = || Expr::var(u);
+    /// The point `(z, x)` and the weight as expressions in the loop variable `u` and the
+    /// temporaries `t1`, `t2` (set by `pre` from u first), for the loop form; `None` for a
+    /// profile, which the control cannot evaluate. The temporaries keep every block short
+    /// (LinuxCNC refuses lines over 256 characters, the 802D over 200).
+    pub fn exprs(&self, u: Var, t1: Var, t2: Var) -> Option<CurveExprs> {
         let n = Expr::num;
+        let v = Expr::var;
+        // start + d·u with d = ±1, written as a sum or a difference.
+        let along = |start: f64, d: f64| {
+            if d > 0.0 {
+                n(start).add(v(u))
+            } else {
+                n(start).sub(v(u))
+            }
+        };
         Some(match *self {
             Curve::Ellipse {
                 centre_z_mm,
@@ -233,17 +243,19 @@ impl Curve {
                 end_deg,
             } => {
                 let d = Self::direction(start_deg, end_deg);
-                let t = || n(start_deg).add(n(d).mul(u()));
-                let rate = a_mm * a_mm * RAD * RAD;
-                let rate_b = b_mm * b_mm * RAD * RAD;
+                let (ra, rb) = (a_mm * a_mm * RAD * RAD, b_mm * b_mm * RAD * RAD);
                 CurveExprs {
-                    z: n(centre_z_mm).add(n(a_mm).mul(t().cos())),
-                    x: n(centre_x_mm).add(n(b_mm).mul(t().sin())),
+                    pre: vec![
+                        (t1, along(start_deg, d).sin()),
+                        (t2, along(start_deg, d).cos()),
+                    ],
+                    z: n(centre_z_mm).add(n(a_mm).mul(v(t2))),
+                    x: n(centre_x_mm).add(n(b_mm).mul(v(t1))),
                     // ab·RAD³ / (RAD·sqrt(a² sin² + b² cos²)), as in Jet::weight.
                     weight: n(a_mm * b_mm * RAD * RAD * RAD).div(
-                        n(rate)
-                            .mul(t().sin().mul(t().sin()))
-                            .add(n(rate_b).mul(t().cos().mul(t().cos())))
+                        n(ra)
+                            .mul(v(t1).mul(v(t1)))
+                            .add(n(rb).mul(v(t2).mul(v(t2))))
                             .sqrt(),
                     ),
                 }
@@ -256,13 +268,12 @@ impl Curve {
                 x_end_mm,
             } => {
                 let d = Self::direction(x_start_mm, x_end_mm);
-                let x = || n(x_start_mm).add(n(d).mul(u()));
-                let w = || x().sub(n(vertex_x_mm));
                 CurveExprs {
-                    z: n(vertex_z_mm).add(w().mul(w()).div(n(2.0 * p_mm))),
-                    x: x(),
+                    pre: vec![(t1, along(x_start_mm - vertex_x_mm, d))],
+                    z: n(vertex_z_mm).add(v(t1).mul(v(t1)).div(n(2.0 * p_mm))),
+                    x: n(vertex_x_mm).add(v(t1)),
                     weight: n(1.0 / p_mm.abs())
-                        .div(n(1.0).add(w().mul(w()).div(n(p_mm * p_mm))).sqrt()),
+                        .div(n(1.0).add(v(t1).mul(v(t1)).div(n(p_mm * p_mm))).sqrt()),
                 }
             }
             Curve::Sine {
@@ -274,15 +285,19 @@ impl Curve {
                 z_end_mm,
             } => {
                 let d = Self::direction(z_start_mm, z_end_mm);
-                let z = || n(z_start_mm).add(n(d).mul(u()));
-                let arg = || n(360.0 / wavelength_mm).mul(z()).add(n(phase_deg));
+                let arg = || {
+                    n(360.0 / wavelength_mm)
+                        .mul(along(z_start_mm, d))
+                        .add(n(phase_deg))
+                };
                 let w = 360.0 / wavelength_mm * RAD;
-                let slope = || n(amplitude_mm * w).mul(arg().cos());
+                let slope = || n(amplitude_mm * w).mul(v(t2));
                 CurveExprs {
-                    z: z(),
-                    x: n(mean_x_mm).add(n(amplitude_mm).mul(arg().sin())),
+                    pre: vec![(t1, arg().sin()), (t2, arg().cos())],
+                    z: along(z_start_mm, d),
+                    x: n(mean_x_mm).add(n(amplitude_mm).mul(v(t1))),
                     weight: n(amplitude_mm * w * w)
-                        .mul(arg().sin())
+                        .mul(v(t1))
                         .abs()
                         .div(n(1.0).add(slope().mul(slope())).sqrt()),
                 }
@@ -296,17 +311,24 @@ impl Curve {
                 z_end_mm,
             } => {
                 let d = Self::direction(z_start_mm, z_end_mm);
-                let z = || n(z_start_mm).add(n(d).mul(u()));
-                let t = || z().sub(n(centre_z_mm)).mul(n(rate_deg_per_mm)).tan();
                 let w = rate_deg_per_mm * RAD;
-                let sec2 = || n(1.0).add(t().mul(t()));
-                let slope = || n(amplitude_mm * w).mul(sec2());
+                // t1 = tan, t2 = sec² = 1 + tan².
+                let slope = || n(amplitude_mm * w).mul(v(t2));
                 CurveExprs {
-                    z: z(),
-                    x: n(mean_x_mm).add(n(amplitude_mm).mul(t())),
+                    pre: vec![
+                        (
+                            t1,
+                            along(z_start_mm - centre_z_mm, d)
+                                .mul(n(rate_deg_per_mm))
+                                .tan(),
+                        ),
+                        (t2, n(1.0).add(v(t1).mul(v(t1)))),
+                    ],
+                    z: along(z_start_mm, d),
+                    x: n(mean_x_mm).add(n(amplitude_mm).mul(v(t1))),
                     weight: n(2.0 * amplitude_mm * w * w)
-                        .mul(sec2())
-                        .mul(t())
+                        .mul(v(t2))
+                        .mul(v(t1))
                         .abs()
                         .div(n(1.0).add(slope().mul(slope())).sqrt()),
                 }
@@ -319,8 +341,23 @@ impl Curve {
 /// A curve written for the control.
 #[derive(Debug, Clone)]
 pub struct CurveExprs {
+    /// Temporaries assigned from u, in order, before z, x and the weight are evaluated.
+    pub pre: Vec<(Var, Expr)>,
     pub z: Expr,
     pub x: Expr,
     /// κ·|p′|², as [`Jet::weight`].
     pub weight: Expr,
+}
+
+impl CurveExprs {
+    /// The variables at u, as the loop has them when it evaluates z, x and the weight.
+    pub fn vars_at(&self, u_var: Var, u: f64) -> super::ir::Vars {
+        let mut vars = super::ir::Vars::default();
+        vars.set(u_var, u);
+        for (t, e) in &self.pre {
+            let value = e.eval(&vars);
+            vars.set(*t, value);
+        }
+        vars
+    }
 }

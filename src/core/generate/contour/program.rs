@@ -1,7 +1,7 @@
 //! The contour's program: the safe start, the roughing loop over the offset, the finish
 //! pass with compensation, lead-in and lead-out.
 
-use super::{ContourJob, DU, OFS, Side, U, du_expr, shifted};
+use super::{ContourJob, DU, OFS, Side, T1, T2, U, du_expr, exprs, shifted};
 use crate::core::generate::chords::{StepLaw, round_to};
 use crate::core::generate::ir::{Axis, Compensation, Cond, Expr, Motion, Plane, Program, Stmt};
 
@@ -100,7 +100,7 @@ pub(super) fn build_program(
     Program {
         name,
         plane: Plane::Zx,
-        vars: vec![U, DU, OFS],
+        vars: vec![U, DU, T1, T2, OFS],
         comments: vec![
             format!(
                 "contour: {} chords within {:.2} um of the exact curve",
@@ -181,7 +181,7 @@ fn contour_stmts(
         words,
         feed_mm_min: feed,
     };
-    let (Some(e), Some(du)) = (job.curve.exprs(U), du_expr(&job.curve, law)) else {
+    let (Some(e), Some(du)) = (exprs(&job.curve), du_expr(&job.curve, law)) else {
         return points
             .iter()
             .enumerate()
@@ -199,30 +199,33 @@ fn contour_stmts(
             (Axis::Z, e.z.clone()),
         ]
     };
-    vec![
-        Stmt::Assign(U, n(0.0)),
-        mv(point(), Some(feed)),
-        Stmt::DoWhile {
-            label,
-            body: vec![
-                Stmt::Assign(DU, du),
-                Stmt::Assign(U, Expr::var(U).add(Expr::var(DU))),
-                Stmt::If {
-                    label: label + 1,
-                    cond: Cond {
-                        left: Expr::var(U),
-                        less: false,
-                        right: n(span),
-                    },
-                    body: vec![Stmt::Assign(U, n(span))],
-                },
-                mv(point(), None),
-            ],
+    let pre = || e.pre.iter().map(|(t, x)| Stmt::Assign(*t, x.clone()));
+    let mut body = vec![
+        Stmt::Assign(DU, du),
+        Stmt::Assign(U, Expr::var(U).add(Expr::var(DU))),
+        Stmt::If {
+            label: label + 1,
             cond: Cond {
                 left: Expr::var(U),
-                less: true,
+                less: false,
                 right: n(span),
             },
+            body: vec![Stmt::Assign(U, n(span))],
         },
-    ]
+    ];
+    body.extend(pre());
+    body.push(mv(point(), None));
+    let mut out = vec![Stmt::Assign(U, n(0.0))];
+    out.extend(pre());
+    out.push(mv(point(), Some(feed)));
+    out.push(Stmt::DoWhile {
+        label,
+        body,
+        cond: Cond {
+            left: Expr::var(U),
+            less: true,
+            right: n(span),
+        },
+    });
+    out
 }
