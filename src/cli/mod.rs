@@ -3,12 +3,15 @@
 
 mod analyze;
 mod compensate;
+mod contour;
 pub mod history;
 mod output;
 mod part;
+mod planing;
 mod program_args;
 mod run;
 mod table;
+mod turnmill;
 
 use clap::{Parser, Subcommand};
 
@@ -38,6 +41,13 @@ pub enum Command {
     History(history::HistoryArgs),
     /// Export the measurement history of a time range as CSV or JSON.
     Export(history::ExportArgs),
+    /// A non-circular turning contour (ellipse, parabola, sine, tangent, CSV profile) as a
+    /// program with chords placed by tolerance.
+    Contour(contour::ContourArgs),
+    /// Eccentric circles on a turn-mill centre (X/Y with C held) from a TOML job file.
+    Turnmill(turnmill::TurnMillArgs),
+    /// Ratio-coupled planing of a twisted-lobe rotor (A follows X), resumable by segment.
+    Planing(planing::PlaningArgs),
 }
 
 /// Runs a parsed command; the error chain is printed by `main` on one line.
@@ -50,6 +60,9 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Run(args) => run::run_service(args),
         Command::History(args) => history::run_history(args),
         Command::Export(args) => history::run_export(args),
+        Command::Contour(args) => contour::run_contour(args),
+        Command::Turnmill(args) => turnmill::run_turnmill(args),
+        Command::Planing(args) => planing::run_planing(args),
     }
 }
 

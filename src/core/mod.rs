@@ -4,6 +4,7 @@
 pub mod analysis;
 pub mod compensate;
 pub mod fit;
+pub mod generate;
 pub mod geometry;
 pub mod harmonics;
 pub mod learn;

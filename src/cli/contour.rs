@@ -1,0 +1,260 @@
+//! `camloop contour`: a non-circular turning contour as a SINUMERIK or ISO program, in loop
+//! or expanded form, with chords placed by tolerance.
+
+use super::output::Outputs;
+use crate::core::generate::contour::{ContourJob, Roughing, Side, generate};
+use crate::core::generate::curve::Curve;
+use crate::core::generate::dialect::{Decimals, Dialect, Form};
+use crate::core::generate::profile::parse_profile;
+use anyhow::Context;
+use clap::{Args, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum DialectArg {
+    /// SINUMERIK 840D sl (`DEF REAL`, `IF … GOTOB`).
+    Sinumerik,
+    /// ISO G-code with `#` macro variables and O-word loops (LinuxCNC).
+    Iso,
+}
+
+impl From<DialectArg> for Dialect {
+    fn from(d: DialectArg) -> Self {
+        match d {
+            DialectArg::Sinumerik => Dialect::Sinumerik,
+            DialectArg::Iso => Dialect::Iso,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FormArg {
+    /// The control evaluates the curve in a loop.
+    Loop,
+    /// One block per chord.
+    Expanded,
+}
+
+#[derive(Debug, Args)]
+#[command(allow_negative_numbers = true)]
+pub struct ContourArgs {
+    #[command(subcommand)]
+    pub curve: CurveArgs,
+    /// Where to write the program.
+    #[arg(long, global = true, value_name = "OUT", default_value = "contour.mpf")]
+    pub out: PathBuf,
+    /// Program name (SINUMERIK rules).
+    #[arg(long, global = true, default_value = "CONTOUR")]
+    pub name: String,
+    #[arg(long, global = true, value_enum, default_value_t = DialectArg::Sinumerik)]
+    pub dialect: DialectArg,
+    #[arg(long, global = true, value_enum, default_value_t = FormArg::Loop)]
+    pub form: FormArg,
+    /// Largest chord error, µm.
+    #[arg(long, global = true, default_value_t = 2.0)]
+    pub tolerance_um: f64,
+    /// Boring (tool inside) instead of outside turning.
+    #[arg(long, global = true)]
+    pub inside: bool,
+    #[arg(long, global = true, default_value_t = 0.8)]
+    pub nose_radius_mm: f64,
+    /// Radial stock to rough away before the finish pass (0: no roughing).
+    #[arg(long, global = true, default_value_t = 0.0)]
+    pub stock_mm: f64,
+    #[arg(long, global = true, default_value_t = 1.0)]
+    pub depth_mm: f64,
+    #[arg(long, global = true, default_value_t = 0.2)]
+    pub allowance_mm: f64,
+    #[arg(long, global = true, default_value_t = 1.0)]
+    pub clearance_mm: f64,
+    #[arg(long, global = true, default_value_t = 120.0)]
+    pub finish_feed_mm_min: f64,
+    #[arg(long, global = true, default_value_t = 250.0)]
+    pub rough_feed_mm_min: f64,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum CurveArgs {
+    /// z = zc + a·cos θ, x = xc + b·sin θ.
+    #[command(allow_negative_numbers = true)]
+    Ellipse {
+        #[arg(long)]
+        centre_z_mm: f64,
+        #[arg(long)]
+        centre_x_mm: f64,
+        #[arg(long)]
+        a_mm: f64,
+        #[arg(long)]
+        b_mm: f64,
+        #[arg(long)]
+        start_deg: f64,
+        #[arg(long)]
+        end_deg: f64,
+    },
+    /// (x − x0)² = 2p·(z − z0), run along x.
+    #[command(allow_negative_numbers = true)]
+    Parabola {
+        #[arg(long)]
+        vertex_z_mm: f64,
+        #[arg(long)]
+        vertex_x_mm: f64,
+        #[arg(long)]
+        p_mm: f64,
+        #[arg(long)]
+        x_start_mm: f64,
+        #[arg(long)]
+        x_end_mm: f64,
+    },
+    /// x = x0 + A·sin(360·z/λ + φ), run along z.
+    #[command(allow_negative_numbers = true)]
+    Sine {
+        #[arg(long)]
+        mean_x_mm: f64,
+        #[arg(long)]
+        amplitude_mm: f64,
+        #[arg(long)]
+        wavelength_mm: f64,
+        #[arg(long, default_value_t = 0.0)]
+        phase_deg: f64,
+        #[arg(long)]
+        z_start_mm: f64,
+        #[arg(long)]
+        z_end_mm: f64,
+    },
+    /// x = x0 + A·tan(ω·(z − zc)), run along z.
+    #[command(allow_negative_numbers = true)]
+    Tangent {
+        #[arg(long)]
+        mean_x_mm: f64,
+        #[arg(long)]
+        amplitude_mm: f64,
+        #[arg(long)]
+        rate_deg_per_mm: f64,
+        #[arg(long)]
+        centre_z_mm: f64,
+        #[arg(long)]
+        z_start_mm: f64,
+        #[arg(long)]
+        z_end_mm: f64,
+    },
+    /// Points `z_mm,x_mm` from a CSV file, interpolated by a natural cubic spline.
+    #[command(allow_negative_numbers = true)]
+    Profile {
+        #[arg(long)]
+        csv: PathBuf,
+    },
+}
+
+fn curve(args: &CurveArgs) -> anyhow::Result<Curve> {
+    Ok(match *args {
+        CurveArgs::Ellipse {
+            centre_z_mm,
+            centre_x_mm,
+            a_mm,
+            b_mm,
+            start_deg,
+            end_deg,
+        } => Curve::Ellipse {
+            centre_z_mm,
+            centre_x_mm,
+            a_mm,
+            b_mm,
+            start_deg,
+            end_deg,
+        },
+        CurveArgs::Parabola {
+            vertex_z_mm,
+            vertex_x_mm,
+            p_mm,
+            x_start_mm,
+            x_end_mm,
+        } => Curve::Parabola {
+            vertex_z_mm,
+            vertex_x_mm,
+            p_mm,
+            x_start_mm,
+            x_end_mm,
+        },
+        CurveArgs::Sine {
+            mean_x_mm,
+            amplitude_mm,
+            wavelength_mm,
+            phase_deg,
+            z_start_mm,
+            z_end_mm,
+        } => Curve::Sine {
+            mean_x_mm,
+            amplitude_mm,
+            wavelength_mm,
+            phase_deg,
+            z_start_mm,
+            z_end_mm,
+        },
+        CurveArgs::Tangent {
+            mean_x_mm,
+            amplitude_mm,
+            rate_deg_per_mm,
+            centre_z_mm,
+            z_start_mm,
+            z_end_mm,
+        } => Curve::Tangent {
+            mean_x_mm,
+            amplitude_mm,
+            rate_deg_per_mm,
+            centre_z_mm,
+            z_start_mm,
+            z_end_mm,
+        },
+        CurveArgs::Profile { ref csv } => {
+            let text = std::fs::read_to_string(csv)
+                .with_context(|| format!("cannot read {}", csv.display()))?;
+            parse_profile(&text, &csv.display().to_string())?
+        }
+    })
+}
+
+pub fn run_contour(args: ContourArgs) -> anyhow::Result<()> {
+    let roughing = (args.stock_mm > 0.0).then_some(Roughing {
+        stock_mm: args.stock_mm,
+        depth_mm: args.depth_mm,
+        allowance_mm: args.allowance_mm,
+    });
+    let job = ContourJob {
+        name: args.name.clone(),
+        curve: curve(&args.curve)?,
+        tolerance_mm: args.tolerance_um * 1e-3,
+        decimals: Decimals::default().linear,
+        side: if args.inside {
+            Side::Inside
+        } else {
+            Side::Outside
+        },
+        nose_radius_mm: args.nose_radius_mm,
+        roughing,
+        clearance_mm: args.clearance_mm,
+        finish_feed_mm_min: args.finish_feed_mm_min,
+        rough_feed_mm_min: args.rough_feed_mm_min,
+    };
+    let c = generate(&job).context("contour refused")?;
+    let form = match args.form {
+        FormArg::Loop => Form::Loop,
+        FormArg::Expanded => Form::Expanded,
+    };
+    let text = Dialect::from(args.dialect).render(&c.program, form, Decimals::default());
+    let mut outputs = Outputs::default();
+    outputs.add(&args.out, text);
+    outputs.commit()?;
+    let r = &c.report;
+    println!(
+        "{}: {} chords, worst deviation {:.3} um (tolerance {} um); a fixed step needs {} chords for the same worst error; {:?} compensation; {} roughing passes",
+        args.out.display(),
+        r.chords,
+        r.worst_deviation_mm * 1e3,
+        args.tolerance_um,
+        r.fixed_step_chords
+            .map_or_else(|| "more than 200000".to_owned(), |n| n.to_string()),
+        r.compensation,
+        r.pass_offsets_mm.len()
+    );
+    Ok(())
+}

@@ -1,0 +1,363 @@
+//! The exact turning contours: ellipse, parabola, sine, tangent and an explicit CSV profile,
+//! in lathe coordinates (z along the axis, x the radius), each on a parameter u running
+//! from 0 to its span.
+//!
+//! Each analytic curve also gives its point as an [`Expr`] in the loop variable, so the
+//! control can evaluate the same curve the generator proves.
+
+use super::ir::{Expr, Var};
+use super::open_spline::OpenSpline;
+
+/// A contour. Angles in degrees, lengths in mm.
+#[derive(Debug, Clone)]
+pub enum Curve {
+    /// `z = zc + a·cos θ`, `x = xc + b·sin θ`, θ from `start_deg` to `end_deg`.
+    Ellipse {
+        centre_z_mm: f64,
+        centre_x_mm: f64,
+        a_mm: f64,
+        b_mm: f64,
+        start_deg: f64,
+        end_deg: f64,
+    },
+    /// `(x − x0)² = 2p·(z − z0)`, run along x from `x_start_mm` to `x_end_mm`.
+    Parabola {
+        vertex_z_mm: f64,
+        vertex_x_mm: f64,
+        p_mm: f64,
+        x_start_mm: f64,
+        x_end_mm: f64,
+    },
+    /// `x = x0 + A·sin(360·z/λ + φ)`, run along z.
+    Sine {
+        mean_x_mm: f64,
+        amplitude_mm: f64,
+        wavelength_mm: f64,
+        phase_deg: f64,
+        z_start_mm: f64,
+        z_end_mm: f64,
+    },
+    /// `x = x0 + A·tan(ω·(z − zc))`, ω in degrees per mm, run along z; the argument must
+    /// stay inside (−90°, 90°).
+    Tangent {
+        mean_x_mm: f64,
+        amplitude_mm: f64,
+        rate_deg_per_mm: f64,
+        centre_z_mm: f64,
+        z_start_mm: f64,
+        z_end_mm: f64,
+    },
+    /// `x(z)` through the points of a profile (natural cubic spline), run from the first
+    /// point to the last.
+    Profile { spline: OpenSpline, reversed: bool },
+}
+
+/// Point and parameter derivatives (per unit of u).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Jet {
+    pub z: f64,
+    pub x: f64,
+    pub dz: f64,
+    pub dx: f64,
+    pub ddz: f64,
+    pub ddx: f64,
+}
+
+impl Jet {
+    /// Signed curvature, positive when the contour turns left (towards +x when it runs +z).
+    pub fn curvature(&self) -> f64 {
+        (self.dz * self.ddx - self.dx * self.ddz) / (self.dz.hypot(self.dx)).powi(3)
+    }
+
+    /// κ·|p′|², the chord-height rate: a chord over a parameter step Δu rises about
+    /// `weight·Δu²/8` from the curve.
+    pub fn weight(&self) -> f64 {
+        (self.dz * self.ddx - self.dx * self.ddz).abs() / self.dz.hypot(self.dx)
+    }
+}
+
+const RAD: f64 = std::f64::consts::PI / 180.0;
+
+/// Graph `x(z)` with z = z0 + d·u (d = ±1): the jet in u.
+fn graph(z: f64, d: f64, x: [f64; 3]) -> Jet {
+    Jet {
+        z,
+        x: x[0],
+        dz: d,
+        dx: x[1] * d,
+        ddz: 0.0,
+        ddx: x[2],
+    }
+}
+
+impl Curve {
+    /// Direction of the parameter along its natural coordinate: +1 or −1.
+    fn direction(from: f64, to: f64) -> f64 {
+        if to >= from { 1.0 } else { -1.0 }
+    }
+
+    /// Parameter span: u runs from 0 to this.
+    pub fn span(&self) -> f64 {
+        match self {
+            Curve::Ellipse {
+                start_deg, end_deg, ..
+            } => (end_deg - start_deg).abs(),
+            Curve::Parabola {
+                x_start_mm,
+                x_end_mm,
+                ..
+            } => (x_end_mm - x_start_mm).abs(),
+            Curve::Sine {
+                z_start_mm,
+                z_end_mm,
+                ..
+            }
+            | Curve::Tangent {
+                z_start_mm,
+                z_end_mm,
+                ..
+            } => (z_end_mm - z_start_mm).abs(),
+            Curve::Profile { spline, .. } => spline.last() - spline.first(),
+        }
+    }
+
+    /// Exact point and derivatives at u.
+    pub fn jet(&self, u: f64) -> Jet {
+        match *self {
+            Curve::Ellipse {
+                centre_z_mm,
+                centre_x_mm,
+                a_mm,
+                b_mm,
+                start_deg,
+                end_deg,
+            } => {
+                let d = Self::direction(start_deg, end_deg);
+                let t = (start_deg + d * u) * RAD;
+                let (s, c) = t.sin_cos();
+                Jet {
+                    z: centre_z_mm + a_mm * c,
+                    x: centre_x_mm + b_mm * s,
+                    dz: -a_mm * s * d * RAD,
+                    dx: b_mm * c * d * RAD,
+                    ddz: -a_mm * c * RAD * RAD,
+                    ddx: -b_mm * s * RAD * RAD,
+                }
+            }
+            Curve::Parabola {
+                vertex_z_mm,
+                vertex_x_mm,
+                p_mm,
+                x_start_mm,
+                x_end_mm,
+            } => {
+                let d = Self::direction(x_start_mm, x_end_mm);
+                let x = x_start_mm + d * u;
+                let w = x - vertex_x_mm;
+                // Along is x, across is z here: z = z0 + w²/(2p).
+                let z = vertex_z_mm + w * w / (2.0 * p_mm);
+                Jet {
+                    z,
+                    x,
+                    dz: w / p_mm * d,
+                    dx: d,
+                    ddz: 1.0 / p_mm,
+                    ddx: 0.0,
+                }
+            }
+            Curve::Sine {
+                mean_x_mm,
+                amplitude_mm,
+                wavelength_mm,
+                phase_deg,
+                z_start_mm,
+                z_end_mm,
+            } => {
+                let d = Self::direction(z_start_mm, z_end_mm);
+                let z = z_start_mm + d * u;
+                let w = 360.0 / wavelength_mm * RAD;
+                let arg = (360.0 * z / wavelength_mm + phase_deg) * RAD;
+                let y = [
+                    mean_x_mm + amplitude_mm * arg.sin(),
+                    amplitude_mm * w * arg.cos(),
+                    -amplitude_mm * w * w * arg.sin(),
+                ];
+                graph(z, d, y)
+            }
+            Curve::Tangent {
+                mean_x_mm,
+                amplitude_mm,
+                rate_deg_per_mm,
+                centre_z_mm,
+                z_start_mm,
+                z_end_mm,
+            } => {
+                let d = Self::direction(z_start_mm, z_end_mm);
+                let z = z_start_mm + d * u;
+                let w = rate_deg_per_mm * RAD;
+                let t = ((z - centre_z_mm) * rate_deg_per_mm * RAD).tan();
+                let sec2 = 1.0 + t * t;
+                let y = [
+                    mean_x_mm + amplitude_mm * t,
+                    amplitude_mm * w * sec2,
+                    2.0 * amplitude_mm * w * w * sec2 * t,
+                ];
+                graph(z, d, y)
+            }
+            Curve::Profile {
+                ref spline,
+                reversed,
+            } => {
+                let (z, d) = if reversed {
+                    (spline.last() - u, -1.0)
+                } else {
+                    (spline.first() + u, 1.0)
+                };
+                graph(z, d, spline.eval(z))
+            }
+        }
+    }
+
+    /// The point `(z, x)` and the weight as expressions in the loop variable `u` and the
+    /// temporaries `t1`, `t2` (set by `pre` from u first), for the loop form; `None` for a
+    /// profile, which the control cannot evaluate. The temporaries keep every block short
+    /// (LinuxCNC refuses lines over 256 characters, the 802D over 200).
+    pub fn exprs(&self, u: Var, t1: Var, t2: Var) -> Option<CurveExprs> {
+        let n = Expr::num;
+        let v = Expr::var;
+        // start + d·u with d = ±1, written as a sum or a difference.
+        let along = |start: f64, d: f64| {
+            if d > 0.0 {
+                n(start).add(v(u))
+            } else {
+                n(start).sub(v(u))
+            }
+        };
+        Some(match *self {
+            Curve::Ellipse {
+                centre_z_mm,
+                centre_x_mm,
+                a_mm,
+                b_mm,
+                start_deg,
+                end_deg,
+            } => {
+                let d = Self::direction(start_deg, end_deg);
+                let (ra, rb) = (a_mm * a_mm * RAD * RAD, b_mm * b_mm * RAD * RAD);
+                CurveExprs {
+                    pre: vec![
+                        (t1, along(start_deg, d).sin()),
+                        (t2, along(start_deg, d).cos()),
+                    ],
+                    z: n(centre_z_mm).add(n(a_mm).mul(v(t2))),
+                    x: n(centre_x_mm).add(n(b_mm).mul(v(t1))),
+                    // ab·RAD³ / (RAD·sqrt(a² sin² + b² cos²)), as in Jet::weight.
+                    weight: n(a_mm * b_mm * RAD * RAD * RAD).div(
+                        n(ra)
+                            .mul(v(t1).mul(v(t1)))
+                            .add(n(rb).mul(v(t2).mul(v(t2))))
+                            .sqrt(),
+                    ),
+                }
+            }
+            Curve::Parabola {
+                vertex_z_mm,
+                vertex_x_mm,
+                p_mm,
+                x_start_mm,
+                x_end_mm,
+            } => {
+                let d = Self::direction(x_start_mm, x_end_mm);
+                CurveExprs {
+                    pre: vec![(t1, along(x_start_mm - vertex_x_mm, d))],
+                    z: n(vertex_z_mm).add(v(t1).mul(v(t1)).div(n(2.0 * p_mm))),
+                    x: n(vertex_x_mm).add(v(t1)),
+                    weight: n(1.0 / p_mm.abs())
+                        .div(n(1.0).add(v(t1).mul(v(t1)).div(n(p_mm * p_mm))).sqrt()),
+                }
+            }
+            Curve::Sine {
+                mean_x_mm,
+                amplitude_mm,
+                wavelength_mm,
+                phase_deg,
+                z_start_mm,
+                z_end_mm,
+            } => {
+                let d = Self::direction(z_start_mm, z_end_mm);
+                let arg = || {
+                    n(360.0 / wavelength_mm)
+                        .mul(along(z_start_mm, d))
+                        .add(n(phase_deg))
+                };
+                let w = 360.0 / wavelength_mm * RAD;
+                let slope = || n(amplitude_mm * w).mul(v(t2));
+                CurveExprs {
+                    pre: vec![(t1, arg().sin()), (t2, arg().cos())],
+                    z: along(z_start_mm, d),
+                    x: n(mean_x_mm).add(n(amplitude_mm).mul(v(t1))),
+                    weight: n(amplitude_mm * w * w)
+                        .mul(v(t1))
+                        .abs()
+                        .div(n(1.0).add(slope().mul(slope())).sqrt()),
+                }
+            }
+            Curve::Tangent {
+                mean_x_mm,
+                amplitude_mm,
+                rate_deg_per_mm,
+                centre_z_mm,
+                z_start_mm,
+                z_end_mm,
+            } => {
+                let d = Self::direction(z_start_mm, z_end_mm);
+                let w = rate_deg_per_mm * RAD;
+                // t1 = tan, t2 = sec² = 1 + tan².
+                let slope = || n(amplitude_mm * w).mul(v(t2));
+                CurveExprs {
+                    pre: vec![
+                        (
+                            t1,
+                            along(z_start_mm - centre_z_mm, d)
+                                .mul(n(rate_deg_per_mm))
+                                .tan(),
+                        ),
+                        (t2, n(1.0).add(v(t1).mul(v(t1)))),
+                    ],
+                    z: along(z_start_mm, d),
+                    x: n(mean_x_mm).add(n(amplitude_mm).mul(v(t1))),
+                    weight: n(2.0 * amplitude_mm * w * w)
+                        .mul(v(t2))
+                        .mul(v(t1))
+                        .abs()
+                        .div(n(1.0).add(slope().mul(slope())).sqrt()),
+                }
+            }
+            Curve::Profile { .. } => return None,
+        })
+    }
+}
+
+/// A curve written for the control.
+#[derive(Debug, Clone)]
+pub struct CurveExprs {
+    /// Temporaries assigned from u, in order, before z, x and the weight are evaluated.
+    pub pre: Vec<(Var, Expr)>,
+    pub z: Expr,
+    pub x: Expr,
+    /// κ·|p′|², as [`Jet::weight`].
+    pub weight: Expr,
+}
+
+impl CurveExprs {
+    /// The variables at u, as the loop has them when it evaluates z, x and the weight.
+    pub fn vars_at(&self, u_var: Var, u: f64) -> super::ir::Vars {
+        let mut vars = super::ir::Vars::default();
+        vars.set(u_var, u);
+        for (t, e) in &self.pre {
+            let value = e.eval(&vars);
+            vars.set(*t, value);
+        }
+        vars
+    }
+}

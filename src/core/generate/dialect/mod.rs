@@ -1,0 +1,87 @@
+//! Controller dialects: one file per control, all behind [`Dialect`].
+//!
+//! A generator builds a [`super::ir::Program`] once; a dialect only writes it. Adding a
+//! controller means adding a variant here and one file beside this one: nothing in the
+//! generators changes.
+
+mod iso;
+mod sinumerik;
+
+use super::ir::{Expr, Program, expand};
+
+/// The controls camloop writes programs for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dialect {
+    /// SINUMERIK 840D sl: `DEF REAL` variables, labels and `IF … GOTOB` loops.
+    Sinumerik,
+    /// ISO G-code with macro variables as LinuxCNC reads them: `#` numbers, `o… do` /
+    /// `o… while` loops and `o… if` blocks.
+    Iso,
+}
+
+/// Loop form (the control evaluates the curve) or expanded form (one block per move).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Form {
+    Loop,
+    Expanded,
+}
+
+/// Decimals written in move words.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Decimals {
+    /// Linear axes and arc centres, mm.
+    pub linear: usize,
+    /// Rotary axes, degrees.
+    pub angle: usize,
+}
+
+impl Default for Decimals {
+    /// 0.1 µm and 0.0001°, the resolution of the controls' default machine data.
+    fn default() -> Self {
+        Decimals {
+            linear: 4,
+            angle: 4,
+        }
+    }
+}
+
+impl Dialect {
+    /// The program as text in this dialect and form.
+    pub fn render(self, program: &Program, form: Form, decimals: Decimals) -> String {
+        let expanded;
+        let p = match form {
+            Form::Loop => program,
+            Form::Expanded => {
+                expanded = expand(program);
+                &expanded
+            }
+        };
+        match self {
+            Dialect::Sinumerik => sinumerik::render(p, decimals),
+            Dialect::Iso => iso::render(p, decimals),
+        }
+    }
+}
+
+/// `v` with exactly `decimals` decimals, never `-0.000`.
+pub(crate) fn fixed(v: f64, decimals: usize) -> String {
+    let text = format!("{v:.decimals$}");
+    match text.strip_prefix('-') {
+        Some(rest) if rest.bytes().all(|b| b == b'0' || b == b'.') => rest.to_owned(),
+        _ => text,
+    }
+}
+
+/// A constant inside an expression: the shortest text that reads back as the same `f64`,
+/// so the control computes with exactly the value the generator used.
+pub(crate) fn exact(v: f64) -> String {
+    format!("{v}")
+}
+
+/// True when `e` is a binary operation, which needs brackets inside another one.
+pub(crate) fn is_binary(e: &Expr) -> bool {
+    matches!(
+        e,
+        Expr::Add(..) | Expr::Sub(..) | Expr::Mul(..) | Expr::Div(..)
+    )
+}

@@ -1,0 +1,17 @@
+//! Generators for the other non-circular machines: turning contours (X–Z chords placed by
+//! tolerance), turn-mill eccentric surfaces (X/Y/C) and ratio-coupled planing (X–A).
+//!
+//! Each generator checks its geometry, builds one [`ir::Program`] and reports what it
+//! proved; [`dialect::Dialect`] writes that program for a control, as a loop the control
+//! evaluates or fully expanded. Pure: values in, programs or typed refusals out.
+
+pub mod chords;
+pub mod contour;
+pub mod curve;
+pub mod dialect;
+pub mod ir;
+pub mod open_spline;
+pub mod planing;
+pub mod profile;
+pub mod sinumerik_eval;
+pub mod turnmill;
