@@ -302,6 +302,30 @@ impl Store {
         Ok(Page { items, next_cursor })
     }
 
+    /// Every measurement of one part (a shaft, by the number the gauge gave) on one machine,
+    /// oldest first: what answers "did shaft 1234 pass, lobe by lobe". At most `MAX_PAGE`.
+    pub async fn part_measurements(
+        &self,
+        machine: &str,
+        part: &str,
+    ) -> Result<Vec<MeasurementSummary>, StoreError> {
+        check_name("machine", machine)?;
+        let sql = format!(
+            "SELECT {SUMMARY_COLUMNS} FROM measurements m \
+             WHERE m.machine = $1 AND m.part = $2 ORDER BY m.id LIMIT {}",
+            super::MAX_PAGE
+        );
+        with_read!(self, pool => {
+            let rows = sqlx::query(&sql)
+                .bind(machine)
+                .bind(part)
+                .fetch_all(pool)
+                .await
+                .map_err(self.db_error("reading a part's measurements"))?;
+            rows.iter().map(|row| Ok(summary_from_row!(row))).collect::<Result<Vec<_>, StoreError>>()
+        })
+    }
+
     /// One measurement with its profiles and report, or `None` when no such id.
     pub async fn measurement(
         &self,

@@ -10,6 +10,7 @@
 
 mod api;
 mod openapi;
+mod parts;
 mod routes;
 mod server;
 mod writes;
@@ -32,8 +33,8 @@ use tokio::sync::{mpsc, oneshot};
 pub struct AppState {
     pub store: StoreHandle,
     pub metrics: Arc<Metrics>,
-    /// Every configured machine with the names of the lobes or pins it grinds (today one:
-    /// the `lobe` of its `[[machines]]` entry).
+    /// Every configured machine with the names of the lobes or pins it grinds, in grinding
+    /// order.
     pub machines: Arc<BTreeMap<MachineName, Vec<String>>>,
     /// Per machine (by name), the channel to its loop for write requests.
     pub commands: Arc<HashMap<String, mpsc::Sender<Command>>>,
@@ -121,6 +122,7 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/machines", get(routes::machines))
         .route(&format!("{m}/measurements"), get(routes::history))
         .route(&format!("{m}/events"), get(routes::events))
+        .route(&format!("{m}/parts/{{part}}"), get(parts::part))
         .route(&format!("{m}/lobes/{{lobe}}/tables"), get(routes::tables))
         .route(
             &format!("{m}/lobes/{{lobe}}/tables/{{version}}/program"),

@@ -29,6 +29,7 @@ pub(super) async fn openapi() -> Json<Value> {
             "/api/v1/machines": get("machines and their lobes or pins: configured ones and those in the history"),
             "/api/v1/machines/{machine}/measurements": get("measurement history, newest first; filters lobe, since_ms, until_ms, verdict, limit, cursor"),
             "/api/v1/machines/{machine}/events": get("alarms and events, newest first"),
+            "/api/v1/machines/{machine}/parts/{part}": get("one part (a shaft), feature by feature: its measurements and whether it passed"),
             "/api/v1/machines/{machine}/lobes/{lobe}/tables": get("table versions, newest first"),
             "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program": get("program text of a table version"),
             "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/diff": get("X difference to the parent version at every table point, µm"),

@@ -10,7 +10,7 @@ use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 
-async fn store(state: &AppState) -> Result<Store, ApiError> {
+pub(super) async fn store(state: &AppState) -> Result<Store, ApiError> {
     state.store.read().await.clone().ok_or(ApiError(
         StatusCode::SERVICE_UNAVAILABLE,
         "store_unavailable",
@@ -72,12 +72,16 @@ pub struct LobeInfo {
     pub kind: Option<&'static str>,
     /// Ground by this service's configuration (else only in the history).
     pub configured: bool,
+    /// Its loop's state in this service: the latest part's errors, the table version on the
+    /// control, frozen, blocked by a guard (configured features only).
+    pub status: Option<crate::service::metrics::FeatureStatus>,
 }
 
 pub(super) async fn machines(
     State(state): State<AppState>,
 ) -> Result<Json<MachinesReply>, ApiError> {
     let store = store(&state).await?;
+    let statuses = state.metrics.features();
     let mut out: Vec<MachineInfo> = state
         .machines
         .iter()
@@ -92,6 +96,12 @@ pub(super) async fn machines(
                     part: None,
                     kind: None,
                     configured: true,
+                    status: Some(
+                        statuses
+                            .get(&(name.to_string(), l.clone()))
+                            .cloned()
+                            .unwrap_or_default(),
+                    ),
                 })
                 .collect(),
         })
@@ -123,6 +133,7 @@ pub(super) async fn machines(
                         part: None,
                         kind: None,
                         configured: false,
+                        status: None,
                     });
                     lobes.len() - 1
                 }
@@ -161,6 +172,7 @@ pub(super) struct HistoryPage {
 }
 
 #[derive(Debug, Serialize)]
+#[derive(Clone)]
 pub(super) struct MeasurementItem {
     id: i64,
     machine: String,

@@ -1,0 +1,72 @@
+//! A whole part through the API: `GET /api/v1/machines/{machine}/parts/{part}` answers "did
+//! shaft 1234 pass, lobe by lobe": every configured feature with its measurement of that part
+//! (or none), and the part's verdict.
+
+use super::AppState;
+use super::api::{ApiError, ApiPath, machine_name};
+use super::routes::{MeasurementItem, store};
+use axum::Json;
+use axum::extract::State;
+use serde::Serialize;
+
+/// The reply: the part's verdict and its features in grinding order.
+#[derive(Debug, Serialize)]
+pub(super) struct PartReply {
+    machine: String,
+    part: String,
+    /// Every feature the machine grinds was measured on this part and passed its bands.
+    pass: bool,
+    /// Features of the machine with no measurement of this part (not yet gauged, or lost).
+    missing: Vec<String>,
+    features: Vec<PartFeature>,
+}
+
+#[derive(Debug, Serialize)]
+pub(super) struct PartFeature {
+    lobe: String,
+    /// The newest measurement of this feature on this part, if any.
+    measurement: Option<MeasurementItem>,
+    /// Measurements of it on this part (more than one: it was gauged again).
+    measurements: usize,
+}
+
+pub(super) async fn part(
+    State(state): State<AppState>,
+    ApiPath((machine, part)): ApiPath<(String, String)>,
+) -> Result<Json<PartReply>, ApiError> {
+    let name = machine_name(&machine)?;
+    let rows = store(&state).await?.part_measurements(&machine, &part).await?;
+    // Configured features first, in grinding order; then any the history alone knows.
+    let mut lobes: Vec<String> = state.machines.get(&name).cloned().unwrap_or_default();
+    for r in &rows {
+        if !lobes.contains(&r.lobe) {
+            lobes.push(r.lobe.clone());
+        }
+    }
+    let features: Vec<PartFeature> = lobes
+        .into_iter()
+        .map(|lobe| {
+            let of: Vec<_> = rows.iter().filter(|r| r.lobe == lobe).collect();
+            PartFeature {
+                measurements: of.len(),
+                measurement: of.last().map(|m| MeasurementItem::from((*m).clone())),
+                lobe,
+            }
+        })
+        .collect();
+    let missing: Vec<String> = features
+        .iter()
+        .filter(|f| f.measurement.is_none())
+        .map(|f| f.lobe.clone())
+        .collect();
+    let pass = missing.is_empty()
+        && rows.iter().all(|r| r.verdict == crate::store::Verdict::Pass)
+        && !features.is_empty();
+    Ok(Json(PartReply {
+        machine,
+        part,
+        pass,
+        missing,
+        features,
+    }))
+}
