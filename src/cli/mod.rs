@@ -3,6 +3,7 @@
 
 mod analyze;
 mod compensate;
+mod export_dfq;
 pub mod history;
 mod output;
 mod part;
@@ -36,7 +37,7 @@ pub enum Command {
     Run(run::RunArgs),
     /// Measurement history of a machine from the store.
     History(history::HistoryArgs),
-    /// Export the measurement history of a time range as CSV or JSON.
+    /// Export the measurement history of a time range as CSV, JSON or Q-DAS AQDEF (dfq).
     Export(history::ExportArgs),
 }
 

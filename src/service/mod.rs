@@ -142,6 +142,7 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
     let mut commands = std::collections::HashMap::new();
     let mut sources_done = Vec::new();
     let mut features = std::collections::BTreeMap::new();
+    let mut sheets = std::collections::BTreeMap::new();
     let shared = Shared {
         store: store.clone(),
         metrics: metrics.clone(),
@@ -155,6 +156,8 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
             .find(|c| c.name == m.name.as_str())
             .context("a checked machine is in the config")?;
         features.insert(m.name.clone(), vec![m.setup.name.clone()]);
+        let sheet = http::FeatureSheet::from_setup(&m.setup);
+        sheets.insert((m.name.to_string(), m.setup.name.clone()), sheet);
         let wired = wire_machine(&config, section, m.setup, &shared).await?;
         commands.insert(section.name.clone(), wired.commands);
         sources_done.push(wired.source_done);
@@ -169,6 +172,7 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
         commands: Arc::new(commands),
         token: config.api_token.clone(),
         body_timeout: limits.body_timeout,
+        dashboard: Arc::new(sheets),
     });
     let http_addr = listener.local_addr()?;
     info!(listen = %http_addr, machines = config.machines.len(), "camloop started");

@@ -1,0 +1,2 @@
+//! Dashboard benchmarks (placeholder while the dashboard is written).
+fn main() {}
