@@ -145,7 +145,7 @@ fn a_file_holds_only_published_fields_with_consistent_structure() {
     }
     // IN1's profile error (characteristic 2): limits from the symmetric band, values as given.
     assert_eq!(get("K2001", Some(2)), vec!["GR1.IN1.PROFILE"]);
-    assert_eq!(get("K2110", Some(2)), vec!["0.000"]);
+    assert_eq!(get("K2110", Some(2)), vec!["0"]);
     assert_eq!(get("K2111", Some(2)), vec!["2.500"]);
     assert_eq!(get("K0001", Some(2)), vec!["1.500", "1.250"]);
     assert_eq!(

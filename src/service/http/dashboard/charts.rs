@@ -264,11 +264,14 @@ mod tests {
 
     #[test]
     fn ticks_cover_the_range_in_round_steps() {
+        // Span 10.2 over five ticks wants 2.04 per step: the next of 1, 2, 5 is 5.
         let (a, b, t) = ticks(-2.3, 7.9);
-        assert!(a <= -2.3 && b >= 7.9, "{a} {b}");
-        assert_eq!(t.first().copied(), Some(a));
+        assert_eq!((a, b), (-5.0, 10.0));
+        assert_eq!(t, vec![-5.0, 0.0, 5.0, 10.0]);
+        let (a, b, t) = ticks(0.12, 0.93);
+        assert!(a <= 0.12 && b >= 0.93, "{a} {b}");
         let steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-        assert!(steps.iter().all(|s| (s - 2.0).abs() < 1e-9), "{steps:?}");
+        assert!(steps.iter().all(|s| (s - 0.2).abs() < 1e-9), "{steps:?}");
     }
 
     #[test]

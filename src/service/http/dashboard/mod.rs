@@ -35,6 +35,7 @@ use std::sync::Arc;
 
 const APP_JS: &str = include_str!("assets/app.js");
 const APP_CSS: &str = include_str!("assets/app.css");
+const ICON_SVG: &str = include_str!("assets/icon.svg");
 
 /// What the dashboard knows of a configured feature beyond the store: its tolerance bands,
 /// base radius and setup drawing, computed once at start.
@@ -108,6 +109,7 @@ pub(super) fn router(app: AppState) -> Router {
         .route("/dashboard/events", get(sse::events))
         .route("/assets/app.js", get(asset_js))
         .route("/assets/app.css", get(asset_css))
+        .route("/assets/icon.svg", get(asset_icon))
         .with_state(Dash { app, live })
 }
 
@@ -202,23 +204,21 @@ pub(super) async fn ack(
 }
 
 async fn asset_js() -> Response {
-    (
-        [
-            (header::CONTENT_TYPE, "text/javascript; charset=utf-8"),
-            (header::CACHE_CONTROL, "no-cache"),
-        ],
-        APP_JS,
-    )
-        .into_response()
+    asset("text/javascript; charset=utf-8", APP_JS)
 }
 
 async fn asset_css() -> Response {
+    asset("text/css; charset=utf-8", APP_CSS)
+}
+
+async fn asset_icon() -> Response {
+    asset("image/svg+xml", ICON_SVG)
+}
+
+fn asset(kind: &'static str, body: &'static str) -> Response {
     (
-        [
-            (header::CONTENT_TYPE, "text/css; charset=utf-8"),
-            (header::CACHE_CONTROL, "no-cache"),
-        ],
-        APP_CSS,
+        [(header::CONTENT_TYPE, kind), (header::CACHE_CONTROL, "no-cache")],
+        body,
     )
         .into_response()
 }

@@ -51,7 +51,7 @@ pub(super) fn page(
     format!(
         r#"<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
-<title>{t} · camloop</title><link rel="stylesheet" href="/assets/app.css"><script src="/assets/app.js" defer></script></head>
+<title>{t} · camloop</title><link rel="icon" href="/assets/icon.svg" type="image/svg+xml"><link rel="stylesheet" href="/assets/app.css"><script src="/assets/app.js" defer></script></head>
 <body><header><nav aria-label="breadcrumb"><a href="/">camloop</a>{crumbs}</nav>
 <p class="token"><label for="token">API token</label> <input id="token" type="password" autocomplete="off" placeholder="for writes"></p>
 <p id="live-status" role="status">live: connecting</p></header>
