@@ -41,7 +41,7 @@ pub enum DfqError {
 #[derive(Debug, Clone, PartialEq)]
 pub struct DfqRow {
     pub received_at_ms: i64,
-    /// What identifies the part (K0014), e.g. the measurement's id.
+    /// What identifies the part (K0014): its number as the gauge reported it.
     pub part_ident: String,
     /// Largest |measured − nominal| with nothing fitted, µm; `None` when unknown.
     pub max_error_um: Option<f64>,
@@ -73,7 +73,7 @@ pub fn row_from(m: &crate::store::MeasurementSummary, analysis_json: Option<&str
         .map(|r| r.error_um.iter().fold(0.0f64, |a, e| a.max(e.abs())));
     DfqRow {
         received_at_ms: m.received_at_ms,
-        part_ident: format!("{}", m.id.0),
+        part_ident: m.part.clone(),
         max_error_um,
         profile_error_um: m.max_profile_error_um,
         size_error_um: m.base_radius_error_um,

@@ -58,7 +58,7 @@ pub struct ExportArgs {
     /// Up to this time (exclusive); default: now.
     #[arg(long, value_name = "TIME")]
     pub until: Option<String>,
-    /// Only this part (recipe name); a .dfq file holds one part.
+    /// With `--format dfq`: the part (recipe name) to export; a .dfq file holds one part.
     #[arg(long)]
     pub part: Option<String>,
     /// Write here instead of stdout.
@@ -141,17 +141,21 @@ pub fn run_export(args: ExportArgs) -> anyhow::Result<()> {
             let batch = store.export(since, until, after, 1000).await?;
             let Some(last) = batch.last() else { break };
             after = Some(last.summary.id);
-            let wanted = batch
-                .into_iter()
-                .filter(|d| args.part.as_ref().is_none_or(|p| *p == d.summary.part));
-            rows.extend(wanted);
+            rows.extend(batch);
         }
+        let recipes = super::export_dfq::recipe_parts(&store, &rows).await;
         store.close().await;
-        anyhow::Ok(rows)
+        anyhow::Ok((rows, recipes?))
     })?;
+    let (rows, recipes) = rows;
     let count = rows.len();
     let text = if args.format == Format::Dfq {
-        super::export_dfq::dfq_text(&rows, &args.store.config)?
+        let export = super::export_dfq::DfqExport {
+            recipes: &recipes,
+            part: args.part.as_deref(),
+            config: &args.store.config,
+        };
+        export.text(&rows)?
     } else {
         let rows: Vec<MeasurementSummary> = rows.into_iter().map(|d| d.summary).collect();
         render(&rows, args.format)?

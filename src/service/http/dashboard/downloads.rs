@@ -206,7 +206,13 @@ pub(super) async fn dfq(
     let store = data::store(&d.app).await?;
     let mut parts = data::history(&store, &machine, &lobe, DFQ_PARTS).await?;
     parts.reverse();
-    let part_name = parts.last().map(|p| p.part.clone()).unwrap_or_default();
+    let part_name = store
+        .features(&machine)
+        .await?
+        .into_iter()
+        .find(|f| f.lobe == lobe)
+        .map(|f| f.part)
+        .unwrap_or_default();
     let mut rows = Vec::with_capacity(parts.len());
     for p in &parts {
         let detail = store.measurement(p.id).await?;

@@ -83,7 +83,12 @@ pub(super) fn overview(rows: &[OverviewRow], fragment: bool) -> String {
         let url = feature_url(&r.machine, &r.lobe);
         let last = r.recent.last();
         let part = last.map_or("—".to_string(), |p| {
-            format!("{} #{} · {}", esc(&p.part), p.id.0, when(p.received_at_ms))
+            format!(
+                "part {} · #{} · {}",
+                esc(&p.part),
+                p.id.0,
+                when(p.received_at_ms)
+            )
         });
         let error = match (last, r.band_um) {
             (Some(p), Some(b)) => format!(
@@ -157,6 +162,8 @@ pub(super) fn versions(
         );
     }
     live.push_str("</tbody></table>");
+    // Without a version asked for, the newest with a parent, also after a refresh.
+    let asked = shown;
     let shown = shown.or_else(|| {
         versions
             .iter()
@@ -201,7 +208,7 @@ pub(super) fn versions(
         &crumbs,
         &format!(
             "{base}/versions{}",
-            shown.map_or(String::new(), |v| format!("?v={v}"))
+            asked.map_or(String::new(), |v| format!("?v={v}"))
         ),
         (machine, lobe),
         live,
