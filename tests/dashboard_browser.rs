@@ -174,14 +174,40 @@ async fn assert_clean(c: &Client, page: &str) {
     );
 }
 
+/// Clicks `css`; the live region may be replaced between finding and clicking (a part
+/// arrived), so a stale element is found again, at most five times.
+async fn click(c: &Client, css: &str) {
+    for _ in 0..5 {
+        if let Ok(e) = c.find(Locator::Css(css)).await
+            && e.click().await.is_ok()
+        {
+            return;
+        }
+    }
+    panic!("{css} could not be clicked");
+}
+
 fn shots() -> PathBuf {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("dashboard");
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }
 
+/// A screenshot of the whole page: the window is made as tall as the page for it.
 async fn screenshot(c: &Client, name: &str) {
+    let size = c
+        .execute(
+            "return [window.innerHeight, document.documentElement.scrollHeight];",
+            vec![],
+        )
+        .await
+        .unwrap();
+    let (inner, page) = (size[0].as_u64().unwrap(), size[1].as_u64().unwrap());
+    let (w, h) = c.get_window_size().await.unwrap();
+    let tall = (page + h.saturating_sub(inner)).clamp(h, 4000);
+    c.set_window_size(w as u32, tall as u32).await.unwrap();
     let png = c.screenshot().await.unwrap();
+    c.set_window_size(w as u32, h as u32).await.unwrap();
     assert!(png.starts_with(b"\x89PNG"), "{name}: a PNG");
     std::fs::write(shots().join(name), png).unwrap();
 }
@@ -354,12 +380,7 @@ async fn versions(c: &Client, base: &str, addr: SocketAddr) {
         .await
         .unwrap();
     let button = "button.rollback[data-version=\"1\"]";
-    c.find(Locator::Css(button))
-        .await
-        .unwrap()
-        .click()
-        .await
-        .unwrap();
+    click(c, button).await;
     let refused = until(Duration::from_secs(5), "the refusal", || async {
         let t = text_of(c, "#rollback-result").await;
         (!t.is_empty()).then_some(t)
@@ -376,12 +397,7 @@ async fn versions(c: &Client, base: &str, addr: SocketAddr) {
         .send_keys(TOKEN)
         .await
         .unwrap();
-    c.find(Locator::Css(button))
-        .await
-        .unwrap()
-        .click()
-        .await
-        .unwrap();
+    click(c, button).await;
     let done = until(Duration::from_secs(20), "the rollback's answer", || async {
         let class = attr_of(c, "#rollback-result", "class").await?;
         (class == "ok").then_some(())

@@ -232,14 +232,16 @@ pub(super) fn polar(angle_deg: &[f64], nominal_mm: &[f64], error_um: &[f64], r0_
         d
     };
     format!(
-        r#"<svg class="chart polar" viewBox="0 0 {size} {size}" role="img" aria-label="Latest part, polar"><title>Latest part: nominal and measured, error ×{m}</title><line class="grid" x1="{c}" x2="{c}" y1="10" y2="{e}"/><line class="grid" x1="10" x2="{e}" y1="{c}" y2="{c}"/><path class="nominal" d="{n}"/><path class="measured" d="{me}"/><text class="label" x="8" y="16">error ×{m} (radial, µm → mm ×{m}/1000)</text><text class="legend nominal" x="8" y="{l1}">nominal</text><text class="legend measured" x="8" y="{l2}">measured</text><text class="tick" x="{e}" y="{ct}" text-anchor="end">0°</text><text class="tick" x="{c}" y="20" text-anchor="middle">90°</text></svg>"#,
+        r#"<svg class="chart polar" viewBox="0 0 {size} {size}" role="img" aria-label="Latest part, polar"><title>Latest part: nominal and measured, error ×{m}</title><line class="grid" x1="{c}" x2="{c}" y1="10" y2="{e}"/><line class="grid" x1="10" x2="{e}" y1="{c}" y2="{c}"/><path class="nominal" d="{n}"/><path class="measured" d="{me}"/><text class="label" x="8" y="16">error drawn ×{m}</text><text class="legend nominal" x="8" y="{l1}">— nominal</text><text class="legend measured" x="8" y="{l2}">— measured</text><text class="tick" x="{e}" y="{ct}" text-anchor="end">0°</text><text class="tick" x="{c4}" y="{top}">90°</text></svg>"#,
         e = size - 10.0,
         n = path(false),
         me = path(true),
         m = fmt_tick(magnification),
         l1 = size - 24.0,
         l2 = size - 10.0,
-        ct = c - 4.0
+        ct = c - 4.0,
+        c4 = c + 4.0,
+        top = 30.0
     )
 }
 

@@ -9,9 +9,15 @@ use super::pages::{downloads, esc, feature_url, page, when};
 use crate::store::MeasurementSummary;
 use std::fmt::Write as _;
 
-/// Minutes of `at_ms` before the newest part (the trend's x).
-fn minutes(at_ms: i64, newest_ms: i64) -> f64 {
-    (at_ms - newest_ms) as f64 / 60_000.0
+/// The trend's time unit for a span of parts: its name and length in ms.
+fn unit(span_ms: i64) -> (&'static str, f64) {
+    if span_ms < 120_000 {
+        ("s", 1000.0)
+    } else if span_ms < 3 * 3_600_000 {
+        ("min", 60_000.0)
+    } else {
+        ("h", 3_600_000.0)
+    }
 }
 
 fn trend_chart(
@@ -24,16 +30,18 @@ fn trend_chart(
     marks: &[Mark],
 ) -> String {
     let newest = parts.last().map_or(0, |p| p.received_at_ms);
+    let oldest = parts.first().map_or(0, |p| p.received_at_ms);
+    let (name, ms) = unit(newest - oldest);
     LineChart {
         title: title.into(),
-        x_label: "time, min before the newest part".into(),
+        x_label: format!("time, {name} before the newest part"),
         y_label: y_label.into(),
         lines: vec![Line {
             name: title.into(),
             class,
             points: parts
                 .iter()
-                .map(|p| (minutes(p.received_at_ms, newest), value(p)))
+                .map(|p| ((p.received_at_ms - newest) as f64 / ms, value(p)))
                 .collect(),
         }],
         limits,
@@ -55,13 +63,15 @@ fn trend(d: &FeatureData, sheet: Option<&FeatureSheet>, base: &str) -> String {
     };
     let newest = d.parts.last().map_or(0, |p| p.received_at_ms);
     let in_range = |t: i64| t >= first.received_at_ms && t <= newest;
+    let (_, ms) = unit(newest - first.received_at_ms);
+    let x = |t: i64| (t - newest) as f64 / ms;
     let mut marks: Vec<Mark> = d
         .dressings
         .iter()
-        .filter(|x| in_range(x.at_ms))
-        .map(|x| Mark {
-            x: minutes(x.at_ms, newest),
-            label: format!("dressed {:.3} → {:.3} mm", x.old_radius_mm, x.new_radius_mm),
+        .filter(|d| in_range(d.at_ms))
+        .map(|d| Mark {
+            x: x(d.at_ms),
+            label: format!("dressed {:.3} → {:.3} mm", d.old_radius_mm, d.new_radius_mm),
             class: "dressing",
         })
         .collect();
@@ -70,7 +80,7 @@ fn trend(d: &FeatureData, sheet: Option<&FeatureSheet>, base: &str) -> String {
             .iter()
             .filter(|v| in_range(v.created_at_ms))
             .map(|v| Mark {
-                x: minutes(v.created_at_ms, newest),
+                x: x(v.created_at_ms),
                 label: format!("table v{} ({})", v.version, v.reason),
                 class: "version",
             }),
@@ -211,6 +221,9 @@ fn events(d: &FeatureData, machine: &str) -> String {
             k = esc(&e.kind),
             msg = esc(&e.message),
         );
+    }
+    if d.events.is_empty() {
+        s.push_str(r#"<tr><td colspan="5">No events.</td></tr>"#);
     }
     s.push_str("</tbody></table></section>");
     s
