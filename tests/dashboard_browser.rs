@@ -419,11 +419,7 @@ async fn versions(c: &Client, base: &str, addr: SocketAddr) {
     )
     .await;
     assert!(shown.contains("rollback to v1"), "{shown}");
-    let (_, body) = get(
-        addr,
-        &format!("/api/v1/machines/SIM1/lobes/IN1/tables?limit=50"),
-    )
-    .await;
+    let (_, body) = get(addr, "/api/v1/machines/SIM1/lobes/IN1/tables?limit=50").await;
     let listed = json(&body)["items"]
         .as_array()
         .unwrap()
