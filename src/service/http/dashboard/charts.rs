@@ -63,58 +63,77 @@ fn fmt_tick(v: f64) -> String {
     if s == "-0" { "0".into() } else { s.into() }
 }
 
+/// Data bounds to pixels.
+struct Scale {
+    x0: f64,
+    x1: f64,
+    y0: f64,
+    y1: f64,
+}
+
+impl Scale {
+    fn px(&self, x: f64) -> f64 {
+        LEFT + (x - self.x0) / (self.x1 - self.x0) * (W - LEFT - RIGHT)
+    }
+
+    fn py(&self, y: f64) -> f64 {
+        TOP + (self.y1 - y) / (self.y1 - self.y0) * (H - TOP - BOTTOM)
+    }
+}
+
+/// Smallest and largest finite value; (0, 1) when there is none.
+fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
+    v.filter(|x| x.is_finite())
+        .fold(None, |acc: Option<(f64, f64)>, x| match acc {
+            None => Some((x, x)),
+            Some((a, b)) => Some((a.min(x), b.max(x))),
+        })
+        .unwrap_or((0.0, 1.0))
+}
+
 impl LineChart {
     pub(super) fn svg(&self) -> String {
-        let xs = self.lines.iter().flat_map(|l| l.points.iter().map(|p| p.0));
-        let xs: Vec<f64> = xs.chain(self.marks.iter().map(|m| m.x)).collect();
-        let ys: Vec<f64> = self
-            .lines
-            .iter()
-            .flat_map(|l| l.points.iter().map(|p| p.1))
-            .chain(self.limits.iter().map(|l| l.0))
-            .collect();
-        let range = |v: &[f64]| {
-            v.iter()
-                .filter(|x| x.is_finite())
-                .fold(None, |acc: Option<(f64, f64)>, &x| match acc {
-                    None => Some((x, x)),
-                    Some((a, b)) => Some((a.min(x), b.max(x))),
-                })
-                .unwrap_or((0.0, 1.0))
-        };
-        let (x0, x1) = range(&xs);
+        let points = || self.lines.iter().flat_map(|l| l.points.iter());
+        let (x0, x1) = range(points().map(|p| p.0).chain(self.marks.iter().map(|m| m.x)));
         let (x0, x1) = if x1 > x0 {
             (x0, x1)
         } else {
             (x0 - 1.0, x0 + 1.0)
         };
-        let (ylo, yhi) = range(&ys);
+        let (ylo, yhi) = range(points().map(|p| p.1).chain(self.limits.iter().map(|l| l.0)));
         let (y0, y1, yt) = ticks(ylo, yhi);
         let (_, _, xt) = ticks(x0, x1);
-        let px = |x: f64| LEFT + (x - x0) / (x1 - x0) * (W - LEFT - RIGHT);
-        let py = |y: f64| TOP + (y1 - y) / (y1 - y0) * (H - TOP - BOTTOM);
+        let scale = Scale { x0, x1, y0, y1 };
         let mut s = String::new();
         let _ = write!(
             s,
             r#"<svg class="chart" viewBox="0 0 {W} {H}" role="img" aria-label="{t}"><title>{t}</title>"#,
             t = esc(&self.title)
         );
-        for &y in &yt {
+        self.axes(&mut s, &scale, &xt, &yt);
+        self.overlays(&mut s, &scale);
+        s.push_str("</svg>");
+        s
+    }
+
+    /// Grid, ticks, axes, their labels with units, and the title.
+    fn axes(&self, s: &mut String, sc: &Scale, xt: &[f64], yt: &[f64]) {
+        for &y in yt {
             let _ = write!(
                 s,
                 r#"<line class="grid" x1="{LEFT}" x2="{}" y1="{y:.1}" y2="{y:.1}"/><text class="tick" x="{}" y="{:.1}" text-anchor="end">{}</text>"#,
                 W - RIGHT,
                 LEFT - 4.0,
-                py(y) + 3.0,
+                sc.py(y) + 3.0,
                 fmt_tick(y),
-                y = py(y)
+                y = sc.py(y)
             );
         }
-        for &x in xt.iter().filter(|x| **x >= x0 && **x <= x1) {
+        for &x in xt.iter().filter(|x| **x >= sc.x0 && **x <= sc.x1) {
             let _ = write!(
                 s,
                 r#"<text class="tick" x="{:.1}" y="{}" text-anchor="middle">{}</text>"#,
-                px(x),
+                sc.px(x),
                 H - BOTTOM + 14.0,
                 fmt_tick(x)
             );
@@ -131,12 +150,16 @@ impl LineChart {
             yl = esc(&self.y_label),
             t = esc(&self.title)
         );
+    }
+
+    /// Marks, limit lines, then the data lines with their legend.
+    fn overlays(&self, s: &mut String, sc: &Scale) {
         for m in &self.marks {
             let _ = write!(
                 s,
                 r#"<line class="mark {c}" x1="{x:.1}" x2="{x:.1}" y1="{TOP}" y2="{b}"><title>{l}</title></line>"#,
                 c = m.class,
-                x = px(m.x),
+                x = sc.px(m.x),
                 b = H - BOTTOM,
                 l = esc(&m.label)
             );
@@ -146,7 +169,7 @@ impl LineChart {
                 s,
                 r#"<line class="limit" x1="{LEFT}" x2="{r}" y1="{y:.1}" y2="{y:.1}"><title>{l}</title></line>"#,
                 r = W - RIGHT,
-                y = py(*y),
+                y = sc.py(*y),
                 l = esc(label)
             );
         }
@@ -155,7 +178,7 @@ impl LineChart {
                 .points
                 .iter()
                 .filter(|p| p.1.is_finite())
-                .map(|p| format!("{:.1},{:.1} ", px(p.0), py(p.1)))
+                .map(|p| format!("{:.1},{:.1} ", sc.px(p.0), sc.py(p.1)))
                 .collect();
             let _ = write!(
                 s,
@@ -165,8 +188,6 @@ impl LineChart {
                 n = esc(&l.name)
             );
         }
-        s.push_str("</svg>");
-        s
     }
 }
 

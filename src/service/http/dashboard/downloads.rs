@@ -117,24 +117,7 @@ pub(super) async fn chart_data(
                     "diff needs v".into(),
                 )
             })?;
-            let newer = store
-                .table_version(&machine, &lobe, v)
-                .await?
-                .ok_or_else(|| not_found(format!("version {v} not found")))?;
-            let parent = newer
-                .parent_version
-                .ok_or_else(|| not_found(format!("version {v} is the first")))?;
-            let older = store
-                .table_version(&machine, &lobe, parent)
-                .await?
-                .ok_or_else(|| not_found(format!("version {parent} not found")))?;
-            let points = diff_um(&newer, &older)
-                .ok_or_else(|| not_found(format!("version {v} or {parent} unreadable")))?;
-            Table {
-                name: format!("{machine} {lobe} v{v} minus v{parent}"),
-                columns: vec!["c_deg", "delta_x_um"],
-                rows: points.into_iter().map(|(c, x)| vec![c, x]).collect(),
-            }
+            diff_table(&store, &machine, &lobe, v).await?
         }
     };
     let (body, kind, ext) = match q.format {
@@ -154,6 +137,32 @@ pub(super) async fn chart_data(
         body,
     )
         .into_response())
+}
+
+async fn diff_table(
+    store: &crate::store::Store,
+    machine: &str,
+    lobe: &str,
+    v: i64,
+) -> Result<Table, ApiError> {
+    let newer = store
+        .table_version(machine, lobe, v)
+        .await?
+        .ok_or_else(|| not_found(format!("version {v} not found")))?;
+    let parent = newer
+        .parent_version
+        .ok_or_else(|| not_found(format!("version {v} is the first")))?;
+    let older = store
+        .table_version(machine, lobe, parent)
+        .await?
+        .ok_or_else(|| not_found(format!("version {parent} not found")))?;
+    let points = diff_um(&newer, &older)
+        .ok_or_else(|| not_found(format!("version {v} or {parent} unreadable")))?;
+    Ok(Table {
+        name: format!("{machine} {lobe} v{v} minus v{parent}"),
+        columns: vec!["c_deg", "delta_x_um"],
+        rows: points.into_iter().map(|(c, x)| vec![c, x]).collect(),
+    })
 }
 
 async fn latest_table(
