@@ -338,6 +338,7 @@ async fn live_part(c: &Client, addr: SocketAddr) {
     )
     .await;
     let delay_ms = camloop::clock::now_ms() - received_ms;
+    eprintln!("part {id} shown on the page {delay_ms} ms after it was measured");
     assert!(
         delay_ms <= 2000,
         "part {id} shown {delay_ms} ms after it was measured"

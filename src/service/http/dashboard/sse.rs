@@ -79,14 +79,29 @@ impl Live {
         }
     }
 
-    fn subscribe(&self) -> broadcast::Receiver<Frame> {
+    /// A receiver of new parts. A new poller starts from the newest id at this moment, so
+    /// the page's refresh when its stream opens covers everything before.
+    async fn subscribe(&self) -> broadcast::Receiver<Frame> {
+        if let Some(tx) = self
+            .sender
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .as_ref()
+        {
+            return tx.subscribe();
+        }
+        let store = self.store.read().await.clone();
+        let newest = match store {
+            Some(s) => s.newest_measurement_id().await.ok().flatten(),
+            None => None,
+        };
         let mut slot = self.sender.lock().unwrap_or_else(|p| p.into_inner());
         if let Some(tx) = slot.as_ref() {
             return tx.subscribe();
         }
         let (tx, rx) = broadcast::channel(1024);
         *slot = Some(tx.clone());
-        tokio::spawn(poll(self.store.clone(), tx, self.sender.clone()));
+        tokio::spawn(poll(self.store.clone(), tx, self.sender.clone(), newest));
         rx
     }
 }
@@ -96,9 +111,8 @@ async fn poll(
     store: StoreHandle,
     tx: broadcast::Sender<Frame>,
     slot: Arc<Mutex<Option<broadcast::Sender<Frame>>>>,
+    mut last: Option<MeasurementId>,
 ) {
-    let mut last: Option<MeasurementId> = None;
-    let mut started = false;
     let mut tick = tokio::time::interval(POLL);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
@@ -117,11 +131,6 @@ async fn poll(
         let Ok(newest) = store.newest_measurement_id().await else {
             continue;
         };
-        if !started {
-            // Parts stored before the first listener came are in the page it loaded.
-            (last, started) = (newest, true);
-            continue;
-        }
         if newest <= last {
             continue;
         }
@@ -151,7 +160,7 @@ pub(super) async fn events(
     stopping: Option<axum::Extension<Stopping>>,
     headers: HeaderMap,
 ) -> Response {
-    let rx = state.live.subscribe();
+    let rx = state.live.subscribe().await;
     let resume = headers
         .get("last-event-id")
         .and_then(|v| v.to_str().ok())

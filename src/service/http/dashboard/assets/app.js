@@ -58,7 +58,8 @@ function listen() {
   const status = $("#live-status");
   if (!live || !window.EventSource) return;
   const source = new EventSource("/dashboard/events");
-  source.addEventListener("open", () => { status.textContent = "live: connected"; });
+  // Parts stored between the page's rendering and the stream's start come with a refresh.
+  source.addEventListener("open", () => { status.textContent = "live: connected"; refresh(); });
   source.addEventListener("error", () => { status.textContent = "live: reconnecting"; });
   source.addEventListener("part", (e) => {
     const part = JSON.parse(e.data);
