@@ -146,7 +146,16 @@ async fn pages_downloads_and_acknowledgements_agree_with_the_api() {
     assert_eq!(values(&f, "K0014", Some(1)), idents);
 
     acknowledgements(addr).await;
+    let stream = catch_up(addr, &parts).await;
     running.stop().await;
+    // The open stream ends with the service instead of holding its shutdown.
+    let mut rest = Vec::new();
+    let ended = tokio::time::timeout(
+        std::time::Duration::from_secs(5),
+        tokio::io::AsyncReadExt::read_to_end(&mut { stream }, &mut rest),
+    )
+    .await;
+    assert!(ended.is_ok(), "the event stream did not end at shutdown");
     cli_export(dir.path(), &url, &parts);
 }
 
@@ -209,6 +218,39 @@ async fn acknowledgements(addr: SocketAddr) {
         page.contains("(dashboard)"),
         "and shows who acknowledged it"
     );
+}
+
+/// A page that reconnects with `Last-Event-ID` gets the parts after it, in order, as the
+/// script reads them; the stream stays open.
+async fn catch_up(addr: SocketAddr, parts: &[(i64, String, f64)]) -> tokio::net::TcpStream {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+    let request = format!(
+        "GET /dashboard/events HTTP/1.1\r\nHost: x\r\nLast-Event-ID: {}\r\n\r\n",
+        parts[1].0
+    );
+    s.write_all(request.as_bytes()).await.unwrap();
+    let mut text = String::new();
+    let last = format!("id: {}\n", parts[PARTS - 1].0);
+    while !text.contains(&last) {
+        let mut buf = [0u8; 4096];
+        let n = s.read(&mut buf).await.unwrap();
+        assert!(n > 0, "stream ended early: {text}");
+        text.push_str(&String::from_utf8_lossy(&buf[..n]));
+    }
+    assert!(text.contains("content-type: text/event-stream"), "{text}");
+    let ids: Vec<i64> = text
+        .lines()
+        .filter_map(|l| l.strip_prefix("id: ")?.parse().ok())
+        .collect();
+    let expected: Vec<i64> = parts[2..].iter().map(|p| p.0).collect();
+    assert_eq!(ids, expected);
+    let data = text.lines().find(|l| l.starts_with("data: ")).unwrap();
+    let event: serde_json::Value = serde_json::from_str(&data[6..]).unwrap();
+    assert_eq!(event["id"].as_i64(), Some(parts[2].0));
+    assert_eq!(event["max_profile_error_um"].as_f64(), Some(parts[2].2));
+    assert_eq!(event["part"].as_str(), Some(parts[2].1.as_str()));
+    s
 }
 
 fn cli_export(dir: &std::path::Path, url: &str, parts: &[(i64, String, f64)]) {
