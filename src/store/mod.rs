@@ -41,7 +41,7 @@ pub use codec::{UNITS_PER_MM, decode_lifts_mm, encode_lifts_mm, sha256_hex};
 pub use error::{Detail, StoreError};
 pub use identity::StoreIdentity;
 pub use types::*;
-pub use views::{AckOutcome, EventAck};
+pub use views::{AckOutcome, EventAck, TableVersionHead};
 
 /// Migrations embedded in the binary: (version, description, SQLite SQL, PostgreSQL SQL).
 /// A test checks that this list and both folders under `migrations/` hold the same versions.

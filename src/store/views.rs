@@ -3,7 +3,7 @@
 //! gate (the machine loop reads it through the writer; a dashboard must never take that).
 
 use super::codec::check_limit;
-use super::{EventId, LearningState, Store, StoreError, col, with_read, with_write};
+use super::{EventId, LearningState, Store, StoreError, TableStatus, col, with_read, with_write};
 
 /// An event's acknowledgement.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -12,6 +12,16 @@ pub struct EventAck {
     pub at_ms: i64,
     /// Who acknowledged ("dashboard").
     pub source: String,
+}
+
+/// A table version without its program: what lists and charts show.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TableVersionHead {
+    pub version: i64,
+    pub table_number: u32,
+    pub reason: String,
+    pub created_at_ms: i64,
+    pub status: TableStatus,
 }
 
 /// What acknowledging an event did.
@@ -117,6 +127,46 @@ impl Store {
             .await
             .map_err(self.db_error("loading learning state"))?;
             Ok(row.map(|(state_json, saved_at_ms)| LearningState { state_json, saved_at_ms }))
+        })
+    }
+
+    /// The newest `limit` table versions of (machine, lobe) without their programs, highest
+    /// first: the overview and the trend read these, never the program texts.
+    pub async fn table_version_heads(
+        &self,
+        machine: &str,
+        lobe: &str,
+        limit: u32,
+    ) -> Result<Vec<TableVersionHead>, StoreError> {
+        let limit = check_limit(limit)?;
+        with_read!(self, pool => {
+            let rows = sqlx::query(
+                "SELECT t.version, t.table_number, t.reason, t.created_at_ms, s.status \
+                 FROM table_versions t JOIN table_version_status s ON s.id = \
+                 (SELECT MAX(s2.id) FROM table_version_status s2 WHERE s2.table_version_id = t.id) \
+                 WHERE t.machine = $1 AND t.lobe = $2 ORDER BY t.version DESC LIMIT $3",
+            )
+            .bind(machine)
+            .bind(lobe)
+            .bind(limit)
+            .fetch_all(pool)
+            .await
+            .map_err(self.db_error("listing table versions"))?;
+            rows.iter()
+                .map(|row| {
+                    let status: String = col!(row, "status", "reading a table version");
+                    let number: i64 = col!(row, "table_number", "reading a table version");
+                    Ok(TableVersionHead {
+                        version: col!(row, "version", "reading a table version"),
+                        table_number: u32::try_from(number).map_err(|_| {
+                            StoreError::invalid("table_number", format!("stored value {number} out of range"))
+                        })?,
+                        reason: col!(row, "reason", "reading a table version"),
+                        created_at_ms: col!(row, "created_at_ms", "reading a table version"),
+                        status: TableStatus::parse(&status)?,
+                    })
+                })
+                .collect()
         })
     }
 }

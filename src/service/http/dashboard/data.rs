@@ -7,7 +7,7 @@ use crate::service::http::api::ApiError;
 use crate::service::metrics::MachineMetrics;
 use crate::store::{
     Dressing, Event, EventAck, EventFilter, EventId, EventLevel, HistoryFilter, MeasurementSummary,
-    Store, TableStatus, TableVersion,
+    Store, TableStatus, TableVersion, TableVersionHead,
 };
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -53,7 +53,7 @@ pub(super) struct OverviewRow {
     pub recent: Vec<MeasurementSummary>,
     pub band_um: Option<f64>,
     /// The version the control has: the newest pushed.
-    pub in_force: Option<TableVersion>,
+    pub in_force: Option<TableVersionHead>,
 }
 
 pub(super) fn unavailable() -> ApiError {
@@ -96,7 +96,7 @@ pub(super) async fn overview(app: &AppState) -> Result<Vec<OverviewRow>, ApiErro
         for lobe in lobes {
             let mut recent = history(&store, &machine, &lobe, SPARK_PARTS).await?;
             recent.reverse();
-            let versions = store.table_versions(&machine, &lobe, 20).await?;
+            let versions = store.table_version_heads(&machine, &lobe, 20).await?;
             let frozen = learning(&store, &machine, &lobe).await?.frozen.is_some();
             let sheet = app.dashboard.get(&(machine.clone(), lobe.clone()));
             rows.push(OverviewRow {
@@ -226,7 +226,7 @@ pub(super) struct FeatureData {
     pub parts: Vec<MeasurementSummary>,
     pub latest: Option<Latest>,
     /// Newest first.
-    pub versions: Vec<TableVersion>,
+    pub versions: Vec<TableVersionHead>,
     pub dressings: Vec<Dressing>,
     pub events: Vec<(Event, Option<EventAck>)>,
     pub learning: Learning,
@@ -250,7 +250,7 @@ pub(super) async fn feature(
     Ok(FeatureData {
         parts,
         latest,
-        versions: store.table_versions(machine, lobe, 50).await?,
+        versions: store.table_version_heads(machine, lobe, 50).await?,
         dressings: store.dressings(machine, 50).await?,
         events: events(store, machine).await?,
         learning: learning(store, machine, lobe).await?,
