@@ -138,22 +138,30 @@ async fn newest_part(addr: SocketAddr) -> Option<(i64, f64, i64)> {
     ))
 }
 
+/// The rendered text of `css`, read in one script call: the live region may be replaced at
+/// any moment, and a found element could go stale before its text is read.
 async fn text_of(c: &Client, css: &str) -> String {
-    c.find(Locator::Css(css))
+    let v = c
+        .execute(
+            "const e = document.querySelector(arguments[0]); return e ? e.innerText : null;",
+            vec![serde_json::json!(css)],
+        )
         .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap()
+        .unwrap();
+    v.as_str()
+        .unwrap_or_else(|| panic!("{css} not on the page"))
+        .to_string()
 }
 
 async fn attr_of(c: &Client, css: &str, name: &str) -> Option<String> {
-    c.find(Locator::Css(css))
+    let v = c
+        .execute(
+            "const e = document.querySelector(arguments[0]); return e ? e.getAttribute(arguments[1]) : null;",
+            vec![serde_json::json!(css), serde_json::json!(name)],
+        )
         .await
-        .ok()?
-        .attr(name)
-        .await
-        .ok()?
+        .ok()?;
+    v.as_str().map(str::to_string)
 }
 
 /// Every script error and failed request the page recorded must be none.
@@ -430,5 +438,10 @@ async fn versions(c: &Client, base: &str, addr: SocketAddr) {
     assert!(c.find(Locator::Css("svg.chart")).await.is_ok(), "diff plot");
     screenshot(c, "versions.png").await;
     assert_fits(c, "versions at 1280").await;
+    c.set_window_size(1024, 768).await.unwrap();
+    assert_fits(c, "versions at 1024").await;
+    c.goto(&format!("{base}/")).await.unwrap();
+    assert_fits(c, "overview at 1024").await;
+    c.set_window_size(1280, 800).await.unwrap();
     assert_clean(c, "versions").await;
 }
