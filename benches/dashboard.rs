@@ -247,13 +247,16 @@ fn part(n: i64) -> NewMeasurement {
     }
 }
 
-/// Stores one part and waits until all `n` clients have it.
+/// Stores one part and waits until all `n` clients have it. The part is stored at a
+/// spread-out moment of the poller's 250 ms period (a waiting time outside the measurement):
+/// storing right after the previous delivery would always wait the full period.
 async fn one_live(
     store: &Store,
     rx: &mut mpsc::UnboundedReceiver<i64>,
     k: i64,
     n: usize,
 ) -> Duration {
+    tokio::time::sleep(Duration::from_millis((k * 37 % 250) as u64)).await;
     let id = store.insert_measurement(&part(k)).await.unwrap().0;
     let t = Instant::now();
     let mut got = 0;
