@@ -143,12 +143,12 @@ pub(super) fn versions(
     let base = feature_url(machine, lobe);
     let api = format!("/api/v1/machines/{machine}/lobes/{lobe}");
     let mut live = String::from(
-        r#"<table id="versions"><caption>Table versions, newest first</caption><thead><tr><th scope="col">Version</th><th scope="col">Parent</th><th scope="col">Table</th><th scope="col">Status</th><th scope="col">Reason</th><th scope="col">Made</th><th scope="col">Program</th><th scope="col">Rollback</th></tr></thead><tbody>"#,
+        r#"<table id="versions"><caption>Table versions, newest first</caption><thead><tr><th scope="col">Version</th><th scope="col">Parent</th><th scope="col">Table</th><th scope="col">Status</th><th scope="col">Reason</th><th scope="col">Made</th><th scope="col">Program (SHA-256)</th><th scope="col">Rollback</th></tr></thead><tbody>"#,
     );
     for v in versions {
         let _ = write!(
             live,
-            r#"<tr data-version="{n}"><th scope="row"><a href="{b}/versions?v={n}">v{n}</a></th><td>{p}</td><td>T{t}</td><td title="{why}">{s}</td><td>{r}</td><td>{at}</td><td><a href="{api}/tables/{n}/program" download="{lobe}_v{n}.spf">program</a></td><td><button type="button" class="rollback" data-url="{api}/rollback" data-version="{n}">Roll back to v{n}</button></td></tr>"#,
+            r#"<tr data-version="{n}"><th scope="row"><a href="{b}/versions?v={n}">v{n}</a></th><td>{p}</td><td>T{t}</td><td title="{why}">{s}</td><td>{r}</td><td>{at}</td><td><a href="{api}/tables/{n}/program" download="{lobe}_v{n}.spf" title="{sha}">{short}…</a></td><td><button type="button" class="rollback" data-url="{api}/rollback" data-version="{n}">Roll back to v{n}</button></td></tr>"#,
             n = v.version,
             b = esc(&base),
             p = v.parent_version.map_or("—".into(), |p| format!("v{p}")),
@@ -159,6 +159,8 @@ pub(super) fn versions(
             at = when(v.created_at_ms),
             api = esc(&api),
             lobe = esc(lobe),
+            sha = esc(&v.sha256),
+            short = esc(v.sha256.get(..12).unwrap_or(&v.sha256)),
         );
     }
     live.push_str("</tbody></table>");
