@@ -104,7 +104,7 @@ async fn browser(driver: &Driver, profile: &Path) -> Client {
         .capabilities(caps)
         .connect(&driver.url)
         .await
-        .expect("a browser session")
+        .expect("chromedriver starts a headless Chromium")
 }
 
 /// Polls `check` every 50 ms until it answers `Some`, at most `limit`.
