@@ -11,6 +11,7 @@ pub mod cli;
 pub mod clock;
 pub mod config;
 pub mod core;
+pub mod dfq;
 pub mod digest;
 pub mod gauge;
 pub mod names;

@@ -79,6 +79,7 @@ async fn server(limits: HttpLimits, store: Option<camloop::store::Store>) -> Ser
         commands: Arc::new(commands),
         token: Some(Secret::new(TOKEN)),
         body_timeout: limits.body_timeout,
+        dashboard: Arc::default(),
     };
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();

@@ -15,6 +15,8 @@ pub enum Format {
     Table,
     Csv,
     Json,
+    /// Q-DAS AQDEF (`export` only).
+    Dfq,
 }
 
 /// Where the store is: --database, else CAMLOOP_DATABASE_URL, else the service config's URL.
@@ -56,6 +58,9 @@ pub struct ExportArgs {
     /// Up to this time (exclusive); default: now.
     #[arg(long, value_name = "TIME")]
     pub until: Option<String>,
+    /// With `--format dfq`: the part (recipe name) to export; a .dfq file holds one part.
+    #[arg(long)]
+    pub part: Option<String>,
     /// Write here instead of stdout.
     #[arg(long, value_name = "FILE")]
     pub out: Option<PathBuf>,
@@ -136,18 +141,31 @@ pub fn run_export(args: ExportArgs) -> anyhow::Result<()> {
             let batch = store.export(since, until, after, 1000).await?;
             let Some(last) = batch.last() else { break };
             after = Some(last.summary.id);
-            rows.extend(batch.into_iter().map(|d| d.summary));
+            rows.extend(batch);
         }
+        let recipes = super::export_dfq::recipe_parts(&store, &rows).await;
         store.close().await;
-        anyhow::Ok(rows)
+        anyhow::Ok((rows, recipes?))
     })?;
-    let text = render(&rows, args.format)?;
+    let (rows, recipes) = rows;
+    let count = rows.len();
+    let text = if args.format == Format::Dfq {
+        let export = super::export_dfq::DfqExport {
+            recipes: &recipes,
+            part: args.part.as_deref(),
+            config: &args.store.config,
+        };
+        export.text(&rows)?
+    } else {
+        let rows: Vec<MeasurementSummary> = rows.into_iter().map(|d| d.summary).collect();
+        render(&rows, args.format)?
+    };
     match &args.out {
         Some(path) => {
             let mut outputs = Outputs::default();
             outputs.add(path, text);
             outputs.commit()?;
-            println!("exported {} measurements to {}", rows.len(), path.display());
+            println!("exported {count} measurements to {}", path.display());
         }
         None => print!("{text}"),
     }
@@ -181,6 +199,7 @@ async fn connect(args: &StoreArgs) -> anyhow::Result<Store> {
 fn render(rows: &[MeasurementSummary], format: Format) -> anyhow::Result<String> {
     let mut s = String::new();
     match format {
+        Format::Dfq => bail!("--format dfq is for `camloop export`"),
         Format::Table => {
             let _ = writeln!(
                 s,

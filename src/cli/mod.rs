@@ -4,6 +4,7 @@
 mod analyze;
 mod compensate;
 mod contour;
+mod export_dfq;
 pub mod history;
 mod output;
 mod part;
@@ -39,7 +40,7 @@ pub enum Command {
     Run(run::RunArgs),
     /// Measurement history of a machine from the store.
     History(history::HistoryArgs),
-    /// Export the measurement history of a time range as CSV or JSON.
+    /// Export the measurement history of a time range as CSV, JSON or Q-DAS AQDEF (dfq).
     Export(history::ExportArgs),
     /// A non-circular turning contour (ellipse, parabola, sine, tangent, CSV profile) as a
     /// program with chords placed by tolerance.

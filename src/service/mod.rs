@@ -142,6 +142,7 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
     let mut commands = std::collections::HashMap::new();
     let mut sources_done = Vec::new();
     let mut features = std::collections::BTreeMap::new();
+    let mut sheets = std::collections::BTreeMap::new();
     let shared = Shared {
         store: store.clone(),
         metrics: metrics.clone(),
@@ -158,6 +159,10 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
             m.name.clone(),
             m.setups.iter().map(|s| s.name.clone()).collect(),
         );
+        for setup in &m.setups {
+            let sheet = http::FeatureSheet::from_setup(setup);
+            sheets.insert((m.name.to_string(), setup.name.clone()), sheet);
+        }
         let wired = wire_machine(&config, section, m, &shared).await?;
         commands.insert(section.name.clone(), wired.commands);
         sources_done.push(wired.source_done);
@@ -172,6 +177,7 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
         commands: Arc::new(commands),
         token: config.api_token.clone(),
         body_timeout: limits.body_timeout,
+        dashboard: Arc::new(sheets),
     });
     let http_addr = listener.local_addr()?;
     info!(listen = %http_addr, machines = config.machines.len(), "camloop started");

@@ -377,6 +377,39 @@ impl Store {
         })
     }
 
+    /// The id of the newest measurement, `None` while there is none: what the dashboard's
+    /// live channel polls (one index lookup).
+    pub async fn newest_measurement_id(&self) -> Result<Option<MeasurementId>, StoreError> {
+        with_read!(self, pool => {
+            let id: Option<i64> = sqlx::query_scalar("SELECT MAX(id) FROM measurements")
+                .fetch_one(pool)
+                .await
+                .map_err(self.db_error("reading the newest measurement id"))?;
+            Ok(id.map(MeasurementId))
+        })
+    }
+
+    /// Summaries of the measurements after `after` (exclusive), oldest first, at most `limit`.
+    pub async fn measurements_after(
+        &self,
+        after: MeasurementId,
+        limit: u32,
+    ) -> Result<Vec<MeasurementSummary>, StoreError> {
+        let limit = check_limit(limit)?;
+        let sql = format!(
+            "SELECT {SUMMARY_COLUMNS} FROM measurements m WHERE m.id > $1 ORDER BY m.id LIMIT $2"
+        );
+        with_read!(self, pool => {
+            let rows = sqlx::query(&sql)
+                .bind(after.0)
+                .bind(limit)
+                .fetch_all(pool)
+                .await
+                .map_err(self.db_error("listing new measurements"))?;
+            rows.iter().map(|row| Ok(summary_from_row!(row))).collect()
+        })
+    }
+
     /// Retention: drops the raw revolutions of measurements received before `cutoff_ms`,
     /// keeping their summaries, averaged profiles and reports. Returns how many were pruned.
     pub async fn prune_raw_older_than(&self, cutoff_ms: i64) -> Result<u64, StoreError> {

@@ -28,6 +28,7 @@ mod log;
 mod measurements;
 mod tables;
 mod types;
+mod views;
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -40,6 +41,7 @@ pub use codec::{UNITS_PER_MM, decode_lifts_mm, encode_lifts_mm, sha256_hex};
 pub use error::{Detail, StoreError};
 pub use identity::StoreIdentity;
 pub use types::*;
+pub use views::{AckOutcome, EventAck, TableVersionHead};
 
 /// Migrations embedded in the binary: (version, description, SQLite SQL, PostgreSQL SQL).
 /// A test checks that this list and both folders under `migrations/` hold the same versions.
@@ -55,6 +57,12 @@ pub const MIGRATIONS: &[(i64, &str, &str, &str)] = &[
         "store_identity",
         include_str!("../../migrations/sqlite/0002_store_identity.sql"),
         include_str!("../../migrations/postgres/0002_store_identity.sql"),
+    ),
+    (
+        3,
+        "event_ack",
+        include_str!("../../migrations/sqlite/0003_event_ack.sql"),
+        include_str!("../../migrations/postgres/0003_event_ack.sql"),
     ),
 ];
 

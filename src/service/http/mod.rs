@@ -7,8 +7,10 @@
 //! - `writes.rs`: the write handlers and the command hand-over.
 //! - `server.rs`: the listener loop: header and body timeouts, the connection cap.
 //! - `openapi.rs`: the API description.
+//! - `dashboard/`: the engineers' web pages, their live channel and downloads.
 
 mod api;
+mod dashboard;
 mod openapi;
 mod parts;
 mod routes;
@@ -16,6 +18,7 @@ mod server;
 mod writes;
 
 pub use api::{ApiError, ApiJson, ApiPath, ApiQuery, Authorized};
+pub use dashboard::{FeatureSheet, FeatureSheets, Stopping};
 pub use routes::{LobeInfo, MachineInfo, MachinesReply};
 pub use server::{HttpLimits, serve};
 pub use writes::CommandReply;
@@ -42,6 +45,8 @@ pub struct AppState {
     pub token: Option<crate::config::Secret>,
     /// How long a request body may take to arrive once its headers are in.
     pub body_timeout: std::time::Duration,
+    /// The dashboard's view of each configured feature (bands, setup drawing).
+    pub dashboard: FeatureSheets,
 }
 
 /// Where a machine's loop sends its answer to a [`Command`].
@@ -141,5 +146,7 @@ pub fn router(state: AppState) -> Router {
             get(routes::dressings).post(writes::dress),
         )
         .route("/api/v1/measurements/{id}", get(routes::measurement))
-        .with_state(state)
+        .route(&format!("{m}/events/{{id}}/ack"), post(dashboard::ack))
+        .with_state(state.clone())
+        .merge(dashboard::router(state))
 }

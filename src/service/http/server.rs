@@ -63,6 +63,8 @@ pub async fn serve(
             limits.max_connections = cap;
         }
     }
+    // Open event streams end when the server stops (see `dashboard::Stopping`).
+    let app = app.layer(axum::Extension(super::Stopping(shutdown.clone())));
     let slots = Arc::new(Semaphore::new(limits.max_connections));
     let mut http = hyper::server::conn::http1::Builder::new();
     http.timer(TokioTimer::new())

@@ -1,0 +1,356 @@
+//! The dashboard on a large store: the plant overview and a feature page rendered by the
+//! server (over a real loopback connection, as a browser asks) with 50 machines and
+//! 1,000,000 measurements in SQLite; and the live channel with 50 open event streams: from a
+//! measurement stored to all 50 clients having it. Prints p50/p99 besides criterion's
+//! estimate.
+//!
+//! The store is generated in the setup: the million summary rows by one recursive INSERT in
+//! SQLite itself (seconds), then, per machine, what the pages read besides the summaries: the
+//! newest part's profile and analysis report (360 points), 20 table versions with a
+//! 360-point program, 10 events, a learning state and a recipe snapshot.
+
+use camloop::config::Secret;
+use camloop::names::MachineName;
+use camloop::recipe::Recipe;
+use camloop::service::http::{self, AppState, FeatureSheet, HttpLimits};
+use camloop::store::{NewMeasurement, RawPool, Store, Verdict, encode_lifts_mm};
+use criterion::{Criterion, criterion_group, criterion_main};
+use std::collections::{BTreeMap, HashMap};
+use std::net::SocketAddr;
+use std::path::Path;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
+use tokio::sync::{mpsc, watch};
+
+const MACHINES: usize = 50;
+const MEASUREMENTS: i64 = 1_000_000;
+const POINTS: usize = 360;
+/// 2026-01-01, the first part's time; one part a second across the plant.
+const T0_MS: i64 = 1_767_225_600_000;
+
+fn machine(i: usize) -> String {
+    format!("M{i:02}")
+}
+
+async fn exec(store: &Store, sql: &str) {
+    let RawPool::Sqlite(pool) = store.raw_pool() else {
+        panic!("sqlite")
+    };
+    sqlx::query(sql).execute(pool).await.expect(sql);
+}
+
+/// A 360-point analysis report shaped as the service stores it (the curves the pages read,
+/// and the other per-angle arrays and harmonics that make its size).
+fn report(i: usize) -> String {
+    let a: Vec<f64> = (0..POINTS).map(|k| k as f64).collect();
+    let e: Vec<f64> = a
+        .iter()
+        .map(|d| (d.to_radians() * 3.0 + i as f64).sin() * 1.5)
+        .collect();
+    let h: Vec<serde_json::Value> = (1..=50)
+        .map(|k| serde_json::json!({"order": k, "amplitude_um": 0.1, "phase_deg": 12.0}))
+        .collect();
+    serde_json::json!({
+        "angle_deg": a, "error_um": e, "profile_error_um": e, "velocity_error_um_per_deg": e,
+        "repeatability_um": e, "repeatability_range_um": e, "harmonics": h,
+        "phase_error_deg": 0.01, "base_radius_error_um": -0.3,
+    })
+    .to_string()
+}
+
+fn program() -> String {
+    let mut s = String::from("; camloop table\nCTABDEF(CL_TNO,C,1,1)\n");
+    for k in 0..POINTS {
+        s.push_str(&format!(
+            "C={k}.0000 X=POLY PO[X]=({:.4},0.0012,-0.0003)\n",
+            20.0 + k as f64 * 1e-3
+        ));
+    }
+    s + "CTABEND\nM17\n"
+}
+
+/// 50 machines, 1 M measurements and what the pages read besides them.
+async fn seed(store: &Store) {
+    let t = Instant::now();
+    let values: Vec<String> = (0..MACHINES)
+        .map(|i| format!("('{}', {T0_MS})", machine(i)))
+        .collect();
+    exec(
+        store,
+        &format!(
+            "INSERT INTO machines (name, first_seen_ms) VALUES {}",
+            values.join(",")
+        ),
+    )
+    .await;
+    exec(
+        store,
+        &format!(
+            "WITH RECURSIVE n(i) AS (SELECT 0 UNION ALL SELECT i + 1 FROM n WHERE i < {last}) \
+             INSERT INTO measurements (machine, part, lobe, received_at_ms, verdict, \
+             max_profile_error_um, base_radius_error_um, phase_error_deg, revolutions_used, \
+             points_per_rev, origin, sha256) \
+             SELECT printf('M%02d', i % {MACHINES}), CAST(i / {MACHINES} AS TEXT), 'IN1', \
+             {T0_MS} + i * 1000, CASE WHEN i % 17 = 0 THEN 'fail' ELSE 'pass' END, \
+             (abs(random()) % 3000) / 1000.0, ((abs(random()) % 2000) - 1000) / 1000.0, \
+             ((abs(random()) % 200) - 100) / 10000.0, 3, {POINTS}, 'can0', printf('%064x', i) \
+             FROM n",
+            last = MEASUREMENTS - 1
+        ),
+    )
+    .await;
+    let RawPool::Sqlite(pool) = store.raw_pool() else {
+        panic!("sqlite")
+    };
+    let mut lift = Vec::new();
+    encode_lifts_mm(vec![1.5; POINTS], &mut lift).unwrap();
+    let text = program();
+    for i in 0..MACHINES {
+        let m = machine(i);
+        let newest: i64 = sqlx::query_scalar("SELECT MAX(id) FROM measurements WHERE machine = $1")
+            .bind(&m)
+            .fetch_one(pool)
+            .await
+            .unwrap();
+        sqlx::query("INSERT INTO measurement_data (measurement_id, averaged_profile, analysis_json) VALUES ($1, $2, $3)")
+            .bind(newest).bind(&lift).bind(report(i)).execute(pool).await.unwrap();
+        sqlx::query("INSERT INTO recipe_snapshots (machine, part, lobe, kind, recipe_json, sha256, created_at_ms) VALUES ($1, 'DEMO-CAM', 'IN1', 'lobe', '{}', $2, $3)")
+            .bind(&m).bind(format!("{i:064x}")).bind(T0_MS).execute(pool).await.unwrap();
+        for v in 1..=20i64 {
+            let id: i64 = sqlx::query_scalar("INSERT INTO table_versions (machine, lobe, version, parent_version, table_number, program_text, sha256, learning_params_json, reason, created_at_ms) VALUES ($1, 'IN1', $2, $3, $4, $5, $6, '{}', $7, $8) RETURNING id")
+                .bind(&m).bind(v).bind((v > 1).then_some(v - 1)).bind(1 + v % 2).bind(&text)
+                .bind(format!("{:064x}", v)).bind(format!("part {v}: learned")).bind(T0_MS + v * 60_000)
+                .fetch_one(pool).await.unwrap();
+            sqlx::query("INSERT INTO table_version_status (table_version_id, status, why, at_ms) VALUES ($1, 'pushed', 'pushed to share', $2)")
+                .bind(id).bind(T0_MS + v * 60_000).execute(pool).await.unwrap();
+        }
+        for k in 0..10i64 {
+            sqlx::query("INSERT INTO events (machine, at_ms, level, kind, message) VALUES ($1, $2, $3, 'table_refused', 'step too large')")
+                .bind(&m).bind(T0_MS + k * 1000).bind(if k == 9 { "error" } else { "info" })
+                .execute(pool).await.unwrap();
+        }
+        let memory =
+            serde_json::json!({"learning": {"correction_um": vec![0.25; POINTS], "frozen": null}});
+        sqlx::query("INSERT INTO learning_states (machine, lobe, state_json, saved_at_ms) VALUES ($1, 'IN1', $2, $3)")
+            .bind(&m).bind(memory.to_string()).bind(T0_MS).execute(pool).await.unwrap();
+    }
+    exec(store, "ANALYZE").await;
+    eprintln!(
+        "seeded 50 machines, {MEASUREMENTS} measurements in {:.1} s",
+        t.elapsed().as_secs_f64()
+    );
+}
+
+/// The service's HTTP side on port 0 with the 50 machines configured on the demo lobe.
+async fn serve(store: Store) -> (SocketAddr, watch::Sender<bool>) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let setup = Recipe::load(&path)
+        .unwrap()
+        .feature_setup(&path, "IN1")
+        .unwrap();
+    let sheet = FeatureSheet::from_setup(&setup);
+    let mut machines = BTreeMap::new();
+    let mut sheets = BTreeMap::new();
+    for i in 0..MACHINES {
+        machines.insert(
+            MachineName::new(&machine(i)).unwrap(),
+            vec!["IN1".to_string()],
+        );
+        sheets.insert((machine(i), "IN1".to_string()), sheet.clone());
+    }
+    let limits = HttpLimits {
+        max_connections: 256,
+        header_timeout: Duration::from_secs(10),
+        body_timeout: Duration::from_secs(10),
+    };
+    let state = AppState {
+        store: Arc::new(tokio::sync::RwLock::new(Some(store))),
+        metrics: Arc::default(),
+        machines: Arc::new(machines),
+        commands: Arc::new(HashMap::new()),
+        token: Some(Secret::new("bench")),
+        body_timeout: limits.body_timeout,
+        dashboard: Arc::new(sheets),
+    };
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (stop, stopped) = watch::channel(false);
+    tokio::spawn(http::serve(listener, http::router(state), limits, stopped));
+    (addr, stop)
+}
+
+/// One GET on a new connection; the body's length (the status must be 200).
+async fn get(addr: SocketAddr, path: &str) -> usize {
+    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+    let req = format!("GET {path} HTTP/1.1\r\nHost: bench\r\nConnection: close\r\n\r\n");
+    s.write_all(req.as_bytes()).await.unwrap();
+    let mut body = Vec::new();
+    s.read_to_end(&mut body).await.unwrap();
+    assert!(
+        body.starts_with(b"HTTP/1.1 200"),
+        "{path}: {}",
+        String::from_utf8_lossy(&body[..body.len().min(300)])
+    );
+    body.len()
+}
+
+fn percentiles(mut d: Vec<Duration>) -> (f64, f64) {
+    d.sort();
+    let at = |q: f64| d[((d.len() - 1) as f64 * q).round() as usize].as_secs_f64() * 1000.0;
+    (at(0.5), at(0.99))
+}
+
+/// 50 event streams; each reports the ids it receives.
+async fn clients(addr: SocketAddr, n: usize) -> mpsc::UnboundedReceiver<i64> {
+    let (tx, rx) = mpsc::unbounded_channel();
+    for _ in 0..n {
+        let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+        s.write_all(b"GET /dashboard/events HTTP/1.1\r\nHost: bench\r\n\r\n")
+            .await
+            .unwrap();
+        let tx = tx.clone();
+        tokio::spawn(async move {
+            let mut lines = BufReader::new(s).lines();
+            while let Ok(Some(line)) = lines.next_line().await {
+                // Chunked framing puts the event's lines inside chunks; the id line is whole.
+                if let Some(id) = line
+                    .strip_prefix("id: ")
+                    .and_then(|v| v.trim().parse().ok())
+                {
+                    let _ = tx.send(id);
+                }
+            }
+        });
+    }
+    rx
+}
+
+fn part(n: i64) -> NewMeasurement {
+    NewMeasurement {
+        machine: machine(7),
+        part: format!("live-{n}"),
+        lobe: "IN1".into(),
+        received_at_ms: T0_MS + MEASUREMENTS * 1000 + n,
+        verdict: Verdict::Pass,
+        max_profile_error_um: 0.5,
+        base_radius_error_um: 0.1,
+        phase_error_deg: 0.001,
+        revolutions_used: 3,
+        points_per_rev: POINTS as u32,
+        origin: "bench".into(),
+        sha256: format!("{:064x}", 1u64 << 40 | n as u64),
+        recipe_snapshot: None,
+        raw_lift_mm: Vec::new(),
+        averaged_lift_mm: vec![1.5; POINTS],
+        analysis_json: "{}".into(),
+    }
+}
+
+/// Stores one part and waits until all `n` clients have it. The part is stored at a
+/// spread-out moment of the poller's 250 ms period (a waiting time outside the measurement):
+/// storing right after the previous delivery would always wait the full period.
+async fn one_live(
+    store: &Store,
+    rx: &mut mpsc::UnboundedReceiver<i64>,
+    k: i64,
+    n: usize,
+) -> Duration {
+    tokio::time::sleep(Duration::from_millis((k * 37 % 250) as u64)).await;
+    let id = store.insert_measurement(&part(k)).await.unwrap().0;
+    let t = Instant::now();
+    let mut got = 0;
+    while got < n {
+        if rx.recv().await.unwrap() == id {
+            got += 1;
+        }
+    }
+    t.elapsed()
+}
+
+fn bench(c: &mut Criterion) {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap();
+    let dir = tempfile::tempdir_in(env!("CARGO_TARGET_TMPDIR")).unwrap();
+    let url = format!("sqlite://{}/bench.db?mode=rwc", dir.path().display());
+    let store = rt.block_on(Store::connect(&url)).unwrap();
+    rt.block_on(seed(&store));
+    let (addr, stop) = rt.block_on(serve(store.clone()));
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+
+    for (name, path) in [
+        ("overview", "/".to_string()),
+        ("feature_page", "/machines/M07/features/IN1".to_string()),
+    ] {
+        let times: Vec<Duration> = rt.block_on(async {
+            let mut v = Vec::new();
+            for _ in 0..100 {
+                let t = Instant::now();
+                get(addr, &path).await;
+                v.push(t.elapsed());
+            }
+            v
+        });
+        let (p50, p99) = percentiles(times);
+        let bytes = rt.block_on(get(addr, &path));
+        eprintln!(
+            "{name} ({bytes} bytes, 50 machines, 1 M measurements, {cores} cores): p50 {p50:.1} ms, p99 {p99:.1} ms"
+        );
+        c.bench_function(&format!("dashboard_{name}_50_machines_1M"), |b| {
+            b.iter(|| rt.block_on(get(addr, &path)))
+        });
+    }
+
+    let mut rx = rt.block_on(clients(addr, 50));
+    // The first part starts the poller; the clients are connected once it reaches them.
+    rt.block_on(async {
+        let mut k = 0;
+        loop {
+            k += 1;
+            let id = store.insert_measurement(&part(k)).await.unwrap().0;
+            let deadline = Instant::now() + Duration::from_secs(2);
+            let mut got = 0;
+            while let Ok(Some(x)) = tokio::time::timeout_at(deadline.into(), rx.recv()).await {
+                got += usize::from(x == id);
+                if got == 50 {
+                    return;
+                }
+            }
+        }
+    });
+    let mut k = 1000;
+    let times: Vec<Duration> = rt.block_on(async {
+        let mut v = Vec::new();
+        for _ in 0..40 {
+            k += 1;
+            v.push(one_live(&store, &mut rx, k, 50).await);
+        }
+        v
+    });
+    let (p50, p99) = percentiles(times);
+    eprintln!(
+        "live channel, 50 open streams ({cores} cores): stored → all 50 have it: p50 {p50:.0} ms, p99 {p99:.0} ms"
+    );
+    let mut g = c.benchmark_group("dashboard_live");
+    g.sample_size(10);
+    g.bench_function("stored_to_50_sse_clients", |b| {
+        b.iter_custom(|iters| {
+            rt.block_on(async {
+                let mut total = Duration::ZERO;
+                for _ in 0..iters {
+                    k += 1;
+                    total += one_live(&store, &mut rx, k, 50).await;
+                }
+                total
+            })
+        })
+    });
+    g.finish();
+    let _ = stop.send(true);
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

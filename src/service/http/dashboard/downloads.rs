@@ -1,0 +1,260 @@
+//! Downloads: the data of every chart as CSV or JSON, and a feature's parts as a Q-DAS
+//! `.dfq` file.
+
+use super::data::{self, diff_um};
+use super::{Dash, names};
+use crate::dfq::{DfqSeries, row_from, write_dfq};
+use crate::service::http::api::{ApiError, ApiPath, ApiQuery};
+use axum::extract::State;
+use axum::http::{StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use std::fmt::Write as _;
+
+/// Parts in the dashboard's `.dfq` download (the CLI exports any range).
+const DFQ_PARTS: u32 = 500;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub(super) enum Chart {
+    Trend,
+    Latest,
+    Diff,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub(super) enum Format {
+    Csv,
+    Json,
+}
+
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct DataQuery {
+    chart: Chart,
+    format: Format,
+    v: Option<i64>,
+}
+
+/// A table of numbers: column names (with units) and rows.
+struct Table {
+    name: String,
+    columns: Vec<&'static str>,
+    rows: Vec<Vec<f64>>,
+}
+
+impl Table {
+    fn csv(&self) -> String {
+        let mut s = self.columns.join(",") + "\n";
+        for r in &self.rows {
+            let cells: Vec<String> = r.iter().map(|v| v.to_string()).collect();
+            let _ = writeln!(s, "{}", cells.join(","));
+        }
+        s
+    }
+
+    fn json(&self) -> String {
+        let rows: Vec<serde_json::Map<String, serde_json::Value>> = self
+            .rows
+            .iter()
+            .map(|r| {
+                self.columns
+                    .iter()
+                    .zip(r)
+                    .map(|(c, v)| (c.to_string(), serde_json::json!(v)))
+                    .collect()
+            })
+            .collect();
+        serde_json::json!({ "chart": self.name, "rows": rows }).to_string()
+    }
+}
+
+fn not_found(what: String) -> ApiError {
+    ApiError(StatusCode::NOT_FOUND, "no_data", what)
+}
+
+/// `GET …/data?chart=trend|latest|diff&format=csv|json[&v=N]`.
+pub(super) async fn chart_data(
+    State(d): State<Dash>,
+    ApiPath((machine, lobe)): ApiPath<(String, String)>,
+    ApiQuery(q): ApiQuery<DataQuery>,
+) -> Result<Response, ApiError> {
+    names(&machine, &lobe)?;
+    let store = data::store(&d.app).await?;
+    let table = match q.chart {
+        Chart::Trend => {
+            let mut parts = data::history(&store, &machine, &lobe, data::TREND_PARTS).await?;
+            parts.reverse();
+            Table {
+                name: format!("{machine} {lobe} trend"),
+                columns: vec![
+                    "id",
+                    "received_at_ms",
+                    "max_profile_error_um",
+                    "base_radius_error_um",
+                    "phase_error_deg",
+                ],
+                rows: parts
+                    .iter()
+                    .map(|p| {
+                        vec![
+                            p.id.0 as f64,
+                            p.received_at_ms as f64,
+                            p.max_profile_error_um,
+                            p.base_radius_error_um,
+                            p.phase_error_deg,
+                        ]
+                    })
+                    .collect(),
+            }
+        }
+        Chart::Latest => latest_table(&store, &machine, &lobe).await?,
+        Chart::Diff => {
+            let v = q.v.ok_or_else(|| {
+                ApiError(
+                    StatusCode::BAD_REQUEST,
+                    "invalid_query",
+                    "diff needs v".into(),
+                )
+            })?;
+            diff_table(&store, &machine, &lobe, v).await?
+        }
+    };
+    let (body, kind, ext) = match q.format {
+        Format::Csv => (table.csv(), "text/csv; charset=utf-8", "csv"),
+        Format::Json => (table.json(), "application/json", "json"),
+    };
+    let file = format!(
+        "attachment; filename=\"{machine}_{lobe}_{:?}.{ext}\"",
+        q.chart
+    )
+    .to_lowercase();
+    Ok((
+        [
+            (header::CONTENT_TYPE, kind.to_string()),
+            (header::CONTENT_DISPOSITION, file),
+        ],
+        body,
+    )
+        .into_response())
+}
+
+async fn diff_table(
+    store: &crate::store::Store,
+    machine: &str,
+    lobe: &str,
+    v: i64,
+) -> Result<Table, ApiError> {
+    let newer = store
+        .table_version(machine, lobe, v)
+        .await?
+        .ok_or_else(|| not_found(format!("version {v} not found")))?;
+    let parent = newer
+        .parent_version
+        .ok_or_else(|| not_found(format!("version {v} is the first")))?;
+    let older = store
+        .table_version(machine, lobe, parent)
+        .await?
+        .ok_or_else(|| not_found(format!("version {parent} not found")))?;
+    let points = diff_um(&newer, &older)
+        .ok_or_else(|| not_found(format!("version {v} or {parent} unreadable")))?;
+    Ok(Table {
+        name: format!("{machine} {lobe} v{v} minus v{parent}"),
+        columns: vec!["c_deg", "delta_x_um"],
+        rows: points.into_iter().map(|(c, x)| vec![c, x]).collect(),
+    })
+}
+
+async fn latest_table(
+    store: &crate::store::Store,
+    machine: &str,
+    lobe: &str,
+) -> Result<Table, ApiError> {
+    let fd = data::feature(store, machine, lobe).await?;
+    let l = fd
+        .latest
+        .ok_or_else(|| not_found(format!("{machine} {lobe} has no part yet")))?;
+    let c = &l.curves;
+    let k = fd.learning.correction_um.len();
+    let rows = (0..c.angle_deg.len())
+        .map(|i| {
+            // The correction lives on the gauge grid; the same index when the grids agree.
+            let correction = if k == c.angle_deg.len() {
+                fd.learning.correction_um[i]
+            } else {
+                f64::NAN
+            };
+            vec![
+                c.angle_deg[i],
+                l.lift_mm.get(i).copied().unwrap_or(f64::NAN),
+                c.error_um.get(i).copied().unwrap_or(f64::NAN),
+                c.profile_error_um.get(i).copied().unwrap_or(f64::NAN),
+                correction,
+            ]
+        })
+        .collect();
+    Ok(Table {
+        name: format!("{machine} {lobe} part {}", l.summary.id.0),
+        columns: vec![
+            "angle_deg",
+            "measured_lift_mm",
+            "error_um",
+            "profile_error_um",
+            "correction_um",
+        ],
+        rows,
+    })
+}
+
+/// `GET …/export.dfq`: the newest parts of the feature as Q-DAS AQDEF.
+pub(super) async fn dfq(
+    State(d): State<Dash>,
+    ApiPath((machine, lobe)): ApiPath<(String, String)>,
+) -> Result<Response, ApiError> {
+    names(&machine, &lobe)?;
+    let store = data::store(&d.app).await?;
+    let mut parts = data::history(&store, &machine, &lobe, DFQ_PARTS).await?;
+    parts.reverse();
+    let part_name = store
+        .features(&machine)
+        .await?
+        .into_iter()
+        .find(|f| f.lobe == lobe)
+        .map(|f| f.part)
+        .unwrap_or_default();
+    let mut rows = Vec::with_capacity(parts.len());
+    for p in &parts {
+        let detail = store.measurement(p.id).await?;
+        rows.push(row_from(
+            p,
+            detail.as_ref().map(|d| d.analysis_json.as_str()),
+        ));
+    }
+    let sheet = d.app.dashboard.get(&(machine.clone(), lobe.clone()));
+    let series = DfqSeries {
+        machine: machine.clone(),
+        feature: lobe.clone(),
+        profile_band_um: sheet
+            .and_then(super::FeatureSheet::symmetric_band_um)
+            .map(|b| (-b, b)),
+        rows,
+    };
+    let text = write_dfq(
+        &part_name,
+        &format!("{part_name} ground on {machine}"),
+        &[series],
+    )
+    .map_err(|e| not_found(format!("{machine} {lobe}: {e}")))?;
+    let file = format!("attachment; filename=\"{machine}_{lobe}.dfq\"");
+    Ok((
+        [
+            (
+                header::CONTENT_TYPE,
+                "text/plain; charset=utf-8".to_string(),
+            ),
+            (header::CONTENT_DISPOSITION, file),
+        ],
+        text,
+    )
+        .into_response())
+}

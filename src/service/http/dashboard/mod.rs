@@ -1,0 +1,227 @@
+//! The engineers' dashboard, served by `camloop run` on the API's listener: server-rendered
+//! HTML with inline SVG charts and one small script, all compiled into the binary (no CDN,
+//! no front-end toolchain).
+//!
+//! - `/`: the plant overview; `/machines/{m}/features/{f}`: trend, latest part, events,
+//!   dressing form, setup drawing; `…/versions`: table versions, diff, rollback.
+//! - `…/data?chart=…&format=csv|json`: the data of every chart; `…/export.dfq`: Q-DAS.
+//! - `/dashboard/events`: Server-Sent Events of every stored part (`sse.rs`).
+//! - `POST /api/v1/machines/{m}/events/{id}/ack` (routed with the API): acknowledges an
+//!   event (token).
+//!
+//! Writes from the page (rollback, dressing, acknowledgement) use the API with the token
+//! the engineer types; the page never stores it.
+
+mod charts;
+mod data;
+mod downloads;
+mod feature;
+mod pages;
+mod sse;
+
+pub use sse::Stopping;
+
+use super::AppState;
+use super::api::{ApiError, ApiPath, ApiQuery, Authorized, feature_name, machine_name};
+use crate::core::analysis::ToleranceBand;
+use crate::recipe::FeatureSetup;
+use axum::Router;
+use axum::extract::State;
+use axum::http::{StatusCode, header};
+use axum::response::{Html, IntoResponse, Response};
+use axum::routing::get;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+const APP_JS: &str = include_str!("assets/app.js");
+const APP_CSS: &str = include_str!("assets/app.css");
+const ICON_SVG: &str = include_str!("assets/icon.svg");
+
+/// What the dashboard knows of a configured feature beyond the store: its tolerance bands,
+/// base radius and setup drawing, computed once at start.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FeatureSheet {
+    /// The bands the analysis judges against (the analysis default when the recipe has none).
+    pub bands: Vec<ToleranceBand>,
+    pub base_radius_mm: Option<f64>,
+    /// The setup drawing (SVG); `None` when the geometry could not be drawn.
+    pub setup_svg: Option<String>,
+}
+
+/// Per (machine, feature) name.
+pub type FeatureSheets = Arc<BTreeMap<(String, String), FeatureSheet>>;
+
+impl FeatureSheet {
+    pub fn from_setup(s: &FeatureSetup) -> Self {
+        let bands = if s.bands.is_empty() {
+            let band = crate::core::analysis::LobeOptions::default().default_band_um;
+            vec![ToleranceBand::everywhere(band)]
+        } else {
+            s.bands.clone()
+        };
+        let base_radius_mm = match &s.feature {
+            crate::core::compensate::Feature::Cam(c) => Some(c.base_radius_mm),
+            crate::core::compensate::Feature::Pin(_) => None,
+        };
+        let setup_svg = s.feature.part(&s.nominal).ok().and_then(|part| {
+            crate::core::setup::setup_view(&part, &[0.0, 90.0, 180.0, 270.0], &s.label)
+                .ok()
+                .map(|v| crate::core::svg::render_setup_svg(&v))
+        });
+        Self {
+            bands,
+            base_radius_mm,
+            setup_svg,
+        }
+    }
+
+    /// The half-width of the band when the feature has one symmetric band all round: the
+    /// limit of its max |profile error|.
+    pub fn symmetric_band_um(&self) -> Option<f64> {
+        match self.bands.as_slice() {
+            [b] if (b.lower_um + b.upper_um).abs() < 1e-9
+                && b.upper_um > 0.0
+                && (b.to_deg - b.from_deg - 360.0).abs() < 1e-9 =>
+            {
+                Some(b.upper_um)
+            }
+            _ => None,
+        }
+    }
+}
+
+/// The dashboard's state: the API's, and the live channel.
+#[derive(Clone)]
+pub(super) struct Dash {
+    app: AppState,
+    live: sse::Live,
+}
+
+pub(super) fn router(app: AppState) -> Router {
+    let f = "/machines/{machine}/features/{lobe}";
+    let live = sse::Live::new(app.store.clone());
+    Router::new()
+        .route("/", get(overview))
+        .route(f, get(feature_page))
+        .route(&format!("{f}/versions"), get(versions_page))
+        .route(&format!("{f}/data"), get(downloads::chart_data))
+        .route(&format!("{f}/export.dfq"), get(downloads::dfq))
+        .route("/dashboard/events", get(sse::events))
+        .route("/assets/app.js", get(asset_js))
+        .route("/assets/app.css", get(asset_css))
+        .route("/assets/icon.svg", get(asset_icon))
+        .with_state(Dash { app, live })
+}
+
+#[derive(Debug, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct PageQuery {
+    fragment: Option<u8>,
+    v: Option<i64>,
+}
+
+async fn overview(
+    State(d): State<Dash>,
+    ApiQuery(q): ApiQuery<PageQuery>,
+) -> Result<Html<String>, ApiError> {
+    let rows = data::overview(&d.app).await?;
+    Ok(Html(pages::overview(&rows, q.fragment.is_some())))
+}
+
+fn names(machine: &str, lobe: &str) -> Result<(), ApiError> {
+    machine_name(machine)?;
+    feature_name(lobe)
+}
+
+async fn feature_page(
+    State(d): State<Dash>,
+    ApiPath((machine, lobe)): ApiPath<(String, String)>,
+    ApiQuery(q): ApiQuery<PageQuery>,
+) -> Result<Html<String>, ApiError> {
+    names(&machine, &lobe)?;
+    let store = data::store(&d.app).await?;
+    let fd = data::feature(&store, &machine, &lobe).await?;
+    let sheet = d.app.dashboard.get(&(machine.clone(), lobe.clone()));
+    Ok(Html(feature::feature(
+        &machine,
+        &lobe,
+        &fd,
+        sheet,
+        q.fragment.is_some(),
+    )))
+}
+
+async fn versions_page(
+    State(d): State<Dash>,
+    ApiPath((machine, lobe)): ApiPath<(String, String)>,
+    ApiQuery(q): ApiQuery<PageQuery>,
+) -> Result<Html<String>, ApiError> {
+    names(&machine, &lobe)?;
+    let store = data::store(&d.app).await?;
+    let versions = store.table_versions(&machine, &lobe, 50).await?;
+    Ok(Html(pages::versions(
+        &machine,
+        &lobe,
+        &versions,
+        q.v,
+        q.fragment.is_some(),
+    )))
+}
+
+/// `POST /api/v1/machines/{machine}/events/{id}/ack`: the token first, then the event.
+pub(super) async fn ack(
+    _: Authorized,
+    State(app): State<AppState>,
+    ApiPath((machine, id)): ApiPath<(String, i64)>,
+) -> Result<Response, ApiError> {
+    machine_name(&machine)?;
+    let store = data::store(&app).await?;
+    let at = crate::clock::now_ms();
+    use crate::store::AckOutcome;
+    let (status, message) = match store
+        .acknowledge_event(&machine, crate::store::EventId(id), at, "dashboard")
+        .await?
+    {
+        AckOutcome::Acknowledged => (StatusCode::OK, format!("event {id} acknowledged")),
+        AckOutcome::AlreadyAcknowledged => (
+            StatusCode::OK,
+            format!("event {id} was acknowledged before"),
+        ),
+        AckOutcome::NotFound => {
+            return Err(ApiError(
+                StatusCode::NOT_FOUND,
+                "event_not_found",
+                format!("machine {machine} has no event {id}"),
+            ));
+        }
+    };
+    let body = super::CommandReply {
+        status: "ok",
+        version: None,
+        message,
+    };
+    Ok((status, axum::Json(body)).into_response())
+}
+
+async fn asset_js() -> Response {
+    asset("text/javascript; charset=utf-8", APP_JS)
+}
+
+async fn asset_css() -> Response {
+    asset("text/css; charset=utf-8", APP_CSS)
+}
+
+async fn asset_icon() -> Response {
+    asset("image/svg+xml", ICON_SVG)
+}
+
+fn asset(kind: &'static str, body: &'static str) -> Response {
+    (
+        [
+            (header::CONTENT_TYPE, kind),
+            (header::CACHE_CONTROL, "no-cache"),
+        ],
+        body,
+    )
+        .into_response()
+}

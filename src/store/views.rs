@@ -1,0 +1,172 @@
+//! What the dashboard reads and writes beyond the API's queries: acknowledgements of events
+//! and alarms (appended, once per event), and the learning state read through the readers'
+//! gate (the machine loop reads it through the writer; a dashboard must never take that).
+
+use super::codec::check_limit;
+use super::{EventId, LearningState, Store, StoreError, TableStatus, col, with_read, with_write};
+
+/// An event's acknowledgement.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EventAck {
+    pub event: EventId,
+    pub at_ms: i64,
+    /// Who acknowledged ("dashboard").
+    pub source: String,
+}
+
+/// A table version without its program: what lists and charts show.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TableVersionHead {
+    pub version: i64,
+    pub table_number: u32,
+    pub reason: String,
+    pub created_at_ms: i64,
+    pub status: TableStatus,
+}
+
+/// What acknowledging an event did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AckOutcome {
+    /// Recorded now.
+    Acknowledged,
+    /// It was acknowledged before; the first acknowledgement stays.
+    AlreadyAcknowledged,
+    /// No such event on that machine.
+    NotFound,
+}
+
+impl Store {
+    /// Acknowledges event `id` of `machine` at `at_ms`. Appended: a second acknowledgement
+    /// changes nothing and says so.
+    pub async fn acknowledge_event(
+        &self,
+        machine: &str,
+        id: EventId,
+        at_ms: i64,
+        source: &str,
+    ) -> Result<AckOutcome, StoreError> {
+        const OP: &str = "acknowledging an event";
+        with_write!(self, pool => {
+            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
+            let found: Option<i64> =
+                sqlx::query_scalar("SELECT id FROM events WHERE id = $1 AND machine = $2")
+                    .bind(id.0)
+                    .bind(machine)
+                    .fetch_optional(&mut *tx)
+                    .await
+                    .map_err(self.db_error(OP))?;
+            if found.is_none() {
+                return Ok(AckOutcome::NotFound);
+            }
+            let done = sqlx::query(
+                "INSERT INTO event_acks (event_id, at_ms, source) VALUES ($1, $2, $3) \
+                 ON CONFLICT (event_id) DO NOTHING",
+            )
+            .bind(id.0)
+            .bind(at_ms)
+            .bind(source)
+            .execute(&mut *tx)
+            .await
+            .map_err(self.db_error(OP))?;
+            tx.commit().await.map_err(self.db_error(OP))?;
+            Ok(if done.rows_affected() == 1 {
+                AckOutcome::Acknowledged
+            } else {
+                AckOutcome::AlreadyAcknowledged
+            })
+        })
+    }
+
+    /// The acknowledgements of `machine`'s events with id ≥ `from`, oldest first, at most
+    /// `limit`.
+    pub async fn event_acks(
+        &self,
+        machine: &str,
+        from: EventId,
+        limit: u32,
+    ) -> Result<Vec<EventAck>, StoreError> {
+        let limit = check_limit(limit)?;
+        with_read!(self, pool => {
+            let rows = sqlx::query(
+                "SELECT a.event_id, a.at_ms, a.source FROM event_acks a \
+                 JOIN events e ON e.id = a.event_id \
+                 WHERE e.machine = $1 AND a.event_id >= $2 ORDER BY a.event_id LIMIT $3",
+            )
+            .bind(machine)
+            .bind(from.0)
+            .bind(limit)
+            .fetch_all(pool)
+            .await
+            .map_err(self.db_error("listing event acknowledgements"))?;
+            rows.iter()
+                .map(|row| {
+                    Ok(EventAck {
+                        event: EventId(col!(row, "event_id", "reading an acknowledgement")),
+                        at_ms: col!(row, "at_ms", "reading an acknowledgement"),
+                        source: col!(row, "source", "reading an acknowledgement"),
+                    })
+                })
+                .collect()
+        })
+    }
+
+    /// The newest learning-state snapshot of (machine, lobe), read through the readers' gate.
+    pub async fn learning_state_for_view(
+        &self,
+        machine: &str,
+        lobe: &str,
+    ) -> Result<Option<LearningState>, StoreError> {
+        with_read!(self, pool => {
+            let row: Option<(String, i64)> = sqlx::query_as(
+                "SELECT state_json, saved_at_ms FROM learning_states \
+                 WHERE machine = $1 AND lobe = $2 ORDER BY id DESC LIMIT 1",
+            )
+            .bind(machine)
+            .bind(lobe)
+            .fetch_optional(pool)
+            .await
+            .map_err(self.db_error("loading learning state"))?;
+            Ok(row.map(|(state_json, saved_at_ms)| LearningState { state_json, saved_at_ms }))
+        })
+    }
+
+    /// The newest `limit` table versions of (machine, lobe) without their programs, highest
+    /// first: the overview and the trend read these, never the program texts.
+    pub async fn table_version_heads(
+        &self,
+        machine: &str,
+        lobe: &str,
+        limit: u32,
+    ) -> Result<Vec<TableVersionHead>, StoreError> {
+        let limit = check_limit(limit)?;
+        with_read!(self, pool => {
+            let rows = sqlx::query(
+                "SELECT t.version, t.table_number, t.reason, t.created_at_ms, s.status \
+                 FROM table_versions t JOIN table_version_status s ON s.id = \
+                 (SELECT MAX(s2.id) FROM table_version_status s2 WHERE s2.table_version_id = t.id) \
+                 WHERE t.machine = $1 AND t.lobe = $2 ORDER BY t.version DESC LIMIT $3",
+            )
+            .bind(machine)
+            .bind(lobe)
+            .bind(limit)
+            .fetch_all(pool)
+            .await
+            .map_err(self.db_error("listing table versions"))?;
+            rows.iter()
+                .map(|row| {
+                    let status: String = col!(row, "status", "reading a table version");
+                    let number: i64 = col!(row, "table_number", "reading a table version");
+                    Ok(TableVersionHead {
+                        version: col!(row, "version", "reading a table version"),
+                        table_number: u32::try_from(number).map_err(|_| {
+                            StoreError::invalid("table_number", format!("stored value {number} out of range"))
+                        })?,
+                        reason: col!(row, "reason", "reading a table version"),
+                        created_at_ms: col!(row, "created_at_ms", "reading a table version"),
+                        status: TableStatus::parse(&status)?,
+                    })
+                })
+                .collect()
+        })
+    }
+}

@@ -1,0 +1,447 @@
+//! The dashboard as an engineer uses it: a real headless Chromium, driven through WebDriver
+//! (chromedriver), against a real service with the simulated machine. The overview shows the
+//! machine with the last error the API reports; a new part appears without a reload within
+//! 2 s of being measured; a rollback without the token is refused in the page, with the token
+//! it delivers a new version that the page shows; no script errors, no failed requests; the
+//! pages fit a 1024-pixel tablet. Screenshots go to the target folder
+//! (`target/tmp/dashboard/`).
+//!
+//! Without Chromium the test prints why and passes, unless `CAMLOOP_REQUIRE_BROWSER=1`
+//! (CI sets it), which makes a missing browser a failure.
+
+mod service_support;
+
+use camloop::service::{self, RunOptions};
+use fantoccini::{Client, ClientBuilder, Locator};
+use service_support::{get, json, sim_config};
+use std::io::{BufRead, BufReader};
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const TOKEN: &str = "let-me-write";
+const CHROMIUM: &str = "/usr/bin/chromium";
+const DRIVER: &str = "/usr/bin/chromedriver";
+
+/// The browser pieces, or why they are missing.
+fn browser_present() -> Result<(), String> {
+    for p in [CHROMIUM, DRIVER] {
+        if !Path::new(p).exists() {
+            return Err(format!(
+                "{p} is not installed (apt-get install chromium chromium-driver)"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// chromedriver on a free port, started as a child; killed on drop.
+struct Driver {
+    child: Child,
+    url: String,
+}
+
+impl Drop for Driver {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn start_driver() -> Driver {
+    // A port the kernel just handed out and released: not fixed, and free at this moment.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let mut child = Command::new(DRIVER)
+        .arg(format!("--port={port}"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("chromedriver starts");
+    // It says when it listens; read until then.
+    let out = child.stdout.take().unwrap();
+    let mut lines = BufReader::new(out).lines();
+    let ready = lines
+        .by_ref()
+        .take(20)
+        .map_while(Result::ok)
+        .any(|l| l.contains("started successfully"));
+    assert!(ready, "chromedriver did not report that it started");
+    std::thread::spawn(move || for _ in lines {});
+    Driver {
+        child,
+        url: format!("http://127.0.0.1:{port}"),
+    }
+}
+
+async fn browser(driver: &Driver, profile: &Path) -> Client {
+    let args = [
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--window-size=1280,800",
+    ];
+    let mut args: Vec<String> = args.iter().map(|a| a.to_string()).collect();
+    args.push(format!("--user-data-dir={}", profile.display()));
+    let caps = serde_json::json!({
+        "browserName": "chrome",
+        "goog:chromeOptions": { "binary": CHROMIUM, "args": args },
+    });
+    let serde_json::Value::Object(caps) = caps else {
+        unreachable!()
+    };
+    let connector = hyper_util::client::legacy::connect::HttpConnector::new();
+    ClientBuilder::new(connector)
+        .capabilities(caps)
+        .connect(&driver.url)
+        .await
+        .expect("chromedriver starts a headless Chromium")
+}
+
+/// Polls `check` every 50 ms until it answers `Some`, at most `limit`.
+async fn until<T, F, Fut>(limit: Duration, what: &str, mut check: F) -> T
+where
+    F: FnMut() -> Fut,
+    Fut: std::future::Future<Output = Option<T>>,
+{
+    let start = Instant::now();
+    loop {
+        if let Some(v) = check().await {
+            return v;
+        }
+        assert!(start.elapsed() < limit, "{what}: not within {limit:?}");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// The newest part the API lists for SIM1 IN1: (id, max profile error µm, received ms).
+async fn newest_part(addr: SocketAddr) -> Option<(i64, f64, i64)> {
+    let (status, body) = get(addr, "/api/v1/machines/SIM1/measurements?lobe=IN1&limit=1").await;
+    if status != 200 {
+        return None;
+    }
+    let v = json(&body);
+    let item = v["items"].as_array()?.first()?.clone();
+    Some((
+        item["id"].as_i64()?,
+        item["max_profile_error_um"].as_f64()?,
+        item["received_at_ms"].as_i64()?,
+    ))
+}
+
+/// The rendered text of `css`, read in one script call: the live region may be replaced at
+/// any moment, and a found element could go stale before its text is read.
+async fn text_of(c: &Client, css: &str) -> String {
+    let v = c
+        .execute(
+            "const e = document.querySelector(arguments[0]); return e ? e.innerText : null;",
+            vec![serde_json::json!(css)],
+        )
+        .await
+        .unwrap();
+    v.as_str()
+        .unwrap_or_else(|| panic!("{css} not on the page"))
+        .to_string()
+}
+
+async fn attr_of(c: &Client, css: &str, name: &str) -> Option<String> {
+    let v = c
+        .execute(
+            "const e = document.querySelector(arguments[0]); return e ? e.getAttribute(arguments[1]) : null;",
+            vec![serde_json::json!(css), serde_json::json!(name)],
+        )
+        .await
+        .ok()?;
+    v.as_str().map(str::to_string)
+}
+
+/// Every script error and failed request the page recorded must be none.
+async fn assert_clean(c: &Client, page: &str) {
+    let seen = c
+        .execute("return window.camloopSeen;", vec![])
+        .await
+        .unwrap();
+    assert_eq!(
+        seen["errors"],
+        serde_json::json!([]),
+        "{page}: script errors"
+    );
+    assert_eq!(
+        seen["failed"],
+        serde_json::json!([]),
+        "{page}: failed requests"
+    );
+}
+
+/// Clicks `css`; the live region may be replaced between finding and clicking (a part
+/// arrived), so a stale element is found again, at most five times.
+async fn click(c: &Client, css: &str) {
+    for _ in 0..5 {
+        if let Ok(e) = c.find(Locator::Css(css)).await
+            && e.click().await.is_ok()
+        {
+            return;
+        }
+    }
+    panic!("{css} could not be clicked");
+}
+
+fn shots() -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("dashboard");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A screenshot of the whole page: the window is made as tall as the page for it.
+async fn screenshot(c: &Client, name: &str) {
+    let size = c
+        .execute(
+            "return [window.innerHeight, document.documentElement.scrollHeight];",
+            vec![],
+        )
+        .await
+        .unwrap();
+    let (inner, page) = (size[0].as_u64().unwrap(), size[1].as_u64().unwrap());
+    let (w, h) = c.get_window_size().await.unwrap();
+    let tall = (page + h.saturating_sub(inner)).clamp(h, 4000);
+    c.set_window_size(w as u32, tall as u32).await.unwrap();
+    let png = c.screenshot().await.unwrap();
+    c.set_window_size(w as u32, h as u32).await.unwrap();
+    assert!(png.starts_with(b"\x89PNG"), "{name}: a PNG");
+    std::fs::write(shots().join(name), png).unwrap();
+}
+
+/// The page is no wider than the window (no sideways scrolling).
+async fn assert_fits(c: &Client, page: &str) {
+    let v = c
+        .execute(
+            "return [document.documentElement.scrollWidth, window.innerWidth];",
+            vec![],
+        )
+        .await
+        .unwrap();
+    let (w, inner) = (v[0].as_f64().unwrap(), v[1].as_f64().unwrap());
+    assert!(w <= inner, "{page}: {w} px wide in a {inner} px window");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_dashboard_works_in_a_real_browser() {
+    if let Err(why) = browser_present() {
+        if std::env::var("CAMLOOP_REQUIRE_BROWSER").as_deref() == Ok("1") {
+            panic!("CAMLOOP_REQUIRE_BROWSER=1 but {why}");
+        }
+        eprintln!("skipping the browser test: {why}");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let url = format!("sqlite://{}/var/camloop.db?mode=rwc", dir.path().display());
+    let env = |k: &str| (k == camloop::config::ENV_API_TOKEN).then(|| TOKEN.to_string());
+    // A part every 1.5 s: the live check sees several arrive.
+    let config = sim_config(dir.path(), &url, 1500, 7, env);
+    let running = service::start(config, RunOptions::default()).await.unwrap();
+    let addr = running.http_addr;
+    let base = format!("http://{addr}");
+    until(Duration::from_secs(30), "first part stored", || {
+        newest_part(addr)
+    })
+    .await;
+
+    let driver = start_driver();
+    let profile = tempfile::tempdir().unwrap();
+    let c = browser(&driver, profile.path()).await;
+
+    overview(&c, &base, addr).await;
+    live_part(&c, addr).await;
+    feature(&c, &base).await;
+    versions(&c, &base, addr).await;
+
+    c.close().await.unwrap();
+    drop(driver);
+    running.stop().await;
+}
+
+/// The overview lists every configured machine, with the last error the API reports.
+async fn overview(c: &Client, base: &str, addr: SocketAddr) {
+    c.goto(&format!("{base}/")).await.unwrap();
+    let (status, body) = get(addr, "/api/v1/machines").await;
+    assert_eq!(status, 200);
+    for name in json(&body)["configured"].as_array().unwrap() {
+        let name = name.as_str().unwrap();
+        let row = text_of(c, &format!("tr[data-machine=\"{name}\"]")).await;
+        assert!(row.contains(name), "{row}");
+    }
+    // Compared for the part the page shows (a newer one may arrive in between).
+    let shown_id: i64 = attr_of(c, "tr[data-machine=\"SIM1\"]", "data-last-id")
+        .await
+        .unwrap()
+        .parse()
+        .unwrap();
+    let shown_error: f64 = attr_of(c, "tr[data-machine=\"SIM1\"] .err", "data-last-error-um")
+        .await
+        .unwrap()
+        .parse()
+        .unwrap();
+    let (_, body) = get(addr, "/api/v1/machines/SIM1/measurements?lobe=IN1&limit=50").await;
+    let items = json(&body)["items"].as_array().unwrap().clone();
+    let api = items
+        .iter()
+        .find(|i| i["id"].as_i64() == Some(shown_id))
+        .expect("the part shown is in the API's history");
+    let api_error = api["max_profile_error_um"].as_f64().unwrap();
+    assert_eq!(
+        shown_error, api_error,
+        "the same number, not a rounding of it"
+    );
+    let text = text_of(c, "tr[data-machine=\"SIM1\"] .err").await;
+    assert_eq!(text, format!("{api_error:.2}"));
+    assert!(
+        c.find(Locator::Css("tr[data-machine=\"SIM1\"] svg.spark polyline"))
+            .await
+            .is_ok()
+    );
+    screenshot(c, "overview.png").await;
+    assert_fits(c, "overview at 1280").await;
+    assert_clean(c, "overview").await;
+}
+
+/// A part stored after the page loaded shows in it, without a reload, within 2 s of its
+/// measurement being received (which is before it is stored).
+async fn live_part(c: &Client, addr: SocketAddr) {
+    c.execute("window.loadedOnce = true;", vec![])
+        .await
+        .unwrap();
+    until(
+        Duration::from_secs(10),
+        "live channel connected",
+        || async {
+            let s = text_of(c, "#live-status").await;
+            (!s.contains("connecting")).then_some(())
+        },
+    )
+    .await;
+    let shown = || async {
+        attr_of(c, "tr[data-machine=\"SIM1\"]", "data-last-id")
+            .await?
+            .parse::<i64>()
+            .ok()
+    };
+    let before = shown().await.unwrap();
+    let (id, _, received_ms) = until(Duration::from_secs(10), "a new part stored", || async {
+        newest_part(addr).await.filter(|p| p.0 > before)
+    })
+    .await;
+    until(
+        Duration::from_secs(3),
+        "the new part on the page",
+        || async { shown().await.filter(|s| *s >= id) },
+    )
+    .await;
+    let delay_ms = camloop::clock::now_ms() - received_ms;
+    eprintln!("part {id} shown on the page {delay_ms} ms after it was measured");
+    assert!(
+        delay_ms <= 2000,
+        "part {id} shown {delay_ms} ms after it was measured"
+    );
+    let same = c
+        .execute("return window.loadedOnce === true;", vec![])
+        .await
+        .unwrap();
+    assert_eq!(same, serde_json::json!(true), "the page was not reloaded");
+    assert_clean(c, "overview after live parts").await;
+}
+
+async fn feature(c: &Client, base: &str) {
+    c.goto(&format!("{base}/machines/SIM1/features/IN1"))
+        .await
+        .unwrap();
+    let charts = c.find_all(Locator::Css("svg.chart")).await.unwrap();
+    // Three trend charts, the polar plot and the unrolled error.
+    assert!(charts.len() >= 5, "{} charts", charts.len());
+    assert!(
+        c.find(Locator::Css(".setup svg")).await.is_ok(),
+        "setup drawing"
+    );
+    assert!(c.find(Locator::Css("table#events")).await.is_ok());
+    let polar = text_of(c, "#latest-h").await;
+    assert!(polar.starts_with("Latest part #"), "{polar}");
+    screenshot(c, "feature.png").await;
+    assert_fits(c, "feature at 1280").await;
+    c.set_window_size(1024, 768).await.unwrap();
+    assert_fits(c, "feature at 1024").await;
+    screenshot(c, "feature-1024.png").await;
+    c.set_window_size(1280, 800).await.unwrap();
+    assert_clean(c, "feature").await;
+}
+
+/// Rollback from the versions page: refused in the page without the token; with it, a new
+/// version is delivered and shown.
+async fn versions(c: &Client, base: &str, addr: SocketAddr) {
+    c.goto(&format!("{base}/machines/SIM1/features/IN1/versions"))
+        .await
+        .unwrap();
+    let button = "button.rollback[data-version=\"1\"]";
+    click(c, button).await;
+    let refused = until(Duration::from_secs(5), "the refusal", || async {
+        let t = text_of(c, "#rollback-result").await;
+        (!t.is_empty()).then_some(t)
+    })
+    .await;
+    assert!(refused.contains("refused"), "{refused}");
+    let (_, body) = get(addr, "/api/v1/machines/SIM1/lobes/IN1/tables?limit=50").await;
+    let reasons = body.matches("rollback to v1").count();
+    assert_eq!(reasons, 0, "nothing was rolled back: {body}");
+
+    c.find(Locator::Css("#token"))
+        .await
+        .unwrap()
+        .send_keys(TOKEN)
+        .await
+        .unwrap();
+    click(c, button).await;
+    let done = until(Duration::from_secs(20), "the rollback's answer", || async {
+        let class = attr_of(c, "#rollback-result", "class").await?;
+        (class == "ok").then_some(())
+    })
+    .await;
+    let () = done;
+    let message = text_of(c, "#rollback-result").await;
+    let version: i64 = message
+        .split("delivered as v")
+        .nth(1)
+        .and_then(|r| r.split(|ch: char| !ch.is_ascii_digit()).next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no new version in {message:?}"));
+    let row = format!("tr[data-version=\"{version}\"]");
+    let shown = until(
+        Duration::from_secs(5),
+        "the new version in the table",
+        || async { c.find(Locator::Css(&row)).await.ok()?.text().await.ok() },
+    )
+    .await;
+    assert!(shown.contains("rollback to v1"), "{shown}");
+    let (_, body) = get(addr, "/api/v1/machines/SIM1/lobes/IN1/tables?limit=50").await;
+    let listed = json(&body)["items"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|t| t["version"].as_i64() == Some(version) && t["reason"] == "rollback to v1");
+    assert!(listed, "the API lists v{version} as the rollback: {body}");
+    assert!(c.find(Locator::Css("svg.chart")).await.is_ok(), "diff plot");
+    screenshot(c, "versions.png").await;
+    assert_fits(c, "versions at 1280").await;
+    c.set_window_size(1024, 768).await.unwrap();
+    assert_fits(c, "versions at 1024").await;
+    c.goto(&format!("{base}/")).await.unwrap();
+    assert_fits(c, "overview at 1024").await;
+    c.set_window_size(1280, 800).await.unwrap();
+    assert_clean(c, "versions").await;
+}
