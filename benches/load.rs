@@ -39,7 +39,7 @@ fn main() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(PARTS);
     let dir = tempfile::tempdir().expect("temp dir");
-    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
     let mut text = format!(
         "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://{}/load.db?mode=rwc\"\n[http]\nlisten = \"127.0.0.1:0\"\n",
         dir.path().display()

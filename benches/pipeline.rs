@@ -107,8 +107,7 @@ fn loop_turn(c: &mut Criterion) {
     c.bench_function("loop_learn_and_regenerate_360", |b| {
         b.iter(|| {
             let mut s = state.clone();
-            compensate::learn_and_regenerate(&mut s, black_box(&part), &lobe)
-                .expect("table")
+            compensate::learn_and_regenerate(&mut s, black_box(&part), &lobe).expect("table")
         })
     });
     let shm = Path::new("/dev/shm");
@@ -134,8 +133,9 @@ fn loop_turn(c: &mut Criterion) {
             |b| {
                 b.iter(|| {
                     let mut s = state.clone();
-                    let (_, table) = compensate::learn_and_regenerate(&mut s, black_box(&part), &lobe)
-                        .expect("table");
+                    let (_, table) =
+                        compensate::learn_and_regenerate(&mut s, black_box(&part), &lobe)
+                            .expect("table");
                     let settings = ProgramSettings {
                         table_number: share.next_table_number(),
                         ..ProgramSettings::default()

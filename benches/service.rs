@@ -25,7 +25,7 @@ use std::time::{Duration, Instant};
 
 /// Twenty simulated measurements of the demo lobe ground with its nominal table.
 fn measurements(points: u32) -> Vec<RawMeasurement> {
-    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
     let recipe = Recipe::load(&recipe_path).expect("demo recipe");
     let setup = recipe.feature_setup(&recipe_path, "IN1").expect("lobe");
     let camloop::core::compensate::Feature::Cam(g) = setup.feature else {
@@ -126,7 +126,7 @@ fn per_part_case(c: &mut Criterion, points: u32, clients: usize) {
         .build()
         .expect("runtime");
     let dir = tempfile::tempdir_in(scratch_root()).expect("temp dir");
-    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
     let recipe = Recipe::load(&recipe_path).expect("demo recipe");
     let mut setup = recipe.feature_setup(&recipe_path, "IN1").expect("lobe");
     setup.request.points = points as usize;

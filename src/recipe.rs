@@ -269,7 +269,9 @@ impl Recipe {
                     },
                 )
             } else {
-                let pin = self.pin(name).expect("a feature name is a lobe's or a pin's");
+                let pin = self
+                    .pin(name)
+                    .expect("a feature name is a lobe's or a pin's");
                 let geometry = pin.geometry(self.wheel.radius_mm);
                 (
                     format!("{} pin {}", self.name, pin.name),
@@ -325,7 +327,13 @@ impl Recipe {
         if self.feature_names().len() > 1 {
             let suffix: String = name
                 .chars()
-                .map(|c| if c == '-' { '_' } else { c.to_ascii_uppercase() })
+                .map(|c| {
+                    if c == '-' {
+                        '_'
+                    } else {
+                        c.to_ascii_uppercase()
+                    }
+                })
                 .collect();
             format!("{}_{suffix}", self.program.name)
         } else {

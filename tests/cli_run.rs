@@ -9,7 +9,7 @@ use std::path::Path;
 #[test]
 fn the_service_runs_its_parts_and_the_history_shows_them() {
     let dir = tempfile::tempdir().unwrap();
-    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
     let config = format!(
         "[database]\nurl = \"sqlite://var/camloop.db?mode=rwc\"\n[service]\nvar_dir = \"var\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
          [[machines]]\nname = \"M7\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/M7\"\n[machines.gauge]\nkind = \"sim\"\npart_interval_ms = 10\n",
@@ -125,7 +125,7 @@ fn every_problem_is_reported_before_the_database_or_a_share_is_touched() {
     let dir = tempfile::tempdir().unwrap();
     let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let port = taken.local_addr().unwrap().port();
-    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
     let machine = |name: &str, recipe: &str, share: &str| {
         format!(
             "[[machines]]\nname = \"{name}\"\nrecipe = \"{recipe}\"\nlobe = \"IN1\"\nshare = \"{share}\"\n[machines.gauge]\nkind = \"sim\"\n"

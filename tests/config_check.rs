@@ -14,7 +14,7 @@ fn line_of(text: &str, marker: &str) -> usize {
 
 fn demo_recipe() -> String {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("config/parts/demo-camshaft.toml")
+        .join("config/parts/demo-lobe.toml")
         .display()
         .to_string()
 }
@@ -213,7 +213,11 @@ fn a_good_config_passes_with_its_listener_bound_and_its_lobes_loaded() {
     assert_ne!(checked.listener.local_addr().unwrap().port(), 0);
     assert_eq!(checked.machines.len(), 1);
     assert_eq!(checked.machines[0].name.as_str(), "SIM1");
-    let names: Vec<&str> = checked.machines[0].setups.iter().map(|s| s.name.as_str()).collect();
+    let names: Vec<&str> = checked.machines[0]
+        .setups
+        .iter()
+        .map(|s| s.name.as_str())
+        .collect();
     assert_eq!(names, ["IN1"], "lobe = \"IN1\" grinds that lobe only");
     assert_eq!(checked.config.http.max_connections, 8);
     assert_eq!(checked.config.http.header_timeout_ms, 500);

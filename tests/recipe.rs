@@ -37,7 +37,13 @@ fn demo_recipe_has_the_documented_values() {
     let lobe = recipe.lobe("IN1").unwrap();
     assert_eq!(lobe.base_radius_mm, 20.0);
     assert_eq!(lobe.tolerance.len(), 1);
-    assert_eq!(recipe.table.table_numbers, (1, 2));
+    // Eight lobes, two table numbers each.
+    assert_eq!(recipe.lobes.len(), 8);
+    assert_eq!(recipe.table.table_numbers, (1, 16));
+    let ex4 = recipe.feature_setup(&path, "EX4").unwrap();
+    assert_eq!(ex4.table_pair, (15, 16));
+    assert_eq!(ex4.program.name, "DEMO_CAM_EX4");
+    assert_eq!((ex4.index, ex4.phase_deg, ex4.z_mm), (8, 70.0, 320.0));
     assert_eq!(recipe.learning.gain, 0.8);
 }
 

@@ -14,7 +14,7 @@ use std::sync::Arc;
 
 /// A measurement of the demo lobe ground with its nominal table, labelled as given.
 fn measurement(machine: &str, part: &str, lobe: &str, seed: u64) -> RawMeasurement {
-    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
     let recipe = Recipe::load(&recipe_path).unwrap();
     let setup = recipe.feature_setup(&recipe_path, "IN1").unwrap();
     let camloop::core::compensate::Feature::Cam(g) = setup.feature else {
@@ -34,7 +34,7 @@ fn measurement(machine: &str, part: &str, lobe: &str, seed: u64) -> RawMeasureme
 }
 
 async fn machine(dir: &Path, metrics: Arc<Metrics>) -> MachineLoop {
-    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
     let recipe = Recipe::load(&recipe_path).unwrap();
     let setup = recipe.feature_setup(&recipe_path, "IN1").unwrap();
     let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.display());
@@ -120,7 +120,7 @@ async fn the_same_reading_twice_is_learned_once() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn drop_files_are_moved_by_the_verdict_and_learned_once() {
     let dir = tempfile::tempdir().unwrap();
-    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
     let text = format!(
         "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://{}/db.sqlite?mode=rwc\"\n\
          [http]\nlisten = \"127.0.0.1:0\"\n[[machines]]\nname = \"DROP1\"\nrecipe = \"{}\"\n\

@@ -30,7 +30,7 @@ fn one_machine(dir: &Path, name: &str, database_extra: &str, gauge: &str) -> Con
          [[machines]]\nname = \"{name}\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/{name}\"\n\
          [machines.gauge]\n{gauge}\n",
         dir.display(),
-        root.join("config/parts/demo-camshaft.toml").display(),
+        root.join("config/parts/demo-lobe.toml").display(),
     );
     Config::parse(&text, &dir.join("camloop.toml"), |_| None).unwrap()
 }

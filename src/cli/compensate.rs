@@ -206,8 +206,14 @@ fn learn_from(
             saved.learning.iteration
         );
     }
-    let done = turn(&setup.turn_setup(), &saved.learning, &raw, None, saved.previous)
-        .with_context(|| format!("measurement {}", path.display()))?;
+    let done = turn(
+        &setup.turn_setup(),
+        &saved.learning,
+        &raw,
+        None,
+        saved.previous,
+    )
+    .with_context(|| format!("measurement {}", path.display()))?;
     saved.previous = Some(done.measured.as_previous());
     let (outcome, next, table) = match done.decision {
         Decision::Table {

@@ -43,7 +43,7 @@ pub fn machine_features(recipe: &Recipe, m: &MachineSection) -> Result<Vec<Strin
     };
     if let Some(missing) = chosen.iter().find(|c| !all.contains(&c.as_str())) {
         return Err(format!(
-            "the recipe has no lobe or pin {missing} (has: {})",
+            "no lobe or pin {missing} (has: {})",
             all.join(", ")
         ));
     }
@@ -122,11 +122,13 @@ pub fn check(config: Config) -> Result<Checked, ConfigError> {
             Ok(recipe) => match machine_setups(&recipe, &recipe_path, m) {
                 Ok(setups) => Some(setups),
                 Err(e) => {
-                    let key = if m.features.is_some() { "features" } else { "lobe" };
-                    problems.push(ConfigProblem::at(
-                        line(key).or(line("recipe")),
-                        format!("{label}: {e:#}"),
-                    ));
+                    let key = if m.features.is_some() {
+                        "features"
+                    } else {
+                        "lobe"
+                    };
+                    let at = if line(key).is_some() { key } else { "recipe" };
+                    problems.push(ConfigProblem::at(line(at), format!("{label}.{at}: {e:#}")));
                     None
                 }
             },

@@ -378,7 +378,7 @@ mod tests {
     const MINIMAL: &str = r#"
 [[machines]]
 name = "SIM1"
-recipe = "parts/demo-camshaft.toml"
+recipe = "parts/demo-lobe.toml"
 lobe = "IN1"
 share = "../var/share/SIM1"
 [machines.gauge]

@@ -365,8 +365,13 @@ mod tests {
             let correction: Vec<f64> = (0..360)
                 .map(|j| if j == at { -3.7614780203374214 } else { -3.0 })
                 .collect();
-            let cmd = commanded_lift(&nominal, &correction).unwrap_or_else(|e| panic!("{at}°: {e}"));
-            let j = cmd.angles_deg().iter().position(|a| *a == f64::from(at)).unwrap();
+            let cmd =
+                commanded_lift(&nominal, &correction).unwrap_or_else(|e| panic!("{at}°: {e}"));
+            let j = cmd
+                .angles_deg()
+                .iter()
+                .position(|a| *a == f64::from(at))
+                .unwrap();
             let expected = nominal.lifts_mm()[j] - 3.7614780203374214e-3;
             assert!((cmd.lifts_mm()[j] - expected).abs() < 1e-12);
         }

@@ -219,7 +219,8 @@ impl PreviousPart {
     /// This part's error confirms the previous one's: not a jump (no growth beyond the
     /// divergence margin or 25 %).
     fn confirms_lift(&self, max_error_um: f64, params: &LearningParams) -> bool {
-        max_error_um <= self.max_error_um + params.divergence_margin_um.max(0.25 * self.max_error_um)
+        max_error_um
+            <= self.max_error_um + params.divergence_margin_um.max(0.25 * self.max_error_um)
     }
 
     /// The same for timing: within 25 % or five deadbands of the previous timing error.
@@ -470,9 +471,15 @@ fn learn_correction(
         next.size_drift_um_per_part = state.size_drift_um_per_part
             + params.wear_gain * (observed - state.size_drift_um_per_part);
     }
+    // Right after a dressing the size step is the dresser's offset, measured to a few nm
+    // over every angle: taken whole, not by the gain (which guards the shape against model
+    // mismatch).
+    let size_gain = if state.dressed { 1.0 } else { params.gain };
     let learned: Vec<f64> = (0..n)
         .map(|j| {
-            state.correction_um[j] - params.gain * (size + soft_dead(shape[j], shape_band))
+            state.correction_um[j]
+                - size_gain * size
+                - params.gain * soft_dead(shape[j], shape_band)
                 - next.size_drift_um_per_part
         })
         .collect();
@@ -571,8 +578,8 @@ fn learn_timing(
 fn deadbands(part: &PartError<'_>, params: &LearningParams) -> (f64, f64) {
     let n = part.error_um.len();
     let revs = f64::from(part.revolutions.max(1));
-    let sigma = (part.repeatability_um.iter().map(|s| s * s).sum::<f64>() / n as f64).sqrt()
-        / revs.sqrt();
+    let sigma =
+        (part.repeatability_um.iter().map(|s| s * s).sum::<f64>() / n as f64).sqrt() / revs.sqrt();
     let top = ((params.cutoff_order + params.rolloff_orders) as usize).min(n / 2);
     let k_eff: f64 = (1..=top)
         .map(|k| {
@@ -844,14 +851,20 @@ mod tests {
                 }
                 other => panic!("part {k}: {other:?}"),
             }
-            let max_u = state.correction_um.iter().fold(0.0f64, |a, u| a.max(u.abs()));
+            let max_u = state
+                .correction_um
+                .iter()
+                .fold(0.0f64, |a, u| a.max(u.abs()));
             assert!(max_u <= 20.0 + 1e-9, "part {k}: correction {max_u}");
         }
         // 30, 30 (refused), then held to 20 µm of correction: 30 − 20 = 10 µm remain.
         assert!(errors[2] < errors[1]);
         // Q rounds the clipped crest: the last 1 % of the limit is not reached there.
         assert!((10.0 - 1e-9..10.2).contains(&errors[8]), "{errors:?}");
-        assert!(at_limit.is_some(), "the limit must end the learning: {errors:?}");
+        assert!(
+            at_limit.is_some(),
+            "the limit must end the learning: {errors:?}"
+        );
     }
 
     #[test]
@@ -872,7 +885,10 @@ mod tests {
         }
         // The residual timing error ends within the deadband.
         let residual = lag_deg + state.timing_correction_deg;
-        assert!(residual.abs() <= params.timing_deadband_deg + 1e-9, "{residual}");
+        assert!(
+            residual.abs() <= params.timing_deadband_deg + 1e-9,
+            "{residual}"
+        );
         // A jump of 2° on a first part is refused, never clamped.
         let mut fresh = LearningState::new(36);
         let jump = PartError {

@@ -9,8 +9,8 @@ use super::analysis::{AnalysisError, LobeOptions, LobeReport, ToleranceBand, ana
 use super::compensate::{self, CycleError, GuardedTable, LobeLoop};
 use super::learn::{LearnError, LearningState, PartError, PreviousPart, StepOutcome};
 use super::lift::LiftCurve;
-use super::spline::PeriodicSpline;
 use super::measure::{AssemblyLimits, AveragedMeasurement, MeasurementError, RawMeasurement};
+use super::spline::PeriodicSpline;
 
 /// What stays fixed between turns of one feature's loop.
 #[derive(Debug, Clone, Copy)]
@@ -181,8 +181,7 @@ fn learn(
     let repeatability_um = to_feature_frame(&report.repeatability_um, setup.phase_deg);
     // Parts between the previous one measured and this one (a gap when a measurement was
     // lost or refused): the drift ran on for them.
-    let parts_since_previous = match (previous.and_then(|p| p.part_number), measured.part_number)
-    {
+    let parts_since_previous = match (previous.and_then(|p| p.part_number), measured.part_number) {
         (Some(before), Some(now)) if now > before => (now - before).min(u64::from(u32::MAX)) as u32,
         _ => 1,
     };

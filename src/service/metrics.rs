@@ -132,7 +132,11 @@ pub struct FeatureStatus {
 }
 
 /// Gauges per feature: name, help, value (none: not rendered yet).
-type FeatureFamily = (&'static str, &'static str, fn(&FeatureStatus) -> Option<f64>);
+type FeatureFamily = (
+    &'static str,
+    &'static str,
+    fn(&FeatureStatus) -> Option<f64>,
+);
 
 const FEATURE_FAMILIES: [FeatureFamily; 5] = [
     (
@@ -241,7 +245,20 @@ mod tests {
             text.contains("camloop_last_max_error_um{machine=\"M1\"} 0.5\n"),
             "{text}"
         );
-        assert_eq!(text.matches("# TYPE").count(), 12);
+        assert_eq!(text.matches("# TYPE").count(), 12 + 5);
+        m.update_feature("M1", "IN1", |f| {
+            f.last_max_error_um = Some(0.7);
+            f.blocked_by_guard = Some("correction at its limit".into());
+        });
+        let text = m.render();
+        assert!(
+            text.contains("camloop_feature_max_error_um{machine=\"M1\",lobe=\"IN1\"} 0.7\n"),
+            "{text}"
+        );
+        assert!(
+            text.contains("camloop_blocked_by_guard{machine=\"M1\",lobe=\"IN1\"} 1\n"),
+            "{text}"
+        );
         assert!(
             text.contains("camloop_learning_held{machine=\"M1\"} 0\n"),
             "{text}"

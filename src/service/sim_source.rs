@@ -77,7 +77,12 @@ impl SimSource {
         interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         let (mut runs, mut gauged) = (0u64, 0u64);
         // The shaft in the machine: a run that starts at the first feature loads a new one.
-        let mut shaft = self.stations.iter().map(|s| s.parts_done).max().unwrap_or(0);
+        let mut shaft = self
+            .stations
+            .iter()
+            .map(|s| s.parts_done)
+            .max()
+            .unwrap_or(0);
         let mut control = Control::new();
         if self.resume_pending() {
             // The operator resumes the shaft a stop interrupted (see the shaft program).
@@ -102,6 +107,11 @@ impl SimSource {
             }
             let last = grinds.len().saturating_sub(1);
             for (i, (coupled, ground_with)) in grinds.into_iter().enumerate() {
+                if *shutdown.borrow() {
+                    // A stop between features interrupts the shaft: the resume point on the
+                    // share names the first feature not gauged.
+                    return;
+                }
                 if let Some(k) = self.station_at(&coupled) {
                     gauged += 1;
                     let event = self.grind_and_gauge(&mut sim, &dbc, &coupled, k, shaft, gauged);
@@ -144,8 +154,12 @@ impl SimSource {
             .is_some_and(|k| k > 1)
     }
 
-    /// The station whose Z the control stood at while grinding.
+    /// The station whose Z the control stood at while grinding (a one-feature program moves
+    /// no Z: the one feature is where the wheel is).
     fn station_at(&self, coupled: &Coupled) -> Option<usize> {
+        if self.stations.len() == 1 {
+            return Some(0);
+        }
         let k = self
             .stations
             .iter()

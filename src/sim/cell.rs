@@ -202,7 +202,10 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
         let dressed = match sim.after_part() {
             Some(event) => {
                 feature = feature.with_wheel_radius(event.believed_wheel_radius_mm);
-                let (own, x_own) = (learn::size_correction_um(&state), learn::size_correction_um(&x_state));
+                let (own, x_own) = (
+                    learn::size_correction_um(&state),
+                    learn::size_correction_um(&x_state),
+                );
                 learn::after_dressing(&mut state, own);
                 learn::after_dressing(&mut x_state, x_own);
                 let mean = naive_dx_mm.iter().sum::<f64>() / naive_dx_mm.len() as f64;

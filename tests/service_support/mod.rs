@@ -69,7 +69,7 @@ pub fn sim_config(
     seed: u64,
     env: impl Fn(&str) -> Option<String>,
 ) -> Config {
-    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
     let text = format!(
         r#"
 [service]

@@ -14,17 +14,14 @@
 //! digit extension (`C1`, `XA`) require the `=`, and `=` is valid for both.
 
 mod main_program;
-mod shaft_program;
 mod names;
 mod parse;
 mod provenance;
 mod settings;
+mod shaft_program;
 mod table;
 
 pub use main_program::{MainProgramSettings, render_main_program};
-pub use shaft_program::{
-    RESUME_PROGRAM, Station, parse_resume_program, render_resume_program, render_shaft_program,
-};
 pub use names::{
     AxisNameError, MAX_AXIS_NAME_CHARS, MAX_PROGRAM_NAME_CHARS, ProgramNameError,
     RESERVED_DEVICE_NAMES, RESERVED_PREFIXES, validate_axis_name, validate_program_name,
@@ -35,6 +32,9 @@ pub use provenance::{RetargetError, retarget_table_program};
 pub use settings::{
     C_DECIMALS, CDirection, ProgramSettings, Provenance, SettingError, SettingsErrors, TableMemory,
     X_DECIMALS,
+};
+pub use shaft_program::{
+    RESUME_PROGRAM, Station, parse_resume_program, render_resume_program, render_shaft_program,
 };
 pub use table::{TableError, render_g1_table, render_poly_table, reverse_cubic};
 

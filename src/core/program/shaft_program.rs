@@ -125,7 +125,10 @@ pub fn render_shaft_program(
     line(&mut out, format_args!("LEADOF({x},{c})"));
     out.push_str("ENDIF\n");
     let r = main.resume_r_param;
-    line(&mut out, format_args!("{FROM_VAR}=1 ; a new shaft: every feature"));
+    line(
+        &mut out,
+        format_args!("{FROM_VAR}=1 ; a new shaft: every feature"),
+    );
     line(
         &mut out,
         format_args!("IF R{r}<0 ; resume: the first feature without a gauge record"),
@@ -138,7 +141,10 @@ pub fn render_shaft_program(
     );
     line(&mut out, format_args!("{FROM_VAR}=R{r}"));
     out.push_str("ENDIF\n");
-    line(&mut out, format_args!("R{r}=0 ; a resume applies to one run"));
+    line(
+        &mut out,
+        format_args!("R{r}=0 ; a resume applies to one run"),
+    );
     let clear = fmt_fixed(clear_x_mm, xd);
     for (k, (s, r)) in stations.iter().zip(&resolved).enumerate() {
         let t = &r.name;
@@ -192,7 +198,9 @@ pub fn render_resume_program(first_feature: usize) -> String {
         &mut out,
         format_args!("PROC {RESUME_PROGRAM}(VAR INT {FROM_VAR}) SAVE"),
     );
-    out.push_str("; written by camloop after each gauged feature: the first feature of the shaft\n");
+    out.push_str(
+        "; written by camloop after each gauged feature: the first feature of the shaft\n",
+    );
     out.push_str("; in the machine not yet ground and gauged (1: a new shaft)\n");
     line(&mut out, format_args!("{FROM_VAR}={first_feature}"));
     out.push_str("RET\n");

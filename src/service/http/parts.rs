@@ -35,7 +35,10 @@ pub(super) async fn part(
     ApiPath((machine, part)): ApiPath<(String, String)>,
 ) -> Result<Json<PartReply>, ApiError> {
     let name = machine_name(&machine)?;
-    let rows = store(&state).await?.part_measurements(&machine, &part).await?;
+    let rows = store(&state)
+        .await?
+        .part_measurements(&machine, &part)
+        .await?;
     // Configured features first, in grinding order; then any the history alone knows.
     let mut lobes: Vec<String> = state.machines.get(&name).cloned().unwrap_or_default();
     for r in &rows {
@@ -60,7 +63,9 @@ pub(super) async fn part(
         .map(|f| f.lobe.clone())
         .collect();
     let pass = missing.is_empty()
-        && rows.iter().all(|r| r.verdict == crate::store::Verdict::Pass)
+        && rows
+            .iter()
+            .all(|r| r.verdict == crate::store::Verdict::Pass)
         && !features.is_empty();
     Ok(Json(PartReply {
         machine,

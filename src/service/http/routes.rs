@@ -171,8 +171,7 @@ pub(super) struct HistoryPage {
     next_cursor: Option<String>,
 }
 
-#[derive(Debug, Serialize)]
-#[derive(Clone)]
+#[derive(Debug, Serialize, Clone)]
 pub(super) struct MeasurementItem {
     id: i64,
     machine: String,

@@ -2,9 +2,9 @@
 //! table program, retries, and which version is in force.
 
 use super::super::journal::{EventKind, Pending};
+use super::FeatureLoop;
 use super::memory::{TableLearning, WaitingTable};
 use super::records::event;
-use super::FeatureLoop;
 use crate::clock::{now_ms, now_ms_u64};
 use crate::core::compensate::GuardedTable;
 use crate::core::learn::LearningState;

@@ -2,8 +2,8 @@
 //! same correction (only the learned size is dropped).
 
 use super::super::journal::{EventKind, Pending};
-use super::records::event;
 use super::FeatureLoop;
+use super::records::event;
 use crate::clock::now_ms;
 use crate::core::compensate;
 use crate::core::learn;

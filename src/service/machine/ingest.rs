@@ -2,10 +2,10 @@
 //! and its records. The measurement is recorded before anything is learned from it.
 
 use super::super::journal::{EventKind, Pending};
+use super::memory::GuardKind;
 use super::records::{event, keep_reject, outcome_text, raw_revolutions};
 use super::{FeatureLoop, Ingested};
 use crate::clock::now_ms;
-use super::memory::GuardKind;
 use crate::core::learn::StepOutcome;
 use crate::core::measure::{MeasurementHeader, RawMeasurement};
 use crate::core::turn::{self, Decision, HoldReason, Measured, TurnError, measurement_sha256};
@@ -263,12 +263,21 @@ impl FeatureLoop {
             Decision::Refused(e) => {
                 self.metrics
                     .update(&self.name, |m| m.tables_refused_total += 1);
-                let in_a_row =
-                    self.guard_acted(GuardKind::of_refusal(&e), &e.to_string(), part, at_ms, &mut records);
+                let in_a_row = self.guard_acted(
+                    GuardKind::of_refusal(&e),
+                    &e.to_string(),
+                    part,
+                    at_ms,
+                    &mut records,
+                );
                 if in_a_row == 1 {
                     warn!(machine = %self.name, lobe = %self.setup.name, reason = %e, "table refused, previous table stays in force");
                 }
-                let level = if in_a_row == 1 { EventLevel::Warn } else { EventLevel::Info };
+                let level = if in_a_row == 1 {
+                    EventLevel::Warn
+                } else {
+                    EventLevel::Info
+                };
                 records.push(event(
                     &self.name,
                     at_ms,
@@ -327,7 +336,13 @@ impl FeatureLoop {
 
     /// A measurement that is not this machine's, or fails the checks: kept among the
     /// rejects with the reason, recorded as an event, never learned from.
-    pub(super) async fn reject(&mut self, raw: &RawMeasurement, sha: &str, reason: &str, at_ms: i64) {
+    pub(super) async fn reject(
+        &mut self,
+        raw: &RawMeasurement,
+        sha: &str,
+        reason: &str,
+        at_ms: i64,
+    ) {
         warn!(machine = %self.name, lobe = %self.setup.name, origin = %raw.origin, reason = %reason, "measurement rejected");
         let dir = self.share.config().state_dir.with_file_name("rejected");
         if let Err(e) = keep_reject(&dir, raw, sha, reason) {

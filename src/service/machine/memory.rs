@@ -4,7 +4,9 @@
 //! the store, and a restart resumes from the newest copy.
 
 use crate::core::compensate::CycleError;
-use crate::core::learn::{BoundedQuantity, LearnError, LearningParams, LearningState, PreviousPart};
+use crate::core::learn::{
+    BoundedQuantity, LearnError, LearningParams, LearningState, PreviousPart,
+};
 use serde::{Deserialize, Serialize};
 
 /// Layout of [`LoopMemory`] written by this build. Records without the field are layout 1
@@ -73,9 +75,9 @@ pub enum GuardKind {
 impl GuardKind {
     pub fn of_refusal(e: &CycleError) -> Self {
         match e {
-            CycleError::Learn(LearnError::CorrectionTooLarge { .. } | LearnError::AtLimit { .. }) => {
-                GuardKind::CorrectionLimit
-            }
+            CycleError::Learn(
+                LearnError::CorrectionTooLarge { .. } | LearnError::AtLimit { .. },
+            ) => GuardKind::CorrectionLimit,
             CycleError::Learn(LearnError::TimingTooLarge { .. }) => GuardKind::TimingLimit,
             CycleError::Learn(LearnError::GridMismatch { .. } | LearnError::NonFinite { .. }) => {
                 GuardKind::Measurement

@@ -14,18 +14,20 @@
 //! - `rollback`, `dressing`: the operator's and the wheel's events;
 //! - `records`: the journal records and the reject folder;
 //! - `memory`: what a feature's loop remembers between parts;
-//! - `shaft`: the main program of the whole part and the resume point.
+//! - `shaft`: the main program of the whole part and the resume point;
+//! - `coast`: a part ground but not gauged moves the table on by the learned drift.
 //!
 //! The version in force is the newest one the share confirmed. A step always starts from its
 //! learning state: a table computed while the share refused it never becomes the base of the
 //! next step, so an outage cannot wind the correction up.
 
+mod coast;
 mod delivery;
 mod dressing;
 mod feature;
+mod guards;
 mod ingest;
 pub mod memory;
-mod guards;
 mod records;
 mod rollback;
 mod shaft;
@@ -231,6 +233,7 @@ impl MachineLoop {
                     .and_then(|f| self.features.iter().position(|x| x.feature_name() == f))
                 {
                     self.write_resume_point(k + 2);
+                    self.features[k].coast(&raw.header.part).await;
                 }
                 // Kept and recorded by the first feature's loop: it belongs to none.
                 let sha = measurement_sha256(&raw);
@@ -240,13 +243,13 @@ impl MachineLoop {
             }
         };
         let version = ground_with.map(|g| g.version);
-        let ingested = self.features[index]
-            .on_measurement(raw, version)
-            .await;
+        let ingested = self.features[index].on_measurement(raw, version).await;
         // Ground and gauged, whatever the loop made of it.
         self.write_resume_point(index + 2);
         let ingested = ingested?;
-        if ingested == Ingested::Recorded && index + 1 == self.features.len() && self.features.len() > 1
+        if ingested == Ingested::Recorded
+            && index + 1 == self.features.len()
+            && self.features.len() > 1
         {
             self.shaft_line();
         }
@@ -256,7 +259,11 @@ impl MachineLoop {
     /// One line per shaft, said when its last feature is gauged: the worst feature, and what
     /// became of the tables.
     fn shaft_line(&self) {
-        let Some(part) = self.features.last().and_then(|f| f.last_line.as_ref()).map(|l| l.part.clone())
+        let Some(part) = self
+            .features
+            .last()
+            .and_then(|f| f.last_line.as_ref())
+            .map(|l| l.part.clone())
         else {
             return;
         };
@@ -353,8 +360,7 @@ impl MachineLoop {
     ) -> Result<Vec<RolledBack>, RollbackError> {
         for (lobe, version) in versions {
             let names = self.feature_names().join(", ");
-            let Some(feature) = self.features.iter_mut().find(|f| f.feature_name() == lobe)
-            else {
+            let Some(feature) = self.features.iter_mut().find(|f| f.feature_name() == lobe) else {
                 return Err(RollbackError::UnknownFeature {
                     machine: self.name.clone(),
                     grinds: names,
@@ -403,8 +409,12 @@ impl MachineLoop {
         let path = shaft::resume_path(self.share_dir());
         if !path.exists() {
             match shaft::write_resume(self.share_dir(), 1) {
-                Ok(()) => info!(machine = %self.name, "resume point written: a new shaft starts at the first feature"),
-                Err(e) => warn!(machine = %self.name, error = %e, "resume point not written to the share"),
+                Ok(()) => {
+                    info!(machine = %self.name, "resume point written: a new shaft starts at the first feature")
+                }
+                Err(e) => {
+                    warn!(machine = %self.name, error = %e, "resume point not written to the share")
+                }
             }
         }
     }

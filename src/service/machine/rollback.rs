@@ -2,9 +2,9 @@
 //! in use, its correction restored. History is appended: the rollback is a new version.
 
 use super::super::journal::{EventKind, Pending};
+use super::FeatureLoop;
 use super::memory::TableLearning;
 use super::records::event;
-use super::FeatureLoop;
 use crate::clock::{now_ms, now_ms_u64};
 use crate::core::program::retarget_table_program;
 use crate::share::{ProgramFile, PushRequest};

@@ -111,14 +111,14 @@ pub(super) fn adopt_single_feature_layout(state_dir: &Path, setups: &[FeatureSet
     if !journal.exists() && !state_dir.join("share").is_dir() {
         return;
     }
-    let named = std::fs::read_to_string(&journal)
-        .ok()
-        .and_then(|text| {
-            text.lines().rev().find_map(|l| match serde_json::from_str::<Pending>(l) {
+    let named = std::fs::read_to_string(&journal).ok().and_then(|text| {
+        text.lines()
+            .rev()
+            .find_map(|l| match serde_json::from_str::<Pending>(l) {
                 Ok(Pending::Learning { lobe, .. }) => Some(lobe),
                 _ => None,
             })
-        });
+    });
     let feature = match (named, setups) {
         (Some(n), _) if setups.iter().any(|s| s.name == n) => n,
         (_, [only]) => only.name.clone(),
@@ -144,7 +144,11 @@ pub(super) fn adopt_single_feature_layout(state_dir: &Path, setups: &[FeatureSet
         Ok(())
     })();
     match moved {
-        Ok(()) => info!(folder = %state_dir.display(), feature, "state folder from a one-feature machine moved into the feature's folder"),
-        Err(e) => warn!(folder = %state_dir.display(), error = %e, "state folder from a one-feature machine could not be moved"),
+        Ok(()) => {
+            info!(folder = %state_dir.display(), feature, "state folder from a one-feature machine moved into the feature's folder")
+        }
+        Err(e) => {
+            warn!(folder = %state_dir.display(), error = %e, "state folder from a one-feature machine could not be moved")
+        }
     }
 }

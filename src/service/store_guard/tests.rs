@@ -229,7 +229,7 @@ async fn an_accepted_store_is_checked_only_for_what_comes_after() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_service_refuses_to_start_on_a_truncated_database() {
     let dir = tempfile::tempdir().unwrap();
-    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
     let text = format!(
         "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://var/camloop.db?mode=rwc\"\n\
          [http]\nlisten = \"127.0.0.1:0\"\n[[machines]]\nname = \"SIM1\"\nrecipe = \"{}\"\n\

@@ -6,8 +6,8 @@ use super::statements::{
     is_name, proc_line, real_var, table_number, undefined_variable, unsupported,
 };
 use super::{
-    r_param, AXIAL_AXIS, COUP_ACT_MASTER_VALUE, ControlError, ControlFault, Coupled, Coupling, MAX_CALL_DEPTH,
-    program_name, table_shape,
+    AXIAL_AXIS, COUP_ACT_MASTER_VALUE, ControlError, ControlFault, Coupled, Coupling,
+    MAX_CALL_DEPTH, program_name, r_param, table_shape,
 };
 use crate::core::program::{ParsedTable, TableBlocks, parse_ctabdef};
 
