@@ -101,6 +101,7 @@ fn loop_turn(c: &mut Criterion) {
         repeatability_um: &repeat,
         revolutions: 4,
         timing_error_deg: 0.0,
+        timing_sigma_deg: 0.0,
         parts_since_previous: 1,
         previous: None,
     };

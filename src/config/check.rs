@@ -154,7 +154,8 @@ pub fn check(config: Config) -> Result<Checked, ConfigError> {
                 name,
                 recipe_path,
                 setups,
-                sim_c_speed_explicit: line("gauge.grinder.c_speed_rpm").is_some(),
+                sim_c_speed_explicit: config
+                    .sets(&format!("machines[{i}].gauge.grinder.c_speed_rpm")),
             });
         }
     }

@@ -35,6 +35,11 @@ pub struct Lines(BTreeMap<String, usize>);
 
 impl Lines {
     /// The line of `path`, or of its nearest ancestor that has one.
+    /// Whether the file sets exactly this key (no parent counts).
+    pub fn has(&self, path: &str) -> bool {
+        self.0.contains_key(path)
+    }
+
     pub fn of(&self, path: &str) -> Option<usize> {
         let mut p = path;
         loop {

@@ -304,6 +304,11 @@ impl Config {
         self.lines.of(path)
     }
 
+    /// Whether the file sets exactly the key at `path` (`machines[0].gauge.grinder.c_speed_rpm`).
+    pub fn sets(&self, path: &str) -> bool {
+        self.lines.has(path)
+    }
+
     fn problems(&self, machines_dropped: bool) -> Vec<ConfigProblem> {
         let mut p = Vec::new();
         if self.machines.is_empty() && !machines_dropped {

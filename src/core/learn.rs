@@ -46,7 +46,9 @@ pub struct LearningParams {
     /// of the size disturbance from part to part, averaged with this weight into a drift per
     /// part that the next table anticipates. 0: off.
     pub wear_gain: f64,
-    /// Timing errors within this are not corrected, degrees.
+    /// Timing errors within this are never corrected, degrees; the deadband is otherwise
+    /// `deadband_sigmas` standard errors of the timing estimate (which a steep feature, such
+    /// as a crankpin, measures far better than a cam lobe).
     pub timing_deadband_deg: f64,
     /// Largest |timing correction| (the feature's C offset), degrees; never exceeded.
     pub max_timing_correction_deg: f64,
@@ -65,7 +67,7 @@ impl Default for LearningParams {
             max_correction_um: 50.0,
             divergence_margin_um: 0.5,
             wear_gain: 0.3,
-            timing_deadband_deg: 0.001,
+            timing_deadband_deg: 0.0001,
             max_timing_correction_deg: 0.5,
             blocked_alarm_after_parts: 3,
         }
@@ -196,6 +198,10 @@ pub struct PartError<'a> {
     pub revolutions: u32,
     /// The feature's timing error, degrees, positive when it lags its nominal position.
     pub timing_error_deg: f64,
+    /// Standard error of the timing estimate, degrees: the per-angle standard error of the
+    /// mean over the root of Σ h′(ψ)² (h′ in mm/°); the timing deadband is
+    /// `deadband_sigmas` of it, and never less than `timing_deadband_deg`.
+    pub timing_sigma_deg: f64,
     /// Parts ground since the one the table in force was learned from (1 when every part
     /// is measured; more after a part that was not): the drift the table anticipated for
     /// one part has run on for the others.
@@ -549,8 +555,10 @@ fn learn_timing(
     let repeatable = part
         .previous
         .is_some_and(|p| p.confirms_timing(part.timing_error_deg, params));
-    let wanted = state.timing_correction_deg
-        - params.gain * soft_dead(part.timing_error_deg, params.timing_deadband_deg);
+    let band = params
+        .timing_deadband_deg
+        .max(params.deadband_sigmas * part.timing_sigma_deg);
+    let wanted = state.timing_correction_deg - params.gain * soft_dead(part.timing_error_deg, band);
     let limit = params.max_timing_correction_deg;
     if wanted.abs() <= limit {
         return Ok((wanted, None));
@@ -688,6 +696,7 @@ mod tests {
             repeatability_um,
             revolutions,
             timing_error_deg: 0.0,
+            timing_sigma_deg: 0.0,
             parts_since_previous: 1,
             previous: None,
         }

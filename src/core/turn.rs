@@ -185,11 +185,13 @@ fn learn(
         (Some(before), Some(now)) if now > before => (now - before).min(u64::from(u32::MAX)) as u32,
         _ => 1,
     };
+    let revolutions = averaged.revolutions_used.len() as u32;
     let part = PartError {
         error_um: &error_um,
         repeatability_um: &repeatability_um,
-        revolutions: averaged.revolutions_used.len() as u32,
+        revolutions,
         timing_error_deg: measured.timing_error_deg,
+        timing_sigma_deg: timing_sigma_deg(setup, &report.repeatability_um, revolutions),
         parts_since_previous,
         previous,
     };
@@ -200,6 +202,32 @@ fn learn(
             table: Box::new(table),
         },
         Err(e) => Decision::Refused(e),
+    }
+}
+
+/// Standard error of the timing estimate, degrees: σ of the per-angle mean (the rms
+/// repeatability over √revolutions) over √Σ h′², h′ the nominal slope in mm/° at each gauge
+/// angle (a least-squares phase from N points of equal noise).
+fn timing_sigma_deg(setup: &TurnSetup<'_>, repeatability_um: &[f64], revolutions: u32) -> f64 {
+    let n = repeatability_um.len();
+    if n == 0 {
+        return 0.0;
+    }
+    let sigma_mm = (repeatability_um.iter().map(|s| s * s).sum::<f64>() / n as f64).sqrt()
+        / f64::from(revolutions.max(1)).sqrt()
+        / 1000.0;
+    let curve = LiftCurve::new(setup.lobe.nominal);
+    let slope_sq: f64 = (0..n)
+        .map(|k| {
+            let feature_deg = k as f64 * 360.0 / n as f64 - setup.phase_deg;
+            let per_deg = curve.eval(feature_deg.to_radians()).dh_mm.to_radians();
+            per_deg * per_deg
+        })
+        .sum();
+    if slope_sq > 0.0 {
+        sigma_mm / slope_sq.sqrt()
+    } else {
+        0.0
     }
 }
 

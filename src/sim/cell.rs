@@ -182,6 +182,7 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                     repeatability_um: &measured.report.repeatability_um,
                     revolutions: measured.averaged.revolutions_used.len() as u32,
                     timing_error_deg: 0.0,
+                    timing_sigma_deg: 0.0,
                     parts_since_previous: 1,
                     previous: None,
                 };
