@@ -74,7 +74,7 @@ async fn another_machines_or_lobes_measurement_is_rejected() {
     let seen = of(&metrics);
     assert_eq!((seen.parts_total, seen.measurements_rejected_total), (0, 2));
     // Each kept among the rejects with a reason naming what did not match.
-    let reasons: Vec<String> = std::fs::read_dir(dir.path().join("state/rejected"))
+    let reasons: Vec<String> = std::fs::read_dir(dir.path().join("state/IN1/rejected"))
         .unwrap()
         .filter_map(|e| e.ok())
         .filter(|e| e.file_name().to_string_lossy().ends_with(".reason.txt"))
