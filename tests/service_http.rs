@@ -45,6 +45,14 @@ fn fake_machine() -> mpsc::Sender<Command> {
                     };
                     let _ = reply.send(answer);
                 }
+                Command::RollbackPart { versions, reply } => {
+                    let names: Vec<String> =
+                        versions.iter().map(|(l, v)| format!("{l} v{v}")).collect();
+                    let _ = reply.send(Ok(CommandDone {
+                        version: None,
+                        message: format!("rolled back together: {}", names.join(", ")),
+                    }));
+                }
                 Command::Dressing {
                     wheel_radius_mm,
                     reply,
@@ -298,4 +306,37 @@ async fn the_machine_list_shows_each_configured_machines_lobes() {
     assert_eq!(machine["configured"], true);
     assert_eq!(machine["lobes"][0]["lobe"], "IN1", "{reply}");
     assert_eq!(machine["lobes"].as_array().unwrap().len(), 1);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_whole_part_rollback_names_every_feature_it_takes_back() {
+    let s = server(limits(16, 5_000, 30_000), None).await;
+    let path = "/api/v1/machines/SIM1/rollback";
+    let (status, _) = exchange(
+        s.addr,
+        &post_request(path, r#"{"versions": {"IN1": 3}}"#, None),
+    )
+    .await;
+    assert_eq!(status, 401);
+    let (status, body) = exchange(
+        s.addr,
+        &post_request(path, r#"{"versions": {"IN1": 3}}"#, Some(TOKEN)),
+    )
+    .await;
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(json(&body)["message"], "rolled back together: IN1 v3");
+    let (status, body) = exchange(
+        s.addr,
+        &post_request(path, r#"{"versions": {"IN1": 3, "EX9": 2}}"#, Some(TOKEN)),
+    )
+    .await;
+    assert_eq!(
+        (status, json(&body)["code"].clone()),
+        (404, "lobe_not_found".into()),
+        "{body}"
+    );
+    for bad in [r#"{"versions": {}}"#, r#"{"versions": {"IN1": 0}}"#] {
+        let (status, body) = exchange(s.addr, &post_request(path, bad, Some(TOKEN))).await;
+        assert_eq!(status, 400, "{bad}: {body}");
+    }
 }

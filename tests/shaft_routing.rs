@@ -163,4 +163,37 @@ async fn swapped_lobes_are_refused_or_rejected_never_learned_crosswise() {
     );
     let after = states(&m);
     assert_eq!((after[0].0, after[1].0), (2, 2));
+
+    // The whole part back to its nominal tables (v1 of each), together; a version one lobe
+    // lacks refuses all, before anything is pushed.
+    let versions = |m: &MachineLoop| -> Vec<u64> {
+        m.features()
+            .iter()
+            .map(|f| f.memory().in_force_version)
+            .collect()
+    };
+    let before = versions(&m);
+    let e = m
+        .rollback_part(&[("IN1".into(), 1), ("IN2".into(), 99)])
+        .await
+        .unwrap_err();
+    assert!(e.to_string().contains("version 99"), "{e}");
+    assert_eq!(
+        versions(&m),
+        before,
+        "nothing pushed when one version is missing"
+    );
+    let done = m
+        .rollback_part(&[("IN1".into(), 1), ("IN2".into(), 1)])
+        .await
+        .unwrap();
+    assert_eq!(done.len(), 2);
+    let now = versions(&m);
+    assert!(
+        now[0] > before[0] && now[1] > before[1],
+        "{before:?} → {now:?}"
+    );
+    for f in m.features() {
+        assert!(f.memory().learning.correction_um.iter().all(|u| *u == 0.0));
+    }
 }

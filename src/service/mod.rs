@@ -287,6 +287,9 @@ async fn machine_task(
                 http::Command::Rollback { lobe, version, reply } => {
                     let _ = reply.send(rollback_result(&mut machine, &lobe, version).await);
                 }
+                http::Command::RollbackPart { versions, reply } => {
+                    let _ = reply.send(rollback_part_result(&mut machine, &versions).await);
+                }
                 http::Command::Dressing { wheel_radius_mm, reply } => {
                     let result = machine.dress(wheel_radius_mm, "api").await;
                     let _ = reply.send(dressing_result(result));
@@ -318,6 +321,36 @@ async fn rollback_result(
             message: done.summary,
         }),
         Err(machine::RollbackError::NotFound { .. }) => Err(not_found()),
+        Err(e @ machine::RollbackError::StoreUnavailable) => Err(CommandError::StoreUnavailable {
+            reason: e.to_string(),
+        }),
+        Err(e) => Err(CommandError::Refused {
+            reason: format!("{e:#}"),
+        }),
+    }
+}
+
+/// A whole-part rollback asked for through the API.
+async fn rollback_part_result(
+    machine: &mut MachineLoop,
+    versions: &[(String, u64)],
+) -> Result<http::CommandDone, http::CommandError> {
+    use http::CommandError;
+    match machine.rollback_part(versions).await {
+        Ok(done) => Ok(http::CommandDone {
+            version: None,
+            message: done
+                .iter()
+                .map(|d| d.summary.clone())
+                .collect::<Vec<_>>()
+                .join("; "),
+        }),
+        Err(machine::RollbackError::NotFound { lobe, version, .. }) => {
+            Err(CommandError::VersionNotFound {
+                lobe,
+                version: i64::try_from(version).unwrap_or(i64::MAX),
+            })
+        }
         Err(e @ machine::RollbackError::StoreUnavailable) => Err(CommandError::StoreUnavailable {
             reason: e.to_string(),
         }),

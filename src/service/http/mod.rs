@@ -66,6 +66,12 @@ pub enum Command {
     /// The wheel was dressed to this radius (mm, already within 5–1000): regenerate the
     /// table.
     Dressing { wheel_radius_mm: f64, reply: Reply },
+    /// Roll several features back together (a whole part: one version of each); every
+    /// version is checked before any is pushed.
+    RollbackPart {
+        versions: Vec<(String, u64)>,
+        reply: Reply,
+    },
 }
 
 /// A write the machine's loop carried out.
@@ -128,6 +134,7 @@ pub fn router(state: AppState) -> Router {
         .route(&format!("{m}/measurements"), get(routes::history))
         .route(&format!("{m}/events"), get(routes::events))
         .route(&format!("{m}/parts/{{part}}"), get(parts::part))
+        .route(&format!("{m}/rollback"), post(writes::rollback_part))
         .route(&format!("{m}/lobes/{{lobe}}/tables"), get(routes::tables))
         .route(
             &format!("{m}/lobes/{{lobe}}/tables/{{version}}/program"),

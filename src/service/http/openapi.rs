@@ -29,6 +29,7 @@ pub(super) async fn openapi() -> Json<Value> {
             "/api/v1/machines": get("machines and their lobes or pins: configured ones and those in the history"),
             "/api/v1/machines/{machine}/measurements": get("measurement history, newest first; filters lobe, since_ms, until_ms, verdict, limit, cursor"),
             "/api/v1/machines/{machine}/events": get("alarms and events, newest first"),
+            "/api/v1/machines/{machine}/rollback": { "post": write("roll several features back together (a whole part); body {\"versions\": {\"IN1\": 5, \"EX1\": 7}}; every version is checked before any is pushed; needs Authorization: Bearer <CAMLOOP_API_TOKEN>", "delivered: {status, version: null, message}", json!({})) },
             "/api/v1/machines/{machine}/parts/{part}": get("one part (a shaft), feature by feature: its measurements and whether it passed"),
             "/api/v1/machines/{machine}/lobes/{lobe}/tables": get("table versions, newest first"),
             "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program": get("program text of a table version"),

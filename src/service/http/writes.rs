@@ -77,6 +77,63 @@ pub(super) async fn rollback(
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+pub struct PartRollbackBody {
+    /// The version of each feature to go back to, by feature name.
+    versions: std::collections::BTreeMap<String, i64>,
+}
+
+/// `POST /api/v1/machines/{machine}/rollback` with `{"versions": {"IN1": 5, "EX1": 7}}`:
+/// several features back together, or none of them.
+pub(super) async fn rollback_part(
+    _: Authorized,
+    State(state): State<AppState>,
+    ApiPath(machine): ApiPath<String>,
+    ApiJson(body): ApiJson<PartRollbackBody>,
+) -> Result<Json<CommandReply>, ApiError> {
+    let machine = configured(&state, &machine)?;
+    let grinds = state.machines.get(&machine).cloned().unwrap_or_default();
+    if body.versions.is_empty() {
+        return Err(ApiError(
+            StatusCode::BAD_REQUEST,
+            "invalid_versions",
+            "versions names no feature".into(),
+        ));
+    }
+    let mut versions = Vec::new();
+    for (lobe, version) in body.versions {
+        feature_name(&lobe)?;
+        if !grinds.contains(&lobe) {
+            return Err(ApiError(
+                StatusCode::NOT_FOUND,
+                "lobe_not_found",
+                format!("machine {machine} does not grind a lobe or pin {lobe}"),
+            ));
+        }
+        let Ok(v) = u64::try_from(version) else {
+            return Err(ApiError(
+                StatusCode::BAD_REQUEST,
+                "invalid_version",
+                format!("{lobe}: version must be ≥ 1"),
+            ));
+        };
+        if v == 0 {
+            return Err(ApiError(
+                StatusCode::BAD_REQUEST,
+                "invalid_version",
+                format!("{lobe}: version must be ≥ 1"),
+            ));
+        }
+        versions.push((lobe, v));
+    }
+    let done = command(&state, &machine, "rollback_refused", |reply| {
+        Command::RollbackPart { versions, reply }
+    })
+    .await?;
+    Ok(Json(done.into()))
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct DressingBody {
     wheel_radius_mm: f64,
 }
