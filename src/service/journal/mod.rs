@@ -299,7 +299,7 @@ mod tests {
         Pending::Learning {
             machine: "M1".into(),
             lobe: "IN1".into(),
-            state,
+            state: Box::new(state),
             saved_at_ms: 7 + parts as i64,
         }
     }

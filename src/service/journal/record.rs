@@ -67,7 +67,7 @@ pub enum Pending {
     Learning {
         machine: String,
         lobe: String,
-        state: LoopMemory,
+        state: Box<LoopMemory>,
         saved_at_ms: i64,
     },
     /// What the machine grinds, kept once per change (the store skips an identical one).

@@ -284,7 +284,7 @@ impl FeatureLoop {
         Pending::Learning {
             machine: self.name.clone(),
             lobe: self.setup.name.clone(),
-            state: self.memory.clone(),
+            state: Box::new(self.memory.clone()),
             saved_at_ms: at_ms,
         }
     }
@@ -332,7 +332,7 @@ async fn load_memory(
                 memory.remember(sha256.clone());
             }
         }
-        return Ok(memory);
+        return Ok(*memory);
     }
     let Some(store) = store.read().await.clone() else {
         return Ok(LoopMemory::new(setup.feature.wheel_radius_mm()));
