@@ -99,7 +99,11 @@ fn the_converged_lobe_is_below_half_a_micrometre_and_each_part_of_the_law_counts
     // the plateau down. The cut-off is not asserted: this simulated machine's repeatable
     // errors are of order 3 and less, so a lower cut-off only keeps out more noise (it does
     // here, a little); a real machine's higher orders are why the default stays at 40.
-    for (name, mean, _) in results.iter().filter(|(n, _, _)| !n.contains("cut-off")).skip(1) {
+    for (name, mean, _) in results
+        .iter()
+        .filter(|(n, _, _)| !n.contains("cut-off"))
+        .skip(1)
+    {
         assert!(*mean > shipped_mean, "{name}\n{text}");
     }
 }

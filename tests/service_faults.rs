@@ -134,7 +134,7 @@ async fn a_read_only_share_does_not_wind_up_the_learning() {
         after[1] < 2.0 && after[2] < 1.3,
         "error after the share came back: {after:?}"
     );
-    let journal = Journal::open(&dir.path().join("var/machines/SIM1")).unwrap();
+    let journal = Journal::open(&dir.path().join("var/machines/SIM1/IN1")).unwrap();
     let memory = journal
         .records()
         .iter()

@@ -287,7 +287,8 @@ async fn a_database_that_is_down_loses_nothing() {
     running.machines_done().await;
     running.stop().await;
     let journal =
-        camloop::service::journal::Journal::open(&dir.path().join("var/machines/SIM1")).unwrap();
+        camloop::service::journal::Journal::open(&dir.path().join("var/machines/SIM1/IN1"))
+            .unwrap();
     let profile_errors: Vec<f64> = journal
         .pending()
         .iter()
@@ -305,7 +306,7 @@ async fn a_database_that_is_down_loses_nothing() {
         "{profile_errors:?}"
     );
     // Every record waits in the journal: 4 measurements, 5 tables (nominal + 4).
-    let journal_dir = dir.path().join("var/machines/SIM1");
+    let journal_dir = dir.path().join("var/machines/SIM1/IN1");
     let mut journal = camloop::service::journal::Journal::open(&journal_dir).unwrap();
     let pending = journal.pending().to_vec();
     let count = |kind: &str| {

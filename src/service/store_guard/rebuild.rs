@@ -17,7 +17,11 @@ pub(super) async fn rebuild_versions(
 ) -> Result<u64, StoreError> {
     let mut rebuilt = 0;
     for e in expectations {
-        let state = var_dir.join("machines").join(&e.machine).join("share");
+        let state = var_dir
+            .join("machines")
+            .join(&e.machine)
+            .join(&e.lobe)
+            .join("share");
         let Ok(loaded) = load_manifest(&state.join(MANIFEST_FILE)) else {
             continue;
         };
