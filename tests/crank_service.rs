@@ -150,30 +150,33 @@ fn table(parts: &[PinPart]) -> String {
 }
 
 /// Only the recipe sets the C speed (10 rpm): the simulator grinds at it, the main program
-/// turns C at it, and the pin converges below 1.3 µm by its 4th part.
+/// turns C at it, and the pin converges below 1.3 µm by its 4th part. At 30 rpm the servo
+/// lag alone puts the first pin 69 µm off, which learned as lift needed 55 µm of correction
+/// (above the 50 µm limit): learned as the index angle it is one small number, and the pin
+/// converges by its 5th part.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_pin_at_the_recipes_c_speed_converges_by_the_fourth_part() {
-    let dir = tempfile::tempdir().unwrap();
-    let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
-    let recipe = one_pin_recipe(dir.path(), 10.0, 50.0);
-    let mut running = service::start(
-        config(dir.path(), &url, &recipe, "CRANK1", ""),
-        RunOptions::parts(8),
-    )
-    .await
-    .unwrap();
-    running.machines_done().await;
-    running.stop().await;
-    let main = std::fs::read_to_string(dir.path().join("share/CRANK1/CAMLOOP_GRIND.MPF")).unwrap();
-    assert!(main.contains("FA[C]=3600.000 ; 3 rev at 10 rpm"), "{main}");
-    let store = Store::connect(&url).await.unwrap();
-    let parts = pin_parts(&store, "CRANK1", "P1", 0.0).await;
-    let text = table(&parts);
-    println!("{text}");
-    assert_eq!(parts.len(), 8, "{text}");
-    assert!(parts[0].max_lift_um > 5.0, "{text}");
-    for p in &parts[3..] {
-        assert!(p.max_lift_um < 1.3, "{text}");
+async fn a_pin_at_the_recipes_c_speed_converges() {
+    for (rpm, by_part) in [(10.0, 4), (30.0, 5)] {
+        let dir = tempfile::tempdir().unwrap();
+        let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
+        let recipe = one_pin_recipe(dir.path(), rpm, 50.0);
+        let config = config(dir.path(), &url, &recipe, "CRANK1", "");
+        let mut running = service::start(config, RunOptions::parts(8)).await.unwrap();
+        running.machines_done().await;
+        running.stop().await;
+        let main =
+            std::fs::read_to_string(dir.path().join("share/CRANK1/CAMLOOP_GRIND.MPF")).unwrap();
+        let fa = format!("FA[C]={:.3} ; 3 rev at {rpm} rpm", 360.0 * rpm);
+        assert!(main.contains(&fa), "{main}");
+        let store = Store::connect(&url).await.unwrap();
+        let parts = pin_parts(&store, "CRANK1", "P1", 0.0).await;
+        let text = table(&parts);
+        println!("{rpm} rpm:\n{text}");
+        assert_eq!(parts.len(), 8, "{text}");
+        assert!(parts[0].max_lift_um > 20.0, "{text}");
+        for p in &parts[by_part - 1..] {
+            assert!(p.max_lift_um < 1.3, "{rpm} rpm\n{text}");
+        }
     }
 }
 
@@ -201,8 +204,8 @@ async fn a_guard_blocking_part_after_part_is_one_alarm_and_a_higher_limit_finish
     let text = table(&parts);
     println!("limit 50 µm:\n{text}");
     // Falls part after part (a limited step is still a step) to what the limit leaves.
-    assert!(parts[0].max_lift_um > 55.0, "{text}");
-    assert!(parts[3].max_lift_um < parts[1].max_lift_um - 20.0, "{text}");
+    assert!(parts[0].max_lift_um > 100.0, "{text}");
+    assert!(parts[3].max_lift_um < parts[1].max_lift_um - 50.0, "{text}");
     let residual = parts[9].max_lift_um;
     assert!((5.0..20.0).contains(&residual), "{text}");
 
