@@ -30,7 +30,7 @@ pub struct SimStation {
     pub name: String,
     pub feature: Feature,
     pub z_mm: f64,
-    /// Parts of this feature measured before this run (the next shaft's number follows).
+    /// The newest part (shaft) number this feature was ground for before this run.
     pub parts_done: u64,
     /// Wheel radius the feature's program on the share was made for.
     pub table_wheel_radius_bits: Arc<AtomicU64>,
@@ -58,7 +58,7 @@ impl SimSource {
                 name: f.feature_name().to_string(),
                 feature: f.feature(),
                 z_mm: f.setup().z_mm,
-                parts_done: f.memory().parts,
+                parts_done: f.memory().last_part_number().unwrap_or(f.memory().parts),
                 table_wheel_radius_bits: f.table_wheel_radius(),
             })
             .collect()

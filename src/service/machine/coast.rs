@@ -9,12 +9,16 @@ use crate::core::compensate;
 use tracing::{debug, warn};
 
 impl FeatureLoop {
-    /// Moves the table on by one part of learned drift; nothing when there is none to
-    /// anticipate (or learning is frozen, or a table waits for the share).
+    /// Notes the part as ground and moves the table on by one part of learned drift (not when
+    /// there is none to anticipate, learning is frozen, or a table waits for the share).
     pub(super) async fn coast(&mut self, part: &str) {
+        // Ground for this part: a resumed shaft does not grind it again.
+        self.memory.last_part = Some(part.to_string());
         let learning = &self.memory.learning;
         let drift = learning.size_drift_um_per_part;
         if drift.abs() < 1e-3 || learning.frozen.is_some() || self.memory.waiting.is_some() {
+            let record = self.learning_record(now_ms());
+            self.record(vec![record]).await;
             return;
         }
         let mut next = learning.clone();

@@ -103,8 +103,28 @@ impl FeatureLoop {
         if let Some(pushed) = self.share.history().last_pushed().map(|v| v.record.version)
             && pushed != self.memory.in_force_version
         {
-            // Killed between the push and the record of it: the share is the authority.
+            // Killed between the push and the record of it: the share is the authority, and
+            // the correction in force is the one that table was made from (its journal
+            // record), not the one before it.
             info!(machine = %self.name, share_version = pushed, memory_version = self.memory.in_force_version, "version in force taken from the share's manifest");
+            let waiting = self.memory.waiting.as_ref().map(|w| w.version);
+            let made_from = self.journal.records().iter().rev().find_map(|r| match r {
+                Pending::Table {
+                    lobe,
+                    version,
+                    learning,
+                    ..
+                } if *lobe == self.setup.name && *version == pushed => Some(learning.clone()),
+                _ => None,
+            });
+            if let (Some(t), false) = (made_from, waiting == Some(pushed)) {
+                let l = &mut self.memory.learning;
+                if t.correction_um.len() == l.correction_um.len() {
+                    l.correction_um = t.correction_um;
+                    l.timing_correction_deg = t.timing_correction_deg;
+                    l.iteration = t.iteration;
+                }
+            }
             self.memory.delivered(pushed);
         }
         let mut records = vec![self.recipe_snapshot(at_ms)];
@@ -327,9 +347,14 @@ async fn load_memory(
         // still count, and are still known, so a replay does not learn them again.
         let mut memory = state.clone();
         for r in &records[i + 1..] {
-            if let Pending::Measurement { sha256, .. } = r {
+            if let Pending::Measurement {
+                sha256, part, lobe, ..
+            } = r
+                && *lobe == setup.name
+            {
                 memory.parts += 1;
                 memory.remember(sha256.clone());
+                memory.last_part = Some(part.clone());
             }
         }
         return Ok(*memory);

@@ -149,6 +149,7 @@ impl FeatureLoop {
         self.memory.parts += 1;
         self.memory.remember(sha.clone());
         self.memory.previous = Some(done.measured.as_previous());
+        self.memory.last_part = Some(raw.header.part.clone());
         let part = self.memory.parts;
         let held = matches!(done.decision, Decision::Held(_));
         let ground_with = self.memory.in_force_version;

@@ -54,6 +54,10 @@ pub struct LoopMemory {
     /// The guard that refused or limited the latest parts in a row, if one did.
     #[serde(default)]
     pub guard: Option<GuardStreak>,
+    /// The newest part (shaft) this feature was ground for, gauged or not: where a resumed
+    /// shaft program starts is derived from it.
+    #[serde(default)]
+    pub last_part: Option<String>,
 }
 
 /// Which guard acted on a part: parts in a row with the same kind make a streak.
@@ -143,6 +147,7 @@ impl LoopMemory {
             recent_measurements: Vec::new(),
             previous: None,
             guard: None,
+            last_part: None,
         }
     }
 
@@ -152,6 +157,13 @@ impl LoopMemory {
         self.waiting
             .as_ref()
             .map_or(&self.learning, |w| &w.learning)
+    }
+
+    /// The newest part's number, when the gauge gave a number.
+    pub fn last_part_number(&self) -> Option<u64> {
+        self.last_part
+            .as_deref()
+            .and_then(|p| p.trim().parse().ok())
     }
 
     /// Whether this measurement identity was seen among the newest ones.

@@ -154,7 +154,7 @@ impl MachineLoop {
             main,
             metrics,
         };
-        machine.write_resume_point_if_missing();
+        machine.write_resume_point_from_memory();
         Ok(machine)
     }
 
@@ -400,21 +400,33 @@ impl MachineLoop {
         }
     }
 
-    /// A new share gets the resume point of a new shaft; one already there (camloop's, or
-    /// an operator's) is left as it is.
-    fn write_resume_point_if_missing(&self) {
+    /// The resume point from what each feature's loop remembers, at start: the shaft in the
+    /// machine is the newest part any feature was ground for, and its first feature not
+    /// ground for it is where a resume starts (1 when none is missing). Derived rather than
+    /// read back, so a stop between a record and the file's rewrite never grinds a feature
+    /// twice.
+    fn write_resume_point_from_memory(&self) {
         if self.features.len() < 2 {
             return;
         }
-        let path = shaft::resume_path(self.share_dir());
-        if !path.exists() {
-            match shaft::write_resume(self.share_dir(), 1) {
-                Ok(()) => {
-                    info!(machine = %self.name, "resume point written: a new shaft starts at the first feature")
-                }
-                Err(e) => {
-                    warn!(machine = %self.name, error = %e, "resume point not written to the share")
-                }
+        let last: Vec<Option<u64>> = self
+            .features
+            .iter()
+            .map(|f| f.memory().last_part_number())
+            .collect();
+        let first = match last.iter().flatten().max() {
+            None => 1,
+            Some(shaft) => last
+                .iter()
+                .position(|l| *l != Some(*shaft))
+                .map_or(1, |k| k + 1),
+        };
+        match shaft::write_resume(self.share_dir(), first) {
+            Ok(()) => {
+                info!(machine = %self.name, first_feature = first, "resume point written from the features' records")
+            }
+            Err(e) => {
+                warn!(machine = %self.name, error = %e, "resume point not written to the share")
             }
         }
     }
