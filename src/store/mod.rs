@@ -20,12 +20,16 @@
 //! ([`Store::prune_raw_older_than`]) setting a raw blob to NULL; table-version status
 //! changes are appended rows; the newest learning-state row wins.
 
+mod chain;
 mod codec;
 mod connect;
+mod convert;
 mod error;
 mod identity;
 mod log;
 mod measurements;
+mod pack;
+mod pack_report;
 mod tables;
 mod types;
 
@@ -37,8 +41,10 @@ use sqlx::sqlite::SqlitePool;
 use tokio::sync::{Semaphore, SemaphorePermit};
 
 pub use codec::{UNITS_PER_MM, decode_lifts_mm, encode_lifts_mm, sha256_hex};
+pub use convert::Converted;
 pub use error::{Detail, StoreError};
 pub use identity::StoreIdentity;
+pub use pack_report::REPORT_STEP;
 pub use types::*;
 
 /// Migrations embedded in the binary: (version, description, SQLite SQL, PostgreSQL SQL).
@@ -55,6 +61,12 @@ pub const MIGRATIONS: &[(i64, &str, &str, &str)] = &[
         "store_identity",
         include_str!("../../migrations/sqlite/0002_store_identity.sql"),
         include_str!("../../migrations/postgres/0002_store_identity.sql"),
+    ),
+    (
+        4,
+        "compact_history",
+        include_str!("../../migrations/sqlite/0004_compact_history.sql"),
+        include_str!("../../migrations/postgres/0004_compact_history.sql"),
     ),
 ];
 
