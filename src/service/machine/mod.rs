@@ -101,6 +101,9 @@ pub struct MachineLoop {
     table_wheel_radius_bits: Arc<AtomicU64>,
     /// The disk-full alarm was raised and not yet cleared.
     disk_alarm: bool,
+    /// PLANT EVENTS HOOK (MQTT): set by the service after `start`; every record passing
+    /// through [`MachineLoop::record`] is offered to it (never blocks).
+    pub plant_events: Option<crate::service::mqtt::EventSender>,
 }
 
 impl MachineLoop {
@@ -148,6 +151,7 @@ impl MachineLoop {
             metrics,
             table_wheel_radius_bits: Arc::new(AtomicU64::new(0)),
             disk_alarm: false,
+            plant_events: None,
         };
         machine.after_start(&report).await?;
         Ok(machine)
@@ -320,6 +324,10 @@ impl MachineLoop {
                 false
             }
         };
+        // PLANT EVENTS HOOK (MQTT): what the journal took, the plant hears of.
+        if let Some(events) = self.plant_events.as_ref().filter(|_| kept) {
+            records.iter().for_each(|r| events.record(r));
+        }
         let failing = u64::from(!kept || self.journal.on_reserve());
         self.metrics
             .update(&self.name, |m| m.journal_failing = failing);
