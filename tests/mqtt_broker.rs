@@ -8,8 +8,9 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use camloop::config::MqttSection;
+use camloop::config::{Config, MqttSection};
 use camloop::service::mqtt::{PlantEvent, Progress, Publisher};
+use camloop::service::{self, RunOptions};
 use camloop::store::Verdict;
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use tokio::sync::{mpsc, watch};
@@ -275,5 +276,50 @@ async fn events_reach_a_real_broker_survive_its_outage_and_report_what_the_bound
     tokio::time::timeout(DEADLINE, publisher.join())
         .await
         .unwrap();
+    stop(b);
+}
+
+/// The service with `[mqtt]` on: the simulated machine's parts and deliveries reach the
+/// broker through the loop's hook, one event per part, in order.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_running_service_publishes_its_parts_and_tables() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let broker_dir = dir.path().join("broker");
+    std::fs::create_dir(&broker_dir).unwrap();
+    let b = broker(port, &broker_dir);
+    let mut rx = subscriber(port, "plant-service", "camloop/#", true).await;
+    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let text = format!(
+        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://{}/var/camloop.db?mode=rwc\"\n\
+         [http]\nlisten = \"127.0.0.1:0\"\n[mqtt]\nenabled = true\nport = {port}\n\
+         [[machines]]\nname = \"SIM1\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/SIM1\"\n\
+         [machines.gauge]\nkind = \"sim\"\npart_interval_ms = 20\nseed = 3\n",
+        dir.path().display(),
+        recipe.display()
+    );
+    let config = Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
+    let mut running = service::start(config, RunOptions::parts(3)).await.unwrap();
+    running.machines_done().await;
+    let mut parts = Vec::new();
+    let mut delivered = 0;
+    while parts.len() < 3 {
+        let (topic, payload, _) = next_live(&mut rx).await;
+        match topic.as_str() {
+            "camloop/SIM1/IN1/part_analysed" => {
+                assert!(payload["max_profile_error_um"].as_f64().unwrap() > 0.0);
+                parts.push(payload["part"].as_str().unwrap().to_owned());
+            }
+            "camloop/SIM1/IN1/table_delivered" => delivered += 1,
+            _ => {}
+        }
+    }
+    assert_eq!(parts.len(), 3, "{parts:?}");
+    assert!(parts.windows(2).all(|w| w[0] != w[1]), "{parts:?}");
+    assert!(
+        delivered >= 1,
+        "the first part's table was delivered before part 2"
+    );
+    running.stop().await;
     stop(b);
 }
