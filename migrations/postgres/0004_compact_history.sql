@@ -96,3 +96,8 @@ SELECT setval(pg_get_serial_sequence('learning_states', 'id'), COALESCE(MAX(id),
     FROM learning_states;
 DROP TABLE learning_states_v1;
 CREATE INDEX learning_states_by_lobe ON learning_states (machine, lobe, id DESC);
+
+-- The rows still to pack, so that the check at every start reads an index, not the blobs.
+CREATE INDEX measurement_data_plain ON measurement_data (measurement_id) WHERE codec = 0;
+CREATE INDEX table_versions_plain ON table_versions (id) WHERE codec = 0;
+CREATE INDEX learning_states_plain ON learning_states (id) WHERE codec = 0;

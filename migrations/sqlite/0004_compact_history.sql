@@ -86,3 +86,8 @@ INSERT INTO learning_states (id, machine, lobe, state_json, saved_at_ms, codec, 
     SELECT id, machine, lobe, state_json, saved_at_ms, 0, 0 FROM learning_states_v1;
 DROP TABLE learning_states_v1;
 CREATE INDEX learning_states_by_lobe ON learning_states (machine, lobe, id DESC);
+
+-- The rows still to pack, so that the check at every start reads an index, not the blobs.
+CREATE INDEX measurement_data_plain ON measurement_data (measurement_id) WHERE codec = 0;
+CREATE INDEX table_versions_plain ON table_versions (id) WHERE codec = 0;
+CREATE INDEX learning_states_plain ON learning_states (id) WHERE codec = 0;

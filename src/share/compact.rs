@@ -81,6 +81,18 @@ impl Checkpoint {
 }
 
 impl History {
+    /// Takes the checkpoint's history; only a first line may be a checkpoint.
+    pub(super) fn restore(&mut self, c: Checkpoint) -> Result<(), RecordOutOfOrder> {
+        if self.told != 0 {
+            return Err(RecordOutOfOrder(format!(
+                "checkpoint after v{}: only a first line may be one",
+                self.told
+            )));
+        }
+        *self = c.into_history()?;
+        Ok(())
+    }
+
     fn checkpoint(&self, at_unix_ms: u64, archived_lines: usize) -> Checkpoint {
         Checkpoint {
             told: self.told,

@@ -230,15 +230,7 @@ impl History {
     /// Fold one record in, checking that it follows from what came before.
     pub fn apply(&mut self, record: Record) -> Result<(), RecordOutOfOrder> {
         match record {
-            Record::Checkpoint(c) => {
-                if self.told != 0 {
-                    return Err(RecordOutOfOrder(format!(
-                        "checkpoint after v{}: only a first line may be one",
-                        self.told
-                    )));
-                }
-                *self = c.into_history()?;
-            }
+            Record::Checkpoint(c) => self.restore(*c)?,
             Record::Version(rec) => {
                 if rec.version != self.next_version() {
                     return Err(RecordOutOfOrder(format!(

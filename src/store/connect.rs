@@ -25,8 +25,8 @@ const SQLITE_CACHE_KIB: u64 = 16 << 10;
 /// WAL size (4 KiB pages) at which a committing writer checkpoints by itself. SQLite's
 /// default of 1,000 pages put a checkpoint into every ~40th part's commit; the service calls
 /// [`Store::checkpoint`] off the per-part path instead, and this larger limit (64 MiB) only
-/// bounds the WAL of programs that never do (in 16 KiB pages, see [`SQLITE_PAGE_BYTES`]).
-const SQLITE_AUTOCHECKPOINT_PAGES: u32 = 4_096;
+/// bounds the WAL of programs that never do.
+const SQLITE_AUTOCHECKPOINT_PAGES: u32 = 16_384;
 /// Writer connections on PostgreSQL (one per machine writing at once is plenty).
 const PG_WRITERS: u32 = 4;
 /// How long a PostgreSQL read may run before the server cancels it ([`StoreError::Busy`]).
@@ -34,9 +34,6 @@ const PG_READ_TIMEOUT: &str = "5s";
 
 /// Reads admitted at once: one per core, at least 2 and at most 4. Every admitted read keeps
 /// a core busy, and the machine loops need the rest.
-/// Page size of a new SQLite file.
-const SQLITE_PAGE_BYTES: u32 = 16_384;
-
 fn readers() -> u32 {
     let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
     cores.clamp(2, 4) as u32
@@ -69,9 +66,6 @@ impl Store {
             .map_err(|e| StoreError::invalid("database url", format!("not a sqlite url: {e}")))?
             .busy_timeout(ACQUIRE_TIMEOUT)
             .foreign_keys(true)
-            // Packed rows are 1-5 KiB: in 4 KiB pages a quarter of each page stays empty. A
-            // new file gets 16 KiB pages; an existing file keeps its size (a VACUUM changes it).
-            .page_size(SQLITE_PAGE_BYTES)
             // History pages touch rows spread over the file: map it and cache more than the
             // 2 MiB default so a 1,000-row page is served without a syscall per page.
             .pragma("mmap_size", SQLITE_MMAP_BYTES.to_string())

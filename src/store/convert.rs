@@ -10,6 +10,9 @@ use super::measurements::{StoredData, pack_data};
 use super::pack::pack_text;
 use super::{Store, StoreError, with_write};
 
+/// SQLite `user_version` once every version-1 row is packed.
+const PACKED_USER_VERSION: i64 = 4;
+
 /// Rows packed per transaction.
 const BATCH: i64 = 200;
 
@@ -29,11 +32,37 @@ impl Store {
     /// Packs every row still in the version-1 layout (see the module doc).
     pub async fn pack_legacy_rows(&self) -> Result<Converted, StoreError> {
         let mut done = Converted::default();
+        if self.packed_mark(None).await? {
+            return Ok(done);
+        }
         self.pack_measurements(&mut done).await?;
         for chained in [&TABLE_VERSIONS, &LEARNING_STATES] {
             self.pack_chained(chained, &mut done).await?;
         }
+        self.packed_mark(Some(PACKED_USER_VERSION)).await?;
         Ok(done)
+    }
+
+    /// On SQLite, whether the file's header says every row is packed (`user_version`, which
+    /// a start reads without touching a table page, so a later start never scans); with
+    /// `Some`, says so. PostgreSQL has no such header: its check reads the partial indexes.
+    async fn packed_mark(&self, set: Option<i64>) -> Result<bool, StoreError> {
+        let super::Pools::Sqlite { write, .. } = &self.pools else {
+            return Ok(false);
+        };
+        const OP: &str = "reading the file's packing mark";
+        if let Some(v) = set {
+            sqlx::query(&format!("PRAGMA user_version = {v}"))
+                .execute(write)
+                .await
+                .map_err(self.db_error(OP))?;
+            return Ok(true);
+        }
+        let v: i64 = sqlx::query_scalar("PRAGMA user_version")
+            .fetch_one(write)
+            .await
+            .map_err(self.db_error(OP))?;
+        Ok(v >= PACKED_USER_VERSION)
     }
 
     async fn pack_measurements(&self, done: &mut Converted) -> Result<(), StoreError> {
@@ -45,10 +74,9 @@ impl Store {
                     "SELECT d.measurement_id, m.points_per_rev, d.raw_revolutions, \
                      d.averaged_profile, d.analysis_json FROM measurement_data d \
                      JOIN measurements m ON m.id = d.measurement_id \
-                     WHERE d.codec = $1 AND d.measurement_id > $2 \
-                     ORDER BY d.measurement_id LIMIT $3",
+                     WHERE d.codec = 0 AND d.measurement_id > $1 \
+                     ORDER BY d.measurement_id LIMIT $2",
                 )
-                .bind(CODEC_PLAIN)
                 .bind(after)
                 .bind(BATCH)
                 .fetch_all(pool)
@@ -103,42 +131,13 @@ impl Store {
     /// older row of its (machine, lobe), which is already packed (or left plain).
     async fn pack_chained(&self, c: &Chained, done: &mut Converted) -> Result<(), StoreError> {
         const OP: &str = "packing stored history";
-        let texts: Vec<&str> = c.fields.iter().map(|f| f.0).collect();
-        let select = format!(
-            "SELECT id, machine, lobe, {} FROM {} WHERE codec = $1 AND id > $2 \
-             ORDER BY id LIMIT $3",
-            texts.join(", "),
-            c.table
-        );
-        let base_sql = format!(
-            "SELECT id, chain_depth FROM {} WHERE machine = $1 AND lobe = $2 AND id < $3 \
-             ORDER BY id DESC LIMIT 1",
-            c.table
-        );
-        let sets: Vec<String> = c
-            .fields
-            .iter()
-            .enumerate()
-            .map(|(i, (text, packed))| format!("{text} = NULL, {packed} = ${}", i + 4))
-            .collect();
         let learning = c.table == LEARNING_STATES.table;
-        let next = c.fields.len() + 4;
-        let (digest, id_at) = if learning {
-            (format!(", state_sha256 = ${next}"), next + 1)
-        } else {
-            (String::new(), next)
-        };
-        let update = format!(
-            "UPDATE {} SET codec = $1, base_id = $2, chain_depth = $3, {}{digest} WHERE id = ${id_at}",
-            c.table,
-            sets.join(", "),
-        );
+        let (select, base_sql, update) = chained_sql(c, learning);
         let mut after = i64::MIN;
         loop {
             let more = with_write!(self, pool => {
                 let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
                 let rows = sqlx::query(&select)
-                    .bind(CODEC_PLAIN)
                     .bind(after)
                     .bind(BATCH)
                     .fetch_all(&mut *tx)
@@ -188,4 +187,40 @@ impl Store {
             }
         }
     }
+}
+
+/// The statements of [`Store::pack_chained`]: the version-1 rows after `$1` (the literal
+/// `codec = 0` lets the partial index `*_plain` answer), the newest
+/// older row of a (machine, lobe), and the update that packs a row.
+fn chained_sql(c: &Chained, learning: bool) -> (String, String, String) {
+    let texts: Vec<&str> = c.fields.iter().map(|f| f.0).collect();
+    let select = format!(
+        "SELECT id, machine, lobe, {} FROM {} WHERE codec = 0 AND id > $1 \
+         ORDER BY id LIMIT $2",
+        texts.join(", "),
+        c.table
+    );
+    let base_sql = format!(
+        "SELECT id, chain_depth FROM {} WHERE machine = $1 AND lobe = $2 AND id < $3 \
+         ORDER BY id DESC LIMIT 1",
+        c.table
+    );
+    let sets: Vec<String> = c
+        .fields
+        .iter()
+        .enumerate()
+        .map(|(i, (text, packed))| format!("{text} = NULL, {packed} = ${}", i + 4))
+        .collect();
+    let next = c.fields.len() + 4;
+    let (digest, id_at) = if learning {
+        (format!(", state_sha256 = ${next}"), next + 1)
+    } else {
+        (String::new(), next)
+    };
+    let update = format!(
+        "UPDATE {} SET codec = $1, base_id = $2, chain_depth = $3, {}{digest} WHERE id = ${id_at}",
+        c.table,
+        sets.join(", "),
+    );
+    (select, base_sql, update)
 }

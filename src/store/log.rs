@@ -12,6 +12,13 @@ use super::{
     StoreError, col, with_read, with_write,
 };
 
+/// The newest learning state of (machine, lobe) when it has meaning `$3` and no row is
+/// packed against it: the one a snapshot with the same meaning replaces.
+const REPLACEABLE_STATE: &str = "SELECT n.id, n.base_id FROM learning_states n WHERE n.id = \
+     (SELECT MAX(id) FROM learning_states WHERE machine = $1 AND lobe = $2) \
+     AND n.meaning_sha256 = $3 AND NOT EXISTS \
+     (SELECT 1 FROM learning_states c WHERE c.base_id = n.id)";
+
 const ENSURE_MACHINE: &str =
     "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) ON CONFLICT (name) DO NOTHING";
 
@@ -323,21 +330,15 @@ impl Store {
                 .execute(&mut *tx)
                 .await
                 .map_err(self.db_error(OP))?;
-            // The newest row, when it has the same meaning and no row is packed against it.
             let replace: Option<(i64, Option<i64>)> = match meaning_sha256 {
                 None => None,
-                Some(meaning) => sqlx::query_as(
-                    "SELECT n.id, n.base_id FROM learning_states n WHERE n.id = \
-                     (SELECT MAX(id) FROM learning_states WHERE machine = $1 AND lobe = $2) \
-                     AND n.meaning_sha256 = $3 AND NOT EXISTS \
-                     (SELECT 1 FROM learning_states c WHERE c.base_id = n.id)",
-                )
-                .bind(machine)
-                .bind(lobe)
-                .bind(meaning)
-                .fetch_optional(&mut *tx)
-                .await
-                .map_err(self.db_error(OP))?,
+                Some(meaning) => sqlx::query_as(REPLACEABLE_STATE)
+                    .bind(machine)
+                    .bind(lobe)
+                    .bind(meaning)
+                    .fetch_optional(&mut *tx)
+                    .await
+                    .map_err(self.db_error(OP))?,
             };
             match replace {
                 Some((id, base_id)) => {
