@@ -111,15 +111,21 @@ impl PlantEvent {
                 kind,
                 message,
             } => match kind {
-                EventKind::LearningHeld | EventKind::LearningReverted => {
-                    PlantEvent::LearningFrozen {
-                        machine,
-                        at_ms,
-                        reason: message,
-                    }
-                }
-                // Told by the table records and the dressing record themselves.
-                EventKind::TableRefused | EventKind::WheelDressed => return None,
+                EventKind::LearningReverted => PlantEvent::LearningFrozen {
+                    machine,
+                    at_ms,
+                    reason: message,
+                },
+                // A table refused by the loop's checks before it got a version.
+                EventKind::TableRefused => PlantEvent::TableRefused {
+                    machine,
+                    feature: MACHINE_LEVEL.to_owned(),
+                    version: None,
+                    reason: message,
+                    at_ms,
+                },
+                // Told by the dressing record itself.
+                EventKind::WheelDressed => return None,
                 _ => PlantEvent::Alarm {
                     machine,
                     at_ms,
@@ -256,17 +262,18 @@ mod tests {
         let d = PlantEvent::from_pending(&dressing).unwrap();
         assert_eq!(d.topic("p"), "p/G7/machine/dressing");
         assert!(d.payload().contains(r#""new_radius_mm":249.5"#));
-        let held = Pending::Event {
+        let event = |kind| Pending::Event {
             machine: "G7".into(),
             at_ms: 1,
             level: EventLevel::Warn,
-            kind: EventKind::LearningHeld,
+            kind,
             message: "diverging".into(),
         };
-        assert_eq!(
-            PlantEvent::from_pending(&held).unwrap().name(),
-            "learning_frozen"
-        );
+        let name = |kind| PlantEvent::from_pending(&event(kind)).map(|e| e.name());
+        assert_eq!(name(EventKind::LearningReverted), Some("learning_frozen"));
+        assert_eq!(name(EventKind::TableRefused), Some("table_refused"));
+        assert_eq!(name(EventKind::LearningHeld), Some("alarm"));
+        assert_eq!(name(EventKind::WheelDressed), None);
         let waiting = Pending::TableStatus {
             machine: "G7".into(),
             lobe: "IN1".into(),
