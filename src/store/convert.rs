@@ -56,6 +56,12 @@ impl Store {
                 .execute(write)
                 .await
                 .map_err(self.db_error(OP))?;
+            // The migration and the packing rewrote whole tables through the log: fold it
+            // into the file now, at start, rather than in the last connection's close.
+            sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
+                .execute(write)
+                .await
+                .map_err(self.db_error(OP))?;
             return Ok(true);
         }
         let v: i64 = sqlx::query_scalar("PRAGMA user_version")
