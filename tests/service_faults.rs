@@ -53,16 +53,18 @@ fn immutable(folder: &Path, on: bool) {
 async fn errors(dir: &Path) -> Vec<(i64, f64)> {
     let url = format!("sqlite://{}/db.sqlite", dir.display());
     let store = camloop::store::Store::connect(&url).await.unwrap();
-    let camloop::store::RawPool::Sqlite(pool) = store.raw_pool() else {
-        panic!("a SQLite store")
-    };
-    let rows: Vec<(i64, String)> = sqlx::query_as(
-        "SELECT m.received_at_ms, d.analysis_json FROM measurements m \
-         JOIN measurement_data d ON d.measurement_id = m.id WHERE m.machine = 'SIM1' ORDER BY m.id",
-    )
-    .fetch_all(pool)
-    .await
-    .unwrap();
+    let mut rows: Vec<(i64, String)> = Vec::new();
+    let mut after = None;
+    loop {
+        let page = store.export(0, i64::MAX, after, 500).await.unwrap();
+        let Some(last) = page.last() else { break };
+        after = Some(last.summary.id);
+        rows.extend(
+            page.into_iter()
+                .filter(|d| d.summary.machine == "SIM1")
+                .map(|d| (d.summary.received_at_ms, d.analysis_json)),
+        );
+    }
     rows.into_iter()
         .map(|(at, json)| {
             let v: serde_json::Value = serde_json::from_str(&json).unwrap();

@@ -324,9 +324,28 @@ async fn a_database_that_is_down_loses_nothing() {
     assert_eq!(written, pending.len());
     assert!(journal.pending().is_empty());
     let stored = stored_counts(&store).await;
+    // The store keeps a learning snapshot per change of the learning's mode (frozen or not,
+    // best part, wheel, grid) and replaces the newest otherwise.
+    let mut kept_learning = 0;
+    let mut previous = None;
+    for p in &pending {
+        if let camloop::service::journal::Pending::Learning { state, .. } = p {
+            let l = &state.learning;
+            let mode = (
+                state.schema,
+                l.points_per_rev,
+                l.frozen.clone(),
+                l.best.as_ref().map(|b| b.iteration),
+                state.wheel_radius_mm.to_bits(),
+            );
+            kept_learning += usize::from(previous.as_ref() != Some(&mode));
+            previous = Some(mode);
+        }
+    }
+    assert!(kept_learning >= 1);
     assert_eq!(
         stored,
-        [4, 5, count("Event"), count("Learning")],
+        [4, 5, count("Event"), kept_learning],
         "measurements, tables, events, learning states"
     );
     assert!(count("Learning") >= 4);

@@ -20,6 +20,7 @@ import os
 import random
 import signal
 import sqlite3
+import struct
 import subprocess
 import sys
 import tempfile
@@ -57,19 +58,107 @@ def start(dir, config):
     return subprocess.Popen([BINARY, "run", "--config", config], cwd=dir, stdout=log, stderr=log)
 
 
+def unzstd(blob, dictionary=b""):
+    """A packed blob (format byte 1, then zstd, see src/store/pack.rs) with the zstd tool."""
+    assert blob[0] == 1, "unknown packed format"
+    with tempfile.NamedTemporaryFile() as d:
+        d.write(dictionary)
+        d.flush()
+        args = ["zstd", "-d", "-c", "-q"] + (["-D", d.name] if dictionary else [])
+        return subprocess.run(args, input=blob[1:], capture_output=True, check=True).stdout
+
+
+def unpack_report(blob):
+    """The analysis report of a packed row (src/store/pack_report.rs), as a Python value."""
+    data, pos = unzstd(blob), 0
+
+    def u():
+        nonlocal pos
+        value, shift = 0, 0
+        while True:
+            b = data[pos]
+            pos += 1
+            value |= (b & 0x7F) << shift
+            shift += 7
+            if b < 0x80:
+                return value
+
+    def i():
+        v = u()
+        return (v >> 1) ^ -(v & 1)
+
+    def text():
+        nonlocal pos
+        n = u()
+        pos += n
+        return data[pos - n:pos].decode()
+
+    def value():
+        nonlocal pos
+        tag = data[pos]
+        pos += 1
+        if tag in (0, 1, 2):
+            return [None, False, True][tag]
+        if tag == 3:
+            return i()
+        if tag == 4:
+            return u()
+        if tag == 5:
+            return i() / 100.0
+        if tag == 6:
+            pos += 8
+            return struct.unpack("<d", data[pos - 8:pos])[0]
+        if tag == 7:
+            return text()
+        if tag == 8:
+            return [value() for _ in range(u())]
+        if tag == 10:
+            out, prev = [], 0
+            for _ in range(u()):
+                prev += i()
+                out.append(prev / 100.0)
+            return out
+        if tag == 9:
+            return {text(): value() for _ in range(u())}
+        raise ValueError(f"unknown tag {tag}")
+
+    return value()
+
+
+def report(codec, text, packed):
+    return json.loads(text) if codec == 0 else unpack_report(packed)
+
+
+def newest_state(db):
+    """The newest learning state, unpacked along its chain (src/store/chain.rs)."""
+    row = db.execute("SELECT id FROM learning_states ORDER BY id DESC LIMIT 1").fetchone()
+    if row is None:
+        return None
+
+    def plain(id):
+        codec, base, text, packed = db.execute(
+            "SELECT codec, base_id, state_json, state_packed FROM learning_states WHERE id = ?", (id,)
+        ).fetchone()
+        if codec == 0:
+            return text.encode()
+        return unzstd(packed, plain(base) if base is not None else b"")
+
+    return json.loads(plain(row[0]))
+
+
 def rows(dir):
     db = sqlite3.connect(os.path.join(dir, "var", "camloop.db"))
     n, distinct = db.execute("SELECT COUNT(*), COUNT(DISTINCT sha256) FROM measurements").fetchone()
     errors = [
-        max(abs(e) for e in json.loads(a)["error_um"])
-        for (a,) in db.execute(
-            "SELECT d.analysis_json FROM measurements m JOIN measurement_data d "
-            "ON d.measurement_id = m.id ORDER BY m.id"
+        max(abs(e) for e in report(codec, text, packed)["error_um"])
+        for (codec, text, packed) in db.execute(
+            "SELECT d.codec, d.analysis_json, d.analysis_packed FROM measurements m "
+            "JOIN measurement_data d ON d.measurement_id = m.id ORDER BY m.id"
         )
     ]
-    state = db.execute("SELECT state_json FROM learning_states ORDER BY id DESC LIMIT 1").fetchone()
+    state = newest_state(db)
     db.close()
-    return n, distinct, errors, json.loads(state[0]) if state else None
+    return n, distinct, errors, state
 
 
 def stop(proc):

@@ -6,7 +6,9 @@
 //! second in round-robin (row n: machine n mod 8, lobe (n div 8) mod 16), so each lobe holds
 //! n/128 measurements spread over the whole time range, as a busy plant would. 1 in 23 fails.
 //! Each measurement has a 1,440-byte averaged profile (360 i32 values) and a small report;
-//! raw revolutions are NULL, as retention leaves them in a store this old.
+//! raw revolutions are NULL, as retention leaves them in a store this old. The rows are in
+//! the version-1 layout (`codec` 0), which every read understands; the store packs them
+//! when it next connects.
 //!
 //! Used by `benches/store.rs` through `#[path]`; not part of the library.
 
@@ -54,9 +56,9 @@ pub async fn seed(store: &Store, n: i64) -> Result<(), sqlx::Error> {
             .execute(&mut *tx)
             .await?;
             sqlx::query(
-                "INSERT INTO measurement_data (measurement_id, raw_revolutions, \
+                "INSERT INTO measurement_data (measurement_id, codec, raw_revolutions, \
                  averaged_profile, analysis_json) \
-                 SELECT id, NULL, zeroblob(1440), '{\"seeded\":true}' FROM measurements",
+                 SELECT id, 0, NULL, zeroblob(1440), '{\"seeded\":true}' FROM measurements",
             )
             .execute(&mut *tx)
             .await?;
@@ -90,9 +92,9 @@ pub async fn seed(store: &Store, n: i64) -> Result<(), sqlx::Error> {
             .execute(&mut *tx)
             .await?;
             sqlx::query(
-                "INSERT INTO measurement_data (measurement_id, raw_revolutions, \
+                "INSERT INTO measurement_data (measurement_id, codec, raw_revolutions, \
                  averaged_profile, analysis_json) \
-                 SELECT id, NULL, decode(repeat('00', 1440), 'hex'), '{\"seeded\":true}' \
+                 SELECT id, 0, NULL, decode(repeat('00', 1440), 'hex'), '{\"seeded\":true}' \
                  FROM measurements",
             )
             .execute(&mut *tx)

@@ -4,10 +4,12 @@
 
 mod check;
 mod keys;
+mod mqtt;
 mod values;
 
 pub use check::{Checked, CheckedMachine, check, configured_features, load, machine_features};
 pub use keys::Lines;
+pub use mqtt::MqttSection;
 
 use crate::names::MachineName;
 use crate::sim::GrinderConfig;
@@ -30,6 +32,8 @@ pub struct Config {
     pub database: DatabaseSection,
     #[serde(default)]
     pub http: HttpSection,
+    #[serde(default)]
+    pub mqtt: MqttSection,
     #[serde(default)]
     pub machines: Vec<MachineSection>,
     /// Folder of the config file; relative paths in the file are resolved against it.
@@ -328,6 +332,7 @@ impl Config {
             ));
         }
         p.extend(self.http.problems(&self.lines));
+        p.extend(self.mqtt.problems(&self.lines));
         let mut names = std::collections::HashMap::new();
         for (i, m) in self.machines.iter().enumerate() {
             let at = |key: &str| self.line(&format!("machines[{i}]{key}"));

@@ -7,6 +7,7 @@ pub mod http;
 pub mod journal;
 pub mod machine;
 pub mod metrics;
+pub mod mqtt;
 pub mod sim_source;
 mod sources;
 mod store_guard;
@@ -138,6 +139,16 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
         shutdown_rx.clone(),
     ));
 
+    // MQTT: events to the plant's broker, when `[mqtt]` enables them.
+    let publisher = match config.mqtt.enabled {
+        true => Some(mqtt::Publisher::start(
+            &config.mqtt,
+            &config.var_dir().join("mqtt"),
+            shutdown_rx.clone(),
+        )?),
+        false => None,
+    };
+
     let mut machine_tasks = Vec::new();
     let mut commands = std::collections::HashMap::new();
     let mut sources_done = Vec::new();
@@ -148,6 +159,7 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
         metrics: metrics.clone(),
         shutdown: shutdown_rx.clone(),
         parts: options.parts,
+        plant_events: publisher.as_ref().map(mqtt::Publisher::sender),
     };
     for m in checked_machines {
         let section = config
@@ -206,6 +218,8 @@ struct Shared {
     metrics: Arc<Metrics>,
     shutdown: watch::Receiver<bool>,
     parts: Option<u64>,
+    /// Where the loops send plant events (MQTT), when enabled.
+    plant_events: Option<mqtt::EventSender>,
 }
 
 /// A machine's running tasks and how to reach them.
@@ -226,7 +240,7 @@ async fn wire_machine(
         share_dir: config.resolve(&m.share),
         state_dir: config.var_dir().join("machines").join(&m.name),
     };
-    let machine = MachineLoop::start(
+    let mut machine = MachineLoop::start(
         m.name.clone(),
         checked.setups,
         paths,
@@ -234,6 +248,7 @@ async fn wire_machine(
         shared.metrics.clone(),
     )
     .await?;
+    machine.set_plant_events(shared.plant_events.clone());
     let (tx, rx) = mpsc::channel::<SourceEvent>(16);
     let (command_tx, command_rx) = mpsc::channel::<http::Command>(4);
     sources::spawn(

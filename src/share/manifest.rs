@@ -32,6 +32,9 @@ pub enum Record {
     Pushed { version: u64, at_unix_ms: u64 },
     /// The kept text was removed (older than the kept versions); the record stays.
     Pruned { version: u64, at_unix_ms: u64 },
+    /// The first line of a compacted manifest: the versions held when it was compacted
+    /// (see [`super::compact`]); the lines before it went to the archive file.
+    Checkpoint(Box<super::compact::Checkpoint>),
 }
 
 /// A version as requested: what it contains and why it was made.
@@ -69,7 +72,8 @@ pub struct FileRecord {
 }
 
 /// Where a version stands.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "status", rename_all = "snake_case")]
 pub enum VersionStatus {
     /// Not delivered yet; `reason` is the last failure, if an attempt was made.
     Waiting { reason: Option<String> },
@@ -84,7 +88,7 @@ pub enum VersionStatus {
 }
 
 /// A version and what happened to it.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct VersionState {
     pub record: VersionRecord,
     pub status: VersionStatus,
@@ -116,14 +120,16 @@ pub struct RecordOutOfOrder(pub String);
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct History {
     /// Ascending by version; without gaps until versions are forgotten.
-    versions: Vec<VersionState>,
+    pub(super) versions: Vec<VersionState>,
     /// Versions told of so far (the highest version number).
-    told: u64,
+    pub(super) told: u64,
     /// The one deliverable version, if any (accepting a version supersedes the previous
     /// deliverable one, so there is never more than one).
-    deliverable: Option<u64>,
+    pub(super) deliverable: Option<u64>,
     /// Versions dropped by [`History::forget_settled`].
-    forgotten: u64,
+    pub(super) forgotten: u64,
+    /// Versions pushed and verified so far, held or forgotten.
+    pub(super) pushed: u64,
 }
 /// A manifest read from disk.
 #[derive(Debug, Clone, PartialEq)]
@@ -169,6 +175,11 @@ impl History {
     /// The number the next version gets.
     pub fn next_version(&self) -> u64 {
         self.told + 1
+    }
+
+    /// How many versions were pushed and verified so far (forgotten ones included).
+    pub fn pushed_count(&self) -> u64 {
+        self.pushed
     }
 
     /// How many versions were dropped from memory so far.
@@ -219,6 +230,7 @@ impl History {
     /// Fold one record in, checking that it follows from what came before.
     pub fn apply(&mut self, record: Record) -> Result<(), RecordOutOfOrder> {
         match record {
+            Record::Checkpoint(c) => self.restore(*c)?,
             Record::Version(rec) => {
                 if rec.version != self.next_version() {
                     return Err(RecordOutOfOrder(format!(
@@ -274,6 +286,7 @@ impl History {
                 }
                 v.status = VersionStatus::Pushed { at_unix_ms };
                 self.deliverable = None;
+                self.pushed += 1;
             }
             Record::Pruned { version, .. } => {
                 let v = self.get_mut(version).ok_or_else(|| {

@@ -38,12 +38,14 @@
 //! not). Any other number is recorded as refused, so the table the control may be using is
 //! never redefined.
 
+mod compact;
 mod error;
 mod fs;
 mod manifest;
 mod state;
 mod store;
 
+pub use compact::{ARCHIVE_FILE, COMPACT_AFTER_LINES, Checkpoint};
 pub use error::{PushError, ShareError, StateError};
 pub use fs::{RealFs, ShareFs, TEMP_PREFIX, lower_hex, sha256_hex};
 pub use manifest::{

@@ -153,6 +153,7 @@ impl Share {
             Ok(removed) => report.removed_share_temporaries = removed,
             Err(e) => report.share_unavailable = Some(e),
         }
+        share.compact_if_long();
         Ok((share, report))
     }
 
@@ -523,7 +524,29 @@ impl Share {
             })?;
         // Keeps memory bounded in a service that pushes for months; the manifest keeps all.
         self.history.forget_settled();
+        self.compact_if_long();
         Ok(())
+    }
+
+    /// Compacts the manifest once it is long (see [`super::compact`]). A failure leaves the
+    /// manifest whole and is retried with the next line, so it is only reported.
+    fn compact_if_long(&mut self) {
+        if self.manifest_lines < super::compact::COMPACT_AFTER_LINES {
+            return;
+        }
+        let at = (self.clock)();
+        let dir = &self.config.state_dir;
+        match super::compact::compact(
+            dir,
+            MANIFEST_FILE,
+            &dir.join(VERSIONS_DIR),
+            &self.history,
+            self.manifest_lines,
+            at,
+        ) {
+            Ok(()) => self.manifest_lines = 1,
+            Err(e) => tracing::warn!(error = %e, "manifest not compacted; retried later"),
+        }
     }
 }
 

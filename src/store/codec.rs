@@ -10,6 +10,43 @@ use super::error::StoreError;
 /// Lift units per mm in blobs: 0.1 µm.
 pub const UNITS_PER_MM: f64 = 10_000.0;
 
+/// `codec` of a row in the version-1 layout (i32 blobs, JSON text), as written before
+/// schema version 4 and not yet converted.
+pub(crate) const CODEC_PLAIN: i64 = 0;
+/// `codec` of a packed row (see [`super::pack`]).
+pub(crate) const CODEC_PACKED: i64 = 1;
+
+/// Lifts (mm) as units, with the checks of [`encode_lifts_mm`].
+pub(crate) fn encode_units(
+    lifts_mm: impl IntoIterator<Item = f64>,
+) -> Result<Vec<i32>, StoreError> {
+    let mut blob = Vec::new();
+    encode_lifts_mm(lifts_mm, &mut blob)?;
+    Ok(blob
+        .chunks_exact(4)
+        .map(|c| i32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect())
+}
+
+/// Units of a version-1 blob; a length not a multiple of 4 is a corrupt row.
+pub(crate) fn decode_units(blob: &[u8]) -> Result<Vec<i32>, StoreError> {
+    if !blob.len().is_multiple_of(4) {
+        return Err(StoreError::invalid(
+            "lift blob",
+            format!("length {} is not a multiple of 4", blob.len()),
+        ));
+    }
+    Ok(blob
+        .chunks_exact(4)
+        .map(|c| i32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect())
+}
+
+/// Units as mm, the way a version-1 blob was always read.
+pub(crate) fn units_to_mm(units: &[i32]) -> Vec<f64> {
+    units.iter().map(|&u| f64::from(u) / UNITS_PER_MM).collect()
+}
+
 /// Encodes lifts (mm) for a blob; rejects NaN, infinities and values beyond ±214 m.
 pub fn encode_lifts_mm(
     lifts_mm: impl IntoIterator<Item = f64>,

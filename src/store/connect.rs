@@ -169,7 +169,19 @@ impl Store {
             no_tx: false,
         };
         let result = super::with_write!(self, pool => migrator.run(pool).await);
-        result.map_err(|e| self.migrate_error(e))
+        result.map_err(|e| self.migrate_error(e))?;
+        // Schema version 4 packs the rows written before it; a no-op once done.
+        let packed = self.pack_legacy_rows().await?;
+        if packed != super::Converted::default() {
+            tracing::info!(
+                measurements = packed.measurements,
+                table_versions = packed.table_versions,
+                learning_states = packed.learning_states,
+                left_as_they_were = packed.left_as_they_were,
+                "history rows packed in place (schema version 4)"
+            );
+        }
+        Ok(())
     }
 
     fn migrate_error(&self, e: MigrateError) -> StoreError {

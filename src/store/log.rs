@@ -1,12 +1,23 @@
 //! Machines, recipe snapshots, wheel dressings, events and learning-state snapshots.
 
-use super::codec::{check_finite, check_json, check_limit, check_name, sha256_hex};
+use super::chain::{LEARNING_STATES, fetch_chain, next_link};
+use super::codec::{
+    CODEC_PACKED, check_finite, check_json, check_limit, check_name, check_sha256, sha256_hex,
+};
 use super::measurements::{Bind, Conditions, fetch_all_dynamic};
+use super::pack::pack_text;
 use super::{
     Dressing, DressingId, Event, EventFilter, EventId, EventLevel, Feature, FeatureKind,
     LearningState, Machine, NewDressing, NewEvent, NewRecipeSnapshot, RecipeSnapshotId, Store,
     StoreError, col, with_read, with_write,
 };
+
+/// The newest learning state of (machine, lobe) when it has meaning `$3` and no row is
+/// packed against it: the one a snapshot with the same meaning replaces.
+const REPLACEABLE_STATE: &str = "SELECT n.id, n.base_id FROM learning_states n WHERE n.id = \
+     (SELECT MAX(id) FROM learning_states WHERE machine = $1 AND lobe = $2) \
+     AND n.meaning_sha256 = $3 AND NOT EXISTS \
+     (SELECT 1 FROM learning_states c WHERE c.base_id = n.id)";
 
 const ENSURE_MACHINE: &str =
     "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) ON CONFLICT (name) DO NOTHING";
@@ -278,6 +289,7 @@ impl Store {
     }
 
     /// Appends a learning-state snapshot of (machine, lobe); the newest one wins on load.
+    /// Every call keeps a row (see [`Store::save_learning_snapshot`] to keep fewer).
     pub async fn save_learning_state(
         &self,
         machine: &str,
@@ -285,9 +297,30 @@ impl Store {
         state_json: &str,
         saved_at_ms: i64,
     ) -> Result<(), StoreError> {
+        self.save_learning_snapshot(machine, lobe, state_json, None, saved_at_ms)
+            .await
+    }
+
+    /// Saves a learning-state snapshot of (machine, lobe). `meaning_sha256` identifies what
+    /// of the state matters to history (the caller decides, e.g. a digest of the correction
+    /// and the learning's mode): when the newest row has the same one, that row is replaced
+    /// by this snapshot instead of a row being added, so history keeps each meaningful change
+    /// plus the latest. `None` always adds a row.
+    pub async fn save_learning_snapshot(
+        &self,
+        machine: &str,
+        lobe: &str,
+        state_json: &str,
+        meaning_sha256: Option<&str>,
+        saved_at_ms: i64,
+    ) -> Result<(), StoreError> {
         check_name("machine", machine)?;
         check_name("lobe", lobe)?;
         check_json("state_json", state_json)?;
+        if let Some(m) = meaning_sha256 {
+            check_sha256("meaning_sha256", m)?;
+        }
+        let state_sha256 = sha256_hex(state_json.as_bytes());
         const OP: &str = "saving learning state";
         with_write!(self, pool => {
             let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
@@ -297,17 +330,57 @@ impl Store {
                 .execute(&mut *tx)
                 .await
                 .map_err(self.db_error(OP))?;
-            sqlx::query(
-                "INSERT INTO learning_states (machine, lobe, state_json, saved_at_ms) \
-                 VALUES ($1, $2, $3, $4)",
-            )
-            .bind(machine)
-            .bind(lobe)
-            .bind(state_json)
-            .bind(saved_at_ms)
-            .execute(&mut *tx)
-            .await
-            .map_err(self.db_error(OP))?;
+            let replace: Option<(i64, Option<i64>)> = match meaning_sha256 {
+                None => None,
+                Some(meaning) => sqlx::query_as(REPLACEABLE_STATE)
+                    .bind(machine)
+                    .bind(lobe)
+                    .bind(meaning)
+                    .fetch_optional(&mut *tx)
+                    .await
+                    .map_err(self.db_error(OP))?,
+            };
+            match replace {
+                Some((id, base_id)) => {
+                    let base = match base_id {
+                        Some(b) => fetch_chain!(self, &mut *tx, LEARNING_STATES, b).remove(0),
+                        None => String::new(),
+                    };
+                    let packed = pack_text("state_packed", state_json, &base)?;
+                    sqlx::query(
+                        "UPDATE learning_states SET state_packed = $1, state_sha256 = $2, \
+                         saved_at_ms = $3 WHERE id = $4",
+                    )
+                    .bind(packed)
+                    .bind(&state_sha256)
+                    .bind(saved_at_ms)
+                    .bind(id)
+                    .execute(&mut *tx)
+                    .await
+                    .map_err(self.db_error(OP))?;
+                }
+                None => {
+                    let (base_id, depth, base) = next_link!(self, tx, LEARNING_STATES, machine, lobe);
+                    let packed = pack_text("state_packed", state_json, &base[0])?;
+                    sqlx::query(
+                        "INSERT INTO learning_states (machine, lobe, saved_at_ms, codec, base_id, \
+                         chain_depth, state_packed, state_sha256, meaning_sha256) \
+                         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)",
+                    )
+                    .bind(machine)
+                    .bind(lobe)
+                    .bind(saved_at_ms)
+                    .bind(CODEC_PACKED)
+                    .bind(base_id)
+                    .bind(depth)
+                    .bind(packed)
+                    .bind(&state_sha256)
+                    .bind(meaning_sha256)
+                    .execute(&mut *tx)
+                    .await
+                    .map_err(self.db_error(OP))?;
+                }
+            }
             tx.commit().await.map_err(self.db_error(OP))?;
             Ok(())
         })
@@ -322,19 +395,52 @@ impl Store {
         state_json: &str,
         saved_at_ms: i64,
     ) -> Result<bool, StoreError> {
+        let state_sha256 = sha256_hex(state_json.as_bytes());
         with_write!(self, pool => {
             let found: Option<i64> = sqlx::query_scalar(
                 "SELECT id FROM learning_states WHERE machine = $1 AND lobe = $2 \
-                 AND saved_at_ms = $3 AND state_json = $4 LIMIT 1",
+                 AND saved_at_ms = $3 AND (state_sha256 = $4 OR state_json = $5) LIMIT 1",
             )
             .bind(machine)
             .bind(lobe)
             .bind(saved_at_ms)
+            .bind(&state_sha256)
             .bind(state_json)
             .fetch_optional(pool)
             .await
             .map_err(self.db_error("looking up a learning state"))?;
             Ok(found.is_some())
+        })
+    }
+
+    /// Whether the store holds this snapshot of (machine, lobe) or a later one: its newest
+    /// row was saved after `saved_at_ms`, or then with this very state. How a journal
+    /// replayed after a crash recognises learning it had already written, now that a
+    /// snapshot may have been replaced by a later one with the same meaning.
+    pub async fn learning_state_covered(
+        &self,
+        machine: &str,
+        lobe: &str,
+        state_json: &str,
+        saved_at_ms: i64,
+    ) -> Result<bool, StoreError> {
+        let state_sha256 = sha256_hex(state_json.as_bytes());
+        with_write!(self, pool => {
+            let newest: Option<(i64, Option<String>, Option<String>)> = sqlx::query_as(
+                "SELECT saved_at_ms, state_sha256, state_json FROM learning_states \
+                 WHERE machine = $1 AND lobe = $2 ORDER BY id DESC LIMIT 1",
+            )
+            .bind(machine)
+            .bind(lobe)
+            .fetch_optional(pool)
+            .await
+            .map_err(self.db_error("looking up a learning state"))?;
+            Ok(newest.is_some_and(|(at, sha, text)| {
+                at > saved_at_ms
+                    || (at == saved_at_ms
+                        && (sha.as_deref() == Some(state_sha256.as_str())
+                            || text.as_deref() == Some(state_json)))
+            }))
         })
     }
 
@@ -345,8 +451,8 @@ impl Store {
         lobe: &str,
     ) -> Result<Option<LearningState>, StoreError> {
         with_write!(self, pool => {
-            let row: Option<(String, i64)> = sqlx::query_as(
-                "SELECT state_json, saved_at_ms FROM learning_states \
+            let row: Option<(i64, i64)> = sqlx::query_as(
+                "SELECT id, saved_at_ms FROM learning_states \
                  WHERE machine = $1 AND lobe = $2 ORDER BY id DESC LIMIT 1",
             )
             .bind(machine)
@@ -354,7 +460,13 @@ impl Store {
             .fetch_optional(pool)
             .await
             .map_err(self.db_error("loading learning state"))?;
-            Ok(row.map(|(state_json, saved_at_ms)| LearningState { state_json, saved_at_ms }))
+            match row {
+                None => Ok(None),
+                Some((id, saved_at_ms)) => {
+                    let state_json = fetch_chain!(self, pool, LEARNING_STATES, id).remove(0);
+                    Ok(Some(LearningState { state_json, saved_at_ms }))
+                }
+            }
         })
     }
 }

@@ -2,9 +2,11 @@
 //! raw-blob retention.
 
 use super::codec::{
-    check_finite, check_json, check_limit, check_name, check_sha256, decode_cursor,
-    decode_lifts_mm, encode_cursor, encode_lifts_mm,
+    CODEC_PACKED, CODEC_PLAIN, check_finite, check_json, check_limit, check_name, check_sha256,
+    decode_cursor, decode_units, encode_cursor, encode_units, units_to_mm,
 };
+use super::pack::{pack_profile, pack_revolutions, unpack_profile, unpack_revolutions};
+use super::pack_report::{pack_report, unpack_report};
 use super::{
     HistoryFilter, MeasurementDetail, MeasurementId, MeasurementSummary, NewMeasurement, Page,
     RecipeSnapshotId, Store, StoreError, Verdict, col, with_read, with_write,
@@ -104,22 +106,93 @@ macro_rules! detail_from_row {
     ($row:expr) => {{
         let row = $row;
         let summary = summary_from_row!(row);
-        let raw: Option<Vec<u8>> = col!(row, "raw_revolutions", "reading a measurement");
-        let averaged: Vec<u8> = col!(row, "averaged_profile", "reading a measurement");
-        let raw_lift_mm = match raw {
-            None => None,
-            Some(blob) => Some(split_revolutions(
-                decode_lifts_mm(&blob)?,
-                summary.points_per_rev,
-            )?),
-        };
-        MeasurementDetail {
-            averaged_lift_mm: decode_lifts_mm(&averaged)?,
+        let data = StoredData {
+            codec: col!(row, "codec", "reading a measurement"),
+            raw: col!(row, "raw_revolutions", "reading a measurement"),
+            averaged: col!(row, "averaged_profile", "reading a measurement"),
             analysis_json: col!(row, "analysis_json", "reading a measurement"),
+            analysis_packed: col!(row, "analysis_packed", "reading a measurement"),
+        };
+        let (raw_lift_mm, averaged_lift_mm, analysis_json) = data.decode(summary.points_per_rev)?;
+        MeasurementDetail {
+            averaged_lift_mm,
+            analysis_json,
             raw_lift_mm,
             summary,
         }
     }};
+}
+
+/// The columns of a `measurement_data` row, in either codec.
+pub(crate) struct StoredData {
+    pub(crate) codec: i64,
+    pub(crate) raw: Option<Vec<u8>>,
+    pub(crate) averaged: Vec<u8>,
+    pub(crate) analysis_json: Option<String>,
+    pub(crate) analysis_packed: Option<Vec<u8>>,
+}
+
+/// Raw revolutions (if kept), averaged profile and report of a measurement.
+type Decoded = (Option<Vec<Vec<f64>>>, Vec<f64>, String);
+
+impl StoredData {
+    /// Lift units of the averaged profile and (if kept) the raw revolutions.
+    pub(crate) fn units(
+        &self,
+        points_per_rev: u32,
+    ) -> Result<(Vec<i32>, Option<Vec<i32>>), StoreError> {
+        match self.codec {
+            CODEC_PLAIN => Ok((
+                decode_units(&self.averaged)?,
+                self.raw.as_deref().map(decode_units).transpose()?,
+            )),
+            CODEC_PACKED => {
+                let averaged = unpack_profile(&self.averaged, points_per_rev as usize)?;
+                let raw = match &self.raw {
+                    None => None,
+                    Some(blob) => Some(unpack_revolutions(blob, &averaged)?),
+                };
+                Ok((averaged, raw))
+            }
+            other => Err(StoreError::invalid(
+                "codec",
+                format!("unknown codec {other}"),
+            )),
+        }
+    }
+
+    pub(crate) fn analysis(&self) -> Result<String, StoreError> {
+        match (self.codec, &self.analysis_json, &self.analysis_packed) {
+            (CODEC_PLAIN, Some(text), _) => Ok(text.clone()),
+            (CODEC_PACKED, _, Some(blob)) => unpack_report(blob),
+            (codec, _, _) => Err(StoreError::invalid(
+                "analysis",
+                format!("codec {codec} row without its report"),
+            )),
+        }
+    }
+
+    fn decode(&self, points_per_rev: u32) -> Result<Decoded, StoreError> {
+        let (averaged, raw) = self.units(points_per_rev)?;
+        let raw = match raw {
+            None => None,
+            Some(units) => Some(split_revolutions(units_to_mm(&units), points_per_rev)?),
+        };
+        Ok((raw, units_to_mm(&averaged), self.analysis()?))
+    }
+}
+
+/// Packed `raw_revolutions`, `averaged_profile` and `analysis_packed`.
+pub(crate) type PackedData = (Option<Vec<u8>>, Vec<u8>, Vec<u8>);
+
+/// The packed columns of a new row: raw revolutions, averaged profile, report.
+pub(crate) fn pack_data(
+    raw: Option<&[i32]>,
+    averaged: &[i32],
+    analysis_json: &str,
+) -> Result<PackedData, StoreError> {
+    let raw = raw.map(|r| pack_revolutions(r, averaged)).transpose()?;
+    Ok((raw, pack_profile(averaged)?, pack_report(analysis_json)?))
 }
 
 fn to_u32(field: &'static str, value: i64) -> Result<u32, StoreError> {
@@ -180,12 +253,10 @@ impl Store {
         let raw = if m.raw_lift_mm.is_empty() {
             None
         } else {
-            let mut blob = Vec::with_capacity(4 * m.raw_lift_mm.len() * m.averaged_lift_mm.len());
-            encode_lifts_mm(m.raw_lift_mm.iter().flatten().copied(), &mut blob)?;
-            Some(blob)
+            Some(encode_units(m.raw_lift_mm.iter().flatten().copied())?)
         };
-        let mut averaged = Vec::with_capacity(4 * m.averaged_lift_mm.len());
-        encode_lifts_mm(m.averaged_lift_mm.iter().copied(), &mut averaged)?;
+        let averaged = encode_units(m.averaged_lift_mm.iter().copied())?;
+        let (raw, averaged, analysis) = pack_data(raw.as_deref(), &averaged, &m.analysis_json)?;
         const OP: &str = "inserting a measurement";
         with_write!(self, pool => {
             let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
@@ -224,13 +295,14 @@ impl Store {
             let id = match inserted {
                 Some(id) => {
                     sqlx::query(
-                        "INSERT INTO measurement_data (measurement_id, raw_revolutions, \
-                         averaged_profile, analysis_json) VALUES ($1, $2, $3, $4)",
+                        "INSERT INTO measurement_data (measurement_id, codec, raw_revolutions, \
+                         averaged_profile, analysis_packed) VALUES ($1, $2, $3, $4, $5)",
                     )
                     .bind(id)
+                    .bind(CODEC_PACKED)
                     .bind(raw)
                     .bind(averaged)
-                    .bind(&m.analysis_json)
+                    .bind(analysis)
                     .execute(&mut *tx)
                     .await
                     .map_err(self.db_error(OP))?;
@@ -332,7 +404,8 @@ impl Store {
         id: MeasurementId,
     ) -> Result<Option<MeasurementDetail>, StoreError> {
         let sql = format!(
-            "SELECT {SUMMARY_COLUMNS}, d.raw_revolutions, d.averaged_profile, d.analysis_json \
+            "SELECT {SUMMARY_COLUMNS}, d.codec, d.raw_revolutions, d.averaged_profile, \
+             d.analysis_json, d.analysis_packed \
              FROM measurements m JOIN measurement_data d ON d.measurement_id = m.id WHERE m.id = $1"
         );
         with_read!(self, pool => {
@@ -359,7 +432,8 @@ impl Store {
     ) -> Result<Vec<MeasurementDetail>, StoreError> {
         let limit = check_limit(limit)?;
         let sql = format!(
-            "SELECT {SUMMARY_COLUMNS}, d.raw_revolutions, d.averaged_profile, d.analysis_json \
+            "SELECT {SUMMARY_COLUMNS}, d.codec, d.raw_revolutions, d.averaged_profile, \
+             d.analysis_json, d.analysis_packed \
              FROM measurements m JOIN measurement_data d ON d.measurement_id = m.id \
              WHERE m.received_at_ms >= $1 AND m.received_at_ms < $2 AND m.id > $3 \
              ORDER BY m.id LIMIT $4"

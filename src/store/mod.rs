@@ -20,12 +20,16 @@
 //! ([`Store::prune_raw_older_than`]) setting a raw blob to NULL; table-version status
 //! changes are appended rows; the newest learning-state row wins.
 
+mod chain;
 mod codec;
 mod connect;
+mod convert;
 mod error;
 mod identity;
 mod log;
 mod measurements;
+mod pack;
+mod pack_report;
 mod tables;
 mod types;
 mod views;
@@ -38,8 +42,10 @@ use sqlx::sqlite::SqlitePool;
 use tokio::sync::{Semaphore, SemaphorePermit};
 
 pub use codec::{UNITS_PER_MM, decode_lifts_mm, encode_lifts_mm, sha256_hex};
+pub use convert::Converted;
 pub use error::{Detail, StoreError};
 pub use identity::StoreIdentity;
+pub use pack_report::REPORT_STEP;
 pub use types::*;
 pub use views::{AckOutcome, EventAck, TableVersionHead};
 
@@ -63,6 +69,12 @@ pub const MIGRATIONS: &[(i64, &str, &str, &str)] = &[
         "event_ack",
         include_str!("../../migrations/sqlite/0003_event_ack.sql"),
         include_str!("../../migrations/postgres/0003_event_ack.sql"),
+    ),
+    (
+        4,
+        "compact_history",
+        include_str!("../../migrations/sqlite/0004_compact_history.sql"),
+        include_str!("../../migrations/postgres/0004_compact_history.sql"),
     ),
 ];
 
@@ -215,6 +227,12 @@ impl Store {
         match &self.pools {
             Pools::Sqlite { write, read } => {
                 read.close().await;
+                // Leaves a file that holds everything, with an empty log, whenever the last
+                // connection's own checkpoint would finish (best effort: a failure leaves the
+                // log, which SQLite folds in at the next open).
+                let _ = sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
+                    .execute(write)
+                    .await;
                 write.close().await;
             }
             Pools::Postgres { write, read } => {

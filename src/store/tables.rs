@@ -1,19 +1,44 @@
 //! Table versions: each regenerated curve-table program, numbered per (machine, lobe), with
 //! its status kept as appended rows (the newest row is the current status).
 
-use super::codec::{check_json, check_limit, check_name, sha256_hex};
+use super::chain::{TABLE_VERSIONS, fetch_chain, next_link};
+use super::codec::{CODEC_PACKED, check_json, check_limit, check_name, sha256_hex};
+use super::pack::pack_text;
 use super::{
     NewTableVersion, Store, StoreError, TableStatus, TableVersion, col, with_read, with_write,
 };
 
-const SELECT_VERSION: &str = "SELECT t.machine, t.lobe, t.version, t.parent_version, \
-     t.table_number, t.program_text, t.sha256, t.learning_params_json, t.reason, \
+const SELECT_VERSION: &str = "SELECT t.id, t.machine, t.lobe, t.version, t.parent_version, \
+     t.table_number, t.sha256, t.reason, \
      t.created_at_ms, s.status, s.why, s.at_ms \
      FROM table_versions t JOIN table_version_status s ON s.id = \
      (SELECT MAX(s2.id) FROM table_version_status s2 WHERE s2.table_version_id = t.id) \
      WHERE t.machine = $1 AND t.lobe = $2";
 
+/// A table version with its texts: the row's summary columns, then the program and the
+/// learning unpacked from its chain, the program checked against its SHA-256.
 macro_rules! version_from_row {
+    ($store:expr, $pool:expr, $row:expr) => {{
+        let row = $row;
+        let id: i64 = col!(row, "id", "reading a table version");
+        let mut v = version_summary!(row);
+        let mut texts = fetch_chain!($store, $pool, TABLE_VERSIONS, id).into_iter();
+        v.program_text = texts.next().unwrap_or_default();
+        v.learning_params_json = texts.next().unwrap_or_default();
+        if sha256_hex(v.program_text.as_bytes()) != v.sha256 {
+            return Err(StoreError::invalid(
+                "program_text",
+                format!(
+                    "table version {} of machine {} lobe {} does not match its SHA-256",
+                    v.version, v.machine, v.lobe
+                ),
+            ));
+        }
+        v
+    }};
+}
+
+macro_rules! version_summary {
     ($row:expr) => {{
         let row = $row;
         let status: String = col!(row, "status", "reading a table version");
@@ -29,9 +54,9 @@ macro_rules! version_from_row {
                     format!("stored value {table_number} out of range"),
                 )
             })?,
-            program_text: col!(row, "program_text", "reading a table version"),
+            program_text: String::new(),
             sha256: col!(row, "sha256", "reading a table version"),
-            learning_params_json: col!(row, "learning_params_json", "reading a table version"),
+            learning_params_json: String::new(),
             reason: col!(row, "reason", "reading a table version"),
             created_at_ms: col!(row, "created_at_ms", "reading a table version"),
             status: TableStatus::parse(&status)?,
@@ -81,10 +106,15 @@ impl Store {
                     });
                 }
             }
+            let (base_id, depth, base) = next_link!(self, tx, TABLE_VERSIONS, &t.machine, &t.lobe);
+            let program = pack_text("program_packed", &t.program_text, &base[0])?;
+            let learning = pack_text("learning_packed", &t.learning_params_json, &base[1])?;
             let (id, version): (i64, i64) = sqlx::query_as(
                 "INSERT INTO table_versions (machine, lobe, version, parent_version, \
-                 table_number, program_text, sha256, learning_params_json, reason, created_at_ms) \
-                 SELECT $1, $2, COALESCE($10, COALESCE(MAX(version), 0) + 1), $3, $4, $5, $6, $7, $8, $9 \
+                 table_number, sha256, reason, created_at_ms, codec, base_id, chain_depth, \
+                 program_packed, learning_packed) \
+                 SELECT $1, $2, COALESCE($8, COALESCE(MAX(version), 0) + 1), $3, $4, $5, $6, $7, \
+                 $9, $10, $11, $12, $13 \
                  FROM table_versions WHERE machine = $1 AND lobe = $2 \
                  RETURNING id, version",
             )
@@ -92,12 +122,15 @@ impl Store {
             .bind(&t.lobe)
             .bind(t.parent_version)
             .bind(i64::from(t.table_number))
-            .bind(&t.program_text)
             .bind(&sha256)
-            .bind(&t.learning_params_json)
             .bind(&t.reason)
             .bind(t.created_at_ms)
             .bind(t.version)
+            .bind(CODEC_PACKED)
+            .bind(base_id)
+            .bind(depth)
+            .bind(program)
+            .bind(learning)
             .fetch_one(&mut *tx)
             .await
             .map_err(self.db_error(OP))?;
@@ -233,7 +266,11 @@ impl Store {
                 .fetch_all(pool)
                 .await
                 .map_err(self.db_error("listing table versions"))?;
-            rows.iter().map(|row| Ok(version_from_row!(row))).collect()
+            let mut versions = Vec::with_capacity(rows.len());
+            for row in &rows {
+                versions.push(version_from_row!(self, pool, row));
+            }
+            Ok(versions)
         })
     }
 
@@ -255,7 +292,7 @@ impl Store {
                 .map_err(self.db_error("reading a table version"))?;
             match row {
                 None => Ok(None),
-                Some(row) => Ok(Some(version_from_row!(&row))),
+                Some(row) => Ok(Some(version_from_row!(self, pool, &row))),
             }
         })
     }

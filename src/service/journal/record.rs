@@ -212,7 +212,7 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
             saved_at_ms,
         } => {
             store
-                .learning_state_exists(machine, lobe, &state_json(state)?, *saved_at_ms)
+                .learning_state_covered(machine, lobe, &state_json(state)?, *saved_at_ms)
                 .await?
         }
         Pending::Dressing { .. } => match record.dressing() {
@@ -229,6 +229,31 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
 
 fn state_json(state: &LoopMemory) -> Result<String, StoreError> {
     serde_json::to_string(state).map_err(|e| StoreError::invalid("learning state", e.to_string()))
+}
+
+/// What of a learning state history keeps a snapshot for: the learning's mode (frozen or
+/// not, and why), which part gave the best correction, the wheel and the grid. A snapshot
+/// that differs only in its counters, recent errors, remembered measurements or correction
+/// replaces the newest one: every correction is kept exactly with its table version.
+fn meaning_sha256(state: &LoopMemory) -> Result<String, StoreError> {
+    #[derive(Serialize)]
+    struct Meaning<'a> {
+        schema: u32,
+        points_per_rev: u32,
+        frozen: &'a Option<String>,
+        best_iteration: Option<u32>,
+        wheel_radius_mm: f64,
+    }
+    let meaning = Meaning {
+        schema: state.schema,
+        points_per_rev: state.learning.points_per_rev,
+        frozen: &state.learning.frozen,
+        best_iteration: state.learning.best.as_ref().map(|b| b.iteration),
+        wheel_radius_mm: state.wheel_radius_mm,
+    };
+    serde_json::to_vec(&meaning)
+        .map(|bytes| crate::store::sha256_hex(&bytes))
+        .map_err(|e| StoreError::invalid("learning state", e.to_string()))
 }
 
 pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreError> {
@@ -257,8 +282,15 @@ pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreEr
             state,
             saved_at_ms,
         } => {
+            let meaning = meaning_sha256(&state)?;
             store
-                .save_learning_state(&machine, &lobe, &state_json(&state)?, saved_at_ms)
+                .save_learning_snapshot(
+                    &machine,
+                    &lobe,
+                    &state_json(&state)?,
+                    Some(&meaning),
+                    saved_at_ms,
+                )
                 .await
         }
         record @ Pending::RecipeSnapshot { .. } => insert_snapshot(store, record).await,

@@ -33,6 +33,9 @@ pub struct FeatureLoop {
     pub(super) main: Arc<MainProgram>,
     /// The newest part's line, for the machine's line per shaft.
     pub(super) last_line: Option<super::ingest::PartLine>,
+    /// PLANT EVENTS HOOK (MQTT): set by the service after `start`; every record the journal
+    /// takes is offered to it (never blocks).
+    pub(super) plant_events: Option<crate::service::mqtt::EventSender>,
     /// Wheel radius the program on the share was made for (the simulator reads it).
     pub(super) table_wheel_radius_bits: Arc<AtomicU64>,
     /// The disk-full alarm was raised and not yet cleared.
@@ -83,6 +86,7 @@ impl FeatureLoop {
             metrics,
             main,
             last_line: None,
+            plant_events: None,
             table_wheel_radius_bits: Arc::new(AtomicU64::new(0)),
             disk_alarm: false,
         };
@@ -253,6 +257,9 @@ impl FeatureLoop {
                 false
             }
         };
+        if let Some(events) = self.plant_events.as_ref().filter(|_| kept) {
+            records.iter().for_each(|r| events.record(r));
+        }
         let failing = u64::from(!kept || self.journal.on_reserve());
         self.metrics
             .update(&self.name, |m| m.journal_failing = failing);

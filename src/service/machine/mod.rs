@@ -158,6 +158,13 @@ impl MachineLoop {
         Ok(machine)
     }
 
+    /// Where every feature's loop sends plant events (MQTT).
+    pub fn set_plant_events(&mut self, events: Option<crate::service::mqtt::EventSender>) {
+        for f in &mut self.features {
+            f.plant_events = events.clone();
+        }
+    }
+
     /// The loops of the features, in recipe (grinding) order.
     pub fn features(&self) -> &[FeatureLoop] {
         &self.features

@@ -1,0 +1,287 @@
+//! What the plant hears: typed events made from the loop's journal records, their topics
+//! and JSON payloads (units in the field names).
+
+use serde::{Deserialize, Serialize};
+
+use crate::service::journal::{EventKind, Pending};
+use crate::store::{EventLevel, TableStatus, Verdict};
+
+/// Topic level for events that concern the machine rather than one feature.
+pub const MACHINE_LEVEL: &str = "machine";
+
+/// One event for the broker.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
+pub enum PlantEvent {
+    PartAnalysed {
+        machine: String,
+        feature: String,
+        part: String,
+        at_ms: i64,
+        verdict: Verdict,
+        max_profile_error_um: f64,
+        base_radius_error_um: f64,
+        phase_error_deg: f64,
+        /// Version of the table the part was ground with (0: none known).
+        ground_with_version: u64,
+    },
+    TableDelivered {
+        machine: String,
+        feature: String,
+        version: u64,
+        at_ms: i64,
+    },
+    TableRefused {
+        machine: String,
+        feature: String,
+        /// The refused version, when one was recorded.
+        version: Option<u64>,
+        reason: String,
+        at_ms: i64,
+    },
+    LearningFrozen {
+        machine: String,
+        at_ms: i64,
+        reason: String,
+    },
+    Dressing {
+        machine: String,
+        at_ms: i64,
+        old_radius_mm: f64,
+        new_radius_mm: f64,
+        source: String,
+    },
+    Alarm {
+        machine: String,
+        at_ms: i64,
+        level: EventLevel,
+        kind: String,
+        message: String,
+    },
+}
+
+impl PlantEvent {
+    /// The event a journal record announces, if any (learning snapshots and recipes are
+    /// the loop's own business).
+    pub fn from_pending(record: &Pending) -> Option<Self> {
+        Some(match record.clone() {
+            Pending::Measurement {
+                machine,
+                part,
+                lobe,
+                received_at_ms,
+                verdict,
+                max_profile_error_um,
+                base_radius_error_um,
+                phase_error_deg,
+                ground_with_version,
+                ..
+            } => PlantEvent::PartAnalysed {
+                machine,
+                feature: lobe,
+                part,
+                at_ms: received_at_ms,
+                verdict,
+                max_profile_error_um,
+                base_radius_error_um,
+                phase_error_deg,
+                ground_with_version,
+            },
+            Pending::Table {
+                machine,
+                lobe,
+                version,
+                status,
+                status_why,
+                created_at_ms,
+                ..
+            } => table_event(machine, lobe, version, status, status_why, created_at_ms)?,
+            Pending::TableStatus {
+                machine,
+                lobe,
+                version,
+                status,
+                why,
+                at_ms,
+            } => table_event(machine, lobe, version, status, why, at_ms)?,
+            Pending::Event {
+                machine,
+                at_ms,
+                level,
+                kind,
+                message,
+            } => match kind {
+                EventKind::LearningReverted => PlantEvent::LearningFrozen {
+                    machine,
+                    at_ms,
+                    reason: message,
+                },
+                // A table refused by the loop's checks before it got a version.
+                EventKind::TableRefused => PlantEvent::TableRefused {
+                    machine,
+                    feature: MACHINE_LEVEL.to_owned(),
+                    version: None,
+                    reason: message,
+                    at_ms,
+                },
+                // Told by the dressing record itself.
+                EventKind::WheelDressed => return None,
+                _ => PlantEvent::Alarm {
+                    machine,
+                    at_ms,
+                    level,
+                    kind: kind.as_str().to_owned(),
+                    message,
+                },
+            },
+            Pending::Dressing {
+                machine,
+                at_ms,
+                old_radius_mm,
+                new_radius_mm,
+                source,
+            } => PlantEvent::Dressing {
+                machine,
+                at_ms,
+                old_radius_mm,
+                new_radius_mm,
+                source,
+            },
+            Pending::Learning { .. } | Pending::RecipeSnapshot { .. } => return None,
+        })
+    }
+
+    pub fn machine(&self) -> &str {
+        match self {
+            PlantEvent::PartAnalysed { machine, .. }
+            | PlantEvent::TableDelivered { machine, .. }
+            | PlantEvent::TableRefused { machine, .. }
+            | PlantEvent::LearningFrozen { machine, .. }
+            | PlantEvent::Dressing { machine, .. }
+            | PlantEvent::Alarm { machine, .. } => machine,
+        }
+    }
+
+    /// The feature (lobe or pin) it concerns, or [`MACHINE_LEVEL`].
+    pub fn feature(&self) -> &str {
+        match self {
+            PlantEvent::PartAnalysed { feature, .. }
+            | PlantEvent::TableDelivered { feature, .. }
+            | PlantEvent::TableRefused { feature, .. } => feature,
+            _ => MACHINE_LEVEL,
+        }
+    }
+
+    /// The event's snake_case name, the last topic level.
+    pub fn name(&self) -> &'static str {
+        match self {
+            PlantEvent::PartAnalysed { .. } => "part_analysed",
+            PlantEvent::TableDelivered { .. } => "table_delivered",
+            PlantEvent::TableRefused { .. } => "table_refused",
+            PlantEvent::LearningFrozen { .. } => "learning_frozen",
+            PlantEvent::Dressing { .. } => "dressing",
+            PlantEvent::Alarm { .. } => "alarm",
+        }
+    }
+
+    /// `<prefix>/<machine>/<feature>/<event>`.
+    pub fn topic(&self, prefix: &str) -> String {
+        format!(
+            "{prefix}/{}/{}/{}",
+            self.machine(),
+            self.feature(),
+            self.name()
+        )
+    }
+
+    /// `<prefix>/<machine>/state`: the machine's newest event, retained by the broker.
+    pub fn state_topic(&self, prefix: &str) -> String {
+        format!("{prefix}/{}/state", self.machine())
+    }
+
+    pub fn payload(&self) -> String {
+        // Strings, numbers and enums only: serializing cannot fail.
+        serde_json::to_string(self).expect("a plant event serializes to JSON")
+    }
+}
+
+fn table_event(
+    machine: String,
+    feature: String,
+    version: u64,
+    status: TableStatus,
+    why: String,
+    at_ms: i64,
+) -> Option<PlantEvent> {
+    match status {
+        TableStatus::Pushed => Some(PlantEvent::TableDelivered {
+            machine,
+            feature,
+            version,
+            at_ms,
+        }),
+        TableStatus::Refused => Some(PlantEvent::TableRefused {
+            machine,
+            feature,
+            version: Some(version),
+            reason: why,
+            at_ms,
+        }),
+        TableStatus::Waiting => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn records_map_to_events_with_topics_and_unit_named_fields() {
+        let status = Pending::TableStatus {
+            machine: "G7".into(),
+            lobe: "IN1".into(),
+            version: 12,
+            status: TableStatus::Pushed,
+            why: "pushed".into(),
+            at_ms: 5,
+        };
+        let e = PlantEvent::from_pending(&status).unwrap();
+        assert_eq!(e.topic("plant"), "plant/G7/IN1/table_delivered");
+        assert_eq!(e.state_topic("plant"), "plant/G7/state");
+        assert_eq!(
+            e.payload(),
+            r#"{"event":"table_delivered","machine":"G7","feature":"IN1","version":12,"at_ms":5}"#
+        );
+        let dressing = Pending::Dressing {
+            machine: "G7".into(),
+            at_ms: 9,
+            old_radius_mm: 250.0,
+            new_radius_mm: 249.5,
+            source: "plc".into(),
+        };
+        let d = PlantEvent::from_pending(&dressing).unwrap();
+        assert_eq!(d.topic("p"), "p/G7/machine/dressing");
+        assert!(d.payload().contains(r#""new_radius_mm":249.5"#));
+        let event = |kind| Pending::Event {
+            machine: "G7".into(),
+            at_ms: 1,
+            level: EventLevel::Warn,
+            kind,
+            message: "diverging".into(),
+        };
+        let name = |kind| PlantEvent::from_pending(&event(kind)).map(|e| e.name());
+        assert_eq!(name(EventKind::LearningReverted), Some("learning_frozen"));
+        assert_eq!(name(EventKind::TableRefused), Some("table_refused"));
+        assert_eq!(name(EventKind::LearningHeld), Some("alarm"));
+        assert_eq!(name(EventKind::WheelDressed), None);
+        let waiting = Pending::TableStatus {
+            machine: "G7".into(),
+            lobe: "IN1".into(),
+            version: 13,
+            status: TableStatus::Waiting,
+            why: "share down".into(),
+            at_ms: 6,
+        };
+        assert_eq!(PlantEvent::from_pending(&waiting), None);
+    }
+}

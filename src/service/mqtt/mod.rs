@@ -1,0 +1,245 @@
+//! Events to the plant's MQTT broker (`[mqtt]`, off by default).
+//!
+//! The machine loops hand each journal record to an [`EventSender`] (never waiting: a full
+//! intake counts the event as dropped); an intake task turns it into a [`PlantEvent`] on
+//! its topic `<prefix>/<machine>/<feature>/<event>` plus the machine's retained state
+//! `<prefix>/<machine>/state`, and appends both to the on-disk [`queue::DiskQueue`]; the
+//! [`link`] sends the queue to the broker with QoS 1, in order, whenever the broker is
+//! there. A broker that is down never blocks a loop: events wait on disk up to
+//! `queue_max_events`, the oldest are dropped beyond it, and the number dropped is published
+//! on `<prefix>/<client_id>/queue_dropped` when the broker is back (and logged).
+
+mod event;
+mod link;
+pub mod queue;
+
+pub use event::{MACHINE_LEVEL, PlantEvent};
+pub use link::MAX_BACKOFF;
+
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+
+use anyhow::Context;
+use rumqttc::MqttOptions;
+use tokio::sync::{Notify, mpsc, watch};
+use tracing::warn;
+
+use crate::config::MqttSection;
+use crate::service::journal::Pending;
+use queue::{DiskQueue, Message};
+
+/// Events waiting for the intake task; beyond it an event is dropped (and counted).
+const INTAKE: usize = 4096;
+
+/// Where the machine loops send events. Cheap to clone; never blocks.
+#[derive(Debug, Clone)]
+pub struct EventSender {
+    tx: mpsc::Sender<PlantEvent>,
+    refused: Arc<AtomicU64>,
+}
+
+impl EventSender {
+    /// Queues the event of a journal record, if it announces one.
+    pub fn record(&self, record: &Pending) {
+        if let Some(event) = PlantEvent::from_pending(record) {
+            self.send(event);
+        }
+    }
+
+    pub fn send(&self, event: PlantEvent) {
+        if self.tx.try_send(event).is_err() {
+            self.refused.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// What the intake, the link and the owner share.
+/// What the publisher has done, published after every change (for tests and metrics).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Progress {
+    /// Events waiting on disk.
+    pub queued: usize,
+    /// Events (and drop reports) the broker acknowledged.
+    pub sent: u64,
+    /// Events dropped since start (queue or intake full), reported or not.
+    pub dropped: u64,
+    pub connected: bool,
+}
+
+#[derive(Debug)]
+struct Shared {
+    progress: watch::Sender<Progress>,
+    queue: Mutex<DiskQueue>,
+    refused: Arc<AtomicU64>,
+    connected: AtomicBool,
+    sent: AtomicU64,
+    client_id: String,
+    max: usize,
+}
+
+impl Shared {
+    fn queue(&self) -> MutexGuard<'_, DiskQueue> {
+        // A panic while holding the lock leaves a consistent queue (every change is one
+        // push or pop): keep going with it.
+        self.queue.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn set_connected(&self, on: bool) {
+        self.connected.store(on, Ordering::Relaxed);
+        self.progress();
+    }
+
+    /// Publishes the current [`Progress`].
+    fn progress(&self) {
+        let p = {
+            let q = self.queue();
+            Progress {
+                queued: q.len(),
+                sent: self.sent.load(Ordering::Relaxed),
+                dropped: q.dropped_total() + self.refused.load(Ordering::Relaxed),
+                connected: self.connected.load(Ordering::Relaxed),
+            }
+        };
+        self.progress.send_replace(p);
+    }
+
+    fn queued(&self) -> usize {
+        self.queue().len()
+    }
+
+    /// The next message to send: a drop report when messages were dropped, else the
+    /// oldest queued one; with the number of drops the report tells.
+    fn next_message(&self, prefix: &str) -> (Option<Message>, u64) {
+        let mut q = self.queue();
+        q.count_dropped(self.refused.swap(0, Ordering::Relaxed));
+        let dropped = q.dropped_unreported();
+        if dropped > 0 {
+            let report = serde_json::json!({
+                "event": "queue_dropped",
+                "client_id": self.client_id,
+                "dropped_events": dropped,
+                "queue_max_events": self.max,
+                "at_ms": crate::clock::now_ms(),
+            });
+            let topic = format!("{prefix}/{}/queue_dropped", self.client_id);
+            let m = Message {
+                topic,
+                payload: report.to_string(),
+                state_topic: None,
+            };
+            return (Some(m), dropped);
+        }
+        (q.front().cloned(), 0)
+    }
+
+    /// The message from [`Shared::next_message`] was acknowledged.
+    fn sent(&self, dropped_report: u64) {
+        let mut q = self.queue();
+        let done = if dropped_report > 0 {
+            q.dropped_reported(dropped_report);
+            Ok(())
+        } else {
+            q.pop_front()
+        };
+        drop(q);
+        if let Err(e) = done {
+            warn!(error = %e, "MQTT queue file cannot be updated: a sent event may be sent again");
+        }
+        self.sent.fetch_add(1, Ordering::Relaxed);
+        self.progress();
+    }
+}
+
+/// A running publisher: where to send events, and what it has done.
+#[derive(Debug)]
+pub struct Publisher {
+    sender: EventSender,
+    shared: Arc<Shared>,
+    tasks: Vec<tokio::task::JoinHandle<()>>,
+}
+
+impl Publisher {
+    /// Starts the intake and the link, the queue in `queue_dir`; they stop on `shutdown`.
+    pub fn start(
+        settings: &MqttSection,
+        queue_dir: &Path,
+        shutdown: watch::Receiver<bool>,
+    ) -> anyhow::Result<Self> {
+        let queue = DiskQueue::open(queue_dir, settings.queue_max_events)
+            .with_context(|| format!("MQTT queue in {}", queue_dir.display()))?;
+        let (tx, rx) = mpsc::channel(INTAKE);
+        let refused = Arc::new(AtomicU64::new(0));
+        let shared = Arc::new(Shared {
+            progress: watch::Sender::new(Progress::default()),
+            queue: Mutex::new(queue),
+            refused: refused.clone(),
+            connected: AtomicBool::new(false),
+            sent: AtomicU64::new(0),
+            client_id: settings.client_id.clone(),
+            max: settings.queue_max_events,
+        });
+        shared.progress();
+        let wake = Arc::new(Notify::new());
+        let mut options = MqttOptions::new(&settings.client_id, &settings.host, settings.port);
+        options.set_keep_alive(Duration::from_secs(settings.keep_alive_s));
+        options.set_clean_session(true);
+        let intake = tokio::spawn(intake(
+            rx,
+            settings.topic_prefix.clone(),
+            shared.clone(),
+            wake.clone(),
+        ));
+        let link = tokio::spawn(link::run(
+            options,
+            settings.topic_prefix.clone(),
+            shared.clone(),
+            wake,
+            shutdown,
+        ));
+        Ok(Self {
+            sender: EventSender { tx, refused },
+            shared,
+            tasks: vec![intake, link],
+        })
+    }
+
+    pub fn sender(&self) -> EventSender {
+        self.sender.clone()
+    }
+
+    /// Its progress, updated after every change.
+    pub fn progress(&self) -> watch::Receiver<Progress> {
+        self.shared.progress.subscribe()
+    }
+
+    /// Waits for both tasks to end (after shutdown, once every sender is dropped).
+    pub async fn join(self) {
+        drop(self.sender);
+        for t in self.tasks {
+            let _ = t.await;
+        }
+    }
+}
+
+/// Moves events from the loops to the disk queue.
+async fn intake(
+    mut rx: mpsc::Receiver<PlantEvent>,
+    prefix: String,
+    shared: Arc<Shared>,
+    wake: Arc<Notify>,
+) {
+    while let Some(event) = rx.recv().await {
+        let message = Message {
+            topic: event.topic(&prefix),
+            payload: event.payload(),
+            state_topic: Some(event.state_topic(&prefix)),
+        };
+        if let Err(e) = shared.queue().push(message) {
+            warn!(error = %e, "MQTT queue file cannot be written: event kept in memory only");
+        }
+        shared.progress();
+        wake.notify_one();
+    }
+}

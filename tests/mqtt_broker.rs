@@ -1,0 +1,325 @@
+//! Events to a real broker: Debian's `mosquitto`, started by the test on a free port. The
+//! publisher delivers events in order with QoS 1 and keeps the machine's state retained;
+//! while the broker is away, events wait on disk up to the bound, the oldest are dropped
+//! beyond it, and when the broker is back the drop count is published, then the rest.
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use camloop::config::{Config, MqttSection};
+use camloop::service::mqtt::{PlantEvent, Progress, Publisher};
+use camloop::service::{self, RunOptions};
+use camloop::store::Verdict;
+use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
+use tokio::sync::{mpsc, watch};
+
+/// Longest wait for anything the broker or the publisher should do; a failure, not a pace.
+const DEADLINE: Duration = Duration::from_secs(30);
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+fn is_root() -> bool {
+    std::fs::read_to_string("/proc/self/status")
+        .unwrap_or_default()
+        .lines()
+        .any(|l| l.starts_with("Uid:") && l.split_whitespace().nth(1) == Some("0"))
+}
+
+/// A running mosquitto, killed if the test fails before stopping it.
+struct Broker(Option<Child>);
+
+impl Drop for Broker {
+    fn drop(&mut self) {
+        if let Some(mut child) = self.0.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+/// Starts mosquitto on `port`, persisting sessions in `dir`; returns once it says it runs.
+fn broker(port: u16, dir: &Path) -> Broker {
+    let conf = dir.join("mosquitto.conf");
+    let user = if is_root() { "user root\n" } else { "" };
+    std::fs::write(
+        &conf,
+        format!(
+            "listener {port} 127.0.0.1\nallow_anonymous true\npersistence true\n\
+             persistence_location {}/\nlog_dest stderr\nlog_type all\n{user}",
+            dir.display()
+        ),
+    )
+    .unwrap();
+    let exe = ["/usr/sbin/mosquitto", "mosquitto"]
+        .into_iter()
+        .find(|p| Path::new(p).exists())
+        .unwrap_or("mosquitto");
+    let mut child = Command::new(exe)
+        .arg("-c")
+        .arg(&conf)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("mosquitto cannot start ({e}): install Debian's mosquitto"));
+    // Its log goes to stderr, which is not buffered: the line arrives when it is written.
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let mut seen = Vec::new();
+    loop {
+        match lines.next() {
+            Some(Ok(line)) => {
+                let running = line.contains(" running");
+                seen.push(line);
+                if running {
+                    break;
+                }
+            }
+            _ => panic!("mosquitto stopped before running: {seen:?}"),
+        }
+    }
+    // Keep reading its log so it never blocks on a full pipe.
+    std::thread::spawn(move || for _ in lines {});
+    Broker(Some(child))
+}
+
+/// Stops the broker as an operator would (SIGTERM: it saves its sessions) and waits.
+fn stop(mut broker: Broker) {
+    let mut child = broker.0.take().unwrap();
+    let status = Command::new("kill")
+        .arg("-TERM")
+        .arg(child.id().to_string())
+        .status()
+        .unwrap();
+    assert!(status.success());
+    child.wait().unwrap();
+}
+
+/// A subscriber on `filter` with a persistent session: what the broker sends it while it
+/// reconnects is kept for it. Messages come out as (topic, payload, retained).
+async fn subscriber(
+    port: u16,
+    id: &str,
+    filter: &str,
+    clean: bool,
+) -> mpsc::UnboundedReceiver<(String, serde_json::Value, bool)> {
+    let mut options = MqttOptions::new(id, "127.0.0.1", port);
+    options.set_clean_session(clean);
+    let (client, mut eventloop) = AsyncClient::new(options, 16);
+    let (tx, rx) = mpsc::unbounded_channel();
+    let (subscribed_tx, mut subscribed) = mpsc::channel(1);
+    let filter = filter.to_owned();
+    tokio::spawn(async move {
+        loop {
+            match eventloop.poll().await {
+                Ok(Event::Incoming(Packet::ConnAck(_))) => {
+                    client.subscribe(&filter, QoS::AtLeastOnce).await.unwrap();
+                }
+                Ok(Event::Incoming(Packet::SubAck(_))) => {
+                    let _ = subscribed_tx.try_send(());
+                }
+                Ok(Event::Incoming(Packet::Publish(p))) => {
+                    let payload = serde_json::from_slice(&p.payload).unwrap();
+                    if tx.send((p.topic, payload, p.retain)).is_err() {
+                        return;
+                    }
+                }
+                Ok(_) => {}
+                // The broker is away: rumqttc reconnects on the next poll; pace the retries.
+                Err(_) => tokio::time::sleep(Duration::from_millis(50)).await,
+            }
+        }
+    });
+    tokio::time::timeout(DEADLINE, subscribed.recv())
+        .await
+        .expect("subscribed");
+    rx
+}
+
+async fn next(
+    rx: &mut mpsc::UnboundedReceiver<(String, serde_json::Value, bool)>,
+) -> (String, serde_json::Value, bool) {
+    tokio::time::timeout(DEADLINE, rx.recv())
+        .await
+        .expect("a message within the deadline")
+        .unwrap()
+}
+
+/// The next message published since the subscription: retained copies that the broker
+/// hands out on (re)subscribing are skipped.
+async fn next_live(
+    rx: &mut mpsc::UnboundedReceiver<(String, serde_json::Value, bool)>,
+) -> (String, serde_json::Value, bool) {
+    loop {
+        let m = next(rx).await;
+        if !m.2 {
+            return m;
+        }
+    }
+}
+
+async fn until(
+    progress: &mut watch::Receiver<Progress>,
+    what: impl Fn(&Progress) -> bool,
+) -> Progress {
+    *tokio::time::timeout(DEADLINE, progress.wait_for(what))
+        .await
+        .expect("publisher progress within the deadline")
+        .unwrap()
+}
+
+fn part(n: u32) -> PlantEvent {
+    PlantEvent::PartAnalysed {
+        machine: "M1".into(),
+        feature: "IN1".into(),
+        part: format!("P{n}"),
+        at_ms: 1_000 * i64::from(n),
+        verdict: Verdict::Pass,
+        max_profile_error_um: 0.5 * f64::from(n),
+        base_radius_error_um: -0.25,
+        phase_error_deg: 0.01,
+        ground_with_version: u64::from(n),
+    }
+}
+
+/// Receives part `n`'s event and then its retained-state copy.
+async fn expect_part(rx: &mut mpsc::UnboundedReceiver<(String, serde_json::Value, bool)>, n: u32) {
+    let (topic, payload, _) = next_live(rx).await;
+    assert_eq!(topic, "plant/M1/IN1/part_analysed");
+    assert_eq!(payload["part"], format!("P{n}"), "{payload}");
+    assert_eq!(payload["max_profile_error_um"], 0.5 * f64::from(n));
+    assert_eq!(payload["event"], "part_analysed");
+    let (topic, state, _) = next_live(rx).await;
+    assert_eq!(topic, "plant/M1/state");
+    assert_eq!(state, payload);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn events_reach_a_real_broker_survive_its_outage_and_report_what_the_bound_dropped() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let broker_dir = dir.path().join("broker");
+    std::fs::create_dir(&broker_dir).unwrap();
+    let b = broker(port, &broker_dir);
+    let mut rx = subscriber(port, "plant-listener", "plant/#", false).await;
+    let settings = MqttSection {
+        enabled: true,
+        host: "127.0.0.1".into(),
+        port,
+        client_id: "camloop-test".into(),
+        topic_prefix: "plant".into(),
+        queue_max_events: 5,
+        keep_alive_s: 5,
+    };
+    let (shutdown_tx, shutdown) = watch::channel(false);
+    let publisher = Publisher::start(&settings, &dir.path().join("queue"), shutdown).unwrap();
+    let mut progress = publisher.progress();
+    let events = publisher.sender();
+
+    // Broker up: three parts arrive in order, each with the machine's state.
+    for n in 1..=3 {
+        events.send(part(n));
+    }
+    for n in 1..=3 {
+        expect_part(&mut rx, n).await;
+    }
+    until(&mut progress, |p| p.sent == 3 && p.queued == 0).await;
+
+    // Broker away: 12 more parts; the queue keeps the newest 5 and drops 7.
+    stop(b);
+    until(&mut progress, |p| !p.connected).await;
+    for n in 4..=15 {
+        events.send(part(n));
+    }
+    // Every event went through the intake: 5 kept and 7 dropped, none sent.
+    let p = until(&mut progress, |p| p.queued + p.dropped as usize == 12).await;
+    assert_eq!((p.queued, p.dropped, p.sent), (5, 7, 3));
+    // They wait on disk (at most twice the bound in lines before the file is rewritten).
+    let on_disk = std::fs::read_to_string(dir.path().join("queue/queue.jsonl")).unwrap();
+    assert!(on_disk.contains(r#"\"part\":\"P15\""#), "{on_disk}");
+    assert!((5..10).contains(&on_disk.lines().count()), "{on_disk}");
+
+    // Broker back (same port, same sessions): the drop report, then parts 11 to 15.
+    let b = broker(port, &broker_dir);
+    let (topic, report, _) = next_live(&mut rx).await;
+    assert_eq!(topic, "plant/camloop-test/queue_dropped");
+    assert_eq!(report["dropped_events"], 7);
+    assert_eq!(report["queue_max_events"], 5);
+    for n in 11..=15 {
+        expect_part(&mut rx, n).await;
+    }
+    let p = until(&mut progress, |p| p.queued == 0 && p.sent == 3 + 1 + 5).await;
+    assert!(p.connected);
+    assert_eq!(
+        std::fs::metadata(dir.path().join("queue/queue.jsonl"))
+            .unwrap()
+            .len(),
+        0,
+        "a sent queue leaves an empty file"
+    );
+
+    // A newcomer gets the machine's newest state, retained by the broker.
+    let mut late = subscriber(port, "plant-late", "plant/M1/state", true).await;
+    let (topic, state, retained) = next(&mut late).await;
+    assert_eq!(topic, "plant/M1/state");
+    assert!(retained);
+    assert_eq!(state["part"], "P15");
+
+    shutdown_tx.send(true).unwrap();
+    drop(events);
+    tokio::time::timeout(DEADLINE, publisher.join())
+        .await
+        .unwrap();
+    stop(b);
+}
+
+/// The service with `[mqtt]` on: the simulated machine's parts and deliveries reach the
+/// broker through the loop's hook, one event per part, in order.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_running_service_publishes_its_parts_and_tables() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let broker_dir = dir.path().join("broker");
+    std::fs::create_dir(&broker_dir).unwrap();
+    let b = broker(port, &broker_dir);
+    let mut rx = subscriber(port, "plant-service", "camloop/#", true).await;
+    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let text = format!(
+        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://{}/var/camloop.db?mode=rwc\"\n\
+         [http]\nlisten = \"127.0.0.1:0\"\n[mqtt]\nenabled = true\nport = {port}\n\
+         [[machines]]\nname = \"SIM1\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/SIM1\"\n\
+         [machines.gauge]\nkind = \"sim\"\npart_interval_ms = 20\nseed = 3\n",
+        dir.path().display(),
+        recipe.display()
+    );
+    let config = Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
+    let mut running = service::start(config, RunOptions::parts(3)).await.unwrap();
+    running.machines_done().await;
+    let mut parts = Vec::new();
+    let mut delivered = 0;
+    while parts.len() < 3 {
+        let (topic, payload, _) = next_live(&mut rx).await;
+        match topic.as_str() {
+            "camloop/SIM1/IN1/part_analysed" => {
+                assert!(payload["max_profile_error_um"].as_f64().unwrap() > 0.0);
+                parts.push(payload["part"].as_str().unwrap().to_owned());
+            }
+            "camloop/SIM1/IN1/table_delivered" => delivered += 1,
+            _ => {}
+        }
+    }
+    assert_eq!(parts.len(), 3, "{parts:?}");
+    assert!(parts.windows(2).all(|w| w[0] != w[1]), "{parts:?}");
+    assert!(
+        delivered >= 1,
+        "the first part's table was delivered before part 2"
+    );
+    running.stop().await;
+    stop(b);
+}
