@@ -16,8 +16,10 @@ use super::error::StoreError;
 
 /// Format byte of the blobs this build writes.
 const FORMAT_V1: u8 = 1;
-/// zstd level: the packs are small (a few KiB), where the higher levels cost little time.
-const LEVEL: i32 = 19;
+/// zstd level: 3. Level 19 packed about 20 % smaller but took ~10 ms per table inside the
+/// writer's transaction (an 8-lobe shaft at 360 points went from 13 to 79 ms p50, at 3600 points
+/// to 2.5 s); the part path matters more than the last kilobyte.
+const LEVEL: i32 = 3;
 
 fn corrupt(field: &'static str, why: impl Into<String>) -> StoreError {
     StoreError::invalid(field, why.into())
