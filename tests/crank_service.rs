@@ -256,18 +256,18 @@ async fn a_guard_blocking_part_after_part_is_one_alarm_and_a_higher_limit_finish
 }
 
 /// The demo crankshaft, four pins at 0/180/180/0: from the 4th shaft on every pin is round
-/// within 1.3 µm, at its index angle within 0.01° and at its stroke within 1 µm, for 40
-/// shafts with a dressing after the 20th.
+/// within 1.3 µm, at its index angle within 0.01° and at its stroke within 1 µm, for 100
+/// shafts with dressings after the 35th and the 70th.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_four_pin_crankshaft_converges_pin_by_pin() {
     let dir = tempfile::tempdir().unwrap();
     let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
     let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-crankshaft.toml");
-    let grinder = "dress_at_parts = [20]\nwear_um_per_part = 0.05\ndressing_error_um = 0.5\n\
+    let grinder = "dress_at_parts = [35, 70]\nwear_um_per_part = 0.05\ndressing_error_um = 0.5\n\
                    dressing_error_sigma_um = 0.25\n";
     let mut running = service::start(
         config(dir.path(), &url, &recipe, "CRANK4", grinder),
-        RunOptions::parts(40),
+        RunOptions::parts(100),
     )
     .await
     .unwrap();
@@ -278,7 +278,7 @@ async fn the_four_pin_crankshaft_converges_pin_by_pin() {
         let parts = pin_parts(&store, "CRANK4", pin, phase).await;
         let text = table(&parts);
         println!("{pin}:\n{text}");
-        assert_eq!(parts.len(), 40, "{pin}\n{text}");
+        assert_eq!(parts.len(), 100, "{pin}\n{text}");
         for p in parts.iter().filter(|p| p.number >= 4) {
             assert!(p.roundness_um < 1.3, "{pin}\n{text}");
             assert!(p.index_error_deg.abs() < 0.01, "{pin}\n{text}");
