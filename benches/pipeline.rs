@@ -102,7 +102,7 @@ fn loop_turn(c: &mut Criterion) {
         revolutions: 4,
         timing_error_deg: 0.0,
         timing_sigma_deg: 0.0,
-        parts_since_previous: 1,
+        part_number: None,
         previous: None,
     };
     c.bench_function("loop_learn_and_regenerate_360", |b| {

@@ -151,6 +151,9 @@ pub struct LearningState {
     /// was ground with, µm.
     #[serde(default)]
     pub last_size_disturbance_um: Option<f64>,
+    /// That part's number, when the gauge gave a number.
+    #[serde(default)]
+    pub last_size_disturbance_part: Option<u64>,
     /// The size correction a dressing starts from, µm: learned from the first part after
     /// each dressing, so a dresser's systematic error is corrected before it is ground.
     #[serde(default)]
@@ -177,6 +180,7 @@ impl LearningState {
             timing_correction_deg: 0.0,
             size_drift_um_per_part: 0.0,
             last_size_disturbance_um: None,
+            last_size_disturbance_part: None,
             dressing_offset_um: 0.0,
             dressed: false,
             iteration: 0,
@@ -202,10 +206,11 @@ pub struct PartError<'a> {
     /// mean over the root of Σ h′(ψ)² (h′ in mm/°); the timing deadband is
     /// `deadband_sigmas` of it, and never less than `timing_deadband_deg`.
     pub timing_sigma_deg: f64,
-    /// Parts ground since the one the table in force was learned from (1 when every part
-    /// is measured; more after a part that was not): the drift the table anticipated for
-    /// one part has run on for the others.
-    pub parts_since_previous: u32,
+    /// The part's number, when the gauge gave a number: the drift is the change of the size
+    /// disturbance over the parts since the one the learning state last saw (more than one
+    /// after a part not measured, or while the share refused tables and every part was
+    /// learned from the same state).
+    pub part_number: Option<u64>,
     /// The previous part of this feature, learned from or not: a limit bounds a step only
     /// when this part confirms that part's error (see [`step`]).
     pub previous: Option<PreviousPart>,
@@ -468,11 +473,15 @@ fn learn_correction(
     let disturbance = mean - in_force_size;
     next.dressed = false;
     next.last_size_disturbance_um = Some(disturbance);
+    next.last_size_disturbance_part = part.part_number;
     if state.dressed {
         // The dresser's error, not drift: the next dressing starts from what this one needed.
         next.dressing_offset_um = state.dressing_offset_um - params.gain * size;
     } else if let Some(before) = state.last_size_disturbance_um {
-        let parts = f64::from(part.parts_since_previous.max(1));
+        let parts = match (state.last_size_disturbance_part, part.part_number) {
+            (Some(before), Some(now)) if now > before => (now - before) as f64,
+            _ => 1.0,
+        };
         let observed = (disturbance - before) / parts;
         next.size_drift_um_per_part = state.size_drift_um_per_part
             + params.wear_gain * (observed - state.size_drift_um_per_part);
@@ -697,7 +706,7 @@ mod tests {
             revolutions,
             timing_error_deg: 0.0,
             timing_sigma_deg: 0.0,
-            parts_since_previous: 1,
+            part_number: None,
             previous: None,
         }
     }
@@ -816,6 +825,37 @@ mod tests {
         assert!((proportional - w / 0.8).abs() < 1e-6, "{proportional}");
         let with_drift = run(0.2);
         assert!(with_drift.abs() < 1e-3, "{with_drift}");
+    }
+
+    /// While the share refuses tables every part is learned from the same state: the size
+    /// disturbance's change since that state's part is spread over the parts between, not
+    /// taken as one part's drift (the release-binary probe found a drift of 3.3 µm/part
+    /// after a 10 s outage before this).
+    #[test]
+    fn drift_is_per_part_over_the_parts_since_the_states_own() {
+        let params = LearningParams {
+            deadband_sigmas: 0.0,
+            ..LearningParams::default()
+        };
+        let mut base = LearningState::new(36);
+        base.last_size_disturbance_um = Some(0.0);
+        base.last_size_disturbance_part = Some(10);
+        base.size_drift_um_per_part = 0.1;
+        let zeros = vec![0.0; 36];
+        let error = vec![2.0; 36];
+        let drift_after = |part_number: Option<u64>| {
+            let mut state = base.clone();
+            let part = PartError {
+                part_number,
+                ..pe(&error, &zeros, 4)
+            };
+            step(&mut state, &part, &params).unwrap();
+            state.size_drift_um_per_part
+        };
+        // 2 µm over the 20 parts from part 10 to part 30: 0.1 µm a part, as estimated.
+        assert!((drift_after(Some(30)) - 0.1).abs() < 1e-12);
+        // Without part numbers the gap is one part, and the estimate moves toward 2 µm.
+        assert!((drift_after(None) - (0.1 + 0.3 * (2.0 - 0.1))).abs() < 1e-12);
     }
 
     /// A repeatable error larger than the limit is learned up to the limit, never beyond;

@@ -179,12 +179,6 @@ fn learn(
         .collect();
     let error_um = to_feature_frame(&lift_error, setup.phase_deg);
     let repeatability_um = to_feature_frame(&report.repeatability_um, setup.phase_deg);
-    // Parts between the previous one measured and this one (a gap when a measurement was
-    // lost or refused): the drift ran on for them.
-    let parts_since_previous = match (previous.and_then(|p| p.part_number), measured.part_number) {
-        (Some(before), Some(now)) if now > before => (now - before).min(u64::from(u32::MAX)) as u32,
-        _ => 1,
-    };
     let revolutions = averaged.revolutions_used.len() as u32;
     let part = PartError {
         error_um: &error_um,
@@ -192,7 +186,7 @@ fn learn(
         revolutions,
         timing_error_deg: measured.timing_error_deg,
         timing_sigma_deg: timing_sigma_deg(setup, &report.repeatability_um, revolutions),
-        parts_since_previous,
+        part_number: measured.part_number,
         previous,
     };
     match compensate::learn_and_regenerate(&mut next, &part, &setup.lobe) {

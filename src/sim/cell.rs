@@ -183,7 +183,7 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                     revolutions: measured.averaged.revolutions_used.len() as u32,
                     timing_error_deg: 0.0,
                     timing_sigma_deg: 0.0,
-                    parts_since_previous: 1,
+                    part_number: None,
                     previous: None,
                 };
                 let outcome = learn::step(&mut x_state, &part, &setup.params);
