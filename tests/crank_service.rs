@@ -79,19 +79,6 @@ async fn pin_parts(store: &Store, machine: &str, pin: &str, phase_deg: f64) -> V
         let (error, profile) = (values("error_um"), values("profile_error_um"));
         let n = profile.len() as f64;
         let angle = |k: usize| 2.0 * PI * k as f64 / n - phase_deg.to_radians();
-        // First harmonic of the profile error by a direct sum (independent of the analysis).
-        let a = 2.0 / n
-            * profile
-                .iter()
-                .enumerate()
-                .map(|(k, e)| e * angle(k).cos())
-                .sum::<f64>();
-        let b = 2.0 / n
-            * profile
-                .iter()
-                .enumerate()
-                .map(|(k, e)| e * angle(k).sin())
-                .sum::<f64>();
         let harmonic = |order: f64| {
             let c = 2.0 / n
                 * profile
@@ -107,6 +94,8 @@ async fn pin_parts(store: &Store, machine: &str, pin: &str, phase_deg: f64) -> V
                     .sum::<f64>();
             (c, s)
         };
+        // The first harmonic's part in phase with the pin is its throw error.
+        let (a, _) = harmonic(1.0);
         let bands: Vec<(f64, f64, f64)> = (2..=50)
             .map(|o| {
                 let (c, s) = harmonic(f64::from(o));
@@ -124,7 +113,6 @@ async fn pin_parts(store: &Store, machine: &str, pin: &str, phase_deg: f64) -> V
         let (lo, hi) = form
             .iter()
             .fold((f64::MAX, f64::MIN), |(l, h), v| (l.min(*v), h.max(*v)));
-        let _ = b;
         out.push(PinPart {
             number: s.part.parse().unwrap(),
             max_lift_um: error.iter().fold(0.0, |m, v| m.max(v.abs())),

@@ -64,6 +64,8 @@ pub struct Measured {
     pub timing_error_deg: f64,
     /// The part number the gauge gave, when it is a number.
     pub part_number: Option<u64>,
+    /// Standard error of the timing estimate, degrees (see [`PartError::timing_sigma_deg`]).
+    pub timing_sigma_deg: f64,
 }
 
 impl Measured {
@@ -120,7 +122,10 @@ pub fn turn(
 /// The first half of a turn: checks, averaging and analysis against the nominal.
 pub fn measure(setup: &TurnSetup<'_>, raw: &RawMeasurement) -> Result<Measured, TurnError> {
     let averaged = super::measure::check_and_average(raw, &setup.assembly)?;
-    let report = analyse(setup, &averaged)?;
+    let curve = LiftCurve::new(setup.lobe.nominal);
+    let report = analyse(setup, &curve, &averaged)?;
+    let revolutions = averaged.revolutions_used.len() as u32;
+    let timing_sigma_deg = timing_sigma_deg(setup, &curve, &report.repeatability_um, revolutions);
     let max_error_um = max_abs(&report.error_um);
     let max_profile_error_um = report
         .profile_error_max_um
@@ -128,6 +133,7 @@ pub fn measure(setup: &TurnSetup<'_>, raw: &RawMeasurement) -> Result<Measured, 
         .max(report.profile_error_min_um.abs());
     Ok(Measured {
         timing_error_deg: report.phase_error_deg,
+        timing_sigma_deg,
         part_number: raw.header.part.trim().parse().ok(),
         averaged,
         report,
@@ -138,9 +144,9 @@ pub fn measure(setup: &TurnSetup<'_>, raw: &RawMeasurement) -> Result<Measured, 
 
 fn analyse(
     setup: &TurnSetup<'_>,
+    curve: &LiftCurve,
     averaged: &AveragedMeasurement,
 ) -> Result<LobeReport, AnalysisError> {
-    let curve = LiftCurve::new(setup.lobe.nominal);
     let nominal = |psi_deg: f64| {
         let s = curve.eval((psi_deg - setup.phase_deg).to_radians());
         (s.h_mm, s.dh_mm.to_radians())
@@ -185,7 +191,7 @@ fn learn(
         repeatability_um: &repeatability_um,
         revolutions,
         timing_error_deg: measured.timing_error_deg,
-        timing_sigma_deg: timing_sigma_deg(setup, &report.repeatability_um, revolutions),
+        timing_sigma_deg: measured.timing_sigma_deg,
         part_number: measured.part_number,
         previous,
     };
@@ -202,7 +208,12 @@ fn learn(
 /// Standard error of the timing estimate, degrees: σ of the per-angle mean (the rms
 /// repeatability over √revolutions) over √Σ h′², h′ the nominal slope in mm/° at each gauge
 /// angle (a least-squares phase from N points of equal noise).
-fn timing_sigma_deg(setup: &TurnSetup<'_>, repeatability_um: &[f64], revolutions: u32) -> f64 {
+fn timing_sigma_deg(
+    setup: &TurnSetup<'_>,
+    curve: &LiftCurve,
+    repeatability_um: &[f64],
+    revolutions: u32,
+) -> f64 {
     let n = repeatability_um.len();
     if n == 0 {
         return 0.0;
@@ -210,7 +221,6 @@ fn timing_sigma_deg(setup: &TurnSetup<'_>, repeatability_um: &[f64], revolutions
     let sigma_mm = (repeatability_um.iter().map(|s| s * s).sum::<f64>() / n as f64).sqrt()
         / f64::from(revolutions.max(1)).sqrt()
         / 1000.0;
-    let curve = LiftCurve::new(setup.lobe.nominal);
     let slope_sq: f64 = (0..n)
         .map(|k| {
             let feature_deg = k as f64 * 360.0 / n as f64 - setup.phase_deg;

@@ -172,7 +172,7 @@ impl FeatureLoop {
             profile_error_um: done.measured.max_profile_error_um,
             size_error_um: done.measured.report.base_radius_error_um,
             timing_error_deg: done.measured.timing_error_deg,
-            pushed: self.memory.waiting.is_none() && text.ends_with("pushed"),
+            pushed: self.memory.in_force_version != ground_with,
             text,
         };
         if self.main.table_files.len() == 1 {

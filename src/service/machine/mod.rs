@@ -113,6 +113,8 @@ pub struct MachineLoop {
     ids: GaugeIds,
     main: Arc<MainProgram>,
     metrics: Arc<Metrics>,
+    /// The resume point could not be written (the share refuses): said once, not per part.
+    resume_failing: bool,
 }
 
 impl MachineLoop {
@@ -153,6 +155,7 @@ impl MachineLoop {
             ids,
             main,
             metrics,
+            resume_failing: false,
         };
         machine.write_resume_point_from_memory();
         Ok(machine)
@@ -397,13 +400,22 @@ impl MachineLoop {
     /// Writes the resume point: `next` is the feature after the one just gauged (from 1;
     /// past the last, the shaft is finished and a resume would start a new one at 1). Only a
     /// shaft program reads it, and only when the operator asks for a resume.
-    fn write_resume_point(&self, next: usize) {
+    fn write_resume_point(&mut self, next: usize) {
         if self.features.len() < 2 {
             return;
         }
         let first = if next > self.features.len() { 1 } else { next };
-        if let Err(e) = shaft::write_resume(self.share_dir(), first) {
-            warn!(machine = %self.name, error = %e, "resume point not written to the share");
+        match shaft::write_resume(self.share_dir(), first) {
+            Ok(()) if self.resume_failing => {
+                self.resume_failing = false;
+                info!(machine = %self.name, "resume point written to the share again");
+            }
+            Ok(()) => {}
+            Err(e) if !self.resume_failing => {
+                self.resume_failing = true;
+                warn!(machine = %self.name, error = %e, "resume point not written to the share (said once until it can be)");
+            }
+            Err(_) => {}
         }
     }
 
