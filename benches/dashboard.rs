@@ -15,7 +15,7 @@ use camloop::recipe::Recipe;
 use camloop::service::http::{self, AppState, FeatureSheet, HttpLimits};
 use camloop::store::{NewMeasurement, RawPool, Store, Verdict, encode_lifts_mm};
 use criterion::{Criterion, criterion_group, criterion_main};
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::path::Path;
 use std::sync::Arc;
@@ -168,7 +168,7 @@ async fn serve(store: Store) -> (SocketAddr, watch::Sender<bool>) {
         store: Arc::new(tokio::sync::RwLock::new(Some(store))),
         metrics: Arc::default(),
         machines: Arc::new(machines),
-        commands: Arc::new(HashMap::new()),
+        commands: Arc::default(),
         token: Some(Secret::new("bench")),
         body_timeout: limits.body_timeout,
         dashboard: Arc::new(sheets),

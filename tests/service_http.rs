@@ -84,7 +84,7 @@ async fn server(limits: HttpLimits, store: Option<camloop::store::Store>) -> Ser
         store: Arc::new(tokio::sync::RwLock::new(store)),
         metrics: Arc::default(),
         machines: Arc::new(machines),
-        commands: Arc::new(commands),
+        commands: Arc::new(std::sync::RwLock::new(commands)),
         token: Some(Secret::new(TOKEN)),
         body_timeout: limits.body_timeout,
         dashboard: Arc::default(),

@@ -3,11 +3,13 @@
 //! redacted in Debug output.
 
 mod check;
+mod cluster;
 mod keys;
 mod mqtt;
 mod values;
 
 pub use check::{Checked, CheckedMachine, check, configured_features, load, machine_features};
+pub use cluster::ClusterSection;
 pub use keys::Lines;
 pub use mqtt::MqttSection;
 
@@ -34,6 +36,8 @@ pub struct Config {
     pub http: HttpSection,
     #[serde(default)]
     pub mqtt: MqttSection,
+    #[serde(default)]
+    pub cluster: ClusterSection,
     #[serde(default)]
     pub machines: Vec<MachineSection>,
     /// Folder of the config file; relative paths in the file are resolved against it.
@@ -333,6 +337,7 @@ impl Config {
         }
         p.extend(self.http.problems(&self.lines));
         p.extend(self.mqtt.problems(&self.lines));
+        p.extend(self.cluster.problems(&self.lines, url));
         let mut names = std::collections::HashMap::new();
         for (i, m) in self.machines.iter().enumerate() {
             let at = |key: &str| self.line(&format!("machines[{i}]{key}"));
@@ -378,6 +383,15 @@ impl Config {
 
     pub fn var_dir(&self) -> PathBuf {
         self.resolve(&self.service.var_dir)
+    }
+
+    /// Where each machine's journal and delivery state live: `<var>/machines`, or with a
+    /// cluster the shared `<cluster.state_dir>/machines` every instance reaches.
+    pub fn machines_dir(&self) -> PathBuf {
+        match self.cluster.enabled {
+            true => self.resolve(&self.cluster.state_dir).join("machines"),
+            false => self.var_dir().join("machines"),
+        }
     }
 }
 

@@ -2,12 +2,14 @@
 //! machine a gauge source and the machine's loop; a store connector; the HTTP listener; and a
 //! graceful shutdown on SIGINT/SIGTERM that lets every machine finish the part in hand.
 
+mod cluster_task;
 mod drop_source;
 pub mod http;
 pub mod journal;
 pub mod machine;
 pub mod metrics;
 pub mod mqtt;
+pub(crate) mod runner;
 pub mod sim_source;
 mod sources;
 mod store_guard;
@@ -56,7 +58,7 @@ pub struct Running {
     pub http_addr: std::net::SocketAddr,
     shutdown: watch::Sender<bool>,
     machines_done: Option<tokio::task::JoinHandle<()>>,
-    machine_tasks: Vec<tokio::task::JoinHandle<()>>,
+    machines: Machines,
     server: tokio::task::JoinHandle<()>,
     connector: tokio::task::JoinHandle<()>,
     retention: tokio::task::JoinHandle<()>,
@@ -78,8 +80,11 @@ impl Running {
         if let Some(handle) = self.machines_done {
             handle.abort();
         }
-        for task in self.machine_tasks {
-            let _ = task.await;
+        match self.machines {
+            Machines::Local(mut runner) => runner.stop_all().await,
+            Machines::Cluster(task) => {
+                let _ = task.await;
+            }
         }
         let _ = self.server.await;
         let _ = self.connector.await;
@@ -149,24 +154,9 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
         false => None,
     };
 
-    let mut machine_tasks = Vec::new();
-    let mut commands = std::collections::HashMap::new();
-    let mut sources_done = Vec::new();
     let mut features = std::collections::BTreeMap::new();
     let mut sheets = std::collections::BTreeMap::new();
-    let shared = Shared {
-        store: store.clone(),
-        metrics: metrics.clone(),
-        shutdown: shutdown_rx.clone(),
-        parts: options.parts,
-        plant_events: publisher.as_ref().map(mqtt::Publisher::sender),
-    };
-    for m in checked_machines {
-        let section = config
-            .machines
-            .iter()
-            .find(|c| c.name == m.name.as_str())
-            .context("a checked machine is in the config")?;
+    for m in &checked_machines {
         features.insert(
             m.name.clone(),
             m.setups.iter().map(|s| s.name.clone()).collect(),
@@ -175,18 +165,46 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
             let sheet = http::FeatureSheet::from_setup(setup);
             sheets.insert((m.name.to_string(), setup.name.clone()), sheet);
         }
-        let wired = wire_machine(&config, section, m, &shared).await?;
-        commands.insert(section.name.clone(), wired.commands);
-        sources_done.push(wired.source_done);
-        machine_tasks.push(wired.task);
     }
+    let shared = Shared {
+        store: store.clone(),
+        metrics: metrics.clone(),
+        shutdown: shutdown_rx.clone(),
+        parts: options.parts,
+        plant_events: publisher.as_ref().map(mqtt::Publisher::sender),
+    };
+    let commands: runner::CommandRoutes = Arc::default();
+    let mut runner =
+        runner::Runner::new(config.clone(), checked_machines, shared, commands.clone());
+    let (machines, sources_done) = if config.cluster.enabled {
+        let lease = Duration::from_millis(config.cluster.lease_ms);
+        let instance = config.cluster.instance_name();
+        let leases = crate::cluster::Leases::connect(&config.database_url(), &instance, lease)
+            .await
+            .context("cluster")?;
+        info!(instance = %instance, lease_ms = config.cluster.lease_ms, "cluster: joined; machines are taken as leases allow");
+        let task = cluster_task::ClusterTask {
+            leases,
+            lease,
+            machines_dir: config.machines_dir(),
+            runner,
+        };
+        let task = tokio::spawn(task.run(shutdown_rx.clone()));
+        (Machines::Cluster(task), None)
+    } else {
+        let mut done = Vec::new();
+        for name in runner.names() {
+            done.push(runner.start(&name, None).await?);
+        }
+        (Machines::Local(Box::new(runner)), Some(done))
+    };
 
     let limits = http::HttpLimits::from_config(&config.http);
     let app = http::router(http::AppState {
         store: store.clone(),
         metrics: metrics.clone(),
         machines: Arc::new(features),
-        commands: Arc::new(commands),
+        commands,
         token: config.api_token.clone(),
         body_timeout: limits.body_timeout,
         dashboard: Arc::new(sheets),
@@ -195,16 +213,22 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
     info!(listen = %http_addr, machines = config.machines.len(), "camloop started");
     let server = tokio::spawn(http::serve(listener, app, limits, shutdown_rx.clone()));
 
+    // In a cluster the machines come and go: the service runs until a signal.
     let machines_done = tokio::spawn(async move {
-        for done in sources_done {
-            let _ = done.await;
+        match sources_done {
+            Some(sources) => {
+                for done in sources {
+                    let _ = done.await;
+                }
+            }
+            None => std::future::pending().await,
         }
     });
     Ok(Running {
         http_addr,
         shutdown: shutdown_tx,
         machines_done: Some(machines_done),
-        machine_tasks,
+        machines,
         server,
         connector,
         retention,
@@ -222,57 +246,10 @@ struct Shared {
     plant_events: Option<mqtt::EventSender>,
 }
 
-/// A machine's running tasks and how to reach them.
-struct Wired {
-    commands: mpsc::Sender<http::Command>,
-    source_done: tokio::sync::oneshot::Receiver<()>,
-    task: tokio::task::JoinHandle<()>,
-}
-
-/// Starts one machine: its loop, its gauge source and the task that feeds the loop.
-async fn wire_machine(
-    config: &Config,
-    m: &crate::config::MachineSection,
-    checked: crate::config::CheckedMachine,
-    shared: &Shared,
-) -> anyhow::Result<Wired> {
-    let paths = machine::MachinePaths {
-        share_dir: config.resolve(&m.share),
-        state_dir: config.var_dir().join("machines").join(&m.name),
-    };
-    let mut machine = MachineLoop::start(
-        m.name.clone(),
-        checked.setups,
-        paths,
-        shared.store.clone(),
-        shared.metrics.clone(),
-    )
-    .await?;
-    machine.set_plant_events(shared.plant_events.clone());
-    let (tx, rx) = mpsc::channel::<SourceEvent>(16);
-    let (command_tx, command_rx) = mpsc::channel::<http::Command>(4);
-    sources::spawn(
-        config,
-        m,
-        &machine,
-        checked.sim_c_speed_explicit,
-        tx,
-        shared.parts,
-        shared.shutdown.clone(),
-    )?;
-    let (done_tx, done_rx) = tokio::sync::oneshot::channel();
-    let task = tokio::spawn(machine_task(
-        machine,
-        rx,
-        command_rx,
-        done_tx,
-        shared.shutdown.clone(),
-    ));
-    Ok(Wired {
-        commands: command_tx,
-        source_done: done_rx,
-        task,
-    })
+/// This instance's machines: all of them, or those a cluster gives it.
+enum Machines {
+    Local(Box<runner::Runner>),
+    Cluster(tokio::task::JoinHandle<()>),
 }
 
 /// One machine: events in order, retries on a timer, stops on shutdown after the part in hand.

@@ -22,7 +22,7 @@ use tracing::{error, info};
 
 mod rebuild;
 
-use super::journal::{Journal, Pending};
+use super::journal::Pending;
 use super::machine::StoreHandle;
 use crate::config::Config;
 use crate::store::{Store, StoreError, StoreIdentity};
@@ -40,6 +40,8 @@ pub(crate) struct MachineExpectation {
     /// Table versions still in the journal, not yet written to the store: a store that was
     /// down for a while is behind the share by exactly these.
     pub tables_in_journal: u64,
+    /// The feature's state folder (journal, and the share's manifest under `share/`).
+    pub state_dir: std::path::PathBuf,
 }
 
 /// A store that passed the check.
@@ -242,7 +244,7 @@ pub(crate) async fn accept_new_store(
         source,
     };
     let identity = store.identity().await.map_err(asked)?;
-    let rebuilt = rebuild::rebuild_versions(store, var_dir, expectations)
+    let rebuilt = rebuild::rebuild_versions(store, expectations)
         .await
         .map_err(asked)?;
     info!(
@@ -281,10 +283,9 @@ pub(crate) async fn accept_new_store(
 /// paths follow the service's layout: `<var>/machines/<name>/<feature>/` holds a feature's
 /// journal, and its `share/` folder the share's manifest (see `service::start`).
 pub(crate) fn expectations(config: &Config) -> Vec<MachineExpectation> {
-    let var = config.var_dir();
     let mut out = Vec::new();
     for m in &config.machines {
-        let machine_dir = var.join("machines").join(&m.name);
+        let machine_dir = config.machines_dir().join(&m.name);
         for lobe in crate::config::configured_features(config, m) {
             let state_dir = machine_dir.join(&lobe);
             let manifest = state_dir.join("share").join(crate::share::MANIFEST_FILE);
@@ -292,9 +293,11 @@ pub(crate) fn expectations(config: &Config) -> Vec<MachineExpectation> {
                 .ok()
                 .map(|loaded| loaded.history.next_version().saturating_sub(1))
                 .filter(|&v| v > 0);
-            let tables_in_journal = Journal::open(&state_dir).map_or(0, |j| {
-                j.records()
-                    .iter()
+            // Read only: in a cluster another instance may be appending to it right now.
+            let journal = std::fs::read_to_string(state_dir.join("journal.jsonl"));
+            let tables_in_journal = journal.map_or(0, |text| {
+                text.lines()
+                    .filter_map(|line| serde_json::from_str::<Pending>(line).ok())
                     .filter(|r| {
                         matches!(r, Pending::Table { machine, lobe: l, .. }
                             if *machine == m.name && *l == lobe)
@@ -306,6 +309,7 @@ pub(crate) fn expectations(config: &Config) -> Vec<MachineExpectation> {
                 lobe,
                 newest_share_version,
                 tables_in_journal,
+                state_dir,
             });
         }
     }

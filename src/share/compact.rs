@@ -158,6 +158,7 @@ mod tests {
             learning: serde_json::json!({"gain": 0.5}),
             rollback_of: None,
             refused: None,
+            epoch: None,
         })
     }
 

@@ -83,6 +83,16 @@ pub enum StateError {
     TablePair(#[from] TablePairError),
     #[error("invalid share settings: keep_versions must be at least 1")]
     KeepNone,
+    /// Another instance owns the machine now (its lease epoch is newer than this one's).
+    #[error(
+        "{} is fenced at epoch {current}: this instance's lease (epoch {mine}) is no longer the owner's",
+        dir.display()
+    )]
+    Fenced {
+        dir: PathBuf,
+        mine: u64,
+        current: u64,
+    },
 }
 
 impl StateError {

@@ -138,9 +138,31 @@ pub(crate) fn is_temp_name(name: &std::ffi::OsStr) -> bool {
     name.to_str().is_some_and(|n| n.starts_with(TEMP_PREFIX))
 }
 
+/// Why a name cannot be a program file on the share, if it cannot.
+pub(super) fn bad_file_name(name: &str) -> Option<&'static str> {
+    if name.is_empty() {
+        Some("is empty")
+    } else if name.contains(['/', '\\', '\0']) {
+        Some("is not a plain file name")
+    } else if name.starts_with('.') {
+        Some("starts with '.' (reserved for temporaries)")
+    } else {
+        None
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn file_names_must_be_plain_and_not_hidden() {
+        assert_eq!(bad_file_name("CAM_T1.SPF"), None);
+        assert!(bad_file_name("").is_some());
+        assert!(bad_file_name("../CAM.SPF").is_some());
+        assert!(bad_file_name("a\\b").is_some());
+        assert!(bad_file_name(".camloop-tmp-x").is_some());
+    }
 
     #[test]
     fn temp_names_are_recognised_by_exact_prefix() {

@@ -58,6 +58,10 @@ pub struct VersionRecord {
     pub rollback_of: Option<u64>,
     /// Set when the version was refused; it is then never pushed and has no kept text.
     pub refused: Option<String>,
+    /// The fencing epoch of the owner that made it, with several instances (see
+    /// [`super::Fence`]); absent for a single instance.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub epoch: Option<u64>,
 }
 
 /// One program file of a version.
@@ -393,6 +397,7 @@ mod tests {
             learning: serde_json::json!({"gain": 0.5}),
             rollback_of: None,
             refused: refused.map(str::to_owned),
+            epoch: None,
         })
     }
 

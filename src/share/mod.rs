@@ -40,6 +40,7 @@
 
 mod compact;
 mod error;
+mod fence;
 mod fs;
 mod manifest;
 mod state;
@@ -47,6 +48,7 @@ mod store;
 
 pub use compact::{ARCHIVE_FILE, COMPACT_AFTER_LINES, Checkpoint};
 pub use error::{PushError, ShareError, StateError};
+pub use fence::{Fence, Held, read_epoch as fence_epoch};
 pub use fs::{RealFs, ShareFs, TEMP_PREFIX, lower_hex, sha256_hex};
 pub use manifest::{
     FileRecord, History, Loaded, Record, VersionRecord, VersionState, VersionStatus,

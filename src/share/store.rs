@@ -5,7 +5,7 @@ use std::fs;
 use std::path::PathBuf;
 
 use super::error::{PushError, ShareError, StateError};
-use super::fs::{ShareFs, is_temp_name, sha256_hex};
+use super::fs::{ShareFs, bad_file_name, is_temp_name, sha256_hex};
 use super::manifest::{self, FileRecord, History, Record, VersionRecord, VersionStatus};
 use super::state::{clean_versions_dir, cut_manifest, read_kept, store_text, version_dir};
 use crate::core::program::{check_table_pair, next_table_number};
@@ -103,6 +103,8 @@ pub struct Share {
     /// Complete lines in the manifest.
     manifest_lines: usize,
     share_cleaned: bool,
+    /// With several instances: this owner's epoch, checked before every write.
+    fence: Option<super::Fence>,
 }
 
 impl std::fmt::Debug for Share {
@@ -148,6 +150,7 @@ impl Share {
             history: loaded.history,
             manifest_lines: loaded.lines,
             share_cleaned: false,
+            fence: None,
         };
         match share.clean_share() {
             Ok(removed) => report.removed_share_temporaries = removed,
@@ -155,6 +158,17 @@ impl Share {
         }
         share.compact_if_long();
         Ok((share, report))
+    }
+
+    /// Fences every later write with `fence` (see [`super::Fence`]): once another owner
+    /// claims a newer epoch, submits and deliveries are refused with
+    /// [`StateError::Fenced`].
+    pub fn set_fence(&mut self, fence: super::Fence) {
+        self.fence = Some(fence);
+    }
+
+    fn hold_fence(&self) -> Result<Option<super::Held>, StateError> {
+        self.fence.as_ref().map(super::Fence::hold).transpose()
     }
 
     pub fn config(&self) -> &ShareConfig {
@@ -178,6 +192,7 @@ impl Share {
     /// manifest line. An accepted version supersedes any older waiting one (which stays in
     /// the history). A request that must not reach the control is recorded as refused.
     pub fn submit(&mut self, request: PushRequest) -> Result<Submitted, StateError> {
+        let _held = self.hold_fence()?;
         let version = self.history.next_version();
         let refused = self.refusal(&request);
         if refused.is_none() {
@@ -205,6 +220,7 @@ impl Share {
             learning: request.learning,
             rollback_of: request.rollback_of,
             refused: refused.clone(),
+            epoch: self.fence.as_ref().map(super::Fence::epoch),
         };
         self.append(Record::Version(record), Flush::Now)?;
         Ok(match refused {
@@ -218,6 +234,11 @@ impl Share {
     /// file back and compare its SHA-256, record "pushed". On a share fault the version keeps
     /// waiting (the reason is recorded when it changes) and the error names the condition.
     pub fn deliver(&mut self) -> Result<Option<Pushed>, PushError> {
+        if self.history.waiting().is_none() {
+            return Ok(None);
+        }
+        // Held through the renames: a new owner's claim waits until this push is done.
+        let _held = self.hold_fence()?;
         let Some(waiting) = self.history.waiting() else {
             return Ok(None);
         };
@@ -556,31 +577,4 @@ enum Flush {
     Now,
     /// With the next flushed line (`fdatasync` flushes all the file's data).
     WithNext,
-}
-
-/// Why a name cannot be a program file on the share, if it cannot.
-fn bad_file_name(name: &str) -> Option<&'static str> {
-    if name.is_empty() {
-        Some("is empty")
-    } else if name.contains(['/', '\\', '\0']) {
-        Some("is not a plain file name")
-    } else if name.starts_with('.') {
-        Some("starts with '.' (reserved for temporaries)")
-    } else {
-        None
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn file_names_must_be_plain_and_not_hidden() {
-        assert_eq!(bad_file_name("CAM_T1.SPF"), None);
-        assert!(bad_file_name("").is_some());
-        assert!(bad_file_name("../CAM.SPF").is_some());
-        assert!(bad_file_name("a\\b").is_some());
-        assert!(bad_file_name(".camloop-tmp-x").is_some());
-    }
 }

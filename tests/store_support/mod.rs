@@ -34,17 +34,7 @@ pub async fn sqlite() -> TestStore {
 /// A fresh PostgreSQL database, or `None` (with a skip line) when the server binaries are
 /// missing and `CAMLOOP_REQUIRE_POSTGRES` is not `1`.
 pub async fn postgres(test: &str) -> Option<TestStore> {
-    let server = match pg::TempPostgres::start() {
-        Ok(server) => server,
-        Err(pg::StartError::NoBinaries(why)) => {
-            if std::env::var("CAMLOOP_REQUIRE_POSTGRES").as_deref() == Ok("1") {
-                panic!("CAMLOOP_REQUIRE_POSTGRES=1 but {why}");
-            }
-            eprintln!("SKIP {test} on postgres: {why} (set CAMLOOP_REQUIRE_POSTGRES=1 to fail)");
-            return None;
-        }
-        Err(pg::StartError::Failed(why)) => panic!("temporary postgres failed: {why}"),
-    };
+    let server = pg::start_or_skip(test)?;
     let store = Store::connect(&server.url()).await.unwrap();
     Some(TestStore {
         store,

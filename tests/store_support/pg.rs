@@ -56,6 +56,23 @@ fn free_port() -> std::io::Result<u16> {
     Ok(listener.local_addr()?.port())
 }
 
+/// A fresh server, or `None` (with a skip line) when the server binaries are missing and
+/// `CAMLOOP_REQUIRE_POSTGRES` is not `1`.
+pub fn start_or_skip(test: &str) -> Option<TempPostgres> {
+    let server = match TempPostgres::start() {
+        Ok(server) => server,
+        Err(StartError::NoBinaries(why)) => {
+            if std::env::var("CAMLOOP_REQUIRE_POSTGRES").as_deref() == Ok("1") {
+                panic!("CAMLOOP_REQUIRE_POSTGRES=1 but {why}");
+            }
+            eprintln!("SKIP {test} on postgres: {why} (set CAMLOOP_REQUIRE_POSTGRES=1 to fail)");
+            return None;
+        }
+        Err(StartError::Failed(why)) => panic!("temporary postgres failed: {why}"),
+    };
+    Some(server)
+}
+
 impl TempPostgres {
     /// A server in a fresh tempdir, removed on drop.
     pub fn start() -> Result<Self, StartError> {

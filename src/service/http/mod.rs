@@ -28,9 +28,9 @@ use super::metrics::Metrics;
 use crate::names::MachineName;
 use axum::Router;
 use axum::routing::{get, post};
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::sync::Arc;
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::oneshot;
 
 #[derive(Clone)]
 pub struct AppState {
@@ -40,7 +40,8 @@ pub struct AppState {
     /// order.
     pub machines: Arc<BTreeMap<MachineName, Vec<String>>>,
     /// Per machine (by name), the channel to its loop for write requests.
-    pub commands: Arc<HashMap<String, mpsc::Sender<Command>>>,
+    /// The machines running on this instance (in a cluster, those it holds now).
+    pub commands: crate::service::runner::CommandRoutes,
     /// Write requests need it (`Authorization: Bearer …`); none configured: writes refused.
     pub token: Option<crate::config::Secret>,
     /// How long a request body may take to arrive once its headers are in.

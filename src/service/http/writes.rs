@@ -194,11 +194,31 @@ async fn command(
             format!("machine {machine} {what}"),
         )
     };
-    let sender = state.commands.get(machine.as_str()).ok_or(ApiError(
-        StatusCode::NOT_FOUND,
-        "machine_not_found",
-        format!("machine {machine} is not configured"),
-    ))?;
+    let sender = state
+        .commands
+        .read()
+        .ok()
+        .and_then(|routes| routes.get(machine.as_str()).cloned());
+    let sender = match sender {
+        Some(s) => s,
+        // Configured, but another instance of the cluster owns it now.
+        None if state.machines.contains_key(machine) => {
+            return Err(ApiError(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "machine_elsewhere",
+                format!(
+                    "machine {machine} does not run on this instance now: another instance of the cluster holds it; ask that one"
+                ),
+            ));
+        }
+        None => {
+            return Err(ApiError(
+                StatusCode::NOT_FOUND,
+                "machine_not_found",
+                format!("machine {machine} is not configured"),
+            ));
+        }
+    };
     let (reply, answer) = tokio::sync::oneshot::channel();
     sender
         .send(make(reply))

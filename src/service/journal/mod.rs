@@ -378,6 +378,8 @@ mod tests {
                 status: TableStatus::Waiting,
                 status_why: "waiting: share full".into(),
                 created_at_ms: 7,
+                measurement_id: None,
+                rollback_of: None,
             },
             Pending::TableStatus {
                 machine: "M1".into(),

@@ -47,6 +47,12 @@ pub enum Pending {
         status: TableStatus,
         status_why: String,
         created_at_ms: i64,
+        /// The measurement it was learned from (a replay re-submits the version with it).
+        #[serde(default)]
+        measurement_id: Option<String>,
+        /// The version it re-pushes, for a rollback.
+        #[serde(default)]
+        rollback_of: Option<u64>,
     },
     /// A later status of a recorded version (e.g. waiting → pushed once the share is back).
     TableStatus {
@@ -357,6 +363,7 @@ async fn insert_table(store: &Store, record: Pending) -> Result<(), StoreError> 
         status,
         status_why,
         created_at_ms,
+        ..
     } = record
     else {
         return Ok(());

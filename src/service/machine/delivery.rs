@@ -6,21 +6,38 @@ use super::FeatureLoop;
 use super::memory::{TableLearning, WaitingTable};
 use super::records::event;
 use crate::clock::{now_ms, now_ms_u64};
+
 use crate::core::compensate::GuardedTable;
 use crate::core::learn::LearningState;
 use crate::core::program::{Provenance, comment_text};
-use crate::share::{ProgramFile, PushError, PushRequest};
+use crate::share::{ProgramFile, PushError, PushRequest, Submitted};
 use crate::store::{EventLevel, TableStatus};
 use anyhow::Context;
 use std::sync::atomic::Ordering;
 use tracing::{error, info, warn};
 
+/// Why a version's first record says "waiting": it is written before the share hears of it.
+pub(super) const SUBMITTED: &str = "submitted to the share";
+
+/// A table version before the share numbers it: what its journal record and its push
+/// request are both made from.
+pub(super) struct Draft {
+    /// The table program's text.
+    pub(super) text: String,
+    pub(super) table_number: u32,
+    pub(super) learning: TableLearning,
+    pub(super) reason: String,
+    pub(super) measurement_id: Option<String>,
+    pub(super) rollback_of: Option<u64>,
+    pub(super) at_ms: i64,
+}
+
 impl FeatureLoop {
     /// Renders `table` for the next table number with its provenance and delivers it (with
     /// the main program when the share's copy differs). `next` is the learning state the
     /// table was made from: it is in force once the share confirms the table, waiting
-    /// otherwise. Returns the records to keep; an error means nothing was recorded as a
-    /// version (the state folder could not be written).
+    /// otherwise. Returns the records to keep; an error means nothing was submitted to the
+    /// share (the journal or the state folder could not be written).
     pub(super) async fn deliver(
         &mut self,
         table: &GuardedTable,
@@ -48,62 +65,116 @@ impl FeatureLoop {
                 learning.wheel_radius_mm, learning.iteration
             )),
         ];
-        let text = table.render(&settings)?;
-        let mut files = vec![ProgramFile {
-            name: self.program_file.clone(),
-            text: text.clone(),
-        }];
-        files.extend(self.main_program_if_changed()?);
-        let request = PushRequest {
-            files,
+        let draft = Draft {
+            text: table.render(&settings)?,
             table_number: settings.table_number,
-            reason: reason.to_string(),
-            measurement_id: measurement,
-            learning: serde_json::to_value(learning.summary())?,
-            rollback_of: None,
-            created_at_unix_ms: at_ms as u64,
-        };
-        let (version, status, why, mut records) = self.push(request, next, at_ms)?;
-        records.push(Pending::Table {
-            machine: self.name.clone(),
-            lobe: self.setup.name.clone(),
-            version,
-            parent_version: (parent > 0).then_some(parent),
-            table_number: settings.table_number,
-            program_text: text,
             learning,
             reason: reason.to_string(),
-            status,
-            status_why: why,
-            created_at_ms: at_ms,
-        });
+            measurement_id: measurement,
+            rollback_of: None,
+            at_ms,
+        };
+        let (_, _, _, records) = self.push(draft, next)?;
         Ok(records)
     }
 
     /// One push attempt; the state in force follows what the share confirmed.
+    ///
+    /// Write-ahead: the version's record (status waiting) is in the journal before the
+    /// share hears of it, so whenever the process dies the version is known with the
+    /// correction it was made from ([`Self::reconcile_share`] finishes what was cut short).
+    /// The records returned hold the outcome.
     pub(super) fn push(
         &mut self,
+        draft: Draft,
+        next: LearningState,
+    ) -> anyhow::Result<(u64, TableStatus, String, Vec<Pending>)> {
+        let version = self.share.history().next_version();
+        let record = self.table_record(&draft, version);
+        self.journal
+            .append(std::slice::from_ref(&record))
+            .context("the table version's record cannot be journalled: not submitted")?;
+        let at_ms = draft.at_ms;
+        let request = self.request(draft)?;
+        let (status, why, records) = self.submit_and_deliver(request, version, next, at_ms)?;
+        let mut records = records;
+        records.push(Pending::TableStatus {
+            machine: self.name.clone(),
+            lobe: self.setup.name.clone(),
+            version,
+            status,
+            why: why.clone(),
+            at_ms,
+        });
+        Ok((version, status, why, records))
+    }
+
+    /// The journal record of a version not yet submitted.
+    fn table_record(&self, draft: &Draft, version: u64) -> Pending {
+        let parent = self.memory.in_force_version;
+        Pending::Table {
+            machine: self.name.clone(),
+            lobe: self.setup.name.clone(),
+            version,
+            parent_version: (parent > 0).then_some(parent),
+            table_number: draft.table_number,
+            program_text: draft.text.clone(),
+            learning: draft.learning.clone(),
+            reason: draft.reason.clone(),
+            status: TableStatus::Waiting,
+            status_why: SUBMITTED.into(),
+            created_at_ms: draft.at_ms,
+            measurement_id: draft.measurement_id.clone(),
+            rollback_of: draft.rollback_of,
+        }
+    }
+
+    /// The share's request for a draft: the table program, then the main program when the
+    /// share's copy is not this text.
+    pub(super) fn request(&self, draft: Draft) -> anyhow::Result<PushRequest> {
+        let mut files = vec![ProgramFile {
+            name: self.program_file.clone(),
+            text: draft.text,
+        }];
+        files.extend(self.main_program_if_changed()?);
+        Ok(PushRequest {
+            files,
+            table_number: draft.table_number,
+            reason: draft.reason,
+            measurement_id: draft.measurement_id,
+            learning: serde_json::to_value(draft.learning.summary())?,
+            rollback_of: draft.rollback_of,
+            created_at_unix_ms: draft.at_ms as u64,
+        })
+    }
+
+    /// Submits `request` as `version` and delivers it: its status, why, and the records of
+    /// what happened on the way.
+    fn submit_and_deliver(
+        &mut self,
         request: PushRequest,
+        version: u64,
         next: LearningState,
         at_ms: i64,
-    ) -> anyhow::Result<(u64, TableStatus, String, Vec<Pending>)> {
+    ) -> anyhow::Result<(TableStatus, String, Vec<Pending>)> {
         let mut records = Vec::new();
-        match self.share.push_once(request) {
-            Ok(p) => {
+        match self.share.submit(request).context("share state folder")? {
+            Submitted::Refused { reason, .. } => {
+                error!(machine = %self.name, version, reason = %reason, "table version refused by the share");
+                return Ok((TableStatus::Refused, reason, records));
+            }
+            Submitted::Accepted { version: v } if v != version => {
+                anyhow::bail!("the share numbered the version {v}, its record says {version}")
+            }
+            Submitted::Accepted { .. } => {}
+        }
+        match self.share.deliver() {
+            Ok(Some(p)) if p.version == version => {
                 self.memory.waiting = None;
                 self.memory.learning = next;
-                self.memory.in_force_version = p.version;
+                self.memory.in_force_version = version;
                 self.on_delivered(self.memory.wheel_radius_mm);
-                Ok((
-                    p.version,
-                    TableStatus::Pushed,
-                    "pushed to the share".into(),
-                    records,
-                ))
-            }
-            Err(PushError::Refused { version, reason }) => {
-                error!(machine = %self.name, version, reason = %reason, "table version refused by the share");
-                Ok((version, TableStatus::Refused, reason, records))
+                Ok((TableStatus::Pushed, "pushed to the share".into(), records))
             }
             Err(PushError::Share { version, error: e }) => {
                 if self.memory.waiting.is_none() {
@@ -131,13 +202,13 @@ impl FeatureLoop {
                     m.share_waiting = 1;
                     m.learning_held = 1;
                 });
-                Ok((
-                    version,
-                    TableStatus::Waiting,
-                    format!("waiting: {e}"),
-                    records,
-                ))
+                Ok((TableStatus::Waiting, format!("waiting: {e}"), records))
             }
+            Ok(other) => anyhow::bail!(
+                "the share delivered {:?} instead of the version just submitted, {version}",
+                other.map(|p| p.version)
+            ),
+            Err(PushError::Refused { reason, .. }) => Ok((TableStatus::Refused, reason, records)),
             Err(PushError::State(e)) => Err(e).context("share state folder"),
         }
     }
@@ -230,9 +301,22 @@ impl FeatureLoop {
             );
             self.record(vec![e]).await;
         }
+        self.deliver_waiting().await;
+        self.flush_journal().await;
+        let store = self.store.read().await.clone();
+        if let Some(store) = store
+            && let Err(e) = self.journal.release_durable(&store).await
+        {
+            warn!(machine = %self.name, error = format!("{e:#}"), "database not confirmed durable: records stay in the journal");
+        }
+    }
+
+    /// Delivers the version waiting for the share, if any; once it is there its learning
+    /// state is the one in force.
+    pub(super) async fn deliver_waiting(&mut self) {
         match self.share.deliver() {
             Ok(Some(p)) => {
-                info!(machine = %self.name, version = p.version, "controller share back: waiting table delivered, learning resumes from it");
+                info!(machine = %self.name, version = p.version, "controller share: waiting table delivered, learning resumes from it");
                 let at_ms = now_ms();
                 let radius = self.memory.delivered(p.version);
                 self.on_delivered(radius.unwrap_or(self.memory.wheel_radius_mm));
@@ -261,13 +345,6 @@ impl FeatureLoop {
             }
             Ok(None) => {}
             Err(e) => warn!(machine = %self.name, error = %e, "controller share still unavailable"),
-        }
-        self.flush_journal().await;
-        let store = self.store.read().await.clone();
-        if let Some(store) = store
-            && let Err(e) = self.journal.release_durable(&store).await
-        {
-            warn!(machine = %self.name, error = format!("{e:#}"), "database not confirmed durable: records stay in the journal");
         }
     }
 }

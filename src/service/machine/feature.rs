@@ -17,7 +17,7 @@ use anyhow::Context;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use tracing::{error, info, warn};
+use tracing::{error, warn};
 
 /// One feature's loop with everything it owns.
 pub struct FeatureLoop {
@@ -50,6 +50,7 @@ impl FeatureLoop {
         name: String,
         setup: FeatureSetup,
         paths: MachinePaths,
+        fence: Option<crate::share::Fence>,
         store: StoreHandle,
         metrics: Arc<Metrics>,
         main: Arc<MainProgram>,
@@ -69,8 +70,11 @@ impl FeatureLoop {
             table_pair: setup.table_pair,
             keep_versions: 50,
         };
-        let (share, report) = Share::open(config, Box::new(RealFs), Box::new(now_ms_u64))
+        let (mut share, report) = Share::open(config, Box::new(RealFs), Box::new(now_ms_u64))
             .with_context(|| format!("machine {name}: cannot open the share state"))?;
+        if let Some(fence) = fence {
+            share.set_fence(fence);
+        }
         if let Some(e) = &report.share_unavailable {
             error!(machine = %name, error = %e, "controller share unavailable; tables wait until it is back");
         }
@@ -104,33 +108,7 @@ impl FeatureLoop {
             .with_wheel_radius(self.memory.wheel_radius_mm);
         self.table_wheel_radius_bits
             .store(self.memory.wheel_radius_mm.to_bits(), Ordering::SeqCst);
-        if let Some(pushed) = self.share.history().last_pushed().map(|v| v.record.version)
-            && pushed != self.memory.in_force_version
-        {
-            // Killed between the push and the record of it: the share is the authority, and
-            // the correction in force is the one that table was made from (its journal
-            // record), not the one before it.
-            info!(machine = %self.name, share_version = pushed, memory_version = self.memory.in_force_version, "version in force taken from the share's manifest");
-            let waiting = self.memory.waiting.as_ref().map(|w| w.version);
-            let made_from = self.journal.records().iter().rev().find_map(|r| match r {
-                Pending::Table {
-                    lobe,
-                    version,
-                    learning,
-                    ..
-                } if *lobe == self.setup.name && *version == pushed => Some(learning.clone()),
-                _ => None,
-            });
-            if let (Some(t), false) = (made_from, waiting == Some(pushed)) {
-                let l = &mut self.memory.learning;
-                if t.correction_um.len() == l.correction_um.len() {
-                    l.correction_um = t.correction_um;
-                    l.timing_correction_deg = t.timing_correction_deg;
-                    l.iteration = t.iteration;
-                }
-            }
-            self.memory.delivered(pushed);
-        }
+        self.reconcile_share().await?;
         let mut records = vec![self.recipe_snapshot(at_ms)];
         for q in self.journal.quarantined() {
             error!(machine = %self.name, line = q.line, reason = %q.reason, "journal line unreadable: moved to the quarantine file");
@@ -152,6 +130,9 @@ impl FeatureLoop {
         let _ = report;
         // The share lacks the table, or its main program is not the one this camloop writes
         // (a first start, or an upgrade): the current table goes with the main program.
+        if self.memory.waiting.is_some() {
+            self.deliver_waiting().await;
+        }
         let stale = !self.program_path().exists() || self.main_program_if_changed()?.is_some();
         if stale && self.memory.waiting.is_none() {
             let table =

@@ -28,6 +28,7 @@ mod feature;
 mod guards;
 mod ingest;
 pub mod memory;
+mod reconcile;
 mod records;
 mod rollback;
 mod shaft;
@@ -128,6 +129,19 @@ impl MachineLoop {
         store: StoreHandle,
         metrics: Arc<Metrics>,
     ) -> anyhow::Result<Self> {
+        Self::start_owned(name, setups, paths, None, store, metrics).await
+    }
+
+    /// [`Self::start`] for an owner in a cluster: every feature's share state is fenced
+    /// with the owner's epoch (see [`crate::share::Fence`]).
+    pub async fn start_owned(
+        name: String,
+        setups: Vec<FeatureSetup>,
+        paths: MachinePaths,
+        fence: Option<crate::share::Fence>,
+        store: StoreHandle,
+        metrics: Arc<Metrics>,
+    ) -> anyhow::Result<Self> {
         let main = Arc::new(MainProgram::for_features(&setups)?);
         shaft::adopt_single_feature_layout(&paths.state_dir, &setups);
         let ids = GaugeIds::new(&name, &setups);
@@ -141,6 +155,7 @@ impl MachineLoop {
                 name.clone(),
                 setup,
                 feature_paths,
+                fence.clone(),
                 store.clone(),
                 metrics.clone(),
                 main.clone(),

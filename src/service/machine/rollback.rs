@@ -1,13 +1,12 @@
 //! Rollback: a stored version delivered again as a new version under the table number not
 //! in use, its correction restored. History is appended: the rollback is a new version.
 
-use super::super::journal::{EventKind, Pending};
+use super::super::journal::EventKind;
 use super::FeatureLoop;
 use super::memory::TableLearning;
 use super::records::event;
 use crate::clock::{now_ms, now_ms_u64};
 use crate::core::program::retarget_table_program;
-use crate::share::{ProgramFile, PushRequest};
 use crate::store::EventLevel;
 use anyhow::Context;
 use tracing::info;
@@ -67,20 +66,16 @@ impl FeatureLoop {
             next.timing_correction_deg = learning.timing_correction_deg;
             next.recent_max_error_um.clear();
         }
-        let request = PushRequest {
-            files: vec![ProgramFile {
-                name: self.program_file.clone(),
-                text: text.clone(),
-            }],
+        let draft = super::delivery::Draft {
+            text,
             table_number: number,
+            learning,
             reason: reason.clone(),
             measurement_id: None,
-            learning: serde_json::to_value(learning.summary()).context("learning summary")?,
             rollback_of: Some(version),
-            created_at_unix_ms: at_ms as u64,
+            at_ms,
         };
-        let parent = self.memory.in_force_version;
-        let (new_version, status, why, mut records) = self.push(request, next, at_ms)?;
+        let (new_version, status, why, mut records) = self.push(draft, next)?;
         info!(machine = %self.name, lobe, version, new_version, table_number = number, status = status.as_str(), "rollback");
         records.extend([
             event(
@@ -90,19 +85,6 @@ impl FeatureLoop {
                 EventKind::Rollback,
                 format!("{reason} as v{new_version}, table {number}: {why}"),
             ),
-            Pending::Table {
-                machine: self.name.clone(),
-                lobe: lobe.to_string(),
-                version: new_version,
-                parent_version: (parent > 0).then_some(parent),
-                table_number: number,
-                program_text: text,
-                learning,
-                reason: reason.clone(),
-                status,
-                status_why: why.clone(),
-                created_at_ms: at_ms,
-            },
             self.learning_record(at_ms),
         ]);
         self.record(records).await;

@@ -7,21 +7,15 @@
 use super::MachineExpectation;
 use crate::share::{MANIFEST_FILE, VERSIONS_DIR, VersionStatus, load_manifest, version_dir};
 use crate::store::{NewTableVersion, Store, StoreError, TableStatus};
-use std::path::Path;
 
 /// Inserts the kept versions the store lacks; returns how many went in.
 pub(super) async fn rebuild_versions(
     store: &Store,
-    var_dir: &Path,
     expectations: &[MachineExpectation],
 ) -> Result<u64, StoreError> {
     let mut rebuilt = 0;
     for e in expectations {
-        let state = var_dir
-            .join("machines")
-            .join(&e.machine)
-            .join(&e.lobe)
-            .join("share");
+        let state = e.state_dir.join("share");
         let Ok(loaded) = load_manifest(&state.join(MANIFEST_FILE)) else {
             continue;
         };

@@ -32,6 +32,7 @@ fn share_at(version: Option<u64>, tables_in_journal: u64) -> Vec<MachineExpectat
         lobe: "IN1".into(),
         newest_share_version: version,
         tables_in_journal,
+        state_dir: PathBuf::from("/nonexistent/camloop-state"),
     }]
 }
 

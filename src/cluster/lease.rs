@@ -1,0 +1,199 @@
+//! Machine leases in PostgreSQL: who owns which machine, until when, and the fencing epoch
+//! of each ownership. Times are the database's (`now()`), so the instances' clocks never
+//! have to agree. The tables are the cluster's own coordination state (not history), made
+//! by the first instance that joins.
+
+use sqlx::Row;
+use sqlx::postgres::{PgPool, PgPoolOptions};
+use std::time::Duration;
+
+const SCHEMA: &str = "\
+CREATE TABLE IF NOT EXISTS camloop_leases (\
+  machine TEXT PRIMARY KEY,\
+  owner TEXT NOT NULL,\
+  epoch BIGINT NOT NULL,\
+  expires_at TIMESTAMPTZ NOT NULL);\
+CREATE TABLE IF NOT EXISTS camloop_instances (\
+  instance TEXT PRIMARY KEY,\
+  seen_until TIMESTAMPTZ NOT NULL)";
+
+/// A lease operation failed; the database said why.
+#[derive(Debug, thiserror::Error)]
+#[error("cluster lease database: cannot {op}: {source}")]
+pub struct LeaseError {
+    op: &'static str,
+    #[source]
+    source: sqlx::Error,
+}
+
+fn op(op: &'static str) -> impl FnOnce(sqlx::Error) -> LeaseError {
+    move |source| LeaseError { op, source }
+}
+
+/// One machine's lease as the database holds it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LeaseRow {
+    pub machine: String,
+    pub owner: String,
+    pub epoch: u64,
+    /// Whether it is still running (not expired, not released).
+    pub live: bool,
+}
+
+/// This instance's handle on the lease tables.
+#[derive(Debug, Clone)]
+pub struct Leases {
+    pool: PgPool,
+    instance: String,
+    lease_ms: i64,
+}
+
+impl Leases {
+    /// Connects (a small pool of its own, apart from the history's) and makes the tables.
+    pub async fn connect(url: &str, instance: &str, lease: Duration) -> Result<Self, LeaseError> {
+        let pool = PgPoolOptions::new()
+            .max_connections(2)
+            .acquire_timeout(lease / 4)
+            .connect(url)
+            .await
+            .map_err(op("connect"))?;
+        sqlx::raw_sql(SCHEMA)
+            .execute(&pool)
+            .await
+            .map_err(op("create the lease tables"))?;
+        Ok(Self {
+            pool,
+            instance: instance.to_string(),
+            lease_ms: lease.as_millis() as i64,
+        })
+    }
+
+    pub fn instance(&self) -> &str {
+        &self.instance
+    }
+
+    /// Says this instance is alive for one more lease; returns how many instances are.
+    pub async fn heartbeat(&self) -> Result<usize, LeaseError> {
+        sqlx::query(
+            "INSERT INTO camloop_instances (instance, seen_until) \
+             VALUES ($1, now() + $2 * interval '1 millisecond') \
+             ON CONFLICT (instance) DO UPDATE SET seen_until = EXCLUDED.seen_until",
+        )
+        .bind(&self.instance)
+        .bind(self.lease_ms)
+        .execute(&self.pool)
+        .await
+        .map_err(op("record the heartbeat"))?;
+        let live: i64 =
+            sqlx::query_scalar("SELECT count(*) FROM camloop_instances WHERE seen_until > now()")
+                .fetch_one(&self.pool)
+                .await
+                .map_err(op("count the live instances"))?;
+        Ok(live.max(1) as usize)
+    }
+
+    /// Takes `machine` when nobody holds it (never leased, expired or released): returns the
+    /// new epoch, one above the last owner's. `None`: another instance holds it.
+    pub async fn acquire(&self, machine: &str) -> Result<Option<u64>, LeaseError> {
+        let epoch: Option<i64> = sqlx::query_scalar(
+            "INSERT INTO camloop_leases (machine, owner, epoch, expires_at) \
+             VALUES ($1, $2, 1, now() + $3 * interval '1 millisecond') \
+             ON CONFLICT (machine) DO UPDATE SET owner = EXCLUDED.owner, \
+               epoch = camloop_leases.epoch + 1, expires_at = EXCLUDED.expires_at \
+             WHERE camloop_leases.expires_at <= now() RETURNING epoch",
+        )
+        .bind(machine)
+        .bind(&self.instance)
+        .bind(self.lease_ms)
+        .fetch_optional(&self.pool)
+        .await
+        .map_err(op("acquire a lease"))?;
+        Ok(epoch.map(|e| e as u64))
+    }
+
+    /// Raises the epoch of a lease this instance holds to `to` (the machine's fence was
+    /// already higher: a lease table made again from nothing). Returns the new epoch, or
+    /// `None` when the lease is no longer this instance's.
+    pub async fn raise_epoch(
+        &self,
+        machine: &str,
+        epoch: u64,
+        to: u64,
+    ) -> Result<Option<u64>, LeaseError> {
+        let raised: Option<i64> = sqlx::query_scalar(
+            "UPDATE camloop_leases SET epoch = $4 \
+             WHERE machine = $1 AND owner = $2 AND epoch = $3 AND expires_at > now() \
+             RETURNING epoch",
+        )
+        .bind(machine)
+        .bind(&self.instance)
+        .bind(epoch as i64)
+        .bind(to as i64)
+        .fetch_optional(&self.pool)
+        .await
+        .map_err(op("raise a lease's epoch"))?;
+        Ok(raised.map(|e| e as u64))
+    }
+
+    /// Extends every lease this instance still holds; returns them (machine, epoch). A
+    /// lease missing from the answer was lost: it expired and another instance may own it.
+    pub async fn renew(&self) -> Result<Vec<(String, u64)>, LeaseError> {
+        let rows = sqlx::query(
+            "UPDATE camloop_leases SET expires_at = now() + $2 * interval '1 millisecond' \
+             WHERE owner = $1 AND expires_at > now() RETURNING machine, epoch",
+        )
+        .bind(&self.instance)
+        .bind(self.lease_ms)
+        .fetch_all(&self.pool)
+        .await
+        .map_err(op("renew the leases"))?;
+        Ok(rows
+            .iter()
+            .map(|r| (r.get::<String, _>(0), r.get::<i64, _>(1) as u64))
+            .collect())
+    }
+
+    /// Gives `machine` up at once (its loop has stopped): any instance may take it now.
+    pub async fn release(&self, machine: &str, epoch: u64) -> Result<(), LeaseError> {
+        sqlx::query(
+            "UPDATE camloop_leases SET expires_at = now() - interval '1 millisecond' \
+             WHERE machine = $1 AND owner = $2 AND epoch = $3",
+        )
+        .bind(machine)
+        .bind(&self.instance)
+        .bind(epoch as i64)
+        .execute(&self.pool)
+        .await
+        .map_err(op("release a lease"))?;
+        Ok(())
+    }
+
+    /// This instance leaves: it no longer counts among the live ones.
+    pub async fn leave(&self) -> Result<(), LeaseError> {
+        sqlx::query("DELETE FROM camloop_instances WHERE instance = $1")
+            .bind(&self.instance)
+            .execute(&self.pool)
+            .await
+            .map_err(op("leave"))?;
+        Ok(())
+    }
+
+    /// Every lease, for the API and the tests.
+    pub async fn all(&self) -> Result<Vec<LeaseRow>, LeaseError> {
+        let rows = sqlx::query(
+            "SELECT machine, owner, epoch, expires_at > now() FROM camloop_leases ORDER BY machine",
+        )
+        .fetch_all(&self.pool)
+        .await
+        .map_err(op("read the leases"))?;
+        Ok(rows
+            .iter()
+            .map(|r| LeaseRow {
+                machine: r.get(0),
+                owner: r.get(1),
+                epoch: r.get::<i64, _>(2) as u64,
+                live: r.get(3),
+            })
+            .collect())
+    }
+}

@@ -1,0 +1,176 @@
+//! The cluster task: every quarter lease, renew what this instance holds, stop what it lost,
+//! shed what is beyond its fair share and take free machines (see [`crate::cluster`]). A
+//! machine is started only after its fence is raised to the lease's epoch, and released
+//! only after its loop has stopped.
+
+use super::runner::Runner;
+use crate::cluster::{Leases, plan};
+use crate::share::{Fence, StateError};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Duration;
+use tokio::sync::watch;
+use tokio::time::Instant;
+use tracing::{error, info, warn};
+
+/// A machine this instance holds.
+struct Held {
+    epoch: u64,
+    /// Stop it by then if the lease could not be renewed: before the database lets another
+    /// instance take it.
+    deadline: Instant,
+}
+
+pub(super) struct ClusterTask {
+    pub(super) leases: Leases,
+    pub(super) lease: Duration,
+    pub(super) machines_dir: PathBuf,
+    pub(super) runner: Runner,
+}
+
+impl ClusterTask {
+    /// Runs until shutdown; then stops every machine, releases its leases and leaves.
+    pub(super) async fn run(mut self, mut shutdown: watch::Receiver<bool>) {
+        let mut held: BTreeMap<String, Held> = BTreeMap::new();
+        let mut tick = tokio::time::interval(self.lease / 4);
+        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        // The first round only says this instance is here, so instances started together
+        // count each other before anyone takes machines.
+        if let Err(e) = self.leases.heartbeat().await {
+            warn!(error = %e, "cluster: first heartbeat failed");
+        }
+        tick.tick().await;
+        let mut said = String::new();
+        loop {
+            tokio::select! {
+                _ = tick.tick() => {}
+                _ = shutdown.changed() => break,
+            }
+            if let Err(e) = self.round(&mut held).await {
+                let text = e.to_string();
+                if text != said {
+                    error!(error = %text, "cluster: lease database unavailable; machines held stop before their leases run out");
+                    said = text;
+                }
+            } else {
+                said.clear();
+            }
+            self.stop_overdue(&mut held).await;
+        }
+        self.runner.stop_all().await;
+        for (machine, h) in &held {
+            if let Err(e) = self.leases.release(machine, h.epoch).await {
+                warn!(machine = %machine, error = %e, "cluster: lease not released (it expires)");
+            }
+        }
+        let _ = self.leases.leave().await;
+        info!(instance = %self.leases.instance(), "cluster: left");
+    }
+
+    /// One round: renew, heartbeat, shed, take.
+    async fn round(
+        &mut self,
+        held: &mut BTreeMap<String, Held>,
+    ) -> Result<(), crate::cluster::LeaseError> {
+        let asked = Instant::now();
+        let renewed: BTreeMap<String, u64> = self.leases.renew().await?.into_iter().collect();
+        let lost: Vec<String> = held
+            .iter()
+            .filter(|(m, h)| renewed.get(*m) != Some(&h.epoch))
+            .map(|(m, _)| m.clone())
+            .collect();
+        for m in lost {
+            error!(machine = %m, "cluster: lease lost; machine stopped on this instance");
+            self.runner.stop(&m).await;
+            held.remove(&m);
+        }
+        for h in held.values_mut() {
+            h.deadline = asked + self.lease / 2;
+        }
+        let live = self.leases.heartbeat().await?;
+        let all = self.runner.names();
+        let rows = self.leases.all().await?;
+        let free: Vec<String> = all
+            .iter()
+            .filter(|m| !rows.iter().any(|r| r.machine == **m && r.live))
+            .cloned()
+            .collect();
+        let mine: Vec<String> = held.keys().cloned().collect();
+        let p = plan(self.leases.instance(), &all, &mine, &free, live);
+        for m in p.shed {
+            info!(machine = %m, live_instances = live, "cluster: handing the machine over (rebalance)");
+            self.runner.stop(&m).await;
+            if let Some(h) = held.remove(&m) {
+                self.leases.release(&m, h.epoch).await?;
+            }
+        }
+        for m in p.take {
+            let Some(epoch) = self.leases.acquire(&m).await? else {
+                continue;
+            };
+            let acquired = Instant::now();
+            match self.own(&m, epoch).await {
+                Ok(epoch) => {
+                    held.insert(
+                        m,
+                        Held {
+                            epoch,
+                            deadline: acquired + self.lease / 2,
+                        },
+                    );
+                }
+                Err(e) => {
+                    error!(machine = %m, error = format!("{e:#}"), "cluster: machine not started; lease released");
+                    self.leases.release(&m, epoch).await?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Raises the machine's fence to the lease's epoch (or past a higher one found there,
+    /// raising the lease to match) and starts it. Returns the epoch it runs under.
+    async fn own(&mut self, machine: &str, epoch: u64) -> anyhow::Result<u64> {
+        let dir = self.machines_dir.join(machine);
+        let instance = self.leases.instance().to_string();
+        let claim = |epoch: u64| {
+            let dir = dir.clone();
+            let instance = instance.clone();
+            tokio::task::spawn_blocking(move || Fence::claim(&dir, epoch, &instance))
+        };
+        let fence = match claim(epoch).await? {
+            Ok(f) => f,
+            Err(StateError::Fenced { current, .. }) => {
+                // The lease table was made again (a new database): continue above the fence.
+                warn!(machine = %machine, lease_epoch = epoch, fence_epoch = current, "cluster: the machine's fence is ahead of its lease; lease raised past it");
+                let raised = self
+                    .leases
+                    .raise_epoch(machine, epoch, current + 1)
+                    .await?
+                    .ok_or_else(|| anyhow::anyhow!("lease lost while raising its epoch"))?;
+                claim(raised).await??
+            }
+            Err(e) => return Err(e.into()),
+        };
+        let epoch = fence.epoch();
+        // A source that ends (a part count) ends its machine's parts here; nothing waits on it.
+        let _done = self.runner.start(machine, Some(fence)).await?;
+        info!(machine = %machine, epoch, "cluster: machine taken");
+        Ok(epoch)
+    }
+
+    /// Stops machines whose lease could not be renewed in time.
+    async fn stop_overdue(&mut self, held: &mut BTreeMap<String, Held>) {
+        let now = Instant::now();
+        let overdue: Vec<String> = held
+            .iter()
+            .filter(|(_, h)| h.deadline <= now)
+            .map(|(m, _)| m.clone())
+            .collect();
+        for m in overdue {
+            error!(machine = %m, "cluster: lease not renewed in time; machine stopped before another instance may take it");
+            self.runner.stop(&m).await;
+            held.remove(&m);
+        }
+    }
+}

@@ -1,0 +1,124 @@
+//! Acceptance: `kill -9` of the real service at random moments never leaves a table version
+//! that the history does not know. Every version the share's manifest holds has its row in
+//! the store (with the program the share verified and the status the share gave it), the
+//! journal drains once the service runs again.
+//!
+//! Before the write-ahead record (a version's record journalled before the share hears of
+//! it), a kill between the push and its record left a version only the share knew: its
+//! status could never be written and that feature's journal stopped draining.
+
+mod cli_support;
+
+use camloop::share::{VersionStatus, load_manifest};
+use camloop::store::{Store, TableStatus};
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+const KILLS: usize = 14;
+const SEED: u64 = 0x5EED_0000_0013;
+
+fn config(recipe: &Path) -> String {
+    format!(
+        "[database]\nurl = \"sqlite://var/camloop.db?mode=rwc\"\n[service]\nvar_dir = \"var\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
+         [[machines]]\nname = \"M7\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/M7\"\n[machines.gauge]\nkind = \"sim\"\npart_interval_ms = 5\n",
+        recipe.display()
+    )
+}
+
+/// A small deterministic generator (xorshift), so a failure can be replayed.
+fn next(state: &mut u64) -> u64 {
+    *state ^= *state << 13;
+    *state ^= *state >> 7;
+    *state ^= *state << 17;
+    *state
+}
+
+#[test]
+fn killing_the_service_never_leaves_a_version_the_history_does_not_know() {
+    let dir = tempfile::tempdir().unwrap();
+    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
+    std::fs::write(dir.path().join("camloop.toml"), config(&recipe)).unwrap();
+    let mut rng = SEED;
+    for _ in 0..KILLS {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_camloop"))
+            .args(["run", "--config", "camloop.toml"])
+            .current_dir(dir.path())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        // Start-up takes some 100 ms; the kills land anywhere in the parts after it.
+        std::thread::sleep(Duration::from_millis(150 + next(&mut rng) % 700));
+        child.kill().unwrap();
+        child.wait().unwrap();
+    }
+    // A last, graceful run: the journal is written and released as it would be in service.
+    let out = cli_support::camloop(
+        &["run", "--config", "camloop.toml", "--parts", "5"],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", cli_support::stderr(&out));
+
+    let manifest = dir.path().join("var/machines/M7/IN1/share/manifest.jsonl");
+    let history = load_manifest(&manifest).unwrap().history;
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    rt.block_on(async {
+        let url = format!("sqlite://{}", dir.path().join("var/camloop.db").display());
+        let store = Store::connect(&url).await.unwrap();
+        let mut pushed = 0;
+        for v in history.versions() {
+            let version = v.record.version;
+            let row = store
+                .table_version("M7", "IN1", version as i64)
+                .await
+                .unwrap()
+                .unwrap_or_else(|| {
+                    panic!("v{version} is on the share's manifest, not in the store")
+                });
+            assert_eq!(row.table_number, v.record.table_number, "v{version}");
+            let expected = match &v.status {
+                VersionStatus::Pushed { .. } => Some(TableStatus::Pushed),
+                VersionStatus::Refused { .. } => Some(TableStatus::Refused),
+                _ => None,
+            };
+            if let Some(expected) = expected {
+                assert_eq!(row.status, expected, "v{version}: {}", row.status_why);
+            }
+            if v.text_kept {
+                let on_share = &v.record.files[0].sha256;
+                assert_eq!(
+                    &row.sha256, on_share,
+                    "v{version}: the store's program is not the share's"
+                );
+            }
+            pushed += usize::from(matches!(v.status, VersionStatus::Pushed { .. }));
+        }
+        assert!(
+            pushed >= KILLS,
+            "only {pushed} versions pushed: the kills came too early to test anything"
+        );
+        // The newest version pushed is the one in force in the stored learning state.
+        let newest = history.last_pushed().unwrap().record.version;
+        let state = store
+            .load_learning_state("M7", "IN1")
+            .await
+            .unwrap()
+            .unwrap();
+        let memory: serde_json::Value = serde_json::from_str(&state.state_json).unwrap();
+        assert_eq!(memory["in_force_version"].as_u64(), Some(newest));
+        // Nothing stuck in the journal: what it still holds is already in the store.
+        let journal = std::fs::read_to_string(dir.path().join("var/machines/M7/IN1/journal.jsonl"))
+            .unwrap_or_default();
+        for line in journal.lines() {
+            let record: serde_json::Value = serde_json::from_str(line).unwrap();
+            if record["record"] == "table" {
+                let v = record["version"].as_i64().unwrap();
+                assert!(
+                    store.table_version("M7", "IN1", v).await.unwrap().is_some(),
+                    "v{v} stuck in the journal"
+                );
+            }
+        }
+    });
+}
