@@ -114,6 +114,7 @@ fn shipped_service_configurations_parse() {
         "config/camloop.toml",
         "config/crankshaft.toml",
         "docker/camloop.toml",
+        "docker/cluster.toml",
     ] {
         let path = root.join(file);
         let text = std::fs::read_to_string(&path).unwrap();

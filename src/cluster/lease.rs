@@ -7,7 +7,11 @@ use sqlx::Row;
 use sqlx::postgres::{PgPool, PgPoolOptions};
 use std::time::Duration;
 
+/// Instances starting together make the tables one at a time, under a transaction lock: a
+/// `CREATE TABLE IF NOT EXISTS` racing another can fail on the catalogue's unique index.
 const SCHEMA: &str = "\
+BEGIN;\
+SELECT pg_advisory_xact_lock(7340925001);\
 CREATE TABLE IF NOT EXISTS camloop_leases (\
   machine TEXT PRIMARY KEY,\
   owner TEXT NOT NULL,\
@@ -15,7 +19,8 @@ CREATE TABLE IF NOT EXISTS camloop_leases (\
   expires_at TIMESTAMPTZ NOT NULL);\
 CREATE TABLE IF NOT EXISTS camloop_instances (\
   instance TEXT PRIMARY KEY,\
-  seen_until TIMESTAMPTZ NOT NULL)";
+  seen_until TIMESTAMPTZ NOT NULL);\
+COMMIT";
 
 /// A lease operation failed; the database said why.
 #[derive(Debug, thiserror::Error)]

@@ -3,7 +3,7 @@
 //! machine is started only after its fence is raised to the lease's epoch, and released
 //! only after its loop has stopped.
 
-use super::runner::Runner;
+use super::runner::{Opened, Runner};
 use crate::cluster::{Leases, plan};
 use crate::share::{Fence, StateError};
 use std::collections::BTreeMap;
@@ -73,20 +73,7 @@ impl ClusterTask {
         held: &mut BTreeMap<String, Held>,
     ) -> Result<(), crate::cluster::LeaseError> {
         let asked = Instant::now();
-        let renewed: BTreeMap<String, u64> = self.leases.renew().await?.into_iter().collect();
-        let lost: Vec<String> = held
-            .iter()
-            .filter(|(m, h)| renewed.get(*m) != Some(&h.epoch))
-            .map(|(m, _)| m.clone())
-            .collect();
-        for m in lost {
-            error!(machine = %m, "cluster: lease lost; machine stopped on this instance");
-            self.runner.stop(&m).await;
-            held.remove(&m);
-        }
-        for h in held.values_mut() {
-            h.deadline = asked + self.lease / 2;
-        }
+        self.renew(held).await?;
         let live = self.leases.heartbeat().await?;
         let all = self.runner.names();
         let rows = self.leases.all().await?;
@@ -104,24 +91,63 @@ impl ClusterTask {
                 self.leases.release(&m, h.epoch).await?;
             }
         }
-        for m in p.take {
-            let Some(epoch) = self.leases.acquire(&m).await? else {
-                continue;
-            };
-            let acquired = Instant::now();
-            match self.own(&m, epoch).await {
+        self.take(p.take, held).await?;
+        if asked.elapsed() > self.lease / 4 {
+            // Taking machines took a while: renew now rather than a quarter lease later.
+            self.renew(held).await?;
+        }
+        Ok(())
+    }
+
+    /// Renews every lease held; stops the machines whose lease another instance has now.
+    async fn renew(
+        &mut self,
+        held: &mut BTreeMap<String, Held>,
+    ) -> Result<(), crate::cluster::LeaseError> {
+        let asked = Instant::now();
+        let renewed: BTreeMap<String, u64> = self.leases.renew().await?.into_iter().collect();
+        let lost: Vec<String> = held
+            .iter()
+            .filter(|(m, h)| renewed.get(*m) != Some(&h.epoch))
+            .map(|(m, _)| m.clone())
+            .collect();
+        for m in lost {
+            error!(machine = %m, "cluster: lease lost; machine stopped on this instance");
+            self.runner.stop(&m).await;
+            held.remove(&m);
+        }
+        for h in held.values_mut() {
+            h.deadline = asked + self.lease / 2;
+        }
+        Ok(())
+    }
+
+    /// Takes the planned machines: every lease first, then the fences are claimed and the
+    /// loops opened all at once (a dead instance's machines start together, not in turn).
+    async fn take(
+        &mut self,
+        machines: Vec<String>,
+        held: &mut BTreeMap<String, Held>,
+    ) -> Result<(), crate::cluster::LeaseError> {
+        let mut won = Vec::new();
+        for m in machines {
+            if let Some(epoch) = self.leases.acquire(&m).await? {
+                won.push((m, epoch, Instant::now()));
+            }
+        }
+        let opening = won.iter().map(|(m, epoch, _)| self.open(m, *epoch));
+        let opened = futures_util::future::join_all(opening).await;
+        for ((m, lease_epoch, acquired), result) in won.into_iter().zip(opened) {
+            let launched = result.and_then(|(epoch, o)| self.runner.launch(o).map(|_| epoch));
+            match launched {
                 Ok(epoch) => {
-                    held.insert(
-                        m,
-                        Held {
-                            epoch,
-                            deadline: acquired + self.lease / 2,
-                        },
-                    );
+                    info!(machine = %m, epoch, "cluster: machine taken");
+                    let deadline = acquired + self.lease / 2;
+                    held.insert(m, Held { epoch, deadline });
                 }
                 Err(e) => {
                     error!(machine = %m, error = format!("{e:#}"), "cluster: machine not started; lease released");
-                    self.leases.release(&m, epoch).await?;
+                    self.leases.release(&m, lease_epoch).await?;
                 }
             }
         }
@@ -129,8 +155,8 @@ impl ClusterTask {
     }
 
     /// Raises the machine's fence to the lease's epoch (or past a higher one found there,
-    /// raising the lease to match) and starts it. Returns the epoch it runs under.
-    async fn own(&mut self, machine: &str, epoch: u64) -> anyhow::Result<u64> {
+    /// raising the lease to match) and opens its loop. Returns the epoch it runs under.
+    async fn open(&self, machine: &str, epoch: u64) -> anyhow::Result<(u64, Opened)> {
         let dir = self.machines_dir.join(machine);
         let instance = self.leases.instance().to_string();
         let claim = |epoch: u64| {
@@ -153,10 +179,7 @@ impl ClusterTask {
             Err(e) => return Err(e.into()),
         };
         let epoch = fence.epoch();
-        // A source that ends (a part count) ends its machine's parts here; nothing waits on it.
-        let _done = self.runner.start(machine, Some(fence)).await?;
-        info!(machine = %machine, epoch, "cluster: machine taken");
-        Ok(epoch)
+        Ok((epoch, self.runner.open(machine, Some(fence)).await?))
     }
 
     /// Stops machines whose lease could not be renewed in time.

@@ -21,6 +21,12 @@ struct RunningMachine {
     task: tokio::task::JoinHandle<()>,
 }
 
+/// A machine whose loop is open, not yet running.
+pub(super) struct Opened {
+    name: String,
+    machine: MachineLoop,
+}
+
 /// The machines of this instance.
 pub(super) struct Runner {
     config: Config,
@@ -64,21 +70,50 @@ impl Runner {
         name: &str,
         fence: Option<crate::share::Fence>,
     ) -> anyhow::Result<oneshot::Receiver<()>> {
+        let opened = self.open(name, fence).await?;
+        self.launch(opened)
+    }
+
+    /// Opens machine `name`'s loop (journal, share state, memory): the slow part of a start,
+    /// which several machines may do at once.
+    pub(super) async fn open(
+        &self,
+        name: &str,
+        fence: Option<crate::share::Fence>,
+    ) -> anyhow::Result<Opened> {
         let checked = self
             .checked
             .get(name)
-            .with_context(|| format!("machine {name} is not configured"))?
-            .clone();
-        let section = self
-            .config
-            .machines
-            .iter()
-            .find(|c| c.name == name)
-            .context("a checked machine is in the config")?;
+            .with_context(|| format!("machine {name} is not configured"))?;
+        let section = self.section(name)?;
         let paths = machine::MachinePaths {
             share_dir: self.config.resolve(&section.share),
             state_dir: self.config.machines_dir().join(name),
         };
+        let mut machine = MachineLoop::start_owned(
+            name.to_string(),
+            checked.setups.clone(),
+            paths,
+            fence,
+            self.shared.store.clone(),
+            self.shared.metrics.clone(),
+        )
+        .await?;
+        machine.set_plant_events(self.shared.plant_events.clone());
+        Ok(Opened {
+            name: name.to_string(),
+            machine,
+        })
+    }
+
+    /// Starts an opened machine's gauge source and loop.
+    pub(super) fn launch(&mut self, opened: Opened) -> anyhow::Result<oneshot::Receiver<()>> {
+        let Opened { name, machine } = opened;
+        let section = self.section(&name)?;
+        let checked = self
+            .checked
+            .get(&name)
+            .context("an opened machine is configured")?;
         let (stop, stopped) = watch::channel(false);
         let stop = Arc::new(stop);
         let mut global = self.shared.shutdown.clone();
@@ -89,16 +124,6 @@ impl Runner {
                 let _ = forward.send(true);
             }
         });
-        let mut machine = MachineLoop::start_owned(
-            name.to_string(),
-            checked.setups,
-            paths,
-            fence,
-            self.shared.store.clone(),
-            self.shared.metrics.clone(),
-        )
-        .await?;
-        machine.set_plant_events(self.shared.plant_events.clone());
         let (tx, rx) = mpsc::channel::<SourceEvent>(16);
         let (command_tx, command_rx) = mpsc::channel::<http::Command>(4);
         super::sources::spawn(
@@ -113,11 +138,18 @@ impl Runner {
         let (done_tx, done_rx) = oneshot::channel();
         let task = tokio::spawn(machine_task(machine, rx, command_rx, done_tx, stopped));
         if let Ok(mut routes) = self.commands.write() {
-            routes.insert(name.to_string(), command_tx);
+            routes.insert(name.clone(), command_tx);
         }
-        self.running
-            .insert(name.to_string(), RunningMachine { stop, task });
+        self.running.insert(name, RunningMachine { stop, task });
         Ok(done_rx)
+    }
+
+    fn section(&self, name: &str) -> anyhow::Result<&crate::config::MachineSection> {
+        self.config
+            .machines
+            .iter()
+            .find(|c| c.name == name)
+            .context("a checked machine is in the config")
     }
 
     /// Stops machine `name` after the part in hand; returns once it has stopped.

@@ -12,6 +12,7 @@ use record::{apply, apply_once};
 use reserve::DiskReserve;
 pub use reserve::RESERVE_BYTES;
 
+use crate::share::{Fence, Held};
 use crate::store::Store;
 use anyhow::Context;
 use std::io::Write;
@@ -32,6 +33,9 @@ pub struct Journal {
     replayed: usize,
     quarantined: Vec<Quarantined>,
     reserve: DiskReserve,
+    /// With several instances: this owner's fence, held around every write (the file and the
+    /// store), so an instance that lost the machine writes nothing more for it.
+    fence: Option<Fence>,
 }
 
 fn is_disk_full(e: &std::io::Error) -> bool {
@@ -77,6 +81,7 @@ impl Journal {
             records,
             written: 0,
             quarantined: Vec::new(),
+            fence: None,
             reserve,
         };
         if !bad.is_empty() {
@@ -114,9 +119,21 @@ impl Journal {
         &self.quarantined
     }
 
+    /// Fences every later write with `fence` (an owner in a cluster): once another instance
+    /// claims the machine, appends, flushes and releases fail with the fence's error.
+    pub fn set_fence(&mut self, fence: Fence) {
+        self.fence = Some(fence);
+    }
+
+    fn hold(&self) -> anyhow::Result<Option<Held>> {
+        let held = self.fence.as_ref().map(Fence::hold).transpose();
+        held.with_context(|| format!("journal {}", self.path.display()))
+    }
+
     /// Appends the records and flushes them to disk before returning. When the disk is
     /// full, the space of the reserve file is given up to take them (see [`Self::on_reserve`]).
     pub fn append(&mut self, records: &[Pending]) -> anyhow::Result<()> {
+        let _held = self.hold()?;
         let mut text = String::new();
         for r in records {
             text.push_str(&serde_json::to_string(r)?);
@@ -174,6 +191,7 @@ impl Journal {
     /// for the next attempt (e.g. the database is down). Records that went stay in the file
     /// until [`Journal::release_durable`] finds the store's copy durable.
     pub async fn flush(&mut self, store: &Store) -> anyhow::Result<usize> {
+        let _held = self.hold()?;
         let mut done = 0;
         let mut failure = None;
         for (i, record) in self.records.iter().enumerate().skip(self.written) {
@@ -204,6 +222,7 @@ impl Journal {
     /// committed so far is durable ([`Store::checkpoint`]). Returns how many were dropped.
     pub async fn release_durable(&mut self, store: &Store) -> anyhow::Result<usize> {
         let written = self.written;
+        let _held = self.hold()?;
         if written == 0 || !store.checkpoint().await? {
             return Ok(0);
         }

@@ -55,7 +55,7 @@ impl FeatureLoop {
         metrics: Arc<Metrics>,
         main: Arc<MainProgram>,
     ) -> anyhow::Result<Self> {
-        let journal =
+        let mut journal =
             Journal::open(&paths.state_dir).with_context(|| format!("machine {name}: journal"))?;
         let memory = load_memory(&name, &setup, &journal, &store).await?;
         if let Err(e) = std::fs::create_dir_all(&paths.share_dir) {
@@ -73,6 +73,8 @@ impl FeatureLoop {
         let (mut share, report) = Share::open(config, Box::new(RealFs), Box::new(now_ms_u64))
             .with_context(|| format!("machine {name}: cannot open the share state"))?;
         if let Some(fence) = fence {
+            // Every write for this feature (journal, store, share) is fenced from here on.
+            journal.set_fence(fence.clone());
             share.set_fence(fence);
         }
         if let Some(e) = &report.share_unavailable {

@@ -1,0 +1,362 @@
+//! Acceptance for several instances: three `camloop run` processes with `[cluster]` on one
+//! throwaway PostgreSQL share 30 machines, each machine a thread outside camloop that grinds
+//! what its share's program couples and drops the measurement into its inbox. One instance
+//! is killed with SIGKILL mid-run and started again. Checked:
+//! - the leases split the machines evenly; the dead instance's machines are taken within
+//!   10 s (the default lease of 6 s, plus a quarter lease until the others look) and handed
+//!   back when it returns;
+//! - every machine keeps producing: every dropped file is taken, none rejected, none waits
+//!   longer than the takeover;
+//! - no measurement lost and none stored twice: the store holds each dropped part once;
+//! - no version number used twice, no version pushed by two owners: each machine's manifest
+//!   holds versions 1..n once each, every one carries the fencing epoch of its owner, epochs
+//!   never go down, and the store holds the same versions with the same programs.
+
+mod cluster_support;
+mod store_support;
+
+use cluster_support::{Dropped, Machine};
+use sqlx::Row;
+use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+const MACHINES: usize = 30;
+const INSTANCES: [&str; 3] = ["a", "b", "c"];
+/// The default lease; the takeover bound the issue sets follows from it.
+const LEASE_MS: u64 = 6000;
+const TAKEOVER_LIMIT: Duration = Duration::from_secs(10);
+
+fn machine_name(i: usize) -> String {
+    format!("M{:02}", i + 1)
+}
+
+fn config(root: &Path, instance: &str, db_url: &str) -> String {
+    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
+    let mut text = format!(
+        "[service]\nvar_dir = \"var-{instance}\"\n[database]\nurl = \"{db_url}\"\n\
+         [http]\nlisten = \"127.0.0.1:0\"\n\
+         [cluster]\nenabled = true\ninstance = \"{instance}\"\nlease_ms = {LEASE_MS}\nstate_dir = \"state\"\n"
+    );
+    for i in 0..MACHINES {
+        let m = machine_name(i);
+        text.push_str(&format!(
+            "[[machines]]\nname = \"{m}\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"shares/{m}\"\n\
+             [machines.gauge]\nkind = \"drop\"\nfolder = \"inbox/{m}\"\npoll_ms = 50\n",
+            recipe.display()
+        ));
+    }
+    std::fs::write(root.join(format!("{instance}.toml")), &text).unwrap();
+    text
+}
+
+fn start(root: &Path, instance: &str) -> Child {
+    let log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(root.join(format!("{instance}.log")))
+        .unwrap();
+    Command::new(env!("CARGO_BIN_EXE_camloop"))
+        .args(["run", "--config", &format!("{instance}.toml")])
+        .current_dir(root)
+        .stdout(Stdio::null())
+        .stderr(log)
+        .spawn()
+        .unwrap()
+}
+
+/// Owner of every leased machine whose lease has not expired.
+async fn owners(db: &sqlx::PgPool) -> HashMap<String, String> {
+    sqlx::query("SELECT machine, owner FROM camloop_leases WHERE expires_at > now()")
+        .fetch_all(db)
+        .await
+        .map(|rows| {
+            rows.iter()
+                .map(|r| (r.get::<String, _>(0), r.get::<String, _>(1)))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+fn counts(owners: &HashMap<String, String>) -> BTreeMap<String, usize> {
+    let mut c = BTreeMap::new();
+    for o in owners.values() {
+        *c.entry(o.clone()).or_default() += 1;
+    }
+    c
+}
+
+/// Polls the leases until `done` holds; panics naming what was seen after `limit`.
+async fn wait_leases(
+    root: &Path,
+    db: &sqlx::PgPool,
+    limit: Duration,
+    what: &str,
+    done: impl Fn(&HashMap<String, String>) -> bool,
+) -> Duration {
+    let at = Instant::now();
+    loop {
+        let o = owners(db).await;
+        if done(&o) {
+            return at.elapsed();
+        }
+        assert!(
+            at.elapsed() < limit,
+            "{what}: after {limit:?} the leases are {:?}\n{}",
+            counts(&o),
+            log_tails(root)
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+fn percentile(sorted: &[Duration], p: f64) -> Duration {
+    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
+}
+
+#[test]
+fn three_instances_share_the_machines_and_survive_a_kill() {
+    let Some(server) = store_support::pg::start_or_skip("cluster_takeover") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    for i in INSTANCES {
+        config(root, i, &server.url());
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    let machines: Vec<_> = (0..MACHINES)
+        .map(|i| {
+            let name = machine_name(i);
+            let inbox = root.join("inbox").join(&name);
+            std::fs::create_dir_all(&inbox).unwrap();
+            let machine = Machine {
+                share: root.join("shares").join(&name),
+                inbox,
+                name,
+                cycle: Duration::from_millis(1500),
+                seed: 1000 + i as u64,
+            };
+            let stop = stop.clone();
+            std::thread::spawn(move || machine.run(stop, Duration::from_secs(40)))
+        })
+        .collect();
+    let mut children: HashMap<&str, Child> =
+        INSTANCES.iter().map(|&i| (i, start(root, i))).collect();
+
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let report = rt.block_on(async {
+        let db = sqlx::PgPool::connect(&server.url()).await.unwrap();
+        let even = |o: &HashMap<String, String>| {
+            o.len() == MACHINES && INSTANCES.iter().all(|i| counts(o).get(*i) == Some(&10))
+        };
+        wait_leases(
+            root,
+            &db,
+            Duration::from_secs(40),
+            "three instances split 30 machines",
+            even,
+        )
+        .await;
+        tokio::time::sleep(Duration::from_secs(6)).await;
+
+        // SIGKILL: no release, no goodbye; its leases run out.
+        let held: Vec<String> = owners(&db)
+            .await
+            .into_iter()
+            .filter(|(_, o)| o == "c")
+            .map(|(m, _)| m)
+            .collect();
+        let killed = Instant::now();
+        let mut child = children.remove("c").unwrap();
+        child.kill().unwrap();
+        child.wait().unwrap();
+        let mut takeover: HashMap<String, Duration> = HashMap::new();
+        while takeover.len() < held.len() {
+            let o = owners(&db).await;
+            for m in &held {
+                if o.get(m).is_some_and(|owner| owner != "c") && !takeover.contains_key(m) {
+                    takeover.insert(m.clone(), killed.elapsed());
+                }
+            }
+            assert!(
+                killed.elapsed() < Duration::from_secs(30),
+                "the dead instance's machines not taken: {:?}\n{}",
+                counts(&o),
+                log_tails(root)
+            );
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        tokio::time::sleep(Duration::from_secs(4)).await;
+
+        children.insert("c", start(root, "c"));
+        let rebalance = wait_leases(
+            root,
+            &db,
+            Duration::from_secs(30),
+            "the returning instance gets its share",
+            even,
+        )
+        .await;
+        tokio::time::sleep(Duration::from_secs(6)).await;
+        (takeover, rebalance)
+    });
+    let (takeover, rebalance) = report;
+
+    stop.store(true, Ordering::SeqCst);
+    let dropped: Vec<(String, Vec<Dropped>)> = machines
+        .into_iter()
+        .enumerate()
+        .map(|(i, h)| (machine_name(i), h.join().unwrap()))
+        .collect();
+    for (_, mut child) in children {
+        // SIGTERM: a graceful stop releases the leases.
+        let _ = Command::new("kill").arg(child.id().to_string()).status();
+        child.wait().unwrap();
+    }
+
+    let mut times: Vec<Duration> = takeover.values().copied().collect();
+    times.sort();
+    let mut waits: Vec<Duration> = dropped
+        .iter()
+        .flat_map(|(_, d)| d.iter().map(|p| p.waited))
+        .collect();
+    waits.sort();
+    let parts: usize = dropped.iter().map(|(_, d)| d.len()).sum();
+    eprintln!(
+        "takeover of {} machines: p50 {:?}, max {:?}; rebalance after the restart {rebalance:?}; \
+         {parts} parts, wait in the inbox p50 {:?} max {:?}",
+        times.len(),
+        percentile(&times, 0.5),
+        times[times.len() - 1],
+        percentile(&waits, 0.5),
+        waits[waits.len() - 1],
+    );
+    assert!(
+        times[times.len() - 1] < TAKEOVER_LIMIT,
+        "takeover took {:?}",
+        times[times.len() - 1]
+    );
+    for (m, parts) in &dropped {
+        assert!(parts.len() >= 8, "{m} made only {} parts", parts.len());
+        for p in parts {
+            assert_eq!(
+                p.rejected, None,
+                "{m} {} was not taken as a measurement",
+                p.file
+            );
+            assert!(
+                p.waited < TAKEOVER_LIMIT + Duration::from_secs(2),
+                "{m} {} waited {:?} in the inbox",
+                p.file,
+                p.waited
+            );
+        }
+    }
+    rt.block_on(check_history(root, &server.url(), &dropped));
+    assert_logs_clean(root);
+}
+
+/// The store holds every dropped part once; each machine's versions are 1..n once each, with
+/// non-decreasing epochs, and the store holds the same versions with the same programs.
+async fn check_history(root: &Path, url: &str, dropped: &[(String, Vec<Dropped>)]) {
+    let db = sqlx::PgPool::connect(url).await.unwrap();
+    let store = camloop::store::Store::connect(url).await.unwrap();
+    for (m, parts) in dropped {
+        let stored: Vec<String> =
+            sqlx::query("SELECT part FROM measurements WHERE machine = $1 ORDER BY part")
+                .bind(m)
+                .fetch_all(&db)
+                .await
+                .unwrap()
+                .iter()
+                .map(|r| r.get(0))
+                .collect();
+        let mut expected: Vec<String> = parts.iter().map(|p| p.part.clone()).collect();
+        expected.sort();
+        assert_eq!(
+            stored, expected,
+            "{m}: the store's parts are not the parts dropped"
+        );
+
+        let manifest = root.join(format!("state/machines/{m}/IN1/share/manifest.jsonl"));
+        let history = camloop::share::load_manifest(&manifest).unwrap().history;
+        let versions = history.versions();
+        let mut last_epoch = 0;
+        for (i, v) in versions.iter().enumerate() {
+            let version = v.record.version;
+            assert_eq!(
+                version,
+                i as u64 + 1,
+                "{m}: versions are not 1..n once each"
+            );
+            let epoch = v
+                .record
+                .epoch
+                .unwrap_or_else(|| panic!("{m} v{version} has no epoch"));
+            assert!(
+                epoch >= last_epoch,
+                "{m} v{version}: epoch {epoch} after {last_epoch}"
+            );
+            last_epoch = epoch;
+            let row = store
+                .table_version(m, "IN1", version as i64)
+                .await
+                .unwrap()
+                .unwrap_or_else(|| panic!("{m} v{version} is on the share, not in the store"));
+            assert_eq!(row.table_number, v.record.table_number, "{m} v{version}");
+            assert_eq!(
+                row.sha256, v.record.files[0].sha256,
+                "{m} v{version}: another program"
+            );
+        }
+        assert!(versions.len() > 2, "{m}: only {} versions", versions.len());
+        let fence =
+            std::fs::read_to_string(root.join(format!("state/machines/{m}/fence"))).unwrap();
+        assert!(
+            fence_epoch(&fence) >= last_epoch,
+            "{m}: fence {fence:?} behind v{}",
+            versions.len()
+        );
+    }
+    store.close().await;
+}
+
+fn fence_epoch(text: &str) -> u64 {
+    text.split_whitespace()
+        .nth(1)
+        .and_then(|e| e.parse().ok())
+        .unwrap_or(0)
+}
+
+/// The last lines of each instance's log, for a failure's message.
+fn log_tails(root: &Path) -> String {
+    let mut out = String::new();
+    for i in INSTANCES {
+        let log = std::fs::read_to_string(root.join(format!("{i}.log"))).unwrap_or_default();
+        let lines: Vec<&str> = log.lines().filter(|l| !l.contains(" part ")).collect();
+        out.push_str(&format!("--- {i}.log (without part lines), last 20:\n"));
+        for l in &lines[lines.len().saturating_sub(20)..] {
+            out.push_str(l);
+            out.push('\n');
+        }
+    }
+    out
+}
+
+/// No instance refused a push for a stale epoch or panicked.
+fn assert_logs_clean(root: &Path) {
+    for i in INSTANCES {
+        let log = std::fs::read_to_string(root.join(format!("{i}.log"))).unwrap();
+        assert!(!log.contains("panicked"), "{i} panicked:\n{log}");
+        let errors: Vec<&str> = log.lines().filter(|l| l.contains(" ERROR ")).collect();
+        assert!(
+            errors.is_empty(),
+            "{i} logged errors:\n{}",
+            errors.join("\n")
+        );
+    }
+}
