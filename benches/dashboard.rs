@@ -172,6 +172,7 @@ async fn serve(store: Store) -> (SocketAddr, watch::Sender<bool>) {
         token: Some(Secret::new("bench")),
         body_timeout: limits.body_timeout,
         dashboard: Arc::new(sheets),
+        cluster: None,
     };
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();

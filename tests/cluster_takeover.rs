@@ -1,12 +1,14 @@
 //! Acceptance for several instances: three `camloop run` processes with `[cluster]` on one
 //! throwaway PostgreSQL share 30 machines, each machine a thread outside camloop that grinds
 //! what its share's program couples and drops the measurement into its inbox. One instance
-//! is killed with SIGKILL mid-run and started again. Checked:
+//! is killed with SIGKILL mid-run and started again; then another is paused (SIGSTOP) until
+//! its machines have moved, and let go on (SIGCONT), as a suspended VM would. Checked:
 //! - the leases split the machines evenly; the dead instance's machines are taken within
 //!   10 s (the default lease of 6 s, plus a quarter lease until the others look) and handed
-//!   back when it returns;
+//!   back when it returns; the paused one notices it lost its leases and writes nothing
+//!   more (its writes are fenced);
 //! - every machine keeps producing: every dropped file is taken, none rejected, none waits
-//!   longer than the takeover;
+//!   in its inbox longer than a takeover (plus 2 s);
 //! - no measurement lost and none stored twice: the store holds each dropped part once;
 //! - no version number used twice, no version pushed by two owners: each machine's manifest
 //!   holds versions 1..n once each, every one carries the fencing epoch of its owner, epochs
@@ -19,7 +21,7 @@ use cluster_support::{Dropped, Machine};
 use sqlx::Row;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -62,7 +64,7 @@ fn start(root: &Path, instance: &str) -> Child {
     Command::new(env!("CARGO_BIN_EXE_camloop"))
         .args(["run", "--config", &format!("{instance}.toml")])
         .current_dir(root)
-        .stdout(Stdio::null())
+        .stdout(log.try_clone().unwrap())
         .stderr(log)
         .spawn()
         .unwrap()
@@ -201,10 +203,40 @@ fn three_instances_share_the_machines_and_survive_a_kill() {
             even,
         )
         .await;
-        tokio::time::sleep(Duration::from_secs(6)).await;
-        (takeover, rebalance)
+        tokio::time::sleep(Duration::from_secs(3)).await;
+
+        // SIGSTOP: b stays alive, holding its leases' memory, its files open, until its
+        // leases have run out and the others own its machines; then it goes on (SIGCONT)
+        // and must write nothing more for them.
+        let paused = children["b"].id().to_string();
+        let signal = |s: &str| Command::new("kill").args([s, &paused]).status().unwrap();
+        signal("-STOP");
+        let no_b = |o: &HashMap<String, String>| {
+            o.len() == MACHINES && !o.values().any(|owner| owner == "b")
+        };
+        let paused_takeover = wait_leases(
+            root,
+            &db,
+            Duration::from_secs(30),
+            "a paused instance's machines move",
+            no_b,
+        )
+        .await;
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        signal("-CONT");
+        wait_leases(
+            root,
+            &db,
+            Duration::from_secs(30),
+            "the paused instance gets its share back",
+            even,
+        )
+        .await;
+        tokio::time::sleep(Duration::from_secs(3)).await;
+        check_cluster_api(root);
+        (takeover, rebalance, paused_takeover)
     });
-    let (takeover, rebalance) = report;
+    let (takeover, rebalance, paused_takeover) = report;
 
     stop.store(true, Ordering::SeqCst);
     let dropped: Vec<(String, Vec<Dropped>)> = machines
@@ -228,6 +260,7 @@ fn three_instances_share_the_machines_and_survive_a_kill() {
     let parts: usize = dropped.iter().map(|(_, d)| d.len()).sum();
     eprintln!(
         "takeover of {} machines: p50 {:?}, max {:?}; rebalance after the restart {rebalance:?}; \
+         a paused instance's machines all moved after {paused_takeover:?}; \
          {parts} parts, wait in the inbox p50 {:?} max {:?}",
         times.len(),
         percentile(&times, 0.5),
@@ -332,6 +365,34 @@ fn fence_epoch(text: &str) -> u64 {
         .unwrap_or(0)
 }
 
+/// `GET /api/v1/cluster` on instance a: every machine leased and live, a third run there.
+fn check_cluster_api(root: &Path) {
+    let log = std::fs::read_to_string(root.join("a.log")).unwrap();
+    let addr = log
+        .split("listen=")
+        .nth(1)
+        .and_then(|rest| rest.split_whitespace().next())
+        .unwrap_or_else(|| panic!("no listen address in a.log:\n{log}"));
+    let mut stream = std::net::TcpStream::connect(addr).unwrap();
+    use std::io::{Read, Write};
+    write!(
+        stream,
+        "GET /api/v1/cluster HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut response = String::new();
+    stream.read_to_string(&mut response).unwrap();
+    let body = &response[response.find('{').unwrap()..=response.rfind('}').unwrap()];
+    let reply: serde_json::Value = serde_json::from_str(body).unwrap();
+    assert_eq!(reply["enabled"], true, "{reply}");
+    assert_eq!(reply["instance"], "a", "{reply}");
+    let machines = reply["machines"].as_array().unwrap();
+    assert_eq!(machines.len(), MACHINES, "{reply}");
+    assert!(machines.iter().all(|m| m["live"] == true), "{reply}");
+    let here = machines.iter().filter(|m| m["here"] == true).count();
+    assert_eq!(here, MACHINES / INSTANCES.len(), "{reply}");
+}
+
 /// The last lines of each instance's log, for a failure's message.
 fn log_tails(root: &Path) -> String {
     let mut out = String::new();
@@ -347,12 +408,28 @@ fn log_tails(root: &Path) -> String {
     out
 }
 
-/// No instance refused a push for a stale epoch or panicked.
+/// No instance panicked or logged an error, but for the paused one's lost leases.
 fn assert_logs_clean(root: &Path) {
     for i in INSTANCES {
         let log = std::fs::read_to_string(root.join(format!("{i}.log"))).unwrap();
         assert!(!log.contains("panicked"), "{i} panicked:\n{log}");
-        let errors: Vec<&str> = log.lines().filter(|l| l.contains(" ERROR ")).collect();
+        assert!(
+            log.contains("camloop started"),
+            "{i} logged nothing:\n{log}"
+        );
+        // The paused instance says it lost its machines, and nothing else goes wrong.
+        let expected = |l: &str| i == "b" && l.contains("cluster:");
+        if i == "b" {
+            assert!(
+                log.contains("cluster: lease lost"),
+                "b never noticed:\n{}",
+                log_tails(root)
+            );
+        }
+        let errors: Vec<&str> = log
+            .lines()
+            .filter(|l| l.contains(" ERROR ") && !expected(l))
+            .collect();
         assert!(
             errors.is_empty(),
             "{i} logged errors:\n{}",

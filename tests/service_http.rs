@@ -88,6 +88,7 @@ async fn server(limits: HttpLimits, store: Option<camloop::store::Store>) -> Ser
         token: Some(Secret::new(TOKEN)),
         body_timeout: limits.body_timeout,
         dashboard: Arc::default(),
+        cluster: None,
     };
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
@@ -306,6 +307,18 @@ async fn the_machine_list_shows_each_configured_machines_lobes() {
     assert_eq!(machine["configured"], true);
     assert_eq!(machine["lobes"][0]["lobe"], "IN1", "{reply}");
     assert_eq!(machine["lobes"].as_array().unwrap().len(), 1);
+
+    // One instance alone: no cluster to show (tests/cluster_takeover.rs asks a cluster).
+    let (status, body) = exchange(
+        s.addr,
+        "GET /api/v1/cluster HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n",
+    )
+    .await;
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(
+        json(&body),
+        serde_json::json!({"enabled": false, "instance": null, "machines": []})
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

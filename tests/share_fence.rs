@@ -8,6 +8,9 @@ mod share_support;
 use camloop::share::{Fence, PushError, StateError, Submitted, load_manifest};
 use share_support::{dirs, names, next_request, open};
 
+/// Long enough for any write here.
+const WAIT: std::time::Duration = std::time::Duration::from_secs(10);
+
 fn is_fenced(e: &StateError, mine: u64, current: u64) -> bool {
     matches!(e, StateError::Fenced { mine: m, current: c, .. } if (*m, *c) == (mine, current))
 }
@@ -17,7 +20,7 @@ fn an_owner_fenced_out_can_neither_record_nor_deliver() {
     let d = dirs();
     let machine = d.root.path().join("machine");
     let (mut old, _) = open(&d, 5);
-    old.set_fence(Fence::claim(&machine, 1, "a").unwrap());
+    old.set_fence(Fence::claim(&machine, 1, "a", WAIT).unwrap());
     let v1 = old.push_once(next_request(&old, 1)).unwrap();
     assert_eq!(v1.version, 1);
     // v2 is recorded by the old owner, not yet delivered, when the new owner claims.
@@ -25,7 +28,7 @@ fn an_owner_fenced_out_can_neither_record_nor_deliver() {
         panic!("v2 not accepted")
     };
 
-    let new_fence = Fence::claim(&machine, 2, "b").unwrap();
+    let new_fence = Fence::claim(&machine, 2, "b", WAIT).unwrap();
     match old.deliver() {
         Err(PushError::State(e)) => assert!(is_fenced(&e, 1, 2), "{e}"),
         other => panic!("the old owner delivered after the claim: {other:?}"),

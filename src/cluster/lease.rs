@@ -4,7 +4,7 @@
 //! by the first instance that joins.
 
 use sqlx::Row;
-use sqlx::postgres::{PgPool, PgPoolOptions};
+use sqlx::postgres::{PgConnectOptions, PgPool, PgPoolOptions};
 use std::time::Duration;
 
 /// Instances starting together make the tables one at a time, under a transaction lock: a
@@ -56,10 +56,16 @@ pub struct Leases {
 impl Leases {
     /// Connects (a small pool of its own, apart from the history's) and makes the tables.
     pub async fn connect(url: &str, instance: &str, lease: Duration) -> Result<Self, LeaseError> {
+        // No statement may hold a round up longer than a quarter lease (a database that
+        // hangs rather than refuses): the machines held must be stopped in time.
+        let options = url
+            .parse::<PgConnectOptions>()
+            .map_err(op("read the database URL"))?
+            .options([("statement_timeout", (lease / 4).as_millis().to_string())]);
         let pool = PgPoolOptions::new()
             .max_connections(2)
             .acquire_timeout(lease / 4)
-            .connect(url)
+            .connect_with(options)
             .await
             .map_err(op("connect"))?;
         sqlx::raw_sql(SCHEMA)

@@ -159,10 +159,12 @@ impl ClusterTask {
     async fn open(&self, machine: &str, epoch: u64) -> anyhow::Result<(u64, Opened)> {
         let dir = self.machines_dir.join(machine);
         let instance = self.leases.instance().to_string();
+        // Never longer than an eighth of a lease: the round must go on renewing.
+        let wait = self.lease / 8;
         let claim = |epoch: u64| {
             let dir = dir.clone();
             let instance = instance.clone();
-            tokio::task::spawn_blocking(move || Fence::claim(&dir, epoch, &instance))
+            tokio::task::spawn_blocking(move || Fence::claim(&dir, epoch, &instance, wait))
         };
         let fence = match claim(epoch).await? {
             Ok(f) => f,

@@ -176,6 +176,7 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
     let commands: runner::CommandRoutes = Arc::default();
     let mut runner =
         runner::Runner::new(config.clone(), checked_machines, shared, commands.clone());
+    let mut cluster_view = None;
     let (machines, sources_done) = if config.cluster.enabled {
         let lease = Duration::from_millis(config.cluster.lease_ms);
         let instance = config.cluster.instance_name();
@@ -183,6 +184,7 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
             .await
             .context("cluster")?;
         info!(instance = %instance, lease_ms = config.cluster.lease_ms, "cluster: joined; machines are taken as leases allow");
+        cluster_view = Some(leases.clone());
         let task = cluster_task::ClusterTask {
             leases,
             lease,
@@ -208,6 +210,7 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
         token: config.api_token.clone(),
         body_timeout: limits.body_timeout,
         dashboard: Arc::new(sheets),
+        cluster: cluster_view,
     });
     let http_addr = listener.local_addr()?;
     info!(listen = %http_addr, machines = config.machines.len(), "camloop started");
@@ -263,11 +266,14 @@ async fn machine_task(
     mut shutdown: watch::Receiver<bool>,
 ) {
     let mut retry = tokio::time::interval(RETRY_EVERY);
+    // After a pause (a stopped process, a suspended VM) one retry, not one per tick missed.
+    retry.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut source_done = Some(source_done);
     loop {
         tokio::select! {
             biased;
             event = rx.recv(), if source_done.is_some() => match event {
+                Some(_) if machine.fenced_out() => return fenced_out(&machine),
                 Some(e) => machine.handle(e).await,
                 None => {
                     if let Some(done) = source_done.take() {
@@ -287,12 +293,26 @@ async fn machine_task(
                     let _ = reply.send(dressing_result(result));
                 }
             },
-            _ = retry.tick() => machine.retry().await,
+            _ = retry.tick() => {
+                if machine.fenced_out() {
+                    return fenced_out(&machine);
+                }
+                machine.retry().await;
+            }
             _ = shutdown.changed() => break,
         }
     }
     // Whatever is still waiting gets one more try before the process ends.
-    machine.retry().await;
+    if !machine.fenced_out() {
+        machine.retry().await;
+    }
+}
+
+/// Another instance took the machine while this one could not renew its lease (paused, cut
+/// off from the database): the event in hand stays with its source (a drop file in its
+/// inbox, for the new owner) and this loop ends without another write.
+fn fenced_out(machine: &MachineLoop) {
+    error!(machine = %machine.name, "cluster: another instance owns this machine now; stopped here without writing");
 }
 
 /// A rollback asked for through the API, its outcome as the HTTP side wants it.

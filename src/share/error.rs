@@ -93,6 +93,10 @@ pub enum StateError {
         mine: u64,
         current: u64,
     },
+    /// The fence stayed locked while a claim waited: the owner is mid-write, or paused while
+    /// writing (a stopped process keeps its lock). The claim is tried again later.
+    #[error("{} stayed locked for {waited_ms} ms: its owner is writing (or paused mid-write)", dir.display())]
+    FenceBusy { dir: PathBuf, waited_ms: u64 },
 }
 
 impl StateError {

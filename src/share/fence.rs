@@ -9,9 +9,10 @@
 //! `<machine state>/fence.lock` (the lock, never renamed: a lock belongs to its inode).
 
 use super::error::StateError;
-use std::fs::File;
+use std::fs::{File, TryLockError};
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
 const FENCE_FILE: &str = "fence";
 const LOCK_FILE: &str = "fence.lock";
@@ -30,12 +31,14 @@ pub struct Held {
 }
 
 impl Fence {
-    /// Raises the fence of `dir` to `epoch` for `owner`. Refused with
+    /// Raises the fence of `dir` to `epoch` for `owner`, waiting at most `wait` for a write
+    /// under way ([`StateError::FenceBusy`] after that: an owner paused mid-write keeps its
+    /// lock, and a claim must never take the fence from under a write). Refused with
     /// [`StateError::Fenced`] when the fence already holds a higher epoch (an owner newer
     /// than this lease); an equal one is this owner's own, claimed again.
-    pub fn claim(dir: &Path, epoch: u64, owner: &str) -> Result<Fence, StateError> {
+    pub fn claim(dir: &Path, epoch: u64, owner: &str, wait: Duration) -> Result<Fence, StateError> {
         std::fs::create_dir_all(dir).map_err(StateError::io("create", dir))?;
-        let lock = lock(dir)?;
+        let lock = lock_within(dir, wait)?;
         let current = read_epoch(dir)?;
         if current > epoch {
             return Err(StateError::Fenced {
@@ -98,28 +101,60 @@ pub fn read_epoch(dir: &Path) -> Result<u64, StateError> {
         })
 }
 
-fn lock(dir: &Path) -> Result<File, StateError> {
+fn lock_file(dir: &Path) -> Result<File, StateError> {
     let path = dir.join(LOCK_FILE);
-    let file = std::fs::OpenOptions::new()
+    std::fs::OpenOptions::new()
         .create(true)
         .truncate(false)
         .write(true)
         .open(&path)
-        .map_err(StateError::io("open", &path))?;
-    file.lock().map_err(StateError::io("lock", &path))?;
+        .map_err(StateError::io("open", &path))
+}
+
+/// The owner's lock: contended only by a claim, which holds it for one small write.
+fn lock(dir: &Path) -> Result<File, StateError> {
+    let file = lock_file(dir)?;
+    file.lock()
+        .map_err(StateError::io("lock", &dir.join(LOCK_FILE)))?;
     Ok(file)
+}
+
+/// A claimer's lock: given up after `wait`.
+fn lock_within(dir: &Path, wait: Duration) -> Result<File, StateError> {
+    let file = lock_file(dir)?;
+    let started = Instant::now();
+    loop {
+        match file.try_lock() {
+            Ok(()) => return Ok(file),
+            Err(TryLockError::WouldBlock) if started.elapsed() < wait => {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            Err(TryLockError::WouldBlock) => {
+                return Err(StateError::FenceBusy {
+                    dir: dir.to_path_buf(),
+                    waited_ms: started.elapsed().as_millis() as u64,
+                });
+            }
+            Err(TryLockError::Error(e)) => {
+                return Err(StateError::io("lock", &dir.join(LOCK_FILE))(e));
+            }
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    /// Long enough for any write in these tests.
+    const WAIT: Duration = Duration::from_secs(10);
+
     #[test]
     fn a_newer_claim_fences_the_older_owner_out() {
         let dir = tempfile::tempdir().unwrap();
-        let old = Fence::claim(dir.path(), 3, "a").unwrap();
+        let old = Fence::claim(dir.path(), 3, "a", WAIT).unwrap();
         assert!(old.hold().is_ok());
-        let new = Fence::claim(dir.path(), 4, "b").unwrap();
+        let new = Fence::claim(dir.path(), 4, "b", WAIT).unwrap();
         match old.hold() {
             Err(StateError::Fenced { mine, current, .. }) => assert_eq!((mine, current), (3, 4)),
             other => panic!("the old owner still holds the fence: {other:?}"),
@@ -127,7 +162,7 @@ mod tests {
         assert!(new.hold().is_ok());
         // An owner with an older lease cannot take the fence back.
         assert!(matches!(
-            Fence::claim(dir.path(), 3, "a"),
+            Fence::claim(dir.path(), 3, "a", WAIT),
             Err(StateError::Fenced { current: 4, .. })
         ));
         assert_eq!(read_epoch(dir.path()).unwrap(), 4);
@@ -136,10 +171,11 @@ mod tests {
     #[test]
     fn a_claim_waits_for_a_push_under_way() {
         let dir = tempfile::tempdir().unwrap();
-        let old = Fence::claim(dir.path(), 1, "a").unwrap();
+        let old = Fence::claim(dir.path(), 1, "a", WAIT).unwrap();
         let held = old.hold().unwrap();
         let path = dir.path().to_path_buf();
-        let claimer = std::thread::spawn(move || Fence::claim(&path, 2, "b").map(|f| f.epoch()));
+        let claimer =
+            std::thread::spawn(move || Fence::claim(&path, 2, "b", WAIT).map(|f| f.epoch()));
         std::thread::sleep(std::time::Duration::from_millis(100));
         // Still the old owner's while it holds the lock.
         assert_eq!(read_epoch(dir.path()).unwrap(), 1);
@@ -147,5 +183,20 @@ mod tests {
         drop(held);
         assert_eq!(claimer.join().unwrap().unwrap(), 2);
         assert!(old.hold().is_err());
+    }
+
+    #[test]
+    fn a_claim_gives_up_on_an_owner_paused_mid_write() {
+        let dir = tempfile::tempdir().unwrap();
+        let old = Fence::claim(dir.path(), 1, "a", WAIT).unwrap();
+        let _held = old.hold().unwrap();
+        let started = Instant::now();
+        match Fence::claim(dir.path(), 2, "b", Duration::from_millis(200)) {
+            Err(StateError::FenceBusy { waited_ms, .. }) => assert!(waited_ms >= 200),
+            other => panic!("a claim took the fence from under a write: {other:?}"),
+        }
+        assert!(started.elapsed() >= Duration::from_millis(200));
+        // Nothing changed: the owner mid-write still owns it.
+        assert_eq!(read_epoch(dir.path()).unwrap(), 1);
     }
 }

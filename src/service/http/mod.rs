@@ -48,6 +48,8 @@ pub struct AppState {
     pub body_timeout: std::time::Duration,
     /// The dashboard's view of each configured feature (bands, setup drawing).
     pub dashboard: FeatureSheets,
+    /// In a cluster: the leases, for `GET /api/v1/cluster`.
+    pub cluster: Option<crate::cluster::Leases>,
 }
 
 /// Where a machine's loop sends its answer to a [`Command`].
@@ -132,6 +134,7 @@ pub fn router(state: AppState) -> Router {
         .route("/metrics", get(routes::metrics))
         .route("/openapi.json", get(openapi::openapi))
         .route("/api/v1/machines", get(routes::machines))
+        .route("/api/v1/cluster", get(routes::cluster))
         .route(&format!("{m}/measurements"), get(routes::history))
         .route(&format!("{m}/events"), get(routes::events))
         .route(&format!("{m}/parts/{{part}}"), get(parts::part))

@@ -26,6 +26,7 @@ pub(super) async fn openapi() -> Json<Value> {
         "paths": {
             "/healthz": get("service and database health"),
             "/metrics": get("Prometheus metrics"),
+            "/api/v1/cluster": get("with [cluster]: each machine's lease (owner, fencing epoch, live, run here); {enabled: false} without"),
             "/api/v1/machines": get("machines and their lobes or pins: configured ones and those in the history"),
             "/api/v1/machines/{machine}/measurements": get("measurement history, newest first; filters lobe, since_ms, until_ms, verdict, limit, cursor"),
             "/api/v1/machines/{machine}/events": get("alarms and events, newest first"),

@@ -77,6 +77,61 @@ pub struct LobeInfo {
     pub status: Option<crate::service::metrics::FeatureStatus>,
 }
 
+/// `GET /api/v1/cluster`: which instance runs which machine.
+#[derive(Debug, Serialize)]
+pub(super) struct ClusterReply {
+    enabled: bool,
+    /// The instance that answered.
+    instance: Option<String>,
+    machines: Vec<LeaseInfo>,
+}
+
+#[derive(Debug, Serialize)]
+struct LeaseInfo {
+    machine: String,
+    owner: String,
+    /// The fencing epoch: raised at every change of owner.
+    epoch: u64,
+    /// The lease is current (not run out, not released).
+    live: bool,
+    /// The instance that answered runs it.
+    here: bool,
+}
+
+pub(super) async fn cluster(State(state): State<AppState>) -> Result<Json<ClusterReply>, ApiError> {
+    let Some(leases) = &state.cluster else {
+        let off = ClusterReply {
+            enabled: false,
+            instance: None,
+            machines: Vec::new(),
+        };
+        return Ok(Json(off));
+    };
+    let rows = leases.all().await.map_err(|e| {
+        ApiError(
+            axum::http::StatusCode::SERVICE_UNAVAILABLE,
+            "cluster_unavailable",
+            e.to_string(),
+        )
+    })?;
+    let here = |r: &crate::cluster::LeaseRow| r.live && r.owner == leases.instance();
+    let machines = rows
+        .iter()
+        .map(|r| LeaseInfo {
+            here: here(r),
+            machine: r.machine.clone(),
+            owner: r.owner.clone(),
+            epoch: r.epoch,
+            live: r.live,
+        })
+        .collect();
+    Ok(Json(ClusterReply {
+        enabled: true,
+        instance: Some(leases.instance().to_string()),
+        machines,
+    }))
+}
+
 pub(super) async fn machines(
     State(state): State<AppState>,
 ) -> Result<Json<MachinesReply>, ApiError> {

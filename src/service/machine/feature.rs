@@ -231,6 +231,12 @@ impl FeatureLoop {
         }
         let kept = match self.journal.append(&records) {
             Ok(()) => true,
+            Err(e) if super::fenced(&e) => {
+                // Not a fault here: the machine moved while this instance was paused; the
+                // loop stops before its next event, and the part stays with its source.
+                warn!(machine = %self.name, error = format!("{e:#}"), "cluster: another instance owns this machine now; records not written here");
+                return false;
+            }
             Err(e) => {
                 error!(machine = %self.name, error = format!("{e:#}"), "journal cannot be written: records not kept, learning holds");
                 self.metrics.update(&self.name, |m| {

@@ -255,6 +255,10 @@ impl FeatureLoop {
                         records.append(&mut more);
                         self.delivery_line()
                     }
+                    Err(e) if super::fenced(&e) => {
+                        warn!(machine = %self.name, error = format!("{e:#}"), "cluster: another instance owns this machine now; table not recorded here");
+                        format!("table not recorded: {e:#}")
+                    }
                     Err(e) => {
                         error!(machine = %self.name, error = format!("{e:#}"), "table not recorded: previous table stays in force");
                         format!("table not recorded: {e:#}")

@@ -83,6 +83,20 @@ pub enum SourceEvent {
     },
 }
 
+/// Whether `e` says another instance owns the machine now (its fence holds a newer epoch).
+pub(crate) fn fenced(e: &anyhow::Error) -> bool {
+    use crate::share::{PushError, StateError};
+    let is = |s: Option<&StateError>| matches!(s, Some(StateError::Fenced { .. }));
+    e.chain().any(|c| {
+        // A push error wraps the state error transparently: the chain skips it.
+        let pushed = match c.downcast_ref::<PushError>() {
+            Some(PushError::State(s)) => Some(s),
+            _ => None,
+        };
+        is(c.downcast_ref::<StateError>()) || is(pushed)
+    })
+}
+
 /// What became of a measurement, for the source that sent it (a drop file is moved to
 /// `processed/` or `rejected/` by it).
 #[derive(Debug, Clone, PartialEq)]
@@ -116,6 +130,8 @@ pub struct MachineLoop {
     metrics: Arc<Metrics>,
     /// The resume point could not be written (the share refuses): said once, not per part.
     resume_failing: bool,
+    /// In a cluster: the owner's fence, which every feature's writes check.
+    fence: Option<crate::share::Fence>,
 }
 
 impl MachineLoop {
@@ -166,6 +182,7 @@ impl MachineLoop {
         }
         let machine = Self {
             name,
+            fence,
             features,
             ids,
             main,
@@ -195,6 +212,14 @@ impl MachineLoop {
 
     fn share_dir(&self) -> &std::path::Path {
         self.features[0].share_dir()
+    }
+
+    /// In a cluster: another instance has claimed this machine since it started here (its
+    /// fence holds a newer epoch), so nothing more may be done for it on this instance.
+    pub fn fenced_out(&self) -> bool {
+        self.fence
+            .as_ref()
+            .is_some_and(|f| matches!(f.hold(), Err(crate::share::StateError::Fenced { .. })))
     }
 
     /// Handles one event from the gauge side. Errors are logged and recorded, never fatal:
@@ -232,7 +257,11 @@ impl MachineLoop {
             }
         };
         if let Err(e) = result {
-            error!(machine = %self.name, error = format!("{e:#}"), "part not processed");
+            if fenced(&e) {
+                warn!(machine = %self.name, error = format!("{e:#}"), "cluster: another instance owns this machine now; part not processed here");
+            } else {
+                error!(machine = %self.name, error = format!("{e:#}"), "part not processed");
+            }
         }
         self.metrics.update(&self.name, |m| {
             m.processing_seconds_sum += started.elapsed().as_secs_f64();
