@@ -146,7 +146,13 @@ impl ClusterTask {
                     held.insert(m, Held { epoch, deadline });
                 }
                 Err(e) => {
-                    error!(machine = %m, error = format!("{e:#}"), "cluster: machine not started; lease released");
+                    let busy = matches!(e.downcast_ref(), Some(StateError::FenceBusy { .. }));
+                    if busy {
+                        // Its last owner is paused mid-write: tried again at the next round.
+                        warn!(machine = %m, error = format!("{e:#}"), "cluster: machine not started yet; lease released");
+                    } else {
+                        error!(machine = %m, error = format!("{e:#}"), "cluster: machine not started; lease released");
+                    }
                     self.leases.release(&m, lease_epoch).await?;
                 }
             }
