@@ -385,6 +385,17 @@ impl Config {
         self.resolve(&self.service.var_dir)
     }
 
+    /// The `[mqtt]` settings as this instance uses them: in a cluster the client id is
+    /// `<client_id>-<instance>`, since a broker disconnects a client whose id another takes.
+    pub fn mqtt_settings(&self) -> mqtt::MqttSection {
+        let mut settings = self.mqtt.clone();
+        if self.cluster.enabled {
+            let instance = self.cluster.instance_name();
+            settings.client_id = format!("{}-{instance}", settings.client_id);
+        }
+        settings
+    }
+
     /// Where each machine's journal and delivery state live: `<var>/machines`, or with a
     /// cluster the shared `<cluster.state_dir>/machines` every instance reaches.
     pub fn machines_dir(&self) -> PathBuf {
@@ -408,6 +419,29 @@ share = "../var/share/SIM1"
 [machines.gauge]
 kind = "sim"
 "#;
+
+    #[test]
+    fn a_cluster_needs_postgres_and_a_shared_folder_and_names_its_mqtt_client() {
+        let alone = format!("{MINIMAL}[cluster]\nenabled = true\n");
+        let e = Config::parse(&alone, Path::new("config/camloop.toml"), |_| None).unwrap_err();
+        let text = e.to_string();
+        assert!(text.contains("cluster.state_dir: required"), "{text}");
+        assert!(text.contains("must be postgres://"), "{text}");
+
+        let text = format!(
+            "[database]\nurl = \"postgres://db/camloop\"\n[mqtt]\nenabled = true\n\
+             [cluster]\nenabled = true\ninstance = \"line2-a\"\nstate_dir = \"/mnt/camloop\"\n{MINIMAL}"
+        );
+        let c = Config::parse(&text, Path::new("config/camloop.toml"), |_| None).unwrap();
+        assert_eq!(c.machines_dir(), Path::new("/mnt/camloop/machines"));
+        // Two instances with one client id would knock each other off the broker.
+        assert_eq!(c.mqtt_settings().client_id, "camloop-line2-a");
+        assert_eq!(c.cluster.lease_ms, 6000);
+
+        let c = Config::parse(MINIMAL, Path::new("config/camloop.toml"), |_| None).unwrap();
+        assert_eq!(c.mqtt_settings().client_id, "camloop");
+        assert_eq!(c.machines_dir(), Path::new("config/../var/machines"));
+    }
 
     #[test]
     fn environment_overrides_the_url_and_supplies_the_token_which_never_shows() {

@@ -147,7 +147,7 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
     // MQTT: events to the plant's broker, when `[mqtt]` enables them.
     let publisher = match config.mqtt.enabled {
         true => Some(mqtt::Publisher::start(
-            &config.mqtt,
+            &config.mqtt_settings(),
             &config.var_dir().join("mqtt"),
             shutdown_rx.clone(),
         )?),
