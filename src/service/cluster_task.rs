@@ -4,7 +4,7 @@
 //! only after its loop has stopped.
 
 use super::runner::{Opened, Runner};
-use crate::cluster::{Leases, plan};
+use crate::cluster::{Leases, fair_share, plan};
 use crate::share::{Fence, StateError};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -12,6 +12,9 @@ use std::time::Duration;
 use tokio::sync::watch;
 use tokio::time::Instant;
 use tracing::{error, info, warn};
+
+/// How soon an instance below its share looks again for machines being handed over.
+const HUNGRY_LOOK: Duration = Duration::from_millis(250);
 
 /// A machine this instance holds.
 struct Held {
@@ -32,29 +35,38 @@ impl ClusterTask {
     /// Runs until shutdown; then stops every machine, releases its leases and leaves.
     pub(super) async fn run(mut self, mut shutdown: watch::Receiver<bool>) {
         let mut held: BTreeMap<String, Held> = BTreeMap::new();
-        let mut tick = tokio::time::interval(self.lease / 4);
-        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         // The first round only says this instance is here, so instances started together
         // count each other before anyone takes machines.
         if let Err(e) = self.leases.heartbeat().await {
             warn!(error = %e, "cluster: first heartbeat failed");
         }
-        tick.tick().await;
         let mut said = String::new();
+        let mut hungry = false;
         loop {
+            // Below its share while others hand machines over: look again soon, so a machine
+            // released between parts is running again within a fraction of a second.
+            let wait = match hungry {
+                true => (self.lease / 4).min(HUNGRY_LOOK),
+                false => self.lease / 4,
+            };
             tokio::select! {
-                _ = tick.tick() => {}
+                _ = tokio::time::sleep(wait) => {}
                 _ = shutdown.changed() => break,
             }
-            if let Err(e) = self.round(&mut held).await {
-                let text = e.to_string();
-                if text != said {
-                    error!(error = %text, "cluster: lease database unavailable; machines held stop before their leases run out");
-                    said = text;
+            hungry = match self.round(&mut held).await {
+                Ok(hungry) => {
+                    said.clear();
+                    hungry
                 }
-            } else {
-                said.clear();
-            }
+                Err(e) => {
+                    let text = e.to_string();
+                    if text != said {
+                        error!(error = %text, "cluster: lease database unavailable; machines held stop before their leases run out");
+                        said = text;
+                    }
+                    false
+                }
+            };
             self.stop_overdue(&mut held).await;
         }
         self.runner.stop_all().await;
@@ -67,11 +79,12 @@ impl ClusterTask {
         info!(instance = %self.leases.instance(), "cluster: left");
     }
 
-    /// One round: renew, heartbeat, shed, take.
+    /// One round: renew, heartbeat, shed, take. Returns whether this instance is still below
+    /// its fair share while machines are free or others hold more than theirs.
     async fn round(
         &mut self,
         held: &mut BTreeMap<String, Held>,
-    ) -> Result<(), crate::cluster::LeaseError> {
+    ) -> Result<bool, crate::cluster::LeaseError> {
         let asked = Instant::now();
         self.renew(held).await?;
         let live = self.leases.heartbeat().await?;
@@ -96,7 +109,15 @@ impl ClusterTask {
             // Taking machines took a while: renew now rather than a quarter lease later.
             self.renew(held).await?;
         }
-        Ok(())
+        let me = self.leases.instance();
+        let mut others: BTreeMap<&str, usize> = BTreeMap::new();
+        for r in rows.iter().filter(|r| r.live && r.owner != me) {
+            *others.entry(r.owner.as_str()).or_default() += 1;
+        }
+        let fair = fair_share(all.len(), live);
+        let unowned = all.len() > held.len() + others.values().sum::<usize>();
+        let overfull = others.values().any(|&n| n > fair);
+        Ok(held.len() < fair && (unowned || overfull))
     }
 
     /// Renews every lease held; stops the machines whose lease another instance has now.
