@@ -45,6 +45,15 @@ pub struct LeaseRow {
     pub live: bool,
 }
 
+/// What [`Leases::renew`] did.
+#[derive(Debug, Clone, Default)]
+pub struct Renewed {
+    /// The leases renewed: machine and epoch.
+    pub renewed: Vec<(String, u64)>,
+    /// Live leases under this instance's name that it does not run, released.
+    pub leftovers: Vec<String>,
+}
+
 /// This instance's handle on the lease tables.
 #[derive(Debug, Clone)]
 pub struct Leases {
@@ -146,22 +155,43 @@ impl Leases {
         Ok(raised.map(|e| e as u64))
     }
 
-    /// Extends every lease this instance still holds; returns them (machine, epoch). A
-    /// lease missing from the answer was lost: it expired and another instance may own it.
-    pub async fn renew(&self) -> Result<Vec<(String, u64)>, LeaseError> {
+    /// Extends the leases this instance runs (`held`: machine and epoch) and returns those
+    /// renewed: one missing from the answer was lost (it expired; another instance may own
+    /// it). Every other live lease under this instance's name runs nowhere (left by an
+    /// earlier process of the same name, or stopped while the database was away) and is
+    /// released, so that it is taken at once rather than renewed forever; those come back
+    /// second.
+    pub async fn renew(&self, held: &[(String, u64)]) -> Result<Renewed, LeaseError> {
+        let machines: Vec<&str> = held.iter().map(|(m, _)| m.as_str()).collect();
+        let epochs: Vec<i64> = held.iter().map(|(_, e)| *e as i64).collect();
         let rows = sqlx::query(
             "UPDATE camloop_leases SET expires_at = now() + $2 * interval '1 millisecond' \
-             WHERE owner = $1 AND expires_at > now() RETURNING machine, epoch",
+             WHERE owner = $1 AND expires_at > now() \
+               AND (machine, epoch) IN (SELECT * FROM unnest($3::text[], $4::bigint[])) \
+             RETURNING machine, epoch",
         )
         .bind(&self.instance)
         .bind(self.lease_ms)
+        .bind(&machines)
+        .bind(&epochs)
         .fetch_all(&self.pool)
         .await
         .map_err(op("renew the leases"))?;
-        Ok(rows
+        let renewed = rows
             .iter()
             .map(|r| (r.get::<String, _>(0), r.get::<i64, _>(1) as u64))
-            .collect())
+            .collect();
+        let leftovers: Vec<String> = sqlx::query_scalar(
+            "UPDATE camloop_leases SET expires_at = now() - interval '1 millisecond' \
+             WHERE owner = $1 AND expires_at > now() AND NOT (machine = ANY($2::text[])) \
+             RETURNING machine",
+        )
+        .bind(&self.instance)
+        .bind(&machines)
+        .fetch_all(&self.pool)
+        .await
+        .map_err(op("release leftover leases"))?;
+        Ok(Renewed { renewed, leftovers })
     }
 
     /// Gives `machine` up at once (its loop has stopped): any instance may take it now.

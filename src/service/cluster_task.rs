@@ -126,7 +126,12 @@ impl ClusterTask {
         held: &mut BTreeMap<String, Held>,
     ) -> Result<(), crate::cluster::LeaseError> {
         let asked = Instant::now();
-        let renewed: BTreeMap<String, u64> = self.leases.renew().await?.into_iter().collect();
+        let mine: Vec<(String, u64)> = held.iter().map(|(m, h)| (m.clone(), h.epoch)).collect();
+        let answer = self.leases.renew(&mine).await?;
+        for m in &answer.leftovers {
+            warn!(machine = %m, "cluster: a lease under this instance's name that runs nowhere (an earlier process, a stop while the database was away) released");
+        }
+        let renewed: BTreeMap<String, u64> = answer.renewed.into_iter().collect();
         let lost: Vec<String> = held
             .iter()
             .filter(|(m, h)| renewed.get(*m) != Some(&h.epoch))
