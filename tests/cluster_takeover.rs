@@ -15,6 +15,7 @@
 //!   never go down, and the store holds the same versions with the same programs.
 
 mod cluster_support;
+mod gauge_drop_support;
 mod store_support;
 
 use cluster_support::{Dropped, Machine};

@@ -3,12 +3,15 @@
 //! same file dropped twice, under another name) is recognised by its content and not learned
 //! from a second time.
 
+mod gauge_drop_support;
+
 use camloop::core::measure::RawMeasurement;
 use camloop::recipe::Recipe;
 use camloop::service::machine::{MachineLoop, MachinePaths, SourceEvent, StoreHandle};
 use camloop::service::metrics::{MachineMetrics, Metrics};
 use camloop::sim::{CommandedTable, GrinderConfig, PartLabels, SimGrinder, Workpiece};
 use camloop::store::Store;
+use gauge_drop_support::measurement_csv;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -134,16 +137,16 @@ async fn drop_files_are_moved_by_the_verdict_and_learned_once() {
         .await
         .unwrap();
     let inbox = dir.path().join("inbox");
-    let good = csv(&measurement("DROP1", "P1", "IN1", 1));
+    let good = measurement_csv(&measurement("DROP1", "P1", "IN1", 1));
     let write = |name: &str, text: &str| std::fs::write(inbox.join(name), text).unwrap();
     write(
         "a_other_machine.csv",
-        &csv(&measurement("SIM1", "P2", "IN1", 2)),
+        &measurement_csv(&measurement("SIM1", "P2", "IN1", 2)),
     );
     let mut short = measurement("DROP1", "P3", "IN1", 3);
     short.samples.retain(|s| s.revolution < 1);
     short.header.revolutions = 1;
-    write("b_one_revolution.csv", &csv(&short));
+    write("b_one_revolution.csv", &measurement_csv(&short));
     write("c_good.csv", &good);
     wait_for(|| moved(&inbox, "processed").len() + moved(&inbox, "rejected").len() >= 5).await;
     write("d_good_again.csv", &good);
@@ -177,21 +180,6 @@ async fn drop_files_are_moved_by_the_verdict_and_learned_once() {
         .await
         .unwrap();
     assert_eq!(history.items.len(), 1, "learned from once");
-}
-
-/// A measurement as a drop-folder CSV, marked complete with `# end`.
-fn csv(raw: &RawMeasurement) -> String {
-    let h = &raw.header;
-    let mut text = format!(
-        "# machine={} part={} lobe={}\n# points_per_rev={} revolutions={}\nrev,angle_deg,lift_mm\n",
-        h.machine, h.part, h.lobe, h.points_per_rev, h.revolutions
-    );
-    for s in &raw.samples {
-        let angle = f64::from(s.angle_index) * 360.0 / f64::from(h.points_per_rev);
-        text.push_str(&format!("{},{angle},{}\n", s.revolution, s.lift_mm));
-    }
-    text.push_str("# end\n");
-    text
 }
 
 /// File names in `inbox/<sub>`, sorted.

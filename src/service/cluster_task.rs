@@ -137,11 +137,12 @@ impl ClusterTask {
             .filter(|(m, h)| renewed.get(*m) != Some(&h.epoch))
             .map(|(m, _)| m.clone())
             .collect();
-        for m in lost {
-            error!(machine = %m, "cluster: lease lost; machine stopped on this instance");
-            self.runner.stop(&m).await;
-            held.remove(&m);
-        }
+        self.stop_held(
+            held,
+            lost,
+            "cluster: lease lost; machine stopped on this instance",
+        )
+        .await;
         for h in held.values_mut() {
             h.deadline = asked + self.lease / 2;
         }
@@ -224,8 +225,20 @@ impl ClusterTask {
             .filter(|(_, h)| h.deadline <= now)
             .map(|(m, _)| m.clone())
             .collect();
-        for m in overdue {
-            error!(machine = %m, "cluster: lease not renewed in time; machine stopped before another instance may take it");
+        let why = "cluster: lease not renewed in time; machine stopped before another instance may take it";
+        self.stop_held(held, overdue, why).await;
+    }
+
+    /// Stops `machines` on this instance (after the part in hand) and forgets them, saying
+    /// `why` for each.
+    async fn stop_held(
+        &mut self,
+        held: &mut BTreeMap<String, Held>,
+        machines: Vec<String>,
+        why: &str,
+    ) {
+        for m in machines {
+            error!(machine = %m, "{why}");
             self.runner.stop(&m).await;
             held.remove(&m);
         }

@@ -8,6 +8,7 @@
 
 #![allow(dead_code)]
 
+use super::gauge_drop_support::measurement_csv;
 use camloop::core::compensate::Feature;
 use camloop::core::measure::RawMeasurement;
 use camloop::recipe::Recipe;
@@ -127,7 +128,7 @@ impl Machine {
         give_up: Duration,
     ) -> Option<Dropped> {
         let temp = self.inbox.join(format!(".{file}.tmp"));
-        std::fs::write(&temp, csv(raw)).unwrap();
+        std::fs::write(&temp, measurement_csv(raw)).unwrap();
         std::fs::rename(&temp, self.inbox.join(file)).unwrap();
         let dropped_ms = now_ms();
         let at = Instant::now();
@@ -150,19 +151,4 @@ impl Machine {
         }
         None
     }
-}
-
-/// A measurement as a drop-folder CSV, marked complete with `# end`.
-pub fn csv(raw: &RawMeasurement) -> String {
-    let h = &raw.header;
-    let mut text = format!(
-        "# machine={} part={} lobe={}\n# points_per_rev={} revolutions={}\nrev,angle_deg,lift_mm\n",
-        h.machine, h.part, h.lobe, h.points_per_rev, h.revolutions
-    );
-    for s in &raw.samples {
-        let angle = f64::from(s.angle_index) * 360.0 / f64::from(h.points_per_rev);
-        text.push_str(&format!("{},{angle},{}\n", s.revolution, s.lift_mm));
-    }
-    text.push_str("# end\n");
-    text
 }

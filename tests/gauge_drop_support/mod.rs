@@ -9,6 +9,22 @@ use camloop::gauge::{DropEvent, DropFolder, DropOptions, GaugeDbc, Rejection};
 
 pub const FIXTURE: &str = "M3_P1234_L2_20240501T101500.csv";
 
+/// A measurement as a complete drop-folder CSV: its identity and counts in the metadata
+/// comments, marked done with `# end`.
+pub fn measurement_csv(raw: &camloop::core::measure::RawMeasurement) -> String {
+    let h = &raw.header;
+    let mut text = format!(
+        "# machine={} part={} lobe={}\n# points_per_rev={} revolutions={}\nrev,angle_deg,lift_mm\n",
+        h.machine, h.part, h.lobe, h.points_per_rev, h.revolutions
+    );
+    for s in &raw.samples {
+        let angle = f64::from(s.angle_index) * 360.0 / f64::from(h.points_per_rev);
+        text.push_str(&format!("{},{angle},{}\n", s.revolution, s.lift_mm));
+    }
+    text.push_str("# end\n");
+    text
+}
+
 pub fn fixture_text(name: &str) -> String {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("tests/fixtures")

@@ -6,7 +6,6 @@ use super::FeatureLoop;
 use super::memory::{TableLearning, WaitingTable};
 use super::records::event;
 use crate::clock::{now_ms, now_ms_u64};
-
 use crate::core::compensate::GuardedTable;
 use crate::core::learn::LearningState;
 use crate::core::program::{Provenance, comment_text};
@@ -96,8 +95,7 @@ impl FeatureLoop {
             .context("the table version's record cannot be journalled: not submitted")?;
         let at_ms = draft.at_ms;
         let request = self.request(draft)?;
-        let (status, why, records) = self.submit_and_deliver(request, version, next, at_ms)?;
-        let mut records = records;
+        let (status, why, mut records) = self.submit_and_deliver(request, version, next, at_ms)?;
         records.push(Pending::TableStatus {
             machine: self.name.clone(),
             lobe: self.setup.name.clone(),
