@@ -80,6 +80,29 @@ async fn store_bytes(store: &camloop::store::Store, dir: &Path) -> u64 {
     }
 }
 
+/// Where the bytes go, table by table (with its indexes and, on PostgreSQL, its TOAST), in
+/// bytes per stored part. SQLite needs its `dbstat` table, which not every build has.
+async fn breakdown(store: &camloop::store::Store, parts: f64) -> String {
+    const PG: &str = "SELECT c.relname::TEXT, pg_total_relation_size(c.oid)::BIGINT FROM pg_class c \
+        JOIN pg_namespace n ON n.oid = c.relnamespace \
+        WHERE n.nspname = 'public' AND c.relkind = 'r' ORDER BY 2 DESC";
+    const LITE: &str = "SELECT COALESCE(m.tbl_name, d.name), SUM(d.pgsize) FROM dbstat d \
+        LEFT JOIN sqlite_master m ON m.name = d.name GROUP BY 1 ORDER BY 2 DESC";
+    let rows: Result<Vec<(String, i64)>, _> = match store.raw_pool() {
+        camloop::store::RawPool::Sqlite(pool) => sqlx::query_as(LITE).fetch_all(pool).await,
+        camloop::store::RawPool::Postgres(pool) => sqlx::query_as(PG).fetch_all(pool).await,
+    };
+    match rows {
+        Ok(rows) => rows
+            .iter()
+            .filter(|(_, b)| *b as f64 / parts >= 1.0)
+            .map(|(t, b)| format!("{t} {:.0}", *b as f64 / parts))
+            .collect::<Vec<_>>()
+            .join(", "),
+        Err(e) => format!("not available ({e})"),
+    }
+}
+
 /// Runs the load on the store at `url` and reports it; `memory` checks flat memory (once is
 /// enough, the PostgreSQL run is for its bytes).
 fn run(dir: &tempfile::TempDir, url: &str, parts: u64, memory: bool) {
@@ -140,8 +163,11 @@ fn run(dir: &tempfile::TempDir, url: &str, parts: u64, memory: bool) {
             store.close().await;
         }
         let db_bytes = store_bytes(&store, dir.path()).await.saturating_sub(empty_bytes);
-        store.close().await;
         let stored = counts.iter().map(|(_, n)| *n as f64).sum::<f64>().max(1.0);
+        let reopened = camloop::store::Store::connect(url).await.expect("store");
+        println!("load: {backend}: bytes per part by table: {}", breakdown(&reopened, stored).await);
+        reopened.close().await;
+        store.close().await;
         println!(
             "load: {backend}: {:.1} MiB for {stored} parts, {:.0} bytes ({:.2} KiB) per part (measurement with raw revolutions and report, table version, learning state, events; the empty schema's {empty_bytes} bytes left out); 50 machines at a part every 10 s: {:.2} GB a day",
             db_bytes as f64 / (1 << 20) as f64,

@@ -346,6 +346,22 @@ pub enum LearnError {
 /// Corrections closer than this everywhere are the same table, µm (and degrees / 1000).
 const SAME_CORRECTION_UM: f64 = 0.01;
 
+/// The step a learned correction is kept in, µm: 1 nm. The table writes X to 0.1 µm and the
+/// gauge reads 0.1 µm, so digits below a nanometre change no table (but at a rounding tie)
+/// and carry nothing the next part could confirm; kept at whole nanometres, a correction
+/// prints with at most three decimals, and its history (every table version and learning
+/// snapshot keeps it exactly) takes a fraction of the bytes of full f64 digits.
+pub const CORRECTION_STEP_UM: f64 = 0.001;
+
+/// Rounds a correction to whole [`CORRECTION_STEP_UM`], never beyond `±limit_um`.
+pub fn quantise_correction(correction_um: &mut [f64], limit_um: f64) {
+    let steps = 1.0 / CORRECTION_STEP_UM;
+    let limit = (limit_um * steps).floor() / steps;
+    for u in correction_um {
+        *u = ((*u * steps).round() / steps).clamp(-limit, limit);
+    }
+}
+
 /// One learning step from the part just measured. On error the state is left exactly as it
 /// was.
 ///
@@ -519,6 +535,7 @@ fn learn_correction(
         });
         within_limit(&wanted, params)
     };
+    quantise_correction(&mut next.correction_um, params.max_correction_um);
     let timing = learn_timing(state, part, params)?;
     next.timing_correction_deg = timing.0;
     bound = bound.or(timing.1);
@@ -648,8 +665,10 @@ fn max_abs_at(values: &[f64]) -> (f64, usize) {
 pub fn after_dressing(state: &mut LearningState, wheel_size_um: f64) {
     let shift = state.dressing_offset_um - wheel_size_um;
     state.correction_um.iter_mut().for_each(|u| *u += shift);
+    quantise_correction(&mut state.correction_um, f64::INFINITY);
     if let Some(best) = state.best.as_mut() {
         best.correction_um.iter_mut().for_each(|u| *u += shift);
+        quantise_correction(&mut best.correction_um, f64::INFINITY);
     }
     state.recent_max_error_um.clear();
     state.dressed = true;
@@ -735,7 +754,10 @@ mod tests {
     }
 
     /// A repeatable error with no noise: the correction converges geometrically with rate
-    /// (1 − L) towards −e when the plant adds the correction 1:1.
+    /// (1 − L) towards −e when the plant adds the correction 1:1. The correction is kept in
+    /// whole nanometres: each step rounds by at most half of one, and the plant passes an
+    /// earlier step's rounding on at the rate (1 − L) = 0.2, so the error stays within
+    /// 0.5 nm / (1 − 0.2) = 0.625 nm of the exact law; one step (1 nm) is the tolerance.
     #[test]
     fn converges_on_a_one_to_one_plant() {
         let params = LearningParams {
@@ -756,7 +778,7 @@ mod tests {
             let max_error = error.iter().fold(0.0f64, |a, e| a.max(e.abs()));
             let expected = 11.0 * 0.2f64.powi(k);
             assert!(
-                (max_error - expected).abs() < 1e-9 * expected.max(1.0),
+                (max_error - expected).abs() <= CORRECTION_STEP_UM,
                 "part {k}: {max_error} vs {expected}"
             );
             assert!(max_error < last);
@@ -778,8 +800,12 @@ mod tests {
         step(&mut state, &pe(&vec![0.15; 36], &sigma, 4), &params).unwrap();
         assert!(state.correction_um.iter().all(|u| u.abs() < 1e-12));
         step(&mut state, &pe(&vec![0.5; 36], &sigma, 4), &params).unwrap();
+        // Exactly the law but for the rounding to whole nanometres (half a step at most).
         for u in &state.correction_um {
-            assert!((u + 0.8 * (0.5 - 1.0 / 6.0)).abs() < 1e-9, "{u}");
+            assert!(
+                (u + 0.8 * (0.5 - 1.0 / 6.0)).abs() <= CORRECTION_STEP_UM / 2.0 + 1e-12,
+                "{u}"
+            );
         }
         // Shape: with 36 points and the cut-off above the Nyquist order, Q passes all 35
         // degrees of freedom beyond the mean: deadband 2·0.5·√(35/36) µm per angle.
@@ -822,7 +848,12 @@ mod tests {
             last
         };
         let proportional = run(0.0);
-        assert!((proportional - w / 0.8).abs() < 1e-6, "{proportional}");
+        // Within one nanometre step: the correction is kept in whole ones (see
+        // converges_on_a_one_to_one_plant for the bound).
+        assert!(
+            (proportional - w / 0.8).abs() <= CORRECTION_STEP_UM,
+            "{proportional}"
+        );
         let with_drift = run(0.2);
         assert!(with_drift.abs() < 1e-3, "{with_drift}");
     }
@@ -988,6 +1019,32 @@ mod tests {
         assert_eq!(state, before);
     }
 
+    /// A learned correction is in whole nanometres (its JSON has at most three decimals, the
+    /// point of keeping it so), within half a step of the exact value, and never beyond the
+    /// limit even where rounding to nearest would cross it.
+    #[test]
+    fn corrections_are_kept_in_whole_nanometres_within_the_limit() {
+        let exact = vec![1.23449, -1.23451, 4.99979, -4.9999999, 0.0, 1e-4];
+        let mut u = exact.clone();
+        quantise_correction(&mut u, 4.9999);
+        assert_eq!(u, vec![1.234, -1.235, 4.999, -4.999, 0.0, 0.0]);
+        let params = LearningParams {
+            deadband_sigmas: 0.0,
+            ..LearningParams::default()
+        };
+        let mut state = LearningState::new(360);
+        let error = grid(360, |p| {
+            3.1 * (2.0 * p).cos() + 0.77 * (5.0 * p).sin() + 0.3
+        });
+        step(&mut state, &pe(&error, &vec![0.0; 360], 4), &params).unwrap();
+        for u in &state.correction_um {
+            assert!((u * 1000.0 - (u * 1000.0).round()).abs() < 1e-6, "{u}");
+            let text = serde_json::to_string(u).unwrap();
+            let decimals = text.split('.').nth(1).map_or(0, str::len);
+            assert!(decimals <= 3, "{text}");
+        }
+    }
+
     #[test]
     fn dressing_drops_the_learned_size_and_keeps_the_shape() {
         let mut state = LearningState::new(360);
@@ -996,8 +1053,12 @@ mod tests {
         let own = size_correction_um(&state);
         after_dressing(&mut state, own);
         let shape = grid(360, |p| 2.0 * (3.0 * p).cos());
+        // The shape to within the rounding to whole nanometres.
         for (u, s) in state.correction_um.iter().zip(&shape) {
-            assert!((u - s).abs() < 1e-12);
+            assert!(
+                (u - s).abs() <= CORRECTION_STEP_UM / 2.0 + 1e-12,
+                "{u} vs {s}"
+            );
         }
         assert!(state.recent_max_error_um.is_empty());
     }

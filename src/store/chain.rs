@@ -149,3 +149,57 @@ macro_rules! next_link {
     }};
 }
 pub(crate) use next_link;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::store::pack::pack_text;
+
+    /// A chain whose rows were packed by builds with different formats (zstd only, then
+    /// numbers against the parent, then zstd again) reads back every row exactly: each link is
+    /// decoded by its own format byte against its parent's plain text.
+    #[test]
+    fn a_chain_of_mixed_formats_reads_back() {
+        let texts: Vec<String> = (0..3)
+            .map(|v| {
+                (0..40)
+                    .map(|k| format!("X={:.4}\n", 7.0 + 0.01 * k as f64 + 0.0003 * v as f64))
+                    .collect()
+            })
+            .collect();
+        let plain = |t: &str, d: &str| {
+            let mut out = vec![1u8];
+            out.extend(
+                zstd::bulk::Compressor::with_dictionary(3, d.as_bytes())
+                    .unwrap()
+                    .compress(t.as_bytes())
+                    .unwrap(),
+            );
+            out
+        };
+        let packs = [
+            plain(&texts[0], ""),
+            pack_text("program_packed", &texts[1], &texts[0]).unwrap(),
+            plain(&texts[2], &texts[1]),
+        ];
+        assert_eq!(packs[1][0], 2, "the middle row uses the numbers format");
+        for end in 1..=3 {
+            let links: Vec<Link> = packs[..end]
+                .iter()
+                .map(|p| Link {
+                    codec: CODEC_PACKED,
+                    texts: vec![None],
+                    packs: vec![Some(p.clone())],
+                })
+                .collect();
+            let chained = Chained {
+                table: "t",
+                fields: &[("program_text", "program_packed")],
+            };
+            assert_eq!(
+                chained.resolve(&links).unwrap(),
+                vec![texts[end - 1].clone()]
+            );
+        }
+    }
+}

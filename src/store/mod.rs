@@ -29,6 +29,7 @@ mod identity;
 mod log;
 mod measurements;
 mod pack;
+mod pack_numbers;
 mod pack_report;
 mod tables;
 mod types;

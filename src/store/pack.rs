@@ -7,12 +7,14 @@
 //!   profile has small ones), zigzag LEB128 varints, zstd;
 //! - raw revolutions: each value minus the averaged profile's value at its angle (what is
 //!   left is the gauge's noise and the part's run-out, a few µm), zigzag varints, zstd;
-//! - text (analysis report, table program, learning state): zstd, optionally with the
-//!   parent table program as dictionary (consecutive programs differ only in the digits).
+//! - text (table program, its learning, learning state): zstd with the parent row's text as
+//!   dictionary (format 1), or what changed in its numbers against the parent's (format 2,
+//!   see `pack_numbers`), whichever is smaller. Consecutive programs differ only in digits.
 //!
 //! Every packed blob starts with one format byte, so a later format can sit beside this one.
 
 use super::error::StoreError;
+use super::pack_numbers;
 
 /// Format byte of the blobs this build writes.
 const FORMAT_V1: u8 = 1;
@@ -25,7 +27,7 @@ fn corrupt(field: &'static str, why: impl Into<String>) -> StoreError {
     StoreError::invalid(field, why.into())
 }
 
-fn zigzag(v: i64) -> u64 {
+pub(super) fn zigzag(v: i64) -> u64 {
     ((v << 1) ^ (v >> 63)) as u64
 }
 
@@ -33,7 +35,7 @@ fn unzigzag(u: u64) -> i64 {
     ((u >> 1) as i64) ^ -((u & 1) as i64)
 }
 
-fn put_varint(out: &mut Vec<u8>, mut u: u64) {
+pub(super) fn put_varint(out: &mut Vec<u8>, mut u: u64) {
     while u >= 0x80 {
         out.push((u as u8) | 0x80);
         u >>= 7;
@@ -42,13 +44,17 @@ fn put_varint(out: &mut Vec<u8>, mut u: u64) {
 }
 
 /// Reads varints from a byte slice; `None` at the end, an error on a truncated one.
-struct Varints<'a> {
-    bytes: &'a [u8],
-    field: &'static str,
+pub(super) struct Varints<'a> {
+    pub(super) bytes: &'a [u8],
+    pub(super) field: &'static str,
 }
 
 impl Varints<'_> {
-    fn next_i64(&mut self) -> Result<i64, StoreError> {
+    pub(super) fn next_i64(&mut self) -> Result<i64, StoreError> {
+        self.next_u64().map(unzigzag)
+    }
+
+    pub(super) fn next_u64(&mut self) -> Result<u64, StoreError> {
         let mut u: u64 = 0;
         for shift in (0..64).step_by(7) {
             let (&b, rest) = self
@@ -58,7 +64,7 @@ impl Varints<'_> {
             self.bytes = rest;
             u |= u64::from(b & 0x7f) << shift;
             if b & 0x80 == 0 {
-                return Ok(unzigzag(u));
+                return Ok(u);
             }
         }
         Err(corrupt(self.field, "a packed value is longer than 64 bits"))
@@ -78,7 +84,7 @@ fn compress(field: &'static str, plain: &[u8], dictionary: &[u8]) -> Result<Vec<
 
 /// Largest plain size a pack may claim: 64 MiB, far above any real row, so a damaged length
 /// cannot make a read allocate without bound.
-const MAX_PLAIN: usize = 64 << 20;
+pub(super) const MAX_PLAIN: usize = 64 << 20;
 
 fn decompress(field: &'static str, blob: &[u8], dictionary: &[u8]) -> Result<Vec<u8>, StoreError> {
     let (&format, body) = blob
@@ -103,21 +109,30 @@ pub(crate) fn unpack_bytes(field: &'static str, blob: &[u8]) -> Result<Vec<u8>, 
     decompress(field, blob, &[])
 }
 
-/// Packs text (UTF-8), with `dictionary` (may be empty) as shared history.
+/// Packs text (UTF-8) against `dictionary` (its parent, may be empty): as the changes in
+/// its numbers ([`pack_numbers`]) or as zstd with the parent as dictionary, whichever is
+/// smaller.
 pub(crate) fn pack_text(
     field: &'static str,
     text: &str,
     dictionary: &str,
 ) -> Result<Vec<u8>, StoreError> {
-    compress(field, text.as_bytes(), dictionary.as_bytes())
+    let plain = compress(field, text.as_bytes(), dictionary.as_bytes())?;
+    Ok(match pack_numbers::pack(field, text, dictionary, LEVEL) {
+        Some(numbers) if numbers.len() < plain.len() => numbers,
+        _ => plain,
+    })
 }
 
-/// Unpacks what [`pack_text`] made with the same dictionary.
+/// Unpacks what [`pack_text`] made with the same dictionary (either format).
 pub(crate) fn unpack_text(
     field: &'static str,
     blob: &[u8],
     dictionary: &str,
 ) -> Result<String, StoreError> {
+    if blob.first() == Some(&pack_numbers::FORMAT_NUMBERS) {
+        return pack_numbers::unpack(field, blob, dictionary);
+    }
     String::from_utf8(decompress(field, blob, dictionary.as_bytes())?)
         .map_err(|_| corrupt(field, "packed text is not UTF-8"))
 }

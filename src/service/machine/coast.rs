@@ -23,6 +23,7 @@ impl FeatureLoop {
         }
         let mut next = learning.clone();
         next.correction_um.iter_mut().for_each(|u| *u -= drift);
+        crate::core::learn::quantise_correction(&mut next.correction_um, f64::INFINITY);
         let table = match compensate::current_table(&next, &self.lobe_loop()) {
             Ok(t) => t,
             Err(e) => {
