@@ -124,6 +124,119 @@ macro_rules! fetch_chain {
 }
 pub(crate) use fetch_chain;
 
+/// Plain texts of recently packed rows, so that a new row does not decode its parent's whole
+/// chain again (at 3600 points that was up to 15 programs of 190 KB per table). An entry
+/// serves only while the row's packed bytes in the database are the ones it was made from:
+/// a base row never changes, so equal bytes over the same id mean equal texts. Anything else
+/// (another instance wrote the row, a replaced learning state, a restored database) reads
+/// the chain. Two rows per (table, machine, lobe): the newest and its base (what replacing
+/// the newest learning state packs against).
+#[derive(Debug, Default)]
+pub(crate) struct ChainCache {
+    rows: std::sync::Mutex<std::collections::HashMap<CacheKey, Vec<CachedRow>>>,
+}
+
+type CacheKey = (&'static str, String, String);
+
+#[derive(Debug)]
+struct CachedRow {
+    id: i64,
+    packs: Vec<Vec<u8>>,
+    texts: Vec<String>,
+}
+
+/// Features whose rows are kept: past this many the cache starts again (it only saves work).
+const CACHED_FEATURES: usize = 4096;
+
+impl ChainCache {
+    fn lock(
+        &self,
+    ) -> std::sync::MutexGuard<'_, std::collections::HashMap<CacheKey, Vec<CachedRow>>> {
+        self.rows.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The texts of row `id` when its packed columns are still `packs`.
+    pub(crate) fn get(
+        &self,
+        key: (&'static str, &str, &str),
+        id: i64,
+        packs: &[Option<Vec<u8>>],
+    ) -> Option<Vec<String>> {
+        let rows = self.lock();
+        let row = rows
+            .get(&(key.0, key.1.to_string(), key.2.to_string()))?
+            .iter()
+            .find(|r| r.id == id)?;
+        let same = row.packs.len() == packs.len()
+            && row
+                .packs
+                .iter()
+                .zip(packs)
+                .all(|(a, b)| Some(a) == b.as_ref());
+        same.then(|| row.texts.clone())
+    }
+
+    /// Remembers row `id` (packed as `packs`, reading as `texts`) as the newest of its key.
+    pub(crate) fn put(
+        &self,
+        key: (&'static str, &str, &str),
+        id: i64,
+        packs: Vec<Vec<u8>>,
+        texts: Vec<String>,
+    ) {
+        let mut rows = self.lock();
+        if rows.len() >= CACHED_FEATURES {
+            rows.clear();
+        }
+        let kept = rows
+            .entry((key.0, key.1.to_string(), key.2.to_string()))
+            .or_default();
+        kept.retain(|r| r.id != id);
+        kept.push(CachedRow { id, packs, texts });
+        let excess = kept.len().saturating_sub(2);
+        kept.drain(..excess);
+    }
+}
+
+/// The plain texts of row `$id` of (`$machine`, `$lobe`) in `$chained`: from the store's
+/// [`ChainCache`] when the row still holds the packs it was cached with, else by reading its
+/// chain (and caching them).
+macro_rules! texts_of {
+    ($store:expr, $exec:expr, $chained:expr, $machine:expr, $lobe:expr, $id:expr) => {{
+        let chained = &$chained;
+        let id: i64 = $id;
+        let key: (&'static str, &str, &str) = (chained.table, $machine, $lobe);
+        let packed: Vec<&str> = chained.fields.iter().map(|(_, p)| *p).collect();
+        let row = sqlx::query(&format!(
+            "SELECT {} FROM {} WHERE id = $1",
+            packed.join(", "),
+            chained.table
+        ))
+        .bind(id)
+        .fetch_one(&mut *$exec)
+        .await
+        .map_err($store.db_error("reading packed history"))?;
+        let mut packs: Vec<Option<Vec<u8>>> = Vec::with_capacity(packed.len());
+        for i in 0..packed.len() {
+            packs.push(
+                sqlx::Row::try_get(&row, i)
+                    .map_err($crate::store::error::db_error("reading packed history"))?,
+            );
+        }
+        match $store.chains.get(key, id, &packs) {
+            Some(texts) => texts,
+            None => {
+                let texts = $crate::store::chain::fetch_chain!($store, &mut *$exec, chained, id);
+                if let Some(packs) = packs.into_iter().collect::<Option<Vec<_>>>() {
+                    $store.chains.put(key, id, packs, texts.clone());
+                }
+                texts
+            }
+        }
+    }};
+}
+pub(crate) use texts_of;
+
 /// Where a new row of (machine, lobe) goes in its chain: `(base_id, chain_depth)` and the
 /// base's plain texts (the dictionaries), read with `$exec` from the newest row.
 macro_rules! next_link {
@@ -141,7 +254,8 @@ macro_rules! next_link {
         .map_err($store.db_error("reading packed history"))?;
         match newest {
             Some((id, depth)) if depth + 1 < $crate::store::chain::MAX_DEPTH => {
-                let plain = $crate::store::chain::fetch_chain!($store, &mut *$exec, chained, id);
+                let plain =
+                    $crate::store::chain::texts_of!($store, $exec, chained, $machine, $lobe, id);
                 (Some(id), depth + 1, plain)
             }
             _ => (None, 0, vec![String::new(); chained.fields.len()]),

@@ -1,6 +1,6 @@
 //! Machines, recipe snapshots, wheel dressings, events and learning-state snapshots.
 
-use super::chain::{LEARNING_STATES, fetch_chain, next_link};
+use super::chain::{LEARNING_STATES, fetch_chain, next_link, texts_of};
 use super::codec::{
     CODEC_PACKED, check_finite, check_json, check_limit, check_name, check_sha256, sha256_hex,
 };
@@ -343,10 +343,16 @@ impl Store {
             match replace {
                 Some((id, base_id)) => {
                     let base = match base_id {
-                        Some(b) => fetch_chain!(self, &mut *tx, LEARNING_STATES, b).remove(0),
+                        Some(b) => texts_of!(self, tx, LEARNING_STATES, machine, lobe, b).remove(0),
                         None => String::new(),
                     };
                     let packed = pack_text("state_packed", state_json, &base)?;
+                    self.chains.put(
+                        (LEARNING_STATES.table, machine, lobe),
+                        id,
+                        vec![packed.clone()],
+                        vec![state_json.to_string()],
+                    );
                     sqlx::query(
                         "UPDATE learning_states SET state_packed = $1, state_sha256 = $2, \
                          saved_at_ms = $3 WHERE id = $4",
@@ -362,10 +368,10 @@ impl Store {
                 None => {
                     let (base_id, depth, base) = next_link!(self, tx, LEARNING_STATES, machine, lobe);
                     let packed = pack_text("state_packed", state_json, &base[0])?;
-                    sqlx::query(
+                    let id: i64 = sqlx::query_scalar(
                         "INSERT INTO learning_states (machine, lobe, saved_at_ms, codec, base_id, \
                          chain_depth, state_packed, state_sha256, meaning_sha256) \
-                         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)",
+                         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) RETURNING id",
                     )
                     .bind(machine)
                     .bind(lobe)
@@ -373,12 +379,18 @@ impl Store {
                     .bind(CODEC_PACKED)
                     .bind(base_id)
                     .bind(depth)
-                    .bind(packed)
+                    .bind(&packed)
                     .bind(&state_sha256)
                     .bind(meaning_sha256)
-                    .execute(&mut *tx)
+                    .fetch_one(&mut *tx)
                     .await
                     .map_err(self.db_error(OP))?;
+                    self.chains.put(
+                        (LEARNING_STATES.table, machine, lobe),
+                        id,
+                        vec![packed],
+                        vec![state_json.to_string()],
+                    );
                 }
             }
             tx.commit().await.map_err(self.db_error(OP))?;
@@ -451,8 +463,8 @@ impl Store {
         lobe: &str,
     ) -> Result<Option<LearningState>, StoreError> {
         with_write!(self, pool => {
-            let row: Option<(i64, i64)> = sqlx::query_as(
-                "SELECT id, saved_at_ms FROM learning_states \
+            let row: Option<(i64, i64, Option<String>)> = sqlx::query_as(
+                "SELECT id, saved_at_ms, state_sha256 FROM learning_states \
                  WHERE machine = $1 AND lobe = $2 ORDER BY id DESC LIMIT 1",
             )
             .bind(machine)
@@ -462,8 +474,16 @@ impl Store {
             .map_err(self.db_error("loading learning state"))?;
             match row {
                 None => Ok(None),
-                Some((id, saved_at_ms)) => {
+                Some((id, saved_at_ms, sha256)) => {
                     let state_json = fetch_chain!(self, pool, LEARNING_STATES, id).remove(0);
+                    // A packed state is checked like a program: a damaged chain is an error,
+                    // never a learning state with other numbers.
+                    if sha256.is_some_and(|s| s != sha256_hex(state_json.as_bytes())) {
+                        return Err(StoreError::invalid(
+                            "state_json",
+                            format!("learning state of machine {machine} lobe {lobe} does not match its SHA-256"),
+                        ));
+                    }
                     Ok(Some(LearningState { state_json, saved_at_ms }))
                 }
             }

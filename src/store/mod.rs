@@ -90,6 +90,8 @@ pub struct Store {
     reads: Arc<Semaphore>,
     /// The database without credentials, for messages: a file path or `host:port/db`.
     target: Arc<str>,
+    /// Plain texts of the newest packed rows, for packing the next ones.
+    chains: Arc<chain::ChainCache>,
 }
 
 #[derive(Debug, Clone)]
@@ -145,6 +147,7 @@ impl Store {
             pools,
             reads: Arc::new(Semaphore::new(readers as usize)),
             target: target.into(),
+            chains: Arc::default(),
         }
     }
 

@@ -129,11 +129,17 @@ impl Store {
             .bind(CODEC_PACKED)
             .bind(base_id)
             .bind(depth)
-            .bind(program)
-            .bind(learning)
+            .bind(&program)
+            .bind(&learning)
             .fetch_one(&mut *tx)
             .await
             .map_err(self.db_error(OP))?;
+            self.chains.put(
+                (TABLE_VERSIONS.table, &t.machine, &t.lobe),
+                id,
+                vec![program, learning],
+                vec![t.program_text.clone(), t.learning_params_json.clone()],
+            );
             sqlx::query(
                 "INSERT INTO table_version_status (table_version_id, status, why, at_ms) \
                  VALUES ($1, $2, $3, $4)",
