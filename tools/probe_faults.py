@@ -16,8 +16,10 @@ Everything runs in a temporary folder on loopback; nothing is left behind.
 """
 
 import json
+import math
 import os
 import random
+import re
 import signal
 import sqlite3
 import struct
@@ -58,14 +60,111 @@ def start(dir, config):
     return subprocess.Popen([BINARY, "run", "--config", config], cwd=dir, stdout=log, stderr=log)
 
 
-def unzstd(blob, dictionary=b""):
-    """A packed blob (format byte 1, then zstd, see src/store/pack.rs) with the zstd tool."""
-    assert blob[0] == 1, "unknown packed format"
+def zstd_frame(frame, dictionary=b""):
+    """One zstd frame, with `dictionary` as raw content, by the zstd tool."""
     with tempfile.NamedTemporaryFile() as d:
         d.write(dictionary)
         d.flush()
         args = ["zstd", "-d", "-c", "-q"] + (["-D", d.name] if dictionary else [])
-        return subprocess.run(args, input=blob[1:], capture_output=True, check=True).stdout
+        return subprocess.run(args, input=frame, capture_output=True, check=True).stdout
+
+
+def unzstd(blob, dictionary=b""):
+    """A packed blob (see src/store/pack.rs): format 1 is zstd against the parent text,
+    format 2 the numbers against the parent's (src/store/pack_numbers.rs), decoded here
+    from its description, apart from the Rust code."""
+    if blob[0] == 1:
+        return zstd_frame(blob[1:], dictionary)
+    assert blob[0] == 2, "unknown packed format"
+    return unpack_numbers(blob, dictionary)
+
+
+NUMBER = re.compile(rb"(?<![A-Za-z0-9_.])-?(?:0|[1-9][0-9]*)(?:\.[0-9]+)?(?![A-Za-z0-9_.])")
+
+
+def tokenise(text):
+    """(template, [(mantissa, decimals)]): numbers of at most 18 digits become marker bytes
+    (2 for a negative zero); `None` when the text holds a marker byte."""
+    if b"\x01" in text or b"\x02" in text:
+        return None
+    template, numbers, pos = bytearray(), [], 0
+    for m in NUMBER.finditer(text):
+        word = m.group(0)
+        body = word.lstrip(b"-")
+        whole, _, frac = body.partition(b".")
+        if len(whole) + len(frac) > 18:
+            continue
+        mantissa = int(whole + frac) * (-1 if word.startswith(b"-") else 1)
+        template += text[pos:m.start()]
+        template.append(2 if word.startswith(b"-") and mantissa == 0 else 1)
+        numbers.append((mantissa, len(frac) if b"." in body else -1))
+        pos = m.end()
+    template += text[pos:]
+    return bytes(template), numbers
+
+
+def units(template):
+    """(unit template, index of its first number) per unit: up to and with each , or \n."""
+    out, start, first = [], 0, 0
+    for i, b in enumerate(template):
+        if b in b",\n" or i + 1 == len(template):
+            unit = template[start:i + 1]
+            out.append((unit, first))
+            first += unit.count(1) + unit.count(2)
+            start = i + 1
+    return out
+
+
+def predict(parent, decimals):
+    mantissa, before = parent
+    shift = max(decimals, 0) - max(before, 0)
+    if shift >= 0:
+        return mantissa * 10**shift
+    q = 10**-shift
+    return int(math.copysign((abs(mantissa) + q // 2) // q, mantissa))
+
+
+def unpack_numbers(blob, parent_text):
+    def varint(data, pos):
+        value, shift = 0, 0
+        while True:
+            b = data[pos]
+            pos += 1
+            value |= (b & 0x7F) << shift
+            shift += 7
+            if b < 0x80:
+                return value, pos
+
+    parent = tokenise(parent_text) or (b"", [])
+    length, pos = varint(blob, 1)
+    template = zstd_frame(blob[pos:pos + length], parent[0])
+    stream = zstd_frame(blob[pos + length:])
+    parent_units = units(parent[0])
+    bases = []
+    for k, (unit, _) in enumerate(units(template)):
+        same = k < len(parent_units) and parent_units[k][0] == unit
+        for n in range(unit.count(1) + unit.count(2)):
+            bases.append(parent[1][parent_units[k][1] + n] if same else None)
+    values, pos = [], 0
+    while pos < len(stream):
+        v, pos = varint(stream, pos)
+        values.append((v >> 1) ^ -(v & 1))
+    assert len(values) == 2 * len(bases), "numbers pack does not match its template"
+    out, k = bytearray(), 0
+    for b in template:
+        if b not in (1, 2):
+            out.append(b)
+            continue
+        base = bases[k]
+        decimals = values[len(bases) + k] + (base[1] if base else -1)
+        mantissa = values[k] + (predict(base, decimals) if base else 0)
+        digits = str(abs(mantissa))
+        if decimals >= 0:
+            digits = digits.rjust(decimals + 1, "0")
+            digits = digits[:len(digits) - decimals] + "." + digits[len(digits) - decimals:]
+        out += (b"-" if mantissa < 0 or b == 2 else b"") + digits.encode()
+        k += 1
+    return bytes(out)
 
 
 def unpack_report(blob):
