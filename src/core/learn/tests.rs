@@ -1,3 +1,6 @@
+//! Tests of the learning law against closed forms: convergence, deadbands, limits, drift,
+//! dressing, reverting, and the nanometre step.
+
 use super::*;
 
 fn pe<'a>(error_um: &'a [f64], repeatability_um: &'a [f64], revolutions: u32) -> PartError<'a> {
