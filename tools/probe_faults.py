@@ -124,17 +124,19 @@ def predict(parent, decimals):
     return int(math.copysign((abs(mantissa) + q // 2) // q, mantissa))
 
 
-def unpack_numbers(blob, parent_text):
-    def varint(data, pos):
-        value, shift = 0, 0
-        while True:
-            b = data[pos]
-            pos += 1
-            value |= (b & 0x7F) << shift
-            shift += 7
-            if b < 0x80:
-                return value, pos
+def varint(data, pos):
+    """The LEB128 varint at `pos` and the position after it."""
+    value, shift = 0, 0
+    while True:
+        b = data[pos]
+        pos += 1
+        value |= (b & 0x7F) << shift
+        shift += 7
+        if b < 0x80:
+            return value, pos
 
+
+def unpack_numbers(blob, parent_text):
     parent = tokenise(parent_text) or (b"", [])
     length, pos = varint(blob, 1)
     template = zstd_frame(blob[pos:pos + length], parent[0])
@@ -173,14 +175,8 @@ def unpack_report(blob):
 
     def u():
         nonlocal pos
-        value, shift = 0, 0
-        while True:
-            b = data[pos]
-            pos += 1
-            value |= (b & 0x7F) << shift
-            shift += 7
-            if b < 0x80:
-                return value
+        value, pos = varint(data, pos)
+        return value
 
     def i():
         v = u()

@@ -214,7 +214,7 @@ pub(super) fn pack(field: &'static str, text: &str, parent: &str, level: i32) ->
     super::pack::put_varint(&mut out, template.len() as u64);
     out.extend_from_slice(&template);
     out.extend_from_slice(&numbers);
-    match unpack(field, &out, parent) {
+    match decode(field, &out, &parent_t) {
         Ok(back) if back == text => Some(out),
         _ => None,
     }
@@ -222,6 +222,11 @@ pub(super) fn pack(field: &'static str, text: &str, parent: &str, level: i32) ->
 
 /// Unpacks what [`pack`] made against the same parent.
 pub(super) fn unpack(field: &'static str, blob: &[u8], parent: &str) -> Result<String, StoreError> {
+    decode(field, blob, &parent_tokens(parent))
+}
+
+/// [`unpack`] with the parent already tokenised (the pack's own check reuses its tokens).
+fn decode(field: &'static str, blob: &[u8], parent_t: &Tokens) -> Result<String, StoreError> {
     let body = match blob.split_first() {
         Some((&FORMAT_NUMBERS, body)) => body,
         _ => return Err(corrupt(field, "not a numbers pack")),
@@ -232,13 +237,12 @@ pub(super) fn unpack(field: &'static str, blob: &[u8], parent: &str) -> Result<S
         .filter(|&l| l <= reader.bytes.len())
         .ok_or_else(|| corrupt(field, "template length beyond the pack"))?;
     let (template, numbers) = reader.bytes.split_at(template_len);
-    let parent_t = parent_tokens(parent);
     let template = zstd::bulk::Decompressor::with_dictionary(&parent_t.template)
         .and_then(|mut d| d.decompress(template, super::pack::MAX_PLAIN))
         .map_err(|e| corrupt(field, format!("template is not readable: {e}")))?;
     let numbers = zstd::bulk::decompress(numbers, super::pack::MAX_PLAIN)
         .map_err(|e| corrupt(field, format!("numbers are not readable: {e}")))?;
-    let bases = pairs(&template, &parent_t);
+    let bases = pairs(&template, parent_t);
     let mut values = super::pack::Varints {
         bytes: &numbers,
         field,
