@@ -16,13 +16,15 @@
 
 mod cluster_support;
 mod gauge_drop_support;
+mod process_support;
 mod store_support;
 
 use cluster_support::{Dropped, Machine};
+use process_support::KillOnDrop;
 use sqlx::Row;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
-use std::process::{Child, Command};
+use std::process::Command;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -32,6 +34,9 @@ const INSTANCES: [&str; 3] = ["a", "b", "c"];
 /// The default lease; the takeover bound the issue sets follows from it.
 const LEASE_MS: u64 = 6000;
 const TAKEOVER_LIMIT: Duration = Duration::from_secs(10);
+/// A returning instance holds its fair share within this: it looks every 250 ms while the
+/// others hand machines over, and a handover waits only for the part in hand.
+const REJOIN_LIMIT: Duration = Duration::from_secs(15);
 
 fn machine_name(i: usize) -> String {
     format!("M{:02}", i + 1)
@@ -56,19 +61,44 @@ fn config(root: &Path, instance: &str, db_url: &str) -> String {
     text
 }
 
-fn start(root: &Path, instance: &str) -> Child {
+fn start(root: &Path, instance: &str) -> KillOnDrop {
     let log = std::fs::OpenOptions::new()
         .create(true)
         .append(true)
         .open(root.join(format!("{instance}.log")))
         .unwrap();
-    Command::new(env!("CARGO_BIN_EXE_camloop"))
-        .args(["run", "--config", &format!("{instance}.toml")])
-        .current_dir(root)
-        .stdout(log.try_clone().unwrap())
-        .stderr(log)
-        .spawn()
+    KillOnDrop::spawn(
+        Command::new(env!("CARGO_BIN_EXE_camloop"))
+            .args(["run", "--config", &format!("{instance}.toml")])
+            .current_dir(root)
+            .stdout(log.try_clone().unwrap())
+            .stderr(log),
+    )
+    .unwrap()
+}
+
+/// Every machine's lease epoch: one more each time the machine changed owner.
+async fn epochs(db: &sqlx::PgPool) -> HashMap<String, u64> {
+    sqlx::query("SELECT machine, epoch FROM camloop_leases")
+        .fetch_all(db)
+        .await
         .unwrap()
+        .iter()
+        .map(|r| (r.get::<String, _>(0), r.get::<i64, _>(1) as u64))
+        .collect()
+}
+
+/// How many machines changed owner 0, 1, 2, … times between two readings of the epochs.
+fn owner_changes(before: &HashMap<String, u64>, after: &HashMap<String, u64>) -> Vec<usize> {
+    let mut histogram = Vec::new();
+    for (m, b) in before {
+        let n = (after[m] - b) as usize;
+        if histogram.len() <= n {
+            histogram.resize(n + 1, 0);
+        }
+        histogram[n] += 1;
+    }
+    histogram
 }
 
 /// Owner of every leased machine whose lease has not expired.
@@ -147,7 +177,8 @@ fn three_instances_share_the_machines_and_survive_a_kill() {
             std::thread::spawn(move || machine.run(stop, Duration::from_secs(40)))
         })
         .collect();
-    let mut children: HashMap<&str, Child> =
+    // Killed on drop: a failed assertion never leaves instances running.
+    let mut children: HashMap<&str, KillOnDrop> =
         INSTANCES.iter().map(|&i| (i, start(root, i))).collect();
 
     let rt = tokio::runtime::Runtime::new().unwrap();
@@ -167,6 +198,7 @@ fn three_instances_share_the_machines_and_survive_a_kill() {
         tokio::time::sleep(Duration::from_secs(6)).await;
 
         // SIGKILL: no release, no goodbye; its leases run out.
+        let before_kill = epochs(&db).await;
         let held: Vec<String> = owners(&db)
             .await
             .into_iter()
@@ -200,20 +232,28 @@ fn three_instances_share_the_machines_and_survive_a_kill() {
         let rebalance = wait_leases(
             root,
             &db,
-            Duration::from_secs(30),
+            REJOIN_LIMIT,
             "the returning instance gets its share",
             even,
         )
         .await;
         let rejoin = (restarted_ms, cluster_support::now_ms());
         tokio::time::sleep(Duration::from_secs(3)).await;
+        // Steady again: every machine changed owner at most twice since the kill (to a
+        // survivor, then back), and not once more in these 3 s.
+        let changes = owner_changes(&before_kill, &epochs(&db).await);
+        assert!(
+            changes.len() <= 3,
+            "owner changes per machine after a kill and a return (machines with 0, 1, 2, … changes): {changes:?}\n{}",
+            log_tails(root)
+        );
+        // Nothing lost before b is paused: its log up to here has no lost lease.
+        let b_before_pause = std::fs::read_to_string(root.join("b.log")).unwrap().len();
 
         // SIGSTOP: b stays alive, holding its leases' memory, its files open, until its
         // leases have run out and the others own its machines; then it goes on (SIGCONT)
         // and must write nothing more for them.
-        let paused = children["b"].id().to_string();
-        let signal = |s: &str| Command::new("kill").args([s, &paused]).status().unwrap();
-        signal("-STOP");
+        children["b"].signal("-STOP");
         let no_b = |o: &HashMap<String, String>| {
             o.len() == MACHINES && !o.values().any(|owner| owner == "b")
         };
@@ -226,7 +266,7 @@ fn three_instances_share_the_machines_and_survive_a_kill() {
         )
         .await;
         tokio::time::sleep(Duration::from_secs(1)).await;
-        signal("-CONT");
+        children["b"].signal("-CONT");
         wait_leases(
             root,
             &db,
@@ -249,9 +289,9 @@ fn three_instances_share_the_machines_and_survive_a_kill() {
         let quick = (quick_ms, cluster_support::now_ms());
         wait_leases(root, &db, Duration::from_secs(30), "a quick restart", even).await;
         check_cluster_api(root);
-        (takeover, rebalance, paused_takeover, rejoin, quick)
+        (takeover, rebalance, paused_takeover, rejoin, quick, changes, b_before_pause)
     });
-    let (takeover, rebalance, paused_takeover, rejoin, quick) = report;
+    let (takeover, rebalance, paused_takeover, rejoin, quick, changes, b_before_pause) = report;
 
     stop.store(true, Ordering::SeqCst);
     let dropped: Vec<(String, Vec<Dropped>)> = machines
@@ -261,7 +301,7 @@ fn three_instances_share_the_machines_and_survive_a_kill() {
         .collect();
     for (_, mut child) in children {
         // SIGTERM: a graceful stop releases the leases.
-        let _ = Command::new("kill").arg(child.id().to_string()).status();
+        child.signal("-TERM");
         child.wait().unwrap();
     }
 
@@ -304,7 +344,8 @@ fn three_instances_share_the_machines_and_survive_a_kill() {
     eprintln!(
         "takeover of {} machines: p50 {:?}, max {:?}; rebalance after the restart {rebalance:?}; \
          a paused instance's machines all moved after {paused_takeover:?}; \
-         {parts} parts, wait in the inbox p50 {:?} max {:?}",
+         owner changes per machine from the kill to the return (machines with 0, 1, 2 changes): \
+         {changes:?}; {parts} parts, wait in the inbox p50 {:?} max {:?}",
         times.len(),
         percentile(&times, 0.5),
         times[times.len() - 1],
@@ -333,7 +374,7 @@ fn three_instances_share_the_machines_and_survive_a_kill() {
         }
     }
     rt.block_on(check_history(root, &server.url(), &dropped));
-    assert_logs_clean(root);
+    assert_logs_clean(root, b_before_pause);
 }
 
 /// The store holds every dropped part once; each machine's versions are 1..n once each, with
@@ -453,10 +494,27 @@ fn log_tails(root: &Path) -> String {
     out
 }
 
-/// No instance panicked or logged an error, but for the paused one's lost leases.
-fn assert_logs_clean(root: &Path) {
+/// No instance panicked or logged an error, but for the paused one's lost leases after its
+/// pause (`b_before_pause`: the length of its log then).
+fn assert_logs_clean(root: &Path, b_before_pause: usize) {
     for i in INSTANCES {
         let log = std::fs::read_to_string(root.join(format!("{i}.log"))).unwrap();
+        let steady = if i == "b" {
+            &log[..b_before_pause]
+        } else {
+            &log[..]
+        };
+        for lost in [
+            "lease lost",
+            "not renewed in time",
+            "ran out while the machine opened",
+        ] {
+            assert!(
+                !steady.contains(lost),
+                "{i} lost a lease in a steady state ({lost}):\n{}",
+                log_tails(root)
+            );
+        }
         assert!(!log.contains("panicked"), "{i} panicked:\n{log}");
         assert!(
             log.contains("camloop started"),

@@ -8,6 +8,7 @@
 //! status could never be written and that feature's journal stopped draining.
 
 mod cli_support;
+mod process_support;
 
 use camloop::share::{VersionStatus, load_manifest};
 use camloop::store::{Store, TableStatus};
@@ -41,13 +42,14 @@ fn killing_the_service_never_leaves_a_version_the_history_does_not_know() {
     std::fs::write(dir.path().join("camloop.toml"), config(&recipe)).unwrap();
     let mut rng = SEED;
     for _ in 0..KILLS {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_camloop"))
-            .args(["run", "--config", "camloop.toml"])
-            .current_dir(dir.path())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
+        let mut child = process_support::KillOnDrop::spawn(
+            Command::new(env!("CARGO_BIN_EXE_camloop"))
+                .args(["run", "--config", "camloop.toml"])
+                .current_dir(dir.path())
+                .stdout(Stdio::null())
+                .stderr(Stdio::null()),
+        )
+        .unwrap();
         // Start-up takes some 100 ms; the kills land anywhere in the parts after it.
         std::thread::sleep(Duration::from_millis(150 + next(&mut rng) % 700));
         child.kill().unwrap();

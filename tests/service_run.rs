@@ -512,15 +512,17 @@ async fn a_dropped_dressing_report_regenerates_the_table() {
     std::fs::write(inbox.join(".dress.tmp"), "wheel_radius_mm = 249.9\n# end\n").unwrap();
     std::fs::rename(inbox.join(".dress.tmp"), inbox.join("dress.dressing.toml")).unwrap();
 
-    // Poll the API (bounded) until the dressing and its table are in.
+    // Poll the API (bounded) until both the dressing and its table are in: the two are
+    // separate records reaching the database one after the other, so the wait is for both.
     let mut dressings = serde_json::Value::Null;
     let mut tables = 0;
     for _ in 0..200 {
-        let (_, body) = get(running.http_addr, "/api/v1/machines/DROP1/dressings").await;
-        dressings = json(&body);
         let (_, body) = get(running.http_addr, "/api/v1/machines/DROP1/lobes/IN1/tables").await;
         tables = json(&body)["items"].as_array().map_or(0, Vec::len);
-        if tables == 2 {
+        let (_, body) = get(running.http_addr, "/api/v1/machines/DROP1/dressings").await;
+        dressings = json(&body);
+        let dressed = dressings["items"].as_array().is_some_and(|d| !d.is_empty());
+        if tables == 2 && dressed {
             break;
         }
         tokio::time::sleep(std::time::Duration::from_millis(50)).await;

@@ -72,7 +72,7 @@ impl Leases {
             .map_err(op("read the database URL"))?
             .options([("statement_timeout", (lease / 4).as_millis().to_string())]);
         let pool = PgPoolOptions::new()
-            .max_connections(2)
+            .max_connections(3)
             .acquire_timeout(lease / 4)
             .connect_with(options)
             .await
@@ -104,6 +104,11 @@ impl Leases {
         .execute(&self.pool)
         .await
         .map_err(op("record the heartbeat"))?;
+        self.live_instances().await
+    }
+
+    /// How many instances are alive (their heartbeat has not run out); at least one.
+    pub async fn live_instances(&self) -> Result<usize, LeaseError> {
         let live: i64 =
             sqlx::query_scalar("SELECT count(*) FROM camloop_instances WHERE seen_until > now()")
                 .fetch_one(&self.pool)
@@ -160,9 +165,19 @@ impl Leases {
     /// it). Every other live lease under this instance's name runs nowhere (left by an
     /// earlier process of the same name, or stopped while the database was away) and is
     /// released, so that it is taken at once rather than renewed forever; those come back
-    /// second.
-    pub async fn renew(&self, held: &[(String, u64)]) -> Result<Renewed, LeaseError> {
+    /// second. `acquiring`: machines this instance is taking at this moment, whose new
+    /// leases are neither renewed nor released here.
+    pub async fn renew(
+        &self,
+        held: &[(String, u64)],
+        acquiring: &[String],
+    ) -> Result<Renewed, LeaseError> {
         let machines: Vec<&str> = held.iter().map(|(m, _)| m.as_str()).collect();
+        let known: Vec<&str> = machines
+            .iter()
+            .copied()
+            .chain(acquiring.iter().map(String::as_str))
+            .collect();
         let epochs: Vec<i64> = held.iter().map(|(_, e)| *e as i64).collect();
         let rows = sqlx::query(
             "UPDATE camloop_leases SET expires_at = now() + $2 * interval '1 millisecond' \
@@ -187,7 +202,7 @@ impl Leases {
              RETURNING machine",
         )
         .bind(&self.instance)
-        .bind(&machines)
+        .bind(&known)
         .fetch_all(&self.pool)
         .await
         .map_err(op("release leftover leases"))?;

@@ -1,59 +1,116 @@
-//! The cluster task: every quarter lease, renew what this instance holds, stop what it lost,
-//! shed what is beyond its fair share and take free machines (see [`crate::cluster`]). A
-//! machine is started only after its fence is raised to the lease's epoch, and released
-//! only after its loop has stopped.
+//! The cluster task: every quarter lease it follows the plan (see [`crate::cluster`]): it
+//! hands over what is beyond this instance's fair share and takes free machines. Renewal is
+//! not its work: the [`lease_keeper`](super::lease_keeper) renews every lease held on a
+//! thread of its own, so opening and stopping machines (a few at a time, beside each other)
+//! can take as long as they take.
+//!
+//! A machine is started only after its fence is raised to the lease's epoch, and released
+//! only after its loop has stopped. A lease won is held (and renewed) from the moment it is
+//! won: while the machine opens, and while its fence is busy under a paused last owner, in
+//! which case the opening is tried again at the next round without letting the lease go.
 
+use super::lease_keeper::{self, Holding, Keeper, Phase, SharedHoldings};
+use super::metrics::Metrics;
 use super::runner::{Opened, Runner};
-use crate::cluster::{Leases, fair_share, plan};
+use crate::cluster::{LeaseError, Leases, fair_share, plan};
 use crate::share::{Fence, StateError};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::time::Duration;
-use tokio::sync::watch;
-use tokio::time::Instant;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tokio::sync::{Semaphore, watch};
+use tokio::task::JoinSet;
 use tracing::{error, info, warn};
 
 /// How soon an instance below its share looks again for machines being handed over.
 const HUNGRY_LOOK: Duration = Duration::from_millis(250);
 
-/// A machine this instance holds.
-struct Held {
-    epoch: u64,
-    /// Stop it by then if the lease could not be renewed: before the database lets another
-    /// instance take it.
-    deadline: Instant,
+/// Machines opened or stopped at once: enough that a dead instance's machines start
+/// together, few enough that 30 openings do not crowd out the running machines' parts.
+const AT_ONCE: usize = 8;
+
+/// Why a machine won could not be opened.
+#[derive(Debug, thiserror::Error)]
+enum OpenError {
+    #[error(transparent)]
+    Fence(#[from] StateError),
+    #[error(transparent)]
+    Lease(#[from] LeaseError),
+    #[error("the lease was lost while its epoch was raised")]
+    LostWhileRaising,
+    #[error("the fence claim did not finish: {0}")]
+    Claim(#[from] tokio::task::JoinError),
+    #[error("{0:#}")]
+    Machine(anyhow::Error),
+}
+
+/// What the cluster task and the work it spawns share.
+#[derive(Clone)]
+struct Ctx {
+    leases: Leases,
+    lease: Duration,
+    machines_dir: Arc<PathBuf>,
+    runner: Arc<Runner>,
+    holdings: SharedHoldings,
+    gate: Arc<Semaphore>,
+    metrics: Arc<Metrics>,
 }
 
 pub(super) struct ClusterTask {
     pub(super) leases: Leases,
+    pub(super) url: String,
     pub(super) lease: Duration,
     pub(super) machines_dir: PathBuf,
     pub(super) runner: Runner,
+    pub(super) metrics: Arc<Metrics>,
 }
 
 impl ClusterTask {
     /// Runs until shutdown; then stops every machine, releases its leases and leaves.
-    pub(super) async fn run(mut self, mut shutdown: watch::Receiver<bool>) {
-        let mut held: BTreeMap<String, Held> = BTreeMap::new();
-        // The first round only says this instance is here, so instances started together
-        // count each other before anyone takes machines.
-        if let Err(e) = self.leases.heartbeat().await {
-            warn!(error = %e, "cluster: first heartbeat failed");
-        }
+    pub(super) async fn run(self, mut shutdown: watch::Receiver<bool>) {
+        let ctx = Ctx {
+            leases: self.leases,
+            lease: self.lease,
+            machines_dir: Arc::new(self.machines_dir),
+            runner: Arc::new(self.runner),
+            holdings: SharedHoldings::default(),
+            gate: Arc::new(Semaphore::new(AT_ONCE)),
+            metrics: self.metrics,
+        };
+        let keeper = Keeper {
+            url: self.url,
+            instance: ctx.leases.instance().to_string(),
+            lease: ctx.lease,
+            holdings: ctx.holdings.clone(),
+            runner: ctx.runner.clone(),
+            metrics: ctx.metrics.clone(),
+            service: tokio::runtime::Handle::current(),
+        };
+        // The keeper's first act is a heartbeat, so instances started together count each
+        // other before the first round (a quarter lease later) takes machines.
+        let keeper = match keeper.spawn() {
+            Ok(k) => k,
+            Err(e) => {
+                error!(error = %e, "cluster: the lease keeper's thread cannot start; no machine is taken");
+                return;
+            }
+        };
+        let mut work = JoinSet::new();
         let mut said = String::new();
         let mut hungry = false;
         loop {
             // Below its share while others hand machines over: look again soon, so a machine
             // released between parts is running again within a fraction of a second.
             let wait = match hungry {
-                true => (self.lease / 4).min(HUNGRY_LOOK),
-                false => self.lease / 4,
+                true => (ctx.lease / 4).min(HUNGRY_LOOK),
+                false => ctx.lease / 4,
             };
             tokio::select! {
                 _ = tokio::time::sleep(wait) => {}
                 _ = shutdown.changed() => break,
             }
-            hungry = match self.round(&mut held).await {
+            while work.try_join_next().is_some() {}
+            hungry = match ctx.round(&mut work).await {
                 Ok(hungry) => {
                     said.clear();
                     hungry
@@ -61,53 +118,44 @@ impl ClusterTask {
                 Err(e) => {
                     let text = e.to_string();
                     if text != said {
-                        error!(error = %text, "cluster: lease database unavailable; machines held stop before their leases run out");
+                        warn!(error = %text, "cluster: this round's plan could not be read; the leases held are still renewed");
                         said = text;
                     }
                     false
                 }
             };
-            self.stop_overdue(&mut held).await;
         }
-        self.runner.stop_all().await;
-        for (machine, h) in &held {
-            if let Err(e) = self.leases.release(machine, h.epoch).await {
-                warn!(machine = %machine, error = %e, "cluster: lease not released (it expires)");
-            }
-        }
-        let _ = self.leases.leave().await;
-        info!(instance = %self.leases.instance(), "cluster: left");
+        ctx.leave(work).await;
+        keeper.stop().await;
+        info!(instance = %ctx.leases.instance(), "cluster: left");
+    }
+}
+
+impl Ctx {
+    fn holdings(&self) -> std::sync::MutexGuard<'_, lease_keeper::Holdings> {
+        lease_keeper::lock(&self.holdings)
     }
 
-    /// One round: renew, heartbeat, shed, take. Returns whether this instance is still below
-    /// its fair share while machines are free or others hold more than theirs.
-    async fn round(
-        &mut self,
-        held: &mut BTreeMap<String, Held>,
-    ) -> Result<bool, crate::cluster::LeaseError> {
-        let asked = Instant::now();
-        self.renew(held).await?;
-        let live = self.leases.heartbeat().await?;
-        let all = self.runner.names();
+    /// One round: read the leases, hand over what is beyond the fair share, try again the
+    /// machines whose fence was busy, take free ones. Returns whether this instance is still
+    /// below its fair share while machines are free or others hold more than theirs.
+    async fn round(&self, work: &mut JoinSet<()>) -> Result<bool, LeaseError> {
+        let live = self.leases.live_instances().await?;
         let rows = self.leases.all().await?;
+        let all = self.runner.names();
         let free: Vec<String> = all
             .iter()
             .filter(|m| !rows.iter().any(|r| r.machine == **m && r.live))
             .cloned()
             .collect();
-        let mine: Vec<String> = held.keys().cloned().collect();
+        let mine: Vec<String> = self.holdings().held.keys().cloned().collect();
         let p = plan(self.leases.instance(), &all, &mine, &free, live);
         for m in p.shed {
-            info!(machine = %m, live_instances = live, "cluster: handing the machine over (rebalance)");
-            self.runner.stop(&m).await;
-            if let Some(h) = held.remove(&m) {
-                self.leases.release(&m, h.epoch).await?;
-            }
+            self.shed(m, live, work).await?;
         }
-        self.take(p.take, held).await?;
-        if asked.elapsed() > self.lease / 4 {
-            // Taking machines took a while: renew now rather than a quarter lease later.
-            self.renew(held).await?;
+        self.retry_busy(work);
+        for m in p.take {
+            self.take(m, work).await?;
         }
         let me = self.leases.instance();
         let mut others: BTreeMap<&str, usize> = BTreeMap::new();
@@ -115,84 +163,160 @@ impl ClusterTask {
             *others.entry(r.owner.as_str()).or_default() += 1;
         }
         let fair = fair_share(all.len(), live);
-        let unowned = all.len() > held.len() + others.values().sum::<usize>();
+        let held = self.holdings().held.len();
+        let unowned = all.len() > held + others.values().sum::<usize>();
         let overfull = others.values().any(|&n| n > fair);
-        Ok(held.len() < fair && (unowned || overfull))
+        Ok(held < fair && (unowned || overfull))
     }
 
-    /// Renews every lease held; stops the machines whose lease another instance has now.
-    async fn renew(
-        &mut self,
-        held: &mut BTreeMap<String, Held>,
-    ) -> Result<(), crate::cluster::LeaseError> {
-        let asked = Instant::now();
-        let mine: Vec<(String, u64)> = held.iter().map(|(m, h)| (m.clone(), h.epoch)).collect();
-        let answer = self.leases.renew(&mine).await?;
-        for m in &answer.leftovers {
-            warn!(machine = %m, "cluster: a lease under this instance's name that runs nowhere (an earlier process, a stop while the database was away) released");
-        }
-        let renewed: BTreeMap<String, u64> = answer.renewed.into_iter().collect();
-        let lost: Vec<String> = held
-            .iter()
-            .filter(|(m, h)| renewed.get(*m) != Some(&h.epoch))
-            .map(|(m, _)| m.clone())
-            .collect();
-        self.stop_held(
-            held,
-            lost,
-            "cluster: lease lost; machine stopped on this instance",
-        )
-        .await;
-        for h in held.values_mut() {
-            h.deadline = asked + self.lease / 2;
-        }
-        Ok(())
-    }
-
-    /// Takes the planned machines: every lease first, then the fences are claimed and the
-    /// loops opened all at once (a dead instance's machines start together, not in turn).
-    async fn take(
-        &mut self,
-        machines: Vec<String>,
-        held: &mut BTreeMap<String, Held>,
-    ) -> Result<(), crate::cluster::LeaseError> {
-        let mut won = Vec::new();
-        for m in machines {
-            if let Some(epoch) = self.leases.acquire(&m).await? {
-                won.push((m, epoch, Instant::now()));
-            }
-        }
-        let opening = won.iter().map(|(m, epoch, _)| self.open(m, *epoch));
-        let opened = futures_util::future::join_all(opening).await;
-        for ((m, lease_epoch, acquired), result) in won.into_iter().zip(opened) {
-            let launched = result.and_then(|(epoch, o)| self.runner.launch(o).map(|_| epoch));
-            match launched {
-                Ok(epoch) => {
-                    info!(machine = %m, epoch, "cluster: machine taken");
-                    let deadline = acquired + self.lease / 2;
-                    held.insert(m, Held { epoch, deadline });
+    /// Hands `machine` over: a running one stops after the part in hand (beside the rest of
+    /// the round) and is released then; one never started is released now.
+    async fn shed(&self, m: String, live: usize, work: &mut JoinSet<()>) -> Result<(), LeaseError> {
+        let unstarted = {
+            let mut h = self.holdings();
+            match h.held.get_mut(&m) {
+                Some(x) if x.phase == Phase::Running => {
+                    x.phase = Phase::Stopping;
+                    None
                 }
-                Err(e) => {
-                    let busy = matches!(e.downcast_ref(), Some(StateError::FenceBusy { .. }));
-                    if busy {
-                        // Its last owner is paused mid-write: tried again at the next round.
-                        warn!(machine = %m, error = format!("{e:#}"), "cluster: machine not started yet; lease released");
-                    } else {
-                        error!(machine = %m, error = format!("{e:#}"), "cluster: machine not started; lease released");
+                Some(x) if x.phase == Phase::FenceBusy => {
+                    let epoch = x.epoch;
+                    h.held.remove(&m);
+                    Some(epoch)
+                }
+                // Opening or already stopping: a later round decides.
+                _ => return Ok(()),
+            }
+        };
+        info!(machine = %m, live_instances = live, "cluster: handing the machine over (rebalance)");
+        if let Some(epoch) = unstarted {
+            return self.leases.release(&m, epoch).await;
+        }
+        let ctx = self.clone();
+        work.spawn(async move {
+            let _permit = ctx.gate.acquire().await;
+            ctx.runner.stop(&m).await;
+            let epoch = {
+                let mut h = ctx.holdings();
+                match h.held.get(&m) {
+                    Some(x) if x.phase == Phase::Stopping => {
+                        let epoch = x.epoch;
+                        h.held.remove(&m);
+                        Some(epoch)
                     }
-                    self.leases.release(&m, lease_epoch).await?;
+                    _ => None,
                 }
+            };
+            if let Some(epoch) = epoch
+                && let Err(e) = ctx.leases.release(&m, epoch).await
+            {
+                warn!(machine = %m, error = %e, "cluster: lease not released (it expires)");
+            }
+        });
+        Ok(())
+    }
+
+    /// Machines whose fence was busy at their opening: opened again, under the same lease.
+    fn retry_busy(&self, work: &mut JoinSet<()>) {
+        let busy: Vec<(String, u64)> = {
+            let mut h = self.holdings();
+            h.held
+                .iter_mut()
+                .filter(|(_, x)| x.phase == Phase::FenceBusy)
+                .map(|(m, x)| {
+                    x.phase = Phase::Opening;
+                    (m.clone(), x.epoch)
+                })
+                .collect()
+        };
+        for (m, epoch) in busy {
+            self.spawn_open(m, epoch, work);
+        }
+    }
+
+    /// Tries to win `machine`'s lease; once won it is held (and renewed by the keeper)
+    /// while the machine opens beside the rest of the round.
+    async fn take(&self, m: String, work: &mut JoinSet<()>) -> Result<(), LeaseError> {
+        self.holdings().acquiring.insert(m.clone());
+        let won = self.leases.acquire(&m).await;
+        let acquired = Instant::now();
+        {
+            let mut h = self.holdings();
+            h.acquiring.remove(&m);
+            if let Ok(Some(epoch)) = won {
+                let deadline = acquired + self.lease / 2;
+                let phase = Phase::Opening;
+                h.held.insert(
+                    m.clone(),
+                    Holding {
+                        epoch,
+                        deadline,
+                        phase,
+                    },
+                );
             }
         }
+        if let Some(epoch) = won? {
+            self.metrics.update(&m, |x| x.leases_taken_total += 1);
+            self.spawn_open(m, epoch, work);
+        }
         Ok(())
+    }
+
+    fn spawn_open(&self, m: String, epoch: u64, work: &mut JoinSet<()>) {
+        let ctx = self.clone();
+        work.spawn(async move {
+            let _permit = ctx.gate.acquire().await;
+            let result = ctx.open(&m, epoch).await;
+            ctx.opened(&m, result);
+        });
+    }
+
+    /// Launches an opened machine if its lease is still held; otherwise keeps the lease for
+    /// another try (busy fence) or gives it up (any other failure).
+    fn opened(&self, m: &str, result: Result<(u64, Opened), OpenError>) {
+        let mut h = self.holdings();
+        let closing = h.closing;
+        let Some(x) = h.held.get_mut(m) else {
+            warn!(machine = %m, "cluster: the lease ran out while the machine opened; not started");
+            return;
+        };
+        // Launched under the holdings' lock: the keeper cannot drop the lease in between.
+        let failed = match result {
+            Ok((epoch, _)) if closing || x.epoch != epoch => return,
+            Ok((epoch, opened)) => match self.runner.launch(opened) {
+                Ok(_) => {
+                    x.phase = Phase::Running;
+                    info!(machine = %m, epoch, "cluster: machine taken");
+                    return;
+                }
+                Err(e) => format!("{e:#}"),
+            },
+            Err(OpenError::Fence(e @ StateError::FenceBusy { .. })) => {
+                // Its last owner is mid-write or paused: tried again at the next round, under
+                // the same lease.
+                warn!(machine = %m, error = %e, "cluster: machine not started yet; lease kept, opened again at the next round");
+                x.phase = Phase::FenceBusy;
+                return;
+            }
+            Err(e) => e.to_string(),
+        };
+        error!(machine = %m, error = %failed, "cluster: machine not started; lease released");
+        let epoch = x.epoch;
+        h.held.remove(m);
+        drop(h);
+        let leases = self.leases.clone();
+        let m = m.to_string();
+        tokio::spawn(async move { leases.release(&m, epoch).await });
     }
 
     /// Raises the machine's fence to the lease's epoch (or past a higher one found there,
     /// raising the lease to match) and opens its loop. Returns the epoch it runs under.
-    async fn open(&self, machine: &str, epoch: u64) -> anyhow::Result<(u64, Opened)> {
+    async fn open(&self, machine: &str, epoch: u64) -> Result<(u64, Opened), OpenError> {
         let dir = self.machines_dir.join(machine);
         let instance = self.leases.instance().to_string();
-        // Never longer than an eighth of a lease: the round must go on renewing.
+        // A claim waits at most an eighth of a lease for a write under way; a busy fence is
+        // tried again at the next round.
         let wait = self.lease / 8;
         let claim = |epoch: u64| {
             let dir = dir.clone();
@@ -208,39 +332,36 @@ impl ClusterTask {
                     .leases
                     .raise_epoch(machine, epoch, current + 1)
                     .await?
-                    .ok_or_else(|| anyhow::anyhow!("lease lost while raising its epoch"))?;
+                    .ok_or(OpenError::LostWhileRaising)?;
+                if let Some(x) = self.holdings().held.get_mut(machine)
+                    && x.epoch == epoch
+                {
+                    x.epoch = raised;
+                }
                 claim(raised).await??
             }
             Err(e) => return Err(e.into()),
         };
         let epoch = fence.epoch();
-        Ok((epoch, self.runner.open(machine, Some(fence)).await?))
+        let opened = self.runner.open(machine, Some(fence)).await;
+        Ok((epoch, opened.map_err(OpenError::Machine)?))
     }
 
-    /// Stops machines whose lease could not be renewed in time.
-    async fn stop_overdue(&mut self, held: &mut BTreeMap<String, Held>) {
-        let now = Instant::now();
-        let overdue: Vec<String> = held
-            .iter()
-            .filter(|(_, h)| h.deadline <= now)
-            .map(|(m, _)| m.clone())
+    /// Shutdown: nothing more opens, the work under way ends, every machine stops after the
+    /// part in hand (the keeper renews meanwhile), and every lease is released.
+    async fn leave(&self, mut work: JoinSet<()>) {
+        self.holdings().closing = true;
+        while work.join_next().await.is_some() {}
+        self.runner.stop_all().await;
+        let held: Vec<(String, u64)> = std::mem::take(&mut self.holdings().held)
+            .into_iter()
+            .map(|(m, x)| (m, x.epoch))
             .collect();
-        let why = "cluster: lease not renewed in time; machine stopped before another instance may take it";
-        self.stop_held(held, overdue, why).await;
-    }
-
-    /// Stops `machines` on this instance (after the part in hand) and forgets them, saying
-    /// `why` for each.
-    async fn stop_held(
-        &mut self,
-        held: &mut BTreeMap<String, Held>,
-        machines: Vec<String>,
-        why: &str,
-    ) {
-        for m in machines {
-            error!(machine = %m, "{why}");
-            self.runner.stop(&m).await;
-            held.remove(&m);
+        for (machine, epoch) in held {
+            if let Err(e) = self.leases.release(&machine, epoch).await {
+                warn!(machine = %machine, error = %e, "cluster: lease not released (it expires)");
+            }
         }
+        let _ = self.leases.leave().await;
     }
 }

@@ -25,6 +25,10 @@ pub struct MachineMetrics {
     pub journal_failing: u64,
     pub processing_seconds_sum: f64,
     pub processing_seconds_count: u64,
+    /// In a cluster: leases of this machine this instance won, and lost (not renewed in
+    /// time, or taken by another instance while this one could not renew).
+    pub leases_taken_total: u64,
+    pub leases_lost_total: u64,
 }
 
 /// Name, type, help and value of one metric family.
@@ -36,7 +40,7 @@ type Family = (
 );
 
 /// Every metric family, in the order rendered.
-const FAMILIES: [Family; 12] = [
+const FAMILIES: [Family; 14] = [
     (
         "camloop_parts_total",
         "counter",
@@ -105,6 +109,18 @@ const FAMILIES: [Family; 12] = [
         "counter",
         "Parts timed.",
         |m| m.processing_seconds_count as f64,
+    ),
+    (
+        "camloop_leases_taken_total",
+        "counter",
+        "Leases of the machine this instance won (cluster only).",
+        |m| m.leases_taken_total as f64,
+    ),
+    (
+        "camloop_leases_lost_total",
+        "counter",
+        "Leases of the machine this instance lost before handing it over (cluster only).",
+        |m| m.leases_lost_total as f64,
     ),
 ];
 
@@ -245,7 +261,7 @@ mod tests {
             text.contains("camloop_last_max_error_um{machine=\"M1\"} 0.5\n"),
             "{text}"
         );
-        assert_eq!(text.matches("# TYPE").count(), 12 + 5);
+        assert_eq!(text.matches("# TYPE").count(), 14 + 5);
         m.update_feature("M1", "IN1", |f| {
             f.last_max_error_um = Some(0.7);
             f.blocked_by_guard = Some("correction at its limit".into());

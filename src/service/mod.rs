@@ -6,6 +6,7 @@ mod cluster_task;
 mod drop_source;
 pub mod http;
 pub mod journal;
+mod lease_keeper;
 pub mod machine;
 pub mod metrics;
 pub mod mqtt;
@@ -81,7 +82,7 @@ impl Running {
             handle.abort();
         }
         match self.machines {
-            Machines::Local(mut runner) => runner.stop_all().await,
+            Machines::Local(runner) => runner.stop_all().await,
             Machines::Cluster(task) => {
                 let _ = task.await;
             }
@@ -174,8 +175,7 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
         plant_events: publisher.as_ref().map(mqtt::Publisher::sender),
     };
     let commands: runner::CommandRoutes = Arc::default();
-    let mut runner =
-        runner::Runner::new(config.clone(), checked_machines, shared, commands.clone());
+    let runner = runner::Runner::new(config.clone(), checked_machines, shared, commands.clone());
     let mut cluster_view = None;
     let (machines, sources_done) = if config.cluster.enabled {
         let lease = Duration::from_millis(config.cluster.lease_ms);
@@ -187,9 +187,11 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
         cluster_view = Some(leases.clone());
         let task = cluster_task::ClusterTask {
             leases,
+            url: config.database_url(),
             lease,
             machines_dir: config.machines_dir(),
             runner,
+            metrics: metrics.clone(),
         };
         let task = tokio::spawn(task.run(shutdown_rx.clone()));
         (Machines::Cluster(task), None)

@@ -2,6 +2,9 @@
 //! cluster, the machines this instance holds a lease on, as leases come and go. A machine
 //! stops as at shutdown: it finishes the part in hand, retries what waits, and its gauge
 //! source stops (a drop folder's unsettled files stay for the next owner).
+//!
+//! The runner is shared (`&self` everywhere): in a cluster several machines open and stop at
+//! once, beside the lease keeper, and none waits for another.
 
 use super::machine::{self, MachineLoop, SourceEvent};
 use super::{Shared, http, machine_task};
@@ -33,7 +36,7 @@ pub(super) struct Runner {
     checked: HashMap<String, CheckedMachine>,
     shared: Shared,
     commands: CommandRoutes,
-    running: HashMap<String, RunningMachine>,
+    running: std::sync::Mutex<HashMap<String, RunningMachine>>,
 }
 
 impl Runner {
@@ -52,7 +55,7 @@ impl Runner {
             checked,
             shared,
             commands,
-            running: HashMap::new(),
+            running: std::sync::Mutex::default(),
         }
     }
 
@@ -66,7 +69,7 @@ impl Runner {
     /// Starts machine `name` (fenced with `fence` in a cluster). The receiver says when its
     /// gauge source ended (a simulated run with a part count).
     pub(super) async fn start(
-        &mut self,
+        &self,
         name: &str,
         fence: Option<crate::share::Fence>,
     ) -> anyhow::Result<oneshot::Receiver<()>> {
@@ -107,7 +110,7 @@ impl Runner {
     }
 
     /// Starts an opened machine's gauge source and loop.
-    pub(super) fn launch(&mut self, opened: Opened) -> anyhow::Result<oneshot::Receiver<()>> {
+    pub(super) fn launch(&self, opened: Opened) -> anyhow::Result<oneshot::Receiver<()>> {
         let Opened { name, machine } = opened;
         let section = self.section(&name)?;
         let checked = self
@@ -140,7 +143,8 @@ impl Runner {
         if let Ok(mut routes) = self.commands.write() {
             routes.insert(name.clone(), command_tx);
         }
-        self.running.insert(name, RunningMachine { stop, task });
+        self.running_map()
+            .insert(name, RunningMachine { stop, task });
         Ok(done_rx)
     }
 
@@ -152,22 +156,33 @@ impl Runner {
             .context("a checked machine is in the config")
     }
 
-    /// Stops machine `name` after the part in hand; returns once it has stopped.
-    pub(super) async fn stop(&mut self, name: &str) {
+    fn running_map(&self) -> std::sync::MutexGuard<'_, HashMap<String, RunningMachine>> {
+        // A panic elsewhere cannot leave the map half-changed: every change is one call.
+        self.running.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Tells machine `name` to stop after the part in hand and returns at once with its
+    /// task, to be awaited by whoever wants to know it has stopped (`None`: not running).
+    pub(super) fn signal_stop(&self, name: &str) -> Option<tokio::task::JoinHandle<()>> {
         if let Ok(mut routes) = self.commands.write() {
             routes.remove(name);
         }
-        if let Some(m) = self.running.remove(name) {
-            let _ = m.stop.send(true);
-            let _ = m.task.await;
+        let m = self.running_map().remove(name)?;
+        let _ = m.stop.send(true);
+        Some(m.task)
+    }
+
+    /// Stops machine `name` after the part in hand; returns once it has stopped.
+    pub(super) async fn stop(&self, name: &str) {
+        if let Some(task) = self.signal_stop(name) {
+            let _ = task.await;
             info!(machine = %name, "machine stopped on this instance");
         }
     }
 
-    /// Stops every machine.
-    pub(super) async fn stop_all(&mut self) {
-        for name in self.names() {
-            self.stop(&name).await;
-        }
+    /// Stops every machine, all at once.
+    pub(super) async fn stop_all(&self) {
+        let names = self.names();
+        futures_util::future::join_all(names.iter().map(|n| self.stop(n))).await;
     }
 }
