@@ -11,7 +11,13 @@ pub mod cli;
 pub mod clock;
 pub mod cluster;
 pub mod config;
-pub mod core;
+/// The pure core (crate `camloop-core`) with the other machines' generators (crate
+/// `camloop-generate`) under `core::generate`, where the rest of camloop and its users find
+/// them.
+pub mod core {
+    pub use camloop_core::*;
+    pub use camloop_generate as generate;
+}
 pub mod dfq;
 pub mod digest;
 pub mod gauge;

@@ -4,7 +4,7 @@
 use std::fmt::Write as _;
 
 use super::{Decimals, exact, fixed, is_binary};
-use crate::core::generate::ir::{Axis, Compensation, Cond, Expr, Motion, Plane, Program, Stmt};
+use crate::ir::{Axis, Compensation, Cond, Expr, Motion, Plane, Program, Stmt};
 
 /// ISO variable numbers start here (100 and up are free for programs on both FANUC and
 /// LinuxCNC).

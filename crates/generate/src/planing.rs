@@ -13,7 +13,7 @@ use std::fmt::Write as _;
 use thiserror::Error;
 
 use super::ir::{Axis, Expr, Motion, Plane, Program, Stmt, Var};
-use crate::core::program::{ProgramNameError, validate_program_name};
+use camloop_core::program::{ProgramNameError, validate_program_name};
 
 /// A planing job.
 #[derive(Debug, Clone, PartialEq)]

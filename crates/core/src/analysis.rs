@@ -43,8 +43,8 @@ mod pin;
 pub use bands::{ToleranceBand, Verdict, Violation, judge};
 pub use pin::{PinNominal, PinReport, analyse_pin};
 
-use crate::core::harmonics::{DftTable, Harmonic, wrap_deg};
-use crate::core::measure::{AveragedMeasurement, DroppedRevolution};
+use crate::harmonics::{DftTable, Harmonic, wrap_deg};
+use crate::measure::{AveragedMeasurement, DroppedRevolution};
 
 /// Fewest points per revolution the analysis accepts (harmonics, a 3-parameter base-circle
 /// fit and a meaningful phase need a few points per feature).

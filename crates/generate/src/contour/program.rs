@@ -2,8 +2,8 @@
 //! pass with compensation, lead-in and lead-out.
 
 use super::{ContourJob, DU, OFS, Side, T1, T2, U, du_expr, exprs, shifted};
-use crate::core::generate::chords::{StepLaw, round_to};
-use crate::core::generate::ir::{Axis, Compensation, Cond, Expr, Motion, Plane, Program, Stmt};
+use crate::chords::{StepLaw, round_to};
+use crate::ir::{Axis, Compensation, Cond, Expr, Motion, Plane, Program, Stmt};
 
 /// The job's program: safe start, roughing passes (a loop over the offset), finish pass.
 #[allow(clippy::too_many_arguments)]

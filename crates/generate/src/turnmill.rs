@@ -11,7 +11,7 @@
 use thiserror::Error;
 
 use super::ir::{Axis, Expr, Motion, Plane, Program, Stmt, Var};
-use crate::core::program::{ProgramNameError, validate_program_name};
+use camloop_core::program::{ProgramNameError, validate_program_name};
 
 /// One circular surface of the drawing.
 #[derive(Debug, Clone, PartialEq)]

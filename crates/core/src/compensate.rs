@@ -336,7 +336,7 @@ fn sampled_acceleration_and_jerk(points: &[TablePoint], c_speed_rpm: f64) -> (f6
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::geometry::Follower;
+    use crate::geometry::Follower;
 
     fn nominal() -> LiftTable {
         let angles: Vec<f64> = (0..360).map(f64::from).collect();
@@ -359,7 +359,7 @@ mod tests {
     /// demo exhaust lobe, by a rounding hair at 353°; the floor now has 1 nm of slack).
     #[test]
     fn the_deepest_correction_on_the_base_circle_is_a_valid_lift() {
-        let text = include_str!("../../config/parts/demo-exhaust-lobe.csv");
+        let text = include_str!("../../../config/parts/demo-exhaust-lobe.csv");
         let nominal = LiftTable::parse_csv(text, "exhaust").unwrap();
         for at in 0..360 {
             let correction: Vec<f64> = (0..360)

@@ -310,7 +310,7 @@ pub fn correction_sha256(correction_um: &[f64]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::measure::{MeasurementHeader, RawSample};
+    use crate::measure::{MeasurementHeader, RawSample};
 
     fn measurement(machine: &str, part: &str, lifts: &[f64]) -> RawMeasurement {
         RawMeasurement {

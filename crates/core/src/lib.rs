@@ -1,10 +1,14 @@
 //! The pure core: lift tables, exact wheel-centre geometry, curve-table fitting and program
 //! rendering. No I/O, no clock, no logging: inputs arrive as values, failures leave as data.
+//!
+//! A crate of its own so the compiler holds that line: it depends on no I/O crate at all.
+
+// No unwrap() in shipped code: bad input must become an error, not a panic (tests may).
+#![warn(clippy::unwrap_used)]
 
 pub mod analysis;
 pub mod compensate;
 pub mod fit;
-pub mod generate;
 pub mod geometry;
 pub mod harmonics;
 pub mod learn;

@@ -5,6 +5,9 @@
 //! proved; [`dialect::Dialect`] writes that program for a control, as a loop the control
 //! evaluates or fully expanded. Pure: values in, programs or typed refusals out.
 
+// No unwrap() in shipped code: bad input must become an error, not a panic (tests may).
+#![warn(clippy::unwrap_used)]
+
 pub mod chords;
 pub mod contour;
 pub mod curve;

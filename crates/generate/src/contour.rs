@@ -12,7 +12,7 @@ use thiserror::Error;
 use super::chords::{StepLaw, fixed_step_for, round_to, walk, worst_deviation};
 use super::curve::Curve;
 use super::ir::{Compensation, Expr, Program, Var};
-use crate::core::program::{ProgramNameError, validate_program_name};
+use camloop_core::program::{ProgramNameError, validate_program_name};
 
 mod program;
 use program::{build_program, far_x};

@@ -10,8 +10,8 @@
 //! and 1 are exactly the least-squares fit of `c + a·cos ψ + b·sin ψ`.
 
 use super::{AnalysisError, check_measurement};
-use crate::core::harmonics::{DftTable, Harmonic, wrap_deg};
-use crate::core::measure::{AveragedMeasurement, DroppedRevolution};
+use crate::harmonics::{DftTable, Harmonic, wrap_deg};
+use crate::measure::{AveragedMeasurement, DroppedRevolution};
 
 /// The nominal pin, as in the part drawing.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]

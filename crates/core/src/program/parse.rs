@@ -119,7 +119,7 @@ pub fn parse_table_program(text: &str) -> Result<ParsedTable, ParseError> {
 
 /// The arguments of `CTABDEF(<following>,<leading>,<n>,<periodicity>[,<memory>])`.
 #[derive(Debug, Clone, PartialEq)]
-pub(crate) struct CtabDef {
+pub struct CtabDef {
     pub following: String,
     pub leading: String,
     pub number: u32,
@@ -127,7 +127,7 @@ pub(crate) struct CtabDef {
 }
 
 /// Reads a `CTABDEF(…)` statement (`code` without comment).
-pub(crate) fn parse_ctabdef(code: &str, line: usize) -> Result<CtabDef, ParseError> {
+pub fn parse_ctabdef(code: &str, line: usize) -> Result<CtabDef, ParseError> {
     let err = |reason: String| ParseError { line, reason };
     let args = code
         .strip_prefix("CTABDEF(")
@@ -155,7 +155,7 @@ pub(crate) fn parse_ctabdef(code: &str, line: usize) -> Result<CtabDef, ParseErr
 /// a start point, `POLY` and `PO[C]=(…) PO[X]=(…)` segments. Shared by the reader and the
 /// simulated control, so both see the same table.
 #[derive(Debug, Clone)]
-pub(crate) struct TableBlocks {
+pub struct TableBlocks {
     following: String,
     leading: String,
     poly: bool,
@@ -164,7 +164,7 @@ pub(crate) struct TableBlocks {
 }
 
 impl TableBlocks {
-    pub(crate) fn new(following: String, leading: String) -> Self {
+    pub fn new(following: String, leading: String) -> Self {
         Self {
             following,
             leading,
@@ -175,7 +175,7 @@ impl TableBlocks {
     }
 
     /// One block (`code` without comment, not empty) on `line`.
-    pub(crate) fn block(&mut self, code: &str, line: usize) -> Result<(), ParseError> {
+    pub fn block(&mut self, code: &str, line: usize) -> Result<(), ParseError> {
         let err = |reason: &str| ParseError {
             line,
             reason: reason.to_string(),
@@ -213,7 +213,7 @@ impl TableBlocks {
     }
 
     /// Following axis, leading axis and the shape read.
-    pub(crate) fn finish(self) -> (String, String, ParsedShape) {
+    pub fn finish(self) -> (String, String, ParsedShape) {
         let shape = if self.poly {
             ParsedShape::Poly(self.segments)
         } else {
@@ -262,8 +262,8 @@ fn tuple(code: &str, key: &str, line: usize) -> Result<Vec<f64>, ParseError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::program::{ProgramSettings, render_g1_table, render_poly_table};
-    use crate::core::table::TablePoint;
+    use crate::program::{ProgramSettings, render_g1_table, render_poly_table};
+    use crate::table::TablePoint;
 
     fn points() -> Vec<TablePoint> {
         (0..36)
@@ -304,7 +304,7 @@ mod tests {
 
     #[test]
     fn reads_back_poly_segments_as_the_control_does() {
-        let segments = crate::core::fit::fit_poly(&points());
+        let segments = crate::fit::fit_poly(&points());
         let text = render_poly_table(&segments, &ProgramSettings::default()).unwrap();
         let ParsedShape::Poly(read) = parse_table_program(&text).unwrap().shape else {
             panic!("POLY expected")

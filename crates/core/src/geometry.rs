@@ -691,7 +691,7 @@ fn cross(a: [f64; 2], b: [f64; 2]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::lift::LiftTable;
+    use crate::lift::LiftTable;
 
     /// A shaped pin with no correction is the round pin: its table must match the crankpin
     /// closed form d(c) = b·cos c + √((R + r_p)² − (b·sin c)²). The lift b·(1 + cos ψ) is

@@ -27,7 +27,7 @@ pub use names::{
     RESERVED_DEVICE_NAMES, RESERVED_PREFIXES, validate_axis_name, validate_program_name,
 };
 pub use parse::{ParseError, ParsedShape, ParsedTable, parse_table_program};
-pub(crate) use parse::{TableBlocks, parse_ctabdef};
+pub use parse::{CtabDef, TableBlocks, parse_ctabdef};
 pub use provenance::{RetargetError, retarget_table_program};
 pub use settings::{
     C_DECIMALS, CDirection, ProgramSettings, Provenance, SettingError, SettingsErrors, TableMemory,

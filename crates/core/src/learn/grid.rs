@@ -1,6 +1,6 @@
 //! Operations on a correction over the gauge grid: the low-pass Q and the nanometre step.
 
-use crate::core::harmonics::DftTable;
+use crate::harmonics::DftTable;
 use std::f64::consts::PI;
 
 /// The step a learned correction is kept in, µm: 1 nm. The table writes X to 0.1 µm and the

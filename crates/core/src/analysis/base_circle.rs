@@ -1,6 +1,6 @@
 //! Base-circle runout and roundness of a lobe's profile error.
 
-use crate::core::harmonics::{DftTable, wrap_deg};
+use crate::harmonics::{DftTable, wrap_deg};
 
 pub(super) struct BaseCircle {
     pub(super) runout_um: Option<f64>,

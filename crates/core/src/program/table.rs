@@ -6,7 +6,7 @@ use thiserror::Error;
 
 use super::provenance::{TABLE_COMMENT, provenance_lines};
 use super::settings::{ProgramSettings, Resolved, SettingsErrors};
-use crate::core::table::{PolySegment, TablePoint};
+use crate::table::{PolySegment, TablePoint};
 
 /// Why a table cannot be rendered. Indices are positions in the caller's slice; angles named
 /// `c_deg` are in the part frame, values named `c_prog` / `x_prog` as written in the program.
