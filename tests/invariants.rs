@@ -50,7 +50,10 @@ fn the_pure_crates_depend_on_no_io_crate() {
         let text = std::fs::read_to_string(root.join(krate).join("Cargo.toml")).unwrap();
         let manifest: toml::Table = text.parse().unwrap();
         let deps = manifest["dependencies"].as_table().unwrap();
-        assert!(!deps.is_empty(), "{krate} lists no dependencies: is this its manifest?");
+        assert!(
+            !deps.is_empty(),
+            "{krate} lists no dependencies: is this its manifest?"
+        );
         for name in deps.keys() {
             assert!(
                 allowed.contains(&name.as_str()),
@@ -164,7 +167,9 @@ fn shipped_service_configurations_parse() {
 fn no_paths_of_the_development_machine() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut offenders = Vec::new();
-    for dir in ["src", "crates", "tests", "benches", "config", "docker", "tools"] {
+    for dir in [
+        "src", "crates", "tests", "benches", "config", "docker", "tools",
+    ] {
         let mut stack = vec![root.join(dir)];
         while let Some(d) = stack.pop() {
             for entry in std::fs::read_dir(&d).unwrap() {

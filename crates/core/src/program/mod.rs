@@ -26,8 +26,8 @@ pub use names::{
     AxisNameError, MAX_AXIS_NAME_CHARS, MAX_PROGRAM_NAME_CHARS, ProgramNameError,
     RESERVED_DEVICE_NAMES, RESERVED_PREFIXES, validate_axis_name, validate_program_name,
 };
-pub use parse::{ParseError, ParsedShape, ParsedTable, parse_table_program};
 pub use parse::{CtabDef, TableBlocks, parse_ctabdef};
+pub use parse::{ParseError, ParsedShape, ParsedTable, parse_table_program};
 pub use provenance::{RetargetError, retarget_table_program};
 pub use settings::{
     C_DECIMALS, CDirection, ProgramSettings, Provenance, SettingError, SettingsErrors, TableMemory,
