@@ -20,10 +20,12 @@ pub mod core {
 }
 pub mod dfq;
 pub mod digest;
-pub mod gauge;
+/// Gauge input: the crate `camloop-gauge`, with its I/O adapters.
+pub use camloop_gauge as gauge;
 pub mod names;
 pub mod recipe;
 pub mod service;
 pub mod share;
-pub mod sim;
+/// The simulated grinder, gauge and control: the crate `camloop-sim`.
+pub use camloop_sim as sim;
 pub mod store;

@@ -39,14 +39,21 @@ fn uses_of(dir: &Path, forbidden: &[&str], min_files: usize) -> Vec<String> {
     violations
 }
 
-/// The pure crates (the core and the generators) depend on nothing that does I/O: their
-/// manifests name only these crates, so the compiler refuses a file system, runtime, clock
-/// or logging call there, whatever the code says.
+/// The pure crates (the core, the generators, the simulator) depend on nothing that does
+/// I/O (the simulator takes the gauge crate without its `io` adapters): their
+/// manifests name only these crates, so the compiler refuses a runtime, a database or
+/// logging there, whatever the code says.
 #[test]
 fn the_pure_crates_depend_on_no_io_crate() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let allowed = ["camloop-core", "serde", "sha2", "thiserror"];
-    for krate in ["crates/core", "crates/generate"] {
+    let allowed = [
+        "camloop-core",
+        "camloop-gauge",
+        "serde",
+        "sha2",
+        "thiserror",
+    ];
+    for krate in ["crates/core", "crates/generate", "crates/sim"] {
         let text = std::fs::read_to_string(root.join(krate).join("Cargo.toml")).unwrap();
         let manifest: toml::Table = text.parse().unwrap();
         let deps = manifest["dependencies"].as_table().unwrap();
@@ -61,6 +68,24 @@ fn the_pure_crates_depend_on_no_io_crate() {
             );
         }
     }
+    // The gauge crate's codecs come without a runtime: tokio, SocketCAN and the serial port
+    // are optional, behind `io`, and the simulator does not ask for it.
+    let text = std::fs::read_to_string(root.join("crates/gauge/Cargo.toml")).unwrap();
+    let manifest: toml::Table = text.parse().unwrap();
+    for (name, spec) in manifest["dependencies"].as_table().unwrap() {
+        if ["tokio", "socketcan", "tokio-serial"].contains(&name.as_str()) {
+            assert_eq!(
+                spec.get("optional").and_then(|o| o.as_bool()),
+                Some(true),
+                "gauge: {name}"
+            );
+        }
+    }
+    let sim = std::fs::read_to_string(root.join("crates/sim/Cargo.toml")).unwrap();
+    assert!(
+        !sim.contains("\"io\""),
+        "the simulator takes the gauge's adapters"
+    );
 }
 
 /// The core is pure: no file system, network, async runtime, database, HTTP, clock or logging.
@@ -96,7 +121,7 @@ fn core_does_no_io() {
 /// logging), so that a seed and the inputs fix every result.
 #[test]
 fn sim_does_no_io_and_reads_no_clock() {
-    let sim = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/sim");
+    let sim = Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/sim/src");
     let forbidden = [
         "std::fs",
         "std::net",
@@ -124,8 +149,8 @@ fn sim_does_no_io_and_reads_no_clock() {
 fn every_module_starts_with_a_doc_line() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut files = rust_files(&root.join("src"));
-    for krate in ["crates/core/src", "crates/generate/src"] {
-        files.extend(rust_files(&root.join(krate)));
+    for krate in ["core", "gauge", "generate", "sim"] {
+        files.extend(rust_files(&root.join("crates").join(krate).join("src")));
     }
     let missing: Vec<String> = files
         .into_iter()

@@ -7,15 +7,15 @@ use super::delivered::DeliveredTables;
 use super::{
     CommandedTable, GrinderConfig, PartLabels, SimError, SimGrinder, TableShape, Workpiece,
 };
-use crate::core::analysis::{AnalysisError, LobeOptions, analyse_lobe};
-use crate::core::compensate::{
+use camloop_core::analysis::{AnalysisError, LobeOptions, analyse_lobe};
+use camloop_core::compensate::{
     self, AxisLimits, CycleError, Feature, GuardError, LobeLoop, TableRequest,
 };
-use crate::core::fit::{TableForm, fit_poly};
-use crate::core::learn::{self, LearningParams, LearningState, StepOutcome};
-use crate::core::lift::{LiftCurve, LiftTable};
-use crate::core::measure::{AssemblyLimits, AveragedMeasurement, MeasurementError};
-use crate::core::turn::{self, Decision, TurnError, TurnSetup};
+use camloop_core::fit::{TableForm, fit_poly};
+use camloop_core::learn::{self, LearningParams, LearningState, StepOutcome};
+use camloop_core::lift::{LiftCurve, LiftTable};
+use camloop_core::measure::{AssemblyLimits, AveragedMeasurement, MeasurementError};
+use camloop_core::turn::{self, Decision, TurnError, TurnSetup};
 
 /// Points of the fine grid the ground part is judged on (0.1°), not only the gauge's points.
 pub const JUDGE_POINTS: usize = 3600;
@@ -66,7 +66,7 @@ pub enum CellError {
     #[error("table: {0}")]
     Guard(#[from] GuardError),
     #[error("geometry: {0}")]
-    Geometry(#[from] crate::core::geometry::GeometryError),
+    Geometry(#[from] camloop_core::geometry::GeometryError),
 }
 
 /// The cell's fixed settings.

@@ -5,8 +5,8 @@
 //! up in the cell's figures, as it would on the machine.
 
 use super::{CommandedTable, Control, ControlError};
-use crate::core::compensate::{Feature, GuardedTable};
-use crate::core::program::{
+use camloop_core::compensate::{Feature, GuardedTable};
+use camloop_core::program::{
     MainProgramSettings, ProgramSettings, SettingsErrors, TableError, next_table_number,
     render_main_program,
 };

@@ -19,7 +19,7 @@
 //! (≤ 1.5e-7 mm observed, 1e-6 mm required).
 
 use super::envelope::Node;
-use crate::core::geometry::{CamGeometry, CrankpinGeometry, Follower};
+use camloop_core::geometry::{CamGeometry, CrankpinGeometry, Follower};
 use std::f64::consts::TAU;
 
 /// The part being ground and how the gauge reads it.

@@ -5,8 +5,8 @@
 //! for CAN must be plain decimal numbers (machine `"1"`, part `"1"`, lobe `"1"`); labels such
 //! as `"SIM"` or `"intake-1"` are refused with [`EncodeError::Label`], naming the field.
 
-use crate::core::measure::RawMeasurement;
-use crate::gauge::{CanId, EncodeError, GaugeDbc, encode_measurement};
+use camloop_core::measure::RawMeasurement;
+use camloop_gauge::{CanId, EncodeError, GaugeDbc, encode_measurement};
 
 /// GaugeStart, every sample in order, GaugeEnd with status 0 (complete), encoded with
 /// `dbc`. Lifts are rounded to the DBC resolution (0.1 µm with the shipped DBC).

@@ -55,12 +55,12 @@
 //! # Use
 //!
 //! ```
-//! use camloop::core::fit::TableForm;
-//! use camloop::core::geometry::{CamGeometry, Follower, Part};
-//! use camloop::core::lift::{LiftCurve, LiftTable};
-//! use camloop::sim::{CommandedTable, GrinderConfig, PartLabels, SimGrinder, Workpiece};
+//! use camloop_core::fit::TableForm;
+//! use camloop_core::geometry::{CamGeometry, Follower, Part};
+//! use camloop_core::lift::{LiftCurve, LiftTable};
+//! use camloop_sim::{CommandedTable, GrinderConfig, PartLabels, SimGrinder, Workpiece};
 //!
-//! let text = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/config/parts/demo-intake-lobe.csv"));
+//! let text = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/parts/demo-intake-lobe.csv"));
 //! let lift = LiftCurve::new(&LiftTable::parse_csv(text, "demo")?);
 //! let geometry = CamGeometry { base_radius_mm: 20.0, follower: Follower::Flat, wheel_radius_mm: 250.0 };
 //! let mut part = Part::cam(geometry, lift)?;
@@ -78,6 +78,9 @@
 //! }
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+
+// No unwrap() in shipped code: bad input must become an error, not a panic (tests may).
+#![warn(clippy::unwrap_used)]
 
 pub mod cell;
 mod config;
@@ -101,7 +104,7 @@ pub use ground::{GroundPart, Workpiece};
 pub use rng::SimRng;
 pub use table::{CommandedTable, TableShape};
 
-use crate::core::measure::RawMeasurement;
+use camloop_core::measure::RawMeasurement;
 use ground::Probe;
 use path::MachinePath;
 use std::f64::consts::TAU;
@@ -361,7 +364,7 @@ fn check_workpiece(workpiece: &Workpiece) -> Result<(), SimError> {
         Workpiece::Cam(g) => {
             positive("base radius", g.base_radius_mm)?;
             positive("wheel radius", g.wheel_radius_mm)?;
-            if let crate::core::geometry::Follower::Roller { radius_mm } = g.follower {
+            if let camloop_core::geometry::Follower::Roller { radius_mm } = g.follower {
                 positive("roller radius", radius_mm)?;
             }
         }

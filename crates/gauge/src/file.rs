@@ -10,7 +10,7 @@ use std::ffi::OsStr;
 use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 
-use crate::core::measure::RawMeasurement;
+use camloop_core::measure::RawMeasurement;
 
 use super::candump::{CandumpIssue, read_candump_measurements};
 use super::csv_file::{Completeness, CsvError, CsvParser};

@@ -13,7 +13,7 @@
 
 use std::fmt::Write as _;
 
-use crate::core::measure::RawMeasurement;
+use camloop_core::measure::RawMeasurement;
 
 use super::dbc::{GaugeDbc, MessageSpec, SignalSpec};
 use super::frame::{CanId, GaugeFrame, GaugeStart};
@@ -432,9 +432,9 @@ impl<'a, const N: usize> Writer<'a, N> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::measure::RawSample;
-    use crate::gauge::candump::parse_candump_line;
-    use crate::gauge::dbc::{BUILTIN_DBC, GaugeSignalNames};
+    use crate::candump::parse_candump_line;
+    use crate::dbc::{BUILTIN_DBC, GaugeSignalNames};
+    use camloop_core::measure::RawSample;
 
     #[test]
     fn the_cantools_start_vector_is_reproduced() {

@@ -8,7 +8,7 @@ use std::io;
 use socketcan::id::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_RTR_FLAG, CAN_SFF_MASK};
 use socketcan::{CanFilter, EmbeddedFrame, SocketOptions};
 
-use crate::core::measure::RawMeasurement;
+use camloop_core::measure::RawMeasurement;
 
 use super::assemble::{Assembled, Assembler, AssemblyProblem};
 use super::candump::parse_candump_line;

@@ -7,7 +7,7 @@
 //! `T` (transmitted) as newer can-utils and python-can write it. CAN FD lines (`ID##F…`) and remote requests (`ID#R`) are
 //! rejected explicitly: the gauge protocol is classic CAN data frames.
 
-use crate::core::measure::RawMeasurement;
+use camloop_core::measure::RawMeasurement;
 
 use super::assemble::{Assembled, Assembler, AssemblyProblem};
 use super::dbc::GaugeDbc;

@@ -9,7 +9,7 @@ use super::{
     AXIAL_AXIS, COUP_ACT_MASTER_VALUE, ControlError, ControlFault, Coupled, Coupling,
     MAX_CALL_DEPTH, program_name, r_param, table_shape,
 };
-use crate::core::program::{ParsedTable, TableBlocks, parse_ctabdef};
+use camloop_core::program::{ParsedTable, TableBlocks, parse_ctabdef};
 
 /// Words that are statements, never subprogram names: out of place, they are refused as
 /// statements rather than looked up as programs.

@@ -2,9 +2,9 @@
 //! interpolates it: straight in X(C) between G1 points, the cubic of each POLY segment.
 
 use super::SimError;
-use crate::core::fit::{TableForm, fit_poly};
-use crate::core::geometry::{GeometryError, Part};
-use crate::core::table::{PolySegment, TablePoint};
+use camloop_core::fit::{TableForm, fit_poly};
+use camloop_core::geometry::{GeometryError, Part};
+use camloop_core::table::{PolySegment, TablePoint};
 use std::f64::consts::TAU;
 
 /// Largest C gap (degrees) tolerated between one POLY segment's end and the next one's start.

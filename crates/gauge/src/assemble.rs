@@ -9,7 +9,7 @@
 
 use std::fmt;
 
-use crate::core::measure::{MeasurementHeader, RawMeasurement, RawSample};
+use camloop_core::measure::{MeasurementHeader, RawMeasurement, RawSample};
 
 use super::frame::{GaugeFrame, GaugeStart};
 

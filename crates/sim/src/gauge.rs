@@ -5,7 +5,7 @@
 use super::config::{GaugeConfig, GaugeFault};
 use super::ground::GroundPart;
 use super::rng::SimRng;
-use crate::core::measure::{MeasurementHeader, RawMeasurement, RawSample};
+use camloop_core::measure::{MeasurementHeader, RawMeasurement, RawSample};
 
 /// Who the measurement belongs to, as the gauge announces it.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]

@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 
 use super::{Control, ControlError, ControlFault, Coupled};
-use crate::core::program::ParsedShape;
+use camloop_core::program::ParsedShape;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) enum Value {

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use crate::core::compensate::WheelRadiusError;
+use camloop_core::compensate::WheelRadiusError;
 
 use super::file::shown_path;
 
@@ -91,7 +91,7 @@ pub fn open_dressing_file(path: &Path) -> Result<DressingFile, DressingError> {
         line: e.span().map(|s| text[..s.start].matches('\n').count() + 1),
         message: e.message().trim_end_matches('\n').to_owned(),
     })?;
-    crate::core::compensate::check_wheel_radius(report.wheel_radius_mm).map_err(|source| {
+    camloop_core::compensate::check_wheel_radius(report.wheel_radius_mm).map_err(|source| {
         DressingError::Radius {
             path: shown(),
             source,

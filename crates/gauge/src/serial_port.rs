@@ -128,7 +128,7 @@ impl<R: AsyncRead + Unpin> SerialGauge<R> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gauge::serial::SerialProblem;
+    use crate::serial::SerialProblem;
 
     async fn events(input: &[u8]) -> Vec<SerialEvent> {
         let mut gauge = SerialGauge::new(input, "pipe");

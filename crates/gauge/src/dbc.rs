@@ -16,7 +16,7 @@ use super::signal::{ByteOrder, LayoutError, RawKind, SignalCodec};
 
 /// The DBC shipped with camloop (`config/gauge.dbc`), compiled into the binary so tests,
 /// benches and a default install need no file.
-pub const BUILTIN_DBC: &str = include_str!("../../config/gauge.dbc");
+pub const BUILTIN_DBC: &str = include_str!("../../../config/gauge.dbc");
 
 /// Names of the three gauge messages and their signals in the DBC. The defaults match
 /// `config/gauge.dbc`; a site with its own gauge DBC overrides them in config.

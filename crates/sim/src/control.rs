@@ -6,7 +6,7 @@
 //! the program and line. Alarms the real control raises are errors too: `LEADON` or `CTAB` on
 //! an undefined table, redefining the coupled table, programming the coupled axis, a leading
 //! value that does not increase in a table (10949). Table blocks are read by the same reader
-//! as [`crate::core::program::parse_table_program`].
+//! as [`camloop_core::program::parse_table_program`].
 //!
 //! Not modelled: modal G states (`G90`, `G71`, `SAVE` restore), feeds and timing, the
 //! synchronising move of `LEADON`, work offsets (`$AA_IW` is the programmed setpoint).
@@ -17,8 +17,8 @@ mod statements;
 use std::collections::BTreeMap;
 
 use super::TableShape;
-use crate::core::program::{ParsedShape, ParsedTable};
-use crate::core::table::TablePoint;
+use camloop_core::program::{ParsedShape, ParsedTable};
+use camloop_core::table::TablePoint;
 use statements::{Frame, Run};
 
 /// Deepest subprogram nesting accepted (camloop needs 1).

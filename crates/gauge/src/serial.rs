@@ -22,7 +22,7 @@
 
 use crc32fast::Hasher;
 
-use crate::core::measure::{MeasurementHeader, RawMeasurement, RawSample};
+use camloop_core::measure::{MeasurementHeader, RawMeasurement, RawSample};
 
 use super::assemble::{
     Assembled, AssemblyProblem, DiscardReason, MAX_POINTS_PER_REV, MAX_REVOLUTIONS, OpenMeasurement,

@@ -23,7 +23,7 @@
 //!   follow it. A file is complete when it has that marker, or when it declares
 //!   `revolutions` and holds every angle of every declared revolution ([`Completeness`]).
 
-use crate::core::measure::{MeasurementHeader, RawMeasurement, RawSample};
+use camloop_core::measure::{MeasurementHeader, RawMeasurement, RawSample};
 
 use super::assemble::{MAX_POINTS_PER_REV, MAX_REVOLUTIONS, MAX_SAMPLES};
 use super::csv_fields::{

@@ -35,7 +35,7 @@ use std::time::{Duration, Instant, SystemTime};
 
 use tokio::sync::mpsc;
 
-use crate::core::measure::RawMeasurement;
+use camloop_core::measure::RawMeasurement;
 
 use super::dbc::GaugeDbc;
 pub use super::dressing::{

@@ -3,7 +3,7 @@
 
 use std::fmt;
 
-use crate::core::measure::RawSample;
+use camloop_core::measure::RawSample;
 
 use super::dbc::{GaugeDbc, MessageSpec, SignalSpec};
 use super::signal::{PayloadWords, RawValue};
@@ -287,7 +287,7 @@ fn positive_u32<const N: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gauge::dbc::{BUILTIN_DBC, GaugeSignalNames};
+    use crate::dbc::{BUILTIN_DBC, GaugeSignalNames};
 
     const START: CanId = CanId::Standard(0x5a0);
     const SAMPLE: CanId = CanId::Standard(0x5a1);
