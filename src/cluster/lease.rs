@@ -20,6 +20,7 @@ CREATE TABLE IF NOT EXISTS camloop_leases (\
 CREATE TABLE IF NOT EXISTS camloop_instances (\
   instance TEXT PRIMARY KEY,\
   seen_until TIMESTAMPTZ NOT NULL);\
+ALTER TABLE camloop_leases ADD COLUMN IF NOT EXISTS incarnation TEXT NOT NULL DEFAULT '';\
 COMMIT";
 
 /// A lease operation failed; the database said why.
@@ -59,7 +60,25 @@ pub struct Renewed {
 pub struct Leases {
     pool: PgPool,
     instance: String,
+    /// This process among all that ever ran under the instance's name: every lease it wins
+    /// carries it, so a lease left by an earlier process of the same name is told apart from
+    /// one this process has just won (see [`Leases::renew`]).
+    incarnation: String,
     lease_ms: i64,
+}
+
+/// This process's incarnation: its pid and start time, unique among the processes of one
+/// instance name (a restart gets a new pid or a later time).
+fn incarnation() -> String {
+    static ME: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    ME.get_or_init(|| {
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_nanos())
+            .unwrap_or(0);
+        format!("{}-{nanos}", std::process::id())
+    })
+    .clone()
 }
 
 impl Leases {
@@ -84,6 +103,7 @@ impl Leases {
         Ok(Self {
             pool,
             instance: instance.to_string(),
+            incarnation: incarnation(),
             lease_ms: lease.as_millis() as i64,
         })
     }
@@ -121,15 +141,17 @@ impl Leases {
     /// new epoch, one above the last owner's. `None`: another instance holds it.
     pub async fn acquire(&self, machine: &str) -> Result<Option<u64>, LeaseError> {
         let epoch: Option<i64> = sqlx::query_scalar(
-            "INSERT INTO camloop_leases (machine, owner, epoch, expires_at) \
-             VALUES ($1, $2, 1, now() + $3 * interval '1 millisecond') \
+            "INSERT INTO camloop_leases (machine, owner, epoch, expires_at, incarnation) \
+             VALUES ($1, $2, 1, now() + $3 * interval '1 millisecond', $4) \
              ON CONFLICT (machine) DO UPDATE SET owner = EXCLUDED.owner, \
-               epoch = camloop_leases.epoch + 1, expires_at = EXCLUDED.expires_at \
+               epoch = camloop_leases.epoch + 1, expires_at = EXCLUDED.expires_at, \
+               incarnation = EXCLUDED.incarnation \
              WHERE camloop_leases.expires_at <= now() RETURNING epoch",
         )
         .bind(machine)
         .bind(&self.instance)
         .bind(self.lease_ms)
+        .bind(&self.incarnation)
         .fetch_optional(&self.pool)
         .await
         .map_err(op("acquire a lease"))?;
@@ -162,22 +184,13 @@ impl Leases {
 
     /// Extends the leases this instance runs (`held`: machine and epoch) and returns those
     /// renewed: one missing from the answer was lost (it expired; another instance may own
-    /// it). Every other live lease under this instance's name runs nowhere (left by an
-    /// earlier process of the same name, or stopped while the database was away) and is
-    /// released, so that it is taken at once rather than renewed forever; those come back
-    /// second. `acquiring`: machines this instance is taking at this moment, whose new
-    /// leases are neither renewed nor released here.
-    pub async fn renew(
-        &self,
-        held: &[(String, u64)],
-        acquiring: &[String],
-    ) -> Result<Renewed, LeaseError> {
+    /// it). Every live lease under this instance's name that an earlier process won (a
+    /// restart within the lease) runs nowhere and is released, so that it is taken at once
+    /// rather than renewed forever; those come back second. A lease this process won is
+    /// never taken for such a leftover, however recently it was won: the two are told apart
+    /// by the process's incarnation, not by a list that a concurrent win could outrun.
+    pub async fn renew(&self, held: &[(String, u64)]) -> Result<Renewed, LeaseError> {
         let machines: Vec<&str> = held.iter().map(|(m, _)| m.as_str()).collect();
-        let known: Vec<&str> = machines
-            .iter()
-            .copied()
-            .chain(acquiring.iter().map(String::as_str))
-            .collect();
         let epochs: Vec<i64> = held.iter().map(|(_, e)| *e as i64).collect();
         let rows = sqlx::query(
             "UPDATE camloop_leases SET expires_at = now() + $2 * interval '1 millisecond' \
@@ -198,11 +211,11 @@ impl Leases {
             .collect();
         let leftovers: Vec<String> = sqlx::query_scalar(
             "UPDATE camloop_leases SET expires_at = now() - interval '1 millisecond' \
-             WHERE owner = $1 AND expires_at > now() AND NOT (machine = ANY($2::text[])) \
+             WHERE owner = $1 AND expires_at > now() AND incarnation <> $2 \
              RETURNING machine",
         )
         .bind(&self.instance)
-        .bind(&known)
+        .bind(&self.incarnation)
         .fetch_all(&self.pool)
         .await
         .map_err(op("release leftover leases"))?;

@@ -237,26 +237,12 @@ impl Ctx {
     /// Tries to win `machine`'s lease; once won it is held (and renewed by the keeper)
     /// while the machine opens beside the rest of the round.
     async fn take(&self, m: String, work: &mut JoinSet<()>) -> Result<(), LeaseError> {
-        self.holdings().acquiring.insert(m.clone());
-        let won = self.leases.acquire(&m).await;
-        let acquired = Instant::now();
-        {
-            let mut h = self.holdings();
-            h.acquiring.remove(&m);
-            if let Ok(Some(epoch)) = won {
-                let deadline = acquired + self.lease / 2;
-                let phase = Phase::Opening;
-                h.held.insert(
-                    m.clone(),
-                    Holding {
-                        epoch,
-                        deadline,
-                        phase,
-                    },
-                );
-            }
-        }
-        if let Some(epoch) = won? {
+        let asked = Instant::now();
+        if let Some(epoch) = self.leases.acquire(&m).await? {
+            let deadline = asked + self.lease / 2;
+            let phase = Phase::Opening;
+            let holding = Holding { epoch, deadline, phase };
+            self.holdings().held.insert(m.clone(), holding);
             self.metrics.update(&m, |x| x.leases_taken_total += 1);
             self.spawn_open(m, epoch, work);
         }

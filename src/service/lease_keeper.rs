@@ -14,7 +14,7 @@
 use super::metrics::Metrics;
 use super::runner::Runner;
 use crate::cluster::{LeaseError, Leases};
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 use tokio::sync::watch;
@@ -48,9 +48,6 @@ pub(super) struct Holding {
 #[derive(Debug, Default)]
 pub(super) struct Holdings {
     pub(super) held: BTreeMap<String, Holding>,
-    /// Machines whose lease is being acquired right now: the keeper must not take their
-    /// fresh leases for leftovers of an earlier process.
-    pub(super) acquiring: BTreeSet<String>,
     /// The service is stopping: nothing more is opened.
     pub(super) closing: bool,
 }
@@ -157,12 +154,11 @@ impl Keeper {
     /// not renew under the epoch it was asked for is lost: its machine stops.
     async fn renew(&self, leases: &Leases) -> Result<(), LeaseError> {
         let asked = Instant::now();
-        let (mine, acquiring): (Vec<(String, u64)>, Vec<String>) = {
+        let mine: Vec<(String, u64)> = {
             let h = lock(&self.holdings);
-            let mine = h.held.iter().map(|(m, x)| (m.clone(), x.epoch)).collect();
-            (mine, h.acquiring.iter().cloned().collect())
+            h.held.iter().map(|(m, x)| (m.clone(), x.epoch)).collect()
         };
-        let answer = leases.renew(&mine, &acquiring).await?;
+        let answer = leases.renew(&mine).await?;
         for m in &answer.leftovers {
             warn!(machine = %m, "cluster: a lease under this instance's name that runs nowhere (an earlier process, a stop while the database was away) released");
         }
