@@ -14,6 +14,7 @@ pub mod config;
 pub mod core;
 pub mod dfq;
 pub mod digest;
+pub mod failpoint;
 pub mod gauge;
 pub mod names;
 pub mod recipe;
