@@ -20,6 +20,7 @@ pub mod core {
 }
 pub mod dfq;
 pub mod digest;
+pub mod failpoint;
 /// Gauge input: the crate `camloop-gauge`, with its I/O adapters.
 pub use camloop_gauge as gauge;
 pub mod names;

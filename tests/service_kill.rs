@@ -8,10 +8,10 @@
 //! status could never be written and that feature's journal stopped draining.
 
 mod cli_support;
+mod history_support;
 mod process_support;
 
-use camloop::share::{VersionStatus, load_manifest};
-use camloop::store::{Store, TableStatus};
+use camloop::store::Store;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
@@ -62,65 +62,24 @@ fn killing_the_service_never_leaves_a_version_the_history_does_not_know() {
     );
     assert!(out.status.success(), "{}", cli_support::stderr(&out));
 
-    let manifest = dir.path().join("var/machines/M7/IN1/share/manifest.jsonl");
-    let history = load_manifest(&manifest).unwrap().history;
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(async {
         let url = format!("sqlite://{}", dir.path().join("var/camloop.db").display());
         let store = Store::connect(&url).await.unwrap();
-        let mut pushed = 0;
-        for v in history.versions() {
-            let version = v.record.version;
-            let row = store
-                .table_version("M7", "IN1", version as i64)
-                .await
-                .unwrap()
-                .unwrap_or_else(|| {
-                    panic!("v{version} is on the share's manifest, not in the store")
-                });
-            assert_eq!(row.table_number, v.record.table_number, "v{version}");
-            let expected = match &v.status {
-                VersionStatus::Pushed { .. } => Some(TableStatus::Pushed),
-                VersionStatus::Refused { .. } => Some(TableStatus::Refused),
-                _ => None,
-            };
-            if let Some(expected) = expected {
-                assert_eq!(row.status, expected, "v{version}: {}", row.status_why);
-            }
-            if v.text_kept {
-                let on_share = &v.record.files[0].sha256;
-                assert_eq!(
-                    &row.sha256, on_share,
-                    "v{version}: the store's program is not the share's"
-                );
-            }
-            pushed += usize::from(matches!(v.status, VersionStatus::Pushed { .. }));
-        }
+        let a = history_support::agreement(&dir.path().join("var"), &store, "M7", "IN1").await;
+        // Every manifest version is in the store, with its table number, the program the
+        // share verified and the status the share gave it.
+        assert!(a.mismatches.is_empty(), "{:#?}", a.mismatches);
         assert!(
-            pushed >= KILLS,
-            "only {pushed} versions pushed: the kills came too early to test anything"
+            a.pushed >= KILLS,
+            "only {} versions pushed: the kills came too early to test anything",
+            a.pushed
         );
         // The newest version pushed is the one in force in the stored learning state.
-        let newest = history.last_pushed().unwrap().record.version;
-        let state = store
-            .load_learning_state("M7", "IN1")
-            .await
-            .unwrap()
-            .unwrap();
-        let memory: serde_json::Value = serde_json::from_str(&state.state_json).unwrap();
-        assert_eq!(memory["in_force_version"].as_u64(), Some(newest));
+        assert!(a.newest_pushed.is_some());
+        assert_eq!(a.in_force_version, a.newest_pushed);
         // Nothing stuck in the journal: what it still holds is already in the store.
-        let journal = std::fs::read_to_string(dir.path().join("var/machines/M7/IN1/journal.jsonl"))
-            .unwrap_or_default();
-        for line in journal.lines() {
-            let record: serde_json::Value = serde_json::from_str(line).unwrap();
-            if record["record"] == "table" {
-                let v = record["version"].as_i64().unwrap();
-                assert!(
-                    store.table_version("M7", "IN1", v).await.unwrap().is_some(),
-                    "v{v} stuck in the journal"
-                );
-            }
-        }
+        assert!(a.stuck.is_empty(), "{:#?}", a.stuck);
+        assert!(a.learned_twice.is_empty(), "{:#?}", a.learned_twice);
     });
 }

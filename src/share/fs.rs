@@ -6,6 +6,8 @@ use std::fs::{File, OpenOptions};
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
+use crate::failpoint::crash_point;
+
 /// Name prefix of every temporary camloop writes, on the share and in the state folder.
 ///
 /// It starts with a dot (hidden on the control's file views, and not a valid SINUMERIK
@@ -44,12 +46,19 @@ pub struct RealFs;
 
 impl ShareFs for RealFs {
     fn write_temp(&self, dir: &Path, bytes: &[u8]) -> io::Result<PathBuf> {
-        let (file, path) = create_temp(dir, |p| File::create_new(p))?;
-        if let Err(e) = write_synced(&file, bytes) {
+        let (mut file, path) = create_temp(dir, |p| File::create_new(p))?;
+        // Written and flushed as two steps (not `write_synced`), so a crash point can land
+        // between them.
+        let written = file.write_all(bytes).and_then(|()| {
+            crash_point("share_temp_written");
+            file.sync_all()
+        });
+        if let Err(e) = written {
             // Best effort: a leftover temporary is removed at the next start.
             let _ = std::fs::remove_file(&path);
             return Err(e);
         }
+        crash_point("share_temp_synced");
         Ok(path)
     }
 

@@ -9,6 +9,7 @@ use super::fs::{ShareFs, bad_file_name, is_temp_name, sha256_hex};
 use super::manifest::{self, FileRecord, History, Record, VersionRecord, VersionStatus};
 use super::state::{clean_versions_dir, cut_manifest, read_kept, store_text, version_dir};
 use crate::core::program::{check_table_pair, next_table_number};
+use crate::failpoint::crash_point;
 
 /// Manifest file name inside the state folder.
 pub const MANIFEST_FILE: &str = "manifest.jsonl";
@@ -434,6 +435,7 @@ impl Share {
         self.fs
             .sync_dir(&share)
             .map_err(|e| fail(ShareError::classify(&share, "flush", &share, e)))?;
+        crash_point("share_renamed");
         for (path, file) in paths.iter().zip(&record.files) {
             let bytes = self
                 .fs
@@ -535,6 +537,11 @@ impl Share {
         let path = self.config.state_dir.join(MANIFEST_FILE);
         super::fs::append_line(&path, &manifest::line(&record), flush == Flush::Now)
             .map_err(StateError::io("append to", &path))?;
+        // Past the write a process death keeps the line (only a power cut could lose an
+        // unflushed one), so the crash point goes here, before the history takes it.
+        if let Some(step) = manifest_step(&record) {
+            crash_point(step);
+        }
         self.manifest_lines += 1;
         self.history
             .apply(record)
@@ -568,6 +575,16 @@ impl Share {
             Ok(()) => self.manifest_lines = 1,
             Err(e) => tracing::warn!(error = %e, "manifest not compacted; retried later"),
         }
+    }
+}
+
+/// The crash point after a manifest line of this kind (the lines of a part's push).
+fn manifest_step(record: &Record) -> Option<&'static str> {
+    match record {
+        Record::Version(_) => Some("manifest:version"),
+        Record::Delivering { .. } => Some("manifest:delivering"),
+        Record::Pushed { .. } => Some("manifest:pushed"),
+        Record::Waiting { .. } | Record::Pruned { .. } | Record::Checkpoint(_) => None,
     }
 }
 

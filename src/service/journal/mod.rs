@@ -12,6 +12,7 @@ use record::{apply, apply_once};
 use reserve::DiskReserve;
 pub use reserve::RESERVE_BYTES;
 
+use crate::failpoint::crash_point;
 use crate::share::{Fence, Held};
 use crate::store::Store;
 use anyhow::Context;
@@ -144,6 +145,9 @@ impl Journal {
             other => other,
         }
         .with_context(|| format!("cannot write journal {}", self.path.display()))?;
+        for step in records.iter().filter_map(Pending::journaled_step) {
+            crash_point(step);
+        }
         self.records.extend_from_slice(records);
         Ok(())
     }
@@ -201,7 +205,10 @@ impl Journal {
                 apply(store, record).await
             };
             match result {
-                Ok(()) => done += 1,
+                Ok(()) => {
+                    crash_point(record.committed_step());
+                    done += 1;
+                }
                 Err(e) => {
                     failure = Some(e);
                     break;

@@ -161,6 +161,33 @@ impl Pending {
         }
     }
 
+    /// The crash point once a record of this kind is in the journal (the kinds a part's or
+    /// a dressing's durability turns on; the others travel in the same appends).
+    pub(super) fn journaled_step(&self) -> Option<&'static str> {
+        match self {
+            Pending::Measurement { .. } => Some("journaled:measurement"),
+            Pending::Table { .. } => Some("journaled:table_version"),
+            Pending::Learning { .. } => Some("journaled:learning_state"),
+            Pending::Dressing { .. } => Some("journaled:dressing"),
+            Pending::TableStatus { .. }
+            | Pending::Event { .. }
+            | Pending::RecipeSnapshot { .. } => None,
+        }
+    }
+
+    /// The crash point once a record of this kind is committed to the store.
+    pub(super) fn committed_step(&self) -> &'static str {
+        match self {
+            Pending::Measurement { .. } => "store_commit:measurement",
+            Pending::Table { .. } => "store_commit:table_version",
+            Pending::TableStatus { .. } => "store_commit:table_status",
+            Pending::Event { .. } => "store_commit:event",
+            Pending::Learning { .. } => "store_commit:learning_state",
+            Pending::RecipeSnapshot { .. } => "store_commit:recipe_snapshot",
+            Pending::Dressing { .. } => "store_commit:dressing",
+        }
+    }
+
     /// The dressing to store, for a [`Pending::Dressing`].
     fn dressing(&self) -> Option<NewDressing> {
         match self {

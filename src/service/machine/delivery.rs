@@ -9,6 +9,7 @@ use crate::clock::{now_ms, now_ms_u64};
 use crate::core::compensate::GuardedTable;
 use crate::core::learn::LearningState;
 use crate::core::program::{Provenance, comment_text};
+use crate::failpoint::crash_point;
 use crate::share::{ProgramFile, PushError, PushRequest, Submitted};
 use crate::store::{EventLevel, TableStatus};
 use anyhow::Context;
@@ -64,8 +65,10 @@ impl FeatureLoop {
                 learning.wheel_radius_mm, learning.iteration
             )),
         ];
+        let text = table.render(&settings)?;
+        crash_point("table_rendered");
         let draft = Draft {
-            text: table.render(&settings)?,
+            text,
             table_number: settings.table_number,
             learning,
             reason: reason.to_string(),

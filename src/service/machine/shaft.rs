@@ -99,7 +99,9 @@ pub(super) fn write_resume(share_dir: &Path, first_feature: usize) -> std::io::R
     drop(f);
     std::fs::rename(&tmp, &path).inspect_err(|_| {
         let _ = std::fs::remove_file(&tmp);
-    })
+    })?;
+    crate::failpoint::crash_point("resume_written");
+    Ok(())
 }
 
 /// Before machines ground whole parts, a machine's one feature kept its journal and share
