@@ -9,6 +9,9 @@ use std::time::Duration;
 
 /// Instances starting together make the tables one at a time, under a transaction lock: a
 /// `CREATE TABLE IF NOT EXISTS` racing another can fail on the catalogue's unique index.
+/// The `incarnation` column came later: a table made before it gets it once. The catalogue
+/// is asked first because `ALTER TABLE` locks the table whole even when the column exists,
+/// and every connect (each instance's, each keeper's) would then stall every renewal.
 const SCHEMA: &str = "\
 BEGIN;\
 SELECT pg_advisory_xact_lock(7340925001);\
@@ -16,11 +19,17 @@ CREATE TABLE IF NOT EXISTS camloop_leases (\
   machine TEXT PRIMARY KEY,\
   owner TEXT NOT NULL,\
   epoch BIGINT NOT NULL,\
-  expires_at TIMESTAMPTZ NOT NULL);\
+  expires_at TIMESTAMPTZ NOT NULL,\
+  incarnation TEXT NOT NULL DEFAULT '');\
 CREATE TABLE IF NOT EXISTS camloop_instances (\
   instance TEXT PRIMARY KEY,\
   seen_until TIMESTAMPTZ NOT NULL);\
-ALTER TABLE camloop_leases ADD COLUMN IF NOT EXISTS incarnation TEXT NOT NULL DEFAULT '';\
+DO $$ BEGIN \
+  IF NOT EXISTS (SELECT 1 FROM information_schema.columns \
+    WHERE table_name = 'camloop_leases' AND column_name = 'incarnation') THEN \
+    ALTER TABLE camloop_leases ADD COLUMN incarnation TEXT NOT NULL DEFAULT ''; \
+  END IF; \
+END $$;\
 COMMIT";
 
 /// A lease operation failed; the database said why.
