@@ -340,14 +340,14 @@ fn three_instances_share_the_machines_and_survive_a_kill() {
         "while an instance rejoined: {} parts dropped, the longest waited {rejoin_max:?}",
         rejoining.len()
     );
-    // A handover is between parts, and never slower than a takeover: the old owner notices
-    // the new instance at its next round (0.5 s at most), finishes the part in hand and
-    // releases; the new owner looks every 250 ms while below its share, opens the machine
-    // and then measures the part that waited. Two parts' processing and one opening: about
-    // 1-2 s on idle cores, up to 6 s in a debug build with both cores busy from outside.
+    // A handover is between parts: the old owner notices the new instance at its next round
+    // (0.5 s at most), finishes the part in hand and releases; the new owner looks every
+    // 250 ms while below its share, opens the machine and measures the part that waited.
+    // Two parts' processing and one opening: 1.3-2.4 s in a debug build with both cores
+    // busy from outside (when the holders looked every quarter lease, 1.5 s, it was 5-6 s).
     assert!(
-        !rejoining.is_empty() && rejoin_max < TAKEOVER_LIMIT,
-        "a handover kept a part waiting {rejoin_max:?}, longer than a takeover may take"
+        !rejoining.is_empty() && rejoin_max < Duration::from_secs(4),
+        "a handover kept a part waiting {rejoin_max:?}"
     );
     eprintln!(
         "takeover of {} machines: p50 {:?}, max {:?}; rebalance after the restart {rebalance:?}; \
