@@ -2,7 +2,7 @@
 //! noise, 0.15 µm wheel wear per part, no dressing) run for 60 parts with the loop as shipped
 //! and with one part of it changed at a time. The figure is the true max lift error with
 //! nothing fitted, on a 0.1° grid (not the gauge's noisy reading), over parts 10 to 60. Run
-//! with `--nocapture` for the table; the README's "Pushing the plateau" quotes it.
+//! with `--nocapture` for the table; the manual's "Pushing the plateau" (docs/src/controller.md) quotes it.
 
 use camloop::core::compensate::{AxisLimits, Feature, TableRequest};
 use camloop::core::fit::TableForm;
