@@ -2,13 +2,15 @@
 //! SINUMERIK loop checked against the expanded form by evaluating its text, the ISO loop run
 //! through LinuxCNC's `rs274` interpreter, refusals, and golden programs.
 
+mod sinumerik_support;
+use sinumerik_support as sinumerik_eval;
+
 mod rs274_support;
 
 use camloop::core::generate::contour::{ContourError, ContourJob, Roughing, Side, generate};
 use camloop::core::generate::curve::Curve;
 use camloop::core::generate::dialect::{Decimals, Dialect, Form};
 use camloop::core::generate::ir::Compensation;
-use camloop::core::generate::sinumerik_eval;
 use rs274_support::{Canon, run_rs274};
 
 /// The ellipse of the tests: centre z = −30, x = 10; semi-axes 30 (z) and 20 (x); from

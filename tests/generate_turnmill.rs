@@ -2,10 +2,12 @@
 //! must give the drawing's radius and phase, from our own evaluation of the SINUMERIK text
 //! and from LinuxCNC's interpreter running the ISO text.
 
+mod sinumerik_support;
+use sinumerik_support as sinumerik_eval;
+
 mod rs274_support;
 
 use camloop::core::generate::dialect::{Decimals, Dialect, Form};
-use camloop::core::generate::sinumerik_eval;
 use camloop::core::generate::turnmill::{
     EccentricCircle, TurnMillError, TurnMillJob, cut_span_deg, generate,
 };

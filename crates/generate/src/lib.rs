@@ -16,5 +16,4 @@ pub mod ir;
 pub mod open_spline;
 pub mod planing;
 pub mod profile;
-pub mod sinumerik_eval;
 pub mod turnmill;

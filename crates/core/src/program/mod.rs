@@ -36,7 +36,7 @@ pub use settings::{
 pub use shaft_program::{
     RESUME_PROGRAM, Station, parse_resume_program, render_resume_program, render_shaft_program,
 };
-pub use table::{TableError, render_g1_table, render_poly_table, reverse_cubic};
+pub use table::{TableError, fmt_fixed, render_g1_table, render_poly_table, reverse_cubic};
 
 /// Text made safe for a program comment line: printable ASCII only (the units camloop writes
 /// spelled in ASCII, `µm` as `um` and `°` as ` deg`; anything else becomes `?`), at most 200

@@ -462,7 +462,7 @@ pub(crate) fn line(out: &mut String, args: std::fmt::Arguments<'_>) {
 
 /// `v` with exactly `decimals` decimals, rounded as `format!` does (to the nearest decimal
 /// of the exact binary value), never `-0.000`.
-pub(crate) fn fmt_fixed(v: f64, decimals: usize) -> String {
+pub fn fmt_fixed(v: f64, decimals: usize) -> String {
     let text = format!("{v:.decimals$}");
     match text.strip_prefix('-') {
         Some(rest) if rest.bytes().all(|b| b == b'0' || b == b'.') => rest.to_owned(),

@@ -63,14 +63,8 @@ impl Dialect {
     }
 }
 
-/// `v` with exactly `decimals` decimals, never `-0.000`.
-pub(crate) fn fixed(v: f64, decimals: usize) -> String {
-    let text = format!("{v:.decimals$}");
-    match text.strip_prefix('-') {
-        Some(rest) if rest.bytes().all(|b| b == b'0' || b == b'.') => rest.to_owned(),
-        _ => text,
-    }
-}
+/// `v` with exactly `decimals` decimals, never `-0.000`: the curve tables' own formatter.
+pub(crate) use camloop_core::program::fmt_fixed as fixed;
 
 /// A constant inside an expression: the shortest text that reads back as the same `f64`,
 /// so the control computes with exactly the value the generator used.

@@ -4,13 +4,18 @@
 //!
 //! It reads the program *text*, not the generator's structures, so running a loop program
 //! through it and comparing the moves with the expanded program checks the rendering.
+//!
+//! Test support, not product code: the generators' tests evaluate the SINUMERIK loop text
+//! with it and require exactly the expanded blocks.
+
+#![allow(dead_code)]
 
 use std::collections::HashMap;
 
 use thiserror::Error;
 
-use super::dialect::fixed;
-use super::ir::{cos_deg, sin_deg, tan_deg};
+use camloop::core::generate::ir::{cos_deg, sin_deg, tan_deg};
+use camloop::core::program::fmt_fixed as fixed;
 
 /// Why a program cannot be evaluated; lines are 1-based.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
