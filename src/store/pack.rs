@@ -31,8 +31,32 @@ pub(super) fn zigzag(v: i64) -> u64 {
     ((v << 1) ^ (v >> 63)) as u64
 }
 
-fn unzigzag(u: u64) -> i64 {
+pub(super) fn unzigzag(u: u64) -> i64 {
     ((u >> 1) as i64) ^ -((u & 1) as i64)
+}
+
+/// Why a varint could not be read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum VarintError {
+    /// The bytes end mid-value.
+    Truncated,
+    /// More than 64 bits of continuation.
+    TooLong,
+}
+
+/// Takes one little-endian base-128 varint off the front of `bytes`. The one reader of
+/// every packed format (history rows and analysis reports).
+pub(super) fn take_varint(bytes: &mut &[u8]) -> Result<u64, VarintError> {
+    let mut u: u64 = 0;
+    for shift in (0..64).step_by(7) {
+        let (&b, rest) = bytes.split_first().ok_or(VarintError::Truncated)?;
+        *bytes = rest;
+        u |= u64::from(b & 0x7f) << shift;
+        if b & 0x80 == 0 {
+            return Ok(u);
+        }
+    }
+    Err(VarintError::TooLong)
 }
 
 pub(super) fn put_varint(out: &mut Vec<u8>, mut u: u64) {
@@ -55,19 +79,10 @@ impl Varints<'_> {
     }
 
     pub(super) fn next_u64(&mut self) -> Result<u64, StoreError> {
-        let mut u: u64 = 0;
-        for shift in (0..64).step_by(7) {
-            let (&b, rest) = self
-                .bytes
-                .split_first()
-                .ok_or_else(|| corrupt(self.field, "packed values end mid-value"))?;
-            self.bytes = rest;
-            u |= u64::from(b & 0x7f) << shift;
-            if b & 0x80 == 0 {
-                return Ok(u);
-            }
-        }
-        Err(corrupt(self.field, "a packed value is longer than 64 bits"))
+        take_varint(&mut self.bytes).map_err(|e| match e {
+            VarintError::Truncated => corrupt(self.field, "packed values end mid-value"),
+            VarintError::TooLong => corrupt(self.field, "a packed value is longer than 64 bits"),
+        })
     }
 }
 

@@ -11,6 +11,7 @@
 use serde_json::{Map, Number, Value};
 
 use super::error::StoreError;
+use super::pack::{VarintError, put_varint as put, take_varint, unzigzag, zigzag};
 
 /// Quantisation of fractional numbers in a packed report: 0.01 of the number's unit (µm,
 /// deg, µm/deg), a tenth of the gauge's 0.1 µm resolution.
@@ -37,17 +38,8 @@ fn bad(why: impl Into<String>) -> StoreError {
     StoreError::invalid("analysis_packed", why.into())
 }
 
-fn put(out: &mut Vec<u8>, u: u64) {
-    let mut u = u;
-    while u >= 0x80 {
-        out.push((u as u8) | 0x80);
-        u >>= 7;
-    }
-    out.push(u as u8);
-}
-
 fn put_i(out: &mut Vec<u8>, v: i64) {
-    put(out, ((v << 1) ^ (v >> 63)) as u64);
+    put(out, zigzag(v));
 }
 
 /// A fractional number's steps, when it fits exactly enough (|x| < 2^50 steps).
@@ -147,20 +139,14 @@ impl Reader<'_> {
     }
 
     fn u(&mut self) -> Result<u64, StoreError> {
-        let mut u = 0_u64;
-        for shift in (0..64).step_by(7) {
-            let b = self.byte()?;
-            u |= u64::from(b & 0x7f) << shift;
-            if b & 0x80 == 0 {
-                return Ok(u);
-            }
-        }
-        Err(bad("a number is longer than 64 bits"))
+        take_varint(&mut self.bytes).map_err(|e| match e {
+            VarintError::Truncated => bad("report ends early"),
+            VarintError::TooLong => bad("a number is longer than 64 bits"),
+        })
     }
 
     fn i(&mut self) -> Result<i64, StoreError> {
-        let u = self.u()?;
-        Ok(((u >> 1) as i64) ^ -((u & 1) as i64))
+        self.u().map(unzigzag)
     }
 
     /// A length, checked against what is left (each item takes at least one byte).
