@@ -182,17 +182,27 @@ async fn assert_clean(c: &Client, page: &str) {
     );
 }
 
-/// Clicks `css`; the live region may be replaced between finding and clicking (a part
-/// arrived), so a stale element is found again, at most five times.
+/// Clicks `css`, waiting (at most 10 s) until the click goes through: the live region may
+/// be replaced between finding and clicking (a part arrived), and on a loaded machine the
+/// page may still be laying out, so a stale or covered element is found again until the
+/// click lands. Five attempts in a row, with no wait, failed on 2 busy cores.
 async fn click(c: &Client, css: &str) {
-    for _ in 0..5 {
-        if let Ok(e) = c.find(Locator::Css(css)).await
-            && e.click().await.is_ok()
-        {
-            return;
+    let limit = Duration::from_secs(10);
+    let start = Instant::now();
+    loop {
+        let tried = match c.find(Locator::Css(css)).await {
+            Ok(e) => e.click().await.map(|_| ()),
+            Err(e) => Err(e),
+        };
+        match tried {
+            Ok(()) => return,
+            Err(e) => assert!(
+                start.elapsed() < limit,
+                "{css} could not be clicked within {limit:?}: {e}"
+            ),
         }
+        tokio::time::sleep(Duration::from_millis(50)).await;
     }
-    panic!("{css} could not be clicked");
 }
 
 fn shots() -> PathBuf {
