@@ -28,9 +28,11 @@ function token() {
   return t ? t.value.trim() : "";
 }
 
-// Refreshes the live region from its address with fragment=1; one request at a time.
+// Refreshes the live region from its address with fragment=1; one request at a time. A
+// refresh that failed says so until one succeeds (a busy store answers 503 now and then).
 let busy = false;
 let again = false;
+let refreshFailed = false;
 async function refresh() {
   const live = $("#live");
   if (!live) return;
@@ -41,8 +43,10 @@ async function refresh() {
     const r = await fetch(url, { cache: "no-store" });
     if (r.ok) {
       live.innerHTML = await r.text();
+      if (refreshFailed) { refreshFailed = false; notice(""); }
     } else {
       seen.failed.push(r.status + " " + url);
+      refreshFailed = true;
       notice("refresh failed: HTTP " + r.status);
     }
   } catch (e) {
