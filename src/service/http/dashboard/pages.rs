@@ -204,7 +204,7 @@ pub(super) fn versions(
         m = esc(machine),
         l = esc(lobe)
     );
-    let rest = r#"<p class="hint">Rollback delivers the chosen version again as a new version; it needs the API token (top right).</p><p id="rollback-result" role="status"></p>"#;
+    let rest = r#"<p class="hint">Rollback delivers the chosen version again as a new version; it needs the API token (in the bar at the top).</p><p id="rollback-result" role="status"></p>"#;
     page(
         &format!("{machine} {lobe}: table versions"),
         &crumbs,
