@@ -284,24 +284,37 @@ def outage(dir):
     proc = start(dir, config)
     time.sleep(4)
     subprocess.run(["chattr", "+i", share], check=True)
-    before = rows_now(dir)
+    made_read_only_ms = time.time() * 1000
     time.sleep(10)
     subprocess.run(["chattr", "-i", share], check=True)
-    during = rows_now(dir)
+    restored_ms = time.time() * 1000
     time.sleep(5)
     stop(proc)
     _, _, errors, state = rows(dir)
+    # Parts are placed by when they were received, not by how many rows the database held
+    # at the moment: the journal may lag behind the parts during the outage, so a row
+    # count taken then can put parts ground during the outage on the "after" side.
+    received = received_ms(dir)
+    before = sum(1 for t in received if t < made_read_only_ms)
+    during = sum(1 for t in received if t < restored_ms)
     show = lambda v: " ".join(f"{e:.2f}" for e in v)
     print(f"outage: before {show(errors[:before])}")
     print(f"outage: during {show(errors[before:during])}")
     print(f"outage: after  {show(errors[during:])}")
     frozen = state["learning"].get("frozen") if state else None
     print(f"outage: learning frozen: {frozen}")
-    # The first part after the restore was ground before any new table reached the share;
-    # the next one with a table learned from it; the one after that is the second part
-    # ground with a new table and must be back under 1.3 µm. (Later dressings bring their
-    # own spike of the dressing's size error; they are not the outage's.)
+    # The first part received after the restore was ground before any new table reached
+    # the share; the next one with a table learned from it; the one after that is the
+    # second part ground with a new table and must be back under 1.3 µm. (Later dressings
+    # bring their own spike of the dressing's size error; they are not the outage's.)
     return frozen is None and errors[during + 2] < 1.3
+
+
+def received_ms(dir):
+    db = sqlite3.connect(os.path.join(dir, "var", "camloop.db"))
+    times = [t for (t,) in db.execute("SELECT received_at_ms FROM measurements ORDER BY id")]
+    db.close()
+    return times
 
 
 def rows_now(dir):
