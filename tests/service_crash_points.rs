@@ -4,7 +4,7 @@
 //! next part is learned from the table in force. Once for one lobe, once for the whole
 //! 8-lobe demo camshaft.
 //!
-//! Where `tests/service_kill.rs` kills at random moments, this lands a crash between every
+//! Where `tests/it/service_kill.rs` kills at random moments, this lands a crash between every
 //! pair of steps on purpose, so a window no random kill happened to hit is tested all the
 //! same. It prints a table (step, where it crashed, what the restart found) for the record.
 

@@ -1,6 +1,5 @@
 //! Running the real `camloop` binary from the command-line tests.
 // Each test crate uses the part it needs.
-#![allow(dead_code)]
 
 use std::path::Path;
 use std::process::{Command, Output};

@@ -5,7 +5,6 @@
 //! call per line (`STRAIGHT_FEED(x, y, z, a, b, c)` with 4 decimals). Without an INI file
 //! the interpreter's machine units are inches, so the tool table's diameter `D` is written
 //! in inches while the program itself runs in mm (G21).
-#![allow(dead_code)]
 
 use std::path::PathBuf;
 use std::process::{Command, Stdio};

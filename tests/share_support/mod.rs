@@ -1,7 +1,6 @@
 //! Helpers shared by the share tests: temporary share and state folders, a fake clock,
 //! real curve-table programs.
 
-#![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
 

@@ -1,10 +1,8 @@
 //! Shared support for the simulator tests: the demo lobe and crankpin, tables for them, and
 //! the nominal lift to compare a ground part against.
-#![allow(dead_code)]
 
 pub mod brute;
-#[path = "../support/golden.rs"]
-pub mod golden;
+pub use crate::support::golden;
 
 use camloop::core::fit::TableForm;
 use camloop::core::geometry::{CamGeometry, CrankpinGeometry, Follower, Part};

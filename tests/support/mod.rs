@@ -3,7 +3,6 @@
 //!
 //! Each integration-test crate includes this with `mod support;` and uses only part of it, so
 //! dead-code warnings for the unused rest are expected and silenced here.
-#![allow(dead_code)]
 
 pub mod golden;
 pub mod lobes;

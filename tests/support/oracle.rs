@@ -331,11 +331,6 @@ impl<L: Fn(f64) -> f64> CamOracle<L> {
         }
     }
 
-    /// Cam outline radius at θ (rad), mm: the brute-force radial function.
-    pub fn outline_radius_mm(&self, theta_rad: f64) -> f64 {
-        self.outline_wide(theta_rad).0
-    }
-
     /// Wheel-centre distance at wheel direction `c_deg`, mm.
     pub fn d_mm(&self, c_deg: f64) -> f64 {
         envelope_mm(

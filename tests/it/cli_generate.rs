@@ -1,0 +1,159 @@
+//! `camloop contour`, `turnmill` and `planing` as a user runs them: real binary, real
+//! files, one-line refusals that leave nothing behind.
+
+use crate::cli_support;
+
+use cli_support::{camloop, repo, stderr};
+
+#[test]
+fn contour_writes_the_program_and_reports_the_fixed_step_figure() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = camloop(
+        &[
+            "contour",
+            "ellipse",
+            "--centre-z-mm",
+            "-30",
+            "--centre-x-mm",
+            "10",
+            "--a-mm",
+            "30",
+            "--b-mm",
+            "20",
+            "--start-deg",
+            "10",
+            "--end-deg",
+            "170",
+            "--dialect",
+            "iso",
+            "--out",
+            "e.ngc",
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("117 chords"), "{stdout}");
+    assert!(stdout.contains("fixed step needs 130 chords"), "{stdout}");
+    let text = std::fs::read_to_string(dir.path().join("e.ngc")).unwrap();
+    assert!(
+        text.contains("o104 do") && text.contains("G42 G1"),
+        "{text}"
+    );
+}
+
+#[test]
+fn contour_refusal_is_one_line_with_the_reason_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = camloop(
+        &[
+            "contour",
+            "sine",
+            "--mean-x-mm",
+            "20",
+            "--amplitude-mm",
+            "2",
+            "--wavelength-mm",
+            "20",
+            "--z-start-mm",
+            "0",
+            "--z-end-mm",
+            "-40",
+            "--nose-radius-mm",
+            "6",
+            "--out",
+            "s.mpf",
+        ],
+        dir.path(),
+    );
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.contains("nose radius 6 mm is larger than the concave radius 5.066"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    let out = camloop(
+        &[
+            "contour",
+            "sine",
+            "--mean-x-mm",
+            "20",
+            "--amplitude-mm",
+            "2",
+            "--wavelength-mm",
+            "20",
+            "--z-start-mm",
+            "0",
+            "--z-end-mm",
+            "-40",
+            "--tolerance-um",
+            "0.1",
+        ],
+        dir.path(),
+    );
+    assert!(
+        stderr(&out).contains("below what the control can hold"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn turnmill_job_file_to_program_and_unknown_keys_refused_with_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let job = repo("tests/fixtures/turnmill-crank.toml");
+    let out = camloop(&["turnmill", "--job", &job, "--out", "c.mpf"], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = std::fs::read_to_string(dir.path().join("c.mpf")).unwrap();
+    assert!(text.contains("DEF REAL PHI,ECC,PHA,RAD,XC,YC"), "{text}");
+    assert_eq!(text.matches("G0 C=PHI").count(), 3);
+    let bad = dir.path().join("bad.toml");
+    let mut t = std::fs::read_to_string(&job).unwrap();
+    t = t.replace("safety_deg = 3.0", "safety_deg = 3.0\nsafety = 3.0");
+    std::fs::write(&bad, t).unwrap();
+    let out = camloop(
+        &["turnmill", "--job", bad.to_str().unwrap(), "--out", "d.mpf"],
+        dir.path(),
+    );
+    let err = stderr(&out);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("bad.toml") && err.contains("line 25") && err.contains("safety"),
+        "{err}"
+    );
+    assert!(!dir.path().join("d.mpf").exists());
+}
+
+#[test]
+fn planing_resumes_after_the_segments_done() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = camloop(
+        &[
+            "planing",
+            "--ratio-deg-per-mm",
+            "0.75",
+            "--x-start-mm",
+            "0",
+            "--x-end-mm",
+            "80",
+            "--z-cut-mm",
+            "-2",
+            "--z-lift-mm",
+            "5",
+            "--done",
+            "4",
+            "--out",
+            "p.mpf",
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = std::fs::read_to_string(dir.path().join("p.mpf")).unwrap();
+    assert!(
+        text.contains("; segment 5 of 6") && !text.contains("; segment 4 of 6"),
+        "{text}"
+    );
+    assert!(text.contains("LEADON(A,X,1)"), "{text}");
+}

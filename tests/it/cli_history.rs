@@ -1,0 +1,95 @@
+//! `camloop history --last N` reads the store page by page: more than one page (10,000 rows)
+//! comes out whole, newest first.
+
+use crate::cli_support;
+use crate::store_support;
+
+use camloop::cli::history::newest;
+use camloop::store::{HistoryFilter, Store};
+use cli_support::camloop;
+
+/// A SQLite store in `dir` with `n` measurements of M1/IN1, received at 1, 2, … n s.
+async fn store_with(dir: &std::path::Path, n: u32) -> (Store, String) {
+    let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.display());
+    let store = Store::connect(&url).await.unwrap();
+    // The first through the store (it registers the machine); the rest in one statement.
+    store
+        .insert_measurement(&store_support::data::measurement("M1", "IN1", 1, 1_000))
+        .await
+        .unwrap();
+    let camloop::store::RawPool::Sqlite(pool) = store.raw_pool() else {
+        panic!("a SQLite store")
+    };
+    sqlx::query(
+        "INSERT INTO measurements (machine, part, lobe, received_at_ms, verdict, \
+         max_profile_error_um, base_radius_error_um, phase_error_deg, revolutions_used, \
+         points_per_rev, origin, sha256) \
+         WITH RECURSIVE n(i) AS (SELECT 2 UNION ALL SELECT i + 1 FROM n WHERE i < $1) \
+         SELECT 'M1', 'P-' || i, 'IN1', i * 1000, 'pass', 1.0, 0.0, 0.0, 3, 36, 'bulk', \
+         printf('%064d', i) FROM n",
+    )
+    .bind(i64::from(n))
+    .execute(pool)
+    .await
+    .unwrap();
+    (store, url)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn newest_pages_through_the_store_until_it_has_n_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let (store, _) = store_with(dir.path(), 25).await;
+    let filter = HistoryFilter {
+        machine: "M1".into(),
+        ..HistoryFilter::default()
+    };
+    // Pages of 10: 23 rows take three queries and come out newest first, none twice.
+    let rows = newest(&store, filter.clone(), 23, 10).await.unwrap();
+    let times: Vec<i64> = rows.iter().map(|m| m.received_at_ms).collect();
+    let expected: Vec<i64> = (3..=25).rev().map(|i| i * 1000).collect();
+    assert_eq!(times, expected);
+    // More asked than there are: all 25.
+    assert_eq!(
+        newest(&store, filter.clone(), 40, 10).await.unwrap().len(),
+        25
+    );
+    assert_eq!(newest(&store, filter, 0, 10).await.unwrap().len(), 0);
+}
+
+#[test]
+fn history_last_beyond_one_page_is_not_capped() {
+    let dir = tempfile::tempdir().unwrap();
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let n = 10_050;
+    let url = runtime.block_on(async {
+        let (store, url) = store_with(dir.path(), n).await;
+        store.close().await;
+        url
+    });
+    let last = (n - 1).to_string();
+    let out = camloop(
+        &[
+            "history",
+            "--machine",
+            "M1",
+            "--last",
+            &last,
+            "--format",
+            "csv",
+            "--database",
+            &url,
+        ],
+        dir.path(),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = String::from_utf8_lossy(&out.stdout);
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    assert_eq!(rows.len(), 10_049);
+    // Newest first, down to the second-oldest.
+    assert!(rows[0].contains(",10050000,M1,P-10050,"), "{}", rows[0]);
+    assert!(rows[10_048].contains(",2000,M1,P-2,"), "{}", rows[10_048]);
+}

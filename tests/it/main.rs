@@ -1,0 +1,94 @@
+//! The integration tests, as one test binary: each former `tests/*.rs` file is a module,
+//! and the support modules are compiled once. Tests that need a process of their own
+//! (timing-bound, or driving a browser) stay separate binaries in `tests/`.
+
+#[path = "../cli_support/mod.rs"]
+mod cli_support;
+#[path = "../common/cycloid_cam.rs"]
+mod cycloid_cam;
+#[path = "../gauge_drop_support/mod.rs"]
+mod gauge_drop_support;
+#[path = "../history_support/mod.rs"]
+mod history_support;
+#[path = "../process_support/mod.rs"]
+mod process_support;
+#[path = "../rs274_support/mod.rs"]
+mod rs274_support;
+#[path = "../service_support/mod.rs"]
+mod service_support;
+#[path = "../share_support/mod.rs"]
+mod share_support;
+#[path = "../sim_support/mod.rs"]
+mod sim_support;
+#[path = "../sinumerik_support/mod.rs"]
+mod sinumerik_support;
+#[path = "../store_support/mod.rs"]
+mod store_support;
+#[path = "../support/mod.rs"]
+mod support;
+
+mod analysis_accuracy;
+mod analysis_assembly;
+mod analysis_fixture;
+mod analysis_harmonics;
+mod analysis_lobe;
+mod analysis_pin;
+mod cli_analyze;
+mod cli_compensate;
+mod cli_generate;
+mod cli_history;
+mod cli_run;
+mod cli_table;
+mod config_check;
+mod control_coupling;
+mod crank_service;
+mod dashboard_http;
+mod docs;
+mod gauge_can;
+mod gauge_can_live;
+mod gauge_drop_complete;
+mod gauge_drop_entries;
+mod gauge_drop_folder;
+mod gauge_drop_memory;
+mod gauge_encode;
+mod gauge_file;
+mod gauge_proptest;
+mod gauge_serial;
+mod gauge_serial_codec;
+mod generate_contour;
+mod generate_planing;
+mod generate_turnmill;
+mod geometry_accuracy;
+mod geometry_oracle;
+mod geometry_props;
+mod invariants;
+mod loop_plateau;
+mod loop_sim;
+mod mqtt_broker;
+mod program_retarget;
+mod program_settings;
+mod program_svg;
+mod program_tables;
+mod recipe;
+mod service_disk_full;
+mod service_faults;
+mod service_http;
+mod service_identity;
+mod service_kill;
+mod service_run;
+mod shaft_routing;
+mod shaft_service;
+mod share_faults;
+mod share_fence;
+mod share_kill;
+mod share_manifest_bound;
+mod share_push;
+mod sim_envelope;
+mod sim_gauge;
+mod sim_machine;
+mod sim_wheel;
+mod store_chains;
+mod store_errors;
+mod store_migrate;
+mod store_schema;
+mod store_story;

@@ -1,0 +1,118 @@
+//! Packed rows chain onto the previous row of their feature, and each store handle keeps the
+//! newest rows' texts to pack the next one without decoding the chain. Two handles on one
+//! database (two instances of a cluster, or a restart) take turns writing one feature: a
+//! handle must notice that the newest row is no longer the one it wrote, or has been
+//! replaced, and every row must read back exactly from a third, fresh handle. SQLite and a
+//! throwaway PostgreSQL server.
+
+use crate::store_support;
+
+use camloop::store::{NewTableVersion, Store, TableStatus};
+use store_support::data::sha_of;
+
+/// A curve-table program whose numbers move with `v` as a learned correction moves them.
+fn program(v: i64) -> String {
+    let mut text = format!("; table version: v{v}\nCTABDEF(X,C,7,1)\n");
+    for k in 0..360 {
+        let x = 7.5 + (f64::from(k) * 0.0174).sin() * 3.0 + 3e-4 * v as f64 * f64::from(k % 7);
+        text += &format!(
+            "PO[C]=({k}.9160) PO[X]=({x:.4},{:.6},0.000039)\n",
+            -0.002 - 1e-6 * v as f64
+        );
+    }
+    text + "CTABEND\n"
+}
+
+fn learning(v: i64) -> String {
+    let correction: Vec<f64> = (0..360)
+        .map(|k| ((f64::from(k) * 0.05).cos() * v as f64 * 137.0).round() / 1000.0)
+        .collect();
+    serde_json::json!({"iteration": v, "wheel_radius_mm": 250.0, "correction_um": correction})
+        .to_string()
+}
+
+fn state(v: i64) -> String {
+    let correction: Vec<f64> = (0..360)
+        .map(|k| ((f64::from(k) * 0.07).sin() * v as f64 * 91.0).round() / 1000.0)
+        .collect();
+    serde_json::json!({"parts": v, "learning": {"correction_um": correction}}).to_string()
+}
+
+async fn take_turns(url: &str) {
+    let a = Store::connect(url).await.unwrap();
+    let b = Store::connect(url).await.unwrap();
+    // 40 versions: more than two chains of 16; the writer changes every 3 versions.
+    for v in 1..=40_i64 {
+        let store = if (v / 3) % 2 == 0 { &a } else { &b };
+        let t = NewTableVersion {
+            machine: "M1".into(),
+            lobe: "IN1".into(),
+            version: Some(v),
+            parent_version: (v > 1).then_some(v - 1),
+            table_number: 7,
+            program_text: program(v),
+            learning_params_json: learning(v),
+            reason: format!("part {v}"),
+            status: TableStatus::Waiting,
+            status_why: "waiting".into(),
+            created_at_ms: v * 10,
+        };
+        assert_eq!(store.insert_table_version(&t).await.unwrap(), v);
+        // Learning snapshots: the meaning changes every 4 parts (a row is added), else the
+        // newest row is replaced, by whichever handle writes this part.
+        let meaning = sha_of(&format!("mode {}", v / 4));
+        store
+            .save_learning_snapshot("M1", "IN1", &state(v), Some(&meaning), v * 10)
+            .await
+            .unwrap();
+        let other = if std::ptr::eq(store, &a) { &b } else { &a };
+        let newest = other
+            .load_learning_state("M1", "IN1")
+            .await
+            .unwrap()
+            .unwrap();
+        assert_eq!(newest.state_json, state(v), "part {v}");
+    }
+    let fresh = Store::connect(url).await.unwrap();
+    let versions = fresh.table_versions("M1", "IN1", 100).await.unwrap();
+    assert_eq!(versions.len(), 40);
+    for t in versions {
+        assert_eq!(t.program_text, program(t.version), "v{}", t.version);
+        assert_eq!(
+            t.learning_params_json,
+            learning(t.version),
+            "v{}",
+            t.version
+        );
+    }
+    for v in 1..=40_i64 {
+        // The snapshot of each meaning's last part is kept; the others were replaced.
+        let kept = v == 40 || (v + 1) % 4 == 0;
+        let exists = fresh
+            .learning_state_exists("M1", "IN1", &state(v), v * 10)
+            .await
+            .unwrap();
+        assert_eq!(exists, kept, "learning state of part {v}");
+    }
+    for s in [a, b, fresh] {
+        s.close().await;
+    }
+}
+
+#[tokio::test]
+async fn two_handles_taking_turns_on_sqlite_read_back_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    take_turns(&format!(
+        "sqlite://{}?mode=rwc",
+        dir.path().join("c.db").display()
+    ))
+    .await;
+}
+
+#[tokio::test]
+async fn two_handles_taking_turns_on_postgres_read_back_exactly() {
+    let Some(server) = store_support::pg::start_or_skip("store_chains") else {
+        return;
+    };
+    take_turns(&server.url()).await;
+}

@@ -1,0 +1,652 @@
+//! The history store's story, run on SQLite and on a throwaway PostgreSQL server: machine →
+//! recipe snapshot → measurements → table versions → history with filters and cursor paging
+//! → learning state → dressings and events → export → retention keeps summaries. Plus
+//! idempotent insert, refused input and concurrent writers.
+
+use crate::store_support;
+
+use store_support::data::{LIFT_TOL_MM, all_pages, filter, measurement, sha_of, table};
+
+use camloop::store::{
+    EventFilter, EventLevel, FeatureKind, HistoryFilter, MeasurementId, MeasurementSummary,
+    NewDressing, NewEvent, NewMeasurement, NewRecipeSnapshot, Store, StoreError, TableStatus,
+    Verdict,
+};
+
+async fn story(store: &Store) {
+    assert!(store.machines().await.unwrap().is_empty());
+
+    // Recipe snapshots: unchanged JSON reuses the newest snapshot, a change appends one.
+    let snap = |lobe: &str, kind, json: &str| NewRecipeSnapshot {
+        machine: "M1".into(),
+        part: "CAM-7".into(),
+        lobe: lobe.into(),
+        kind,
+        recipe_json: json.into(),
+        created_at_ms: 1_000,
+    };
+    let r1 = store
+        .insert_recipe_snapshot(&snap("in1", FeatureKind::Lobe, r#"{"base_radius_mm":18}"#))
+        .await
+        .unwrap();
+    let again = store
+        .insert_recipe_snapshot(&snap("in1", FeatureKind::Lobe, r#"{"base_radius_mm":18}"#))
+        .await
+        .unwrap();
+    assert_eq!(r1, again);
+    let r2 = store
+        .insert_recipe_snapshot(&snap(
+            "in1",
+            FeatureKind::Lobe,
+            r#"{"base_radius_mm":18.5}"#,
+        ))
+        .await
+        .unwrap();
+    assert_ne!(r1, r2);
+    let p1 = store
+        .insert_recipe_snapshot(&snap("pin1", FeatureKind::Pin, r#"{"throw_mm":45}"#))
+        .await
+        .unwrap();
+    let features = store.features("M1").await.unwrap();
+    let seen: Vec<_> = features
+        .iter()
+        .map(|f| (f.lobe.as_str(), f.kind, f.recipe_snapshot))
+        .collect();
+    assert_eq!(
+        seen,
+        [
+            ("in1", FeatureKind::Lobe, r2),
+            ("pin1", FeatureKind::Pin, p1)
+        ]
+    );
+    assert_eq!(features[0].recipe_json, r#"{"base_radius_mm":18.5}"#);
+
+    // Measurements: 30 on M1/in1 (two sharing a millisecond), 10 on M1/ex1, 5 on M2/in1.
+    let mut inserted: Vec<(MeasurementId, NewMeasurement)> = Vec::new();
+    for n in 0..45u32 {
+        let (machine, lobe) = match n {
+            0..30 => ("M1", "in1"),
+            30..40 => ("M1", "ex1"),
+            _ => ("M2", "in1"),
+        };
+        // Parts 10 and 11 arrive in the same millisecond: id breaks the tie.
+        let at = 10_000 + 1_000 * i64::from(n) - i64::from(n == 11) * 1_000;
+        let mut m = measurement(machine, lobe, n, at);
+        if n < 30 {
+            m.recipe_snapshot = Some(r2);
+        }
+        let id = store.insert_measurement(&m).await.unwrap();
+        inserted.push((id, m));
+    }
+    let names: Vec<_> = store
+        .machines()
+        .await
+        .unwrap()
+        .into_iter()
+        .map(|m| (m.name, m.first_seen_ms))
+        .collect();
+    assert_eq!(
+        names,
+        [("M1".to_owned(), 1_000), ("M2".to_owned(), 10_000 + 40_000)]
+    );
+
+    // Detail round trip: blobs within the quantisation, everything else exact.
+    let (id5, m5) = &inserted[5];
+    let d = store.measurement(*id5).await.unwrap().unwrap();
+    assert_eq!(d.summary.id, *id5);
+    assert_eq!(d.summary.part, "P-00005");
+    assert_eq!(d.summary.verdict, Verdict::Pass);
+    assert_eq!(d.summary.max_profile_error_um, m5.max_profile_error_um);
+    assert_eq!(d.summary.recipe_snapshot, Some(r2));
+    assert_eq!(d.summary.sha256, m5.sha256);
+    // The report is kept as packed binary: the same JSON object (its numbers here are
+    // multiples of the 0.01 quantisation step, so they come back exactly).
+    let json = |t: &str| serde_json::from_str::<serde_json::Value>(t).unwrap();
+    assert_eq!(json(&d.analysis_json), json(&m5.analysis_json));
+    assert_eq!(d.averaged_lift_mm.len(), 36);
+    for (a, b) in d.averaged_lift_mm.iter().zip(&m5.averaged_lift_mm) {
+        assert!((a - b).abs() <= LIFT_TOL_MM, "averaged {a} vs {b}");
+    }
+    let raw = d.raw_lift_mm.as_ref().unwrap();
+    assert_eq!(raw.len(), 3);
+    for (ra, rb) in raw.iter().zip(&m5.raw_lift_mm) {
+        for (a, b) in ra.iter().zip(rb) {
+            assert!((a - b).abs() <= LIFT_TOL_MM, "raw {a} vs {b}");
+        }
+    }
+    assert!(
+        store
+            .measurement(MeasurementId(-1))
+            .await
+            .unwrap()
+            .is_none()
+    );
+
+    // History: the expectation is computed here from what was inserted, newest first.
+    let expect = |keep: &dyn Fn(&NewMeasurement) -> bool| {
+        let mut v: Vec<(i64, MeasurementId)> = inserted
+            .iter()
+            .filter(|(_, m)| keep(m))
+            .map(|(id, m)| (m.received_at_ms, *id))
+            .collect();
+        v.sort_by(|a, b| b.cmp(a));
+        v.into_iter().map(|(_, id)| id).collect::<Vec<_>>()
+    };
+    let ids = |v: Vec<MeasurementSummary>| v.into_iter().map(|s| s.id).collect::<Vec<_>>();
+
+    let lobe_in1 = HistoryFilter {
+        lobe: Some("in1".into()),
+        ..filter("M1")
+    };
+    let got = ids(all_pages(store, lobe_in1.clone()).await);
+    assert_eq!(got.len(), 30);
+    assert_eq!(got, expect(&|m| m.machine == "M1" && m.lobe == "in1"));
+    // The tie: part 11 (inserted later, higher id) comes before part 10.
+    let p10 = got.iter().position(|id| *id == inserted[10].0).unwrap();
+    assert_eq!(got[p10 - 1], inserted[11].0);
+
+    let all_m1 = ids(all_pages(store, filter("M1")).await);
+    assert_eq!(all_m1, expect(&|m| m.machine == "M1"));
+    assert_eq!(all_m1.len(), 40);
+
+    let fails = all_pages(
+        store,
+        HistoryFilter {
+            verdict: Some(Verdict::Fail),
+            ..lobe_in1.clone()
+        },
+    )
+    .await;
+    assert!(fails.iter().all(|s| s.verdict == Verdict::Fail));
+    assert_eq!(
+        ids(fails),
+        expect(&|m| m.machine == "M1" && m.lobe == "in1" && m.verdict == Verdict::Fail)
+    );
+    assert_eq!(
+        expect(&|m| m.machine == "M1" && m.lobe == "in1" && m.verdict == Verdict::Fail).len(),
+        8,
+        "parts 0, 4, …, 28 fail"
+    );
+
+    let window = HistoryFilter {
+        since_ms: Some(15_000),
+        until_ms: Some(20_000),
+        ..lobe_in1.clone()
+    };
+    assert_eq!(
+        ids(all_pages(store, window).await),
+        expect(&|m| m.machine == "M1"
+            && m.lobe == "in1"
+            && (15_000..20_000).contains(&m.received_at_ms))
+    );
+    let empty = store.measurement_history(&filter("nobody")).await.unwrap();
+    assert!(empty.items.is_empty() && empty.next_cursor.is_none());
+    let bad = HistoryFilter {
+        cursor: Some("not-a-cursor".into()),
+        ..filter("M1")
+    };
+    assert_eq!(
+        store.measurement_history(&bad).await.unwrap_err().code(),
+        "invalid"
+    );
+
+    // Table versions: numbered per lobe, status appended.
+    assert!(
+        store
+            .latest_table_version("M1", "in1")
+            .await
+            .unwrap()
+            .is_none()
+    );
+    let v1 = store
+        .insert_table_version(&table("in1", None, "CTABDEF(11)\nv1", TableStatus::Waiting))
+        .await
+        .unwrap();
+    assert_eq!(v1, 1);
+    store
+        .set_table_status(
+            "M1",
+            "in1",
+            1,
+            TableStatus::Pushed,
+            "pushed to share",
+            6_000,
+        )
+        .await
+        .unwrap();
+    let v2 = store
+        .insert_table_version(&table(
+            "in1",
+            Some(1),
+            "CTABDEF(12)\nv2",
+            TableStatus::Refused,
+        ))
+        .await
+        .unwrap();
+    assert_eq!(v2, 2);
+    assert_eq!(
+        store
+            .insert_table_version(&table("ex1", None, "x", TableStatus::Waiting))
+            .await
+            .unwrap(),
+        1,
+        "numbering is per lobe"
+    );
+    let latest = store
+        .latest_table_version("M1", "in1")
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!((latest.version, latest.parent_version), (2, Some(1)));
+    assert_eq!(latest.status, TableStatus::Refused);
+    assert_eq!(latest.sha256, sha_of("CTABDEF(12)\nv2"));
+    let first = store.table_version("M1", "in1", 1).await.unwrap().unwrap();
+    assert_eq!(first.status, TableStatus::Pushed);
+    assert_eq!(
+        (first.status_why.as_str(), first.status_at_ms),
+        ("pushed to share", 6_000)
+    );
+    assert_eq!(first.program_text, "CTABDEF(11)\nv1");
+    assert_eq!(first.table_number, 11);
+    assert_eq!(first.learning_params_json, r#"{"gain":0.6}"#);
+    let listed: Vec<i64> = store
+        .table_versions("M1", "in1", 10)
+        .await
+        .unwrap()
+        .iter()
+        .map(|t| t.version)
+        .collect();
+    assert_eq!(listed, [2, 1]);
+    assert!(matches!(
+        store
+            .insert_table_version(&table("in1", Some(99), "y", TableStatus::Waiting))
+            .await,
+        Err(StoreError::NotFound { .. })
+    ));
+    assert!(matches!(
+        store
+            .set_table_status("M1", "in1", 42, TableStatus::Pushed, "x", 1)
+            .await,
+        Err(StoreError::NotFound { .. })
+    ));
+    assert!(store.table_version("M1", "in1", 3).await.unwrap().is_none());
+
+    // Learning state: newest snapshot wins.
+    assert!(
+        store
+            .load_learning_state("M1", "in1")
+            .await
+            .unwrap()
+            .is_none()
+    );
+    store
+        .save_learning_state("M1", "in1", r#"{"k":1}"#, 7_000)
+        .await
+        .unwrap();
+    store
+        .save_learning_state("M1", "in1", r#"{"k":2}"#, 8_000)
+        .await
+        .unwrap();
+    store
+        .save_learning_state("M1", "ex1", r#"{"k":9}"#, 9_000)
+        .await
+        .unwrap();
+    let state = store
+        .load_learning_state("M1", "in1")
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(
+        (state.state_json.as_str(), state.saved_at_ms),
+        (r#"{"k":2}"#, 8_000)
+    );
+
+    // Dressings and events.
+    for (at, old_mm, new_mm) in [(20_000_i64, 250.0, 249.95), (30_000, 249.95, 249.9)] {
+        store
+            .insert_dressing(&NewDressing {
+                machine: "M1".into(),
+                at_ms: at,
+                old_radius_mm: old_mm,
+                new_radius_mm: new_mm,
+                source: "plc".into(),
+            })
+            .await
+            .unwrap();
+    }
+    let dressings = store.dressings("M1", 10).await.unwrap();
+    assert_eq!(dressings.len(), 2);
+    assert_eq!(dressings[0].at_ms, 30_000);
+    // Doubles round-trip exactly through REAL / DOUBLE PRECISION.
+    assert_eq!(
+        (dressings[0].old_radius_mm, dressings[0].new_radius_mm),
+        (249.95, 249.9)
+    );
+    let mut event_ids = Vec::new();
+    for (at, level, kind) in [
+        (1, EventLevel::Info, "started"),
+        (2, EventLevel::Error, "gauge_down"),
+        (3, EventLevel::Warn, "table_refused"),
+    ] {
+        let id = store
+            .insert_event(&NewEvent {
+                machine: "M1".into(),
+                at_ms: at,
+                level,
+                kind: kind.into(),
+                message: format!("{kind} at {at}"),
+            })
+            .await
+            .unwrap();
+        event_ids.push(id);
+    }
+    let events = store
+        .events(&EventFilter {
+            machine: Some("M1".into()),
+            limit: 10,
+            ..EventFilter::default()
+        })
+        .await
+        .unwrap();
+    let kinds: Vec<_> = events.iter().map(|e| e.kind.as_str()).collect();
+    assert_eq!(kinds, ["table_refused", "gauge_down", "started"]);
+    event_ids.reverse();
+    assert_eq!(events.iter().map(|e| e.id).collect::<Vec<_>>(), event_ids);
+    let errors = store
+        .events(&EventFilter {
+            level: Some(EventLevel::Error),
+            since_ms: Some(2),
+            limit: 10,
+            ..EventFilter::default()
+        })
+        .await
+        .unwrap();
+    assert_eq!(errors.len(), 1);
+    assert_eq!(errors[0].message, "gauge_down at 2");
+
+    // Export pages by id through everything in the window.
+    let mut exported = Vec::new();
+    let mut after = None;
+    loop {
+        let page = store.export(0, i64::MAX, after, 16).await.unwrap();
+        let Some(last) = page.last() else { break };
+        after = Some(last.summary.id);
+        exported.extend(page);
+    }
+    let mut want: Vec<_> = inserted.iter().map(|(id, _)| *id).collect();
+    want.sort();
+    assert_eq!(
+        exported.iter().map(|d| d.summary.id).collect::<Vec<_>>(),
+        want
+    );
+
+    // Retention: raw blobs before the cutoff go, summaries and averaged profiles stay.
+    let cutoff = 20_000;
+    let old = inserted
+        .iter()
+        .filter(|(_, m)| m.received_at_ms < cutoff)
+        .count();
+    assert_eq!(
+        old, 10,
+        "parts 0 to 9; parts 10 and 11 arrive at the cutoff"
+    );
+    assert_eq!(
+        store.prune_raw_older_than(cutoff).await.unwrap(),
+        old as u64
+    );
+    assert_eq!(store.prune_raw_older_than(cutoff).await.unwrap(), 0);
+    let pruned = store.measurement(*id5).await.unwrap().unwrap();
+    assert!(pruned.raw_lift_mm.is_none());
+    assert_eq!(pruned.averaged_lift_mm, d.averaged_lift_mm);
+    assert_eq!(pruned.summary, d.summary);
+    let kept = store.measurement(inserted[20].0).await.unwrap().unwrap();
+    assert_eq!(kept.raw_lift_mm.map(|r| r.len()), Some(3));
+    assert_eq!(all_pages(store, filter("M1")).await.len(), 40);
+}
+
+async fn idempotent(store: &Store) {
+    let m = measurement("M9", "in1", 1, 1_000);
+    let a = store.insert_measurement(&m).await.unwrap();
+    let b = store.insert_measurement(&m).await.unwrap();
+    assert_eq!(a, b);
+    // Same hash, later arrival: still the stored measurement, nothing new written.
+    let late = NewMeasurement {
+        received_at_ms: 2_000,
+        ..m.clone()
+    };
+    assert_eq!(store.insert_measurement(&late).await.unwrap(), a);
+    let page = store.measurement_history(&filter("M9")).await.unwrap();
+    assert_eq!(page.items.len(), 1);
+    assert_eq!(page.items[0].received_at_ms, 1_000);
+
+    // Refused input names the field and writes nothing.
+    let mut short = measurement("M9", "in1", 2, 3_000);
+    short.averaged_lift_mm.pop();
+    let e = store.insert_measurement(&short).await.unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "invalid averaged_lift_mm: 35 values, expected points_per_rev = 36"
+    );
+    let mut nan = measurement("M9", "in1", 3, 3_000);
+    nan.raw_lift_mm[1][7] = f64::NAN;
+    assert!(matches!(
+        store.insert_measurement(&nan).await,
+        Err(StoreError::Invalid {
+            field: "lift_mm",
+            ..
+        })
+    ));
+    let mut not_json = measurement("M9", "in1", 4, 3_000);
+    not_json.analysis_json = "{".into();
+    assert_eq!(
+        store
+            .insert_measurement(&not_json)
+            .await
+            .unwrap_err()
+            .code(),
+        "invalid"
+    );
+    assert_eq!(
+        store
+            .measurement_history(&filter("M9"))
+            .await
+            .unwrap()
+            .items
+            .len(),
+        1
+    );
+}
+
+#[tokio::test]
+async fn story_on_sqlite() {
+    let t = store_support::sqlite().await;
+    assert!(t.dir.path().join("var").join("camloop.db").is_file());
+    story(&t.store).await;
+}
+
+#[tokio::test]
+async fn story_on_postgres() {
+    let Some(t) = store_support::postgres("story_on_postgres").await else {
+        return;
+    };
+    story(&t.store).await;
+}
+
+#[tokio::test]
+async fn idempotent_insert_on_sqlite() {
+    idempotent(&store_support::sqlite().await.store).await;
+}
+
+#[tokio::test]
+async fn idempotent_insert_on_postgres() {
+    let Some(t) = store_support::postgres("idempotent_insert_on_postgres").await else {
+        return;
+    };
+    idempotent(&t.store).await;
+}
+
+/// What a journal replayed after a crash asks the store: is this record already in? Each
+/// look-up finds the stored record and nothing that differs in one identifying field; and
+/// the durability call answers yes on an idle store.
+async fn replay_lookups(store: &Store) {
+    let t = table(
+        "in1",
+        None,
+        "CTABDEF(X,C,11,1)\nCTABEND\n",
+        TableStatus::Pushed,
+    );
+    store.insert_table_version(&t).await.unwrap();
+    assert!(
+        store
+            .table_version_exists("M1", "in1", 5_000, &t.program_text)
+            .await
+            .unwrap()
+    );
+    assert!(
+        !store
+            .table_version_exists("M1", "in1", 5_001, &t.program_text)
+            .await
+            .unwrap()
+    );
+    assert!(
+        !store
+            .table_version_exists("M1", "in1", 5_000, "other")
+            .await
+            .unwrap()
+    );
+    assert!(
+        !store
+            .table_version_exists("M1", "ex1", 5_000, &t.program_text)
+            .await
+            .unwrap()
+    );
+
+    let e = NewEvent {
+        machine: "M1".into(),
+        at_ms: 7_000,
+        level: EventLevel::Warn,
+        kind: "table_refused".into(),
+        message: "grindability".into(),
+    };
+    store.insert_event(&e).await.unwrap();
+    assert!(store.event_exists(&e).await.unwrap());
+    let other = NewEvent {
+        message: "axis limits".into(),
+        ..e.clone()
+    };
+    assert!(!store.event_exists(&other).await.unwrap());
+
+    store
+        .save_learning_state("M1", "in1", r#"{"i":1}"#, 8_000)
+        .await
+        .unwrap();
+    assert!(
+        store
+            .learning_state_exists("M1", "in1", r#"{"i":1}"#, 8_000)
+            .await
+            .unwrap()
+    );
+    assert!(
+        !store
+            .learning_state_exists("M1", "in1", r#"{"i":2}"#, 8_000)
+            .await
+            .unwrap()
+    );
+
+    let d = NewDressing {
+        machine: "M1".into(),
+        at_ms: 9_000,
+        old_radius_mm: 250.0,
+        new_radius_mm: 249.98,
+        source: "api".into(),
+    };
+    store.insert_dressing(&d).await.unwrap();
+    assert!(store.dressing_exists(&d).await.unwrap());
+    let later = NewDressing {
+        at_ms: 9_001,
+        ..d.clone()
+    };
+    assert!(!store.dressing_exists(&later).await.unwrap());
+
+    assert!(store.checkpoint().await.unwrap());
+}
+
+#[tokio::test]
+async fn replay_lookups_on_sqlite() {
+    replay_lookups(&store_support::sqlite().await.store).await;
+}
+
+#[tokio::test]
+async fn replay_lookups_on_postgres() {
+    let Some(t) = store_support::postgres("replay_lookups_on_postgres").await else {
+        return;
+    };
+    replay_lookups(&t.store).await;
+}
+
+/// Writers in parallel (the daemon's gauge tasks): every measurement lands once, and table
+/// versions either get distinct numbers or a clean `Conflict`, never a duplicate.
+async fn concurrent_writers(store: &Store) {
+    // Each measurement inserted by two tasks at once: idempotence under concurrency.
+    let mut set = tokio::task::JoinSet::new();
+    for n in (0..16u32).chain(0..16) {
+        let store = store.clone();
+        set.spawn(async move {
+            let m = measurement("MC", "in1", n, i64::from(n));
+            (n, store.insert_measurement(&m).await.unwrap())
+        });
+    }
+    let mut ids = std::collections::BTreeMap::new();
+    while let Some(done) = set.join_next().await {
+        let (n, id) = done.unwrap();
+        if let Some(first) = ids.insert(n, id) {
+            assert_eq!(first, id, "measurement {n} stored under two ids");
+        }
+    }
+    assert_eq!(ids.len(), 16);
+    let listed = store
+        .measurement_history(&HistoryFilter {
+            limit: 100,
+            ..filter("MC")
+        })
+        .await
+        .unwrap();
+    assert_eq!(listed.items.len(), 16);
+
+    let mut set = tokio::task::JoinSet::new();
+    for n in 0..8 {
+        let store = store.clone();
+        set.spawn(async move {
+            let mut t = table("in1", None, &format!("v{n}"), TableStatus::Waiting);
+            t.machine = "MC".into();
+            store.insert_table_version(&t).await
+        });
+    }
+    let mut versions = Vec::new();
+    while let Some(done) = set.join_next().await {
+        match done.unwrap() {
+            Ok(v) => versions.push(v),
+            Err(StoreError::Conflict { .. }) => {}
+            Err(e) => panic!("unexpected {e:?}"),
+        }
+    }
+    versions.sort();
+    let expected: Vec<i64> = (1..=versions.len() as i64).collect();
+    assert_eq!(versions, expected, "numbers are distinct and without gaps");
+    let stored = store.table_versions("MC", "in1", 100).await.unwrap();
+    assert_eq!(stored.len(), versions.len());
+}
+
+#[tokio::test]
+async fn concurrent_writers_on_sqlite() {
+    let t = store_support::sqlite().await;
+    concurrent_writers(&t.store).await;
+}
+
+#[tokio::test]
+async fn concurrent_writers_on_postgres() {
+    let Some(t) = store_support::postgres("concurrent_writers_on_postgres").await else {
+        return;
+    };
+    concurrent_writers(&t.store).await;
+}
