@@ -19,7 +19,8 @@ pub mod core {
     pub use camloop_generate as generate;
 }
 pub mod dfq;
-pub mod digest;
+/// SHA-256 digests as hex: the core's, so its ids and the edges' agree.
+pub use camloop_core::digest;
 pub mod failpoint;
 /// Gauge input: the crate `camloop-gauge`, with its I/O adapters.
 pub use camloop_gauge as gauge;

@@ -1,7 +1,6 @@
 //! Helpers shared by the share tests: temporary share and state folders, a fake clock,
 //! real curve-table programs.
 
-
 use std::path::{Path, PathBuf};
 
 use camloop::core::program::{ProgramSettings, render_g1_table};

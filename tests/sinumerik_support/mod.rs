@@ -8,7 +8,6 @@
 //! Test support, not product code: the generators' tests evaluate the SINUMERIK loop text
 //! with it and require exactly the expanded blocks.
 
-
 use std::collections::HashMap;
 
 use thiserror::Error;

@@ -8,6 +8,7 @@
 
 pub mod analysis;
 pub mod compensate;
+pub mod digest;
 pub mod fit;
 pub mod geometry;
 pub mod harmonics;

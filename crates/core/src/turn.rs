@@ -285,11 +285,7 @@ pub fn measurement_sha256(raw: &RawMeasurement) -> String {
     }
     hasher.update((raw.samples.len() as u64).to_le_bytes());
     hasher.update(&samples);
-    hasher
-        .finalize()
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
+    crate::digest::lower_hex(&hasher.finalize())
 }
 
 /// SHA-256 of a correction (µm per gauge angle, exact bits), as written into each table
@@ -300,11 +296,7 @@ pub fn correction_sha256(correction_um: &[f64]) -> String {
     for u in correction_um {
         hasher.update(u.to_bits().to_le_bytes());
     }
-    hasher
-        .finalize()
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
+    crate::digest::lower_hex(&hasher.finalize())
 }
 
 #[cfg(test)]

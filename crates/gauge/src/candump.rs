@@ -115,30 +115,27 @@ fn parse_id(text: &str) -> Result<CanId, CandumpLineError> {
 }
 
 fn parse_data(text: &str) -> Result<([u8; 8], u8), CandumpLineError> {
-    let mut data = [0u8; 8];
-    let mut len = 0usize;
     let bad = || CandumpLineError::DataHex { found: clip(text) };
-    let mut digits = text.bytes().filter(|&b| b != b'.');
-    while let Some(hi) = digits.next() {
-        let lo = digits.next().ok_or_else(bad)?;
-        let byte = (hex_value(hi).ok_or_else(bad)? << 4) | hex_value(lo).ok_or_else(bad)?;
-        if len == 8 {
-            let bytes = 9 + digits.count() / 2;
-            return Err(CandumpLineError::DataTooLong { bytes });
+    // The first 16 digits (8 bytes) on the stack; beyond them only the count matters.
+    let (mut head, mut digits) = ([0u8; 16], 0usize);
+    for b in text.bytes().filter(|&b| b != b'.') {
+        if let Some(slot) = head.get_mut(digits) {
+            *slot = b;
         }
-        data[len] = byte;
-        len += 1;
+        digits += 1;
+    }
+    let head = &head[..digits.min(16)];
+    let mut data = [0u8; 8];
+    if head.len() % 2 != 0 || digits == 17 {
+        return Err(bad());
+    }
+    let len = base16ct::mixed::decode(head, &mut data)
+        .map_err(|_| bad())?
+        .len();
+    if digits > 16 {
+        return Err(CandumpLineError::DataTooLong { bytes: digits / 2 });
     }
     Ok((data, u8::try_from(len).expect("≤ 8")))
-}
-
-fn hex_value(b: u8) -> Option<u8> {
-    match b {
-        b'0'..=b'9' => Some(b - b'0'),
-        b'a'..=b'f' => Some(b - b'a' + 10),
-        b'A'..=b'F' => Some(b - b'A' + 10),
-        _ => None,
-    }
 }
 
 /// Error messages quote at most this many characters of the offending text.
