@@ -139,6 +139,10 @@ impl LiftTable {
             if content.is_empty() {
                 continue;
             }
+            // Hand-written on purpose, not the `csv` crate: numbers only (no quoting to
+            // handle), and a line may end in a `# note`, which the crate's `comment` option
+            // cannot express (it skips only lines that start with the comment byte). A split
+            // keeps the line number and the field in every error without a second pass.
             let fields: Vec<&str> = content.split(',').map(str::trim).collect();
             let syntax = |reason: String| LiftTableError::Syntax {
                 file: origin.to_string(),

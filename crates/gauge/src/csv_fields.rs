@@ -27,6 +27,10 @@ pub(super) fn is_header(line: &str) -> bool {
     fields == ["rev", "angle_deg", "lift_mm"]
 }
 
+// Hand-written on purpose, not the `csv` crate: the file holds numbers only (no quoting to
+// handle), and a line may end in a `# note` or be a `# key=value` metadata line, which the crate's `comment` option cannot
+// express (it skips only lines that start with the comment byte). A split keeps the line
+// number and the field in every error without a second pass.
 pub(super) fn parse_row(line: usize, text: &str) -> Result<Row, CsvLineError> {
     let fields: Vec<&str> = text.split(',').map(str::trim).collect();
     let [rev, angle, lift] = fields.as_slice() else {

@@ -46,6 +46,7 @@ pub fn parse_profile(text: &str, label: &str) -> Result<Curve, ProfileError> {
         if t.is_empty() || t.starts_with('#') {
             continue;
         }
+        // Numbers only, no quoting: a split keeps the line in every error (see `lift.rs`).
         let fields: Vec<&str> = t.split(',').map(str::trim).collect();
         if pts.is_empty() && fields.iter().any(|f| f.parse::<f64>().is_err()) && line == 1 {
             continue;
