@@ -19,25 +19,30 @@ pub struct DressingId(pub i64);
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct EventId(pub i64);
 
+/// Stored and API text of the small enums below: the variant's name in lower case, one
+/// spelling for the database, serde and `as_str` (strum and serde derive it alike).
 macro_rules! text_enum {
-    ($(#[$m:meta])* $name:ident, $field:literal { $($variant:ident => $text:literal),+ $(,)? }) => {
+    ($(#[$m:meta])* $name:ident, $field:literal { $($variant:ident),+ $(,)? }) => {
         $(#[$m])*
-        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+        #[derive(
+            Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+            strum::IntoStaticStr, strum::EnumString,
+        )]
         #[serde(rename_all = "lowercase")]
+        #[strum(serialize_all = "lowercase")]
         pub enum $name { $($variant),+ }
 
         impl $name {
             /// The text stored in the database and used in APIs.
             pub fn as_str(self) -> &'static str {
-                match self { $($name::$variant => $text),+ }
+                self.into()
             }
 
             /// Parses the stored text.
             pub fn parse(text: &str) -> Result<Self, StoreError> {
-                match text {
-                    $($text => Ok($name::$variant),)+
-                    other => Err(StoreError::invalid($field, format!("unknown value `{other}`"))),
-                }
+                text.parse().map_err(|_| {
+                    StoreError::invalid($field, format!("unknown value `{text}`"))
+                })
             }
         }
     };
@@ -45,20 +50,20 @@ macro_rules! text_enum {
 
 text_enum!(
     /// Whether a measured lobe or pin was within tolerance.
-    Verdict, "verdict" { Pass => "pass", Fail => "fail" }
+    Verdict, "verdict" { Pass, Fail }
 );
 text_enum!(
     /// What happened to a table version: waiting for a decision, pushed to the control, or
     /// refused (by a check or by the operator).
-    TableStatus, "table status" { Waiting => "waiting", Pushed => "pushed", Refused => "refused" }
+    TableStatus, "table status" { Waiting, Pushed, Refused }
 );
 text_enum!(
     /// Severity of an event; `Error` means an operator must act.
-    EventLevel, "event level" { Info => "info", Warn => "warn", Error => "error" }
+    EventLevel, "event level" { Info, Warn, Error }
 );
 text_enum!(
     /// A camshaft lobe or a crankshaft pin.
-    FeatureKind, "feature kind" { Lobe => "lobe", Pin => "pin" }
+    FeatureKind, "feature kind" { Lobe, Pin }
 );
 
 /// A recipe snapshot to keep: the definition of one lobe or pin of a part, as JSON text.

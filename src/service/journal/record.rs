@@ -95,9 +95,10 @@ pub enum Pending {
     },
 }
 
-/// What an event is about; stored as its snake_case name.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+/// What an event is about; stored as its snake_case name (serde and strum spell it alike).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, strum::IntoStaticStr)]
 #[serde(rename_all = "snake_case")]
+#[strum(serialize_all = "snake_case")]
 pub enum EventKind {
     MeasurementRejected,
     MeasurementRepeated,
@@ -120,23 +121,7 @@ pub enum EventKind {
 
 impl EventKind {
     pub fn as_str(self) -> &'static str {
-        match self {
-            EventKind::MeasurementRejected => "measurement_rejected",
-            EventKind::MeasurementRepeated => "measurement_repeated",
-            EventKind::TableRefused => "table_refused",
-            EventKind::LearningReverted => "learning_reverted",
-            EventKind::LearningHeld => "learning_held",
-            EventKind::LearningResumed => "learning_resumed",
-            EventKind::ShareUnavailable => "share_unavailable",
-            EventKind::ShareBack => "share_back",
-            EventKind::WheelDressed => "wheel_dressed",
-            EventKind::Rollback => "rollback",
-            EventKind::JournalQuarantined => "journal_quarantined",
-            EventKind::DiskFull => "disk_full",
-            EventKind::DiskSpaceBack => "disk_space_back",
-            EventKind::BlockedByGuard => "blocked_by_guard",
-            EventKind::GuardCleared => "guard_cleared",
-        }
+        self.into()
     }
 }
 
