@@ -22,9 +22,10 @@ pub mod dfq;
 /// SHA-256 digests as hex: the core's, so its ids and the edges' agree.
 pub use camloop_core::digest;
 pub mod failpoint;
+/// Machine and feature names: the core's one rule, shared by config, API and store.
+pub use camloop_core::names;
 /// Gauge input: the crate `camloop-gauge`, with its I/O adapters.
 pub use camloop_gauge as gauge;
-pub mod names;
 pub mod recipe;
 pub mod service;
 pub mod share;

@@ -15,6 +15,7 @@ pub mod harmonics;
 pub mod learn;
 pub mod lift;
 pub mod measure;
+pub mod names;
 pub mod program;
 pub mod setup;
 pub mod smooth;

@@ -8,8 +8,12 @@ use std::fmt;
 pub const MAX_NAME_LEN: usize = 32;
 
 /// A machine name that passed [`MachineName::new`]; the only way to make one.
-#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
-#[serde(transparent)]
+/// Deserialising checks the rule too, so a name read from a file or a request is valid once
+/// it is a `MachineName`.
+#[derive(
+    Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(try_from = "String", into = "String")]
 pub struct MachineName(String);
 
 /// Why a name was refused.
@@ -51,6 +55,20 @@ impl fmt::Display for MachineName {
 impl AsRef<str> for MachineName {
     fn as_ref(&self) -> &str {
         &self.0
+    }
+}
+
+impl From<MachineName> for String {
+    fn from(name: MachineName) -> String {
+        name.0
+    }
+}
+
+impl TryFrom<String> for MachineName {
+    type Error = NameError;
+    fn try_from(name: String) -> Result<Self, NameError> {
+        check_plain_name(&name)?;
+        Ok(Self(name))
     }
 }
 
@@ -116,5 +134,16 @@ mod tests {
                 ..
             })
         ));
+    }
+
+    /// serde goes through the same rule: a bad name in JSON is refused with the rule's
+    /// message, a good one round-trips unchanged.
+    #[test]
+    fn deserialising_checks_the_rule() {
+        let ok: MachineName = serde_json::from_str("\"SIM1\"").unwrap();
+        assert_eq!(ok.as_str(), "SIM1");
+        assert_eq!(serde_json::to_string(&ok).unwrap(), "\"SIM1\"");
+        let bad = serde_json::from_str::<MachineName>("\"../etc\"").unwrap_err();
+        assert!(bad.to_string().contains("only letters, digits"), "{bad}");
     }
 }
