@@ -2,18 +2,17 @@
 //! pool (see the module doc of `store`), the SQLite file is checked for damage before SQLite
 //! opens it, and the schema is brought up to date.
 
-use std::borrow::Cow;
 use std::path::Path;
 use std::str::FromStr;
 use std::time::Duration;
 
-use sqlx::migrate::{MigrateError, Migration, MigrationType, Migrator};
+use sqlx::migrate::MigrateError;
 use sqlx::postgres::{PgConnectOptions, PgPoolOptions};
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions};
 use sqlx::{ConnectOptions, Connection};
 
 use super::error::{Detail as D, connect_error, corrupt};
-use super::{MIGRATIONS, Pools, Store, StoreError};
+use super::{POSTGRES_MIGRATOR, Pools, SQLITE_MIGRATOR, Store, StoreError};
 
 /// How long an operation waits for a pooled connection before reporting the store unavailable.
 const ACQUIRE_TIMEOUT: Duration = Duration::from_secs(5);
@@ -149,24 +148,9 @@ impl Store {
     }
 
     async fn migrate(&self) -> Result<(), StoreError> {
-        let sqlite = matches!(self.pools, Pools::Sqlite { .. });
-        let migrations = MIGRATIONS
-            .iter()
-            .map(|&(version, description, sqlite_sql, pg_sql)| {
-                Migration::new(
-                    version,
-                    Cow::Borrowed(description),
-                    MigrationType::Simple,
-                    Cow::Borrowed(if sqlite { sqlite_sql } else { pg_sql }),
-                    false,
-                )
-            })
-            .collect::<Vec<_>>();
-        let migrator = Migrator {
-            migrations: Cow::Owned(migrations),
-            ignore_missing: false,
-            locking: true,
-            no_tx: false,
+        let migrator = match self.pools {
+            Pools::Sqlite { .. } => &SQLITE_MIGRATOR,
+            Pools::Postgres { .. } => &POSTGRES_MIGRATOR,
         };
         let result = super::with_write!(self, pool => migrator.run(pool).await);
         result.map_err(|e| self.migrate_error(e))?;

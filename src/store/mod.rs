@@ -50,34 +50,14 @@ pub use pack_report::REPORT_STEP;
 pub use types::*;
 pub use views::{AckOutcome, EventAck, TableVersionHead};
 
-/// Migrations embedded in the binary: (version, description, SQLite SQL, PostgreSQL SQL).
-/// A test checks that this list and both folders under `migrations/` hold the same versions.
-pub const MIGRATIONS: &[(i64, &str, &str, &str)] = &[
-    (
-        1,
-        "history",
-        include_str!("../../migrations/sqlite/0001_history.sql"),
-        include_str!("../../migrations/postgres/0001_history.sql"),
-    ),
-    (
-        2,
-        "store_identity",
-        include_str!("../../migrations/sqlite/0002_store_identity.sql"),
-        include_str!("../../migrations/postgres/0002_store_identity.sql"),
-    ),
-    (
-        3,
-        "event_ack",
-        include_str!("../../migrations/sqlite/0003_event_ack.sql"),
-        include_str!("../../migrations/postgres/0003_event_ack.sql"),
-    ),
-    (
-        4,
-        "compact_history",
-        include_str!("../../migrations/sqlite/0004_compact_history.sql"),
-        include_str!("../../migrations/postgres/0004_compact_history.sql"),
-    ),
-];
+/// The SQLite migrations, embedded from `migrations/sqlite` by sqlx (`build.rs` rebuilds
+/// when a file there changes). sqlx records each with a SHA-384 checksum of its SQL and
+/// refuses a changed one; it takes the database's migration lock while it runs.
+pub static SQLITE_MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("migrations/sqlite");
+
+/// The PostgreSQL migrations, from `migrations/postgres`: the same versions (a test holds
+/// the two folders to the same versions and tables).
+pub static POSTGRES_MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("migrations/postgres");
 
 /// How long a read waits for its turn before it is refused with [`StoreError::Busy`].
 pub const READ_WAIT: Duration = Duration::from_secs(2);

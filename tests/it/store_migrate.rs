@@ -9,8 +9,8 @@ use crate::store_support;
 
 use std::borrow::Cow;
 
-use camloop::store::{MIGRATIONS, NewTableVersion, REPORT_STEP, RawPool, Store, TableStatus};
-use sqlx::migrate::{Migration, MigrationType, Migrator};
+use camloop::store::{NewTableVersion, REPORT_STEP, RawPool, Store, TableStatus};
+use sqlx::migrate::{Migration, Migrator};
 use store_support::data::{measurement, sha_of};
 
 /// Table versions and learning states written before the migration: more than one chain
@@ -18,24 +18,30 @@ use store_support::data::{measurement, sha_of};
 const OLD_ROWS: i64 = 20;
 
 fn old_migrator(sqlite: bool) -> Migrator {
-    let migrations = MIGRATIONS
+    let all = if sqlite {
+        &camloop::store::SQLITE_MIGRATOR
+    } else {
+        &camloop::store::POSTGRES_MIGRATOR
+    };
+    // As the hand-assembled migrator of those versions recorded them: descriptions with
+    // underscores (sqlx's macro writes spaces; only the checksum must match).
+    let old = all
         .iter()
-        .filter(|m| m.0 < 4)
-        .map(|&(version, description, sqlite_sql, pg_sql)| {
+        .filter(|m| m.version < 4)
+        .map(|m| {
+            let description = m.description.replace(' ', "_");
             Migration::new(
-                version,
-                Cow::Borrowed(description),
-                MigrationType::Simple,
-                Cow::Borrowed(if sqlite { sqlite_sql } else { pg_sql }),
+                m.version,
+                Cow::Owned(description),
+                m.migration_type,
+                m.sql.clone(),
                 false,
             )
         })
-        .collect::<Vec<_>>();
+        .collect();
     Migrator {
-        migrations: Cow::Owned(migrations),
-        ignore_missing: false,
-        locking: true,
-        no_tx: false,
+        migrations: Cow::Owned(old),
+        ..Migrator::DEFAULT
     }
 }
 
