@@ -247,9 +247,7 @@ fn text(value: &str, max_chars: usize) -> String {
 
 /// `DD.MM.YYYY/HH:MM:SS` (K0004), UTC.
 fn time(ms: i64) -> String {
-    let t = crate::clock::utc_text(u64::try_from(ms).unwrap_or(0));
-    // utc_text: `YYYY-MM-DDTHH:MM:SS…`.
-    format!("{}.{}.{}/{}", &t[8..10], &t[5..7], &t[0..4], &t[11..19])
+    crate::clock::utc_format(ms, "%d.%m.%Y/%H:%M:%S")
 }
 
 #[cfg(test)]

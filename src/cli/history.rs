@@ -300,46 +300,12 @@ pub fn parse_time(text: &str, now_ms: i64) -> anyhow::Result<i64> {
     if t.chars().all(|c| c.is_ascii_digit()) && t.len() > 8 {
         return t.parse().map_err(|_| bad());
     }
-    let (date, time) = match t.split_once('T') {
-        Some((d, rest)) => (d, rest.trim_end_matches('Z')),
-        None => (t, "00:00:00"),
-    };
-    let ymd: Vec<i64> = date
-        .split('-')
-        .map(|p| p.parse().map_err(|_| bad()))
-        .collect::<Result<_, _>>()?;
-    let hms: Vec<i64> = time
-        .split(':')
-        .map(|p| p.parse().map_err(|_| bad()))
-        .collect::<Result<_, _>>()?;
-    let (&[y, mo, d], &[h, mi, sec]) = (ymd.as_slice(), hms.as_slice()) else {
-        return Err(bad());
-    };
-    if !(1..=12).contains(&mo)
-        || !(1..=31).contains(&d)
-        || !(0..24).contains(&h)
-        || !(0..60).contains(&mi)
-        || !(0..61).contains(&sec)
-    {
-        return Err(bad());
-    }
-    Ok(((days_from_civil(y, mo, d) * 24 + h) * 60 + mi) * 60_000 + sec * 1000)
-}
-
-/// Days since 1970-01-01 of a proleptic Gregorian date (Howard Hinnant's algorithm).
-fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
-    let y = if m <= 2 { y - 1 } else { y };
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let doy = (153 * (m + if m > 2 { -3 } else { 9 }) + 2) / 5 + d - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    era * 146_097 + doe - 719_468
+    crate::clock::parse_utc(t).ok_or_else(bad)
 }
 
 /// `MM-DD HH:MM:SS` in UTC, enough to tell parts apart in a terminal.
 fn format_time(ms: i64) -> String {
-    let full = crate::clock::utc_text(u64::try_from(ms).unwrap_or(0));
-    format!("{} {}", &full[5..10], &full[11..19])
+    crate::clock::utc_format(ms, "%m-%d %H:%M:%S")
 }
 
 #[cfg(test)]

@@ -25,8 +25,7 @@ pub(crate) fn esc(text: &str) -> String {
 
 /// `YYYY-MM-DD HH:MM:SS` UTC.
 pub(super) fn when(ms: i64) -> String {
-    let t = crate::clock::utc_text(u64::try_from(ms).unwrap_or(0));
-    format!("{} {}", &t[0..10], &t[11..19])
+    crate::clock::utc_format(ms, "%Y-%m-%d %H:%M:%S")
 }
 
 /// The address of a feature's pages.
