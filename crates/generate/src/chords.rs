@@ -24,12 +24,12 @@ pub struct StepLaw {
 const SAMPLES: usize = 24;
 
 /// Round to `decimals` decimals, as the program text does.
-pub fn round_to(v: f64, decimals: Decimals) -> f64 {
+pub(crate) fn round_to(v: f64, decimals: Decimals) -> f64 {
     format!("{v:.decimals$}").parse().unwrap_or(v)
 }
 
 /// Distance from `p` to the segment `a`–`b` (points as (z, x)).
-pub fn segment_distance(p: (f64, f64), a: (f64, f64), b: (f64, f64)) -> f64 {
+pub(crate) fn segment_distance(p: (f64, f64), a: (f64, f64), b: (f64, f64)) -> f64 {
     let (dz, dx) = (b.0 - a.0, b.1 - a.1);
     let len2 = dz * dz + dx * dx;
     let t = if len2 > 0.0 {
@@ -42,7 +42,13 @@ pub fn segment_distance(p: (f64, f64), a: (f64, f64), b: (f64, f64)) -> f64 {
 
 /// Largest distance of the exact curve between `u0` and `u1` from the chord `a`–`b`:
 /// sampled, then refined by golden-section search around the largest sample.
-pub fn chord_deviation(curve: &Curve, u0: f64, u1: f64, a: (f64, f64), b: (f64, f64)) -> f64 {
+pub(crate) fn chord_deviation(
+    curve: &Curve,
+    u0: f64,
+    u1: f64,
+    a: (f64, f64),
+    b: (f64, f64),
+) -> f64 {
     let dist = |u: f64| {
         let j = curve.jet(u);
         segment_distance((j.z, j.x), a, b)
@@ -104,7 +110,7 @@ pub fn walk(span: f64, du: impl Fn(f64) -> f64, max_points: usize) -> Option<Vec
 }
 
 /// Worst deviation of the chords through `points` (as written) at parameters `us`.
-pub fn worst_deviation(curve: &Curve, us: &[f64], points: &[(f64, f64)]) -> (usize, f64) {
+pub(crate) fn worst_deviation(curve: &Curve, us: &[f64], points: &[(f64, f64)]) -> (usize, f64) {
     let mut worst = (0, 0.0);
     for i in 0..us.len() - 1 {
         let d = chord_deviation(curve, us[i], us[i + 1], points[i], points[i + 1]);
@@ -117,7 +123,7 @@ pub fn worst_deviation(curve: &Curve, us: &[f64], points: &[(f64, f64)]) -> (usi
 
 /// Fewest chords of equal parameter step whose worst deviation (endpoints rounded to
 /// `decimals`) is at most `target_mm`, with that deviation; `None` beyond `max_chords`.
-pub fn fixed_step_for(
+pub(crate) fn fixed_step_for(
     curve: &Curve,
     target_mm: f64,
     decimals: Decimals,

@@ -150,7 +150,7 @@ pub(super) const OFS: Var = Var {
     name: "CL_OFS",
 };
 /// Chord limit of the search; a job needing more is refused.
-pub const MAX_CHORDS: usize = 200_000;
+pub(crate) const MAX_CHORDS: usize = 200_000;
 /// Samples of the geometry checks along the contour.
 const SCAN: usize = 4000;
 
@@ -412,7 +412,7 @@ fn check_geometry(job: &ContourJob) -> Result<(), ContourError> {
 
 /// G41 or G42 in the Z–X plane seen with z to the right and x up: the tool is left of the
 /// travel when it runs +z outside the material or −z inside it.
-pub fn compensation_side(job: &ContourJob) -> Compensation {
+pub(crate) fn compensation_side(job: &ContourJob) -> Compensation {
     let span = job.curve.span();
     // The mid-point is inside the contour, where z has its one sense (checked above).
     let dz = job.curve.jet(span / 2.0).dz;

@@ -222,7 +222,7 @@ impl Curve {
     /// temporaries `t1`, `t2` (set by `pre` from u first), for the loop form; `None` for a
     /// profile, which the control cannot evaluate. The temporaries keep every block short
     /// (LinuxCNC refuses lines over 256 characters, the 802D over 200).
-    pub fn exprs(&self, u: Var, t1: Var, t2: Var) -> Option<CurveExprs> {
+    pub(crate) fn exprs(&self, u: Var, t1: Var, t2: Var) -> Option<CurveExprs> {
         let n = Expr::num;
         let v = Expr::var;
         // start + d·u with d = ±1, written as a sum or a difference.
@@ -340,7 +340,7 @@ impl Curve {
 
 /// A curve written for the control.
 #[derive(Debug, Clone)]
-pub struct CurveExprs {
+pub(crate) struct CurveExprs {
     /// Temporaries assigned from u, in order, before z, x and the weight are evaluated.
     pub pre: Vec<(Var, Expr)>,
     pub z: Expr,
@@ -351,7 +351,7 @@ pub struct CurveExprs {
 
 impl CurveExprs {
     /// The variables at u, as the loop has them when it evaluates z, x and the weight.
-    pub fn vars_at(&self, u_var: Var, u: f64) -> super::ir::Vars {
+    pub(crate) fn vars_at(&self, u_var: Var, u: f64) -> super::ir::Vars {
         let mut vars = super::ir::Vars::default();
         vars.set(u_var, u);
         for (t, e) in &self.pre {

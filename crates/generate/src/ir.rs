@@ -61,7 +61,7 @@ impl Expr {
         Expr::Sub(Box::new(self), Box::new(o))
     }
     #[allow(clippy::should_implement_trait)]
-    pub fn mul(self, o: Expr) -> Self {
+    pub(crate) fn mul(self, o: Expr) -> Self {
         Expr::Mul(Box::new(self), Box::new(o))
     }
     #[allow(clippy::should_implement_trait)]
@@ -166,7 +166,7 @@ impl Axis {
         }
     }
     /// Rotary axes are written with the angle decimals.
-    pub fn is_rotary(self) -> bool {
+    pub(crate) fn is_rotary(self) -> bool {
         matches!(self, Axis::A | Axis::C)
     }
 }
@@ -247,7 +247,7 @@ pub struct Program {
 }
 
 /// Loops run at most this many iterations in [`expand`]: a generator bug must not hang.
-pub const MAX_ITERATIONS: usize = 1_000_000;
+pub(crate) const MAX_ITERATIONS: usize = 1_000_000;
 
 /// The program with every loop and condition run and every expression replaced by its
 /// value: the expanded form. Marks are kept in place.

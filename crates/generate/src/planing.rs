@@ -53,7 +53,7 @@ impl JobState {
         }
     }
 
-    pub fn first_unfinished(&self) -> Option<usize> {
+    pub(crate) fn first_unfinished(&self) -> Option<usize> {
         self.finished.iter().position(|f| !f)
     }
 }
@@ -76,7 +76,7 @@ pub enum PlaningError {
 }
 
 /// The mark variable: segments done, in order.
-pub const MARK: Var = Var {
+pub(crate) const MARK: Var = Var {
     index: 50,
     name: "R50",
 };
