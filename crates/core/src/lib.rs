@@ -17,6 +17,7 @@ pub mod measure;
 pub mod program;
 pub mod setup;
 pub mod smooth;
+pub mod speed_plan;
 pub mod spline;
 pub mod svg;
 pub mod table;
