@@ -63,6 +63,17 @@ pub fn run_speed_plan(args: SpeedPlanArgs) -> anyhow::Result<()> {
     }
     let mut report = format!("{}\n", loaded.description);
     report += &summary(&plan)?;
+    if !plan.is_constant {
+        let tables = speed_plan::tables::va_tables(&loaded.part, &plan.law, 0.1)?;
+        writeln!(
+            report,
+            "for the control: VA at {:.3} rpm leads C = f(VA) ({} POLY segments, the plan's own cubics) and X = g(VA) ({} POLY segments, within {:.4} µm of the exact X)",
+            tables.va_speed_rpm,
+            tables.c_segments.len(),
+            tables.x_segments.len(),
+            tables.x_deviation_um
+        )?;
+    }
     for path in outputs.commit()? {
         writeln!(report, "wrote {}", path.display())?;
     }

@@ -364,3 +364,34 @@ fn bad_limits_are_named() {
         other => panic!("{other:?}"),
     }
 }
+
+/// The tables the control is to run: C = f(VA) reproduces the time law to 1e-9° (it is the
+/// law's own cubics, rounding only), the X table stays within 0.1 µm of the exact X(C(VA))
+/// between its points, and its own motion at VA's constant speed (exact for its cubics)
+/// keeps the X limits.
+#[test]
+fn the_virtual_axis_tables_run_the_plan() {
+    let part = lobe(INTAKE);
+    let limits = demo_limits();
+    let plan = speed_plan::plan(&part, &limits).unwrap();
+    let tables = speed_plan::tables::va_tables(&part, &plan.law, 0.1).unwrap();
+    assert_eq!(tables.c_segments.len(), speed_plan::LAW_POINTS);
+    for (k, s) in tables.c_segments.iter().enumerate() {
+        let u = 0.37;
+        let table_c = s.x0_mm + u * (s.a1_mm + u * (s.a2_mm + u * s.a3_mm));
+        let t = (k as f64 + u) / speed_plan::LAW_POINTS as f64 * plan.revolution_s();
+        let law_c = plan.law.at(t).c_rad.to_degrees();
+        assert!(
+            (table_c - law_c).abs() < 1e-9,
+            "piece {k}: {table_c} vs {law_c}"
+        );
+    }
+    assert!(tables.x_deviation_um <= 0.1, "{}", tables.x_deviation_um);
+    let motion = camloop_core::fit::poly_motion(&tables.x_segments, tables.va_speed_rpm);
+    assert!(motion.velocity_max_mm_s <= limits.x_velocity_mm_s);
+    assert!(motion.acceleration_max_mm_s2.unwrap() <= limits.x_acceleration_mm_s2);
+    assert!(motion.jerk_max_mm_s3.unwrap() <= limits.x_jerk_mm_s3);
+    // The table's X motion is the plan's to within what 0.1 µm of shape allows.
+    let planned_v = plan.max_usage(Constraint::XVelocity) * limits.x_velocity_mm_s;
+    assert!((motion.velocity_max_mm_s - planned_v).abs() <= 0.01 * planned_v);
+}
