@@ -22,6 +22,16 @@ fn lobe(text: &str) -> Part {
     Part::cam(geometry, LiftCurve::new(&table)).unwrap()
 }
 
+fn roller_lobe(text: &str) -> Part {
+    let table = LiftTable::parse_csv(text, "demo lobe").unwrap();
+    let geometry = CamGeometry {
+        base_radius_mm: 20.0,
+        follower: Follower::Roller { radius_mm: 12.0 },
+        wheel_radius_mm: 250.0,
+    };
+    Part::cam(geometry, LiftCurve::new(&table)).unwrap()
+}
+
 fn pin() -> Part {
     Part::crankpin(CrankpinGeometry {
         throw_mm: 45.0,
