@@ -1,6 +1,15 @@
 //! The plan as the control is to run it: a virtual leading axis VA turning at constant speed
 //! (360° of VA per planned revolution) leads two POLY curve tables, C = f(VA) and X = g(VA).
 //!
+//! Why a virtual axis and two tables rather than a feed profile on C (`FLIN`/`FCUB` under
+//! G93/G94): a feed profile runs through the path interpolation's look-ahead and block cycle,
+//! so the speed between blocks depends on the control's smoothing, and the limits proven on
+//! the plan would not be what the axis does; a POLY table holds the plan's cubics exactly,
+//! and both tables go through the same table programs and numbering as today's.
+//! Unconfirmed on a control (see the manual's "Speed plan"): a simulated leading axis
+//! leading two `LEADON` couplings at once with C as a following axis, the machine data that
+//! axis needs, starting both couplings together, and the limits of 720-piece tables.
+//!
 //! C = f(VA) is the time law itself: each of its cubic pieces is one POLY segment, exact.
 //! X = g(VA) is a periodic C² cubic spline through the exact X at C(VA), refined like the
 //! constant-speed tables (a midpoint inserted wherever a segment strays further than the
