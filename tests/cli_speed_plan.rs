@@ -23,6 +23,8 @@ fn the_demo_intake_lobe_plan_prints_the_time_saved_and_what_binds() {
             "250",
             "--svg",
             "plan.svg",
+            "--program",
+            "PLAN.SPF",
         ],
         dir.path(),
     );
@@ -43,6 +45,9 @@ fn the_demo_intake_lobe_plan_prints_the_time_saved_and_what_binds() {
     assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
     // One path per limit, the speed, the constant speed and the 100 % line.
     assert_eq!(svg.matches("<path ").count(), 9, "{svg}");
+    let program = std::fs::read_to_string(dir.path().join("PLAN.SPF")).unwrap();
+    assert!(program.starts_with("%_N_CAMLOOP_PLAN_SPF"), "{program}");
+    assert!(program.contains("CTABDEF(X,VA,1,1)") && program.contains("CTABDEF(C,VA,2,2)"));
 }
 
 #[test]

@@ -3,6 +3,7 @@
 
 use super::output::Outputs;
 use super::part::{PartKindArgs, load_part};
+use crate::core::speed_plan::render::{VaProgramSettings, render_va_table_program};
 use crate::core::speed_plan::{self, Constraint, SpeedLimits, SpeedPlan, plot};
 use clap::Args;
 use std::fmt::Write as _;
@@ -43,6 +44,18 @@ pub struct SpeedPlanArgs {
     /// Write the chart (C speed and each limit's usage against C) as SVG.
     #[arg(long, global = true, value_name = "OUT")]
     pub svg: Option<PathBuf>,
+    /// Write the table program with both curve tables over the virtual leading axis
+    /// (X = g(VA) as table 1, C = f(VA) as table 2).
+    #[arg(long, global = true, value_name = "OUT")]
+    pub program: Option<PathBuf>,
+    /// The table program's name.
+    #[arg(
+        long,
+        global = true,
+        value_name = "NAME",
+        default_value = "CAMLOOP_PLAN"
+    )]
+    pub program_name: String,
 }
 
 pub fn run_speed_plan(args: SpeedPlanArgs) -> anyhow::Result<()> {
@@ -65,6 +78,21 @@ pub fn run_speed_plan(args: SpeedPlanArgs) -> anyhow::Result<()> {
     report += &summary(&plan)?;
     if !plan.is_constant {
         let tables = speed_plan::tables::va_tables(&loaded.part, &plan.law, 0.1)?;
+        if let Some(path) = &args.program {
+            let settings = VaProgramSettings {
+                name: args.program_name.clone(),
+                virtual_axis: "VA".into(),
+                x_axis: "X".into(),
+                c_axis: "C".into(),
+                x_decimals: 4,
+                c_decimals: 4,
+                x_table: 1,
+                c_table: 2,
+            };
+            let text = render_va_table_program(&tables, &settings)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            outputs.add(path, text);
+        }
         writeln!(
             report,
             "for the control: VA at {:.3} rpm leads C = f(VA) ({} POLY segments, the plan's own cubics) and X = g(VA) ({} POLY segments, within {:.4} µm of the exact X)",

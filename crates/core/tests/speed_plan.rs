@@ -291,6 +291,11 @@ fn every_limit_holds_at_every_tenth_of_a_degree() {
         ("exhaust", lobe(EXHAUST), demo_limits()),
         ("intake, X bound", lobe(INTAKE), x_bound_limits()),
         (
+            "intake, roller follower",
+            roller_lobe(INTAKE),
+            demo_limits(),
+        ),
+        (
             "crankpin",
             pin(),
             SpeedLimits {
@@ -404,4 +409,86 @@ fn the_virtual_axis_tables_run_the_plan() {
     // The table's X motion is the plan's to within what 0.1 µm of shape allows.
     let planned_v = plan.max_usage(Constraint::XVelocity) * limits.x_velocity_mm_s;
     assert!((motion.velocity_max_mm_s - planned_v).abs() <= 0.01 * planned_v);
+}
+
+/// The table program as written: both CTABDEFs read back (by the program reader) with the
+/// numbers the program returns, and the POLY blocks, rebuilt from the text alone, give C
+/// within 1e-3° of the plan and X within 0.2 µm of the exact X(C(VA)) at every segment's
+/// middle (0.1 µm of table deviation plus rounding to 4 decimals).
+#[test]
+fn the_table_program_text_holds_the_plan() {
+    use camloop_core::program::parse_ctabdef;
+    use camloop_core::speed_plan::render::{VaProgramSettings, render_va_table_program};
+    let part = lobe(INTAKE);
+    let plan = speed_plan::plan(&part, &demo_limits()).unwrap();
+    let tables = speed_plan::tables::va_tables(&part, &plan.law, 0.1).unwrap();
+    let settings = VaProgramSettings {
+        name: "DEMO_CAM_IN1_PLAN".into(),
+        virtual_axis: "VA".into(),
+        x_axis: "X".into(),
+        c_axis: "C".into(),
+        x_decimals: 4,
+        c_decimals: 4,
+        x_table: 1,
+        c_table: 17,
+    };
+    let text = render_va_table_program(&tables, &settings).unwrap();
+    assert!(
+        text.contains("CL_TNO=1 ") && text.contains("CL_TNO_C=17 "),
+        "{text}"
+    );
+    let mut defs = Vec::new();
+    let mut blocks: Vec<Vec<(f64, f64, f64, f64)>> = Vec::new();
+    let mut start = (0.0, 0.0);
+    let num = |s: &str| s.trim().parse::<f64>().unwrap();
+    for (i, line) in text.lines().enumerate() {
+        if line.starts_with("CTABDEF(") {
+            defs.push(parse_ctabdef(line, i + 1).unwrap());
+            blocks.push(Vec::new());
+        } else if let Some(rest) = line.strip_prefix("G1 VA=") {
+            let (va, value) = rest.split_once(' ').unwrap();
+            start = (num(va), num(value.split_once('=').unwrap().1));
+        } else if let Some(rest) = line.strip_prefix("PO[VA]=(") {
+            let (va, rest) = rest.split_once(") PO[").unwrap();
+            let inner = rest.split_once("=(").unwrap().1.trim_end_matches(')');
+            let v: Vec<f64> = inner.split(',').map(num).collect();
+            let block = blocks.last_mut().unwrap();
+            let (va0, x0) = block.last().map_or(start, |b| (b.0, b.1));
+            block.push((num(va), v[0], v[1], v[2]));
+            let (va1, x1, a2, a3) = (num(va), v[0], v[1], v[2]);
+            let a1 = x1 - x0 - a2 - a3;
+            let mid = x0 + 0.5 * a1 + 0.25 * a2 + 0.125 * a3;
+            let va_mid = 0.5 * (va0 + va1);
+            let c_deg = plan
+                .law
+                .at(va_mid / 360.0 * plan.revolution_s())
+                .c_rad
+                .to_degrees();
+            if defs.len() == 1 {
+                let exact = part.d_at_c_deg(c_deg.rem_euclid(360.0)).unwrap() - part.x_zero_mm();
+                assert!(
+                    (mid - exact).abs() < 2e-4,
+                    "X at VA {va_mid}: {mid} vs {exact}"
+                );
+            } else {
+                assert!(
+                    (mid - c_deg).abs() < 1e-3,
+                    "C at VA {va_mid}: {mid} vs {c_deg}"
+                );
+            }
+        }
+    }
+    let numbers: Vec<(String, String, u32, String)> = defs
+        .into_iter()
+        .map(|d| (d.following, d.leading, d.number, d.periodicity))
+        .collect();
+    assert_eq!(
+        numbers,
+        [
+            ("X".into(), "VA".into(), 1, "1".into()),
+            ("C".into(), "VA".into(), 17, "2".into())
+        ]
+    );
+    assert_eq!(blocks[1].len(), speed_plan::LAW_POINTS);
+    assert!((blocks[1].last().unwrap().0 - 360.0).abs() < 1e-9);
 }

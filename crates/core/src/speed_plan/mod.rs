@@ -22,6 +22,7 @@
 mod check;
 pub mod plot;
 pub mod profile;
+pub mod render;
 pub mod tables;
 pub mod time_law;
 pub mod topp;
