@@ -3,7 +3,9 @@
 
 use super::output::Outputs;
 use super::part::{PartKindArgs, load_part};
-use crate::core::speed_plan::render::{VaProgramSettings, render_va_table_program};
+use crate::core::speed_plan::render::{
+    VaProgramSettings, render_va_main_program, render_va_table_program,
+};
 use crate::core::speed_plan::{self, Constraint, SpeedLimits, SpeedPlan, plot};
 use clap::Args;
 use std::fmt::Write as _;
@@ -48,6 +50,10 @@ pub struct SpeedPlanArgs {
     /// (X = g(VA) as table 1, C = f(VA) as table 2).
     #[arg(long, global = true, value_name = "OUT")]
     pub program: Option<PathBuf>,
+    /// Write the main program that couples both tables to the virtual axis and grinds one
+    /// revolution (needs --program).
+    #[arg(long, global = true, value_name = "OUT", requires = "program")]
+    pub main_program: Option<PathBuf>,
     /// The table program's name.
     #[arg(
         long,
@@ -92,6 +98,11 @@ pub fn run_speed_plan(args: SpeedPlanArgs) -> anyhow::Result<()> {
             let text = render_va_table_program(&tables, &settings)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
             outputs.add(path, text);
+            if let Some(main_path) = &args.main_program {
+                let text = render_va_main_program("CAMLOOP_GRIND", &settings, &tables, 1.0)
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", main_path.display()))?;
+                outputs.add(main_path, text);
+            }
         }
         writeln!(
             report,

@@ -492,3 +492,35 @@ fn the_table_program_text_holds_the_plan() {
     assert_eq!(blocks[1].len(), speed_plan::LAW_POINTS);
     assert!((blocks[1].last().unwrap().0 - 360.0).abs() < 1e-9);
 }
+
+/// The main program couples both tables by the numbers the table program returns, C first,
+/// and turns VA at the plan's constant speed for the revolutions asked.
+#[test]
+fn the_main_program_couples_the_returned_numbers() {
+    use camloop_core::speed_plan::render::{VaProgramSettings, render_va_main_program};
+    let part = lobe(INTAKE);
+    let plan = speed_plan::plan(&part, &demo_limits()).unwrap();
+    let tables = speed_plan::tables::va_tables(&part, &plan.law, 0.1).unwrap();
+    let settings = VaProgramSettings {
+        name: "DEMO_CAM_IN1_PLAN".into(),
+        virtual_axis: "VA".into(),
+        x_axis: "X".into(),
+        c_axis: "C".into(),
+        x_decimals: 4,
+        c_decimals: 4,
+        x_table: 1,
+        c_table: 2,
+    };
+    let text = render_va_main_program("CAMLOOP_GRIND", &settings, &tables, 1.0).unwrap();
+    let at = |needle: &str| {
+        text.find(needle)
+            .unwrap_or_else(|| panic!("{needle}: {text}"))
+    };
+    assert!(at("DEMO_CAM_IN1_PLAN(CL_TNO,CL_TNO_C)") < at("LEADON(C,VA,CL_TNO_C)"));
+    assert!(at("LEADON(C,VA,CL_TNO_C)") < at("LEADON(X,VA,CL_TNO)"));
+    assert!(at("LEADON(X,VA,CL_TNO)") < at("POS[VA]=IC(360.0000)"));
+    // VA turns 360° per planned revolution: FA in degrees per minute.
+    let fa = 360.0 * 60.0 / plan.revolution_s();
+    assert!(text.contains(&format!("FA[VA]={fa:.3}")), "{fa:.3}: {text}");
+    assert!(!text.contains("LEADON(X,VA,1)") && !text.contains("LEADON(C,VA,2)"));
+}

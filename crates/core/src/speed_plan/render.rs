@@ -128,3 +128,59 @@ fn poly_table(
     }
     o.push_str("CTABEND\n");
 }
+
+/// The main program that grinds `revolutions` finish revolutions with the plan: it calls the
+/// table program, puts C and X on their curves at VA = 0, couples C and then X to VA with the
+/// numbers the table program returned (never literals, as for the constant-speed main
+/// program), turns VA at its constant speed and uncouples.
+///
+/// [?] on a control: VA must be an axis the control can move without a drive (a simulated
+/// axis in machine data); whether two `LEADON` to one leading axis start in step when
+/// programmed in consecutive blocks; whether C, a rotary axis that may be a spindle, can
+/// follow in a curve-table coupling in its axis mode.
+pub fn render_va_main_program(
+    main_name: &str,
+    s: &VaProgramSettings,
+    tables: &VaTables,
+    revolutions: f64,
+) -> Result<String, VaProgramError> {
+    let main = validate_program_name(main_name).map_err(|e| VaProgramError::Name(e.to_string()))?;
+    let table = validate_program_name(&s.name).map_err(|e| VaProgramError::Name(e.to_string()))?;
+    let (va, x, c, cn) = (&s.virtual_axis, &s.x_axis, &s.c_axis, C_NUMBER_VAR);
+    let mut o = String::new();
+    let _ = writeln!(o, "%_N_{main}_MPF\n;$PATH=/_N_MPF_DIR");
+    let _ = writeln!(o, "DEF REAL CL_C, CL_X, CL_SLOPE\nDEF INT CL_TNO, {cn}");
+    let _ = writeln!(o, "EXTERN {table}(VAR INT, VAR INT)");
+    for axis in [x, c] {
+        let _ = writeln!(
+            o,
+            "IF $AA_COUP_ACT[{axis}]<>0 ; a coupling left active by an aborted run\nLEADOF({axis},{va})\nENDIF"
+        );
+    }
+    let _ = writeln!(
+        o,
+        "{table}(CL_TNO,{cn}) ; defines both tables, returns their numbers"
+    );
+    o.push_str("STOPRE ; use the numbers only after the tables are defined\n");
+    let _ = writeln!(o, "G90 G0 {va}=0");
+    let _ = writeln!(
+        o,
+        "CL_C=CTAB(0,{cn},CL_SLOPE) ; {c} on its curve at {va} = 0"
+    );
+    let _ = writeln!(
+        o,
+        "CL_X=CTAB(0,CL_TNO,CL_SLOPE) ; {x} on its curve at {va} = 0"
+    );
+    let _ = writeln!(o, "POS[{c}]=DC(CL_C) FA[{c}]=3600\nWAITP({c})");
+    let _ = writeln!(o, "G1 {x}=CL_X F=100.000");
+    let _ = writeln!(o, "LEADON({c},{va},{cn})\nLEADON({x},{va},CL_TNO)");
+    let _ = writeln!(
+        o,
+        "POS[{va}]=IC({}) FA[{va}]={} ; {revolutions} rev, {} s each",
+        fmt_fixed(360.0 * revolutions, 4),
+        fmt_fixed(360.0 * tables.va_speed_rpm, 3),
+        fmt_fixed(60.0 / tables.va_speed_rpm, 4)
+    );
+    let _ = writeln!(o, "WAITP({va})\nLEADOF({x},{va})\nLEADOF({c},{va})\nM30");
+    Ok(o)
+}
