@@ -11,6 +11,7 @@ use crate::core::learn::LearningParams;
 use crate::core::lift::LiftTable;
 use crate::core::measure::AssemblyLimits;
 use crate::core::program::ProgramSettings;
+use crate::core::speed_plan::SpeedPlanSettings;
 use crate::core::turn::TurnSetup;
 use anyhow::{Context, bail};
 use serde::Deserialize;
@@ -53,6 +54,9 @@ pub struct Recipe {
     pub learning: LearningParams,
     #[serde(default)]
     pub axis_limits: AxisLimits,
+    /// `[speed_plan]`: a planned C speed for the finish revolution (off by default).
+    #[serde(default)]
+    pub speed_plan: SpeedPlanSettings,
     #[serde(default)]
     pub lobes: Vec<Lobe>,
     #[serde(default)]
@@ -186,6 +190,8 @@ pub struct FeatureSetup {
     pub program: ProgramSettings,
     pub params: LearningParams,
     pub limits: AxisLimits,
+    /// The recipe's `[speed_plan]`.
+    pub speed_plan: SpeedPlanSettings,
     pub request: TableRequest,
     pub table_pair: (u32, u32),
     pub bands: Vec<ToleranceBand>,
@@ -299,6 +305,7 @@ impl Recipe {
             program,
             params: self.learning.clone(),
             limits: self.axis_limits.clone(),
+            speed_plan: self.speed_plan,
             request: TableRequest {
                 points: self.table.points,
                 form: self.table.form(),
@@ -427,6 +434,11 @@ impl Recipe {
         }
         if let Err(e) = self.learning.validate() {
             p.extend(e);
+        }
+        if self.speed_plan.enabled
+            && let Err(e) = self.speed_plan.limits(&self.axis_limits).check()
+        {
+            p.push(format!("speed_plan (with axis_limits): {e}"));
         }
         let mut names = std::collections::HashSet::new();
         for lobe in &self.lobes {

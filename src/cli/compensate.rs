@@ -423,6 +423,7 @@ fn flag_setup(
         program,
         params: LearningParams::default(),
         limits: AxisLimits::default(),
+        speed_plan: Default::default(),
         request: TableRequest {
             points: 360,
             form: form.unwrap_or(TableForm::G1),

@@ -11,6 +11,7 @@ mod part;
 mod planing;
 mod program_args;
 mod run;
+mod speed_plan;
 mod table;
 mod turnmill;
 
@@ -49,6 +50,9 @@ pub enum Command {
     Turnmill(turnmill::TurnMillArgs),
     /// Ratio-coupled planing of a twisted-lobe rotor (A follows X), resumable by segment.
     Planing(planing::PlaningArgs),
+    /// Plan C speed along the profile for the shortest finish revolution within the X, C and
+    /// removal-rate limits, against the fastest constant C speed; optionally as SVG.
+    SpeedPlan(speed_plan::SpeedPlanArgs),
 }
 
 /// Runs a parsed command; the error chain is printed by `main` on one line.
@@ -64,6 +68,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Contour(args) => contour::run_contour(args),
         Command::Turnmill(args) => turnmill::run_turnmill(args),
         Command::Planing(args) => planing::run_planing(args),
+        Command::SpeedPlan(args) => speed_plan::run_speed_plan(args),
     }
 }
 

@@ -38,6 +38,7 @@ mod cli_compensate;
 mod cli_generate;
 mod cli_history;
 mod cli_run;
+mod cli_speed_plan;
 mod cli_table;
 mod config_check;
 mod control_coupling;

@@ -45,6 +45,34 @@ fn demo_recipe_has_the_documented_values() {
     assert_eq!(ex4.program.name, "DEMO_CAM_EX4");
     assert_eq!((ex4.index, ex4.phase_deg, ex4.z_mm), (8, 70.0, 320.0));
     assert_eq!(recipe.learning.gain, 0.8);
+    // The speed plan's keys: off, with the removal limit that makes 30 rpm the fastest
+    // constant speed of the intake lobes.
+    assert!(!recipe.speed_plan.enabled);
+    assert_eq!(recipe.speed_plan.q_w_max_mm3_mm_s, 2.36);
+    assert_eq!(recipe.axis_limits.c_max_speed_rpm, 120.0);
+    assert_eq!(recipe.axis_limits.c_max_accel_deg_s2, 3600.0);
+}
+
+#[test]
+fn an_enabled_speed_plan_with_a_bad_limit_is_named() {
+    let text = r#"
+name = "X"
+kind = "camshaft"
+[wheel]
+radius_mm = 250
+[axis_limits]
+c_max_accel_deg_s2 = 0
+[speed_plan]
+enabled = true
+[[lobes]]
+name = "L1"
+lift = "a.csv"
+follower = "flat"
+base_radius_mm = 20
+"#;
+    let e = Recipe::parse(text, "bad.toml").unwrap_err().to_string();
+    assert!(e.contains("speed_plan (with axis_limits)"), "{e}");
+    assert!(e.contains("c_max_accel_deg_s2 = 0"), "{e}");
 }
 
 #[test]

@@ -101,6 +101,10 @@ pub struct AxisLimits {
     pub velocity_mm_s: f64,
     pub acceleration_mm_s2: f64,
     pub jerk_mm_s3: f64,
+    /// C speed limit, rev/min: what a speed plan may reach.
+    pub c_max_speed_rpm: f64,
+    /// C acceleration limit, degrees/s², for a speed plan.
+    pub c_max_accel_deg_s2: f64,
 }
 
 impl Default for AxisLimits {
@@ -110,6 +114,8 @@ impl Default for AxisLimits {
             velocity_mm_s: 200.0,
             acceleration_mm_s2: 10_000.0,
             jerk_mm_s3: 1.0e7,
+            c_max_speed_rpm: 120.0,
+            c_max_accel_deg_s2: 3600.0,
         }
     }
 }

@@ -19,6 +19,7 @@ pub mod names;
 pub mod program;
 pub mod setup;
 pub mod smooth;
+pub mod speed_plan;
 pub mod spline;
 pub mod svg;
 pub mod table;

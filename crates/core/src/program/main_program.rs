@@ -129,7 +129,6 @@ pub fn render_main_program(
 
 fn main_text(main: &MainProgramSettings, main_name: &str, r: &Resolved<'_>) -> String {
     let (x, c, t, n) = (&r.following, &r.leading, &r.name, NUMBER_VAR);
-    let cd = usize::from(r.settings.c_decimals);
     let mut out = String::new();
     line(&mut out, format_args!("%_N_{main_name}_MPF"));
     out.push_str(";$PATH=/_N_MPF_DIR\n");
@@ -149,22 +148,59 @@ fn main_text(main: &MainProgramSettings, main_name: &str, r: &Resolved<'_>) -> S
         &mut out,
         format_args!("{t}({n}) ; defines the newest curve table, returns its number"),
     );
-    out.push_str("STOPRE ; read C below only after the table is defined\n");
+    coupled_revolutions(&mut out, main, r, true);
+    out.push_str("M30\n");
+    out
+}
+
+/// The coupled grind both main programs run once the table program has returned its number
+/// in `CL_TNO`: wait for the definition, put X on the curve at the current C, couple, turn C
+/// the revolutions at the grinding speed, uncouple. With `explained`, the lines carry the
+/// comments a reader of a one-feature program needs (a shaft program repeats the block per
+/// feature and leaves them out).
+pub(crate) fn coupled_revolutions(
+    out: &mut String,
+    main: &MainProgramSettings,
+    r: &Resolved<'_>,
+    explained: bool,
+) {
+    let (x, c, n) = (&r.following, &r.leading, NUMBER_VAR);
+    let cd = usize::from(r.settings.c_decimals);
+    let why = |text: &str| {
+        if explained {
+            format!(" ; {text}")
+        } else {
+            String::new()
+        }
+    };
     line(
-        &mut out,
-        format_args!("CL_C=$AA_IW[{c}] ; setpoint of {c} in workpiece coordinates"),
+        out,
+        format_args!(
+            "STOPRE{}",
+            why("read C below only after the table is defined")
+        ),
     );
     line(
-        &mut out,
-        format_args!("CL_X=CTAB(CL_C,{n},CL_SLOPE) ; {x} on the curve at the current {c}"),
+        out,
+        format_args!(
+            "CL_C=$AA_IW[{c}]{}",
+            why(&format!("setpoint of {c} in workpiece coordinates"))
+        ),
     );
     line(
-        &mut out,
+        out,
+        format_args!(
+            "CL_X=CTAB(CL_C,{n},CL_SLOPE){}",
+            why(&format!("{x} on the curve at the current {c}"))
+        ),
+    );
+    line(
+        out,
         format_args!("G90 G1 {x}=CL_X F={}", fmt_fixed(main.x_feed_mm_min, 3)),
     );
-    line(&mut out, format_args!("LEADON({x},{c},{n})"));
+    line(out, format_args!("LEADON({x},{c},{n})"));
     line(
-        &mut out,
+        out,
         format_args!(
             "POS[{c}]=IC({}) FA[{c}]={} ; {} rev at {} rpm",
             fmt_fixed(360.0 * main.revolutions, cd),
@@ -173,8 +209,6 @@ fn main_text(main: &MainProgramSettings, main_name: &str, r: &Resolved<'_>) -> S
             main.c_speed_rpm
         ),
     );
-    line(&mut out, format_args!("WAITP({c})"));
-    line(&mut out, format_args!("LEADOF({x},{c})"));
-    out.push_str("M30\n");
-    out
+    line(out, format_args!("WAITP({c})"));
+    line(out, format_args!("LEADOF({x},{c})"));
 }

@@ -3,7 +3,7 @@
 //! feature; and the small resume subprogram camloop rewrites after each gauged feature.
 
 use super::ProgramSettings;
-use super::main_program::MainProgramSettings;
+use super::main_program::{MainProgramSettings, coupled_revolutions};
 use super::names::validate_axis_name;
 use super::settings::{SettingError, SettingsErrors, check_comments, check_positive};
 use super::table::{NUMBER_VAR, fmt_fixed, line};
@@ -103,7 +103,6 @@ pub fn render_shaft_program(
     }
     let first = &resolved[0];
     let (x, c, n) = (&first.following, &first.leading, NUMBER_VAR);
-    let cd = usize::from(first.settings.c_decimals);
     let xd = usize::from(first.settings.x_decimals);
     let z = &main.axial_axis;
     let mut out = String::new();
@@ -161,26 +160,7 @@ pub fn render_shaft_program(
             &mut out,
             format_args!("{t}({n}) ; defines the newest curve table, returns its number"),
         );
-        out.push_str("STOPRE\n");
-        line(&mut out, format_args!("CL_C=$AA_IW[{c}]"));
-        line(&mut out, format_args!("CL_X=CTAB(CL_C,{n},CL_SLOPE)"));
-        line(
-            &mut out,
-            format_args!("G90 G1 {x}=CL_X F={}", fmt_fixed(main.x_feed_mm_min, 3)),
-        );
-        line(&mut out, format_args!("LEADON({x},{c},{n})"));
-        line(
-            &mut out,
-            format_args!(
-                "POS[{c}]=IC({}) FA[{c}]={} ; {} rev at {} rpm",
-                fmt_fixed(360.0 * main.revolutions, cd),
-                fmt_fixed(360.0 * main.c_speed_rpm, 3),
-                main.revolutions,
-                main.c_speed_rpm
-            ),
-        );
-        line(&mut out, format_args!("WAITP({c})"));
-        line(&mut out, format_args!("LEADOF({x},{c})"));
+        coupled_revolutions(&mut out, main, r, false);
         out.push_str("ENDIF\n");
     }
     line(&mut out, format_args!("G0 {x}={clear}"));

@@ -254,8 +254,15 @@ pub(super) fn feature(
     let setup = sheet
         .and_then(|s| s.setup_svg.as_deref())
         .unwrap_or("<p>No setup drawing: the feature is not configured in this service.</p>");
+    let plan = sheet
+        .and_then(|s| s.speed_plan_svg.as_deref())
+        .map_or(String::new(), |svg| {
+            format!(
+                r#"<section aria-labelledby="plan-h"><h2 id="plan-h">Speed plan</h2><div class="setup">{svg}</div></section>"#
+            )
+        });
     let rest = format!(
-        r#"<section aria-labelledby="dress-h"><h2 id="dress-h">Report a dressing</h2><form id="dressing" data-url="/api/v1/machines/{m}/dressings"><label for="radius">New wheel radius, mm</label> <input id="radius" name="wheel_radius_mm" type="number" step="0.001" min="5" max="1000" required> <button type="submit">Report dressing</button></form><p id="dressing-result" role="status"></p></section><section aria-labelledby="setup-h"><h2 id="setup-h">Setup drawing</h2><div class="setup">{setup}</div></section>"#,
+        r#"<section aria-labelledby="dress-h"><h2 id="dress-h">Report a dressing</h2><form id="dressing" data-url="/api/v1/machines/{m}/dressings"><label for="radius">New wheel radius, mm</label> <input id="radius" name="wheel_radius_mm" type="number" step="0.001" min="5" max="1000" required> <button type="submit">Report dressing</button></form><p id="dressing-result" role="status"></p></section><section aria-labelledby="setup-h"><h2 id="setup-h">Setup drawing</h2><div class="setup">{setup}</div></section>{plan}"#,
         m = esc(machine)
     );
     let crumbs = format!(r#" › {} {}"#, esc(machine), esc(lobe));

@@ -46,6 +46,8 @@ pub struct FeatureSheet {
     pub base_radius_mm: Option<f64>,
     /// The setup drawing (SVG); `None` when the geometry could not be drawn.
     pub setup_svg: Option<String>,
+    /// The speed plan's chart (SVG) when the recipe has `[speed_plan] enabled = true`.
+    pub speed_plan_svg: Option<String>,
 }
 
 /// Per (machine, feature) name.
@@ -68,10 +70,21 @@ impl FeatureSheet {
                 .ok()
                 .map(|v| crate::core::svg::render_setup_svg(&v))
         });
+        let speed_plan_svg = s
+            .speed_plan
+            .enabled
+            .then(|| s.feature.part(&s.nominal).ok())
+            .flatten()
+            .and_then(|part| {
+                let limits = s.speed_plan.limits(&s.limits);
+                crate::core::speed_plan::plan(&part, &limits).ok()
+            })
+            .map(|plan| crate::core::speed_plan::plot::render_plan_svg(&plan, &s.label));
         Self {
             bands,
             base_radius_mm,
             setup_svg,
+            speed_plan_svg,
         }
     }
 
@@ -224,4 +237,27 @@ fn asset(kind: &'static str, body: &'static str) -> Response {
         body,
     )
         .into_response()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::FeatureSheet;
+    use crate::recipe::Recipe;
+    use std::path::Path;
+
+    /// The feature page's speed plan chart is there exactly when the recipe asks for a plan.
+    #[test]
+    fn the_speed_plan_chart_comes_with_the_recipe_switch() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
+        let mut recipe = Recipe::load(&path).unwrap();
+        let off = FeatureSheet::from_setup(&recipe.feature_setup(&path, "IN1").unwrap());
+        assert!(off.speed_plan_svg.is_none());
+        recipe.speed_plan.enabled = true;
+        let on = FeatureSheet::from_setup(&recipe.feature_setup(&path, "IN1").unwrap());
+        let svg = on.speed_plan_svg.expect("the demo lobe has a plan");
+        assert!(
+            svg.starts_with("<svg") && svg.contains("removal rate Q'w"),
+            "{svg}"
+        );
+    }
 }
