@@ -1,6 +1,7 @@
 //! Command-line front end: argument types and the commands behind them. This is an edge:
 //! it reads files, calls the pure core and writes outputs atomically.
 
+mod access;
 mod analyze;
 mod compensate;
 mod contour;
@@ -49,6 +50,12 @@ pub enum Command {
     Turnmill(turnmill::TurnMillArgs),
     /// Ratio-coupled planing of a twisted-lobe rotor (A follows X), resumable by segment.
     Planing(planing::PlaningArgs),
+    /// Users of the service and dashboard: add, passwd, disable, list.
+    User(access::UserArgs),
+    /// Per-user API tokens: create (shown once), revoke, list.
+    Token(access::TokenArgs),
+    /// The audit trail: who did what (`--since`), and `verify` its chain.
+    Audit(access::AuditArgs),
 }
 
 /// Runs a parsed command; the error chain is printed by `main` on one line.
@@ -64,6 +71,9 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Contour(args) => contour::run_contour(args),
         Command::Turnmill(args) => turnmill::run_turnmill(args),
         Command::Planing(args) => planing::run_planing(args),
+        Command::User(args) => access::run_user(args),
+        Command::Token(args) => access::run_token(args),
+        Command::Audit(args) => access::run_audit(args),
     }
 }
 
