@@ -29,12 +29,37 @@ impl From<RoleArg> for Role {
     }
 }
 
+/// Where the store is (as `history`), accepted before or after the subcommand.
+#[derive(Debug, Args)]
+pub struct GlobalStoreArgs {
+    /// Database URL (sqlite://… or postgres://…).
+    #[arg(long, value_name = "URL", global = true)]
+    pub database: Option<String>,
+    /// Service configuration whose database to use.
+    #[arg(
+        long,
+        value_name = "FILE",
+        default_value = "config/camloop.toml",
+        global = true
+    )]
+    pub config: std::path::PathBuf,
+}
+
+impl GlobalStoreArgs {
+    fn store(&self) -> StoreArgs {
+        StoreArgs {
+            database: self.database.clone(),
+            config: self.config.clone(),
+        }
+    }
+}
+
 #[derive(Debug, Args)]
 pub struct UserArgs {
     #[command(subcommand)]
     pub action: UserAction,
     #[command(flatten)]
-    pub store: StoreArgs,
+    pub store: GlobalStoreArgs,
 }
 
 #[derive(Debug, Subcommand)]
@@ -60,7 +85,7 @@ pub struct TokenArgs {
     #[command(subcommand)]
     pub action: TokenAction,
     #[command(flatten)]
-    pub store: StoreArgs,
+    pub store: GlobalStoreArgs,
 }
 
 #[derive(Debug, Subcommand)]
@@ -94,16 +119,13 @@ pub struct AuditArgs {
     #[arg(long, value_name = "TIME")]
     pub since: Option<String>,
     #[command(flatten)]
-    pub store: StoreArgs,
+    pub store: GlobalStoreArgs,
 }
 
 #[derive(Debug, Subcommand)]
 pub enum AuditAction {
     /// Check every row's chain digest; fails (exit 1) naming the rows changed or removed.
-    Verify {
-        #[command(flatten)]
-        store: StoreArgs,
-    },
+    Verify,
 }
 
 /// `cli:<login>`: who ran the command, as the audit trail names them.
@@ -154,7 +176,7 @@ pub fn run_user(args: UserArgs) -> anyhow::Result<()> {
     };
     let hash = password.map(|p| hash_password(&p)).transpose()?;
     runtime()?.block_on(async {
-        let store = connect(&args.store).await?;
+        let store = connect(&args.store.store()).await?;
         let result = user(&store, args.action, hash.as_deref()).await;
         store.close().await;
         result
@@ -244,7 +266,7 @@ fn lifetime_ms(text: &str) -> anyhow::Result<i64> {
 
 pub fn run_token(args: TokenArgs) -> anyhow::Result<()> {
     runtime()?.block_on(async {
-        let store = connect(&args.store).await?;
+        let store = connect(&args.store.store()).await?;
         let result = token(&store, args.action).await;
         store.close().await;
         result
@@ -345,11 +367,8 @@ pub fn run_audit(args: AuditArgs) -> anyhow::Result<()> {
         None => now - 86_400_000,
     };
     runtime()?.block_on(async {
-        let (store, verify) = match &args.action {
-            Some(AuditAction::Verify { store }) => (connect(store).await?, true),
-            None => (connect(&args.store).await?, false),
-        };
-        let result = match verify {
+        let store = connect(&args.store.store()).await?;
+        let result = match matches!(args.action, Some(AuditAction::Verify)) {
             true => verify_trail(&store).await,
             false => print_trail(&store, since).await,
         };
