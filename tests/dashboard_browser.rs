@@ -1,8 +1,8 @@
 //! The dashboard as an engineer uses it: a real headless Chromium, driven through WebDriver
 //! (chromedriver), against a real service with the simulated machine. The overview shows the
 //! machine with the last error the API reports; a new part appears without a reload within
-//! 2 s of being measured; a rollback without the token is refused in the page, with the token
-//! it delivers a new version that the page shows; no script errors, no failed requests; the
+//! 2 s of being measured; a rollback before signing in is refused in the page, signed in as
+//! an engineer it delivers a new version that the page shows; no script errors, no failed requests; the
 //! pages fit a 1024-pixel tablet. Screenshots go to the target folder
 //! (`target/tmp/dashboard/`).
 //!
@@ -21,6 +21,8 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 const TOKEN: &str = "let-me-write";
+/// The engineer `eng`'s password.
+const PASSWORD: &str = "a-long-enough-secret";
 const CHROMIUM: &str = "/usr/bin/chromium";
 const DRIVER: &str = "/usr/bin/chromedriver";
 
@@ -264,6 +266,12 @@ async fn the_dashboard_works_in_a_real_browser() {
         newest_part(addr)
     })
     .await;
+    let store = camloop::store::Store::connect(&url).await.unwrap();
+    let hash = camloop::auth::hash_password(PASSWORD).unwrap();
+    let now = camloop::clock::now_ms();
+    let engineer = camloop::store::Role::Engineer;
+    store.add_user("eng", engineer, &hash, now).await.unwrap();
+    store.close().await;
 
     let driver = start_driver();
     let profile = tempfile::tempdir().unwrap();
@@ -392,8 +400,8 @@ async fn feature(c: &Client, base: &str) {
     assert_clean(c, "feature").await;
 }
 
-/// Rollback from the versions page: refused in the page without the token; with it, a new
-/// version is delivered and shown.
+/// Rollback from the versions page: refused in the page before signing in; signed in as an
+/// engineer, a new version is delivered and shown.
 async fn versions(c: &Client, base: &str, addr: SocketAddr) {
     c.goto(&format!("{base}/machines/SIM1/features/IN1/versions"))
         .await
@@ -410,12 +418,34 @@ async fn versions(c: &Client, base: &str, addr: SocketAddr) {
     let reasons = body.matches("rollback to v1").count();
     assert_eq!(reasons, 0, "nothing was rolled back: {body}");
 
-    c.find(Locator::Css("#token"))
+    click(c, "#signin-link").await;
+    c.find(Locator::Css("#name"))
         .await
         .unwrap()
-        .send_keys(TOKEN)
+        .send_keys("eng")
         .await
         .unwrap();
+    c.find(Locator::Css("#password"))
+        .await
+        .unwrap()
+        .send_keys(PASSWORD)
+        .await
+        .unwrap();
+    click(c, "#signin button[type=submit]").await;
+    // Back on the versions page, signed in.
+    until(Duration::from_secs(10), "signed in", || async {
+        let who = c
+            .execute(
+                "const e = document.querySelector('#user'); return e ? e.innerText : null;",
+                vec![],
+            )
+            .await
+            .ok()?;
+        who.as_str()
+            .filter(|t| t.contains("eng (engineer)"))
+            .map(|_| ())
+    })
+    .await;
     click(c, button).await;
     let done = until(Duration::from_secs(20), "the rollback's answer", || async {
         let class = attr_of(c, "#rollback-result", "class").await?;
