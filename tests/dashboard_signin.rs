@@ -71,7 +71,7 @@ async fn sign_in(c: &Client, base: &str, name: &str, password: &str) -> String {
             let url = c.current_url().await.ok()?;
             let page = c.source().await.ok()?;
             let done = url.path() != "/signin" || page.contains("signin-result");
-            done.then(|| page)
+            done.then_some(page)
         },
     )
     .await

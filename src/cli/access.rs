@@ -281,45 +281,7 @@ async fn token(store: &Store, action: TokenAction) -> anyhow::Result<()> {
             role,
             expires,
             label,
-        } => {
-            let name = user_name(&user)?;
-            let Some(u) = store
-                .user(name.as_str())
-                .await?
-                .filter(|u| u.disabled_at_ms.is_none())
-            else {
-                bail!("no enabled user {name}");
-            };
-            let role = Role::from(role);
-            if role > u.role {
-                bail!(
-                    "a token of {name} can do at most what {name} can ({}), not {role}",
-                    u.role
-                );
-            }
-            let secret = new_token()?;
-            let expires_at_ms = now + lifetime_ms(&expires)?;
-            let label: String = label.chars().take(64).collect();
-            let t = NewToken {
-                user: u.id,
-                label: label.clone(),
-                sha256: token_digest(&secret),
-                role,
-                created_at_ms: now,
-                expires_at_ms,
-            };
-            let id = store.add_token(&t).await?;
-            let after = serde_json::json!({ "token": id.0, "user": name, "role": role.as_str(), "expires_at_ms": expires_at_ms, "label": label });
-            store
-                .append_audit(&entry("token.create", after, String::new()))
-                .await?;
-            eprintln!(
-                "token {} for {name} ({role}), valid until {} UTC; shown once, keep it secret:",
-                id.0,
-                crate::clock::utc_text(u64::try_from(expires_at_ms).unwrap_or(0))
-            );
-            println!("{secret}");
-        }
+        } => create_token(store, &user, role.into(), &expires, &label).await?,
         TokenAction::Revoke { id } => {
             if !store.revoke_token(TokenId(id), now).await? {
                 bail!("no live token {id}");
@@ -357,6 +319,54 @@ async fn token(store: &Store, action: TokenAction) -> anyhow::Result<()> {
             }
         }
     }
+    Ok(())
+}
+
+/// `token create`: prints the token once; keeps its digest.
+async fn create_token(
+    store: &Store,
+    user: &str,
+    role: Role,
+    expires: &str,
+    label: &str,
+) -> anyhow::Result<()> {
+    let now = now_ms();
+    let name = user_name(user)?;
+    let Some(u) = store
+        .user(name.as_str())
+        .await?
+        .filter(|u| u.disabled_at_ms.is_none())
+    else {
+        bail!("no enabled user {name}");
+    };
+    if role > u.role {
+        bail!(
+            "a token of {name} can do at most what {name} can ({}), not {role}",
+            u.role
+        );
+    }
+    let secret = new_token()?;
+    let expires_at_ms = now + lifetime_ms(expires)?;
+    let label: String = label.chars().take(64).collect();
+    let t = NewToken {
+        user: u.id,
+        label: label.clone(),
+        sha256: token_digest(&secret),
+        role,
+        created_at_ms: now,
+        expires_at_ms,
+    };
+    let id = store.add_token(&t).await?;
+    let after = serde_json::json!({ "token": id.0, "user": name, "role": role.as_str(), "expires_at_ms": expires_at_ms, "label": label });
+    store
+        .append_audit(&entry("token.create", after, String::new()))
+        .await?;
+    eprintln!(
+        "token {} for {name} ({role}), valid until {} UTC; shown once, keep it secret:",
+        id.0,
+        crate::clock::utc_text(u64::try_from(expires_at_ms).unwrap_or(0))
+    );
+    println!("{secret}");
     Ok(())
 }
 

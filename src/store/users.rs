@@ -63,6 +63,13 @@ pub struct TokenInfo {
 const USER_COLUMNS: &str =
     "SELECT id, name, role, password_hash, created_at_ms, disabled_at_ms FROM users";
 
+/// A token with its user as read: id, user, user role, token role, expires, revoked,
+/// user disabled.
+type GrantRow = (i64, String, String, String, i64, Option<i64>, Option<i64>);
+
+/// A token as listed: id, user, label, role, created, expires, revoked.
+type TokenRow = (i64, String, String, String, i64, i64, Option<i64>);
+
 /// A user's row as read: id, name, role, password hash, created, disabled.
 type UserRow = (i64, String, String, String, i64, Option<i64>);
 
@@ -201,7 +208,7 @@ impl Store {
     pub async fn token_grant(&self, sha256: &str) -> Result<Option<TokenGrant>, StoreError> {
         const OP: &str = "checking a token";
         with_read!(self, pool => {
-            let row: Option<(i64, String, String, String, i64, Option<i64>, Option<i64>)> =
+            let row: Option<GrantRow> =
                 sqlx::query_as(
                     "SELECT t.id, u.name, u.role, t.role, t.expires_at_ms, t.revoked_at_ms, \
                      u.disabled_at_ms FROM api_tokens t JOIN users u ON u.id = t.user_id \
@@ -246,7 +253,7 @@ impl Store {
     pub async fn tokens(&self) -> Result<Vec<TokenInfo>, StoreError> {
         const OP: &str = "listing tokens";
         with_read!(self, pool => {
-            let rows: Vec<(i64, String, String, String, i64, i64, Option<i64>)> = sqlx::query_as(
+            let rows: Vec<TokenRow> = sqlx::query_as(
                 "SELECT t.id, u.name, t.label, t.role, t.created_at_ms, t.expires_at_ms, \
                  t.revoked_at_ms FROM api_tokens t JOIN users u ON u.id = t.user_id ORDER BY t.id",
             )

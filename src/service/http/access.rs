@@ -1,4 +1,5 @@
-//! Who may call what. [`ROUTES`] is the one table of every route with the role it needs;
+//! Who may call what. [`ROUTES`] (in `route_roles.rs`) is the one table of every route with
+//! the role it needs;
 //! [`guard`] (a layer on the whole router, after routing) finds the caller's
 //! [`Principal`] from the request's headers alone (a bearer token, a dashboard session, or
 //! nobody), looks the matched route up in the table and lets the request through or answers
@@ -20,163 +21,7 @@ use axum::response::{IntoResponse, Redirect, Response};
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use tracing::warn;
 
-/// What a route needs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Need {
-    /// Anyone, signed in or not (health, assets, the sign-in page).
-    Public,
-    /// At least this role.
-    Role(Role),
-}
-
-/// How a route answers one who may not call it, and how it is protected from cross-site
-/// requests.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Kind {
-    /// JSON API: 401/403 with `{code, message}`; a session's writes need `X-CSRF-Token`.
-    Api,
-    /// A dashboard page: an anonymous visitor is sent to the sign-in page.
-    Page,
-    /// An HTML form post (sign-in, sign-out): its handler checks the form's CSRF field.
-    Form,
-}
-
-/// One route: method, path as routed, what it needs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct RouteRule {
-    pub method: &'static str,
-    pub path: &'static str,
-    pub need: Need,
-    pub kind: Kind,
-}
-
-const fn r(method: &'static str, path: &'static str, need: Need, kind: Kind) -> RouteRule {
-    RouteRule {
-        method,
-        path,
-        need,
-        kind,
-    }
-}
-
-const VIEW: Need = Need::Role(Role::Viewer);
-const OPERATE: Need = Need::Role(Role::Operator);
-const ENGINEER: Need = Need::Role(Role::Engineer);
-
-/// Every route of the router with what it needs. Reads are `viewer`; acknowledging and
-/// reporting a dressing `operator`; rolling back and the audit trail `engineer`.
-pub const ROUTES: &[RouteRule] = &[
-    r("GET", "/healthz", Need::Public, Kind::Api),
-    r("GET", "/metrics", VIEW, Kind::Api),
-    r("GET", "/openapi.json", VIEW, Kind::Api),
-    r("GET", "/api/v1/machines", VIEW, Kind::Api),
-    r("GET", "/api/v1/cluster", VIEW, Kind::Api),
-    r(
-        "GET",
-        "/api/v1/machines/{machine}/measurements",
-        VIEW,
-        Kind::Api,
-    ),
-    r("GET", "/api/v1/machines/{machine}/events", VIEW, Kind::Api),
-    r(
-        "GET",
-        "/api/v1/machines/{machine}/parts/{part}",
-        VIEW,
-        Kind::Api,
-    ),
-    r(
-        "POST",
-        "/api/v1/machines/{machine}/rollback",
-        ENGINEER,
-        Kind::Api,
-    ),
-    r(
-        "GET",
-        "/api/v1/machines/{machine}/lobes/{lobe}/tables",
-        VIEW,
-        Kind::Api,
-    ),
-    r(
-        "GET",
-        "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program",
-        VIEW,
-        Kind::Api,
-    ),
-    r(
-        "GET",
-        "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/diff",
-        VIEW,
-        Kind::Api,
-    ),
-    r(
-        "POST",
-        "/api/v1/machines/{machine}/lobes/{lobe}/rollback",
-        ENGINEER,
-        Kind::Api,
-    ),
-    r(
-        "GET",
-        "/api/v1/machines/{machine}/dressings",
-        VIEW,
-        Kind::Api,
-    ),
-    r(
-        "POST",
-        "/api/v1/machines/{machine}/dressings",
-        OPERATE,
-        Kind::Api,
-    ),
-    r("GET", "/api/v1/measurements/{id}", VIEW, Kind::Api),
-    r(
-        "POST",
-        "/api/v1/machines/{machine}/events/{id}/ack",
-        OPERATE,
-        Kind::Api,
-    ),
-    r("GET", "/api/v1/audit", ENGINEER, Kind::Api),
-    r("GET", "/", VIEW, Kind::Page),
-    r(
-        "GET",
-        "/machines/{machine}/features/{lobe}",
-        VIEW,
-        Kind::Page,
-    ),
-    r(
-        "GET",
-        "/machines/{machine}/features/{lobe}/versions",
-        VIEW,
-        Kind::Page,
-    ),
-    r(
-        "GET",
-        "/machines/{machine}/features/{lobe}/data",
-        VIEW,
-        Kind::Page,
-    ),
-    r(
-        "GET",
-        "/machines/{machine}/features/{lobe}/export.dfq",
-        VIEW,
-        Kind::Page,
-    ),
-    r("GET", "/dashboard/events", VIEW, Kind::Page),
-    r("GET", "/audit", ENGINEER, Kind::Page),
-    r("GET", "/assets/app.js", Need::Public, Kind::Api),
-    r("GET", "/assets/app.css", Need::Public, Kind::Api),
-    r("GET", "/assets/icon.svg", Need::Public, Kind::Api),
-    r("GET", "/signin", Need::Public, Kind::Page),
-    r("POST", "/signin", Need::Public, Kind::Form),
-    r("POST", "/signout", Need::Public, Kind::Form),
-    r("GET", "/session", Need::Public, Kind::Api),
-];
-
-/// The rule of a routed path, if the table has one.
-pub fn rule_for(method: &Method, path: &str) -> Option<&'static RouteRule> {
-    let head = *method == Method::HEAD;
-    ROUTES
-        .iter()
-        .find(|r| r.path == path && (r.method == method.as_str() || (head && r.method == "GET")))
-}
+pub use super::route_roles::{Kind, Need, ROUTES, RouteRule, rule_for};
 
 /// The access settings and the in-memory state of sign-ins (sessions, lockout).
 #[derive(Debug)]
@@ -267,6 +112,21 @@ impl<S: Send + Sync> FromRequestParts<S> for Principal {
             "unauthorized",
             "no caller identified".into(),
         ))
+    }
+}
+
+/// Proof that the access layer let the request through (its role checked against
+/// [`ROUTES`]), for handlers that need no more than that.
+#[derive(Debug, Clone, Copy)]
+pub struct Authorized;
+
+impl<S: Send + Sync> FromRequestParts<S> for Authorized {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, ApiError> {
+        Principal::from_request_parts(parts, state)
+            .await
+            .map(|_| Authorized)
     }
 }
 
@@ -556,23 +416,5 @@ mod tests {
         assert!(same_secret(b"let-me-write", b"let-me-write"));
         assert!(!same_secret(b"let-me-writ", b"let-me-write"));
         assert!(!same_secret(b"", b"let-me-write"));
-    }
-
-    #[test]
-    fn every_route_is_in_the_table_once() {
-        let mut seen = std::collections::BTreeSet::new();
-        for r in ROUTES {
-            assert!(
-                seen.insert((r.method, r.path)),
-                "{} {} twice",
-                r.method,
-                r.path
-            );
-        }
-        assert_eq!(
-            rule_for(&Method::HEAD, "/healthz").map(|r| r.need),
-            Some(Need::Public)
-        );
-        assert!(rule_for(&Method::DELETE, "/healthz").is_none());
     }
 }

@@ -3,6 +3,7 @@
 //! which runs before any handler reads a byte of the body.
 
 use super::AppState;
+pub use super::access::Authorized;
 use crate::names::{MachineName, check_plain_name};
 use axum::Json;
 use axum::extract::{FromRequest, FromRequestParts, Path, Query, Request};

@@ -4,6 +4,7 @@
 //!
 //! - `access.rs`: who may call what: the route → role table, the layer that identifies the
 //!   caller (bearer token, session, anonymous) and checks it, the lockout.
+//! - `route_roles.rs`: the table of every route and the role it needs.
 //! - `session.rs`: dashboard sign-in, sessions, CSRF tokens, sign-out.
 //! - `audit.rs`: appending to the audit trail, and reading it.
 //! - `api.rs`: the `{code, message}` error and the extractors that keep it.
@@ -19,13 +20,14 @@ mod audit;
 mod dashboard;
 mod openapi;
 mod parts;
+mod route_roles;
 mod routes;
 mod server;
 mod session;
 mod writes;
 
 pub use access::{AuthState, Principal, ROUTES, RouteRule};
-pub use api::{ApiError, ApiJson, ApiPath, ApiQuery};
+pub use api::{ApiError, ApiJson, ApiPath, ApiQuery, Authorized};
 pub use audit::record as record_audit;
 pub use dashboard::{FeatureSheet, FeatureSheets, Stopping};
 pub use routes::{LobeInfo, MachineInfo, MachinesReply};

@@ -195,42 +195,14 @@ pub(super) async fn signin(
             e.0,
         );
     }
-    let store = super::routes::store(&app).await?;
-    let user = match &name {
-        Some(n) => store.user(n.as_str()).await?,
-        None => None,
-    };
-    // A hash is checked even for an unknown user, so the time taken does not tell.
-    let hash = user
-        .as_ref()
-        .map_or(DUMMY_HASH, |u| u.password_hash.as_str());
-    let password = form.password.clone();
-    let hash_owned = hash.to_string();
-    let matches = tokio::task::spawn_blocking(move || verify_password(&password, &hash_owned))
-        .await
-        .unwrap_or(false);
-    let why = match &user {
-        None => Some("unknown user"),
-        Some(u) if u.disabled_at_ms.is_some() => Some("disabled user"),
-        Some(_) if !matches => Some("wrong password"),
-        Some(_) => None,
-    };
-    let Some(user) = user.filter(|_| why.is_none()) else {
-        failed(
-            &app,
-            "password",
-            user_text,
-            address,
-            why.unwrap_or("refused"),
-        )
-        .await;
-        let message = "Wrong user name or password.";
-        return signin_form(
-            &app,
-            form.next.as_deref(),
-            message,
-            StatusCode::UNAUTHORIZED,
-        );
+    let user = match check_password(&app, name.as_ref(), &form.password).await? {
+        Ok(user) => user,
+        Err(why) => {
+            failed(&app, "password", user_text, address, why).await;
+            let message = "Wrong user name or password.";
+            let next = form.next.as_deref();
+            return signin_form(&app, next, message, StatusCode::UNAUTHORIZED);
+        }
     };
     let (key, _) = app
         .auth
@@ -255,6 +227,34 @@ pub(super) async fn signin(
         header::HeaderValue::try_from(clear).map_err(internal)?,
     );
     Ok(r)
+}
+
+/// The enabled user `name` whose password is `password`, or why not. A hash is checked even
+/// for an unknown user, so the time taken does not tell which names exist.
+async fn check_password(
+    app: &AppState,
+    name: Option<&UserName>,
+    password: &str,
+) -> Result<Result<crate::store::User, &'static str>, ApiError> {
+    let store = super::routes::store(app).await?;
+    let user = match name {
+        Some(n) => store.user(n.as_str()).await?,
+        None => None,
+    };
+    let hash = user
+        .as_ref()
+        .map_or(DUMMY_HASH, |u| u.password_hash.as_str())
+        .to_string();
+    let password = password.to_string();
+    let matches = tokio::task::spawn_blocking(move || verify_password(&password, &hash))
+        .await
+        .unwrap_or(false);
+    Ok(match user {
+        None => Err("unknown user"),
+        Some(u) if u.disabled_at_ms.is_some() => Err("disabled user"),
+        Some(_) if !matches => Err("wrong password"),
+        Some(u) => Ok(u),
+    })
 }
 
 fn internal(e: impl std::fmt::Display) -> ApiError {

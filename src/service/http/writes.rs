@@ -67,7 +67,7 @@ pub(super) async fn rollback(
         ));
     }
     let version = body.version;
-    let before = in_force(&state, &machine, &[lobe.clone()]);
+    let before = in_force(&state, &machine, std::slice::from_ref(&lobe));
     let mut entry = p.audit("rollback", AuditResult::Ok, String::new());
     entry.machine = Some(machine.to_string());
     entry.feature = Some(lobe.clone());
@@ -82,7 +82,7 @@ pub(super) async fn rollback(
     })
     .await;
     audited(&state, entry, &done, || {
-        in_force(&state, &machine, &[lobe.clone()])
+        in_force(&state, &machine, std::slice::from_ref(&lobe))
     })
     .await;
     Ok(Json(done?.into()))
