@@ -235,3 +235,56 @@ async fn users_tokens_and_rows_edited_and_removed_in_postgres() {
         .unwrap();
     verify_names(&url, 5, "link to the row before");
 }
+
+/// The first start of the real binary makes `admin`: the password goes to a file only its
+/// owner may read, its path is printed, and the password itself is nowhere in the output.
+/// A second start leaves the file and the user as they are.
+#[test]
+fn the_first_start_writes_the_admin_password_to_an_owner_only_file_and_never_logs_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let recipe = cli_support::repo("config/parts/demo-lobe.toml");
+    let config = format!(
+        "[database]\nurl = \"sqlite://var/camloop.db?mode=rwc\"\n[service]\nvar_dir = \"var\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
+         [[machines]]\nname = \"M7\"\nrecipe = \"{recipe}\"\nlobe = \"IN1\"\nshare = \"share/M7\"\n[machines.gauge]\nkind = \"sim\"\npart_interval_ms = 10\n"
+    );
+    std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
+    let run = || {
+        cli_support::camloop(
+            &["run", "--config", "camloop.toml", "--parts", "1"],
+            dir.path(),
+        )
+    };
+    let first = run();
+    assert!(first.status.success(), "{}", err(&first));
+    let file = dir.path().join("var/admin-password");
+    let password = std::fs::read_to_string(&file).unwrap().trim().to_string();
+    assert_eq!(password.chars().count(), 24);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(&file).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, 0o600);
+    }
+    let output = format!("{}{}", out(&first), err(&first));
+    assert!(
+        output.contains("var/admin-password"),
+        "the path is printed: {output}"
+    );
+    assert!(
+        !output.contains(&password),
+        "the password is never printed or logged"
+    );
+    let second = run();
+    assert!(second.status.success(), "{}", err(&second));
+    assert_eq!(std::fs::read_to_string(&file).unwrap().trim(), password);
+    let users = cli_support::camloop(
+        &["user", "list", "--database", "sqlite://var/camloop.db"],
+        dir.path(),
+    );
+    let list = out(&users);
+    assert_eq!(
+        list.lines().filter(|l| l.starts_with("admin ")).count(),
+        1,
+        "{list}"
+    );
+}

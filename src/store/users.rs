@@ -120,7 +120,9 @@ impl Store {
     /// The user called `name`, disabled or not.
     pub async fn user(&self, name: &str) -> Result<Option<User>, StoreError> {
         const OP: &str = "reading a user";
-        with_write!(self, pool => {
+        // Through the readers: the access layer asks on every session's request, and must
+        // never wait for (or hold) the connection the machine loops write through.
+        with_read!(self, pool => {
             let row: Option<UserRow> =
                 sqlx::query_as(&format!("{USER_COLUMNS} WHERE name = $1"))
                     .bind(name)
