@@ -45,6 +45,12 @@ fn fake_machine() -> mpsc::Sender<Command> {
                     };
                     let _ = reply.send(answer);
                 }
+                Command::Freeze { lobe, reply, .. } => {
+                    let _ = reply.send(Ok(CommandDone {
+                        version: None,
+                        message: format!("learning of {lobe} frozen"),
+                    }));
+                }
                 Command::RollbackPart { versions, reply } => {
                     let names: Vec<String> =
                         versions.iter().map(|(l, v)| format!("{l} v{v}")).collect();

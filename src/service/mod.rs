@@ -291,6 +291,19 @@ async fn machine_task(
                 http::Command::Rollback { lobe, version, reply } => {
                     let _ = reply.send(rollback_result(&mut machine, &lobe, version).await);
                 }
+                http::Command::Freeze { lobe, frozen, reply } => {
+                    let done = match machine.set_frozen(&lobe, frozen.clone()).await {
+                        Some(_) => Ok(http::CommandDone {
+                            version: None,
+                            message: match frozen {
+                                Some(why) => format!("learning of {lobe} frozen: {why}"),
+                                None => format!("learning of {lobe} resumed"),
+                            },
+                        }),
+                        None => Err(http::CommandError::Refused { reason: format!("{lobe} is not ground here") }),
+                    };
+                    let _ = reply.send(done);
+                }
                 http::Command::RollbackPart { versions, reply } => {
                     let _ = reply.send(rollback_part_result(&mut machine, &versions).await);
                 }

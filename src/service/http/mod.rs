@@ -84,6 +84,12 @@ pub enum Command {
         source: String,
         reply: Reply,
     },
+    /// Freeze the learning of `lobe` with this reason, or (`None`) let it learn again.
+    Freeze {
+        lobe: String,
+        frozen: Option<String>,
+        reply: Reply,
+    },
     /// Roll several features back together (a whole part: one version of each); every
     /// version is checked before any is pushed.
     RollbackPart {
@@ -166,6 +172,10 @@ pub fn router(state: AppState) -> Router {
         .route(
             &format!("{m}/lobes/{{lobe}}/rollback"),
             post(writes::rollback),
+        )
+        .route(
+            &format!("{m}/lobes/{{lobe}}/learning"),
+            post(writes::freeze),
         )
         .route(
             &format!("{m}/dressings"),

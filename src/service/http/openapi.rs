@@ -37,6 +37,7 @@ pub(super) async fn openapi() -> Json<Value> {
             "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program": get("program text of a table version"),
             "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/diff": get("X difference to the parent version at every table point, µm"),
             "/api/v1/measurements/{id}": get("one measurement with its averaged profile and analysis"),
+            "/api/v1/machines/{machine}/lobes/{lobe}/learning": { "post": write("role engineer: freeze a feature's learning (the correction stays) or let it learn again; body {\"frozen\": true, \"reason\": \"…\"} or {\"frozen\": false}", "done: {status, version: null, message}", json!({})) },
             "/api/v1/audit": get("role engineer: the audit trail, newest first (who, role, client address, action, target, before/after, result, reason); since_ms, limit ≤ 1000"),
             "/api/v1/machines/{machine}/dressings": {
                 "get": get("wheel dressings, newest first")["get"],

@@ -49,7 +49,8 @@ const OPERATE: Need = Need::Role(Role::Operator);
 const ENGINEER: Need = Need::Role(Role::Engineer);
 
 /// Every route of the router with what it needs. Reads are `viewer`; acknowledging and
-/// reporting a dressing `operator`; rolling back and the audit trail `engineer`.
+/// reporting a dressing `operator`; rolling back, freezing learning and the audit trail
+/// `engineer`.
 pub const ROUTES: &[RouteRule] = &[
     r("GET", "/healthz", Need::Public, Kind::Api),
     r("GET", "/metrics", VIEW, Kind::Api),
@@ -96,6 +97,12 @@ pub const ROUTES: &[RouteRule] = &[
     r(
         "POST",
         "/api/v1/machines/{machine}/lobes/{lobe}/rollback",
+        ENGINEER,
+        Kind::Api,
+    ),
+    r(
+        "POST",
+        "/api/v1/machines/{machine}/lobes/{lobe}/learning",
         ENGINEER,
         Kind::Api,
     ),

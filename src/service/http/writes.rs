@@ -197,6 +197,76 @@ pub(super) async fn rollback_part(
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+pub struct FreezeBody {
+    frozen: bool,
+    /// Why (kept with the state and in the audit trail); at most 200 characters.
+    reason: Option<String>,
+}
+
+/// `POST /api/v1/machines/{machine}/lobes/{lobe}/learning` with `{"frozen": true, "reason":
+/// "…"}` or `{"frozen": false}`: an engineer freezes a feature's learning (the correction
+/// stays as it is) or lets it learn again.
+pub(super) async fn freeze(
+    p: Principal,
+    State(state): State<AppState>,
+    ApiPath((machine, lobe)): ApiPath<(String, String)>,
+    ApiJson(body): ApiJson<FreezeBody>,
+) -> Result<Json<CommandReply>, ApiError> {
+    let machine = configured(&state, &machine)?;
+    feature_name(&lobe)?;
+    if !state
+        .machines
+        .get(&machine)
+        .is_some_and(|l| l.contains(&lobe))
+    {
+        return Err(ApiError(
+            StatusCode::NOT_FOUND,
+            "lobe_not_found",
+            format!("machine {machine} does not grind a lobe or pin {lobe}"),
+        ));
+    }
+    let reason = body.reason.unwrap_or_default();
+    if reason.chars().count() > 200 || reason.chars().any(char::is_control) {
+        return Err(ApiError(
+            StatusCode::BAD_REQUEST,
+            "invalid_reason",
+            "reason: at most 200 characters, no control characters".into(),
+        ));
+    }
+    let frozen = body.frozen.then(|| match reason.is_empty() {
+        true => format!("frozen by {}", p.actor),
+        false => format!("frozen by {}: {reason}", p.actor),
+    });
+    let status = |s: &AppState| {
+        let f = s.metrics.features();
+        let now = f
+            .get(&(machine.to_string(), lobe.clone()))
+            .and_then(|f| f.frozen.clone());
+        serde_json::json!({ "frozen": now }).to_string()
+    };
+    let action = if body.frozen {
+        "learning.freeze"
+    } else {
+        "learning.resume"
+    };
+    let mut entry = p.audit(action, AuditResult::Ok, String::new());
+    entry.machine = Some(machine.to_string());
+    entry.feature = Some(lobe.clone());
+    entry.before = Some(status(&state));
+    let done = command(&state, &machine, "freeze_refused", |reply| {
+        Command::Freeze {
+            lobe: lobe.clone(),
+            frozen,
+            reply,
+        }
+    })
+    .await;
+    audited(&state, entry, &done, || status(&state)).await;
+    Ok(Json(done?.into()))
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct DressingBody {
     wheel_radius_mm: f64,
 }
