@@ -169,7 +169,7 @@ async fn serve(store: Store) -> (SocketAddr, watch::Sender<bool>) {
         metrics: Arc::default(),
         machines: Arc::new(machines),
         commands: Arc::default(),
-        token: Some(Secret::new("bench")),
+        auth: Arc::new(http::AuthState::new(Some(Secret::new("bench")), true)),
         body_timeout: limits.body_timeout,
         dashboard: Arc::new(sheets),
         cluster: None,

@@ -7,6 +7,7 @@
 // No unwrap() in shipped code: bad input must become an error, not a panic (tests may).
 #![warn(clippy::unwrap_used)]
 
+pub mod auth;
 pub mod cli;
 pub mod clock;
 pub mod cluster;

@@ -1,6 +1,7 @@
 //! Command-line front end: argument types and the commands behind them. This is an edge:
 //! it reads files, calls the pure core and writes outputs atomically.
 
+mod access;
 mod analyze;
 mod compensate;
 mod contour;
@@ -53,6 +54,12 @@ pub enum Command {
     /// Plan C speed along the profile for the shortest finish revolution within the X, C and
     /// removal-rate limits, against the fastest constant C speed; optionally as SVG.
     SpeedPlan(speed_plan::SpeedPlanArgs),
+    /// Users of the service and dashboard: add, passwd, disable, list.
+    User(access::UserArgs),
+    /// Per-user API tokens: create (shown once), revoke, list.
+    Token(access::TokenArgs),
+    /// The audit trail: who did what (`--since`), and `verify` its chain.
+    Audit(access::AuditArgs),
 }
 
 /// Runs a parsed command; the error chain is printed by `main` on one line.
@@ -69,6 +76,9 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Turnmill(args) => turnmill::run_turnmill(args),
         Command::Planing(args) => planing::run_planing(args),
         Command::SpeedPlan(args) => speed_plan::run_speed_plan(args),
+        Command::User(args) => access::run_user(args),
+        Command::Token(args) => access::run_token(args),
+        Command::Audit(args) => access::run_audit(args),
     }
 }
 

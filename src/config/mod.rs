@@ -2,12 +2,14 @@
 //! errors, every problem is reported at once, secrets come from the environment and are
 //! redacted in Debug output.
 
+mod auth;
 mod check;
 mod cluster;
 mod keys;
 mod mqtt;
 mod values;
 
+pub use auth::AuthSection;
 pub use check::{Checked, CheckedMachine, check, configured_features, load, machine_features};
 pub use cluster::ClusterSection;
 pub use keys::Lines;
@@ -22,7 +24,8 @@ use std::path::{Path, PathBuf};
 
 /// Environment variable that overrides `database.url`.
 pub const ENV_DATABASE_URL: &str = "CAMLOOP_DATABASE_URL";
-/// Environment variable holding the API token for write requests.
+/// Environment variable holding the shared API token (deprecated: it acts as an `admin`;
+/// use per-user tokens from `camloop token create`).
 pub const ENV_API_TOKEN: &str = "CAMLOOP_API_TOKEN";
 
 #[derive(Debug, Clone, Deserialize)]
@@ -39,11 +42,13 @@ pub struct Config {
     #[serde(default)]
     pub cluster: ClusterSection,
     #[serde(default)]
+    pub auth: AuthSection,
+    #[serde(default)]
     pub machines: Vec<MachineSection>,
     /// Folder of the config file; relative paths in the file are resolved against it.
     #[serde(skip)]
     pub base_dir: PathBuf,
-    /// The API token, from the environment only.
+    /// The deprecated shared API token (acts as `admin`), from the environment only.
     #[serde(skip)]
     pub api_token: Option<Secret>,
     /// The line of every key in the file, for problems found after parsing.
@@ -383,6 +388,14 @@ impl Config {
 
     pub fn var_dir(&self) -> PathBuf {
         self.resolve(&self.service.var_dir)
+    }
+
+    /// Where the first start writes the `admin` password.
+    pub fn admin_password_file(&self) -> PathBuf {
+        match self.auth.admin_password_file.as_os_str().is_empty() {
+            true => self.var_dir().join("admin-password"),
+            false => self.resolve(&self.auth.admin_password_file),
+        }
     }
 
     /// The `[mqtt]` settings as this instance uses them: in a cluster the client id is

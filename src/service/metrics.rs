@@ -186,6 +186,18 @@ const FEATURE_FAMILIES: [FeatureFamily; 5] = [
 pub struct Metrics {
     machines: Mutex<BTreeMap<String, MachineMetrics>>,
     features: Mutex<BTreeMap<(String, String), FeatureStatus>>,
+    access: Mutex<AccessMetrics>,
+}
+
+/// Counters of the listener's access control.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct AccessMetrics {
+    /// Failed sign-ins and tokens, by kind (`password`, `token`, `locked`, `csrf`).
+    pub failures: BTreeMap<&'static str, u64>,
+    /// Users and addresses locked out.
+    pub lockouts_total: u64,
+    /// Audit rows that could not be written (the database was unreachable).
+    pub audit_failures_total: u64,
 }
 
 impl Metrics {
@@ -218,6 +230,43 @@ impl Metrics {
             .clone()
     }
 
+    /// Changes the access counters.
+    pub fn update_access(&self, f: impl FnOnce(&mut AccessMetrics)) {
+        f(&mut self.access.lock().unwrap_or_else(|p| p.into_inner()));
+    }
+
+    pub fn access(&self) -> AccessMetrics {
+        self.access
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
+    }
+
+    fn render_access(&self, s: &mut String) {
+        let a = self.access();
+        let name = "camloop_auth_failures_total";
+        let _ = writeln!(
+            s,
+            "# HELP {name} Failed sign-ins, tokens and CSRF checks, by kind.\n# TYPE {name} counter"
+        );
+        for kind in ["password", "token", "locked", "csrf"] {
+            let n = a.failures.get(kind).copied().unwrap_or(0);
+            let _ = writeln!(s, "{name}{{kind=\"{kind}\"}} {n}");
+        }
+        let name = "camloop_auth_lockouts_total";
+        let _ = writeln!(
+            s,
+            "# HELP {name} Users and client addresses locked out after repeated failures.\n# TYPE {name} counter\n{name} {}",
+            a.lockouts_total
+        );
+        let name = "camloop_audit_failures_total";
+        let _ = writeln!(
+            s,
+            "# HELP {name} Audit rows that could not be stored.\n# TYPE {name} counter\n{name} {}",
+            a.audit_failures_total
+        );
+    }
+
     /// The text exposition format (version 0.0.4).
     pub fn render(&self) -> String {
         let map = self.snapshot();
@@ -237,6 +286,7 @@ impl Metrics {
                 }
             }
         }
+        self.render_access(&mut s);
         s
     }
 }
@@ -261,7 +311,7 @@ mod tests {
             text.contains("camloop_last_max_error_um{machine=\"M1\"} 0.5\n"),
             "{text}"
         );
-        assert_eq!(text.matches("# TYPE").count(), 14 + 5);
+        assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 3);
         m.update_feature("M1", "IN1", |f| {
             f.last_max_error_um = Some(0.7);
             f.blocked_by_guard = Some("correction at its limit".into());

@@ -2,6 +2,7 @@
 //! machine a gauge source and the machine's loop; a store connector; the HTTP listener; and a
 //! graceful shutdown on SIGINT/SIGTERM that lets every machine finish the part in hand.
 
+mod access_setup;
 mod cluster_task;
 mod drop_source;
 pub mod http;
@@ -133,6 +134,9 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
     let store: StoreHandle = Arc::new(tokio::sync::RwLock::new(None));
     connect_store(&config, &store).await;
     store_guard::guard_start(&store, &config, options.accept_new_database).await?;
+    if let Some(s) = store.read().await.as_ref() {
+        access_setup::ensure_admin(s, &config).await?;
+    }
     let connector = tokio::spawn(keep_store_connected(
         config.clone(),
         store.clone(),
@@ -209,7 +213,7 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
         metrics: metrics.clone(),
         machines: Arc::new(features),
         commands,
-        token: config.api_token.clone(),
+        auth: Arc::new(access_setup::access_settings(&config)),
         body_timeout: limits.body_timeout,
         dashboard: Arc::new(sheets),
         cluster: cluster_view,
@@ -287,11 +291,24 @@ async fn machine_task(
                 http::Command::Rollback { lobe, version, reply } => {
                     let _ = reply.send(rollback_result(&mut machine, &lobe, version).await);
                 }
+                http::Command::Freeze { lobe, frozen, reply } => {
+                    let done = match machine.set_frozen(&lobe, frozen.clone()).await {
+                        Some(_) => Ok(http::CommandDone {
+                            version: None,
+                            message: match frozen {
+                                Some(why) => format!("learning of {lobe} frozen: {why}"),
+                                None => format!("learning of {lobe} resumed"),
+                            },
+                        }),
+                        None => Err(http::CommandError::Refused { reason: format!("{lobe} is not ground here") }),
+                    };
+                    let _ = reply.send(done);
+                }
                 http::Command::RollbackPart { versions, reply } => {
                     let _ = reply.send(rollback_part_result(&mut machine, &versions).await);
                 }
-                http::Command::Dressing { wheel_radius_mm, reply } => {
-                    let result = machine.dress(wheel_radius_mm, "api").await;
+                http::Command::Dressing { wheel_radius_mm, source, reply } => {
+                    let result = machine.dress(wheel_radius_mm, &source).await;
                     let _ = reply.send(dressing_result(result));
                 }
             },

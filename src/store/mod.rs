@@ -16,10 +16,13 @@
 //! other history requests, but never makes a part wait for a connection. On PostgreSQL the
 //! readers also run under a statement timeout.
 //!
+//! Users, API tokens and the chained audit trail are in `users.rs` and `audit.rs`.
+//!
 //! Invariant: history is appended. The only UPDATE is retention
 //! ([`Store::prune_raw_older_than`]) setting a raw blob to NULL; table-version status
 //! changes are appended rows; the newest learning-state row wins.
 
+mod audit;
 mod chain;
 mod codec;
 mod connect;
@@ -33,6 +36,7 @@ mod pack_numbers;
 mod pack_report;
 mod tables;
 mod types;
+mod users;
 mod views;
 
 use std::sync::Arc;
@@ -42,12 +46,14 @@ use sqlx::postgres::PgPool;
 use sqlx::sqlite::SqlitePool;
 use tokio::sync::{Semaphore, SemaphorePermit};
 
+pub use audit::{AUDIT_GENESIS, AuditCheck, AuditEntry, AuditRow, MAX_AUDIT_PAGE, audit_digest};
 pub use codec::{UNITS_PER_MM, decode_lifts_mm, encode_lifts_mm, sha256_hex};
 pub use convert::Converted;
 pub use error::{Detail, StoreError};
 pub use identity::StoreIdentity;
 pub use pack_report::REPORT_STEP;
 pub use types::*;
+pub use users::{NewToken, TokenGrant, TokenId, TokenInfo, User, UserId};
 pub use views::{AckOutcome, EventAck, TableVersionHead};
 
 /// The SQLite migrations, embedded from `migrations/sqlite` by sqlx (`build.rs` rebuilds

@@ -290,3 +290,48 @@ pub struct LearningState {
     pub state_json: String,
     pub saved_at_ms: i64,
 }
+
+text_enum!(
+    /// What a user may do; each role may do everything the ones before it may:
+    /// `viewer` reads, `operator` also acknowledges alarms and reports dressings,
+    /// `engineer` also rolls back and changes what the loop may do, `admin` also manages
+    /// users.
+    Role, "role" { Viewer, Operator, Engineer, Admin }
+);
+
+impl Role {
+    /// Every role, least first.
+    pub const ALL: [Role; 4] = [Role::Viewer, Role::Operator, Role::Engineer, Role::Admin];
+
+    fn rank(self) -> u8 {
+        match self {
+            Role::Viewer => 0,
+            Role::Operator => 1,
+            Role::Engineer => 2,
+            Role::Admin => 3,
+        }
+    }
+}
+
+impl PartialOrd for Role {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Role {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.rank().cmp(&other.rank())
+    }
+}
+
+impl std::fmt::Display for Role {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+text_enum!(
+    /// How an audited action ended.
+    AuditResult, "audit result" { Ok, Refused, Failed }
+);

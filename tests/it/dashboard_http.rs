@@ -220,8 +220,9 @@ async fn acknowledgements(addr: SocketAddr) {
         !page.contains(&path),
         "the acknowledged event has no button any more"
     );
+    // Who: the caller (here the deprecated shared token, named `api-token`), not "dashboard".
     assert!(
-        page.contains("(dashboard)"),
+        page.contains("(api-token)"),
         "and shows who acknowledged it"
     );
 }

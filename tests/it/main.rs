@@ -27,6 +27,8 @@ mod store_support;
 #[path = "../support/mod.rs"]
 mod support;
 
+mod access_cli;
+mod access_matrix;
 mod analysis_accuracy;
 mod analysis_assembly;
 mod analysis_fixture;

@@ -45,6 +45,12 @@ fn fake_machine() -> mpsc::Sender<Command> {
                     };
                     let _ = reply.send(answer);
                 }
+                Command::Freeze { lobe, reply, .. } => {
+                    let _ = reply.send(Ok(CommandDone {
+                        version: None,
+                        message: format!("learning of {lobe} frozen"),
+                    }));
+                }
                 Command::RollbackPart { versions, reply } => {
                     let names: Vec<String> =
                         versions.iter().map(|(l, v)| format!("{l} v{v}")).collect();
@@ -56,6 +62,7 @@ fn fake_machine() -> mpsc::Sender<Command> {
                 Command::Dressing {
                     wheel_radius_mm,
                     reply,
+                    ..
                 } => {
                     let _ = reply.send(Ok(CommandDone {
                         version: Some(8),
@@ -85,7 +92,7 @@ async fn server(limits: HttpLimits, store: Option<camloop::store::Store>) -> Ser
         metrics: Arc::default(),
         machines: Arc::new(machines),
         commands: Arc::new(std::sync::RwLock::new(commands)),
-        token: Some(Secret::new(TOKEN)),
+        auth: Arc::new(http::AuthState::new(Some(Secret::new(TOKEN)), true)),
         body_timeout: limits.body_timeout,
         dashboard: Arc::default(),
         cluster: None,

@@ -238,7 +238,8 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
     let dressing = json(&body)["items"][0].clone();
     assert_eq!(dressing["new_radius_mm"], 249.95, "{body}");
     assert_eq!(dressing["old_radius_mm"], 250.0, "{body}");
-    assert_eq!(dressing["source"], "api");
+    // Who reported it: the caller (the deprecated shared token is named `api-token`).
+    assert_eq!(dressing["source"], "api:api-token");
     let (_, body) = get(addr, "/api/v1/machines/SIM1/lobes/IN1/tables?limit=1").await;
     let dressed = json(&body)["items"][0].clone();
     assert_eq!(dressed["reason"], "wheel dressed to 249.95 mm", "{body}");

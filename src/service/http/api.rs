@@ -1,16 +1,16 @@
 //! The API's error (`{code, message}` with a status), axum's extractors wrapped so their
-//! rejections keep that shape, the name checks, and the token check that every write runs
-//! before it reads a byte of the body.
+//! rejections keep that shape, and the name checks. Who may call what is `access.rs`,
+//! which runs before any handler reads a byte of the body.
 
 use super::AppState;
+pub use super::access::Authorized;
 use crate::names::{MachineName, check_plain_name};
 use axum::Json;
 use axum::extract::{FromRequest, FromRequestParts, Path, Query, Request};
+use axum::http::StatusCode;
 use axum::http::request::Parts;
-use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
-use sha2::{Digest, Sha256};
 
 /// Largest request body read, bytes: the writes take a few dozen.
 const BODY_LIMIT: usize = 64 * 1024;
@@ -87,32 +87,39 @@ impl<T: serde::de::DeserializeOwned> FromRequest<AppState> for ApiJson<T> {
 
     async fn from_request(req: Request, state: &AppState) -> Result<Self, ApiError> {
         let (parts, body) = req.into_parts();
-        let bytes =
-            tokio::time::timeout(state.body_timeout, axum::body::to_bytes(body, BODY_LIMIT))
-                .await
-                .map_err(|_| {
-                    ApiError(
-                        StatusCode::REQUEST_TIMEOUT,
-                        "body_timeout",
-                        format!(
-                            "the request body did not arrive within {} ms",
-                            state.body_timeout.as_millis()
-                        ),
-                    )
-                })?
-                .map_err(|e| {
-                    ApiError(
-                        StatusCode::PAYLOAD_TOO_LARGE,
-                        "invalid_body",
-                        format!("request body unreadable or over {BODY_LIMIT} bytes: {e}"),
-                    )
-                })?;
+        let bytes = read_body(body, state.body_timeout).await?;
         let req = Request::from_parts(parts, axum::body::Body::from(bytes));
         Json::<T>::from_request(req, state)
             .await
             .map(|Json(v)| ApiJson(v))
             .map_err(|r| ApiError(r.status(), "invalid_body", r.body_text()))
     }
+}
+
+/// A request body, within `timeout` and at most 64 KiB.
+pub(super) async fn read_body(
+    body: axum::body::Body,
+    timeout: std::time::Duration,
+) -> Result<axum::body::Bytes, ApiError> {
+    tokio::time::timeout(timeout, axum::body::to_bytes(body, BODY_LIMIT))
+        .await
+        .map_err(|_| {
+            ApiError(
+                StatusCode::REQUEST_TIMEOUT,
+                "body_timeout",
+                format!(
+                    "the request body did not arrive within {} ms",
+                    timeout.as_millis()
+                ),
+            )
+        })?
+        .map_err(|e| {
+            ApiError(
+                StatusCode::PAYLOAD_TOO_LARGE,
+                "invalid_body",
+                format!("request body unreadable or over {BODY_LIMIT} bytes: {e}"),
+            )
+        })
 }
 
 /// axum's query extractor, its rejections as the API's `{code, message}` errors.
@@ -140,62 +147,5 @@ impl<S: Send + Sync, T: serde::de::DeserializeOwned + Send> FromRequestParts<S> 
             .await
             .map(|Path(v)| ApiPath(v))
             .map_err(|r| ApiError(r.status(), "invalid_path", r.body_text()))
-    }
-}
-
-/// Proof that the request carries the configured token as `Authorization: Bearer <token>`.
-/// Handlers take it as their first argument, so it is checked from the headers alone, before
-/// the path, the query or a byte of the body. No token configured: 403; missing or wrong:
-/// 401. Tokens are never logged.
-pub struct Authorized;
-
-impl FromRequestParts<AppState> for Authorized {
-    type Rejection = ApiError;
-
-    async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, ApiError> {
-        let Some(token) = &state.token else {
-            return Err(ApiError(
-                StatusCode::FORBIDDEN,
-                "writes_disabled",
-                "no API token is configured (CAMLOOP_API_TOKEN)".into(),
-            ));
-        };
-        let given = parts
-            .headers
-            .get(header::AUTHORIZATION)
-            .and_then(|v| v.as_bytes().strip_prefix(b"Bearer "))
-            .unwrap_or_default();
-        if same_secret(given, token.expose().as_bytes()) {
-            Ok(Authorized)
-        } else {
-            Err(ApiError(
-                StatusCode::UNAUTHORIZED,
-                "unauthorized",
-                "missing or wrong API token".into(),
-            ))
-        }
-    }
-}
-
-/// Compares the SHA-256 digests of both in constant time: neither the position of the first
-/// difference nor the token's length shows in the time taken.
-fn same_secret(given: &[u8], expected: &[u8]) -> bool {
-    let (a, b) = (Sha256::digest(given), Sha256::digest(expected));
-    a.iter()
-        .zip(b.iter())
-        .fold(0u8, |acc, (x, y)| acc | (x ^ y))
-        == 0
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn secrets_compare_equal_only_when_equal() {
-        assert!(same_secret(b"let-me-write", b"let-me-write"));
-        assert!(!same_secret(b"let-me-writ", b"let-me-write"));
-        assert!(!same_secret(b"", b"let-me-write"));
-        assert!(!same_secret(b"let-me-writE", b"let-me-write"));
     }
 }

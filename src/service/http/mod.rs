@@ -2,22 +2,33 @@
 //! history store (JSON), and the two writes (rollback, dressing), which go as [`Command`]s to
 //! the machine's loop. Errors carry a stable code and a message, never SQL text.
 //!
-//! - `api.rs`: the `{code, message}` error, the extractors that keep it, the token check.
+//! - `access.rs`: who may call what: the route → role table, the layer that identifies the
+//!   caller (bearer token, session, anonymous) and checks it, the lockout.
+//! - `route_roles.rs`: the table of every route and the role it needs.
+//! - `session.rs`: dashboard sign-in, sessions, CSRF tokens, sign-out.
+//! - `audit.rs`: appending to the audit trail, and reading it.
+//! - `api.rs`: the `{code, message}` error and the extractors that keep it.
 //! - `routes.rs`: the read handlers and their typed replies.
 //! - `writes.rs`: the write handlers and the command hand-over.
 //! - `server.rs`: the listener loop: header and body timeouts, the connection cap.
 //! - `openapi.rs`: the API description.
 //! - `dashboard/`: the engineers' web pages, their live channel and downloads.
 
+pub mod access;
 mod api;
+mod audit;
 mod dashboard;
 mod openapi;
 mod parts;
+mod route_roles;
 mod routes;
 mod server;
+mod session;
 mod writes;
 
+pub use access::{AuthState, Principal, ROUTES, RouteRule};
 pub use api::{ApiError, ApiJson, ApiPath, ApiQuery, Authorized};
+pub use audit::record as record_audit;
 pub use dashboard::{FeatureSheet, FeatureSheets, Stopping};
 pub use routes::{LobeInfo, MachineInfo, MachinesReply};
 pub use server::{HttpLimits, serve};
@@ -42,8 +53,8 @@ pub struct AppState {
     /// Per machine (by name), the channel to its loop for write requests.
     /// The machines running on this instance (in a cluster, those it holds now).
     pub commands: crate::service::runner::CommandRoutes,
-    /// Write requests need it (`Authorization: Bearer …`); none configured: writes refused.
-    pub token: Option<crate::config::Secret>,
+    /// Access: the deprecated shared token, anonymous reading, sessions, the lockout.
+    pub auth: Arc<AuthState>,
     /// How long a request body may take to arrive once its headers are in.
     pub body_timeout: std::time::Duration,
     /// The dashboard's view of each configured feature (bands, setup drawing).
@@ -56,7 +67,7 @@ pub struct AppState {
 pub type Reply = oneshot::Sender<Result<CommandDone, CommandError>>;
 
 /// A write request handed to a machine's loop, answered on `reply` when done. The HTTP
-/// side has already checked the token, the machine, the lobe (it is one the machine
+/// side has already checked the caller's role, the machine, the lobe (it is one the machine
 /// grinds), and the values' ranges.
 pub enum Command {
     /// Deliver stored table `version` of `lobe` again, as a new version under the table
@@ -67,8 +78,18 @@ pub enum Command {
         reply: Reply,
     },
     /// The wheel was dressed to this radius (mm, already within 5–1000): regenerate the
-    /// table.
-    Dressing { wheel_radius_mm: f64, reply: Reply },
+    /// table. `source` is who reported it (`api:<user>`), as the store keeps it.
+    Dressing {
+        wheel_radius_mm: f64,
+        source: String,
+        reply: Reply,
+    },
+    /// Freeze the learning of `lobe` with this reason, or (`None`) let it learn again.
+    Freeze {
+        lobe: String,
+        frozen: Option<String>,
+        reply: Reply,
+    },
     /// Roll several features back together (a whole part: one version of each); every
     /// version is checked before any is pushed.
     RollbackPart {
@@ -153,11 +174,23 @@ pub fn router(state: AppState) -> Router {
             post(writes::rollback),
         )
         .route(
+            &format!("{m}/lobes/{{lobe}}/learning"),
+            post(writes::freeze),
+        )
+        .route(
             &format!("{m}/dressings"),
             get(routes::dressings).post(writes::dress),
         )
         .route("/api/v1/measurements/{id}", get(routes::measurement))
         .route(&format!("{m}/events/{{id}}/ack"), post(dashboard::ack))
+        .route("/api/v1/audit", get(audit::audit))
+        .route("/audit", get(audit::audit_page))
+        .route("/signin", get(session::signin_page).post(session::signin))
+        .route("/signout", post(session::signout))
+        .route("/session", get(session::session))
         .with_state(state.clone())
-        .merge(dashboard::router(state))
+        .merge(dashboard::router(state.clone()))
+        // After routing, so the layer knows the matched route; before every handler, so no
+        // handler runs for a caller who may not call it.
+        .route_layer(axum::middleware::from_fn_with_state(state, access::guard))
 }

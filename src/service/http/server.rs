@@ -90,7 +90,11 @@ pub async fn serve(
             },
             _ = shutdown.changed() => break,
         };
-        let service = TowerToHyperService::new(app.clone());
+        // The client's address, for the access layer (lockout, audit).
+        let with_peer = app
+            .clone()
+            .layer(axum::Extension(axum::extract::ConnectInfo(peer)));
+        let service = TowerToHyperService::new(with_peer);
         let connection = http.serve_connection(TokioIo::new(stream), service);
         let mut stop = shutdown.clone();
         tokio::spawn(async move {

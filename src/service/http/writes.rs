@@ -1,10 +1,13 @@
-//! The write requests: rollback and dressing. Each checks the token first (from the headers,
-//! before the body is read), then the machine and lobe, then hands a [`Command`] to the
-//! machine's loop, which owns the loop state, so a write never races a part.
+//! The write requests: rollback and dressing. The access layer has checked the caller's role
+//! (from the headers, before the body is read); each checks the machine and lobe, then hands
+//! a [`Command`] to the machine's loop, which owns the loop state, so a write never races a
+//! part. Every write that reaches a machine is audited with its outcome.
 
-use super::api::{ApiError, ApiJson, ApiPath, Authorized, feature_name, machine_name};
+use super::access::Principal;
+use super::api::{ApiError, ApiJson, ApiPath, feature_name, machine_name};
 use super::{AppState, Command, CommandDone, CommandError, Reply};
 use crate::names::MachineName;
+use crate::store::AuditResult;
 use axum::Json;
 use axum::extract::State;
 use axum::http::StatusCode;
@@ -38,7 +41,7 @@ pub struct RollbackBody {
 
 /// Deliver a stored table version again (as a new version, under the table number not in use).
 pub(super) async fn rollback(
-    _: Authorized,
+    p: Principal,
     State(state): State<AppState>,
     ApiPath((machine, lobe)): ApiPath<(String, String)>,
     ApiJson(body): ApiJson<RollbackBody>,
@@ -64,15 +67,61 @@ pub(super) async fn rollback(
         ));
     }
     let version = body.version;
+    let before = in_force(&state, &machine, std::slice::from_ref(&lobe));
+    let mut entry = p.audit("rollback", AuditResult::Ok, String::new());
+    entry.machine = Some(machine.to_string());
+    entry.feature = Some(lobe.clone());
+    entry.version = Some(version);
+    entry.before = Some(before);
     let done = command(&state, &machine, "rollback_refused", |reply| {
         Command::Rollback {
-            lobe,
+            lobe: lobe.clone(),
             version,
             reply,
         }
     })
-    .await?;
-    Ok(Json(done.into()))
+    .await;
+    audited(&state, entry, &done, || {
+        in_force(&state, &machine, std::slice::from_ref(&lobe))
+    })
+    .await;
+    Ok(Json(done?.into()))
+}
+
+/// The table versions on the control of `features` of `machine`, as JSON.
+fn in_force(state: &AppState, machine: &MachineName, features: &[String]) -> String {
+    let statuses = state.metrics.features();
+    let versions: std::collections::BTreeMap<&str, i64> = features
+        .iter()
+        .filter_map(|f| {
+            let s = statuses.get(&(machine.to_string(), f.clone()))?;
+            Some((f.as_str(), i64::try_from(s.in_force_version).ok()?))
+        })
+        .collect();
+    serde_json::json!({ "in_force": versions }).to_string()
+}
+
+/// Appends the audit row of a write that reached the machine's loop, with its outcome.
+async fn audited(
+    state: &AppState,
+    mut entry: crate::store::AuditEntry,
+    done: &Result<CommandDone, ApiError>,
+    after: impl FnOnce() -> String,
+) {
+    match done {
+        Ok(d) => {
+            entry.reason = d.message.clone();
+            entry.after = Some(after());
+        }
+        Err(e) => {
+            entry.result = match e.0.is_server_error() {
+                true => AuditResult::Failed,
+                false => AuditResult::Refused,
+            };
+            entry.reason = format!("{}: {}", e.1, e.2);
+        }
+    }
+    super::audit::record(state, entry).await;
 }
 
 #[derive(Debug, Deserialize)]
@@ -85,7 +134,7 @@ pub struct PartRollbackBody {
 /// `POST /api/v1/machines/{machine}/rollback` with `{"versions": {"IN1": 5, "EX1": 7}}`:
 /// several features back together, or none of them.
 pub(super) async fn rollback_part(
-    _: Authorized,
+    p: Principal,
     State(state): State<AppState>,
     ApiPath(machine): ApiPath<String>,
     ApiJson(body): ApiJson<PartRollbackBody>,
@@ -125,11 +174,95 @@ pub(super) async fn rollback_part(
         }
         versions.push((lobe, v));
     }
+    let features: Vec<String> = versions.iter().map(|(f, _)| f.clone()).collect();
+    let mut entry = p.audit("rollback_part", AuditResult::Ok, String::new());
+    entry.machine = Some(machine.to_string());
+    entry.before = Some(in_force(&state, &machine, &features));
+    let asked: std::collections::BTreeMap<&str, u64> =
+        versions.iter().map(|(f, v)| (f.as_str(), *v)).collect();
+    entry.reason = serde_json::json!({ "to": asked }).to_string();
     let done = command(&state, &machine, "rollback_refused", |reply| {
-        Command::RollbackPart { versions, reply }
+        Command::RollbackPart {
+            versions: versions.clone(),
+            reply,
+        }
     })
-    .await?;
-    Ok(Json(done.into()))
+    .await;
+    audited(&state, entry, &done, || {
+        in_force(&state, &machine, &features)
+    })
+    .await;
+    Ok(Json(done?.into()))
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FreezeBody {
+    frozen: bool,
+    /// Why (kept with the state and in the audit trail); at most 200 characters.
+    reason: Option<String>,
+}
+
+/// `POST /api/v1/machines/{machine}/lobes/{lobe}/learning` with `{"frozen": true, "reason":
+/// "…"}` or `{"frozen": false}`: an engineer freezes a feature's learning (the correction
+/// stays as it is) or lets it learn again.
+pub(super) async fn freeze(
+    p: Principal,
+    State(state): State<AppState>,
+    ApiPath((machine, lobe)): ApiPath<(String, String)>,
+    ApiJson(body): ApiJson<FreezeBody>,
+) -> Result<Json<CommandReply>, ApiError> {
+    let machine = configured(&state, &machine)?;
+    feature_name(&lobe)?;
+    if !state
+        .machines
+        .get(&machine)
+        .is_some_and(|l| l.contains(&lobe))
+    {
+        return Err(ApiError(
+            StatusCode::NOT_FOUND,
+            "lobe_not_found",
+            format!("machine {machine} does not grind a lobe or pin {lobe}"),
+        ));
+    }
+    let reason = body.reason.unwrap_or_default();
+    if reason.chars().count() > 200 || reason.chars().any(char::is_control) {
+        return Err(ApiError(
+            StatusCode::BAD_REQUEST,
+            "invalid_reason",
+            "reason: at most 200 characters, no control characters".into(),
+        ));
+    }
+    let frozen = body.frozen.then(|| match reason.is_empty() {
+        true => format!("frozen by {}", p.actor),
+        false => format!("frozen by {}: {reason}", p.actor),
+    });
+    let status = |s: &AppState| {
+        let f = s.metrics.features();
+        let now = f
+            .get(&(machine.to_string(), lobe.clone()))
+            .and_then(|f| f.frozen.clone());
+        serde_json::json!({ "frozen": now }).to_string()
+    };
+    let action = if body.frozen {
+        "learning.freeze"
+    } else {
+        "learning.resume"
+    };
+    let mut entry = p.audit(action, AuditResult::Ok, String::new());
+    entry.machine = Some(machine.to_string());
+    entry.feature = Some(lobe.clone());
+    entry.before = Some(status(&state));
+    let done = command(&state, &machine, "freeze_refused", |reply| {
+        Command::Freeze {
+            lobe: lobe.clone(),
+            frozen,
+            reply,
+        }
+    })
+    .await;
+    audited(&state, entry, &done, || status(&state)).await;
+    Ok(Json(done?.into()))
 }
 
 #[derive(Debug, Deserialize)]
@@ -141,7 +274,7 @@ pub struct DressingBody {
 /// A wheel dressing reported by the operator or a cell controller: the table is regenerated
 /// for the new radius.
 pub(super) async fn dress(
-    _: Authorized,
+    p: Principal,
     State(state): State<AppState>,
     ApiPath(machine): ApiPath<String>,
     ApiJson(body): ApiJson<DressingBody>,
@@ -155,14 +288,27 @@ pub(super) async fn dress(
                 e.to_string(),
             )
         })?;
+    let mut entry = p.audit("dressing", AuditResult::Ok, String::new());
+    entry.machine = Some(machine.to_string());
+    let features = state.machines.get(&machine).cloned().unwrap_or_default();
+    entry.before = Some(in_force(&state, &machine, &features));
+    let source = format!("api:{}", p.actor);
     let done = command(&state, &machine, "dressing_refused", |reply| {
         Command::Dressing {
             wheel_radius_mm: radius,
+            source,
             reply,
         }
     })
-    .await?;
-    Ok(Json(done.into()))
+    .await;
+    audited(&state, entry, &done, || {
+        let mut after: serde_json::Value =
+            serde_json::from_str(&in_force(&state, &machine, &features)).unwrap_or_default();
+        after["wheel_radius_mm"] = serde_json::json!(radius);
+        after.to_string()
+    })
+    .await;
+    Ok(Json(done?.into()))
 }
 
 /// A machine of this service: a valid name that is configured, else 400 or 404.

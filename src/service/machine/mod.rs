@@ -25,6 +25,7 @@ mod coast;
 mod delivery;
 mod dressing;
 mod feature;
+mod freeze;
 mod guards;
 mod ingest;
 pub mod memory;
@@ -404,6 +405,20 @@ impl MachineLoop {
             });
         };
         feature.rollback(lobe, version).await
+    }
+
+    /// Freezes (with a reason) or unfreezes the learning of feature `lobe`: the reason before,
+    /// or `None` when the machine does not grind `lobe`.
+    pub async fn set_frozen(
+        &mut self,
+        lobe: &str,
+        frozen: Option<String>,
+    ) -> Option<Option<String>> {
+        let feature = self
+            .features
+            .iter_mut()
+            .find(|f| f.feature_name() == lobe)?;
+        Some(feature.set_frozen(frozen).await)
     }
 
     /// Rolls several features back together (a whole part: one version of each). Every

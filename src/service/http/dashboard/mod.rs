@@ -7,11 +7,13 @@
 //! - `…/data?chart=…&format=csv|json`: the data of every chart; `…/export.dfq`: Q-DAS.
 //! - `/dashboard/events`: Server-Sent Events of every stored part (`sse.rs`).
 //! - `POST /api/v1/machines/{m}/events/{id}/ack` (routed with the API): acknowledges an
-//!   event (token).
+//!   event (operator).
+//! - `/signin`, `/audit`: the sign-in form and the audit trail (`account.rs`).
 //!
-//! Writes from the page (rollback, dressing, acknowledgement) use the API with the token
-//! the engineer types; the page never stores it.
+//! Writes from the page (rollback, dressing, acknowledgement) use the API with the signed-in
+//! session's cookie and its CSRF token (see `http::session`).
 
+mod account;
 mod charts;
 mod data;
 mod downloads;
@@ -19,10 +21,12 @@ mod feature;
 mod pages;
 mod sse;
 
+pub(super) use account::{audit_html, signin_html};
 pub use sse::Stopping;
 
 use super::AppState;
-use super::api::{ApiError, ApiPath, ApiQuery, Authorized, feature_name, machine_name};
+use super::access::Principal;
+use super::api::{ApiError, ApiPath, ApiQuery, feature_name, machine_name};
 use crate::core::analysis::ToleranceBand;
 use crate::recipe::FeatureSetup;
 use axum::Router;
@@ -181,20 +185,37 @@ async fn versions_page(
     )))
 }
 
-/// `POST /api/v1/machines/{machine}/events/{id}/ack`: the token first, then the event.
+/// `POST /api/v1/machines/{machine}/events/{id}/ack`: the caller (an operator, checked by
+/// the access layer), then the event; audited.
 pub(super) async fn ack(
-    _: Authorized,
+    p: Principal,
     State(app): State<AppState>,
     ApiPath((machine, id)): ApiPath<(String, i64)>,
 ) -> Result<Response, ApiError> {
     machine_name(&machine)?;
     let store = data::store(&app).await?;
     let at = crate::clock::now_ms();
-    use crate::store::AckOutcome;
-    let (status, message) = match store
-        .acknowledge_event(&machine, crate::store::EventId(id), at, "dashboard")
-        .await?
-    {
+    use crate::store::{AckOutcome, AuditResult};
+    let outcome = store
+        .acknowledge_event(&machine, crate::store::EventId(id), at, &p.actor)
+        .await;
+    let mut entry = p.audit("acknowledge", AuditResult::Ok, String::new());
+    entry.machine = Some(machine.clone());
+    entry.after = Some(format!("{{\"event\":{id}}}"));
+    entry.reason = match &outcome {
+        Ok(AckOutcome::Acknowledged) => "acknowledged".into(),
+        Ok(AckOutcome::AlreadyAcknowledged) => "acknowledged before".into(),
+        Ok(AckOutcome::NotFound) => "no such event".into(),
+        Err(e) => e.to_string(),
+    };
+    if !matches!(
+        outcome,
+        Ok(AckOutcome::Acknowledged | AckOutcome::AlreadyAcknowledged)
+    ) {
+        entry.result = AuditResult::Refused;
+    }
+    super::audit::record(&app, entry).await;
+    let (status, message) = match outcome? {
         AckOutcome::Acknowledged => (StatusCode::OK, format!("event {id} acknowledged")),
         AckOutcome::AlreadyAcknowledged => (
             StatusCode::OK,

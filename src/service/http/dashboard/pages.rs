@@ -52,7 +52,7 @@ pub(super) fn page(
 <html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
 <title>{t} · camloop</title><link rel="icon" href="/assets/icon.svg" type="image/svg+xml"><link rel="stylesheet" href="/assets/app.css"><script src="/assets/app.js" defer></script></head>
 <body><header><nav aria-label="breadcrumb"><a href="/">camloop</a>{crumbs}</nav>
-<p class="token"><label for="token">API token</label> <input id="token" type="password" autocomplete="off" placeholder="for writes"></p>
+<p id="who"><a href="/signin">Sign in</a></p>
 <p id="live-status" role="status">live: connecting</p></header>
 <main><h1>{t}</h1><div id="live" data-url="{u}" data-machine="{m}" data-lobe="{l}">{live}</div>{rest}</main>
 <p id="notice" role="alert" hidden></p></body></html>
@@ -203,7 +203,7 @@ pub(super) fn versions(
         m = esc(machine),
         l = esc(lobe)
     );
-    let rest = r#"<p class="hint">Rollback delivers the chosen version again as a new version; it needs the API token (in the bar at the top).</p><p id="rollback-result" role="status"></p>"#;
+    let rest = r#"<p class="hint">Rollback delivers the chosen version again as a new version; it needs an engineer signed in (top right).</p><p id="rollback-result" role="status"></p>"#;
     page(
         &format!("{machine} {lobe}: table versions"),
         &crumbs,

@@ -1,5 +1,5 @@
-// camloop dashboard: live refresh over Server-Sent Events, and the writes (rollback,
-// acknowledgement, dressing) through the API with the token typed into the page.
+// camloop dashboard: live refresh over Server-Sent Events, who is signed in, and the writes
+// (rollback, acknowledgement, dressing) through the API with the session's CSRF token.
 "use strict";
 
 // Every script error and failed request is kept here and shown, so a broken page says so.
@@ -23,9 +23,49 @@ function notice(text) {
   n.hidden = !text;
 }
 
-function token() {
-  const t = $("#token");
-  return t ? t.value.trim() : "";
+// The signed-in session: {user, role, csrf}; user null when nobody is signed in.
+let session = { user: null, role: null, csrf: null };
+
+async function whoami() {
+  try {
+    const r = await fetch("/session", { cache: "no-store" });
+    if (r.ok) session = await r.json();
+  } catch (e) {
+    seen.failed.push(String(e));
+  }
+  const who = $("#who");
+  if (!who) return;
+  who.textContent = "";
+  if (session.user) {
+    const form = document.createElement("form");
+    form.method = "post";
+    form.action = "/signout";
+    form.id = "signout";
+    const csrf = document.createElement("input");
+    csrf.type = "hidden";
+    csrf.name = "csrf";
+    csrf.value = session.csrf;
+    const button = document.createElement("button");
+    button.type = "submit";
+    button.textContent = "Sign out";
+    const name = document.createElement("span");
+    name.id = "user";
+    name.textContent = session.user + " (" + session.role + ") ";
+    form.append(name, csrf, button);
+    who.append(form);
+    if (session.role === "engineer" || session.role === "admin") {
+      const audit = document.createElement("a");
+      audit.href = "/audit";
+      audit.textContent = "Audit trail";
+      who.append(" ", audit);
+    }
+  } else {
+    const a = document.createElement("a");
+    a.href = "/signin?next=" + encodeURIComponent(location.pathname);
+    a.textContent = "Sign in";
+    a.id = "signin-link";
+    who.append(a);
+  }
 }
 
 // Refreshes the live region from its address with fragment=1; one request at a time. A
@@ -75,15 +115,14 @@ function listen() {
   window.addEventListener("pagehide", () => source.close());
 }
 
-// A write through the API with the token; answers {ok, message}.
+// A write through the API as the signed-in user; answers {ok, message}.
 async function write(url, body, what) {
-  const t = token();
-  if (!t) {
-    return { ok: false, message: what + " refused: enter the API token first" };
+  if (!session.user) {
+    return { ok: false, message: what + " refused: sign in first" };
   }
   const r = await fetch(url, {
     method: "POST",
-    headers: { "Content-Type": "application/json", "Authorization": "Bearer " + t },
+    headers: { "Content-Type": "application/json", "X-CSRF-Token": session.csrf },
     body: JSON.stringify(body),
   });
   let reply = {};
@@ -128,4 +167,5 @@ document.addEventListener("submit", async (e) => {
   await refresh();
 });
 
+whoami();
 listen();

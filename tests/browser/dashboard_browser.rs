@@ -1,127 +1,27 @@
 //! The dashboard as an engineer uses it: a real headless Chromium, driven through WebDriver
 //! (chromedriver), against a real service with the simulated machine. The overview shows the
 //! machine with the last error the API reports; a new part appears without a reload within
-//! 2 s of being measured; a rollback without the token is refused in the page, with the token
-//! it delivers a new version that the page shows; no script errors, no failed requests; the
+//! 2 s of being measured; a rollback before signing in is refused in the page, signed in as
+//! an engineer it delivers a new version that the page shows; no script errors, no failed requests; the
 //! pages fit a 1024-pixel tablet. Screenshots go to the target folder
 //! (`target/tmp/dashboard/`).
 //!
 //! Without Chromium the test prints why and passes, unless `CAMLOOP_REQUIRE_BROWSER=1`
 //! (CI sets it), which makes a missing browser a failure.
 
-mod service_support;
+use crate::browser_support::{browser, browser_present, click, start_driver, text_of, until};
+use crate::service_support;
 
 use camloop::service::{self, RunOptions};
-use fantoccini::{Client, ClientBuilder, Locator};
+use fantoccini::{Client, Locator};
 use service_support::{get, json, sim_config};
-use std::io::{BufRead, BufReader};
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const TOKEN: &str = "let-me-write";
-const CHROMIUM: &str = "/usr/bin/chromium";
-const DRIVER: &str = "/usr/bin/chromedriver";
-
-/// The browser pieces, or why they are missing.
-fn browser_present() -> Result<(), String> {
-    for p in [CHROMIUM, DRIVER] {
-        if !Path::new(p).exists() {
-            return Err(format!(
-                "{p} is not installed (apt-get install chromium chromium-driver)"
-            ));
-        }
-    }
-    Ok(())
-}
-
-/// chromedriver on a free port, started as a child; killed on drop.
-struct Driver {
-    child: Child,
-    url: String,
-}
-
-impl Drop for Driver {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn start_driver() -> Driver {
-    // A port the kernel just handed out and released: not fixed, and free at this moment.
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let mut child = Command::new(DRIVER)
-        .arg(format!("--port={port}"))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("chromedriver starts");
-    // It says when it listens; read until then.
-    let out = child.stdout.take().unwrap();
-    let mut lines = BufReader::new(out).lines();
-    let ready = lines
-        .by_ref()
-        .take(20)
-        .map_while(Result::ok)
-        .any(|l| l.contains("started successfully"));
-    assert!(ready, "chromedriver did not report that it started");
-    std::thread::spawn(move || for _ in lines {});
-    Driver {
-        child,
-        url: format!("http://127.0.0.1:{port}"),
-    }
-}
-
-async fn browser(driver: &Driver, profile: &Path) -> Client {
-    let args = [
-        "--headless",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-quic",
-        "--no-first-run",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
-        "--window-size=1280,800",
-    ];
-    let mut args: Vec<String> = args.iter().map(|a| a.to_string()).collect();
-    args.push(format!("--user-data-dir={}", profile.display()));
-    let caps = serde_json::json!({
-        "browserName": "chrome",
-        "goog:chromeOptions": { "binary": CHROMIUM, "args": args },
-    });
-    let serde_json::Value::Object(caps) = caps else {
-        unreachable!()
-    };
-    let connector = hyper_util::client::legacy::connect::HttpConnector::new();
-    ClientBuilder::new(connector)
-        .capabilities(caps)
-        .connect(&driver.url)
-        .await
-        .expect("chromedriver starts a headless Chromium")
-}
-
-/// Polls `check` every 50 ms until it answers `Some`, at most `limit`.
-async fn until<T, F, Fut>(limit: Duration, what: &str, mut check: F) -> T
-where
-    F: FnMut() -> Fut,
-    Fut: std::future::Future<Output = Option<T>>,
-{
-    let start = Instant::now();
-    loop {
-        if let Some(v) = check().await {
-            return v;
-        }
-        assert!(start.elapsed() < limit, "{what}: not within {limit:?}");
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
-}
+/// The engineer `eng`'s password.
+const PASSWORD: &str = "a-long-enough-secret";
 
 /// The newest part the API lists for SIM1 IN1: (id, max profile error µm, received ms).
 async fn newest_part(addr: SocketAddr) -> Option<(i64, f64, i64)> {
@@ -136,21 +36,6 @@ async fn newest_part(addr: SocketAddr) -> Option<(i64, f64, i64)> {
         item["max_profile_error_um"].as_f64()?,
         item["received_at_ms"].as_i64()?,
     ))
-}
-
-/// The rendered text of `css`, read in one script call: the live region may be replaced at
-/// any moment, and a found element could go stale before its text is read.
-async fn text_of(c: &Client, css: &str) -> String {
-    let v = c
-        .execute(
-            "const e = document.querySelector(arguments[0]); return e ? e.innerText : null;",
-            vec![serde_json::json!(css)],
-        )
-        .await
-        .unwrap();
-    v.as_str()
-        .unwrap_or_else(|| panic!("{css} not on the page"))
-        .to_string()
 }
 
 async fn attr_of(c: &Client, css: &str, name: &str) -> Option<String> {
@@ -180,29 +65,6 @@ async fn assert_clean(c: &Client, page: &str) {
         serde_json::json!([]),
         "{page}: failed requests"
     );
-}
-
-/// Clicks `css`, waiting (at most 10 s) until the click goes through: the live region may
-/// be replaced between finding and clicking (a part arrived), and on a loaded machine the
-/// page may still be laying out, so a stale or covered element is found again until the
-/// click lands. Five attempts in a row, with no wait, failed on 2 busy cores.
-async fn click(c: &Client, css: &str) {
-    let limit = Duration::from_secs(10);
-    let start = Instant::now();
-    loop {
-        let tried = match c.find(Locator::Css(css)).await {
-            Ok(e) => e.click().await.map(|_| ()),
-            Err(e) => Err(e),
-        };
-        match tried {
-            Ok(()) => return,
-            Err(e) => assert!(
-                start.elapsed() < limit,
-                "{css} could not be clicked within {limit:?}: {e}"
-            ),
-        }
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
 }
 
 fn shots() -> PathBuf {
@@ -264,6 +126,12 @@ async fn the_dashboard_works_in_a_real_browser() {
         newest_part(addr)
     })
     .await;
+    let store = camloop::store::Store::connect(&url).await.unwrap();
+    let hash = camloop::auth::hash_password(PASSWORD).unwrap();
+    let now = camloop::clock::now_ms();
+    let engineer = camloop::store::Role::Engineer;
+    store.add_user("eng", engineer, &hash, now).await.unwrap();
+    store.close().await;
 
     let driver = start_driver();
     let profile = tempfile::tempdir().unwrap();
@@ -392,8 +260,8 @@ async fn feature(c: &Client, base: &str) {
     assert_clean(c, "feature").await;
 }
 
-/// Rollback from the versions page: refused in the page without the token; with it, a new
-/// version is delivered and shown.
+/// Rollback from the versions page: refused in the page before signing in; signed in as an
+/// engineer, a new version is delivered and shown.
 async fn versions(c: &Client, base: &str, addr: SocketAddr) {
     c.goto(&format!("{base}/machines/SIM1/features/IN1/versions"))
         .await
@@ -410,12 +278,34 @@ async fn versions(c: &Client, base: &str, addr: SocketAddr) {
     let reasons = body.matches("rollback to v1").count();
     assert_eq!(reasons, 0, "nothing was rolled back: {body}");
 
-    c.find(Locator::Css("#token"))
+    click(c, "#signin-link").await;
+    c.find(Locator::Css("#name"))
         .await
         .unwrap()
-        .send_keys(TOKEN)
+        .send_keys("eng")
         .await
         .unwrap();
+    c.find(Locator::Css("#password"))
+        .await
+        .unwrap()
+        .send_keys(PASSWORD)
+        .await
+        .unwrap();
+    click(c, "#signin button[type=submit]").await;
+    // Back on the versions page, signed in.
+    until(Duration::from_secs(10), "signed in", || async {
+        let who = c
+            .execute(
+                "const e = document.querySelector('#user'); return e ? e.innerText : null;",
+                vec![],
+            )
+            .await
+            .ok()?;
+        who.as_str()
+            .filter(|t| t.contains("eng (engineer)"))
+            .map(|_| ())
+    })
+    .await;
     click(c, button).await;
     let done = until(Duration::from_secs(20), "the rollback's answer", || async {
         let class = attr_of(c, "#rollback-result", "class").await?;

@@ -1,0 +1,265 @@
+//! Who someone is: user names, password rules and hashes (argon2id), API tokens and their
+//! digests, and the lockout after repeated failures. The HTTP side (`service::http::access`)
+//! and the commands (`camloop user`, `camloop token`) both use these; the store keeps only
+//! hashes.
+//!
+//! Passwords are hashed with argon2id (the `argon2` crate's defaults: 19 MiB, 2 passes, a
+//! random 16-byte salt per hash): slow on purpose, since a person's password may be guessable.
+//! API tokens are 32 random bytes from the operating system, so a fast SHA-256 is enough to
+//! store them: nobody can search a 2^256 space, however fast the hash, and a fast digest
+//! lets the service find a token by its digest (an index) on every request.
+
+use crate::names::check_plain_name;
+use crate::store::Role;
+use argon2::password_hash::phc::PasswordHash;
+use argon2::password_hash::{PasswordHasher, PasswordVerifier};
+use std::collections::HashMap;
+use std::fmt;
+use std::net::IpAddr;
+use std::sync::Mutex;
+
+/// Shortest password accepted, characters.
+pub const MIN_PASSWORD_CHARS: usize = 12;
+/// Failures within [`LOCKOUT_WINDOW_MS`] that lock a user and an address.
+pub const LOCKOUT_FAILURES: usize = 5;
+/// The window failures are counted in, and how long a lock lasts: 15 minutes.
+pub const LOCKOUT_WINDOW_MS: i64 = 15 * 60 * 1000;
+/// API tokens start with this, so a leaked one is recognisable (secret scanners, logs).
+pub const TOKEN_PREFIX: &str = "clt_";
+
+/// A user name: the machine-name rule (1–32 letters, digits, `-`, `_`), since it appears in
+/// URLs, logs and the audit trail.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
+#[serde(transparent)]
+pub struct UserName(String);
+
+impl UserName {
+    pub fn new(name: &str) -> Result<Self, crate::names::NameError> {
+        check_plain_name(name)?;
+        Ok(Self(name.to_string()))
+    }
+
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Display for UserName {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+/// Why a password or a token could not be made or checked.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum AuthError {
+    #[error("the password has {chars} characters; at least {MIN_PASSWORD_CHARS} are needed")]
+    PasswordTooShort { chars: usize },
+    #[error("the operating system's random source failed: {0}")]
+    Random(String),
+    #[error("password hashing failed: {0}")]
+    Hash(String),
+}
+
+/// Checks the password rule: at least [`MIN_PASSWORD_CHARS`] characters.
+pub fn check_password(password: &str) -> Result<(), AuthError> {
+    let chars = password.chars().count();
+    if chars < MIN_PASSWORD_CHARS {
+        return Err(AuthError::PasswordTooShort { chars });
+    }
+    Ok(())
+}
+
+/// The argon2id hash of `password` (a PHC string with its salt and parameters), after
+/// checking the password rule.
+pub fn hash_password(password: &str) -> Result<String, AuthError> {
+    check_password(password)?;
+    argon2::Argon2::default()
+        .hash_password(password.as_bytes())
+        .map(|h| h.to_string())
+        .map_err(|e| AuthError::Hash(e.to_string()))
+}
+
+/// Whether `password` matches the stored hash. A hash that does not parse matches nothing.
+pub fn verify_password(password: &str, hash: &str) -> bool {
+    let Ok(parsed) = PasswordHash::new(hash) else {
+        return false;
+    };
+    argon2::Argon2::default()
+        .verify_password(password.as_bytes(), &parsed)
+        .is_ok()
+}
+
+/// `n` random bytes from the operating system, as lowercase hex.
+pub fn random_hex(n: usize) -> Result<String, AuthError> {
+    let mut bytes = vec![0u8; n];
+    getrandom::fill(&mut bytes).map_err(|e| AuthError::Random(e.to_string()))?;
+    Ok(crate::digest::lower_hex(&bytes))
+}
+
+/// A new API token: the prefix and 32 random bytes (hex). Shown once; only its
+/// [`token_digest`] is kept.
+pub fn new_token() -> Result<String, AuthError> {
+    Ok(format!("{TOKEN_PREFIX}{}", random_hex(32)?))
+}
+
+/// What the store keeps of a token or a session key: its SHA-256, hex.
+pub fn token_digest(token: &str) -> String {
+    crate::digest::sha256_hex(token.as_bytes())
+}
+
+/// A random password for the first `admin`: 24 characters from a 64-letter alphabet
+/// (144 bits).
+pub fn random_password() -> Result<String, AuthError> {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHJKLMNPQRSTUVWXYZabcdefghijkmnopqrstuvwxyz23456789-_.+=%@";
+    let mut bytes = [0u8; 24];
+    getrandom::fill(&mut bytes).map_err(|e| AuthError::Random(e.to_string()))?;
+    Ok(bytes
+        .iter()
+        .map(|b| char::from(ALPHABET[usize::from(b % 64)]))
+        .collect())
+}
+
+/// The role someone acts with: the lower of the user's role and the token's ceiling.
+pub fn effective_role(user: Role, ceiling: Role) -> Role {
+    user.min(ceiling)
+}
+
+/// Who is counted: a user name or a client address.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+enum Subject {
+    User(String),
+    Address(IpAddr),
+}
+
+#[derive(Debug, Default)]
+struct Record {
+    /// Times of failures within the window, ms.
+    failures: Vec<i64>,
+    /// Locked until this time, ms.
+    locked_until_ms: Option<i64>,
+}
+
+/// Failed sign-ins and tokens per user and per client address: [`LOCKOUT_FAILURES`] within
+/// [`LOCKOUT_WINDOW_MS`] lock both for [`LOCKOUT_WINDOW_MS`]. Kept in memory: a restart
+/// forgets it (an attacker who can restart the service has no need to guess).
+#[derive(Debug, Default)]
+pub struct Lockout {
+    records: Mutex<HashMap<Subject, Record>>,
+}
+
+/// A failure counted: whether it locked the user and address now.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Counted {
+    pub locked_now: bool,
+}
+
+impl Lockout {
+    /// Until when `user` (when known) or `address` is locked, if either is at `now_ms`.
+    pub fn locked_until(&self, user: Option<&str>, address: IpAddr, now_ms: i64) -> Option<i64> {
+        let records = self.records.lock().unwrap_or_else(|p| p.into_inner());
+        let subjects = subjects(user, address);
+        subjects
+            .iter()
+            .filter_map(|s| records.get(s)?.locked_until_ms)
+            .filter(|&until| until > now_ms)
+            .max()
+    }
+
+    /// Counts one failure of `user` (when known) from `address` at `now_ms`.
+    pub fn fail(&self, user: Option<&str>, address: IpAddr, now_ms: i64) -> Counted {
+        let mut records = self.records.lock().unwrap_or_else(|p| p.into_inner());
+        let mut locked_now = false;
+        for s in subjects(user, address) {
+            let r = records.entry(s).or_default();
+            r.failures.retain(|&t| now_ms - t < LOCKOUT_WINDOW_MS);
+            r.failures.push(now_ms);
+            let locked = r.locked_until_ms.is_some_and(|u| u > now_ms);
+            if !locked && r.failures.len() >= LOCKOUT_FAILURES {
+                r.locked_until_ms = Some(now_ms + LOCKOUT_WINDOW_MS);
+                r.failures.clear();
+                locked_now = true;
+            }
+        }
+        // Old records go, so a scan of many addresses does not grow the map for ever.
+        records.retain(|_, r| {
+            r.locked_until_ms.is_some_and(|u| u > now_ms)
+                || r.failures.iter().any(|&t| now_ms - t < LOCKOUT_WINDOW_MS)
+        });
+        Counted { locked_now }
+    }
+}
+
+fn subjects(user: Option<&str>, address: IpAddr) -> Vec<Subject> {
+    let mut v = vec![Subject::Address(address)];
+    if let Some(u) = user {
+        v.push(Subject::User(u.to_string()));
+    }
+    v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn passwords_need_twelve_characters_and_verify_only_themselves() {
+        assert_eq!(
+            hash_password("eleven-char"),
+            Err(AuthError::PasswordTooShort { chars: 11 })
+        );
+        let hash = hash_password("twelve-chars").unwrap();
+        assert!(hash.starts_with("$argon2id$"), "{hash}");
+        assert!(verify_password("twelve-chars", &hash));
+        assert!(!verify_password("twelve-charS", &hash));
+        assert!(!verify_password("twelve-chars", "not a hash"));
+        // A fresh salt each time: the same password never gives the same text.
+        assert_ne!(hash, hash_password("twelve-chars").unwrap());
+    }
+
+    #[test]
+    fn tokens_are_random_and_kept_as_digests() {
+        let (a, b) = (new_token().unwrap(), new_token().unwrap());
+        assert_ne!(a, b);
+        assert_eq!(a.len(), TOKEN_PREFIX.len() + 64);
+        assert_eq!(token_digest(&a).len(), 64);
+        assert_ne!(token_digest(&a), a);
+        let p = random_password().unwrap();
+        assert_eq!(p.chars().count(), 24);
+        assert!(check_password(&p).is_ok());
+    }
+
+    #[test]
+    fn five_failures_in_fifteen_minutes_lock_user_and_address_for_fifteen_minutes() {
+        let l = Lockout::default();
+        let (a, b): (IpAddr, IpAddr) = ("10.0.0.1".parse().unwrap(), "10.0.0.2".parse().unwrap());
+        let t0 = 1_000_000;
+        for i in 0..4 {
+            assert!(!l.fail(Some("ann"), a, t0 + i).locked_now);
+        }
+        assert_eq!(l.locked_until(Some("ann"), a, t0 + 4), None);
+        assert!(l.fail(Some("ann"), a, t0 + 4).locked_now);
+        let until = t0 + 4 + LOCKOUT_WINDOW_MS;
+        // The user from elsewhere, and anyone from that address, are locked.
+        assert_eq!(l.locked_until(Some("ann"), b, t0 + 5), Some(until));
+        assert_eq!(l.locked_until(Some("bob"), a, t0 + 5), Some(until));
+        assert_eq!(l.locked_until(Some("bob"), b, t0 + 5), None);
+        assert_eq!(
+            l.locked_until(Some("ann"), a, until),
+            None,
+            "15 minutes later"
+        );
+        // Failures spread over more than the window never lock.
+        for i in 0..10 {
+            let at = until + i * (LOCKOUT_WINDOW_MS / 4 + 1);
+            assert!(!l.fail(Some("cy"), b, at).locked_now, "failure {i}");
+        }
+    }
+
+    #[test]
+    fn the_effective_role_is_the_lower_of_user_and_token() {
+        assert_eq!(effective_role(Role::Admin, Role::Viewer), Role::Viewer);
+        assert_eq!(effective_role(Role::Operator, Role::Admin), Role::Operator);
+        assert!(Role::Viewer < Role::Operator && Role::Engineer < Role::Admin);
+    }
+}

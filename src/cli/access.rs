@@ -1,0 +1,451 @@
+//! `camloop user`, `camloop token` and `camloop audit`: users, their API tokens and the
+//! audit trail, on the same store the service uses. Whoever runs these can open the
+//! database, so they act as an admin; each change is audited as `cli:<login>`.
+
+use super::history::{StoreArgs, connect, parse_time, runtime};
+use crate::auth::{UserName, hash_password, new_token, token_digest};
+use crate::clock::now_ms;
+use crate::store::{AuditEntry, AuditResult, NewToken, Role, Store, TokenId};
+use anyhow::{Context, bail};
+use clap::{Args, Subcommand, ValueEnum};
+use std::io::BufRead as _;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum RoleArg {
+    Viewer,
+    Operator,
+    Engineer,
+    Admin,
+}
+
+impl From<RoleArg> for Role {
+    fn from(r: RoleArg) -> Self {
+        match r {
+            RoleArg::Viewer => Role::Viewer,
+            RoleArg::Operator => Role::Operator,
+            RoleArg::Engineer => Role::Engineer,
+            RoleArg::Admin => Role::Admin,
+        }
+    }
+}
+
+/// Where the store is (as `history`), accepted before or after the subcommand.
+#[derive(Debug, Args)]
+pub struct GlobalStoreArgs {
+    /// Database URL (sqlite://… or postgres://…).
+    #[arg(long, value_name = "URL", global = true)]
+    pub database: Option<String>,
+    /// Service configuration whose database to use.
+    #[arg(
+        long,
+        value_name = "FILE",
+        default_value = "config/camloop.toml",
+        global = true
+    )]
+    pub config: std::path::PathBuf,
+}
+
+impl GlobalStoreArgs {
+    fn store(&self) -> StoreArgs {
+        StoreArgs {
+            database: self.database.clone(),
+            config: self.config.clone(),
+        }
+    }
+}
+
+#[derive(Debug, Args)]
+pub struct UserArgs {
+    #[command(subcommand)]
+    pub action: UserAction,
+    #[command(flatten)]
+    pub store: GlobalStoreArgs,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum UserAction {
+    /// Add a user; the password (at least 12 characters) is read from the first line of
+    /// standard input.
+    Add {
+        name: String,
+        #[arg(long, value_enum)]
+        role: RoleArg,
+    },
+    /// Set a user's password, read from the first line of standard input.
+    Passwd { name: String },
+    /// Disable a user: its sessions and tokens stop working (users are never deleted, so
+    /// the audit trail keeps its names).
+    Disable { name: String },
+    /// Every user with role and state.
+    List,
+}
+
+#[derive(Debug, Args)]
+pub struct TokenArgs {
+    #[command(subcommand)]
+    pub action: TokenAction,
+    #[command(flatten)]
+    pub store: GlobalStoreArgs,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum TokenAction {
+    /// Make an API token for a user; it is printed once and only its digest is kept.
+    Create {
+        /// The user the token acts as.
+        #[arg(long)]
+        user: String,
+        /// The most the token may do (never more than its user's role).
+        #[arg(long, value_enum)]
+        role: RoleArg,
+        /// Lifetime: `90d`, `12h` (at most 400 days).
+        #[arg(long, default_value = "90d")]
+        expires: String,
+        /// What the token is for (a cell controller's name, a script).
+        #[arg(long, default_value = "")]
+        label: String,
+    },
+    /// Revoke a token by its id (see `token list`).
+    Revoke { id: i64 },
+    /// Every token (no secrets).
+    List,
+}
+
+#[derive(Debug, Args)]
+pub struct AuditArgs {
+    #[command(subcommand)]
+    pub action: Option<AuditAction>,
+    /// From this time (see `history --since`); default: the last 24 hours.
+    #[arg(long, value_name = "TIME")]
+    pub since: Option<String>,
+    #[command(flatten)]
+    pub store: GlobalStoreArgs,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum AuditAction {
+    /// Check every row's chain digest; fails (exit 1) naming the rows changed or removed.
+    Verify,
+}
+
+/// `cli:<login>`: who ran the command, as the audit trail names them.
+fn cli_actor() -> String {
+    let login = std::env::var("USER")
+        .or_else(|_| std::env::var("LOGNAME"))
+        .unwrap_or_else(|_| "unknown".into());
+    format!("cli:{}", login.chars().take(32).collect::<String>())
+}
+
+fn entry(action: &str, after: serde_json::Value, reason: String) -> AuditEntry {
+    AuditEntry {
+        at_ms: now_ms(),
+        actor: cli_actor(),
+        role: Role::Admin,
+        client: "local".into(),
+        action: action.into(),
+        machine: None,
+        feature: None,
+        version: None,
+        before: None,
+        after: Some(after.to_string()),
+        result: AuditResult::Ok,
+        reason,
+    }
+}
+
+fn read_password() -> anyhow::Result<String> {
+    if std::io::IsTerminal::is_terminal(&std::io::stdin()) {
+        eprintln!("password (at least 12 characters; it shows as you type), then Enter:");
+    }
+    let mut line = String::new();
+    std::io::stdin()
+        .lock()
+        .read_line(&mut line)
+        .context("cannot read the password from standard input")?;
+    Ok(line.trim_end_matches(['\r', '\n']).to_string())
+}
+
+fn user_name(name: &str) -> anyhow::Result<UserName> {
+    UserName::new(name).with_context(|| "user name")
+}
+
+pub fn run_user(args: UserArgs) -> anyhow::Result<()> {
+    let password = match &args.action {
+        UserAction::Add { .. } | UserAction::Passwd { .. } => Some(read_password()?),
+        _ => None,
+    };
+    let hash = password.map(|p| hash_password(&p)).transpose()?;
+    runtime()?.block_on(async {
+        let store = connect(&args.store.store()).await?;
+        let result = user(&store, args.action, hash.as_deref()).await;
+        store.close().await;
+        result
+    })
+}
+
+async fn user(store: &Store, action: UserAction, hash: Option<&str>) -> anyhow::Result<()> {
+    let now = now_ms();
+    match action {
+        UserAction::Add { name, role } => {
+            let name = user_name(&name)?;
+            let role = Role::from(role);
+            store
+                .add_user(name.as_str(), role, hash.unwrap_or_default(), now)
+                .await?;
+            let after = serde_json::json!({ "user": name, "role": role.as_str() });
+            store
+                .append_audit(&entry("user.add", after, String::new()))
+                .await?;
+            println!("user {name} added ({role})");
+        }
+        UserAction::Passwd { name } => {
+            let name = user_name(&name)?;
+            if !store
+                .set_password(name.as_str(), hash.unwrap_or_default(), now)
+                .await?
+            {
+                bail!("no user {name}");
+            }
+            let after = serde_json::json!({ "user": name });
+            store
+                .append_audit(&entry("user.passwd", after, String::new()))
+                .await?;
+            println!("password of {name} changed");
+        }
+        UserAction::Disable { name } => {
+            let name = user_name(&name)?;
+            if !store.disable_user(name.as_str(), now).await? {
+                bail!("no enabled user {name}");
+            }
+            let after = serde_json::json!({ "user": name, "disabled": true });
+            store
+                .append_audit(&entry("user.disable", after, String::new()))
+                .await?;
+            println!("user {name} disabled");
+        }
+        UserAction::List => {
+            println!("{:<32} {:<9} {:<20} state", "user", "role", "created (UTC)");
+            for u in store.users().await? {
+                let state = if u.disabled_at_ms.is_some() {
+                    "disabled"
+                } else {
+                    "enabled"
+                };
+                let created = crate::clock::utc_text(u64::try_from(u.created_at_ms).unwrap_or(0));
+                println!(
+                    "{:<32} {:<9} {:<20} {state}",
+                    u.name,
+                    u.role.as_str(),
+                    &created[..19]
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A lifetime such as `90d` or `12h`, ms; at most 400 days.
+fn lifetime_ms(text: &str) -> anyhow::Result<i64> {
+    let t = text.trim();
+    let (number, unit_ms) = match t.char_indices().last() {
+        Some((i, 'd')) => (&t[..i], 86_400_000),
+        Some((i, 'h')) => (&t[..i], 3_600_000),
+        _ => bail!("--expires `{text}`: give days or hours, like 90d or 12h"),
+    };
+    let n: i64 = number
+        .parse()
+        .ok()
+        .filter(|n| *n > 0)
+        .with_context(|| format!("--expires `{text}`: not a positive number"))?;
+    let ms = n.saturating_mul(unit_ms);
+    if ms > 400 * 86_400_000 {
+        bail!("--expires `{text}`: at most 400 days");
+    }
+    Ok(ms)
+}
+
+pub fn run_token(args: TokenArgs) -> anyhow::Result<()> {
+    runtime()?.block_on(async {
+        let store = connect(&args.store.store()).await?;
+        let result = token(&store, args.action).await;
+        store.close().await;
+        result
+    })
+}
+
+async fn token(store: &Store, action: TokenAction) -> anyhow::Result<()> {
+    let now = now_ms();
+    match action {
+        TokenAction::Create {
+            user,
+            role,
+            expires,
+            label,
+        } => create_token(store, &user, role.into(), &expires, &label).await?,
+        TokenAction::Revoke { id } => {
+            if !store.revoke_token(TokenId(id), now).await? {
+                bail!("no live token {id}");
+            }
+            store
+                .append_audit(&entry(
+                    "token.revoke",
+                    serde_json::json!({ "token": id }),
+                    String::new(),
+                ))
+                .await?;
+            println!("token {id} revoked");
+        }
+        TokenAction::List => {
+            println!(
+                "{:>5} {:<32} {:<9} {:<20} {:<8} label",
+                "id", "user", "role", "expires (UTC)", "state"
+            );
+            for t in store.tokens().await? {
+                let state = match (t.revoked_at_ms, t.expires_at_ms <= now) {
+                    (Some(_), _) => "revoked",
+                    (None, true) => "expired",
+                    (None, false) => "live",
+                };
+                let expires = crate::clock::utc_text(u64::try_from(t.expires_at_ms).unwrap_or(0));
+                println!(
+                    "{:>5} {:<32} {:<9} {:<20} {:<8} {}",
+                    t.id.0,
+                    t.user,
+                    t.role.as_str(),
+                    &expires[..19],
+                    state,
+                    t.label
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `token create`: prints the token once; keeps its digest.
+async fn create_token(
+    store: &Store,
+    user: &str,
+    role: Role,
+    expires: &str,
+    label: &str,
+) -> anyhow::Result<()> {
+    let now = now_ms();
+    let name = user_name(user)?;
+    let Some(u) = store
+        .user(name.as_str())
+        .await?
+        .filter(|u| u.disabled_at_ms.is_none())
+    else {
+        bail!("no enabled user {name}");
+    };
+    if role > u.role {
+        bail!(
+            "a token of {name} can do at most what {name} can ({}), not {role}",
+            u.role
+        );
+    }
+    let secret = new_token()?;
+    let expires_at_ms = now + lifetime_ms(expires)?;
+    let label: String = label.chars().take(64).collect();
+    let t = NewToken {
+        user: u.id,
+        label: label.clone(),
+        sha256: token_digest(&secret),
+        role,
+        created_at_ms: now,
+        expires_at_ms,
+    };
+    let id = store.add_token(&t).await?;
+    let after = serde_json::json!({ "token": id.0, "user": name, "role": role.as_str(), "expires_at_ms": expires_at_ms, "label": label });
+    store
+        .append_audit(&entry("token.create", after, String::new()))
+        .await?;
+    eprintln!(
+        "token {} for {name} ({role}), valid until {} UTC; shown once, keep it secret:",
+        id.0,
+        crate::clock::utc_text(u64::try_from(expires_at_ms).unwrap_or(0))
+    );
+    println!("{secret}");
+    Ok(())
+}
+
+pub fn run_audit(args: AuditArgs) -> anyhow::Result<()> {
+    let now = now_ms();
+    let since = match &args.since {
+        Some(t) => parse_time(t, now)?,
+        None => now - 86_400_000,
+    };
+    runtime()?.block_on(async {
+        let store = connect(&args.store.store()).await?;
+        let result = match matches!(args.action, Some(AuditAction::Verify)) {
+            true => verify_trail(&store).await,
+            false => print_trail(&store, since).await,
+        };
+        store.close().await;
+        result
+    })
+}
+
+async fn verify_trail(store: &Store) -> anyhow::Result<()> {
+    let check = store.verify_audit().await?;
+    if check.broken.is_empty() {
+        println!("audit trail intact: {} rows, every link holds", check.rows);
+        return Ok(());
+    }
+    for (id, why) in &check.broken {
+        eprintln!("row {id}: {why}");
+    }
+    bail!(
+        "audit trail broken at {} of {} rows (first: row {})",
+        check.broken.len(),
+        check.rows,
+        check.broken[0].0
+    )
+}
+
+async fn print_trail(store: &Store, since_ms: i64) -> anyhow::Result<()> {
+    let mut after = 0;
+    loop {
+        let rows = store
+            .audit(since_ms, after, crate::store::MAX_AUDIT_PAGE, false)
+            .await?;
+        let Some(last) = rows.last() else {
+            return Ok(());
+        };
+        after = last.id;
+        for r in &rows {
+            let e = &r.entry;
+            let t = crate::clock::utc_text(u64::try_from(e.at_ms).unwrap_or(0));
+            let target = [
+                e.machine.clone(),
+                e.feature.clone(),
+                e.version.map(|v| format!("v{v}")),
+            ]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>()
+            .join(" ");
+            println!(
+                "{:>6} {} {} ({}) from {} {} {} {} {}{}{}",
+                r.id,
+                &t[..19],
+                e.actor,
+                e.role.as_str(),
+                e.client,
+                e.action,
+                if target.is_empty() { "-" } else { &target },
+                e.result.as_str(),
+                e.reason,
+                e.before
+                    .as_deref()
+                    .map(|b| format!(" before {b}"))
+                    .unwrap_or_default(),
+                e.after
+                    .as_deref()
+                    .map(|a| format!(" after {a}"))
+                    .unwrap_or_default(),
+            );
+        }
+    }
+}

@@ -1,0 +1,95 @@
+//! Access at start: the settings the listener uses, and the first `admin`.
+//!
+//! On a database with no user, the service makes `admin` with a random password and writes
+//! the password once to a file only its owner can read (mode 0600), printing the file's path
+//! and never the password. The operator signs in with it, then changes it
+//! (`camloop user passwd admin`) and deletes the file.
+
+use crate::config::Config;
+use crate::service::http::AuthState;
+use crate::store::{AuditEntry, AuditResult, Role, Store};
+use anyhow::Context;
+use std::io::Write as _;
+use std::path::Path;
+use tracing::{info, warn};
+
+/// The listener's access settings from the configuration.
+pub(crate) fn access_settings(config: &Config) -> AuthState {
+    let anonymous_read = config.auth.anonymous_read(config.http.listen);
+    let mut auth = AuthState::new(config.api_token.clone(), anonymous_read);
+    auth.session_ms = i64::from(config.auth.session_minutes.max(1)) * 60_000;
+    if config.api_token.is_some() {
+        warn!(
+            "CAMLOOP_API_TOKEN is deprecated: it acts as an admin; make per-user tokens with `camloop token create`"
+        );
+    }
+    auth
+}
+
+/// Makes the first `admin` when the store has no user; returns the password file written.
+pub(crate) async fn ensure_admin(
+    store: &Store,
+    config: &Config,
+) -> anyhow::Result<Option<std::path::PathBuf>> {
+    if !store.users().await?.is_empty() {
+        return Ok(None);
+    }
+    let password = crate::auth::random_password()?;
+    let hash = tokio::task::spawn_blocking({
+        let p = password.clone();
+        move || crate::auth::hash_password(&p)
+    })
+    .await
+    .context("hashing the first admin's password")??;
+    let file = config.admin_password_file();
+    write_secret_file(&file, &format!("{password}\n")).with_context(|| {
+        format!(
+            "cannot write the first admin's password to {}",
+            file.display()
+        )
+    })?;
+    let now = crate::clock::now_ms();
+    store.add_user("admin", Role::Admin, &hash, now).await?;
+    let entry = AuditEntry {
+        at_ms: now,
+        actor: "camloop".into(),
+        role: Role::Admin,
+        client: "local".into(),
+        action: "user.add".into(),
+        machine: None,
+        feature: None,
+        version: None,
+        before: None,
+        after: Some(r#"{"user":"admin","role":"admin"}"#.into()),
+        result: AuditResult::Ok,
+        reason: format!("first start: password written to {}", file.display()),
+    };
+    store.append_audit(&entry).await?;
+    info!(file = %file.display(), "first start: user `admin` created; its password is in this file (readable only by this account): sign in, change it with `camloop user passwd admin`, then delete the file");
+    println!(
+        "camloop: first start: the password of user `admin` is in {}",
+        file.display()
+    );
+    Ok(Some(file))
+}
+
+/// Writes `text` to a new file readable and writable only by its owner (mode 0600 from the
+/// moment it exists), replacing any file there.
+pub(crate) fn write_secret_file(path: &Path, text: &str) -> std::io::Result<()> {
+    if let Some(dir) = path.parent()
+        && !dir.as_os_str().is_empty()
+    {
+        std::fs::create_dir_all(dir)?;
+    }
+    let _ = std::fs::remove_file(path);
+    let mut options = std::fs::OpenOptions::new();
+    options.write(true).create_new(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.mode(0o600);
+    }
+    let mut file = options.open(path)?;
+    file.write_all(text.as_bytes())?;
+    file.sync_all()
+}

@@ -1,0 +1,420 @@
+//! Who may call what. [`ROUTES`] (in `route_roles.rs`) is the one table of every route with
+//! the role it needs;
+//! [`guard`] (a layer on the whole router, after routing) finds the caller's
+//! [`Principal`] from the request's headers alone (a bearer token, a dashboard session, or
+//! nobody), looks the matched route up in the table and lets the request through or answers
+//! 401 (who are you?), 403 (not allowed, or a missing CSRF token), 429 (locked out). A route
+//! missing from the table is refused for everyone (500 `route_without_role`), so a new
+//! route cannot be open by mistake. `tests/it/access_matrix.rs` walks the same table.
+
+use super::AppState;
+use super::api::ApiError;
+use super::session::{SESSION_COOKIE, cookie};
+use crate::auth::{Lockout, effective_role, token_digest};
+use crate::config::Secret;
+use crate::store::{AuditEntry, AuditResult, Role};
+use axum::extract::{ConnectInfo, FromRequestParts, MatchedPath, Request, State};
+use axum::http::request::Parts;
+use axum::http::{HeaderMap, Method, StatusCode, header};
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Redirect, Response};
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use tracing::warn;
+
+pub use super::route_roles::{Kind, Need, ROUTES, RouteRule, rule_for};
+
+/// The access settings and the in-memory state of sign-ins (sessions, lockout).
+#[derive(Debug)]
+pub struct AuthState {
+    /// The deprecated shared token (`CAMLOOP_API_TOKEN`), acting as `admin`.
+    pub legacy_token: Option<Secret>,
+    /// Anonymous clients read as `viewer`.
+    pub anonymous_read: bool,
+    /// Session cookies carry `Secure` (set when the listener serves TLS).
+    pub secure_cookie: bool,
+    /// How long a session lasts after sign-in, ms.
+    pub session_ms: i64,
+    pub sessions: super::session::Sessions,
+    pub lockout: Lockout,
+}
+
+impl AuthState {
+    /// Settings with the defaults for the rest: 8-hour sessions, no `Secure` cookie.
+    pub fn new(legacy_token: Option<Secret>, anonymous_read: bool) -> Self {
+        Self {
+            legacy_token,
+            anonymous_read,
+            secure_cookie: false,
+            session_ms: 8 * 3600 * 1000,
+            sessions: Default::default(),
+            lockout: Lockout::default(),
+        }
+    }
+}
+
+/// How the caller proved who it is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Via {
+    Anonymous,
+    /// The deprecated shared token.
+    SharedToken,
+    Token,
+    /// A dashboard session, with its CSRF token.
+    Session {
+        csrf: String,
+        key: String,
+    },
+}
+
+/// Who is calling, put into the request by [`guard`]; handlers take it to audit their
+/// writes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Principal {
+    /// User name, `anonymous` or `api-token`.
+    pub actor: String,
+    /// `None`: anonymous without anonymous reading.
+    pub role: Option<Role>,
+    pub address: IpAddr,
+    pub via: Via,
+}
+
+impl Principal {
+    /// The client address as the audit trail shows it.
+    pub fn client(&self) -> String {
+        self.address.to_string()
+    }
+
+    /// An audit entry by this caller now; the caller fills the target and change.
+    pub fn audit(&self, action: &str, result: AuditResult, reason: String) -> AuditEntry {
+        AuditEntry {
+            at_ms: crate::clock::now_ms(),
+            actor: self.actor.clone(),
+            role: self.role.unwrap_or(Role::Viewer),
+            client: self.client(),
+            action: action.to_string(),
+            machine: None,
+            feature: None,
+            version: None,
+            before: None,
+            after: None,
+            result,
+            reason,
+        }
+    }
+}
+
+impl<S: Send + Sync> FromRequestParts<S> for Principal {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, _: &S) -> Result<Self, ApiError> {
+        parts.extensions.get::<Principal>().cloned().ok_or(ApiError(
+            StatusCode::UNAUTHORIZED,
+            "unauthorized",
+            "no caller identified".into(),
+        ))
+    }
+}
+
+/// Proof that the access layer let the request through (its role checked against
+/// [`ROUTES`]), for handlers that need no more than that.
+#[derive(Debug, Clone, Copy)]
+pub struct Authorized;
+
+impl<S: Send + Sync> FromRequestParts<S> for Authorized {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, ApiError> {
+        Principal::from_request_parts(parts, state)
+            .await
+            .map(|_| Authorized)
+    }
+}
+
+/// The client's address, from the listener (unknown: 0.0.0.0, counted together).
+pub fn client_address(req_extensions: &axum::http::Extensions) -> IpAddr {
+    req_extensions
+        .get::<ConnectInfo<SocketAddr>>()
+        .map_or(IpAddr::V4(Ipv4Addr::UNSPECIFIED), |c| c.0.ip())
+}
+
+/// The layer: identify, look the route up, check the role (and a session's CSRF token).
+pub async fn guard(State(app): State<AppState>, mut req: Request, next: Next) -> Response {
+    let path = req
+        .extensions()
+        .get::<MatchedPath>()
+        .map(|p| p.as_str().to_owned());
+    let Some(rule) = path.as_deref().and_then(|p| rule_for(req.method(), p)) else {
+        return ApiError(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "route_without_role",
+            "this route has no entry in the access table: refused for everyone".into(),
+        )
+        .into_response();
+    };
+    let address = client_address(req.extensions());
+    let principal = match identify(&app, req.headers(), address).await {
+        Ok(p) => p,
+        Err(e) => return e.into_response(),
+    };
+    let unsafe_method = !matches!(*req.method(), Method::GET | Method::HEAD);
+    if let Via::Session { csrf, .. } = &principal.via
+        && unsafe_method
+        && rule.kind != Kind::Form
+    {
+        let given = req.headers().get("x-csrf-token").map(|v| v.as_bytes());
+        if !given.is_some_and(|g| same_secret(g, csrf.as_bytes())) {
+            csrf_refused(&app, &principal, path.as_deref().unwrap_or("")).await;
+            return ApiError(
+                StatusCode::FORBIDDEN,
+                "csrf_mismatch",
+                "the request did not carry this session's CSRF token".into(),
+            )
+            .into_response();
+        }
+    }
+    if let Need::Role(needed) = rule.need {
+        match principal.role {
+            Some(role) if role >= needed => {}
+            Some(role) if principal.via != Via::Anonymous => {
+                return ApiError(
+                    StatusCode::FORBIDDEN,
+                    "forbidden",
+                    format!(
+                        "this needs the role {needed}; {} has {role}",
+                        principal.actor
+                    ),
+                )
+                .into_response();
+            }
+            _ if rule.kind == Kind::Page => {
+                let next_path = req.uri().path().to_string();
+                return Redirect::to(&format!("/signin?next={}", encode_path(&next_path)))
+                    .into_response();
+            }
+            _ => return unauthorized(needed),
+        }
+    }
+    req.extensions_mut().insert(principal);
+    next.run(req).await
+}
+
+fn unauthorized(needed: Role) -> Response {
+    let mut r = ApiError(
+        StatusCode::UNAUTHORIZED,
+        "unauthorized",
+        format!("this needs the role {needed}: send Authorization: Bearer <token>, or sign in"),
+    )
+    .into_response();
+    r.headers_mut().insert(
+        header::WWW_AUTHENTICATE,
+        header::HeaderValue::from_static("Bearer"),
+    );
+    r
+}
+
+/// Keeps a path safe inside a query: letters, digits and `/-_.` as they are, the rest
+/// percent-encoded.
+fn encode_path(path: &str) -> String {
+    path.bytes()
+        .map(|b| match b {
+            b'a'..=b'z' | b'A'..=b'Z' | b'0'..=b'9' | b'/' | b'-' | b'_' | b'.' => {
+                char::from(b).to_string()
+            }
+            _ => format!("%{b:02X}"),
+        })
+        .collect()
+}
+
+/// The caller: by bearer token, else by session cookie, else anonymous.
+async fn identify(
+    app: &AppState,
+    headers: &HeaderMap,
+    address: IpAddr,
+) -> Result<Principal, ApiError> {
+    let auth = &app.auth;
+    if let Some(value) = headers.get(header::AUTHORIZATION) {
+        let token = value
+            .as_bytes()
+            .strip_prefix(b"Bearer ")
+            .unwrap_or_default();
+        return bearer(app, std::str::from_utf8(token).unwrap_or(""), address).await;
+    }
+    if let Some(key) = cookie(headers, SESSION_COOKIE) {
+        let now = crate::clock::now_ms();
+        if let Some(s) = auth.sessions.get(&key, now) {
+            // The user may have been disabled or changed since sign-in (by the command line).
+            let store = super::routes::store(app).await?;
+            if let Some(user) = store.user(&s.user).await?
+                && user.disabled_at_ms.is_none()
+            {
+                return Ok(Principal {
+                    actor: user.name,
+                    role: Some(user.role),
+                    address,
+                    via: Via::Session { csrf: s.csrf, key },
+                });
+            }
+            auth.sessions.remove(&key);
+        }
+    }
+    Ok(Principal {
+        actor: "anonymous".into(),
+        role: auth.anonymous_read.then_some(Role::Viewer),
+        address,
+        via: Via::Anonymous,
+    })
+}
+
+/// A bearer token: the shared one, or a user's token from the store.
+async fn bearer(app: &AppState, token: &str, address: IpAddr) -> Result<Principal, ApiError> {
+    let auth = &app.auth;
+    let now = crate::clock::now_ms();
+    if let Some(until) = auth.lockout.locked_until(None, address, now) {
+        return Err(locked(app, None, address, until));
+    }
+    if let Some(shared) = &auth.legacy_token
+        && same_secret(token.as_bytes(), shared.expose().as_bytes())
+    {
+        return Ok(Principal {
+            actor: "api-token".into(),
+            role: Some(Role::Admin),
+            address,
+            via: Via::SharedToken,
+        });
+    }
+    let store = match token.is_empty() {
+        true => None,
+        false => super::routes::store(app).await.ok(),
+    };
+    let grant = match &store {
+        Some(s) => s.token_grant(&token_digest(token)).await?,
+        // Not counted as a failure: the token could not be checked.
+        None if !token.is_empty() => {
+            return Err(ApiError(
+                StatusCode::UNAUTHORIZED,
+                "unauthorized",
+                "the bearer token cannot be checked while the database is unreachable".into(),
+            ));
+        }
+        None => None,
+    };
+    let why = match &grant {
+        None => "unknown token",
+        Some(g) if g.revoked_at_ms.is_some() => "revoked token",
+        Some(g) if g.expires_at_ms <= now => "expired token",
+        Some(g) if g.user_disabled_at_ms.is_some() => "the token's user is disabled",
+        Some(g) => {
+            if let Some(until) = auth.lockout.locked_until(Some(&g.user), address, now) {
+                return Err(locked(app, Some(&g.user), address, until));
+            }
+            return Ok(Principal {
+                actor: g.user.clone(),
+                role: Some(effective_role(g.user_role, g.role)),
+                address,
+                via: Via::Token,
+            });
+        }
+    };
+    let user = grant.as_ref().map(|g| g.user.as_str());
+    failed(app, "token", user, address, why).await;
+    Err(ApiError(
+        StatusCode::UNAUTHORIZED,
+        "unauthorized",
+        "the bearer token is not valid".into(),
+    ))
+}
+
+/// Counts and logs one failed sign-in or token, audits it, and locks the user and address
+/// at the fifth failure in 15 minutes.
+pub(super) async fn failed(
+    app: &AppState,
+    kind: &'static str,
+    user: Option<&str>,
+    address: IpAddr,
+    why: &str,
+) {
+    let now = crate::clock::now_ms();
+    let counted = app.auth.lockout.fail(user, address, now);
+    let user_text = user.unwrap_or("-");
+    warn!(kind, user = user_text, client = %address, why, "authentication failed");
+    app.metrics.update_access(|a| {
+        *a.failures.entry(kind).or_default() += 1;
+        if counted.locked_now {
+            a.lockouts_total += 1;
+        }
+    });
+    let anonymous = Principal {
+        actor: user.unwrap_or("anonymous").to_string(),
+        role: None,
+        address,
+        via: Via::Anonymous,
+    };
+    let action = if kind == "password" {
+        "signin"
+    } else {
+        "token"
+    };
+    let mut reason = why.to_string();
+    if counted.locked_now {
+        warn!(user = user_text, client = %address, "locked out for 15 minutes after 5 failures");
+        reason.push_str("; user and address locked out for 15 minutes");
+    }
+    super::audit::record(app, anonymous.audit(action, AuditResult::Refused, reason)).await;
+}
+
+/// A refusal while locked out: counted and logged, not audited again (the lock was).
+pub(super) fn locked(
+    app: &AppState,
+    user: Option<&str>,
+    address: IpAddr,
+    until_ms: i64,
+) -> ApiError {
+    let left_s = (until_ms - crate::clock::now_ms()).max(0) / 1000 + 1;
+    warn!(user = user.unwrap_or("-"), client = %address, left_s, "refused: locked out");
+    app.metrics
+        .update_access(|a| *a.failures.entry("locked").or_default() += 1);
+    ApiError(
+        StatusCode::TOO_MANY_REQUESTS,
+        "locked_out",
+        format!("too many failed attempts: try again in {left_s} s"),
+    )
+}
+
+async fn csrf_refused(app: &AppState, p: &Principal, path: &str) {
+    warn!(user = %p.actor, client = %p.address, path, "refused: no CSRF token");
+    app.metrics
+        .update_access(|a| *a.failures.entry("csrf").or_default() += 1);
+    let reason = format!(
+        "a write to {} without this session's CSRF token",
+        short(path)
+    );
+    super::audit::record(app, p.audit("csrf", AuditResult::Refused, reason)).await;
+}
+
+/// At most 64 characters of something a client sent.
+pub(super) fn short(text: &str) -> String {
+    text.chars().take(64).collect()
+}
+
+/// Compares the SHA-256 digests of both in constant time: neither the position of the first
+/// difference nor the secret's length shows in the time taken.
+pub(super) fn same_secret(given: &[u8], expected: &[u8]) -> bool {
+    use sha2::{Digest, Sha256};
+    let (a, b) = (Sha256::digest(given), Sha256::digest(expected));
+    a.iter()
+        .zip(b.iter())
+        .fold(0u8, |acc, (x, y)| acc | (x ^ y))
+        == 0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn secrets_compare_equal_only_when_equal() {
+        assert!(same_secret(b"let-me-write", b"let-me-write"));
+        assert!(!same_secret(b"let-me-writ", b"let-me-write"));
+        assert!(!same_secret(b"", b"let-me-write"));
+    }
+}

@@ -1,0 +1,75 @@
+//! The audit trail on the HTTP side: [`record`] appends what a handler did (every write
+//! calls it), `GET /api/v1/audit` and the dashboard's `/audit` page read it (engineers and
+//! admins, see `access::ROUTES`).
+
+use super::AppState;
+use super::api::{ApiError, ApiQuery};
+use crate::store::{AuditEntry, AuditRow};
+use axum::Json;
+use axum::extract::State;
+use axum::response::Html;
+use serde::{Deserialize, Serialize};
+use tracing::{error, info};
+
+/// Appends `entry` to the trail and logs it. When the database cannot take it, the whole
+/// entry goes to the log at error level and `camloop_audit_failures_total` counts it: the
+/// action has happened and stays done, and what happened is not lost.
+pub async fn record(app: &AppState, entry: AuditEntry) {
+    info!(
+        actor = %entry.actor,
+        role = %entry.role,
+        client = %entry.client,
+        action = %entry.action,
+        machine = entry.machine.as_deref().unwrap_or("-"),
+        feature = entry.feature.as_deref().unwrap_or("-"),
+        version = entry.version.unwrap_or(0),
+        result = entry.result.as_str(),
+        reason = %entry.reason,
+        "audit"
+    );
+    let stored = match super::routes::store(app).await {
+        Ok(store) => store
+            .append_audit(&entry)
+            .await
+            .map(|_| ())
+            .map_err(|e| e.to_string()),
+        Err(e) => Err(e.2),
+    };
+    if let Err(why) = stored {
+        app.metrics.update_access(|a| a.audit_failures_total += 1);
+        let text = serde_json::to_string(&entry).unwrap_or_default();
+        error!(entry = %text, why = %why, "audit row not stored");
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct AuditQuery {
+    since_ms: Option<i64>,
+    limit: Option<u32>,
+}
+
+#[derive(Debug, Serialize)]
+pub(super) struct AuditReply {
+    /// Newest first.
+    items: Vec<AuditRow>,
+}
+
+/// `GET /api/v1/audit?since_ms=…&limit=…`: the newest rows (at most 1,000).
+pub(super) async fn audit(
+    State(app): State<AppState>,
+    ApiQuery(q): ApiQuery<AuditQuery>,
+) -> Result<Json<AuditReply>, ApiError> {
+    let store = super::routes::store(&app).await?;
+    let items = store
+        .audit(q.since_ms.unwrap_or(0), 0, q.limit.unwrap_or(200), true)
+        .await?;
+    Ok(Json(AuditReply { items }))
+}
+
+/// `GET /audit`: the newest 200 rows as a table.
+pub(super) async fn audit_page(State(app): State<AppState>) -> Result<Html<String>, ApiError> {
+    let store = super::routes::store(&app).await?;
+    let rows = store.audit(0, 0, 200, true).await?;
+    Ok(Html(super::dashboard::audit_html(&rows)))
+}

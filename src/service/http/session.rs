@@ -1,0 +1,371 @@
+//! Dashboard sign-in: the sign-in page, sessions, sign-out.
+//!
+//! - A session is a random key in an `HttpOnly`, `SameSite=Strict` cookie (`Secure` under
+//!   TLS); the service keeps only the key's SHA-256, the user and a CSRF token, in memory,
+//!   for `auth.session_minutes` (a restart signs everyone out).
+//! - Every write a session makes must carry its CSRF token (`X-CSRF-Token`, which the page's
+//!   script reads from `GET /session`; a form field on the sign-out form). A cross-site
+//!   page can make the browser send the cookie (a sibling port is the same site) but cannot
+//!   read the token.
+//! - The sign-in form carries a one-time value that must equal a cookie set with the form
+//!   (double submit), so another site cannot sign a browser in as someone else.
+//! - Failures count towards the lockout (`crate::auth::Lockout`) and are audited.
+
+use super::AppState;
+use super::access::{Principal, Via, client_address, failed, locked, same_secret};
+use super::api::ApiError;
+use crate::auth::{UserName, random_hex, token_digest, verify_password};
+use crate::store::AuditResult;
+use axum::extract::{FromRequest, Request, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::response::{Html, IntoResponse, Redirect, Response};
+use axum::{Form, Json};
+use std::collections::HashMap;
+use std::sync::Mutex;
+
+/// The session cookie's name.
+pub const SESSION_COOKIE: &str = "camloop_session";
+/// The sign-in form's double-submit cookie.
+const SIGNIN_COOKIE: &str = "camloop_signin";
+/// At most this many sessions live at once; the oldest go first.
+const MAX_SESSIONS: usize = 10_000;
+
+/// A signed-in browser.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Session {
+    pub user: String,
+    pub csrf: String,
+    pub expires_at_ms: i64,
+}
+
+/// Live sessions by the SHA-256 of their key.
+#[derive(Debug, Default)]
+pub struct Sessions {
+    map: Mutex<HashMap<String, Session>>,
+}
+
+impl Sessions {
+    /// A new session for `user` until `expires_at_ms`: its key (for the cookie) and itself.
+    pub fn create(&self, user: &str, expires_at_ms: i64) -> Result<(String, Session), ApiError> {
+        let random = |n| {
+            random_hex(n).map_err(|e| {
+                ApiError(
+                    StatusCode::INTERNAL_SERVER_ERROR,
+                    "random_failed",
+                    e.to_string(),
+                )
+            })
+        };
+        let key = random(32)?;
+        let session = Session {
+            user: user.to_string(),
+            csrf: random(32)?,
+            expires_at_ms,
+        };
+        let mut map = self.map.lock().unwrap_or_else(|p| p.into_inner());
+        let now = crate::clock::now_ms();
+        map.retain(|_, s| s.expires_at_ms > now);
+        if map.len() >= MAX_SESSIONS
+            && let Some(oldest) = map
+                .iter()
+                .min_by_key(|(_, s)| s.expires_at_ms)
+                .map(|(k, _)| k.clone())
+        {
+            map.remove(&oldest);
+        }
+        map.insert(token_digest(&key), session.clone());
+        Ok((key, session))
+    }
+
+    /// The live session of `key` at `now_ms`.
+    pub fn get(&self, key: &str, now_ms: i64) -> Option<Session> {
+        let map = self.map.lock().unwrap_or_else(|p| p.into_inner());
+        map.get(&token_digest(key))
+            .filter(|s| s.expires_at_ms > now_ms)
+            .cloned()
+    }
+
+    pub fn remove(&self, key: &str) {
+        let mut map = self.map.lock().unwrap_or_else(|p| p.into_inner());
+        map.remove(&token_digest(key));
+    }
+}
+
+/// The value of cookie `name` in the request's `Cookie` headers.
+pub fn cookie(headers: &HeaderMap, name: &str) -> Option<String> {
+    headers
+        .get_all(header::COOKIE)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(';'))
+        .filter_map(|pair| pair.trim().split_once('='))
+        .find(|(k, _)| *k == name)
+        .map(|(_, v)| v.to_string())
+}
+
+fn set_cookie(app: &AppState, name: &str, value: &str, path: &str, max_age_s: i64) -> String {
+    let secure = if app.auth.secure_cookie {
+        "; Secure"
+    } else {
+        ""
+    };
+    format!("{name}={value}; Path={path}; Max-Age={max_age_s}; HttpOnly; SameSite=Strict{secure}")
+}
+
+#[derive(Debug, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SigninQuery {
+    next: Option<String>,
+}
+
+/// Where to go after sign-in: a path on this site only.
+fn local_path(next: Option<&str>) -> String {
+    match next {
+        Some(p)
+            if p.starts_with('/')
+                && !p.starts_with("//")
+                && !p.contains('\\')
+                && p.len() <= 512 =>
+        {
+            p.to_string()
+        }
+        _ => "/".to_string(),
+    }
+}
+
+/// `GET /signin`: the form, with a fresh double-submit value.
+pub(super) async fn signin_page(
+    State(app): State<AppState>,
+    super::api::ApiQuery(q): super::api::ApiQuery<SigninQuery>,
+) -> Result<Response, ApiError> {
+    signin_form(&app, q.next.as_deref(), "", StatusCode::OK)
+}
+
+fn signin_form(
+    app: &AppState,
+    next: Option<&str>,
+    message: &str,
+    status: StatusCode,
+) -> Result<Response, ApiError> {
+    let nonce = random_hex(16).map_err(|e| {
+        ApiError(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "random_failed",
+            e.to_string(),
+        )
+    })?;
+    let html = super::dashboard::signin_html(&nonce, &local_path(next), message);
+    let cookie = set_cookie(app, SIGNIN_COOKIE, &nonce, "/signin", 600);
+    Ok((status, [(header::SET_COOKIE, cookie)], Html(html)).into_response())
+}
+
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SigninForm {
+    name: String,
+    password: String,
+    csrf: String,
+    next: Option<String>,
+}
+
+/// `POST /signin`: checks the double-submit value, the lockout, then the password.
+pub(super) async fn signin(
+    State(app): State<AppState>,
+    req: Request,
+) -> Result<Response, ApiError> {
+    let address = client_address(req.extensions());
+    let expected = cookie(req.headers(), SIGNIN_COOKIE).unwrap_or_default();
+    let Form(form) = read_form::<SigninForm>(req, &app).await?;
+    if expected.is_empty() || !same_secret(form.csrf.as_bytes(), expected.as_bytes()) {
+        app.metrics
+            .update_access(|a| *a.failures.entry("csrf").or_default() += 1);
+        let message =
+            "The form was not sent from this site's sign-in page (CSRF check). Try again.";
+        return signin_form(&app, form.next.as_deref(), message, StatusCode::FORBIDDEN);
+    }
+    let name = UserName::new(&form.name).ok();
+    let now = crate::clock::now_ms();
+    let user_text = name.as_ref().map(UserName::as_str);
+    if let Some(until) = app.auth.lockout.locked_until(user_text, address, now) {
+        let e = locked(&app, user_text, address, until);
+        return signin_form(
+            &app,
+            form.next.as_deref(),
+            &format!("Locked out: {}.", e.2),
+            e.0,
+        );
+    }
+    let user = match check_password(&app, name.as_ref(), &form.password).await? {
+        Ok(user) => user,
+        Err(why) => {
+            failed(&app, "password", user_text, address, why).await;
+            let message = "Wrong user name or password.";
+            let next = form.next.as_deref();
+            return signin_form(&app, next, message, StatusCode::UNAUTHORIZED);
+        }
+    };
+    let (key, _) = app
+        .auth
+        .sessions
+        .create(&user.name, now + app.auth.session_ms)?;
+    let p = Principal {
+        actor: user.name.clone(),
+        role: Some(user.role),
+        address,
+        via: Via::Anonymous,
+    };
+    super::audit::record(&app, p.audit("signin", AuditResult::Ok, "password".into())).await;
+    let cookie = set_cookie(&app, SESSION_COOKIE, &key, "/", app.auth.session_ms / 1000);
+    let clear = set_cookie(&app, SIGNIN_COOKIE, "", "/signin", 0);
+    let mut r = Redirect::to(&local_path(form.next.as_deref())).into_response();
+    r.headers_mut().append(
+        header::SET_COOKIE,
+        header::HeaderValue::try_from(cookie).map_err(internal)?,
+    );
+    r.headers_mut().append(
+        header::SET_COOKIE,
+        header::HeaderValue::try_from(clear).map_err(internal)?,
+    );
+    Ok(r)
+}
+
+/// The enabled user `name` whose password is `password`, or why not. A hash is checked even
+/// for an unknown user, so the time taken does not tell which names exist.
+async fn check_password(
+    app: &AppState,
+    name: Option<&UserName>,
+    password: &str,
+) -> Result<Result<crate::store::User, &'static str>, ApiError> {
+    let store = super::routes::store(app).await?;
+    let user = match name {
+        Some(n) => store.user(n.as_str()).await?,
+        None => None,
+    };
+    let hash = user
+        .as_ref()
+        .map_or(DUMMY_HASH, |u| u.password_hash.as_str())
+        .to_string();
+    let password = password.to_string();
+    let matches = tokio::task::spawn_blocking(move || verify_password(&password, &hash))
+        .await
+        .unwrap_or(false);
+    Ok(match user {
+        None => Err("unknown user"),
+        Some(u) if u.disabled_at_ms.is_some() => Err("disabled user"),
+        Some(_) if !matches => Err("wrong password"),
+        Some(u) => Ok(u),
+    })
+}
+
+fn internal(e: impl std::fmt::Display) -> ApiError {
+    ApiError(StatusCode::INTERNAL_SERVER_ERROR, "internal", e.to_string())
+}
+
+/// An argon2id hash of a password nobody has, checked for unknown users.
+const DUMMY_HASH: &str = "$argon2id$v=19$m=19456,t=2,p=1$c29tZXNhbHRzb21lc2FsdA$QUwJiZ3Eg4pcXfI7u8T/HWl3eo6L6VeKvzZp4RkZ+6Q";
+
+#[derive(Debug, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SignoutForm {
+    csrf: Option<String>,
+}
+
+/// `POST /signout`: ends the session when the form (or the `X-CSRF-Token` header) carries
+/// its CSRF token.
+pub(super) async fn signout(
+    State(app): State<AppState>,
+    p: Principal,
+    req: Request,
+) -> Result<Response, ApiError> {
+    let header_token = req
+        .headers()
+        .get("x-csrf-token")
+        .and_then(|v| v.to_str().ok())
+        .map(str::to_string);
+    let Form(form) = read_form::<SignoutForm>(req, &app).await?;
+    let Via::Session { csrf, key } = &p.via else {
+        return Ok(Redirect::to("/signin").into_response());
+    };
+    let given = header_token.or(form.csrf).unwrap_or_default();
+    if !same_secret(given.as_bytes(), csrf.as_bytes()) {
+        app.metrics
+            .update_access(|a| *a.failures.entry("csrf").or_default() += 1);
+        return Err(ApiError(
+            StatusCode::FORBIDDEN,
+            "csrf_mismatch",
+            "sign-out without this session's CSRF token".into(),
+        ));
+    }
+    app.auth.sessions.remove(key);
+    super::audit::record(&app, p.audit("signout", AuditResult::Ok, String::new())).await;
+    let clear = set_cookie(&app, SESSION_COOKIE, "", "/", 0);
+    Ok(([(header::SET_COOKIE, clear)], Redirect::to("/signin")).into_response())
+}
+
+/// `GET /session`: who this browser is, and its CSRF token (same-origin script only: no
+/// other site can read the answer).
+pub(super) async fn session(p: Principal) -> Response {
+    let csrf = match &p.via {
+        Via::Session { csrf, .. } => Some(csrf.clone()),
+        _ => None,
+    };
+    let signed_in = csrf.is_some();
+    let body = serde_json::json!({
+        "user": signed_in.then_some(&p.actor),
+        "role": p.role.map(|r| r.as_str()),
+        "csrf": csrf,
+    });
+    ([(header::CACHE_CONTROL, "no-store")], Json(body)).into_response()
+}
+
+/// A urlencoded form body, within the body timeout and size limit of the JSON bodies.
+async fn read_form<T: serde::de::DeserializeOwned>(
+    req: Request,
+    app: &AppState,
+) -> Result<Form<T>, ApiError> {
+    let (parts, body) = req.into_parts();
+    let bytes = super::api::read_body(body, app.body_timeout).await?;
+    let req = Request::from_parts(parts, axum::body::Body::from(bytes));
+    Form::<T>::from_request(req, app).await.map_err(|r| {
+        ApiError(
+            r.status(),
+            "invalid_body",
+            super::access::short(&r.body_text()),
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_dummy_hash_parses_and_matches_nothing_typed() {
+        assert!(!verify_password("", DUMMY_HASH));
+        assert!(!verify_password("twelve-chars", DUMMY_HASH));
+        assert!(argon2::password_hash::phc::PasswordHash::new(DUMMY_HASH).is_ok());
+    }
+
+    #[test]
+    fn only_local_paths_are_followed_after_sign_in() {
+        assert_eq!(
+            local_path(Some("/machines/M1/features/IN1")),
+            "/machines/M1/features/IN1"
+        );
+        for bad in ["//evil.example/", "https://evil.example/", "/\\evil", ""] {
+            assert_eq!(local_path(Some(bad)), "/", "{bad}");
+        }
+        assert_eq!(local_path(None), "/");
+    }
+
+    #[test]
+    fn cookies_are_found_by_name() {
+        let mut h = HeaderMap::new();
+        h.insert(
+            header::COOKIE,
+            "a=1; camloop_session=abc; b=2".parse().unwrap(),
+        );
+        assert_eq!(cookie(&h, SESSION_COOKIE).as_deref(), Some("abc"));
+        assert_eq!(cookie(&h, "c"), None);
+    }
+}
