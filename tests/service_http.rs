@@ -56,6 +56,7 @@ fn fake_machine() -> mpsc::Sender<Command> {
                 Command::Dressing {
                     wheel_radius_mm,
                     reply,
+                    ..
                 } => {
                     let _ = reply.send(Ok(CommandDone {
                         version: Some(8),

@@ -290,8 +290,8 @@ async fn machine_task(
                 http::Command::RollbackPart { versions, reply } => {
                     let _ = reply.send(rollback_part_result(&mut machine, &versions).await);
                 }
-                http::Command::Dressing { wheel_radius_mm, reply } => {
-                    let result = machine.dress(wheel_radius_mm, "api").await;
+                http::Command::Dressing { wheel_radius_mm, infeed_um, reply } => {
+                    let result = machine.dress(wheel_radius_mm, infeed_um, "api").await;
                     let _ = reply.send(dressing_result(result));
                 }
             },

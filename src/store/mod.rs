@@ -77,6 +77,12 @@ pub const MIGRATIONS: &[(i64, &str, &str, &str)] = &[
         include_str!("../../migrations/sqlite/0004_compact_history.sql"),
         include_str!("../../migrations/postgres/0004_compact_history.sql"),
     ),
+    (
+        5,
+        "dressing_infeed",
+        include_str!("../../migrations/sqlite/0005_dressing_infeed.sql"),
+        include_str!("../../migrations/postgres/0005_dressing_infeed.sql"),
+    ),
 ];
 
 /// How long a read waits for its turn before it is refused with [`StoreError::Busy`].

@@ -202,13 +202,11 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
         };
         let dressed = match sim.after_part() {
             Some(event) => {
+                let old_radius_mm = feature.wheel_radius_mm();
                 feature = feature.with_wheel_radius(event.believed_wheel_radius_mm);
-                let (own, x_own) = (
-                    learn::size_correction_um(&state),
-                    learn::size_correction_um(&x_state),
-                );
-                learn::after_dressing(&mut state, own);
-                learn::after_dressing(&mut x_state, x_own);
+                for s in [&mut state, &mut x_state] {
+                    after_dressing(s, old_radius_mm, &event);
+                }
                 let mean = naive_dx_mm.iter().sum::<f64>() / naive_dx_mm.len() as f64;
                 naive_dx_mm.iter_mut().for_each(|d| *d -= mean);
                 table = make_table(setup, feature, &state, method, &naive_dx_mm, &mut control)?;
@@ -229,6 +227,27 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
         parts: figures,
         stopped: None,
     })
+}
+
+/// What the loop does with a dressing, as the service does: with the dresser's measured
+/// infeed the size step is known and the whole correction moves by it; without it the
+/// wheel's share of the size correction (here all of it: one feature) is replaced by the
+/// dressing offset.
+fn after_dressing(state: &mut LearningState, old_radius_mm: f64, event: &super::DressingEvent) {
+    match event.measured_infeed_um {
+        Some(infeed_um) => {
+            let step_um = learn::dressing_size_step_um(
+                old_radius_mm,
+                event.believed_wheel_radius_mm,
+                infeed_um,
+            );
+            learn::after_measured_dressing(state, step_um);
+        }
+        None => {
+            let own = learn::size_correction_um(state);
+            learn::after_dressing(state, own);
+        }
+    }
 }
 
 fn lobe_loop(setup: &CellSetup, feature: Feature) -> LobeLoop<'_> {

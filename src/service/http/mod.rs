@@ -66,9 +66,13 @@ pub enum Command {
         version: i64,
         reply: Reply,
     },
-    /// The wheel was dressed to this radius (mm, already within 5–1000): regenerate the
-    /// table.
-    Dressing { wheel_radius_mm: f64, reply: Reply },
+    /// The wheel was dressed to this radius (mm, already within 5–1000), the dresser
+    /// measured this infeed (µm, already within 0–1000) if it said: regenerate the table.
+    Dressing {
+        wheel_radius_mm: f64,
+        infeed_um: Option<f64>,
+        reply: Reply,
+    },
     /// Roll several features back together (a whole part: one version of each); every
     /// version is checked before any is pushed.
     RollbackPart {

@@ -38,7 +38,7 @@ pub(super) async fn openapi() -> Json<Value> {
             "/api/v1/measurements/{id}": get("one measurement with its averaged profile and analysis"),
             "/api/v1/machines/{machine}/dressings": {
                 "get": get("wheel dressings, newest first")["get"],
-                "post": write("report a wheel dressing; body {\"wheel_radius_mm\": R}; regenerates the table for the new radius; needs Authorization: Bearer <CAMLOOP_API_TOKEN>", "recorded, table regenerated: {status, version, message}", json!({ "400": { "description": "implausible radius" } }))
+                "post": write("report a wheel dressing; body {\"wheel_radius_mm\": R, \"infeed_um\": D} (D, the dresser's measured infeed, optional); regenerates the table for the new radius; needs Authorization: Bearer <CAMLOOP_API_TOKEN>", "recorded, table regenerated: {status, version, message}", json!({ "400": { "description": "implausible radius or infeed" } }))
             },
             "/api/v1/machines/{machine}/events/{id}/ack": { "post": write("acknowledge an event or alarm (the dashboard's button); needs Authorization: Bearer <CAMLOOP_API_TOKEN>; a second acknowledgement changes nothing", "acknowledged: {status, version: null, message}", json!({ "404": { "description": "event_not_found" } })) },
             "/api/v1/machines/{machine}/lobes/{lobe}/rollback": { "post": write("deliver a stored version again; body {\"version\": N}; needs Authorization: Bearer <CAMLOOP_API_TOKEN>", "delivered: {status, version, message}", json!({})) },
