@@ -187,12 +187,7 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                     previous: None,
                 };
                 let outcome = learn::step(&mut x_state, &part, &setup.params);
-                let step = setup.request.points / points_per_rev as usize;
-                for (j, u) in x_state.correction_um.iter().enumerate() {
-                    if let Some(dx) = naive_dx_mm.get_mut(j * step.max(1)) {
-                        *dx = u / 1000.0;
-                    }
-                }
+                x_from_correction(&x_state, &mut naive_dx_mm);
                 table = make_table(setup, feature, &state, method, &naive_dx_mm, &mut control)?;
                 match outcome {
                     Ok(o) => outcome_text(&o),
@@ -207,8 +202,14 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                 for s in [&mut state, &mut x_state] {
                     after_dressing(s, old_radius_mm, &event);
                 }
-                let mean = naive_dx_mm.iter().sum::<f64>() / naive_dx_mm.len() as f64;
-                naive_dx_mm.iter_mut().for_each(|d| *d -= mean);
+                if method == Method::XDomainIlc {
+                    // Its X follows its learning state, moved for the dressing like camloop's.
+                    x_from_correction(&x_state, &mut naive_dx_mm);
+                } else {
+                    // The hand method drops what it added to the size.
+                    let mean = naive_dx_mm.iter().sum::<f64>() / naive_dx_mm.len() as f64;
+                    naive_dx_mm.iter_mut().for_each(|d| *d -= mean);
+                }
                 table = make_table(setup, feature, &state, method, &naive_dx_mm, &mut control)?;
                 true
             }
@@ -227,6 +228,17 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
         parts: figures,
         stopped: None,
     })
+}
+
+/// The X-domain method's X at each table point: its correction, taken as ΔX at the same
+/// index (mm).
+fn x_from_correction(state: &LearningState, dx_mm: &mut [f64]) {
+    let step = (dx_mm.len() / state.correction_um.len().max(1)).max(1);
+    for (j, u) in state.correction_um.iter().enumerate() {
+        if let Some(dx) = dx_mm.get_mut(j * step) {
+            *dx = u / 1000.0;
+        }
+    }
 }
 
 /// What the loop does with a dressing, as the service does: with the dresser's measured
