@@ -26,6 +26,18 @@ fn tables(sql: &str) -> BTreeSet<String> {
         .collect()
 }
 
+/// (table, column) of each `ALTER TABLE t ADD COLUMN c …` line.
+fn added_columns(sql: &str) -> BTreeSet<(String, String)> {
+    sql.lines()
+        .filter_map(|l| l.trim().strip_prefix("ALTER TABLE "))
+        .filter_map(|rest| {
+            let (table, column) = rest.split_once(" ADD COLUMN ")?;
+            let column = column.split_whitespace().next()?;
+            Some((table.trim().to_owned(), column.to_owned()))
+        })
+        .collect()
+}
+
 #[test]
 fn both_backends_list_the_same_versions_and_the_binary_embeds_them() {
     let sqlite = versions("sqlite");
@@ -44,11 +56,24 @@ fn both_backends_create_the_same_tables() {
     let mut all = BTreeSet::new();
     for (version, _, sqlite, postgres) in camloop::store::MIGRATIONS {
         let t = tables(sqlite);
-        assert!(!t.is_empty(), "migration {version} creates no table");
+        let columns = added_columns(sqlite);
+        assert!(
+            !(t.is_empty() && columns.is_empty()),
+            "migration {version} creates no table and adds no column"
+        );
         assert_eq!(t, tables(postgres), "migration {version}");
+        assert_eq!(columns, added_columns(postgres), "migration {version}");
         all.extend(t);
     }
     for table in ["measurements", "table_versions", "store_identity"] {
         assert!(all.contains(table), "{table} missing from {all:?}");
     }
+    let infeed = camloop::store::MIGRATIONS
+        .iter()
+        .find(|m| m.1 == "dressing_infeed")
+        .unwrap();
+    assert!(
+        added_columns(infeed.2).contains(&("dressings".to_owned(), "infeed_um".to_owned())),
+        "the dresser's infeed column"
+    );
 }
