@@ -11,7 +11,10 @@
 //!   needs telling apart: not the wheel's share from a station's own size error (a shaft's
 //!   deflection), nor the dresser's error in the radius it tells the control. This is how
 //!   the dressing miss is avoided: a relative move read on a scale is known to a fraction of
-//!   a micrometre, while the absolute radius after a dressing is known to a few.
+//!   a micrometre, while the absolute radius after a dressing is known to a few. (Splitting
+//!   the wheel's share from the stations' by a model along Z still leaves the stations' mean
+//!   in the wheel's share; a size-control gauge stopping the infeed in the cycle would take
+//!   size from the loop on every part. The infeed needs neither.)
 //! - **Only the new radius** (older reports). The wheel's share of the size correction is
 //!   replaced by the dressing offset (see [`after_dressing`]); on a shaft the first part after
 //!   the first such dressing carries the shaft's mean station error and the dresser's error.
