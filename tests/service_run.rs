@@ -284,7 +284,10 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
     .await;
     assert_eq!(status, 200, "{body}");
     assert!(
-        json(&body)["message"].as_str().unwrap().contains("249.9"),
+        json(&body)["message"]
+            .as_str()
+            .unwrap()
+            .contains("249.95 → 249.9 mm (dresser infeed 52.00 µm: size step +2.00 µm)"),
         "{body}"
     );
     let (_, body) = get(addr, path).await;
@@ -308,6 +311,24 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
     let base = deltas.iter().fold(f64::MAX, |m, d| m.min(d.abs()));
     assert!((base - 2.0).abs() <= 0.11, "{base} µm\n{body}");
     assert!(deltas.iter().all(|d| *d < -1.89 && *d > -3.0), "{body}");
+    // An infeed that cannot go with the radius change (0.4 mm less radius told, nothing
+    // removed: a wheel change, or a wrong report) is not used: the size step would be beyond
+    // the correction limit, so the wheel's share of the learned size is replaced instead.
+    let (status, body) = post(
+        addr,
+        path,
+        r#"{"wheel_radius_mm":249.5,"infeed_um":0.0}"#,
+        Some(TOKEN),
+    )
+    .await;
+    assert_eq!(status, 200, "{body}");
+    assert!(
+        json(&body)["message"]
+            .as_str()
+            .unwrap()
+            .contains("(no usable infeed: the wheel's share of the learned size replaced)"),
+        "{body}"
+    );
 
     running.stop().await;
 }

@@ -79,7 +79,7 @@ impl FeatureLoop {
                 let reason = format!("wheel dressed to {wheel_radius_mm} mm");
                 records.extend(self.deliver(&table, next, &reason, None).await?);
                 format!(
-                    "wheel radius {old} → {wheel_radius_mm} mm: {}",
+                    "wheel radius {old} → {wheel_radius_mm} mm ({how}): {}",
                     self.delivery_line()
                 )
             }
@@ -94,7 +94,7 @@ impl FeatureLoop {
                     e.to_string(),
                 ));
                 format!(
-                    "wheel radius {old} → {wheel_radius_mm} mm recorded; table refused, previous kept: {e}"
+                    "wheel radius {old} → {wheel_radius_mm} mm ({how}) recorded; table refused, previous kept: {e}"
                 )
             }
         };
