@@ -203,6 +203,7 @@ impl GrinderConfig {
             dress_depth_um: 0.0,
             dressing_error_um: 0.0,
             dressing_error_sigma_um: 0.0,
+            dresser_infeed_sigma_um: 0.0,
             gauge: GaugeConfig {
                 noise_sigma_um: 0.0,
                 ..GaugeConfig::default()
