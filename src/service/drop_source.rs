@@ -57,6 +57,7 @@ pub(super) async fn run(
                 crate::gauge::DropEvent::Dressing { report, moved_to } => {
                     let event = SourceEvent::Dressing {
                         wheel_radius_mm: report.wheel_radius_mm,
+                        infeed_um: report.infeed_um,
                         source: format!("drop file {}", moved_to.display()),
                         done: None,
                     };

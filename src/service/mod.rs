@@ -307,8 +307,8 @@ async fn machine_task(
                 http::Command::RollbackPart { versions, reply } => {
                     let _ = reply.send(rollback_part_result(&mut machine, &versions).await);
                 }
-                http::Command::Dressing { wheel_radius_mm, source, reply } => {
-                    let result = machine.dress(wheel_radius_mm, &source).await;
+                http::Command::Dressing { wheel_radius_mm, infeed_um, source, reply } => {
+                    let result = machine.dress(wheel_radius_mm, infeed_um, &source).await;
                     let _ = reply.send(dressing_result(result));
                 }
             },

@@ -131,6 +131,7 @@ impl SimSource {
                 let (done, regenerated) = tokio::sync::oneshot::channel();
                 let event = SourceEvent::Dressing {
                     wheel_radius_mm: d.believed_wheel_radius_mm,
+                    infeed_um: d.measured_infeed_um,
                     source: "sim".into(),
                     done: Some(done),
                 };

@@ -126,6 +126,9 @@ impl Store {
         check_name("machine", &d.machine)?;
         check_finite("old_radius_mm", d.old_radius_mm)?;
         check_finite("new_radius_mm", d.new_radius_mm)?;
+        if let Some(infeed) = d.infeed_um {
+            check_finite("infeed_um", infeed)?;
+        }
         const OP: &str = "inserting a dressing";
         with_write!(self, pool => {
             let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
@@ -136,14 +139,15 @@ impl Store {
                 .await
                 .map_err(self.db_error(OP))?;
             let id: i64 = sqlx::query_scalar(
-                "INSERT INTO dressings (machine, at_ms, old_radius_mm, new_radius_mm, source) \
-                 VALUES ($1, $2, $3, $4, $5) RETURNING id",
+                "INSERT INTO dressings (machine, at_ms, old_radius_mm, new_radius_mm, source, \
+                 infeed_um) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
             )
             .bind(&d.machine)
             .bind(d.at_ms)
             .bind(d.old_radius_mm)
             .bind(d.new_radius_mm)
             .bind(&d.source)
+            .bind(d.infeed_um)
             .fetch_one(&mut *tx)
             .await
             .map_err(self.db_error(OP))?;
@@ -174,9 +178,10 @@ impl Store {
     pub async fn dressings(&self, machine: &str, limit: u32) -> Result<Vec<Dressing>, StoreError> {
         let limit = check_limit(limit)?;
         with_read!(self, pool => {
-            let rows: Vec<(i64, String, i64, f64, f64, String)> = sqlx::query_as(
-                "SELECT id, machine, at_ms, old_radius_mm, new_radius_mm, source FROM dressings \
-                 WHERE machine = $1 ORDER BY at_ms DESC, id DESC LIMIT $2",
+            type Row = (i64, String, i64, f64, f64, String, Option<f64>);
+            let rows: Vec<Row> = sqlx::query_as(
+                "SELECT id, machine, at_ms, old_radius_mm, new_radius_mm, source, infeed_um \
+                 FROM dressings WHERE machine = $1 ORDER BY at_ms DESC, id DESC LIMIT $2",
             )
             .bind(machine)
             .bind(limit)
@@ -185,13 +190,16 @@ impl Store {
             .map_err(self.db_error("listing dressings"))?;
             Ok(rows
                 .into_iter()
-                .map(|(id, machine, at_ms, old_radius_mm, new_radius_mm, source)| Dressing {
-                    id: DressingId(id),
-                    machine,
-                    at_ms,
-                    old_radius_mm,
-                    new_radius_mm,
-                    source,
+                .map(|(id, machine, at_ms, old_radius_mm, new_radius_mm, source, infeed_um)| {
+                    Dressing {
+                        id: DressingId(id),
+                        machine,
+                        at_ms,
+                        old_radius_mm,
+                        new_radius_mm,
+                        infeed_um,
+                        source,
+                    }
                 })
                 .collect())
         })

@@ -234,6 +234,8 @@ pub struct NewDressing {
     pub at_ms: i64,
     pub old_radius_mm: f64,
     pub new_radius_mm: f64,
+    /// The dresser's measured infeed (radius removed), µm, when it reported one.
+    pub infeed_um: Option<f64>,
     /// Who reported it ("plc", "operator", "sim").
     pub source: String,
 }
@@ -246,6 +248,8 @@ pub struct Dressing {
     pub at_ms: i64,
     pub old_radius_mm: f64,
     pub new_radius_mm: f64,
+    /// `None` for dressings reported without it, and for rows older than the column.
+    pub infeed_um: Option<f64>,
     pub source: String,
 }
 

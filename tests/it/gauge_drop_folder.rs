@@ -302,3 +302,36 @@ async fn the_watcher_delivers_and_settles_on_request() {
         .expect("no panic")
         .expect("no join error");
 }
+
+/// A dressing report may carry the dresser's measured infeed; an implausible one rejects the
+/// file with a reason naming it.
+#[test]
+fn a_dressing_report_carries_the_dresser_infeed() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let inbox = dir.path();
+    let mut f = Folder::open(inbox, STABLE_MS);
+    let write = |name: &str, text: &str| std::fs::write(inbox.join(name), text).expect("write");
+    write(
+        "a.dressing.toml",
+        "wheel_radius_mm = 249.98\ninfeed_um = 20.3\n# end\n",
+    );
+    write(
+        "b.dressing.toml",
+        "wheel_radius_mm = 249.98\ninfeed_um = -2.0\n# end\n",
+    );
+    let events = f.at(0);
+    assert!(
+        matches!(&events[..], [DropEvent::Dressing { report, .. }]
+            if report.wheel_radius_mm == 249.98 && report.infeed_um == Some(20.3)),
+        "{events:?}"
+    );
+    // A report that does not read is rejected once it has stayed unchanged (it may still be
+    // being written), as any other.
+    let events = f.at(STABLE_MS);
+    let reasons = rejected(&events);
+    assert!(
+        reasons[0].1.contains("b.dressing.toml") && reasons[0].1.contains("dresser infeed -2"),
+        "{}",
+        reasons[0].1
+    );
+}

@@ -124,19 +124,34 @@ fn camloop_beats_half_the_published_residual_by_part_4_and_holds_it_for_100_part
             p.max_profile_error_um
         );
     }
-    // With nothing fitted, the lift error includes size: it is below 1.3 µm too, except on
-    // the first part after each dressing, where the control's new wheel radius is off by the
-    // simulated dressing error (2 ± 1 µm); one learning step later it is back below.
-    for (k, p) in camloop.parts.iter().enumerate().skip(3) {
-        let after_dressing = camloop.parts[k - 1].dressed;
-        let limit = if after_dressing { 4.0 } else { 1.3 };
+    // With nothing fitted, the lift error includes size: it is below 1.3 µm too, the first
+    // part after each dressing included. The control is told the new wheel radius 2 ± 1 µm
+    // off, but the dresser reports the radius it removed (read to 0.2 µm), so the loop knows
+    // the size step before that part is ground.
+    for p in &camloop.parts[3..] {
         assert!(
-            p.max_lift_error_um < limit,
+            p.max_lift_error_um < 1.3,
             "part {}: {:.3} µm\n{text}",
             p.part,
             p.max_lift_error_um
         );
     }
+    // Without the infeed (a report of the new radius alone) the first part after a dressing
+    // carries the dresser's error: what the infeed is for.
+    let radius_only = CellSetup {
+        grinder: GrinderConfig {
+            dresser_reports_infeed: false,
+            ..setup.grinder.clone()
+        },
+        ..setup.clone()
+    };
+    let old = cell::run(&radius_only, Method::Camloop, 45).unwrap();
+    println!("radius only, parts 40-45: {:?}", lift_errors(&old, 39..45));
+    println!(
+        "with infeed, parts 40-45: {:?}",
+        lift_errors(&camloop, 39..45)
+    );
+    assert!(old.parts[40].max_lift_error_um > 1.3, "{:?}", old.parts[40]);
     // The published hand method on the same machine and noise breaks down: writing raw
     // errors (noise included) into X at the nose makes the wheel path tighter than the
     // wheel. Or, if it survives, it stays clearly worse.
@@ -165,6 +180,13 @@ fn camloop_beats_half_the_published_residual_by_part_4_and_holds_it_for_100_part
             camloop.parts[k].max_profile_error_um
         );
     }
+}
+
+fn lift_errors(run: &CellRun, parts: std::ops::Range<usize>) -> Vec<String> {
+    run.parts[parts]
+        .iter()
+        .map(|p| format!("{}:{:.2}", p.part, p.max_lift_error_um))
+        .collect()
 }
 
 /// Crankpins learn the same way, through their support function: a 45 mm throw pin on a

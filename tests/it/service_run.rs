@@ -260,6 +260,77 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
     let max = json(&body)["max_abs_delta_x_um"].as_f64().unwrap();
     assert!(max > 0.01 && max < 1.0, "{max}");
 
+    // A dressing with the dresser's measured infeed: an implausible one is refused; 52 µm
+    // removed while the radius told drops by 50 µm makes parts 2 µm oversize, so the whole
+    // correction moves by −2 µm: X by −2 µm where the wheel touches on the X line (exactly,
+    // to the program's 0.1 µm), and by that plus under 1 µm of flank geometry elsewhere.
+    let (status, body) = post(
+        addr,
+        path,
+        r#"{"wheel_radius_mm":249.9,"infeed_um":-5}"#,
+        Some(TOKEN),
+    )
+    .await;
+    assert_eq!(
+        (status, json(&body)["code"].clone()),
+        (400, "invalid_infeed".into()),
+        "{body}"
+    );
+    let (status, body) = post(
+        addr,
+        path,
+        r#"{"wheel_radius_mm":249.9,"infeed_um":52.0}"#,
+        Some(TOKEN),
+    )
+    .await;
+    assert_eq!(status, 200, "{body}");
+    assert!(
+        json(&body)["message"]
+            .as_str()
+            .unwrap()
+            .contains("249.95 → 249.9 mm (dresser infeed 52.00 µm: size step +2.00 µm)"),
+        "{body}"
+    );
+    let (_, body) = get(addr, path).await;
+    assert_eq!(json(&body)["items"][0]["infeed_um"], 52.0, "{body}");
+    assert!(json(&body)["items"][1]["infeed_um"].is_null(), "{body}");
+    let (_, body) = get(addr, "/api/v1/machines/SIM1/lobes/IN1/tables?limit=1").await;
+    let version = json(&body)["items"][0]["version"].clone();
+    let (status, body) = get(
+        addr,
+        &format!("/api/v1/machines/SIM1/lobes/IN1/tables/{version}/diff"),
+    )
+    .await;
+    assert_eq!(status, 200, "{body}");
+    let diff = json(&body);
+    let deltas: Vec<f64> = diff["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["delta_x_um"].as_f64().unwrap())
+        .collect();
+    let base = deltas.iter().fold(f64::MAX, |m, d| m.min(d.abs()));
+    assert!((base - 2.0).abs() <= 0.11, "{base} µm\n{body}");
+    assert!(deltas.iter().all(|d| *d < -1.89 && *d > -3.0), "{body}");
+    // An infeed that cannot go with the radius change (0.4 mm less radius told, nothing
+    // removed: a wheel change, or a wrong report) is not used: the size step would be beyond
+    // the correction limit, so the wheel's share of the learned size is replaced instead.
+    let (status, body) = post(
+        addr,
+        path,
+        r#"{"wheel_radius_mm":249.5,"infeed_um":0.0}"#,
+        Some(TOKEN),
+    )
+    .await;
+    assert_eq!(status, 200, "{body}");
+    assert!(
+        json(&body)["message"]
+            .as_str()
+            .unwrap()
+            .contains("(no usable infeed: the wheel's share of the learned size replaced)"),
+        "{body}"
+    );
+
     running.stop().await;
 }
 
@@ -510,7 +581,11 @@ async fn a_dropped_dressing_report_regenerates_the_table() {
     std::fs::create_dir_all(&inbox).unwrap();
     // Written under a temporary name, ended with the `# end` marker and renamed, as the
     // drop-folder rules ask (so it is taken at once, not after the stability wait).
-    std::fs::write(inbox.join(".dress.tmp"), "wheel_radius_mm = 249.9\n# end\n").unwrap();
+    std::fs::write(
+        inbox.join(".dress.tmp"),
+        "wheel_radius_mm = 249.9\ninfeed_um = 100.4\n# end\n",
+    )
+    .unwrap();
     std::fs::rename(inbox.join(".dress.tmp"), inbox.join("dress.dressing.toml")).unwrap();
 
     // Poll the API (bounded) until both the dressing and its table are in: the two are
@@ -531,6 +606,7 @@ async fn a_dropped_dressing_report_regenerates_the_table() {
     assert_eq!(tables, 2, "nominal + dressed table within 10 s");
     let d = &dressings["items"][0];
     assert_eq!(d["new_radius_mm"], 249.9, "{dressings}");
+    assert_eq!(d["infeed_um"], 100.4, "{dressings}");
     let processed = inbox.join("processed/dress.dressing.toml");
     assert_eq!(
         d["source"].as_str().unwrap(),

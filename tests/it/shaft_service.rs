@@ -68,12 +68,11 @@ async fn parts_of(store: &Store, lobe: &str) -> Vec<Part> {
 }
 
 /// 100 shafts with two dressings (after shafts 35 and 70): from the 4th shaft on, every lobe
-/// stays below 1.3 µm max lift error and 0.01° timing error, but for the first shaft after
-/// the first dressing. A dressing replaces the wheel's share of the size correction (what all
-/// lobes have in common), and before one has been measured nothing tells the wheel's share
-/// from the shaft's mean deflection or the dresser's error: that shaft is allowed 3.5 µm. The
-/// loop learns the step as the dressing offset, so the first shaft after the second dressing
-/// is back below 1.3 µm. The dresser here is told the radius within 0.5 ± 0.25 µm.
+/// stays below 1.3 µm max lift error and 0.01° timing error, the first shafts after the
+/// dressings included. The control is told the new radius 0.5 ± 0.25 µm off and the shaft's
+/// lobes carry their own size errors (deflection along Z); the dresser reports the radius it
+/// removed (read to 0.2 µm), so the loop moves every lobe's correction by the size step the
+/// dressing made and has nothing to tell apart.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_eight_lobe_camshaft_converges_lobe_by_lobe_and_holds_through_two_dressings() {
     let dir = tempfile::tempdir().unwrap();
@@ -93,7 +92,8 @@ async fn an_eight_lobe_camshaft_converges_lobe_by_lobe_and_holds_through_two_dre
     let mut report = String::new();
     let mut worst_after_3 = (0.0f64, "", 0u64);
     let mut worst_timing_after_3 = 0.0f64;
-    let mut first_dressing = 0.0f64;
+    // The worst lobe of the first shaft after each dressing.
+    let mut after_dressing = [0.0f64; 2];
     for lobe in LOBES {
         let parts = parts_of(&store, lobe).await;
         // Each lobe learned from its own parts: numbered from 1, none twice; a few were lost
@@ -108,10 +108,9 @@ async fn an_eight_lobe_camshaft_converges_lobe_by_lobe_and_holds_through_two_dre
             parts.len()
         );
         for p in parts.iter().filter(|p| p.number >= 4) {
-            if p.number == 36 {
-                assert!(p.max_lift_um < 3.5, "{lobe}: {p:?}");
-                first_dressing = first_dressing.max(p.max_lift_um);
-                continue;
+            if p.number == 36 || p.number == 71 {
+                after_dressing[usize::from(p.number == 71)] =
+                    after_dressing[usize::from(p.number == 71)].max(p.max_lift_um);
             }
             if p.max_lift_um > worst_after_3.0 {
                 worst_after_3 = (p.max_lift_um, lobe, p.number);
@@ -145,6 +144,8 @@ async fn an_eight_lobe_camshaft_converges_lobe_by_lobe_and_holds_through_two_dre
             around(69, 74)
         ));
     }
+    // Both first shafts after a dressing were gauged (and so are under the bound below).
+    assert!(after_dressing.iter().all(|e| *e > 0.0), "{report}");
     assert!(
         worst_after_3.0 < 1.3,
         "worst {:.3} µm on {} shaft {}\n{report}",
@@ -158,8 +159,8 @@ async fn an_eight_lobe_camshaft_converges_lobe_by_lobe_and_holds_through_two_dre
     );
     println!(
         "{report}worst from shaft 4: {:.3} µm ({} shaft {}), timing {worst_timing_after_3:.4}°; \
-         first shaft after the first dressing {first_dressing:.3} µm",
-        worst_after_3.0, worst_after_3.1, worst_after_3.2
+         first shafts after the dressings {:.3} and {:.3} µm",
+        worst_after_3.0, worst_after_3.1, worst_after_3.2, after_dressing[0], after_dressing[1]
     );
 
     // The API lists each feature with its latest error, version and state.

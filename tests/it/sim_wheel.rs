@@ -78,6 +78,38 @@ fn dressing_error_has_the_configured_bias_and_spread() {
     assert!((sd - 1.0).abs() < 0.15, "sd {sd} µm");
 }
 
+/// The dresser's infeed reading: 400 dressings of 10 µm read with σ = 0.2 µm. The mean error
+/// has a standard error of 0.01 µm (bound 0.04 µm = 4 s.e.), the spread about 0.007 µm
+/// (bound 0.03 µm). Turned off, the report is absent and every other draw of the seed is
+/// the same: the radius the control is told after each dressing does not move.
+#[test]
+fn the_dresser_reads_its_infeed_to_the_configured_spread() {
+    let config = |report: bool| GrinderConfig {
+        dress_every_parts: 1,
+        dress_depth_um: 10.0,
+        dressing_error_um: 2.0,
+        dressing_error_sigma_um: 1.0,
+        dresser_reports_infeed: report,
+        dresser_infeed_sigma_um: 0.2,
+        ..GrinderConfig::perfect()
+    };
+    let (mut with, mut without) = (
+        demo_sim(config(true), Follower::Flat, 5),
+        demo_sim(config(false), Follower::Flat, 5),
+    );
+    let mut errors_um = Vec::new();
+    for _ in 0..400 {
+        let (a, b) = (with.after_part().unwrap(), without.after_part().unwrap());
+        assert_eq!(b.measured_infeed_um, None);
+        assert_eq!(a.believed_wheel_radius_mm, b.believed_wheel_radius_mm);
+        errors_um.push(a.measured_infeed_um.unwrap() - a.depth_mm * 1000.0);
+    }
+    let mean = errors_um.iter().sum::<f64>() / 400.0;
+    let sd = (errors_um.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / 399.0).sqrt();
+    assert!(mean.abs() < 0.04, "mean {mean} µm");
+    assert!((sd - 0.2).abs() < 0.03, "sd {sd} µm");
+}
+
 /// After a dressing the control believes R_true + 2 µm. A table regenerated for that
 /// radius grinds every angle 2 µm high (the wheel is smaller than believed). A table left
 /// from before the dressing is shifted by the control's X zero (tool offset), so after a

@@ -141,12 +141,19 @@ async fn half_truncated_sqlite_database_is_corrupt_at_connect() {
 async fn sqlite_pages_damaged_in_the_middle_are_corrupt_on_query() {
     let dir = tempfile::tempdir().unwrap();
     let path = filled_sqlite(dir.path(), 300).await;
+    let schema_end = schema_end_bytes(&path).await;
     let mut bytes = std::fs::read(&path).unwrap();
     let len = bytes.len();
-    // Every page from 30 % to 70 % of the file overwritten: the header is intact, so the
-    // file opens, and the damage shows on the first query that reads those pages.
+    // Every page from 30 % (and past every table's and index's root page) to 70 % of the
+    // file overwritten: the header and the schema are intact, so the file opens, and the
+    // damage shows on the first query that reads those pages.
     let page = 4096;
-    for b in &mut bytes[(len * 3 / 10) / page * page..(len * 7 / 10) / page * page] {
+    let from = (len * 3 / 10).max(schema_end) / page * page;
+    assert!(
+        from < len * 6 / 10,
+        "the schema takes {schema_end} of {len} bytes"
+    );
+    for b in &mut bytes[from..(len * 7 / 10) / page * page] {
         *b = 0xa5;
     }
     std::fs::write(&path, &bytes).unwrap();
@@ -156,6 +163,25 @@ async fn sqlite_pages_damaged_in_the_middle_are_corrupt_on_query() {
     let e = store.export(0, i64::MAX, None, 1000).await.unwrap_err();
     assert_corrupt(&e, &path, "database disk image is malformed");
     assert!(e.detail().unwrap().starts_with("exporting measurements: "));
+}
+
+/// Where the last root page (of a table or index) ends, bytes: the schema's pages are all
+/// before it, since they are made when the migrations run, before any row is written.
+async fn schema_end_bytes(path: &std::path::Path) -> usize {
+    use sqlx::Connection;
+    let mut c = sqlx::SqliteConnection::connect(&format!("sqlite://{}", path.display()))
+        .await
+        .unwrap();
+    let last: i64 = sqlx::query_scalar("SELECT max(rootpage) FROM sqlite_master")
+        .fetch_one(&mut c)
+        .await
+        .unwrap();
+    let page: i64 = sqlx::query_scalar("PRAGMA page_size")
+        .fetch_one(&mut c)
+        .await
+        .unwrap();
+    c.close().await.unwrap();
+    usize::try_from(last * page).unwrap()
 }
 
 /// A tmpfs mounted on a tempdir folder, unmounted on drop (also when the test fails).

@@ -3,7 +3,8 @@
 //! writes rows as camloop wrote them before (i32 blobs, JSON text, one row per learning
 //! state), connects with this build, and reads every row back: lifts, programs, learning
 //! parameters and states exactly, reports within half a quantisation step. Rows written
-//! after the conversion chain onto the converted ones and read back the same way.
+//! after the conversion chain onto the converted ones and read back the same way. A dressing
+//! written before version 6 reads back without a dresser's infeed.
 
 use crate::store_support;
 
@@ -97,6 +98,14 @@ macro_rules! write_old_rows {
             .execute(pool)
             .await
             .unwrap();
+        // A dressing as reported before the dresser's infeed was kept.
+        sqlx::query(
+            "INSERT INTO dressings (machine, at_ms, old_radius_mm, new_radius_mm, source) \
+             VALUES ('M1', 500, 250.0, 249.98, 'api')",
+        )
+        .execute(pool)
+        .await
+        .unwrap();
         for n in 0..5u32 {
             let m = measurement("M1", "in1", n, 1_000 * i64::from(n));
             let id: i64 = sqlx::query_scalar(
@@ -205,6 +214,12 @@ async fn check_old_rows(store: &Store) {
         }
         assert_report_close(&d.analysis_json, &report(n as u32));
     }
+    let dressings = store.dressings("M1", 10).await.unwrap();
+    assert_eq!(dressings.len(), 1);
+    assert_eq!(
+        (dressings[0].new_radius_mm, dressings[0].infeed_um),
+        (249.98, None)
+    );
     let versions = store.table_versions("M1", "in1", 100).await.unwrap();
     assert_eq!(versions.len() as i64, OLD_ROWS);
     for t in &versions {

@@ -26,6 +26,18 @@ fn tables(sql: &str) -> BTreeSet<String> {
         .collect()
 }
 
+/// (table, column) of each `ALTER TABLE t ADD COLUMN c …` line.
+fn added_columns(sql: &str) -> BTreeSet<(String, String)> {
+    sql.lines()
+        .filter_map(|l| l.trim().strip_prefix("ALTER TABLE "))
+        .filter_map(|rest| {
+            let (table, column) = rest.split_once(" ADD COLUMN ")?;
+            let column = column.split_whitespace().next()?;
+            Some((table.trim().to_owned(), column.to_owned()))
+        })
+        .collect()
+}
+
 #[test]
 fn both_backends_list_the_same_versions_and_the_binary_embeds_them() {
     let sqlite = versions("sqlite");
@@ -52,11 +64,25 @@ fn both_backends_create_the_same_tables() {
     for (s, p) in sqlite.zip(camloop::store::POSTGRES_MIGRATOR.iter()) {
         assert_eq!(s.version, p.version);
         let t = tables(&s.sql);
-        assert!(!t.is_empty(), "migration {} creates no table", s.version);
+        let columns = added_columns(&s.sql);
+        assert!(
+            !(t.is_empty() && columns.is_empty()),
+            "migration {} creates no table and adds no column",
+            s.version
+        );
         assert_eq!(t, tables(&p.sql), "migration {}", s.version);
+        assert_eq!(columns, added_columns(&p.sql), "migration {}", s.version);
         all.extend(t);
     }
     for table in ["measurements", "table_versions", "store_identity"] {
         assert!(all.contains(table), "{table} missing from {all:?}");
     }
+    let infeed = camloop::store::SQLITE_MIGRATOR
+        .iter()
+        .find(|m| m.description == "dressing infeed")
+        .unwrap();
+    assert!(
+        added_columns(&infeed.sql).contains(&("dressings".to_owned(), "infeed_um".to_owned())),
+        "the dresser's infeed column"
+    );
 }

@@ -302,13 +302,19 @@ async fn story(store: &Store) {
     );
 
     // Dressings and events.
-    for (at, old_mm, new_mm) in [(20_000_i64, 250.0, 249.95), (30_000, 249.95, 249.9)] {
+    // The first without the dresser's infeed (as reported before it was kept), the second
+    // with it.
+    for (at, old_mm, new_mm, infeed) in [
+        (20_000_i64, 250.0, 249.95, None),
+        (30_000, 249.95, 249.9, Some(50.3)),
+    ] {
         store
             .insert_dressing(&NewDressing {
                 machine: "M1".into(),
                 at_ms: at,
                 old_radius_mm: old_mm,
                 new_radius_mm: new_mm,
+                infeed_um: infeed,
                 source: "plc".into(),
             })
             .await
@@ -321,6 +327,10 @@ async fn story(store: &Store) {
     assert_eq!(
         (dressings[0].old_radius_mm, dressings[0].new_radius_mm),
         (249.95, 249.9)
+    );
+    assert_eq!(
+        (dressings[0].infeed_um, dressings[1].infeed_um),
+        (Some(50.3), None)
     );
     let mut event_ids = Vec::new();
     for (at, level, kind) in [
@@ -558,6 +568,7 @@ async fn replay_lookups(store: &Store) {
         at_ms: 9_000,
         old_radius_mm: 250.0,
         new_radius_mm: 249.98,
+        infeed_um: Some(20.2),
         source: "api".into(),
     };
     store.insert_dressing(&d).await.unwrap();

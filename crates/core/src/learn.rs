@@ -17,9 +17,14 @@
 //! Because the correction lives in the lift domain it is independent of the wheel: after a
 //! dressing the same correction regenerates the table for the new wheel radius.
 
+mod dressing;
 mod grid;
 mod params;
 
+pub use dressing::{
+    DRESSER_INFEED_RANGE_UM, DresserInfeedError, after_dressing, after_measured_dressing,
+    check_dresser_infeed, dressing_size_step_um, size_correction_um,
+};
 use grid::q_gain;
 pub use grid::{CORRECTION_STEP_UM, low_pass, quantise_correction};
 pub use params::LearningParams;
@@ -65,6 +70,12 @@ pub struct LearningState {
     /// dresser's, not drift.
     #[serde(default)]
     pub dressed: bool,
+    /// The wheel was dressed since the last step and the dresser measured the radius it
+    /// removed, so the correction was moved by the size step already: the next part's size
+    /// error is what the infeed reading missed, learned whole, not into the dressing offset
+    /// and not as drift.
+    #[serde(default)]
+    pub dressing_measured: bool,
     /// Parts learned from so far.
     pub iteration: u32,
     /// Max |error| of the parts measured with each recent correction, oldest first (≤ 3).
@@ -86,6 +97,7 @@ impl LearningState {
             last_size_disturbance_part: None,
             dressing_offset_um: 0.0,
             dressed: false,
+            dressing_measured: false,
             iteration: 0,
             recent_max_error_um: Vec::new(),
             best: None,
@@ -375,11 +387,14 @@ fn learn_correction(
     let in_force_size = state.correction_um.iter().sum::<f64>() / n as f64;
     let disturbance = mean - in_force_size;
     next.dressed = false;
+    next.dressing_measured = false;
     next.last_size_disturbance_um = Some(disturbance);
     next.last_size_disturbance_part = part.part_number;
     if state.dressed {
         // The dresser's error, not drift: the next dressing starts from what this one needed.
         next.dressing_offset_um = state.dressing_offset_um - params.gain * size;
+    } else if state.dressing_measured {
+        // What the dresser's infeed reading missed: an offset, not drift.
     } else if let Some(before) = state.last_size_disturbance_um {
         let parts = match (state.last_size_disturbance_part, part.part_number) {
             (Some(before), Some(now)) if now > before => (now - before) as f64,
@@ -389,10 +404,14 @@ fn learn_correction(
         next.size_drift_um_per_part = state.size_drift_um_per_part
             + params.wear_gain * (observed - state.size_drift_um_per_part);
     }
-    // Right after a dressing the size step is the dresser's offset, measured to a few nm
-    // over every angle: taken whole, not by the gain (which guards the shape against model
-    // mismatch).
-    let size_gain = if state.dressed { 1.0 } else { params.gain };
+    // Right after a dressing the size step is the dresser's offset (or what its infeed
+    // reading missed), measured to a few nm over every angle: taken whole, not by the gain
+    // (which guards the shape against model mismatch).
+    let size_gain = if state.dressed || state.dressing_measured {
+        1.0
+    } else {
+        params.gain
+    };
     let learned: Vec<f64> = (0..n)
         .map(|j| {
             state.correction_um[j]
@@ -538,32 +557,6 @@ fn max_abs_at(values: &[f64]) -> (f64, usize) {
         .fold((0.0f64, 0), |(m, jm), (j, u)| {
             if u.abs() > m { (u.abs(), j) } else { (m, jm) }
         })
-}
-
-/// After a wheel dressing the control gets a new wheel radius, which replaces everything the
-/// loop learned about the wheel's size (the initial radius error and the wear since). So the
-/// part of the size correction that was the wheel's, `wheel_size_um` (for one feature, its
-/// whole size correction; for a shaft, what all its features have in common: a lobe's own
-/// size error, such as the shaft's deflection at its station, is not the wheel's), is
-/// replaced by the dressing offset (what the previous dressings needed: a dresser's
-/// systematic error), and the shape is kept. The error history restarts so the size step
-/// after dressing is not taken for divergence, and the next step learns that step into the
-/// offset rather than into the wear rate.
-pub fn after_dressing(state: &mut LearningState, wheel_size_um: f64) {
-    let shift = state.dressing_offset_um - wheel_size_um;
-    state.correction_um.iter_mut().for_each(|u| *u += shift);
-    quantise_correction(&mut state.correction_um, f64::INFINITY);
-    if let Some(best) = state.best.as_mut() {
-        best.correction_um.iter_mut().for_each(|u| *u += shift);
-        quantise_correction(&mut best.correction_um, f64::INFINITY);
-    }
-    state.recent_max_error_um.clear();
-    state.dressed = true;
-}
-
-/// The size part (order 0, the mean) of a state's correction, µm.
-pub fn size_correction_um(state: &LearningState) -> f64 {
-    state.correction_um.iter().sum::<f64>() / state.correction_um.len().max(1) as f64
 }
 
 #[cfg(test)]

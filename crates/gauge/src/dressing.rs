@@ -4,6 +4,7 @@
 use std::path::Path;
 
 use camloop_core::compensate::WheelRadiusError;
+use camloop_core::learn::DresserInfeedError;
 
 use super::file::shown_path;
 
@@ -18,12 +19,19 @@ pub const MAX_DRESSING_BYTES: u64 = 64 * 1024;
 ///
 /// ```toml
 /// wheel_radius_mm = 249.998
+/// infeed_um = 20.1
 /// ```
+///
+/// `infeed_um`, the radius the dresser removed as it measured it (its infeed from first
+/// contact), is optional; with it the loop knows the size step of the dressing.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DressingReport {
     /// The wheel radius after dressing, as the control now believes it, mm.
     pub wheel_radius_mm: f64,
+    /// The dresser's measured infeed (radius removed), µm.
+    #[serde(default)]
+    pub infeed_um: Option<f64>,
 }
 
 /// Why a dressing report could not be used.
@@ -50,6 +58,11 @@ pub enum DressingError {
     Radius {
         path: String,
         source: WheelRadiusError,
+    },
+    #[error("dressing report {path}: {source}")]
+    Infeed {
+        path: String,
+        source: DresserInfeedError,
     },
 }
 
@@ -97,6 +110,14 @@ pub fn open_dressing_file(path: &Path) -> Result<DressingFile, DressingError> {
             source,
         }
     })?;
+    if let Some(infeed) = report.infeed_um {
+        camloop_core::learn::check_dresser_infeed(infeed).map_err(|source| {
+            DressingError::Infeed {
+                path: shown(),
+                source,
+            }
+        })?;
+    }
     let end_marker = text.lines().any(|l| {
         l.trim()
             .strip_prefix('#')

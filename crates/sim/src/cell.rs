@@ -187,12 +187,7 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                     previous: None,
                 };
                 let outcome = learn::step(&mut x_state, &part, &setup.params);
-                let step = setup.request.points / points_per_rev as usize;
-                for (j, u) in x_state.correction_um.iter().enumerate() {
-                    if let Some(dx) = naive_dx_mm.get_mut(j * step.max(1)) {
-                        *dx = u / 1000.0;
-                    }
-                }
+                x_from_correction(&x_state, &mut naive_dx_mm);
                 table = make_table(setup, feature, &state, method, &naive_dx_mm, &mut control)?;
                 match outcome {
                     Ok(o) => outcome_text(&o),
@@ -202,15 +197,19 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
         };
         let dressed = match sim.after_part() {
             Some(event) => {
+                let old_radius_mm = feature.wheel_radius_mm();
                 feature = feature.with_wheel_radius(event.believed_wheel_radius_mm);
-                let (own, x_own) = (
-                    learn::size_correction_um(&state),
-                    learn::size_correction_um(&x_state),
-                );
-                learn::after_dressing(&mut state, own);
-                learn::after_dressing(&mut x_state, x_own);
-                let mean = naive_dx_mm.iter().sum::<f64>() / naive_dx_mm.len() as f64;
-                naive_dx_mm.iter_mut().for_each(|d| *d -= mean);
+                for s in [&mut state, &mut x_state] {
+                    after_dressing(s, old_radius_mm, &event);
+                }
+                if method == Method::XDomainIlc {
+                    // Its X follows its learning state, moved for the dressing like camloop's.
+                    x_from_correction(&x_state, &mut naive_dx_mm);
+                } else {
+                    // The hand method drops what it added to the size.
+                    let mean = naive_dx_mm.iter().sum::<f64>() / naive_dx_mm.len() as f64;
+                    naive_dx_mm.iter_mut().for_each(|d| *d -= mean);
+                }
                 table = make_table(setup, feature, &state, method, &naive_dx_mm, &mut control)?;
                 true
             }
@@ -229,6 +228,38 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
         parts: figures,
         stopped: None,
     })
+}
+
+/// The X-domain method's X at each table point: its correction, taken as ΔX at the same
+/// index (mm).
+fn x_from_correction(state: &LearningState, dx_mm: &mut [f64]) {
+    let step = (dx_mm.len() / state.correction_um.len().max(1)).max(1);
+    for (j, u) in state.correction_um.iter().enumerate() {
+        if let Some(dx) = dx_mm.get_mut(j * step) {
+            *dx = u / 1000.0;
+        }
+    }
+}
+
+/// What the loop does with a dressing, as the service does: with the dresser's measured
+/// infeed the size step is known and the whole correction moves by it; without it the
+/// wheel's share of the size correction (here all of it: one feature) is replaced by the
+/// dressing offset.
+fn after_dressing(state: &mut LearningState, old_radius_mm: f64, event: &super::DressingEvent) {
+    match event.measured_infeed_um {
+        Some(infeed_um) => {
+            let step_um = learn::dressing_size_step_um(
+                old_radius_mm,
+                event.believed_wheel_radius_mm,
+                infeed_um,
+            );
+            learn::after_measured_dressing(state, step_um);
+        }
+        None => {
+            let own = learn::size_correction_um(state);
+            learn::after_dressing(state, own);
+        }
+    }
 }
 
 fn lobe_loop(setup: &CellSetup, feature: Feature) -> LobeLoop<'_> {

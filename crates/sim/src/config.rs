@@ -33,6 +33,12 @@ pub struct GrinderConfig {
     pub dressing_error_um: f64,
     /// Standard deviation of a random part of that error, drawn per dressing, µm. Default 1.
     pub dressing_error_sigma_um: f64,
+    /// The dresser reports its measured infeed with each dressing: the radius it removed, read
+    /// on the dressing axis's scale from first contact to the end of the stroke. Default true.
+    pub dresser_reports_infeed: bool,
+    /// Standard deviation of that reading's error (true radius removed less reported), drawn
+    /// per dressing, µm. Default 0.2 (scale resolution, contact detection, the roll's wear).
+    pub dresser_infeed_sigma_um: f64,
     /// Envelope samples per table segment (the part between two table points). Default 16.
     pub samples_per_segment: usize,
     pub gauge: GaugeConfig,
@@ -164,6 +170,8 @@ impl Default for GrinderConfig {
             dress_depth_um: 20.0,
             dressing_error_um: 2.0,
             dressing_error_sigma_um: 1.0,
+            dresser_reports_infeed: true,
+            dresser_infeed_sigma_um: 0.2,
             samples_per_segment: 16,
             gauge: GaugeConfig::default(),
             shaft: ShaftErrors::default(),
@@ -195,6 +203,7 @@ impl GrinderConfig {
             dress_depth_um: 0.0,
             dressing_error_um: 0.0,
             dressing_error_sigma_um: 0.0,
+            dresser_infeed_sigma_um: 0.0,
             gauge: GaugeConfig {
                 noise_sigma_um: 0.0,
                 ..GaugeConfig::default()
@@ -234,6 +243,7 @@ impl GrinderConfig {
             ("wear_um_per_part", self.wear_um_per_part),
             ("dress_depth_um", self.dress_depth_um),
             ("dressing_error_sigma_um", self.dressing_error_sigma_um),
+            ("dresser_infeed_sigma_um", self.dresser_infeed_sigma_um),
             ("gauge.noise_sigma_um", self.gauge.noise_sigma_um),
         ] {
             need(

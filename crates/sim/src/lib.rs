@@ -17,7 +17,8 @@
 //! - a geometric error of low harmonic order in d: Σ A_k·cos(k·c + φ_k);
 //! - wheel size: the true radius R_act = R_believed + ΔR at the start, minus a wear per part;
 //!   dressing (every N parts and/or after listed parts) removes the dress depth, and the
-//!   control is told R_act + a dressing error (systematic plus Gaussian), see
+//!   control is told R_act + a dressing error (systematic plus Gaussian); the dresser
+//!   reports the depth it removed as read on its scale, to a small Gaussian error, see
 //!   [`SimGrinder::after_part`].
 //!
 //! The real wheel-centre path is W(c) = (X_act(c) + x_zero + geom(c))·u(c), u = (cos c, sin c),
@@ -47,10 +48,11 @@
 //!
 //! **Defaults** ([`GrinderConfig::default`]): 30 rpm, τ = 0.45 ms (0.081° of C), harmonics
 //! 2 µm (order 2) and 1 µm (order 3), ΔR = +3 µm, wear 0.1 µm/part, dressing every 50 parts
-//! by 20 µm with a +2 ± 1 µm error, gauge 4 × 360 readings with σ = 0.3 µm. On the demo lobe
-//! (8 mm lift, Rb 20 mm, R 250 mm, 360-point POLY table) the uncompensated maximum profile
-//! error is 16.35 µm (lag alone 13.9 µm on the flanks, harmonics alone 2.9 µm, size 3 µm),
-//! like the 16 µm of the published 840D case.
+//! by 20 µm with a +2 ± 1 µm error in the radius told (the infeed read to σ = 0.2 µm),
+//! gauge 4 × 360 readings with σ = 0.3 µm. On the demo lobe (8 mm lift, Rb 20 mm,
+//! R 250 mm, 360-point POLY table) the uncompensated maximum profile error is 16.35 µm
+//! (lag alone 13.9 µm on the flanks, harmonics alone 2.9 µm, size 3 µm), like the 16 µm of
+//! the published 840D case.
 //!
 //! # Use
 //!
@@ -113,6 +115,10 @@ use table::TablePath;
 /// Seed offset of the dressing-error stream, so that gauge settings do not change which
 /// dressing errors a seed gives.
 const DRESSING_STREAM: u64 = 0x5DEE_CE66_D1CE_5EED;
+
+/// Seed offset of the dresser's infeed-reading errors: a stream of its own, so reporting the
+/// infeed or not changes no other draw of a seed.
+const INFEED_STREAM: u64 = 0x1AFE_ED00_5CA1_E5ED;
 
 /// Why the simulator refused a setting, a workpiece or a table, or could not grind it.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -183,6 +189,9 @@ pub struct DressingEvent {
     pub wheel_radius_mm: f64,
     /// Radius the control now believes; tables should be regenerated for it, mm.
     pub believed_wheel_radius_mm: f64,
+    /// Radius removed as the dresser measured it (`depth_mm` plus the reading's error), µm;
+    /// `None` when the dresser does not report it.
+    pub measured_infeed_um: Option<f64>,
 }
 
 /// The simulated machine and its gauge. See the module docs for the model.
@@ -195,6 +204,7 @@ pub struct SimGrinder {
     parts_ground: u32,
     gauge_rng: SimRng,
     dressing_rng: SimRng,
+    infeed_rng: SimRng,
 }
 
 impl SimGrinder {
@@ -217,6 +227,7 @@ impl SimGrinder {
             parts_ground: 0,
             gauge_rng: SimRng::new(seed),
             dressing_rng: SimRng::new(seed ^ DRESSING_STREAM),
+            infeed_rng: SimRng::new(seed ^ INFEED_STREAM),
         })
     }
 
@@ -350,11 +361,17 @@ impl SimGrinder {
         let error_um =
             c.dressing_error_um + c.dressing_error_sigma_um * self.dressing_rng.gaussian();
         self.believed_wheel_radius_mm = self.wheel_radius_mm + error_um * 1e-3;
+        // The dresser reads its infeed (a relative move on its scale) far better than anyone
+        // knows the absolute radius after it.
+        let measured_infeed_um = c
+            .dresser_reports_infeed
+            .then(|| c.dress_depth_um + c.dresser_infeed_sigma_um * self.infeed_rng.gaussian());
         Some(DressingEvent {
             after_part: n,
             depth_mm,
             wheel_radius_mm: self.wheel_radius_mm,
             believed_wheel_radius_mm: self.believed_wheel_radius_mm,
+            measured_infeed_um,
         })
     }
 }

@@ -77,10 +77,12 @@ pub enum Command {
         version: i64,
         reply: Reply,
     },
-    /// The wheel was dressed to this radius (mm, already within 5–1000): regenerate the
-    /// table. `source` is who reported it (`api:<user>`), as the store keeps it.
+    /// The wheel was dressed to this radius (mm, already within 5–1000), the dresser
+    /// measured this infeed (µm, already within 0–1000) if it said: regenerate the table.
+    /// `source` is who reported it (`api:<user>`), as the store keeps it.
     Dressing {
         wheel_radius_mm: f64,
+        infeed_um: Option<f64>,
         source: String,
         reply: Reply,
     },

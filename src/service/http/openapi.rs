@@ -41,7 +41,7 @@ pub(super) async fn openapi() -> Json<Value> {
             "/api/v1/audit": get("role engineer: the audit trail, newest first (who, role, client address, action, target, before/after, result, reason); since_ms, limit ≤ 1000"),
             "/api/v1/machines/{machine}/dressings": {
                 "get": get("wheel dressings, newest first")["get"],
-                "post": write("report a wheel dressing; body {\"wheel_radius_mm\": R}; regenerates the table for the new radius; role operator", "recorded, table regenerated: {status, version, message}", json!({ "400": { "description": "implausible radius" } }))
+                "post": write("report a wheel dressing; body {\"wheel_radius_mm\": R, \"infeed_um\": D} (D, the dresser's measured infeed, optional); regenerates the table for the new radius; role operator", "recorded, table regenerated: {status, version, message}", json!({ "400": { "description": "implausible radius or infeed" } }))
             },
             "/api/v1/machines/{machine}/events/{id}/ack": { "post": write("acknowledge an event or alarm (the dashboard's button); role operator (Authorization: Bearer <token> or a dashboard session); a second acknowledgement changes nothing", "acknowledged: {status, version: null, message}", json!({ "404": { "description": "event_not_found" } })) },
             "/api/v1/machines/{machine}/lobes/{lobe}/rollback": { "post": write("deliver a stored version again; body {\"version\": N}; role engineer", "delivered: {status, version, message}", json!({})) },

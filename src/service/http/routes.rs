@@ -498,6 +498,8 @@ pub(super) struct DressingItem {
     at_ms: i64,
     old_radius_mm: f64,
     new_radius_mm: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    infeed_um: Option<f64>,
     source: String,
 }
 
@@ -515,6 +517,7 @@ pub(super) async fn dressings(
             at_ms: d.at_ms,
             old_radius_mm: d.old_radius_mm,
             new_radius_mm: d.new_radius_mm,
+            infeed_um: d.infeed_um,
             source: d.source,
         })
         .collect();

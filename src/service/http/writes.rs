@@ -269,6 +269,9 @@ pub(super) async fn freeze(
 #[serde(deny_unknown_fields)]
 pub struct DressingBody {
     wheel_radius_mm: f64,
+    /// The dresser's measured infeed (radius removed), µm; optional.
+    #[serde(default)]
+    infeed_um: Option<f64>,
 }
 
 /// A wheel dressing reported by the operator or a cell controller: the table is regenerated
@@ -288,6 +291,11 @@ pub(super) async fn dress(
                 e.to_string(),
             )
         })?;
+    let infeed_um = body
+        .infeed_um
+        .map(crate::core::learn::check_dresser_infeed)
+        .transpose()
+        .map_err(|e| ApiError(StatusCode::BAD_REQUEST, "invalid_infeed", e.to_string()))?;
     let mut entry = p.audit("dressing", AuditResult::Ok, String::new());
     entry.machine = Some(machine.to_string());
     let features = state.machines.get(&machine).cloned().unwrap_or_default();
@@ -296,6 +304,7 @@ pub(super) async fn dress(
     let done = command(&state, &machine, "dressing_refused", |reply| {
         Command::Dressing {
             wheel_radius_mm: radius,
+            infeed_um,
             source,
             reply,
         }

@@ -421,6 +421,7 @@ mod tests {
                 at_ms: 7,
                 old_radius_mm: 250.0,
                 new_radius_mm: 249.998,
+                infeed_um: Some(2.1),
                 source: "api".into(),
             },
         ];

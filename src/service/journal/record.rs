@@ -90,6 +90,10 @@ pub enum Pending {
         at_ms: i64,
         old_radius_mm: f64,
         new_radius_mm: f64,
+        /// The dresser's measured infeed (radius removed), µm, when it reported one; journal
+        /// lines written before it was kept have none.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        infeed_um: Option<f64>,
         /// Who reported it: "sim", "drop file <path>", "api".
         source: String,
     },
@@ -181,12 +185,14 @@ impl Pending {
                 at_ms,
                 old_radius_mm,
                 new_radius_mm,
+                infeed_um,
                 source,
             } => Some(NewDressing {
                 machine: machine.clone(),
                 at_ms: *at_ms,
                 old_radius_mm: *old_radius_mm,
                 new_radius_mm: *new_radius_mm,
+                infeed_um: *infeed_um,
                 source: source.clone(),
             }),
             _ => None,

@@ -1,5 +1,6 @@
 //! A wheel dressing: recorded, and the newest table regenerated for the new radius from the
-//! same correction (only the learned size is dropped).
+//! same correction, moved by the size step the dresser's infeed tells, or, without an
+//! infeed, with the wheel's share of the learned size dropped.
 
 use super::super::journal::{EventKind, Pending};
 use super::FeatureLoop;
@@ -8,7 +9,7 @@ use crate::clock::now_ms;
 use crate::core::compensate;
 use crate::core::learn;
 use crate::store::EventLevel;
-use tracing::{error, info};
+use tracing::{error, info, warn};
 
 /// What a dressing did, for the API's answer.
 #[derive(Debug, Clone, PartialEq)]
@@ -19,29 +20,39 @@ pub struct Dressed {
     pub summary: String,
 }
 
+/// The wheel after a dressing, as the machine hands it to each feature.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Wheel {
+    /// The radius the control now believes, mm.
+    pub radius_mm: f64,
+    /// The dresser's measured infeed (radius removed), µm, when it reported one.
+    pub infeed_um: Option<f64>,
+    /// The wheel's share of the size corrections (what all features have in common), µm:
+    /// what a dressing without an infeed replaces (see [`learn::after_dressing`]).
+    pub share_um: f64,
+}
+
 impl FeatureLoop {
     /// A wheel dressing, from the gauge/controller feed, a dropped report or the API. A
     /// radius outside [`compensate::WHEEL_RADIUS_RANGE_MM`] changes nothing. The machine's
     /// `first` feature records the dressing itself; every feature regenerates its table.
-    /// `wheel_size_um` is the part of the size correction that was the wheel's (see
-    /// [`learn::after_dressing`]).
-    pub async fn dress(
+    pub(super) async fn dress(
         &mut self,
-        wheel_radius_mm: f64,
+        wheel: &Wheel,
         source: &str,
         first: bool,
-        wheel_size_um: f64,
     ) -> anyhow::Result<Dressed> {
-        let wheel_radius_mm = compensate::check_wheel_radius(wheel_radius_mm)?;
+        let wheel_radius_mm = compensate::check_wheel_radius(wheel.radius_mm)?;
+        let infeed_um = wheel
+            .infeed_um
+            .map(learn::check_dresser_infeed)
+            .transpose()?;
         let at_ms = now_ms();
         let old = self.memory.wheel_radius_mm;
-        info!(machine = %self.name, old_radius_mm = old, new_radius_mm = wheel_radius_mm, source, "wheel dressed: table regenerated for the new radius");
+        info!(machine = %self.name, old_radius_mm = old, new_radius_mm = wheel_radius_mm, infeed_um, source, "wheel dressed: table regenerated for the new radius");
+        let how = self.move_correction(old, wheel_radius_mm, infeed_um, wheel.share_um);
         self.memory.wheel_radius_mm = wheel_radius_mm;
         self.setup.feature = self.setup.feature.with_wheel_radius(wheel_radius_mm);
-        learn::after_dressing(&mut self.memory.learning, wheel_size_um);
-        if let Some(w) = self.memory.waiting.as_mut() {
-            learn::after_dressing(&mut w.learning, wheel_size_um);
-        }
         let mut records = Vec::new();
         if first {
             records.push(Pending::Dressing {
@@ -49,6 +60,7 @@ impl FeatureLoop {
                 at_ms,
                 old_radius_mm: old,
                 new_radius_mm: wheel_radius_mm,
+                infeed_um,
                 source: source.to_string(),
             });
             records.push(event(
@@ -56,7 +68,7 @@ impl FeatureLoop {
                 at_ms,
                 EventLevel::Info,
                 EventKind::WheelDressed,
-                format!("wheel radius {old} → {wheel_radius_mm} mm ({source})"),
+                format!("wheel radius {old} → {wheel_radius_mm} mm ({source}); {how}"),
             ));
         }
         // The newest correction made (delivered or waiting) is regenerated: a dressing is not
@@ -67,7 +79,7 @@ impl FeatureLoop {
                 let reason = format!("wheel dressed to {wheel_radius_mm} mm");
                 records.extend(self.deliver(&table, next, &reason, None).await?);
                 format!(
-                    "wheel radius {old} → {wheel_radius_mm} mm: {}",
+                    "wheel radius {old} → {wheel_radius_mm} mm ({how}): {}",
                     self.delivery_line()
                 )
             }
@@ -82,7 +94,7 @@ impl FeatureLoop {
                     e.to_string(),
                 ));
                 format!(
-                    "wheel radius {old} → {wheel_radius_mm} mm recorded; table refused, previous kept: {e}"
+                    "wheel radius {old} → {wheel_radius_mm} mm ({how}) recorded; table refused, previous kept: {e}"
                 )
             }
         };
@@ -93,5 +105,40 @@ impl FeatureLoop {
             new_radius_mm: wheel_radius_mm,
             summary,
         })
+    }
+
+    /// Moves the learned correction (in force and waiting) for the dressing: by the size step
+    /// when the dresser measured its infeed and the step is plausible, else by replacing the
+    /// wheel's share. Returns how, for the event.
+    fn move_correction(
+        &mut self,
+        old_radius_mm: f64,
+        new_radius_mm: f64,
+        infeed_um: Option<f64>,
+        share_um: f64,
+    ) -> String {
+        let step_um =
+            infeed_um.map(|i| learn::dressing_size_step_um(old_radius_mm, new_radius_mm, i));
+        let limit_um = self.setup.params.max_correction_um;
+        let states = std::iter::once(&mut self.memory.learning)
+            .chain(self.memory.waiting.as_mut().map(|w| &mut w.learning));
+        match step_um {
+            Some(step) if step.abs() <= limit_um => {
+                states.for_each(|s| learn::after_measured_dressing(s, step));
+                format!(
+                    "dresser infeed {:.2} µm: size step {step:+.2} µm",
+                    infeed_um.unwrap_or(0.0)
+                )
+            }
+            _ => {
+                if let Some(step) = step_um {
+                    // A radius that moved much more than the infeed is a wheel change or a
+                    // wrong report: the infeed cannot tell the size step then.
+                    warn!(machine = %self.name, size_step_um = step, limit_um, "dresser infeed and radius change disagree beyond the correction limit: the wheel's share of the learned size is replaced instead");
+                }
+                states.for_each(|s| learn::after_dressing(s, share_um));
+                "no usable infeed: the wheel's share of the learned size replaced".to_string()
+            }
+        }
     }
 }

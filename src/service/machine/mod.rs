@@ -75,10 +75,12 @@ pub enum SourceEvent {
         ground_with: Option<GroundWith>,
         done: Option<tokio::sync::oneshot::Sender<Ingested>>,
     },
-    /// The wheel was dressed; the control now believes this radius. `done` is answered once
-    /// every feature's table for it is out.
+    /// The wheel was dressed; the control now believes this radius, and the dresser measured
+    /// this infeed (radius removed, µm) when it reports one. `done` is answered once every
+    /// feature's table for it is out.
     Dressing {
         wheel_radius_mm: f64,
+        infeed_um: Option<f64>,
         source: String,
         done: Option<tokio::sync::oneshot::Sender<()>>,
     },
@@ -247,10 +249,14 @@ impl MachineLoop {
             }
             SourceEvent::Dressing {
                 wheel_radius_mm,
+                infeed_um,
                 source,
                 done,
             } => {
-                let r = self.dress(wheel_radius_mm, &source).await.map(|_| ());
+                let r = self
+                    .dress(wheel_radius_mm, infeed_um, &source)
+                    .await
+                    .map(|_| ());
                 if let Some(done) = done {
                     let _ = done.send(());
                 }
@@ -367,20 +373,31 @@ impl MachineLoop {
     }
 
     /// A wheel dressing acts on every feature: each regenerates its table for the new radius.
-    pub async fn dress(&mut self, wheel_radius_mm: f64, source: &str) -> anyhow::Result<Dressed> {
+    /// `infeed_um` is the dresser's measured infeed, when it reports one (see
+    /// [`crate::core::learn::after_measured_dressing`]).
+    pub async fn dress(
+        &mut self,
+        wheel_radius_mm: f64,
+        infeed_um: Option<f64>,
+        source: &str,
+    ) -> anyhow::Result<Dressed> {
         let mut summary = Vec::new();
         let mut dressed = None;
-        // The wheel's share of the size corrections: what every feature has in common.
+        // The wheel's share of the size corrections, what every feature has in common: used
+        // only when the dresser gave no infeed.
         let wheel_size_um = self
             .features
             .iter()
             .map(|f| crate::core::learn::size_correction_um(f.memory().newest_learning()))
             .sum::<f64>()
             / self.features.len() as f64;
+        let wheel = dressing::Wheel {
+            radius_mm: wheel_radius_mm,
+            infeed_um,
+            share_um: wheel_size_um,
+        };
         for (i, feature) in self.features.iter_mut().enumerate() {
-            let d = feature
-                .dress(wheel_radius_mm, source, i == 0, wheel_size_um)
-                .await?;
+            let d = feature.dress(&wheel, source, i == 0).await?;
             summary.push(format!("{}: {}", feature.feature_name(), d.summary));
             dressed.get_or_insert(d);
         }

@@ -49,6 +49,9 @@ pub enum PlantEvent {
         at_ms: i64,
         old_radius_mm: f64,
         new_radius_mm: f64,
+        /// The dresser's measured infeed, µm, when it reported one.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        infeed_um: Option<f64>,
         source: String,
     },
     Alarm {
@@ -139,12 +142,14 @@ impl PlantEvent {
                 at_ms,
                 old_radius_mm,
                 new_radius_mm,
+                infeed_um,
                 source,
             } => PlantEvent::Dressing {
                 machine,
                 at_ms,
                 old_radius_mm,
                 new_radius_mm,
+                infeed_um,
                 source,
             },
             Pending::Learning { .. } | Pending::RecipeSnapshot { .. } => return None,
@@ -257,11 +262,13 @@ mod tests {
             at_ms: 9,
             old_radius_mm: 250.0,
             new_radius_mm: 249.5,
+            infeed_um: Some(500.2),
             source: "plc".into(),
         };
         let d = PlantEvent::from_pending(&dressing).unwrap();
         assert_eq!(d.topic("p"), "p/G7/machine/dressing");
         assert!(d.payload().contains(r#""new_radius_mm":249.5"#));
+        assert!(d.payload().contains(r#""infeed_um":500.2"#));
         let event = |kind| Pending::Event {
             machine: "G7".into(),
             at_ms: 1,

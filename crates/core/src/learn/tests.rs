@@ -359,3 +359,82 @@ fn stop_in_tolerance_keeps_the_correction() {
     assert!(matches!(outcome, StepOutcome::InTolerance { .. }));
     assert!(state.correction_um.iter().all(|u| *u == 0.0));
 }
+
+/// A one-feature size plant in closed form: the part's size error is the size correction
+/// plus the station's own oversize plus (told − true) wheel radius; the wheel wears 0.1 µm
+/// per part. A 20 µm dressing tells the control the new radius 2.3 µm off while the dresser
+/// reads its infeed 0.1 µm long. With the infeed the first part after the dressing is off by
+/// the reading's error (−0.1 µm) plus what the wear anticipation missed; with the radius
+/// alone it is off by the station's share and the dresser's error (1.5 + 2.3 µm).
+#[test]
+fn a_measured_dressing_moves_the_correction_by_the_size_step() {
+    const N: usize = 36;
+    const STATION_UM: f64 = 1.5;
+    const WEAR_MM: f64 = 0.1e-3;
+    let params = LearningParams::default();
+    let (mut told_mm, mut wheel_mm) = (250.0, 250.003);
+    let size_error = |s: &LearningState, told: f64, wheel: f64| {
+        size_correction_um(s) + STATION_UM + (told - wheel) * 1000.0
+    };
+    let mut state = LearningState::new(N as u32);
+    let mut before_um = 0.0;
+    for _ in 0..30 {
+        before_um = size_error(&state, told_mm, wheel_mm);
+        step(&mut state, &pe(&[before_um; N], &[0.0; N], 4), &params).unwrap();
+        wheel_mm -= WEAR_MM;
+    }
+    // Converged, wear rate learned: the loop anticipates the next part's wear.
+    assert!(before_um.abs() < 0.01, "{before_um}");
+    assert!(
+        (state.size_drift_um_per_part - 0.1).abs() < 0.01,
+        "{state:?}"
+    );
+    let shape_before = state.correction_um.clone();
+
+    wheel_mm -= 0.020;
+    let told_after_mm = wheel_mm + 2.3e-3;
+    let step_um = dressing_size_step_um(told_mm, told_after_mm, 20.1);
+    let mut radius_only = state.clone();
+    let wheel_share_um = size_correction_um(&radius_only);
+    after_dressing(&mut radius_only, wheel_share_um);
+    after_measured_dressing(&mut state, step_um);
+    told_mm = told_after_mm;
+    // The whole correction moved by the step (to the nanometre rounding), shape kept.
+    for (a, b) in state.correction_um.iter().zip(&shape_before) {
+        assert!(
+            (a - b + step_um).abs() <= CORRECTION_STEP_UM,
+            "{a} {b} {step_um}"
+        );
+    }
+    let first_um = size_error(&state, told_mm, wheel_mm);
+    let without_um = size_error(&radius_only, told_mm, wheel_mm);
+    // The reading 0.1 µm long moved the correction 0.1 µm too far: the part is 0.1 µm
+    // small, ±0.01 µm of the wear anticipation.
+    assert!((first_um + 0.1).abs() < 0.02, "{first_um}");
+    assert!(
+        (without_um - (STATION_UM + 2.3)).abs() < 0.2,
+        "{without_um}"
+    );
+    // The residual is learned whole and not taken for wear; the loop goes on as before.
+    step(&mut state, &pe(&[first_um; N], &[0.0; N], 4), &params).unwrap();
+    wheel_mm -= WEAR_MM;
+    assert!(
+        (state.size_drift_um_per_part - 0.1).abs() < 0.01,
+        "{state:?}"
+    );
+    let second_um = size_error(&state, told_mm, wheel_mm);
+    assert!(second_um.abs() < 0.02, "{second_um}");
+    assert!(!state.dressing_measured && state.dressing_offset_um == 0.0);
+}
+
+#[test]
+fn the_dresser_infeed_is_checked() {
+    assert_eq!(check_dresser_infeed(20.0), Ok(20.0));
+    assert_eq!(check_dresser_infeed(0.0), Ok(0.0));
+    for bad in [-0.1, 1000.5, f64::NAN, f64::INFINITY] {
+        let e = check_dresser_infeed(bad).unwrap_err();
+        assert!(e.to_string().contains("dresser infeed"), "{e}");
+    }
+    // Told 17.7 µm smaller, 20 µm removed: the part grows by 2.3 µm.
+    assert!((dressing_size_step_um(250.0, 249.9823, 20.0) - 2.3).abs() < 1e-9);
+}
