@@ -4,12 +4,14 @@
 
 mod check;
 mod cluster;
+mod http;
 mod keys;
 mod mqtt;
 mod values;
 
 pub use check::{Checked, CheckedMachine, check, configured_features, load, machine_features};
 pub use cluster::ClusterSection;
+pub use http::{HttpSection, network_exposure};
 pub use keys::Lines;
 pub use mqtt::MqttSection;
 
@@ -17,7 +19,6 @@ use crate::names::MachineName;
 use crate::sim::GrinderConfig;
 use serde::Deserialize;
 use std::fmt;
-use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
 /// Environment variable that overrides `database.url`.
@@ -105,31 +106,6 @@ impl fmt::Debug for DatabaseSection {
             .field("url", &format!("{scheme}://…"))
             .field("raw_retention_days", &self.raw_retention_days)
             .finish()
-    }
-}
-
-#[derive(Debug, Clone, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct HttpSection {
-    /// Address the API listens on; localhost unless you mean otherwise.
-    pub listen: SocketAddr,
-    /// Connections served at once; more wait in the kernel's queue until one ends.
-    pub max_connections: usize,
-    /// A client has this long to send a request's headers (also an idle keep-alive
-    /// connection's limit), ms.
-    pub header_timeout_ms: u64,
-    /// A client has this long to send a request's body once its headers are in, ms.
-    pub body_timeout_ms: u64,
-}
-
-impl Default for HttpSection {
-    fn default() -> Self {
-        Self {
-            listen: SocketAddr::from(([127, 0, 0, 1], 8080)),
-            max_connections: 256,
-            header_timeout_ms: 10_000,
-            body_timeout_ms: 10_000,
-        }
     }
 }
 

@@ -5,22 +5,28 @@
 //! - `api.rs`: the `{code, message}` error, the extractors that keep it, the token check.
 //! - `routes.rs`: the read handlers and their typed replies.
 //! - `writes.rs`: the write handlers and the command hand-over.
-//! - `server.rs`: the listener loop: header and body timeouts, the connection cap.
+//! - `server.rs`: the listener loop: header and body timeouts, the connection caps.
+//! - `harden.rs`: the `Host` allow-list, the security headers, the per-client cap.
+//! - `tls.rs`: HTTPS with rustls, reloaded on SIGHUP; the self-signed development pair.
 //! - `openapi.rs`: the API description.
 //! - `dashboard/`: the engineers' web pages, their live channel and downloads.
 
 mod api;
 mod dashboard;
+mod harden;
 mod openapi;
 mod parts;
 mod routes;
 mod server;
+mod tls;
 mod writes;
 
 pub use api::{ApiError, ApiJson, ApiPath, ApiQuery, Authorized};
 pub use dashboard::{FeatureSheet, FeatureSheets, Stopping};
 pub use routes::{LobeInfo, MachineInfo, MachinesReply};
-pub use server::{HttpLimits, serve};
+pub use harden::{CONTENT_SECURITY_POLICY, HostAllowList, Policy};
+pub use server::{HttpLimits, serve, serve_with};
+pub use tls::{Tls, self_signed};
 pub use writes::CommandReply;
 
 use super::machine::StoreHandle;
