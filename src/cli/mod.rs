@@ -12,6 +12,7 @@ mod planing;
 mod program_args;
 mod run;
 mod table;
+mod tls;
 mod turnmill;
 
 use clap::{Parser, Subcommand};
@@ -49,6 +50,8 @@ pub enum Command {
     Turnmill(turnmill::TurnMillArgs),
     /// Ratio-coupled planing of a twisted-lobe rotor (A follows X), resumable by segment.
     Planing(planing::PlaningArgs),
+    /// TLS for the API: `camloop tls self-signed` makes a development certificate and key.
+    Tls(tls::TlsArgs),
 }
 
 /// Runs a parsed command; the error chain is printed by `main` on one line.
@@ -64,6 +67,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Contour(args) => contour::run_contour(args),
         Command::Turnmill(args) => turnmill::run_turnmill(args),
         Command::Planing(args) => planing::run_planing(args),
+        Command::Tls(args) => tls::run_tls(args),
     }
 }
 

@@ -13,7 +13,7 @@ pub use check::{Checked, CheckedMachine, check, configured_features, load, machi
 pub use cluster::ClusterSection;
 pub use http::{HttpSection, network_exposure};
 pub use keys::Lines;
-pub use mqtt::MqttSection;
+pub use mqtt::{ENV_MQTT_PASSWORD, MqttSection};
 
 use crate::names::MachineName;
 use crate::sim::GrinderConfig;
@@ -277,6 +277,7 @@ impl Config {
             config.database.url = url;
         }
         config.api_token = env(ENV_API_TOKEN).filter(|t| !t.is_empty()).map(Secret);
+        config.mqtt.password = env(ENV_MQTT_PASSWORD).filter(|t| !t.is_empty()).map(Secret);
         let machines_dropped = read.dropped.iter().any(|k| k == "machines");
         problems.extend(config.problems(machines_dropped));
         problems.sort_by_key(|p| p.line.unwrap_or(usize::MAX));
@@ -365,6 +366,7 @@ impl Config {
     /// `<client_id>-<instance>`, since a broker disconnects a client whose id another takes.
     pub fn mqtt_settings(&self) -> mqtt::MqttSection {
         let mut settings = self.mqtt.clone();
+        settings.tls_ca = settings.tls_ca.map(|p| self.resolve(&p));
         if self.cluster.enabled {
             let instance = self.cluster.instance_name();
             settings.client_id = format!("{}-{instance}", settings.client_id);
