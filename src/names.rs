@@ -141,7 +141,9 @@ mod tests {
             })
         );
         // A 10 kB name is quoted back by its first 64 characters only; NUL comes escaped.
-        let long = MachineName::new(&"y".repeat(10_000)).unwrap_err().to_string();
+        let long = MachineName::new(&"y".repeat(10_000))
+            .unwrap_err()
+            .to_string();
         assert!(long.contains(&format!("`{}…`", "y".repeat(64))), "{long}");
         assert!(long.len() < 200, "{} bytes", long.len());
         let nul = MachineName::new("a\0b").unwrap_err().to_string();

@@ -68,7 +68,11 @@ async fn get_as(addr: SocketAddr, host: &str, path: &str) -> (u16, String, Strin
     let _ = s.read_to_string(&mut text).await;
     let (head, body) = text.split_once("\r\n\r\n").unwrap_or((&text, ""));
     let status = head.split(' ').nth(1).and_then(|s| s.parse().ok());
-    (status.unwrap_or(0), head.to_ascii_lowercase(), body.to_string())
+    (
+        status.unwrap_or(0),
+        head.to_ascii_lowercase(),
+        body.to_string(),
+    )
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -105,8 +109,7 @@ async fn a_forged_host_is_refused_and_allowed_names_are_served() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn every_response_carries_the_security_headers_and_api_pages_and_programs_are_not_stored()
-{
+async fn every_response_carries_the_security_headers_and_api_pages_and_programs_are_not_stored() {
     let s = server(16, 8).await;
     let program = "/api/v1/machines/SIM1/lobes/IN1/tables/1/program";
     for (path, cache) in [
@@ -136,7 +139,11 @@ async fn every_response_carries_the_security_headers_and_api_pages_and_programs_
         // No TLS here: no HSTS (a browser would pin HTTPS on a plain-HTTP service).
         assert!(!head.contains("strict-transport-security"), "{head}");
     }
-    for part in ["frame-ancestors 'none'", "default-src 'self'", "script-src 'self'"] {
+    for part in [
+        "frame-ancestors 'none'",
+        "default-src 'self'",
+        "script-src 'self'",
+    ] {
         assert!(http::CONTENT_SECURITY_POLICY.contains(part));
     }
     assert!(!http::CONTENT_SECURITY_POLICY.contains("unsafe-inline"));
@@ -163,18 +170,22 @@ async fn one_client_holding_its_cap_does_not_lock_the_others_out() {
             .unwrap();
         hog.push(c);
     }
-    // Those beyond its cap are closed at once (bound: 2 s, far below the 10 s header
-    // timeout that would otherwise close them).
+    // Those beyond its cap are closed at once: each read waits at most 200 ms, far below
+    // the 10 s header timeout that would otherwise close them.
     let mut closed = 0;
     for c in &mut hog {
         let mut buf = [0u8; 64];
         // Closed with the request unread: an end of stream or a reset.
-        match tokio::time::timeout(Duration::from_millis(200), c.read(&mut buf)).await {
-            Ok(Ok(0) | Err(_)) => closed += 1,
-            _ => {}
+        let read = tokio::time::timeout(Duration::from_millis(200), c.read(&mut buf)).await;
+        if let Ok(Ok(0) | Err(_)) = read {
+            closed += 1;
         }
     }
-    assert_eq!(closed, global - per_client, "connections closed beyond the cap");
+    assert_eq!(
+        closed,
+        global - per_client,
+        "connections closed beyond the cap"
+    );
     // Another client is served at once (bound: 2 s; before the cap it waited 9.5 s).
     let started = Instant::now();
     let answer = tokio::time::timeout(
@@ -208,14 +219,21 @@ async fn path_parameters_are_checked_and_errors_quote_at_most_64_characters() {
         format!("/api/v1/machines/SIM1/parts/{long}"),
         format!("/api/v1/machines/{long}/parts/P1"),
         format!("/api/v1/machines/SIM1/lobes/{long}/tables"),
-        format!("/api/v1/machines/SIM1/lobes/IN1/tables/{}/program", "9".repeat(10_000)),
+        format!(
+            "/api/v1/machines/SIM1/lobes/IN1/tables/{}/program",
+            "9".repeat(10_000)
+        ),
         format!("/api/v1/measurements/{}", "9".repeat(10_000)),
         format!("/machines/SIM1/features/{long}"),
         format!("/api/v1/machines/SIM1/measurements?lobe={long}"),
     ];
     for path in &cases {
         let (status, _, body) = get_as(s.addr, "localhost", path).await;
-        assert!(matches!(status, 400 | 404), "{status} for {:.80}: {body:.200}", path);
+        assert!(
+            matches!(status, 400 | 404),
+            "{status} for {:.80}: {body:.200}",
+            path
+        );
         let code = json(&body)["code"].as_str().unwrap_or("").to_string();
         assert!(
             ["invalid_name", "invalid_path", "invalid_query"].contains(&code.as_str()),
@@ -231,6 +249,10 @@ async fn path_parameters_are_checked_and_errors_quote_at_most_64_characters() {
         assert!(!body.contains('\0'), "{body}");
     }
     // A plain part identifier passes the check (and then finds no database here).
-    let (status, _, body) = get_as(s.addr, "localhost", "/api/v1/machines/SIM1/parts/SN-0042.A").await;
-    assert_eq!((status, json(&body)["code"].clone()), (503, "store_unavailable".into()));
+    let (status, _, body) =
+        get_as(s.addr, "localhost", "/api/v1/machines/SIM1/parts/SN-0042.A").await;
+    assert_eq!(
+        (status, json(&body)["code"].clone()),
+        (503, "store_unavailable".into())
+    );
 }

@@ -75,13 +75,17 @@ async fn tls(port: u16, trusted: &str) -> std::io::Result<TlsStream<TcpStream>> 
 /// One GET /healthz on `s` (kept alive unless `close`); the response head.
 async fn healthz(s: &mut TlsStream<TcpStream>, close: bool) -> String {
     let connection = if close { "close" } else { "keep-alive" };
-    let request = format!("GET /healthz HTTP/1.1\r\nHost: localhost\r\nConnection: {connection}\r\n\r\n");
+    let request =
+        format!("GET /healthz HTTP/1.1\r\nHost: localhost\r\nConnection: {connection}\r\n\r\n");
     s.write_all(request.as_bytes()).await.unwrap();
     let mut got = Vec::new();
     let mut buf = [0u8; 4096];
     // The body is small JSON: the response is complete once its closing brace arrives.
     while !got.ends_with(b"}") {
-        let n = tokio::time::timeout(DEADLINE, s.read(&mut buf)).await.unwrap().unwrap();
+        let n = tokio::time::timeout(DEADLINE, s.read(&mut buf))
+            .await
+            .unwrap()
+            .unwrap();
         assert!(n > 0, "closed early: {}", String::from_utf8_lossy(&got));
         got.extend_from_slice(&buf[..n]);
     }
@@ -117,7 +121,10 @@ async fn clients_verify_the_certificate_and_a_hangup_reloads_it_without_dropping
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
-        let mode = std::fs::metadata(dir.path().join("tls/key.pem")).unwrap().permissions().mode();
+        let mode = std::fs::metadata(dir.path().join("tls/key.pem"))
+            .unwrap()
+            .permissions()
+            .mode();
         assert_eq!(mode & 0o777, 0o600, "the key is its owner's only");
     }
     // A second run does not overwrite the pair without --force.
@@ -134,14 +141,25 @@ async fn clients_verify_the_certificate_and_a_hangup_reloads_it_without_dropping
     let mut kept = until_trusted(port, &old_cert).await;
     let head = healthz(&mut kept, false).await;
     assert!(head.starts_with("http/1.1 200"), "{head}");
-    assert!(head.contains("strict-transport-security: max-age=31536000"), "{head}");
+    assert!(
+        head.contains("strict-transport-security: max-age=31536000"),
+        "{head}"
+    );
     // A client that trusts another certificate refuses this one.
-    let stranger = camloop::service::http::self_signed(&["localhost".into()]).unwrap().0;
+    let stranger = camloop::service::http::self_signed(&["localhost".into()])
+        .unwrap()
+        .0;
     let refused = tls(port, &stranger).await;
-    assert!(refused.is_err(), "a certificate nobody vouched for was accepted");
+    assert!(
+        refused.is_err(),
+        "a certificate nobody vouched for was accepted"
+    );
     // Plain HTTP on the TLS port gets no answer.
     let mut plain = TcpStream::connect(("127.0.0.1", port)).await.unwrap();
-    plain.write_all(b"GET /healthz HTTP/1.1\r\nHost: localhost\r\n\r\n").await.unwrap();
+    plain
+        .write_all(b"GET /healthz HTTP/1.1\r\nHost: localhost\r\n\r\n")
+        .await
+        .unwrap();
     let mut buf = Vec::new();
     let _ = tokio::time::timeout(DEADLINE, plain.read_to_end(&mut buf)).await;
     assert!(!String::from_utf8_lossy(&buf).contains("200 OK"));
@@ -154,7 +172,10 @@ async fn clients_verify_the_certificate_and_a_hangup_reloads_it_without_dropping
     service.signal("-HUP");
     let mut fresh = until_trusted(port, &new_cert).await;
     assert!(healthz(&mut fresh, true).await.starts_with("http/1.1 200"));
-    assert!(tls(port, &old_cert).await.is_err(), "the old certificate is still served");
+    assert!(
+        tls(port, &old_cert).await.is_err(),
+        "the old certificate is still served"
+    );
     assert!(healthz(&mut kept, true).await.starts_with("http/1.1 200"));
     curl(port, dir.path());
     drop(service);
@@ -163,7 +184,13 @@ async fn clients_verify_the_certificate_and_a_hangup_reloads_it_without_dropping
 /// curl trusting `tls/cert.pem` fetches /healthz; skipped with a line when curl is missing.
 fn curl(port: u16, dir: &Path) {
     let Ok(out) = Command::new("curl")
-        .args(["--silent", "--show-error", "--fail", "--cacert", "tls/cert.pem"])
+        .args([
+            "--silent",
+            "--show-error",
+            "--fail",
+            "--cacert",
+            "tls/cert.pem",
+        ])
         .arg(format!("https://localhost:{port}/healthz"))
         .current_dir(dir)
         .output()
@@ -172,7 +199,11 @@ fn curl(port: u16, dir: &Path) {
         return;
     };
     let body = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "curl: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "curl: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(body.contains(r#""status":"ok""#), "{body}");
 }
 
@@ -202,7 +233,12 @@ fn a_network_address_without_tls_is_refused_unless_allowed_and_then_warns() {
             }
         }
     });
-    let warned = rx.recv_timeout(DEADLINE).expect("the warning is logged at start");
-    assert!(warned.contains("WARN") && warned.contains("0.0.0.0"), "{warned}");
+    let warned = rx
+        .recv_timeout(DEADLINE)
+        .expect("the warning is logged at start");
+    assert!(
+        warned.contains("WARN") && warned.contains("0.0.0.0"),
+        "{warned}"
+    );
     drop(service);
 }

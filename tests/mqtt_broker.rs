@@ -207,7 +207,10 @@ async fn expect_part(
     assert_eq!(topic, "plant/M1/IN1/state");
     assert_eq!(state["last_part"], format!("P{n}"), "{state}");
     assert_eq!(state["last_verdict"], "pass");
-    assert_eq!((state["alarm"].clone(), state["seq"].clone()), (false.into(), seq.into()));
+    assert_eq!(
+        (state["alarm"].clone(), state["seq"].clone()),
+        (false.into(), seq.into())
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

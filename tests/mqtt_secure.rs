@@ -56,8 +56,8 @@ fn tools() -> Option<(String, String)> {
 /// A TLS-only, password-only mosquitto on `port`; `dir` gets its files. Returns the broker
 /// and the certificate a client must trust.
 fn secure_broker(port: u16, dir: &Path, (exe, passwd): &(String, String)) -> (KillOnDrop, String) {
-    let (cert, key) = camloop::service::http::self_signed(&["localhost".into(), "127.0.0.1".into()])
-        .unwrap();
+    let (cert, key) =
+        camloop::service::http::self_signed(&["localhost".into(), "127.0.0.1".into()]).unwrap();
     std::fs::write(dir.join("cert.pem"), &cert).unwrap();
     std::fs::write(dir.join("key.pem"), &key).unwrap();
     let made = Command::new(passwd)
@@ -114,7 +114,9 @@ fn client_options(id: &str, port: u16, cert: &str, password: &str) -> MqttOption
         .with_no_client_auth();
     let mut o = MqttOptions::new(id, "localhost", port);
     o.set_credentials(USER, password);
-    o.set_transport(Transport::tls_with_config(TlsConfiguration::Rustls(Arc::new(config))));
+    o.set_transport(Transport::tls_with_config(TlsConfiguration::Rustls(
+        Arc::new(config),
+    )));
     o
 }
 
@@ -156,7 +158,10 @@ async fn subscriber(
 }
 
 /// The next message on `topic` (others skipped), within the deadline.
-async fn next_on(rx: &mut mpsc::UnboundedReceiver<(String, String, bool)>, topic: &str) -> (String, bool) {
+async fn next_on(
+    rx: &mut mpsc::UnboundedReceiver<(String, String, bool)>,
+    topic: &str,
+) -> (String, bool) {
     loop {
         let (t, payload, retained) = tokio::time::timeout(DEADLINE, rx.recv())
             .await
@@ -179,9 +184,8 @@ async fn a_wrong_password_is_refused_and_the_right_one_delivers_over_tls() {
     let (_c, mut wrong) = AsyncClient::new(client_options("intruder", port, &cert, "guess"), 4);
     let refused = tokio::time::timeout(DEADLINE, async {
         loop {
-            match wrong.poll().await {
-                Err(e) => return e,
-                Ok(_) => {}
+            if let Err(e) = wrong.poll().await {
+                return e;
             }
         }
     })
@@ -224,10 +228,16 @@ async fn a_wrong_password_is_refused_and_the_right_one_delivers_over_tls() {
         phase_error_deg: 0.0,
         ground_with_version: 2,
     });
-    assert_eq!(next_on(&mut rx, "plant/camloop-tls/status").await.0, "online");
+    assert_eq!(
+        next_on(&mut rx, "plant/camloop-tls/status").await.0,
+        "online"
+    );
     let (event, _) = next_on(&mut rx, "plant/M1/IN1/part_analysed").await;
     let event: serde_json::Value = serde_json::from_str(&event).unwrap();
-    assert_eq!((event["part"].clone(), event["seq"].clone()), ("P1".into(), 1.into()));
+    assert_eq!(
+        (event["part"].clone(), event["seq"].clone()),
+        ("P1".into(), 1.into())
+    );
     let (state, retained) = next_on(&mut rx, "plant/M1/IN1/state").await;
     assert!(!retained, "live delivery to a subscriber already there");
     assert!(state.contains(r#""version_in_force":2"#), "{state}");
@@ -247,7 +257,9 @@ async fn a_wrong_password_is_refused_and_the_right_one_delivers_over_tls() {
     assert!(connected.is_err(), "connected with a wrong password");
 
     stop.send(true).unwrap();
-    tokio::time::timeout(DEADLINE, publisher.join()).await.unwrap();
+    tokio::time::timeout(DEADLINE, publisher.join())
+        .await
+        .unwrap();
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -68,7 +68,10 @@ fn write_new(path: &Path, text: &str, mode: u32, force: bool) -> anyhow::Result<
     #[cfg(not(unix))]
     let _ = mode;
     let mut file = options.open(path).with_context(|| {
-        format!("{}: cannot write (exists? --force replaces it)", path.display())
+        format!(
+            "{}: cannot write (exists? --force replaces it)",
+            path.display()
+        )
     })?;
     #[cfg(unix)]
     std::fs::set_permissions(path, std::os::unix::fs::PermissionsExt::from_mode(mode))

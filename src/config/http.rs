@@ -96,7 +96,8 @@ impl HttpSection {
             let plain = |c: char| c.is_ascii_alphanumeric() || "-.:[]_".contains(c);
             if host.is_empty() || host.len() > 255 || !host.chars().all(plain) {
                 let shown = crate::names::quote(host);
-                let why = format!(": `{shown}` must be a host name or address, with or without :port");
+                let why =
+                    format!(": `{shown}` must be a host name or address, with or without :port");
                 bad("allowed_hosts", why);
             }
         }
@@ -151,7 +152,10 @@ mod tests {
     #[test]
     fn a_network_address_needs_tls_or_an_explicit_allowance() {
         let lines = Lines::default();
-        assert_eq!(network_exposure(&http("127.0.0.1:8080"), &lines), Ok(vec![]));
+        assert_eq!(
+            network_exposure(&http("127.0.0.1:8080"), &lines),
+            Ok(vec![])
+        );
         assert_eq!(network_exposure(&http("[::1]:8080"), &lines), Ok(vec![]));
         let open = http("0.0.0.0:8080");
         let e = network_exposure(&open, &lines).unwrap_err();
@@ -182,6 +186,9 @@ mod tests {
             ..HttpSection::default()
         };
         let p = over.problems(&Lines::default());
-        assert!(p[0].message.contains("must be 1 to max_connections (256)"), "{p:?}");
+        assert!(
+            p[0].message.contains("must be 1 to max_connections (256)"),
+            "{p:?}"
+        );
     }
 }

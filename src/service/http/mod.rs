@@ -23,8 +23,8 @@ mod writes;
 
 pub use api::{ApiError, ApiJson, ApiPath, ApiQuery, Authorized};
 pub use dashboard::{FeatureSheet, FeatureSheets, Stopping};
-pub use routes::{LobeInfo, MachineInfo, MachinesReply};
 pub use harden::{CONTENT_SECURITY_POLICY, HostAllowList, Policy};
+pub use routes::{LobeInfo, MachineInfo, MachinesReply};
 pub use server::{HttpLimits, serve, serve_with};
 pub use tls::{Tls, self_signed};
 pub use writes::CommandReply;

@@ -52,10 +52,14 @@ pub(super) async fn run(
                     info!(host = %options.broker_address().0, "MQTT broker back: sending the queued events");
                 }
                 let status = super::status_topic(&prefix, &shared.client_id);
-                let outcome = match send(&client, &mut events, &mut shutdown, &status, true, ONLINE).await {
-                    Ok(()) => send_queue(&client, &mut events, &prefix, &shared, &wake, &mut shutdown).await,
-                    Err(outcome) => outcome,
-                };
+                let outcome =
+                    match send(&client, &mut events, &mut shutdown, &status, true, ONLINE).await {
+                        Ok(()) => {
+                            send_queue(&client, &mut events, &prefix, &shared, &wake, &mut shutdown)
+                                .await
+                        }
+                        Err(outcome) => outcome,
+                    };
                 shared.set_connected(false);
                 match outcome {
                     Outcome::Shutdown => {

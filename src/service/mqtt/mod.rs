@@ -31,8 +31,8 @@ use std::time::Duration;
 use anyhow::Context;
 use rumqttc::{LastWill, MqttOptions, QoS, TlsConfiguration, Transport};
 use tokio::sync::{Notify, mpsc, watch};
-use tracing::warn;
 use tokio_rustls::rustls;
+use tracing::warn;
 
 use crate::config::MqttSection;
 use crate::service::journal::Pending;
@@ -283,7 +283,10 @@ fn tls_client(ca: Option<&Path>) -> anyhow::Result<rustls::ClientConfig> {
             roots.add_parsable_certificates(found.certs);
         }
     }
-    anyhow::ensure!(!roots.is_empty(), "mqtt.tls: no CA certificate to check the broker against");
+    anyhow::ensure!(
+        !roots.is_empty(),
+        "mqtt.tls: no CA certificate to check the broker against"
+    );
     let provider = Arc::new(rustls::crypto::ring::default_provider());
     Ok(rustls::ClientConfig::builder_with_provider(provider)
         .with_safe_default_protocol_versions()?

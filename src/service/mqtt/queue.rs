@@ -18,6 +18,9 @@ use serde::{Deserialize, Serialize};
 
 /// Queue file name in the queue folder.
 pub const QUEUE_FILE: &str = "queue.jsonl";
+/// The count of drops not yet reported, kept across restarts (the dropped lines are gone
+/// from the queue file, which never exceeds the bound).
+pub const DROPPED_FILE: &str = "queue.dropped";
 
 /// One event to publish: its payload on its topic, then each state it changed, retained.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -67,6 +70,10 @@ impl DiskQueue {
             }
         }
         let max = max.max(1);
+        dropped += std::fs::read_to_string(dir.join(DROPPED_FILE))
+            .ok()
+            .and_then(|t| t.trim().parse::<u64>().ok())
+            .unwrap_or(0);
         while pending.len() > max {
             pending.pop_front();
             dropped += 1;
@@ -91,8 +98,7 @@ impl DiskQueue {
         let full = self.pending.len() >= self.max;
         if full {
             self.pending.pop_front();
-            self.dropped_unreported += 1;
-            self.dropped_total += 1;
+            self.count_dropped(1);
         }
         let mut line = serde_json::to_string(&message).map_err(std::io::Error::other)?;
         line.push('\n');
@@ -132,13 +138,18 @@ impl DiskQueue {
 
     /// Counts messages lost before they reached the queue (its intake was full).
     pub fn count_dropped(&mut self, n: u64) {
+        if n == 0 {
+            return;
+        }
         self.dropped_unreported += n;
+        self.save_dropped();
         self.dropped_total += n;
     }
 
     /// `n` drops were reported to the broker.
     pub fn dropped_reported(&mut self, n: u64) {
         self.dropped_unreported = self.dropped_unreported.saturating_sub(n);
+        self.save_dropped();
     }
 
     /// Drops not yet reported (still to be told to the broker).
@@ -149,6 +160,15 @@ impl DiskQueue {
     /// Every drop since the queue was opened (with those found at open).
     pub fn dropped_total(&self) -> u64 {
         self.dropped_total
+    }
+
+    /// Keeps the unreported count for a restart; a failure only risks under-reporting.
+    fn save_dropped(&self) {
+        let path = self.path.with_file_name(DROPPED_FILE);
+        let _ = match self.dropped_unreported {
+            0 => std::fs::remove_file(&path).or(Ok(())),
+            n => std::fs::write(&path, n.to_string()),
+        };
     }
 
     /// Rewrites the file with the pending messages only (temporary, then rename).
@@ -192,8 +212,8 @@ mod tests {
         assert_eq!(q.dropped_unreported(), 2);
         q.pop_front().unwrap();
         drop(q);
-        // The file still holds the sent and the dropped lines; the reopen keeps the newest
-        // 3 (message 2 was sent but the file had it: at least once) and counts the rest.
+        // The file holds the newest 3 lines (message 2 was sent but the file had it: at
+        // least once), and the count of the 2 dropped, not yet reported, comes back too.
         let mut q = DiskQueue::open(dir.path(), 3).unwrap();
         assert_eq!(q.len(), 3);
         assert_eq!(q.front(), Some(&msg(2)));

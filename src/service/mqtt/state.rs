@@ -60,7 +60,10 @@ pub struct Tracker {
 /// Alarms an event raises (`Some(kind)`) or the kinds it clears.
 fn alarm_change(kind: &str) -> (Option<&str>, &'static [&'static str]) {
     match kind {
-        "blocked_by_guard" | "share_unavailable" | "disk_full" | "journal_quarantined"
+        "blocked_by_guard"
+        | "share_unavailable"
+        | "disk_full"
+        | "journal_quarantined"
         | "learning_held" => (Some(kind), &[]),
         "guard_cleared" => (None, &["blocked_by_guard"]),
         "share_back" => (None, &["share_unavailable"]),
@@ -205,11 +208,17 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let mut t = Tracker::open(dir.path());
         let (seq, s) = state(&mut t, &part(1, Verdict::Pass));
-        assert_eq!((seq, s["alarm"].clone(), s["version_in_force"].clone()), (1, false.into(), 3.into()));
+        assert_eq!(
+            (seq, s["alarm"].clone(), s["version_in_force"].clone()),
+            (1, false.into(), 3.into())
+        );
         let (_, s) = state(&mut t, &alarm("blocked_by_guard"));
         assert_eq!(s["alarm"], true);
         let (_, s) = state(&mut t, &part(2, Verdict::Fail));
-        assert_eq!((s["alarm"].clone(), s["last_verdict"].clone()), (true.into(), "fail".into()));
+        assert_eq!(
+            (s["alarm"].clone(), s["last_verdict"].clone()),
+            (true.into(), "fail".into())
+        );
         assert_eq!(s["alarms"], serde_json::json!(["blocked_by_guard"]));
         let frozen = PlantEvent::LearningFrozen {
             machine: "M1".into(),
@@ -224,14 +233,23 @@ mod tests {
             at_ms: 11,
         };
         let (_, s) = state(&mut t, &delivered);
-        assert_eq!((s["version_in_force"].clone(), s["frozen"].clone()), (7.into(), true.into()));
+        assert_eq!(
+            (s["version_in_force"].clone(), s["frozen"].clone()),
+            (7.into(), true.into())
+        );
         let (seq, s) = state(&mut t, &alarm("guard_cleared"));
-        assert_eq!((s["alarm"].clone(), s["last_part"].clone()), (false.into(), "P2".into()));
+        assert_eq!(
+            (s["alarm"].clone(), s["last_part"].clone()),
+            (false.into(), "P2".into())
+        );
         assert_eq!(seq, 6);
         // The sequence and the states survive a restart.
         t.save().unwrap();
         let mut again = Tracker::open(dir.path());
         let (seq, s) = state(&mut again, &part(3, Verdict::Pass));
-        assert_eq!((seq, s["version_in_force"].clone(), s["frozen"].clone()), (7, 7.into(), true.into()));
+        assert_eq!(
+            (seq, s["version_in_force"].clone(), s["frozen"].clone()),
+            (7, 7.into(), true.into())
+        );
     }
 }
