@@ -76,20 +76,7 @@ pub async fn serve_with(
     tls: Option<Arc<super::tls::Tls>>,
     mut shutdown: watch::Receiver<bool>,
 ) {
-    let mut limits = limits;
-    if let Some(files) = open_file_limit() {
-        // Half the descriptors stay for the gauges, the journals, the shares and the database.
-        let cap = usize::try_from(files / 2).unwrap_or(usize::MAX).max(1);
-        if limits.max_connections > cap {
-            warn!(
-                max_connections = limits.max_connections,
-                open_file_limit = files,
-                cap,
-                "http.max_connections lowered to half the open-file limit"
-            );
-            limits.max_connections = cap;
-        }
-    }
+    let limits = fit_to_open_files(limits);
     // Open event streams end when the server stops (see `dashboard::Stopping`).
     let app = app.layer(axum::Extension(super::Stopping(shutdown.clone())));
     let app = super::harden::apply(app, policy);
@@ -177,6 +164,27 @@ impl Conn {
             debug!(peer = %self.peer, error = %e, "http connection ended");
         }
     }
+}
+
+/// `limits` with the caps lowered to half the process's open-file limit where that is
+/// lower: the other half stays for the gauges, the journals, the shares and the database.
+fn fit_to_open_files(mut limits: HttpLimits) -> HttpLimits {
+    if let Some(files) = open_file_limit() {
+        let cap = usize::try_from(files / 2).unwrap_or(usize::MAX).max(1);
+        if limits.max_connections > cap {
+            warn!(
+                max_connections = limits.max_connections,
+                open_file_limit = files,
+                cap,
+                "http.max_connections lowered to half the open-file limit"
+            );
+            limits.max_connections = cap;
+        }
+    }
+    limits.max_connections_per_client = limits
+        .max_connections_per_client
+        .clamp(1, limits.max_connections);
+    limits
 }
 
 /// The process's soft limit on open files (Linux: from /proc/self/limits); `None` where
