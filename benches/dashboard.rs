@@ -161,6 +161,7 @@ async fn serve(store: Store) -> (SocketAddr, watch::Sender<bool>) {
     }
     let limits = HttpLimits {
         max_connections: 256,
+        max_connections_per_client: 256,
         header_timeout: Duration::from_secs(10),
         body_timeout: Duration::from_secs(10),
     };
@@ -184,7 +185,7 @@ async fn serve(store: Store) -> (SocketAddr, watch::Sender<bool>) {
 /// One GET on a new connection; the body's length (the status must be 200).
 async fn get(addr: SocketAddr, path: &str) -> usize {
     let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
-    let req = format!("GET {path} HTTP/1.1\r\nHost: bench\r\nConnection: close\r\n\r\n");
+    let req = format!("GET {path} HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n");
     s.write_all(req.as_bytes()).await.unwrap();
     let mut body = Vec::new();
     s.read_to_end(&mut body).await.unwrap();
@@ -207,7 +208,7 @@ async fn clients(addr: SocketAddr, n: usize) -> mpsc::UnboundedReceiver<i64> {
     let (tx, rx) = mpsc::unbounded_channel();
     for _ in 0..n {
         let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
-        s.write_all(b"GET /dashboard/events HTTP/1.1\r\nHost: bench\r\n\r\n")
+        s.write_all(b"GET /dashboard/events HTTP/1.1\r\nHost: localhost\r\n\r\n")
             .await
             .unwrap();
         let tx = tx.clone();

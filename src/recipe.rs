@@ -387,6 +387,14 @@ impl Recipe {
                 p.push(format!("{field} = {v}: must be a finite number"));
             }
         };
+        // The part name goes into the API's JSON, DFQ K1001/K1002, the programs' comments
+        // and the dashboard: one plain rule keeps it safe in all of them.
+        if !valid_name(&self.name) {
+            p.push(format!(
+                "name = `{}`: must be 1–32 letters, digits, '-' or '_'",
+                crate::names::quote(&self.name)
+            ));
+        }
         positive(&mut p, "wheel.radius_mm".into(), self.wheel.radius_mm);
         match self.kind {
             ShaftKind::Camshaft if self.lobes.is_empty() => {

@@ -471,7 +471,7 @@ fn check_cluster_api(root: &Path) {
     use std::io::{Read, Write};
     write!(
         stream,
-        "GET /api/v1/cluster HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+        "GET /api/v1/cluster HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n"
     )
     .unwrap();
     let mut response = String::new();

@@ -14,6 +14,7 @@ mod program_args;
 mod run;
 mod speed_plan;
 mod table;
+mod tls;
 mod turnmill;
 
 use clap::{Parser, Subcommand};
@@ -60,6 +61,8 @@ pub enum Command {
     Token(access::TokenArgs),
     /// The audit trail: who did what (`--since`), and `verify` its chain.
     Audit(access::AuditArgs),
+    /// TLS for the API: `camloop tls self-signed` makes a development certificate and key.
+    Tls(tls::TlsArgs),
 }
 
 /// Runs a parsed command; the error chain is printed by `main` on one line.
@@ -79,6 +82,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::User(args) => access::run_user(args),
         Command::Token(args) => access::run_token(args),
         Command::Audit(args) => access::run_audit(args),
+        Command::Tls(args) => tls::run_tls(args),
     }
 }
 

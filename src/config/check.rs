@@ -160,6 +160,13 @@ pub fn check(config: Config) -> Result<Checked, ConfigError> {
         }
     }
     problems.extend(shared_folders(&config));
+    if let Err(p) = super::network_exposure(
+        &config.http,
+        config.auth.anonymous_read(config.http.listen),
+        &config.lines,
+    ) {
+        problems.push(p);
+    }
     let listener = match bind(config.http.listen) {
         Ok(l) => Some(l),
         Err(e) => {

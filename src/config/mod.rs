@@ -5,6 +5,7 @@
 mod auth;
 mod check;
 mod cluster;
+mod http;
 mod keys;
 mod mqtt;
 mod values;
@@ -12,14 +13,14 @@ mod values;
 pub use auth::AuthSection;
 pub use check::{Checked, CheckedMachine, check, configured_features, load, machine_features};
 pub use cluster::ClusterSection;
+pub use http::{HttpSection, network_exposure};
 pub use keys::Lines;
-pub use mqtt::MqttSection;
+pub use mqtt::{ENV_MQTT_PASSWORD, MqttSection};
 
 use crate::names::MachineName;
 use crate::sim::GrinderConfig;
 use serde::Deserialize;
 use std::fmt;
-use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
 /// Environment variable that overrides `database.url`.
@@ -110,31 +111,6 @@ impl fmt::Debug for DatabaseSection {
             .field("url", &format!("{scheme}://…"))
             .field("raw_retention_days", &self.raw_retention_days)
             .finish()
-    }
-}
-
-#[derive(Debug, Clone, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct HttpSection {
-    /// Address the API listens on; localhost unless you mean otherwise.
-    pub listen: SocketAddr,
-    /// Connections served at once; more wait in the kernel's queue until one ends.
-    pub max_connections: usize,
-    /// A client has this long to send a request's headers (also an idle keep-alive
-    /// connection's limit), ms.
-    pub header_timeout_ms: u64,
-    /// A client has this long to send a request's body once its headers are in, ms.
-    pub body_timeout_ms: u64,
-}
-
-impl Default for HttpSection {
-    fn default() -> Self {
-        Self {
-            listen: SocketAddr::from(([127, 0, 0, 1], 8080)),
-            max_connections: 256,
-            header_timeout_ms: 10_000,
-            body_timeout_ms: 10_000,
-        }
     }
 }
 
@@ -306,6 +282,7 @@ impl Config {
             config.database.url = url;
         }
         config.api_token = env(ENV_API_TOKEN).filter(|t| !t.is_empty()).map(Secret);
+        config.mqtt.password = env(ENV_MQTT_PASSWORD).filter(|t| !t.is_empty()).map(Secret);
         let machines_dropped = read.dropped.iter().any(|k| k == "machines");
         problems.extend(config.problems(machines_dropped));
         problems.sort_by_key(|p| p.line.unwrap_or(usize::MAX));
@@ -402,6 +379,7 @@ impl Config {
     /// `<client_id>-<instance>`, since a broker disconnects a client whose id another takes.
     pub fn mqtt_settings(&self) -> mqtt::MqttSection {
         let mut settings = self.mqtt.clone();
+        settings.tls_ca = settings.tls_ca.map(|p| self.resolve(&p));
         if self.cluster.enabled {
             let instance = self.cluster.instance_name();
             settings.client_id = format!("{}-{instance}", settings.client_id);

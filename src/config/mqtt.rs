@@ -1,7 +1,11 @@
 //! The `[mqtt]` section: events to the plant's message broker (off by default).
 
-use super::{ConfigProblem, Lines};
+use super::{ConfigProblem, Lines, Secret};
 use serde::Deserialize;
+use std::path::PathBuf;
+
+/// Environment variable holding the broker password for `mqtt.username`.
+pub const ENV_MQTT_PASSWORD: &str = "CAMLOOP_MQTT_PASSWORD";
 
 #[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -19,6 +23,16 @@ pub struct MqttSection {
     /// the count is published when the broker is back).
     pub queue_max_events: usize,
     pub keep_alive_s: u64,
+    /// User name at the broker; its password comes from `CAMLOOP_MQTT_PASSWORD`.
+    pub username: Option<String>,
+    /// From the environment only.
+    #[serde(skip)]
+    pub password: Option<Secret>,
+    /// Speak MQTT over TLS (port 8883 usually); the broker's certificate is checked against
+    /// `tls_ca`, or the system's roots without it.
+    pub tls: bool,
+    /// PEM file of the CA (or the certificate itself) the broker's certificate must chain to.
+    pub tls_ca: Option<PathBuf>,
 }
 
 impl Default for MqttSection {
@@ -31,6 +45,10 @@ impl Default for MqttSection {
             topic_prefix: "camloop".into(),
             queue_max_events: 100_000,
             keep_alive_s: 30,
+            username: None,
+            password: None,
+            tls: false,
+            tls_ca: None,
         }
     }
 }
@@ -71,6 +89,15 @@ impl MqttSection {
                 "queue_max_events",
                 format!("{} must be 1 to 10000000", self.queue_max_events),
             );
+        }
+        if self.password.is_some() && self.username.is_none() {
+            bad(
+                "username",
+                format!("required when {ENV_MQTT_PASSWORD} is set"),
+            );
+        }
+        if self.tls_ca.is_some() && !self.tls {
+            bad("tls_ca", "given but mqtt.tls is false".into());
         }
         if !(1..=3600).contains(&self.keep_alive_s) {
             bad(

@@ -1,34 +1,7 @@
-//! Range and sense checks of single sections' values (the HTTP limits, each gauge), each
+//! Range and sense checks of single sections' values (each gauge), each
 //! problem with the line of its key.
 
-use super::{ConfigProblem, GaugeSection, HttpSection, Lines};
-
-impl HttpSection {
-    pub(super) fn problems(&self, lines: &Lines) -> Vec<ConfigProblem> {
-        let mut p = Vec::new();
-        if !(1..=65_536).contains(&self.max_connections) {
-            p.push(ConfigProblem::at(
-                lines.of("http.max_connections"),
-                format!(
-                    "http.max_connections = {}: must be 1 to 65536",
-                    self.max_connections
-                ),
-            ));
-        }
-        for (key, ms) in [
-            ("header_timeout_ms", self.header_timeout_ms),
-            ("body_timeout_ms", self.body_timeout_ms),
-        ] {
-            if !(1..=3_600_000).contains(&ms) {
-                p.push(ConfigProblem::at(
-                    lines.of(&format!("http.{key}")),
-                    format!("http.{key} = {ms}: must be 1 to 3600000 ms"),
-                ));
-            }
-        }
-        p
-    }
-}
+use super::{ConfigProblem, GaugeSection};
 
 impl GaugeSection {
     /// A drop gauge's `stable_ms` and `max_file_bytes`, as the drop folder takes them;

@@ -18,6 +18,8 @@ pub(crate) fn access_settings(config: &Config) -> AuthState {
     let anonymous_read = config.auth.anonymous_read(config.http.listen);
     let mut auth = AuthState::new(config.api_token.clone(), anonymous_read);
     auth.session_ms = i64::from(config.auth.session_minutes.max(1)) * 60_000;
+    // Under TLS the session cookie is `Secure`: a browser never sends it in clear.
+    auth.secure_cookie = config.http.tls();
     if config.api_token.is_some() {
         warn!(
             "CAMLOOP_API_TOKEN is deprecated: it acts as an admin; make per-user tokens with `camloop token create`"

@@ -219,8 +219,16 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
         cluster: cluster_view,
     });
     let http_addr = listener.local_addr()?;
-    info!(listen = %http_addr, machines = config.machines.len(), "camloop started");
-    let server = tokio::spawn(http::serve(listener, app, limits, shutdown_rx.clone()));
+    let (policy, tls) = listener_policy(&config, http_addr, shutdown_rx.clone())?;
+    info!(listen = %http_addr, tls = tls.is_some(), machines = config.machines.len(), "camloop started");
+    let server = tokio::spawn(http::serve_with(
+        listener,
+        app,
+        limits,
+        policy,
+        tls,
+        shutdown_rx.clone(),
+    ));
 
     // In a cluster the machines come and go: the service runs until a signal.
     let machines_done = tokio::spawn(async move {
@@ -243,6 +251,60 @@ pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Res
         retention,
         store,
     })
+}
+
+/// The listener's host allow-list and TLS (reloaded on SIGHUP until shutdown); logs a
+/// warning for every insecure setting the config allowed, at every start.
+fn listener_policy(
+    config: &Config,
+    http_addr: std::net::SocketAddr,
+    shutdown: watch::Receiver<bool>,
+) -> anyhow::Result<(http::Policy, Option<Arc<http::Tls>>)> {
+    let warnings = crate::config::network_exposure(
+        &config.http,
+        config.auth.anonymous_read(config.http.listen),
+        &config.lines,
+    )
+    .map_err(|p| anyhow::anyhow!("{}: {p}", config.file.display()))?;
+    for w in warnings {
+        warn!(reason = %w, "serving insecurely because http.allow_insecure_network = true");
+    }
+    let tls = match (&config.http.tls_cert, &config.http.tls_key) {
+        (Some(cert), Some(key)) => {
+            let tls = http::Tls::load(&config.resolve(cert), &config.resolve(key))?;
+            tokio::spawn(reload_tls_on_hangup(tls.clone(), shutdown));
+            Some(tls)
+        }
+        _ => None,
+    };
+    let policy = http::Policy {
+        hosts: http::HostAllowList::new(http_addr, &config.http.allowed_hosts),
+        tls: tls.is_some(),
+    };
+    Ok((policy, tls))
+}
+
+/// Reads the TLS pair again at every SIGHUP; the accept loop goes on meanwhile.
+async fn reload_tls_on_hangup(tls: Arc<http::Tls>, mut shutdown: watch::Receiver<bool>) {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        let Ok(mut hangup) = signal(SignalKind::hangup()) else {
+            warn!("SIGHUP cannot be caught: the TLS certificate is not reloaded");
+            return;
+        };
+        loop {
+            tokio::select! {
+                _ = hangup.recv() => match tls.reload() {
+                    Ok(()) => info!("SIGHUP: TLS certificate and key reloaded"),
+                    Err(e) => error!(error = %format!("{e:#}"), "SIGHUP: TLS reload failed; the previous certificate stays in force"),
+                },
+                _ = shutdown.changed() => return,
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = (tls, shutdown.changed().await);
 }
 
 /// What every machine's tasks share.

@@ -233,7 +233,7 @@ async fn catch_up(addr: SocketAddr, parts: &[(i64, String, f64)]) -> tokio::net:
     use tokio::io::{AsyncReadExt, AsyncWriteExt};
     let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
     let request = format!(
-        "GET /dashboard/events HTTP/1.1\r\nHost: x\r\nLast-Event-ID: {}\r\n\r\n",
+        "GET /dashboard/events HTTP/1.1\r\nHost: localhost\r\nLast-Event-ID: {}\r\n\r\n",
         parts[1].0
     );
     s.write_all(request.as_bytes()).await.unwrap();

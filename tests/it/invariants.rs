@@ -176,6 +176,10 @@ fn shipped_service_configurations_parse() {
         let text = std::fs::read_to_string(&path).unwrap();
         let config = camloop::config::Config::parse(&text, &path, |_| None)
             .unwrap_or_else(|e| panic!("{e}"));
+        // The start-up rule lets each of them start (the docker ones say why they may).
+        let anonymous = config.auth.anonymous_read(config.http.listen);
+        camloop::config::network_exposure(&config.http, anonymous, &config.lines)
+            .unwrap_or_else(|e| panic!("{file}: {e}"));
         for m in &config.machines {
             // The docker file expects the recipes copied beside it, as the image does.
             let recipe = root.join("config").join(&m.recipe);

@@ -125,7 +125,10 @@ async fn subscriber(
                     let _ = subscribed_tx.try_send(());
                 }
                 Ok(Event::Incoming(Packet::Publish(p))) => {
-                    let payload = serde_json::from_slice(&p.payload).unwrap();
+                    // The status topic says `online`/`offline`, the rest is JSON.
+                    let payload = serde_json::from_slice(&p.payload).unwrap_or_else(|_| {
+                        String::from_utf8_lossy(&p.payload).into_owned().into()
+                    });
                     if tx.send((p.topic, payload, p.retain)).is_err() {
                         return;
                     }
@@ -152,13 +155,13 @@ async fn next(
 }
 
 /// The next message published since the subscription: retained copies that the broker
-/// hands out on (re)subscribing are skipped.
+/// hands out on (re)subscribing, and the publisher's `online`/`offline` status, are skipped.
 async fn next_live(
     rx: &mut mpsc::UnboundedReceiver<(String, serde_json::Value, bool)>,
 ) -> (String, serde_json::Value, bool) {
     loop {
         let m = next(rx).await;
-        if !m.2 {
+        if !m.2 && !m.0.ends_with("/status") {
             return m;
         }
     }
@@ -188,16 +191,26 @@ fn part(n: u32) -> PlantEvent {
     }
 }
 
-/// Receives part `n`'s event and then its retained-state copy.
-async fn expect_part(rx: &mut mpsc::UnboundedReceiver<(String, serde_json::Value, bool)>, n: u32) {
+/// Receives part `n`'s event (sequence number `seq`) and then the feature's state.
+async fn expect_part(
+    rx: &mut mpsc::UnboundedReceiver<(String, serde_json::Value, bool)>,
+    n: u32,
+    seq: u64,
+) {
     let (topic, payload, _) = next_live(rx).await;
     assert_eq!(topic, "plant/M1/IN1/part_analysed");
     assert_eq!(payload["part"], format!("P{n}"), "{payload}");
     assert_eq!(payload["max_profile_error_um"], 0.5 * f64::from(n));
     assert_eq!(payload["event"], "part_analysed");
+    assert_eq!(payload["seq"], seq, "{payload}");
     let (topic, state, _) = next_live(rx).await;
-    assert_eq!(topic, "plant/M1/state");
-    assert_eq!(state, payload);
+    assert_eq!(topic, "plant/M1/IN1/state");
+    assert_eq!(state["last_part"], format!("P{n}"), "{state}");
+    assert_eq!(state["last_verdict"], "pass");
+    assert_eq!(
+        (state["alarm"].clone(), state["seq"].clone()),
+        (false.into(), seq.into())
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -216,6 +229,7 @@ async fn events_reach_a_real_broker_survive_its_outage_and_report_what_the_bound
         topic_prefix: "plant".into(),
         queue_max_events: 5,
         keep_alive_s: 5,
+        ..MqttSection::default()
     };
     let (shutdown_tx, shutdown) = watch::channel(false);
     let publisher = Publisher::start(&settings, &dir.path().join("queue"), shutdown).unwrap();
@@ -227,7 +241,7 @@ async fn events_reach_a_real_broker_survive_its_outage_and_report_what_the_bound
         events.send(part(n));
     }
     for n in 1..=3 {
-        expect_part(&mut rx, n).await;
+        expect_part(&mut rx, n, u64::from(n)).await;
     }
     until(&mut progress, |p| p.sent == 3 && p.queued == 0).await;
 
@@ -240,10 +254,10 @@ async fn events_reach_a_real_broker_survive_its_outage_and_report_what_the_bound
     // Every event went through the intake: 5 kept and 7 dropped, none sent.
     let p = until(&mut progress, |p| p.queued + p.dropped as usize == 12).await;
     assert_eq!((p.queued, p.dropped, p.sent), (5, 7, 3));
-    // They wait on disk (at most twice the bound in lines before the file is rewritten).
+    // They wait on disk: exactly the bound in lines, the newest last.
     let on_disk = std::fs::read_to_string(dir.path().join("queue/queue.jsonl")).unwrap();
     assert!(on_disk.contains(r#"\"part\":\"P15\""#), "{on_disk}");
-    assert!((5..10).contains(&on_disk.lines().count()), "{on_disk}");
+    assert_eq!(on_disk.lines().count(), 5, "{on_disk}");
 
     // Broker back (same port, same sessions): the drop report, then parts 11 to 15.
     let b = broker(port, &broker_dir);
@@ -251,8 +265,9 @@ async fn events_reach_a_real_broker_survive_its_outage_and_report_what_the_bound
     assert_eq!(topic, "plant/camloop-test/queue_dropped");
     assert_eq!(report["dropped_events"], 7);
     assert_eq!(report["queue_max_events"], 5);
+    // Their sequence numbers show the 7 dropped (4 to 10) as a gap.
     for n in 11..=15 {
-        expect_part(&mut rx, n).await;
+        expect_part(&mut rx, n, u64::from(n)).await;
     }
     let p = until(&mut progress, |p| p.queued == 0 && p.sent == 3 + 1 + 5).await;
     assert!(p.connected);
@@ -265,17 +280,21 @@ async fn events_reach_a_real_broker_survive_its_outage_and_report_what_the_bound
     );
 
     // A newcomer gets the machine's newest state, retained by the broker.
-    let mut late = subscriber(port, "plant-late", "plant/M1/state", true).await;
+    let mut late = subscriber(port, "plant-late", "plant/M1/IN1/state", true).await;
     let (topic, state, retained) = next(&mut late).await;
-    assert_eq!(topic, "plant/M1/state");
+    assert_eq!(topic, "plant/M1/IN1/state");
     assert!(retained);
-    assert_eq!(state["part"], "P15");
+    assert_eq!(state["last_part"], "P15");
+    let mut status = subscriber(port, "plant-status", "plant/camloop-test/status", true).await;
+    assert_eq!(next(&mut status).await.1, "online");
 
     shutdown_tx.send(true).unwrap();
     drop(events);
     tokio::time::timeout(DEADLINE, publisher.join())
         .await
         .unwrap();
+    // A clean stop says `offline` itself.
+    assert_eq!(next(&mut status).await.1, "offline");
     stop(b);
 }
 

@@ -116,3 +116,28 @@ fn unknown_keys_are_errors() {
         "{e}"
     );
 }
+
+/// The part name reaches the API's JSON, DFQ K1001/K1002 and the NC comment: it is held to
+/// the machine-name rule at load, so no sink needs its own escaping.
+#[test]
+fn a_part_name_outside_the_plain_rule_is_refused_naming_the_file() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let good = "name = \"DEMO-CAM\"";
+    assert!(text.contains(good));
+    for bad in [
+        "<script>alert(1)</script>",
+        "CAM)\\nM30",
+        "K1002 x",
+        "a;b",
+        "",
+        "DRAWING-NUMBER-FAR-TOO-LONG-1234567",
+    ] {
+        let forged = text.replacen(good, &format!("name = \"{bad}\""), 1);
+        let e = Recipe::parse(&forged, "evil.toml").unwrap_err().to_string();
+        assert!(
+            e.starts_with("evil.toml: ") && e.contains("must be 1–32 letters, digits, '-' or '_'"),
+            "{bad}: {e}"
+        );
+    }
+}

@@ -107,6 +107,7 @@ async fn server(limits: HttpLimits, store: Option<camloop::store::Store>) -> Ser
 fn limits(max_connections: usize, header_ms: u64, body_ms: u64) -> HttpLimits {
     HttpLimits {
         max_connections,
+        max_connections_per_client: max_connections,
         header_timeout: Duration::from_millis(header_ms),
         body_timeout: Duration::from_millis(body_ms),
     }
@@ -117,7 +118,7 @@ fn post_request(path: &str, body: &str, token: Option<&str>) -> String {
         .map(|t| format!("Authorization: Bearer {t}\r\n"))
         .unwrap_or_default();
     format!(
-        "POST {path} HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n{auth}Content-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        "POST {path} HTTP/1.1\r\nHost: localhost\r\nContent-Type: application/json\r\n{auth}Content-Length: {}\r\nConnection: close\r\n\r\n{body}",
         body.len()
     )
 }
@@ -136,7 +137,7 @@ async fn half_sent_requests_are_cut_off_and_the_cap_holds_the_rest_until_slots_f
     let mut stalled = Vec::new();
     for _ in 0..4 {
         let mut c = TcpStream::connect(s.addr).await.unwrap();
-        c.write_all(b"GET /healthz HTTP/1.1\r\nHost: x\r\n")
+        c.write_all(b"GET /healthz HTTP/1.1\r\nHost: localhost\r\n")
             .await
             .unwrap();
         stalled.push(c);
@@ -144,7 +145,7 @@ async fn half_sent_requests_are_cut_off_and_the_cap_holds_the_rest_until_slots_f
     // A fifth, complete request waits for a slot.
     let waiting = tokio::spawn(exchange(
         s.addr,
-        "GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n",
+        "GET /healthz HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n",
     ));
     for mut c in stalled {
         let mut buf = Vec::new();
@@ -190,7 +191,7 @@ async fn a_write_without_the_token_is_refused_before_its_body_is_read() {
     // 10 MB announced, a few bytes sent, the rest never comes: 401 at once.
     let started = Instant::now();
     let request = format!(
-        "POST {path} HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 10000000\r\n\r\n{{\"version\""
+        "POST {path} HTTP/1.1\r\nHost: localhost\r\nContent-Type: application/json\r\nContent-Length: 10000000\r\n\r\n{{\"version\""
     );
     let (status, body) = tokio::time::timeout(Duration::from_secs(5), exchange(s.addr, &request))
         .await
@@ -212,7 +213,7 @@ async fn a_write_without_the_token_is_refused_before_its_body_is_read() {
 async fn a_body_that_does_not_arrive_in_time_gets_408() {
     let s = server(limits(16, 5_000, 300), None).await;
     let request = format!(
-        "POST /api/v1/machines/SIM1/dressings HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nAuthorization: Bearer {TOKEN}\r\nContent-Length: 100\r\n\r\n{{\"wheel"
+        "POST /api/v1/machines/SIM1/dressings HTTP/1.1\r\nHost: localhost\r\nContent-Type: application/json\r\nAuthorization: Bearer {TOKEN}\r\nContent-Length: 100\r\n\r\n{{\"wheel"
     );
     let started = Instant::now();
     let (status, body) = tokio::time::timeout(Duration::from_secs(5), exchange(s.addr, &request))
@@ -303,7 +304,7 @@ async fn the_machine_list_shows_each_configured_machines_lobes() {
     let s = server(limits(16, 5_000, 5_000), Some(store)).await;
     let (status, body) = exchange(
         s.addr,
-        "GET /api/v1/machines HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n",
+        "GET /api/v1/machines HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n",
     )
     .await;
     assert_eq!(status, 200, "{body}");
@@ -318,7 +319,7 @@ async fn the_machine_list_shows_each_configured_machines_lobes() {
     // One instance alone: no cluster to show (tests/cluster_takeover.rs asks a cluster).
     let (status, body) = exchange(
         s.addr,
-        "GET /api/v1/cluster HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n",
+        "GET /api/v1/cluster HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n",
     )
     .await;
     assert_eq!(status, 200, "{body}");

@@ -91,18 +91,54 @@ pub fn check_plain_name(name: &str) -> Result<(), NameError> {
         .find(|(_, c)| !(c.is_ascii_alphanumeric() || *c == '-' || *c == '_'))
     {
         return Err(NameError::BadCharacter {
-            name: name.to_string(),
+            name: quote(name),
             ch,
             position: i + 1,
         });
     }
     if name.len() > MAX_NAME_LEN {
         return Err(NameError::TooLong {
-            name: name.to_string(),
+            name: quote(name),
             len: name.len(),
         });
     }
     Ok(())
+}
+
+/// A part's identifier (serial number) as the gauges send it: 1–32 characters of
+/// `A–Z a–z 0–9 . _ -` (the gauge codecs' rule), so a path such as `../..`, a NUL or a
+/// 10 kB value is refused before it reaches the store.
+pub fn valid_part_ident(part: &str) -> bool {
+    (1..=MAX_NAME_LEN).contains(&part.len())
+        && part
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+}
+
+/// Most characters of a value sent by a client that an error message quotes back.
+pub const MAX_QUOTED_CHARS: usize = 64;
+
+/// `value` as an error message may quote it: at most [`MAX_QUOTED_CHARS`] characters (then
+/// `…`), control characters escaped, so a 10 kB or binary value never comes back whole.
+pub fn quote(value: &str) -> String {
+    quote_up_to(value, MAX_QUOTED_CHARS)
+}
+
+/// [`quote`] with another length.
+pub fn quote_up_to(value: &str, max_chars: usize) -> String {
+    let mut out = String::new();
+    for (i, c) in value.chars().enumerate() {
+        if i == max_chars {
+            out.push('…');
+            break;
+        }
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
 }
 
 #[cfg(test)]
@@ -122,6 +158,14 @@ mod tests {
                 len: 33
             })
         );
+        // A 10 kB name is quoted back by its first 64 characters only; NUL comes escaped.
+        let long = MachineName::new(&"y".repeat(10_000))
+            .unwrap_err()
+            .to_string();
+        assert!(long.contains(&format!("`{}…`", "y".repeat(64))), "{long}");
+        assert!(long.len() < 200, "{} bytes", long.len());
+        let nul = MachineName::new("a\0b").unwrap_err().to_string();
+        assert!(nul.starts_with("name `a\\u{0}b` has"), "{nul}");
         assert_eq!(
             MachineName::new("bad name").unwrap_err().to_string(),
             "name `bad name` has ` ` at character 4: only letters, digits, '-' or '_' are allowed"

@@ -92,7 +92,7 @@ impl<T: serde::de::DeserializeOwned> FromRequest<AppState> for ApiJson<T> {
         Json::<T>::from_request(req, state)
             .await
             .map(|Json(v)| ApiJson(v))
-            .map_err(|r| ApiError(r.status(), "invalid_body", r.body_text()))
+            .map_err(|r| ApiError(r.status(), "invalid_body", clip(&r.body_text())))
     }
 }
 
@@ -132,7 +132,7 @@ impl<S: Send + Sync, T: serde::de::DeserializeOwned> FromRequestParts<S> for Api
         Query::<T>::from_request_parts(parts, state)
             .await
             .map(|Query(v)| ApiQuery(v))
-            .map_err(|r| ApiError(r.status(), "invalid_query", r.body_text()))
+            .map_err(|r| ApiError(r.status(), "invalid_query", clip(&r.body_text())))
     }
 }
 
@@ -146,6 +146,42 @@ impl<S: Send + Sync, T: serde::de::DeserializeOwned + Send> FromRequestParts<S> 
         Path::<T>::from_request_parts(parts, state)
             .await
             .map(|Path(v)| ApiPath(v))
-            .map_err(|r| ApiError(r.status(), "invalid_path", r.body_text()))
+            .map_err(|r| ApiError(r.status(), "invalid_path", clip(&r.body_text())))
+    }
+}
+
+/// An extractor's rejection text as an error message may carry it: each `quoted` value
+/// cut to [`crate::names::MAX_QUOTED_CHARS`] characters, and the whole to 256, so what a
+/// client sent (a 10 kB path segment, a huge query) never comes back whole.
+fn clip(text: &str) -> String {
+    let mut out = String::new();
+    for (i, piece) in text.split('`').enumerate() {
+        if i > 0 {
+            out.push('`');
+        }
+        // Odd pieces sit between backticks: values quoted from the request.
+        match i % 2 {
+            1 => out.push_str(&crate::names::quote(piece)),
+            _ => out.push_str(piece),
+        }
+    }
+    crate::names::quote_up_to(&out, 256)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rejection_texts_quote_at_most_64_characters_of_the_request() {
+        let sent = "9".repeat(10_000);
+        let text = format!("Cannot parse `{sent}` to a `i64`");
+        let clipped = clip(&text);
+        assert_eq!(
+            clipped,
+            format!("Cannot parse `{}…` to a `i64`", "9".repeat(64))
+        );
+        let unquoted = clip(&format!("bad value {sent}"));
+        assert!(unquoted.chars().count() <= 257, "{}", unquoted.len());
     }
 }

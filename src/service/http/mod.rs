@@ -10,7 +10,9 @@
 //! - `api.rs`: the `{code, message}` error and the extractors that keep it.
 //! - `routes.rs`: the read handlers and their typed replies.
 //! - `writes.rs`: the write handlers and the command hand-over.
-//! - `server.rs`: the listener loop: header and body timeouts, the connection cap.
+//! - `server.rs`: the listener loop: header and body timeouts, the connection caps.
+//! - `harden.rs`: the `Host` allow-list, the security headers, the per-client cap.
+//! - `tls.rs`: HTTPS with rustls, reloaded on SIGHUP; the self-signed development pair.
 //! - `openapi.rs`: the API description.
 //! - `dashboard/`: the engineers' web pages, their live channel and downloads.
 
@@ -18,20 +20,24 @@ pub mod access;
 mod api;
 mod audit;
 mod dashboard;
+mod harden;
 mod openapi;
 mod parts;
 mod route_roles;
 mod routes;
 mod server;
 mod session;
+mod tls;
 mod writes;
 
 pub use access::{AuthState, Principal, ROUTES, RouteRule};
 pub use api::{ApiError, ApiJson, ApiPath, ApiQuery, Authorized};
 pub use audit::record as record_audit;
 pub use dashboard::{FeatureSheet, FeatureSheets, Stopping};
+pub use harden::{CONTENT_SECURITY_POLICY, HostAllowList, Policy};
 pub use routes::{LobeInfo, MachineInfo, MachinesReply};
-pub use server::{HttpLimits, serve};
+pub use server::{HttpLimits, serve, serve_with};
+pub use tls::{Tls, self_signed};
 pub use writes::CommandReply;
 
 use super::machine::StoreHandle;

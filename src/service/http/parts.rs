@@ -35,6 +35,16 @@ pub(super) async fn part(
     ApiPath((machine, part)): ApiPath<(String, String)>,
 ) -> Result<Json<PartReply>, ApiError> {
     let name = machine_name(&machine)?;
+    if !crate::names::valid_part_ident(&part) {
+        return Err(ApiError(
+            axum::http::StatusCode::BAD_REQUEST,
+            "invalid_name",
+            format!(
+                "part `{}`: must be 1–32 characters of A–Z a–z 0–9 . _ -",
+                crate::names::quote(&part)
+            ),
+        ));
+    }
     let rows = store(&state)
         .await?
         .part_measurements(&machine, &part)

@@ -3,6 +3,8 @@
 //! gauge, the journal and the share. Here:
 //! - at most `max_connections` connections are served at once; the loop takes a slot before
 //!   it accepts, so the rest wait in the kernel's queue and hold none of ours;
+//! - at most `max_connections_per_client` of them from one client address: a connection
+//!   beyond it is closed at once, so one client cannot hold every slot;
 //! - a client has `header_timeout` to send a request's headers (hyper's header read timeout,
 //!   which also runs while a kept-alive connection is idle), else the connection is closed;
 //! - a body has `body_timeout` to arrive (enforced where a body is read, see `ApiJson`);
@@ -18,11 +20,15 @@ use std::time::Duration;
 use tokio::sync::{Semaphore, watch};
 use tracing::{debug, warn};
 
+use super::harden::{HostAllowList, PerClient, Policy};
+
 /// How much the API may take of the process.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct HttpLimits {
     /// Connections served at once.
     pub max_connections: usize,
+    /// Connections served at once to one client address.
+    pub max_connections_per_client: usize,
     /// Time to send a request's headers (and an idle kept-alive connection's limit).
     pub header_timeout: Duration,
     /// Time to send a request's body once its headers are in.
@@ -33,6 +39,7 @@ impl HttpLimits {
     pub fn from_config(http: &crate::config::HttpSection) -> Self {
         Self {
             max_connections: http.max_connections.max(1),
+            max_connections_per_client: http.per_client_connections(),
             header_timeout: Duration::from_millis(http.header_timeout_ms),
             body_timeout: Duration::from_millis(http.body_timeout_ms),
         }
@@ -42,30 +49,39 @@ impl HttpLimits {
 /// After shutdown, requests in flight get this long to finish.
 const DRAIN: Duration = Duration::from_secs(10);
 
-/// Serves `app` on `listener` until `shutdown` turns true.
+/// Serves `app` on `listener` until `shutdown` turns true, answering to the listen address
+/// and `localhost` only, without TLS.
 pub async fn serve(
     listener: tokio::net::TcpListener,
     app: Router,
     limits: HttpLimits,
+    shutdown: watch::Receiver<bool>,
+) {
+    let policy = match listener.local_addr() {
+        Ok(addr) => Policy {
+            hosts: HostAllowList::new(addr, &[]),
+            tls: false,
+        },
+        Err(_) => return,
+    };
+    serve_with(listener, app, limits, policy, None, shutdown).await
+}
+
+/// Serves `app` on `listener` under `policy` (and TLS when given) until `shutdown`.
+pub async fn serve_with(
+    listener: tokio::net::TcpListener,
+    app: Router,
+    limits: HttpLimits,
+    policy: Policy,
+    tls: Option<Arc<super::tls::Tls>>,
     mut shutdown: watch::Receiver<bool>,
 ) {
-    let mut limits = limits;
-    if let Some(files) = open_file_limit() {
-        // Half the descriptors stay for the gauges, the journals, the shares and the database.
-        let cap = usize::try_from(files / 2).unwrap_or(usize::MAX).max(1);
-        if limits.max_connections > cap {
-            warn!(
-                max_connections = limits.max_connections,
-                open_file_limit = files,
-                cap,
-                "http.max_connections lowered to half the open-file limit"
-            );
-            limits.max_connections = cap;
-        }
-    }
+    let limits = fit_to_open_files(limits);
     // Open event streams end when the server stops (see `dashboard::Stopping`).
     let app = app.layer(axum::Extension(super::Stopping(shutdown.clone())));
+    let app = super::harden::apply(app, policy);
     let slots = Arc::new(Semaphore::new(limits.max_connections));
+    let clients = PerClient::new(limits.max_connections_per_client);
     let mut http = hyper::server::conn::http1::Builder::new();
     http.timer(TokioTimer::new())
         .header_read_timeout(limits.header_timeout);
@@ -90,31 +106,90 @@ pub async fn serve(
             },
             _ = shutdown.changed() => break,
         };
-        // The client's address, for the access layer (lockout, audit).
-        let with_peer = app
-            .clone()
-            .layer(axum::Extension(axum::extract::ConnectInfo(peer)));
-        let service = TowerToHyperService::new(with_peer);
-        let connection = http.serve_connection(TokioIo::new(stream), service);
-        let mut stop = shutdown.clone();
+        let Some(client) = clients.admit(peer.ip()) else {
+            // Closed at once: its global slot goes back with it.
+            debug!(peer = %peer, "http connection refused: the client holds its connection cap");
+            continue;
+        };
+        let conn = Conn {
+            app: app.clone(),
+            http: http.clone(),
+            stop: shutdown.clone(),
+            peer,
+            handshake_timeout: limits.header_timeout,
+        };
+        let tls = tls.clone();
         tokio::spawn(async move {
-            let _slot = slot;
-            tokio::pin!(connection);
-            let result = tokio::select! {
-                r = connection.as_mut() => r,
-                _ = stop.changed() => {
-                    connection.as_mut().graceful_shutdown();
-                    connection.await
-                }
-            };
-            if let Err(e) = result {
-                debug!(peer = %peer, error = %e, "http connection ended");
+            let _slots = (slot, client);
+            match tls {
+                None => conn.serve(stream).await,
+                Some(tls) => match tls.accept(stream, conn.handshake_timeout).await {
+                    Ok(stream) => conn.serve(stream).await,
+                    Err(e) => debug!(peer = %peer, error = %e, "TLS handshake failed"),
+                },
             }
         });
     }
     // Every slot back means every connection has ended.
     let all = u32::try_from(limits.max_connections).unwrap_or(u32::MAX);
     let _ = tokio::time::timeout(DRAIN, slots.acquire_many(all)).await;
+}
+
+/// One accepted connection, ready to serve over plain TCP or TLS.
+struct Conn {
+    app: Router,
+    http: hyper::server::conn::http1::Builder,
+    stop: watch::Receiver<bool>,
+    peer: std::net::SocketAddr,
+    /// The TLS handshake gets as long as a request's headers.
+    handshake_timeout: Duration,
+}
+
+impl Conn {
+    async fn serve<I>(mut self, stream: I)
+    where
+        I: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin + Send + 'static,
+    {
+        // The client's address, for the access layer (lockout, audit).
+        let with_peer = self
+            .app
+            .clone()
+            .layer(axum::Extension(axum::extract::ConnectInfo(self.peer)));
+        let service = TowerToHyperService::new(with_peer);
+        let connection = self.http.serve_connection(TokioIo::new(stream), service);
+        tokio::pin!(connection);
+        let result = tokio::select! {
+            r = connection.as_mut() => r,
+            _ = self.stop.changed() => {
+                connection.as_mut().graceful_shutdown();
+                connection.await
+            }
+        };
+        if let Err(e) = result {
+            debug!(peer = %self.peer, error = %e, "http connection ended");
+        }
+    }
+}
+
+/// `limits` with the caps lowered to half the process's open-file limit where that is
+/// lower: the other half stays for the gauges, the journals, the shares and the database.
+fn fit_to_open_files(mut limits: HttpLimits) -> HttpLimits {
+    if let Some(files) = open_file_limit() {
+        let cap = usize::try_from(files / 2).unwrap_or(usize::MAX).max(1);
+        if limits.max_connections > cap {
+            warn!(
+                max_connections = limits.max_connections,
+                open_file_limit = files,
+                cap,
+                "http.max_connections lowered to half the open-file limit"
+            );
+            limits.max_connections = cap;
+        }
+    }
+    limits.max_connections_per_client = limits
+        .max_connections_per_client
+        .clamp(1, limits.max_connections);
+    limits
 }
 
 /// The process's soft limit on open files (Linux: from /proc/self/limits); `None` where

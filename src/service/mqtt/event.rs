@@ -199,14 +199,29 @@ impl PlantEvent {
         )
     }
 
-    /// `<prefix>/<machine>/state`: the machine's newest event, retained by the broker.
-    pub fn state_topic(&self, prefix: &str) -> String {
-        format!("{prefix}/{}/state", self.machine())
-    }
-
     pub fn payload(&self) -> String {
         // Strings, numbers and enums only: serializing cannot fail.
         serde_json::to_string(self).expect("a plant event serializes to JSON")
+    }
+
+    /// The payload with the event's sequence number (`seq`) last.
+    pub fn payload_with_seq(&self, seq: u64) -> String {
+        let mut value = serde_json::to_value(self).expect("a plant event serializes to JSON");
+        if let Some(fields) = value.as_object_mut() {
+            fields.insert("seq".into(), seq.into());
+        }
+        value.to_string()
+    }
+
+    pub fn at_ms(&self) -> i64 {
+        match self {
+            PlantEvent::PartAnalysed { at_ms, .. }
+            | PlantEvent::TableDelivered { at_ms, .. }
+            | PlantEvent::TableRefused { at_ms, .. }
+            | PlantEvent::LearningFrozen { at_ms, .. }
+            | PlantEvent::Dressing { at_ms, .. }
+            | PlantEvent::Alarm { at_ms, .. } => *at_ms,
+        }
     }
 }
 
@@ -252,7 +267,6 @@ mod tests {
         };
         let e = PlantEvent::from_pending(&status).unwrap();
         assert_eq!(e.topic("plant"), "plant/G7/IN1/table_delivered");
-        assert_eq!(e.state_topic("plant"), "plant/G7/state");
         assert_eq!(
             e.payload(),
             r#"{"event":"table_delivered","machine":"G7","feature":"IN1","version":12,"at_ms":5}"#

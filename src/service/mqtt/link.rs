@@ -19,6 +19,9 @@ const MIN_BACKOFF: Duration = Duration::from_millis(100);
 pub const MAX_BACKOFF: Duration = Duration::from_secs(5);
 /// A broker that accepted the connection but does not answer within this is given up on.
 const ANSWER_TIMEOUT: Duration = Duration::from_secs(10);
+/// The status topic's payloads: the birth message, and the last will (and a clean stop).
+pub const ONLINE: &str = "online";
+pub const OFFLINE: &str = "offline";
 
 /// What a connection attempt or a send ended with.
 enum Outcome {
@@ -48,11 +51,22 @@ pub(super) async fn run(
                 if was_lost {
                     info!(host = %options.broker_address().0, "MQTT broker back: sending the queued events");
                 }
+                let status = super::status_topic(&prefix, &shared.client_id);
                 let outcome =
-                    send_queue(&client, &mut events, &prefix, &shared, &wake, &mut shutdown).await;
+                    match send(&client, &mut events, &mut shutdown, &status, true, ONLINE).await {
+                        Ok(()) => {
+                            send_queue(&client, &mut events, &prefix, &shared, &wake, &mut shutdown)
+                                .await
+                        }
+                        Err(outcome) => outcome,
+                    };
                 shared.set_connected(false);
                 match outcome {
                     Outcome::Shutdown => {
+                        // A clean stop sends no last will: say `offline` ourselves.
+                        let (_keep, mut never) = watch::channel(false);
+                        let bye = send(&client, &mut events, &mut never, &status, true, OFFLINE);
+                        let _ = tokio::time::timeout(Duration::from_secs(2), bye).await;
                         let _ = client.disconnect().await;
                         return;
                     }
@@ -150,30 +164,37 @@ async fn send_queue(
                 _ = shutdown.changed() => return Outcome::Shutdown,
             }
         };
-        let retained = message.state_topic.iter().map(|t| (t, true));
-        for (topic, retain) in std::iter::once((&message.topic, false)).chain(retained) {
-            if let Err(e) = publish(client, topic, retain, &message.payload).await {
-                return Outcome::Lost(e.to_string());
-            }
-            loop {
-                match next_event(events, shutdown).await {
-                    Ok(Event::Incoming(Packet::PubAck(_))) => break,
-                    Ok(_) => {}
-                    Err(outcome) => return outcome,
-                }
+        let event = std::iter::once((&message.topic, false, &message.payload));
+        let legacy = message
+            .state_topic
+            .iter()
+            .map(|t| (t, true, &message.payload));
+        let states = message.states.iter().map(|(t, p)| (t, true, p));
+        for (topic, retain, payload) in event.chain(legacy).chain(states) {
+            if let Err(outcome) = send(client, events, shutdown, topic, retain, payload).await {
+                return outcome;
             }
         }
         shared.sent(dropped);
     }
 }
 
-async fn publish(
+/// Publishes with QoS 1 and waits for the broker's acknowledgement.
+async fn send(
     client: &AsyncClient,
+    events: &mut mpsc::Receiver<Result<Event, rumqttc::ConnectionError>>,
+    shutdown: &mut watch::Receiver<bool>,
     topic: &str,
     retain: bool,
     payload: &str,
-) -> Result<(), rumqttc::ClientError> {
+) -> Result<(), Outcome> {
     client
         .publish(topic, QoS::AtLeastOnce, retain, payload.as_bytes().to_vec())
         .await
+        .map_err(|e| Outcome::Lost(e.to_string()))?;
+    loop {
+        if let Event::Incoming(Packet::PubAck(_)) = next_event(events, shutdown).await? {
+            return Ok(());
+        }
+    }
 }

@@ -2,16 +2,23 @@
 //!
 //! The machine loops hand each journal record to an [`EventSender`] (never waiting: a full
 //! intake counts the event as dropped); an intake task turns it into a [`PlantEvent`] on
-//! its topic `<prefix>/<machine>/<feature>/<event>` plus the machine's retained state
-//! `<prefix>/<machine>/state`, and appends both to the on-disk [`queue::DiskQueue`]; the
-//! [`link`] sends the queue to the broker with QoS 1, in order, whenever the broker is
-//! there. A broker that is down never blocks a loop: events wait on disk up to
-//! `queue_max_events`, the oldest are dropped beyond it, and the number dropped is published
-//! on `<prefix>/<client_id>/queue_dropped` when the broker is back (and logged).
+//! its topic `<prefix>/<machine>/<feature>/<event>` with its sequence number, plus the
+//! retained states it changed (`<prefix>/<machine>/<feature>/state`, see [`state`]), and
+//! appends them to the on-disk [`queue::DiskQueue`]; the [`link`] sends the queue to the
+//! broker with QoS 1, in order, whenever the broker is there. A broker that is down never
+//! blocks a loop: events wait on disk up to `queue_max_events`, the oldest are dropped
+//! beyond it (logged when dropping starts), and the number dropped is published on
+//! `<prefix>/<client_id>/queue_dropped` when the broker is back (and logged).
+//!
+//! `<prefix>/<client_id>/status` says `online` (retained) once connected and `offline` when
+//! the service stops; the broker publishes `offline` itself (the last will) when the
+//! connection is lost without that, e.g. when the process is killed. Credentials and TLS
+//! (rustls) come from `[mqtt]`.
 
 mod event;
 mod link;
 pub mod queue;
+pub mod state;
 
 pub use event::{MACHINE_LEVEL, PlantEvent};
 pub use link::MAX_BACKOFF;
@@ -22,8 +29,9 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
 use anyhow::Context;
-use rumqttc::MqttOptions;
+use rumqttc::{LastWill, MqttOptions, QoS, TlsConfiguration, Transport};
 use tokio::sync::{Notify, mpsc, watch};
+use tokio_rustls::rustls;
 use tracing::warn;
 
 use crate::config::MqttSection;
@@ -124,10 +132,16 @@ impl Shared {
                 "at_ms": crate::clock::now_ms(),
             });
             let topic = format!("{prefix}/{}/queue_dropped", self.client_id);
+            warn!(
+                dropped_events = dropped,
+                queue_max_events = self.max,
+                "MQTT events dropped while the broker was away (queue full): reporting the count on {topic}"
+            );
             let m = Message {
                 topic,
                 payload: report.to_string(),
                 state_topic: None,
+                states: Vec::new(),
             };
             return (Some(m), dropped);
         }
@@ -182,14 +196,14 @@ impl Publisher {
         });
         shared.progress();
         let wake = Arc::new(Notify::new());
-        let mut options = MqttOptions::new(&settings.client_id, &settings.host, settings.port);
-        options.set_keep_alive(Duration::from_secs(settings.keep_alive_s));
-        options.set_clean_session(true);
+        let options = options(settings)?;
+        let tracker = state::Tracker::open(queue_dir);
         let intake = tokio::spawn(intake(
             rx,
             settings.topic_prefix.clone(),
             shared.clone(),
             wake.clone(),
+            tracker,
         ));
         let link = tokio::spawn(link::run(
             options,
@@ -223,21 +237,95 @@ impl Publisher {
     }
 }
 
-/// Moves events from the loops to the disk queue.
+/// `<prefix>/<client_id>/status`: `online` while connected, else `offline`.
+pub fn status_topic(prefix: &str, client_id: &str) -> String {
+    format!("{prefix}/{client_id}/status")
+}
+
+/// The client's options: keep-alive, the last will, credentials and TLS.
+fn options(settings: &MqttSection) -> anyhow::Result<MqttOptions> {
+    let mut options = MqttOptions::new(&settings.client_id, &settings.host, settings.port);
+    options.set_keep_alive(Duration::from_secs(settings.keep_alive_s));
+    options.set_clean_session(true);
+    let status = status_topic(&settings.topic_prefix, &settings.client_id);
+    options.set_last_will(LastWill::new(status, link::OFFLINE, QoS::AtLeastOnce, true));
+    if let Some(user) = &settings.username {
+        let password = settings.password.as_ref().map(|p| p.expose().to_owned());
+        options.set_credentials(user, password.unwrap_or_default());
+    }
+    if settings.tls {
+        let config = tls_client(settings.tls_ca.as_deref())?;
+        options.set_transport(Transport::tls_with_config(TlsConfiguration::Rustls(
+            Arc::new(config),
+        )));
+    }
+    Ok(options)
+}
+
+/// A rustls client trusting `ca` (PEM), or the system's roots.
+fn tls_client(ca: Option<&Path>) -> anyhow::Result<rustls::ClientConfig> {
+    use rustls::pki_types::CertificateDer;
+    use rustls::pki_types::pem::PemObject;
+    let mut roots = rustls::RootCertStore::empty();
+    match ca {
+        Some(path) => {
+            for cert in CertificateDer::pem_file_iter(path)
+                .with_context(|| format!("mqtt.tls_ca {}", path.display()))?
+            {
+                let cert = cert.with_context(|| format!("mqtt.tls_ca {}", path.display()))?;
+                roots
+                    .add(cert)
+                    .with_context(|| format!("mqtt.tls_ca {}", path.display()))?;
+            }
+        }
+        None => {
+            let found = rustls_native_certs::load_native_certs();
+            roots.add_parsable_certificates(found.certs);
+        }
+    }
+    anyhow::ensure!(
+        !roots.is_empty(),
+        "mqtt.tls: no CA certificate to check the broker against"
+    );
+    let provider = Arc::new(rustls::crypto::ring::default_provider());
+    Ok(rustls::ClientConfig::builder_with_provider(provider)
+        .with_safe_default_protocol_versions()?
+        .with_root_certificates(roots)
+        .with_no_client_auth())
+}
+
+/// Moves events from the loops to the disk queue, numbering them and tracking the states
+/// they change.
 async fn intake(
     mut rx: mpsc::Receiver<PlantEvent>,
     prefix: String,
     shared: Arc<Shared>,
     wake: Arc<Notify>,
+    mut tracker: state::Tracker,
 ) {
     while let Some(event) = rx.recv().await {
+        let (seq, states) = tracker.apply(&event, &prefix);
+        if let Err(e) = tracker.save() {
+            warn!(error = %e, "MQTT state file cannot be written: sequence numbers may repeat after a restart");
+        }
         let message = Message {
             topic: event.topic(&prefix),
-            payload: event.payload(),
-            state_topic: Some(event.state_topic(&prefix)),
+            payload: event.payload_with_seq(seq),
+            state_topic: None,
+            states,
         };
-        if let Err(e) = shared.queue().push(message) {
-            warn!(error = %e, "MQTT queue file cannot be written: event kept in memory only");
+        // The guard goes before the match: the arms take the lock again.
+        let pushed = shared.queue().push(message);
+        match pushed {
+            // The first drop since the last report: say so now, the count follows.
+            Ok(true) if shared.queue().dropped_unreported() == 1 => warn!(
+                queue_max_events = shared.max,
+                "MQTT queue full: the oldest events are dropped until the broker is back"
+            ),
+            Ok(_) => {}
+            Err(e) => {
+                warn!(error = %e, "MQTT queue file cannot be written: event kept in memory only")
+            }
         }
         shared.progress();
         wake.notify_one();

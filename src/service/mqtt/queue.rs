@@ -2,7 +2,9 @@
 //! and mirrored in memory, so events survive a broker outage and a restart. It holds at
 //! most `max` messages: when full, the oldest is dropped and counted, and the count is
 //! published once the broker is back. The file is emptied when everything is sent, and
-//! rewritten with what is pending when it has twice `max` lines, so it stays bounded too.
+//! rewritten with what is pending when one more line would make it longer than `max`
+//! lines, so the file never holds more than `max` lines either. (While the broker is away
+//! and the queue is full, that is one rewrite of the file per event.)
 //!
 //! Delivery is at least once (MQTT QoS 1): a message sent but not yet acknowledged when the
 //! process stops is sent again after the restart.
@@ -16,14 +18,21 @@ use serde::{Deserialize, Serialize};
 
 /// Queue file name in the queue folder.
 pub const QUEUE_FILE: &str = "queue.jsonl";
+/// The count of drops not yet reported, kept across restarts (the dropped lines are gone
+/// from the queue file, which never exceeds the bound).
+pub const DROPPED_FILE: &str = "queue.dropped";
 
-/// One event to publish: its payload on its topic, and again, retained, on the state topic
-/// when it has one.
+/// One event to publish: its payload on its topic, then each state it changed, retained.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Message {
     pub topic: String,
     pub payload: String,
+    /// Queues written before the per-feature states: the payload again, retained, here.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub state_topic: Option<String>,
+    /// (topic, payload) of each state the event changed, published retained.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub states: Vec<(String, String)>,
 }
 
 /// The queue (see the module doc).
@@ -61,6 +70,10 @@ impl DiskQueue {
             }
         }
         let max = max.max(1);
+        dropped += std::fs::read_to_string(dir.join(DROPPED_FILE))
+            .ok()
+            .and_then(|t| t.trim().parse::<u64>().ok())
+            .unwrap_or(0);
         while pending.len() > max {
             pending.pop_front();
             dropped += 1;
@@ -79,22 +92,25 @@ impl DiskQueue {
         Ok(queue)
     }
 
-    /// Appends a message; when the queue is full, the oldest pending one is dropped.
-    pub fn push(&mut self, message: Message) -> std::io::Result<()> {
-        if self.pending.len() >= self.max {
+    /// Appends a message; when the queue is full, the oldest pending one is dropped (and
+    /// `Ok(true)` says so).
+    pub fn push(&mut self, message: Message) -> std::io::Result<bool> {
+        let full = self.pending.len() >= self.max;
+        if full {
             self.pending.pop_front();
-            self.dropped_unreported += 1;
-            self.dropped_total += 1;
+            self.count_dropped(1);
         }
         let mut line = serde_json::to_string(&message).map_err(std::io::Error::other)?;
         line.push('\n');
         self.pending.push_back(message);
-        self.file.write_all(line.as_bytes())?;
-        self.lines += 1;
-        if self.lines >= 2 * self.max {
+        if self.lines >= self.max {
+            // The file holds sent or dropped lines: write the pending ones alone.
             self.rewrite()?;
+        } else {
+            self.file.write_all(line.as_bytes())?;
+            self.lines += 1;
         }
-        Ok(())
+        Ok(full)
     }
 
     /// The oldest pending message.
@@ -122,13 +138,18 @@ impl DiskQueue {
 
     /// Counts messages lost before they reached the queue (its intake was full).
     pub fn count_dropped(&mut self, n: u64) {
+        if n == 0 {
+            return;
+        }
         self.dropped_unreported += n;
+        self.save_dropped();
         self.dropped_total += n;
     }
 
     /// `n` drops were reported to the broker.
     pub fn dropped_reported(&mut self, n: u64) {
         self.dropped_unreported = self.dropped_unreported.saturating_sub(n);
+        self.save_dropped();
     }
 
     /// Drops not yet reported (still to be told to the broker).
@@ -139,6 +160,15 @@ impl DiskQueue {
     /// Every drop since the queue was opened (with those found at open).
     pub fn dropped_total(&self) -> u64 {
         self.dropped_total
+    }
+
+    /// Keeps the unreported count for a restart; a failure only risks under-reporting.
+    fn save_dropped(&self) {
+        let path = self.path.with_file_name(DROPPED_FILE);
+        let _ = match self.dropped_unreported {
+            0 => std::fs::remove_file(&path).or(Ok(())),
+            n => std::fs::write(&path, n.to_string()),
+        };
     }
 
     /// Rewrites the file with the pending messages only (temporary, then rename).
@@ -166,6 +196,7 @@ mod tests {
             topic: format!("t/{n}"),
             payload: n.to_string(),
             state_topic: None,
+            states: Vec::new(),
         }
     }
 
@@ -181,8 +212,8 @@ mod tests {
         assert_eq!(q.dropped_unreported(), 2);
         q.pop_front().unwrap();
         drop(q);
-        // The file still holds the sent and the dropped lines; the reopen keeps the newest
-        // 3 (message 2 was sent but the file had it: at least once) and counts the rest.
+        // The file holds the newest 3 lines (message 2 was sent but the file had it: at
+        // least once), and the count of the 2 dropped, not yet reported, comes back too.
         let mut q = DiskQueue::open(dir.path(), 3).unwrap();
         assert_eq!(q.len(), 3);
         assert_eq!(q.front(), Some(&msg(2)));
@@ -205,14 +236,21 @@ mod tests {
     fn the_file_stays_bounded_and_a_torn_line_is_skipped() {
         let dir = tempfile::tempdir().unwrap();
         let mut q = DiskQueue::open(dir.path(), 4).unwrap();
+        let lines = || {
+            std::fs::read_to_string(dir.path().join(QUEUE_FILE))
+                .unwrap()
+                .lines()
+                .count()
+        };
         for n in 0..100 {
-            q.push(msg(n)).unwrap();
+            // Full from the fifth on, but for the one after a message was sent.
+            assert_eq!(q.push(msg(n)).unwrap(), n >= 4 && n != 51, "message {n}");
+            // Never more lines than the bound, whether sent lines or dropped ones fill it.
+            assert_eq!(lines(), (n + 1).min(4), "after message {n}");
+            if n == 50 {
+                q.pop_front().unwrap();
+            }
         }
-        let lines = std::fs::read_to_string(dir.path().join(QUEUE_FILE))
-            .unwrap()
-            .lines()
-            .count();
-        assert!(lines < 8, "{lines} lines");
         drop(q);
         let mut f = OpenOptions::new()
             .append(true)
