@@ -111,7 +111,8 @@ pub fn evaluate(values: &[f64], limits: &ChartLimits) -> Vec<ChartPoint> {
     for (i, &x) in values.iter().enumerate() {
         ewma = EWMA_LAMBDA * x + (1.0 - EWMA_LAMBDA) * ewma;
         let decay = (1.0 - EWMA_LAMBDA).powi(2 * (i as i32 + 1));
-        let half = EWMA_L * limits.sigma * (EWMA_LAMBDA / (2.0 - EWMA_LAMBDA) * (1.0 - decay)).sqrt();
+        let half =
+            EWMA_L * limits.sigma * (EWMA_LAMBDA / (2.0 - EWMA_LAMBDA) * (1.0 - decay)).sqrt();
         let mut fired = state.push(x, limits);
         let now_out = (ewma - limits.center).abs() > half;
         if now_out && !ewma_out {
@@ -146,7 +147,9 @@ impl RunState {
         if x > limits.upper || x < limits.lower {
             fired.push(Rule::BeyondThreeSigma);
         }
-        let side = (x - limits.center).partial_cmp(&0.0).map_or(0, |o| o as i64);
+        let side = (x - limits.center)
+            .partial_cmp(&0.0)
+            .map_or(0, |o| o as i64);
         self.side_run = match side {
             0 => 0,
             s if self.side_run.signum() == s => self.side_run + s,
@@ -198,7 +201,9 @@ mod tests {
     #[test]
     fn each_rule_fires_once_where_its_condition_first_holds() {
         // Alternating small values: nothing.
-        let quiet: Vec<f64> = (0..40).map(|i| if i % 2 == 0 { 0.5 } else { -0.5 }).collect();
+        let quiet: Vec<f64> = (0..40)
+            .map(|i| if i % 2 == 0 { 0.5 } else { -0.5 })
+            .collect();
         assert_eq!(fired(&quiet), vec![]);
         // One point at 3.5σ, back at once: rule 1 at that point (the EWMA moves 0.7σ, inside).
         assert_eq!(

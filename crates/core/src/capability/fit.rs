@@ -240,7 +240,9 @@ mod tests {
     #[test]
     fn a_folded_normal_far_from_zero_is_the_normal() {
         // μ = 50σ: the fold carries nothing, so the MLE is the sample's mean and (n-divisor) σ.
-        let values: Vec<f64> = (0..40).map(|i| 50.0 + ((i * 7) % 11) as f64 * 0.2).collect();
+        let values: Vec<f64> = (0..40)
+            .map(|i| 50.0 + ((i * 7) % 11) as f64 * 0.2)
+            .collect();
         let n = values.len() as f64;
         let mean = values.iter().sum::<f64>() / n;
         let sd = (values.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();

@@ -40,13 +40,17 @@ pub struct GaugeStudy {
 /// Why no study.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum GaugeStudyError {
-    #[error("{n} master runs: a type-1 study needs at least {MIN_RUNS} (VDA 5 asks for {RECOMMENDED_RUNS})")]
+    #[error(
+        "{n} master runs: a type-1 study needs at least {MIN_RUNS} (VDA 5 asks for {RECOMMENDED_RUNS})"
+    )]
     TooFewRuns { n: usize },
     #[error("tolerance width {tolerance} is not a positive number")]
     NoTolerance { tolerance: f64 },
     #[error("master run {index} (from 0): value {value} is not a finite number")]
     NotFinite { index: usize, value: f64 },
-    #[error("every master run measured the same value: the gauge's resolution is too coarse for a study")]
+    #[error(
+        "every master run measured the same value: the gauge's resolution is too coarse for a study"
+    )]
     NoSpread,
 }
 

@@ -20,8 +20,8 @@
 //!   Cpk, Ppk, Cpu and Ppu by Bissell's approximation Ĉ − z₀.₉₅·√(1/9n + Ĉ²/2(n − 1))
 //!   (for the percentile indices an approximation: Bissell assumes normality).
 
-pub mod chart;
 mod characteristic;
+pub mod chart;
 pub mod fit;
 pub mod gauge_study;
 
@@ -137,7 +137,9 @@ pub enum CapabilityError {
     TooFewParts { n: usize },
     #[error("part {index} of the window (from 0): value {value} is not a finite number")]
     NotFinite { index: usize, value: f64 },
-    #[error("part {index} of the window (from 0): value {value} is negative, but the characteristic is bounded at zero")]
+    #[error(
+        "part {index} of the window (from 0): value {value} is negative, but the characteristic is bounded at zero"
+    )]
     Negative { index: usize, value: f64 },
 }
 
@@ -271,8 +273,8 @@ fn percentile_indices(s: &Stats, limits: Limits, f: Fitted) -> Indices {
         (Some(l), Some(u)) => Some(chi_square_bound((u - l) / ((hi + lo) * scale), s.n)),
         _ => None,
     };
-    let expected = limits.lower.map_or(0.0, |l| f.cdf(l))
-        + limits.upper.map_or(0.0, |u| 1.0 - f.cdf(u));
+    let expected =
+        limits.lower.map_or(0.0, |l| f.cdf(l)) + limits.upper.map_or(0.0, |u| 1.0 - f.cdf(u));
     Indices {
         sides: sides(limits),
         cp: p(within),

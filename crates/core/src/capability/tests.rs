@@ -48,7 +48,15 @@ fn no_limit_gives_no_index_and_says_so() {
     let c = assess(&[1.0, 2.0, 4.0, 3.0], Limits::default(), false).unwrap();
     assert_eq!(c.indices, None);
     assert_eq!(c.no_index, Some(NoIndex::NoTolerance));
-    let flat = assess(&[2.0; 5], Limits { lower: None, upper: Some(3.0) }, true).unwrap();
+    let flat = assess(
+        &[2.0; 5],
+        Limits {
+            lower: None,
+            upper: Some(3.0),
+        },
+        true,
+    )
+    .unwrap();
     assert_eq!(flat.no_index, Some(NoIndex::NoSpread));
 }
 
@@ -86,7 +94,11 @@ fn one_sided_uses_the_likeliest_fit_and_the_percentile_method() {
         panic!("a fitted model");
     };
     assert!(matches!(candidates[0].fitted, Fitted::LogNormal { .. }));
-    assert!(candidates.windows(2).all(|w| w[0].log_likelihood >= w[1].log_likelihood));
+    assert!(
+        candidates
+            .windows(2)
+            .all(|w| w[0].log_likelihood >= w[1].log_likelihood)
+    );
     let f = candidates[0].fitted;
     let ix = c.indices.unwrap();
     let ppu = (3.0 - f.quantile(0.5)) / (f.quantile(0.998_65) - f.quantile(0.5));
