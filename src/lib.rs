@@ -24,6 +24,7 @@ pub mod failpoint;
 /// Gauge input: the crate `camloop-gauge`, with its I/O adapters.
 pub use camloop_gauge as gauge;
 pub mod names;
+pub mod quality;
 pub mod recipe;
 pub mod service;
 pub mod share;

@@ -124,6 +124,12 @@ pub struct GaugeConfig {
     pub noise_sigma_um: f64,
     /// Faults injected into every measurement (for tests of the analysis). Default none.
     pub faults: Vec<GaugeFault>,
+    /// A type-1 gauge study on request: before shaft `master_before_part` (from 1; 0 never)
+    /// the gauge measures the master part (the nominal) this many times per feature, as part
+    /// `MASTER`. Default 0: no master runs.
+    pub master_runs: u32,
+    /// See `master_runs`. Default 0.
+    pub master_before_part: u64,
 }
 
 /// A deliberate gauge fault, to check that the analysis notices it.
@@ -178,6 +184,8 @@ impl Default for GaugeConfig {
             points_per_rev: 360,
             noise_sigma_um: 0.3,
             faults: Vec::new(),
+            master_runs: 0,
+            master_before_part: 0,
         }
     }
 }

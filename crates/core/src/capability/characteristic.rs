@@ -3,8 +3,8 @@
 //!
 //! A pin is analysed like a lobe (its nominal lift in its own frame is b·(1 + cos ψ), b the
 //! throw), so its own characteristics come from the unfitted error e(ψ) = measured −
-//! nominal lift: the mean of e is the radius error (diameter error = 2·mean), the cosine
-//! coefficient a₁ of order 1 is the throw error (stroke error = 2·a₁; exact to b₁²/2b, under
+//! nominal lift: the mean of e is the radius error (diameter error = 2·mean), order 1 along
+//! the pin's direction (the cosine coefficient a₁ in its own frame) is the throw error (stroke error = 2·a₁; exact to b₁²/2b, under
 //! 0.001 µm for a 45 mm throw and b₁ ≤ 10 µm), and e without orders 0 and 1 is the form,
 //! whose peak to valley is the roundness. The index angle error is the timing.
 
@@ -38,8 +38,11 @@ pub struct PartValues<'a> {
     pub max_profile_error_um: f64,
     pub base_radius_error_um: f64,
     pub phase_error_deg: f64,
-    /// Measured − nominal lift per equally spaced angle, µm; empty when unknown.
+    /// Measured − nominal lift per equally spaced angle of the gauge (the shaft's frame),
+    /// µm; empty when unknown.
     pub error_um: &'a [f64],
+    /// Where the feature's 0° is on the shaft, degrees (a pin's nominal direction).
+    pub phase_deg: f64,
 }
 
 impl Characteristic {
@@ -94,9 +97,9 @@ impl Characteristic {
             Characteristic::ProfileError => Some(part.max_profile_error_um),
             Characteristic::Size => Some(part.base_radius_error_um),
             Characteristic::Timing | Characteristic::IndexAngle => Some(part.phase_error_deg),
-            Characteristic::Roundness => pin_terms(part.error_um).map(|t| t.roundness_um),
-            Characteristic::Stroke => pin_terms(part.error_um).map(|t| 2.0 * t.throw_error_um),
-            Characteristic::Diameter => pin_terms(part.error_um).map(|t| 2.0 * t.mean_um),
+            Characteristic::Roundness => pin_terms(part).map(|t| t.roundness_um),
+            Characteristic::Stroke => pin_terms(part).map(|t| 2.0 * t.throw_error_um),
+            Characteristic::Diameter => pin_terms(part).map(|t| 2.0 * t.mean_um),
         }
     }
 }
@@ -107,7 +110,10 @@ struct PinTerms {
     roundness_um: f64,
 }
 
-fn pin_terms(error_um: &[f64]) -> Option<PinTerms> {
+/// The error's orders 0 and 1 and form. The gauge reads in the shaft's frame, where the
+/// pin's nominal is b·(1 + cos(ψ − φ)), φ its phase: the throw error is order 1 along φ.
+fn pin_terms(part: &PartValues<'_>) -> Option<PinTerms> {
+    let error_um = part.error_um;
     let n = error_um.len();
     if n < 8 {
         return None;
@@ -122,9 +128,10 @@ fn pin_terms(error_um: &[f64]) -> Option<PinTerms> {
         lo = lo.min(form);
         hi = hi.max(form);
     }
+    let (sin_phi, cos_phi) = part.phase_deg.to_radians().sin_cos();
     Some(PinTerms {
         mean_um,
-        throw_error_um: a1,
+        throw_error_um: a1 * cos_phi + b1 * sin_phi,
         roundness_um: hi - lo,
     })
 }
@@ -148,11 +155,24 @@ mod tests {
             base_radius_error_um: 0.0,
             phase_error_deg: 0.01,
             error_um: &error_um,
+            phase_deg: 0.0,
         };
         let v = |c: Characteristic| c.value(&part).unwrap();
         assert!((v(Characteristic::Diameter) - 6.0).abs() < 1e-9);
         assert!((v(Characteristic::Stroke) - 4.0).abs() < 1e-9);
         assert!((v(Characteristic::Roundness) - 0.8).abs() < 1e-9);
         assert_eq!(v(Characteristic::IndexAngle), 0.01);
+        // The same pin at 180° on the shaft: its throw error reads as −cos in the shaft's frame.
+        let turned: Vec<f64> = error_um
+            .iter()
+            .enumerate()
+            .map(|(k, e)| e - 4.0 * f64::from(k as u32).to_radians().cos())
+            .collect();
+        let at_180 = PartValues {
+            error_um: &turned,
+            phase_deg: 180.0,
+            ..part
+        };
+        assert!((Characteristic::Stroke.value(&at_180).unwrap() - 4.0).abs() < 1e-9);
     }
 }
