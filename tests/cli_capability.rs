@@ -91,8 +91,8 @@ fn masters_feed_the_gauge_study_and_never_the_loop_or_the_capability() {
             .unwrap()
             .clone()
     };
-    // The demo lobe's recipe gives a timing tolerance and one symmetric band, no size or
-    // max-error tolerance: indices for the first two, and the reply says why not the others.
+    // The demo lobe's recipe gives timing and size tolerances and one symmetric band, no
+    // max-error tolerance: indices for the others, and the reply says why not for that one.
     let timing = by("timing");
     assert_eq!(timing["capability"]["n"].as_u64(), Some(PARTS as u64));
     assert!(

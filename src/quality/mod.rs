@@ -95,7 +95,7 @@ pub async fn window_rows(
     lobe: &str,
     window: &Window,
     masters: bool,
-) -> anyhow::Result<(Vec<PartRow>, i64, usize)> {
+) -> Result<(Vec<PartRow>, i64, usize), crate::store::StoreError> {
     let mut since = window.since_ms.unwrap_or(i64::MIN);
     if window.since_dressing
         && let Some(d) = store.dressings(machine, 1).await?.first()
@@ -179,7 +179,10 @@ pub fn study(
                         .map_or(why.to_string(), |b| format!("{b}: no index"))
                 }),
             };
-            let chart = with_chart.then(|| chart_of(&parts, &values)).flatten();
+            let resolution = capability::chart::resolution(&l.limits);
+            let chart = with_chart
+                .then(|| chart_of(&parts, &values, resolution))
+                .flatten();
             CharacteristicStudy {
                 characteristic: c,
                 unit: c.unit(),
@@ -192,9 +195,9 @@ pub fn study(
         .collect()
 }
 
-fn chart_of(parts: &[String], values: &[f64]) -> Option<Chart> {
+fn chart_of(parts: &[String], values: &[f64], resolution: f64) -> Option<Chart> {
     let base = &values[..values.len().min(capability::chart::BASELINE_PARTS)];
-    let limits = ChartLimits::from_baseline(base)?;
+    let limits = ChartLimits::from_baseline(base, resolution)?;
     Some(Chart {
         limits,
         part: parts.to_vec(),

@@ -130,6 +130,12 @@ pub struct GaugeConfig {
     pub master_runs: u32,
     /// See `master_runs`. Default 0.
     pub master_before_part: u64,
+    /// An injected drift, to prove the control charts: from part (shaft) `drift_from_part`
+    /// on (0: never) every reading grows by this much per part, µm (a gauge warming up).
+    /// Default 0.
+    pub drift_um_per_part: f64,
+    /// See `drift_um_per_part`. Default 0.
+    pub drift_from_part: u32,
 }
 
 /// A deliberate gauge fault, to check that the analysis notices it.
@@ -186,6 +192,8 @@ impl Default for GaugeConfig {
             faults: Vec::new(),
             master_runs: 0,
             master_before_part: 0,
+            drift_um_per_part: 0.0,
+            drift_from_part: 0,
         }
     }
 }

@@ -27,12 +27,13 @@ pub(crate) fn measure(
     ground: &GroundPart,
     labels: &PartLabels,
 ) -> RawMeasurement {
-    measure_truth(
-        config,
-        rng,
-        &ground.lift_on_grid(config.points_per_rev as usize),
-        labels,
-    )
+    let mut truth = ground.lift_on_grid(config.points_per_rev as usize);
+    if config.drift_from_part > 0 && ground.part_number >= config.drift_from_part {
+        let parts = f64::from(ground.part_number - config.drift_from_part + 1);
+        let drift_mm = config.drift_um_per_part * 1e-3 * parts;
+        truth.iter_mut().for_each(|t| *t += drift_mm);
+    }
+    measure_truth(config, rng, &truth, labels)
 }
 
 /// Reads a part whose true lift on the gauge grid is `truth` mm (a ground part's, or a

@@ -10,6 +10,7 @@
 //! - `dashboard/`: the engineers' web pages, their live channel and downloads.
 
 mod api;
+mod capability;
 mod dashboard;
 mod openapi;
 mod parts;
@@ -138,6 +139,10 @@ pub fn router(state: AppState) -> Router {
         .route(&format!("{m}/measurements"), get(routes::history))
         .route(&format!("{m}/events"), get(routes::events))
         .route(&format!("{m}/parts/{{part}}"), get(parts::part))
+        .route(
+            &format!("{m}/features/{{feature}}/capability"),
+            get(capability::capability),
+        )
         .route(&format!("{m}/rollback"), post(writes::rollback_part))
         .route(&format!("{m}/lobes/{{lobe}}/tables"), get(routes::tables))
         .route(

@@ -116,6 +116,8 @@ pub enum EventKind {
     BlockedByGuard,
     /// A part was learned from again without that guard acting.
     GuardCleared,
+    /// A control chart's run rule fired on a characteristic (the loop never acts on it).
+    RunRule,
 }
 
 impl EventKind {
@@ -136,6 +138,7 @@ impl EventKind {
             EventKind::DiskSpaceBack => "disk_space_back",
             EventKind::BlockedByGuard => "blocked_by_guard",
             EventKind::GuardCleared => "guard_cleared",
+            EventKind::RunRule => "run_rule",
         }
     }
 }

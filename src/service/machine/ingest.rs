@@ -154,6 +154,7 @@ impl FeatureLoop {
         let held = matches!(done.decision, Decision::Held(_));
         let ground_with = self.memory.in_force_version;
         let (mut records, text) = self.decide(done.decision, &sha, part, at_ms).await;
+        records.extend(self.chart_events(&raw.header.part, &done.measured, at_ms));
         if !held || !self.journal.on_reserve() {
             // On the reserve only measurements are kept: the memory did not change.
             records.push(self.learning_record(at_ms));

@@ -21,6 +21,7 @@
 //! learning state: a table computed while the share refused it never becomes the base of the
 //! next step, so an outage cannot wind the correction up.
 
+mod charts;
 mod coast;
 mod delivery;
 mod dressing;

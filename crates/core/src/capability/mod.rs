@@ -130,6 +130,20 @@ pub struct Capability {
     pub no_index: Option<NoIndex>,
 }
 
+impl Capability {
+    /// P(X ≤ x) under the model the indices rest on: the normal with x̄ and σ overall, or
+    /// the fitted distribution (what the dashboard draws over the histogram).
+    pub fn model_cdf(&self, x: f64) -> f64 {
+        match self.model.fitted() {
+            Some(f) => f.cdf(x),
+            None if self.sigma_overall > 0.0 => {
+                fit::std_normal().cdf((x - self.mean) / self.sigma_overall)
+            }
+            None => f64::from(u8::from(x >= self.mean)),
+        }
+    }
+}
+
 /// Why no statistics could be computed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum CapabilityError {

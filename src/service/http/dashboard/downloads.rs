@@ -237,6 +237,9 @@ pub(super) async fn dfq(
         profile_band_um: sheet
             .and_then(super::FeatureSheet::symmetric_band_um)
             .map(|b| (-b, b)),
+        limits: sheet.map_or_else(Default::default, |s| {
+            crate::dfq::DfqLimits::from_feature(&s.limits)
+        }),
         rows,
     };
     let text = write_dfq(

@@ -12,6 +12,7 @@
 //! Writes from the page (rollback, dressing, acknowledgement) use the API with the token
 //! the engineer types; the page never stores it.
 
+mod capability_panel;
 mod charts;
 mod data;
 mod downloads;
@@ -46,6 +47,8 @@ pub struct FeatureSheet {
     pub base_radius_mm: Option<f64>,
     /// The setup drawing (SVG); `None` when the geometry could not be drawn.
     pub setup_svg: Option<String>,
+    /// Each characteristic's limits from the recipe (capability and charts).
+    pub limits: crate::quality::FeatureLimits,
 }
 
 /// Per (machine, feature) name.
@@ -72,6 +75,7 @@ impl FeatureSheet {
             bands,
             base_radius_mm,
             setup_svg,
+            limits: crate::quality::FeatureLimits::from_setup(s),
         }
     }
 
@@ -142,12 +146,20 @@ async fn feature_page(
     let store = data::store(&d.app).await?;
     let fd = data::feature(&store, &machine, &lobe).await?;
     let sheet = d.app.dashboard.get(&(machine.clone(), lobe.clone()));
+    // Only on a full page: the live refresh after each part redraws the live part alone.
+    let panel = match sheet {
+        Some(sh) if q.fragment.is_none() => {
+            capability_panel::panel(&store, &machine, &lobe, sh).await?
+        }
+        _ => String::new(),
+    };
     Ok(Html(feature::feature(
         &machine,
         &lobe,
         &fd,
         sheet,
         q.fragment.is_some(),
+        &panel,
     )))
 }
 
