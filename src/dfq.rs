@@ -229,13 +229,11 @@ fn describe(out: &mut String, k: usize, c: &Characteristic) {
     line(out, "K2022", Some(k), &c.decimals.to_string());
     line(out, "K2101", Some(k), "0");
     if let Some(upper) = c.upper {
-        let lower = c.lower.unwrap_or(0.0);
-        line(
-            out,
-            "K2110",
-            Some(k),
-            &format!("{lower:.*}", c.decimals as usize),
-        );
+        // A magnitude's lower limit is its natural bound 0, written as before.
+        let lower = c
+            .lower
+            .map_or("0".to_string(), |l| format!("{l:.*}", c.decimals as usize));
+        line(out, "K2110", Some(k), &lower);
         line(
             out,
             "K2111",

@@ -110,14 +110,15 @@ fn masters_feed_the_gauge_study_and_never_the_loop_or_the_capability() {
             .len()
             >= 2
     );
-    let size = by("size");
-    assert!(size["capability"]["indices"].is_null());
+    let max = by("max_error");
+    assert!(max["capability"]["indices"].is_null());
+    let note = max["note"].as_str().unwrap();
+    assert!(note.contains("no max_error_tolerance_um"), "{max}");
     assert!(
-        size["note"]
-            .as_str()
+        by("size")["capability"]["indices"]["cp"]["value"]
+            .as_f64()
             .unwrap()
-            .contains("no size_tolerance_um"),
-        "{size}"
+            > 0.0
     );
 
     let study = json(
@@ -151,5 +152,14 @@ fn masters_feed_the_gauge_study_and_never_the_loop_or_the_capability() {
         .iter()
         .find(|c| c["characteristic"] == "size")
         .unwrap();
-    assert!(size["study"].is_null() && size["note"].as_str().unwrap().contains("no study"));
+    assert_eq!(size["study"]["capable"], true, "{size}");
+    let max = items
+        .iter()
+        .find(|c| c["characteristic"] == "max_error")
+        .unwrap();
+    let note = max["note"].as_str().unwrap();
+    assert!(
+        max["study"].is_null() && note.contains("does not apply"),
+        "{max}"
+    );
 }

@@ -55,7 +55,11 @@ impl DfqExport<'_> {
         };
         let bands = profile_bands(self.config);
         let mut series: BTreeMap<(String, String), DfqSeries> = BTreeMap::new();
-        for d in rows.iter().filter(|d| recipe(d) == part) {
+        // Master runs are the gauge study's, not production parts.
+        let production = |d: &&MeasurementDetail| {
+            recipe(d) == part && !crate::core::measure::is_master_part(&d.summary.part)
+        };
+        for d in rows.iter().filter(production) {
             let s = &d.summary;
             let key = (s.machine.clone(), s.lobe.clone());
             series

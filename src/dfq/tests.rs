@@ -221,7 +221,7 @@ fn recipe_tolerances_become_the_characteristics_limits() {
     // 1 max error, 2 profile (no band given), 3 size, 4 phase.
     assert_eq!(
         (field("K2110", 1), field("K2111", 1)),
-        (Some("0.000".into()), Some("4.000".into()))
+        (Some("0".into()), Some("4.000".into()))
     );
     assert_eq!((field("K2110", 2), field("K2111", 2)), (None, None));
     assert_eq!(

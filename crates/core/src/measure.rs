@@ -489,3 +489,18 @@ impl AveragedMeasurement {
         angle_deg(k, self.points_per_rev)
     }
 }
+
+#[cfg(test)]
+mod master_tests {
+    use super::is_master_part;
+
+    #[test]
+    fn master_parts_are_named_by_their_prefix_in_any_case() {
+        for part in ["MASTER", "MASTER-1", "master-7", "Master_A"] {
+            assert!(is_master_part(part), "{part}");
+        }
+        for part in ["1234", "MASTE", "P-MASTER", "", "ÄMASTER"] {
+            assert!(!is_master_part(part), "{part}");
+        }
+    }
+}
