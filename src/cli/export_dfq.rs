@@ -83,12 +83,14 @@ impl DfqExport<'_> {
     }
 }
 
+/// A feature's profile band (lower, upper) µm when it has one all round, and its other
+/// limits.
+type FeatureLimitsDfq = (Option<(f64, f64)>, crate::dfq::DfqLimits);
+
 /// (lower, upper) µm of each configured feature's profile band when it has one all round,
 /// and its other limits; empty when the configuration or a recipe cannot be read (the file
 /// is then written without limits).
-fn profile_bands(
-    config: &Path,
-) -> BTreeMap<(String, String), (Option<(f64, f64)>, crate::dfq::DfqLimits)> {
+fn profile_bands(config: &Path) -> BTreeMap<(String, String), FeatureLimitsDfq> {
     let mut out = BTreeMap::new();
     let Ok(text) = std::fs::read_to_string(config) else {
         return out;

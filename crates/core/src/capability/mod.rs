@@ -31,7 +31,7 @@ pub use fit::{Candidate, Fitted};
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 /// d₂ of moving ranges of span 2: E[|X₁ − X₂|] = (2/√π)·σ for a normal.
-pub const D2_SPAN_2: f64 = 1.128_379_167_095_512_6;
+pub const D2_SPAN_2: f64 = std::f64::consts::FRAC_2_SQRT_PI;
 /// The tail of the percentile method: X₉₉.₈₆₅ is the normal's +3σ.
 const UPPER_PERCENTILE: f64 = 0.998_65;
 /// Fewest parts that give a statistic.
