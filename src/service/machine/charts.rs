@@ -5,7 +5,9 @@
 //! pin's roundness, index angle, stroke, diameter) the limits come from a baseline: the
 //! [`BASELINE_PARTS`] production parts after the first [`WARMUP_PARTS`] this loop sees
 //! since it started (the loop's start-up is not the process). The rules
-//! (`core::capability::chart`) then run on every part after the baseline.
+//! (`core::capability::chart`) then run on every part after the baseline. The magnitudes
+//! bounded at zero (max error, profile error, roundness) raise events on their upper side
+//! only: a part nearer zero than usual is better, not a problem.
 
 use super::FeatureLoop;
 use super::records::event;
@@ -79,6 +81,11 @@ impl ChartWatch {
             match &mut w.monitor {
                 Some(m) => {
                     let point = m.push(x);
+                    // A magnitude bounded at zero below its centre is a better part than
+                    // usual, never an alarm: only its upper side raises events.
+                    if w.characteristic.bounded_at_zero() && x < m.limits().center {
+                        continue;
+                    }
                     out.extend(point.fired.into_iter().map(|rule| Fired {
                         characteristic: w.characteristic,
                         rule,
