@@ -6,7 +6,9 @@
 //! radius error) and phase. Each is a variable characteristic (K2004 = 0) with nominal 0,
 //! its unit and decimals, and its limits where the recipe gives them: the profile error's
 //! upper limit is the tolerance band when the feature has one symmetric band all round
-//! (otherwise no limits are written rather than a wrong one). Values are written in
+//! (otherwise no limits are written rather than a wrong one); the max error's upper limit,
+//! the size's and the phase's ± limits from the recipe's optional tolerances. The
+//! magnitudes (max error, profile error) get the lower limit 0. Values are written in
 //! K-field notation (K0001 value, K0002 attribute, K0004 time, K0014 part ident), so every
 //! value names its characteristic; times are UTC.
 
@@ -57,7 +59,34 @@ pub struct DfqSeries {
     pub feature: String,
     /// The profile tolerance as (lower, upper) µm, when the feature has one band all round.
     pub profile_band_um: Option<(f64, f64)>,
+    /// The recipe's other tolerances, where it gives them.
+    pub limits: DfqLimits,
     pub rows: Vec<DfqRow>,
+}
+
+/// The recipe's tolerances of the other characteristics (the same limits `camloop
+/// capability` uses), so a quality tool computes the same indices.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct DfqLimits {
+    /// Upper limit of the max |error| (nothing fitted), µm.
+    pub max_error_um: Option<f64>,
+    /// ± limit of the size (base radius) error, µm.
+    pub size_um: Option<f64>,
+    /// ± limit of the phase (timing) error, degrees.
+    pub phase_deg: Option<f64>,
+}
+
+impl DfqLimits {
+    /// From a lobe's limits (the pin characteristics have no column of their own here).
+    pub fn from_feature(l: &crate::quality::FeatureLimits) -> Self {
+        use crate::core::capability::Characteristic as C;
+        let upper = |c| l.of(c).and_then(|i| i.limits.upper);
+        Self {
+            max_error_um: upper(C::MaxError),
+            size_um: upper(C::Size),
+            phase_deg: upper(C::Timing).or(upper(C::IndexAngle)),
+        }
+    }
 }
 
 /// A stored measurement as a row: the max error (nothing fitted) comes from its analysis
@@ -87,6 +116,8 @@ struct Characteristic {
     description: String,
     unit: &'static str,
     decimals: u32,
+    /// Lower limit; `None` with an upper limit: 0, the characteristic is a magnitude.
+    lower: Option<f64>,
     upper: Option<f64>,
     value: fn(&DfqRow) -> Option<f64>,
 }
@@ -103,7 +134,8 @@ fn characteristics(s: &DfqSeries) -> [Characteristic; 4] {
             description: format!("{} {} max error (unfitted)", s.machine, s.feature),
             unit: "µm",
             decimals: 3,
-            upper: None,
+            lower: None,
+            upper: s.limits.max_error_um,
             value: |r| r.max_error_um,
         },
         Characteristic {
@@ -111,6 +143,7 @@ fn characteristics(s: &DfqSeries) -> [Characteristic; 4] {
             description: format!("{} {} profile error max |e|", s.machine, s.feature),
             unit: "µm",
             decimals: 3,
+            lower: None,
             upper: band,
             value: |r| Some(r.profile_error_um),
         },
@@ -119,7 +152,8 @@ fn characteristics(s: &DfqSeries) -> [Characteristic; 4] {
             description: format!("{} {} size (base radius error)", s.machine, s.feature),
             unit: "µm",
             decimals: 3,
-            upper: None,
+            lower: s.limits.size_um.map(|t| -t),
+            upper: s.limits.size_um,
             value: |r| Some(r.size_error_um),
         },
         Characteristic {
@@ -127,7 +161,8 @@ fn characteristics(s: &DfqSeries) -> [Characteristic; 4] {
             description: format!("{} {} phase error", s.machine, s.feature),
             unit: "°",
             decimals: 4,
-            upper: None,
+            lower: s.limits.phase_deg.map(|t| -t),
+            upper: s.limits.phase_deg,
             value: |r| Some(r.phase_error_deg),
         },
     ]
@@ -194,7 +229,11 @@ fn describe(out: &mut String, k: usize, c: &Characteristic) {
     line(out, "K2022", Some(k), &c.decimals.to_string());
     line(out, "K2101", Some(k), "0");
     if let Some(upper) = c.upper {
-        line(out, "K2110", Some(k), "0");
+        // A magnitude's lower limit is its natural bound 0, written as before.
+        let lower = c
+            .lower
+            .map_or("0".to_string(), |l| format!("{l:.*}", c.decimals as usize));
+        line(out, "K2110", Some(k), &lower);
         line(
             out,
             "K2111",

@@ -27,6 +27,7 @@ pub mod failpoint;
 pub use camloop_core::names;
 /// Gauge input: the crate `camloop-gauge`, with its I/O adapters.
 pub use camloop_gauge as gauge;
+pub mod quality;
 pub mod recipe;
 pub mod service;
 pub mod share;

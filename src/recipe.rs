@@ -127,6 +127,12 @@ pub struct Lobe {
     /// Timing tolerance: largest |phase error| of the lobe against the datum, degrees.
     #[serde(default = "default_timing_tolerance_deg")]
     pub timing_tolerance_deg: f64,
+    /// Largest |base radius error|, µm; none: size gets no capability index.
+    #[serde(default)]
+    pub size_tolerance_um: Option<f64>,
+    /// Largest max |error| with nothing fitted, µm; none: it gets no capability index.
+    #[serde(default)]
+    pub max_error_tolerance_um: Option<f64>,
 }
 
 fn default_timing_tolerance_deg() -> f64 {
@@ -165,6 +171,9 @@ pub struct Pin {
     /// Largest roundness (peak to valley of the profile without its first harmonic), µm.
     #[serde(default = "default_roundness_tolerance_um")]
     pub roundness_tolerance_um: f64,
+    /// Largest |diameter error|, µm; none: the diameter gets no capability index.
+    #[serde(default)]
+    pub diameter_tolerance_um: Option<f64>,
 }
 
 /// A recipe that could not be used: every problem found, one per line.
@@ -209,11 +218,14 @@ pub struct FeatureSetup {
 pub enum FeatureTolerances {
     Lobe {
         timing_deg: f64,
+        size_um: Option<f64>,
+        max_error_um: Option<f64>,
     },
     Pin {
         index_deg: f64,
         stroke_um: f64,
         roundness_um: f64,
+        diameter_um: Option<f64>,
     },
 }
 
@@ -272,6 +284,8 @@ impl Recipe {
                     lobe.tolerance.clone(),
                     FeatureTolerances::Lobe {
                         timing_deg: lobe.timing_tolerance_deg,
+                        size_um: lobe.size_tolerance_um,
+                        max_error_um: lobe.max_error_tolerance_um,
                     },
                 )
             } else {
@@ -290,6 +304,7 @@ impl Recipe {
                         index_deg: pin.index_tolerance_deg,
                         stroke_um: pin.stroke_tolerance_um,
                         roundness_um: pin.roundness_tolerance_um,
+                        diameter_um: pin.diameter_tolerance_um,
                     },
                 )
             };
@@ -465,6 +480,12 @@ impl Recipe {
                 format!("{at}.timing_tolerance_deg"),
                 lobe.timing_tolerance_deg,
             );
+            for (key, v) in [
+                ("size_tolerance_um", lobe.size_tolerance_um),
+                ("max_error_tolerance_um", lobe.max_error_tolerance_um),
+            ] {
+                v.inspect(|&v| positive(&mut p, format!("{at}.{key}"), v));
+            }
             finite(&mut p, format!("{at}.phase_deg"), lobe.phase_deg);
             finite(&mut p, format!("{at}.z_mm"), lobe.z_mm);
             match (lobe.follower, lobe.roller_radius_mm) {
@@ -497,6 +518,9 @@ impl Recipe {
                 ("roundness_tolerance_um", pin.roundness_tolerance_um),
             ] {
                 positive(&mut p, format!("{at}.{field}"), v);
+            }
+            if let Some(v) = pin.diameter_tolerance_um {
+                positive(&mut p, format!("{at}.diameter_tolerance_um"), v);
             }
             finite(&mut p, format!("{at}.phase_deg"), pin.phase_deg);
             finite(&mut p, format!("{at}.z_mm"), pin.z_mm);

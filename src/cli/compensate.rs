@@ -434,7 +434,11 @@ fn flag_setup(
         index: 1,
         phase_deg: 0.0,
         z_mm: 0.0,
-        tolerances: crate::recipe::FeatureTolerances::Lobe { timing_deg: 0.05 },
+        tolerances: crate::recipe::FeatureTolerances::Lobe {
+            timing_deg: 0.05,
+            size_um: None,
+            max_error_um: None,
+        },
     }
 }
 

@@ -55,7 +55,11 @@ impl DfqExport<'_> {
         };
         let bands = profile_bands(self.config);
         let mut series: BTreeMap<(String, String), DfqSeries> = BTreeMap::new();
-        for d in rows.iter().filter(|d| recipe(d) == part) {
+        // Master runs are the gauge study's, not production parts.
+        let production = |d: &&MeasurementDetail| {
+            recipe(d) == part && !crate::core::measure::is_master_part(&d.summary.part)
+        };
+        for d in rows.iter().filter(production) {
             let s = &d.summary;
             let key = (s.machine.clone(), s.lobe.clone());
             series
@@ -63,7 +67,8 @@ impl DfqExport<'_> {
                 .or_insert_with(|| DfqSeries {
                     machine: s.machine.clone(),
                     feature: s.lobe.clone(),
-                    profile_band_um: bands.get(&key).copied(),
+                    profile_band_um: bands.get(&key).and_then(|b| b.0),
+                    limits: bands.get(&key).map(|b| b.1).unwrap_or_default(),
                     rows: Vec::new(),
                 })
                 .rows
@@ -78,9 +83,14 @@ impl DfqExport<'_> {
     }
 }
 
-/// (lower, upper) µm of each configured feature that has one band all round; empty when
-/// the configuration or a recipe cannot be read (the file is then written without limits).
-fn profile_bands(config: &Path) -> BTreeMap<(String, String), (f64, f64)> {
+/// A feature's profile band (lower, upper) µm when it has one all round, and its other
+/// limits.
+type FeatureLimitsDfq = (Option<(f64, f64)>, crate::dfq::DfqLimits);
+
+/// (lower, upper) µm of each configured feature's profile band when it has one all round,
+/// and its other limits; empty when the configuration or a recipe cannot be read (the file
+/// is then written without limits).
+fn profile_bands(config: &Path) -> BTreeMap<(String, String), FeatureLimitsDfq> {
     let mut out = BTreeMap::new();
     let Ok(text) = std::fs::read_to_string(config) else {
         return out;
@@ -98,9 +108,9 @@ fn profile_bands(config: &Path) -> BTreeMap<(String, String), (f64, f64)> {
                 continue;
             };
             let sheet = crate::service::http::FeatureSheet::from_setup(&setup);
-            if let Some(b) = sheet.symmetric_band_um() {
-                out.insert((m.name.clone(), lobe), (-b, b));
-            }
+            let band = sheet.symmetric_band_um().map(|b| (-b, b));
+            let limits = crate::dfq::DfqLimits::from_feature(&sheet.limits);
+            out.insert((m.name.clone(), lobe), (band, limits));
         }
     }
     out

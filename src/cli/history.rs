@@ -172,14 +172,14 @@ pub fn run_export(args: ExportArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-pub(super) fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+pub(crate) fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
     tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .context("cannot start the async runtime")
 }
 
-pub(super) async fn connect(args: &StoreArgs) -> anyhow::Result<Store> {
+pub(crate) async fn connect(args: &StoreArgs) -> anyhow::Result<Store> {
     let url = match (&args.database, std::env::var(ENV_DATABASE_URL).ok()) {
         (Some(url), _) => url.clone(),
         (None, Some(url)) => url,

@@ -11,6 +11,7 @@ mod output;
 mod part;
 mod planing;
 mod program_args;
+mod quality;
 mod run;
 mod speed_plan;
 mod table;
@@ -45,6 +46,11 @@ pub enum Command {
     History(history::HistoryArgs),
     /// Export the measurement history of a time range as CSV, JSON or Q-DAS AQDEF (dfq).
     Export(history::ExportArgs),
+    /// Process capability of a machine's features: Cp/Cpk, Pp/Ppk with 95 % bounds, per
+    /// characteristic, over a window of parts.
+    Capability(quality::CapabilityArgs),
+    /// The type-1 gauge study (Cg, Cgk, bias) of a feature from its master runs.
+    GaugeStudy(quality::GaugeStudyArgs),
     /// A non-circular turning contour (ellipse, parabola, sine, tangent, CSV profile) as a
     /// program with chords placed by tolerance.
     Contour(contour::ContourArgs),
@@ -75,6 +81,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Run(args) => run::run_service(args),
         Command::History(args) => history::run_history(args),
         Command::Export(args) => history::run_export(args),
+        Command::Capability(args) => quality::run_capability(args),
+        Command::GaugeStudy(args) => quality::run_gauge_study(args),
         Command::Contour(args) => contour::run_contour(args),
         Command::Turnmill(args) => turnmill::run_turnmill(args),
         Command::Planing(args) => planing::run_planing(args),

@@ -98,6 +98,7 @@ fn series(feature: &str, band: Option<(f64, f64)>, rows: Vec<DfqRow>) -> DfqSeri
         machine: "GR1".into(),
         feature: feature.into(),
         profile_band_um: band,
+        limits: crate::dfq::DfqLimits::default(),
         rows,
     }
 }
@@ -196,5 +197,39 @@ fn an_unknown_max_error_is_a_placeholder_and_bad_numbers_are_refused() {
     assert_eq!(
         write_dfq("P", "p", &[series("IN1", None, vec![])]),
         Err(DfqError::Empty)
+    );
+}
+
+/// The recipe's other tolerances reach the file as limits: max error 0..4 µm, size ±5 µm,
+/// phase ±0.05°; characteristics without one get none.
+#[test]
+fn recipe_tolerances_become_the_characteristics_limits() {
+    let mut s = series("IN1", None, vec![row(1, 1_795_219_200_000, 0.5)]);
+    s.limits = DfqLimits {
+        max_error_um: Some(4.0),
+        size_um: Some(5.0),
+        phase_deg: Some(0.05),
+    };
+    let text = write_dfq("DEMO-CAM", "demo", &[s]).unwrap();
+    let fields = check(&text);
+    let field = |key: &str, k: usize| {
+        fields
+            .iter()
+            .find(|(f, i, _)| f == key && *i == Some(k))
+            .map(|(_, _, v)| v.clone())
+    };
+    // 1 max error, 2 profile (no band given), 3 size, 4 phase.
+    assert_eq!(
+        (field("K2110", 1), field("K2111", 1)),
+        (Some("0".into()), Some("4.000".into()))
+    );
+    assert_eq!((field("K2110", 2), field("K2111", 2)), (None, None));
+    assert_eq!(
+        (field("K2110", 3), field("K2111", 3)),
+        (Some("-5.000".into()), Some("5.000".into()))
+    );
+    assert_eq!(
+        (field("K2110", 4), field("K2111", 4)),
+        (Some("-0.0500".into()), Some("0.0500".into()))
     );
 }

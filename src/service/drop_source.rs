@@ -90,7 +90,7 @@ async fn hand_over(
     tx.send(event).await.ok()?;
     let settle = match verdict.await.ok()? {
         Ingested::Rejected { reason } | Ingested::Failed { reason } => Settle::Rejected { reason },
-        Ingested::Recorded | Ingested::Repeated => Settle::Processed,
+        Ingested::Recorded | Ingested::Master | Ingested::Repeated => Settle::Processed,
         // Kept where it is, claimed, and read again at the next start.
         Ingested::NotRecorded => return Some(drop_folder),
     };

@@ -34,6 +34,9 @@ pub struct SimStation {
     pub parts_done: u64,
     /// Wheel radius the feature's program on the share was made for.
     pub table_wheel_radius_bits: Arc<AtomicU64>,
+    /// The nominal lift and where the feature's 0° is on the shaft: what a master reads.
+    pub nominal: crate::core::lift::LiftTable,
+    pub phase_deg: f64,
 }
 
 pub struct SimSource {
@@ -60,6 +63,8 @@ impl SimSource {
                 z_mm: f.setup().z_mm,
                 parts_done: f.memory().last_part_number().unwrap_or(f.memory().parts),
                 table_wheel_radius_bits: f.table_wheel_radius(),
+                nominal: f.setup().nominal.clone(),
+                phase_deg: f.setup().phase_deg,
             })
             .collect()
     }
@@ -95,6 +100,22 @@ impl SimSource {
             }
             if *shutdown.borrow() || self.parts.is_some_and(|n| runs >= n) {
                 return;
+            }
+            let gauge = &self.grinder.gauge;
+            if gauge.master_runs > 0 && shaft + 1 == gauge.master_before_part {
+                // The operator puts the master in before this shaft: a type-1 gauge study.
+                for k in 0..self.stations.len() {
+                    for _ in 0..gauge.master_runs {
+                        if *shutdown.borrow() {
+                            return;
+                        }
+                        if let Some(m) = self.master_run(&mut sim, &dbc, k)
+                            && !send_and_wait(&tx, m, None).await
+                        {
+                            return;
+                        }
+                    }
+                }
             }
             // The control runs the main program, which calls the table programs: the tables
             // it couples are what gets ground, at the stations where Z stands.
@@ -214,6 +235,29 @@ impl SimSource {
             lobe: lobe.to_string(),
         };
         let raw = sim.measure(&ground, &labels);
+        self.through_the_bus(dbc, &raw)
+    }
+
+    /// One gauge run of the master part at station `k`: the nominal lift, read in the shaft's
+    /// frame with the gauge's noise, sent as part `MASTER` through the bus.
+    fn master_run(
+        &self,
+        sim: &mut SimGrinder,
+        dbc: &GaugeDbc,
+        k: usize,
+    ) -> Option<crate::core::measure::RawMeasurement> {
+        let station = &self.stations[k];
+        let curve = crate::core::lift::LiftCurve::new(&station.nominal);
+        let n = self.grinder.gauge.points_per_rev;
+        let truth: Vec<f64> = (0..n)
+            .map(|j| curve.lift_mm(f64::from(j) * 360.0 / f64::from(n) - station.phase_deg))
+            .collect();
+        let labels = PartLabels {
+            machine: "1".into(),
+            part: crate::gauge::assemble::MASTER_PART.into(),
+            lobe: (k + 1).to_string(),
+        };
+        let raw = sim.measure_master(&truth, &labels);
         self.through_the_bus(dbc, &raw)
     }
 

@@ -451,6 +451,41 @@ impl Store {
         })
     }
 
+    /// One feature's measurements received in `[since_ms, until_ms)` with their reports,
+    /// newest first, before id `before` (exclusive; call again with the last id to go on),
+    /// at most `limit`: the window of a capability study or a control chart.
+    pub async fn feature_measurements(
+        &self,
+        machine: &str,
+        lobe: &str,
+        (since_ms, until_ms): (i64, i64),
+        before: Option<MeasurementId>,
+        limit: u32,
+    ) -> Result<Vec<MeasurementDetail>, StoreError> {
+        check_name("machine", machine)?;
+        let limit = check_limit(limit)?;
+        let sql = format!(
+            "SELECT {SUMMARY_COLUMNS}, d.codec, d.raw_revolutions, d.averaged_profile, \
+             d.analysis_json, d.analysis_packed \
+             FROM measurements m JOIN measurement_data d ON d.measurement_id = m.id \
+             WHERE m.machine = $1 AND m.lobe = $2 AND m.received_at_ms >= $3 \
+             AND m.received_at_ms < $4 AND m.id < $5 ORDER BY m.id DESC LIMIT $6"
+        );
+        with_read!(self, pool => {
+            let rows = sqlx::query(&sql)
+                .bind(machine)
+                .bind(lobe)
+                .bind(since_ms)
+                .bind(until_ms)
+                .bind(before.map_or(i64::MAX, |b| b.0))
+                .bind(limit)
+                .fetch_all(pool)
+                .await
+                .map_err(self.db_error("reading a feature's measurements"))?;
+            rows.iter().map(|row| Ok(detail_from_row!(row))).collect()
+        })
+    }
+
     /// The id of the newest measurement, `None` while there is none: what the dashboard's
     /// live channel polls (one index lookup).
     pub async fn newest_measurement_id(&self) -> Result<Option<MeasurementId>, StoreError> {

@@ -82,6 +82,44 @@ async fn pages_downloads_and_acknowledgements_agree_with_the_api() {
         page.contains(&format!("Latest part #{}", parts[PARTS - 1].0)),
         "{page}"
     );
+    // The capability panel, and the API it quotes: every part of the window, the four
+    // characteristics of a lobe, the chart on request; a bad window or feature is refused.
+    assert!(page.contains(r#"<table id="capability">"#), "{page}");
+    assert!(page.contains("Gauge study (type 1"), "{page}");
+    let (status, body) = get(
+        addr,
+        "/api/v1/machines/SIM1/features/IN1/capability?window=parts:500&chart=true",
+    )
+    .await;
+    assert_eq!(status, 200, "{body}");
+    let cap = json(&body);
+    assert_eq!(cap["parts"].as_u64(), Some(PARTS as u64));
+    let items = cap["characteristics"].as_array().unwrap();
+    assert_eq!(items.len(), 4);
+    let timing = items
+        .iter()
+        .find(|c| c["characteristic"] == "timing")
+        .unwrap();
+    assert_eq!(timing["capability"]["n"].as_u64(), Some(PARTS as u64));
+    assert_eq!(timing["chart"]["points"].as_array().unwrap().len(), PARTS);
+    for (path, status_code, code) in [
+        (
+            "/api/v1/machines/SIM1/features/IN1/capability?window=weekly",
+            400,
+            "invalid_window",
+        ),
+        (
+            "/api/v1/machines/SIM1/features/XX9/capability",
+            404,
+            "feature_not_found",
+        ),
+    ] {
+        let (status, body) = get(addr, path).await;
+        assert_eq!(
+            (status, json(&body)["code"].as_str()),
+            (status_code, Some(code))
+        );
+    }
     let (status, body) = get(addr, "/machines/SIM1/features/IN..1").await;
     assert_eq!(
         (status, json(&body)["code"].as_str()),

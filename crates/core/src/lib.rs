@@ -7,6 +7,7 @@
 #![warn(clippy::unwrap_used)]
 
 pub mod analysis;
+pub mod capability;
 pub mod compensate;
 pub mod digest;
 pub mod fit;

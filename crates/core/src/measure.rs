@@ -13,6 +13,16 @@ pub struct MeasurementHeader {
     pub points_per_rev: u32,
 }
 
+/// Part ids of master runs start with this, in any case (`MASTER-1`, `master-7`): the
+/// measurement of a master part for a gauge study.
+pub const MASTER_PART_PREFIX: &str = "MASTER";
+
+/// Whether `part` names a master part: never learned from, never a production part.
+pub fn is_master_part(part: &str) -> bool {
+    part.get(..MASTER_PART_PREFIX.len())
+        .is_some_and(|p| p.eq_ignore_ascii_case(MASTER_PART_PREFIX))
+}
+
 /// One gauge reading: revolution number (0-based), angle index within the revolution
 /// (0-based, angle = index · 360° / points_per_rev) and the lift in mm.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -477,5 +487,20 @@ impl AveragedMeasurement {
     /// Angle of index `k` on this measurement's grid, degrees.
     pub fn angle_deg(&self, k: u32) -> f64 {
         angle_deg(k, self.points_per_rev)
+    }
+}
+
+#[cfg(test)]
+mod master_tests {
+    use super::is_master_part;
+
+    #[test]
+    fn master_parts_are_named_by_their_prefix_in_any_case() {
+        for part in ["MASTER", "MASTER-1", "master-7", "Master_A"] {
+            assert!(is_master_part(part), "{part}");
+        }
+        for part in ["1234", "MASTE", "P-MASTER", "", "ÄMASTER"] {
+            assert!(!is_master_part(part), "{part}");
+        }
     }
 }

@@ -33,6 +33,9 @@ pub enum HoldReason {
     /// The part was ground with another table than the one the learning state belongs to.
     #[error("part was ground with table v{ground_with}, the learning state belongs to v{in_force}")]
     OtherTable { ground_with: u64, in_force: u64 },
+    /// A master part's run (a gauge study): evidence about the gauge, never about the table.
+    #[error("part {part} is a master part (gauge study): never learned from")]
+    MasterPart { part: String },
 }
 
 /// The outcome of the learning half of a turn.
@@ -112,6 +115,13 @@ pub fn turn(
     previous: Option<PreviousPart>,
 ) -> Result<Turn, TurnError> {
     let measured = measure(setup, raw)?;
+    let hold = if super::measure::is_master_part(&raw.header.part) {
+        Some(HoldReason::MasterPart {
+            part: raw.header.part.clone(),
+        })
+    } else {
+        hold
+    };
     let decision = match hold {
         Some(reason) => Decision::Held(reason),
         None => learn(setup, in_force, &measured, previous),

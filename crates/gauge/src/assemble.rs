@@ -137,13 +137,24 @@ pub enum Assembled {
     Problem(AssemblyProblem),
 }
 
+/// The CAN part number of a master part (the 24-bit field all ones).
+pub const MASTER_PART_NUMBER: u64 = 0xFF_FFFF;
+/// The part id a master part's CAN run renders as.
+pub const MASTER_PART: &str = "MASTER";
+
 /// Renders the numeric ids of a CAN start frame. Decision: plain decimal numbers ("3",
 /// "1234", "2"), so that the same machine/part/lobe sent over serial or in a file name as
 /// digits names the same thing.
+/// The one exception: part [`MASTER_PART_NUMBER`] (all ones) is a master part's run of a
+/// gauge study and renders as [`MASTER_PART`].
 pub fn header_from_start(start: &GaugeStart) -> MeasurementHeader {
     MeasurementHeader {
         machine: start.machine.to_string(),
-        part: start.part.to_string(),
+        part: if start.part == MASTER_PART_NUMBER {
+            MASTER_PART.to_string()
+        } else {
+            start.part.to_string()
+        },
         lobe: start.lobe.to_string(),
         revolutions: start.revolutions,
         points_per_rev: start.points_per_rev,

@@ -145,7 +145,8 @@ impl GaugeDbc {
 /// A whole measurement as the gauge sends it: GaugeStart, every sample in the order held,
 /// then GaugeEnd with `status` (0 = complete). The header's machine, part and lobe must be
 /// plain decimal numbers (`"3"`, `"1234"`), exactly as the decoder renders the ids it
-/// receives, so that decoding gives back the same strings; anything else is
+/// receives, so that decoding gives back the same strings (part `MASTER` is sent as the
+/// master's number, see [`super::assemble::MASTER_PART_NUMBER`]); anything else is
 /// [`EncodeError::Label`]. Samples are encoded as given, even off the announced grid (the
 /// assembler on the other side judges those). A failing sample is named by its position.
 pub fn encode_measurement(
@@ -156,7 +157,11 @@ pub fn encode_measurement(
     let h = &m.header;
     let start = GaugeStart {
         machine: numeric_label("machine", &h.machine)?,
-        part: numeric_label("part", &h.part)?,
+        part: if h.part == super::assemble::MASTER_PART {
+            super::assemble::MASTER_PART_NUMBER
+        } else {
+            numeric_label("part", &h.part)?
+        },
         lobe: numeric_label("lobe", &h.lobe)?,
         revolutions: h.revolutions,
         points_per_rev: h.points_per_rev,

@@ -130,6 +130,18 @@ pub struct GaugeConfig {
     pub noise_sigma_um: f64,
     /// Faults injected into every measurement (for tests of the analysis). Default none.
     pub faults: Vec<GaugeFault>,
+    /// A type-1 gauge study on request: before shaft `master_before_part` (from 1; 0 never)
+    /// the gauge measures the master part (the nominal) this many times per feature, as part
+    /// `MASTER`. Default 0: no master runs.
+    pub master_runs: u32,
+    /// See `master_runs`. Default 0.
+    pub master_before_part: u64,
+    /// An injected drift, to prove the control charts: from part (shaft) `drift_from_part`
+    /// on (0: never) every reading grows by this much per part, µm (a gauge warming up).
+    /// Default 0.
+    pub drift_um_per_part: f64,
+    /// See `drift_um_per_part`. Default 0.
+    pub drift_from_part: u32,
 }
 
 /// A deliberate gauge fault, to check that the analysis notices it.
@@ -186,6 +198,10 @@ impl Default for GaugeConfig {
             points_per_rev: 360,
             noise_sigma_um: 0.3,
             faults: Vec::new(),
+            master_runs: 0,
+            master_before_part: 0,
+            drift_um_per_part: 0.0,
+            drift_from_part: 0,
         }
     }
 }

@@ -27,12 +27,28 @@ pub(crate) fn measure(
     ground: &GroundPart,
     labels: &PartLabels,
 ) -> RawMeasurement {
+    let mut truth = ground.lift_on_grid(config.points_per_rev as usize);
+    if config.drift_from_part > 0 && ground.part_number >= config.drift_from_part {
+        let parts = f64::from(ground.part_number - config.drift_from_part + 1);
+        let drift_mm = config.drift_um_per_part * 1e-3 * parts;
+        truth.iter_mut().for_each(|t| *t += drift_mm);
+    }
+    measure_truth(config, rng, &truth, labels)
+}
+
+/// Reads a part whose true lift on the gauge grid is `truth` mm (a ground part's, or a
+/// master's: the nominal), with the gauge's noise and faults.
+pub(crate) fn measure_truth(
+    config: &GaugeConfig,
+    rng: &mut SimRng,
+    truth: &[f64],
+    labels: &PartLabels,
+) -> RawMeasurement {
     let points = config.points_per_rev;
-    let truth = ground.lift_on_grid(points as usize);
     let sigma_mm = config.noise_sigma_um * 1e-3;
     let mut samples = Vec::with_capacity((config.revolutions * points) as usize);
     for revolution in 0..config.revolutions {
-        for (angle_index, &lift) in (0..points).zip(&truth) {
+        for (angle_index, &lift) in (0..points).zip(truth) {
             let mut lift_mm = lift + sigma_mm * rng.gaussian();
             for fault in &config.faults {
                 lift_mm += fault_mm(fault, revolution, angle_index);

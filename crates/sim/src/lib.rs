@@ -338,6 +338,12 @@ impl SimGrinder {
         gauge::measure(&self.config.gauge, &mut self.gauge_rng, ground, labels)
     }
 
+    /// The gauge reading a master part whose true lift on the gauge grid is `truth_mm` (the
+    /// nominal, in the gauge's frame): a run of a type-1 gauge study. Nothing is ground.
+    pub fn measure_master(&mut self, truth_mm: &[f64], labels: &PartLabels) -> RawMeasurement {
+        gauge::measure_truth(&self.config.gauge, &mut self.gauge_rng, truth_mm, labels)
+    }
+
     /// Ends a part: the wheel wears by `wear_um_per_part`, and if a dressing is due after
     /// this part (every `dress_every_parts`, or listed in `dress_at_parts`), the wheel loses
     /// `dress_depth_um` and the control is told the new radius plus the dressing error.

@@ -19,6 +19,7 @@
 pub mod access;
 mod api;
 mod audit;
+mod capability;
 mod dashboard;
 mod harden;
 mod openapi;
@@ -167,6 +168,10 @@ pub fn router(state: AppState) -> Router {
         .route(&format!("{m}/measurements"), get(routes::history))
         .route(&format!("{m}/events"), get(routes::events))
         .route(&format!("{m}/parts/{{part}}"), get(parts::part))
+        .route(
+            &format!("{m}/features/{{feature}}/capability"),
+            get(capability::capability),
+        )
         .route(&format!("{m}/rollback"), post(writes::rollback_part))
         .route(&format!("{m}/lobes/{{lobe}}/tables"), get(routes::tables))
         .route(

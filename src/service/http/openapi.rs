@@ -33,6 +33,7 @@ pub(super) async fn openapi() -> Json<Value> {
             "/api/v1/machines/{machine}/events": get("alarms and events, newest first"),
             "/api/v1/machines/{machine}/rollback": { "post": write("roll several features back together (a whole part); body {\"versions\": {\"IN1\": 5, \"EX1\": 7}}; every version is checked before any is pushed; role engineer", "delivered: {status, version: null, message}", json!({})) },
             "/api/v1/machines/{machine}/parts/{part}": get("one part (a shaft), feature by feature: its measurements and whether it passed"),
+            "/api/v1/machines/{machine}/features/{feature}/capability": get("process capability of every characteristic of a feature (n, mean, σ within and overall, Cp/Cpk, Pp/Ppk with lower 95 % bounds, the fitted model, expected and observed share out of tolerance; no index without a recipe tolerance, and the note says so); window=parts:N (default parts:125) | since:TIME | dressing | recipe; chart=true adds the I-MR/EWMA chart with the run rules' flags; master runs are left out"),
             "/api/v1/machines/{machine}/lobes/{lobe}/tables": get("table versions, newest first"),
             "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program": get("program text of a table version"),
             "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/diff": get("X difference to the parent version at every table point, µm"),

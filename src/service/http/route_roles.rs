@@ -78,6 +78,12 @@ pub const ROUTES: &[RouteRule] = &[
     ),
     r(
         "GET",
+        "/api/v1/machines/{machine}/features/{feature}/capability",
+        VIEW,
+        Kind::Api,
+    ),
+    r(
+        "GET",
         "/api/v1/machines/{machine}/lobes/{lobe}/tables",
         VIEW,
         Kind::Api,

@@ -121,6 +121,8 @@ pub enum EventKind {
     BlockedByGuard,
     /// A part was learned from again without that guard acting.
     GuardCleared,
+    /// A control chart's run rule fired on a characteristic (the loop never acts on it).
+    RunRule,
 }
 
 impl EventKind {

@@ -40,6 +40,8 @@ pub struct FeatureLoop {
     pub(super) table_wheel_radius_bits: Arc<AtomicU64>,
     /// The disk-full alarm was raised and not yet cleared.
     pub(super) disk_alarm: bool,
+    /// The control charts' run rules (events only: learning never reads them).
+    pub(super) charts: super::charts::ChartWatch,
 }
 
 impl FeatureLoop {
@@ -81,6 +83,8 @@ impl FeatureLoop {
             error!(machine = %name, error = %e, "controller share unavailable; tables wait until it is back");
         }
         let program_file = format!("{}.SPF", setup.program.name);
+        let charts =
+            super::charts::ChartWatch::new(&crate::quality::FeatureLimits::from_setup(&setup));
         let mut machine = Self {
             name,
             setup,
@@ -92,6 +96,7 @@ impl FeatureLoop {
             metrics,
             main,
             last_line: None,
+            charts,
             plant_events: None,
             table_wheel_radius_bits: Arc::new(AtomicU64::new(0)),
             disk_alarm: false,

@@ -154,6 +154,7 @@ impl FeatureLoop {
         let held = matches!(done.decision, Decision::Held(_));
         let ground_with = self.memory.in_force_version;
         let (mut records, text) = self.decide(done.decision, &sha, part, at_ms).await;
+        records.extend(self.chart_events(&raw.header.part, &done.measured, at_ms));
         if !held || !self.journal.on_reserve() {
             // On the reserve only measurements are kept: the memory did not change.
             records.push(self.learning_record(at_ms));
@@ -208,6 +209,33 @@ impl FeatureLoop {
         }
         self.last_line = Some(line);
         Ok(Ingested::Recorded)
+    }
+
+    /// A master part's run (see [`crate::core::measure::is_master_part`]): checked, analysed
+    /// and recorded for the gauge study, never a step of learning (the turn is not taken),
+    /// never counted as a part, never the previous part of the next one.
+    pub(crate) async fn on_master(&mut self, raw: RawMeasurement) -> anyhow::Result<Ingested> {
+        let at_ms = now_ms();
+        let sha = measurement_sha256(&raw);
+        if self.memory.has_seen(&sha) {
+            return Ok(Ingested::Repeated);
+        }
+        let measured = match turn::measure(&self.setup.turn_setup(), &raw) {
+            Ok(m) => m,
+            Err(TurnError::Measurement(e)) => {
+                let reason = e.to_string();
+                self.reject(&raw, &sha, &reason, at_ms).await;
+                return Ok(Ingested::Rejected { reason });
+            }
+            Err(e) => return Err(e.into()),
+        };
+        let record = self.measurement_record(&raw, &sha, &measured, at_ms);
+        if !self.record(vec![record]).await {
+            return Ok(Ingested::NotRecorded);
+        }
+        self.memory.remember(sha);
+        info!(machine = %self.name, lobe = %self.setup.name, part = %raw.header.part, size_error_um = format!("{:.3}", measured.report.base_radius_error_um), "master run recorded for the gauge study (not learned from)");
+        Ok(Ingested::Master)
     }
 
     /// Acts on the turn's decision; returns the records and a line for the log.

@@ -21,6 +21,7 @@
 //! learning state: a table computed while the share refused it never becomes the base of the
 //! next step, so an outage cannot wind the correction up.
 
+mod charts;
 mod coast;
 mod delivery;
 mod dressing;
@@ -106,6 +107,9 @@ pub(crate) fn fenced(e: &anyhow::Error) -> bool {
 pub enum Ingested {
     /// Checked, analysed and recorded (learned from, or held with a reason in the history).
     Recorded,
+    /// A master part's run of a gauge study: analysed and recorded for the study, never
+    /// learned from, never counted as a production part.
+    Master,
     /// A reading already used: not learned again.
     Repeated,
     /// Not this machine's, or failed the checks: never learned from.
@@ -303,6 +307,10 @@ impl MachineLoop {
                 return Ok(Ingested::Rejected { reason });
             }
         };
+        if crate::core::measure::is_master_part(&raw.header.part) {
+            // Nothing was ground: no resume point moves, no shaft line.
+            return self.features[index].on_master(raw).await;
+        }
         let version = ground_with.map(|g| g.version);
         let ingested = self.features[index].on_measurement(raw, version).await;
         // Ground and gauged, whatever the loop made of it.

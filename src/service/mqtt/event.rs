@@ -294,6 +294,7 @@ mod tests {
         assert_eq!(name(EventKind::LearningReverted), Some("learning_frozen"));
         assert_eq!(name(EventKind::TableRefused), Some("table_refused"));
         assert_eq!(name(EventKind::LearningHeld), Some("alarm"));
+        assert_eq!(name(EventKind::RunRule), Some("alarm"));
         assert_eq!(name(EventKind::WheelDressed), None);
         let waiting = Pending::TableStatus {
             machine: "G7".into(),

@@ -215,6 +215,8 @@ pub(super) async fn dfq(
     let store = data::store(&d.app).await?;
     let mut parts = data::history(&store, &machine, &lobe, DFQ_PARTS).await?;
     parts.reverse();
+    // Master runs are the gauge study's, not production parts.
+    parts.retain(|p| !crate::core::measure::is_master_part(&p.part));
     let part_name = store
         .features(&machine)
         .await?
@@ -237,6 +239,9 @@ pub(super) async fn dfq(
         profile_band_um: sheet
             .and_then(super::FeatureSheet::symmetric_band_um)
             .map(|b| (-b, b)),
+        limits: sheet.map_or_else(Default::default, |s| {
+            crate::dfq::DfqLimits::from_feature(&s.limits)
+        }),
         rows,
     };
     let text = write_dfq(

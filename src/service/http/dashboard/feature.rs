@@ -235,6 +235,7 @@ pub(super) fn feature(
     d: &FeatureData,
     sheet: Option<&FeatureSheet>,
     fragment: bool,
+    capability: &str,
 ) -> String {
     let base = feature_url(machine, lobe);
     let in_force = d
@@ -262,7 +263,7 @@ pub(super) fn feature(
             )
         });
     let rest = format!(
-        r#"<section aria-labelledby="dress-h"><h2 id="dress-h">Report a dressing</h2><form id="dressing" data-url="/api/v1/machines/{m}/dressings"><label for="radius">New wheel radius, mm</label> <input id="radius" name="wheel_radius_mm" type="number" step="0.001" min="5" max="1000" required> <button type="submit">Report dressing</button></form><p id="dressing-result" role="status"></p></section><section aria-labelledby="setup-h"><h2 id="setup-h">Setup drawing</h2><div class="setup">{setup}</div></section>{plan}"#,
+        r#"{capability}<section aria-labelledby="dress-h"><h2 id="dress-h">Report a dressing</h2><form id="dressing" data-url="/api/v1/machines/{m}/dressings"><label for="radius">New wheel radius, mm</label> <input id="radius" name="wheel_radius_mm" type="number" step="0.001" min="5" max="1000" required> <button type="submit">Report dressing</button></form><p id="dressing-result" role="status"></p></section><section aria-labelledby="setup-h"><h2 id="setup-h">Setup drawing</h2><div class="setup">{setup}</div></section>{plan}"#,
         m = esc(machine)
     );
     let crumbs = format!(r#" › {} {}"#, esc(machine), esc(lobe));

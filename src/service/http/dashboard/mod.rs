@@ -14,6 +14,7 @@
 //! session's cookie and its CSRF token (see `http::session`).
 
 mod account;
+mod capability_panel;
 mod charts;
 mod data;
 mod downloads;
@@ -52,6 +53,8 @@ pub struct FeatureSheet {
     pub setup_svg: Option<String>,
     /// The speed plan's chart (SVG) when the recipe has `[speed_plan] enabled = true`.
     pub speed_plan_svg: Option<String>,
+    /// Each characteristic's limits from the recipe (capability and charts).
+    pub limits: crate::quality::FeatureLimits,
 }
 
 /// Per (machine, feature) name.
@@ -89,6 +92,7 @@ impl FeatureSheet {
             base_radius_mm,
             setup_svg,
             speed_plan_svg,
+            limits: crate::quality::FeatureLimits::from_setup(s),
         }
     }
 
@@ -159,12 +163,20 @@ async fn feature_page(
     let store = data::store(&d.app).await?;
     let fd = data::feature(&store, &machine, &lobe).await?;
     let sheet = d.app.dashboard.get(&(machine.clone(), lobe.clone()));
+    // Only on a full page: the live refresh after each part redraws the live part alone.
+    let panel = match sheet {
+        Some(sh) if q.fragment.is_none() => {
+            capability_panel::panel(&store, &machine, &lobe, sh).await?
+        }
+        _ => String::new(),
+    };
     Ok(Html(feature::feature(
         &machine,
         &lobe,
         &fd,
         sheet,
         q.fragment.is_some(),
+        &panel,
     )))
 }
 

@@ -1,0 +1,105 @@
+//! `GET /api/v1/machines/{machine}/features/{feature}/capability?window=…[&chart=true]`:
+//! the capability of every characteristic of a feature over a window of production parts
+//! (master runs left out), with the limits from the recipe, and on request the control
+//! chart of each (limits from the window's first 25 parts, the rules' flags per point).
+//!
+//! `window`: `parts:N` (the newest N, default `parts:125`; a bare number too), `since:TIME`
+//! (`2026-11-21`, `…T10:00:00Z`, Unix ms or an age like `24h`), `dressing` (since the
+//! machine's last wheel dressing) or `recipe` (since the feature's recipe last changed).
+
+use super::AppState;
+use super::api::{ApiError, ApiPath, ApiQuery, feature_name, machine_name};
+use super::routes::store;
+use crate::quality::{self, CharacteristicStudy, Window};
+use axum::Json;
+use axum::extract::State;
+use axum::http::StatusCode;
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct CapabilityQuery {
+    window: Option<String>,
+    chart: Option<bool>,
+}
+
+#[derive(Debug, Serialize)]
+pub(super) struct CapabilityReply {
+    machine: String,
+    feature: String,
+    /// The window as asked.
+    window: String,
+    parts: usize,
+    /// Start of the window, Unix ms, when it has one.
+    since_ms: Option<i64>,
+    master_runs_left_out: usize,
+    characteristics: Vec<CharacteristicStudy>,
+}
+
+fn bad_window(text: &str) -> ApiError {
+    ApiError(
+        StatusCode::BAD_REQUEST,
+        "invalid_window",
+        format!(
+            "window `{text}`: use parts:N, since:TIME (2026-11-21, an age like 24h), dressing or recipe"
+        ),
+    )
+}
+
+/// The window a query names.
+pub(crate) fn parse_window(text: &str, now_ms: i64) -> Result<Window, ApiError> {
+    let mut w = Window::default();
+    let parts = |n: &str| {
+        n.parse::<u32>()
+            .ok()
+            .filter(|n| (1..=crate::store::MAX_PAGE).contains(n))
+    };
+    match text.split_once(':') {
+        _ if text == "dressing" => w.since_dressing = true,
+        _ if text == "recipe" => w.since_recipe_change = true,
+        Some(("parts", n)) => w.last = parts(n).ok_or_else(|| bad_window(text))?,
+        Some(("since", t)) => {
+            w.since_ms =
+                Some(crate::cli::history::parse_time(t, now_ms).map_err(|_| bad_window(text))?);
+            w.last = crate::store::MAX_PAGE;
+        }
+        None => w.last = parts(text).ok_or_else(|| bad_window(text))?,
+        _ => return Err(bad_window(text)),
+    }
+    if w.since_dressing || w.since_recipe_change {
+        w.last = crate::store::MAX_PAGE;
+    }
+    Ok(w)
+}
+
+pub(super) async fn capability(
+    State(state): State<AppState>,
+    ApiPath((machine, feature)): ApiPath<(String, String)>,
+    ApiQuery(q): ApiQuery<CapabilityQuery>,
+) -> Result<Json<CapabilityReply>, ApiError> {
+    machine_name(&machine)?;
+    feature_name(&feature)?;
+    let window_text = q.window.unwrap_or_else(|| "parts:125".into());
+    let window = parse_window(&window_text, crate::clock::now_ms())?;
+    let Some(sheet) = state.dashboard.get(&(machine.clone(), feature.clone())) else {
+        return Err(ApiError(
+            StatusCode::NOT_FOUND,
+            "feature_not_found",
+            format!(
+                "machine {machine} has no configured feature {feature}: its limits come from the recipe"
+            ),
+        ));
+    };
+    let store = store(&state).await?;
+    let (rows, since, masters) =
+        quality::window_rows(&store, &machine, &feature, &window, false).await?;
+    Ok(Json(CapabilityReply {
+        characteristics: quality::study(&rows, &sheet.limits, q.chart.unwrap_or(false)),
+        machine,
+        feature,
+        window: window_text,
+        parts: rows.len(),
+        since_ms: (since != i64::MIN).then_some(since),
+        master_runs_left_out: masters,
+    }))
+}
