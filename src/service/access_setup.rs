@@ -51,7 +51,17 @@ pub(crate) async fn ensure_admin(
         )
     })?;
     let now = crate::clock::now_ms();
-    store.add_user("admin", Role::Admin, &hash, now).await?;
+    match store.add_user("admin", Role::Admin, &hash, now).await {
+        Ok(_) => {}
+        // Instances sharing one database start together: another one made the admin
+        // between our look and our insert. Its password is in its own file; ours is void.
+        Err(crate::store::StoreError::Conflict { .. }) => {
+            let _ = std::fs::remove_file(&file);
+            info!("first start: another instance created user `admin` at the same moment");
+            return Ok(None);
+        }
+        Err(e) => return Err(e.into()),
+    }
     let entry = AuditEntry {
         at_ms: now,
         actor: "camloop".into(),

@@ -80,7 +80,8 @@ fn a_4x360_measurement_round_trips_through_decoder_and_assembler() {
         samples,
         origin: "roundtrip".into(),
     };
-    // Part is 24 bits wide in the shipped DBC: 2^32 is refused, the largest part is sent.
+    // Part is 24 bits wide in the shipped DBC: 2^32 is refused, the largest production part
+    // is sent (all ones, 16777215, is the master part of a gauge study: `MASTER`).
     let err = encode_measurement(&dbc, &raw, 0).expect_err("part beyond 24 bits");
     assert_eq!(
         err.to_string(),
@@ -88,7 +89,7 @@ fn a_4x360_measurement_round_trips_through_decoder_and_assembler() {
     );
     let raw = RawMeasurement {
         header: MeasurementHeader {
-            part: "16777215".into(),
+            part: "16777214".into(),
             ..raw.header
         },
         ..raw
