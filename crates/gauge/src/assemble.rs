@@ -138,7 +138,7 @@ pub enum Assembled {
 }
 
 /// The CAN part number of a master part (the 24-bit field all ones).
-pub const MASTER_PART_NUMBER: u64 = 0xFF_FFFF;
+pub(crate) const MASTER_PART_NUMBER: u64 = 0xFF_FFFF;
 /// The part id a master part's CAN run renders as.
 pub const MASTER_PART: &str = "MASTER";
 
@@ -147,7 +147,7 @@ pub const MASTER_PART: &str = "MASTER";
 /// digits names the same thing.
 /// The one exception: part [`MASTER_PART_NUMBER`] (all ones) is a master part's run of a
 /// gauge study and renders as [`MASTER_PART`].
-pub fn header_from_start(start: &GaugeStart) -> MeasurementHeader {
+pub(crate) fn header_from_start(start: &GaugeStart) -> MeasurementHeader {
     MeasurementHeader {
         machine: start.machine.to_string(),
         part: if start.part == MASTER_PART_NUMBER {
@@ -223,7 +223,7 @@ impl OpenMeasurement {
     }
 
     /// Records the first reason this measurement is unusable.
-    pub fn spoil(&mut self, reason: DiscardReason) {
+    pub(crate) fn spoil(&mut self, reason: DiscardReason) {
         self.spoiled.get_or_insert(reason);
     }
 

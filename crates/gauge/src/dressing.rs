@@ -12,7 +12,7 @@ use super::file::shown_path;
 pub const DRESSING_SUFFIX: &str = ".dressing.toml";
 
 /// Largest dressing report read, bytes (a report is one line).
-pub const MAX_DRESSING_BYTES: u64 = 64 * 1024;
+pub(crate) const MAX_DRESSING_BYTES: u64 = 64 * 1024;
 
 /// A wheel-dressing report, written by the control's dressing cycle (or whoever dresses)
 /// into the drop folder, one line (and optionally the `# end` marker line):

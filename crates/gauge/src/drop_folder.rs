@@ -46,9 +46,9 @@ pub use super::drop_reasons::{DropFolderError, Rejection};
 use super::file::{MeasurementFile, open_measurement_file, shown_path};
 
 /// Subfolder for files taken as measurements.
-pub const PROCESSED_DIR: &str = "processed";
+pub(crate) const PROCESSED_DIR: &str = "processed";
 /// Subfolder for files that are not measurements.
-pub const REJECTED_DIR: &str = "rejected";
+pub(crate) const REJECTED_DIR: &str = "rejected";
 
 /// How the drop folder decides a file is finished and how large one may be.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

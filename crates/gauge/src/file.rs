@@ -21,7 +21,7 @@ use super::dbc::GaugeDbc;
 pub const MAX_FILE_BYTES: u64 = 16 * 1024 * 1024;
 
 /// Longest line of a CSV file, bytes (a data row is about 25).
-pub const MAX_LINE_BYTES: usize = 4096;
+pub(crate) const MAX_LINE_BYTES: usize = 4096;
 
 /// Why a measurement file could not be read.
 #[derive(Debug, thiserror::Error)]
@@ -213,7 +213,7 @@ fn read_candump(
 
 /// A path for messages: as displayed, and when its file name is not UTF-8 (shown with
 /// U+FFFD) also the name's bytes escaped, so the operator can find the file.
-pub fn shown_path(path: &Path) -> String {
+pub(crate) fn shown_path(path: &Path) -> String {
     let shown = path.display().to_string();
     match path.file_name() {
         Some(name) if name.to_str().is_none() => {
@@ -224,7 +224,7 @@ pub fn shown_path(path: &Path) -> String {
 }
 
 /// A file name's bytes with everything but printable ASCII escaped (`\xff`).
-pub fn escaped_name(name: &OsStr) -> String {
+pub(crate) fn escaped_name(name: &OsStr) -> String {
     name.as_encoded_bytes()
         .iter()
         .flat_map(|b| std::ascii::escape_default(*b))

@@ -29,7 +29,7 @@ use super::assemble::{
 };
 
 /// Longest accepted line, terminator excluded.
-pub const MAX_LINE_BYTES: usize = 256;
+pub(crate) const MAX_LINE_BYTES: usize = 256;
 /// Largest accepted |lift| in mm.
 pub const MAX_ABS_LIFT_MM: f64 = 1000.0;
 const MAX_ID_CHARS: usize = 32;

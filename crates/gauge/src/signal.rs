@@ -123,14 +123,14 @@ impl SignalCodec {
     }
 
     /// Whether the raw bits are an integer (not an IEEE float).
-    pub fn is_integer(&self) -> bool {
+    pub(crate) fn is_integer(&self) -> bool {
         matches!(self.kind, RawKind::Unsigned | RawKind::Signed)
     }
 
     /// The signal's raw bits, right-aligned. `words` is the payload (zero-padded to 8
     /// bytes) read as `(little-endian u64, big-endian u64)`.
     #[inline]
-    pub fn raw_bits(&self, words: PayloadWords) -> u64 {
+    pub(crate) fn raw_bits(&self, words: PayloadWords) -> u64 {
         let word = match self.order {
             ByteOrder::Intel => words.le,
             ByteOrder::Motorola => words.be,
@@ -150,7 +150,7 @@ impl SignalCodec {
 
     /// The smallest and largest raw integer the signal holds: `0..=2^len − 1` unsigned,
     /// `−2^(len−1)..=2^(len−1) − 1` signed; `None` for float signals.
-    pub fn integer_range(&self) -> Option<(i128, i128)> {
+    pub(crate) fn integer_range(&self) -> Option<(i128, i128)> {
         let len = self.length;
         match self.kind {
             RawKind::Unsigned => Some((0, (1i128 << len) - 1)),
@@ -163,7 +163,7 @@ impl SignalCodec {
     /// fit: an integer outside [`SignalCodec::integer_range`], a float for an integer
     /// signal or the other way round, or a finite value that overflows a 32-bit float.
     /// The inverse of [`SignalCodec::raw_value`].
-    pub fn bits_of(&self, raw: RawValue) -> Option<u64> {
+    pub(crate) fn bits_of(&self, raw: RawValue) -> Option<u64> {
         match (self.kind, raw) {
             (RawKind::Unsigned | RawKind::Signed, RawValue::Unsigned(v)) => {
                 let (_, hi) = self.integer_range()?;
@@ -191,7 +191,7 @@ impl SignalCodec {
     /// an 8-byte payload buffer, leaving every other bit as it was. The inverse of
     /// [`SignalCodec::raw_bits`]: reading back gives `bits` masked to the length.
     #[inline]
-    pub fn write_bits(&self, data: &mut [u8; 8], bits: u64) {
+    pub(crate) fn write_bits(&self, data: &mut [u8; 8], bits: u64) {
         let field = self.mask << self.shift;
         let placed = (bits & self.mask) << self.shift;
         match self.order {
@@ -208,7 +208,7 @@ impl SignalCodec {
 
     /// The raw value as a number, before factor and offset.
     #[inline]
-    pub fn raw_value(&self, words: PayloadWords) -> RawValue {
+    pub(crate) fn raw_value(&self, words: PayloadWords) -> RawValue {
         let bits = self.raw_bits(words);
         match self.kind {
             RawKind::Unsigned => RawValue::Unsigned(bits),
@@ -231,7 +231,7 @@ impl SignalCodec {
 
 /// The payload of one frame read as two 64-bit words (zero-padded to 8 bytes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct PayloadWords {
+pub(crate) struct PayloadWords {
     pub le: u64,
     pub be: u64,
 }
@@ -252,7 +252,7 @@ impl PayloadWords {
 
 /// A raw signal value before scaling.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum RawValue {
+pub(crate) enum RawValue {
     Unsigned(u64),
     Signed(i64),
     Float(f64),
