@@ -9,7 +9,7 @@
 //! Without Chromium the test prints why and passes, unless `CAMLOOP_REQUIRE_BROWSER=1`
 //! (CI sets it), which makes a missing browser a failure.
 
-use crate::browser_support::{browser, browser_present, click, start_driver, text_of, until};
+use crate::browser_support::{browser, browser_or_skip, click, start_driver, text_of, until};
 use crate::service_support;
 
 use camloop::service::{self, RunOptions};
@@ -107,11 +107,7 @@ async fn assert_fits(c: &Client, page: &str) {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_dashboard_works_in_a_real_browser() {
-    if let Err(why) = browser_present() {
-        if std::env::var("CAMLOOP_REQUIRE_BROWSER").as_deref() == Ok("1") {
-            panic!("CAMLOOP_REQUIRE_BROWSER=1 but {why}");
-        }
-        eprintln!("skipping the browser test: {why}");
+    if !browser_or_skip() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();

@@ -13,7 +13,7 @@
 
 use crate::service_support;
 
-use crate::browser_support::{browser, browser_present, click, start_driver, text_of, until};
+use crate::browser_support::{browser, browser_or_skip, click, start_driver, text_of, until};
 use camloop::service::{self, RunOptions};
 use camloop::store::{Role, Store};
 use fantoccini::{Client, Locator};
@@ -78,11 +78,7 @@ async fn sign_in(c: &Client, base: &str, name: &str, password: &str) -> String {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn signing_in_csrf_and_lockout_in_a_real_browser() {
-    if let Err(why) = browser_present() {
-        if std::env::var("CAMLOOP_REQUIRE_BROWSER").as_deref() == Ok("1") {
-            panic!("CAMLOOP_REQUIRE_BROWSER=1 but {why}");
-        }
-        eprintln!("skipping the browser test: {why}");
+    if !browser_or_skip() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();

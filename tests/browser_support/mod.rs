@@ -24,6 +24,21 @@ pub fn browser_present() -> Result<(), String> {
     Ok(())
 }
 
+/// Whether the browser test can run: `false` (with a skip line) when the pieces are missing,
+/// a panic instead when `CAMLOOP_REQUIRE_BROWSER=1` (CI) says they must be there.
+pub fn browser_or_skip() -> bool {
+    match browser_present() {
+        Ok(()) => true,
+        Err(why) if std::env::var("CAMLOOP_REQUIRE_BROWSER").as_deref() == Ok("1") => {
+            panic!("CAMLOOP_REQUIRE_BROWSER=1 but {why}")
+        }
+        Err(why) => {
+            eprintln!("skipping the browser test: {why}");
+            false
+        }
+    }
+}
+
 /// chromedriver on a free port, started as a child; killed on drop.
 pub struct Driver {
     child: Child,

@@ -53,17 +53,22 @@ fn run(dir: &Path, log: Stdio) -> KillOnDrop {
 
 /// A client trusting only the certificate in `cert_pem`.
 fn connector(cert_pem: &str) -> TlsConnector {
+    TlsConnector::from(Arc::new(trusting(cert_pem)))
+}
+
+/// A rustls client configuration (ring) that trusts only the certificates in `cert_pem`:
+/// the HTTP and the MQTT tests check the server's certificate with it.
+pub(crate) fn trusting(cert_pem: &str) -> rustls::ClientConfig {
     let mut roots = rustls::RootCertStore::empty();
     for c in CertificateDer::pem_slice_iter(cert_pem.as_bytes()) {
         roots.add(c.unwrap()).unwrap();
     }
     let provider = Arc::new(rustls::crypto::ring::default_provider());
-    let config = rustls::ClientConfig::builder_with_provider(provider)
+    rustls::ClientConfig::builder_with_provider(provider)
         .with_safe_default_protocol_versions()
         .unwrap()
         .with_root_certificates(roots)
-        .with_no_client_auth();
-    TlsConnector::from(Arc::new(config))
+        .with_no_client_auth()
 }
 
 async fn tls(port: u16, trusted: &str) -> std::io::Result<TlsStream<TcpStream>> {

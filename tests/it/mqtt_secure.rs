@@ -19,7 +19,6 @@ use process_support::KillOnDrop;
 use rumqttc::{AsyncClient, ConnectionError, Event, MqttOptions, Packet, QoS};
 use rumqttc::{TlsConfiguration, Transport};
 use tokio::sync::{mpsc, watch};
-use tokio_rustls::rustls;
 
 /// Longest wait for anything the broker or camloop should do; a failure, not a pace.
 const DEADLINE: Duration = Duration::from_secs(30);
@@ -101,17 +100,7 @@ fn secure_broker(port: u16, dir: &Path, (exe, passwd): &(String, String)) -> (Ki
 
 /// A client over TLS trusting `cert`, as `password`.
 fn client_options(id: &str, port: u16, cert: &str, password: &str) -> MqttOptions {
-    let mut roots = rustls::RootCertStore::empty();
-    use rustls::pki_types::{CertificateDer, pem::PemObject};
-    for c in CertificateDer::pem_slice_iter(cert.as_bytes()) {
-        roots.add(c.unwrap()).unwrap();
-    }
-    let provider = Arc::new(rustls::crypto::ring::default_provider());
-    let config = rustls::ClientConfig::builder_with_provider(provider)
-        .with_safe_default_protocol_versions()
-        .unwrap()
-        .with_root_certificates(roots)
-        .with_no_client_auth();
+    let config = crate::http_tls::trusting(cert);
     let mut o = MqttOptions::new(id, "localhost", port);
     o.set_credentials(USER, password);
     o.set_transport(Transport::tls_with_config(TlsConfiguration::Rustls(
