@@ -25,6 +25,9 @@ use statements::{Frame, Run};
 const MAX_CALL_DEPTH: usize = 8;
 /// The axis along the shaft: its setpoint while grinding names the station ground.
 const AXIAL_AXIS: &str = "Z";
+/// The workpiece axis: following a virtual leading axis by its own table, it turns at the
+/// speed plan's varying speed.
+const C_AXIS: &str = "C";
 /// `$AA_COUP_ACT` of a following axis in a master-value coupling [K].
 const COUP_ACT_MASTER_VALUE: i64 = 16;
 
@@ -33,7 +36,9 @@ const COUP_ACT_MASTER_VALUE: i64 = 16;
 #[derive(Debug, Clone, Default)]
 pub struct Control {
     tables: BTreeMap<u32, ParsedTable>,
-    coupling: Option<Coupling>,
+    /// Active couplings: at most one per following axis (X to C, or X and C to a virtual
+    /// leading axis with a speed plan).
+    couplings: Vec<Coupling>,
     /// Setpoints by axis name (mm or degrees); an axis never moved is at 0.
     positions: BTreeMap<String, f64>,
     /// R parameters (`R90` …), kept between runs as the NC keeps them; unset ones are 0.
@@ -66,6 +71,13 @@ pub struct Coupled {
     pub z_mm: f64,
     /// In program axes, as [`table_shape`] builds it from the table's blocks.
     pub shape: TableShape,
+    /// With a speed plan: the number and shape of C = f(VA), C following the virtual axis
+    /// that leads X (`_mm` fields in degrees of C; `shape` is then X over VA). `None` when X
+    /// follows C directly.
+    pub c_table_number: Option<u32>,
+    pub c_law: Option<TableShape>,
+    /// Speed of the leading axis: C's at constant speed, the virtual axis' with a plan
+    /// (one revolution of C per revolution of it), rev/min.
     pub c_speed_rpm: f64,
     pub revolutions: f64,
 }
@@ -172,7 +184,7 @@ impl Control {
             load,
             ground: Vec::new(),
         };
-        let mut frame = Frame::new(program_name(main, "MPF").unwrap_or("main"), None);
+        let mut frame = Frame::new(program_name(main, "MPF").unwrap_or("main"), Vec::new());
         let end_line = run.program(main, &mut frame, 0)?;
         if run.ground.is_empty() {
             return Err(ControlError {
