@@ -300,6 +300,7 @@ fn make_table(
                 shape,
                 x_zero_mm: part.x_zero_mm(),
                 wheel_radius_mm: feature.wheel_radius_mm(),
+                plan: None,
             })
         }
     }

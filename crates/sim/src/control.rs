@@ -16,7 +16,7 @@ mod statements;
 
 use std::collections::BTreeMap;
 
-use super::TableShape;
+use super::{PlannedSpeed, TableShape};
 use camloop_core::program::{ParsedShape, ParsedTable};
 use camloop_core::table::TablePoint;
 use statements::{Frame, Run};
@@ -80,6 +80,20 @@ pub struct Coupled {
     /// (one revolution of C per revolution of it), rev/min.
     pub c_speed_rpm: f64,
     pub revolutions: f64,
+}
+
+impl Coupled {
+    /// The planned C speed the run ground with, when C followed a virtual axis by a POLY
+    /// table (the only form camloop writes it in; a G1 C table is not run as a plan).
+    pub fn planned_speed(&self) -> Option<PlannedSpeed> {
+        match &self.c_law {
+            Some(TableShape::Poly(segments)) => Some(PlannedSpeed {
+                c_law: segments.clone(),
+                va_speed_rpm: self.c_speed_rpm,
+            }),
+            _ => None,
+        }
+    }
 }
 
 /// A run stopped at `line` (1-based) of `program` (its name, or `main`).

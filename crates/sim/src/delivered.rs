@@ -58,6 +58,7 @@ impl DeliveredTables {
             shape: coupled.shape,
             x_zero_mm: feature.x_zero_mm(),
             wheel_radius_mm: feature.wheel_radius_mm(),
+            plan: None,
         })
     }
 }

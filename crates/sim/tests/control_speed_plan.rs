@@ -108,7 +108,8 @@ fn an_old_table_program_with_one_number_is_refused_by_the_plan_main_program() {
     let err = Control::new().run(&main, &load).unwrap_err();
     assert_eq!(err.program, TABLE);
     assert!(
-        err.to_string().contains("called with 2 arguments for 1 parameters"),
+        err.to_string()
+            .contains("called with 2 arguments for 1 parameters"),
         "{err}"
     );
 }

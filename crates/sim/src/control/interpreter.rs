@@ -140,8 +140,7 @@ impl Run<'_> {
             .strip_prefix("IF $AA_COUP_ACT[")
             .and_then(|r| r.strip_suffix("]<>0"))
         {
-            self.control.couplings.iter().any(|c| c.following == axis)
-                && COUP_ACT_MASTER_VALUE != 0
+            self.control.couplings.iter().any(|c| c.following == axis) && COUP_ACT_MASTER_VALUE != 0
         } else {
             self.condition(code, frame)?
         };
@@ -237,7 +236,12 @@ impl Run<'_> {
             ))
             .into());
         }
-        if self.control.couplings.iter().any(|c| c.following == *following) {
+        if self
+            .control
+            .couplings
+            .iter()
+            .any(|c| c.following == *following)
+        {
             return Err(ControlFault::AlreadyCoupled {
                 axis: (*following).to_owned(),
             }
@@ -382,7 +386,12 @@ impl Run<'_> {
             if !is_name(address) {
                 return Err(unsupported(code).into());
             }
-            if self.control.couplings.iter().any(|c| c.following == address) {
+            if self
+                .control
+                .couplings
+                .iter()
+                .any(|c| c.following == address)
+            {
                 return Err(ControlFault::AxisCoupled {
                     axis: address.to_owned(),
                 }
@@ -475,7 +484,13 @@ impl Run<'_> {
         }
         let values = arguments
             .iter()
-            .map(|v| frame.vars.get(*v).copied().ok_or_else(|| undefined_variable(v)))
+            .map(|v| {
+                frame
+                    .vars
+                    .get(*v)
+                    .copied()
+                    .ok_or_else(|| undefined_variable(v))
+            })
             .collect::<Result<Vec<Value>, ControlFault>>()?;
         if depth + 1 > MAX_CALL_DEPTH {
             return Err(invalid("subprograms nested too deep").into());
