@@ -65,6 +65,11 @@ fn the_demo_lobe_converges_with_the_plan_on_as_at_constant_speed() {
             worst_from_part_4(run, |p| p.max_profile_error_um),
             worst_from_part_4(run, |p| p.max_lift_error_um)
         );
+        let worst = run.parts[3..]
+            .iter()
+            .max_by(|a, b| a.max_lift_error_um.total_cmp(&b.max_lift_error_um))
+            .map(|p| (p.part, p.dressed));
+        println!("{name}: worst lift from part 4 on part (number, dressed after) {worst:?}");
         assert!(run.stopped.is_none(), "{name}: {:?}", run.stopped);
         assert_eq!(run.parts.len(), PARTS as usize);
         assert_eq!(run.parts.iter().filter(|p| p.dressed).count(), 2);
