@@ -152,3 +152,39 @@ fn the_lag_error_follows_the_planned_c_speed_at_each_angle() {
     // Not one factor: the error varies along the profile with the speed.
     assert!(hi > 1.5 * lo, "{lo} {hi}");
 }
+
+#[test]
+fn a_c_table_that_falls_or_does_not_close_is_refused_naming_the_piece() {
+    let part = part();
+    let constant = CommandedTable::nominal(&part, 360, TableForm::Poly).unwrap();
+    let law = |k: u32, a1: f64| PolySegment {
+        c_start_deg: f64::from(k) * 90.0,
+        c_end_deg: f64::from(k + 1) * 90.0,
+        x0_mm: f64::from(k) * 90.0,
+        a1_mm: a1,
+        a2_mm: 0.0,
+        a3_mm: 0.0,
+    };
+    let with = |c_law: Vec<PolySegment>| CommandedTable {
+        plan: Some(PlannedSpeed {
+            c_law,
+            va_speed_rpm: 30.0,
+        }),
+        ..constant.clone()
+    };
+    let sim = SimGrinder::new(GrinderConfig::default(), Workpiece::Cam(geometry()), 1).unwrap();
+    // Piece 2 ends 10° short of where piece 3 starts; then C standing still in piece 1.
+    let gap: Vec<PolySegment> = (0..4)
+        .map(|k| law(k, if k == 2 { 80.0 } else { 90.0 }))
+        .collect();
+    let mut still: Vec<PolySegment> = (0..4).map(|k| law(k, 90.0)).collect();
+    still[1].a1_mm = 0.0;
+    still[1].a2_mm = 90.0;
+    for (c_law, expected) in [
+        (gap, "the planned C speed: piece 2 at VA = 180°"),
+        (still, "the planned C speed: piece 1 at VA = 90°"),
+    ] {
+        let message = sim.grind(&with(c_law)).unwrap_err().to_string();
+        assert!(message.starts_with(expected), "`{message}`");
+    }
+}

@@ -284,7 +284,7 @@ impl Run<'_> {
         let (Some((axis, value)), Some((fa_axis, feed_deg_min))) = (target, feed) else {
             return Err(unsupported(code).into());
         };
-        if axis != fa_axis || !(feed_deg_min > 0.0) {
+        if axis != fa_axis || feed_deg_min.is_nan() || feed_deg_min <= 0.0 {
             return Err(unsupported(code).into());
         }
         if let Some(inner) = value.strip_prefix("DC(").and_then(|r| r.strip_suffix(')')) {
