@@ -203,6 +203,9 @@ pub struct FeatureSetup {
     pub speed_plan: SpeedPlanSettings,
     pub request: TableRequest,
     pub table_pair: (u32, u32),
+    /// With `[speed_plan] enabled`: the numbers C's table (C = f(VA)) alternates between,
+    /// placed after every feature's X pair so the X numbers stay where they are.
+    pub c_table_pair: Option<(u32, u32)>,
     pub bands: Vec<ToleranceBand>,
     /// Position in the recipe, from 1: the gauge's numeric lobe id and the grinding order.
     pub index: usize,
@@ -327,6 +330,7 @@ impl Recipe {
                 poly_tolerance_um: self.table.poly_tolerance_um,
             },
             table_pair: self.table_pair(index),
+            c_table_pair: self.c_table_pair(index),
             bands,
             index: index + 1,
             phase_deg,
@@ -363,10 +367,24 @@ impl Recipe {
         }
     }
 
+    /// How many table numbers the features need: a pair each, two with the speed plan on.
+    fn table_numbers_needed(&self) -> u32 {
+        let pairs = if self.speed_plan.enabled { 2 } else { 1 };
+        2 * pairs * self.feature_names().len() as u32
+    }
+
     /// The table numbers of the feature at `index` (from 0) in recipe order.
     fn table_pair(&self, index: usize) -> (u32, u32) {
         let first = self.table.table_numbers.0 + 2 * index as u32;
         (first, first + 1)
+    }
+
+    /// C's table numbers of the feature at `index` with the speed plan on: after all the
+    /// features' X pairs.
+    fn c_table_pair(&self, index: usize) -> Option<(u32, u32)> {
+        let features = self.feature_names().len() as u32;
+        let first = self.table.table_numbers.0 + 2 * features + 2 * index as u32;
+        self.speed_plan.enabled.then_some((first, first + 1))
     }
 
     /// Parses and checks a recipe; `file` names it in errors.
@@ -438,10 +456,15 @@ impl Recipe {
             p.push(format!(
                 "table.table_numbers = [{first}, {last}]: must be first ≥ 1 and last ≥ first"
             ));
-        } else if last - first + 1 < 2 * features {
+        } else if last - first + 1 < self.table_numbers_needed() {
+            let with_plan = if self.speed_plan.enabled {
+                " (an X and a C pair each, with the speed plan on)"
+            } else {
+                ""
+            };
             p.push(format!(
-                "table.table_numbers = [{first}, {last}]: {features} features need {} table numbers, the range holds {}",
-                2 * features,
+                "table.table_numbers = [{first}, {last}]: {features} features need {} table numbers{with_plan}, the range holds {}",
+                self.table_numbers_needed(),
                 last - first + 1
             ));
         }

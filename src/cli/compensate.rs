@@ -430,6 +430,7 @@ fn flag_setup(
             poly_tolerance_um: 0.1,
         },
         table_pair: (1, 2),
+        c_table_pair: None,
         bands: Vec::new(),
         index: 1,
         phase_deg: 0.0,

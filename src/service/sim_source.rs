@@ -210,6 +210,7 @@ impl SimSource {
             shape: coupled.shape.clone(),
             x_zero_mm: table_r + feature.x_zero_mm() - feature.wheel_radius_mm(),
             wheel_radius_mm: table_r,
+            plan: coupled.planned_speed(),
         };
         let errors = self.grinder.shaft.station(k + 1, station.z_mm);
         let ground = match sim.grind_station(&table, &workpiece(feature), &errors) {

@@ -118,6 +118,7 @@ impl Machine {
             shape: coupled.shape,
             x_zero_mm: feature.x_zero_mm(),
             wheel_radius_mm: feature.wheel_radius_mm(),
+            plan: None,
         })
     }
 

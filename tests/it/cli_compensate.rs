@@ -43,6 +43,7 @@ fn commanded(program: &Path, wheel_radius_mm: f64) -> (CommandedTable, u32) {
             shape,
             x_zero_mm: wheel_radius_mm + 20.0,
             wheel_radius_mm,
+            plan: None,
         },
         parsed.table_number,
     )

@@ -9,6 +9,7 @@ use camloop::core::fit::TableForm;
 use camloop::core::geometry::{CamGeometry, Follower};
 use camloop::core::learn::LearningParams;
 use camloop::core::lift::LiftTable;
+use camloop::core::speed_plan::SpeedPlanSettings;
 use camloop::sim::GrinderConfig;
 use camloop::sim::cell::{self, CellSetup, Method};
 
@@ -34,6 +35,7 @@ fn setup(params: LearningParams, form: TableForm) -> CellSetup {
             ..GrinderConfig::default()
         },
         seed: 11,
+        speed_plan: SpeedPlanSettings::default(),
     }
 }
 

@@ -8,6 +8,7 @@ use camloop::core::fit::TableForm;
 use camloop::core::geometry::{CamGeometry, CrankpinGeometry, Follower};
 use camloop::core::learn::LearningParams;
 use camloop::core::lift::LiftTable;
+use camloop::core::speed_plan::SpeedPlanSettings;
 use camloop::sim::GrinderConfig;
 use camloop::sim::cell::{self, CellRun, CellSetup, Method};
 use std::fmt::Write as _;
@@ -38,6 +39,7 @@ fn setup() -> CellSetup {
         limits: AxisLimits::default(),
         grinder,
         seed: 7,
+        speed_plan: SpeedPlanSettings::default(),
     }
 }
 
@@ -218,6 +220,7 @@ fn crankpins_converge_too() {
             ..GrinderConfig::default()
         },
         seed: 3,
+        speed_plan: SpeedPlanSettings::default(),
     };
     let run = cell::run(&setup, Method::Camloop, 12).unwrap();
     let text = report(&[("camloop", &run)]);

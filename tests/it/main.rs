@@ -70,6 +70,7 @@ mod http_tls;
 mod invariants;
 mod loop_plateau;
 mod loop_sim;
+mod loop_speed_plan;
 mod mqtt_broker;
 mod mqtt_secure;
 mod program_retarget;

@@ -75,6 +75,40 @@ base_radius_mm = 20
     assert!(e.contains("c_max_accel_deg_s2 = 0"), "{e}");
 }
 
+/// With the plan on, each feature needs a second pair for C's table, after every X pair:
+/// the demo's [1, 16] holds its 8 lobes' X pairs only.
+#[test]
+fn the_speed_plan_needs_a_c_pair_per_feature_after_the_x_pairs() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let on = text.replace("enabled = false", "enabled = true");
+    assert_ne!(on, text, "the demo recipe has `enabled = false`");
+    let e = Recipe::parse(&on, "demo.toml").unwrap_err().to_string();
+    assert!(
+        e.contains("8 features need 32 table numbers (an X and a C pair each"),
+        "{e}"
+    );
+    let wide = on.replace("table_numbers = [1, 16]", "table_numbers = [1, 32]");
+    let recipe = Recipe::parse(&wide, "demo.toml").unwrap();
+    let setups = recipe.feature_setups(&path).unwrap();
+    let mut used = Vec::new();
+    for s in &setups {
+        let (c0, c1) = s.c_table_pair.expect("the plan is on");
+        used.extend([s.table_pair.0, s.table_pair.1, c0, c1]);
+    }
+    assert_eq!(setups[0].table_pair, (1, 2));
+    assert_eq!(setups[0].c_table_pair, Some((17, 18)));
+    assert_eq!(setups[7].c_table_pair, Some((31, 32)));
+    used.sort_unstable();
+    assert_eq!(used, (1..=32).collect::<Vec<u32>>(), "every number once");
+    // Off, no C pair, and the X pairs are where they were.
+    let off = Recipe::parse(&text, "demo.toml").unwrap();
+    let setups = off.feature_setups(&path).unwrap();
+    assert!(setups.iter().all(|s| s.c_table_pair.is_none()));
+    assert_eq!(setups[7].table_pair, (15, 16));
+}
+
 #[test]
 fn a_bad_recipe_lists_every_problem() {
     let text = r#"

@@ -9,12 +9,13 @@ use super::{
 };
 use camloop_core::analysis::{AnalysisError, LobeOptions, analyse_lobe};
 use camloop_core::compensate::{
-    self, AxisLimits, CycleError, Feature, GuardError, LobeLoop, TableRequest,
+    self, AxisLimits, CycleError, Feature, GuardError, GuardedTable, LobeLoop, TableRequest,
 };
 use camloop_core::fit::{TableForm, fit_poly};
 use camloop_core::learn::{self, LearningParams, LearningState, StepOutcome};
 use camloop_core::lift::{LiftCurve, LiftTable};
 use camloop_core::measure::{AssemblyLimits, AveragedMeasurement, MeasurementError};
+use camloop_core::speed_plan::{self, SpeedPlanError, SpeedPlanSettings, TimeLaw};
 use camloop_core::turn::{self, Decision, TurnError, TurnSetup};
 
 /// Points of the fine grid the ground part is judged on (0.1°), not only the gauge's points.
@@ -67,6 +68,8 @@ pub enum CellError {
     Guard(#[from] GuardError),
     #[error("geometry: {0}")]
     Geometry(#[from] camloop_core::geometry::GeometryError),
+    #[error("{0}")]
+    Plan(#[from] SpeedPlanError),
 }
 
 /// The cell's fixed settings.
@@ -81,6 +84,10 @@ pub struct CellSetup {
     pub limits: AxisLimits,
     pub grinder: GrinderConfig,
     pub seed: u64,
+    /// With `enabled`, camloop's tables are ground with the planned C speed (the plan of the
+    /// nominal part on the wheel believed, made again after each dressing) through the
+    /// two-table program; the X-domain methods keep the constant speed.
+    pub speed_plan: SpeedPlanSettings,
 }
 
 /// The figures of a run, and why it stopped early if it did.
@@ -117,7 +124,16 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
     // camloop's tables reach the grinder as the service delivers them: rendered, and coupled
     // by the simulated control running the main program.
     let mut control = DeliveredTables::default();
-    let mut table = make_table(setup, feature, &state, method, &naive_dx_mm, &mut control)?;
+    let mut law = plan_law(setup, feature)?;
+    let mut table = make_table(
+        setup,
+        feature,
+        &state,
+        method,
+        &naive_dx_mm,
+        law.as_ref(),
+        &mut control,
+    )?;
     let mut figures = Vec::with_capacity(parts as usize);
     for part in 1..=parts {
         let ground = match sim.grind(&table) {
@@ -155,7 +171,8 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                         table: next_table,
                     } => {
                         state = *next;
-                        table = control.deliver(&next_table, feature)?;
+                        let law = law.as_ref();
+                        table = deliver(setup, feature, &state, &next_table, law, &mut control)?;
                         outcome_text(&outcome)
                     }
                     // A refused table is never used: the machine keeps the previous one.
@@ -171,7 +188,15 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                         *dx -= e / 1000.0;
                     }
                 }
-                table = make_table(setup, feature, &state, method, &naive_dx_mm, &mut control)?;
+                table = make_table(
+                    setup,
+                    feature,
+                    &state,
+                    method,
+                    &naive_dx_mm,
+                    law.as_ref(),
+                    &mut control,
+                )?;
                 "X -= e at each index".to_string()
             }
             Method::XDomainIlc => {
@@ -188,7 +213,15 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                 };
                 let outcome = learn::step(&mut x_state, &part, &setup.params);
                 x_from_correction(&x_state, &mut naive_dx_mm);
-                table = make_table(setup, feature, &state, method, &naive_dx_mm, &mut control)?;
+                table = make_table(
+                    setup,
+                    feature,
+                    &state,
+                    method,
+                    &naive_dx_mm,
+                    law.as_ref(),
+                    &mut control,
+                )?;
                 match outcome {
                     Ok(o) => outcome_text(&o),
                     Err(e) => format!("refused: {e}"),
@@ -202,6 +235,8 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                 for s in [&mut state, &mut x_state] {
                     after_dressing(s, old_radius_mm, &event);
                 }
+                // The correction is kept (lift domain); the plan is made for the new wheel.
+                law = plan_law(setup, feature)?;
                 if method == Method::XDomainIlc {
                     // Its X follows its learning state, moved for the dressing like camloop's.
                     x_from_correction(&x_state, &mut naive_dx_mm);
@@ -210,7 +245,15 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                     let mean = naive_dx_mm.iter().sum::<f64>() / naive_dx_mm.len() as f64;
                     naive_dx_mm.iter_mut().for_each(|d| *d -= mean);
                 }
-                table = make_table(setup, feature, &state, method, &naive_dx_mm, &mut control)?;
+                table = make_table(
+                    setup,
+                    feature,
+                    &state,
+                    method,
+                    &naive_dx_mm,
+                    law.as_ref(),
+                    &mut control,
+                )?;
                 true
             }
             None => false,
@@ -278,12 +321,13 @@ fn make_table(
     state: &LearningState,
     method: Method,
     naive_dx_mm: &[f64],
+    law: Option<&TimeLaw>,
     control: &mut DeliveredTables,
 ) -> Result<CommandedTable, CellError> {
     match method {
         Method::Camloop => {
             let table = compensate::current_table(state, &lobe_loop(setup, feature))?;
-            Ok(control.deliver(&table, feature)?)
+            deliver(setup, feature, state, &table, law, control)
         }
         Method::NaiveX | Method::XDomainIlc => {
             let part = feature.part(&setup.nominal)?;
@@ -300,9 +344,42 @@ fn make_table(
                 shape,
                 x_zero_mm: part.x_zero_mm(),
                 wheel_radius_mm: feature.wheel_radius_mm(),
+                plan: None,
             })
         }
     }
+}
+
+/// The planned C speed for `feature` (its nominal part on the wheel believed now) when the
+/// setup asks for one. It stays fixed between dressings, so the servo lag it leaves is a
+/// repeatable shape the loop learns like any other.
+fn plan_law(setup: &CellSetup, feature: Feature) -> Result<Option<TimeLaw>, CellError> {
+    if !setup.speed_plan.enabled {
+        return Ok(None);
+    }
+    let part = feature.part(&setup.nominal)?;
+    let plan = speed_plan::plan(&part, &setup.speed_plan.limits(&setup.limits))?;
+    Ok(Some(plan.law))
+}
+
+/// Delivers camloop's guarded `table` for `state`: the constant-speed programs, or with
+/// `law` the two-table programs of the commanded part.
+fn deliver(
+    setup: &CellSetup,
+    feature: Feature,
+    state: &LearningState,
+    table: &GuardedTable,
+    law: Option<&TimeLaw>,
+    control: &mut DeliveredTables,
+) -> Result<CommandedTable, CellError> {
+    let Some(law) = law else {
+        return Ok(control.deliver(table, feature)?);
+    };
+    let lift = compensate::commanded_lift(&setup.nominal, &state.correction_um)
+        .map_err(GuardError::from)?;
+    let commanded = feature.part(&lift)?;
+    let tolerance_um = setup.request.poly_tolerance_um;
+    Ok(control.deliver_planned(table, &commanded, law, tolerance_um)?)
 }
 
 /// Max |profile error| (datum fitted), max |lift error| (nothing fitted) and the base-circle

@@ -236,7 +236,12 @@ impl GrinderConfig {
 
     /// The servo lag as an angle of C, radians: ω·τ.
     pub fn lag_rad(&self) -> f64 {
-        (self.c_speed_rpm * 6.0 * self.servo_lag_ms * 1e-3).to_radians()
+        self.lag_rad_at(self.c_speed_rpm)
+    }
+
+    /// The servo lag as an angle of an axis turning at `speed_rpm`, radians.
+    pub fn lag_rad_at(&self, speed_rpm: f64) -> f64 {
+        (speed_rpm * 6.0 * self.servo_lag_ms * 1e-3).to_radians()
     }
 
     /// Every problem with the settings, each naming its field; empty when all is well.

@@ -16,7 +16,7 @@ mod statements;
 
 use std::collections::BTreeMap;
 
-use super::TableShape;
+use super::{PlannedSpeed, TableShape};
 use camloop_core::program::{ParsedShape, ParsedTable};
 use camloop_core::table::TablePoint;
 use statements::{Frame, Run};
@@ -25,6 +25,9 @@ use statements::{Frame, Run};
 const MAX_CALL_DEPTH: usize = 8;
 /// The axis along the shaft: its setpoint while grinding names the station ground.
 const AXIAL_AXIS: &str = "Z";
+/// The workpiece axis: following a virtual leading axis by its own table, it turns at the
+/// speed plan's varying speed.
+const C_AXIS: &str = "C";
 /// `$AA_COUP_ACT` of a following axis in a master-value coupling [K].
 const COUP_ACT_MASTER_VALUE: i64 = 16;
 
@@ -33,7 +36,9 @@ const COUP_ACT_MASTER_VALUE: i64 = 16;
 #[derive(Debug, Clone, Default)]
 pub struct Control {
     tables: BTreeMap<u32, ParsedTable>,
-    coupling: Option<Coupling>,
+    /// Active couplings: at most one per following axis (X to C, or X and C to a virtual
+    /// leading axis with a speed plan).
+    couplings: Vec<Coupling>,
     /// Setpoints by axis name (mm or degrees); an axis never moved is at 0.
     positions: BTreeMap<String, f64>,
     /// R parameters (`R90` …), kept between runs as the NC keeps them; unset ones are 0.
@@ -66,8 +71,29 @@ pub struct Coupled {
     pub z_mm: f64,
     /// In program axes, as [`table_shape`] builds it from the table's blocks.
     pub shape: TableShape,
+    /// With a speed plan: the number and shape of C = f(VA), C following the virtual axis
+    /// that leads X (`_mm` fields in degrees of C; `shape` is then X over VA). `None` when X
+    /// follows C directly.
+    pub c_table_number: Option<u32>,
+    pub c_law: Option<TableShape>,
+    /// Speed of the leading axis: C's at constant speed, the virtual axis' with a plan
+    /// (one revolution of C per revolution of it), rev/min.
     pub c_speed_rpm: f64,
     pub revolutions: f64,
+}
+
+impl Coupled {
+    /// The planned C speed the run ground with, when C followed a virtual axis by a POLY
+    /// table (the only form camloop writes it in; a G1 C table is not run as a plan).
+    pub fn planned_speed(&self) -> Option<PlannedSpeed> {
+        match &self.c_law {
+            Some(TableShape::Poly(segments)) => Some(PlannedSpeed {
+                c_law: segments.clone(),
+                va_speed_rpm: self.c_speed_rpm,
+            }),
+            _ => None,
+        }
+    }
 }
 
 /// A run stopped at `line` (1-based) of `program` (its name, or `main`).
@@ -172,7 +198,7 @@ impl Control {
             load,
             ground: Vec::new(),
         };
-        let mut frame = Frame::new(program_name(main, "MPF").unwrap_or("main"), None);
+        let mut frame = Frame::new(program_name(main, "MPF").unwrap_or("main"), Vec::new());
         let end_line = run.program(main, &mut frame, 0)?;
         if run.ground.is_empty() {
             return Err(ControlError {

@@ -6,14 +6,25 @@
 
 use super::{CommandedTable, Control, ControlError};
 use camloop_core::compensate::{Feature, GuardedTable};
+use camloop_core::geometry::{GeometryError, Part};
 use camloop_core::program::{
     MainProgramSettings, ProgramSettings, SettingsErrors, TableError, next_table_number,
     render_main_program,
 };
+use camloop_core::speed_plan::TimeLaw;
+use camloop_core::speed_plan::render::{
+    VaProgramError, VaProgramSettings, render_va_main_program, render_va_table_program,
+};
+use camloop_core::speed_plan::tables::va_tables;
 use std::collections::BTreeMap;
 
 const TABLE_PROGRAM: &str = "CELL_TABLE";
 const TABLE_PAIR: (u32, u32) = (1, 2);
+/// The C table's numbers with a speed plan, alternating like the X table's.
+const C_TABLE_PAIR: (u32, u32) = (3, 4);
+const MAIN_PROGRAM: &str = "CELL_GRIND";
+/// The virtual leading axis of a speed plan.
+const VIRTUAL_AXIS: &str = "VA";
 
 /// Why a table could not reach the simulated control's coupling.
 #[derive(Debug, thiserror::Error)]
@@ -24,6 +35,10 @@ pub enum DeliveryError {
     Main(#[from] SettingsErrors),
     #[error("control: {0}")]
     Control(#[from] ControlError),
+    #[error("speed plan tables: {0}")]
+    Plan(#[from] GeometryError),
+    #[error("speed plan program: {0}")]
+    PlanProgram(#[from] VaProgramError),
 }
 
 /// An in-memory share and the control that runs it.
@@ -32,6 +47,7 @@ pub(crate) struct DeliveredTables {
     files: BTreeMap<String, String>,
     control: Control,
     table_number: u32,
+    c_table_number: u32,
 }
 
 impl DeliveredTables {
@@ -58,6 +74,49 @@ impl DeliveredTables {
             shape: coupled.shape,
             x_zero_mm: feature.x_zero_mm(),
             wheel_radius_mm: feature.wheel_radius_mm(),
+            plan: None,
+        })
+    }
+
+    /// Delivers the table of `commanded` (the part the guarded `table` was made for) with
+    /// the planned C speed `law`: the two-table program and the main program that couples C
+    /// and X to the virtual axis, run by the control. The learned timing moves C's table, as
+    /// it moves the constant-speed table's C.
+    pub(crate) fn deliver_planned(
+        &mut self,
+        table: &GuardedTable,
+        commanded: &Part,
+        law: &TimeLaw,
+        tolerance_um: f64,
+    ) -> Result<CommandedTable, DeliveryError> {
+        let mut tables = va_tables(commanded, law, tolerance_um)?;
+        for s in &mut tables.c_segments {
+            s.x0_mm += table.timing_offset_deg;
+        }
+        let defaults = ProgramSettings::default();
+        let settings = VaProgramSettings {
+            name: TABLE_PROGRAM.to_string(),
+            virtual_axis: VIRTUAL_AXIS.to_string(),
+            x_axis: defaults.following_axis.clone(),
+            c_axis: defaults.leading_axis.clone(),
+            x_decimals: usize::from(defaults.x_decimals),
+            c_decimals: usize::from(defaults.c_decimals),
+            x_table: next_table_number(self.table_number, TABLE_PAIR),
+            c_table: next_table_number(self.c_table_number, C_TABLE_PAIR),
+        };
+        let text = render_va_table_program(&tables, &settings)?;
+        let main = render_va_main_program(MAIN_PROGRAM, &settings, &tables, 1.0)?;
+        self.files.insert(TABLE_PROGRAM.to_string(), text);
+        (self.table_number, self.c_table_number) = (settings.x_table, settings.c_table);
+        let files = &self.files;
+        let coupled = self
+            .control
+            .run(&main, &|name: &str| files.get(name).cloned())?;
+        Ok(CommandedTable {
+            plan: coupled.planned_speed(),
+            shape: coupled.shape,
+            x_zero_mm: commanded.x_zero_mm(),
+            wheel_radius_mm: commanded.wheel_radius_mm(),
         })
     }
 }

@@ -13,7 +13,10 @@
 //! wrong only by the flank geometry, which is why the loop regenerates it.
 //!
 //! **Machine errors** ([`GrinderConfig`]):
-//! - servo following error as a pure delay τ: X_act(c) = X(c − ω·τ), ω the C speed;
+//! - servo following error as a pure delay τ: X_act(c) = X(c − ω·τ), ω the C speed; with a
+//!   speed plan ([`PlannedSpeed`]: C and X following a virtual axis VA at constant speed)
+//!   X runs g(VA − ω_VA·τ), a lag of ≈ ω_C(c)·τ in C that follows the actual C speed at each
+//!   angle (see the `plan` module);
 //! - a geometric error of low harmonic order in d: Σ A_k·cos(k·c + φ_k);
 //! - wheel size: the true radius R_act = R_believed + ΔR at the start, minus a wear per part;
 //!   dressing (every N parts and/or after listed parts) removes the dress depth, and the
@@ -93,6 +96,7 @@ pub mod frames;
 mod gauge;
 mod ground;
 mod path;
+mod plan;
 mod rng;
 mod table;
 
@@ -103,12 +107,14 @@ pub use envelope::SMOOTH_KINK_RAD;
 pub use frames::measurement_frames;
 pub use gauge::{ORIGIN, PartLabels};
 pub use ground::{GroundPart, Workpiece};
+pub use plan::PlannedSpeed;
 pub use rng::SimRng;
 pub use table::{CommandedTable, TableShape};
 
 use camloop_core::measure::RawMeasurement;
 use ground::Probe;
 use path::MachinePath;
+use plan::{CLaw, PlanLag};
 use std::f64::consts::TAU;
 use table::TablePath;
 
@@ -168,6 +174,8 @@ pub enum SimError {
         x_end_mm: f64,
         next_x_mm: f64,
     },
+    #[error("the planned C speed: {reason}")]
+    CLaw { reason: String },
     #[error(
         "could not resolve the ground outline near c = {c_deg:.4}°: the real wheel path is too irregular"
     )]
@@ -279,9 +287,22 @@ impl SimGrinder {
         positive("true wheel radius", self.wheel_radius_mm)?;
         let path_table = TablePath::new(&table.shape)?;
         let x_zero_mm = self.x_zero_mm(table);
+        let law = table.plan.as_ref().map(CLaw::new).transpose()?;
+        // With a plan the X servo's lag is a constant angle of the virtual axis.
+        let (servo_lag_rad, plan) = match (&law, &table.plan) {
+            (Some(law), Some(p)) => (
+                0.0,
+                Some(PlanLag {
+                    law,
+                    va_lag_rad: self.config.lag_rad_at(p.va_speed_rpm),
+                }),
+            ),
+            _ => (self.config.lag_rad(), None),
+        };
         let path = MachinePath {
             table: &path_table,
-            lag_rad: self.config.lag_rad() + errors.lag_deg.to_radians(),
+            lag_rad: servo_lag_rad + errors.lag_deg.to_radians(),
+            plan,
             x_zero_mm: x_zero_mm + errors.size_um * 1e-3,
             harmonics: self
                 .config

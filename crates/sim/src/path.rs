@@ -1,14 +1,18 @@
 //! The machine's real wheel-centre path, evaluated exactly with its derivatives, and the
 //! small plane-vector helpers the outline construction uses.
 
+use super::plan::PlanLag;
 use super::table::TablePath;
 
 /// The machine's real wheel-centre path: d(c) = X_table(c − lag) + x_zero + Σ harmonics,
-/// W(c) = d(c)·u(c), and the wheel radius that runs along it.
+/// W(c) = d(c)·u(c), and the wheel radius that runs along it. With a speed plan the table
+/// is over the virtual axis and X at c is the plan's (see [`PlanLag`]); `lag_rad` is then
+/// only the lag that does not come from the X servo.
 #[derive(Debug, Clone)]
 pub(crate) struct MachinePath<'a> {
     pub table: &'a TablePath,
     pub lag_rad: f64,
+    pub plan: Option<PlanLag<'a>>,
     pub x_zero_mm: f64,
     /// (order k, amplitude mm, phase rad).
     pub harmonics: Vec<(f64, f64, f64)>,
@@ -33,7 +37,10 @@ impl MachinePath<'_> {
     /// The path of table segment `i` at `c` (radians; the segment's own C range shifted by
     /// the lag, or slightly beyond it as its analytic continuation).
     pub fn at(&self, i: usize, c: f64) -> PathSample {
-        let xs = self.table.eval(i, c - self.lag_rad);
+        let xs = match &self.plan {
+            None => self.table.eval(i, c - self.lag_rad),
+            Some(plan) => plan.x_at(self.table, i, c - self.lag_rad),
+        };
         let (mut d, mut d1, mut d2) = (xs.x + self.x_zero_mm, xs.x1, xs.x2);
         for &(k, a, phi) in &self.harmonics {
             let (s, co) = (k * c + phi).sin_cos();
@@ -62,7 +69,10 @@ impl MachinePath<'_> {
 
     /// C range of segment `i` of the real path (the table's, shifted by the lag), radians.
     pub fn range(&self, i: usize) -> (f64, f64) {
-        let (a, b) = self.table.range_rad(i);
+        let (a, b) = match &self.plan {
+            None => self.table.range_rad(i),
+            Some(plan) => plan.range(self.table, i),
+        };
         (a + self.lag_rad, b + self.lag_rad)
     }
 }

@@ -2,6 +2,7 @@
 //! interpolates it: straight in X(C) between G1 points, the cubic of each POLY segment.
 
 use super::SimError;
+use super::plan::PlannedSpeed;
 use camloop_core::fit::{TableForm, fit_poly};
 use camloop_core::geometry::{GeometryError, Part};
 use camloop_core::table::{PolySegment, TablePoint};
@@ -33,6 +34,9 @@ pub struct CommandedTable {
     pub x_zero_mm: f64,
     /// Wheel radius R the table was computed for, mm.
     pub wheel_radius_mm: f64,
+    /// With a speed plan: C's table and the virtual axis' speed; `shape` is then X over the
+    /// virtual axis (`c_deg` holds VA). `None`: C turns at the grinder's constant speed.
+    pub plan: Option<PlannedSpeed>,
 }
 
 impl CommandedTable {
@@ -48,6 +52,7 @@ impl CommandedTable {
             shape,
             x_zero_mm: part.x_zero_mm(),
             wheel_radius_mm: part.wheel_radius_mm(),
+            plan: None,
         })
     }
 

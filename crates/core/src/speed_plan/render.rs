@@ -5,7 +5,8 @@
 //! VA, so it is written periodic in both axes (periodicity 2) [?: confirm on a control that
 //! a rotary following axis wraps there as the manual's periodicity 2 suggests].
 //!
-//! Not yet used by the service or the simulated control; see the manual's "Speed plan".
+//! Run by the simulated control and the simulated cell; not yet delivered by the service (see
+//! the manual's "Speed plan").
 
 use super::tables::VaTables;
 use crate::program::{fmt_fixed, validate_axis_name, validate_program_name};

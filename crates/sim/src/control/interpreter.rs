@@ -6,7 +6,7 @@ use super::statements::{
     is_name, proc_line, real_var, table_number, undefined_variable, unsupported,
 };
 use super::{
-    AXIAL_AXIS, COUP_ACT_MASTER_VALUE, ControlError, ControlFault, Coupled, Coupling,
+    AXIAL_AXIS, C_AXIS, COUP_ACT_MASTER_VALUE, ControlError, ControlFault, Coupled, Coupling,
     MAX_CALL_DEPTH, program_name, r_param, table_shape,
 };
 use camloop_core::program::{ParsedTable, TableBlocks, parse_ctabdef};
@@ -95,10 +95,10 @@ impl Run<'_> {
             "STOPRE" => Ok(None),
             "M30" => Ok(Some(End::M30)),
             "RET" => {
-                if let (Some(name), Some(slot)) = (&frame.param, frame.argument.as_mut())
-                    && let Some(value) = frame.vars.get(name)
-                {
-                    *slot = *value;
+                for (name, slot) in frame.params.iter().zip(frame.arguments.iter_mut()) {
+                    if let Some(value) = frame.vars.get(name) {
+                        *slot = *value;
+                    }
                 }
                 Ok(Some(End::Ret))
             }
@@ -115,7 +115,7 @@ impl Run<'_> {
             _ if code.starts_with("LEADON(") => self.leadon(code, frame),
             _ if code.starts_with("LEADOF(") => self.leadof(code),
             _ if code.starts_with("WAITP(") => Ok(args(code, "WAITP").map(|_| None)?),
-            _ if code.starts_with("POS[") => self.pos(code),
+            _ if code.starts_with("POS[") => self.pos(code, frame),
             _ if code.starts_with('G') && code[1..].starts_with(|c: char| c.is_ascii_digit()) => {
                 self.motion(code, frame)
             }
@@ -140,10 +140,7 @@ impl Run<'_> {
             .strip_prefix("IF $AA_COUP_ACT[")
             .and_then(|r| r.strip_suffix("]<>0"))
         {
-            match &self.control.coupling {
-                Some(c) if c.following == axis => COUP_ACT_MASTER_VALUE != 0,
-                _ => false,
-            }
+            self.control.couplings.iter().any(|c| c.following == axis) && COUP_ACT_MASTER_VALUE != 0
         } else {
             self.condition(code, frame)?
         };
@@ -189,15 +186,11 @@ impl Run<'_> {
     /// `CTABDEF(…)` … `CTABEND`: reads the blocks and stores the table under its number.
     fn table(&mut self, code: &str, program: &str, lines: &[&str], i: &mut usize) -> Step {
         let def = parse_ctabdef(code, *i).map_err(|e| invalid(&e.reason))?;
-        if def.periodicity != "1" {
+        // 2: periodic in both axes, as the speed plan's C = f(VA) is written.
+        if !matches!(def.periodicity.as_str(), "1" | "2") {
             return Err(unsupported(code).into());
         }
-        if self
-            .control
-            .coupling
-            .as_ref()
-            .is_some_and(|c| c.table == def.number)
-        {
+        if self.control.couplings.iter().any(|c| c.table == def.number) {
             return Err(ControlFault::TableInUse { number: def.number }.into());
         }
         let mut blocks = TableBlocks::new(def.following.clone(), def.leading.clone());
@@ -243,13 +236,18 @@ impl Run<'_> {
             ))
             .into());
         }
-        if self.control.coupling.is_some() {
+        if self
+            .control
+            .couplings
+            .iter()
+            .any(|c| c.following == *following)
+        {
             return Err(ControlFault::AlreadyCoupled {
                 axis: (*following).to_owned(),
             }
             .into());
         }
-        self.control.coupling = Some(Coupling {
+        self.control.couplings.push(Coupling {
             following: (*following).to_owned(),
             leading: (*leading).to_owned(),
             table: number,
@@ -263,56 +261,113 @@ impl Run<'_> {
         let [following, leading] = a.as_slice() else {
             return Err(unsupported(code).into());
         };
-        if let Some(c) = &self.control.coupling
-            && c.following == *following
-            && c.leading == *leading
-        {
-            self.control.coupling = None;
-        }
+        self.control
+            .couplings
+            .retain(|c| !(c.following == *following && c.leading == *leading));
         Ok(None)
     }
 
-    /// `POS[C]=IC(<deg>) FA[C]=<deg/min>`: turns C; while C leads a coupling, that is the
-    /// grinding the run reports.
-    fn pos(&mut self, code: &str) -> Step {
+    /// `POS[<axis>]=IC(<deg>) FA[<axis>]=<deg/min>` turns an axis by an increment (while it
+    /// leads the coupling of X, that is the grinding the run reports);
+    /// `POS[<axis>]=DC(<var or deg>) …` takes an uncoupled rotary axis to a position the
+    /// shortest way.
+    fn pos(&mut self, code: &str, frame: &Frame) -> Step {
         let mut words = code.split_whitespace();
         let (Some(pos), Some(fa), None) = (words.next(), words.next(), words.next()) else {
             return Err(unsupported(code).into());
         };
-        let parsed = pos
-            .strip_prefix("POS[")
-            .and_then(|r| r.split_once("]=IC("))
-            .and_then(|(axis, r)| Some((axis, r.strip_suffix(')')?.parse::<f64>().ok()?)));
+        let target = pos.strip_prefix("POS[").and_then(|r| r.split_once("]="));
         let feed = fa
             .strip_prefix("FA[")
             .and_then(|r| r.split_once("]="))
             .and_then(|(axis, v)| Some((axis, v.parse::<f64>().ok()?)));
-        let (Some((axis, travel_deg)), Some((fa_axis, feed_deg_min))) = (parsed, feed) else {
+        let (Some((axis, value)), Some((fa_axis, feed_deg_min))) = (target, feed) else {
             return Err(unsupported(code).into());
         };
-        if axis != fa_axis || !(travel_deg.is_finite() && feed_deg_min > 0.0) {
+        if axis != fa_axis || feed_deg_min.is_nan() || feed_deg_min <= 0.0 {
             return Err(unsupported(code).into());
         }
-        if let Some(c) = &self.control.coupling
-            && c.leading == axis
-            && let Some(table) = self.control.tables.get(&c.table)
-        {
-            self.ground.push(Coupled {
-                table_number: c.table,
-                defined_by: table.name.clone(),
-                z_mm: self
-                    .control
-                    .positions
-                    .get(AXIAL_AXIS)
-                    .copied()
-                    .unwrap_or(0.0),
-                shape: table_shape(&table.shape),
-                c_speed_rpm: feed_deg_min / 360.0,
-                revolutions: travel_deg / 360.0,
-            });
+        if let Some(inner) = value.strip_prefix("DC(").and_then(|r| r.strip_suffix(')')) {
+            return self.pos_direct(code, axis, inner, frame);
+        }
+        let travel_deg = value
+            .strip_prefix("IC(")
+            .and_then(|r| r.strip_suffix(')')?.parse::<f64>().ok())
+            .filter(|t| t.is_finite())
+            .ok_or_else(|| unsupported(code))?;
+        if let Some(grind) = self.grind(axis, feed_deg_min, travel_deg) {
+            // C follows a virtual axis one revolution per revolution of it.
+            if grind.c_law.is_some() {
+                *self.control.positions.entry(C_AXIS.to_owned()).or_default() += travel_deg;
+            }
+            self.ground.push(grind);
         }
         *self.control.positions.entry(axis.to_owned()).or_default() += travel_deg;
         Ok(None)
+    }
+
+    /// `POS[<axis>]=DC(…)`: the shortest way to the target, modulo 360°.
+    fn pos_direct(&mut self, code: &str, axis: &str, target: &str, frame: &Frame) -> Step {
+        let target_deg = match target.parse::<f64>() {
+            Ok(v) => v,
+            Err(_) => real_var(target, frame)?,
+        };
+        if !target_deg.is_finite() {
+            return Err(unsupported(code).into());
+        }
+        if self.control.couplings.iter().any(|c| c.following == axis) {
+            return Err(ControlFault::AxisCoupled {
+                axis: axis.to_owned(),
+            }
+            .into());
+        }
+        let now = self.control.positions.get(axis).copied().unwrap_or(0.0);
+        let mut step = (target_deg - now).rem_euclid(360.0);
+        if step > 180.0 {
+            step -= 360.0;
+        }
+        self.control.positions.insert(axis.to_owned(), now + step);
+        Ok(None)
+    }
+
+    /// What turning `leading` grinds: X coupled to it, and C turning, either as the leading
+    /// axis itself or following it by its own table (the speed plan's virtual axis).
+    fn grind(&self, leading: &str, feed_deg_min: f64, travel_deg: f64) -> Option<Coupled> {
+        let led = |c: &&Coupling| c.leading == leading;
+        let c_table = self
+            .control
+            .couplings
+            .iter()
+            .filter(led)
+            .find(|c| c.following == C_AXIS);
+        if leading != C_AXIS && c_table.is_none() {
+            return None;
+        }
+        let x = self
+            .control
+            .couplings
+            .iter()
+            .filter(led)
+            .find(|c| c.following != C_AXIS)?;
+        let table = self.control.tables.get(&x.table)?;
+        let c_law = c_table
+            .and_then(|c| self.control.tables.get(&c.table))
+            .map(|t| table_shape(&t.shape));
+        Some(Coupled {
+            table_number: x.table,
+            defined_by: table.name.clone(),
+            z_mm: self
+                .control
+                .positions
+                .get(AXIAL_AXIS)
+                .copied()
+                .unwrap_or(0.0),
+            shape: table_shape(&table.shape),
+            c_table_number: c_table.map(|c| c.table),
+            c_law,
+            c_speed_rpm: feed_deg_min / 360.0,
+            revolutions: travel_deg / 360.0,
+        })
     }
 
     /// `G90 G71`, `G90 G1 X=<var or number> F=<number>` or `G0 <axis>=<number>`.
@@ -333,9 +388,9 @@ impl Run<'_> {
             }
             if self
                 .control
-                .coupling
-                .as_ref()
-                .is_some_and(|c| c.following == address)
+                .couplings
+                .iter()
+                .any(|c| c.following == address)
             {
                 return Err(ControlFault::AxisCoupled {
                     axis: address.to_owned(),
@@ -389,7 +444,10 @@ impl Run<'_> {
         let [leading, number, slope] = a.as_slice() else {
             return Err(unsupported(code).into());
         };
-        let c_deg = real_var(leading, frame)?;
+        let c_deg = match leading.parse::<f64>() {
+            Ok(v) => v,
+            Err(_) => real_var(leading, frame)?,
+        };
         let number = table_number(int_arg(number, frame)?)?;
         let table = self.defined_table(number)?;
         real_var(slope, frame)?;
@@ -403,30 +461,37 @@ impl Run<'_> {
         Ok(x(c_deg))
     }
 
-    /// Calls `NAME` (no parameters) or `NAME(VAR)` (one `VAR INT`, declared by `EXTERN`).
+    /// Calls `NAME` (no parameters) or `NAME(VAR, …)` (`VAR INT` parameters, declared by
+    /// `EXTERN`).
     fn call(&mut self, code: &str, frame: &mut Frame, depth: usize) -> Step {
-        let (name, argument) = match code.split_once('(') {
+        let (name, arguments): (&str, Vec<&str>) = match code.split_once('(') {
             Some((name, rest)) => {
-                let var = rest.strip_suffix(')').ok_or_else(|| unsupported(code))?;
-                (name, Some(var))
+                let vars = rest.strip_suffix(')').ok_or_else(|| unsupported(code))?;
+                (name, vars.split(',').map(str::trim).collect())
             }
-            None => (code, None),
+            None => (code, Vec::new()),
         };
-        if !is_name(name) || KEYWORDS.contains(&name) || argument.is_some_and(|v| !is_name(v)) {
+        if !is_name(name) || KEYWORDS.contains(&name) || arguments.iter().any(|v| !is_name(v)) {
             return Err(unsupported(code).into());
         }
         let declared = frame.externs.get(name).copied().unwrap_or(0);
-        if declared != usize::from(argument.is_some()) {
+        if declared != arguments.len() {
             return Err(invalid(&format!(
                 "{name} is called with {} arguments but declared with {declared} by EXTERN",
-                usize::from(argument.is_some())
+                arguments.len()
             ))
             .into());
         }
-        let value = match argument {
-            Some(v) => Some(*frame.vars.get(v).ok_or_else(|| undefined_variable(v))?),
-            None => None,
-        };
+        let values = arguments
+            .iter()
+            .map(|v| {
+                frame
+                    .vars
+                    .get(*v)
+                    .copied()
+                    .ok_or_else(|| undefined_variable(v))
+            })
+            .collect::<Result<Vec<Value>, ControlFault>>()?;
         if depth + 1 > MAX_CALL_DEPTH {
             return Err(invalid("subprograms nested too deep").into());
         }
@@ -439,14 +504,14 @@ impl Run<'_> {
             ))
             .into());
         }
-        let mut callee = Frame::new(name, value);
+        let mut callee = Frame::new(name, values);
         self.program(&text, &mut callee, depth + 1)
             .map_err(Halt::Nested)?;
-        if callee.argument.is_some() && callee.param.is_none() {
+        if !callee.arguments.is_empty() && callee.params.is_empty() {
             return Err(invalid(&format!("{name} has no parameter for the argument")).into());
         }
-        if let (Some(var), Some(returned)) = (argument, callee.argument) {
-            frame.vars.insert(var.to_owned(), returned);
+        for (var, returned) in arguments.iter().zip(callee.arguments) {
+            frame.vars.insert((*var).to_owned(), returned);
         }
         Ok(None)
     }

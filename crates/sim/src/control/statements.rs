@@ -13,28 +13,28 @@ pub(super) enum Value {
 }
 
 /// One program level: its variables, declared subprograms and, in a subprogram, its `VAR`
-/// parameter (copied in from the caller's variable at the call, back at `RET`).
+/// parameters (copied in from the caller's variables at the call, back at `RET`).
 pub(super) struct Frame {
     pub(super) program: String,
     pub(super) vars: BTreeMap<String, Value>,
     /// Declared subprograms and how many `VAR INT` parameters each takes.
     pub(super) externs: BTreeMap<String, usize>,
-    /// The caller's value for the parameter, until `PROC` names it.
-    pub(super) argument: Option<Value>,
-    /// The parameter's name once `PROC` has named it.
-    pub(super) param: Option<String>,
+    /// The caller's values for the parameters, in order; updated at `RET`.
+    pub(super) arguments: Vec<Value>,
+    /// The parameters' names once `PROC` has named them.
+    pub(super) params: Vec<String>,
     /// A statement other than a definition has run: definitions must come first.
     pub(super) executed: bool,
 }
 
 impl Frame {
-    pub(super) fn new(program: &str, argument: Option<Value>) -> Self {
+    pub(super) fn new(program: &str, arguments: Vec<Value>) -> Self {
         Self {
             program: program.to_owned(),
             vars: BTreeMap::new(),
             externs: BTreeMap::new(),
-            argument,
-            param: None,
+            arguments,
+            params: Vec::new(),
             executed: false,
         }
     }
@@ -87,7 +87,8 @@ pub(super) fn define(code: &str, frame: &mut Frame) -> Step {
     Ok(None)
 }
 
-/// `EXTERN NAME(VAR INT)` or `EXTERN NAME()`.
+/// `EXTERN NAME()`, `EXTERN NAME(VAR INT)` or `EXTERN NAME(VAR INT, VAR INT)` (the speed
+/// plan's table program returns two numbers).
 pub(super) fn declare(code: &str, frame: &mut Frame) -> Step {
     let rest = code.strip_prefix("EXTERN ").unwrap_or(code);
     let (name, params) = rest
@@ -96,7 +97,7 @@ pub(super) fn declare(code: &str, frame: &mut Frame) -> Step {
         .ok_or_else(|| unsupported(code))?;
     let count = match params.trim() {
         "" => 0,
-        "VAR INT" => 1,
+        p if p.split(',').all(|t| t.trim() == "VAR INT") => p.split(',').count(),
         _ => return Err(unsupported(code).into()),
     };
     if !is_name(name) {
@@ -106,32 +107,41 @@ pub(super) fn declare(code: &str, frame: &mut Frame) -> Step {
     Ok(None)
 }
 
-/// `PROC NAME` or `PROC NAME(VAR INT p)`, optionally ` SAVE`, first in a subprogram.
+/// `PROC NAME` or `PROC NAME(VAR INT p, VAR INT q …)`, optionally ` SAVE`, first in a
+/// subprogram.
 pub(super) fn proc_line(code: &str, frame: &mut Frame, depth: usize) -> Step {
     let rest = code.strip_prefix("PROC ").unwrap_or(code);
     let rest = rest.strip_suffix(" SAVE").unwrap_or(rest);
-    let (name, param) = match rest.split_once('(') {
+    let (name, params) = match rest.split_once('(') {
         Some((name, p)) => {
             let p = p.strip_suffix(')').ok_or_else(|| unsupported(code))?;
-            let p = p
-                .strip_prefix("VAR INT ")
+            let names = p
+                .split(',')
+                .map(|t| t.trim().strip_prefix("VAR INT ").map(str::trim))
+                .collect::<Option<Vec<&str>>>()
                 .ok_or_else(|| unsupported(code))?;
-            (name, Some(p.trim()))
+            (name, names)
         }
-        None => (rest, None),
+        None => (rest, Vec::new()),
     };
-    if depth == 0 || name != frame.program || param.is_some_and(|p| !is_name(p)) {
+    if depth == 0 || name != frame.program || params.iter().any(|p| !is_name(p)) {
         return Err(unsupported(code).into());
     }
-    if let Some(p) = param {
-        let value = frame
-            .argument
-            .ok_or_else(|| invalid(&format!("{name} is called without an argument for {p}")))?;
+    // A PROC without parameters is refused after the call returns, naming the caller.
+    if !params.is_empty() && params.len() != frame.arguments.len() {
+        return Err(invalid(&format!(
+            "{name} is called with {} arguments for {} parameters",
+            frame.arguments.len(),
+            params.len()
+        ))
+        .into());
+    }
+    for (p, value) in params.iter().zip(frame.arguments.clone()) {
         if !matches!(value, Value::Int(_)) {
             return Err(invalid(&format!("the argument for {p} is not an INT variable")).into());
         }
-        frame.vars.insert(p.to_owned(), value);
-        frame.param = Some(p.to_owned());
+        frame.vars.insert((*p).to_owned(), value);
+        frame.params.push((*p).to_owned());
     }
     Ok(None)
 }
