@@ -4,7 +4,7 @@
 use super::output::Outputs;
 use crate::clock::now_ms;
 use crate::config::{Config, ENV_DATABASE_URL};
-use crate::store::{HistoryFilter, MAX_PAGE, MeasurementSummary, Store};
+use crate::store::{HistoryFilter, MAX_PAGE, MasterRuns, MeasurementSummary, Store};
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use std::fmt::Write as _;
@@ -44,6 +44,9 @@ pub struct HistoryArgs {
     pub last: u32,
     #[arg(long, value_enum, default_value_t = Format::Table)]
     pub format: Format,
+    /// List the master runs (part ids MASTER…) of gauge studies instead of production parts.
+    #[arg(long)]
+    pub masters: bool,
     #[command(flatten)]
     pub store: StoreArgs,
 }
@@ -82,6 +85,11 @@ pub fn run_history(args: HistoryArgs) -> anyhow::Result<()> {
             machine: args.machine.clone(),
             lobe: args.lobe.clone(),
             since_ms: since,
+            masters: if args.masters {
+                MasterRuns::Only
+            } else {
+                MasterRuns::Excluded
+            },
             ..HistoryFilter::default()
         };
         let rows = newest(&store, filter, args.last, MAX_PAGE).await;

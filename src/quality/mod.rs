@@ -181,7 +181,7 @@ pub fn study(
             };
             let resolution = capability::chart::resolution(&l.limits);
             let chart = with_chart
-                .then(|| chart_of(&parts, &values, resolution))
+                .then(|| chart_of(&parts, &values, resolution, c))
                 .flatten();
             CharacteristicStudy {
                 characteristic: c,
@@ -195,9 +195,9 @@ pub fn study(
         .collect()
 }
 
-fn chart_of(parts: &[String], values: &[f64], resolution: f64) -> Option<Chart> {
+fn chart_of(parts: &[String], values: &[f64], resolution: f64, c: Characteristic) -> Option<Chart> {
     let base = &values[..values.len().min(capability::chart::BASELINE_PARTS)];
-    let limits = ChartLimits::from_baseline(base, resolution)?;
+    let limits = ChartLimits::from_baseline_shaped(base, resolution, c.chart_shape())?;
     Some(Chart {
         limits,
         part: parts.to_vec(),

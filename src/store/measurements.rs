@@ -8,9 +8,10 @@ use super::codec::{
 use super::pack::{pack_profile, pack_revolutions, unpack_profile, unpack_revolutions};
 use super::pack_report::{pack_report, unpack_report};
 use super::{
-    HistoryFilter, MeasurementDetail, MeasurementId, MeasurementSummary, NewMeasurement, Page,
-    RecipeSnapshotId, Store, StoreError, Verdict, col, with_read, with_write,
+    HistoryFilter, MasterRuns, MeasurementDetail, MeasurementId, MeasurementSummary,
+    NewMeasurement, Page, RecipeSnapshotId, Store, StoreError, Verdict, col, with_read, with_write,
 };
+use crate::core::measure::MASTER_PART_PREFIX;
 
 const SUMMARY_COLUMNS: &str = "m.id, m.machine, m.part, m.lobe, m.received_at_ms, m.verdict, \
      m.max_profile_error_um, m.base_radius_error_um, m.phase_error_deg, m.revolutions_used, \
@@ -341,6 +342,18 @@ impl Store {
         }
         if let Some(verdict) = filter.verdict {
             c.push("m.verdict = ?", [Bind::Text(verdict.as_str().to_owned())]);
+        }
+        // The same test as `is_master_part`: the prefix, ASCII case ignored (PostgreSQL's LIKE
+        // is case-sensitive, SQLite's is not, so both compare the upper case).
+        let master = format!(
+            "UPPER(SUBSTR(m.part, 1, {})) = '{}'",
+            MASTER_PART_PREFIX.len(),
+            MASTER_PART_PREFIX.to_ascii_uppercase()
+        );
+        match filter.masters {
+            MasterRuns::Included => {}
+            MasterRuns::Excluded => c.push(&format!("NOT {master}"), []),
+            MasterRuns::Only => c.push(&master, []),
         }
         if let Some(cursor) = &filter.cursor {
             let (at, id) = decode_cursor(cursor)?;

@@ -171,6 +171,21 @@ pub struct HistoryFilter {
     pub limit: u32,
     /// `next_cursor` of the previous page; `None` for the first page.
     pub cursor: Option<String>,
+    /// Production parts, master runs (part ids `MASTER…`), or both.
+    pub masters: MasterRuns,
+}
+
+/// Which kind of part a history lists: master runs are a gauge study's, never production
+/// parts, so what a user reads as history leaves them out unless asked for them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MasterRuns {
+    /// Every measurement (the store's own callers, which sort the kinds themselves).
+    #[default]
+    Included,
+    /// Production parts only.
+    Excluded,
+    /// Master runs only.
+    Only,
 }
 
 /// Largest page the list queries return.

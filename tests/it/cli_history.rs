@@ -93,3 +93,62 @@ fn history_last_beyond_one_page_is_not_capped() {
     assert!(rows[0].contains(",10050000,M1,P-10050,"), "{}", rows[0]);
     assert!(rows[10_048].contains(",2000,M1,P-2,"), "{}", rows[10_048]);
 }
+
+/// Master runs (part ids `MASTER…`, any case) are a gauge study's: `history` lists the
+/// production parts only, and `--masters` lists the master runs only, each in its order.
+#[test]
+fn history_leaves_master_runs_out_unless_asked_for_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let url = runtime.block_on(async {
+        let (store, url) = store_with(dir.path(), 6).await;
+        // Three master runs between the parts, received at 2.5 s, 4.5 s and 7 s.
+        for (n, part, at_ms) in [
+            (101, "MASTER", 2_500),
+            (102, "master-B", 4_500),
+            (103, "Master", 7_000),
+        ] {
+            let mut m = store_support::data::measurement("M1", "IN1", n, at_ms);
+            m.part = part.into();
+            store.insert_measurement(&m).await.unwrap();
+        }
+        store.close().await;
+        url
+    });
+    let parts_of = |extra: &[&str]| {
+        let mut args = vec![
+            "history",
+            "--machine",
+            "M1",
+            "--last",
+            "50",
+            "--format",
+            "csv",
+        ];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--database", &url]);
+        let out = camloop(&args, dir.path());
+        assert!(out.status.success(), "{}", cli_support::stderr(&out));
+        let csv = String::from_utf8_lossy(&out.stdout).into_owned();
+        let header: Vec<String> = csv
+            .lines()
+            .next()
+            .unwrap()
+            .split(',')
+            .map(str::to_owned)
+            .collect();
+        let column = header
+            .iter()
+            .position(|h| h == "part")
+            .expect("a part column");
+        csv.lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(column).unwrap().to_owned())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(
+        parts_of(&[]),
+        ["P-6", "P-5", "P-4", "P-3", "P-2", "P-00001"]
+    );
+    assert_eq!(parts_of(&["--masters"]), ["Master", "master-B", "MASTER"]);
+}

@@ -5,11 +5,14 @@
 use crate::service_support;
 
 use camloop::service::{self, RunOptions};
-use service_support::{get, json, post, sim_config};
+use service_support::{get, json, post, sim_config_with_masters};
 use std::net::SocketAddr;
 
 const TOKEN: &str = "let-me-write";
 const PARTS: usize = 4;
+/// Master runs the simulated gauge measures before the 3rd shaft: never a part of any
+/// listing below, only of the gauge study and of `?masters=true`.
+const MASTER_RUNS: usize = 5;
 
 /// The K-field lines of a .dfq text as (key, index, value).
 fn fields(text: &str) -> Vec<(String, Option<usize>, String)> {
@@ -61,14 +64,26 @@ async fn pages_downloads_and_acknowledgements_agree_with_the_api() {
     let dir = tempfile::tempdir().unwrap();
     let url = format!("sqlite://{}/var/camloop.db?mode=rwc", dir.path().display());
     let env = |k: &str| (k == camloop::config::ENV_API_TOKEN).then(|| TOKEN.to_string());
-    let config = sim_config(dir.path(), &url, 20, 3, env);
+    let config = sim_config_with_masters(dir.path(), &url, 20, 3, MASTER_RUNS as u32, env);
     let mut running = service::start(config, RunOptions::parts(PARTS as u64))
         .await
         .unwrap();
     running.machines_done().await;
     let addr = running.http_addr;
     let parts = api_parts(addr).await;
-    assert_eq!(parts.len(), PARTS);
+    assert_eq!(parts.len(), PARTS, "{parts:?}");
+    assert!(
+        parts.iter().all(|p| !p.1.starts_with("MASTER")),
+        "{parts:?}"
+    );
+    let (_, body) = get(
+        addr,
+        "/api/v1/machines/SIM1/measurements?lobe=IN1&masters=true",
+    )
+    .await;
+    let masters = json(&body)["items"].as_array().unwrap().clone();
+    assert_eq!(masters.len(), MASTER_RUNS, "{body}");
+    assert!(masters.iter().all(|m| m["part"] == "MASTER"), "{body}");
 
     let (status, page) = get(addr, "/").await;
     assert_eq!(status, 200);
@@ -85,7 +100,12 @@ async fn pages_downloads_and_acknowledgements_agree_with_the_api() {
     // The capability panel, and the API it quotes: every part of the window, the four
     // characteristics of a lobe, the chart on request; a bad window or feature is refused.
     assert!(page.contains(r#"<table id="capability">"#), "{page}");
-    assert!(page.contains("Gauge study (type 1"), "{page}");
+    assert!(
+        page.contains(&format!(
+            "Gauge study (type 1, latest {MASTER_RUNS} master runs)"
+        )),
+        "{page}"
+    );
     let (status, body) = get(
         addr,
         "/api/v1/machines/SIM1/features/IN1/capability?window=parts:500&chart=true",
@@ -266,7 +286,7 @@ async fn acknowledgements(addr: SocketAddr) {
 }
 
 /// A page that reconnects with `Last-Event-ID` gets the parts after it, in order, as the
-/// script reads them; the stream stays open.
+/// script reads them, and not the master runs measured among them; the stream stays open.
 async fn catch_up(addr: SocketAddr, parts: &[(i64, String, f64)]) -> tokio::net::TcpStream {
     use tokio::io::{AsyncReadExt, AsyncWriteExt};
     let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();

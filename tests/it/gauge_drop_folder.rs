@@ -335,3 +335,33 @@ fn a_dressing_report_carries_the_dresser_infeed() {
         reasons[0].1
     );
 }
+
+/// A gauge marks the master's run with a `# master=<id>` line: the drop folder hands out a
+/// measurement whose part is the master run's (`MASTER-<id>`), which the service then keeps
+/// for the gauge study and never learns from; the same file without the line is a part.
+#[test]
+fn a_master_line_makes_the_file_a_master_run() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let inbox = dir.path();
+    let mut f = Folder::open(inbox, STABLE_MS);
+    let text = fixture_text(FIXTURE);
+    std::fs::write(inbox.join(FIXTURE), format!("# master=M-0417\n{text}")).expect("write");
+    // No end marker: taken once unchanged for stable_ms, as any file.
+    assert!(f.at(0).is_empty());
+    let events = f.at(STABLE_MS);
+    let [DropEvent::Accepted { measurement, .. }] = &events[..] else {
+        panic!("{events:?}")
+    };
+    assert_eq!(measurement.header.part, "MASTER-M-0417");
+    assert!(camloop::core::measure::is_master_part(
+        &measurement.header.part
+    ));
+    assert_eq!(
+        (
+            measurement.header.machine.as_str(),
+            measurement.header.lobe.as_str()
+        ),
+        ("M3", "L2"),
+        "the rest of the identity from the file name as before"
+    );
+}

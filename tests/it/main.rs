@@ -98,6 +98,7 @@ mod sim_machine;
 mod sim_wheel;
 mod store_chains;
 mod store_errors;
+mod store_masters;
 mod store_migrate;
 mod store_schema;
 mod store_story;

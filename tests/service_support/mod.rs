@@ -69,6 +69,19 @@ pub fn sim_config(
     seed: u64,
     env: impl Fn(&str) -> Option<String>,
 ) -> Config {
+    sim_config_with_masters(dir, database_url, part_interval_ms, seed, 0, env)
+}
+
+/// [`sim_config`] whose simulated gauge measures the master part `master_runs` times
+/// before the 3rd shaft (a type-1 study among the production parts; 0: never).
+pub fn sim_config_with_masters(
+    dir: &Path,
+    database_url: &str,
+    part_interval_ms: u32,
+    seed: u64,
+    master_runs: u32,
+    env: impl Fn(&str) -> Option<String>,
+) -> Config {
     let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
     let text = format!(
         r#"
@@ -87,6 +100,9 @@ share = "share/SIM1"
 kind = "sim"
 part_interval_ms = {part_interval_ms}
 seed = {seed}
+[machines.gauge.grinder.gauge]
+master_runs = {master_runs}
+master_before_part = 3
 "#,
         recipe.display()
     );

@@ -6,13 +6,22 @@ use super::csv_file::{CsvError, CsvLineError, GRID_TOLERANCE_DEG};
 use super::serial::MAX_ABS_LIFT_MM;
 
 const MAX_ID_CHARS: usize = 32;
-const KEYS: [&str; 5] = ["machine", "part", "lobe", "points_per_rev", "revolutions"];
+const KEYS: [&str; 6] = [
+    "machine",
+    "part",
+    "lobe",
+    "points_per_rev",
+    "revolutions",
+    "master",
+];
 
 #[derive(Debug, Default)]
 pub(super) struct Metadata {
     pub(super) ids: [Option<String>; 3],
     pub(super) points_per_rev: Option<u32>,
     pub(super) revolutions: Option<u32>,
+    /// `master=<id>`: the part id of a master run (see [`master_part`]).
+    pub(super) master: Option<String>,
 }
 
 pub(super) struct Row {
@@ -95,6 +104,12 @@ pub(super) fn read_metadata(comment: &str, meta: &mut Metadata) -> Result<(), Cs
                 };
                 set_once(slot, value.to_owned(), key)?;
             }
+            "master" => {
+                let part = master_part(value).ok_or_else(|| {
+                    bad("1–25 characters of A–Z a–z 0–9 . _ - (a part MASTER-id)")
+                })?;
+                set_once(&mut meta.master, part, key)?;
+            }
             "points_per_rev" => {
                 let v = whole(value, 1, MAX_POINTS_PER_REV)
                     .ok_or_else(|| bad("a whole number in 1..=100000"))?;
@@ -139,7 +154,43 @@ pub(super) fn valid_id(text: &str) -> bool {
             .all(|b| b.is_ascii_alphanumeric() || matches!(b, b'.' | b'_' | b'-'))
 }
 
-pub(super) fn identity(ids: [Option<String>; 3], file_name: &str) -> Result<[String; 3], CsvError> {
+/// The part id a `# master=<id>` line gives: `<id>` when it already reads as a master run
+/// (`MASTER…`, any case), else `MASTER-<id>`, so that the service and every listing tell it
+/// from a production part by its id alone; `None` when that is no valid id (at most 32).
+pub(super) fn master_part(id: &str) -> Option<String> {
+    let part = if camloop_core::measure::is_master_part(id) {
+        id.to_owned()
+    } else {
+        format!("{}-{id}", camloop_core::measure::MASTER_PART_PREFIX)
+    };
+    (valid_id(id) && valid_id(&part)).then_some(part)
+}
+
+/// Machine, part and lobe from the metadata, else from the file name; a `master=` line
+/// names the part (it is the master run's), and a `part=` that differs from it is refused
+/// rather than one of the two dropped.
+pub(super) fn identity(
+    mut ids: [Option<String>; 3],
+    master: Option<String>,
+    file_name: &str,
+) -> Result<[String; 3], CsvError> {
+    let Some(master) = master else {
+        return named_identity(ids, file_name);
+    };
+    if let Some(part) = ids[1].as_ref().filter(|p| **p != master) {
+        return Err(CsvError::MasterConflict {
+            part: part.clone(),
+            master,
+        });
+    }
+    if ids[0].is_some() || ids[2].is_some() {
+        ids[1] = Some(master.clone());
+    }
+    let [machine, _, lobe] = named_identity(ids, file_name)?;
+    Ok([machine, master, lobe])
+}
+
+fn named_identity(ids: [Option<String>; 3], file_name: &str) -> Result<[String; 3], CsvError> {
     const NAMES: [&str; 3] = ["machine", "part", "lobe"];
     match ids {
         [Some(m), Some(p), Some(l)] => Ok([m, p, l]),

@@ -13,8 +13,9 @@
 //!   is refused, naming the missing revolution.
 //! - Identity: a metadata comment `# machine=M3 part=P1234 lobe=L2` names all three;
 //!   otherwise the file name must be `MACHINE_PART_LOBE[_anything].csv` (fields split on
-//!   `_`). A comment carrying any of the keys `machine part lobe points_per_rev revolutions`
-//!   is a metadata comment and may only hold `key=value` tokens with those keys.
+//!   `_`). A comment carrying any of the keys `machine part lobe points_per_rev revolutions
+//!   master` is a metadata comment and may only hold `key=value` tokens with those keys.
+//!   `master=<id>` marks a master run: its part is `MASTER-<id>` (`<id>` if it reads MASTER…).
 //! - `points_per_rev` from metadata, else the number of distinct angles in the file. Every
 //!   angle must lie on the grid 360°/points_per_rev within 1e-6°; it becomes the angle index.
 //! - `revolutions` from metadata (then the labels may span at most that many), else the
@@ -68,7 +69,7 @@ pub enum CsvLineError {
     },
     #[error(
         "metadata token {found:?} is not key=value with a key among machine, part, lobe, \
-         points_per_rev, revolutions"
+         points_per_rev, revolutions, master"
     )]
     MetadataToken { found: String },
     #[error("metadata {key}={found:?} is invalid: {expected}")]
@@ -97,6 +98,8 @@ pub enum CsvError {
          name the file MACHINE_PART_LOBE[_…].csv (file name {file_name:?})"
     )]
     NoIdentity { file_name: String },
+    #[error("part={part:?} and master={master:?} disagree: a master run's part is the master")]
+    MasterConflict { part: String, master: String },
     #[error("metadata names {given} but not {missing}: give machine, part and lobe together")]
     PartialIdentity { given: String, missing: String },
     #[error("{found} points per revolution is outside 1..={MAX_POINTS_PER_REV}")]
@@ -239,7 +242,7 @@ impl CsvParser {
         if rows.is_empty() {
             return Err(CsvError::NoSamples);
         }
-        let [machine, part, lobe] = identity(meta.ids, file_name)?;
+        let [machine, part, lobe] = identity(meta.ids, meta.master, file_name)?;
         let points_per_rev = match meta.points_per_rev {
             Some(p) => p,
             None => {
@@ -510,7 +513,7 @@ mod tests {
             (
                 "# machine=M3 shift=night\n0,0,0\n",
                 "line 1: metadata token \"shift=night\" is not key=value with a key among \
-                 machine, part, lobe, points_per_rev, revolutions",
+                 machine, part, lobe, points_per_rev, revolutions, master",
             ),
             (
                 "# points_per_rev=0\n",

@@ -29,7 +29,7 @@ pub(super) async fn openapi() -> Json<Value> {
             "/metrics": get("Prometheus metrics"),
             "/api/v1/cluster": get("with [cluster]: each machine's lease (owner, fencing epoch, live, run here); {enabled: false} without"),
             "/api/v1/machines": get("machines and their lobes or pins: configured ones and those in the history"),
-            "/api/v1/machines/{machine}/measurements": get("measurement history, newest first; filters lobe, since_ms, until_ms, verdict, limit, cursor"),
+            "/api/v1/machines/{machine}/measurements": get("measurement history of production parts, newest first; filters lobe, since_ms, until_ms, verdict, limit, cursor; masters=true lists the master runs (part ids MASTER…) instead"),
             "/api/v1/machines/{machine}/events": get("alarms and events, newest first"),
             "/api/v1/machines/{machine}/rollback": { "post": write("roll several features back together (a whole part); body {\"versions\": {\"IN1\": 5, \"EX1\": 7}}; every version is checked before any is pushed; role engineer", "delivered: {status, version: null, message}", json!({})) },
             "/api/v1/machines/{machine}/parts/{part}": get("one part (a shaft), feature by feature: its measurements and whether it passed"),

@@ -3,7 +3,7 @@
 
 use super::AppState;
 use super::api::{ApiError, ApiPath, ApiQuery, feature_name, machine_name};
-use crate::store::{EventFilter, HistoryFilter, MeasurementId, Store, Verdict};
+use crate::store::{EventFilter, HistoryFilter, MasterRuns, MeasurementId, Store, Verdict};
 use axum::Json;
 use axum::extract::State;
 use axum::http::{StatusCode, header};
@@ -213,6 +213,9 @@ pub(super) struct HistoryQuery {
     verdict: Option<String>,
     limit: Option<u32>,
     cursor: Option<String>,
+    /// `true`: the master runs (part ids `MASTER…`) only; default: production parts only.
+    #[serde(default)]
+    masters: bool,
 }
 
 #[derive(Debug, Serialize)]
@@ -291,6 +294,11 @@ pub(super) async fn history(
         verdict,
         limit: q.limit.unwrap_or(100),
         cursor: q.cursor,
+        masters: if q.masters {
+            MasterRuns::Only
+        } else {
+            MasterRuns::Excluded
+        },
     };
     let page = store(&state).await?.measurement_history(&filter).await?;
     Ok(Json(HistoryPage {

@@ -96,8 +96,12 @@ impl ChartWatch {
                 None => {
                     w.baseline.push(x);
                     if w.baseline.len() >= BASELINE_PARTS {
-                        w.monitor =
-                            ChartLimits::from_baseline(&w.baseline, w.resolution).map(Monitor::new);
+                        w.monitor = ChartLimits::from_baseline_shaped(
+                            &w.baseline,
+                            w.resolution,
+                            w.characteristic.chart_shape(),
+                        )
+                        .map(Monitor::new);
                         w.baseline.clear();
                     }
                 }

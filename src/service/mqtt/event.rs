@@ -65,8 +65,14 @@ pub enum PlantEvent {
 
 impl PlantEvent {
     /// The event a journal record announces, if any (learning snapshots and recipes are
-    /// the loop's own business).
+    /// the loop's own business, and a master run is the gauge study's: a plant counts its
+    /// parts from `part_analysed`, and a master is not one).
     pub fn from_pending(record: &Pending) -> Option<Self> {
+        if let Pending::Measurement { part, .. } = record
+            && crate::core::measure::is_master_part(part)
+        {
+            return None;
+        }
         Some(match record.clone() {
             Pending::Measurement {
                 machine,
@@ -305,5 +311,36 @@ mod tests {
             at_ms: 6,
         };
         assert_eq!(PlantEvent::from_pending(&waiting), None);
+    }
+
+    #[test]
+    fn a_master_run_is_no_part_analysed_and_a_production_part_is() {
+        let measurement = |part: &str| Pending::Measurement {
+            machine: "G7".into(),
+            part: part.into(),
+            lobe: "IN1".into(),
+            received_at_ms: 7,
+            verdict: Verdict::Pass,
+            max_profile_error_um: 0.4,
+            base_radius_error_um: 0.1,
+            phase_error_deg: 0.0,
+            revolutions_used: 3,
+            points_per_rev: 360,
+            origin: "gauge".into(),
+            sha256: "0".repeat(64),
+            ground_with_version: 0,
+            raw_lift_mm: Vec::new(),
+            averaged_lift_mm: Vec::new(),
+            analysis_json: "{}".into(),
+        };
+        for master in ["MASTER", "master-7", "Master_B"] {
+            assert_eq!(
+                PlantEvent::from_pending(&measurement(master)),
+                None,
+                "{master}"
+            );
+        }
+        let part = PlantEvent::from_pending(&measurement("S-1042")).unwrap();
+        assert_eq!(part.name(), "part_analysed");
     }
 }

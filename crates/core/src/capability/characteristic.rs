@@ -88,6 +88,16 @@ impl Characteristic {
         )
     }
 
+    /// The magnitudes bounded at zero are each the largest of a profile's hundreds of
+    /// readings: their chart takes the Gumbel limits of a maximum, the others the normal's.
+    pub fn chart_shape(self) -> super::chart::Shape {
+        if self.bounded_at_zero() {
+            super::chart::Shape::LargestOfMany
+        } else {
+            super::chart::Shape::Normal
+        }
+    }
+
     /// This characteristic's value of a part; `None` when the part lacks what it needs
     /// (an unfitted error on fewer than 8 angles).
     pub fn value(self, part: &PartValues<'_>) -> Option<f64> {

@@ -11,7 +11,8 @@
 //!   within the resolution of the centre is on neither side of it, and a step within the
 //!   resolution is neither rising nor falling. Without a tolerance the resolution is 0 and
 //!   the rules are the textbook's.
-//! - I chart: centre ± 3σ; MR chart: upper limit D₄·MR̄ = 3.267·MR̄.
+//! - I chart: centre ± 3σ; MR chart: upper limit D₄·MR̄ = 3.267·MR̄. A characteristic that
+//!   is the largest of many readings takes the Gumbel quantiles instead ([`Shape`]).
 //! - EWMA: zᵢ = λ·xᵢ + (1 − λ)·zᵢ₋₁, z₀ the centre, λ = 0.2, limits centre ± L·σ·
 //!   √(λ/(2 − λ)·(1 − (1 − λ)²ⁱ)), L = 3 (in-control average run length about 560 parts).
 //! - Rules (Western Electric / Nelson), each fired once when its condition first holds:
@@ -79,6 +80,30 @@ impl Rule {
     }
 }
 
+/// What the chart's limits assume of a characteristic's distribution.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Shape {
+    /// Normal: centre ± 3σ.
+    Normal,
+    /// The largest of many readings (a magnitude bounded at zero: max |error| or profile
+    /// error over hundreds of angles, a pin's roundness): the Gumbel distribution of a
+    /// maximum, skewed to the high side. Its mean + 3σ holds 98.81 % of the parts, not
+    /// 99.865 %, so the limits are its own 0.135 % and 99.865 % quantiles instead: mean
+    /// + 4.70σ and mean − 1.92σ, the same false-alarm rate as a normal chart's ± 3σ.
+    LargestOfMany,
+}
+
+/// Euler–Mascheroni constant γ: the Gumbel's mean is its location + γ·scale.
+const EULER_GAMMA: f64 = 0.577_215_664_901_532_9;
+/// Φ(3): the share of a normal chart's parts below its upper limit.
+const PHI_3: f64 = 0.998_650_101_968_369_9;
+
+/// Gumbel limits as offsets from the mean, in units of the scale β: the quantile q lies at
+/// location − β·ln(−ln q), the mean at location + γβ.
+fn gumbel_offset(q: f64) -> f64 {
+    -(-q.ln()).ln() - EULER_GAMMA
+}
+
 /// Limits of the I-MR chart from a baseline.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct ChartLimits {
@@ -96,23 +121,48 @@ impl ChartLimits {
     /// Limits from `baseline` (part order) at `resolution`; `None` with fewer than 2 parts
     /// or no spread.
     pub fn from_baseline(baseline: &[f64], resolution: f64) -> Option<Self> {
+        Self::from_baseline_shaped(baseline, resolution, Shape::Normal)
+    }
+
+    /// [`Self::from_baseline`] for a characteristic of `shape`. For
+    /// [`Shape::LargestOfMany`] the moving ranges estimate the Gumbel's scale: the
+    /// difference of two independent Gumbels is logistic, whose mean |value| is 2 ln 2·β, so
+    /// β = MR̄/(2 ln 2) and σ = πβ/√6 (MR̄/d₂ would read σ 4 % low).
+    pub fn from_baseline_shaped(baseline: &[f64], resolution: f64, shape: Shape) -> Option<Self> {
         let resolution = if resolution.is_finite() {
             resolution.max(0.0)
         } else {
             0.0
         };
-        let sigma = moving_range_sigma(baseline).max(resolution);
+        let gumbel_sigma_per_mr_sigma =
+            D2_SPAN_2 * std::f64::consts::PI / (6f64.sqrt() * 2.0 * std::f64::consts::LN_2);
+        let mr_sigma = moving_range_sigma(baseline);
+        let sigma = match shape {
+            Shape::Normal => mr_sigma,
+            Shape::LargestOfMany => mr_sigma * gumbel_sigma_per_mr_sigma,
+        }
+        .max(resolution);
         if baseline.len() < 2 || !(sigma > 0.0 && sigma.is_finite()) {
             return None;
         }
         let center = baseline.iter().sum::<f64>() / baseline.len() as f64;
+        let (below, above) = match shape {
+            Shape::Normal => (3.0, 3.0),
+            Shape::LargestOfMany => {
+                let beta_per_sigma = 6f64.sqrt() / std::f64::consts::PI;
+                (
+                    -gumbel_offset(1.0 - PHI_3) * beta_per_sigma,
+                    gumbel_offset(PHI_3) * beta_per_sigma,
+                )
+            }
+        };
         Some(Self {
             baseline_parts: baseline.len(),
             resolution,
             center,
             sigma,
-            lower: center - 3.0 * sigma,
-            upper: center + 3.0 * sigma,
+            lower: center - below * sigma,
+            upper: center + above * sigma,
             moving_range_upper: D4_SPAN_2 * sigma * D2_SPAN_2,
         })
     }
@@ -311,5 +361,27 @@ mod tests {
             .position(|p| p.fired.contains(&Rule::EwmaBeyond));
         assert_eq!(first, Some(4));
         assert!(points[6].fired.contains(&Rule::SevenOneSide));
+    }
+
+    /// The Gumbel limits against scipy 1.17 (`gumbel_r`: mean 0.5772156649, std
+    /// 1.2825498302, ppf(Φ(3)) = 6.6070508926, ppf(1 − Φ(3)) = −1.8882396040): mean +
+    /// 4.7014432390σ and mean − 1.9223075867σ; and the normal chart's mean + 3σ, which holds
+    /// only 98.81 % of a Gumbel (scipy: sf = 0.0119044013).
+    #[test]
+    fn a_largest_of_many_chart_has_the_gumbel_quantiles_as_limits() {
+        // Moving ranges all 1: MR̄/d₂ = 0.8862; the Gumbel's σ = π/(√6·2 ln 2) = 0.9251.
+        let baseline = [0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0];
+        let l = ChartLimits::from_baseline_shaped(&baseline, 0.0, Shape::LargestOfMany).unwrap();
+        let sigma = std::f64::consts::PI / (6f64.sqrt() * 2.0 * std::f64::consts::LN_2);
+        assert!((l.sigma - sigma).abs() < 1e-12, "{}", l.sigma);
+        assert!((l.center - 0.5).abs() < 1e-12);
+        assert!(((l.upper - 0.5) / l.sigma - 4.701_443_238_968_804).abs() < 1e-9);
+        assert!(((0.5 - l.lower) / l.sigma - 1.922_307_586_740_123_1).abs() < 1e-9);
+        let normal = ChartLimits::from_baseline(&baseline, 0.0).unwrap();
+        assert!(((normal.upper - 0.5) / normal.sigma - 3.0).abs() < 1e-12);
+        // The resolution still floors σ.
+        let floored =
+            ChartLimits::from_baseline_shaped(&[0.5; 8], 0.1, Shape::LargestOfMany).unwrap();
+        assert_eq!(floored.sigma, 0.1);
     }
 }

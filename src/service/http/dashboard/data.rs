@@ -6,8 +6,8 @@ use crate::service::http::AppState;
 use crate::service::http::api::ApiError;
 use crate::service::metrics::MachineMetrics;
 use crate::store::{
-    Dressing, Event, EventAck, EventFilter, EventId, EventLevel, HistoryFilter, MeasurementSummary,
-    Store, TableStatus, TableVersion, TableVersionHead,
+    Dressing, Event, EventAck, EventFilter, EventId, EventLevel, HistoryFilter, MasterRuns,
+    MeasurementSummary, Store, TableStatus, TableVersion, TableVersionHead,
 };
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -136,7 +136,8 @@ fn state(
     }
 }
 
-/// The newest `n` parts of (machine, lobe), newest first.
+/// The newest `n` production parts of (machine, lobe), newest first: master runs are the
+/// gauge study's (the capability panel shows them), never a point of the trend.
 pub(super) async fn history(
     store: &Store,
     machine: &str,
@@ -147,6 +148,7 @@ pub(super) async fn history(
         machine: machine.to_string(),
         lobe: Some(lobe.to_string()),
         limit: n,
+        masters: MasterRuns::Excluded,
         ..HistoryFilter::default()
     };
     Ok(store.measurement_history(&filter).await?.items)

@@ -215,8 +215,6 @@ pub(super) async fn dfq(
     let store = data::store(&d.app).await?;
     let mut parts = data::history(&store, &machine, &lobe, DFQ_PARTS).await?;
     parts.reverse();
-    // Master runs are the gauge study's, not production parts.
-    parts.retain(|p| !crate::core::measure::is_master_part(&p.part));
     let part_name = store
         .features(&machine)
         .await?

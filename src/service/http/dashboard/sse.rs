@@ -8,6 +8,7 @@
 //! replay after an outage), and the machine loop does not change. A browser that reconnects
 //! sends `Last-Event-ID` and gets the parts it missed.
 
+use crate::core::measure::is_master_part;
 use crate::service::machine::StoreHandle;
 use crate::store::{MeasurementId, MeasurementSummary};
 use axum::extract::State;
@@ -139,7 +140,10 @@ async fn poll(
             continue;
         };
         for p in &parts {
-            let _ = tx.send(frame(p));
+            // A master run is the gauge study's, never a point of the live trend.
+            if !is_master_part(&p.part) {
+                let _ = tx.send(frame(p));
+            }
             last = Some(p.id);
         }
     }
@@ -173,7 +177,11 @@ pub(super) async fn events(
             .measurements_after(MeasurementId(after), CATCH_UP)
             .await
     {
-        backlog = parts.iter().map(frame).collect();
+        backlog = parts
+            .iter()
+            .filter(|p| !is_master_part(&p.part))
+            .map(frame)
+            .collect();
     }
     let sent = backlog.last().map(|f| f.0).or(resume).unwrap_or(0);
     let first = format!(
