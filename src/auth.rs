@@ -19,19 +19,19 @@ use std::net::IpAddr;
 use std::sync::Mutex;
 
 /// Shortest password accepted, characters.
-pub const MIN_PASSWORD_CHARS: usize = 12;
+pub(crate) const MIN_PASSWORD_CHARS: usize = 12;
 /// Failures within [`LOCKOUT_WINDOW_MS`] that lock a user and an address.
-pub const LOCKOUT_FAILURES: usize = 5;
+pub(crate) const LOCKOUT_FAILURES: usize = 5;
 /// The window failures are counted in, and how long a lock lasts: 15 minutes.
-pub const LOCKOUT_WINDOW_MS: i64 = 15 * 60 * 1000;
+pub(crate) const LOCKOUT_WINDOW_MS: i64 = 15 * 60 * 1000;
 /// API tokens start with this, so a leaked one is recognisable (secret scanners, logs).
-pub const TOKEN_PREFIX: &str = "clt_";
+pub(crate) const TOKEN_PREFIX: &str = "clt_";
 
 /// A user name: the machine-name rule (1–32 letters, digits, `-`, `_`), since it appears in
 /// URLs, logs and the audit trail.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
 #[serde(transparent)]
-pub struct UserName(String);
+pub(crate) struct UserName(String);
 
 impl UserName {
     pub fn new(name: &str) -> Result<Self, crate::names::NameError> {
@@ -62,7 +62,7 @@ pub enum AuthError {
 }
 
 /// Checks the password rule: at least [`MIN_PASSWORD_CHARS`] characters.
-pub fn check_password(password: &str) -> Result<(), AuthError> {
+pub(crate) fn check_password(password: &str) -> Result<(), AuthError> {
     let chars = password.chars().count();
     if chars < MIN_PASSWORD_CHARS {
         return Err(AuthError::PasswordTooShort { chars });
@@ -91,7 +91,7 @@ pub fn verify_password(password: &str, hash: &str) -> bool {
 }
 
 /// `n` random bytes from the operating system, as lowercase hex.
-pub fn random_hex(n: usize) -> Result<String, AuthError> {
+pub(crate) fn random_hex(n: usize) -> Result<String, AuthError> {
     let mut bytes = vec![0u8; n];
     getrandom::fill(&mut bytes).map_err(|e| AuthError::Random(e.to_string()))?;
     Ok(crate::digest::lower_hex(&bytes))
@@ -110,7 +110,7 @@ pub fn token_digest(token: &str) -> String {
 
 /// A random password for the first `admin`: 24 characters from a 64-letter alphabet
 /// (144 bits).
-pub fn random_password() -> Result<String, AuthError> {
+pub(crate) fn random_password() -> Result<String, AuthError> {
     const ALPHABET: &[u8; 64] = b"ABCDEFGHJKLMNPQRSTUVWXYZabcdefghijkmnopqrstuvwxyz23456789-_.+=%@";
     let mut bytes = [0u8; 24];
     getrandom::fill(&mut bytes).map_err(|e| AuthError::Random(e.to_string()))?;
@@ -121,7 +121,7 @@ pub fn random_password() -> Result<String, AuthError> {
 }
 
 /// The role someone acts with: the lower of the user's role and the token's ceiling.
-pub fn effective_role(user: Role, ceiling: Role) -> Role {
+pub(crate) fn effective_role(user: Role, ceiling: Role) -> Role {
     user.min(ceiling)
 }
 
@@ -156,7 +156,12 @@ pub struct Counted {
 
 impl Lockout {
     /// Until when `user` (when known) or `address` is locked, if either is at `now_ms`.
-    pub fn locked_until(&self, user: Option<&str>, address: IpAddr, now_ms: i64) -> Option<i64> {
+    pub(crate) fn locked_until(
+        &self,
+        user: Option<&str>,
+        address: IpAddr,
+        now_ms: i64,
+    ) -> Option<i64> {
         let records = self.records.lock().unwrap_or_else(|p| p.into_inner());
         let subjects = subjects(user, address);
         subjects

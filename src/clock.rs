@@ -9,12 +9,12 @@ pub fn now_ms() -> i64 {
 }
 
 /// [`now_ms`] as the unsigned value the share manifest uses.
-pub fn now_ms_u64() -> u64 {
+pub(crate) fn now_ms_u64() -> u64 {
     u64::try_from(now_ms()).unwrap_or(0)
 }
 
 /// Unix milliseconds as `YYYY-MM-DDTHH:MM:SSZ` (UTC), for provenance written into programs.
-pub fn utc_text(unix_ms: u64) -> String {
+pub(crate) fn utc_text(unix_ms: u64) -> String {
     utc_format(
         i64::try_from(unix_ms).unwrap_or(i64::MAX),
         "%Y-%m-%dT%H:%M:%SZ",
@@ -23,7 +23,7 @@ pub fn utc_text(unix_ms: u64) -> String {
 
 /// Unix milliseconds in UTC, written by a `strftime` pattern (jiff's). Times outside jiff's
 /// range (years −9999 to 9999) are clamped to its ends.
-pub fn utc_format(unix_ms: i64, pattern: &str) -> String {
+pub(crate) fn utc_format(unix_ms: i64, pattern: &str) -> String {
     let ts = jiff::Timestamp::from_millisecond(unix_ms).unwrap_or(if unix_ms < 0 {
         jiff::Timestamp::MIN
     } else {
@@ -34,7 +34,7 @@ pub fn utc_format(unix_ms: i64, pattern: &str) -> String {
 
 /// A UTC date or time as unix milliseconds: `2026-11-21` (midnight),
 /// `2026-11-21T10:00:00` or an RFC 3339 time with its offset (`…Z`, `…+01:00`).
-pub fn parse_utc(text: &str) -> Option<i64> {
+pub(crate) fn parse_utc(text: &str) -> Option<i64> {
     use jiff::civil::{Date, DateTime};
     use jiff::tz::TimeZone;
     if let Ok(ts) = text.parse::<jiff::Timestamp>() {

@@ -29,7 +29,7 @@ const PLACEHOLDER: u32 = 255;
 
 /// Why a file could not be written.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum DfqError {
+pub(crate) enum DfqError {
     #[error("nothing to export: no feature has measurements")]
     Empty,
     #[error("{feature}: {field} is not a finite number")]
@@ -41,7 +41,7 @@ pub enum DfqError {
 
 /// One measured part of a feature.
 #[derive(Debug, Clone, PartialEq)]
-pub struct DfqRow {
+pub(crate) struct DfqRow {
     pub received_at_ms: i64,
     /// What identifies the part (K0014): its number as the gauge reported it.
     pub part_ident: String,
@@ -54,7 +54,7 @@ pub struct DfqRow {
 
 /// A feature (lobe or pin) of a machine and its measured parts, oldest first.
 #[derive(Debug, Clone, PartialEq)]
-pub struct DfqSeries {
+pub(crate) struct DfqSeries {
     pub machine: String,
     pub feature: String,
     /// The profile tolerance as (lower, upper) µm, when the feature has one band all round.
@@ -67,7 +67,7 @@ pub struct DfqSeries {
 /// The recipe's tolerances of the other characteristics (the same limits `camloop
 /// capability` uses), so a quality tool computes the same indices.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct DfqLimits {
+pub(crate) struct DfqLimits {
     /// Upper limit of the max |error| (nothing fitted), µm.
     pub max_error_um: Option<f64>,
     /// ± limit of the size (base radius) error, µm.
@@ -78,7 +78,7 @@ pub struct DfqLimits {
 
 impl DfqLimits {
     /// From a lobe's limits (the pin characteristics have no column of their own here).
-    pub fn from_feature(l: &crate::quality::FeatureLimits) -> Self {
+    pub(crate) fn from_feature(l: &crate::quality::FeatureLimits) -> Self {
         use crate::core::capability::Characteristic as C;
         let upper = |c| l.of(c).and_then(|i| i.limits.upper);
         Self {
@@ -91,7 +91,10 @@ impl DfqLimits {
 
 /// A stored measurement as a row: the max error (nothing fitted) comes from its analysis
 /// report when that is given and readable.
-pub fn row_from(m: &crate::store::MeasurementSummary, analysis_json: Option<&str>) -> DfqRow {
+pub(crate) fn row_from(
+    m: &crate::store::MeasurementSummary,
+    analysis_json: Option<&str>,
+) -> DfqRow {
     #[derive(serde::Deserialize)]
     struct Report {
         error_um: Vec<f64>,
@@ -171,7 +174,11 @@ fn characteristics(s: &DfqSeries) -> [Characteristic; 4] {
 /// The `.dfq` text for `part` (K1001) described as `description` (K1002), with the series'
 /// characteristics numbered 1, 2, … in order. Lines end with CR LF, as the format's
 /// reference files do.
-pub fn write_dfq(part: &str, description: &str, series: &[DfqSeries]) -> Result<String, DfqError> {
+pub(crate) fn write_dfq(
+    part: &str,
+    description: &str,
+    series: &[DfqSeries],
+) -> Result<String, DfqError> {
     if series.iter().all(|s| s.rows.is_empty()) {
         return Err(DfqError::Empty);
     }

@@ -349,7 +349,7 @@ impl Recipe {
 
     /// The table subprogram of feature `name`: the recipe's program name, with the feature's
     /// name appended when the recipe has more than one feature.
-    pub fn table_program_name(&self, name: &str) -> String {
+    pub(crate) fn table_program_name(&self, name: &str) -> String {
         if self.feature_names().len() > 1 {
             let suffix: String = name
                 .chars()
@@ -563,7 +563,7 @@ impl Recipe {
     }
 
     /// Names of all lobes or pins, for messages.
-    pub fn feature_names(&self) -> Vec<&str> {
+    pub(crate) fn feature_names(&self) -> Vec<&str> {
         self.lobes
             .iter()
             .map(|l| l.name.as_str())

@@ -169,7 +169,7 @@ fn user_name(name: &str) -> anyhow::Result<UserName> {
     UserName::new(name).with_context(|| "user name")
 }
 
-pub fn run_user(args: UserArgs) -> anyhow::Result<()> {
+pub(crate) fn run_user(args: UserArgs) -> anyhow::Result<()> {
     let password = match &args.action {
         UserAction::Add { .. } | UserAction::Passwd { .. } => Some(read_password()?),
         _ => None,
@@ -264,7 +264,7 @@ fn lifetime_ms(text: &str) -> anyhow::Result<i64> {
     Ok(ms)
 }
 
-pub fn run_token(args: TokenArgs) -> anyhow::Result<()> {
+pub(crate) fn run_token(args: TokenArgs) -> anyhow::Result<()> {
     runtime()?.block_on(async {
         let store = connect(&args.store.store()).await?;
         let result = token(&store, args.action).await;
@@ -370,7 +370,7 @@ async fn create_token(
     Ok(())
 }
 
-pub fn run_audit(args: AuditArgs) -> anyhow::Result<()> {
+pub(crate) fn run_audit(args: AuditArgs) -> anyhow::Result<()> {
     let now = now_ms();
     let since = match &args.since {
         Some(t) => parse_time(t, now)?,

@@ -15,7 +15,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// Where the gauge DBC is looked for when --dbc is not given.
-pub const DEFAULT_DBC: &str = "config/gauge.dbc";
+pub(crate) const DEFAULT_DBC: &str = "config/gauge.dbc";
 
 #[derive(Debug, Args)]
 #[command(allow_negative_numbers = true)]
@@ -43,7 +43,7 @@ pub struct AnalyzeArgs {
 }
 
 /// The gauge layout: the named DBC, else `config/gauge.dbc` if present, else the built-in one.
-pub fn load_dbc(explicit: Option<&Path>) -> anyhow::Result<GaugeDbc> {
+pub(crate) fn load_dbc(explicit: Option<&Path>) -> anyhow::Result<GaugeDbc> {
     let path = match explicit {
         Some(p) => p,
         None if Path::new(DEFAULT_DBC).exists() => Path::new(DEFAULT_DBC),
@@ -54,7 +54,7 @@ pub fn load_dbc(explicit: Option<&Path>) -> anyhow::Result<GaugeDbc> {
 }
 
 /// Reads, checks and averages a measurement file.
-pub fn averaged_measurement(
+pub(crate) fn averaged_measurement(
     path: &Path,
     dbc: &GaugeDbc,
     limits: &AssemblyLimits,
@@ -64,7 +64,7 @@ pub fn averaged_measurement(
         .with_context(|| format!("measurement {} rejected", path.display()))
 }
 
-pub fn run_analyze(args: AnalyzeArgs) -> anyhow::Result<()> {
+pub(crate) fn run_analyze(args: AnalyzeArgs) -> anyhow::Result<()> {
     let path = args
         .measurement
         .as_deref()

@@ -84,7 +84,7 @@ const STATE_FILE: &str = "learning.json";
 /// Tables refused by a guard, one JSON line each: when, from which measurement, why.
 const REFUSALS_FILE: &str = "refusals.jsonl";
 
-pub fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
+pub(crate) fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
     let (Some(state_dir), Some(program)) = (args.state.clone(), args.program.clone()) else {
         bail!("compensate needs --state DIR and --program OUT.SPF");
     };

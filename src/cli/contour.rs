@@ -213,7 +213,7 @@ fn curve(args: &CurveArgs) -> anyhow::Result<Curve> {
     })
 }
 
-pub fn run_contour(args: ContourArgs) -> anyhow::Result<()> {
+pub(crate) fn run_contour(args: ContourArgs) -> anyhow::Result<()> {
     let roughing = (args.stock_mm > 0.0).then_some(Roughing {
         stock_mm: args.stock_mm,
         depth_mm: args.depth_mm,

@@ -12,7 +12,7 @@ use std::path::Path;
 
 /// The recipe (part) name of each (machine, feature) among `rows`, from the store's recipe
 /// snapshots.
-pub async fn recipe_parts(
+pub(crate) async fn recipe_parts(
     store: &Store,
     rows: &[MeasurementDetail],
 ) -> anyhow::Result<BTreeMap<(String, String), String>> {
@@ -27,7 +27,7 @@ pub async fn recipe_parts(
 }
 
 /// How to write the file.
-pub struct DfqExport<'a> {
+pub(crate) struct DfqExport<'a> {
     /// (machine, feature) → recipe name, see [`recipe_parts`].
     pub recipes: &'a BTreeMap<(String, String), String>,
     /// The part to export when the range holds several.

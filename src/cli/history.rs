@@ -71,7 +71,7 @@ pub struct ExportArgs {
     pub store: StoreArgs,
 }
 
-pub fn run_history(args: HistoryArgs) -> anyhow::Result<()> {
+pub(crate) fn run_history(args: HistoryArgs) -> anyhow::Result<()> {
     let now = now_ms();
     let since = args
         .since
@@ -123,7 +123,7 @@ pub async fn newest(
     Ok(rows)
 }
 
-pub fn run_export(args: ExportArgs) -> anyhow::Result<()> {
+pub(crate) fn run_export(args: ExportArgs) -> anyhow::Result<()> {
     let now = now_ms();
     let since = args
         .since
@@ -286,7 +286,7 @@ fn csv_field(text: &str) -> String {
 }
 
 /// `2026-11-21`, `2026-11-21T10:00:00Z`, Unix ms, or an age (`90s`, `30m`, `24h`, `7d`).
-pub fn parse_time(text: &str, now_ms: i64) -> anyhow::Result<i64> {
+pub(crate) fn parse_time(text: &str, now_ms: i64) -> anyhow::Result<i64> {
     let t = text.trim();
     let bad = || {
         anyhow::anyhow!(

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 /// Files a command will write, staged in memory until [`Outputs::commit`].
 #[derive(Debug, Default)]
-pub struct Outputs {
+pub(crate) struct Outputs {
     files: Vec<(PathBuf, String)>,
 }
 

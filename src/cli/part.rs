@@ -83,14 +83,14 @@ pub struct PartArgs {
 }
 
 /// A part ready for the core, with what was done to its lift table on the way.
-pub struct LoadedPart {
+pub(crate) struct LoadedPart {
     pub part: Part,
     pub description: String,
     /// Present when --smooth was given: the smoothed table and the change it made.
     pub smoothed: Option<Smoothed>,
 }
 
-pub fn load_part(args: &PartKindArgs) -> anyhow::Result<LoadedPart> {
+pub(crate) fn load_part(args: &PartKindArgs) -> anyhow::Result<LoadedPart> {
     match args {
         PartKindArgs::Crankpin(a) => {
             let part = Part::crankpin(CrankpinGeometry {
@@ -112,7 +112,7 @@ pub fn load_part(args: &PartKindArgs) -> anyhow::Result<LoadedPart> {
 }
 
 /// The lift table and geometry given by cam flags (with --smooth applied when asked).
-pub fn load_cam_table(a: &CamArgs) -> anyhow::Result<(LiftTable, CamGeometry)> {
+pub(crate) fn load_cam_table(a: &CamArgs) -> anyhow::Result<(LiftTable, CamGeometry)> {
     let loaded = load_cam(a)?;
     Ok((loaded.table, loaded.geometry))
 }

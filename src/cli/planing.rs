@@ -46,7 +46,7 @@ pub struct PlaningArgs {
     pub out: PathBuf,
 }
 
-pub fn run_planing(args: PlaningArgs) -> anyhow::Result<()> {
+pub(crate) fn run_planing(args: PlaningArgs) -> anyhow::Result<()> {
     let job = PlaningJob {
         name: args.name.clone(),
         segments: args.segments,

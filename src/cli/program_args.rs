@@ -95,7 +95,7 @@ impl ProgramArgs {
     }
 
     /// Main-program settings; the name is the --main-program file stem in upper case.
-    pub fn main_settings(&self, c_speed_rpm: f64) -> Option<MainProgramSettings> {
+    pub(crate) fn main_settings(&self, c_speed_rpm: f64) -> Option<MainProgramSettings> {
         let path = self.main_program.as_deref()?;
         Some(MainProgramSettings {
             name: stem_upper(path).unwrap_or_else(|| MainProgramSettings::default().name),

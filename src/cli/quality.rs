@@ -60,7 +60,7 @@ pub struct GaugeStudyArgs {
     pub store: StoreArgs,
 }
 
-pub fn run_capability(args: CapabilityArgs) -> anyhow::Result<()> {
+pub(crate) fn run_capability(args: CapabilityArgs) -> anyhow::Result<()> {
     let now = now_ms();
     let time = |t: &Option<String>| t.as_deref().map(|t| parse_time(t, now)).transpose();
     let window = Window {
@@ -134,7 +134,7 @@ pub fn run_capability(args: CapabilityArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-pub fn run_gauge_study(args: GaugeStudyArgs) -> anyhow::Result<()> {
+pub(crate) fn run_gauge_study(args: GaugeStudyArgs) -> anyhow::Result<()> {
     let limits = feature_limits(&args.store.config, &args.machine, Some(&args.lobe))?;
     let l = &limits[0].1;
     let window = Window {

@@ -64,7 +64,7 @@ pub struct SpeedPlanArgs {
     pub program_name: String,
 }
 
-pub fn run_speed_plan(args: SpeedPlanArgs) -> anyhow::Result<()> {
+pub(crate) fn run_speed_plan(args: SpeedPlanArgs) -> anyhow::Result<()> {
     let limits = SpeedLimits {
         x_velocity_mm_s: args.x_velocity,
         x_acceleration_mm_s2: args.x_acceleration,

@@ -61,7 +61,7 @@ pub struct PlotArgs {
     pub angles: Vec<f64>,
 }
 
-pub fn run_table(args: TableArgs) -> anyhow::Result<()> {
+pub(crate) fn run_table(args: TableArgs) -> anyhow::Result<()> {
     if !(args.c_speed_rpm.is_finite() && args.c_speed_rpm > 0.0) {
         anyhow::bail!(
             "--c-speed-rpm must be a number > 0, got {}",
@@ -153,7 +153,7 @@ pub fn run_table(args: TableArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-pub fn run_plot(args: PlotArgs) -> anyhow::Result<()> {
+pub(crate) fn run_plot(args: PlotArgs) -> anyhow::Result<()> {
     if let Some(bad) = args.angles.iter().find(|a| !a.is_finite()) {
         anyhow::bail!("--angles: {bad} is not a finite angle");
     }
@@ -205,7 +205,7 @@ fn motion_text(m: Motion) -> String {
 }
 
 /// CSV `c_deg,d_mm,x_mm`, 9 decimals (1e-6 µm) so no precision is lost on the way out.
-pub fn table_csv(points: &[TablePoint]) -> String {
+pub(crate) fn table_csv(points: &[TablePoint]) -> String {
     let mut s = String::from("c_deg,d_mm,x_mm\n");
     for p in points {
         let _ = writeln!(s, "{:.9},{:.9},{:.9}", p.c_deg, p.d_mm, p.x_mm);

@@ -32,7 +32,7 @@ struct SelfSignedArgs {
     force: bool,
 }
 
-pub fn run_tls(args: TlsArgs) -> anyhow::Result<()> {
+pub(crate) fn run_tls(args: TlsArgs) -> anyhow::Result<()> {
     let TlsCommand::SelfSigned(a) = args.command;
     let names = match a.names.is_empty() {
         true => vec!["localhost".into(), "127.0.0.1".into(), "::1".into()],

@@ -52,7 +52,7 @@ struct CircleFile {
     c_deg: Option<f64>,
 }
 
-pub fn run_turnmill(args: TurnMillArgs) -> anyhow::Result<()> {
+pub(crate) fn run_turnmill(args: TurnMillArgs) -> anyhow::Result<()> {
     let text = std::fs::read_to_string(&args.job)
         .with_context(|| format!("cannot read {}", args.job.display()))?;
     let file: JobFile = toml::from_str(&text).with_context(|| format!("{}", args.job.display()))?;

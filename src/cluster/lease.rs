@@ -122,7 +122,7 @@ impl Leases {
     }
 
     /// Says this instance is alive for one more lease; returns how many instances are.
-    pub async fn heartbeat(&self) -> Result<usize, LeaseError> {
+    pub(crate) async fn heartbeat(&self) -> Result<usize, LeaseError> {
         sqlx::query(
             "INSERT INTO camloop_instances (instance, seen_until) \
              VALUES ($1, now() + $2 * interval '1 millisecond') \
@@ -137,7 +137,7 @@ impl Leases {
     }
 
     /// How many instances are alive (their heartbeat has not run out); at least one.
-    pub async fn live_instances(&self) -> Result<usize, LeaseError> {
+    pub(crate) async fn live_instances(&self) -> Result<usize, LeaseError> {
         let live: i64 =
             sqlx::query_scalar("SELECT count(*) FROM camloop_instances WHERE seen_until > now()")
                 .fetch_one(&self.pool)
@@ -148,7 +148,7 @@ impl Leases {
 
     /// Takes `machine` when nobody holds it (never leased, expired or released): returns the
     /// new epoch, one above the last owner's. `None`: another instance holds it.
-    pub async fn acquire(&self, machine: &str) -> Result<Option<u64>, LeaseError> {
+    pub(crate) async fn acquire(&self, machine: &str) -> Result<Option<u64>, LeaseError> {
         let epoch: Option<i64> = sqlx::query_scalar(
             "INSERT INTO camloop_leases (machine, owner, epoch, expires_at, incarnation) \
              VALUES ($1, $2, 1, now() + $3 * interval '1 millisecond', $4) \
@@ -170,7 +170,7 @@ impl Leases {
     /// Raises the epoch of a lease this instance holds to `to` (the machine's fence was
     /// already higher: a lease table made again from nothing). Returns the new epoch, or
     /// `None` when the lease is no longer this instance's.
-    pub async fn raise_epoch(
+    pub(crate) async fn raise_epoch(
         &self,
         machine: &str,
         epoch: u64,
@@ -198,7 +198,7 @@ impl Leases {
     /// rather than renewed forever; those come back second. A lease this process won is
     /// never taken for such a leftover, however recently it was won: the two are told apart
     /// by the process's incarnation, not by a list that a concurrent win could outrun.
-    pub async fn renew(&self, held: &[(String, u64)]) -> Result<Renewed, LeaseError> {
+    pub(crate) async fn renew(&self, held: &[(String, u64)]) -> Result<Renewed, LeaseError> {
         let machines: Vec<&str> = held.iter().map(|(m, _)| m.as_str()).collect();
         let epochs: Vec<i64> = held.iter().map(|(_, e)| *e as i64).collect();
         let rows = sqlx::query(

@@ -24,13 +24,13 @@ pub struct Plan {
 }
 
 /// The machines one instance may hold when `live` instances share `machines`.
-pub fn fair_share(machines: usize, live: usize) -> usize {
+pub(crate) fn fair_share(machines: usize, live: usize) -> usize {
     machines.div_ceil(live.max(1))
 }
 
 /// The instance's preference for a machine (higher: more wanted). FNV-1a over both names:
 /// stable across builds and platforms, unlike the standard library's hasher.
-pub fn preference(instance: &str, machine: &str) -> u64 {
+pub(crate) fn preference(instance: &str, machine: &str) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for b in instance.bytes().chain([0]).chain(machine.bytes()) {
         h ^= u64::from(b);

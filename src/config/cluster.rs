@@ -36,7 +36,7 @@ impl Default for ClusterSection {
 
 impl ClusterSection {
     /// The instance name: the configured one, else the host name.
-    pub fn instance_name(&self) -> String {
+    pub(crate) fn instance_name(&self) -> String {
         if !self.instance.is_empty() {
             return self.instance.clone();
         }

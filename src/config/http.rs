@@ -52,7 +52,7 @@ impl Default for HttpSection {
 
 impl HttpSection {
     /// The per-client connection cap in force.
-    pub fn per_client_connections(&self) -> usize {
+    pub(crate) fn per_client_connections(&self) -> usize {
         self.max_connections_per_client
             .unwrap_or(self.max_connections / 4)
             .clamp(1, self.max_connections.max(1))
@@ -111,7 +111,7 @@ impl HttpSection {
 /// Why serving this configuration on the network is insecure; empty when it is not. The
 /// start-up rule ([`network_exposure`]) refuses a start for any of these unless
 /// `allow_insecure_network = true`.
-pub fn insecure_network_reasons(http: &HttpSection, anonymous_read: bool) -> Vec<String> {
+pub(crate) fn insecure_network_reasons(http: &HttpSection, anonymous_read: bool) -> Vec<String> {
     let mut reasons = Vec::new();
     if !http.listen.ip().is_loopback() && !http.tls() {
         reasons.push(format!(

@@ -24,7 +24,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 /// Environment variable that overrides `database.url`.
-pub const ENV_DATABASE_URL: &str = "CAMLOOP_DATABASE_URL";
+pub(crate) const ENV_DATABASE_URL: &str = "CAMLOOP_DATABASE_URL";
 /// Environment variable holding the shared API token (deprecated: it acts as an `admin`;
 /// use per-user tokens from `camloop token create`).
 pub const ENV_API_TOKEN: &str = "CAMLOOP_API_TOKEN";
@@ -193,7 +193,7 @@ impl Secret {
         Self(secret.into())
     }
 
-    pub fn expose(&self) -> &str {
+    pub(crate) fn expose(&self) -> &str {
         &self.0
     }
 }
@@ -368,7 +368,7 @@ impl Config {
     }
 
     /// Where the first start writes the `admin` password.
-    pub fn admin_password_file(&self) -> PathBuf {
+    pub(crate) fn admin_password_file(&self) -> PathBuf {
         match self.auth.admin_password_file.as_os_str().is_empty() {
             true => self.var_dir().join("admin-password"),
             false => self.resolve(&self.auth.admin_password_file),
@@ -377,7 +377,7 @@ impl Config {
 
     /// The `[mqtt]` settings as this instance uses them: in a cluster the client id is
     /// `<client_id>-<instance>`, since a broker disconnects a client whose id another takes.
-    pub fn mqtt_settings(&self) -> mqtt::MqttSection {
+    pub(crate) fn mqtt_settings(&self) -> mqtt::MqttSection {
         let mut settings = self.mqtt.clone();
         settings.tls_ca = settings.tls_ca.map(|p| self.resolve(&p));
         if self.cluster.enabled {
@@ -389,7 +389,7 @@ impl Config {
 
     /// Where each machine's journal and delivery state live: `<var>/machines`, or with a
     /// cluster the shared `<cluster.state_dir>/machines` every instance reaches.
-    pub fn machines_dir(&self) -> PathBuf {
+    pub(crate) fn machines_dir(&self) -> PathBuf {
         match self.cluster.enabled {
             true => self.resolve(&self.cluster.state_dir).join("machines"),
             false => self.var_dir().join("machines"),

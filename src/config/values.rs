@@ -6,7 +6,7 @@ use super::{ConfigProblem, GaugeSection};
 impl GaugeSection {
     /// A drop gauge's `stable_ms` and `max_file_bytes`, as the drop folder takes them;
     /// `None` for other gauges.
-    pub fn drop_options(&self) -> Option<crate::gauge::DropOptions> {
+    pub(crate) fn drop_options(&self) -> Option<crate::gauge::DropOptions> {
         match self {
             GaugeSection::Drop {
                 stable_ms,

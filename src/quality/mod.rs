@@ -19,7 +19,7 @@ pub use limits::{CharacteristicLimits, FeatureLimits};
 
 /// Which parts of a feature's history a study takes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Window {
+pub(crate) struct Window {
     /// The newest this many production parts (at most [`MAX_PAGE`]).
     pub last: u32,
     pub since_ms: Option<i64>,
@@ -89,7 +89,7 @@ impl PartRow {
 
 /// The window's parts, oldest first: production parts, or (with `masters`) master runs only.
 /// Also returns the start the window took (ms) and how many of the other kind it skipped.
-pub async fn window_rows(
+pub(crate) async fn window_rows(
     store: &Store,
     machine: &str,
     lobe: &str,

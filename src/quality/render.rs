@@ -16,7 +16,7 @@ fn index(i: Option<Index>) -> String {
 }
 
 /// One line per characteristic, then the notes: methods, missing limits and indices.
-pub fn capability_table(title: &str, items: &[CharacteristicStudy]) -> String {
+pub(crate) fn capability_table(title: &str, items: &[CharacteristicStudy]) -> String {
     let mut s = format!("{title}\n");
     let _ = writeln!(
         s,
@@ -80,7 +80,11 @@ pub fn capability_table(title: &str, items: &[CharacteristicStudy]) -> String {
 }
 
 /// The same as CSV, one row per characteristic.
-pub fn capability_csv(machine: &str, feature: &str, items: &[CharacteristicStudy]) -> String {
+pub(crate) fn capability_csv(
+    machine: &str,
+    feature: &str,
+    items: &[CharacteristicStudy],
+) -> String {
     let mut s = String::from(
         "machine,feature,characteristic,unit,n,mean,sigma_within,sigma_overall,lower_limit,upper_limit,model,cp,cp_lower_95,cpk,cpk_lower_95,pp,pp_lower_95,ppk,ppk_lower_95,expected_share_out,observed_share_out,note\n",
     );
@@ -115,7 +119,7 @@ pub fn capability_csv(machine: &str, feature: &str, items: &[CharacteristicStudy
 }
 
 /// The gauge study as a table.
-pub fn gauge_table(title: &str, items: &[GaugeItem]) -> String {
+pub(crate) fn gauge_table(title: &str, items: &[GaugeItem]) -> String {
     let mut s = format!("{title}\n");
     let _ = writeln!(
         s,

@@ -14,7 +14,7 @@ const MAGNITUDE: &str = "a largest |deviation| over the profile: on a perfect ma
 
 /// The study of one characteristic.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct GaugeItem {
+pub(crate) struct GaugeItem {
     pub characteristic: Characteristic,
     pub unit: &'static str,
     pub study: Option<GaugeStudy>,
@@ -23,7 +23,7 @@ pub struct GaugeItem {
 }
 
 /// The studies of every characteristic of `rows` (master runs, oldest first).
-pub fn gauge_studies(rows: &[PartRow], limits: &FeatureLimits) -> Vec<GaugeItem> {
+pub(crate) fn gauge_studies(rows: &[PartRow], limits: &FeatureLimits) -> Vec<GaugeItem> {
     limits
         .items
         .iter()

@@ -215,7 +215,12 @@ impl Metrics {
     }
 
     /// Changes one feature's status.
-    pub fn update_feature(&self, machine: &str, feature: &str, f: impl FnOnce(&mut FeatureStatus)) {
+    pub(crate) fn update_feature(
+        &self,
+        machine: &str,
+        feature: &str,
+        f: impl FnOnce(&mut FeatureStatus),
+    ) {
         let mut map = self.features.lock().unwrap_or_else(|p| p.into_inner());
         f(map
             .entry((machine.to_string(), feature.to_string()))
@@ -231,7 +236,7 @@ impl Metrics {
     }
 
     /// Changes the access counters.
-    pub fn update_access(&self, f: impl FnOnce(&mut AccessMetrics)) {
+    pub(crate) fn update_access(&self, f: impl FnOnce(&mut AccessMetrics)) {
         f(&mut self.access.lock().unwrap_or_else(|p| p.into_inner()));
     }
 

@@ -118,7 +118,10 @@ pub async fn start(config: Config, options: RunOptions) -> anyhow::Result<Runnin
 /// Starts every task of a service whose config passed every check (so nothing below
 /// touches the database or a share before the whole config is known good) and returns at
 /// once.
-pub async fn start_checked(checked: Checked, options: RunOptions) -> anyhow::Result<Running> {
+pub(crate) async fn start_checked(
+    checked: Checked,
+    options: RunOptions,
+) -> anyhow::Result<Running> {
     let Checked {
         config,
         machines: checked_machines,

@@ -16,7 +16,8 @@ use tokio::sync::{mpsc, oneshot, watch};
 use tracing::info;
 
 /// The HTTP side's way to each running machine.
-pub type CommandRoutes = Arc<std::sync::RwLock<HashMap<String, mpsc::Sender<http::Command>>>>;
+pub(crate) type CommandRoutes =
+    Arc<std::sync::RwLock<HashMap<String, mpsc::Sender<http::Command>>>>;
 
 /// One machine's running tasks.
 struct RunningMachine {

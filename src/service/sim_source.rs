@@ -26,7 +26,7 @@ const RESUME_R_PARAM: u32 = 90;
 const STATION_WINDOW_MM: f64 = 0.5;
 
 /// One feature of the simulated shaft: where it is and what it is.
-pub struct SimStation {
+pub(crate) struct SimStation {
     pub name: String,
     pub feature: Feature,
     pub z_mm: f64,
@@ -39,7 +39,7 @@ pub struct SimStation {
     pub phase_deg: f64,
 }
 
-pub struct SimSource {
+pub(crate) struct SimSource {
     pub machine: String,
     pub grinder: GrinderConfig,
     pub seed: u64,

@@ -104,7 +104,7 @@ pub struct VersionState {
 
 impl VersionState {
     /// Still to be delivered (waiting, or renames not confirmed).
-    pub fn is_deliverable(&self) -> bool {
+    pub(crate) fn is_deliverable(&self) -> bool {
         matches!(
             self.status,
             VersionStatus::Waiting { .. } | VersionStatus::Delivering
@@ -187,7 +187,8 @@ impl History {
     }
 
     /// How many versions were dropped from memory so far.
-    pub fn forgotten_count(&self) -> u64 {
+    #[cfg(test)]
+    pub(crate) fn forgotten_count(&self) -> u64 {
         self.forgotten
     }
 
@@ -200,7 +201,7 @@ impl History {
     /// Drops the versions nothing can need: no kept text, not deliverable, and neither the
     /// newest version that reached the share nor the newest pushed one (table numbers and
     /// the share's contents are judged by those). Their records stay in the manifest.
-    pub fn forget_settled(&mut self) {
+    pub(crate) fn forget_settled(&mut self) {
         let newest_reached = self
             .versions
             .iter()
@@ -333,7 +334,7 @@ pub fn load(path: &Path) -> Result<Loaded, StateError> {
 
 /// [`load`], forgetting settled versions as it goes ([`History::forget_settled`]), so a
 /// long manifest never sits whole in memory.
-pub fn load_settled(path: &Path) -> Result<Loaded, StateError> {
+pub(crate) fn load_settled(path: &Path) -> Result<Loaded, StateError> {
     fold_file(path, true)
 }
 

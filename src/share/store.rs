@@ -340,7 +340,7 @@ impl Share {
     }
 
     /// Folder of a version's kept text: `<state>/versions/v000042`.
-    pub fn version_dir(&self, version: u64) -> PathBuf {
+    pub(crate) fn version_dir(&self, version: u64) -> PathBuf {
         version_dir(&self.config.state_dir.join(VERSIONS_DIR), version)
     }
 

@@ -116,7 +116,7 @@ fn row_from(r: AuditDbRow) -> Result<(AuditRow, String, String), StoreError> {
 
 impl Store {
     /// Appends `e` to the trail, chained to the newest row; returns its id.
-    pub async fn append_audit(&self, e: &AuditEntry) -> Result<i64, StoreError> {
+    pub(crate) async fn append_audit(&self, e: &AuditEntry) -> Result<i64, StoreError> {
         const OP: &str = "appending to the audit trail";
         let postgres = self.backend() == "postgres";
         with_write!(self, pool => {

@@ -389,7 +389,7 @@ impl Store {
 
     /// Every measurement of one part (a shaft, by the number the gauge gave) on one machine,
     /// oldest first: what answers "did shaft 1234 pass, lobe by lobe". At most `MAX_PAGE`.
-    pub async fn part_measurements(
+    pub(crate) async fn part_measurements(
         &self,
         machine: &str,
         part: &str,
@@ -467,7 +467,7 @@ impl Store {
     /// One feature's measurements received in `[since_ms, until_ms)` with their reports,
     /// newest first, before id `before` (exclusive; call again with the last id to go on),
     /// at most `limit`: the window of a capability study or a control chart.
-    pub async fn feature_measurements(
+    pub(crate) async fn feature_measurements(
         &self,
         machine: &str,
         lobe: &str,
@@ -501,7 +501,7 @@ impl Store {
 
     /// The id of the newest measurement, `None` while there is none: what the dashboard's
     /// live channel polls (one index lookup).
-    pub async fn newest_measurement_id(&self) -> Result<Option<MeasurementId>, StoreError> {
+    pub(crate) async fn newest_measurement_id(&self) -> Result<Option<MeasurementId>, StoreError> {
         with_read!(self, pool => {
             let id: Option<i64> = sqlx::query_scalar("SELECT MAX(id) FROM measurements")
                 .fetch_one(pool)
@@ -512,7 +512,7 @@ impl Store {
     }
 
     /// Summaries of the measurements after `after` (exclusive), oldest first, at most `limit`.
-    pub async fn measurements_after(
+    pub(crate) async fn measurements_after(
         &self,
         after: MeasurementId,
         limit: u32,

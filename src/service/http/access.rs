@@ -131,7 +131,7 @@ impl<S: Send + Sync> FromRequestParts<S> for Authorized {
 }
 
 /// The client's address, from the listener (unknown: 0.0.0.0, counted together).
-pub fn client_address(req_extensions: &axum::http::Extensions) -> IpAddr {
+pub(crate) fn client_address(req_extensions: &axum::http::Extensions) -> IpAddr {
     req_extensions
         .get::<ConnectInfo<SocketAddr>>()
         .map_or(IpAddr::V4(Ipv4Addr::UNSPECIFIED), |c| c.0.ip())

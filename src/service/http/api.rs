@@ -68,7 +68,7 @@ pub fn machine_name(name: &str) -> Result<MachineName, ApiError> {
 }
 
 /// A lobe or pin name from a path or query: the same rule as machine names.
-pub fn feature_name(name: &str) -> Result<(), ApiError> {
+pub(crate) fn feature_name(name: &str) -> Result<(), ApiError> {
     check_plain_name(name).map_err(|e| {
         ApiError(
             StatusCode::BAD_REQUEST,

@@ -150,14 +150,14 @@ fn security_headers(h: &mut HeaderMap, tls: bool) {
 /// client's connection beyond it at once, so one client holding its cap leaves the rest of
 /// the global slots to everyone else.
 #[derive(Debug)]
-pub struct PerClient {
+pub(crate) struct PerClient {
     max: usize,
     open: Mutex<HashMap<IpAddr, usize>>,
 }
 
 /// One admitted connection; its count goes when it is dropped.
 #[derive(Debug)]
-pub struct ClientSlot {
+pub(crate) struct ClientSlot {
     table: Arc<PerClient>,
     ip: IpAddr,
 }
@@ -171,7 +171,7 @@ impl PerClient {
     }
 
     /// A slot for `ip`, or `None` when it holds its cap already.
-    pub fn admit(self: &Arc<Self>, ip: IpAddr) -> Option<ClientSlot> {
+    pub(crate) fn admit(self: &Arc<Self>, ip: IpAddr) -> Option<ClientSlot> {
         let mut open = self.open.lock().unwrap_or_else(|p| p.into_inner());
         let n = open.entry(ip).or_insert(0);
         if *n >= self.max {

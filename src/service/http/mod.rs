@@ -71,7 +71,7 @@ pub struct AppState {
 }
 
 /// Where a machine's loop sends its answer to a [`Command`].
-pub type Reply = oneshot::Sender<Result<CommandDone, CommandError>>;
+pub(crate) type Reply = oneshot::Sender<Result<CommandDone, CommandError>>;
 
 /// A write request handed to a machine's loop, answered on `reply` when done. The HTTP
 /// side has already checked the caller's role, the machine, the lobe (it is one the machine

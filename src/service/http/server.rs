@@ -36,7 +36,7 @@ pub struct HttpLimits {
 }
 
 impl HttpLimits {
-    pub fn from_config(http: &crate::config::HttpSection) -> Self {
+    pub(crate) fn from_config(http: &crate::config::HttpSection) -> Self {
         Self {
             max_connections: http.max_connections.max(1),
             max_connections_per_client: http.per_client_connections(),

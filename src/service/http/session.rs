@@ -24,7 +24,7 @@ use std::collections::HashMap;
 use std::sync::Mutex;
 
 /// The session cookie's name.
-pub const SESSION_COOKIE: &str = "camloop_session";
+pub(crate) const SESSION_COOKIE: &str = "camloop_session";
 /// The sign-in form's double-submit cookie.
 const SIGNIN_COOKIE: &str = "camloop_signin";
 /// At most this many sessions live at once; the oldest go first.

@@ -35,7 +35,7 @@ impl From<CommandDone> for CommandReply {
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RollbackBody {
+pub(crate) struct RollbackBody {
     version: i64,
 }
 
@@ -126,7 +126,7 @@ async fn audited(
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct PartRollbackBody {
+pub(crate) struct PartRollbackBody {
     /// The version of each feature to go back to, by feature name.
     versions: std::collections::BTreeMap<String, i64>,
 }
@@ -197,7 +197,7 @@ pub(super) async fn rollback_part(
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct FreezeBody {
+pub(crate) struct FreezeBody {
     frozen: bool,
     /// Why (kept with the state and in the audit trail); at most 200 characters.
     reason: Option<String>,
@@ -267,7 +267,7 @@ pub(super) async fn freeze(
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct DressingBody {
+pub(crate) struct DressingBody {
     wheel_radius_mm: f64,
     /// The dresser's measured infeed (radius removed), µm; optional.
     #[serde(default)]

@@ -116,7 +116,7 @@ impl Journal {
 
     /// Lines found unreadable at open and moved to the quarantine file (for the caller to
     /// report), with their line numbers in the journal as it was.
-    pub fn quarantined(&self) -> &[Quarantined] {
+    pub(crate) fn quarantined(&self) -> &[Quarantined] {
         &self.quarantined
     }
 
@@ -170,13 +170,13 @@ impl Journal {
     /// Whether the journal is running on its reserve: the disk was full, and only the space
     /// given up by the reserve file keeps records durable. Bounded: the machine records
     /// measurements and stops learning until [`Self::restore_reserve`] succeeds.
-    pub fn on_reserve(&self) -> bool {
+    pub(crate) fn on_reserve(&self) -> bool {
         self.reserve.in_use()
     }
 
     /// Tries to write the reserve again (space was freed); true when the journal is off its
     /// reserve.
-    pub fn restore_reserve(&mut self) -> bool {
+    pub(crate) fn restore_reserve(&mut self) -> bool {
         self.reserve.ensure()
     }
 
@@ -291,11 +291,11 @@ impl Journal {
 }
 
 /// The quarantine file beside the journal.
-pub const QUARANTINE_FILE: &str = "journal.quarantine.jsonl";
+pub(crate) const QUARANTINE_FILE: &str = "journal.quarantine.jsonl";
 
 /// A journal line that could not be read back.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Quarantined {
+pub(crate) struct Quarantined {
     /// 1-based line number in the journal as it was found.
     pub line: usize,
     pub reason: String,

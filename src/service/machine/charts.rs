@@ -20,7 +20,7 @@ use crate::store::EventLevel;
 use tracing::warn;
 
 /// Parts of a loop's start-up left out of the baseline.
-pub const WARMUP_PARTS: usize = 5;
+pub(crate) const WARMUP_PARTS: usize = 5;
 
 /// One characteristic's chart.
 #[derive(Debug, Clone)]
@@ -33,14 +33,14 @@ struct Watched {
 
 /// Every characteristic's chart of one feature.
 #[derive(Debug, Clone)]
-pub struct ChartWatch {
+pub(crate) struct ChartWatch {
     seen: usize,
     items: Vec<Watched>,
 }
 
 /// A rule that fired, for the event.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Fired {
+pub(crate) struct Fired {
     pub characteristic: Characteristic,
     pub rule: Rule,
     pub value: f64,

@@ -187,13 +187,8 @@ impl FeatureLoop {
         }
     }
 
-    pub fn program_path(&self) -> PathBuf {
+    pub(crate) fn program_path(&self) -> PathBuf {
         self.share.config().share_dir.join(&self.program_file)
-    }
-
-    /// The main program's file on the share.
-    pub fn main_program_path(&self) -> PathBuf {
-        self.share.config().share_dir.join(&self.main.file)
     }
 
     /// The share folder.
@@ -210,7 +205,7 @@ impl FeatureLoop {
         &self.setup
     }
 
-    pub fn table_wheel_radius(&self) -> Arc<AtomicU64> {
+    pub(crate) fn table_wheel_radius(&self) -> Arc<AtomicU64> {
         self.table_wheel_radius_bits.clone()
     }
 
@@ -219,7 +214,7 @@ impl FeatureLoop {
     }
 
     /// The lobe or pin this loop grinds.
-    pub fn feature_name(&self) -> &str {
+    pub(crate) fn feature_name(&self) -> &str {
         &self.setup.name
     }
 

@@ -10,7 +10,7 @@ use tracing::info;
 impl FeatureLoop {
     /// Sets the learning's frozen reason (`None`: learning resumes) and keeps the state as
     /// every other change is kept (journal, then store). Returns the reason before.
-    pub async fn set_frozen(&mut self, frozen: Option<String>) -> Option<String> {
+    pub(crate) async fn set_frozen(&mut self, frozen: Option<String>) -> Option<String> {
         let before = self.memory.learning.frozen.clone();
         if frozen.is_none() {
             self.memory.learning.recent_max_error_um.clear();

@@ -76,7 +76,7 @@ impl GaugeIds {
 
 /// What the newest part of a feature came to, for the machine's line per shaft.
 #[derive(Debug, Clone)]
-pub struct PartLine {
+pub(crate) struct PartLine {
     pub feature: String,
     /// The part (shaft) number the gauge gave.
     pub part: String,

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 /// Layout of [`LoopMemory`] written by this build. Records without the field are layout 1
 /// (one learning state, no version attribution) and are read as such.
-pub const MEMORY_SCHEMA: u32 = 2;
+pub(crate) const MEMORY_SCHEMA: u32 = 2;
 
 /// How many measurement identities are remembered to recognise a repeat.
 const RECENT_MEASUREMENTS: usize = 256;
@@ -77,7 +77,7 @@ pub enum GuardKind {
 }
 
 impl GuardKind {
-    pub fn of_refusal(e: &CycleError) -> Self {
+    pub(crate) fn of_refusal(e: &CycleError) -> Self {
         match e {
             CycleError::Learn(
                 LearnError::CorrectionTooLarge { .. } | LearnError::AtLimit { .. },
@@ -93,7 +93,7 @@ impl GuardKind {
         }
     }
 
-    pub fn of_bound(quantity: BoundedQuantity) -> Self {
+    pub(crate) fn of_bound(quantity: BoundedQuantity) -> Self {
         match quantity {
             BoundedQuantity::Correction => GuardKind::CorrectionLimit,
             BoundedQuantity::Timing => GuardKind::TimingLimit,
@@ -101,7 +101,7 @@ impl GuardKind {
     }
 
     /// What an operator can do about it.
-    pub fn advice(self) -> &'static str {
+    pub(crate) fn advice(self) -> &'static str {
         match self {
             GuardKind::CorrectionLimit => {
                 "check the machine (servo lag, geometry, wheel), dress the wheel, or raise learning.max_correction_um in the recipe"
@@ -160,14 +160,14 @@ impl LoopMemory {
     }
 
     /// The newest part's number, when the gauge gave a number.
-    pub fn last_part_number(&self) -> Option<u64> {
+    pub(crate) fn last_part_number(&self) -> Option<u64> {
         self.last_part
             .as_deref()
             .and_then(|p| p.trim().parse().ok())
     }
 
     /// Whether this measurement identity was seen among the newest ones.
-    pub fn has_seen(&self, sha256: &str) -> bool {
+    pub(crate) fn has_seen(&self, sha256: &str) -> bool {
         self.recent_measurements.iter().any(|s| s == sha256)
     }
 

@@ -157,7 +157,7 @@ impl MachineLoop {
 
     /// [`Self::start`] for an owner in a cluster: every feature's share state is fenced
     /// with the owner's epoch (see [`crate::share::Fence`]).
-    pub async fn start_owned(
+    pub(crate) async fn start_owned(
         name: String,
         setups: Vec<FeatureSetup>,
         paths: MachinePaths,
@@ -201,7 +201,7 @@ impl MachineLoop {
     }
 
     /// Where every feature's loop sends plant events (MQTT).
-    pub fn set_plant_events(&mut self, events: Option<crate::service::mqtt::EventSender>) {
+    pub(crate) fn set_plant_events(&mut self, events: Option<crate::service::mqtt::EventSender>) {
         for f in &mut self.features {
             f.plant_events = events.clone();
         }
@@ -213,7 +213,7 @@ impl MachineLoop {
     }
 
     /// The main program's file on the share.
-    pub fn main_program_path(&self) -> PathBuf {
+    pub(crate) fn main_program_path(&self) -> PathBuf {
         self.share_dir().join(&self.main.file)
     }
 
@@ -223,7 +223,7 @@ impl MachineLoop {
 
     /// In a cluster: another instance has claimed this machine since it started here (its
     /// fence holds a newer epoch), so nothing more may be done for it on this instance.
-    pub fn fenced_out(&self) -> bool {
+    pub(crate) fn fenced_out(&self) -> bool {
         self.fence
             .as_ref()
             .is_some_and(|f| matches!(f.hold(), Err(crate::share::StateError::Fenced { .. })))
@@ -434,7 +434,7 @@ impl MachineLoop {
 
     /// Freezes (with a reason) or unfreezes the learning of feature `lobe`: the reason before,
     /// or `None` when the machine does not grind `lobe`.
-    pub async fn set_frozen(
+    pub(crate) async fn set_frozen(
         &mut self,
         lobe: &str,
         frozen: Option<String>,
@@ -470,7 +470,7 @@ impl MachineLoop {
         Ok(done)
     }
 
-    pub fn feature_names(&self) -> Vec<&str> {
+    pub(crate) fn feature_names(&self) -> Vec<&str> {
         self.features.iter().map(|f| f.feature_name()).collect()
     }
 

@@ -26,7 +26,7 @@ impl MainProgram {
     /// One feature: the one-feature program (no Z, no resume). Several: the shaft program,
     /// in recipe order. The C speed is the recipe's (or the machine's override), the one the
     /// axis-limit guards checked every table at.
-    pub fn for_features(setups: &[FeatureSetup]) -> anyhow::Result<Self> {
+    pub(crate) fn for_features(setups: &[FeatureSetup]) -> anyhow::Result<Self> {
         let first = setups
             .first()
             .ok_or_else(|| anyhow::anyhow!("a machine grinds at least one feature"))?;

@@ -67,7 +67,7 @@ impl PlantEvent {
     /// The event a journal record announces, if any (learning snapshots and recipes are
     /// the loop's own business, and a master run is the gauge study's: a plant counts its
     /// parts from `part_analysed`, and a master is not one).
-    pub fn from_pending(record: &Pending) -> Option<Self> {
+    pub(crate) fn from_pending(record: &Pending) -> Option<Self> {
         if let Pending::Measurement { part, .. } = record
             && crate::core::measure::is_master_part(part)
         {
@@ -211,7 +211,7 @@ impl PlantEvent {
     }
 
     /// The payload with the event's sequence number (`seq`) last.
-    pub fn payload_with_seq(&self, seq: u64) -> String {
+    pub(crate) fn payload_with_seq(&self, seq: u64) -> String {
         let mut value = serde_json::to_value(self).expect("a plant event serializes to JSON");
         if let Some(fields) = value.as_object_mut() {
             fields.insert("seq".into(), seq.into());

@@ -20,8 +20,8 @@ pub const MAX_BACKOFF: Duration = Duration::from_secs(5);
 /// A broker that accepted the connection but does not answer within this is given up on.
 const ANSWER_TIMEOUT: Duration = Duration::from_secs(10);
 /// The status topic's payloads: the birth message, and the last will (and a clean stop).
-pub const ONLINE: &str = "online";
-pub const OFFLINE: &str = "offline";
+pub(crate) const ONLINE: &str = "online";
+pub(crate) const OFFLINE: &str = "offline";
 
 /// What a connection attempt or a send ended with.
 enum Outcome {

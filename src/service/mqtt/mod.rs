@@ -238,7 +238,7 @@ impl Publisher {
 }
 
 /// `<prefix>/<client_id>/status`: `online` while connected, else `offline`.
-pub fn status_topic(prefix: &str, client_id: &str) -> String {
+pub(crate) fn status_topic(prefix: &str, client_id: &str) -> String {
     format!("{prefix}/{client_id}/status")
 }
 

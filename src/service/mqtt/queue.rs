@@ -17,14 +17,14 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 /// Queue file name in the queue folder.
-pub const QUEUE_FILE: &str = "queue.jsonl";
+pub(crate) const QUEUE_FILE: &str = "queue.jsonl";
 /// The count of drops not yet reported, kept across restarts (the dropped lines are gone
 /// from the queue file, which never exceeds the bound).
-pub const DROPPED_FILE: &str = "queue.dropped";
+pub(crate) const DROPPED_FILE: &str = "queue.dropped";
 
 /// One event to publish: its payload on its topic, then each state it changed, retained.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Message {
+pub(crate) struct Message {
     pub topic: String,
     pub payload: String,
     /// Queues written before the per-feature states: the payload again, retained, here.
@@ -37,7 +37,7 @@ pub struct Message {
 
 /// The queue (see the module doc).
 #[derive(Debug)]
-pub struct DiskQueue {
+pub(crate) struct DiskQueue {
     path: PathBuf,
     file: File,
     pending: VecDeque<Message>,
@@ -119,7 +119,7 @@ impl DiskQueue {
     }
 
     /// The oldest pending message was acknowledged by the broker.
-    pub fn pop_front(&mut self) -> std::io::Result<()> {
+    pub(crate) fn pop_front(&mut self) -> std::io::Result<()> {
         self.pending.pop_front();
         if self.pending.is_empty() {
             self.file.set_len(0)?;
@@ -132,12 +132,13 @@ impl DiskQueue {
         self.pending.len()
     }
 
+    #[cfg(test)]
     pub fn is_empty(&self) -> bool {
         self.pending.is_empty()
     }
 
     /// Counts messages lost before they reached the queue (its intake was full).
-    pub fn count_dropped(&mut self, n: u64) {
+    pub(crate) fn count_dropped(&mut self, n: u64) {
         if n == 0 {
             return;
         }
@@ -147,18 +148,18 @@ impl DiskQueue {
     }
 
     /// `n` drops were reported to the broker.
-    pub fn dropped_reported(&mut self, n: u64) {
+    pub(crate) fn dropped_reported(&mut self, n: u64) {
         self.dropped_unreported = self.dropped_unreported.saturating_sub(n);
         self.save_dropped();
     }
 
     /// Drops not yet reported (still to be told to the broker).
-    pub fn dropped_unreported(&self) -> u64 {
+    pub(crate) fn dropped_unreported(&self) -> u64 {
         self.dropped_unreported
     }
 
     /// Every drop since the queue was opened (with those found at open).
-    pub fn dropped_total(&self) -> u64 {
+    pub(crate) fn dropped_total(&self) -> u64 {
         self.dropped_total
     }
 

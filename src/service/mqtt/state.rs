@@ -19,11 +19,11 @@ use super::event::{MACHINE_LEVEL, PlantEvent};
 use crate::store::Verdict;
 
 /// State file name in the queue folder.
-pub const STATE_FILE: &str = "state.json";
+pub(crate) const STATE_FILE: &str = "state.json";
 
 /// One feature's current state, as retained on its state topic.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct FeatureState {
+pub(crate) struct FeatureState {
     pub machine: String,
     pub feature: String,
     /// Any alarm in force (machine-wide ones included).
@@ -50,7 +50,7 @@ struct Machine {
 
 /// The states of every machine seen, and the next sequence number.
 #[derive(Debug, Default, Serialize, Deserialize)]
-pub struct Tracker {
+pub(crate) struct Tracker {
     next_seq: u64,
     machines: BTreeMap<String, Machine>,
     #[serde(skip)]
@@ -134,7 +134,7 @@ impl Tracker {
     }
 
     /// Saves the tracker (temporary file, then rename).
-    pub fn save(&self) -> std::io::Result<()> {
+    pub(crate) fn save(&self) -> std::io::Result<()> {
         let tmp = self.path.with_extension("json.tmp");
         let text = serde_json::to_string(self).map_err(std::io::Error::other)?;
         std::fs::write(&tmp, text)?;

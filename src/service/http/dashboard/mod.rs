@@ -98,7 +98,7 @@ impl FeatureSheet {
 
     /// The half-width of the band when the feature has one symmetric band all round: the
     /// limit of its max |profile error|.
-    pub fn symmetric_band_um(&self) -> Option<f64> {
+    pub(crate) fn symmetric_band_um(&self) -> Option<f64> {
         match self.bands.as_slice() {
             [b] if (b.lower_um + b.upper_um).abs() < 1e-9
                 && b.upper_um > 0.0
