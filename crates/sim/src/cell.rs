@@ -188,15 +188,6 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                         *dx -= e / 1000.0;
                     }
                 }
-                table = make_table(
-                    setup,
-                    feature,
-                    &state,
-                    method,
-                    &naive_dx_mm,
-                    law.as_ref(),
-                    &mut control,
-                )?;
                 "X -= e at each index".to_string()
             }
             Method::XDomainIlc => {
@@ -213,21 +204,24 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
                 };
                 let outcome = learn::step(&mut x_state, &part, &setup.params);
                 x_from_correction(&x_state, &mut naive_dx_mm);
-                table = make_table(
-                    setup,
-                    feature,
-                    &state,
-                    method,
-                    &naive_dx_mm,
-                    law.as_ref(),
-                    &mut control,
-                )?;
                 match outcome {
                     Ok(o) => outcome_text(&o),
                     Err(e) => format!("refused: {e}"),
                 }
             }
         };
+        if method != Method::Camloop {
+            // The hand methods command their X offsets directly: one table from them.
+            table = make_table(
+                setup,
+                feature,
+                &state,
+                method,
+                &naive_dx_mm,
+                law.as_ref(),
+                &mut control,
+            )?;
+        }
         let dressed = match sim.after_part() {
             Some(event) => {
                 let old_radius_mm = feature.wheel_radius_mm();
