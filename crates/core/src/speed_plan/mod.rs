@@ -20,6 +20,7 @@
 //!    which holds them by construction.
 
 mod check;
+pub mod guard;
 pub mod plot;
 pub mod profile;
 pub mod render;
