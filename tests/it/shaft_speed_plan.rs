@@ -183,6 +183,7 @@ fn a_corrected_table_over_an_x_limit_with_the_plan_is_refused() {
         .filter(|l| l.contains("with the speed plan, X velocity"))
         .collect();
     assert!(!refusals.is_empty(), "{log}");
+    println!("{}", refusals[0]);
     assert!(
         refusals[0].contains("exceeds the axis limit 40 mm/s") && refusals[0].contains("C = "),
         "{}",
