@@ -14,7 +14,7 @@
 use super::FeatureLoop;
 use crate::core::compensate::{self, CycleError, GuardError, GuardedTable};
 use crate::core::learn::LearningState;
-use crate::core::program::ProgramSettings;
+use crate::core::program::{ProgramSettings, fmt_fixed};
 use crate::core::speed_plan::guard::planned_tables;
 use crate::core::speed_plan::render::{VaProgramSettings, render_va_table_program};
 use crate::core::speed_plan::tables::VaTables;
@@ -154,18 +154,50 @@ impl FeatureLoop {
         }
     }
 
-    /// The plan made at start for the wheel believed, and its VA speed taken as the share's
-    /// when the share holds this feature's table (it was made for that wheel).
-    pub(super) fn plan_at_start(&mut self) -> anyhow::Result<()> {
+    /// The plan made at start for the wheel believed. The share's table program says the
+    /// VA speed it was made for; when that is this plan's, the main program takes it as on
+    /// the share. Returns true when the share's table is not this plan's (new limits, a
+    /// plan newly switched on, a program from before): it must be delivered again.
+    pub(super) fn plan_at_start(&mut self) -> anyhow::Result<bool> {
         if !self.setup.speed_plan.enabled {
-            return Ok(());
+            return Ok(false);
         }
         let law = self.plan_law()?;
         let va_speed_rpm = 60.0 / law.period_s();
-        if self.program_path().exists() && self.memory.waiting.is_none() {
+        self.plan.pending_va_rpm = Some(va_speed_rpm);
+        let on_share = std::fs::read_to_string(self.program_path())
+            .ok()
+            .and_then(|text| va_speed_text(&text).map(str::to_string));
+        let same = on_share.as_deref() == Some(fmt_fixed(va_speed_rpm, 4).as_str());
+        if same && self.memory.waiting.is_none() {
             self.main.delivered(&self.setup.name, va_speed_rpm)?;
         }
-        self.plan.pending_va_rpm = Some(va_speed_rpm);
-        Ok(())
+        Ok(!same)
+    }
+}
+
+/// The VA speed a two-table program says it was made for, as written (rev/min).
+fn va_speed_text(text: &str) -> Option<&str> {
+    text.lines().find_map(|l| {
+        let rest = l
+            .strip_prefix("; camloop speed plan: ")?
+            .split_once(" at ")?
+            .1;
+        Some(rest.split_once(" rpm")?.0)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::va_speed_text;
+
+    #[test]
+    fn the_va_speed_is_read_from_the_table_program_as_written() {
+        let text = "PROC P(VAR INT CL_TNO, VAR INT CL_TNO_C) SAVE\n; camloop speed plan: VA at 49.7512 rpm, one revolution of C per revolution of VA\n";
+        assert_eq!(va_speed_text(text), Some("49.7512"));
+        assert_eq!(
+            va_speed_text("PROC P(VAR INT CL_TNO) SAVE\nCTABDEF(X,C,1,1)\n"),
+            None
+        );
     }
 }
