@@ -57,7 +57,7 @@ pub fn check_x_over_va(tables: &VaTables, limits: &AxisLimits) -> Result<(), Gua
         ("jerk", "mm/s³", limits.jerk_mm_s3),
     ];
     for ((value, va_deg), (quantity, unit, limit)) in x_maxima(tables).into_iter().zip(named) {
-        if !(value <= limit) {
+        if value > limit || value.is_nan() {
             return Err(GuardError::PlanMotion {
                 quantity,
                 value,
