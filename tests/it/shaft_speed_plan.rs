@@ -196,3 +196,60 @@ fn a_corrected_table_over_an_x_limit_with_the_plan_is_refused() {
         "{table}"
     );
 }
+
+/// A rollback with the plan on: the two-table program has two numbers, so it is made again
+/// from the version's correction and timing for the plan in force (not retargeted), under
+/// the free X number and the C number in step with it. Rolled back to the nominal v1, its
+/// X and C blocks are v1's exactly, only the numbers and the provenance differ.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_rollback_with_the_plan_makes_the_two_tables_again() {
+    use crate::service_support::{get, json, post};
+    use camloop::config::Config;
+    use camloop::service::{self, RunOptions};
+    const TOKEN: &str = "let-me-write";
+    let dir = tempfile::tempdir().unwrap();
+    let recipe = planned_recipe(dir.path(), "demo-lobe.toml");
+    let text = config(&recipe, "")
+        .replace(
+            "share = \"share/SIM8\"",
+            "lobe = \"IN1\"\nshare = \"share/SIM8\"",
+        )
+        .replace(
+            "sqlite://var/camloop.db",
+            &format!("sqlite://{}/var/camloop.db", dir.path().display()),
+        );
+    let env = |k: &str| (k == camloop::config::ENV_API_TOKEN).then(|| TOKEN.to_string());
+    let config = Config::parse(&text, &dir.path().join("camloop.toml"), env).unwrap();
+    let mut running = service::start(config, RunOptions::parts(3)).await.unwrap();
+    running.machines_done().await;
+    let addr = running.http_addr;
+    let path = "/api/v1/machines/SIM8/lobes/IN1/rollback";
+    let (status, body) = post(addr, path, r#"{"version":1}"#, Some(TOKEN)).await;
+    assert_eq!(status, 200, "{body}");
+    let new_version = json(&body)["version"].as_u64().unwrap();
+    assert_eq!(new_version, 5, "{body}");
+    let (_, v1) = get(addr, "/api/v1/machines/SIM8/lobes/IN1/tables/1/program").await;
+    let share = std::fs::read_to_string(dir.path().join("share/SIM8/DEMO_CAM_TABLE.SPF")).unwrap();
+    let blocks = |t: &str| -> Vec<String> {
+        t.lines()
+            .filter(|l| l.starts_with("PO[") || l.starts_with("G1 "))
+            .map(str::to_string)
+            .collect()
+    };
+    assert!(blocks(&v1).len() > 1000, "{v1}");
+    assert_eq!(blocks(&share), blocks(&v1));
+    for line in [
+        "; table version: v5",
+        "; reason: rollback to v1",
+        "CTABDEF(X,VA,",
+        "CTABDEF(C,VA,",
+    ] {
+        assert!(share.contains(line), "{line}\n{share}");
+    }
+    // v4 defined X 2 and C 4; the rollback the free ones: X 1, C 3.
+    assert!(
+        share.contains("CL_TNO=1 ") && share.contains("CL_TNO_C=3 "),
+        "{share}"
+    );
+    drop(running);
+}
