@@ -217,7 +217,8 @@ impl FeatureLoop {
     fn on_delivered(&self, wheel_radius_mm: f64) {
         self.table_wheel_radius_bits
             .store(wheel_radius_mm.to_bits(), Ordering::SeqCst);
-        if let Some(rpm) = self.plan.pending_va_rpm
+        // The main program pairs each feature's table with the VA speed it was made for.
+        if let Some(rpm) = self.va_speed_on_share()
             && let Err(e) = self.main.delivered(&self.setup.name, rpm)
         {
             error!(machine = %self.name, error = format!("{e:#}"), "main program: the plan's speed not kept");

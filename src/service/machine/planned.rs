@@ -154,6 +154,18 @@ impl FeatureLoop {
         }
     }
 
+    /// The VA speed of the table program now on the share (rev/min), as its text says:
+    /// the exact speed of the table just rendered when it is that one, else the text's
+    /// (a waiting version delivered later). None at constant speed.
+    pub(super) fn va_speed_on_share(&self) -> Option<f64> {
+        let text = std::fs::read_to_string(self.program_path()).ok()?;
+        let written = va_speed_text(&text)?;
+        match self.plan.pending_va_rpm {
+            Some(rpm) if fmt_fixed(rpm, 4) == written => Some(rpm),
+            _ => written.parse().ok(),
+        }
+    }
+
     /// The plan made at start for the wheel believed. The share's table program says the
     /// VA speed it was made for; when that is this plan's, the main program takes it as on
     /// the share. Returns true when the share's table is not this plan's (new limits, a
