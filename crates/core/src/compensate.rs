@@ -213,7 +213,7 @@ pub fn commanded_lift(
 /// X motion within `limits`. G1 tables have velocity steps at every point; their acceleration
 /// and jerk are judged by the second and third differences of X over the points, which is the
 /// motion of the smooth path the table samples.
-pub fn guarded_table(
+pub(crate) fn guarded_table(
     feature: Feature,
     commanded: &LiftTable,
     request: TableRequest,
@@ -224,7 +224,7 @@ pub fn guarded_table(
 }
 
 /// Like [`guarded_table`] for a part already built (a crankpin, or a cam).
-pub fn guarded_part_table(
+pub(crate) fn guarded_part_table(
     part: &Part,
     request: TableRequest,
     limits: &AxisLimits,

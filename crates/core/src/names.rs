@@ -5,7 +5,7 @@
 use std::fmt;
 
 /// Longest machine name, in characters.
-pub const MAX_NAME_LEN: usize = 32;
+pub(crate) const MAX_NAME_LEN: usize = 32;
 
 /// A machine name that passed [`MachineName::new`]; the only way to make one.
 /// Deserialising checks the rule too, so a name read from a file or a request is valid once

@@ -214,7 +214,7 @@ impl Control {
     }
 
     /// R parameter `n` (0 when never set).
-    pub fn r_param(&self, n: u32) -> f64 {
+    pub(crate) fn r_param(&self, n: u32) -> f64 {
         self.r_params.get(&n).copied().unwrap_or(0.0)
     }
 

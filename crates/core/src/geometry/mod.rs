@@ -158,7 +158,10 @@ impl Part {
     /// on a base radius `r_p − b` (negative when the pin does not surround the axis; the flat
     /// follower's geometry holds all the same). `lift` is that h. Program X stays
     /// `d − R − r_p`, as for the round pin.
-    pub fn shaped_pin(pin: CrankpinGeometry, lift: LiftCurve) -> Result<Self, GeometryError> {
+    pub(crate) fn shaped_pin(
+        pin: CrankpinGeometry,
+        lift: LiftCurve,
+    ) -> Result<Self, GeometryError> {
         Self::crankpin(pin)?;
         let geometry = CamGeometry {
             base_radius_mm: pin.pin_radius_mm - pin.throw_mm,
@@ -218,7 +221,7 @@ impl Part {
 
     /// A circle worth drawing for orientation: the base circle of a cam, the main journal
     /// axis orbit of a crankpin's centre. Centre, radius (mm) and a label.
-    pub fn reference_circle(&self) -> Option<([f64; 2], f64, String)> {
+    pub(crate) fn reference_circle(&self) -> Option<([f64; 2], f64, String)> {
         match &self.kind {
             Kind::Cam { pin: Some(g), .. } => {
                 Some(([0.0, 0.0], g.throw_mm, "pin-centre orbit".to_string()))
@@ -296,7 +299,11 @@ impl Part {
     /// path parameter of a nearby solution (`guess_rad`, e.g. the previous point of a walk).
     /// Returns d and the parameter found, to pass on as the next guess. Same result as
     /// [`Part::d_at_c_deg`]; only faster when the guess is close.
-    pub fn d_at_c_deg_near(&self, c_deg: f64, guess_rad: f64) -> Result<(f64, f64), GeometryError> {
+    pub(crate) fn d_at_c_deg_near(
+        &self,
+        c_deg: f64,
+        guess_rad: f64,
+    ) -> Result<(f64, f64), GeometryError> {
         let (s, d, _) = self.wheel_at(c_deg, guess_rad)?;
         Ok((d, s))
     }

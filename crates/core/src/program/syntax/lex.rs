@@ -50,7 +50,7 @@ fn split_comment(raw: &str) -> (&str, Option<&str>) {
 
 /// What a token is.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Tok<'t> {
+pub(crate) enum Tok<'t> {
     /// A name, address or keyword: a letter, `_` or `$`, then letters, digits and `_`.
     Name(&'t str),
     /// An unsigned number (`12`, `1.5`, `.5`); a sign is an operator.
@@ -62,13 +62,13 @@ pub enum Tok<'t> {
 }
 
 /// Symbols, two-character ones first so that `<=` is not read as `<`, `=`.
-pub const SYMBOLS: [&str; 17] = [
+pub(crate) const SYMBOLS: [&str; 17] = [
     "<=", ">=", "==", "<>", "(", ")", "[", "]", ",", "=", "+", "-", "*", "/", "<", ">", ":",
 ];
 
 /// A token, where it stands in its line's code (byte offsets) and its 1-based column.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Token<'t> {
+pub(crate) struct Token<'t> {
     pub tok: Tok<'t>,
     pub start: usize,
     pub end: usize,
@@ -77,12 +77,12 @@ pub struct Token<'t> {
 
 impl<'t> Line<'t> {
     /// 1-based column in the line of byte offset `at` of the code.
-    pub fn column_of(&self, at: usize) -> usize {
+    fn column_of(&self, at: usize) -> usize {
         self.code_column + self.code[..at.min(self.code.len())].chars().count()
     }
 
     /// An error at byte offset `at` of the code.
-    pub fn error_at(&self, at: usize, reason: impl Into<String>) -> SyntaxError {
+    pub(crate) fn error_at(&self, at: usize, reason: impl Into<String>) -> SyntaxError {
         SyntaxError {
             line: self.number,
             column: self.column_of(at),
@@ -91,7 +91,7 @@ impl<'t> Line<'t> {
     }
 
     /// The code cut into tokens.
-    pub fn tokens(&self) -> Result<Vec<Token<'t>>, SyntaxError> {
+    pub(crate) fn tokens(&self) -> Result<Vec<Token<'t>>, SyntaxError> {
         let code = self.code;
         let bytes = code.as_bytes();
         let mut out = Vec::new();

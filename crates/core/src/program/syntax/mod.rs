@@ -9,7 +9,8 @@ mod expr;
 mod lex;
 
 pub use expr::Expr;
-pub use lex::{Line, SYMBOLS, Tok, Token, lines};
+pub use lex::{Line, lines};
+use lex::{Tok, Token};
 
 use expr::Cursor;
 
