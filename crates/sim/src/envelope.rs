@@ -34,7 +34,7 @@ use super::path::{MachinePath, add, angle, cross, dot, norm, scale, sub};
 use super::table::wrap_pi;
 
 /// Normal jumps up to this (radians) at a table point count as smooth.
-pub const SMOOTH_KINK_RAD: f64 = 1e-6;
+pub(crate) const SMOOTH_KINK_RAD: f64 = 1e-6;
 /// Spacing of the outline nodes placed on a corner or a wheel arc, radians (0.25°).
 const ARC_NODE_STEP_RAD: f64 = 0.25 * std::f64::consts::PI / 180.0;
 /// Newton iterations allowed for one crossing (quadratic convergence from a close first

@@ -6,7 +6,7 @@
 
 /// A small, fast, seeded generator (xoshiro256**, Blackman and Vigna). Not cryptographic.
 #[derive(Debug, Clone)]
-pub struct SimRng {
+pub(crate) struct SimRng {
     state: [u64; 4],
     /// Second deviate of the last Box–Muller pair, not yet handed out.
     spare: Option<f64>,
