@@ -20,7 +20,7 @@ pub enum Feature {
 
 /// Wheel radii a dressing report may carry, mm: grinding wheels of X–C machines sit well
 /// inside this; a value outside is a typo or a wrong unit, refused before the geometry.
-pub const WHEEL_RADIUS_RANGE_MM: std::ops::RangeInclusive<f64> = 5.0..=1000.0;
+pub(crate) const WHEEL_RADIUS_RANGE_MM: std::ops::RangeInclusive<f64> = 5.0..=1000.0;
 
 /// A dressing report whose wheel radius cannot be right.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]

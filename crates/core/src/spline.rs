@@ -70,7 +70,7 @@ impl PeriodicSpline {
         }
     }
 
-    pub fn knots(&self) -> &[f64] {
+    pub(crate) fn knots(&self) -> &[f64] {
         &self.knots
     }
 

@@ -46,7 +46,7 @@ const CORNER_MATCH_MM: f64 = 1e-10;
 /// One outline node: a point of the part's boundary and its unit outward normal there
 /// (at a corner, one of the normals of its normal cone).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Node {
+pub(crate) struct Node {
     pub p: [f64; 2],
     pub n: [f64; 2],
 }

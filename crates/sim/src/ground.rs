@@ -122,11 +122,6 @@ impl GroundPart {
         )
     }
 
-    /// Outline nodes (part frame, mm) in counter-clockwise order, for drawing.
-    pub fn outline(&self) -> Vec<[f64; 2]> {
-        self.nodes.iter().map(|n| n.p).collect()
-    }
-
     fn read_on_grid(&self, probe: Probe, n: usize) -> Vec<f64> {
         let c = curve(&self.nodes, probe);
         let step = TAU / n.max(1) as f64;

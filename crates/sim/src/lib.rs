@@ -242,10 +242,6 @@ impl SimGrinder {
         &self.config
     }
 
-    pub fn workpiece(&self) -> &Workpiece {
-        &self.workpiece
-    }
-
     /// Wheel radius the control believes now, mm: what tables should be made for.
     pub fn believed_wheel_radius_mm(&self) -> f64 {
         self.believed_wheel_radius_mm

@@ -89,7 +89,7 @@ pub enum Model {
 
 impl Model {
     /// The chosen fitted distribution, for a non-normal model.
-    pub fn fitted(&self) -> Option<Fitted> {
+    pub(crate) fn fitted(&self) -> Option<Fitted> {
         match self {
             Model::Normal => None,
             Model::Fitted { candidates } => candidates.first().map(|c| c.fitted),

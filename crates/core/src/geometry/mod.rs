@@ -316,7 +316,7 @@ impl Part {
     }
 
     /// The part outline as `samples` points (part frame, mm), counter-clockwise.
-    pub fn outline(&self, samples: usize) -> Vec<[f64; 2]> {
+    pub(crate) fn outline(&self, samples: usize) -> Vec<[f64; 2]> {
         let r = self.wheel_radius_mm();
         (0..samples)
             .map(|k| {

@@ -28,7 +28,7 @@ pub enum TableMemory {
 
 impl TableMemory {
     /// The keyword as written in `CTABDEF`.
-    pub fn keyword(self) -> &'static str {
+    pub(crate) fn keyword(self) -> &'static str {
         match self {
             TableMemory::Sram => "SRAM",
             TableMemory::Dram => "DRAM",
@@ -50,7 +50,7 @@ pub enum CDirection {
 
 impl CDirection {
     /// +1.0 or −1.0.
-    pub fn sign(self) -> f64 {
+    pub(crate) fn sign(self) -> f64 {
         match self {
             CDirection::Same => 1.0,
             CDirection::Reversed => -1.0,

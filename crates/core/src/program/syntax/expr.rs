@@ -32,7 +32,7 @@ impl<'t> Expr<'t> {
     }
 
     /// The numbers of a list, or of a single number as a list of one.
-    pub fn numbers(&self) -> Option<Vec<f64>> {
+    pub(crate) fn numbers(&self) -> Option<Vec<f64>> {
         match self {
             Expr::List(items) => items.iter().map(Expr::number).collect(),
             other => other.number().map(|v| vec![v]),
