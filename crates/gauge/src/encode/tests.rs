@@ -1,3 +1,5 @@
+//! The encoder against cantools' vector, the decoder and its own refusals.
+
 use super::*;
 use crate::candump::parse_candump_line;
 use crate::dbc::{BUILTIN_DBC, GaugeSignalNames};

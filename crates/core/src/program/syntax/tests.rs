@@ -1,3 +1,5 @@
+//! The reader against the statements camloop writes, and its errors' lines and columns.
+
 use super::*;
 
 fn one(code: &str) -> Statement<'_> {
