@@ -320,6 +320,26 @@ mod tests {
     }
 
     #[test]
+    fn a_block_that_cannot_be_read_is_refused_naming_line_and_column() {
+        let text = render_g1_table(&points(), &ProgramSettings::default()).unwrap();
+        let at = text.lines().position(|l| l.starts_with("G1 C=")).unwrap();
+        let bad: String = text
+            .lines()
+            .enumerate()
+            .map(|(i, l)| {
+                if i == at {
+                    "G1 C=(10 X=2\n".to_owned()
+                } else {
+                    format!("{l}\n")
+                }
+            })
+            .collect();
+        let e = parse_table_program(&bad).unwrap_err();
+        assert_eq!((e.line, e.column), (at + 1, 10), "{e}");
+        assert_eq!(e.reason, "expected `,` or `)`");
+    }
+
+    #[test]
     fn a_truncated_program_is_refused() {
         let text = render_g1_table(&points(), &ProgramSettings::default()).unwrap();
         let cut = &text[..text.len() / 2];
