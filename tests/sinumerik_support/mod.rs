@@ -2,7 +2,8 @@
 //! parameters, assignments, `STOPRE`, arithmetic with `SIN COS TAN SQRT ABS` (degrees), labels,
 //! `IF <cond> GOTOB/GOTOF <label>` and motion blocks with `<axis>=<expr>` words.
 //!
-//! It reads the program *text*, not the generator's structures, so running a loop program
+//! It reads the program *text* with the core's SINUMERIK reader
+//! (`camloop::core::program::syntax`), not the generator's structures, so running a loop program
 //! through it and comparing the moves with the expanded program checks the rendering.
 //!
 //! Test support, not product code: the generators' tests evaluate the SINUMERIK loop text
@@ -14,10 +15,13 @@ use thiserror::Error;
 
 use camloop::core::generate::ir::{cos_deg, sin_deg, tan_deg};
 use camloop::core::program::fmt_fixed as fixed;
+use camloop::core::program::syntax::{Cond, Expr, Line, Statement, SyntaxError, Word, lines};
 
 /// Why a program cannot be evaluated; lines are 1-based.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 pub enum EvalError {
+    #[error(transparent)]
+    Read(#[from] SyntaxError),
     #[error("line {line}: {what}")]
     Syntax { line: usize, what: String },
     #[error("line {line}: unknown variable `{name}`")]
@@ -31,20 +35,23 @@ pub enum EvalError {
 /// Blocks run at most.
 const MAX_STEPS: usize = 5_000_000;
 
+type Vars = HashMap<String, f64>;
+
 /// Runs `text` and returns every motion block as the expanded form writes it
 /// (`G1 X=… Z=…` with `linear`/`angle` decimals), in order, with the R-parameter writes.
 pub fn run(text: &str, linear: usize, angle: usize) -> Result<Vec<String>, EvalError> {
-    let lines: Vec<&str> = text
-        .lines()
-        .map(|l| l.split(';').next().unwrap_or("").trim())
-        .collect();
+    let lines: Vec<Line> = lines(text).collect();
+    let statements = lines
+        .iter()
+        .map(Line::statement)
+        .collect::<Result<Vec<_>, _>>()?;
     let mut labels = HashMap::new();
-    for (i, l) in lines.iter().enumerate() {
-        if let Some(name) = l.strip_suffix(':') {
-            labels.insert(name.to_owned(), i);
+    for (i, s) in statements.iter().enumerate() {
+        if let Some(Statement::Label(name)) = s {
+            labels.insert(*name, i);
         }
     }
-    let mut vars: HashMap<String, f64> = HashMap::new();
+    let mut vars = Vars::new();
     let mut out = Vec::new();
     let mut pc = 0;
     let mut steps = 0;
@@ -53,57 +60,60 @@ pub fn run(text: &str, linear: usize, angle: usize) -> Result<Vec<String>, EvalE
         if steps > MAX_STEPS {
             return Err(EvalError::Runaway(MAX_STEPS));
         }
-        let line = lines[pc];
-        let n = pc + 1;
+        let (line, n) = (&lines[pc], lines[pc].number);
         pc += 1;
-        if line.is_empty() || line.starts_with('%') || line.ends_with(':') {
-            continue;
-        }
-        if let Some(names) = line.strip_prefix("DEF REAL ") {
-            for name in names.split(',') {
-                vars.insert(name.trim().to_owned(), 0.0);
+        match &statements[pc - 1] {
+            None | Some(Statement::Header { .. } | Statement::Label(_)) => {}
+            Some(Statement::Def {
+                kind: "REAL",
+                names,
+            }) => {
+                for name in names {
+                    vars.insert((*name).to_owned(), 0.0);
+                }
             }
-        } else if let Some(rest) = line.strip_prefix("IF ") {
-            let (cond, jump) = rest
-                .split_once(" GOTO")
-                .ok_or_else(|| syntax(n, "IF without GOTOB/GOTOF"))?;
-            let label = jump[1..].trim();
-            if eval_cond(cond, &vars, n)? {
-                pc = *labels.get(label).ok_or_else(|| EvalError::NoLabel {
-                    line: n,
-                    label: label.to_owned(),
-                })?;
+            Some(Statement::If {
+                cond,
+                goto: Some((_, label)),
+            }) => {
+                if eval_cond(cond, &vars, n)? {
+                    pc = *labels.get(label).ok_or_else(|| EvalError::NoLabel {
+                        line: n,
+                        label: (*label).to_owned(),
+                    })?;
+                }
             }
-        } else if line == "STOPRE" {
             // Only orders preparation against motion; nothing to evaluate.
-        } else if line == "M30" {
-            break;
-        } else if line.starts_with('G') {
-            if is_motion(line) {
-                out.push(motion(line, &vars, n, linear, angle)?);
+            Some(Statement::Keyword("STOPRE")) => {}
+            Some(Statement::Keyword("M30")) => break,
+            Some(Statement::Block(words)) if words.first().is_some_and(Word::is_g_code) => {
+                if is_motion(words) {
+                    out.push(motion(words, &vars, n, linear, angle)?);
+                }
             }
-        } else if let Some((name, e)) = line.split_once('=') {
-            let value = Parser::new(e, &vars, n).whole()?;
-            if name.starts_with('R') && name[1..].chars().all(|c| c.is_ascii_digit()) {
-                out.push(format!("{name}={value}"));
-            } else if !vars.contains_key(name) {
-                return Err(EvalError::UnknownVar {
-                    line: n,
-                    name: name.to_owned(),
-                });
+            Some(Statement::Assign { target, value }) => {
+                let value = eval(value, &vars, n)?;
+                if target.starts_with('R') && target[1..].chars().all(|c| c.is_ascii_digit()) {
+                    out.push(format!("{target}={value}"));
+                } else if !vars.contains_key(*target) {
+                    return Err(EvalError::UnknownVar {
+                        line: n,
+                        name: (*target).to_owned(),
+                    });
+                }
+                vars.insert((*target).to_owned(), value);
             }
-            vars.insert(name.to_owned(), value);
-        } else {
-            return Err(syntax(n, &format!("cannot read `{line}`")));
+            Some(_) => return Err(syntax(n, &format!("cannot read `{}`", line.code))),
         }
     }
     Ok(out)
 }
 
 /// True for a block with a motion word (`G0` to `G3`); mode-only blocks set no position.
-pub fn is_motion(line: &str) -> bool {
-    line.split_whitespace()
-        .any(|w| matches!(w, "G0" | "G1" | "G2" | "G3"))
+fn is_motion(words: &[Word]) -> bool {
+    words
+        .iter()
+        .any(|w| matches!(w, Word::Code("G0" | "G1" | "G2" | "G3")))
 }
 
 fn syntax(line: usize, what: &str) -> EvalError {
@@ -115,155 +125,74 @@ fn syntax(line: usize, what: &str) -> EvalError {
 
 /// A motion block with its words evaluated and written with fixed decimals.
 fn motion(
-    line: &str,
-    vars: &HashMap<String, f64>,
+    words: &[Word],
+    vars: &Vars,
     n: usize,
     linear: usize,
     angle: usize,
 ) -> Result<String, EvalError> {
-    let mut words = Vec::new();
-    for w in line.split_whitespace() {
-        if let Some((axis, e)) = w.split_once('=') {
-            let v = Parser::new(e, vars, n).whole()?;
-            let d = if matches!(axis, "A" | "C") {
-                angle
-            } else {
-                linear
-            };
-            words.push(format!("{axis}={}", fixed(v, d)));
-        } else {
-            words.push(w.to_owned());
-        }
-    }
-    Ok(words.join(" "))
-}
-
-fn eval_cond(text: &str, vars: &HashMap<String, f64>, n: usize) -> Result<bool, EvalError> {
-    for op in ["<=", ">=", "==", "<>", "<", ">"] {
-        if let Some((l, r)) = text.split_once(op) {
-            let a = Parser::new(l, vars, n).whole()?;
-            let b = Parser::new(r, vars, n).whole()?;
-            return Ok(match op {
-                "<=" => a <= b,
-                ">=" => a >= b,
-                "==" => a == b,
-                "<>" => a != b,
-                "<" => a < b,
-                _ => a > b,
-            });
-        }
-    }
-    Err(syntax(n, &format!("no comparison in `{text}`")))
-}
-
-/// Recursive-descent arithmetic: `+ -` over `* /` over unary minus, numbers, variables,
-/// functions and brackets.
-struct Parser<'a> {
-    s: &'a [u8],
-    i: usize,
-    vars: &'a HashMap<String, f64>,
-    line: usize,
-}
-
-impl<'a> Parser<'a> {
-    fn new(s: &'a str, vars: &'a HashMap<String, f64>, line: usize) -> Self {
-        Parser {
-            s: s.trim().as_bytes(),
-            i: 0,
-            vars,
-            line,
-        }
-    }
-
-    fn whole(mut self) -> Result<f64, EvalError> {
-        let v = self.sum()?;
-        if self.i != self.s.len() {
-            return Err(syntax(self.line, "trailing text in an expression"));
-        }
-        Ok(v)
-    }
-
-    fn peek(&self) -> Option<u8> {
-        self.s.get(self.i).copied()
-    }
-
-    fn sum(&mut self) -> Result<f64, EvalError> {
-        let mut v = self.product()?;
-        while let Some(op @ (b'+' | b'-')) = self.peek() {
-            self.i += 1;
-            let r = self.product()?;
-            v = if op == b'+' { v + r } else { v - r };
-        }
-        Ok(v)
-    }
-
-    fn product(&mut self) -> Result<f64, EvalError> {
-        let mut v = self.unary()?;
-        while let Some(op @ (b'*' | b'/')) = self.peek() {
-            self.i += 1;
-            let r = self.unary()?;
-            v = if op == b'*' { v * r } else { v / r };
-        }
-        Ok(v)
-    }
-
-    fn unary(&mut self) -> Result<f64, EvalError> {
-        if self.peek() == Some(b'-') {
-            self.i += 1;
-            return Ok(-self.unary()?);
-        }
-        if self.peek() == Some(b'(') {
-            self.i += 1;
-            let v = self.sum()?;
-            self.expect(b')')?;
-            return Ok(v);
-        }
-        let start = self.i;
-        while let Some(c) = self.peek() {
-            if c.is_ascii_alphanumeric() || c == b'_' || c == b'.' {
-                self.i += 1;
-            } else {
-                break;
+    let mut out = Vec::new();
+    for w in words {
+        match w {
+            Word::Set {
+                address,
+                index: None,
+                value,
+            } => {
+                let v = eval(value, vars, n)?;
+                let d = if matches!(*address, "A" | "C") {
+                    angle
+                } else {
+                    linear
+                };
+                out.push(format!("{address}={}", fixed(v, d)));
+            }
+            Word::Code(code) => out.push((*code).to_owned()),
+            Word::Set { address, .. } => {
+                return Err(syntax(n, &format!("indexed `{address}` in a motion block")));
             }
         }
-        let word = std::str::from_utf8(&self.s[start..self.i]).unwrap_or("");
-        if word.is_empty() {
-            return Err(syntax(self.line, "expected a value"));
-        }
-        if word.as_bytes()[0].is_ascii_digit() || word.starts_with('.') {
-            return word
-                .parse()
-                .map_err(|_| syntax(self.line, &format!("bad number `{word}`")));
-        }
-        let f: Option<fn(f64) -> f64> = match word {
-            "SIN" => Some(sin_deg),
-            "COS" => Some(cos_deg),
-            "TAN" => Some(tan_deg),
-            "SQRT" => Some(f64::sqrt),
-            "ABS" => Some(f64::abs),
-            _ => None,
-        };
-        if let Some(f) = f {
-            self.expect(b'(')?;
-            let v = self.sum()?;
-            self.expect(b')')?;
-            return Ok(f(v));
-        }
-        self.vars
-            .get(word)
-            .copied()
-            .ok_or_else(|| EvalError::UnknownVar {
-                line: self.line,
-                name: word.to_owned(),
-            })
     }
+    Ok(out.join(" "))
+}
 
-    fn expect(&mut self, c: u8) -> Result<(), EvalError> {
-        if self.peek() == Some(c) {
-            self.i += 1;
-            Ok(())
-        } else {
-            Err(syntax(self.line, &format!("expected `{}`", c as char)))
+fn eval_cond(cond: &Cond, vars: &Vars, n: usize) -> Result<bool, EvalError> {
+    Ok(cond.holds(eval(&cond.left, vars, n)?, eval(&cond.right, vars, n)?))
+}
+
+/// The value of an expression: numbers, variables, `+ - * /`, unary minus and `SIN COS TAN
+/// SQRT ABS` (degrees).
+fn eval(e: &Expr, vars: &Vars, n: usize) -> Result<f64, EvalError> {
+    Ok(match e {
+        Expr::Num(v) => *v,
+        Expr::Var(name) => *vars.get(*name).ok_or_else(|| EvalError::UnknownVar {
+            line: n,
+            name: (*name).to_owned(),
+        })?,
+        Expr::Neg(a) => -eval(a, vars, n)?,
+        Expr::Binary(op, a, b) => {
+            let (a, b) = (eval(a, vars, n)?, eval(b, vars, n)?);
+            match op {
+                '+' => a + b,
+                '-' => a - b,
+                '*' => a * b,
+                _ => a / b,
+            }
         }
-    }
+        Expr::Call(name, args) => {
+            let f: fn(f64) -> f64 = match *name {
+                "SIN" => sin_deg,
+                "COS" => cos_deg,
+                "TAN" => tan_deg,
+                "SQRT" => f64::sqrt,
+                "ABS" => f64::abs,
+                _ => return Err(syntax(n, &format!("unknown function `{name}`"))),
+            };
+            let [arg] = args.as_slice() else {
+                return Err(syntax(n, &format!("{name} takes one argument")));
+            };
+            f(eval(arg, vars, n)?)
+        }
+        other => return Err(syntax(n, &format!("cannot evaluate {other:?}"))),
+    })
 }

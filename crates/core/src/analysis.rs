@@ -48,7 +48,7 @@ use crate::measure::{AveragedMeasurement, DroppedRevolution};
 
 /// Fewest points per revolution the analysis accepts (harmonics, a 3-parameter base-circle
 /// fit and a meaningful phase need a few points per feature).
-pub const MIN_POINTS_PER_REV: u32 = 8;
+pub(crate) const MIN_POINTS_PER_REV: u32 = 8;
 
 /// A first-harmonic phase estimate within this of 0 starts the fit from 0, degrees.
 const START_FROM_ZERO_WITHIN_DEG: f64 = 1.0;
@@ -202,7 +202,7 @@ pub struct LobeReport {
 /// d lift/dψ in mm per **degree**). A spline giving mm/rad must be scaled by π/180: the fitted
 /// phase does not depend on the slope's scale, but a slope 57× too large makes every
 /// Gauss–Newton step 57× too short and the fit ends in [`AnalysisError::FitNotConverged`].
-pub type NominalLift<'a> = &'a dyn Fn(f64) -> (f64, f64);
+pub(crate) type NominalLift<'a> = &'a dyn Fn(f64) -> (f64, f64);
 
 /// Analyses an averaged lobe measurement against the nominal lift. See the module docs for
 /// the datum convention. Pure; fails on malformed input or options, never panics.

@@ -20,7 +20,7 @@ pub enum Feature {
 
 /// Wheel radii a dressing report may carry, mm: grinding wheels of X–C machines sit well
 /// inside this; a value outside is a typo or a wrong unit, refused before the geometry.
-pub const WHEEL_RADIUS_RANGE_MM: std::ops::RangeInclusive<f64> = 5.0..=1000.0;
+pub(crate) const WHEEL_RADIUS_RANGE_MM: std::ops::RangeInclusive<f64> = 5.0..=1000.0;
 
 /// A dressing report whose wheel radius cannot be right.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
@@ -224,7 +224,7 @@ pub fn commanded_lift(
 /// X motion within `limits`. G1 tables have velocity steps at every point; their acceleration
 /// and jerk are judged by the second and third differences of X over the points, which is the
 /// motion of the smooth path the table samples.
-pub fn guarded_table(
+pub(crate) fn guarded_table(
     feature: Feature,
     commanded: &LiftTable,
     request: TableRequest,
@@ -235,7 +235,7 @@ pub fn guarded_table(
 }
 
 /// Like [`guarded_table`] for a part already built (a crankpin, or a cam).
-pub fn guarded_part_table(
+pub(crate) fn guarded_part_table(
     part: &Part,
     request: TableRequest,
     limits: &AxisLimits,

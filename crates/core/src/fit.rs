@@ -107,11 +107,6 @@ pub fn g1_deviation(part: &Part, points: &[TablePoint]) -> Result<Deviation, Geo
     Ok(worst_of(&segment_deviations(part, &chords)?))
 }
 
-/// Largest deviation of the given POLY segments from the exact path.
-pub fn poly_deviation(part: &Part, segments: &[PolySegment]) -> Result<Deviation, GeometryError> {
-    Ok(worst_of(&segment_deviations(part, segments)?))
-}
-
 /// G1 table motion at `c_speed_rpm`: chord velocities and the steps between them.
 pub fn g1_motion(points: &[TablePoint], c_speed_rpm: f64) -> Motion {
     let omega_deg_s = c_speed_rpm * 6.0;

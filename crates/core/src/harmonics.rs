@@ -78,7 +78,7 @@ impl DftTable {
     }
 
     /// `(cos ψ_k, sin ψ_k)` of grid angle `k`; `None` past the grid.
-    pub fn cos_sin(&self, k: usize) -> Option<(f64, f64)> {
+    pub(crate) fn cos_sin(&self, k: usize) -> Option<(f64, f64)> {
         Some((*self.cos.get(k)?, *self.sin.get(k)?))
     }
 

@@ -22,11 +22,14 @@ mod grid;
 mod params;
 
 pub use dressing::{
-    DRESSER_INFEED_RANGE_UM, DresserInfeedError, after_dressing, after_measured_dressing,
-    check_dresser_infeed, dressing_size_step_um, size_correction_um,
+    DresserInfeedError, after_dressing, after_measured_dressing, check_dresser_infeed,
+    dressing_size_step_um, size_correction_um,
 };
+#[cfg(test)]
+use grid::CORRECTION_STEP_UM;
+use grid::low_pass;
 use grid::q_gain;
-pub use grid::{CORRECTION_STEP_UM, low_pass, quantise_correction};
+pub use grid::quantise_correction;
 pub use params::LearningParams;
 use serde::{Deserialize, Serialize};
 

@@ -5,11 +5,11 @@ use super::spline::PeriodicSpline;
 use std::f64::consts::TAU;
 
 /// Fewest points a lift table may have.
-pub const MIN_POINTS: usize = 36;
+pub(crate) const MIN_POINTS: usize = 36;
 /// Largest allowed gap between neighbouring angles, the wrap-around included (degrees).
-pub const MAX_GAP_DEG: f64 = 10.0;
+pub(crate) const MAX_GAP_DEG: f64 = 10.0;
 /// Lift below the base circle that is accepted as rounding or gauge noise (mm).
-pub const NEGATIVE_LIFT_TOLERANCE_MM: f64 = 0.001;
+pub(crate) const NEGATIVE_LIFT_TOLERANCE_MM: f64 = 0.001;
 /// A closing point at first angle + 360° must repeat the first lift to within this (mm).
 const CLOSURE_TOLERANCE_MM: f64 = 0.001;
 
@@ -431,7 +431,7 @@ impl LiftCurve {
     }
 
     /// Knot angles in radians (the table's angles), for scans that must not miss a knot.
-    pub fn knots_rad(&self) -> &[f64] {
+    pub(crate) fn knots_rad(&self) -> &[f64] {
         self.spline.knots()
     }
 

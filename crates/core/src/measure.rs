@@ -178,7 +178,7 @@ pub struct AveragedMeasurement {
 }
 
 /// Angle of an index on a grid of `points_per_rev` equal steps, degrees.
-pub fn angle_deg(angle_index: u32, points_per_rev: u32) -> f64 {
+pub(crate) fn angle_deg(angle_index: u32, points_per_rev: u32) -> f64 {
     f64::from(angle_index) * 360.0 / f64::from(points_per_rev)
 }
 
@@ -367,7 +367,7 @@ impl RevolutionGrid {
     /// a whole-revolution offset (probe slip). One pass, no re-iteration: the rule does not
     /// depend on the order of revolutions. With two revolutions the median is their mean,
     /// so both or neither are dropped.
-    pub fn average(
+    pub(crate) fn average(
         &self,
         limits: &AssemblyLimits,
     ) -> Result<AveragedMeasurement, MeasurementError> {
@@ -485,7 +485,7 @@ fn median(values: &mut [f64]) -> f64 {
 
 impl AveragedMeasurement {
     /// Angle of index `k` on this measurement's grid, degrees.
-    pub fn angle_deg(&self, k: u32) -> f64 {
+    pub(crate) fn angle_deg(&self, k: u32) -> f64 {
         angle_deg(k, self.points_per_rev)
     }
 }

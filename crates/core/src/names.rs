@@ -5,7 +5,7 @@
 use std::fmt;
 
 /// Longest machine name, in characters.
-pub const MAX_NAME_LEN: usize = 32;
+pub(crate) const MAX_NAME_LEN: usize = 32;
 
 /// A machine name that passed [`MachineName::new`]; the only way to make one.
 /// Deserialising checks the rule too, so a name read from a file or a request is valid once
@@ -116,7 +116,7 @@ pub fn valid_part_ident(part: &str) -> bool {
 }
 
 /// Most characters of a value sent by a client that an error message quotes back.
-pub const MAX_QUOTED_CHARS: usize = 64;
+pub(crate) const MAX_QUOTED_CHARS: usize = 64;
 
 /// `value` as an error message may quote it: at most [`MAX_QUOTED_CHARS`] characters (then
 /// `…`), control characters escaped, so a 10 kB or binary value never comes back whole.

@@ -6,7 +6,7 @@
 
 /// A periodic cubic spline `s(x)` with `s(x + period) = s(x)`.
 #[derive(Debug, Clone)]
-pub struct PeriodicSpline {
+pub(crate) struct PeriodicSpline {
     /// Knot positions, strictly increasing, spanning less than one period.
     knots: Vec<f64>,
     period: f64,
@@ -19,7 +19,7 @@ pub struct PeriodicSpline {
 
 /// Value and first three derivatives of a spline at one point.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SplineSample {
+pub(crate) struct SplineSample {
     pub value: f64,
     pub d1: f64,
     pub d2: f64,
@@ -70,21 +70,17 @@ impl PeriodicSpline {
         }
     }
 
-    pub fn period(&self) -> f64 {
-        self.period
-    }
-
-    pub fn knots(&self) -> &[f64] {
+    pub(crate) fn knots(&self) -> &[f64] {
         &self.knots
     }
 
     /// Polynomial coefficients of interval `i`, in powers of `x − knots[i]`.
-    pub fn interval_coeffs(&self, i: usize) -> [f64; 4] {
+    pub(crate) fn interval_coeffs(&self, i: usize) -> [f64; 4] {
         self.coeffs[i]
     }
 
     /// Length of interval `i` (the last one wraps around the period).
-    pub fn interval_len(&self, i: usize) -> f64 {
+    pub(crate) fn interval_len(&self, i: usize) -> f64 {
         next_knot(&self.knots, self.period, i) - self.knots[i]
     }
 

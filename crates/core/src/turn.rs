@@ -249,7 +249,7 @@ fn timing_sigma_deg(
 /// feature's frame, whose 0° is at `phase_deg` on the shaft: `v_feature(θ) = v_shaft(θ +
 /// phase)`. A phase on the grid is an exact rotation of the indices; any other goes through
 /// the periodic spline of the values.
-pub fn to_feature_frame(values: &[f64], phase_deg: f64) -> Vec<f64> {
+pub(crate) fn to_feature_frame(values: &[f64], phase_deg: f64) -> Vec<f64> {
     let n = values.len();
     if n == 0 {
         return Vec::new();

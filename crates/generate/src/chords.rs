@@ -23,9 +23,10 @@ pub struct StepLaw {
 /// short enough for a µm tolerance has.
 const SAMPLES: usize = 24;
 
-/// Round to `decimals` decimals, as the program text does.
+/// Round to `decimals` decimals, as the program text does: through the text's own
+/// formatter, so the value is exactly the one written.
 pub(crate) fn round_to(v: f64, decimals: Decimals) -> f64 {
-    format!("{v:.decimals$}").parse().unwrap_or(v)
+    crate::dialect::fixed(v, decimals).parse().unwrap_or(v)
 }
 
 /// Distance from `p` to the segment `a`–`b` (points as (z, x)).

@@ -240,7 +240,7 @@ impl GrinderConfig {
     }
 
     /// The servo lag as an angle of an axis turning at `speed_rpm`, radians.
-    pub fn lag_rad_at(&self, speed_rpm: f64) -> f64 {
+    pub(crate) fn lag_rad_at(&self, speed_rpm: f64) -> f64 {
         (speed_rpm * 6.0 * self.servo_lag_ms * 1e-3).to_radians()
     }
 

@@ -5,8 +5,9 @@
 //! It interprets exactly the subset camloop writes, strictly; anything else is an error naming
 //! the program and line. Alarms the real control raises are errors too: `LEADON` or `CTAB` on
 //! an undefined table, redefining the coupled table, programming the coupled axis, a leading
-//! value that does not increase in a table (10949). Table blocks are read by the same reader
-//! as [`camloop_core::program::parse_table_program`].
+//! value that does not increase in a table (10949). Every line is read by the one SINUMERIK
+//! reader, [`camloop_core::program::syntax`], and table blocks by the same code as
+//! [`camloop_core::program::parse_table_program`].
 //!
 //! Not modelled: modal G states (`G90`, `G71`, `SAVE` restore), feeds and timing, the
 //! synchronising move of `LEADON`, work offsets (`$AA_IW` is the programmed setpoint).
@@ -112,6 +113,8 @@ pub enum ControlFault {
     Unsupported { statement: String },
     #[error("{reason}")]
     Invalid { reason: String },
+    #[error("column {column}: {reason}")]
+    Syntax { column: usize, reason: String },
     #[error("variable {name} is not defined")]
     UndefinedVariable { name: String },
     #[error("program {name} not found")]
@@ -211,7 +214,7 @@ impl Control {
     }
 
     /// R parameter `n` (0 when never set).
-    pub fn r_param(&self, n: u32) -> f64 {
+    pub(crate) fn r_param(&self, n: u32) -> f64 {
         self.r_params.get(&n).copied().unwrap_or(0.0)
     }
 
@@ -234,4 +237,17 @@ fn program_name<'t>(text: &'t str, kind: &str) -> Option<&'t str> {
         .strip_prefix("%_N_")?
         .strip_suffix(kind)?
         .strip_suffix('_')
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_line_the_reader_cannot_read_is_refused_naming_line_and_column() {
+        let main = "%_N_T_MPF\nDEF INT N\nLEADON(X,C,N ; no closing bracket\nM30\n";
+        let err = Control::new().run(main, &|_: &str| None).unwrap_err();
+        assert_eq!(err.to_string(), "T line 3: column 13: expected `,` or `)`");
+        assert!(!err.fault.is_alarm());
+    }
 }

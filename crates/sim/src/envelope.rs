@@ -34,7 +34,7 @@ use super::path::{MachinePath, add, angle, cross, dot, norm, scale, sub};
 use super::table::wrap_pi;
 
 /// Normal jumps up to this (radians) at a table point count as smooth.
-pub const SMOOTH_KINK_RAD: f64 = 1e-6;
+pub(crate) const SMOOTH_KINK_RAD: f64 = 1e-6;
 /// Spacing of the outline nodes placed on a corner or a wheel arc, radians (0.25°).
 const ARC_NODE_STEP_RAD: f64 = 0.25 * std::f64::consts::PI / 180.0;
 /// Newton iterations allowed for one crossing (quadratic convergence from a close first
@@ -46,7 +46,7 @@ const CORNER_MATCH_MM: f64 = 1e-10;
 /// One outline node: a point of the part's boundary and its unit outward normal there
 /// (at a corner, one of the normals of its normal cone).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Node {
+pub(crate) struct Node {
     pub p: [f64; 2],
     pub n: [f64; 2],
 }

@@ -16,7 +16,7 @@ pub struct PartLabels {
 }
 
 /// Origin string of every simulated measurement.
-pub const ORIGIN: &str = "sim";
+pub(crate) const ORIGIN: &str = "sim";
 
 /// Reads `ground` over the configured revolutions. Samples arrive revolution by
 /// revolution, angle index ascending, each the true lift plus independent noise

@@ -112,24 +112,14 @@ impl GroundPart {
         self.read_on_grid(Probe::Flat, n)
     }
 
-    /// Polar radius of the outline at `n` angles j·360°/n from the axis, mm. Meaningful for
-    /// outlines that enclose the axis (cams); a crankpin whose throw exceeds its radius does
-    /// not, and rays that miss it read −∞.
-    pub fn radius_on_grid(&self, n: usize) -> Vec<f64> {
-        self.read_on_grid(Probe::Pitch { radius_mm: 0.0 }, n)
-    }
-
-    /// Polar radius of the outline at one angle, mm (see [`GroundPart::radius_on_grid`]).
+    /// Polar radius of the outline at one angle, mm. Meaningful for outlines that enclose
+    /// the axis (cams); a crankpin whose throw exceeds its radius does not, and a ray that
+    /// misses it reads −∞.
     pub fn radius_mm(&self, theta_deg: f64) -> f64 {
         read_at(
             &curve(&self.nodes, Probe::Pitch { radius_mm: 0.0 }),
             theta_deg.to_radians(),
         )
-    }
-
-    /// Outline nodes (part frame, mm) in counter-clockwise order, for drawing.
-    pub fn outline(&self) -> Vec<[f64; 2]> {
-        self.nodes.iter().map(|n| n.p).collect()
     }
 
     fn read_on_grid(&self, probe: Probe, n: usize) -> Vec<f64> {

@@ -103,12 +103,11 @@ mod table;
 pub use config::{GaugeConfig, GaugeFault, GrinderConfig, Harmonic, ShaftErrors, StationErrors};
 pub use control::{Control, ControlError, ControlFault, Coupled, table_shape};
 pub use delivered::DeliveryError;
-pub use envelope::SMOOTH_KINK_RAD;
 pub use frames::measurement_frames;
-pub use gauge::{ORIGIN, PartLabels};
+pub use gauge::PartLabels;
 pub use ground::{GroundPart, Workpiece};
 pub use plan::PlannedSpeed;
-pub use rng::SimRng;
+use rng::SimRng;
 pub use table::{CommandedTable, TableShape};
 
 use camloop_core::measure::RawMeasurement;
@@ -241,10 +240,6 @@ impl SimGrinder {
 
     pub fn config(&self) -> &GrinderConfig {
         &self.config
-    }
-
-    pub fn workpiece(&self) -> &Workpiece {
-        &self.workpiece
     }
 
     /// Wheel radius the control believes now, mm: what tables should be made for.

@@ -36,7 +36,7 @@ pub(crate) struct PathSample {
 impl MachinePath<'_> {
     /// The path of table segment `i` at `c` (radians; the segment's own C range shifted by
     /// the lag, or slightly beyond it as its analytic continuation).
-    pub fn at(&self, i: usize, c: f64) -> PathSample {
+    pub(crate) fn at(&self, i: usize, c: f64) -> PathSample {
         let xs = match &self.plan {
             None => self.table.eval(i, c - self.lag_rad),
             Some(plan) => plan.x_at(self.table, i, c - self.lag_rad),
@@ -68,7 +68,7 @@ impl MachinePath<'_> {
     }
 
     /// C range of segment `i` of the real path (the table's, shifted by the lag), radians.
-    pub fn range(&self, i: usize) -> (f64, f64) {
+    pub(crate) fn range(&self, i: usize) -> (f64, f64) {
         let (a, b) = match &self.plan {
             None => self.table.range_rad(i),
             Some(plan) => plan.range(self.table, i),

@@ -6,7 +6,7 @@
 
 /// A small, fast, seeded generator (xoshiro256**, Blackman and Vigna). Not cryptographic.
 #[derive(Debug, Clone)]
-pub struct SimRng {
+pub(crate) struct SimRng {
     state: [u64; 4],
     /// Second deviate of the last Box–Muller pair, not yet handed out.
     spare: Option<f64>,
@@ -30,7 +30,7 @@ impl SimRng {
         }
     }
 
-    pub fn next_u64(&mut self) -> u64 {
+    pub(crate) fn next_u64(&mut self) -> u64 {
         let s = &mut self.state;
         let result = s[1].wrapping_mul(5).rotate_left(7).wrapping_mul(9);
         let t = s[1] << 17;
@@ -44,12 +44,12 @@ impl SimRng {
     }
 
     /// Uniform in [0, 1), 53 random bits.
-    pub fn uniform(&mut self) -> f64 {
+    pub(crate) fn uniform(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
     }
 
     /// Standard normal deviate (mean 0, standard deviation 1).
-    pub fn gaussian(&mut self) -> f64 {
+    pub(crate) fn gaussian(&mut self) -> f64 {
         if let Some(z) = self.spare.take() {
             return z;
         }

@@ -55,13 +55,6 @@ impl CommandedTable {
             plan: None,
         })
     }
-
-    pub fn form(&self) -> TableForm {
-        match self.shape {
-            TableShape::G1(_) => TableForm::G1,
-            TableShape::Poly(_) => TableForm::Poly,
-        }
-    }
 }
 
 /// One cubic piece of X(C): `x = x0 + a1·u + a2·u² + a3·u³`, `u = (c − c0)/len`, c in rad.
@@ -104,7 +97,7 @@ impl TablePath {
 
     /// Start and end of segment `i` in C, radians (the last one ends one turn after the
     /// first one starts).
-    pub fn range_rad(&self, i: usize) -> (f64, f64) {
+    pub(crate) fn range_rad(&self, i: usize) -> (f64, f64) {
         let s = &self.segments[i];
         (s.c0_rad, s.c0_rad + s.len_rad)
     }

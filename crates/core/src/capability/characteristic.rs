@@ -46,19 +46,6 @@ pub struct PartValues<'a> {
 }
 
 impl Characteristic {
-    pub const LOBE: [Characteristic; 4] = [
-        Characteristic::MaxError,
-        Characteristic::ProfileError,
-        Characteristic::Size,
-        Characteristic::Timing,
-    ];
-    pub const PIN: [Characteristic; 4] = [
-        Characteristic::Roundness,
-        Characteristic::IndexAngle,
-        Characteristic::Stroke,
-        Characteristic::Diameter,
-    ];
-
     /// The name in APIs and files.
     pub fn as_str(self) -> &'static str {
         match self {

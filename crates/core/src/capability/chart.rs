@@ -23,7 +23,7 @@
 use super::{D2_SPAN_2, moving_range_sigma};
 
 /// The chart's resolution as a share of the tolerance width.
-pub const RESOLUTION_SHARE: f64 = 0.01;
+pub(crate) const RESOLUTION_SHARE: f64 = 0.01;
 
 /// The resolution of a characteristic with `limits`: [`RESOLUTION_SHARE`] of U − L (of U
 /// when only an upper limit is given, a characteristic bounded at zero); 0 without limits.
@@ -38,9 +38,9 @@ pub fn resolution(limits: &super::Limits) -> f64 {
 /// Parts of the baseline window the service takes for the limits.
 pub const BASELINE_PARTS: usize = 25;
 /// EWMA weight of the newest point.
-pub const EWMA_LAMBDA: f64 = 0.2;
+pub(crate) const EWMA_LAMBDA: f64 = 0.2;
 /// EWMA limit width in σ of the EWMA statistic.
-pub const EWMA_L: f64 = 3.0;
+pub(crate) const EWMA_L: f64 = 3.0;
 /// D₄ of moving ranges of span 2.
 const D4_SPAN_2: f64 = 3.267;
 const RUN_ONE_SIDE: usize = 7;
@@ -119,12 +119,13 @@ pub struct ChartLimits {
 
 impl ChartLimits {
     /// Limits from `baseline` (part order) at `resolution`; `None` with fewer than 2 parts
-    /// or no spread.
-    pub fn from_baseline(baseline: &[f64], resolution: f64) -> Option<Self> {
+    /// or no spread. The service always names the shape; the tests use the normal one.
+    #[cfg(test)]
+    pub(crate) fn from_baseline(baseline: &[f64], resolution: f64) -> Option<Self> {
         Self::from_baseline_shaped(baseline, resolution, Shape::Normal)
     }
 
-    /// [`Self::from_baseline`] for a characteristic of `shape`. For
+    /// Limits from `baseline` for a characteristic of `shape`. For
     /// [`Shape::LargestOfMany`] the moving ranges estimate the Gumbel's scale: the
     /// difference of two independent Gumbels is logistic, whose mean |value| is 2 ln 2·β, so
     /// β = MR̄/(2 ln 2) and σ = πβ/√6 (MR̄/d₂ would read σ 4 % low).

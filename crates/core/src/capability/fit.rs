@@ -35,7 +35,7 @@ impl Fitted {
     }
 
     /// P(X ≤ x).
-    pub fn cdf(&self, x: f64) -> f64 {
+    pub(crate) fn cdf(&self, x: f64) -> f64 {
         if x <= 0.0 {
             return 0.0;
         }
@@ -50,7 +50,7 @@ impl Fitted {
     }
 
     /// The `p` quantile, 0 < p < 1.
-    pub fn quantile(&self, p: f64) -> f64 {
+    pub(crate) fn quantile(&self, p: f64) -> f64 {
         match *self {
             Fitted::FoldedNormal { .. } => self.bisect_quantile(p),
             Fitted::LogNormal { mu, sigma } => (mu + sigma * std_normal().inverse_cdf(p)).exp(),
@@ -106,7 +106,7 @@ pub(crate) fn std_normal() -> Normal {
 
 /// Fits every candidate the values allow (log-normal and Weibull need every value > 0) and
 /// returns them best first. `values` are ≥ 0, at least two of them different.
-pub fn fit_candidates(values: &[f64]) -> Vec<Candidate> {
+pub(crate) fn fit_candidates(values: &[f64]) -> Vec<Candidate> {
     let mut out = vec![folded_normal(values)];
     if values.iter().all(|&x| x > 0.0) {
         out.push(log_normal(values));

@@ -10,11 +10,11 @@
 use statrs::distribution::{ContinuousCDF, StudentsT};
 
 /// Fewest master runs that give a study.
-pub const MIN_RUNS: usize = 10;
+pub(crate) const MIN_RUNS: usize = 10;
 /// Runs VDA 5 asks for.
-pub const RECOMMENDED_RUNS: usize = 50;
+pub(crate) const RECOMMENDED_RUNS: usize = 50;
 /// Cg and Cgk a capable gauge reaches.
-pub const CAPABLE: f64 = 1.33;
+pub(crate) const CAPABLE: f64 = 1.33;
 
 /// A type-1 study of one characteristic.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]

@@ -31,11 +31,11 @@ pub use fit::{Candidate, Fitted};
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 /// d₂ of moving ranges of span 2: E[|X₁ − X₂|] = (2/√π)·σ for a normal.
-pub const D2_SPAN_2: f64 = std::f64::consts::FRAC_2_SQRT_PI;
+pub(crate) const D2_SPAN_2: f64 = std::f64::consts::FRAC_2_SQRT_PI;
 /// The tail of the percentile method: X₉₉.₈₆₅ is the normal's +3σ.
 const UPPER_PERCENTILE: f64 = 0.998_65;
 /// Fewest parts that give a statistic.
-pub const MIN_PARTS: usize = 3;
+pub(crate) const MIN_PARTS: usize = 3;
 
 /// Specification limits, in the characteristic's unit.
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
@@ -89,7 +89,7 @@ pub enum Model {
 
 impl Model {
     /// The chosen fitted distribution, for a non-normal model.
-    pub fn fitted(&self) -> Option<Fitted> {
+    pub(crate) fn fitted(&self) -> Option<Fitted> {
         match self {
             Model::Normal => None,
             Model::Fitted { candidates } => candidates.first().map(|c| c.fitted),
@@ -226,7 +226,7 @@ fn check_values(values: &[f64], bounded_at_zero: bool) -> Result<(), CapabilityE
 }
 
 /// Mean moving range of consecutive values over d₂.
-pub fn moving_range_sigma(values: &[f64]) -> f64 {
+pub(crate) fn moving_range_sigma(values: &[f64]) -> f64 {
     if values.len() < 2 {
         return 0.0;
     }

@@ -23,7 +23,7 @@ use super::{LearningState, quantise_correction};
 
 /// A dresser's measured infeed the loop accepts, µm: a dressing removes a few to a few
 /// hundred micrometres of radius; more is a wheel change, not a dressing.
-pub const DRESSER_INFEED_RANGE_UM: std::ops::RangeInclusive<f64> = 0.0..=1000.0;
+pub(crate) const DRESSER_INFEED_RANGE_UM: std::ops::RangeInclusive<f64> = 0.0..=1000.0;
 
 /// A dresser's infeed reading that cannot be right.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]

@@ -8,7 +8,7 @@ use std::f64::consts::PI;
 /// and carry nothing the next part could confirm; kept at whole nanometres, a correction
 /// prints with at most three decimals, and its history (every table version and learning
 /// snapshot keeps it exactly) takes a fraction of the bytes of full f64 digits.
-pub const CORRECTION_STEP_UM: f64 = 0.001;
+pub(crate) const CORRECTION_STEP_UM: f64 = 0.001;
 
 /// Rounds a correction to whole [`CORRECTION_STEP_UM`], never beyond `±limit_um`.
 pub fn quantise_correction(correction_um: &mut [f64], limit_um: f64) {
@@ -21,7 +21,7 @@ pub fn quantise_correction(correction_um: &mut [f64], limit_um: f64) {
 
 /// Zero-phase low-pass Q: keeps orders ≤ `cutoff`, tapers with a half cosine over the next
 /// `rolloff` orders, drops the rest. Gains are real and non-negative, so no phase shift.
-pub fn low_pass(values: &[f64], cutoff: u32, rolloff: u32) -> Vec<f64> {
+pub(crate) fn low_pass(values: &[f64], cutoff: u32, rolloff: u32) -> Vec<f64> {
     let n = values.len();
     let table = DftTable::new(n);
     let top = ((cutoff + rolloff) as usize).min(n / 2);

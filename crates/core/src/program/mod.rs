@@ -19,26 +19,23 @@ mod parse;
 mod provenance;
 mod settings;
 mod shaft_program;
+pub mod syntax;
 mod table;
 
 pub use main_program::{MainProgramSettings, render_main_program};
-pub use names::{
-    AxisNameError, MAX_AXIS_NAME_CHARS, MAX_PROGRAM_NAME_CHARS, ProgramNameError,
-    RESERVED_DEVICE_NAMES, RESERVED_PREFIXES, validate_axis_name, validate_program_name,
-};
-pub use parse::{CtabDef, TableBlocks, parse_ctabdef};
-pub use parse::{ParseError, ParsedShape, ParsedTable, parse_table_program};
+pub use names::{AxisNameError, ProgramNameError, validate_axis_name, validate_program_name};
+pub use parse::{ParsedShape, ParsedTable, TableBlocks, parse_table_program};
 pub(crate) use provenance::provenance_lines;
 pub use provenance::{RetargetError, retarget_table_program};
 pub use settings::{
-    C_DECIMALS, CDirection, ProgramSettings, Provenance, SettingError, SettingsErrors, TableMemory,
-    X_DECIMALS,
+    CDirection, ProgramSettings, Provenance, SettingError, SettingsErrors, TableMemory,
 };
 pub(crate) use shaft_program::FROM_VAR;
 pub use shaft_program::{
     RESUME_PROGRAM, Station, parse_resume_program, render_resume_program, render_shaft_program,
 };
-pub use table::{TableError, fmt_fixed, render_g1_table, render_poly_table, reverse_cubic};
+pub use syntax::{CtabDef, SyntaxError, parse_ctabdef};
+pub use table::{TableError, fmt_fixed, render_g1_table, render_poly_table};
 
 /// Text made safe for a program comment line: printable ASCII only (the units camloop writes
 /// spelled in ASCII, `µm` as `um` and `°` as ` deg`; anything else becomes `?`), at most 200

@@ -3,17 +3,17 @@
 use thiserror::Error;
 
 /// Longest program name the control accepts, characters.
-pub const MAX_PROGRAM_NAME_CHARS: usize = 24;
+pub(crate) const MAX_PROGRAM_NAME_CHARS: usize = 24;
 
 /// Prefixes Siemens reserves for its own programs, upper case, in the order they are checked.
-pub const RESERVED_PREFIXES: [&str; 7] = ["CYCLE", "CUST_", "GROUP_", "_", "S_", "E_", "F_"];
+pub(crate) const RESERVED_PREFIXES: [&str; 7] = ["CYCLE", "CUST_", "GROUP_", "_", "S_", "E_", "F_"];
 
 /// Longest axis name the control accepts, characters.
-pub const MAX_AXIS_NAME_CHARS: usize = 8;
+pub(crate) const MAX_AXIS_NAME_CHARS: usize = 8;
 
 /// Device names Windows reserves; the control refuses them as program names, whatever the
 /// case. `COM1`–`COM9` and `LPT1`–`LPT9` are checked by [`is_reserved_device_name`].
-pub const RESERVED_DEVICE_NAMES: [&str; 4] = ["CON", "PRN", "AUX", "NUL"];
+pub(crate) const RESERVED_DEVICE_NAMES: [&str; 4] = ["CON", "PRN", "AUX", "NUL"];
 
 /// Single-letter addresses with a fixed meaning in a block (feed, G code, spindle, tool, …).
 /// An axis with one of these names would be read as that address, so they are refused.

@@ -3,6 +3,7 @@
 //! (`AXIS=value` words, `POLY` with `PO[…]=(…)`), not arbitrary part programs.
 
 use super::super::table::PolySegment;
+use super::syntax::{Expr, Line, Statement, SyntaxError, Word, lines};
 
 /// A curve table as written in a program, in machine axis values.
 #[derive(Debug, Clone, PartialEq)]
@@ -20,13 +21,6 @@ pub enum ParsedShape {
     G1(Vec<(f64, f64)>),
     /// The cubic segments, a1 derived from each end point as the control does.
     Poly(Vec<PolySegment>),
-}
-
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("line {line}: {reason}")]
-pub struct ParseError {
-    pub line: usize,
-    pub reason: String,
 }
 
 impl ParsedTable {
@@ -70,42 +64,53 @@ impl ParsedTable {
 
 /// Parses a curve-table subprogram written by `render_g1_table` or `render_poly_table`.
 /// Lines outside `CTABDEF … CTABEND` other than `PROC` are not read.
-pub fn parse_table_program(text: &str) -> Result<ParsedTable, ParseError> {
-    let err = |line: usize, reason: String| ParseError { line, reason };
+pub fn parse_table_program(text: &str) -> Result<ParsedTable, SyntaxError> {
+    let err = |line: usize, reason: &str| SyntaxError {
+        line,
+        column: 1,
+        reason: reason.to_owned(),
+    };
     let mut name = None;
     let mut table: Option<(u32, TableBlocks)> = None;
     let mut done: Option<(u32, String, String, ParsedShape)> = None;
-    for (index, raw) in text.lines().enumerate() {
-        let line = index + 1;
-        let code = raw.split(';').next().unwrap_or("").trim();
-        if code.is_empty() {
+    for line in lines(text) {
+        // Outside a table only PROC, CTABDEF and CTABEND matter: other lines are not read.
+        let wanted = table.is_some()
+            || ["PROC", "CTABDEF", "CTABEND"]
+                .iter()
+                .any(|k| line.code.starts_with(k));
+        if !wanted {
             continue;
         }
-        if let Some(rest) = code.strip_prefix("PROC ") {
+        match line.statement()? {
+            None => {}
             // `PROC NAME(VAR INT CL_TNO) SAVE`, or `PROC NAME` in programs written before
             // the table number was returned to the caller.
-            let end = rest.find(['(', ' ']).unwrap_or(rest.len());
-            name = Some(rest[..end].trim().to_string());
-        } else if code.starts_with("CTABDEF(") {
-            let def = parse_ctabdef(code, line)?;
-            table = Some((def.number, TableBlocks::new(def.following, def.leading)));
-        } else if code == "CTABEND" {
-            let Some((number, blocks)) = table.take() else {
-                return Err(err(line, "CTABEND without CTABDEF".to_string()));
-            };
-            let (following, leading, shape) = blocks.finish();
-            done = Some((number, following, leading, shape));
-        } else if let Some((_, blocks)) = table.as_mut() {
-            blocks.block(code, line)?;
+            Some(Statement::Proc { name: n, .. }) => name = Some(n.to_owned()),
+            Some(Statement::CtabDef(def)) => {
+                table = Some((def.number, TableBlocks::new(def.following, def.leading)));
+            }
+            Some(Statement::Keyword("CTABEND")) => {
+                let Some((number, blocks)) = table.take() else {
+                    return Err(err(line.number, "CTABEND without CTABDEF"));
+                };
+                let (following, leading, shape) = blocks.finish();
+                done = Some((number, following, leading, shape));
+            }
+            Some(statement) => {
+                if let Some((_, blocks)) = table.as_mut() {
+                    blocks.block(&line, &statement)?;
+                }
+            }
         }
     }
     let Some((table_number, following_axis, leading_axis, shape)) = done else {
         return Err(match table {
             Some(_) => err(
                 text.lines().count(),
-                "CTABEND missing: the program is incomplete".to_string(),
+                "CTABEND missing: the program is incomplete",
             ),
-            None => err(1, "no CTABDEF in the program".to_string()),
+            None => err(1, "no CTABDEF in the program"),
         });
     };
     Ok(ParsedTable {
@@ -114,40 +119,6 @@ pub fn parse_table_program(text: &str) -> Result<ParsedTable, ParseError> {
         following_axis,
         leading_axis,
         shape,
-    })
-}
-
-/// The arguments of `CTABDEF(<following>,<leading>,<n>,<periodicity>[,<memory>])`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CtabDef {
-    pub following: String,
-    pub leading: String,
-    pub number: u32,
-    pub periodicity: String,
-}
-
-/// Reads a `CTABDEF(…)` statement (`code` without comment).
-pub fn parse_ctabdef(code: &str, line: usize) -> Result<CtabDef, ParseError> {
-    let err = |reason: String| ParseError { line, reason };
-    let args = code
-        .strip_prefix("CTABDEF(")
-        .and_then(|r| r.strip_suffix(')'))
-        .ok_or_else(|| err(format!("`{code}` is not CTABDEF(…)")))?;
-    let parts: Vec<&str> = args.split(',').map(str::trim).collect();
-    if parts.len() < 4 {
-        return Err(err(format!(
-            "CTABDEF needs at least 4 arguments, found {}",
-            parts.len()
-        )));
-    }
-    let number = parts[2]
-        .parse()
-        .map_err(|_| err(format!("table number `{}` is not a whole number", parts[2])))?;
-    Ok(CtabDef {
-        following: parts[0].to_string(),
-        leading: parts[1].to_string(),
-        number,
-        periodicity: parts[3].to_string(),
     })
 }
 
@@ -174,25 +145,26 @@ impl TableBlocks {
         }
     }
 
-    /// One block (`code` without comment, not empty) on `line`.
-    pub fn block(&mut self, code: &str, line: usize) -> Result<(), ParseError> {
-        let err = |reason: &str| ParseError {
-            line,
-            reason: reason.to_string(),
+    /// One block, `statement` read from `line`.
+    pub fn block(&mut self, line: &Line<'_>, statement: &Statement<'_>) -> Result<(), SyntaxError> {
+        let err = |reason: &str| line.error_at(0, reason);
+        let words = match statement {
+            Statement::Keyword("POLY") => {
+                self.poly = true;
+                return Ok(());
+            }
+            Statement::Block(words) => words.as_slice(),
+            _ => return Err(err("expected a table block")),
         };
-        if code == "POLY" {
-            self.poly = true;
-            return Ok(());
-        }
-        let (following, leading) = (&self.following, &self.leading);
+        let (following, leading) = (self.following.as_str(), self.leading.as_str());
         if !self.poly {
-            let c = word(code, leading, line)?;
-            let x = word(code, following, line)?;
+            let c = value(words, leading, None, line)?;
+            let x = value(words, following, None, line)?;
             self.points.push((c, x));
             return Ok(());
         }
-        let c_end = tuple(code, &format!("PO[{leading}]"), line)?;
-        let x = tuple(code, &format!("PO[{following}]"), line)?;
+        let c_end = value_list(words, "PO", leading, line)?;
+        let x = value_list(words, "PO", following, line)?;
         let (&[c1], &[x_end, a2, a3]) = (c_end.as_slice(), x.as_slice()) else {
             return Err(err("expected PO[C]=(c_end) PO[X]=(x_end,a2,a3)"));
         };
@@ -223,40 +195,51 @@ impl TableBlocks {
     }
 }
 
-/// The value of `AXIS=value` in a block.
-fn word(code: &str, axis: &str, line: usize) -> Result<f64, ParseError> {
-    code.split_whitespace()
-        .filter_map(|w| w.split_once('='))
-        .find(|(a, _)| *a == axis)
-        .ok_or_else(|| ParseError {
-            line,
-            reason: format!("no {axis}= word"),
-        })?
-        .1
-        .parse()
-        .map_err(|_| ParseError {
-            line,
-            reason: format!("{axis} value is not a number"),
+/// The expression of word `address[index]=…` in a block.
+fn find<'w, 't>(
+    words: &'w [Word<'t>],
+    address: &str,
+    index: Option<&str>,
+    line: &Line<'_>,
+) -> Result<&'w Expr<'t>, SyntaxError> {
+    words
+        .iter()
+        .find_map(|w| match w {
+            Word::Set {
+                address: a,
+                index: i,
+                value,
+            } if *a == address && *i == index => Some(value),
+            _ => None,
+        })
+        .ok_or_else(|| {
+            let word = index.map_or(address.to_owned(), |i| format!("{address}[{i}]"));
+            line.error_at(0, format!("no {word}= word"))
         })
 }
 
-/// The numbers of `KEY=(a,b,…)` in a block.
-fn tuple(code: &str, key: &str, line: usize) -> Result<Vec<f64>, ParseError> {
-    let start = code.find(&format!("{key}=(")).ok_or_else(|| ParseError {
-        line,
-        reason: format!("no {key}=(…)"),
-    })?;
-    let rest = &code[start + key.len() + 2..];
-    let inner = rest.split(')').next().unwrap_or("");
-    inner
-        .split(',')
-        .map(|v| {
-            v.trim().parse().map_err(|_| ParseError {
-                line,
-                reason: format!("{key}: `{v}` is not a number"),
-            })
-        })
-        .collect()
+/// The number of `AXIS=value` in a block.
+fn value(
+    words: &[Word<'_>],
+    axis: &str,
+    index: Option<&str>,
+    line: &Line<'_>,
+) -> Result<f64, SyntaxError> {
+    find(words, axis, index, line)?
+        .number()
+        .ok_or_else(|| line.error_at(0, format!("{axis} value is not a number")))
+}
+
+/// The numbers of `KEY[AXIS]=(a,b,…)` in a block.
+fn value_list(
+    words: &[Word<'_>],
+    key: &str,
+    axis: &str,
+    line: &Line<'_>,
+) -> Result<Vec<f64>, SyntaxError> {
+    find(words, key, Some(axis), line)?
+        .numbers()
+        .ok_or_else(|| line.error_at(0, format!("{key}[{axis}]: the values are not numbers")))
 }
 
 #[cfg(test)]
@@ -334,6 +317,26 @@ mod tests {
             let x = parsed.x_at(c).unwrap();
             assert!((x - 0.5 * (x10 + x20)).abs() < 1e-4, "{c}: {x}");
         }
+    }
+
+    #[test]
+    fn a_block_that_cannot_be_read_is_refused_naming_line_and_column() {
+        let text = render_g1_table(&points(), &ProgramSettings::default()).unwrap();
+        let at = text.lines().position(|l| l.starts_with("G1 C=")).unwrap();
+        let bad: String = text
+            .lines()
+            .enumerate()
+            .map(|(i, l)| {
+                if i == at {
+                    "G1 C=(10 X=2\n".to_owned()
+                } else {
+                    format!("{l}\n")
+                }
+            })
+            .collect();
+        let e = parse_table_program(&bad).unwrap_err();
+        assert_eq!((e.line, e.column), (at + 1, 10), "{e}");
+        assert_eq!(e.reason, "expected `,` or `)`");
     }
 
     #[test]

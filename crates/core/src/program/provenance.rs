@@ -5,6 +5,7 @@ use thiserror::Error;
 
 use super::comment_text;
 use super::settings::Provenance;
+use super::syntax::{Line, Statement};
 use super::table::NUMBER_VAR;
 
 /// Start of the comment line that names the table number and form.
@@ -188,27 +189,33 @@ fn find_numbers(lines: &[&str]) -> Result<Numbers, RetargetError> {
 }
 
 fn classify(raw: &str, line: usize) -> Result<Found, RetargetError> {
-    let code = raw.split(';').next().unwrap_or("").trim();
-    let number = |what: &'static str, text: &str| {
-        text.trim()
-            .parse::<u32>()
-            .map_err(|_| RetargetError::BadNumber {
-                what,
-                line,
-                text: text.trim().to_owned(),
-            })
-    };
-    if let Some(value) = code
+    let l = Line::new(line, raw);
+    let assigns = l
+        .code
         .strip_prefix(NUMBER_VAR)
-        .and_then(|r| r.trim_start().strip_prefix('='))
-    {
-        return Ok(Found::Assignment(number("table number assignment", value)?));
+        .is_some_and(|r| r.trim_start().starts_with('='));
+    let (what, text) = if assigns {
+        let value = l.code.split_once('=').map_or("", |(_, v)| v);
+        ("table number assignment", value)
+    } else if l.code.starts_with("CTABDEF(") {
+        ("CTABDEF", l.code.split(',').nth(2).unwrap_or(""))
+    } else {
+        return Ok(Found::Other);
+    };
+    let bad = || RetargetError::BadNumber {
+        what,
+        line,
+        text: text.trim().to_owned(),
+    };
+    match l.statement() {
+        Ok(Some(Statement::CtabDef(def))) => Ok(Found::Ctabdef(def.number)),
+        Ok(Some(Statement::Assign { target, value })) if target == NUMBER_VAR => value
+            .number()
+            .filter(|n| n.fract() == 0.0 && (0.0..=f64::from(u32::MAX)).contains(n))
+            .map(|n| Found::Assignment(n as u32))
+            .ok_or_else(bad),
+        _ => Err(bad()),
     }
-    if let Some(args) = code.strip_prefix("CTABDEF(") {
-        let third = args.split(',').nth(2).unwrap_or("");
-        return Ok(Found::Ctabdef(number("CTABDEF", third)?));
-    }
-    Ok(Found::Other)
 }
 
 fn is_provenance_line(raw: &str) -> bool {

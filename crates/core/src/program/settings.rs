@@ -10,9 +10,9 @@ use super::names::{AxisNameError, ProgramNameError, validate_axis_name, validate
 
 /// Allowed decimals for X. Fewer than 3 would round X by 0.5 µm or more, the size of the
 /// corrections camloop writes; more than 9 is below any position resolution of the control.
-pub const X_DECIMALS: std::ops::RangeInclusive<u8> = 3..=9;
+pub(crate) const X_DECIMALS: std::ops::RangeInclusive<u8> = 3..=9;
 /// Allowed decimals for C. 0 is allowed for whole-degree tables; more than 9 is meaningless.
-pub const C_DECIMALS: std::ops::RangeInclusive<u8> = 0..=9;
+pub(crate) const C_DECIMALS: std::ops::RangeInclusive<u8> = 0..=9;
 
 /// Where the control keeps a curve table (5th `CTABDEF` argument). Without it the control
 /// uses its default from MD20905.
@@ -28,7 +28,7 @@ pub enum TableMemory {
 
 impl TableMemory {
     /// The keyword as written in `CTABDEF`.
-    pub fn keyword(self) -> &'static str {
+    pub(crate) fn keyword(self) -> &'static str {
         match self {
             TableMemory::Sram => "SRAM",
             TableMemory::Dram => "DRAM",
@@ -50,7 +50,7 @@ pub enum CDirection {
 
 impl CDirection {
     /// +1.0 or −1.0.
-    pub fn sign(self) -> f64 {
+    pub(crate) fn sign(self) -> f64 {
         match self {
             CDirection::Same => 1.0,
             CDirection::Reversed => -1.0,

@@ -6,6 +6,7 @@ use super::ProgramSettings;
 use super::main_program::{MainProgramSettings, coupled_revolutions};
 use super::names::validate_axis_name;
 use super::settings::{SettingError, SettingsErrors, check_comments, check_positive};
+use super::syntax::{Statement, lines};
 use super::table::{NUMBER_VAR, fmt_fixed, line};
 
 /// The resume subprogram's name (file `CAMLOOP_RESUME.SPF`).
@@ -189,12 +190,11 @@ pub fn render_resume_program(first_feature: usize) -> String {
 
 /// The first feature a resume subprogram names, if `text` is one.
 pub fn parse_resume_program(text: &str) -> Option<usize> {
-    text.lines().find_map(|l| {
-        let code = l.split(';').next()?.trim();
-        code.strip_prefix(FROM_VAR)?
-            .strip_prefix('=')?
-            .trim()
-            .parse()
-            .ok()
+    lines(text).find_map(|l| match l.statement() {
+        Ok(Some(Statement::Assign { target, value })) if target == FROM_VAR => value
+            .number()
+            .filter(|n| n.fract() == 0.0 && *n >= 0.0 && *n <= usize::MAX as f64)
+            .map(|n| n as usize),
+        _ => None,
     })
 }

@@ -267,7 +267,7 @@ fn map_segments(
 
 /// Coefficients `[x0, a1, a2, a3]` of the same cubic with the parameter reversed,
 /// `u' = 1 − u`: x0' = x0 + a1 + a2 + a3, a1' = −a1 − 2a2 − 3a3, a2' = a2 + 3a3, a3' = −a3.
-pub fn reverse_cubic([x0, a1, a2, a3]: [f64; 4]) -> [f64; 4] {
+pub(crate) fn reverse_cubic([x0, a1, a2, a3]: [f64; 4]) -> [f64; 4] {
     [
         x0 + a1 + a2 + a3,
         -a1 - 2.0 * a2 - 3.0 * a3,

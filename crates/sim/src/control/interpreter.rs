@@ -2,14 +2,15 @@
 //! calls, and keeps the curve tables and the coupling in the [`super::Control`].
 
 use super::statements::{
-    End, Frame, Halt, Run, Step, Value, args, check_increasing, declare, define, int_arg, invalid,
-    is_name, proc_line, real_var, table_number, undefined_variable, unsupported,
+    End, Frame, Halt, Run, Step, Value, check_increasing, declare, define, int_arg, invalid,
+    is_name, proc_line, real_arg, real_var, table_number, undefined_variable, unsupported,
 };
 use super::{
     AXIAL_AXIS, C_AXIS, COUP_ACT_MASTER_VALUE, ControlError, ControlFault, Coupled, Coupling,
     MAX_CALL_DEPTH, program_name, r_param, table_shape,
 };
-use camloop_core::program::{ParsedTable, TableBlocks, parse_ctabdef};
+use camloop_core::program::syntax::{Cond, CtabDef, Expr, Line, Statement, Word, lines};
+use camloop_core::program::{ParsedTable, TableBlocks};
 
 /// Words that are statements, never subprogram names: out of place, they are refused as
 /// statements rather than looked up as programs.
@@ -36,7 +37,7 @@ impl Run<'_> {
         frame: &mut Frame,
         depth: usize,
     ) -> Result<usize, ControlError> {
-        let lines: Vec<&str> = text.lines().collect();
+        let lines: Vec<Line> = lines(text).collect();
         let fail = |frame: &Frame, line: usize, fault| ControlError {
             program: frame.program.clone(),
             line,
@@ -44,13 +45,20 @@ impl Run<'_> {
         };
         let (mut i, mut open_if) = (0, false);
         while i < lines.len() {
-            let line = i + 1;
-            let code = lines[i].split(';').next().unwrap_or("").trim();
+            let current = lines[i];
+            let line = current.number;
             i += 1;
-            if code.is_empty() || (line == 1 && code.starts_with("%_N_")) {
-                continue;
-            }
-            let step = self.dispatch(code, frame, depth, &lines, &mut i, &mut open_if);
+            let statement = match current.statement() {
+                Ok(Some(Statement::Header { .. })) if line == 1 => continue,
+                Ok(Some(statement)) => statement,
+                Ok(None) => continue,
+                Err(e) => return Err(fail(frame, line, syntax(e))),
+            };
+            let at = At {
+                code: current.code,
+                lines: &lines,
+            };
+            let step = self.dispatch(&statement, at, frame, depth, &mut i, &mut open_if);
             match (step, depth) {
                 (Ok(None), _) => {}
                 (Ok(Some(End::M30)), 0) | (Ok(Some(End::Ret)), 1..) if !open_if => return Ok(line),
@@ -75,26 +83,28 @@ impl Run<'_> {
     /// One statement; `i` is the next line's index, moved on by `IF` and `CTABDEF`.
     fn dispatch(
         &mut self,
-        code: &str,
+        statement: &Statement<'_>,
+        at: At<'_, '_>,
         frame: &mut Frame,
         depth: usize,
-        lines: &[&str],
         i: &mut usize,
         open_if: &mut bool,
     ) -> Step {
-        let definition = ["DEF ", "EXTERN ", "PROC "]
-            .iter()
-            .any(|k| code.starts_with(k));
+        let code = at.code;
+        let definition = matches!(
+            statement,
+            Statement::Def { .. } | Statement::Extern { .. } | Statement::Proc { .. }
+        );
         if definition && frame.executed {
             return Err(
                 invalid("DEF, EXTERN and PROC must come before the first statement").into(),
             );
         }
         frame.executed |= !definition;
-        match code {
-            "STOPRE" => Ok(None),
-            "M30" => Ok(Some(End::M30)),
-            "RET" => {
+        match statement {
+            Statement::Keyword("STOPRE") => Ok(None),
+            Statement::Keyword("M30") => Ok(Some(End::M30)),
+            Statement::Keyword("RET") => {
                 for (name, slot) in frame.params.iter().zip(frame.arguments.iter_mut()) {
                     if let Some(value) = frame.vars.get(name) {
                         *slot = *value;
@@ -102,24 +112,37 @@ impl Run<'_> {
                 }
                 Ok(Some(End::Ret))
             }
-            "ENDIF" if *open_if => {
+            Statement::Keyword("ENDIF") if *open_if => {
                 *open_if = false;
                 Ok(None)
             }
-            "ENDIF" => Err(invalid("ENDIF without IF").into()),
-            _ if code.starts_with("IF ") => self.if_block(code, frame, lines, i, open_if),
-            _ if code.starts_with("CTABDEF(") => self.table(code, &frame.program, lines, i),
-            _ if code.starts_with("DEF ") => define(code, frame),
-            _ if code.starts_with("EXTERN ") => declare(code, frame),
-            _ if code.starts_with("PROC ") => proc_line(code, frame, depth),
-            _ if code.starts_with("LEADON(") => self.leadon(code, frame),
-            _ if code.starts_with("LEADOF(") => self.leadof(code),
-            _ if code.starts_with("WAITP(") => Ok(args(code, "WAITP").map(|_| None)?),
-            _ if code.starts_with("POS[") => self.pos(code, frame),
-            _ if code.starts_with('G') && code[1..].starts_with(|c: char| c.is_ascii_digit()) => {
-                self.motion(code, frame)
+            Statement::Keyword("ENDIF") => Err(invalid("ENDIF without IF").into()),
+            Statement::If { cond, goto: None } => self.if_block(code, cond, frame, at, i, open_if),
+            Statement::CtabDef(def) => self.table(code, def, &frame.program, at.lines, i),
+            Statement::Def { kind, names } => define(code, kind, names, frame),
+            Statement::Extern { name, params } => declare(code, name, params, frame),
+            Statement::Proc { name, params, .. } => proc_line(code, name, params, frame, depth),
+            Statement::Call {
+                name: "LEADON",
+                args,
+            } => self.leadon(code, args, frame),
+            Statement::Call {
+                name: "LEADOF",
+                args,
+            } => self.leadof(code, args),
+            Statement::Call { name: "WAITP", .. } => Ok(None),
+            Statement::Block(words)
+                if matches!(words.first(), Some(Word::Set { index: Some(_), .. })) =>
+            {
+                self.pos(code, words, frame)
             }
-            _ => self.assignment_or_call(code, frame, depth),
+            Statement::Block(words) if words.first().is_some_and(Word::is_g_code) => {
+                self.motion(code, words, frame)
+            }
+            Statement::Assign { target, value } => self.assignment(code, target, value, frame),
+            Statement::Call { name, args } => self.call(code, name, args, frame, depth),
+            Statement::Keyword(name) => self.call(code, name, &[], frame, depth),
+            _ => Err(unsupported(code).into()),
         }
     }
 
@@ -128,64 +151,61 @@ impl Run<'_> {
     fn if_block(
         &mut self,
         code: &str,
+        cond: &Cond<'_>,
         frame: &Frame,
-        lines: &[&str],
+        at: At<'_, '_>,
         i: &mut usize,
         open_if: &mut bool,
     ) -> Step {
         if *open_if {
             return Err(unsupported(code).into());
         }
-        let holds = if let Some(axis) = code
-            .strip_prefix("IF $AA_COUP_ACT[")
-            .and_then(|r| r.strip_suffix("]<>0"))
-        {
-            self.control.couplings.iter().any(|c| c.following == axis) && COUP_ACT_MASTER_VALUE != 0
-        } else {
-            self.condition(code, frame)?
+        let holds = match (&cond.left, cond.op, cond.right.number()) {
+            (Expr::Indexed("$AA_COUP_ACT", axis), "<>", Some(0.0)) => {
+                self.control.couplings.iter().any(|c| c.following == *axis)
+                    && COUP_ACT_MASTER_VALUE != 0
+            }
+            _ => self.condition(code, cond, frame)?,
         };
         if holds {
             *open_if = true;
             return Ok(None);
         }
-        while let Some(raw) = lines.get(*i) {
+        // Skipped lines are not run; only where the block ends matters.
+        while let Some(line) = at.lines.get(*i) {
             *i += 1;
-            let inner = raw.split(';').next().unwrap_or("").trim();
-            if inner == "ENDIF" {
-                return Ok(None);
-            }
-            if inner.starts_with("IF ") {
-                return Err(Halt::Line(unsupported(inner), *i));
+            match line.statement() {
+                Ok(Some(Statement::Keyword("ENDIF"))) => return Ok(None),
+                Ok(Some(Statement::If { .. })) => {
+                    return Err(Halt::Line(unsupported(line.code), line.number));
+                }
+                _ => {}
             }
         }
         Err(invalid("IF without ENDIF").into())
     }
 
-    /// `IF <INT variable or R parameter><op><integer>`, op one of `<=`, `<`, `>`, `==`,
-    /// `<>`.
-    fn condition(&self, code: &str, frame: &Frame) -> Result<bool, Halt> {
-        let rest = code.strip_prefix("IF ").ok_or_else(|| unsupported(code))?;
-        let (left, op, right) = ["<=", "<>", "==", "<", ">"]
-            .iter()
-            .find_map(|op| rest.split_once(op).map(|(l, r)| (l.trim(), *op, r.trim())))
-            .ok_or_else(|| unsupported(code))?;
-        let bound: f64 = right.parse().map_err(|_| unsupported(code))?;
+    /// `IF <INT variable or R parameter><op><number>`.
+    fn condition(&self, code: &str, cond: &Cond<'_>, frame: &Frame) -> Result<bool, Halt> {
+        let (Some(left), Some(bound)) = (cond.left.name(), cond.right.number()) else {
+            return Err(unsupported(code).into());
+        };
         let value = match r_param(left) {
             Some(n) => self.control.r_param(n),
-            None => int_arg(left, frame)? as f64,
+            None => int_arg(&cond.left, frame)? as f64,
         };
-        Ok(match op {
-            "<=" => value <= bound,
-            "<>" => value != bound,
-            "==" => value == bound,
-            "<" => value < bound,
-            _ => value > bound,
-        })
+        Ok(cond.holds(value, bound))
     }
 
     /// `CTABDEF(…)` … `CTABEND`: reads the blocks and stores the table under its number.
-    fn table(&mut self, code: &str, program: &str, lines: &[&str], i: &mut usize) -> Step {
-        let def = parse_ctabdef(code, *i).map_err(|e| invalid(&e.reason))?;
+    fn table(
+        &mut self,
+        code: &str,
+        def: &CtabDef,
+        program: &str,
+        lines: &[Line<'_>],
+        i: &mut usize,
+    ) -> Step {
         // 2: periodic in both axes, as the speed plan's C = f(VA) is written.
         if !matches!(def.periodicity.as_str(), "1" | "2") {
             return Err(unsupported(code).into());
@@ -194,15 +214,16 @@ impl Run<'_> {
             return Err(ControlFault::TableInUse { number: def.number }.into());
         }
         let mut blocks = TableBlocks::new(def.following.clone(), def.leading.clone());
-        while let Some(raw) = lines.get(*i) {
+        while let Some(line) = lines.get(*i) {
             *i += 1;
-            let block = raw.split(';').next().unwrap_or("").trim();
-            if block.is_empty() {
-                continue;
-            }
-            if block == "CTABEND" {
+            let statement = match line.statement() {
+                Ok(Some(s)) => s,
+                Ok(None) => continue,
+                Err(e) => return Err(Halt::Line(syntax(e), line.number)),
+            };
+            if statement == Statement::Keyword("CTABEND") {
                 let (following_axis, leading_axis, shape) = blocks.finish();
-                check_increasing(def.number, &shape).map_err(|f| Halt::Line(f, *i))?;
+                check_increasing(def.number, &shape).map_err(|f| Halt::Line(f, line.number))?;
                 let table = ParsedTable {
                     name: program.to_owned(),
                     table_number: def.number,
@@ -215,16 +236,18 @@ impl Run<'_> {
                 return Ok(None);
             }
             blocks
-                .block(block, *i)
+                .block(line, &statement)
                 .map_err(|e| Halt::Line(invalid(&e.reason), e.line))?;
         }
         Err(invalid("CTABDEF without CTABEND").into())
     }
 
     /// `LEADON(X,C,n)` with `n` a literal or an INT variable.
-    fn leadon(&mut self, code: &str, frame: &Frame) -> Step {
-        let a = args(code, "LEADON")?;
-        let [following, leading, number] = a.as_slice() else {
+    fn leadon(&mut self, code: &str, args: &[Expr<'_>], frame: &Frame) -> Step {
+        let [following, leading, number] = args else {
+            return Err(unsupported(code).into());
+        };
+        let (Some(following), Some(leading)) = (following.name(), leading.name()) else {
             return Err(unsupported(code).into());
         };
         let number = table_number(int_arg(number, frame)?)?;
@@ -240,25 +263,24 @@ impl Run<'_> {
             .control
             .couplings
             .iter()
-            .any(|c| c.following == *following)
+            .any(|c| c.following == following)
         {
             return Err(ControlFault::AlreadyCoupled {
-                axis: (*following).to_owned(),
+                axis: following.to_owned(),
             }
             .into());
         }
         self.control.couplings.push(Coupling {
-            following: (*following).to_owned(),
-            leading: (*leading).to_owned(),
+            following: following.to_owned(),
+            leading: leading.to_owned(),
             table: number,
         });
         Ok(None)
     }
 
     /// `LEADOF(X,C)`: ends the coupling of X to C, if any.
-    fn leadof(&mut self, code: &str) -> Step {
-        let a = args(code, "LEADOF")?;
-        let [following, leading] = a.as_slice() else {
+    fn leadof(&mut self, code: &str, args: &[Expr<'_>]) -> Step {
+        let [Expr::Var(following), Expr::Var(leading)] = args else {
             return Err(unsupported(code).into());
         };
         self.control
@@ -271,30 +293,35 @@ impl Run<'_> {
     /// leads the coupling of X, that is the grinding the run reports);
     /// `POS[<axis>]=DC(<var or deg>) …` takes an uncoupled rotary axis to a position the
     /// shortest way.
-    fn pos(&mut self, code: &str, frame: &Frame) -> Step {
-        let mut words = code.split_whitespace();
-        let (Some(pos), Some(fa), None) = (words.next(), words.next(), words.next()) else {
+    fn pos(&mut self, code: &str, words: &[Word<'_>], frame: &Frame) -> Step {
+        let [
+            Word::Set {
+                address: "POS",
+                index: Some(axis),
+                value,
+            },
+            Word::Set {
+                address: "FA",
+                index: Some(fa_axis),
+                value: feed,
+            },
+        ] = words
+        else {
             return Err(unsupported(code).into());
         };
-        let target = pos.strip_prefix("POS[").and_then(|r| r.split_once("]="));
-        let feed = fa
-            .strip_prefix("FA[")
-            .and_then(|r| r.split_once("]="))
-            .and_then(|(axis, v)| Some((axis, v.parse::<f64>().ok()?)));
-        let (Some((axis, value)), Some((fa_axis, feed_deg_min))) = (target, feed) else {
-            return Err(unsupported(code).into());
-        };
+        let feed_deg_min = feed.number().unwrap_or(f64::NAN);
         if axis != fa_axis || feed_deg_min.is_nan() || feed_deg_min <= 0.0 {
             return Err(unsupported(code).into());
         }
-        if let Some(inner) = value.strip_prefix("DC(").and_then(|r| r.strip_suffix(')')) {
-            return self.pos_direct(code, axis, inner, frame);
+        let travel_deg = match value {
+            Expr::Call("DC", target) => return self.pos_direct(code, axis, target, frame),
+            Expr::Call("IC", travel) => match travel.as_slice() {
+                [t] => t.number().filter(|t| t.is_finite()),
+                _ => None,
+            },
+            _ => None,
         }
-        let travel_deg = value
-            .strip_prefix("IC(")
-            .and_then(|r| r.strip_suffix(')')?.parse::<f64>().ok())
-            .filter(|t| t.is_finite())
-            .ok_or_else(|| unsupported(code))?;
+        .ok_or_else(|| unsupported(code))?;
         if let Some(grind) = self.grind(axis, feed_deg_min, travel_deg) {
             // C follows a virtual axis one revolution per revolution of it.
             if grind.c_law.is_some() {
@@ -302,16 +329,20 @@ impl Run<'_> {
             }
             self.ground.push(grind);
         }
-        *self.control.positions.entry(axis.to_owned()).or_default() += travel_deg;
+        *self
+            .control
+            .positions
+            .entry((*axis).to_owned())
+            .or_default() += travel_deg;
         Ok(None)
     }
 
     /// `POS[<axis>]=DC(…)`: the shortest way to the target, modulo 360°.
-    fn pos_direct(&mut self, code: &str, axis: &str, target: &str, frame: &Frame) -> Step {
-        let target_deg = match target.parse::<f64>() {
-            Ok(v) => v,
-            Err(_) => real_var(target, frame)?,
+    fn pos_direct(&mut self, code: &str, axis: &str, target: &[Expr<'_>], frame: &Frame) -> Step {
+        let [target] = target else {
+            return Err(unsupported(code).into());
         };
+        let target_deg = real_arg(target, frame)?;
         if !target_deg.is_finite() {
             return Err(unsupported(code).into());
         }
@@ -371,16 +402,19 @@ impl Run<'_> {
     }
 
     /// `G90 G71`, `G90 G1 X=<var or number> F=<number>` or `G0 <axis>=<number>`.
-    fn motion(&mut self, code: &str, frame: &Frame) -> Step {
-        for word in code.split_whitespace() {
-            if matches!(word, "G90" | "G71" | "G1" | "G0") {
-                continue;
-            }
-            let Some((address, value)) = word.split_once('=') else {
-                return Err(unsupported(code).into());
+    fn motion(&mut self, code: &str, words: &[Word<'_>], frame: &Frame) -> Step {
+        for word in words {
+            let (address, value) = match word {
+                Word::Code("G90" | "G71" | "G1" | "G0") => continue,
+                Word::Set {
+                    address,
+                    index: None,
+                    value,
+                } => (*address, value),
+                _ => return Err(unsupported(code).into()),
             };
             if address == "F" {
-                value.parse::<f64>().map_err(|_| unsupported(code))?;
+                value.number().ok_or_else(|| unsupported(code))?;
                 continue;
             }
             if !is_name(address) {
@@ -397,22 +431,22 @@ impl Run<'_> {
                 }
                 .into());
             }
-            let target = match value.parse::<f64>() {
-                Ok(v) => v,
-                Err(_) => real_var(value, frame)?,
-            };
+            let target = real_arg(value, frame)?;
             self.control.positions.insert(address.to_owned(), target);
         }
         Ok(None)
     }
 
-    /// `NAME=<value>` or a subprogram call `NAME` / `NAME(VAR)`.
-    fn assignment_or_call(&mut self, code: &str, frame: &mut Frame, depth: usize) -> Step {
-        let Some((target, value)) = code.split_once('=') else {
-            return self.call(code, frame, depth);
-        };
+    /// `NAME=<value>`: an R parameter, an INT or a REAL variable.
+    fn assignment(
+        &mut self,
+        code: &str,
+        target: &str,
+        value: &Expr<'_>,
+        frame: &mut Frame,
+    ) -> Step {
         if let Some(n) = r_param(target) {
-            let v: f64 = value.trim().parse().map_err(|_| unsupported(code))?;
+            let v = value.number().ok_or_else(|| unsupported(code))?;
             self.control.r_params.insert(n, v);
             return Ok(None);
         }
@@ -422,9 +456,12 @@ impl Run<'_> {
             .ok_or_else(|| undefined_variable(target))?;
         let new = match kind {
             // A REAL (an R parameter) assigned to an INT is rounded, as the control does.
-            Value::Int(_) => Value::Int(match r_param(value) {
+            Value::Int(_) => Value::Int(match value.name().and_then(r_param) {
                 Some(n) => self.control.r_param(n).round() as i64,
-                None => value.parse().map_err(|_| unsupported(code))?,
+                None => value
+                    .number()
+                    .filter(|v| v.fract() == 0.0 && v.abs() < 1e15)
+                    .ok_or_else(|| unsupported(code))? as i64,
             }),
             Value::Real(_) => Value::Real(self.real_value(code, value, frame)?),
         };
@@ -433,21 +470,18 @@ impl Run<'_> {
     }
 
     /// `$AA_IW[<axis>]` or `CTAB(<real var>,<n>,<real var>)` (which also sets the slope).
-    fn real_value(&self, code: &str, value: &str, frame: &mut Frame) -> Result<f64, Halt> {
-        if let Some(axis) = value
-            .strip_prefix("$AA_IW[")
-            .and_then(|r| r.strip_suffix(']'))
-        {
-            return Ok(self.control.positions.get(axis).copied().unwrap_or(0.0));
-        }
-        let a = args(value, "CTAB").map_err(|_| unsupported(code))?;
-        let [leading, number, slope] = a.as_slice() else {
+    fn real_value(&self, code: &str, value: &Expr<'_>, frame: &mut Frame) -> Result<f64, Halt> {
+        let args = match value {
+            Expr::Indexed("$AA_IW", axis) => {
+                return Ok(self.control.positions.get(*axis).copied().unwrap_or(0.0));
+            }
+            Expr::Call("CTAB", args) => args,
+            _ => return Err(unsupported(code).into()),
+        };
+        let [leading, number, Expr::Var(slope)] = args.as_slice() else {
             return Err(unsupported(code).into());
         };
-        let c_deg = match leading.parse::<f64>() {
-            Ok(v) => v,
-            Err(_) => real_var(leading, frame)?,
-        };
+        let c_deg = real_arg(leading, frame)?;
         let number = table_number(int_arg(number, frame)?)?;
         let table = self.defined_table(number)?;
         real_var(slope, frame)?;
@@ -463,15 +497,17 @@ impl Run<'_> {
 
     /// Calls `NAME` (no parameters) or `NAME(VAR, …)` (`VAR INT` parameters, declared by
     /// `EXTERN`).
-    fn call(&mut self, code: &str, frame: &mut Frame, depth: usize) -> Step {
-        let (name, arguments): (&str, Vec<&str>) = match code.split_once('(') {
-            Some((name, rest)) => {
-                let vars = rest.strip_suffix(')').ok_or_else(|| unsupported(code))?;
-                (name, vars.split(',').map(str::trim).collect())
-            }
-            None => (code, Vec::new()),
-        };
-        if !is_name(name) || KEYWORDS.contains(&name) || arguments.iter().any(|v| !is_name(v)) {
+    fn call(
+        &mut self,
+        code: &str,
+        name: &str,
+        args: &[Expr<'_>],
+        frame: &mut Frame,
+        depth: usize,
+    ) -> Step {
+        let arguments: Vec<&str> = args.iter().filter_map(Expr::name).collect();
+        let all_names = arguments.len() == args.len() && arguments.iter().all(|v| is_name(v));
+        if !is_name(name) || KEYWORDS.contains(&name) || !all_names {
             return Err(unsupported(code).into());
         }
         let declared = frame.externs.get(name).copied().unwrap_or(0);
@@ -514,5 +550,21 @@ impl Run<'_> {
             frame.vars.insert((*var).to_owned(), returned);
         }
         Ok(None)
+    }
+}
+
+/// Where a statement stands: its code (for messages) and its program's lines (`IF` and
+/// `CTABDEF` read on).
+#[derive(Clone, Copy)]
+struct At<'a, 't> {
+    code: &'t str,
+    lines: &'a [Line<'t>],
+}
+
+/// A line the reader cannot read, as the run's fault.
+fn syntax(e: camloop_core::program::SyntaxError) -> ControlFault {
+    ControlFault::Syntax {
+        column: e.column,
+        reason: e.reason,
     }
 }

@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 
 use super::{Control, ControlError, ControlFault, Coupled};
 use camloop_core::program::ParsedShape;
+use camloop_core::program::syntax::{Expr, Param};
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) enum Value {
@@ -70,73 +71,59 @@ pub(super) struct Run<'c> {
 }
 
 /// `DEF REAL a, b` / `DEF INT a`.
-pub(super) fn define(code: &str, frame: &mut Frame) -> Step {
-    let rest = code.strip_prefix("DEF ").unwrap_or(code);
-    let (value, names) = if let Some(names) = rest.strip_prefix("REAL ") {
-        (Value::Real(0.0), names)
-    } else if let Some(names) = rest.strip_prefix("INT ") {
-        (Value::Int(0), names)
-    } else {
-        return Err(unsupported(code).into());
+pub(super) fn define(code: &str, kind: &str, names: &[&str], frame: &mut Frame) -> Step {
+    let value = match kind {
+        "REAL" => Value::Real(0.0),
+        "INT" => Value::Int(0),
+        _ => return Err(unsupported(code).into()),
     };
-    for name in names.split(',').map(str::trim) {
-        if !is_name(name) || frame.vars.insert(name.to_owned(), value).is_some() {
+    for name in names {
+        if !is_name(name) || frame.vars.insert((*name).to_owned(), value).is_some() {
             return Err(invalid(&format!("`{name}` cannot be defined here")).into());
         }
     }
     Ok(None)
 }
 
+/// True for `VAR INT` (with a name in `PROC`, without in `EXTERN`).
+fn is_var_int(p: &Param<'_>, named: bool) -> bool {
+    p.by_reference && p.kind == "INT" && p.name.is_some() == named
+}
+
 /// `EXTERN NAME()`, `EXTERN NAME(VAR INT)` or `EXTERN NAME(VAR INT, VAR INT)` (the speed
 /// plan's table program returns two numbers).
-pub(super) fn declare(code: &str, frame: &mut Frame) -> Step {
-    let rest = code.strip_prefix("EXTERN ").unwrap_or(code);
-    let (name, params) = rest
-        .strip_suffix(')')
-        .and_then(|r| r.split_once('('))
-        .ok_or_else(|| unsupported(code))?;
-    let count = match params.trim() {
-        "" => 0,
-        p if p.split(',').all(|t| t.trim() == "VAR INT") => p.split(',').count(),
-        _ => return Err(unsupported(code).into()),
-    };
-    if !is_name(name) {
+pub(super) fn declare(code: &str, name: &str, params: &[Param<'_>], frame: &mut Frame) -> Step {
+    if !is_name(name) || !params.iter().all(|p| is_var_int(p, false)) {
         return Err(unsupported(code).into());
     }
-    frame.externs.insert(name.to_owned(), count);
+    frame.externs.insert(name.to_owned(), params.len());
     Ok(None)
 }
 
 /// `PROC NAME` or `PROC NAME(VAR INT p, VAR INT q …)`, optionally ` SAVE`, first in a
 /// subprogram.
-pub(super) fn proc_line(code: &str, frame: &mut Frame, depth: usize) -> Step {
-    let rest = code.strip_prefix("PROC ").unwrap_or(code);
-    let rest = rest.strip_suffix(" SAVE").unwrap_or(rest);
-    let (name, params) = match rest.split_once('(') {
-        Some((name, p)) => {
-            let p = p.strip_suffix(')').ok_or_else(|| unsupported(code))?;
-            let names = p
-                .split(',')
-                .map(|t| t.trim().strip_prefix("VAR INT ").map(str::trim))
-                .collect::<Option<Vec<&str>>>()
-                .ok_or_else(|| unsupported(code))?;
-            (name, names)
-        }
-        None => (rest, Vec::new()),
-    };
-    if depth == 0 || name != frame.program || params.iter().any(|p| !is_name(p)) {
+pub(super) fn proc_line(
+    code: &str,
+    name: &str,
+    params: &[Param<'_>],
+    frame: &mut Frame,
+    depth: usize,
+) -> Step {
+    let names: Vec<&str> = params.iter().filter_map(|p| p.name).collect();
+    let all_var_int = params.iter().all(|p| is_var_int(p, true));
+    if depth == 0 || name != frame.program || !all_var_int || !names.iter().all(|p| is_name(p)) {
         return Err(unsupported(code).into());
     }
     // A PROC without parameters is refused after the call returns, naming the caller.
-    if !params.is_empty() && params.len() != frame.arguments.len() {
+    if !names.is_empty() && names.len() != frame.arguments.len() {
         return Err(invalid(&format!(
             "{name} is called with {} arguments for {} parameters",
             frame.arguments.len(),
-            params.len()
+            names.len()
         ))
         .into());
     }
-    for (p, value) in params.iter().zip(frame.arguments.clone()) {
+    for (p, value) in names.iter().zip(frame.arguments.clone()) {
         if !matches!(value, Value::Int(_)) {
             return Err(invalid(&format!("the argument for {p} is not an INT variable")).into());
         }
@@ -146,24 +133,33 @@ pub(super) fn proc_line(code: &str, frame: &mut Frame, depth: usize) -> Step {
     Ok(None)
 }
 
-/// The arguments of `KEYWORD(a,b,…)`, trimmed; the whole statement must be the call.
-pub(super) fn args<'t>(code: &'t str, keyword: &str) -> Result<Vec<&'t str>, ControlFault> {
-    code.strip_prefix(keyword)
-        .and_then(|r| r.strip_prefix('('))
-        .and_then(|r| r.strip_suffix(')'))
-        .map(|inner| inner.split(',').map(str::trim).collect())
-        .ok_or_else(|| unsupported(code))
+/// A whole-number literal or the value of an INT variable.
+pub(super) fn int_arg(e: &Expr<'_>, frame: &Frame) -> Result<i64, ControlFault> {
+    if let Some(v) = e.number() {
+        return if v.fract() == 0.0 && v.abs() < 1e15 {
+            Ok(v as i64)
+        } else {
+            Err(invalid(&format!("{v} is not a whole number")))
+        };
+    }
+    let Some(name) = e.name() else {
+        return Err(invalid(
+            "an INT argument is a whole number or an INT variable",
+        ));
+    };
+    match frame.vars.get(name) {
+        Some(Value::Int(n)) => Ok(*n),
+        Some(Value::Real(_)) => Err(invalid(&format!("{name} is not an INT variable"))),
+        None => Err(undefined_variable(name)),
+    }
 }
 
-/// An integer literal or the value of an INT variable.
-pub(super) fn int_arg(text: &str, frame: &Frame) -> Result<i64, ControlFault> {
-    if let Ok(n) = text.parse() {
-        return Ok(n);
-    }
-    match frame.vars.get(text) {
-        Some(Value::Int(n)) => Ok(*n),
-        Some(Value::Real(_)) => Err(invalid(&format!("{text} is not an INT variable"))),
-        None => Err(undefined_variable(text)),
+/// A number literal or the value of a REAL variable.
+pub(super) fn real_arg(e: &Expr<'_>, frame: &Frame) -> Result<f64, ControlFault> {
+    match (e.number(), e.name()) {
+        (Some(v), _) => Ok(v),
+        (None, Some(name)) => real_var(name, frame),
+        (None, None) => Err(invalid("a REAL argument is a number or a REAL variable")),
     }
 }
 
