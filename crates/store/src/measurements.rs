@@ -11,7 +11,7 @@ use super::{
     HistoryFilter, MasterRuns, MeasurementDetail, MeasurementId, MeasurementSummary,
     NewMeasurement, Page, RecipeSnapshotId, Store, StoreError, Verdict, col, with_read, with_write,
 };
-use crate::core::measure::MASTER_PART_PREFIX;
+use camloop_core::measure::MASTER_PART_PREFIX;
 
 const SUMMARY_COLUMNS: &str = "m.id, m.machine, m.part, m.lobe, m.received_at_ms, m.verdict, \
      m.max_profile_error_um, m.base_radius_error_um, m.phase_error_deg, m.revolutions_used, \
@@ -68,8 +68,8 @@ macro_rules! fetch_all_dynamic {
         let mut q = sqlx::query($sql);
         for b in $binds {
             q = match b {
-                $crate::store::measurements::Bind::I64(v) => q.bind(v),
-                $crate::store::measurements::Bind::Text(v) => q.bind(v),
+                $crate::measurements::Bind::I64(v) => q.bind(v),
+                $crate::measurements::Bind::Text(v) => q.bind(v),
             };
         }
         q.fetch_all($pool).await.map_err($store.db_error($op))?
@@ -389,7 +389,7 @@ impl Store {
 
     /// Every measurement of one part (a shaft, by the number the gauge gave) on one machine,
     /// oldest first: what answers "did shaft 1234 pass, lobe by lobe". At most `MAX_PAGE`.
-    pub(crate) async fn part_measurements(
+    pub async fn part_measurements(
         &self,
         machine: &str,
         part: &str,
@@ -467,7 +467,7 @@ impl Store {
     /// One feature's measurements received in `[since_ms, until_ms)` with their reports,
     /// newest first, before id `before` (exclusive; call again with the last id to go on),
     /// at most `limit`: the window of a capability study or a control chart.
-    pub(crate) async fn feature_measurements(
+    pub async fn feature_measurements(
         &self,
         machine: &str,
         lobe: &str,
@@ -501,7 +501,7 @@ impl Store {
 
     /// The id of the newest measurement, `None` while there is none: what the dashboard's
     /// live channel polls (one index lookup).
-    pub(crate) async fn newest_measurement_id(&self) -> Result<Option<MeasurementId>, StoreError> {
+    pub async fn newest_measurement_id(&self) -> Result<Option<MeasurementId>, StoreError> {
         with_read!(self, pool => {
             let id: Option<i64> = sqlx::query_scalar("SELECT MAX(id) FROM measurements")
                 .fetch_one(pool)
@@ -512,7 +512,7 @@ impl Store {
     }
 
     /// Summaries of the measurements after `after` (exclusive), oldest first, at most `limit`.
-    pub(crate) async fn measurements_after(
+    pub async fn measurements_after(
         &self,
         after: MeasurementId,
         limit: u32,

@@ -22,6 +22,10 @@
 //! ([`Store::prune_raw_older_than`]) setting a raw blob to NULL; table-version status
 //! changes are appended rows; the newest learning-state row wins.
 
+
+// No unwrap() in shipped code: bad input must become an error, not a panic (tests may).
+#![warn(clippy::unwrap_used)]
+
 mod audit;
 mod chain;
 mod codec;
@@ -99,8 +103,8 @@ pub enum RawPool<'a> {
 macro_rules! with_write {
     ($store:expr, $pool:ident => $body:expr) => {
         match &$store.pools {
-            $crate::store::Pools::Sqlite { write: $pool, .. } => $body,
-            $crate::store::Pools::Postgres { write: $pool, .. } => $body,
+            $crate::Pools::Sqlite { write: $pool, .. } => $body,
+            $crate::Pools::Postgres { write: $pool, .. } => $body,
         }
     };
 }
@@ -112,8 +116,8 @@ macro_rules! with_read {
     ($store:expr, $pool:ident => $body:expr) => {{
         let _turn = $store.read_turn().await?;
         match &$store.pools {
-            $crate::store::Pools::Sqlite { read: $pool, .. } => $body,
-            $crate::store::Pools::Postgres { read: $pool, .. } => $body,
+            $crate::Pools::Sqlite { read: $pool, .. } => $body,
+            $crate::Pools::Postgres { read: $pool, .. } => $body,
         }
     }};
 }
@@ -122,7 +126,7 @@ pub(crate) use with_read;
 /// Reads a column or returns a `StoreError::Backend` for `$op`.
 macro_rules! col {
     ($row:expr, $name:literal, $op:literal) => {
-        sqlx::Row::try_get($row, $name).map_err($crate::store::error::db_error($op))?
+        sqlx::Row::try_get($row, $name).map_err($crate::error::db_error($op))?
     };
 }
 pub(crate) use col;

@@ -189,7 +189,7 @@ pub enum MasterRuns {
 }
 
 /// Largest page the list queries return.
-pub(crate) const MAX_PAGE: u32 = 10_000;
+pub const MAX_PAGE: u32 = 10_000;
 
 /// One page of a keyset-paginated list.
 #[derive(Debug, Clone, PartialEq)]

@@ -80,7 +80,7 @@ pub fn decode_lifts_mm(blob: &[u8]) -> Result<Vec<f64>, StoreError> {
         .collect())
 }
 
-pub use crate::digest::sha256_hex;
+pub use camloop_core::digest::sha256_hex;
 
 /// Cursor text for the position after the row (received_at_ms, id).
 pub(crate) fn encode_cursor(received_at_ms: i64, id: i64) -> String {
@@ -98,13 +98,13 @@ pub(crate) fn decode_cursor(cursor: &str) -> Result<(i64, i64), StoreError> {
 }
 
 /// A name the store keys by: never empty; a machine name follows the one rule of config and
-/// API ([`crate::names::check_plain_name`]).
+/// API ([`camloop_core::names::check_plain_name`]).
 pub(crate) fn check_name(field: &'static str, value: &str) -> Result<(), StoreError> {
     if value.trim().is_empty() {
         return Err(StoreError::invalid(field, "must not be empty"));
     }
     if field == "machine" {
-        crate::names::check_plain_name(value)
+        camloop_core::names::check_plain_name(value)
             .map_err(|e| StoreError::invalid(field, e.to_string()))?;
     }
     Ok(())

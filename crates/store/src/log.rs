@@ -437,7 +437,7 @@ impl Store {
     /// row was saved after `saved_at_ms`, or then with this very state. How a journal
     /// replayed after a crash recognises learning it had already written, now that a
     /// snapshot may have been replaced by a later one with the same meaning.
-    pub(crate) async fn learning_state_covered(
+    pub async fn learning_state_covered(
         &self,
         machine: &str,
         lobe: &str,

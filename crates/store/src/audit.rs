@@ -7,7 +7,7 @@
 //! `camloop audit verify` to see that.
 
 use super::{AuditResult, Role, Store, StoreError, with_read, with_write};
-use crate::digest::sha256_hex;
+use camloop_core::digest::sha256_hex;
 
 /// The `prev_sha256` of the first row.
 pub const AUDIT_GENESIS: &str = "0000000000000000000000000000000000000000000000000000000000000000";
@@ -116,7 +116,7 @@ fn row_from(r: AuditDbRow) -> Result<(AuditRow, String, String), StoreError> {
 
 impl Store {
     /// Appends `e` to the trail, chained to the newest row; returns its id.
-    pub(crate) async fn append_audit(&self, e: &AuditEntry) -> Result<i64, StoreError> {
+    pub async fn append_audit(&self, e: &AuditEntry) -> Result<i64, StoreError> {
         const OP: &str = "appending to the audit trail";
         let postgres = self.backend() == "postgres";
         with_write!(self, pool => {

@@ -146,7 +146,7 @@ impl Store {
     }
 
     /// Sets a user's password hash; false when there is no such user.
-    pub(crate) async fn set_password(
+    pub async fn set_password(
         &self,
         name: &str,
         password_hash: &str,
@@ -169,7 +169,7 @@ impl Store {
 
     /// Disables a user (its tokens and sessions stop working); false when there is no such
     /// user or it was disabled already.
-    pub(crate) async fn disable_user(&self, name: &str, at_ms: i64) -> Result<bool, StoreError> {
+    pub async fn disable_user(&self, name: &str, at_ms: i64) -> Result<bool, StoreError> {
         const OP: &str = "disabling a user";
         with_write!(self, pool => {
             let done = sqlx::query(
