@@ -310,10 +310,10 @@ async fn postgres_readers_stuck_behind_a_lock_never_hold_up_a_writer() {
     let started = std::time::Instant::now();
     t.store
         .insert_event(&camloop::store::NewEvent {
-            machine: "M1".into(),
+            machine: "M1".parse().unwrap(),
             at_ms: 1,
             level: camloop::store::EventLevel::Info,
-            kind: "part".into(),
+            kind: camloop::store::EventKind::MeasurementRepeated,
             message: "written while every reader waits".into(),
         })
         .await

@@ -254,8 +254,7 @@ macro_rules! next_link {
         .map_err($store.db_error("reading packed history"))?;
         match newest {
             Some((id, depth)) if depth + 1 < $crate::chain::MAX_DEPTH => {
-                let plain =
-                    $crate::chain::texts_of!($store, $exec, chained, $machine, $lobe, id);
+                let plain = $crate::chain::texts_of!($store, $exec, chained, $machine, $lobe, id);
                 (Some(id), depth + 1, plain)
             }
             _ => (None, 0, vec![String::new(); chained.fields.len()]),

@@ -110,6 +110,13 @@ pub(crate) fn check_name(field: &'static str, value: &str) -> Result<(), StoreEr
     Ok(())
 }
 
+/// A machine name read back. Every write checks the rule, so a refusal means a row written
+/// outside camloop.
+pub(crate) fn machine_of(text: String) -> Result<camloop_core::names::MachineName, StoreError> {
+    camloop_core::names::MachineName::try_from(text)
+        .map_err(|e| StoreError::invalid("machine", e.to_string()))
+}
+
 pub(crate) fn check_json(field: &'static str, text: &str) -> Result<(), StoreError> {
     serde_json::from_str::<serde::de::IgnoredAny>(text)
         .map(|_| ())

@@ -22,7 +22,6 @@
 //! ([`Store::prune_raw_older_than`]) setting a raw blob to NULL; table-version status
 //! changes are appended rows; the newest learning-state row wins.
 
-
 // No unwrap() in shipped code: bad input must become an error, not a panic (tests may).
 #![warn(clippy::unwrap_used)]
 

@@ -2,12 +2,13 @@
 
 use super::chain::{LEARNING_STATES, fetch_chain, next_link, texts_of};
 use super::codec::{
-    CODEC_PACKED, check_finite, check_json, check_limit, check_name, check_sha256, sha256_hex,
+    CODEC_PACKED, check_finite, check_json, check_limit, check_name, check_sha256, machine_of,
+    sha256_hex,
 };
 use super::measurements::{Bind, Conditions, fetch_all_dynamic};
 use super::pack::pack_text;
 use super::{
-    Dressing, DressingId, Event, EventFilter, EventId, EventLevel, Feature, FeatureKind,
+    Dressing, DressingId, Event, EventFilter, EventId, EventKind, EventLevel, Feature, FeatureKind,
     LearningState, Machine, NewDressing, NewEvent, NewRecipeSnapshot, RecipeSnapshotId, Store,
     StoreError, col, with_read, with_write,
 };
@@ -29,7 +30,7 @@ impl Store {
         &self,
         r: &NewRecipeSnapshot,
     ) -> Result<RecipeSnapshotId, StoreError> {
-        check_name("machine", &r.machine)?;
+        check_name("machine", r.machine.as_str())?;
         check_name("part", &r.part)?;
         check_name("lobe", &r.lobe)?;
         check_json("recipe_json", &r.recipe_json)?;
@@ -38,7 +39,7 @@ impl Store {
         with_write!(self, pool => {
             let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
             sqlx::query(ENSURE_MACHINE)
-                .bind(&r.machine)
+                .bind(r.machine.as_str())
                 .bind(r.created_at_ms)
                 .execute(&mut *tx)
                 .await
@@ -47,7 +48,7 @@ impl Store {
                 "SELECT id, sha256 FROM recipe_snapshots WHERE machine = $1 AND part = $2 \
                  AND lobe = $3 ORDER BY id DESC LIMIT 1",
             )
-            .bind(&r.machine)
+            .bind(r.machine.as_str())
             .bind(&r.part)
             .bind(&r.lobe)
             .fetch_optional(&mut *tx)
@@ -62,7 +63,7 @@ impl Store {
                 "INSERT INTO recipe_snapshots (machine, part, lobe, kind, recipe_json, sha256, \
                  created_at_ms) VALUES ($1, $2, $3, $4, $5, $6, $7) RETURNING id",
             )
-            .bind(&r.machine)
+            .bind(r.machine.as_str())
             .bind(&r.part)
             .bind(&r.lobe)
             .bind(r.kind.as_str())
@@ -85,10 +86,11 @@ impl Store {
                     .fetch_all(pool)
                     .await
                     .map_err(self.db_error("listing machines"))?;
-            Ok(rows
-                .into_iter()
-                .map(|(name, first_seen_ms)| Machine { name, first_seen_ms })
-                .collect())
+            rows.into_iter()
+                .map(|(name, first_seen_ms)| {
+                    Ok(Machine { name: machine_of(name)?, first_seen_ms })
+                })
+                .collect()
         })
     }
 
@@ -123,7 +125,7 @@ impl Store {
 
     /// Appends a wheel dressing; returns its row id.
     pub async fn insert_dressing(&self, d: &NewDressing) -> Result<DressingId, StoreError> {
-        check_name("machine", &d.machine)?;
+        check_name("machine", d.machine.as_str())?;
         check_finite("old_radius_mm", d.old_radius_mm)?;
         check_finite("new_radius_mm", d.new_radius_mm)?;
         if let Some(infeed) = d.infeed_um {
@@ -133,7 +135,7 @@ impl Store {
         with_write!(self, pool => {
             let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
             sqlx::query(ENSURE_MACHINE)
-                .bind(&d.machine)
+                .bind(d.machine.as_str())
                 .bind(d.at_ms)
                 .execute(&mut *tx)
                 .await
@@ -142,7 +144,7 @@ impl Store {
                 "INSERT INTO dressings (machine, at_ms, old_radius_mm, new_radius_mm, source, \
                  infeed_um) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
             )
-            .bind(&d.machine)
+            .bind(d.machine.as_str())
             .bind(d.at_ms)
             .bind(d.old_radius_mm)
             .bind(d.new_radius_mm)
@@ -164,7 +166,7 @@ impl Store {
                 "SELECT id FROM dressings WHERE machine = $1 AND at_ms = $2 \
                  AND new_radius_mm = $3 LIMIT 1",
             )
-            .bind(&d.machine)
+            .bind(d.machine.as_str())
             .bind(d.at_ms)
             .bind(d.new_radius_mm)
             .fetch_optional(pool)
@@ -188,32 +190,30 @@ impl Store {
             .fetch_all(pool)
             .await
             .map_err(self.db_error("listing dressings"))?;
-            Ok(rows
-                .into_iter()
+            rows.into_iter()
                 .map(|(id, machine, at_ms, old_radius_mm, new_radius_mm, source, infeed_um)| {
-                    Dressing {
+                    Ok(Dressing {
                         id: DressingId(id),
-                        machine,
+                        machine: machine_of(machine)?,
                         at_ms,
                         old_radius_mm,
                         new_radius_mm,
                         infeed_um,
                         source,
-                    }
+                    })
                 })
-                .collect())
+                .collect()
         })
     }
 
     /// Appends an alarm or event; returns its row id.
     pub async fn insert_event(&self, e: &NewEvent) -> Result<EventId, StoreError> {
-        check_name("machine", &e.machine)?;
-        check_name("kind", &e.kind)?;
+        check_name("machine", e.machine.as_str())?;
         const OP: &str = "inserting an event";
         with_write!(self, pool => {
             let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
             sqlx::query(ENSURE_MACHINE)
-                .bind(&e.machine)
+                .bind(e.machine.as_str())
                 .bind(e.at_ms)
                 .execute(&mut *tx)
                 .await
@@ -222,10 +222,10 @@ impl Store {
                 "INSERT INTO events (machine, at_ms, level, kind, message) \
                  VALUES ($1, $2, $3, $4, $5) RETURNING id",
             )
-            .bind(&e.machine)
+            .bind(e.machine.as_str())
             .bind(e.at_ms)
             .bind(e.level.as_str())
-            .bind(&e.kind)
+            .bind(e.kind.as_str())
             .bind(&e.message)
             .fetch_one(&mut *tx)
             .await
@@ -243,9 +243,9 @@ impl Store {
                 "SELECT id FROM events WHERE machine = $1 AND at_ms = $2 AND kind = $3 \
                  AND message = $4 LIMIT 1",
             )
-            .bind(&e.machine)
+            .bind(e.machine.as_str())
             .bind(e.at_ms)
-            .bind(&e.kind)
+            .bind(e.kind.as_str())
             .bind(&e.message)
             .fetch_optional(pool)
             .await
@@ -283,12 +283,13 @@ impl Store {
             rows.iter()
                 .map(|row| {
                     let level: String = col!(row, "level", "reading an event");
+                    let kind: String = col!(row, "kind", "reading an event");
                     Ok(Event {
                         id: EventId(col!(row, "id", "reading an event")),
-                        machine: col!(row, "machine", "reading an event"),
+                        machine: machine_of(col!(row, "machine", "reading an event"))?,
                         at_ms: col!(row, "at_ms", "reading an event"),
                         level: EventLevel::parse(&level)?,
-                        kind: col!(row, "kind", "reading an event"),
+                        kind: EventKind::parse(&kind)?,
                         message: col!(row, "message", "reading an event"),
                     })
                 })

@@ -86,7 +86,7 @@ macro_rules! summary_from_row {
         let recipe: Option<i64> = col!(row, "recipe_snapshot_id", "reading a measurement");
         MeasurementSummary {
             id: MeasurementId(col!(row, "id", "reading a measurement")),
-            machine: col!(row, "machine", "reading a measurement"),
+            machine: $crate::codec::machine_of(col!(row, "machine", "reading a measurement"))?,
             part: col!(row, "part", "reading a measurement"),
             lobe: col!(row, "lobe", "reading a measurement"),
             received_at_ms: col!(row, "received_at_ms", "reading a measurement"),
@@ -213,7 +213,7 @@ fn split_revolutions(lifts: Vec<f64>, points_per_rev: u32) -> Result<Vec<Vec<f64
 }
 
 fn check_measurement(m: &NewMeasurement) -> Result<(), StoreError> {
-    check_name("machine", &m.machine)?;
+    check_name("machine", m.machine.as_str())?;
     check_name("part", &m.part)?;
     check_name("lobe", &m.lobe)?;
     check_sha256("sha256", &m.sha256)?;
@@ -265,7 +265,7 @@ impl Store {
                 "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) \
                  ON CONFLICT (name) DO NOTHING",
             )
-            .bind(&m.machine)
+            .bind(m.machine.as_str())
             .bind(m.received_at_ms)
             .execute(&mut *tx)
             .await
@@ -277,7 +277,7 @@ impl Store {
                  VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13) \
                  ON CONFLICT (sha256) DO NOTHING RETURNING id",
             )
-            .bind(&m.machine)
+            .bind(m.machine.as_str())
             .bind(&m.part)
             .bind(&m.lobe)
             .bind(m.received_at_ms)

@@ -2,6 +2,8 @@
 //! into the store (once, even when replayed after a crash).
 
 use super::super::machine::memory::{LoopMemory, TableLearning};
+use crate::names::MachineName;
+pub use crate::store::EventKind;
 use crate::store::{
     EventLevel, FeatureKind, NewDressing, NewEvent, NewMeasurement, NewRecipeSnapshot,
     NewTableVersion, Store, StoreError, TableStatus, Verdict,
@@ -99,42 +101,10 @@ pub enum Pending {
     },
 }
 
-/// What an event is about; stored as its snake_case name (serde and strum spell it alike).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, strum::IntoStaticStr)]
-#[serde(rename_all = "snake_case")]
-#[strum(serialize_all = "snake_case")]
-pub enum EventKind {
-    MeasurementRejected,
-    MeasurementRepeated,
-    TableRefused,
-    LearningReverted,
-    LearningHeld,
-    LearningResumed,
-    ShareUnavailable,
-    ShareBack,
-    WheelDressed,
-    Rollback,
-    JournalQuarantined,
-    DiskFull,
-    DiskSpaceBack,
-    /// The same guard refused or limited several parts in a row.
-    BlockedByGuard,
-    /// A part was learned from again without that guard acting.
-    GuardCleared,
-    /// A control chart's run rule fired on a characteristic (the loop never acts on it).
-    RunRule,
-}
-
-impl EventKind {
-    pub fn as_str(self) -> &'static str {
-        self.into()
-    }
-}
-
 impl Pending {
     /// The event to store, for a [`Pending::Event`].
-    fn event(&self) -> Option<NewEvent> {
-        match self {
+    fn event(&self) -> Result<Option<NewEvent>, StoreError> {
+        Ok(match self {
             Pending::Event {
                 machine,
                 at_ms,
@@ -142,14 +112,14 @@ impl Pending {
                 kind,
                 message,
             } => Some(NewEvent {
-                machine: machine.clone(),
+                machine: machine_name(machine)?,
                 at_ms: *at_ms,
                 level: *level,
-                kind: kind.as_str().to_string(),
+                kind: *kind,
                 message: message.clone(),
             }),
             _ => None,
-        }
+        })
     }
 
     /// The crash point once a record of this kind is in the journal (the kinds a part's or
@@ -180,8 +150,8 @@ impl Pending {
     }
 
     /// The dressing to store, for a [`Pending::Dressing`].
-    fn dressing(&self) -> Option<NewDressing> {
-        match self {
+    fn dressing(&self) -> Result<Option<NewDressing>, StoreError> {
+        Ok(match self {
             Pending::Dressing {
                 machine,
                 at_ms,
@@ -190,7 +160,7 @@ impl Pending {
                 infeed_um,
                 source,
             } => Some(NewDressing {
-                machine: machine.clone(),
+                machine: machine_name(machine)?,
                 at_ms: *at_ms,
                 old_radius_mm: *old_radius_mm,
                 new_radius_mm: *new_radius_mm,
@@ -198,8 +168,14 @@ impl Pending {
                 source: source.clone(),
             }),
             _ => None,
-        }
+        })
     }
+}
+
+/// The journal names machines as the machine loop does, in text; the store takes the
+/// checked name (the config checked it once already, so this refuses nothing it wrote).
+fn machine_name(text: &str) -> Result<MachineName, StoreError> {
+    MachineName::new(text).map_err(|e| StoreError::invalid("machine", e.to_string()))
 }
 
 /// [`apply`] for a record read back after a crash: skipped when the store already holds it
@@ -227,7 +203,7 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
             .table_version_status(machine, lobe, *version as i64)
             .await?
             .is_some_and(|s| s == *status),
-        Pending::Event { .. } => match record.event() {
+        Pending::Event { .. } => match record.event()? {
             Some(e) => store.event_exists(&e).await?,
             None => false,
         },
@@ -241,7 +217,7 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
                 .learning_state_covered(machine, lobe, &state_json(state)?, *saved_at_ms)
                 .await?
         }
-        Pending::Dressing { .. } => match record.dressing() {
+        Pending::Dressing { .. } => match record.dressing()? {
             Some(d) => store.dressing_exists(&d).await?,
             None => false,
         },
@@ -298,7 +274,7 @@ pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreEr
                 .set_table_status(&machine, &lobe, version as i64, status, &why, at_ms)
                 .await
         }
-        Pending::Event { .. } => match record.event() {
+        Pending::Event { .. } => match record.event()? {
             Some(e) => store.insert_event(&e).await.map(|_| ()),
             None => Ok(()),
         },
@@ -320,7 +296,7 @@ pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreEr
                 .await
         }
         record @ Pending::RecipeSnapshot { .. } => insert_snapshot(store, record).await,
-        Pending::Dressing { .. } => match record.dressing() {
+        Pending::Dressing { .. } => match record.dressing()? {
             Some(d) => store.insert_dressing(&d).await.map(|_| ()),
             None => Ok(()),
         },
@@ -350,7 +326,7 @@ async fn insert_measurement(store: &Store, record: Pending) -> Result<(), StoreE
         return Ok(());
     };
     let m = NewMeasurement {
-        machine,
+        machine: machine_name(&machine)?,
         part,
         lobe,
         received_at_ms,
@@ -404,7 +380,7 @@ async fn insert_table(store: &Store, record: Pending) -> Result<(), StoreError> 
     let learning_params_json = serde_json::to_string(&learning)
         .map_err(|e| StoreError::invalid("table learning", e.to_string()))?;
     let t = NewTableVersion {
-        machine,
+        machine: machine_name(&machine)?,
         lobe,
         version: Some(version as i64),
         parent_version,
@@ -432,7 +408,7 @@ async fn insert_snapshot(store: &Store, record: Pending) -> Result<(), StoreErro
         return Ok(());
     };
     let r = NewRecipeSnapshot {
-        machine,
+        machine: machine_name(&machine)?,
         part,
         lobe,
         kind,
