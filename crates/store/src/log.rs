@@ -23,6 +23,32 @@ const REPLACEABLE_STATE: &str = "SELECT n.id, n.base_id FROM learning_states n W
 const ENSURE_MACHINE: &str =
     "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) ON CONFLICT (name) DO NOTHING";
 
+/// Appends one row of a machine's log in one transaction with the machine's first sight:
+/// `$sql` takes the machine as `$1`, the time as `$2`, then `$bind…`, and returns the id.
+/// Dressings and events are this same transaction.
+macro_rules! append_logged {
+    ($store:expr, $op:expr, $machine:expr, $at_ms:expr, $sql:expr $(, $bind:expr)* $(,)?) => {
+        with_write!($store, pool => {
+            let mut tx = pool.begin().await.map_err($store.db_error($op))?;
+            sqlx::query(ENSURE_MACHINE)
+                .bind($machine)
+                .bind($at_ms)
+                .execute(&mut *tx)
+                .await
+                .map_err($store.db_error($op))?;
+            let id: i64 = sqlx::query_scalar($sql)
+                .bind($machine)
+                .bind($at_ms)
+                $(.bind($bind))*
+                .fetch_one(&mut *tx)
+                .await
+                .map_err($store.db_error($op))?;
+            tx.commit().await.map_err($store.db_error($op))?;
+            Ok::<i64, StoreError>(id)
+        })
+    };
+}
+
 impl Store {
     /// Keeps a recipe snapshot of one lobe or pin. When the newest snapshot of that
     /// (machine, part, lobe) has the same JSON text, returns its id and writes nothing.
@@ -131,31 +157,19 @@ impl Store {
         if let Some(infeed) = d.infeed_um {
             check_finite("infeed_um", infeed)?;
         }
-        const OP: &str = "inserting a dressing";
-        with_write!(self, pool => {
-            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
-            sqlx::query(ENSURE_MACHINE)
-                .bind(d.machine.as_str())
-                .bind(d.at_ms)
-                .execute(&mut *tx)
-                .await
-                .map_err(self.db_error(OP))?;
-            let id: i64 = sqlx::query_scalar(
-                "INSERT INTO dressings (machine, at_ms, old_radius_mm, new_radius_mm, source, \
-                 infeed_um) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
-            )
-            .bind(d.machine.as_str())
-            .bind(d.at_ms)
-            .bind(d.old_radius_mm)
-            .bind(d.new_radius_mm)
-            .bind(&d.source)
-            .bind(d.infeed_um)
-            .fetch_one(&mut *tx)
-            .await
-            .map_err(self.db_error(OP))?;
-            tx.commit().await.map_err(self.db_error(OP))?;
-            Ok(DressingId(id))
-        })
+        append_logged!(
+            self,
+            "inserting a dressing",
+            d.machine.as_str(),
+            d.at_ms,
+            "INSERT INTO dressings (machine, at_ms, old_radius_mm, new_radius_mm, source, \
+             infeed_um) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
+            d.old_radius_mm,
+            d.new_radius_mm,
+            &d.source,
+            d.infeed_um,
+        )
+        .map(DressingId)
     }
 
     /// Whether this dressing (same machine, time and new radius) is stored: how a journal
@@ -209,30 +223,18 @@ impl Store {
     /// Appends an alarm or event; returns its row id.
     pub async fn insert_event(&self, e: &NewEvent) -> Result<EventId, StoreError> {
         check_name("machine", e.machine.as_str())?;
-        const OP: &str = "inserting an event";
-        with_write!(self, pool => {
-            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
-            sqlx::query(ENSURE_MACHINE)
-                .bind(e.machine.as_str())
-                .bind(e.at_ms)
-                .execute(&mut *tx)
-                .await
-                .map_err(self.db_error(OP))?;
-            let id: i64 = sqlx::query_scalar(
-                "INSERT INTO events (machine, at_ms, level, kind, message) \
-                 VALUES ($1, $2, $3, $4, $5) RETURNING id",
-            )
-            .bind(e.machine.as_str())
-            .bind(e.at_ms)
-            .bind(e.level.as_str())
-            .bind(e.kind.as_str())
-            .bind(&e.message)
-            .fetch_one(&mut *tx)
-            .await
-            .map_err(self.db_error(OP))?;
-            tx.commit().await.map_err(self.db_error(OP))?;
-            Ok(EventId(id))
-        })
+        append_logged!(
+            self,
+            "inserting an event",
+            e.machine.as_str(),
+            e.at_ms,
+            "INSERT INTO events (machine, at_ms, level, kind, message) \
+             VALUES ($1, $2, $3, $4, $5) RETURNING id",
+            e.level.as_str(),
+            e.kind.as_str(),
+            &e.message,
+        )
+        .map(EventId)
     }
 
     /// Whether this event (same machine, time, kind and message) is stored: how a journal
