@@ -10,7 +10,8 @@ use super::{AuditResult, Role, Store, StoreError, with_read, with_write};
 use camloop_core::digest::sha256_hex;
 
 /// The `prev_sha256` of the first row.
-pub const AUDIT_GENESIS: &str = "0000000000000000000000000000000000000000000000000000000000000000";
+pub(crate) const AUDIT_GENESIS: &str =
+    "0000000000000000000000000000000000000000000000000000000000000000";
 
 /// Largest page of audit rows one query returns.
 pub const MAX_AUDIT_PAGE: u32 = 1000;
@@ -76,7 +77,7 @@ const COLUMNS: &str = "SELECT id, at_ms, actor, role, client, action, machine, f
 
 /// The chained digest of an entry after `prev`: SHA-256 of `prev`, a newline, and the
 /// entry's fields as a JSON array (serde_json writes it the same way every time).
-pub fn audit_digest(prev: &str, e: &AuditEntry) -> String {
+pub(crate) fn audit_digest(prev: &str, e: &AuditEntry) -> String {
     let fields = serde_json::json!([
         e.at_ms,
         e.actor,

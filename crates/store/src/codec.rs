@@ -8,7 +8,7 @@
 use super::error::StoreError;
 
 /// Lift units per mm in blobs: 0.1 µm.
-pub const UNITS_PER_MM: f64 = 10_000.0;
+pub(crate) const UNITS_PER_MM: f64 = 10_000.0;
 
 /// `codec` of a row in the version-1 layout (i32 blobs, JSON text), as written before
 /// schema version 4 and not yet converted.
@@ -64,20 +64,6 @@ pub fn encode_lifts_mm(
         out.extend_from_slice(&(units as i32).to_le_bytes());
     }
     Ok(())
-}
-
-/// Decodes a lift blob into mm; a length not a multiple of 4 is a corrupt row.
-pub fn decode_lifts_mm(blob: &[u8]) -> Result<Vec<f64>, StoreError> {
-    if !blob.len().is_multiple_of(4) {
-        return Err(StoreError::invalid(
-            "lift blob",
-            format!("length {} is not a multiple of 4", blob.len()),
-        ));
-    }
-    Ok(blob
-        .chunks_exact(4)
-        .map(|c| f64::from(i32::from_le_bytes([c[0], c[1], c[2], c[3]])) / UNITS_PER_MM)
-        .collect())
 }
 
 pub use camloop_core::digest::sha256_hex;
@@ -164,7 +150,7 @@ mod tests {
         let mut blob = Vec::new();
         encode_lifts_mm(lifts, &mut blob).unwrap();
         assert_eq!(blob.len(), 4 * lifts.len());
-        let back = decode_lifts_mm(&blob).unwrap();
+        let back = units_to_mm(&decode_units(&blob).unwrap());
         for (a, b) in lifts.iter().zip(&back) {
             // Quantisation to 0.1 µm = 1e-4 mm: error at most half a unit.
             assert!((a - b).abs() <= 0.5e-4 + 1e-12, "{a} vs {b}");
@@ -181,7 +167,7 @@ mod tests {
             "invalid"
         );
         assert!(encode_lifts_mm([300_000.0], &mut blob).is_err());
-        assert!(decode_lifts_mm(&[1, 2, 3]).is_err());
+        assert!(decode_units(&[1, 2, 3]).is_err());
     }
 
     #[test]

@@ -49,8 +49,8 @@ use sqlx::postgres::PgPool;
 use sqlx::sqlite::SqlitePool;
 use tokio::sync::{Semaphore, SemaphorePermit};
 
-pub use audit::{AUDIT_GENESIS, AuditCheck, AuditEntry, AuditRow, MAX_AUDIT_PAGE, audit_digest};
-pub use codec::{UNITS_PER_MM, decode_lifts_mm, encode_lifts_mm, sha256_hex};
+pub use audit::{AuditCheck, AuditEntry, AuditRow, MAX_AUDIT_PAGE};
+pub use codec::{encode_lifts_mm, sha256_hex};
 pub use convert::Converted;
 pub use error::{Detail, StoreError};
 pub use identity::StoreIdentity;
