@@ -486,6 +486,13 @@ impl Recipe {
         {
             p.push(format!("speed_plan (with axis_limits): {e}"));
         }
+        if self.speed_plan.enabled
+            && self.program.c_direction == crate::core::program::CDirection::Reversed
+        {
+            p.push(
+                "speed_plan: enabled with program.c_direction = -1: C's table over the virtual axis is written rising; turn C the other way in the drive, not in the table".into(),
+            );
+        }
         let mut names = std::collections::HashSet::new();
         for lobe in &self.lobes {
             let at = format!("lobes.{}", lobe.name);

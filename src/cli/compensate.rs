@@ -17,7 +17,7 @@ use crate::core::compensate::{
 };
 use crate::core::fit::TableForm;
 use crate::core::geometry::CrankpinGeometry;
-use crate::core::learn::{self, LearningParams, LearningState, PreviousPart, StepOutcome};
+use crate::core::learn::{self, LearningParams, LearningState, PreviousPart};
 use crate::core::lift::LiftTable;
 use crate::core::program::{ProgramSettings, comment_text};
 use crate::core::turn::{Decision, measurement_sha256, turn};
@@ -247,39 +247,7 @@ fn learn_from(
         Decision::Held(reason) => bail!("{}: not learned: {reason}", path.display()),
     };
     saved.learning = *next;
-    let reason = match outcome {
-        StepOutcome::Updated {
-            max_error_um,
-            max_correction_um,
-        } => format!(
-            "learned from {}: max error {max_error_um:.2} µm, correction up to {max_correction_um:.2} µm",
-            path.display()
-        ),
-        StepOutcome::Limited {
-            max_error_um,
-            bound,
-            ..
-        } => format!(
-            "learned from {}: max error {max_error_um:.2} µm, {bound}",
-            path.display()
-        ),
-        StepOutcome::InTolerance { max_error_um } => {
-            format!(
-                "{}: max error {max_error_um:.2} µm within tolerance, table kept",
-                path.display()
-            )
-        }
-        StepOutcome::Frozen {
-            max_error_um,
-            reason,
-        } => {
-            format!(
-                "{}: max error {max_error_um:.2} µm; learning frozen: {reason}",
-                path.display()
-            )
-        }
-        StepOutcome::Reverted { reason, .. } => format!("ALARM {}: {reason}", path.display()),
-    };
+    let reason = format!("{}: {outcome}", path.display());
     Ok((*table, reason, id))
 }
 

@@ -94,13 +94,15 @@ pub(crate) fn run_speed_plan(args: SpeedPlanArgs) -> anyhow::Result<()> {
                 c_decimals: 4,
                 x_table: 1,
                 c_table: 2,
+                ..VaProgramSettings::default()
             };
             let text = render_va_table_program(&tables, &settings)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
             outputs.add(path, text);
             if let Some(main_path) = &args.main_program {
-                let text = render_va_main_program("CAMLOOP_GRIND", &settings, &tables, 1.0)
-                    .map_err(|e| anyhow::anyhow!("{}: {e}", main_path.display()))?;
+                let text =
+                    render_va_main_program("CAMLOOP_GRIND", &settings, tables.va_speed_rpm, 1.0)
+                        .map_err(|e| anyhow::anyhow!("{}: {e}", main_path.display()))?;
                 outputs.add(main_path, text);
             }
         }

@@ -87,6 +87,7 @@ mod service_kill;
 mod service_run;
 mod shaft_routing;
 mod shaft_service;
+mod shaft_speed_plan;
 mod share_faults;
 mod share_fence;
 mod share_kill;

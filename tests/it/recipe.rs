@@ -75,6 +75,38 @@ base_radius_mm = 20
     assert!(e.contains("c_max_accel_deg_s2 = 0"), "{e}");
 }
 
+/// C's table over the virtual axis is written rising: with C reversed in the program the
+/// plan is refused, saying where to reverse it instead.
+#[test]
+fn an_enabled_speed_plan_with_c_reversed_is_refused() {
+    let text = r#"
+name = "X"
+kind = "camshaft"
+[wheel]
+radius_mm = 250
+[table]
+table_numbers = [1, 4]
+[program]
+c_direction = -1
+[speed_plan]
+enabled = true
+[[lobes]]
+name = "L1"
+lift = "a.csv"
+follower = "flat"
+base_radius_mm = 20
+"#;
+    let e = Recipe::parse(text, "reversed.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("speed_plan: enabled with program.c_direction = -1"),
+        "{e}"
+    );
+    let forward = text.replace("c_direction = -1", "c_direction = 1");
+    assert!(Recipe::parse(&forward, "forward.toml").is_ok());
+}
+
 /// With the plan on, each feature needs a second pair for C's table, after every X pair:
 /// the demo's [1, 16] holds its 8 lobes' X pairs only.
 #[test]

@@ -175,6 +175,17 @@ pub enum GuardError {
         unit: &'static str,
         c_speed_rpm: f64,
     },
+    #[error(
+        "with the speed plan, X {quantity} {value:.1} {unit} exceeds the axis limit {limit} {unit} at C = {c_deg:.2} deg (VA = {va_deg:.2} deg)"
+    )]
+    PlanMotion {
+        quantity: &'static str,
+        value: f64,
+        limit: f64,
+        unit: &'static str,
+        c_deg: f64,
+        va_deg: f64,
+    },
 }
 
 /// Rounding slack below the deepest correction, mm (see [`commanded_lift`]).

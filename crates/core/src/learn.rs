@@ -226,6 +226,40 @@ pub enum StepOutcome {
     },
 }
 
+/// One line for logs, records and the CLI: the one wording of a step's outcome.
+impl std::fmt::Display for StepOutcome {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            StepOutcome::Updated {
+                max_error_um,
+                max_correction_um,
+            } => write!(
+                f,
+                "learned from max error {max_error_um:.2} µm, correction up to {max_correction_um:.2} µm"
+            ),
+            StepOutcome::Limited {
+                max_error_um,
+                bound,
+                ..
+            } => write!(f, "learned from max error {max_error_um:.2} µm, {bound}"),
+            StepOutcome::InTolerance { max_error_um } => {
+                write!(
+                    f,
+                    "max error {max_error_um:.2} µm within tolerance, table kept"
+                )
+            }
+            StepOutcome::Frozen {
+                max_error_um,
+                reason,
+            } => write!(
+                f,
+                "max error {max_error_um:.2} µm; learning frozen: {reason}"
+            ),
+            StepOutcome::Reverted { reason, .. } => write!(f, "ALARM: {reason}"),
+        }
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum LearnError {
     #[error("measurement has {got} points per revolution, the learning state {expected}")]

@@ -431,6 +431,7 @@ fn the_table_program_text_holds_the_plan() {
         c_decimals: 4,
         x_table: 1,
         c_table: 17,
+        ..VaProgramSettings::default()
     };
     let text = render_va_table_program(&tables, &settings).unwrap();
     assert!(
@@ -510,8 +511,10 @@ fn the_main_program_couples_the_returned_numbers() {
         c_decimals: 4,
         x_table: 1,
         c_table: 2,
+        ..VaProgramSettings::default()
     };
-    let text = render_va_main_program("CAMLOOP_GRIND", &settings, &tables, 1.0).unwrap();
+    let text =
+        render_va_main_program("CAMLOOP_GRIND", &settings, tables.va_speed_rpm, 1.0).unwrap();
     let at = |needle: &str| {
         text.find(needle)
             .unwrap_or_else(|| panic!("{needle}: {text}"))

@@ -12,7 +12,7 @@ use camloop_core::compensate::{
     self, AxisLimits, CycleError, Feature, GuardError, GuardedTable, LobeLoop, TableRequest,
 };
 use camloop_core::fit::{TableForm, fit_poly};
-use camloop_core::learn::{self, LearningParams, LearningState, StepOutcome};
+use camloop_core::learn::{self, LearningParams, LearningState};
 use camloop_core::lift::{LiftCurve, LiftTable};
 use camloop_core::measure::{AssemblyLimits, AveragedMeasurement, MeasurementError};
 use camloop_core::speed_plan::{self, SpeedPlanError, SpeedPlanSettings, TimeLaw};
@@ -99,12 +99,7 @@ pub struct CellRun {
 
 /// Grinds `parts` parts with `method` and returns each part's figures.
 pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, CellError> {
-    let mut feature = setup.feature;
-    let workpiece = match feature {
-        Feature::Cam(g) => Workpiece::Cam(g),
-        Feature::Pin(g) => Workpiece::Crankpin(g),
-    };
-    let mut sim = SimGrinder::new(setup.grinder.clone(), workpiece, setup.seed)?;
+    let mut cell = Cell::new(setup, method)?;
     let nominal_curve = LiftCurve::new(&setup.nominal);
     let nominal = |psi_deg: f64| {
         let s = nominal_curve.eval(psi_deg.to_radians());
@@ -115,28 +110,9 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
         part: "DEMO".into(),
         lobe: "IN1".into(),
     };
-    let points_per_rev = setup.grinder.gauge.points_per_rev;
-    let mut state = LearningState::new(points_per_rev);
-    // The X-domain methods' own memory: the X added at each table point, mm.
-    let mut naive_dx_mm = vec![0.0; setup.request.points];
-    let mut x_state = LearningState::new(points_per_rev);
-    let mut previous = None;
-    // camloop's tables reach the grinder as the service delivers them: rendered, and coupled
-    // by the simulated control running the main program.
-    let mut control = DeliveredTables::default();
-    let mut law = plan_law(setup, feature)?;
-    let mut table = make_table(
-        setup,
-        feature,
-        &state,
-        method,
-        &naive_dx_mm,
-        law.as_ref(),
-        &mut control,
-    )?;
     let mut figures = Vec::with_capacity(parts as usize);
     for part in 1..=parts {
-        let ground = match sim.grind(&table) {
+        let ground = match cell.sim.grind(&cell.table) {
             Ok(ground) => ground,
             // The table asks for a wheel path the wheel cannot follow (tighter than the
             // wheel): that method has failed; report how far it got.
@@ -150,108 +126,13 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
         };
         let (max_profile_error_um, max_lift_error_um, base_radius_error_um) =
             judge(&ground.lift_on_grid(JUDGE_POINTS), &nominal)?;
-        let raw = sim.measure(&ground, &labels);
-        let lobe = lobe_loop(setup, feature);
-        let turn_setup = TurnSetup {
-            lobe,
-            bands: &[],
-            assembly: AssemblyLimits::default(),
-            phase_deg: 0.0,
-        };
-        let action = match method {
-            Method::Camloop => {
-                // The cell delivers every table at once, so the part just measured was always
-                // ground with the table of `state`: the turn learns from it.
-                let done = turn::turn(&turn_setup, &state, &raw, None, previous)?;
-                previous = Some(done.measured.as_previous());
-                match done.decision {
-                    Decision::Table {
-                        outcome,
-                        next,
-                        table: next_table,
-                    } => {
-                        state = *next;
-                        let law = law.as_ref();
-                        table = deliver(setup, feature, &state, &next_table, law, &mut control)?;
-                        outcome_text(&outcome)
-                    }
-                    // A refused table is never used: the machine keeps the previous one.
-                    Decision::Refused(e) => format!("refused, previous table kept: {e}"),
-                    Decision::Held(reason) => format!("held: {reason}"),
-                }
-            }
-            Method::NaiveX => {
-                let report = turn::measure(&turn_setup, &raw)?.report;
-                let step = setup.request.points / points_per_rev as usize;
-                for (j, e) in report.error_um.iter().enumerate() {
-                    if let Some(dx) = naive_dx_mm.get_mut(j * step.max(1)) {
-                        *dx -= e / 1000.0;
-                    }
-                }
-                "X -= e at each index".to_string()
-            }
-            Method::XDomainIlc => {
-                let measured = turn::measure(&turn_setup, &raw)?;
-                // The raw error, timing and all, as the hand method sees it.
-                let part = learn::PartError {
-                    error_um: &measured.report.error_um,
-                    repeatability_um: &measured.report.repeatability_um,
-                    revolutions: measured.averaged.revolutions_used.len() as u32,
-                    timing_error_deg: 0.0,
-                    timing_sigma_deg: 0.0,
-                    part_number: None,
-                    previous: None,
-                };
-                let outcome = learn::step(&mut x_state, &part, &setup.params);
-                x_from_correction(&x_state, &mut naive_dx_mm);
-                match outcome {
-                    Ok(o) => outcome_text(&o),
-                    Err(e) => format!("refused: {e}"),
-                }
-            }
-        };
+        let raw = cell.sim.measure(&ground, &labels);
+        let action = cell.learn(&raw)?;
         if method != Method::Camloop {
             // The hand methods command their X offsets directly: one table from them.
-            table = make_table(
-                setup,
-                feature,
-                &state,
-                method,
-                &naive_dx_mm,
-                law.as_ref(),
-                &mut control,
-            )?;
+            cell.table = cell.make_table()?;
         }
-        let dressed = match sim.after_part() {
-            Some(event) => {
-                let old_radius_mm = feature.wheel_radius_mm();
-                feature = feature.with_wheel_radius(event.believed_wheel_radius_mm);
-                for s in [&mut state, &mut x_state] {
-                    after_dressing(s, old_radius_mm, &event);
-                }
-                // The correction is kept (lift domain); the plan is made for the new wheel.
-                law = plan_law(setup, feature)?;
-                if method == Method::XDomainIlc {
-                    // Its X follows its learning state, moved for the dressing like camloop's.
-                    x_from_correction(&x_state, &mut naive_dx_mm);
-                } else {
-                    // The hand method drops what it added to the size.
-                    let mean = naive_dx_mm.iter().sum::<f64>() / naive_dx_mm.len() as f64;
-                    naive_dx_mm.iter_mut().for_each(|d| *d -= mean);
-                }
-                table = make_table(
-                    setup,
-                    feature,
-                    &state,
-                    method,
-                    &naive_dx_mm,
-                    law.as_ref(),
-                    &mut control,
-                )?;
-                true
-            }
-            None => false,
-        };
+        let dressed = cell.after_part()?;
         figures.push(PartFigures {
             part,
             max_profile_error_um,
@@ -265,6 +146,204 @@ pub fn run(setup: &CellSetup, method: Method, parts: u32) -> Result<CellRun, Cel
         parts: figures,
         stopped: None,
     })
+}
+
+/// The cell between parts: the grinder, what each method remembers, and the table the
+/// control couples.
+struct Cell<'s> {
+    setup: &'s CellSetup,
+    method: Method,
+    feature: Feature,
+    sim: SimGrinder,
+    state: LearningState,
+    /// The X-domain methods' own memory: the X added at each table point, mm.
+    naive_dx_mm: Vec<f64>,
+    x_state: LearningState,
+    previous: Option<learn::PreviousPart>,
+    // camloop's tables reach the grinder as the service delivers them: rendered, and
+    // coupled by the simulated control running the main program.
+    control: DeliveredTables,
+    law: Option<TimeLaw>,
+    table: CommandedTable,
+}
+
+impl<'s> Cell<'s> {
+    fn new(setup: &'s CellSetup, method: Method) -> Result<Self, CellError> {
+        let feature = setup.feature;
+        let workpiece = match feature {
+            Feature::Cam(g) => Workpiece::Cam(g),
+            Feature::Pin(g) => Workpiece::Crankpin(g),
+        };
+        let points_per_rev = setup.grinder.gauge.points_per_rev;
+        let mut cell = Cell {
+            setup,
+            method,
+            feature,
+            sim: SimGrinder::new(setup.grinder.clone(), workpiece, setup.seed)?,
+            state: LearningState::new(points_per_rev),
+            naive_dx_mm: vec![0.0; setup.request.points],
+            x_state: LearningState::new(points_per_rev),
+            previous: None,
+            control: DeliveredTables::default(),
+            law: plan_law(setup, feature)?,
+            table: CommandedTable {
+                shape: TableShape::G1(Vec::new()),
+                x_zero_mm: 0.0,
+                wheel_radius_mm: feature.wheel_radius_mm(),
+                plan: None,
+            },
+        };
+        cell.table = cell.make_table()?;
+        Ok(cell)
+    }
+
+    /// What the method does with the part just measured; returns its word on it.
+    fn learn(&mut self, raw: &camloop_core::measure::RawMeasurement) -> Result<String, CellError> {
+        let (setup, feature) = (self.setup, self.feature);
+        let turn_setup = TurnSetup {
+            lobe: lobe_loop(setup, feature),
+            bands: &[],
+            assembly: AssemblyLimits::default(),
+            phase_deg: 0.0,
+        };
+        Ok(match self.method {
+            Method::Camloop => {
+                // The cell delivers every table at once, so the part just measured was always
+                // ground with the table of `state`: the turn learns from it.
+                let done = turn::turn(&turn_setup, &self.state, raw, None, self.previous)?;
+                self.previous = Some(done.measured.as_previous());
+                match done.decision {
+                    Decision::Table {
+                        outcome,
+                        next,
+                        table,
+                    } => match self.deliver(&next, &table)? {
+                        Ok(commanded) => {
+                            (self.state, self.table) = (*next, commanded);
+                            outcome.to_string()
+                        }
+                        // Over an X limit with the plan: refused like any guard, never used.
+                        Err(e) => format!("refused, previous table kept: {e}"),
+                    },
+                    // A refused table is never used: the machine keeps the previous one.
+                    Decision::Refused(e) => format!("refused, previous table kept: {e}"),
+                    Decision::Held(reason) => format!("held: {reason}"),
+                }
+            }
+            Method::NaiveX => {
+                let report = turn::measure(&turn_setup, raw)?.report;
+                let step = setup.request.points / setup.grinder.gauge.points_per_rev as usize;
+                for (j, e) in report.error_um.iter().enumerate() {
+                    if let Some(dx) = self.naive_dx_mm.get_mut(j * step.max(1)) {
+                        *dx -= e / 1000.0;
+                    }
+                }
+                "X -= e at each index".to_string()
+            }
+            Method::XDomainIlc => {
+                let measured = turn::measure(&turn_setup, raw)?;
+                // The raw error, timing and all, as the hand method sees it.
+                let part = learn::PartError {
+                    error_um: &measured.report.error_um,
+                    repeatability_um: &measured.report.repeatability_um,
+                    revolutions: measured.averaged.revolutions_used.len() as u32,
+                    timing_error_deg: 0.0,
+                    timing_sigma_deg: 0.0,
+                    part_number: None,
+                    previous: None,
+                };
+                let outcome = learn::step(&mut self.x_state, &part, &setup.params);
+                x_from_correction(&self.x_state, &mut self.naive_dx_mm);
+                match outcome {
+                    Ok(o) => o.to_string(),
+                    Err(e) => format!("refused: {e}"),
+                }
+            }
+        })
+    }
+
+    /// After the part: a dressing, when the wheel was dressed, moves what each method
+    /// remembers and makes the plan and the table again. True when it was dressed.
+    fn after_part(&mut self) -> Result<bool, CellError> {
+        let Some(event) = self.sim.after_part() else {
+            return Ok(false);
+        };
+        let old_radius_mm = self.feature.wheel_radius_mm();
+        self.feature = self
+            .feature
+            .with_wheel_radius(event.believed_wheel_radius_mm);
+        for s in [&mut self.state, &mut self.x_state] {
+            after_dressing(s, old_radius_mm, &event);
+        }
+        // The correction is kept (lift domain); the plan is made for the new wheel.
+        self.law = plan_law(self.setup, self.feature)?;
+        if self.method == Method::XDomainIlc {
+            // Its X follows its learning state, moved for the dressing like camloop's.
+            x_from_correction(&self.x_state, &mut self.naive_dx_mm);
+        } else {
+            // The hand method drops what it added to the size.
+            let mean = self.naive_dx_mm.iter().sum::<f64>() / self.naive_dx_mm.len() as f64;
+            self.naive_dx_mm.iter_mut().for_each(|d| *d -= mean);
+        }
+        self.table = self.make_table()?;
+        Ok(true)
+    }
+
+    /// The table of the method's present memory, as the control couples it.
+    fn make_table(&mut self) -> Result<CommandedTable, CellError> {
+        let (setup, feature) = (self.setup, self.feature);
+        match self.method {
+            Method::Camloop => {
+                let table = compensate::current_table(&self.state, &lobe_loop(setup, feature))?;
+                let state = self.state.clone();
+                Ok(self.deliver(&state, &table)??)
+            }
+            Method::NaiveX | Method::XDomainIlc => {
+                let part = feature.part(&setup.nominal)?;
+                let mut points = part.wheel_table(setup.request.points)?;
+                for (p, dx) in points.iter_mut().zip(&self.naive_dx_mm) {
+                    p.x_mm += dx;
+                    p.d_mm += dx;
+                }
+                let shape = match setup.request.form {
+                    TableForm::G1 => TableShape::G1(points),
+                    TableForm::Poly => TableShape::Poly(fit_poly(&points)),
+                };
+                Ok(CommandedTable {
+                    shape,
+                    x_zero_mm: part.x_zero_mm(),
+                    wheel_radius_mm: feature.wheel_radius_mm(),
+                    plan: None,
+                })
+            }
+        }
+    }
+
+    /// Delivers camloop's guarded `table` for `state`: the constant-speed programs, or with
+    /// a plan the two-table programs of the commanded part (the inner error: the corrected
+    /// X table exceeds an X limit over VA, refused).
+    fn deliver(
+        &mut self,
+        state: &LearningState,
+        table: &GuardedTable,
+    ) -> Result<Result<CommandedTable, GuardError>, CellError> {
+        let (setup, feature) = (self.setup, self.feature);
+        let Some(law) = &self.law else {
+            return Ok(Ok(self.control.deliver(table, feature)?));
+        };
+        let lift = compensate::commanded_lift(&setup.nominal, &state.correction_um)
+            .map_err(GuardError::from)?;
+        let commanded = feature.part(&lift)?;
+        let tolerance = (setup.request.poly_tolerance_um, &setup.limits);
+        match self
+            .control
+            .deliver_planned(table, &commanded, law, tolerance)
+        {
+            Ok(t) => Ok(Ok(t)),
+            Err(super::DeliveryError::Guard(e)) => Ok(Err(e)),
+            Err(e) => Err(e.into()),
+        }
+    }
 }
 
 /// The X-domain method's X at each table point: its correction, taken as ΔX at the same
@@ -309,41 +388,6 @@ fn lobe_loop(setup: &CellSetup, feature: Feature) -> LobeLoop<'_> {
     }
 }
 
-fn make_table(
-    setup: &CellSetup,
-    feature: Feature,
-    state: &LearningState,
-    method: Method,
-    naive_dx_mm: &[f64],
-    law: Option<&TimeLaw>,
-    control: &mut DeliveredTables,
-) -> Result<CommandedTable, CellError> {
-    match method {
-        Method::Camloop => {
-            let table = compensate::current_table(state, &lobe_loop(setup, feature))?;
-            deliver(setup, feature, state, &table, law, control)
-        }
-        Method::NaiveX | Method::XDomainIlc => {
-            let part = feature.part(&setup.nominal)?;
-            let mut points = part.wheel_table(setup.request.points)?;
-            for (p, dx) in points.iter_mut().zip(naive_dx_mm) {
-                p.x_mm += dx;
-                p.d_mm += dx;
-            }
-            let shape = match setup.request.form {
-                TableForm::G1 => TableShape::G1(points),
-                TableForm::Poly => TableShape::Poly(fit_poly(&points)),
-            };
-            Ok(CommandedTable {
-                shape,
-                x_zero_mm: part.x_zero_mm(),
-                wheel_radius_mm: feature.wheel_radius_mm(),
-                plan: None,
-            })
-        }
-    }
-}
-
 /// The planned C speed for `feature` (its nominal part on the wheel believed now) when the
 /// setup asks for one. It stays fixed between dressings, so the servo lag it leaves is a
 /// repeatable shape the loop learns like any other.
@@ -354,26 +398,6 @@ fn plan_law(setup: &CellSetup, feature: Feature) -> Result<Option<TimeLaw>, Cell
     let part = feature.part(&setup.nominal)?;
     let plan = speed_plan::plan(&part, &setup.speed_plan.limits(&setup.limits))?;
     Ok(Some(plan.law))
-}
-
-/// Delivers camloop's guarded `table` for `state`: the constant-speed programs, or with
-/// `law` the two-table programs of the commanded part.
-fn deliver(
-    setup: &CellSetup,
-    feature: Feature,
-    state: &LearningState,
-    table: &GuardedTable,
-    law: Option<&TimeLaw>,
-    control: &mut DeliveredTables,
-) -> Result<CommandedTable, CellError> {
-    let Some(law) = law else {
-        return Ok(control.deliver(table, feature)?);
-    };
-    let lift = compensate::commanded_lift(&setup.nominal, &state.correction_um)
-        .map_err(GuardError::from)?;
-    let commanded = feature.part(&lift)?;
-    let tolerance_um = setup.request.poly_tolerance_um;
-    Ok(control.deliver_planned(table, &commanded, law, tolerance_um)?)
 }
 
 /// Max |profile error| (datum fitted), max |lift error| (nothing fitted) and the base-circle
@@ -399,18 +423,4 @@ pub fn judge(
         max_abs(&report.error_um),
         report.base_radius_error_um,
     ))
-}
-
-fn outcome_text(outcome: &StepOutcome) -> String {
-    match outcome {
-        StepOutcome::Updated {
-            max_correction_um, ..
-        } => format!("learned, correction ≤ {max_correction_um:.2} µm"),
-        StepOutcome::Limited { bound, .. } => format!("learned, {bound}"),
-        StepOutcome::InTolerance { .. } => "in tolerance, table kept".to_string(),
-        StepOutcome::Frozen { .. } => "frozen".to_string(),
-        StepOutcome::Reverted { to_iteration, .. } => {
-            format!("ALARM: reverted to iteration {to_iteration}")
-        }
-    }
 }

@@ -5,17 +5,17 @@
 //! up in the cell's figures, as it would on the machine.
 
 use super::{CommandedTable, Control, ControlError};
-use camloop_core::compensate::{Feature, GuardedTable};
+use camloop_core::compensate::{AxisLimits, Feature, GuardError, GuardedTable};
 use camloop_core::geometry::{GeometryError, Part};
 use camloop_core::program::{
     MainProgramSettings, ProgramSettings, SettingsErrors, TableError, next_table_number,
     render_main_program,
 };
 use camloop_core::speed_plan::TimeLaw;
+use camloop_core::speed_plan::guard::planned_tables;
 use camloop_core::speed_plan::render::{
     VaProgramError, VaProgramSettings, render_va_main_program, render_va_table_program,
 };
-use camloop_core::speed_plan::tables::va_tables;
 use std::collections::BTreeMap;
 
 const TABLE_PROGRAM: &str = "CELL_TABLE";
@@ -37,6 +37,9 @@ pub enum DeliveryError {
     Control(#[from] ControlError),
     #[error("speed plan tables: {0}")]
     Plan(#[from] GeometryError),
+    /// The corrected X table over VA exceeds an X limit: refused, never delivered.
+    #[error("{0}")]
+    Guard(#[from] GuardError),
     #[error("speed plan program: {0}")]
     PlanProgram(#[from] VaProgramError),
 }
@@ -81,18 +84,16 @@ impl DeliveredTables {
     /// Delivers the table of `commanded` (the part the guarded `table` was made for) with
     /// the planned C speed `law`: the two-table program and the main program that couples C
     /// and X to the virtual axis, run by the control. The learned timing moves C's table, as
-    /// it moves the constant-speed table's C.
+    /// it moves the constant-speed table's C. Refused ([`DeliveryError::Guard`]) before
+    /// anything is rendered when the corrected X table exceeds an X limit over VA.
     pub(crate) fn deliver_planned(
         &mut self,
         table: &GuardedTable,
         commanded: &Part,
         law: &TimeLaw,
-        tolerance_um: f64,
+        (tolerance_um, limits): (f64, &AxisLimits),
     ) -> Result<CommandedTable, DeliveryError> {
-        let mut tables = va_tables(commanded, law, tolerance_um)?;
-        for s in &mut tables.c_segments {
-            s.x0_mm += table.timing_offset_deg;
-        }
+        let tables = planned_tables(table, commanded, law, tolerance_um, limits)?;
         let defaults = ProgramSettings::default();
         let settings = VaProgramSettings {
             name: TABLE_PROGRAM.to_string(),
@@ -103,9 +104,10 @@ impl DeliveredTables {
             c_decimals: usize::from(defaults.c_decimals),
             x_table: next_table_number(self.table_number, TABLE_PAIR),
             c_table: next_table_number(self.c_table_number, C_TABLE_PAIR),
+            ..VaProgramSettings::default()
         };
         let text = render_va_table_program(&tables, &settings)?;
-        let main = render_va_main_program(MAIN_PROGRAM, &settings, &tables, 1.0)?;
+        let main = render_va_main_program(MAIN_PROGRAM, &settings, tables.va_speed_rpm, 1.0)?;
         self.files.insert(TABLE_PROGRAM.to_string(), text);
         (self.table_number, self.c_table_number) = (settings.x_table, settings.c_table);
         let files = &self.files;

@@ -48,6 +48,7 @@ fn settings(x_table: u32, c_table: u32) -> VaProgramSettings {
         c_decimals: 4,
         x_table,
         c_table,
+        ..VaProgramSettings::default()
     }
 }
 
@@ -80,7 +81,7 @@ fn the_control_couples_c_and_x_to_the_virtual_axis_by_the_returned_numbers() {
     for (x_table, c_table) in [(1, 3), (2, 4), (1, 3)] {
         let s = settings(x_table, c_table);
         let table_text = render_va_table_program(&tables, &s).unwrap();
-        let main = render_va_main_program("CAMLOOP_GRIND", &s, &tables, 1.0).unwrap();
+        let main = render_va_main_program("CAMLOOP_GRIND", &s, tables.va_speed_rpm, 1.0).unwrap();
         let load = |name: &str| (name == TABLE).then(|| table_text.clone());
         let coupled = control.run(&main, &load).unwrap();
         assert_eq!(coupled.table_number, x_table);
@@ -99,7 +100,7 @@ fn the_control_couples_c_and_x_to_the_virtual_axis_by_the_returned_numbers() {
 fn an_old_table_program_with_one_number_is_refused_by_the_plan_main_program() {
     let tables = tables();
     let s = settings(1, 2);
-    let main = render_va_main_program("CAMLOOP_GRIND", &s, &tables, 1.0).unwrap();
+    let main = render_va_main_program("CAMLOOP_GRIND", &s, tables.va_speed_rpm, 1.0).unwrap();
     // The table program's PROC takes one number where the main program hands two.
     let table_text = render_va_table_program(&tables, &s)
         .unwrap()
@@ -119,7 +120,7 @@ fn c_cannot_be_positioned_while_it_follows_the_virtual_axis() {
     let tables = tables();
     let s = settings(1, 2);
     let table_text = render_va_table_program(&tables, &s).unwrap();
-    let main = render_va_main_program("CAMLOOP_GRIND", &s, &tables, 1.0)
+    let main = render_va_main_program("CAMLOOP_GRIND", &s, tables.va_speed_rpm, 1.0)
         .unwrap()
         .replace("WAITP(VA)\n", "WAITP(VA)\nPOS[C]=DC(CL_C) FA[C]=3600\n");
     let load = |name: &str| (name == TABLE).then(|| table_text.clone());

@@ -65,7 +65,7 @@ impl FeatureLoop {
                 learning.wheel_radius_mm, learning.iteration
             )),
         ];
-        let text = table.render(&settings)?;
+        let text = self.render_table(table, &next, &settings)?;
         crash_point("table_rendered");
         let draft = Draft {
             text,
@@ -217,6 +217,12 @@ impl FeatureLoop {
     fn on_delivered(&self, wheel_radius_mm: f64) {
         self.table_wheel_radius_bits
             .store(wheel_radius_mm.to_bits(), Ordering::SeqCst);
+        // The main program pairs each feature's table with the VA speed it was made for.
+        if let Some(rpm) = self.va_speed_on_share()
+            && let Err(e) = self.main.delivered(&self.setup.name, rpm)
+        {
+            error!(machine = %self.name, error = format!("{e:#}"), "main program: the plan's speed not kept");
+        }
         self.metrics.update(&self.name, |m| {
             m.tables_pushed_total += 1;
             m.share_waiting = 0;
@@ -271,8 +277,15 @@ impl FeatureLoop {
     /// program, so it goes with the last of them to reach the share.
     pub(super) fn main_program_if_changed(&self) -> anyhow::Result<Option<ProgramFile>> {
         let dir = &self.share.config().share_dir;
+        let Some(text) = self
+            .main
+            .text_with(&self.setup.name, self.plan.pending_va_rpm)?
+        else {
+            // With the plan: a feature's table (and its speed) is not on the share yet.
+            return Ok(None);
+        };
         let on_share = std::fs::read_to_string(dir.join(&self.main.file)).ok();
-        if on_share.as_deref() == Some(self.main.text.as_str()) {
+        if on_share.as_deref() == Some(text.as_str()) {
             return Ok(None);
         }
         let others_there = self
@@ -283,7 +296,7 @@ impl FeatureLoop {
             .all(|f| dir.join(f).exists());
         Ok(others_there.then(|| ProgramFile {
             name: self.main.file.clone(),
-            text: self.main.text.clone(),
+            text,
         }))
     }
 

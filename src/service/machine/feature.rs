@@ -42,6 +42,8 @@ pub struct FeatureLoop {
     pub(super) disk_alarm: bool,
     /// The control charts' run rules (events only: learning never reads them).
     pub(super) charts: super::charts::ChartWatch,
+    /// The speed plan's law, tables and the VA speed being delivered (plan on).
+    pub(super) plan: super::planned::PlanState,
 }
 
 impl FeatureLoop {
@@ -100,6 +102,7 @@ impl FeatureLoop {
             plant_events: None,
             table_wheel_radius_bits: Arc::new(AtomicU64::new(0)),
             disk_alarm: false,
+            plan: Default::default(),
         };
         machine.after_start(&report).await?;
         Ok(machine)
@@ -116,6 +119,7 @@ impl FeatureLoop {
         self.table_wheel_radius_bits
             .store(self.memory.wheel_radius_mm.to_bits(), Ordering::SeqCst);
         self.reconcile_share().await?;
+        let plan_changed = self.plan_at_start()?;
         let mut records = vec![self.recipe_snapshot(at_ms)];
         for q in self.journal.quarantined() {
             error!(machine = %self.name, line = q.line, reason = %q.reason, "journal line unreadable: moved to the quarantine file");
@@ -140,7 +144,9 @@ impl FeatureLoop {
         if self.memory.waiting.is_some() {
             self.deliver_waiting().await;
         }
-        let stale = !self.program_path().exists() || self.main_program_if_changed()?.is_some();
+        let stale = !self.program_path().exists()
+            || plan_changed
+            || self.main_program_if_changed()?.is_some();
         if stale && self.memory.waiting.is_none() {
             let table =
                 compensate::current_table(self.memory.newest_learning(), &self.lobe_loop())?;

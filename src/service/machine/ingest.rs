@@ -3,7 +3,7 @@
 
 use super::super::journal::{EventKind, Pending};
 use super::memory::GuardKind;
-use super::records::{event, keep_reject, outcome_text, raw_revolutions};
+use super::records::{event, keep_reject, raw_revolutions};
 use super::{FeatureLoop, Ingested};
 use crate::clock::now_ms;
 use crate::core::learn::StepOutcome;
@@ -153,7 +153,8 @@ impl FeatureLoop {
         let part = self.memory.parts;
         let held = matches!(done.decision, Decision::Held(_));
         let ground_with = self.memory.in_force_version;
-        let (mut records, text) = self.decide(done.decision, &sha, part, at_ms).await;
+        let decision = self.plan_guard(done.decision);
+        let (mut records, text) = self.decide(decision, &sha, part, at_ms).await;
         records.extend(self.chart_events(&raw.header.part, &done.measured, at_ms));
         if !held || !self.journal.on_reserve() {
             // On the reserve only measurements are kept: the memory did not change.
@@ -274,7 +275,7 @@ impl FeatureLoop {
                     }
                     StepOutcome::Frozen { .. } => {}
                 }
-                let reason = format!("part {part}: {}", outcome_text(&outcome));
+                let reason = format!("part {part}: {outcome}");
                 match self
                     .deliver(&table, *next, &reason, Some(sha.to_string()))
                     .await

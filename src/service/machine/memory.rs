@@ -86,9 +86,10 @@ impl GuardKind {
             CycleError::Learn(LearnError::GridMismatch { .. } | LearnError::NonFinite { .. }) => {
                 GuardKind::Measurement
             }
-            CycleError::Guard(crate::core::compensate::GuardError::Motion { .. }) => {
-                GuardKind::AxisLimits
-            }
+            CycleError::Guard(
+                crate::core::compensate::GuardError::Motion { .. }
+                | crate::core::compensate::GuardError::PlanMotion { .. },
+            ) => GuardKind::AxisLimits,
             CycleError::Guard(_) => GuardKind::Geometry,
         }
     }

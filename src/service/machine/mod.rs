@@ -15,7 +15,8 @@
 //! - `records`: the journal records and the reject folder;
 //! - `memory`: what a feature's loop remembers between parts;
 //! - `shaft`: the main program of the whole part and the resume point;
-//! - `coast`: a part ground but not gauged moves the table on by the learned drift.
+//! - `coast`: a part ground but not gauged moves the table on by the learned drift;
+//! - `planned`: the C speed plan's two-table program and its X check over the virtual axis.
 //!
 //! The version in force is the newest one the share confirmed. A step always starts from its
 //! learning state: a table computed while the share refused it never becomes the base of the
@@ -30,6 +31,7 @@ mod freeze;
 mod guards;
 mod ingest;
 pub mod memory;
+mod planned;
 mod reconcile;
 mod records;
 mod rollback;

@@ -2,7 +2,6 @@
 //! kept on disk with their reason.
 
 use super::super::journal::{EventKind, Pending};
-use crate::core::learn::StepOutcome;
 use crate::core::measure::RawMeasurement;
 use crate::store::EventLevel;
 use std::path::Path;
@@ -20,24 +19,6 @@ pub(super) fn event(
         level,
         kind,
         message,
-    }
-}
-
-pub(super) fn outcome_text(outcome: &StepOutcome) -> String {
-    match outcome {
-        StepOutcome::Updated { max_error_um, .. } => {
-            format!("learned from max error {max_error_um:.2} µm")
-        }
-        StepOutcome::Limited {
-            max_error_um,
-            bound,
-            ..
-        } => format!("learned from max error {max_error_um:.2} µm, {bound}"),
-        StepOutcome::InTolerance { max_error_um } => format!("in tolerance ({max_error_um:.2} µm)"),
-        StepOutcome::Frozen { .. } => "learning frozen".to_string(),
-        StepOutcome::Reverted { to_iteration, .. } => {
-            format!("reverted to iteration {to_iteration}")
-        }
     }
 }
 

@@ -45,6 +45,8 @@ impl FeatureLoop {
     /// Delivers the program of version `version` of feature `lobe` again. The text comes
     /// from the share's own kept copy where it still has it (checked against its SHA-256),
     /// else from the history store; either way it is retargeted to the free table number.
+    /// With the speed plan the program is made again from the version's correction and
+    /// timing for the plan in force (its two tables have two numbers to move).
     pub async fn rollback(
         &mut self,
         lobe: &str,
@@ -139,8 +141,37 @@ impl FeatureLoop {
             self.memory.in_force_version,
             &learning,
         );
-        let text = retarget_table_program(&text, number, Some(&provenance))
-            .with_context(|| format!("version {version}: cannot retarget to table {number}"))?;
+        let text = if self.setup.speed_plan.enabled {
+            // Two tables, two numbers: made again from the version's correction and timing
+            // for the plan in force (the wheel believed now), not retargeted.
+            self.planned_rollback(&learning, version, number, provenance)?
+        } else {
+            retarget_table_program(&text, number, Some(&provenance))
+                .with_context(|| format!("version {version}: cannot retarget to table {number}"))?
+        };
         Ok((text, learning, number))
+    }
+
+    /// With the speed plan: the two-table program of `learning`'s correction and timing, for
+    /// the plan of the wheel believed now, as version `provenance` names, X under `number`.
+    fn planned_rollback(
+        &mut self,
+        learning: &TableLearning,
+        version: u64,
+        number: u32,
+        provenance: crate::core::program::Provenance,
+    ) -> anyhow::Result<String> {
+        let mut state = self.memory.learning.clone();
+        state.correction_um = learning.correction_um.clone();
+        state.timing_correction_deg = learning.timing_correction_deg;
+        let table = crate::core::compensate::current_table(&state, &self.lobe_loop())
+            .with_context(|| format!("version {version}: its correction cannot be ground now"))?;
+        let mut settings = self.setup.program.clone();
+        settings.table_number = number;
+        settings.provenance = Some(provenance);
+        settings.comment_lines = vec![crate::core::program::comment_text(&format!(
+            "reason: rollback to v{version}"
+        ))];
+        self.render_table(&table, &state, &settings)
     }
 }

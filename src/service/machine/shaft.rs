@@ -7,25 +7,51 @@ use crate::core::program::{
     MainProgramSettings, RESUME_PROGRAM, Station, comment_text, render_main_program,
     render_resume_program, render_shaft_program,
 };
+use crate::core::speed_plan::render::{
+    VaProgramSettings, VaStation, render_va_main_program, render_va_shaft_program,
+};
 use crate::recipe::FeatureSetup;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 use tracing::{info, warn};
 
 /// X clearance above the highest nominal lift before Z moves, mm.
 const CLEARANCE_MM: f64 = 5.0;
 
 /// The machine's main program: its file name, text, and the table programs it calls.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub(crate) struct MainProgram {
     pub file: String,
-    pub text: String,
     pub table_files: Vec<String>,
+    kind: MainKind,
+}
+
+#[derive(Debug)]
+enum MainKind {
+    /// At constant C speed the text depends on the recipe alone.
+    Fixed(String),
+    /// With the speed plan each feature's virtual-axis speed is in the text, and it changes
+    /// with the feature's plan (a dressing, new limits).
+    Planned(PlannedMain),
+}
+
+#[derive(Debug)]
+struct PlannedMain {
+    main: MainProgramSettings,
+    /// Each feature's name, table settings (names and axes: the numbers come back from the
+    /// table program) and station.
+    stations: Vec<(String, VaProgramSettings, f64)>,
+    clear_x_mm: f64,
+    /// The virtual axis' speed of the table on the share, by feature name.
+    va_speeds_rpm: Mutex<BTreeMap<String, f64>>,
 }
 
 impl MainProgram {
     /// One feature: the one-feature program (no Z, no resume). Several: the shaft program,
     /// in recipe order. The C speed is the recipe's (or the machine's override), the one the
-    /// axis-limit guards checked every table at.
+    /// axis-limit guards checked every table at. With `[speed_plan] enabled` the programs
+    /// couple C and X to the virtual axis instead (see [`Self::text_with`]).
     pub(crate) fn for_features(setups: &[FeatureSetup]) -> anyhow::Result<Self> {
         let first = setups
             .first()
@@ -34,20 +60,38 @@ impl MainProgram {
             c_speed_rpm: first.limits.c_speed_rpm,
             ..MainProgramSettings::default()
         };
-        let text = if let [only] = setups {
-            main.comment_lines = vec![comment_text(&format!(
-                "camloop {}: couples the table {} defines",
-                env!("CARGO_PKG_VERSION"),
-                only.program.name
-            ))];
-            render_main_program(&main, &only.program)?
+        let what = if let [only] = setups {
+            format!("couples the table {} defines", only.program.name)
         } else {
-            main.comment_lines = vec![comment_text(&format!(
-                "camloop {}: grinds the {} features of {} in turn",
-                env!("CARGO_PKG_VERSION"),
+            format!(
+                "grinds the {} features of {} in turn",
                 setups.len(),
                 first.part
-            ))];
+            )
+        };
+        main.comment_lines = vec![comment_text(&format!(
+            "camloop {}: {what}",
+            env!("CARGO_PKG_VERSION")
+        ))];
+        let clear_x_mm = setups
+            .iter()
+            .flat_map(|s| s.nominal.lifts_mm().iter().copied())
+            .fold(0.0f64, f64::max)
+            + CLEARANCE_MM;
+        let kind = if first.speed_plan.enabled {
+            let stations = setups
+                .iter()
+                .map(|s| (s.name.clone(), super::planned::va_settings(s, 1, 2), s.z_mm))
+                .collect();
+            MainKind::Planned(PlannedMain {
+                main: main.clone(),
+                stations,
+                clear_x_mm,
+                va_speeds_rpm: Mutex::new(BTreeMap::new()),
+            })
+        } else if let [only] = setups {
+            MainKind::Fixed(render_main_program(&main, &only.program)?)
+        } else {
             let stations: Vec<Station<'_>> = setups
                 .iter()
                 .map(|s| Station {
@@ -56,22 +100,77 @@ impl MainProgram {
                     z_mm: s.z_mm,
                 })
                 .collect();
-            let clear_x_mm = setups
-                .iter()
-                .flat_map(|s| s.nominal.lifts_mm().iter().copied())
-                .fold(0.0f64, f64::max)
-                + CLEARANCE_MM;
-            render_shaft_program(&main, &stations, clear_x_mm)?
+            MainKind::Fixed(render_shaft_program(&main, &stations, clear_x_mm)?)
         };
         Ok(Self {
             file: format!("{}.MPF", main.name),
-            text,
+            kind,
             table_files: setups
                 .iter()
                 .map(|s| format!("{}.SPF", s.program.name))
                 .collect(),
         })
     }
+
+    /// The text, with `feature`'s virtual-axis speed `va_speed_rpm` (the table it is about to
+    /// deliver) and every other feature's as on the share. None while some feature's speed
+    /// is not known yet (its table is not on the share).
+    pub(crate) fn text_with(
+        &self,
+        feature: &str,
+        va_speed_rpm: Option<f64>,
+    ) -> anyhow::Result<Option<String>> {
+        let planned = match &self.kind {
+            MainKind::Fixed(text) => return Ok(Some(text.clone())),
+            MainKind::Planned(p) => p,
+        };
+        let mut speeds = planned
+            .va_speeds_rpm
+            .lock()
+            .map_err(|_| poisoned())?
+            .clone();
+        if let Some(v) = va_speed_rpm {
+            speeds.insert(feature.to_string(), v);
+        }
+        let mut stations = Vec::with_capacity(planned.stations.len());
+        for (name, settings, z_mm) in &planned.stations {
+            let Some(&va_speed_rpm) = speeds.get(name) else {
+                return Ok(None);
+            };
+            stations.push(VaStation {
+                table: settings,
+                label: name,
+                z_mm: *z_mm,
+                va_speed_rpm,
+            });
+        }
+        let text = if let [only] = stations.as_slice() {
+            render_va_main_program(
+                &planned.main.name,
+                only.table,
+                only.va_speed_rpm,
+                planned.main.revolutions,
+            )
+        } else {
+            render_va_shaft_program(&planned.main, &stations, planned.clear_x_mm)
+        };
+        Ok(Some(text?))
+    }
+
+    /// `feature`'s table with virtual-axis speed `va_speed_rpm` is on the share.
+    pub(crate) fn delivered(&self, feature: &str, va_speed_rpm: f64) -> anyhow::Result<()> {
+        if let MainKind::Planned(p) = &self.kind {
+            p.va_speeds_rpm
+                .lock()
+                .map_err(|_| poisoned())?
+                .insert(feature.to_string(), va_speed_rpm);
+        }
+        Ok(())
+    }
+}
+
+fn poisoned() -> anyhow::Error {
+    anyhow::anyhow!("the main program's speeds were left half-written by a failed thread")
 }
 
 /// The resume subprogram's file on the share.

@@ -28,11 +28,13 @@ pub use names::{
 };
 pub use parse::{CtabDef, TableBlocks, parse_ctabdef};
 pub use parse::{ParseError, ParsedShape, ParsedTable, parse_table_program};
+pub(crate) use provenance::provenance_lines;
 pub use provenance::{RetargetError, retarget_table_program};
 pub use settings::{
     C_DECIMALS, CDirection, ProgramSettings, Provenance, SettingError, SettingsErrors, TableMemory,
     X_DECIMALS,
 };
+pub(crate) use shaft_program::FROM_VAR;
 pub use shaft_program::{
     RESUME_PROGRAM, Station, parse_resume_program, render_resume_program, render_shaft_program,
 };

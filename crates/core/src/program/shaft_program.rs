@@ -11,7 +11,7 @@ use super::table::{NUMBER_VAR, fmt_fixed, line};
 /// The resume subprogram's name (file `CAMLOOP_RESUME.SPF`).
 pub const RESUME_PROGRAM: &str = "CAMLOOP_RESUME";
 /// The variable the resume subprogram sets: the first feature (from 1) to grind.
-const FROM_VAR: &str = "CL_FROM";
+pub(crate) const FROM_VAR: &str = "CL_FROM";
 
 /// One feature of the shaft as the main program grinds it.
 #[derive(Debug, Clone)]

@@ -59,7 +59,7 @@ impl Usage {
     pub(crate) fn speed_limits(
         s: &ProfileSample,
         limits: &SpeedLimits,
-        margin: f64,
+        (margin, removal_margin): (f64, f64),
         x_accel_mm_s2: f64,
     ) -> [(Constraint, f64); 5] {
         let removal = removal_per_arc_mm(limits.stock_mm, s.curvature_per_mm) * s.surface_mm_rad;
@@ -79,7 +79,7 @@ impl Usage {
             (Constraint::CSpeed, margin * rad_s(limits.c_max_speed_rpm)),
             (
                 Constraint::RemovalRate,
-                margin * limits.q_w_max_mm3_mm_s / removal.abs(),
+                removal_margin * limits.q_w_max_mm3_mm_s / removal.abs(),
             ),
         ]
     }
@@ -147,7 +147,7 @@ pub fn constant_points(
 pub fn fastest_constant(samples: &ProfileSamples, limits: &SpeedLimits) -> ConstantSpeed {
     let mut best = (f64::INFINITY, super::Constraint::CSpeed, 0.0);
     for s in &samples.samples {
-        for (c, omega) in Usage::speed_limits(s, limits, 1.0, limits.x_acceleration_mm_s2) {
+        for (c, omega) in Usage::speed_limits(s, limits, (1.0, 1.0), limits.x_acceleration_mm_s2) {
             if omega < best.0 {
                 best = (omega, c, s.c_deg);
             }

@@ -1,0 +1,215 @@
+//! The C speed plan in the service (`[speed_plan] enabled = true`): each table is delivered
+//! as the two-table program over the virtual axis VA (C = f(VA), X = g(VA)) with the same
+//! provenance and numbering as a constant-speed table, after the corrected X table has been
+//! checked against the X limits over VA (a violation is a guard refusal, never a delivery).
+//!
+//! The plan is made for the nominal part on the wheel the control believes, and made again
+//! only when that radius changes (a dressing): between dressings it is fixed, so the servo
+//! lag it leaves is a repeatable shape the loop learns like any other. When it is made
+//! again, the lift-domain correction and the learned timing in C are carried over (both
+//! live in the part frame, not in time); the part of the timing that the lag contributes
+//! changes with VA's speed by well under its deadband for a dressing, and is re-learned by
+//! the next steps as usual.
+
+use super::FeatureLoop;
+use crate::core::compensate::{self, CycleError, GuardError, GuardedTable};
+use crate::core::learn::LearningState;
+use crate::core::program::{ProgramSettings, fmt_fixed};
+use crate::core::speed_plan::guard::planned_tables;
+use crate::core::speed_plan::render::{VaProgramSettings, render_va_table_program};
+use crate::core::speed_plan::tables::VaTables;
+use crate::core::speed_plan::{self, TimeLaw};
+use crate::core::turn::Decision;
+use crate::recipe::FeatureSetup;
+use tracing::error;
+
+/// The virtual leading axis' name in the programs.
+const VIRTUAL_AXIS: &str = "VA";
+
+/// What a feature's loop keeps of its plan.
+#[derive(Debug, Default)]
+pub(crate) struct PlanState {
+    /// The plan's time law and the wheel radius (bits) it was made for.
+    law: Option<(u64, TimeLaw)>,
+    /// The tables last made, by what they were made from (correction digest, timing,
+    /// radius), so the guard's check and the delivery make them once.
+    last: Option<(String, Result<VaTables, GuardError>)>,
+    /// VA's speed of the table being delivered, rev/min (committed to the main program once
+    /// the share confirms it).
+    pub(super) pending_va_rpm: Option<f64>,
+}
+
+/// The table settings of `setup` for the two-table program, with these numbers.
+pub(super) fn va_settings(setup: &FeatureSetup, x_table: u32, c_table: u32) -> VaProgramSettings {
+    let p = &setup.program;
+    VaProgramSettings {
+        name: p.name.clone(),
+        virtual_axis: VIRTUAL_AXIS.to_string(),
+        x_axis: p.following_axis.clone(),
+        c_axis: p.leading_axis.clone(),
+        x_decimals: usize::from(p.x_decimals),
+        c_decimals: usize::from(p.c_decimals),
+        x_table,
+        c_table,
+        c_offset_deg: p.c_offset_deg,
+        x_offset_mm: p.x_offset_mm,
+        comment_lines: p.comment_lines.clone(),
+        provenance: None,
+    }
+}
+
+impl FeatureLoop {
+    /// The plan's time law for the wheel believed now, made again when the radius changed.
+    fn plan_law(&mut self) -> anyhow::Result<TimeLaw> {
+        let radius_bits = self.setup.feature.wheel_radius_mm().to_bits();
+        if let Some((bits, law)) = &self.plan.law
+            && *bits == radius_bits
+        {
+            return Ok(law.clone());
+        }
+        let part = self.setup.feature.part(&self.setup.nominal)?;
+        let limits = self.setup.speed_plan.limits(&self.setup.limits);
+        let plan = speed_plan::plan(&part, &limits)?;
+        self.plan.law = Some((radius_bits, plan.law.clone()));
+        Ok(plan.law)
+    }
+
+    /// The tables over VA of `table` (made from `next`), checked against the X limits; None
+    /// when the recipe grinds at constant speed.
+    fn planned(
+        &mut self,
+        table: &GuardedTable,
+        next: &LearningState,
+    ) -> anyhow::Result<Option<Result<VaTables, GuardError>>> {
+        if !self.setup.speed_plan.enabled {
+            return Ok(None);
+        }
+        let law = self.plan_law()?;
+        let key = format!(
+            "{} {} {}",
+            crate::core::turn::correction_sha256(&next.correction_um),
+            table.timing_offset_deg.to_bits(),
+            self.setup.feature.wheel_radius_mm().to_bits()
+        );
+        if let Some((k, tables)) = &self.plan.last
+            && *k == key
+        {
+            return Ok(Some(tables.clone()));
+        }
+        let tables = compensate::commanded_lift(&self.setup.nominal, &next.correction_um)
+            .map_err(GuardError::from)
+            .and_then(|lift| Ok(self.setup.feature.part(&lift)?))
+            .and_then(|commanded| {
+                let tolerance_um = self.setup.request.poly_tolerance_um;
+                planned_tables(table, &commanded, &law, tolerance_um, &self.setup.limits)
+            });
+        self.plan.last = Some((key, tables.clone()));
+        Ok(Some(tables))
+    }
+
+    /// The table program of `table` for `settings` (number, provenance, comments): the
+    /// constant-speed program, or with the plan the two-table program, C's number
+    /// alternating in step with X's. Sets the VA speed the main program must carry.
+    pub(super) fn render_table(
+        &mut self,
+        table: &GuardedTable,
+        next: &LearningState,
+        settings: &ProgramSettings,
+    ) -> anyhow::Result<String> {
+        let Some(tables) = self.planned(table, next)? else {
+            self.plan.pending_va_rpm = None;
+            return Ok(table.render(settings)?);
+        };
+        let tables = tables
+            .map_err(|e| anyhow::anyhow!("{}: table not delivered: {e}", self.setup.label))?;
+        let (x_pair, c_pair) = (self.setup.table_pair, self.setup.c_table_pair);
+        let c_pair = c_pair.ok_or_else(|| anyhow::anyhow!("the recipe gave C no table numbers"))?;
+        let c_table = if settings.table_number == x_pair.0 {
+            c_pair.0
+        } else {
+            c_pair.1
+        };
+        let mut va = va_settings(&self.setup, settings.table_number, c_table);
+        va.comment_lines = settings.comment_lines.clone();
+        va.provenance = settings.provenance.clone();
+        self.plan.pending_va_rpm = Some(tables.va_speed_rpm);
+        Ok(render_va_table_program(&tables, &va)?)
+    }
+
+    /// The turn's new table refused when, with the plan, its X table over VA exceeds an X
+    /// limit: the same refusal as the turn's own guards, so it is counted, alarmed in a row
+    /// and recorded alike, and the table in force stays.
+    pub(super) fn plan_guard(&mut self, decision: Decision) -> Decision {
+        let Decision::Table { table, next, .. } = &decision else {
+            return decision;
+        };
+        match self.planned(table, next) {
+            Ok(Some(Err(e))) => Decision::Refused(CycleError::Guard(e)),
+            Ok(_) => decision,
+            Err(e) => {
+                // No plan at all (its geometry): the delivery says so and keeps the table.
+                error!(machine = %self.name, lobe = %self.setup.name, error = format!("{e:#}"), "speed plan cannot be made");
+                decision
+            }
+        }
+    }
+
+    /// The VA speed of the table program now on the share (rev/min), as its text says:
+    /// the exact speed of the table just rendered when it is that one, else the text's
+    /// (a waiting version delivered later). None at constant speed.
+    pub(super) fn va_speed_on_share(&self) -> Option<f64> {
+        let text = std::fs::read_to_string(self.program_path()).ok()?;
+        let written = va_speed_text(&text)?;
+        match self.plan.pending_va_rpm {
+            Some(rpm) if fmt_fixed(rpm, 4) == written => Some(rpm),
+            _ => written.parse().ok(),
+        }
+    }
+
+    /// The plan made at start for the wheel believed. The share's table program says the
+    /// VA speed it was made for; when that is this plan's, the main program takes it as on
+    /// the share. Returns true when the share's table is not this plan's (new limits, a
+    /// plan newly switched on, a program from before): it must be delivered again.
+    pub(super) fn plan_at_start(&mut self) -> anyhow::Result<bool> {
+        if !self.setup.speed_plan.enabled {
+            return Ok(false);
+        }
+        let law = self.plan_law()?;
+        let va_speed_rpm = 60.0 / law.period_s();
+        self.plan.pending_va_rpm = Some(va_speed_rpm);
+        let on_share = std::fs::read_to_string(self.program_path())
+            .ok()
+            .and_then(|text| va_speed_text(&text).map(str::to_string));
+        let same = on_share.as_deref() == Some(fmt_fixed(va_speed_rpm, 4).as_str());
+        if same && self.memory.waiting.is_none() {
+            self.main.delivered(&self.setup.name, va_speed_rpm)?;
+        }
+        Ok(!same)
+    }
+}
+
+/// The VA speed a two-table program says it was made for, as written (rev/min).
+fn va_speed_text(text: &str) -> Option<&str> {
+    text.lines().find_map(|l| {
+        let rest = l
+            .strip_prefix("; camloop speed plan: ")?
+            .split_once(" at ")?
+            .1;
+        Some(rest.split_once(" rpm")?.0)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::va_speed_text;
+
+    #[test]
+    fn the_va_speed_is_read_from_the_table_program_as_written() {
+        let text = "PROC P(VAR INT CL_TNO, VAR INT CL_TNO_C) SAVE\n; camloop speed plan: VA at 49.7512 rpm, one revolution of C per revolution of VA\n";
+        assert_eq!(va_speed_text(text), Some("49.7512"));
+        assert_eq!(
+            va_speed_text("PROC P(VAR INT CL_TNO) SAVE\nCTABDEF(X,C,1,1)\n"),
+            None
+        );
+    }
+}
