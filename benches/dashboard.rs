@@ -230,7 +230,7 @@ async fn clients(addr: SocketAddr, n: usize) -> mpsc::UnboundedReceiver<i64> {
 
 fn part(n: i64) -> NewMeasurement {
     NewMeasurement {
-        machine: machine(7),
+        machine: camloop::names::MachineName::new(&machine(7)).expect("a valid name"),
         part: format!("live-{n}"),
         lobe: "IN1".into(),
         received_at_ms: T0_MS + MEASUREMENTS * 1000 + n,

@@ -33,4 +33,5 @@ pub mod service;
 pub mod share;
 /// The simulated grinder, gauge and control: the crate `camloop-sim`.
 pub use camloop_sim as sim;
-pub mod store;
+/// The history store (SQLite or PostgreSQL): the crate `camloop-store`.
+pub use camloop_store as store;

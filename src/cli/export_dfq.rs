@@ -40,7 +40,7 @@ impl DfqExport<'_> {
     /// The `.dfq` text of `rows` (oldest first).
     pub fn text(&self, rows: &[MeasurementDetail]) -> anyhow::Result<String> {
         let recipe = |d: &MeasurementDetail| {
-            let key = (d.summary.machine.clone(), d.summary.lobe.clone());
+            let key = (d.summary.machine.to_string(), d.summary.lobe.clone());
             self.recipes.get(&key).cloned().unwrap_or_default()
         };
         let parts: BTreeSet<String> = rows.iter().map(recipe).collect();
@@ -61,11 +61,11 @@ impl DfqExport<'_> {
         };
         for d in rows.iter().filter(production) {
             let s = &d.summary;
-            let key = (s.machine.clone(), s.lobe.clone());
+            let key = (s.machine.to_string(), s.lobe.clone());
             series
                 .entry(key.clone())
                 .or_insert_with(|| DfqSeries {
-                    machine: s.machine.clone(),
+                    machine: s.machine.to_string(),
                     feature: s.lobe.clone(),
                     profile_band_um: bands.get(&key).and_then(|b| b.0),
                     limits: bands.get(&key).map(|b| b.1).unwrap_or_default(),

@@ -365,10 +365,9 @@ async fn a_database_that_is_down_loses_nothing() {
         .pending()
         .iter()
         .filter_map(|p| match p {
-            camloop::service::journal::Pending::Measurement {
-                max_profile_error_um,
-                ..
-            } => Some(*max_profile_error_um),
+            camloop::service::journal::Pending::Measurement { measurement, .. } => {
+                Some(measurement.max_profile_error_um)
+            }
             _ => None,
         })
         .collect();

@@ -45,7 +45,7 @@ async fn take_turns(url: &str) {
     for v in 1..=40_i64 {
         let store = if (v / 3) % 2 == 0 { &a } else { &b };
         let t = NewTableVersion {
-            machine: "M1".into(),
+            machine: "M1".parse().unwrap(),
             lobe: "IN1".into(),
             version: Some(v),
             parent_version: (v > 1).then_some(v - 1),

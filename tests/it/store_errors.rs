@@ -310,10 +310,10 @@ async fn postgres_readers_stuck_behind_a_lock_never_hold_up_a_writer() {
     let started = std::time::Instant::now();
     t.store
         .insert_event(&camloop::store::NewEvent {
-            machine: "M1".into(),
+            machine: "M1".parse().unwrap(),
             at_ms: 1,
             level: camloop::store::EventLevel::Info,
-            kind: "part".into(),
+            kind: camloop::store::EventKind::MeasurementRepeated,
             message: "written while every reader waits".into(),
         })
         .await
@@ -387,4 +387,52 @@ async fn postgres_read_past_its_statement_timeout_is_busy() {
         "{e}"
     );
     sqlx::query("ROLLBACK").execute(&mut locker).await.unwrap();
+}
+
+/// Rows written outside camloop (by hand, or by a tool) with a machine name the rule refuses
+/// or an event kind camloop never wrote come back as an `invalid` error naming the field, on
+/// both backends: never a panic, and never a record with an unchecked name.
+#[tokio::test]
+async fn rows_with_a_bad_machine_name_or_event_kind_are_invalid_not_a_panic() {
+    let mut stores = vec![store_support::sqlite().await];
+    stores.extend(store_support::postgres("rows_with_a_bad_machine_name").await);
+    for t in &stores {
+        let rows = [
+            "INSERT INTO machines (name, first_seen_ms) VALUES ('M1', 1)",
+            "INSERT INTO events (machine, at_ms, level, kind, message) \
+             VALUES ('M1', 1, 'info', 'gauge_down', 'by hand')",
+        ];
+        raw_execute(&t.store, &rows).await;
+        let filter = camloop::store::EventFilter {
+            limit: 10,
+            ..Default::default()
+        };
+        let err = t.store.events(&filter).await.unwrap_err();
+        assert_eq!(err.code(), "invalid", "{err}");
+        assert!(err.to_string().contains("event kind"), "{err}");
+        assert!(err.to_string().contains("gauge_down"), "{err}");
+
+        raw_execute(
+            &t.store,
+            &["INSERT INTO machines (name, first_seen_ms) VALUES ('bad name!', 2)"],
+        )
+        .await;
+        let err = t.store.machines().await.unwrap_err();
+        assert_eq!(err.code(), "invalid", "{err}");
+        assert!(err.to_string().contains("machine"), "{err}");
+        assert!(err.to_string().contains("bad name!"), "{err}");
+    }
+}
+
+async fn raw_execute(store: &Store, statements: &[&str]) {
+    for sql in statements {
+        match store.raw_pool() {
+            camloop::store::RawPool::Sqlite(pool) => {
+                sqlx::query(sql).execute(pool).await.unwrap();
+            }
+            camloop::store::RawPool::Postgres(pool) => {
+                sqlx::query(sql).execute(pool).await.unwrap();
+            }
+        }
+    }
 }

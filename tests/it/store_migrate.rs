@@ -252,7 +252,7 @@ async fn check_old_rows(store: &Store) {
 async fn check_new_rows(store: &Store) {
     for v in OLD_ROWS + 1..=OLD_ROWS + 3 {
         let t = NewTableVersion {
-            machine: "M1".into(),
+            machine: "M1".parse().unwrap(),
             lobe: "in1".into(),
             version: Some(v),
             parent_version: Some(v - 1),

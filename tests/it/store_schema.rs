@@ -5,7 +5,7 @@ use std::path::Path;
 
 fn versions(backend: &str) -> BTreeSet<(i64, String)> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("migrations")
+        .join("crates/store/migrations")
         .join(backend);
     std::fs::read_dir(&dir)
         .unwrap()

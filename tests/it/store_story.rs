@@ -8,9 +8,9 @@ use crate::store_support;
 use store_support::data::{LIFT_TOL_MM, all_pages, filter, measurement, sha_of, table};
 
 use camloop::store::{
-    EventFilter, EventLevel, FeatureKind, HistoryFilter, MeasurementId, MeasurementSummary,
-    NewDressing, NewEvent, NewMeasurement, NewRecipeSnapshot, Store, StoreError, TableStatus,
-    Verdict,
+    EventFilter, EventKind, EventLevel, FeatureKind, HistoryFilter, MeasurementId,
+    MeasurementSummary, NewDressing, NewEvent, NewMeasurement, NewRecipeSnapshot, Store,
+    StoreError, TableStatus, Verdict,
 };
 
 async fn story(store: &Store) {
@@ -18,7 +18,7 @@ async fn story(store: &Store) {
 
     // Recipe snapshots: unchanged JSON reuses the newest snapshot, a change appends one.
     let snap = |lobe: &str, kind, json: &str| NewRecipeSnapshot {
-        machine: "M1".into(),
+        machine: "M1".parse().unwrap(),
         part: "CAM-7".into(),
         lobe: lobe.into(),
         kind,
@@ -87,7 +87,10 @@ async fn story(store: &Store) {
         .collect();
     assert_eq!(
         names,
-        [("M1".to_owned(), 1_000), ("M2".to_owned(), 10_000 + 40_000)]
+        [
+            ("M1".parse().unwrap(), 1_000),
+            ("M2".parse().unwrap(), 10_000 + 40_000)
+        ]
     );
 
     // Detail round trip: blobs within the quantisation, everything else exact.
@@ -310,7 +313,7 @@ async fn story(store: &Store) {
     ] {
         store
             .insert_dressing(&NewDressing {
-                machine: "M1".into(),
+                machine: "M1".parse().unwrap(),
                 at_ms: at,
                 old_radius_mm: old_mm,
                 new_radius_mm: new_mm,
@@ -334,17 +337,17 @@ async fn story(store: &Store) {
     );
     let mut event_ids = Vec::new();
     for (at, level, kind) in [
-        (1, EventLevel::Info, "started"),
-        (2, EventLevel::Error, "gauge_down"),
-        (3, EventLevel::Warn, "table_refused"),
+        (1, EventLevel::Info, EventKind::ShareBack),
+        (2, EventLevel::Error, EventKind::DiskFull),
+        (3, EventLevel::Warn, EventKind::TableRefused),
     ] {
         let id = store
             .insert_event(&NewEvent {
-                machine: "M1".into(),
+                machine: "M1".parse().unwrap(),
                 at_ms: at,
                 level,
-                kind: kind.into(),
-                message: format!("{kind} at {at}"),
+                kind,
+                message: format!("{} at {at}", kind.as_str()),
             })
             .await
             .unwrap();
@@ -359,7 +362,7 @@ async fn story(store: &Store) {
         .await
         .unwrap();
     let kinds: Vec<_> = events.iter().map(|e| e.kind.as_str()).collect();
-    assert_eq!(kinds, ["table_refused", "gauge_down", "started"]);
+    assert_eq!(kinds, ["table_refused", "disk_full", "share_back"]);
     event_ids.reverse();
     assert_eq!(events.iter().map(|e| e.id).collect::<Vec<_>>(), event_ids);
     let errors = store
@@ -372,7 +375,7 @@ async fn story(store: &Store) {
         .await
         .unwrap();
     assert_eq!(errors.len(), 1);
-    assert_eq!(errors[0].message, "gauge_down at 2");
+    assert_eq!(errors[0].message, "disk_full at 2");
 
     // Export pages by id through everything in the window.
     let mut exported = Vec::new();
@@ -532,10 +535,10 @@ async fn replay_lookups(store: &Store) {
     );
 
     let e = NewEvent {
-        machine: "M1".into(),
+        machine: "M1".parse().unwrap(),
         at_ms: 7_000,
         level: EventLevel::Warn,
-        kind: "table_refused".into(),
+        kind: EventKind::TableRefused,
         message: "grindability".into(),
     };
     store.insert_event(&e).await.unwrap();
@@ -564,7 +567,7 @@ async fn replay_lookups(store: &Store) {
     );
 
     let d = NewDressing {
-        machine: "M1".into(),
+        machine: "M1".parse().unwrap(),
         at_ms: 9_000,
         old_radius_mm: 250.0,
         new_radius_mm: 249.98,
@@ -629,7 +632,7 @@ async fn concurrent_writers(store: &Store) {
         let store = store.clone();
         set.spawn(async move {
             let mut t = table("in1", None, &format!("v{n}"), TableStatus::Waiting);
-            t.machine = "MC".into();
+            t.machine = "MC".parse().unwrap();
             store.insert_table_version(&t).await
         });
     }

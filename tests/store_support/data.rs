@@ -1,6 +1,7 @@
 //! Predictable inputs for the store tests: every value derives from a part number, so a
 //! test can compute what must come back.
 
+use camloop::names::MachineName;
 use camloop::store::{
     HistoryFilter, MeasurementSummary, NewMeasurement, NewTableVersion, Store, TableStatus, Verdict,
 };
@@ -28,7 +29,7 @@ pub fn measurement(machine: &str, lobe: &str, n: u32, received_at_ms: i64) -> Ne
         .collect();
     let averaged = (0..points).map(|i| lift(1, i)).collect();
     NewMeasurement {
-        machine: machine.into(),
+        machine: MachineName::new(machine).unwrap(),
         part: format!("P-{n:05}"),
         lobe: lobe.into(),
         received_at_ms,
@@ -86,7 +87,7 @@ pub async fn all_pages(store: &Store, mut f: HistoryFilter) -> Vec<MeasurementSu
 pub fn table(lobe: &str, parent: Option<i64>, text: &str, status: TableStatus) -> NewTableVersion {
     NewTableVersion {
         version: None,
-        machine: "M1".into(),
+        machine: MachineName::new("M1").unwrap(),
         lobe: lobe.into(),
         parent_version: parent,
         table_number: 11,

@@ -52,6 +52,28 @@ impl fmt::Display for MachineName {
     }
 }
 
+/// A name reads as the text it is wherever text is asked for (`&name` where a `&str` is
+/// expected), so typed records pass through the text-keyed layers without conversions.
+impl std::ops::Deref for MachineName {
+    type Target = str;
+
+    fn deref(&self) -> &str {
+        &self.0
+    }
+}
+
+impl PartialEq<str> for MachineName {
+    fn eq(&self, other: &str) -> bool {
+        self.0 == other
+    }
+}
+
+impl PartialEq<&str> for MachineName {
+    fn eq(&self, other: &&str) -> bool {
+        self.0 == *other
+    }
+}
+
 impl AsRef<str> for MachineName {
     fn as_ref(&self) -> &str {
         &self.0

@@ -162,11 +162,11 @@ pub(super) async fn machines(
         })
         .collect();
     for m in store.machines().await? {
-        let i = match out.iter().position(|o| o.name == m.name) {
+        let i = match out.iter().position(|o| o.name == *m.name) {
             Some(i) => i,
             None => {
                 out.push(MachineInfo {
-                    name: m.name.clone(),
+                    name: m.name.to_string(),
                     configured: false,
                     first_seen_ms: None,
                     lobes: Vec::new(),
@@ -250,7 +250,7 @@ impl From<crate::store::MeasurementSummary> for MeasurementItem {
         Self {
             id: m.id.0,
             verdict: m.verdict.as_str(),
-            machine: m.machine,
+            machine: m.machine.into(),
             part: m.part,
             lobe: m.lobe,
             received_at_ms: m.received_at_ms,
@@ -336,7 +336,7 @@ pub(super) async fn measurement(
     let analysis = serde_json::from_str(&detail.analysis_json).unwrap_or_default();
     Ok(Json(MeasurementReply {
         id,
-        machine: detail.summary.machine,
+        machine: detail.summary.machine.into(),
         lobe: detail.summary.lobe,
         received_at_ms: detail.summary.received_at_ms,
         averaged_lift_mm: detail.averaged_lift_mm,
@@ -557,7 +557,7 @@ pub(super) async fn events(
         .map(|e| EventItem {
             at_ms: e.at_ms,
             level: e.level.as_str(),
-            kind: e.kind,
+            kind: e.kind.as_str().to_owned(),
             message: e.message,
         })
         .collect();

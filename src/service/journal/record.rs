@@ -2,9 +2,11 @@
 //! into the store (once, even when replayed after a crash).
 
 use super::super::machine::memory::{LoopMemory, TableLearning};
+use crate::names::MachineName;
+pub use crate::store::EventKind;
 use crate::store::{
     EventLevel, FeatureKind, NewDressing, NewEvent, NewMeasurement, NewRecipeSnapshot,
-    NewTableVersion, Store, StoreError, TableStatus, Verdict,
+    NewTableVersion, Store, StoreError, TableStatus,
 };
 use serde::{Deserialize, Serialize};
 
@@ -12,26 +14,14 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "record", rename_all = "snake_case")]
 pub enum Pending {
+    /// The store's own record, as it goes into the store (field names as they always were
+    /// in the journal), with what only the plant's events need.
     Measurement {
-        machine: String,
-        part: String,
-        lobe: String,
-        received_at_ms: i64,
-        verdict: Verdict,
-        max_profile_error_um: f64,
-        base_radius_error_um: f64,
-        phase_error_deg: f64,
-        revolutions_used: u32,
-        points_per_rev: u32,
-        origin: String,
-        /// Content identity (see `core::turn::measurement_sha256`).
-        sha256: String,
+        #[serde(flatten)]
+        measurement: NewMeasurement,
         /// Version of the table on the control when the part was ground (0: none known).
         #[serde(default)]
         ground_with_version: u64,
-        raw_lift_mm: Vec<Vec<f64>>,
-        averaged_lift_mm: Vec<f64>,
-        analysis_json: String,
     },
     Table {
         machine: String,
@@ -99,42 +89,10 @@ pub enum Pending {
     },
 }
 
-/// What an event is about; stored as its snake_case name (serde and strum spell it alike).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, strum::IntoStaticStr)]
-#[serde(rename_all = "snake_case")]
-#[strum(serialize_all = "snake_case")]
-pub enum EventKind {
-    MeasurementRejected,
-    MeasurementRepeated,
-    TableRefused,
-    LearningReverted,
-    LearningHeld,
-    LearningResumed,
-    ShareUnavailable,
-    ShareBack,
-    WheelDressed,
-    Rollback,
-    JournalQuarantined,
-    DiskFull,
-    DiskSpaceBack,
-    /// The same guard refused or limited several parts in a row.
-    BlockedByGuard,
-    /// A part was learned from again without that guard acting.
-    GuardCleared,
-    /// A control chart's run rule fired on a characteristic (the loop never acts on it).
-    RunRule,
-}
-
-impl EventKind {
-    pub fn as_str(self) -> &'static str {
-        self.into()
-    }
-}
-
 impl Pending {
     /// The event to store, for a [`Pending::Event`].
-    fn event(&self) -> Option<NewEvent> {
-        match self {
+    fn event(&self) -> Result<Option<NewEvent>, StoreError> {
+        Ok(match self {
             Pending::Event {
                 machine,
                 at_ms,
@@ -142,14 +100,14 @@ impl Pending {
                 kind,
                 message,
             } => Some(NewEvent {
-                machine: machine.clone(),
+                machine: machine_name(machine)?,
                 at_ms: *at_ms,
                 level: *level,
-                kind: kind.as_str().to_string(),
+                kind: *kind,
                 message: message.clone(),
             }),
             _ => None,
-        }
+        })
     }
 
     /// The crash point once a record of this kind is in the journal (the kinds a part's or
@@ -180,8 +138,8 @@ impl Pending {
     }
 
     /// The dressing to store, for a [`Pending::Dressing`].
-    fn dressing(&self) -> Option<NewDressing> {
-        match self {
+    fn dressing(&self) -> Result<Option<NewDressing>, StoreError> {
+        Ok(match self {
             Pending::Dressing {
                 machine,
                 at_ms,
@@ -190,7 +148,7 @@ impl Pending {
                 infeed_um,
                 source,
             } => Some(NewDressing {
-                machine: machine.clone(),
+                machine: machine_name(machine)?,
                 at_ms: *at_ms,
                 old_radius_mm: *old_radius_mm,
                 new_radius_mm: *new_radius_mm,
@@ -198,8 +156,14 @@ impl Pending {
                 source: source.clone(),
             }),
             _ => None,
-        }
+        })
     }
+}
+
+/// The journal names machines as the machine loop does, in text; the store takes the
+/// checked name (the config checked it once already, so this refuses nothing it wrote).
+fn machine_name(text: &str) -> Result<MachineName, StoreError> {
+    MachineName::new(text).map_err(|e| StoreError::invalid("machine", e.to_string()))
 }
 
 /// [`apply`] for a record read back after a crash: skipped when the store already holds it
@@ -227,7 +191,7 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
             .table_version_status(machine, lobe, *version as i64)
             .await?
             .is_some_and(|s| s == *status),
-        Pending::Event { .. } => match record.event() {
+        Pending::Event { .. } => match record.event()? {
             Some(e) => store.event_exists(&e).await?,
             None => false,
         },
@@ -241,7 +205,7 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
                 .learning_state_covered(machine, lobe, &state_json(state)?, *saved_at_ms)
                 .await?
         }
-        Pending::Dressing { .. } => match record.dressing() {
+        Pending::Dressing { .. } => match record.dressing()? {
             Some(d) => store.dressing_exists(&d).await?,
             None => false,
         },
@@ -284,7 +248,9 @@ fn meaning_sha256(state: &LoopMemory) -> Result<String, StoreError> {
 
 pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreError> {
     match record.clone() {
-        record @ Pending::Measurement { .. } => insert_measurement(store, record).await,
+        Pending::Measurement { measurement, .. } => {
+            store.insert_measurement(&measurement).await.map(|_| ())
+        }
         record @ Pending::Table { .. } => insert_table(store, record).await,
         Pending::TableStatus {
             machine,
@@ -298,7 +264,7 @@ pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreEr
                 .set_table_status(&machine, &lobe, version as i64, status, &why, at_ms)
                 .await
         }
-        Pending::Event { .. } => match record.event() {
+        Pending::Event { .. } => match record.event()? {
             Some(e) => store.insert_event(&e).await.map(|_| ()),
             None => Ok(()),
         },
@@ -320,54 +286,11 @@ pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreEr
                 .await
         }
         record @ Pending::RecipeSnapshot { .. } => insert_snapshot(store, record).await,
-        Pending::Dressing { .. } => match record.dressing() {
+        Pending::Dressing { .. } => match record.dressing()? {
             Some(d) => store.insert_dressing(&d).await.map(|_| ()),
             None => Ok(()),
         },
     }
-}
-
-async fn insert_measurement(store: &Store, record: Pending) -> Result<(), StoreError> {
-    let Pending::Measurement {
-        machine,
-        part,
-        lobe,
-        received_at_ms,
-        verdict,
-        max_profile_error_um,
-        base_radius_error_um,
-        phase_error_deg,
-        revolutions_used,
-        points_per_rev,
-        origin,
-        sha256,
-        ground_with_version: _,
-        raw_lift_mm,
-        averaged_lift_mm,
-        analysis_json,
-    } = record
-    else {
-        return Ok(());
-    };
-    let m = NewMeasurement {
-        machine,
-        part,
-        lobe,
-        received_at_ms,
-        verdict,
-        max_profile_error_um,
-        base_radius_error_um,
-        phase_error_deg,
-        revolutions_used,
-        points_per_rev,
-        origin,
-        sha256,
-        recipe_snapshot: None,
-        raw_lift_mm,
-        averaged_lift_mm,
-        analysis_json,
-    };
-    store.insert_measurement(&m).await.map(|_| ())
 }
 
 async fn insert_table(store: &Store, record: Pending) -> Result<(), StoreError> {
@@ -404,7 +327,7 @@ async fn insert_table(store: &Store, record: Pending) -> Result<(), StoreError> 
     let learning_params_json = serde_json::to_string(&learning)
         .map_err(|e| StoreError::invalid("table learning", e.to_string()))?;
     let t = NewTableVersion {
-        machine,
+        machine: machine_name(&machine)?,
         lobe,
         version: Some(version as i64),
         parent_version,
@@ -432,7 +355,7 @@ async fn insert_snapshot(store: &Store, record: Pending) -> Result<(), StoreErro
         return Ok(());
     };
     let r = NewRecipeSnapshot {
-        machine,
+        machine: machine_name(&machine)?,
         part,
         lobe,
         kind,
@@ -440,4 +363,53 @@ async fn insert_snapshot(store: &Store, record: Pending) -> Result<(), StoreErro
         created_at_ms,
     };
     store.insert_recipe_snapshot(&r).await.map(|_| ())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::store::Verdict;
+
+    /// A measurement line as builds before the shared record wrote it (its fields flat
+    /// beside the tag, no recipe snapshot) reads as the store's record, and is written back
+    /// as the same JSON: journals left by a stopped service still replay.
+    #[test]
+    fn a_measurement_line_of_the_flat_format_reads_and_writes_back_the_same() {
+        let line = r#"{"record":"measurement","machine":"G7","part":"S-1","lobe":"IN1",
+            "received_at_ms":7,"verdict":"fail","max_profile_error_um":2.5,
+            "base_radius_error_um":-0.25,"phase_error_deg":0.125,"revolutions_used":3,
+            "points_per_rev":4,"origin":"can0","sha256":"ab","ground_with_version":5,
+            "raw_lift_mm":[[0.0,1.5]],"averaged_lift_mm":[0.5,1.0],"analysis_json":"{}"}"#;
+        let record: Pending = serde_json::from_str(line).unwrap();
+        let Pending::Measurement {
+            measurement: m,
+            ground_with_version,
+        } = &record
+        else {
+            panic!("{record:?}");
+        };
+        assert_eq!(*ground_with_version, 5);
+        assert_eq!((m.machine.as_str(), m.part.as_str()), ("G7", "S-1"));
+        assert_eq!(
+            (m.verdict, m.points_per_rev, m.recipe_snapshot),
+            (Verdict::Fail, 4, None)
+        );
+        assert_eq!(
+            (m.base_radius_error_um, m.raw_lift_mm.clone()),
+            (-0.25, vec![vec![0.0, 1.5]])
+        );
+        let written = serde_json::to_value(&record).unwrap();
+        let read: serde_json::Value = serde_json::from_str(line).unwrap();
+        assert_eq!(written, read);
+        // Lines from before the version was kept have none: 0, "none known".
+        let older = line.replace(r#""ground_with_version":5,"#, "");
+        let record: Pending = serde_json::from_str(&older).unwrap();
+        assert!(matches!(
+            record,
+            Pending::Measurement {
+                ground_with_version: 0,
+                ..
+            }
+        ));
+    }
 }

@@ -349,14 +349,12 @@ async fn load_memory(
         // still count, and are still known, so a replay does not learn them again.
         let mut memory = state.clone();
         for r in &records[i + 1..] {
-            if let Pending::Measurement {
-                sha256, part, lobe, ..
-            } = r
-                && *lobe == setup.name
+            if let Pending::Measurement { measurement: m, .. } = r
+                && m.lobe == setup.name
             {
                 memory.parts += 1;
-                memory.remember(sha256.clone());
-                memory.last_part = Some(part.clone());
+                memory.remember(m.sha256.clone());
+                memory.last_part = Some(m.part.clone());
             }
         }
         return Ok(*memory);

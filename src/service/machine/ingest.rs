@@ -9,7 +9,7 @@ use crate::clock::now_ms;
 use crate::core::learn::StepOutcome;
 use crate::core::measure::{MeasurementHeader, RawMeasurement};
 use crate::core::turn::{self, Decision, HoldReason, Measured, TurnError, measurement_sha256};
-use crate::store::{EventLevel, Verdict};
+use crate::store::{EventLevel, NewMeasurement, Verdict};
 use tracing::{debug, error, info, warn};
 
 /// The names a gauge may use for a machine and its features: the configured names, or the
@@ -138,7 +138,7 @@ impl FeatureLoop {
             }
             Err(e) => return Err(e.into()),
         };
-        let record = self.measurement_record(&raw, &sha, &done.measured, at_ms);
+        let record = self.measurement_record(&raw, &sha, &done.measured, at_ms)?;
         if !self.record(vec![record]).await {
             // Not counted and not remembered: the same reading sent again once the journal
             // can be written is a new measurement, not a repeat.
@@ -230,7 +230,7 @@ impl FeatureLoop {
             }
             Err(e) => return Err(e.into()),
         };
-        let record = self.measurement_record(&raw, &sha, &measured, at_ms);
+        let record = self.measurement_record(&raw, &sha, &measured, at_ms)?;
         if !self.record(vec![record]).await {
             return Ok(Ingested::NotRecorded);
         }
@@ -342,10 +342,10 @@ impl FeatureLoop {
         sha: &str,
         measured: &Measured,
         at_ms: i64,
-    ) -> Pending {
+    ) -> Result<Pending, crate::names::NameError> {
         let report = &measured.report;
-        Pending::Measurement {
-            machine: self.name.clone(),
+        let measurement = NewMeasurement {
+            machine: crate::names::MachineName::new(&self.name)?,
             part: raw.header.part.clone(),
             lobe: self.setup.name.clone(),
             received_at_ms: at_ms,
@@ -361,11 +361,15 @@ impl FeatureLoop {
             points_per_rev: measured.averaged.points_per_rev,
             origin: raw.origin.clone(),
             sha256: sha.to_string(),
-            ground_with_version: self.memory.in_force_version,
+            recipe_snapshot: None,
             raw_lift_mm: raw_revolutions(raw),
             averaged_lift_mm: measured.averaged.mean_lift_mm.clone(),
             analysis_json: serde_json::to_string(report).unwrap_or_default(),
-        }
+        };
+        Ok(Pending::Measurement {
+            measurement,
+            ground_with_version: self.memory.in_force_version,
+        })
     }
 
     /// A measurement that is not this machine's, or fails the checks: kept among the

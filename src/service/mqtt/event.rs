@@ -68,32 +68,25 @@ impl PlantEvent {
     /// the loop's own business, and a master run is the gauge study's: a plant counts its
     /// parts from `part_analysed`, and a master is not one).
     pub(crate) fn from_pending(record: &Pending) -> Option<Self> {
-        if let Pending::Measurement { part, .. } = record
-            && crate::core::measure::is_master_part(part)
+        if let Pending::Measurement { measurement, .. } = record
+            && crate::core::measure::is_master_part(&measurement.part)
         {
             return None;
         }
         Some(match record.clone() {
+            // The plant's payload: the summary of the store's record (the wire names stay).
             Pending::Measurement {
-                machine,
-                part,
-                lobe,
-                received_at_ms,
-                verdict,
-                max_profile_error_um,
-                base_radius_error_um,
-                phase_error_deg,
+                measurement: m,
                 ground_with_version,
-                ..
             } => PlantEvent::PartAnalysed {
-                machine,
-                feature: lobe,
-                part,
-                at_ms: received_at_ms,
-                verdict,
-                max_profile_error_um,
-                base_radius_error_um,
-                phase_error_deg,
+                machine: m.machine.into(),
+                feature: m.lobe,
+                part: m.part,
+                at_ms: m.received_at_ms,
+                verdict: m.verdict,
+                max_profile_error_um: m.max_profile_error_um,
+                base_radius_error_um: m.base_radius_error_um,
+                phase_error_deg: m.phase_error_deg,
                 ground_with_version,
             },
             Pending::Table {
@@ -316,22 +309,25 @@ mod tests {
     #[test]
     fn a_master_run_is_no_part_analysed_and_a_production_part_is() {
         let measurement = |part: &str| Pending::Measurement {
-            machine: "G7".into(),
-            part: part.into(),
-            lobe: "IN1".into(),
-            received_at_ms: 7,
-            verdict: Verdict::Pass,
-            max_profile_error_um: 0.4,
-            base_radius_error_um: 0.1,
-            phase_error_deg: 0.0,
-            revolutions_used: 3,
-            points_per_rev: 360,
-            origin: "gauge".into(),
-            sha256: "0".repeat(64),
+            measurement: crate::store::NewMeasurement {
+                machine: "G7".parse().unwrap(),
+                part: part.into(),
+                lobe: "IN1".into(),
+                received_at_ms: 7,
+                verdict: Verdict::Pass,
+                max_profile_error_um: 0.4,
+                base_radius_error_um: 0.1,
+                phase_error_deg: 0.0,
+                revolutions_used: 3,
+                points_per_rev: 360,
+                origin: "gauge".into(),
+                sha256: "0".repeat(64),
+                recipe_snapshot: None,
+                raw_lift_mm: Vec::new(),
+                averaged_lift_mm: Vec::new(),
+                analysis_json: "{}".into(),
+            },
             ground_with_version: 0,
-            raw_lift_mm: Vec::new(),
-            averaged_lift_mm: Vec::new(),
-            analysis_json: "{}".into(),
         };
         for master in ["MASTER", "master-7", "Master_B"] {
             assert_eq!(

@@ -50,7 +50,8 @@ pub(super) async fn rebuild_versions(
                 ),
             };
             let t = NewTableVersion {
-                machine: e.machine.clone(),
+                machine: crate::names::MachineName::new(&e.machine)
+                    .map_err(|err| StoreError::invalid("machine", err.to_string()))?,
                 lobe: e.lobe.clone(),
                 version: Some(version),
                 parent_version: None,

@@ -39,7 +39,7 @@ fn share_at(version: Option<u64>, tables_in_journal: u64) -> Vec<MachineExpectat
 async fn add_table(store: &Store) -> i64 {
     store
         .insert_table_version(&NewTableVersion {
-            machine: "SIM1".into(),
+            machine: "SIM1".parse().unwrap(),
             lobe: "IN1".into(),
             version: None,
             parent_version: None,

@@ -80,7 +80,7 @@ pub(super) async fn features(
         .collect();
     for m in store.machines().await? {
         let lobes = store.features(&m.name).await?;
-        out.entry(m.name)
+        out.entry(m.name.into())
             .or_default()
             .extend(lobes.into_iter().map(|f| f.lobe));
     }

@@ -218,7 +218,7 @@ fn events(d: &FeatureData, machine: &str) -> String {
             r#"<tr class="{lv}"><td>{at}</td><td>{lv}</td><td>{k}</td><td>{msg}</td><td>{acked}</td></tr>"#,
             at = when(e.at_ms),
             lv = e.level.as_str(),
-            k = esc(&e.kind),
+            k = esc(e.kind.as_str()),
             msg = esc(&e.message),
         );
     }

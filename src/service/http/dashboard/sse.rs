@@ -50,7 +50,7 @@ impl From<&MeasurementSummary> for PartEvent {
     fn from(m: &MeasurementSummary) -> Self {
         Self {
             id: m.id.0,
-            machine: m.machine.clone(),
+            machine: m.machine.to_string(),
             lobe: m.lobe.clone(),
             part: m.part.clone(),
             received_at_ms: m.received_at_ms,

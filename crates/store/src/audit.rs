@@ -7,10 +7,11 @@
 //! `camloop audit verify` to see that.
 
 use super::{AuditResult, Role, Store, StoreError, with_read, with_write};
-use crate::digest::sha256_hex;
+use camloop_core::digest::sha256_hex;
 
 /// The `prev_sha256` of the first row.
-pub const AUDIT_GENESIS: &str = "0000000000000000000000000000000000000000000000000000000000000000";
+pub(crate) const AUDIT_GENESIS: &str =
+    "0000000000000000000000000000000000000000000000000000000000000000";
 
 /// Largest page of audit rows one query returns.
 pub const MAX_AUDIT_PAGE: u32 = 1000;
@@ -76,7 +77,7 @@ const COLUMNS: &str = "SELECT id, at_ms, actor, role, client, action, machine, f
 
 /// The chained digest of an entry after `prev`: SHA-256 of `prev`, a newline, and the
 /// entry's fields as a JSON array (serde_json writes it the same way every time).
-pub fn audit_digest(prev: &str, e: &AuditEntry) -> String {
+pub(crate) fn audit_digest(prev: &str, e: &AuditEntry) -> String {
     let fields = serde_json::json!([
         e.at_ms,
         e.actor,
@@ -116,7 +117,7 @@ fn row_from(r: AuditDbRow) -> Result<(AuditRow, String, String), StoreError> {
 
 impl Store {
     /// Appends `e` to the trail, chained to the newest row; returns its id.
-    pub(crate) async fn append_audit(&self, e: &AuditEntry) -> Result<i64, StoreError> {
+    pub async fn append_audit(&self, e: &AuditEntry) -> Result<i64, StoreError> {
         const OP: &str = "appending to the audit trail";
         let postgres = self.backend() == "postgres";
         with_write!(self, pool => {

@@ -111,7 +111,7 @@ impl StoreError {
         }
     }
 
-    pub(crate) fn invalid(field: &'static str, reason: impl Into<String>) -> Self {
+    pub fn invalid(field: &'static str, reason: impl Into<String>) -> Self {
         StoreError::Invalid {
             field,
             reason: reason.into(),

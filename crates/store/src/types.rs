@@ -1,6 +1,9 @@
 //! The store's vocabulary: id newtypes, what callers write (`New*`), what they read back,
 //! and the filters of the history queries. Times are unix milliseconds, lifts mm, errors µm.
 
+use camloop_core::names::MachineName;
+use serde::{Deserialize, Serialize};
+
 use super::error::StoreError;
 
 /// Row id of a measurement. Stable for the life of the store.
@@ -8,7 +11,8 @@ use super::error::StoreError;
 pub struct MeasurementId(pub i64);
 
 /// Row id of a recipe snapshot (a part's lobe or pin definition as it was at that time).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(transparent)]
 pub struct RecipeSnapshotId(pub i64);
 
 /// Row id of a wheel dressing.
@@ -25,7 +29,7 @@ macro_rules! text_enum {
     ($(#[$m:meta])* $name:ident, $field:literal { $($variant:ident),+ $(,)? }) => {
         $(#[$m])*
         #[derive(
-            Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+            Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize,
             strum::IntoStaticStr, strum::EnumString,
         )]
         #[serde(rename_all = "lowercase")]
@@ -61,6 +65,57 @@ text_enum!(
     /// Severity of an event; `Error` means an operator must act.
     EventLevel, "event level" { Info, Warn, Error }
 );
+/// What an event is about; stored as its snake_case name (serde, strum and the database
+/// spell it alike, as the journal did when it was text in the store).
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Hash,
+    Serialize,
+    Deserialize,
+    strum::IntoStaticStr,
+    strum::EnumString,
+)]
+#[serde(rename_all = "snake_case")]
+#[strum(serialize_all = "snake_case")]
+pub enum EventKind {
+    MeasurementRejected,
+    MeasurementRepeated,
+    TableRefused,
+    LearningReverted,
+    LearningHeld,
+    LearningResumed,
+    ShareUnavailable,
+    ShareBack,
+    WheelDressed,
+    Rollback,
+    JournalQuarantined,
+    DiskFull,
+    DiskSpaceBack,
+    /// The same guard refused or limited several parts in a row.
+    BlockedByGuard,
+    /// A part was learned from again without that guard acting.
+    GuardCleared,
+    /// A control chart's run rule fired on a characteristic (the loop never acts on it).
+    RunRule,
+}
+
+impl EventKind {
+    /// The text stored in the database and used in APIs.
+    pub fn as_str(self) -> &'static str {
+        self.into()
+    }
+
+    /// Parses the stored text.
+    pub fn parse(text: &str) -> Result<Self, StoreError> {
+        text.parse()
+            .map_err(|_| StoreError::invalid("event kind", format!("unknown value `{text}`")))
+    }
+}
+
 text_enum!(
     /// A camshaft lobe or a crankshaft pin.
     FeatureKind, "feature kind" { Lobe, Pin }
@@ -69,7 +124,7 @@ text_enum!(
 /// A recipe snapshot to keep: the definition of one lobe or pin of a part, as JSON text.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NewRecipeSnapshot {
-    pub machine: String,
+    pub machine: MachineName,
     pub part: String,
     /// Lobe or pin name within the part.
     pub lobe: String,
@@ -93,7 +148,7 @@ pub struct Feature {
 /// A machine the store has seen (created by its first write).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Machine {
-    pub name: String,
+    pub name: MachineName,
     pub first_seen_ms: i64,
 }
 
@@ -101,9 +156,12 @@ pub struct Machine {
 ///
 /// Lifts are stored as i32 little-endian in 0.1 µm units (see [`super::codec`]), so they
 /// come back within 0.05 µm and must lie within ±214 m.
-#[derive(Debug, Clone, PartialEq)]
+///
+/// The service's journal carries it as it is (serde), so its field names are also the
+/// journal's: renaming one needs a serde alias for the journals already written.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct NewMeasurement {
-    pub machine: String,
+    pub machine: MachineName,
     pub part: String,
     pub lobe: String,
     pub received_at_ms: i64,
@@ -119,6 +177,8 @@ pub struct NewMeasurement {
     /// SHA-256 of the measurement as received, 64 lower-case hex digits. Inserting the same
     /// hash again returns the stored id and writes nothing.
     pub sha256: String,
+    /// Journal records never carry one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub recipe_snapshot: Option<RecipeSnapshotId>,
     /// Raw lifts per revolution as received, mm. Empty when not kept.
     pub raw_lift_mm: Vec<Vec<f64>>,
@@ -132,7 +192,7 @@ pub struct NewMeasurement {
 #[derive(Debug, Clone, PartialEq)]
 pub struct MeasurementSummary {
     pub id: MeasurementId,
-    pub machine: String,
+    pub machine: MachineName,
     pub part: String,
     pub lobe: String,
     pub received_at_ms: i64,
@@ -189,7 +249,7 @@ pub enum MasterRuns {
 }
 
 /// Largest page the list queries return.
-pub(crate) const MAX_PAGE: u32 = 10_000;
+pub const MAX_PAGE: u32 = 10_000;
 
 /// One page of a keyset-paginated list.
 #[derive(Debug, Clone, PartialEq)]
@@ -202,7 +262,7 @@ pub struct Page<T> {
 /// A regenerated curve-table program to append.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NewTableVersion {
-    pub machine: String,
+    pub machine: MachineName,
     pub lobe: String,
     /// Its number: the share's version (camloop keeps one version counter, the share's), or
     /// `None` for one more than the highest stored.
@@ -225,7 +285,7 @@ pub struct NewTableVersion {
 /// A stored table version with its latest status.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TableVersion {
-    pub machine: String,
+    pub machine: MachineName,
     pub lobe: String,
     /// 1, 2, 3, … per (machine, lobe).
     pub version: i64,
@@ -245,7 +305,7 @@ pub struct TableVersion {
 /// A wheel dressing: the wheel radius camloop believed before and after.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NewDressing {
-    pub machine: String,
+    pub machine: MachineName,
     pub at_ms: i64,
     pub old_radius_mm: f64,
     pub new_radius_mm: f64,
@@ -259,7 +319,7 @@ pub struct NewDressing {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Dressing {
     pub id: DressingId,
-    pub machine: String,
+    pub machine: MachineName,
     pub at_ms: i64,
     pub old_radius_mm: f64,
     pub new_radius_mm: f64,
@@ -271,11 +331,10 @@ pub struct Dressing {
 /// An alarm or event to append.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct NewEvent {
-    pub machine: String,
+    pub machine: MachineName,
     pub at_ms: i64,
     pub level: EventLevel,
-    /// Short stable kind ("gauge_down", "table_refused", …).
-    pub kind: String,
+    pub kind: EventKind,
     pub message: String,
 }
 
@@ -283,10 +342,10 @@ pub struct NewEvent {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Event {
     pub id: EventId,
-    pub machine: String,
+    pub machine: MachineName,
     pub at_ms: i64,
     pub level: EventLevel,
-    pub kind: String,
+    pub kind: EventKind,
     pub message: String,
 }
 

@@ -23,10 +23,6 @@ const FORMAT_V1: u8 = 1;
 /// to 2.5 s); the part path matters more than the last kilobyte.
 const LEVEL: i32 = 3;
 
-fn corrupt(field: &'static str, why: impl Into<String>) -> StoreError {
-    StoreError::invalid(field, why.into())
-}
-
 pub(super) fn zigzag(v: i64) -> u64 {
     ((v << 1) ^ (v >> 63)) as u64
 }
@@ -80,8 +76,12 @@ impl Varints<'_> {
 
     pub(super) fn next_u64(&mut self) -> Result<u64, StoreError> {
         take_varint(&mut self.bytes).map_err(|e| match e {
-            VarintError::Truncated => corrupt(self.field, "packed values end mid-value"),
-            VarintError::TooLong => corrupt(self.field, "a packed value is longer than 64 bits"),
+            VarintError::Truncated => {
+                StoreError::invalid(self.field, "packed values end mid-value")
+            }
+            VarintError::TooLong => {
+                StoreError::invalid(self.field, "a packed value is longer than 64 bits")
+            }
         })
     }
 }
@@ -89,10 +89,10 @@ impl Varints<'_> {
 fn compress(field: &'static str, plain: &[u8], dictionary: &[u8]) -> Result<Vec<u8>, StoreError> {
     let mut out = vec![FORMAT_V1];
     let mut c = zstd::bulk::Compressor::with_dictionary(LEVEL, dictionary)
-        .map_err(|e| corrupt(field, format!("compressor: {e}")))?;
+        .map_err(|e| StoreError::invalid(field, format!("compressor: {e}")))?;
     out.extend(
         c.compress(plain)
-            .map_err(|e| corrupt(field, format!("compressing: {e}")))?,
+            .map_err(|e| StoreError::invalid(field, format!("compressing: {e}")))?,
     );
     Ok(out)
 }
@@ -104,14 +104,17 @@ pub(super) const MAX_PLAIN: usize = 64 << 20;
 fn decompress(field: &'static str, blob: &[u8], dictionary: &[u8]) -> Result<Vec<u8>, StoreError> {
     let (&format, body) = blob
         .split_first()
-        .ok_or_else(|| corrupt(field, "empty packed blob"))?;
+        .ok_or_else(|| StoreError::invalid(field, "empty packed blob"))?;
     if format != FORMAT_V1 {
-        return Err(corrupt(field, format!("unknown packed format {format}")));
+        return Err(StoreError::invalid(
+            field,
+            format!("unknown packed format {format}"),
+        ));
     }
     let mut d = zstd::bulk::Decompressor::with_dictionary(dictionary)
-        .map_err(|e| corrupt(field, format!("decompressor: {e}")))?;
+        .map_err(|e| StoreError::invalid(field, format!("decompressor: {e}")))?;
     d.decompress(body, MAX_PLAIN)
-        .map_err(|e| corrupt(field, format!("not a readable pack: {e}")))
+        .map_err(|e| StoreError::invalid(field, format!("not a readable pack: {e}")))
 }
 
 /// Packs bytes without a dictionary.
@@ -149,7 +152,7 @@ pub(crate) fn unpack_text(
         return pack_numbers::unpack(field, blob, dictionary);
     }
     String::from_utf8(decompress(field, blob, dictionary.as_bytes())?)
-        .map_err(|_| corrupt(field, "packed text is not UTF-8"))
+        .map_err(|_| StoreError::invalid(field, "packed text is not UTF-8"))
 }
 
 /// Packs one revolution of lift units (the averaged profile).
@@ -182,7 +185,10 @@ pub(crate) fn unpack_profile(blob: &[u8], points: usize) -> Result<Vec<i32>, Sto
         out.push(to_i32(FIELD, prev)?);
     }
     if !values.bytes.is_empty() {
-        return Err(corrupt(FIELD, format!("more than {points} packed values")));
+        return Err(StoreError::invalid(
+            FIELD,
+            format!("more than {points} packed values"),
+        ));
     }
     Ok(out)
 }
@@ -209,14 +215,16 @@ pub(crate) fn unpack_revolutions(blob: &[u8], profile: &[i32]) -> Result<Vec<i32
     let mut out = Vec::new();
     while !values.bytes.is_empty() {
         let base = profile.get(out.len() % profile.len().max(1)).copied();
-        let base = base.ok_or_else(|| corrupt(FIELD, "raw values without a profile"))?;
+        let base =
+            base.ok_or_else(|| StoreError::invalid(FIELD, "raw values without a profile"))?;
         out.push(to_i32(FIELD, values.next_i64()? + i64::from(base))?);
     }
     Ok(out)
 }
 
 fn to_i32(field: &'static str, v: i64) -> Result<i32, StoreError> {
-    i32::try_from(v).map_err(|_| corrupt(field, format!("packed value {v} is out of range")))
+    i32::try_from(v)
+        .map_err(|_| StoreError::invalid(field, format!("packed value {v} is out of range")))
 }
 
 #[cfg(test)]

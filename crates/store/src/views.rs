@@ -38,7 +38,7 @@ pub enum AckOutcome {
 impl Store {
     /// Acknowledges event `id` of `machine` at `at_ms`. Appended: a second acknowledgement
     /// changes nothing and says so.
-    pub(crate) async fn acknowledge_event(
+    pub async fn acknowledge_event(
         &self,
         machine: &str,
         id: EventId,
@@ -79,7 +79,7 @@ impl Store {
 
     /// The acknowledgements of `machine`'s events with id ≥ `from`, oldest first, at most
     /// `limit`.
-    pub(crate) async fn event_acks(
+    pub async fn event_acks(
         &self,
         machine: &str,
         from: EventId,
@@ -111,7 +111,7 @@ impl Store {
     }
 
     /// The newest learning-state snapshot of (machine, lobe), read through the readers' gate.
-    pub(crate) async fn learning_state_for_view(
+    pub async fn learning_state_for_view(
         &self,
         machine: &str,
         lobe: &str,
@@ -132,7 +132,7 @@ impl Store {
 
     /// The newest `limit` table versions of (machine, lobe) without their programs, highest
     /// first: the overview and the trend read these, never the program texts.
-    pub(crate) async fn table_version_heads(
+    pub async fn table_version_heads(
         &self,
         machine: &str,
         lobe: &str,

@@ -106,15 +106,15 @@ macro_rules! fetch_chain {
             let mut packs = Vec::new();
             for i in 0..chained.fields.len() {
                 let text: Option<String> = sqlx::Row::try_get(row, 1 + 2 * i)
-                    .map_err($crate::store::error::db_error("reading packed history"))?;
+                    .map_err($crate::error::db_error("reading packed history"))?;
                 let pack: Option<Vec<u8>> = sqlx::Row::try_get(row, 2 + 2 * i)
-                    .map_err($crate::store::error::db_error("reading packed history"))?;
+                    .map_err($crate::error::db_error("reading packed history"))?;
                 texts.push(text);
                 packs.push(pack);
             }
-            links.push($crate::store::chain::Link {
+            links.push($crate::chain::Link {
                 codec: sqlx::Row::try_get(row, 0)
-                    .map_err($crate::store::error::db_error("reading packed history"))?,
+                    .map_err($crate::error::db_error("reading packed history"))?,
                 texts,
                 packs,
             });
@@ -220,13 +220,13 @@ macro_rules! texts_of {
         for i in 0..packed.len() {
             packs.push(
                 sqlx::Row::try_get(&row, i)
-                    .map_err($crate::store::error::db_error("reading packed history"))?,
+                    .map_err($crate::error::db_error("reading packed history"))?,
             );
         }
         match $store.chains.get(key, id, &packs) {
             Some(texts) => texts,
             None => {
-                let texts = $crate::store::chain::fetch_chain!($store, &mut *$exec, chained, id);
+                let texts = $crate::chain::fetch_chain!($store, &mut *$exec, chained, id);
                 if let Some(packs) = packs.into_iter().collect::<Option<Vec<_>>>() {
                     $store.chains.put(key, id, packs, texts.clone());
                 }
@@ -253,9 +253,8 @@ macro_rules! next_link {
         .await
         .map_err($store.db_error("reading packed history"))?;
         match newest {
-            Some((id, depth)) if depth + 1 < $crate::store::chain::MAX_DEPTH => {
-                let plain =
-                    $crate::store::chain::texts_of!($store, $exec, chained, $machine, $lobe, id);
+            Some((id, depth)) if depth + 1 < $crate::chain::MAX_DEPTH => {
+                let plain = $crate::chain::texts_of!($store, $exec, chained, $machine, $lobe, id);
                 (Some(id), depth + 1, plain)
             }
             _ => (None, 0, vec![String::new(); chained.fields.len()]),
@@ -267,7 +266,7 @@ pub(crate) use next_link;
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::store::pack::pack_text;
+    use crate::pack::pack_text;
 
     /// A chain whose rows were packed by builds with different formats (zstd only, then
     /// numbers against the parent, then zstd again) reads back every row exactly: each link is

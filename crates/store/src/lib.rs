@@ -22,6 +22,9 @@
 //! ([`Store::prune_raw_older_than`]) setting a raw blob to NULL; table-version status
 //! changes are appended rows; the newest learning-state row wins.
 
+// No unwrap() in shipped code: bad input must become an error, not a panic (tests may).
+#![warn(clippy::unwrap_used)]
+
 mod audit;
 mod chain;
 mod codec;
@@ -46,8 +49,8 @@ use sqlx::postgres::PgPool;
 use sqlx::sqlite::SqlitePool;
 use tokio::sync::{Semaphore, SemaphorePermit};
 
-pub use audit::{AUDIT_GENESIS, AuditCheck, AuditEntry, AuditRow, MAX_AUDIT_PAGE, audit_digest};
-pub use codec::{UNITS_PER_MM, decode_lifts_mm, encode_lifts_mm, sha256_hex};
+pub use audit::{AuditCheck, AuditEntry, AuditRow, MAX_AUDIT_PAGE};
+pub use codec::{encode_lifts_mm, sha256_hex};
 pub use convert::Converted;
 pub use error::{Detail, StoreError};
 pub use identity::StoreIdentity;
@@ -99,8 +102,8 @@ pub enum RawPool<'a> {
 macro_rules! with_write {
     ($store:expr, $pool:ident => $body:expr) => {
         match &$store.pools {
-            $crate::store::Pools::Sqlite { write: $pool, .. } => $body,
-            $crate::store::Pools::Postgres { write: $pool, .. } => $body,
+            $crate::Pools::Sqlite { write: $pool, .. } => $body,
+            $crate::Pools::Postgres { write: $pool, .. } => $body,
         }
     };
 }
@@ -112,8 +115,8 @@ macro_rules! with_read {
     ($store:expr, $pool:ident => $body:expr) => {{
         let _turn = $store.read_turn().await?;
         match &$store.pools {
-            $crate::store::Pools::Sqlite { read: $pool, .. } => $body,
-            $crate::store::Pools::Postgres { read: $pool, .. } => $body,
+            $crate::Pools::Sqlite { read: $pool, .. } => $body,
+            $crate::Pools::Postgres { read: $pool, .. } => $body,
         }
     }};
 }
@@ -122,7 +125,7 @@ pub(crate) use with_read;
 /// Reads a column or returns a `StoreError::Backend` for `$op`.
 macro_rules! col {
     ($row:expr, $name:literal, $op:literal) => {
-        sqlx::Row::try_get($row, $name).map_err($crate::store::error::db_error($op))?
+        sqlx::Row::try_get($row, $name).map_err($crate::error::db_error($op))?
     };
 }
 pub(crate) use col;

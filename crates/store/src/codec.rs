@@ -8,7 +8,7 @@
 use super::error::StoreError;
 
 /// Lift units per mm in blobs: 0.1 µm.
-pub const UNITS_PER_MM: f64 = 10_000.0;
+pub(crate) const UNITS_PER_MM: f64 = 10_000.0;
 
 /// `codec` of a row in the version-1 layout (i32 blobs, JSON text), as written before
 /// schema version 4 and not yet converted.
@@ -66,21 +66,7 @@ pub fn encode_lifts_mm(
     Ok(())
 }
 
-/// Decodes a lift blob into mm; a length not a multiple of 4 is a corrupt row.
-pub fn decode_lifts_mm(blob: &[u8]) -> Result<Vec<f64>, StoreError> {
-    if !blob.len().is_multiple_of(4) {
-        return Err(StoreError::invalid(
-            "lift blob",
-            format!("length {} is not a multiple of 4", blob.len()),
-        ));
-    }
-    Ok(blob
-        .chunks_exact(4)
-        .map(|c| f64::from(i32::from_le_bytes([c[0], c[1], c[2], c[3]])) / UNITS_PER_MM)
-        .collect())
-}
-
-pub use crate::digest::sha256_hex;
+pub use camloop_core::digest::sha256_hex;
 
 /// Cursor text for the position after the row (received_at_ms, id).
 pub(crate) fn encode_cursor(received_at_ms: i64, id: i64) -> String {
@@ -98,16 +84,23 @@ pub(crate) fn decode_cursor(cursor: &str) -> Result<(i64, i64), StoreError> {
 }
 
 /// A name the store keys by: never empty; a machine name follows the one rule of config and
-/// API ([`crate::names::check_plain_name`]).
+/// API ([`camloop_core::names::check_plain_name`]).
 pub(crate) fn check_name(field: &'static str, value: &str) -> Result<(), StoreError> {
     if value.trim().is_empty() {
         return Err(StoreError::invalid(field, "must not be empty"));
     }
     if field == "machine" {
-        crate::names::check_plain_name(value)
+        camloop_core::names::check_plain_name(value)
             .map_err(|e| StoreError::invalid(field, e.to_string()))?;
     }
     Ok(())
+}
+
+/// A machine name read back. Every write checks the rule, so a refusal means a row written
+/// outside camloop.
+pub(crate) fn machine_of(text: String) -> Result<camloop_core::names::MachineName, StoreError> {
+    camloop_core::names::MachineName::try_from(text)
+        .map_err(|e| StoreError::invalid("machine", e.to_string()))
 }
 
 pub(crate) fn check_json(field: &'static str, text: &str) -> Result<(), StoreError> {
@@ -157,7 +150,7 @@ mod tests {
         let mut blob = Vec::new();
         encode_lifts_mm(lifts, &mut blob).unwrap();
         assert_eq!(blob.len(), 4 * lifts.len());
-        let back = decode_lifts_mm(&blob).unwrap();
+        let back = units_to_mm(&decode_units(&blob).unwrap());
         for (a, b) in lifts.iter().zip(&back) {
             // Quantisation to 0.1 µm = 1e-4 mm: error at most half a unit.
             assert!((a - b).abs() <= 0.5e-4 + 1e-12, "{a} vs {b}");
@@ -174,7 +167,7 @@ mod tests {
             "invalid"
         );
         assert!(encode_lifts_mm([300_000.0], &mut blob).is_err());
-        assert!(decode_lifts_mm(&[1, 2, 3]).is_err());
+        assert!(decode_units(&[1, 2, 3]).is_err());
     }
 
     #[test]

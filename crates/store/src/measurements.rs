@@ -11,7 +11,7 @@ use super::{
     HistoryFilter, MasterRuns, MeasurementDetail, MeasurementId, MeasurementSummary,
     NewMeasurement, Page, RecipeSnapshotId, Store, StoreError, Verdict, col, with_read, with_write,
 };
-use crate::core::measure::MASTER_PART_PREFIX;
+use camloop_core::measure::MASTER_PART_PREFIX;
 
 const SUMMARY_COLUMNS: &str = "m.id, m.machine, m.part, m.lobe, m.received_at_ms, m.verdict, \
      m.max_profile_error_um, m.base_radius_error_um, m.phase_error_deg, m.revolutions_used, \
@@ -68,8 +68,8 @@ macro_rules! fetch_all_dynamic {
         let mut q = sqlx::query($sql);
         for b in $binds {
             q = match b {
-                $crate::store::measurements::Bind::I64(v) => q.bind(v),
-                $crate::store::measurements::Bind::Text(v) => q.bind(v),
+                $crate::measurements::Bind::I64(v) => q.bind(v),
+                $crate::measurements::Bind::Text(v) => q.bind(v),
             };
         }
         q.fetch_all($pool).await.map_err($store.db_error($op))?
@@ -86,7 +86,7 @@ macro_rules! summary_from_row {
         let recipe: Option<i64> = col!(row, "recipe_snapshot_id", "reading a measurement");
         MeasurementSummary {
             id: MeasurementId(col!(row, "id", "reading a measurement")),
-            machine: col!(row, "machine", "reading a measurement"),
+            machine: $crate::codec::machine_of(col!(row, "machine", "reading a measurement"))?,
             part: col!(row, "part", "reading a measurement"),
             lobe: col!(row, "lobe", "reading a measurement"),
             received_at_ms: col!(row, "received_at_ms", "reading a measurement"),
@@ -213,7 +213,7 @@ fn split_revolutions(lifts: Vec<f64>, points_per_rev: u32) -> Result<Vec<Vec<f64
 }
 
 fn check_measurement(m: &NewMeasurement) -> Result<(), StoreError> {
-    check_name("machine", &m.machine)?;
+    check_name("machine", m.machine.as_str())?;
     check_name("part", &m.part)?;
     check_name("lobe", &m.lobe)?;
     check_sha256("sha256", &m.sha256)?;
@@ -265,7 +265,7 @@ impl Store {
                 "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) \
                  ON CONFLICT (name) DO NOTHING",
             )
-            .bind(&m.machine)
+            .bind(m.machine.as_str())
             .bind(m.received_at_ms)
             .execute(&mut *tx)
             .await
@@ -277,7 +277,7 @@ impl Store {
                  VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13) \
                  ON CONFLICT (sha256) DO NOTHING RETURNING id",
             )
-            .bind(&m.machine)
+            .bind(m.machine.as_str())
             .bind(&m.part)
             .bind(&m.lobe)
             .bind(m.received_at_ms)
@@ -389,7 +389,7 @@ impl Store {
 
     /// Every measurement of one part (a shaft, by the number the gauge gave) on one machine,
     /// oldest first: what answers "did shaft 1234 pass, lobe by lobe". At most `MAX_PAGE`.
-    pub(crate) async fn part_measurements(
+    pub async fn part_measurements(
         &self,
         machine: &str,
         part: &str,
@@ -467,7 +467,7 @@ impl Store {
     /// One feature's measurements received in `[since_ms, until_ms)` with their reports,
     /// newest first, before id `before` (exclusive; call again with the last id to go on),
     /// at most `limit`: the window of a capability study or a control chart.
-    pub(crate) async fn feature_measurements(
+    pub async fn feature_measurements(
         &self,
         machine: &str,
         lobe: &str,
@@ -501,7 +501,7 @@ impl Store {
 
     /// The id of the newest measurement, `None` while there is none: what the dashboard's
     /// live channel polls (one index lookup).
-    pub(crate) async fn newest_measurement_id(&self) -> Result<Option<MeasurementId>, StoreError> {
+    pub async fn newest_measurement_id(&self) -> Result<Option<MeasurementId>, StoreError> {
         with_read!(self, pool => {
             let id: Option<i64> = sqlx::query_scalar("SELECT MAX(id) FROM measurements")
                 .fetch_one(pool)
@@ -512,7 +512,7 @@ impl Store {
     }
 
     /// Summaries of the measurements after `after` (exclusive), oldest first, at most `limit`.
-    pub(crate) async fn measurements_after(
+    pub async fn measurements_after(
         &self,
         after: MeasurementId,
         limit: u32,

@@ -11,7 +11,7 @@
 use serde_json::{Map, Number, Value};
 
 use super::error::StoreError;
-use super::pack::{VarintError, put_varint as put, take_varint, unzigzag, zigzag};
+use super::pack::{Varints, put_varint as put, zigzag};
 
 /// Quantisation of fractional numbers in a packed report: 0.01 of the number's unit (µm,
 /// deg, µm/deg), a tenth of the gauge's 0.1 µm resolution.
@@ -124,29 +124,38 @@ fn encode(value: &Value, out: &mut Vec<u8>) {
     }
 }
 
+/// The report's reader: the varints through the one reader of every packed format
+/// ([`Varints`]), the tags, lengths and texts of the tree beside them.
 struct Reader<'a> {
-    bytes: &'a [u8],
+    values: Varints<'a>,
 }
 
-impl Reader<'_> {
+impl<'a> Reader<'a> {
+    fn new(bytes: &'a [u8]) -> Self {
+        Self {
+            values: Varints {
+                bytes,
+                field: "analysis_packed",
+            },
+        }
+    }
+
     fn byte(&mut self) -> Result<u8, StoreError> {
         let (&b, rest) = self
+            .values
             .bytes
             .split_first()
             .ok_or_else(|| bad("report ends early"))?;
-        self.bytes = rest;
+        self.values.bytes = rest;
         Ok(b)
     }
 
     fn u(&mut self) -> Result<u64, StoreError> {
-        take_varint(&mut self.bytes).map_err(|e| match e {
-            VarintError::Truncated => bad("report ends early"),
-            VarintError::TooLong => bad("a number is longer than 64 bits"),
-        })
+        self.values.next_u64()
     }
 
     fn i(&mut self) -> Result<i64, StoreError> {
-        self.u().map(unzigzag)
+        self.values.next_i64()
     }
 
     /// A length, checked against what is left (each item takes at least one byte).
@@ -154,14 +163,14 @@ impl Reader<'_> {
         let n = self.u()?;
         usize::try_from(n)
             .ok()
-            .filter(|&n| n <= self.bytes.len())
+            .filter(|&n| n <= self.values.bytes.len())
             .ok_or_else(|| bad(format!("length {n} exceeds the report")))
     }
 
     fn text(&mut self) -> Result<String, StoreError> {
         let n = self.len()?;
-        let (s, rest) = self.bytes.split_at(n);
-        self.bytes = rest;
+        let (s, rest) = self.values.bytes.split_at(n);
+        self.values.bytes = rest;
         String::from_utf8(s.to_vec()).map_err(|_| bad("text is not UTF-8"))
     }
 
@@ -238,9 +247,9 @@ pub(crate) fn pack_report(json: &str) -> Result<Vec<u8>, StoreError> {
 /// The report's JSON text from [`pack_report`].
 pub(crate) fn unpack_report(blob: &[u8]) -> Result<String, StoreError> {
     let plain = super::pack::unpack_bytes("analysis_packed", blob)?;
-    let mut r = Reader { bytes: &plain };
+    let mut r = Reader::new(&plain);
     let value = r.value(0)?;
-    if !r.bytes.is_empty() {
+    if !r.values.bytes.is_empty() {
         return Err(bad("bytes after the report"));
     }
     serde_json::to_string(&value).map_err(|e| bad(e.to_string()))
@@ -296,14 +305,12 @@ mod tests {
         let blob = pack_report(r#"{"a":[0.5,1.5],"b":"text"}"#).unwrap();
         let plain = super::super::pack::unpack_bytes("t", &blob).unwrap();
         for cut in 0..plain.len() {
-            let mut r = Reader {
-                bytes: &plain[..cut],
-            };
+            let mut r = Reader::new(&plain[..cut]);
             assert!(r.value(0).is_err(), "cut at {cut}");
         }
         let mut deep = [ARRAY, 1].repeat(100);
         deep.push(NULL);
-        assert!(Reader { bytes: &deep }.value(0).is_err());
-        assert!(Reader { bytes: &[42] }.value(0).is_err());
+        assert!(Reader::new(&deep).value(0).is_err());
+        assert!(Reader::new(&[42]).value(0).is_err());
     }
 }

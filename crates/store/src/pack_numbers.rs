@@ -25,10 +25,6 @@ const NUMBER: u8 = 0x01;
 const NEGATIVE_ZERO: u8 = 0x02;
 const MAX_DIGITS: usize = 18;
 
-fn corrupt(field: &'static str, why: impl Into<String>) -> StoreError {
-    StoreError::invalid(field, why.into())
-}
-
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Number {
     mantissa: i64,
@@ -229,19 +225,19 @@ pub(super) fn unpack(field: &'static str, blob: &[u8], parent: &str) -> Result<S
 fn decode(field: &'static str, blob: &[u8], parent_t: &Tokens) -> Result<String, StoreError> {
     let body = match blob.split_first() {
         Some((&FORMAT_NUMBERS, body)) => body,
-        _ => return Err(corrupt(field, "not a numbers pack")),
+        _ => return Err(StoreError::invalid(field, "not a numbers pack")),
     };
     let mut reader = super::pack::Varints { bytes: body, field };
     let template_len = usize::try_from(reader.next_u64()?)
         .ok()
         .filter(|&l| l <= reader.bytes.len())
-        .ok_or_else(|| corrupt(field, "template length beyond the pack"))?;
+        .ok_or_else(|| StoreError::invalid(field, "template length beyond the pack"))?;
     let (template, numbers) = reader.bytes.split_at(template_len);
     let template = zstd::bulk::Decompressor::with_dictionary(&parent_t.template)
         .and_then(|mut d| d.decompress(template, super::pack::MAX_PLAIN))
-        .map_err(|e| corrupt(field, format!("template is not readable: {e}")))?;
+        .map_err(|e| StoreError::invalid(field, format!("template is not readable: {e}")))?;
     let numbers = zstd::bulk::decompress(numbers, super::pack::MAX_PLAIN)
-        .map_err(|e| corrupt(field, format!("numbers are not readable: {e}")))?;
+        .map_err(|e| StoreError::invalid(field, format!("numbers are not readable: {e}")))?;
     let bases = pairs(&template, parent_t);
     let mut values = super::pack::Varints {
         bytes: &numbers,
@@ -262,7 +258,7 @@ fn decode(field: &'static str, blob: &[u8], parent_t: &Tokens) -> Result<String,
         let decimals = i8::try_from(values.next_i64()?.wrapping_add(base_decimals))
             .ok()
             .filter(|d| (-1..=MAX_DIGITS as i8).contains(d))
-            .ok_or_else(|| corrupt(field, "a number's decimals are out of range"))?;
+            .ok_or_else(|| StoreError::invalid(field, "a number's decimals are out of range"))?;
         let mantissa = match bases[k] {
             Some(p) => residuals[k].wrapping_add(predict(p, decimals)),
             None => residuals[k],
@@ -271,9 +267,12 @@ fn decode(field: &'static str, blob: &[u8], parent_t: &Tokens) -> Result<String,
         k += 1;
     }
     if !values.bytes.is_empty() {
-        return Err(corrupt(field, "numbers pack has bytes left over"));
+        return Err(StoreError::invalid(
+            field,
+            "numbers pack has bytes left over",
+        ));
     }
-    String::from_utf8(out).map_err(|_| corrupt(field, "packed text is not UTF-8"))
+    String::from_utf8(out).map_err(|_| StoreError::invalid(field, "packed text is not UTF-8"))
 }
 
 #[cfg(test)]

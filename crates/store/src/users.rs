@@ -85,6 +85,35 @@ fn user_from(row: UserRow) -> Result<User, StoreError> {
     })
 }
 
+/// One INSERT … RETURNING id through the writer: the id of the new row.
+macro_rules! inserted_id {
+    ($store:expr, $op:expr, $sql:expr $(, $bind:expr)* $(,)?) => {
+        with_write!($store, pool => {
+            let id: i64 = sqlx::query_scalar($sql)
+                $(.bind($bind))*
+                .fetch_one(pool)
+                .await
+                .map_err($store.db_error($op))?;
+            Ok::<i64, StoreError>(id)
+        })
+    };
+}
+
+/// One UPDATE through the writer: whether it changed the row (every change of a user or a
+/// token answers "was there such a one, not changed already").
+macro_rules! changed_one {
+    ($store:expr, $op:expr, $sql:expr $(, $bind:expr)* $(,)?) => {
+        with_write!($store, pool => {
+            let done = sqlx::query($sql)
+                $(.bind($bind))*
+                .execute(pool)
+                .await
+                .map_err($store.db_error($op))?;
+            Ok(done.rows_affected() == 1)
+        })
+    };
+}
+
 impl Store {
     /// Adds a user; a name taken already is a [`StoreError::Conflict`].
     pub async fn add_user(
@@ -101,20 +130,17 @@ impl Store {
                 detail: super::Detail(String::new()),
             });
         }
-        with_write!(self, pool => {
-            let id: i64 = sqlx::query_scalar(
-                "INSERT INTO users (name, role, password_hash, created_at_ms, changed_at_ms) \
-                 VALUES ($1, $2, $3, $4, $4) RETURNING id",
-            )
-            .bind(name)
-            .bind(role.as_str())
-            .bind(password_hash)
-            .bind(at_ms)
-            .fetch_one(pool)
-            .await
-            .map_err(self.db_error(OP))?;
-            Ok(UserId(id))
-        })
+        inserted_id!(
+            self,
+            OP,
+            "INSERT INTO users (name, role, password_hash, created_at_ms, changed_at_ms) \
+             VALUES ($1, $2, $3, $4, $4) RETURNING id",
+            name,
+            role.as_str(),
+            password_hash,
+            at_ms,
+        )
+        .map(UserId)
     }
 
     /// The user called `name`, disabled or not.
@@ -146,64 +172,50 @@ impl Store {
     }
 
     /// Sets a user's password hash; false when there is no such user.
-    pub(crate) async fn set_password(
+    pub async fn set_password(
         &self,
         name: &str,
         password_hash: &str,
         at_ms: i64,
     ) -> Result<bool, StoreError> {
-        const OP: &str = "changing a password";
-        with_write!(self, pool => {
-            let done = sqlx::query(
-                "UPDATE users SET password_hash = $1, changed_at_ms = $2 WHERE name = $3",
-            )
-            .bind(password_hash)
-            .bind(at_ms)
-            .bind(name)
-            .execute(pool)
-            .await
-            .map_err(self.db_error(OP))?;
-            Ok(done.rows_affected() == 1)
-        })
+        changed_one!(
+            self,
+            "changing a password",
+            "UPDATE users SET password_hash = $1, changed_at_ms = $2 WHERE name = $3",
+            password_hash,
+            at_ms,
+            name,
+        )
     }
 
     /// Disables a user (its tokens and sessions stop working); false when there is no such
     /// user or it was disabled already.
-    pub(crate) async fn disable_user(&self, name: &str, at_ms: i64) -> Result<bool, StoreError> {
-        const OP: &str = "disabling a user";
-        with_write!(self, pool => {
-            let done = sqlx::query(
-                "UPDATE users SET disabled_at_ms = $1, changed_at_ms = $1 \
-                 WHERE name = $2 AND disabled_at_ms IS NULL",
-            )
-            .bind(at_ms)
-            .bind(name)
-            .execute(pool)
-            .await
-            .map_err(self.db_error(OP))?;
-            Ok(done.rows_affected() == 1)
-        })
+    pub async fn disable_user(&self, name: &str, at_ms: i64) -> Result<bool, StoreError> {
+        changed_one!(
+            self,
+            "disabling a user",
+            "UPDATE users SET disabled_at_ms = $1, changed_at_ms = $1 \
+             WHERE name = $2 AND disabled_at_ms IS NULL",
+            at_ms,
+            name,
+        )
     }
 
     /// Keeps a new token's digest.
     pub async fn add_token(&self, t: &NewToken) -> Result<TokenId, StoreError> {
-        const OP: &str = "adding a token";
-        with_write!(self, pool => {
-            let id: i64 = sqlx::query_scalar(
-                "INSERT INTO api_tokens (user_id, label, token_sha256, role, created_at_ms, \
-                 expires_at_ms) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
-            )
-            .bind(t.user.0)
-            .bind(&t.label)
-            .bind(&t.sha256)
-            .bind(t.role.as_str())
-            .bind(t.created_at_ms)
-            .bind(t.expires_at_ms)
-            .fetch_one(pool)
-            .await
-            .map_err(self.db_error(OP))?;
-            Ok(TokenId(id))
-        })
+        inserted_id!(
+            self,
+            "adding a token",
+            "INSERT INTO api_tokens (user_id, label, token_sha256, role, created_at_ms, \
+             expires_at_ms) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
+            t.user.0,
+            &t.label,
+            &t.sha256,
+            t.role.as_str(),
+            t.created_at_ms,
+            t.expires_at_ms,
+        )
+        .map(TokenId)
     }
 
     /// The token whose digest is `sha256`, with its user.
@@ -237,18 +249,13 @@ impl Store {
 
     /// Revokes a token; false when there is no such token or it was revoked already.
     pub async fn revoke_token(&self, id: TokenId, at_ms: i64) -> Result<bool, StoreError> {
-        const OP: &str = "revoking a token";
-        with_write!(self, pool => {
-            let done = sqlx::query(
-                "UPDATE api_tokens SET revoked_at_ms = $1 WHERE id = $2 AND revoked_at_ms IS NULL",
-            )
-            .bind(at_ms)
-            .bind(id.0)
-            .execute(pool)
-            .await
-            .map_err(self.db_error(OP))?;
-            Ok(done.rows_affected() == 1)
-        })
+        changed_one!(
+            self,
+            "revoking a token",
+            "UPDATE api_tokens SET revoked_at_ms = $1 WHERE id = $2 AND revoked_at_ms IS NULL",
+            at_ms,
+            id.0,
+        )
     }
 
     /// Every token (no digests), oldest first.

@@ -2,12 +2,13 @@
 
 use super::chain::{LEARNING_STATES, fetch_chain, next_link, texts_of};
 use super::codec::{
-    CODEC_PACKED, check_finite, check_json, check_limit, check_name, check_sha256, sha256_hex,
+    CODEC_PACKED, check_finite, check_json, check_limit, check_name, check_sha256, machine_of,
+    sha256_hex,
 };
 use super::measurements::{Bind, Conditions, fetch_all_dynamic};
 use super::pack::pack_text;
 use super::{
-    Dressing, DressingId, Event, EventFilter, EventId, EventLevel, Feature, FeatureKind,
+    Dressing, DressingId, Event, EventFilter, EventId, EventKind, EventLevel, Feature, FeatureKind,
     LearningState, Machine, NewDressing, NewEvent, NewRecipeSnapshot, RecipeSnapshotId, Store,
     StoreError, col, with_read, with_write,
 };
@@ -22,6 +23,32 @@ const REPLACEABLE_STATE: &str = "SELECT n.id, n.base_id FROM learning_states n W
 const ENSURE_MACHINE: &str =
     "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) ON CONFLICT (name) DO NOTHING";
 
+/// Appends one row of a machine's log in one transaction with the machine's first sight:
+/// `$sql` takes the machine as `$1`, the time as `$2`, then `$bind…`, and returns the id.
+/// Dressings and events are this same transaction.
+macro_rules! append_logged {
+    ($store:expr, $op:expr, $machine:expr, $at_ms:expr, $sql:expr $(, $bind:expr)* $(,)?) => {
+        with_write!($store, pool => {
+            let mut tx = pool.begin().await.map_err($store.db_error($op))?;
+            sqlx::query(ENSURE_MACHINE)
+                .bind($machine)
+                .bind($at_ms)
+                .execute(&mut *tx)
+                .await
+                .map_err($store.db_error($op))?;
+            let id: i64 = sqlx::query_scalar($sql)
+                .bind($machine)
+                .bind($at_ms)
+                $(.bind($bind))*
+                .fetch_one(&mut *tx)
+                .await
+                .map_err($store.db_error($op))?;
+            tx.commit().await.map_err($store.db_error($op))?;
+            Ok::<i64, StoreError>(id)
+        })
+    };
+}
+
 impl Store {
     /// Keeps a recipe snapshot of one lobe or pin. When the newest snapshot of that
     /// (machine, part, lobe) has the same JSON text, returns its id and writes nothing.
@@ -29,7 +56,7 @@ impl Store {
         &self,
         r: &NewRecipeSnapshot,
     ) -> Result<RecipeSnapshotId, StoreError> {
-        check_name("machine", &r.machine)?;
+        check_name("machine", r.machine.as_str())?;
         check_name("part", &r.part)?;
         check_name("lobe", &r.lobe)?;
         check_json("recipe_json", &r.recipe_json)?;
@@ -38,7 +65,7 @@ impl Store {
         with_write!(self, pool => {
             let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
             sqlx::query(ENSURE_MACHINE)
-                .bind(&r.machine)
+                .bind(r.machine.as_str())
                 .bind(r.created_at_ms)
                 .execute(&mut *tx)
                 .await
@@ -47,7 +74,7 @@ impl Store {
                 "SELECT id, sha256 FROM recipe_snapshots WHERE machine = $1 AND part = $2 \
                  AND lobe = $3 ORDER BY id DESC LIMIT 1",
             )
-            .bind(&r.machine)
+            .bind(r.machine.as_str())
             .bind(&r.part)
             .bind(&r.lobe)
             .fetch_optional(&mut *tx)
@@ -62,7 +89,7 @@ impl Store {
                 "INSERT INTO recipe_snapshots (machine, part, lobe, kind, recipe_json, sha256, \
                  created_at_ms) VALUES ($1, $2, $3, $4, $5, $6, $7) RETURNING id",
             )
-            .bind(&r.machine)
+            .bind(r.machine.as_str())
             .bind(&r.part)
             .bind(&r.lobe)
             .bind(r.kind.as_str())
@@ -85,10 +112,11 @@ impl Store {
                     .fetch_all(pool)
                     .await
                     .map_err(self.db_error("listing machines"))?;
-            Ok(rows
-                .into_iter()
-                .map(|(name, first_seen_ms)| Machine { name, first_seen_ms })
-                .collect())
+            rows.into_iter()
+                .map(|(name, first_seen_ms)| {
+                    Ok(Machine { name: machine_of(name)?, first_seen_ms })
+                })
+                .collect()
         })
     }
 
@@ -123,37 +151,25 @@ impl Store {
 
     /// Appends a wheel dressing; returns its row id.
     pub async fn insert_dressing(&self, d: &NewDressing) -> Result<DressingId, StoreError> {
-        check_name("machine", &d.machine)?;
+        check_name("machine", d.machine.as_str())?;
         check_finite("old_radius_mm", d.old_radius_mm)?;
         check_finite("new_radius_mm", d.new_radius_mm)?;
         if let Some(infeed) = d.infeed_um {
             check_finite("infeed_um", infeed)?;
         }
-        const OP: &str = "inserting a dressing";
-        with_write!(self, pool => {
-            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
-            sqlx::query(ENSURE_MACHINE)
-                .bind(&d.machine)
-                .bind(d.at_ms)
-                .execute(&mut *tx)
-                .await
-                .map_err(self.db_error(OP))?;
-            let id: i64 = sqlx::query_scalar(
-                "INSERT INTO dressings (machine, at_ms, old_radius_mm, new_radius_mm, source, \
-                 infeed_um) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
-            )
-            .bind(&d.machine)
-            .bind(d.at_ms)
-            .bind(d.old_radius_mm)
-            .bind(d.new_radius_mm)
-            .bind(&d.source)
-            .bind(d.infeed_um)
-            .fetch_one(&mut *tx)
-            .await
-            .map_err(self.db_error(OP))?;
-            tx.commit().await.map_err(self.db_error(OP))?;
-            Ok(DressingId(id))
-        })
+        append_logged!(
+            self,
+            "inserting a dressing",
+            d.machine.as_str(),
+            d.at_ms,
+            "INSERT INTO dressings (machine, at_ms, old_radius_mm, new_radius_mm, source, \
+             infeed_um) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
+            d.old_radius_mm,
+            d.new_radius_mm,
+            &d.source,
+            d.infeed_um,
+        )
+        .map(DressingId)
     }
 
     /// Whether this dressing (same machine, time and new radius) is stored: how a journal
@@ -164,7 +180,7 @@ impl Store {
                 "SELECT id FROM dressings WHERE machine = $1 AND at_ms = $2 \
                  AND new_radius_mm = $3 LIMIT 1",
             )
-            .bind(&d.machine)
+            .bind(d.machine.as_str())
             .bind(d.at_ms)
             .bind(d.new_radius_mm)
             .fetch_optional(pool)
@@ -188,51 +204,37 @@ impl Store {
             .fetch_all(pool)
             .await
             .map_err(self.db_error("listing dressings"))?;
-            Ok(rows
-                .into_iter()
+            rows.into_iter()
                 .map(|(id, machine, at_ms, old_radius_mm, new_radius_mm, source, infeed_um)| {
-                    Dressing {
+                    Ok(Dressing {
                         id: DressingId(id),
-                        machine,
+                        machine: machine_of(machine)?,
                         at_ms,
                         old_radius_mm,
                         new_radius_mm,
                         infeed_um,
                         source,
-                    }
+                    })
                 })
-                .collect())
+                .collect()
         })
     }
 
     /// Appends an alarm or event; returns its row id.
     pub async fn insert_event(&self, e: &NewEvent) -> Result<EventId, StoreError> {
-        check_name("machine", &e.machine)?;
-        check_name("kind", &e.kind)?;
-        const OP: &str = "inserting an event";
-        with_write!(self, pool => {
-            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
-            sqlx::query(ENSURE_MACHINE)
-                .bind(&e.machine)
-                .bind(e.at_ms)
-                .execute(&mut *tx)
-                .await
-                .map_err(self.db_error(OP))?;
-            let id: i64 = sqlx::query_scalar(
-                "INSERT INTO events (machine, at_ms, level, kind, message) \
-                 VALUES ($1, $2, $3, $4, $5) RETURNING id",
-            )
-            .bind(&e.machine)
-            .bind(e.at_ms)
-            .bind(e.level.as_str())
-            .bind(&e.kind)
-            .bind(&e.message)
-            .fetch_one(&mut *tx)
-            .await
-            .map_err(self.db_error(OP))?;
-            tx.commit().await.map_err(self.db_error(OP))?;
-            Ok(EventId(id))
-        })
+        check_name("machine", e.machine.as_str())?;
+        append_logged!(
+            self,
+            "inserting an event",
+            e.machine.as_str(),
+            e.at_ms,
+            "INSERT INTO events (machine, at_ms, level, kind, message) \
+             VALUES ($1, $2, $3, $4, $5) RETURNING id",
+            e.level.as_str(),
+            e.kind.as_str(),
+            &e.message,
+        )
+        .map(EventId)
     }
 
     /// Whether this event (same machine, time, kind and message) is stored: how a journal
@@ -243,9 +245,9 @@ impl Store {
                 "SELECT id FROM events WHERE machine = $1 AND at_ms = $2 AND kind = $3 \
                  AND message = $4 LIMIT 1",
             )
-            .bind(&e.machine)
+            .bind(e.machine.as_str())
             .bind(e.at_ms)
-            .bind(&e.kind)
+            .bind(e.kind.as_str())
             .bind(&e.message)
             .fetch_optional(pool)
             .await
@@ -283,12 +285,13 @@ impl Store {
             rows.iter()
                 .map(|row| {
                     let level: String = col!(row, "level", "reading an event");
+                    let kind: String = col!(row, "kind", "reading an event");
                     Ok(Event {
                         id: EventId(col!(row, "id", "reading an event")),
-                        machine: col!(row, "machine", "reading an event"),
+                        machine: machine_of(col!(row, "machine", "reading an event"))?,
                         at_ms: col!(row, "at_ms", "reading an event"),
                         level: EventLevel::parse(&level)?,
-                        kind: col!(row, "kind", "reading an event"),
+                        kind: EventKind::parse(&kind)?,
                         message: col!(row, "message", "reading an event"),
                     })
                 })
@@ -437,7 +440,7 @@ impl Store {
     /// row was saved after `saved_at_ms`, or then with this very state. How a journal
     /// replayed after a crash recognises learning it had already written, now that a
     /// snapshot may have been replaced by a later one with the same meaning.
-    pub(crate) async fn learning_state_covered(
+    pub async fn learning_state_covered(
         &self,
         machine: &str,
         lobe: &str,

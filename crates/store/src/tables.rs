@@ -44,7 +44,7 @@ macro_rules! version_summary {
         let status: String = col!(row, "status", "reading a table version");
         let table_number: i64 = col!(row, "table_number", "reading a table version");
         TableVersion {
-            machine: col!(row, "machine", "reading a table version"),
+            machine: $crate::codec::machine_of(col!(row, "machine", "reading a table version"))?,
             lobe: col!(row, "lobe", "reading a table version"),
             version: col!(row, "version", "reading a table version"),
             parent_version: col!(row, "parent_version", "reading a table version"),
@@ -71,7 +71,7 @@ impl Store {
     /// than the highest stored for this (machine, lobe), starting at 1. Two writers racing
     /// for the same number get [`StoreError::Conflict`] for the loser.
     pub async fn insert_table_version(&self, t: &NewTableVersion) -> Result<i64, StoreError> {
-        check_name("machine", &t.machine)?;
+        check_name("machine", t.machine.as_str())?;
         check_name("lobe", &t.lobe)?;
         check_json("learning_params_json", &t.learning_params_json)?;
         let sha256 = sha256_hex(t.program_text.as_bytes());
@@ -82,7 +82,7 @@ impl Store {
                 "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) \
                  ON CONFLICT (name) DO NOTHING",
             )
-            .bind(&t.machine)
+            .bind(t.machine.as_str())
             .bind(t.created_at_ms)
             .execute(&mut *tx)
             .await
@@ -91,7 +91,7 @@ impl Store {
                 let found: Option<i64> = sqlx::query_scalar(
                     "SELECT id FROM table_versions WHERE machine = $1 AND lobe = $2 AND version = $3",
                 )
-                .bind(&t.machine)
+                .bind(t.machine.as_str())
                 .bind(&t.lobe)
                 .bind(parent)
                 .fetch_optional(&mut *tx)
@@ -106,7 +106,7 @@ impl Store {
                     });
                 }
             }
-            let (base_id, depth, base) = next_link!(self, tx, TABLE_VERSIONS, &t.machine, &t.lobe);
+            let (base_id, depth, base) = next_link!(self, tx, TABLE_VERSIONS, t.machine.as_str(), &t.lobe);
             let program = pack_text("program_packed", &t.program_text, &base[0])?;
             let learning = pack_text("learning_packed", &t.learning_params_json, &base[1])?;
             let (id, version): (i64, i64) = sqlx::query_as(
@@ -118,7 +118,7 @@ impl Store {
                  FROM table_versions WHERE machine = $1 AND lobe = $2 \
                  RETURNING id, version",
             )
-            .bind(&t.machine)
+            .bind(t.machine.as_str())
             .bind(&t.lobe)
             .bind(t.parent_version)
             .bind(i64::from(t.table_number))
@@ -135,7 +135,7 @@ impl Store {
             .await
             .map_err(self.db_error(OP))?;
             self.chains.put(
-                (TABLE_VERSIONS.table, &t.machine, &t.lobe),
+                (TABLE_VERSIONS.table, t.machine.as_str(), &t.lobe),
                 id,
                 vec![program, learning],
                 vec![t.program_text.clone(), t.learning_params_json.clone()],
