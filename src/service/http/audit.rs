@@ -33,7 +33,7 @@ pub async fn record(app: &AppState, entry: AuditEntry) {
             .await
             .map(|_| ())
             .map_err(|e| e.to_string()),
-        Err(e) => Err(e.2),
+        Err(e) => Err(e.message().to_string()),
     };
     if let Err(why) = stored {
         app.metrics.update_access(|a| a.audit_failures_total += 1);

@@ -11,9 +11,9 @@ use super::AppState;
 use super::api::{ApiError, ApiPath, ApiQuery, feature_name, machine_name};
 use super::routes::store;
 use crate::quality::{self, CharacteristicStudy, Window};
+use crate::service::http::ApiCode;
 use axum::Json;
 use axum::extract::State;
-use axum::http::StatusCode;
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Deserialize)]
@@ -37,9 +37,8 @@ pub(super) struct CapabilityReply {
 }
 
 fn bad_window(text: &str) -> ApiError {
-    ApiError(
-        StatusCode::BAD_REQUEST,
-        "invalid_window",
+    ApiError::new(
+        ApiCode::InvalidWindow,
         format!(
             "window `{text}`: use parts:N, since:TIME (2026-11-21, an age like 24h), dressing or recipe"
         ),
@@ -82,9 +81,8 @@ pub(super) async fn capability(
     let window_text = q.window.unwrap_or_else(|| "parts:125".into());
     let window = parse_window(&window_text, crate::clock::now_ms())?;
     let Some(sheet) = state.dashboard.get(&(machine.clone(), feature.clone())) else {
-        return Err(ApiError(
-            StatusCode::NOT_FOUND,
-            "feature_not_found",
+        return Err(ApiError::new(
+            ApiCode::FeatureNotFound,
             format!(
                 "machine {machine} has no configured feature {feature}: its limits come from the recipe"
             ),

@@ -8,6 +8,7 @@
 //! - `session.rs`: dashboard sign-in, sessions, CSRF tokens, sign-out.
 //! - `audit.rs`: appending to the audit trail, and reading it.
 //! - `api.rs`: the `{code, message}` error and the extractors that keep it.
+//! - `code.rs`: [`ApiCode`], every error code with its HTTP status.
 //! - `routes.rs`: the read handlers and their typed replies.
 //! - `writes.rs`: the write handlers and the command hand-over.
 //! - `server.rs`: the listener loop: header and body timeouts, the connection caps.
@@ -20,6 +21,7 @@ pub mod access;
 mod api;
 mod audit;
 mod capability;
+mod code;
 mod dashboard;
 mod harden;
 mod openapi;
@@ -34,6 +36,7 @@ mod writes;
 pub use access::{AuthState, Principal, ROUTES, RouteRule};
 pub use api::{ApiError, ApiJson, ApiPath, ApiQuery, Authorized};
 pub use audit::record as record_audit;
+pub use code::ApiCode;
 pub use dashboard::{FeatureSheet, FeatureSheets, Stopping};
 pub use harden::{CONTENT_SECURITY_POLICY, HostAllowList, Policy};
 pub use routes::{LobeInfo, MachineInfo, MachinesReply};
@@ -136,23 +139,18 @@ pub enum CommandError {
 }
 
 impl CommandError {
-    pub fn status(&self) -> axum::http::StatusCode {
-        use axum::http::StatusCode;
-        match self {
-            CommandError::VersionNotFound { .. } => StatusCode::NOT_FOUND,
-            CommandError::StoreUnavailable { .. } => StatusCode::SERVICE_UNAVAILABLE,
-            CommandError::Refused { .. } => StatusCode::CONFLICT,
-            CommandError::Failed { .. } => StatusCode::INTERNAL_SERVER_ERROR,
-        }
+    /// The HTTP status: the code's own.
+    pub fn status(&self, refused: ApiCode) -> axum::http::StatusCode {
+        self.code(refused).status()
     }
 
     /// The stable code; `refused` is the command's own (`rollback_refused`, …).
-    pub fn code(&self, refused: &'static str) -> &'static str {
+    pub fn code(&self, refused: ApiCode) -> ApiCode {
         match self {
-            CommandError::VersionNotFound { .. } => "table_version_not_found",
-            CommandError::StoreUnavailable { .. } => "store_unavailable",
+            CommandError::VersionNotFound { .. } => ApiCode::TableVersionNotFound,
+            CommandError::StoreUnavailable { .. } => ApiCode::StoreUnavailable,
             CommandError::Refused { .. } => refused,
-            CommandError::Failed { .. } => "command_failed",
+            CommandError::Failed { .. } => ApiCode::CommandFailed,
         }
     }
 }

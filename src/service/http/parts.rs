@@ -5,6 +5,7 @@
 use super::AppState;
 use super::api::{ApiError, ApiPath, machine_name};
 use super::routes::{MeasurementItem, store};
+use crate::service::http::ApiCode;
 use axum::Json;
 use axum::extract::State;
 use serde::Serialize;
@@ -36,9 +37,8 @@ pub(super) async fn part(
 ) -> Result<Json<PartReply>, ApiError> {
     let name = machine_name(&machine)?;
     if !crate::names::valid_part_ident(&part) {
-        return Err(ApiError(
-            axum::http::StatusCode::BAD_REQUEST,
-            "invalid_name",
+        return Err(ApiError::new(
+            ApiCode::InvalidName,
             format!(
                 "part `{}`: must be 1–32 characters of A–Z a–z 0–9 . _ -",
                 crate::names::quote(&part)

@@ -3,17 +3,17 @@
 
 use super::AppState;
 use super::api::{ApiError, ApiPath, ApiQuery, feature_name, machine_name};
+use crate::service::http::ApiCode;
 use crate::store::{EventFilter, HistoryFilter, MasterRuns, MeasurementId, Store, Verdict};
 use axum::Json;
 use axum::extract::State;
-use axum::http::{StatusCode, header};
+use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 
 pub(super) async fn store(state: &AppState) -> Result<Store, ApiError> {
-    state.store.read().await.clone().ok_or(ApiError(
-        StatusCode::SERVICE_UNAVAILABLE,
-        "store_unavailable",
+    state.store.read().await.clone().ok_or(ApiError::new(
+        ApiCode::StoreUnavailable,
         "the history database is not reachable; measurements are kept in the journal".into(),
     ))
 }
@@ -107,13 +107,10 @@ pub(super) async fn cluster(State(state): State<AppState>) -> Result<Json<Cluste
         };
         return Ok(Json(off));
     };
-    let rows = leases.all().await.map_err(|e| {
-        ApiError(
-            axum::http::StatusCode::SERVICE_UNAVAILABLE,
-            "cluster_unavailable",
-            e.to_string(),
-        )
-    })?;
+    let rows = leases
+        .all()
+        .await
+        .map_err(|e| ApiError::new(ApiCode::ClusterUnavailable, e.to_string()))?;
     let here = |r: &crate::cluster::LeaseRow| r.live && r.owner == leases.instance();
     let machines = rows
         .iter()
@@ -276,9 +273,8 @@ pub(super) async fn history(
     if let (Some(a), Some(b)) = (q.since_ms, q.until_ms)
         && a >= b
     {
-        return Err(ApiError(
-            StatusCode::BAD_REQUEST,
-            "invalid_range",
+        return Err(ApiError::new(
+            ApiCode::InvalidRange,
             "since_ms must be before until_ms".into(),
         ));
     }
@@ -327,9 +323,8 @@ pub(super) async fn measurement(
         .await?
         .measurement(MeasurementId(id))
         .await?
-        .ok_or(ApiError(
-            StatusCode::NOT_FOUND,
-            "measurement_not_found",
+        .ok_or(ApiError::new(
+            ApiCode::MeasurementNotFound,
             format!("measurement {id} not found"),
         ))?;
     // The store checks it is JSON on the way in.
@@ -409,9 +404,8 @@ pub(super) async fn program(
 }
 
 fn version_not_found(version: i64) -> ApiError {
-    ApiError(
-        StatusCode::NOT_FOUND,
-        "table_version_not_found",
+    ApiError::new(
+        ApiCode::TableVersionNotFound,
         format!("version {version} not found"),
     )
 }
@@ -448,9 +442,8 @@ pub(super) async fn diff(
         .await?
         .ok_or_else(|| version_not_found(version))?;
     let Some(parent) = newer.parent_version else {
-        return Err(ApiError(
-            StatusCode::NOT_FOUND,
-            "no_parent_version",
+        return Err(ApiError::new(
+            ApiCode::NoParentVersion,
             format!("version {version} is the first"),
         ));
     };
@@ -459,13 +452,8 @@ pub(super) async fn diff(
         .await?
         .ok_or_else(|| version_not_found(parent))?;
     let parse = |text: &str, v: i64| {
-        crate::core::program::parse_table_program(text).map_err(|e| {
-            ApiError(
-                StatusCode::INTERNAL_SERVER_ERROR,
-                "program_unreadable",
-                format!("version {v}: {e}"),
-            )
-        })
+        crate::core::program::parse_table_program(text)
+            .map_err(|e| ApiError::new(ApiCode::ProgramUnreadable, format!("version {v}: {e}")))
     };
     let (new_t, old_t) = (
         parse(&newer.program_text, version)?,

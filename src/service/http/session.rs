@@ -15,6 +15,7 @@ use super::AppState;
 use super::access::{Principal, Via, client_address, failed, locked, same_secret};
 use super::api::ApiError;
 use crate::auth::{UserName, random_hex, token_digest, verify_password};
+use crate::service::http::ApiCode;
 use crate::store::AuditResult;
 use axum::extract::{FromRequest, Request, State};
 use axum::http::{HeaderMap, StatusCode, header};
@@ -47,15 +48,8 @@ pub struct Sessions {
 impl Sessions {
     /// A new session for `user` until `expires_at_ms`: its key (for the cookie) and itself.
     pub fn create(&self, user: &str, expires_at_ms: i64) -> Result<(String, Session), ApiError> {
-        let random = |n| {
-            random_hex(n).map_err(|e| {
-                ApiError(
-                    StatusCode::INTERNAL_SERVER_ERROR,
-                    "random_failed",
-                    e.to_string(),
-                )
-            })
-        };
+        let random =
+            |n| random_hex(n).map_err(|e| ApiError::new(ApiCode::RandomFailed, e.to_string()));
         let key = random(32)?;
         let session = Session {
             user: user.to_string(),
@@ -147,13 +141,7 @@ fn signin_form(
     message: &str,
     status: StatusCode,
 ) -> Result<Response, ApiError> {
-    let nonce = random_hex(16).map_err(|e| {
-        ApiError(
-            StatusCode::INTERNAL_SERVER_ERROR,
-            "random_failed",
-            e.to_string(),
-        )
-    })?;
+    let nonce = random_hex(16).map_err(|e| ApiError::new(ApiCode::RandomFailed, e.to_string()))?;
     let html = super::dashboard::signin_html(&nonce, &local_path(next), message);
     let cookie = set_cookie(app, SIGNIN_COOKIE, &nonce, "/signin", 600);
     Ok((status, [(header::SET_COOKIE, cookie)], Html(html)).into_response())
@@ -191,8 +179,8 @@ pub(super) async fn signin(
         return signin_form(
             &app,
             form.next.as_deref(),
-            &format!("Locked out: {}.", e.2),
-            e.0,
+            &format!("Locked out: {}.", e.message()),
+            e.status(),
         );
     }
     let user = match check_password(&app, name.as_ref(), &form.password).await? {
@@ -258,7 +246,7 @@ async fn check_password(
 }
 
 fn internal(e: impl std::fmt::Display) -> ApiError {
-    ApiError(StatusCode::INTERNAL_SERVER_ERROR, "internal", e.to_string())
+    ApiError::new(ApiCode::Internal, e.to_string())
 }
 
 /// An argon2id hash of a password nobody has, checked for unknown users.
@@ -290,9 +278,8 @@ pub(super) async fn signout(
     if !same_secret(given.as_bytes(), csrf.as_bytes()) {
         app.metrics
             .update_access(|a| *a.failures.entry("csrf").or_default() += 1);
-        return Err(ApiError(
-            StatusCode::FORBIDDEN,
-            "csrf_mismatch",
+        return Err(ApiError::new(
+            ApiCode::CsrfMismatch,
             "sign-out without this session's CSRF token".into(),
         ));
     }
@@ -327,9 +314,9 @@ async fn read_form<T: serde::de::DeserializeOwned>(
     let bytes = super::api::read_body(body, app.body_timeout).await?;
     let req = Request::from_parts(parts, axum::body::Body::from(bytes));
     Form::<T>::from_request(req, app).await.map_err(|r| {
-        ApiError(
+        ApiError::rejected(
             r.status(),
-            "invalid_body",
+            ApiCode::InvalidBody,
             super::access::short(&r.body_text()),
         )
     })

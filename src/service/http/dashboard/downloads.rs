@@ -4,9 +4,10 @@
 use super::data::{self, diff_um};
 use super::{Dash, names};
 use crate::dfq::{DfqSeries, row_from, write_dfq};
+use crate::service::http::ApiCode;
 use crate::service::http::api::{ApiError, ApiPath, ApiQuery};
 use axum::extract::State;
-use axum::http::{StatusCode, header};
+use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use std::fmt::Write as _;
 
@@ -70,7 +71,7 @@ impl Table {
 }
 
 fn not_found(what: String) -> ApiError {
-    ApiError(StatusCode::NOT_FOUND, "no_data", what)
+    ApiError::new(ApiCode::NoData, what)
 }
 
 /// `GET …/data?chart=trend|latest|diff&format=csv|json[&v=N]`.
@@ -110,13 +111,8 @@ pub(super) async fn chart_data(
         }
         Chart::Latest => latest_table(&store, &machine, &lobe).await?,
         Chart::Diff => {
-            let v = q.v.ok_or_else(|| {
-                ApiError(
-                    StatusCode::BAD_REQUEST,
-                    "invalid_query",
-                    "diff needs v".into(),
-                )
-            })?;
+            let v =
+                q.v.ok_or_else(|| ApiError::new(ApiCode::InvalidQuery, "diff needs v".into()))?;
             diff_table(&store, &machine, &lobe, v).await?
         }
     };

@@ -30,6 +30,7 @@ use super::access::Principal;
 use super::api::{ApiError, ApiPath, ApiQuery, feature_name, machine_name};
 use crate::core::analysis::ToleranceBand;
 use crate::recipe::FeatureSetup;
+use crate::service::http::ApiCode;
 use axum::Router;
 use axum::extract::State;
 use axum::http::{StatusCode, header};
@@ -234,9 +235,8 @@ pub(super) async fn ack(
             format!("event {id} was acknowledged before"),
         ),
         AckOutcome::NotFound => {
-            return Err(ApiError(
-                StatusCode::NOT_FOUND,
-                "event_not_found",
+            return Err(ApiError::new(
+                ApiCode::EventNotFound,
                 format!("machine {machine} has no event {id}"),
             ));
         }
