@@ -57,7 +57,7 @@ impl ApiError {
 }
 
 /// The body of every error reply.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(crate) struct ErrorBody<'a> {
     code: ApiCode,
     message: &'a str,

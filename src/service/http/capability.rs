@@ -18,12 +18,14 @@ use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(super) struct CapabilityQuery {
     window: Option<String>,
     chart: Option<bool>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct CapabilityReply {
     machine: String,
     feature: String,
@@ -33,6 +35,7 @@ pub(super) struct CapabilityReply {
     /// Start of the window, Unix ms, when it has one.
     since_ms: Option<i64>,
     master_runs_left_out: usize,
+    #[schema(value_type = Vec<Object>)]
     characteristics: Vec<CharacteristicStudy>,
 }
 
@@ -71,6 +74,7 @@ pub(crate) fn parse_window(text: &str, now_ms: i64) -> Result<Window, ApiError> 
     Ok(w)
 }
 
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/features/{feature}/capability", tag = "quality", params(("machine" = String, Path, description = "machine name"), ("feature" = String, Path, description = "lobe or pin name"), CapabilityQuery), responses((status = 200, description = "process capability of every characteristic of the feature", body = CapabilityReply)))]
 pub(super) async fn capability(
     State(state): State<AppState>,
     ApiPath((machine, feature)): ApiPath<(String, String)>,

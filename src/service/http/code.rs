@@ -15,6 +15,7 @@ use axum::http::StatusCode;
     strum::Display,
     strum::EnumIter,
     serde::Serialize,
+    utoipa::ToSchema,
 )]
 #[strum(serialize_all = "snake_case")]
 #[serde(rename_all = "snake_case")]

@@ -14,7 +14,7 @@
 //! - `server.rs`: the listener loop: header and body timeouts, the connection caps.
 //! - `harden.rs`: the `Host` allow-list, the security headers, the per-client cap.
 //! - `tls.rs`: HTTPS with rustls, reloaded on SIGHUP; the self-signed development pair.
-//! - `openapi.rs`: the API description.
+//! - `openapi.rs`: the API description, derived by utoipa from the handlers and their types.
 //! - `dashboard/`: the engineers' web pages, their live channel and downloads.
 
 pub mod access;

@@ -11,7 +11,7 @@ use axum::extract::State;
 use serde::Serialize;
 
 /// The reply: the part's verdict and its features in grinding order.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct PartReply {
     machine: String,
     part: String,
@@ -22,7 +22,7 @@ pub(super) struct PartReply {
     features: Vec<PartFeature>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct PartFeature {
     lobe: String,
     /// The newest measurement of this feature on this part, if any.
@@ -31,6 +31,7 @@ pub(super) struct PartFeature {
     measurements: usize,
 }
 
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/parts/{part}", tag = "history", params(("machine" = String, Path, description = "machine name"), ("part" = String, Path, description = "part id")), responses((status = 200, description = "the part, feature by feature, and whether it passed", body = PartReply)))]
 pub(super) async fn part(
     State(state): State<AppState>,
     ApiPath((machine, part)): ApiPath<(String, String)>,

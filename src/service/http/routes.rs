@@ -18,7 +18,7 @@ pub(super) async fn store(state: &AppState) -> Result<Store, ApiError> {
     ))
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct Health {
     status: &'static str,
     /// "up" or "down".
@@ -27,6 +27,7 @@ pub(super) struct Health {
     machines: usize,
 }
 
+#[utoipa::path(get, path = "/healthz", tag = "service", responses((status = 200, description = "service up; the database up or down", body = Health)))]
 pub(super) async fn healthz(State(state): State<AppState>) -> Json<Health> {
     let up = state.store.read().await.is_some();
     Json(Health {
@@ -36,6 +37,7 @@ pub(super) async fn healthz(State(state): State<AppState>) -> Json<Health> {
     })
 }
 
+#[utoipa::path(get, path = "/metrics", tag = "service", responses((status = 200, description = "Prometheus metrics", content_type = "text/plain")))]
 pub(super) async fn metrics(State(state): State<AppState>) -> Response {
     (
         [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
@@ -45,7 +47,7 @@ pub(super) async fn metrics(State(state): State<AppState>) -> Response {
 }
 
 /// `GET /api/v1/machines`.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub struct MachinesReply {
     /// Configured machines first (in name order), then machines only the store knows.
     pub machines: Vec<MachineInfo>,
@@ -53,7 +55,7 @@ pub struct MachinesReply {
     pub configured: Vec<String>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub struct MachineInfo {
     pub name: String,
     /// In this service's configuration (else only in the history).
@@ -63,7 +65,7 @@ pub struct MachineInfo {
     pub lobes: Vec<LobeInfo>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub struct LobeInfo {
     pub lobe: String,
     /// The part (recipe) name, once the store has a record of it.
@@ -74,11 +76,12 @@ pub struct LobeInfo {
     pub configured: bool,
     /// Its loop's state in this service: the latest part's errors, the table version on the
     /// control, frozen, blocked by a guard (configured features only).
+    #[schema(value_type = Option<Object>)]
     pub status: Option<crate::service::metrics::FeatureStatus>,
 }
 
 /// `GET /api/v1/cluster`: which instance runs which machine.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct ClusterReply {
     enabled: bool,
     /// The instance that answered.
@@ -86,7 +89,7 @@ pub(super) struct ClusterReply {
     machines: Vec<LeaseInfo>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 struct LeaseInfo {
     machine: String,
     owner: String,
@@ -98,6 +101,7 @@ struct LeaseInfo {
     here: bool,
 }
 
+#[utoipa::path(get, path = "/api/v1/cluster", tag = "service", responses((status = 200, description = "each machine's lease (owner, fencing epoch, live, run here); `{enabled: false}` without `[cluster]`", body = ClusterReply)))]
 pub(super) async fn cluster(State(state): State<AppState>) -> Result<Json<ClusterReply>, ApiError> {
     let Some(leases) = &state.cluster else {
         let off = ClusterReply {
@@ -129,6 +133,7 @@ pub(super) async fn cluster(State(state): State<AppState>) -> Result<Json<Cluste
     }))
 }
 
+#[utoipa::path(get, path = "/api/v1/machines", tag = "history", responses((status = 200, description = "machines and their lobes or pins: configured ones and those in the history", body = MachinesReply)))]
 pub(super) async fn machines(
     State(state): State<AppState>,
 ) -> Result<Json<MachinesReply>, ApiError> {
@@ -203,6 +208,8 @@ pub(super) async fn machines(
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(super) struct HistoryQuery {
     lobe: Option<String>,
     since_ms: Option<i64>,
@@ -215,18 +222,18 @@ pub(super) struct HistoryQuery {
     masters: bool,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct Items<T> {
     items: Vec<T>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct HistoryPage {
     items: Vec<MeasurementItem>,
     next_cursor: Option<String>,
 }
 
-#[derive(Debug, Serialize, Clone)]
+#[derive(Debug, Serialize, Clone, utoipa::ToSchema)]
 pub(super) struct MeasurementItem {
     id: i64,
     machine: String,
@@ -261,6 +268,7 @@ impl From<crate::store::MeasurementSummary> for MeasurementItem {
     }
 }
 
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/measurements", tag = "history", params(("machine" = String, Path, description = "machine name"), HistoryQuery), responses((status = 200, description = "measurements, newest first, keyset-paged", body = HistoryPage)))]
 pub(super) async fn history(
     State(state): State<AppState>,
     ApiPath(machine): ApiPath<String>,
@@ -303,7 +311,7 @@ pub(super) async fn history(
     }))
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct MeasurementReply {
     id: i64,
     machine: String,
@@ -312,9 +320,11 @@ pub(super) struct MeasurementReply {
     averaged_lift_mm: Vec<f64>,
     raw_kept: bool,
     /// The analysis report as stored (error curve, spectrum, …).
+    #[schema(value_type = Object)]
     analysis: serde_json::Value,
 }
 
+#[utoipa::path(get, path = "/api/v1/measurements/{id}", tag = "history", params(("id" = i64, Path, description = "measurement id")), responses((status = 200, description = "one measurement with its averaged profile and analysis", body = MeasurementReply)))]
 pub(super) async fn measurement(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
@@ -342,11 +352,13 @@ pub(super) async fn measurement(
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(super) struct LimitQuery {
     limit: Option<u32>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct TableItem {
     version: i64,
     parent_version: Option<i64>,
@@ -358,6 +370,7 @@ pub(super) struct TableItem {
     created_at_ms: i64,
 }
 
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/lobes/{lobe}/tables", tag = "tables", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), LimitQuery), responses((status = 200, description = "table versions, newest first", body = Items<TableItem>)))]
 pub(super) async fn tables(
     State(state): State<AppState>,
     ApiPath((machine, lobe)): ApiPath<(String, String)>,
@@ -385,6 +398,7 @@ pub(super) async fn tables(
     Ok(Json(Items { items }))
 }
 
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program", tag = "tables", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), ("version" = i64, Path, description = "table version")), responses((status = 200, description = "the program text of the version", content_type = "text/plain")))]
 pub(super) async fn program(
     State(state): State<AppState>,
     ApiPath((machine, lobe, version)): ApiPath<(String, String, i64)>,
@@ -410,7 +424,7 @@ fn version_not_found(version: i64) -> ApiError {
     )
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct DiffReply {
     version: i64,
     parent_version: i64,
@@ -422,7 +436,7 @@ pub(super) struct DiffReply {
     points: Vec<DiffPoint>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct DiffPoint {
     c_deg: f64,
     delta_x_um: f64,
@@ -430,6 +444,7 @@ pub(super) struct DiffPoint {
 
 /// How a table version differs from its parent: X (as the control interpolates it) at every
 /// point of the newer table, newer minus older, µm.
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/diff", tag = "tables", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), ("version" = i64, Path, description = "table version")), responses((status = 200, description = "X of the version minus X of its parent at every table point, µm", body = DiffReply)))]
 pub(super) async fn diff(
     State(state): State<AppState>,
     ApiPath((machine, lobe, version)): ApiPath<(String, String, i64)>,
@@ -489,7 +504,7 @@ pub(super) async fn diff(
     }))
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct DressingItem {
     at_ms: i64,
     old_radius_mm: f64,
@@ -499,6 +514,7 @@ pub(super) struct DressingItem {
     source: String,
 }
 
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/dressings", tag = "history", params(("machine" = String, Path, description = "machine name"), LimitQuery), responses((status = 200, description = "wheel dressings, newest first", body = Items<DressingItem>)))]
 pub(super) async fn dressings(
     State(state): State<AppState>,
     ApiPath(machine): ApiPath<String>,
@@ -520,7 +536,7 @@ pub(super) async fn dressings(
     Ok(Json(Items { items }))
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct EventItem {
     at_ms: i64,
     level: &'static str,
@@ -528,6 +544,7 @@ pub(super) struct EventItem {
     message: String,
 }
 
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/events", tag = "history", params(("machine" = String, Path, description = "machine name"), LimitQuery), responses((status = 200, description = "alarms and events, newest first", body = Items<EventItem>)))]
 pub(super) async fn events(
     State(state): State<AppState>,
     ApiPath(machine): ApiPath<String>,

@@ -108,6 +108,8 @@ fn set_cookie(app: &AppState, name: &str, value: &str, path: &str, max_age_s: i6
 
 #[derive(Debug, Default, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(super) struct SigninQuery {
     next: Option<String>,
 }
@@ -128,6 +130,7 @@ fn local_path(next: Option<&str>) -> String {
 }
 
 /// `GET /signin`: the form, with a fresh double-submit value.
+#[utoipa::path(get, path = "/signin", tag = "access", params(SigninQuery), responses((status = 200, description = "the sign-in form", content_type = "text/html")))]
 pub(super) async fn signin_page(
     State(app): State<AppState>,
     super::api::ApiQuery(q): super::api::ApiQuery<SigninQuery>,
@@ -149,6 +152,7 @@ fn signin_form(
 
 #[derive(Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::ToSchema)]
 pub(super) struct SigninForm {
     name: String,
     password: String,
@@ -157,6 +161,7 @@ pub(super) struct SigninForm {
 }
 
 /// `POST /signin`: checks the double-submit value, the lockout, then the password.
+#[utoipa::path(post, path = "/signin", tag = "access", request_body(content = SigninForm, content_type = "application/x-www-form-urlencoded"), responses((status = 303, description = "signed in: to `next`, with the session cookie"), (status = 200, description = "the form again, saying why not", content_type = "text/html")))]
 pub(super) async fn signin(
     State(app): State<AppState>,
     req: Request,
@@ -254,12 +259,14 @@ const DUMMY_HASH: &str = "$argon2id$v=19$m=19456,t=2,p=1$c29tZXNhbHRzb21lc2FsdA$
 
 #[derive(Debug, Default, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::ToSchema)]
 pub(super) struct SignoutForm {
     csrf: Option<String>,
 }
 
 /// `POST /signout`: ends the session when the form (or the `X-CSRF-Token` header) carries
 /// its CSRF token.
+#[utoipa::path(post, path = "/signout", tag = "access", request_body(content = SignoutForm, content_type = "application/x-www-form-urlencoded"), responses((status = 303, description = "signed out: to the sign-in page")))]
 pub(super) async fn signout(
     State(app): State<AppState>,
     p: Principal,
@@ -291,6 +298,7 @@ pub(super) async fn signout(
 
 /// `GET /session`: who this browser is, and its CSRF token (same-origin script only: no
 /// other site can read the answer).
+#[utoipa::path(get, path = "/session", tag = "access", responses((status = 200, description = "who this browser is (`user`, `role`) and its CSRF token (`csrf`), each null when not signed in", content_type = "application/json")))]
 pub(super) async fn session(p: Principal) -> Response {
     let csrf = match &p.via {
         Via::Session { csrf, .. } => Some(csrf.clone()),

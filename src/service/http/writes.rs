@@ -14,7 +14,7 @@ use axum::extract::State;
 use serde::{Deserialize, Serialize};
 
 /// The reply to a write that was carried out.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub struct CommandReply {
     /// Always "ok".
     pub status: &'static str,
@@ -35,11 +35,13 @@ impl From<CommandDone> for CommandReply {
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::ToSchema)]
 pub(crate) struct RollbackBody {
     version: i64,
 }
 
 /// Deliver a stored table version again (as a new version, under the table number not in use).
+#[utoipa::path(post, path = "/api/v1/machines/{machine}/lobes/{lobe}/rollback", tag = "writes", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name")), request_body = RollbackBody, responses((status = 200, description = "delivered as a new version", body = CommandReply)))]
 pub(super) async fn rollback(
     p: Principal,
     State(state): State<AppState>,
@@ -124,6 +126,7 @@ async fn audited(
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::ToSchema)]
 pub(crate) struct PartRollbackBody {
     /// The version of each feature to go back to, by feature name.
     versions: std::collections::BTreeMap<String, i64>,
@@ -131,6 +134,7 @@ pub(crate) struct PartRollbackBody {
 
 /// `POST /api/v1/machines/{machine}/rollback` with `{"versions": {"IN1": 5, "EX1": 7}}`:
 /// several features back together, or none of them.
+#[utoipa::path(post, path = "/api/v1/machines/{machine}/rollback", tag = "writes", params(("machine" = String, Path, description = "machine name")), request_body = PartRollbackBody, responses((status = 200, description = "every feature delivered again", body = CommandReply)))]
 pub(super) async fn rollback_part(
     p: Principal,
     State(state): State<AppState>,
@@ -191,6 +195,7 @@ pub(super) async fn rollback_part(
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::ToSchema)]
 pub(crate) struct FreezeBody {
     frozen: bool,
     /// Why (kept with the state and in the audit trail); at most 200 characters.
@@ -200,6 +205,7 @@ pub(crate) struct FreezeBody {
 /// `POST /api/v1/machines/{machine}/lobes/{lobe}/learning` with `{"frozen": true, "reason":
 /// "…"}` or `{"frozen": false}`: an engineer freezes a feature's learning (the correction
 /// stays as it is) or lets it learn again.
+#[utoipa::path(post, path = "/api/v1/machines/{machine}/lobes/{lobe}/learning", tag = "writes", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name")), request_body = FreezeBody, responses((status = 200, description = "learning frozen or resumed", body = CommandReply)))]
 pub(super) async fn freeze(
     p: Principal,
     State(state): State<AppState>,
@@ -259,6 +265,7 @@ pub(super) async fn freeze(
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::ToSchema)]
 pub(crate) struct DressingBody {
     wheel_radius_mm: f64,
     /// The dresser's measured infeed (radius removed), µm; optional.
@@ -268,6 +275,7 @@ pub(crate) struct DressingBody {
 
 /// A wheel dressing reported by the operator or a cell controller: the table is regenerated
 /// for the new radius.
+#[utoipa::path(post, path = "/api/v1/machines/{machine}/dressings", tag = "writes", params(("machine" = String, Path, description = "machine name")), request_body = DressingBody, responses((status = 200, description = "recorded, the tables regenerated for the new radius", body = CommandReply)))]
 pub(super) async fn dress(
     p: Principal,
     State(state): State<AppState>,

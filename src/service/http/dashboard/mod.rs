@@ -119,6 +119,21 @@ pub(super) struct Dash {
     live: sse::Live,
 }
 
+/// The dashboard's routes, for the API description (`/openapi.json`).
+#[derive(utoipa::OpenApi)]
+#[openapi(paths(
+    overview,
+    feature_page,
+    versions_page,
+    downloads::chart_data,
+    downloads::dfq,
+    sse::events,
+    asset_js,
+    asset_css,
+    asset_icon
+))]
+pub(super) struct DashboardDoc;
+
 pub(super) fn router(app: AppState) -> Router {
     let f = "/machines/{machine}/features/{lobe}";
     let live = sse::Live::new(app.store.clone());
@@ -137,11 +152,14 @@ pub(super) fn router(app: AppState) -> Router {
 
 #[derive(Debug, Default, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(super) struct PageQuery {
     fragment: Option<u8>,
     v: Option<i64>,
 }
 
+#[utoipa::path(get, path = "/", tag = "dashboard", params(PageQuery), responses((status = 200, description = "the plant overview", content_type = "text/html")))]
 async fn overview(
     State(d): State<Dash>,
     ApiQuery(q): ApiQuery<PageQuery>,
@@ -155,6 +173,7 @@ fn names(machine: &str, lobe: &str) -> Result<(), ApiError> {
     feature_name(lobe)
 }
 
+#[utoipa::path(get, path = "/machines/{machine}/features/{lobe}", tag = "dashboard", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), PageQuery), responses((status = 200, description = "a feature: trend, latest part, events, capability, dressing form, setup drawing", content_type = "text/html")))]
 async fn feature_page(
     State(d): State<Dash>,
     ApiPath((machine, lobe)): ApiPath<(String, String)>,
@@ -181,6 +200,7 @@ async fn feature_page(
     )))
 }
 
+#[utoipa::path(get, path = "/machines/{machine}/features/{lobe}/versions", tag = "dashboard", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), PageQuery), responses((status = 200, description = "the feature's table versions with rollback", content_type = "text/html")))]
 async fn versions_page(
     State(d): State<Dash>,
     ApiPath((machine, lobe)): ApiPath<(String, String)>,
@@ -200,6 +220,7 @@ async fn versions_page(
 
 /// `POST /api/v1/machines/{machine}/events/{id}/ack`: the caller (an operator, checked by
 /// the access layer), then the event; audited.
+#[utoipa::path(post, path = "/api/v1/machines/{machine}/events/{id}/ack", tag = "writes", params(("machine" = String, Path, description = "machine name"), ("id" = i64, Path, description = "event id")), responses((status = 200, description = "acknowledged (or acknowledged before)", body = super::CommandReply)))]
 pub(super) async fn ack(
     p: Principal,
     State(app): State<AppState>,
@@ -249,14 +270,17 @@ pub(super) async fn ack(
     Ok((status, axum::Json(body)).into_response())
 }
 
+#[utoipa::path(get, path = "/assets/app.js", tag = "dashboard", responses((status = 200, description = "the dashboard's script", content_type = "text/javascript")))]
 async fn asset_js() -> Response {
     asset("text/javascript; charset=utf-8", APP_JS)
 }
 
+#[utoipa::path(get, path = "/assets/app.css", tag = "dashboard", responses((status = 200, description = "the dashboard's style sheet", content_type = "text/css")))]
 async fn asset_css() -> Response {
     asset("text/css; charset=utf-8", APP_CSS)
 }
 
+#[utoipa::path(get, path = "/assets/icon.svg", tag = "dashboard", responses((status = 200, description = "the icon", content_type = "image/svg+xml")))]
 async fn asset_icon() -> Response {
     asset("image/svg+xml", ICON_SVG)
 }
