@@ -188,7 +188,7 @@ async fn feature_page(
         Some(sh) if q.fragment.is_none() => {
             capability_panel::panel(&store, &machine, &lobe, sh).await?
         }
-        _ => String::new(),
+        _ => maud::html! {},
     };
     Ok(Html(feature::feature(
         &machine,
@@ -196,7 +196,7 @@ async fn feature_page(
         &fd,
         sheet,
         q.fragment.is_some(),
-        &panel,
+        panel,
     )))
 }
 
