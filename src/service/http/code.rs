@@ -159,6 +159,34 @@ mod tests {
     }
 
     #[test]
+    fn a_commands_error_answers_with_its_codes_status() {
+        use crate::service::http::CommandError;
+        let reason = String::from("x");
+        let errors = [
+            CommandError::VersionNotFound {
+                lobe: reason.clone(),
+                version: 3,
+            },
+            CommandError::StoreUnavailable {
+                reason: reason.clone(),
+            },
+            CommandError::Refused {
+                reason: reason.clone(),
+            },
+            CommandError::Failed { reason },
+        ];
+        for refused in [
+            ApiCode::RollbackRefused,
+            ApiCode::FreezeRefused,
+            ApiCode::DressingRefused,
+        ] {
+            for e in &errors {
+                assert_eq!(e.code(refused).status(), e.status(), "{e:?}");
+            }
+        }
+    }
+
+    #[test]
     fn store_errors_keep_their_codes() {
         use crate::store::StoreError;
         let errors = [

@@ -139,9 +139,15 @@ pub enum CommandError {
 }
 
 impl CommandError {
-    /// The HTTP status: the code's own.
-    pub fn status(&self, refused: ApiCode) -> axum::http::StatusCode {
-        self.code(refused).status()
+    /// The HTTP status: that of [`Self::code`], whichever command was refused.
+    pub fn status(&self) -> axum::http::StatusCode {
+        use axum::http::StatusCode;
+        match self {
+            CommandError::VersionNotFound { .. } => StatusCode::NOT_FOUND,
+            CommandError::StoreUnavailable { .. } => StatusCode::SERVICE_UNAVAILABLE,
+            CommandError::Refused { .. } => StatusCode::CONFLICT,
+            CommandError::Failed { .. } => StatusCode::INTERNAL_SERVER_ERROR,
+        }
     }
 
     /// The stable code; `refused` is the command's own (`rollback_refused`, …).
