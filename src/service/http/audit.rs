@@ -47,7 +47,9 @@ pub async fn record(app: &AppState, entry: AuditEntry) {
 #[derive(utoipa::IntoParams)]
 #[into_params(parameter_in = Query)]
 pub(super) struct AuditQuery {
+    /// From this time, Unix ms.
     since_ms: Option<i64>,
+    /// At most this many (default 200, at most 1000).
     limit: Option<u32>,
 }
 

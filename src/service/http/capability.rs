@@ -21,7 +21,10 @@ use serde::{Deserialize, Serialize};
 #[derive(utoipa::IntoParams)]
 #[into_params(parameter_in = Query)]
 pub(super) struct CapabilityQuery {
+    /// `parts:N` (default `parts:125`), `since:TIME` (2026-11-21, or an age like 24h),
+    /// `dressing` (since the last dressing) or `recipe` (since the recipe changed).
     window: Option<String>,
+    /// `true` adds the I-MR/EWMA chart with the run rules' flags.
     chart: Option<bool>,
 }
 
@@ -74,6 +77,7 @@ pub(crate) fn parse_window(text: &str, now_ms: i64) -> Result<Window, ApiError> 
     Ok(w)
 }
 
+/// Process capability of every characteristic of a feature (master runs left out).
 #[utoipa::path(get, path = "/api/v1/machines/{machine}/features/{feature}/capability", tag = "quality", params(("machine" = String, Path, description = "machine name"), ("feature" = String, Path, description = "lobe or pin name"), CapabilityQuery), responses((status = 200, description = "process capability of every characteristic of the feature", body = CapabilityReply)))]
 pub(super) async fn capability(
     State(state): State<AppState>,

@@ -31,6 +31,7 @@ pub(super) struct PartFeature {
     measurements: usize,
 }
 
+/// One part (a shaft), feature by feature: its measurements and whether it passed.
 #[utoipa::path(get, path = "/api/v1/machines/{machine}/parts/{part}", tag = "history", params(("machine" = String, Path, description = "machine name"), ("part" = String, Path, description = "part id")), responses((status = 200, description = "the part, feature by feature, and whether it passed", body = PartReply)))]
 pub(super) async fn part(
     State(state): State<AppState>,

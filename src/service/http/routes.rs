@@ -27,6 +27,7 @@ pub(super) struct Health {
     machines: usize,
 }
 
+/// Service and database health.
 #[utoipa::path(get, path = "/healthz", tag = "service", responses((status = 200, description = "service up; the database up or down", body = Health)))]
 pub(super) async fn healthz(State(state): State<AppState>) -> Json<Health> {
     let up = state.store.read().await.is_some();
@@ -37,6 +38,7 @@ pub(super) async fn healthz(State(state): State<AppState>) -> Json<Health> {
     })
 }
 
+/// Prometheus metrics.
 #[utoipa::path(get, path = "/metrics", tag = "service", responses((status = 200, description = "Prometheus metrics", content_type = "text/plain")))]
 pub(super) async fn metrics(State(state): State<AppState>) -> Response {
     (
@@ -133,6 +135,7 @@ pub(super) async fn cluster(State(state): State<AppState>) -> Result<Json<Cluste
     }))
 }
 
+/// Machines and their lobes or pins: configured ones and those in the history.
 #[utoipa::path(get, path = "/api/v1/machines", tag = "history", responses((status = 200, description = "machines and their lobes or pins: configured ones and those in the history", body = MachinesReply)))]
 pub(super) async fn machines(
     State(state): State<AppState>,
@@ -211,11 +214,17 @@ pub(super) async fn machines(
 #[derive(utoipa::IntoParams)]
 #[into_params(parameter_in = Query)]
 pub(super) struct HistoryQuery {
+    /// Only this lobe or pin.
     lobe: Option<String>,
+    /// From this time, Unix ms.
     since_ms: Option<i64>,
+    /// Before this time, Unix ms.
     until_ms: Option<i64>,
+    /// Only this verdict: `pass` or `fail`.
     verdict: Option<String>,
+    /// At most this many (default 100).
     limit: Option<u32>,
+    /// Where the previous page ended (its `next_cursor`).
     cursor: Option<String>,
     /// `true`: the master runs (part ids `MASTER…`) only; default: production parts only.
     #[serde(default)]
@@ -268,6 +277,8 @@ impl From<crate::store::MeasurementSummary> for MeasurementItem {
     }
 }
 
+/// Measurement history of production parts, newest first, keyset-paged (`masters=true`:
+/// the master runs instead).
 #[utoipa::path(get, path = "/api/v1/machines/{machine}/measurements", tag = "history", params(("machine" = String, Path, description = "machine name"), HistoryQuery), responses((status = 200, description = "measurements, newest first, keyset-paged", body = HistoryPage)))]
 pub(super) async fn history(
     State(state): State<AppState>,
@@ -324,6 +335,7 @@ pub(super) struct MeasurementReply {
     analysis: serde_json::Value,
 }
 
+/// One measurement with its averaged profile and analysis.
 #[utoipa::path(get, path = "/api/v1/measurements/{id}", tag = "history", params(("id" = i64, Path, description = "measurement id")), responses((status = 200, description = "one measurement with its averaged profile and analysis", body = MeasurementReply)))]
 pub(super) async fn measurement(
     State(state): State<AppState>,
@@ -355,6 +367,7 @@ pub(super) async fn measurement(
 #[derive(utoipa::IntoParams)]
 #[into_params(parameter_in = Query)]
 pub(super) struct LimitQuery {
+    /// At most this many.
     limit: Option<u32>,
 }
 
@@ -370,6 +383,7 @@ pub(super) struct TableItem {
     created_at_ms: i64,
 }
 
+/// Table versions of a feature, newest first.
 #[utoipa::path(get, path = "/api/v1/machines/{machine}/lobes/{lobe}/tables", tag = "tables", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), LimitQuery), responses((status = 200, description = "table versions, newest first", body = Items<TableItem>)))]
 pub(super) async fn tables(
     State(state): State<AppState>,
@@ -398,6 +412,7 @@ pub(super) async fn tables(
     Ok(Json(Items { items }))
 }
 
+/// The program text of a table version.
 #[utoipa::path(get, path = "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program", tag = "tables", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), ("version" = i64, Path, description = "table version")), responses((status = 200, description = "the program text of the version", content_type = "text/plain")))]
 pub(super) async fn program(
     State(state): State<AppState>,
@@ -514,6 +529,7 @@ pub(super) struct DressingItem {
     source: String,
 }
 
+/// Wheel dressings, newest first.
 #[utoipa::path(get, path = "/api/v1/machines/{machine}/dressings", tag = "history", params(("machine" = String, Path, description = "machine name"), LimitQuery), responses((status = 200, description = "wheel dressings, newest first", body = Items<DressingItem>)))]
 pub(super) async fn dressings(
     State(state): State<AppState>,
@@ -544,6 +560,7 @@ pub(super) struct EventItem {
     message: String,
 }
 
+/// Alarms and events, newest first.
 #[utoipa::path(get, path = "/api/v1/machines/{machine}/events", tag = "history", params(("machine" = String, Path, description = "machine name"), LimitQuery), responses((status = 200, description = "alarms and events, newest first", body = Items<EventItem>)))]
 pub(super) async fn events(
     State(state): State<AppState>,

@@ -159,6 +159,7 @@ pub(super) struct PageQuery {
     v: Option<i64>,
 }
 
+/// The plant overview page.
 #[utoipa::path(get, path = "/", tag = "dashboard", params(PageQuery), responses((status = 200, description = "the plant overview", content_type = "text/html")))]
 async fn overview(
     State(d): State<Dash>,
@@ -173,6 +174,7 @@ fn names(machine: &str, lobe: &str) -> Result<(), ApiError> {
     feature_name(lobe)
 }
 
+/// A feature's page.
 #[utoipa::path(get, path = "/machines/{machine}/features/{lobe}", tag = "dashboard", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), PageQuery), responses((status = 200, description = "a feature: trend, latest part, events, capability, dressing form, setup drawing", content_type = "text/html")))]
 async fn feature_page(
     State(d): State<Dash>,
@@ -200,6 +202,7 @@ async fn feature_page(
     )))
 }
 
+/// A feature's table versions page.
 #[utoipa::path(get, path = "/machines/{machine}/features/{lobe}/versions", tag = "dashboard", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), PageQuery), responses((status = 200, description = "the feature's table versions with rollback", content_type = "text/html")))]
 async fn versions_page(
     State(d): State<Dash>,
@@ -270,16 +273,19 @@ pub(super) async fn ack(
     Ok((status, axum::Json(body)).into_response())
 }
 
+/// The dashboard's script.
 #[utoipa::path(get, path = "/assets/app.js", tag = "dashboard", responses((status = 200, description = "the dashboard's script", content_type = "text/javascript")))]
 async fn asset_js() -> Response {
     asset("text/javascript; charset=utf-8", APP_JS)
 }
 
+/// The dashboard's style sheet.
 #[utoipa::path(get, path = "/assets/app.css", tag = "dashboard", responses((status = 200, description = "the dashboard's style sheet", content_type = "text/css")))]
 async fn asset_css() -> Response {
     asset("text/css; charset=utf-8", APP_CSS)
 }
 
+/// The icon.
 #[utoipa::path(get, path = "/assets/icon.svg", tag = "dashboard", responses((status = 200, description = "the icon", content_type = "image/svg+xml")))]
 async fn asset_icon() -> Response {
     asset("image/svg+xml", ICON_SVG)
