@@ -161,6 +161,26 @@ impl CommandError {
     }
 }
 
+impl From<crate::service::machine::RollbackError> for CommandError {
+    /// A rollback the machine's loop could not make: an unknown version is 404, a store it
+    /// could not read 503, anything else (a guard, an unusable stored program) refused.
+    fn from(e: crate::service::machine::RollbackError) -> Self {
+        use crate::service::machine::RollbackError;
+        match e {
+            RollbackError::NotFound { lobe, version, .. } => CommandError::VersionNotFound {
+                lobe,
+                version: i64::try_from(version).unwrap_or(i64::MAX),
+            },
+            RollbackError::StoreUnavailable => CommandError::StoreUnavailable {
+                reason: e.to_string(),
+            },
+            e => CommandError::Refused {
+                reason: format!("{e:#}"),
+            },
+        }
+    }
+}
+
 pub fn router(state: AppState) -> Router {
     let m = "/api/v1/machines/{machine}";
     Router::new()
