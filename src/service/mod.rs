@@ -405,25 +405,15 @@ async fn rollback_result(
     lobe: &str,
     version: i64,
 ) -> Result<http::CommandDone, http::CommandError> {
-    use http::CommandError;
-    let not_found = || CommandError::VersionNotFound {
+    let v = u64::try_from(version).map_err(|_| http::CommandError::VersionNotFound {
         lobe: lobe.to_string(),
         version,
-    };
-    let v = u64::try_from(version).map_err(|_| not_found())?;
-    match machine.rollback(lobe, v).await {
-        Ok(done) => Ok(http::CommandDone {
-            version: i64::try_from(done.new_version).ok(),
-            message: done.summary,
-        }),
-        Err(machine::RollbackError::NotFound { .. }) => Err(not_found()),
-        Err(e @ machine::RollbackError::StoreUnavailable) => Err(CommandError::StoreUnavailable {
-            reason: e.to_string(),
-        }),
-        Err(e) => Err(CommandError::Refused {
-            reason: format!("{e:#}"),
-        }),
-    }
+    })?;
+    let done = machine.rollback(lobe, v).await?;
+    Ok(http::CommandDone {
+        version: i64::try_from(done.new_version).ok(),
+        message: done.summary,
+    })
 }
 
 /// A whole-part rollback asked for through the API.
@@ -431,29 +421,15 @@ async fn rollback_part_result(
     machine: &mut MachineLoop,
     versions: &[(String, u64)],
 ) -> Result<http::CommandDone, http::CommandError> {
-    use http::CommandError;
-    match machine.rollback_part(versions).await {
-        Ok(done) => Ok(http::CommandDone {
-            version: None,
-            message: done
-                .iter()
-                .map(|d| d.summary.clone())
-                .collect::<Vec<_>>()
-                .join("; "),
-        }),
-        Err(machine::RollbackError::NotFound { lobe, version, .. }) => {
-            Err(CommandError::VersionNotFound {
-                lobe,
-                version: i64::try_from(version).unwrap_or(i64::MAX),
-            })
-        }
-        Err(e @ machine::RollbackError::StoreUnavailable) => Err(CommandError::StoreUnavailable {
-            reason: e.to_string(),
-        }),
-        Err(e) => Err(CommandError::Refused {
-            reason: format!("{e:#}"),
-        }),
-    }
+    let done = machine.rollback_part(versions).await?;
+    Ok(http::CommandDone {
+        version: None,
+        message: done
+            .iter()
+            .map(|d| d.summary.clone())
+            .collect::<Vec<_>>()
+            .join("; "),
+    })
 }
 
 /// A dressing reported through the API, its outcome as the HTTP side wants it.

@@ -12,10 +12,11 @@ use super::api::ApiError;
 use super::session::{SESSION_COOKIE, cookie};
 use crate::auth::{Lockout, effective_role, token_digest};
 use crate::config::Secret;
+use crate::service::http::ApiCode;
 use crate::store::{AuditEntry, AuditResult, Role};
 use axum::extract::{ConnectInfo, FromRequestParts, MatchedPath, Request, State};
 use axum::http::request::Parts;
-use axum::http::{HeaderMap, Method, StatusCode, header};
+use axum::http::{HeaderMap, Method, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Redirect, Response};
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
@@ -107,11 +108,14 @@ impl<S: Send + Sync> FromRequestParts<S> for Principal {
     type Rejection = ApiError;
 
     async fn from_request_parts(parts: &mut Parts, _: &S) -> Result<Self, ApiError> {
-        parts.extensions.get::<Principal>().cloned().ok_or(ApiError(
-            StatusCode::UNAUTHORIZED,
-            "unauthorized",
-            "no caller identified".into(),
-        ))
+        parts
+            .extensions
+            .get::<Principal>()
+            .cloned()
+            .ok_or(ApiError::new(
+                ApiCode::Unauthorized,
+                "no caller identified".into(),
+            ))
     }
 }
 
@@ -144,9 +148,8 @@ pub async fn guard(State(app): State<AppState>, mut req: Request, next: Next) ->
         .get::<MatchedPath>()
         .map(|p| p.as_str().to_owned());
     let Some(rule) = path.as_deref().and_then(|p| rule_for(req.method(), p)) else {
-        return ApiError(
-            StatusCode::INTERNAL_SERVER_ERROR,
-            "route_without_role",
+        return ApiError::new(
+            ApiCode::RouteWithoutRole,
             "this route has no entry in the access table: refused for everyone".into(),
         )
         .into_response();
@@ -164,9 +167,8 @@ pub async fn guard(State(app): State<AppState>, mut req: Request, next: Next) ->
         let given = req.headers().get("x-csrf-token").map(|v| v.as_bytes());
         if !given.is_some_and(|g| same_secret(g, csrf.as_bytes())) {
             csrf_refused(&app, &principal, path.as_deref().unwrap_or("")).await;
-            return ApiError(
-                StatusCode::FORBIDDEN,
-                "csrf_mismatch",
+            return ApiError::new(
+                ApiCode::CsrfMismatch,
                 "the request did not carry this session's CSRF token".into(),
             )
             .into_response();
@@ -176,9 +178,8 @@ pub async fn guard(State(app): State<AppState>, mut req: Request, next: Next) ->
         match principal.role {
             Some(role) if role >= needed => {}
             Some(role) if principal.via != Via::Anonymous => {
-                return ApiError(
-                    StatusCode::FORBIDDEN,
-                    "forbidden",
+                return ApiError::new(
+                    ApiCode::Forbidden,
                     format!(
                         "this needs the role {needed}; {} has {role}",
                         principal.actor
@@ -199,9 +200,8 @@ pub async fn guard(State(app): State<AppState>, mut req: Request, next: Next) ->
 }
 
 fn unauthorized(needed: Role) -> Response {
-    let mut r = ApiError(
-        StatusCode::UNAUTHORIZED,
-        "unauthorized",
+    let mut r = ApiError::new(
+        ApiCode::Unauthorized,
         format!("this needs the role {needed}: send Authorization: Bearer <token>, or sign in"),
     )
     .into_response();
@@ -290,9 +290,8 @@ async fn bearer(app: &AppState, token: &str, address: IpAddr) -> Result<Principa
         Some(s) => s.token_grant(&token_digest(token)).await?,
         // Not counted as a failure: the token could not be checked.
         None if !token.is_empty() => {
-            return Err(ApiError(
-                StatusCode::UNAUTHORIZED,
-                "unauthorized",
+            return Err(ApiError::new(
+                ApiCode::Unauthorized,
                 "the bearer token cannot be checked while the database is unreachable".into(),
             ));
         }
@@ -317,9 +316,8 @@ async fn bearer(app: &AppState, token: &str, address: IpAddr) -> Result<Principa
     };
     let user = grant.as_ref().map(|g| g.user.as_str());
     failed(app, "token", user, address, why).await;
-    Err(ApiError(
-        StatusCode::UNAUTHORIZED,
-        "unauthorized",
+    Err(ApiError::new(
+        ApiCode::Unauthorized,
         "the bearer token is not valid".into(),
     ))
 }
@@ -373,9 +371,8 @@ pub(super) fn locked(
     warn!(user = user.unwrap_or("-"), client = %address, left_s, "refused: locked out");
     app.metrics
         .update_access(|a| *a.failures.entry("locked").or_default() += 1);
-    ApiError(
-        StatusCode::TOO_MANY_REQUESTS,
-        "locked_out",
+    ApiError::new(
+        ApiCode::LockedOut,
         format!("too many failed attempts: try again in {left_s} s"),
     )
 }

@@ -4,6 +4,7 @@
 
 use super::AppState;
 pub use super::access::Authorized;
+pub use super::code::ApiCode;
 use crate::names::{MachineName, check_plain_name};
 use axum::Json;
 use axum::extract::{FromRequest, FromRequestParts, Path, Query, Request};
@@ -15,67 +16,78 @@ use serde::Serialize;
 /// Largest request body read, bytes: the writes take a few dozen.
 const BODY_LIMIT: usize = 64 * 1024;
 
-/// An API error: HTTP status, stable code, message.
+/// An API error: a stable code, the HTTP status it answers with (the code's own, see
+/// [`ApiCode::status`]), and a message for people.
 #[derive(Debug)]
-pub struct ApiError(pub StatusCode, pub &'static str, pub String);
+pub struct ApiError {
+    status: StatusCode,
+    code: ApiCode,
+    message: String,
+}
+
+impl ApiError {
+    pub fn new(code: ApiCode, message: String) -> Self {
+        ApiError {
+            status: code.status(),
+            code,
+            message,
+        }
+    }
+
+    /// An extractor's rejection: axum's status (415, 422, 413, …) with the API's code.
+    pub(super) fn rejected(status: StatusCode, code: ApiCode, message: String) -> Self {
+        ApiError {
+            status,
+            code,
+            message,
+        }
+    }
+
+    pub fn code(&self) -> ApiCode {
+        self.code
+    }
+
+    pub fn status(&self) -> StatusCode {
+        self.status
+    }
+
+    pub fn message(&self) -> &str {
+        &self.message
+    }
+}
 
 /// The body of every error reply.
-#[derive(Debug, Serialize)]
-struct ErrorBody<'a> {
-    code: &'a str,
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub(crate) struct ErrorBody<'a> {
+    code: ApiCode,
     message: &'a str,
 }
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let body = ErrorBody {
-            code: self.1,
-            message: &self.2,
+            code: self.code,
+            message: &self.message,
         };
-        (self.0, Json(body)).into_response()
+        (self.status, Json(body)).into_response()
     }
 }
 
 impl From<crate::store::StoreError> for ApiError {
     fn from(e: crate::store::StoreError) -> Self {
-        use crate::store::StoreError;
-        let status = match e {
-            StoreError::NotFound { .. } => StatusCode::NOT_FOUND,
-            StoreError::Invalid { .. } => StatusCode::BAD_REQUEST,
-            StoreError::Conflict { .. } => StatusCode::CONFLICT,
-            // Readers beyond the store's bound wait, then get this: try again later.
-            StoreError::Unavailable { .. } | StoreError::Busy { .. } => {
-                StatusCode::SERVICE_UNAVAILABLE
-            }
-            // The database cannot serve until an operator acts (its code says why).
-            StoreError::Corrupt { .. } | StoreError::Full { .. } => StatusCode::SERVICE_UNAVAILABLE,
-            _ => StatusCode::INTERNAL_SERVER_ERROR,
-        };
         // Display never carries SQL text or credentials (see StoreError).
-        ApiError(status, e.code(), e.to_string())
+        ApiError::new(ApiCode::from(&e), e.to_string())
     }
 }
 
 /// A machine name from a path or query, by the one rule ([`MachineName`]).
 pub fn machine_name(name: &str) -> Result<MachineName, ApiError> {
-    MachineName::new(name).map_err(|e| {
-        ApiError(
-            StatusCode::BAD_REQUEST,
-            "invalid_name",
-            format!("machine: {e}"),
-        )
-    })
+    MachineName::new(name).map_err(|e| ApiError::new(ApiCode::InvalidName, format!("machine: {e}")))
 }
 
 /// A lobe or pin name from a path or query: the same rule as machine names.
 pub(crate) fn feature_name(name: &str) -> Result<(), ApiError> {
-    check_plain_name(name).map_err(|e| {
-        ApiError(
-            StatusCode::BAD_REQUEST,
-            "invalid_name",
-            format!("lobe: {e}"),
-        )
-    })
+    check_plain_name(name).map_err(|e| ApiError::new(ApiCode::InvalidName, format!("lobe: {e}")))
 }
 
 /// axum's JSON body extractor, its rejections as the API's `{code, message}` errors. The body
@@ -92,7 +104,7 @@ impl<T: serde::de::DeserializeOwned> FromRequest<AppState> for ApiJson<T> {
         Json::<T>::from_request(req, state)
             .await
             .map(|Json(v)| ApiJson(v))
-            .map_err(|r| ApiError(r.status(), "invalid_body", clip(&r.body_text())))
+            .map_err(|r| ApiError::rejected(r.status(), ApiCode::InvalidBody, clip(&r.body_text())))
     }
 }
 
@@ -104,9 +116,8 @@ pub(super) async fn read_body(
     tokio::time::timeout(timeout, axum::body::to_bytes(body, BODY_LIMIT))
         .await
         .map_err(|_| {
-            ApiError(
-                StatusCode::REQUEST_TIMEOUT,
-                "body_timeout",
+            ApiError::new(
+                ApiCode::BodyTimeout,
                 format!(
                     "the request body did not arrive within {} ms",
                     timeout.as_millis()
@@ -114,9 +125,9 @@ pub(super) async fn read_body(
             )
         })?
         .map_err(|e| {
-            ApiError(
+            ApiError::rejected(
                 StatusCode::PAYLOAD_TOO_LARGE,
-                "invalid_body",
+                ApiCode::InvalidBody,
                 format!("request body unreadable or over {BODY_LIMIT} bytes: {e}"),
             )
         })
@@ -132,7 +143,9 @@ impl<S: Send + Sync, T: serde::de::DeserializeOwned> FromRequestParts<S> for Api
         Query::<T>::from_request_parts(parts, state)
             .await
             .map(|Query(v)| ApiQuery(v))
-            .map_err(|r| ApiError(r.status(), "invalid_query", clip(&r.body_text())))
+            .map_err(|r| {
+                ApiError::rejected(r.status(), ApiCode::InvalidQuery, clip(&r.body_text()))
+            })
     }
 }
 
@@ -146,7 +159,7 @@ impl<S: Send + Sync, T: serde::de::DeserializeOwned + Send> FromRequestParts<S> 
         Path::<T>::from_request_parts(parts, state)
             .await
             .map(|Path(v)| ApiPath(v))
-            .map_err(|r| ApiError(r.status(), "invalid_path", clip(&r.body_text())))
+            .map_err(|r| ApiError::rejected(r.status(), ApiCode::InvalidPath, clip(&r.body_text())))
     }
 }
 

@@ -33,7 +33,7 @@ pub async fn record(app: &AppState, entry: AuditEntry) {
             .await
             .map(|_| ())
             .map_err(|e| e.to_string()),
-        Err(e) => Err(e.2),
+        Err(e) => Err(e.message().to_string()),
     };
     if let Err(why) = stored {
         app.metrics.update_access(|a| a.audit_failures_total += 1);
@@ -44,18 +44,24 @@ pub async fn record(app: &AppState, entry: AuditEntry) {
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(super) struct AuditQuery {
+    /// From this time, Unix ms.
     since_ms: Option<i64>,
+    /// At most this many (default 200, at most 1000).
     limit: Option<u32>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct AuditReply {
     /// Newest first.
+    #[schema(value_type = Vec<Object>)]
     items: Vec<AuditRow>,
 }
 
 /// `GET /api/v1/audit?since_ms=…&limit=…`: the newest rows (at most 1,000).
+#[utoipa::path(get, path = "/api/v1/audit", tag = "access", params(AuditQuery), responses((status = 200, description = "the audit trail, newest first", body = AuditReply)))]
 pub(super) async fn audit(
     State(app): State<AppState>,
     ApiQuery(q): ApiQuery<AuditQuery>,
@@ -68,6 +74,7 @@ pub(super) async fn audit(
 }
 
 /// `GET /audit`: the newest 200 rows as a table.
+#[utoipa::path(get, path = "/audit", tag = "dashboard", responses((status = 200, description = "the audit trail as a page", content_type = "text/html")))]
 pub(super) async fn audit_page(State(app): State<AppState>) -> Result<Html<String>, ApiError> {
     let store = super::routes::store(&app).await?;
     let rows = store.audit(0, 0, 200, true).await?;

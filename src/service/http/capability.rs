@@ -11,19 +11,24 @@ use super::AppState;
 use super::api::{ApiError, ApiPath, ApiQuery, feature_name, machine_name};
 use super::routes::store;
 use crate::quality::{self, CharacteristicStudy, Window};
+use crate::service::http::ApiCode;
 use axum::Json;
 use axum::extract::State;
-use axum::http::StatusCode;
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(super) struct CapabilityQuery {
+    /// `parts:N` (default `parts:125`), `since:TIME` (2026-11-21, or an age like 24h),
+    /// `dressing` (since the last dressing) or `recipe` (since the recipe changed).
     window: Option<String>,
+    /// `true` adds the I-MR/EWMA chart with the run rules' flags.
     chart: Option<bool>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct CapabilityReply {
     machine: String,
     feature: String,
@@ -33,13 +38,13 @@ pub(super) struct CapabilityReply {
     /// Start of the window, Unix ms, when it has one.
     since_ms: Option<i64>,
     master_runs_left_out: usize,
+    #[schema(value_type = Vec<Object>)]
     characteristics: Vec<CharacteristicStudy>,
 }
 
 fn bad_window(text: &str) -> ApiError {
-    ApiError(
-        StatusCode::BAD_REQUEST,
-        "invalid_window",
+    ApiError::new(
+        ApiCode::InvalidWindow,
         format!(
             "window `{text}`: use parts:N, since:TIME (2026-11-21, an age like 24h), dressing or recipe"
         ),
@@ -72,6 +77,8 @@ pub(crate) fn parse_window(text: &str, now_ms: i64) -> Result<Window, ApiError> 
     Ok(w)
 }
 
+/// Process capability of every characteristic of a feature (master runs left out).
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/features/{feature}/capability", tag = "quality", params(("machine" = String, Path, description = "machine name"), ("feature" = String, Path, description = "lobe or pin name"), CapabilityQuery), responses((status = 200, description = "process capability of every characteristic of the feature", body = CapabilityReply)))]
 pub(super) async fn capability(
     State(state): State<AppState>,
     ApiPath((machine, feature)): ApiPath<(String, String)>,
@@ -82,9 +89,8 @@ pub(super) async fn capability(
     let window_text = q.window.unwrap_or_else(|| "parts:125".into());
     let window = parse_window(&window_text, crate::clock::now_ms())?;
     let Some(sheet) = state.dashboard.get(&(machine.clone(), feature.clone())) else {
-        return Err(ApiError(
-            StatusCode::NOT_FOUND,
-            "feature_not_found",
+        return Err(ApiError::new(
+            ApiCode::FeatureNotFound,
             format!(
                 "machine {machine} has no configured feature {feature}: its limits come from the recipe"
             ),

@@ -9,9 +9,10 @@
 //! - the per-client connection cap ([`PerClient`]), used by the accept loop.
 
 use super::api::ApiError;
+use crate::service::http::ApiCode;
 use axum::Router;
 use axum::extract::{Request, State};
-use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::http::{HeaderMap, HeaderValue, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use std::collections::HashMap;
@@ -118,9 +119,8 @@ async fn guard(State(policy): State<Arc<Policy>>, req: Request, next: Next) -> R
         Some(h) if policy.hosts.allows(h) => next.run(req).await,
         other => {
             let shown = crate::names::quote(other.unwrap_or(""));
-            ApiError(
-                StatusCode::MISDIRECTED_REQUEST,
-                "host_not_allowed",
+            ApiError::new(
+                ApiCode::HostNotAllowed,
                 format!("this service does not answer to host `{shown}` (http.allowed_hosts)"),
             )
             .into_response()

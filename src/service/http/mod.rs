@@ -8,18 +8,20 @@
 //! - `session.rs`: dashboard sign-in, sessions, CSRF tokens, sign-out.
 //! - `audit.rs`: appending to the audit trail, and reading it.
 //! - `api.rs`: the `{code, message}` error and the extractors that keep it.
+//! - `code.rs`: [`ApiCode`], every error code with its HTTP status.
 //! - `routes.rs`: the read handlers and their typed replies.
 //! - `writes.rs`: the write handlers and the command hand-over.
 //! - `server.rs`: the listener loop: header and body timeouts, the connection caps.
 //! - `harden.rs`: the `Host` allow-list, the security headers, the per-client cap.
 //! - `tls.rs`: HTTPS with rustls, reloaded on SIGHUP; the self-signed development pair.
-//! - `openapi.rs`: the API description.
+//! - `openapi.rs`: the API description, derived by utoipa from the handlers and their types.
 //! - `dashboard/`: the engineers' web pages, their live channel and downloads.
 
 pub mod access;
 mod api;
 mod audit;
 mod capability;
+mod code;
 mod dashboard;
 mod harden;
 mod openapi;
@@ -34,6 +36,7 @@ mod writes;
 pub use access::{AuthState, Principal, ROUTES, RouteRule};
 pub use api::{ApiError, ApiJson, ApiPath, ApiQuery, Authorized};
 pub use audit::record as record_audit;
+pub use code::ApiCode;
 pub use dashboard::{FeatureSheet, FeatureSheets, Stopping};
 pub use harden::{CONTENT_SECURITY_POLICY, HostAllowList, Policy};
 pub use routes::{LobeInfo, MachineInfo, MachinesReply};
@@ -136,6 +139,7 @@ pub enum CommandError {
 }
 
 impl CommandError {
+    /// The HTTP status: that of [`Self::code`], whichever command was refused.
     pub fn status(&self) -> axum::http::StatusCode {
         use axum::http::StatusCode;
         match self {
@@ -147,12 +151,32 @@ impl CommandError {
     }
 
     /// The stable code; `refused` is the command's own (`rollback_refused`, …).
-    pub fn code(&self, refused: &'static str) -> &'static str {
+    pub fn code(&self, refused: ApiCode) -> ApiCode {
         match self {
-            CommandError::VersionNotFound { .. } => "table_version_not_found",
-            CommandError::StoreUnavailable { .. } => "store_unavailable",
+            CommandError::VersionNotFound { .. } => ApiCode::TableVersionNotFound,
+            CommandError::StoreUnavailable { .. } => ApiCode::StoreUnavailable,
             CommandError::Refused { .. } => refused,
-            CommandError::Failed { .. } => "command_failed",
+            CommandError::Failed { .. } => ApiCode::CommandFailed,
+        }
+    }
+}
+
+impl From<crate::service::machine::RollbackError> for CommandError {
+    /// A rollback the machine's loop could not make: an unknown version is 404, a store it
+    /// could not read 503, anything else (a guard, an unusable stored program) refused.
+    fn from(e: crate::service::machine::RollbackError) -> Self {
+        use crate::service::machine::RollbackError;
+        match e {
+            RollbackError::NotFound { lobe, version, .. } => CommandError::VersionNotFound {
+                lobe,
+                version: i64::try_from(version).unwrap_or(i64::MAX),
+            },
+            RollbackError::StoreUnavailable => CommandError::StoreUnavailable {
+                reason: e.to_string(),
+            },
+            e => CommandError::Refused {
+                reason: format!("{e:#}"),
+            },
         }
     }
 }

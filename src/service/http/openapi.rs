@@ -1,51 +1,180 @@
-//! The API description served at `/openapi.json` (OpenAPI 3.0).
+//! The API description served at `/openapi.json`, derived by utoipa from the handlers'
+//! `#[utoipa::path]` attributes and their request and reply types, so it cannot drift from
+//! the code. Two things are added to every operation here, from the one place each lives:
+//! the `{code, message}` error replies ([`ApiCode`] lists every code) and the role the route
+//! needs (from the access table, `route_roles.rs`).
 
+use super::ApiCode;
+use super::api::ErrorBody;
+use super::route_roles::{Need, ROUTES};
 use axum::Json;
-use serde_json::{Value, json};
+use utoipa::OpenApi;
+use utoipa::openapi::path::Operation;
+use utoipa::openapi::{ContentBuilder, Ref, RefOr, Response, ResponseBuilder};
 
-pub(super) async fn openapi() -> Json<Value> {
-    let get = |summary: &str| json!({ "get": { "summary": summary, "responses": { "200": { "description": "OK" }, "4XX": { "description": "error: {code, message}" }, "503": { "description": "store unavailable" } } } });
-    let write = |summary: &str, ok: &str, extra: Value| {
-        let mut responses = json!({
-            "200": { "description": ok },
-            "401": { "description": "no caller, or a wrong, expired or revoked token (checked before the body is read)" },
-            "403": { "description": "forbidden (the caller's role is below the route's) or csrf_mismatch (a session's write without X-CSRF-Token)" },
-            "429": { "description": "locked_out: 5 failed attempts in 15 minutes from this user or address" },
-            "404": { "description": "machine_not_found, lobe_not_found or table_version_not_found" },
-            "408": { "description": "body_timeout" },
-            "409": { "description": "refused" },
-            "503": { "description": "machine_stopped or store_unavailable" }
-        });
-        if let (Some(r), Some(e)) = (responses.as_object_mut(), extra.as_object()) {
-            r.extend(e.clone());
+/// Every route the router serves, with its handler's description.
+#[derive(OpenApi)]
+#[openapi(
+    info(
+        title = "camloop",
+        description = "Every route needs a role (viewer reads; operator acknowledges and \
+            reports dressings; engineer rolls back, freezes learning and reads the audit trail; \
+            admin manages users): send `Authorization: Bearer <token>` (`camloop token create`) \
+            or sign in on the dashboard. On a loopback listener anonymous callers read as viewer \
+            unless `auth.anonymous_read = false`. Every error is `{code, message}`."
+    ),
+    paths(
+        super::routes::healthz,
+        super::routes::metrics,
+        openapi,
+        super::routes::machines,
+        super::routes::cluster,
+        super::routes::history,
+        super::routes::events,
+        super::parts::part,
+        super::capability::capability,
+        super::writes::rollback_part,
+        super::routes::tables,
+        super::routes::program,
+        super::routes::diff,
+        super::writes::rollback,
+        super::writes::freeze,
+        super::routes::dressings,
+        super::writes::dress,
+        super::routes::measurement,
+        super::dashboard::ack,
+        super::audit::audit,
+        super::audit::audit_page,
+        super::session::signin_page,
+        super::session::signin,
+        super::session::signout,
+        super::session::session,
+    ),
+    components(schemas(ErrorBody, ApiCode)),
+    modifiers(&Errors, &Roles)
+)]
+pub(crate) struct ApiDoc;
+
+/// The whole document: the API's routes and the dashboard's.
+pub(crate) fn document() -> utoipa::openapi::OpenApi {
+    ApiDoc::openapi().merge_from(super::dashboard::DashboardDoc::openapi())
+}
+
+/// This document.
+#[utoipa::path(get, path = "/openapi.json", tag = "service",
+    responses((status = 200, description = "this document (OpenAPI 3.1)", content_type = "application/json")))]
+pub(super) async fn openapi() -> Json<utoipa::openapi::OpenApi> {
+    Json(document())
+}
+
+/// The operations of a path item this service routes (GET and POST).
+fn operations(
+    item: &mut utoipa::openapi::PathItem,
+) -> impl Iterator<Item = (&'static str, &mut Operation)> {
+    [("GET", item.get.as_mut()), ("POST", item.post.as_mut())]
+        .into_iter()
+        .filter_map(|(m, op)| op.map(|op| (m, op)))
+}
+
+/// The `{code, message}` error replies, on every operation that has none of its own.
+struct Errors;
+
+impl utoipa::Modify for Errors {
+    fn modify(&self, doc: &mut utoipa::openapi::OpenApi) {
+        let error = |description: &str| -> RefOr<Response> {
+            let content = ContentBuilder::new()
+                .schema(Some(Ref::from_schema_name("ErrorBody")))
+                .build();
+            ResponseBuilder::new()
+                .description(description)
+                .content("application/json", content)
+                .build()
+                .into()
+        };
+        for item in doc.paths.paths.values_mut() {
+            for (_, op) in operations(item) {
+                let r = &mut op.responses.responses;
+                r.entry("4XX".into()).or_insert_with(|| {
+                    error("refused: `code` says why (unauthorized, forbidden, csrf_mismatch, locked_out, invalid_…, …_not_found, …_refused)")
+                });
+                r.entry("5XX".into()).or_insert_with(|| {
+                    error("not served now: `code` says why (store_unavailable, machine_stopped, machine_elsewhere, …)")
+                });
+            }
         }
-        json!({ "summary": summary, "responses": responses })
-    };
-    Json(json!({
-        "openapi": "3.0.3",
-        "info": { "title": "camloop", "version": env!("CARGO_PKG_VERSION"), "description": "Every route needs a role (viewer reads; operator acknowledges and reports dressings; engineer rolls back and reads the audit trail; admin manages users): send Authorization: Bearer <token> (camloop token create). On a loopback listener anonymous callers read as viewer unless auth.anonymous_read = false." },
-        "paths": {
-            "/healthz": get("service and database health"),
-            "/metrics": get("Prometheus metrics"),
-            "/api/v1/cluster": get("with [cluster]: each machine's lease (owner, fencing epoch, live, run here); {enabled: false} without"),
-            "/api/v1/machines": get("machines and their lobes or pins: configured ones and those in the history"),
-            "/api/v1/machines/{machine}/measurements": get("measurement history of production parts, newest first; filters lobe, since_ms, until_ms, verdict, limit, cursor; masters=true lists the master runs (part ids MASTER…) instead"),
-            "/api/v1/machines/{machine}/events": get("alarms and events, newest first"),
-            "/api/v1/machines/{machine}/rollback": { "post": write("roll several features back together (a whole part); body {\"versions\": {\"IN1\": 5, \"EX1\": 7}}; every version is checked before any is pushed; role engineer", "delivered: {status, version: null, message}", json!({})) },
-            "/api/v1/machines/{machine}/parts/{part}": get("one part (a shaft), feature by feature: its measurements and whether it passed"),
-            "/api/v1/machines/{machine}/features/{feature}/capability": get("process capability of every characteristic of a feature (n, mean, σ within and overall, Cp/Cpk, Pp/Ppk with lower 95 % bounds, the fitted model, expected and observed share out of tolerance; no index without a recipe tolerance, and the note says so); window=parts:N (default parts:125) | since:TIME | dressing | recipe; chart=true adds the I-MR/EWMA chart with the run rules' flags; master runs are left out"),
-            "/api/v1/machines/{machine}/lobes/{lobe}/tables": get("table versions, newest first"),
-            "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program": get("program text of a table version"),
-            "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/diff": get("X difference to the parent version at every table point, µm"),
-            "/api/v1/measurements/{id}": get("one measurement with its averaged profile and analysis"),
-            "/api/v1/machines/{machine}/lobes/{lobe}/learning": { "post": write("role engineer: freeze a feature's learning (the correction stays) or let it learn again; body {\"frozen\": true, \"reason\": \"…\"} or {\"frozen\": false}", "done: {status, version: null, message}", json!({})) },
-            "/api/v1/audit": get("role engineer: the audit trail, newest first (who, role, client address, action, target, before/after, result, reason); since_ms, limit ≤ 1000"),
-            "/api/v1/machines/{machine}/dressings": {
-                "get": get("wheel dressings, newest first")["get"],
-                "post": write("report a wheel dressing; body {\"wheel_radius_mm\": R, \"infeed_um\": D} (D, the dresser's measured infeed, optional); regenerates the table for the new radius; role operator", "recorded, table regenerated: {status, version, message}", json!({ "400": { "description": "implausible radius or infeed" } }))
-            },
-            "/api/v1/machines/{machine}/events/{id}/ack": { "post": write("acknowledge an event or alarm (the dashboard's button); role operator (Authorization: Bearer <token> or a dashboard session); a second acknowledgement changes nothing", "acknowledged: {status, version: null, message}", json!({ "404": { "description": "event_not_found" } })) },
-            "/api/v1/machines/{machine}/lobes/{lobe}/rollback": { "post": write("deliver a stored version again; body {\"version\": N}; role engineer", "delivered: {status, version, message}", json!({})) },
+    }
+}
+
+/// The role each operation needs, from the access table.
+struct Roles;
+
+impl utoipa::Modify for Roles {
+    fn modify(&self, doc: &mut utoipa::openapi::OpenApi) {
+        for (path, item) in doc.paths.paths.iter_mut() {
+            for (method, op) in operations(item) {
+                let need = ROUTES
+                    .iter()
+                    .find(|r| r.method == method && r.path == path)
+                    .map(|r| r.need);
+                let role = match need {
+                    Some(Need::Public) => "anyone".to_string(),
+                    Some(Need::Role(role)) => format!("role {}", role.as_str()),
+                    None => "nobody (no row in the access table)".to_string(),
+                };
+                let text = op.description.get_or_insert_with(String::new);
+                if !text.is_empty() {
+                    text.push_str("\n\n");
+                }
+                text.push_str(&format!("Who may call it: {role}."));
+            }
         }
-    }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::BTreeSet;
+
+    /// Every route of the access table (which the router's routes must each have a row in,
+    /// see `tests/it/access_matrix.rs`) is in the document, and the document has no other.
+    #[test]
+    fn every_route_is_documented_and_nothing_else() {
+        let mut doc = document();
+        let mut documented = BTreeSet::new();
+        for (path, item) in doc.paths.paths.iter_mut() {
+            for (method, _) in operations(item) {
+                documented.insert((method.to_string(), path.clone()));
+            }
+        }
+        let routed: BTreeSet<(String, String)> = ROUTES
+            .iter()
+            .map(|r| (r.method.to_string(), r.path.to_string()))
+            .collect();
+        let missing: Vec<_> = routed.difference(&documented).collect();
+        let extra: Vec<_> = documented.difference(&routed).collect();
+        assert!(
+            missing.is_empty(),
+            "routed, not in /openapi.json: {missing:?}"
+        );
+        assert!(extra.is_empty(), "in /openapi.json, not routed: {extra:?}");
+    }
+
+    #[test]
+    fn errors_carry_every_code_and_each_operation_its_role() {
+        let json = serde_json::to_value(document()).unwrap_or_default();
+        let codes = &json["components"]["schemas"]["ApiCode"]["enum"];
+        let codes: Vec<&str> = codes
+            .as_array()
+            .map(|a| a.iter().filter_map(|c| c.as_str()).collect())
+            .unwrap_or_default();
+        use strum::IntoEnumIterator;
+        assert_eq!(codes.len(), ApiCode::iter().count(), "{codes:?}");
+        assert!(codes.contains(&"table_version_not_found"), "{codes:?}");
+        let rollback = &json["paths"]["/api/v1/machines/{machine}/lobes/{lobe}/rollback"]["post"];
+        let text = rollback["description"].as_str().unwrap_or_default();
+        assert!(text.contains("role engineer"), "{rollback}");
+        assert!(rollback["responses"]["4XX"].is_object(), "{rollback}");
+        assert!(rollback["requestBody"].is_object(), "{rollback}");
+    }
 }

@@ -5,12 +5,13 @@
 use super::AppState;
 use super::api::{ApiError, ApiPath, machine_name};
 use super::routes::{MeasurementItem, store};
+use crate::service::http::ApiCode;
 use axum::Json;
 use axum::extract::State;
 use serde::Serialize;
 
 /// The reply: the part's verdict and its features in grinding order.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct PartReply {
     machine: String,
     part: String,
@@ -21,7 +22,7 @@ pub(super) struct PartReply {
     features: Vec<PartFeature>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct PartFeature {
     lobe: String,
     /// The newest measurement of this feature on this part, if any.
@@ -30,15 +31,16 @@ pub(super) struct PartFeature {
     measurements: usize,
 }
 
+/// One part (a shaft), feature by feature: its measurements and whether it passed.
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/parts/{part}", tag = "history", params(("machine" = String, Path, description = "machine name"), ("part" = String, Path, description = "part id")), responses((status = 200, description = "the part, feature by feature, and whether it passed", body = PartReply)))]
 pub(super) async fn part(
     State(state): State<AppState>,
     ApiPath((machine, part)): ApiPath<(String, String)>,
 ) -> Result<Json<PartReply>, ApiError> {
     let name = machine_name(&machine)?;
     if !crate::names::valid_part_ident(&part) {
-        return Err(ApiError(
-            axum::http::StatusCode::BAD_REQUEST,
-            "invalid_name",
+        return Err(ApiError::new(
+            ApiCode::InvalidName,
             format!(
                 "part `{}`: must be 1–32 characters of A–Z a–z 0–9 . _ -",
                 crate::names::quote(&part)

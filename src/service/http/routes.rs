@@ -3,22 +3,22 @@
 
 use super::AppState;
 use super::api::{ApiError, ApiPath, ApiQuery, feature_name, machine_name};
+use crate::service::http::ApiCode;
 use crate::store::{EventFilter, HistoryFilter, MasterRuns, MeasurementId, Store, Verdict};
 use axum::Json;
 use axum::extract::State;
-use axum::http::{StatusCode, header};
+use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 
 pub(super) async fn store(state: &AppState) -> Result<Store, ApiError> {
-    state.store.read().await.clone().ok_or(ApiError(
-        StatusCode::SERVICE_UNAVAILABLE,
-        "store_unavailable",
+    state.store.read().await.clone().ok_or(ApiError::new(
+        ApiCode::StoreUnavailable,
         "the history database is not reachable; measurements are kept in the journal".into(),
     ))
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct Health {
     status: &'static str,
     /// "up" or "down".
@@ -27,6 +27,8 @@ pub(super) struct Health {
     machines: usize,
 }
 
+/// Service and database health.
+#[utoipa::path(get, path = "/healthz", tag = "service", responses((status = 200, description = "service up; the database up or down", body = Health)))]
 pub(super) async fn healthz(State(state): State<AppState>) -> Json<Health> {
     let up = state.store.read().await.is_some();
     Json(Health {
@@ -36,6 +38,8 @@ pub(super) async fn healthz(State(state): State<AppState>) -> Json<Health> {
     })
 }
 
+/// Prometheus metrics.
+#[utoipa::path(get, path = "/metrics", tag = "service", responses((status = 200, description = "Prometheus metrics", content_type = "text/plain")))]
 pub(super) async fn metrics(State(state): State<AppState>) -> Response {
     (
         [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
@@ -45,7 +49,7 @@ pub(super) async fn metrics(State(state): State<AppState>) -> Response {
 }
 
 /// `GET /api/v1/machines`.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub struct MachinesReply {
     /// Configured machines first (in name order), then machines only the store knows.
     pub machines: Vec<MachineInfo>,
@@ -53,7 +57,7 @@ pub struct MachinesReply {
     pub configured: Vec<String>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub struct MachineInfo {
     pub name: String,
     /// In this service's configuration (else only in the history).
@@ -63,7 +67,7 @@ pub struct MachineInfo {
     pub lobes: Vec<LobeInfo>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub struct LobeInfo {
     pub lobe: String,
     /// The part (recipe) name, once the store has a record of it.
@@ -74,11 +78,12 @@ pub struct LobeInfo {
     pub configured: bool,
     /// Its loop's state in this service: the latest part's errors, the table version on the
     /// control, frozen, blocked by a guard (configured features only).
+    #[schema(value_type = Option<Object>)]
     pub status: Option<crate::service::metrics::FeatureStatus>,
 }
 
 /// `GET /api/v1/cluster`: which instance runs which machine.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct ClusterReply {
     enabled: bool,
     /// The instance that answered.
@@ -86,7 +91,7 @@ pub(super) struct ClusterReply {
     machines: Vec<LeaseInfo>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 struct LeaseInfo {
     machine: String,
     owner: String,
@@ -98,6 +103,7 @@ struct LeaseInfo {
     here: bool,
 }
 
+#[utoipa::path(get, path = "/api/v1/cluster", tag = "service", responses((status = 200, description = "each machine's lease (owner, fencing epoch, live, run here); `{enabled: false}` without `[cluster]`", body = ClusterReply)))]
 pub(super) async fn cluster(State(state): State<AppState>) -> Result<Json<ClusterReply>, ApiError> {
     let Some(leases) = &state.cluster else {
         let off = ClusterReply {
@@ -107,13 +113,10 @@ pub(super) async fn cluster(State(state): State<AppState>) -> Result<Json<Cluste
         };
         return Ok(Json(off));
     };
-    let rows = leases.all().await.map_err(|e| {
-        ApiError(
-            axum::http::StatusCode::SERVICE_UNAVAILABLE,
-            "cluster_unavailable",
-            e.to_string(),
-        )
-    })?;
+    let rows = leases
+        .all()
+        .await
+        .map_err(|e| ApiError::new(ApiCode::ClusterUnavailable, e.to_string()))?;
     let here = |r: &crate::cluster::LeaseRow| r.live && r.owner == leases.instance();
     let machines = rows
         .iter()
@@ -132,6 +135,8 @@ pub(super) async fn cluster(State(state): State<AppState>) -> Result<Json<Cluste
     }))
 }
 
+/// Machines and their lobes or pins: configured ones and those in the history.
+#[utoipa::path(get, path = "/api/v1/machines", tag = "history", responses((status = 200, description = "machines and their lobes or pins: configured ones and those in the history", body = MachinesReply)))]
 pub(super) async fn machines(
     State(state): State<AppState>,
 ) -> Result<Json<MachinesReply>, ApiError> {
@@ -206,30 +211,38 @@ pub(super) async fn machines(
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(super) struct HistoryQuery {
+    /// Only this lobe or pin.
     lobe: Option<String>,
+    /// From this time, Unix ms.
     since_ms: Option<i64>,
+    /// Before this time, Unix ms.
     until_ms: Option<i64>,
+    /// Only this verdict: `pass` or `fail`.
     verdict: Option<String>,
+    /// At most this many (default 100).
     limit: Option<u32>,
+    /// Where the previous page ended (its `next_cursor`).
     cursor: Option<String>,
     /// `true`: the master runs (part ids `MASTER…`) only; default: production parts only.
     #[serde(default)]
     masters: bool,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct Items<T> {
     items: Vec<T>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct HistoryPage {
     items: Vec<MeasurementItem>,
     next_cursor: Option<String>,
 }
 
-#[derive(Debug, Serialize, Clone)]
+#[derive(Debug, Serialize, Clone, utoipa::ToSchema)]
 pub(super) struct MeasurementItem {
     id: i64,
     machine: String,
@@ -264,6 +277,9 @@ impl From<crate::store::MeasurementSummary> for MeasurementItem {
     }
 }
 
+/// Measurement history of production parts, newest first, keyset-paged (`masters=true`:
+/// the master runs instead).
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/measurements", tag = "history", params(("machine" = String, Path, description = "machine name"), HistoryQuery), responses((status = 200, description = "measurements, newest first, keyset-paged", body = HistoryPage)))]
 pub(super) async fn history(
     State(state): State<AppState>,
     ApiPath(machine): ApiPath<String>,
@@ -276,9 +292,8 @@ pub(super) async fn history(
     if let (Some(a), Some(b)) = (q.since_ms, q.until_ms)
         && a >= b
     {
-        return Err(ApiError(
-            StatusCode::BAD_REQUEST,
-            "invalid_range",
+        return Err(ApiError::new(
+            ApiCode::InvalidRange,
             "since_ms must be before until_ms".into(),
         ));
     }
@@ -307,7 +322,7 @@ pub(super) async fn history(
     }))
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct MeasurementReply {
     id: i64,
     machine: String,
@@ -316,9 +331,12 @@ pub(super) struct MeasurementReply {
     averaged_lift_mm: Vec<f64>,
     raw_kept: bool,
     /// The analysis report as stored (error curve, spectrum, …).
+    #[schema(value_type = Object)]
     analysis: serde_json::Value,
 }
 
+/// One measurement with its averaged profile and analysis.
+#[utoipa::path(get, path = "/api/v1/measurements/{id}", tag = "history", params(("id" = i64, Path, description = "measurement id")), responses((status = 200, description = "one measurement with its averaged profile and analysis", body = MeasurementReply)))]
 pub(super) async fn measurement(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
@@ -327,9 +345,8 @@ pub(super) async fn measurement(
         .await?
         .measurement(MeasurementId(id))
         .await?
-        .ok_or(ApiError(
-            StatusCode::NOT_FOUND,
-            "measurement_not_found",
+        .ok_or(ApiError::new(
+            ApiCode::MeasurementNotFound,
             format!("measurement {id} not found"),
         ))?;
     // The store checks it is JSON on the way in.
@@ -347,11 +364,14 @@ pub(super) async fn measurement(
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(super) struct LimitQuery {
+    /// At most this many.
     limit: Option<u32>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct TableItem {
     version: i64,
     parent_version: Option<i64>,
@@ -363,6 +383,8 @@ pub(super) struct TableItem {
     created_at_ms: i64,
 }
 
+/// Table versions of a feature, newest first.
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/lobes/{lobe}/tables", tag = "tables", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), LimitQuery), responses((status = 200, description = "table versions, newest first", body = Items<TableItem>)))]
 pub(super) async fn tables(
     State(state): State<AppState>,
     ApiPath((machine, lobe)): ApiPath<(String, String)>,
@@ -390,6 +412,8 @@ pub(super) async fn tables(
     Ok(Json(Items { items }))
 }
 
+/// The program text of a table version.
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program", tag = "tables", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), ("version" = i64, Path, description = "table version")), responses((status = 200, description = "the program text of the version", content_type = "text/plain")))]
 pub(super) async fn program(
     State(state): State<AppState>,
     ApiPath((machine, lobe, version)): ApiPath<(String, String, i64)>,
@@ -409,14 +433,13 @@ pub(super) async fn program(
 }
 
 fn version_not_found(version: i64) -> ApiError {
-    ApiError(
-        StatusCode::NOT_FOUND,
-        "table_version_not_found",
+    ApiError::new(
+        ApiCode::TableVersionNotFound,
         format!("version {version} not found"),
     )
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct DiffReply {
     version: i64,
     parent_version: i64,
@@ -428,7 +451,7 @@ pub(super) struct DiffReply {
     points: Vec<DiffPoint>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct DiffPoint {
     c_deg: f64,
     delta_x_um: f64,
@@ -436,6 +459,7 @@ pub(super) struct DiffPoint {
 
 /// How a table version differs from its parent: X (as the control interpolates it) at every
 /// point of the newer table, newer minus older, µm.
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/diff", tag = "tables", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), ("version" = i64, Path, description = "table version")), responses((status = 200, description = "X of the version minus X of its parent at every table point, µm", body = DiffReply)))]
 pub(super) async fn diff(
     State(state): State<AppState>,
     ApiPath((machine, lobe, version)): ApiPath<(String, String, i64)>,
@@ -448,9 +472,8 @@ pub(super) async fn diff(
         .await?
         .ok_or_else(|| version_not_found(version))?;
     let Some(parent) = newer.parent_version else {
-        return Err(ApiError(
-            StatusCode::NOT_FOUND,
-            "no_parent_version",
+        return Err(ApiError::new(
+            ApiCode::NoParentVersion,
             format!("version {version} is the first"),
         ));
     };
@@ -459,13 +482,8 @@ pub(super) async fn diff(
         .await?
         .ok_or_else(|| version_not_found(parent))?;
     let parse = |text: &str, v: i64| {
-        crate::core::program::parse_table_program(text).map_err(|e| {
-            ApiError(
-                StatusCode::INTERNAL_SERVER_ERROR,
-                "program_unreadable",
-                format!("version {v}: {e}"),
-            )
-        })
+        crate::core::program::parse_table_program(text)
+            .map_err(|e| ApiError::new(ApiCode::ProgramUnreadable, format!("version {v}: {e}")))
     };
     let (new_t, old_t) = (
         parse(&newer.program_text, version)?,
@@ -501,7 +519,7 @@ pub(super) async fn diff(
     }))
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct DressingItem {
     at_ms: i64,
     old_radius_mm: f64,
@@ -511,6 +529,8 @@ pub(super) struct DressingItem {
     source: String,
 }
 
+/// Wheel dressings, newest first.
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/dressings", tag = "history", params(("machine" = String, Path, description = "machine name"), LimitQuery), responses((status = 200, description = "wheel dressings, newest first", body = Items<DressingItem>)))]
 pub(super) async fn dressings(
     State(state): State<AppState>,
     ApiPath(machine): ApiPath<String>,
@@ -532,7 +552,7 @@ pub(super) async fn dressings(
     Ok(Json(Items { items }))
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct EventItem {
     at_ms: i64,
     level: &'static str,
@@ -540,6 +560,8 @@ pub(super) struct EventItem {
     message: String,
 }
 
+/// Alarms and events, newest first.
+#[utoipa::path(get, path = "/api/v1/machines/{machine}/events", tag = "history", params(("machine" = String, Path, description = "machine name"), LimitQuery), responses((status = 200, description = "alarms and events, newest first", body = Items<EventItem>)))]
 pub(super) async fn events(
     State(state): State<AppState>,
     ApiPath(machine): ApiPath<String>,

@@ -15,6 +15,7 @@ use super::AppState;
 use super::access::{Principal, Via, client_address, failed, locked, same_secret};
 use super::api::ApiError;
 use crate::auth::{UserName, random_hex, token_digest, verify_password};
+use crate::service::http::ApiCode;
 use crate::store::AuditResult;
 use axum::extract::{FromRequest, Request, State};
 use axum::http::{HeaderMap, StatusCode, header};
@@ -47,15 +48,8 @@ pub struct Sessions {
 impl Sessions {
     /// A new session for `user` until `expires_at_ms`: its key (for the cookie) and itself.
     pub fn create(&self, user: &str, expires_at_ms: i64) -> Result<(String, Session), ApiError> {
-        let random = |n| {
-            random_hex(n).map_err(|e| {
-                ApiError(
-                    StatusCode::INTERNAL_SERVER_ERROR,
-                    "random_failed",
-                    e.to_string(),
-                )
-            })
-        };
+        let random =
+            |n| random_hex(n).map_err(|e| ApiError::new(ApiCode::RandomFailed, e.to_string()));
         let key = random(32)?;
         let session = Session {
             user: user.to_string(),
@@ -114,6 +108,8 @@ fn set_cookie(app: &AppState, name: &str, value: &str, path: &str, max_age_s: i6
 
 #[derive(Debug, Default, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(super) struct SigninQuery {
     next: Option<String>,
 }
@@ -134,6 +130,7 @@ fn local_path(next: Option<&str>) -> String {
 }
 
 /// `GET /signin`: the form, with a fresh double-submit value.
+#[utoipa::path(get, path = "/signin", tag = "access", params(SigninQuery), responses((status = 200, description = "the sign-in form", content_type = "text/html")))]
 pub(super) async fn signin_page(
     State(app): State<AppState>,
     super::api::ApiQuery(q): super::api::ApiQuery<SigninQuery>,
@@ -147,13 +144,7 @@ fn signin_form(
     message: &str,
     status: StatusCode,
 ) -> Result<Response, ApiError> {
-    let nonce = random_hex(16).map_err(|e| {
-        ApiError(
-            StatusCode::INTERNAL_SERVER_ERROR,
-            "random_failed",
-            e.to_string(),
-        )
-    })?;
+    let nonce = random_hex(16).map_err(|e| ApiError::new(ApiCode::RandomFailed, e.to_string()))?;
     let html = super::dashboard::signin_html(&nonce, &local_path(next), message);
     let cookie = set_cookie(app, SIGNIN_COOKIE, &nonce, "/signin", 600);
     Ok((status, [(header::SET_COOKIE, cookie)], Html(html)).into_response())
@@ -161,6 +152,7 @@ fn signin_form(
 
 #[derive(Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::ToSchema)]
 pub(super) struct SigninForm {
     name: String,
     password: String,
@@ -169,6 +161,7 @@ pub(super) struct SigninForm {
 }
 
 /// `POST /signin`: checks the double-submit value, the lockout, then the password.
+#[utoipa::path(post, path = "/signin", tag = "access", request_body(content = SigninForm, content_type = "application/x-www-form-urlencoded"), responses((status = 303, description = "signed in: to `next`, with the session cookie"), (status = 200, description = "the form again, saying why not", content_type = "text/html")))]
 pub(super) async fn signin(
     State(app): State<AppState>,
     req: Request,
@@ -191,8 +184,8 @@ pub(super) async fn signin(
         return signin_form(
             &app,
             form.next.as_deref(),
-            &format!("Locked out: {}.", e.2),
-            e.0,
+            &format!("Locked out: {}.", e.message()),
+            e.status(),
         );
     }
     let user = match check_password(&app, name.as_ref(), &form.password).await? {
@@ -258,7 +251,7 @@ async fn check_password(
 }
 
 fn internal(e: impl std::fmt::Display) -> ApiError {
-    ApiError(StatusCode::INTERNAL_SERVER_ERROR, "internal", e.to_string())
+    ApiError::new(ApiCode::Internal, e.to_string())
 }
 
 /// An argon2id hash of a password nobody has, checked for unknown users.
@@ -266,12 +259,14 @@ const DUMMY_HASH: &str = "$argon2id$v=19$m=19456,t=2,p=1$c29tZXNhbHRzb21lc2FsdA$
 
 #[derive(Debug, Default, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::ToSchema)]
 pub(super) struct SignoutForm {
     csrf: Option<String>,
 }
 
 /// `POST /signout`: ends the session when the form (or the `X-CSRF-Token` header) carries
 /// its CSRF token.
+#[utoipa::path(post, path = "/signout", tag = "access", request_body(content = SignoutForm, content_type = "application/x-www-form-urlencoded"), responses((status = 303, description = "signed out: to the sign-in page")))]
 pub(super) async fn signout(
     State(app): State<AppState>,
     p: Principal,
@@ -290,9 +285,8 @@ pub(super) async fn signout(
     if !same_secret(given.as_bytes(), csrf.as_bytes()) {
         app.metrics
             .update_access(|a| *a.failures.entry("csrf").or_default() += 1);
-        return Err(ApiError(
-            StatusCode::FORBIDDEN,
-            "csrf_mismatch",
+        return Err(ApiError::new(
+            ApiCode::CsrfMismatch,
             "sign-out without this session's CSRF token".into(),
         ));
     }
@@ -304,6 +298,7 @@ pub(super) async fn signout(
 
 /// `GET /session`: who this browser is, and its CSRF token (same-origin script only: no
 /// other site can read the answer).
+#[utoipa::path(get, path = "/session", tag = "access", responses((status = 200, description = "who this browser is (`user`, `role`) and its CSRF token (`csrf`), each null when not signed in", content_type = "application/json")))]
 pub(super) async fn session(p: Principal) -> Response {
     let csrf = match &p.via {
         Via::Session { csrf, .. } => Some(csrf.clone()),
@@ -327,9 +322,9 @@ async fn read_form<T: serde::de::DeserializeOwned>(
     let bytes = super::api::read_body(body, app.body_timeout).await?;
     let req = Request::from_parts(parts, axum::body::Body::from(bytes));
     Form::<T>::from_request(req, app).await.map_err(|r| {
-        ApiError(
+        ApiError::rejected(
             r.status(),
-            "invalid_body",
+            ApiCode::InvalidBody,
             super::access::short(&r.body_text()),
         )
     })

@@ -7,14 +7,14 @@ use super::access::Principal;
 use super::api::{ApiError, ApiJson, ApiPath, feature_name, machine_name};
 use super::{AppState, Command, CommandDone, CommandError, Reply};
 use crate::names::MachineName;
+use crate::service::http::ApiCode;
 use crate::store::AuditResult;
 use axum::Json;
 use axum::extract::State;
-use axum::http::StatusCode;
 use serde::{Deserialize, Serialize};
 
 /// The reply to a write that was carried out.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub struct CommandReply {
     /// Always "ok".
     pub status: &'static str,
@@ -35,11 +35,13 @@ impl From<CommandDone> for CommandReply {
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::ToSchema)]
 pub(crate) struct RollbackBody {
     version: i64,
 }
 
 /// Deliver a stored table version again (as a new version, under the table number not in use).
+#[utoipa::path(post, path = "/api/v1/machines/{machine}/lobes/{lobe}/rollback", tag = "writes", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name")), request_body = RollbackBody, responses((status = 200, description = "delivered as a new version", body = CommandReply)))]
 pub(super) async fn rollback(
     p: Principal,
     State(state): State<AppState>,
@@ -53,16 +55,14 @@ pub(super) async fn rollback(
         .get(&machine)
         .is_some_and(|l| l.contains(&lobe));
     if !ground {
-        return Err(ApiError(
-            StatusCode::NOT_FOUND,
-            "lobe_not_found",
+        return Err(ApiError::new(
+            ApiCode::LobeNotFound,
             format!("machine {machine} does not grind a lobe or pin {lobe}"),
         ));
     }
     if body.version < 1 {
-        return Err(ApiError(
-            StatusCode::BAD_REQUEST,
-            "invalid_version",
+        return Err(ApiError::new(
+            ApiCode::InvalidVersion,
             "version must be ≥ 1".into(),
         ));
     }
@@ -73,7 +73,7 @@ pub(super) async fn rollback(
     entry.feature = Some(lobe.clone());
     entry.version = Some(version);
     entry.before = Some(before);
-    let done = command(&state, &machine, "rollback_refused", |reply| {
+    let done = command(&state, &machine, ApiCode::RollbackRefused, |reply| {
         Command::Rollback {
             lobe: lobe.clone(),
             version,
@@ -114,11 +114,11 @@ async fn audited(
             entry.after = Some(after());
         }
         Err(e) => {
-            entry.result = match e.0.is_server_error() {
+            entry.result = match e.status().is_server_error() {
                 true => AuditResult::Failed,
                 false => AuditResult::Refused,
             };
-            entry.reason = format!("{}: {}", e.1, e.2);
+            entry.reason = format!("{}: {}", e.code(), e.message());
         }
     }
     super::audit::record(state, entry).await;
@@ -126,6 +126,7 @@ async fn audited(
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::ToSchema)]
 pub(crate) struct PartRollbackBody {
     /// The version of each feature to go back to, by feature name.
     versions: std::collections::BTreeMap<String, i64>,
@@ -133,6 +134,7 @@ pub(crate) struct PartRollbackBody {
 
 /// `POST /api/v1/machines/{machine}/rollback` with `{"versions": {"IN1": 5, "EX1": 7}}`:
 /// several features back together, or none of them.
+#[utoipa::path(post, path = "/api/v1/machines/{machine}/rollback", tag = "writes", params(("machine" = String, Path, description = "machine name")), request_body = PartRollbackBody, responses((status = 200, description = "every feature delivered again", body = CommandReply)))]
 pub(super) async fn rollback_part(
     p: Principal,
     State(state): State<AppState>,
@@ -142,9 +144,8 @@ pub(super) async fn rollback_part(
     let machine = configured(&state, &machine)?;
     let grinds = state.machines.get(&machine).cloned().unwrap_or_default();
     if body.versions.is_empty() {
-        return Err(ApiError(
-            StatusCode::BAD_REQUEST,
-            "invalid_versions",
+        return Err(ApiError::new(
+            ApiCode::InvalidVersions,
             "versions names no feature".into(),
         ));
     }
@@ -152,23 +153,20 @@ pub(super) async fn rollback_part(
     for (lobe, version) in body.versions {
         feature_name(&lobe)?;
         if !grinds.contains(&lobe) {
-            return Err(ApiError(
-                StatusCode::NOT_FOUND,
-                "lobe_not_found",
+            return Err(ApiError::new(
+                ApiCode::LobeNotFound,
                 format!("machine {machine} does not grind a lobe or pin {lobe}"),
             ));
         }
         let Ok(v) = u64::try_from(version) else {
-            return Err(ApiError(
-                StatusCode::BAD_REQUEST,
-                "invalid_version",
+            return Err(ApiError::new(
+                ApiCode::InvalidVersion,
                 format!("{lobe}: version must be ≥ 1"),
             ));
         };
         if v == 0 {
-            return Err(ApiError(
-                StatusCode::BAD_REQUEST,
-                "invalid_version",
+            return Err(ApiError::new(
+                ApiCode::InvalidVersion,
                 format!("{lobe}: version must be ≥ 1"),
             ));
         }
@@ -181,7 +179,7 @@ pub(super) async fn rollback_part(
     let asked: std::collections::BTreeMap<&str, u64> =
         versions.iter().map(|(f, v)| (f.as_str(), *v)).collect();
     entry.reason = serde_json::json!({ "to": asked }).to_string();
-    let done = command(&state, &machine, "rollback_refused", |reply| {
+    let done = command(&state, &machine, ApiCode::RollbackRefused, |reply| {
         Command::RollbackPart {
             versions: versions.clone(),
             reply,
@@ -197,6 +195,7 @@ pub(super) async fn rollback_part(
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::ToSchema)]
 pub(crate) struct FreezeBody {
     frozen: bool,
     /// Why (kept with the state and in the audit trail); at most 200 characters.
@@ -206,6 +205,7 @@ pub(crate) struct FreezeBody {
 /// `POST /api/v1/machines/{machine}/lobes/{lobe}/learning` with `{"frozen": true, "reason":
 /// "…"}` or `{"frozen": false}`: an engineer freezes a feature's learning (the correction
 /// stays as it is) or lets it learn again.
+#[utoipa::path(post, path = "/api/v1/machines/{machine}/lobes/{lobe}/learning", tag = "writes", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name")), request_body = FreezeBody, responses((status = 200, description = "learning frozen or resumed", body = CommandReply)))]
 pub(super) async fn freeze(
     p: Principal,
     State(state): State<AppState>,
@@ -219,17 +219,15 @@ pub(super) async fn freeze(
         .get(&machine)
         .is_some_and(|l| l.contains(&lobe))
     {
-        return Err(ApiError(
-            StatusCode::NOT_FOUND,
-            "lobe_not_found",
+        return Err(ApiError::new(
+            ApiCode::LobeNotFound,
             format!("machine {machine} does not grind a lobe or pin {lobe}"),
         ));
     }
     let reason = body.reason.unwrap_or_default();
     if reason.chars().count() > 200 || reason.chars().any(char::is_control) {
-        return Err(ApiError(
-            StatusCode::BAD_REQUEST,
-            "invalid_reason",
+        return Err(ApiError::new(
+            ApiCode::InvalidReason,
             "reason: at most 200 characters, no control characters".into(),
         ));
     }
@@ -253,7 +251,7 @@ pub(super) async fn freeze(
     entry.machine = Some(machine.to_string());
     entry.feature = Some(lobe.clone());
     entry.before = Some(status(&state));
-    let done = command(&state, &machine, "freeze_refused", |reply| {
+    let done = command(&state, &machine, ApiCode::FreezeRefused, |reply| {
         Command::Freeze {
             lobe: lobe.clone(),
             frozen,
@@ -267,6 +265,7 @@ pub(super) async fn freeze(
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::ToSchema)]
 pub(crate) struct DressingBody {
     wheel_radius_mm: f64,
     /// The dresser's measured infeed (radius removed), µm; optional.
@@ -276,6 +275,7 @@ pub(crate) struct DressingBody {
 
 /// A wheel dressing reported by the operator or a cell controller: the table is regenerated
 /// for the new radius.
+#[utoipa::path(post, path = "/api/v1/machines/{machine}/dressings", tag = "writes", params(("machine" = String, Path, description = "machine name")), request_body = DressingBody, responses((status = 200, description = "recorded, the tables regenerated for the new radius", body = CommandReply)))]
 pub(super) async fn dress(
     p: Principal,
     State(state): State<AppState>,
@@ -283,25 +283,19 @@ pub(super) async fn dress(
     ApiJson(body): ApiJson<DressingBody>,
 ) -> Result<Json<CommandReply>, ApiError> {
     let machine = configured(&state, &machine)?;
-    let radius =
-        crate::core::compensate::check_wheel_radius(body.wheel_radius_mm).map_err(|e| {
-            ApiError(
-                StatusCode::BAD_REQUEST,
-                "invalid_wheel_radius",
-                e.to_string(),
-            )
-        })?;
+    let radius = crate::core::compensate::check_wheel_radius(body.wheel_radius_mm)
+        .map_err(|e| ApiError::new(ApiCode::InvalidWheelRadius, e.to_string()))?;
     let infeed_um = body
         .infeed_um
         .map(crate::core::learn::check_dresser_infeed)
         .transpose()
-        .map_err(|e| ApiError(StatusCode::BAD_REQUEST, "invalid_infeed", e.to_string()))?;
+        .map_err(|e| ApiError::new(ApiCode::InvalidInfeed, e.to_string()))?;
     let mut entry = p.audit("dressing", AuditResult::Ok, String::new());
     entry.machine = Some(machine.to_string());
     let features = state.machines.get(&machine).cloned().unwrap_or_default();
     entry.before = Some(in_force(&state, &machine, &features));
     let source = format!("api:{}", p.actor);
-    let done = command(&state, &machine, "dressing_refused", |reply| {
+    let done = command(&state, &machine, ApiCode::DressingRefused, |reply| {
         Command::Dressing {
             wheel_radius_mm: radius,
             infeed_um,
@@ -326,9 +320,8 @@ fn configured(state: &AppState, machine: &str) -> Result<MachineName, ApiError> 
     if state.machines.contains_key(&name) {
         Ok(name)
     } else {
-        Err(ApiError(
-            StatusCode::NOT_FOUND,
-            "machine_not_found",
+        Err(ApiError::new(
+            ApiCode::MachineNotFound,
             format!("machine {machine} is not configured"),
         ))
     }
@@ -339,16 +332,11 @@ fn configured(state: &AppState, machine: &str) -> Result<MachineName, ApiError> 
 async fn command(
     state: &AppState,
     machine: &MachineName,
-    refused: &'static str,
+    refused: ApiCode,
     make: impl FnOnce(Reply) -> Command,
 ) -> Result<CommandDone, ApiError> {
-    let stopped = |what: &str| {
-        ApiError(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "machine_stopped",
-            format!("machine {machine} {what}"),
-        )
-    };
+    let stopped =
+        |what: &str| ApiError::new(ApiCode::MachineStopped, format!("machine {machine} {what}"));
     let sender = state
         .commands
         .read()
@@ -358,18 +346,16 @@ async fn command(
         Some(s) => s,
         // Configured, but another instance of the cluster owns it now.
         None if state.machines.contains_key(machine) => {
-            return Err(ApiError(
-                StatusCode::SERVICE_UNAVAILABLE,
-                "machine_elsewhere",
+            return Err(ApiError::new(
+                ApiCode::MachineElsewhere,
                 format!(
                     "machine {machine} does not run on this instance now: another instance of the cluster holds it; ask that one"
                 ),
             ));
         }
         None => {
-            return Err(ApiError(
-                StatusCode::NOT_FOUND,
-                "machine_not_found",
+            return Err(ApiError::new(
+                ApiCode::MachineNotFound,
                 format!("machine {machine} is not configured"),
             ));
         }
@@ -380,5 +366,5 @@ async fn command(
         .await
         .map_err(|_| stopped("is not running"))?;
     let result: Result<CommandDone, CommandError> = answer.await.map_err(|_| stopped("stopped"))?;
-    result.map_err(|e| ApiError(e.status(), e.code(refused), e.to_string()))
+    result.map_err(|e| ApiError::new(e.code(refused), e.to_string()))
 }

@@ -126,6 +126,15 @@ impl Journal {
         self.fence = Some(fence);
     }
 
+    /// In a cluster: whether another instance has claimed the machine since this journal was
+    /// fenced (its fence holds a newer epoch). Asked after a failed write, so the failure is
+    /// told apart by the fence itself, not by digging through the error.
+    pub(crate) fn fenced_out(&self) -> bool {
+        self.fence
+            .as_ref()
+            .is_some_and(|f| matches!(f.hold(), Err(crate::share::StateError::Fenced { .. })))
+    }
+
     fn hold(&self) -> anyhow::Result<Option<Held>> {
         let held = self.fence.as_ref().map(Fence::hold).transpose();
         held.with_context(|| format!("journal {}", self.path.display()))

@@ -237,7 +237,7 @@ impl FeatureLoop {
         }
         let kept = match self.journal.append(&records) {
             Ok(()) => true,
-            Err(e) if super::fenced(&e) => {
+            Err(e) if self.journal.fenced_out() => {
                 // Not a fault here: the machine moved while this instance was paused; the
                 // loop stops before its next event, and the part stays with its source.
                 warn!(machine = %self.name, error = format!("{e:#}"), "cluster: another instance owns this machine now; records not written here");

@@ -284,7 +284,7 @@ impl FeatureLoop {
                         records.append(&mut more);
                         self.delivery_line()
                     }
-                    Err(e) if super::fenced(&e) => {
+                    Err(e) if self.journal.fenced_out() => {
                         warn!(machine = %self.name, error = format!("{e:#}"), "cluster: another instance owns this machine now; table not recorded here");
                         format!("table not recorded: {e:#}")
                     }

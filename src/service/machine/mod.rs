@@ -89,20 +89,6 @@ pub enum SourceEvent {
     },
 }
 
-/// Whether `e` says another instance owns the machine now (its fence holds a newer epoch).
-pub(crate) fn fenced(e: &anyhow::Error) -> bool {
-    use crate::share::{PushError, StateError};
-    let is = |s: Option<&StateError>| matches!(s, Some(StateError::Fenced { .. }));
-    e.chain().any(|c| {
-        // A push error wraps the state error transparently: the chain skips it.
-        let pushed = match c.downcast_ref::<PushError>() {
-            Some(PushError::State(s)) => Some(s),
-            _ => None,
-        };
-        is(c.downcast_ref::<StateError>()) || is(pushed)
-    })
-}
-
 /// What became of a measurement, for the source that sent it (a drop file is moved to
 /// `processed/` or `rejected/` by it).
 #[derive(Debug, Clone, PartialEq)]
@@ -270,7 +256,7 @@ impl MachineLoop {
             }
         };
         if let Err(e) = result {
-            if fenced(&e) {
+            if self.fenced_out() {
                 warn!(machine = %self.name, error = format!("{e:#}"), "cluster: another instance owns this machine now; part not processed here");
             } else {
                 error!(machine = %self.name, error = format!("{e:#}"), "part not processed");

@@ -1,7 +1,7 @@
 //! Inline SVG charts, drawn on the server: line charts with axes, units, limit lines and
 //! time-axis marks; sparklines; the polar plot of a lobe with its error magnified.
 
-use super::pages::esc;
+use maud::{Markup, html};
 use std::fmt::Write as _;
 
 const W: f64 = 640.0;
@@ -91,8 +91,13 @@ fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
         .unwrap_or((0.0, 1.0))
 }
 
+/// A coordinate as the charts write it: one decimal.
+fn d1(v: f64) -> String {
+    format!("{v:.1}")
+}
+
 impl LineChart {
-    pub(super) fn svg(&self) -> String {
+    pub(super) fn svg(&self) -> Markup {
         let points = || self.lines.iter().flat_map(|l| l.points.iter());
         let (x0, x1) = range(points().map(|p| p.0).chain(self.marks.iter().map(|m| m.x)));
         let (x0, x1) = if x1 > x0 {
@@ -104,95 +109,63 @@ impl LineChart {
         let (y0, y1, yt) = ticks(ylo, yhi);
         let (_, _, xt) = ticks(x0, x1);
         let scale = Scale { x0, x1, y0, y1 };
-        let mut s = String::new();
-        let _ = write!(
-            s,
-            r#"<svg class="chart" viewBox="0 0 {W} {H}" role="img" aria-label="{t}"><title>{t}</title>"#,
-            t = esc(&self.title)
-        );
-        self.axes(&mut s, &scale, &xt, &yt);
-        self.overlays(&mut s, &scale);
-        s.push_str("</svg>");
-        s
+        html! {
+            svg class="chart" viewBox={ "0 0 " (W) " " (H) } role="img" aria-label=(self.title) {
+                title { (self.title) }
+                (self.axes(&scale, &xt, &yt))
+                (self.overlays(&scale))
+            }
+        }
     }
 
     /// Grid, ticks, axes, their labels with units, and the title.
-    fn axes(&self, s: &mut String, sc: &Scale, xt: &[f64], yt: &[f64]) {
-        for &y in yt {
-            let _ = write!(
-                s,
-                r#"<line class="grid" x1="{LEFT}" x2="{}" y1="{y:.1}" y2="{y:.1}"/><text class="tick" x="{}" y="{:.1}" text-anchor="end">{}</text>"#,
-                W - RIGHT,
-                LEFT - 4.0,
-                sc.py(y) + 3.0,
-                fmt_tick(y),
-                y = sc.py(y)
-            );
+    fn axes(&self, sc: &Scale, xt: &[f64], yt: &[f64]) -> Markup {
+        let b = H - BOTTOM;
+        html! {
+            @for &y in yt {
+                line class="grid" x1=(LEFT) x2=(W - RIGHT) y1=(d1(sc.py(y))) y2=(d1(sc.py(y))) {}
+                text class="tick" x=(LEFT - 4.0) y=(d1(sc.py(y) + 3.0)) text-anchor="end" { (fmt_tick(y)) }
+            }
+            @for &x in xt.iter().filter(|x| **x >= sc.x0 && **x <= sc.x1) {
+                text class="tick" x=(d1(sc.px(x))) y=(H - BOTTOM + 14.0) text-anchor="middle" { (fmt_tick(x)) }
+            }
+            line class="axis" x1=(LEFT) x2=(LEFT) y1=(TOP) y2=(b) {}
+            line class="axis" x1=(LEFT) x2=(W - RIGHT) y1=(b) y2=(b) {}
+            text class="label" x=((LEFT + W - RIGHT) / 2.0) y=(H - 6.0) text-anchor="middle" { (self.x_label) }
+            text class="label" transform={ "translate(14 " ((TOP + H - BOTTOM) / 2.0) ") rotate(-90)" } text-anchor="middle" { (self.y_label) }
+            text class="title" x=(LEFT) y="15" { (self.title) }
         }
-        for &x in xt.iter().filter(|x| **x >= sc.x0 && **x <= sc.x1) {
-            let _ = write!(
-                s,
-                r#"<text class="tick" x="{:.1}" y="{}" text-anchor="middle">{}</text>"#,
-                sc.px(x),
-                H - BOTTOM + 14.0,
-                fmt_tick(x)
-            );
-        }
-        let _ = write!(
-            s,
-            r#"<line class="axis" x1="{LEFT}" x2="{LEFT}" y1="{TOP}" y2="{b}"/><line class="axis" x1="{LEFT}" x2="{r}" y1="{b}" y2="{b}"/><text class="label" x="{cx}" y="{ly}" text-anchor="middle">{xl}</text><text class="label" transform="translate(14 {cy}) rotate(-90)" text-anchor="middle">{yl}</text><text class="title" x="{LEFT}" y="15">{t}</text>"#,
-            b = H - BOTTOM,
-            r = W - RIGHT,
-            cx = (LEFT + W - RIGHT) / 2.0,
-            ly = H - 6.0,
-            cy = (TOP + H - BOTTOM) / 2.0,
-            xl = esc(&self.x_label),
-            yl = esc(&self.y_label),
-            t = esc(&self.title)
-        );
     }
 
     /// Marks, limit lines, then the data lines with their legend.
-    fn overlays(&self, s: &mut String, sc: &Scale) {
-        for m in &self.marks {
-            let _ = write!(
-                s,
-                r#"<line class="mark {c}" x1="{x:.1}" x2="{x:.1}" y1="{TOP}" y2="{b}"><title>{l}</title></line>"#,
-                c = m.class,
-                x = sc.px(m.x),
-                b = H - BOTTOM,
-                l = esc(&m.label)
-            );
-        }
-        for (y, label) in &self.limits {
-            let _ = write!(
-                s,
-                r#"<line class="limit" x1="{LEFT}" x2="{r}" y1="{y:.1}" y2="{y:.1}"><title>{l}</title></line>"#,
-                r = W - RIGHT,
-                y = sc.py(*y),
-                l = esc(label)
-            );
-        }
-        for (i, l) in self.lines.iter().enumerate() {
-            let pts: String = l
-                .points
-                .iter()
-                .filter(|p| p.1.is_finite())
-                .map(|p| format!("{:.1},{:.1} ", sc.px(p.0), sc.py(p.1)))
-                .collect();
-            let _ = write!(
-                s,
-                r#"<polyline class="line {c}" points="{pts}"/><text class="legend {c}" x="{x}" y="15" text-anchor="end">{n}</text>"#,
-                c = l.class,
-                x = W - RIGHT - 120.0 * i as f64,
-                n = esc(&l.name)
-            );
+    fn overlays(&self, sc: &Scale) -> Markup {
+        html! {
+            @for m in &self.marks {
+                line class={ "mark " (m.class) } x1=(d1(sc.px(m.x))) x2=(d1(sc.px(m.x))) y1=(TOP) y2=(H - BOTTOM) {
+                    title { (m.label) }
+                }
+            }
+            @for (y, label) in &self.limits {
+                line class="limit" x1=(LEFT) x2=(W - RIGHT) y1=(d1(sc.py(*y))) y2=(d1(sc.py(*y))) {
+                    title { (label) }
+                }
+            }
+            @for (i, l) in self.lines.iter().enumerate() {
+                @let pts: String = l
+                    .points
+                    .iter()
+                    .filter(|p| p.1.is_finite())
+                    .map(|p| format!("{:.1},{:.1} ", sc.px(p.0), sc.py(p.1)))
+                    .collect();
+                polyline class={ "line " (l.class) } points=(pts) {}
+                text class={ "legend " (l.class) } x=(W - RIGHT - 120.0 * i as f64) y="15" text-anchor="end" { (l.name) }
+            }
         }
     }
 }
 
 /// A small line of `values` (oldest first) with the tolerance `limit` as a dashed line.
-pub(super) fn sparkline(values: &[f64], limit: Option<f64>, label: &str) -> String {
+pub(super) fn sparkline(values: &[f64], limit: Option<f64>, label: &str) -> Markup {
     let (w, h) = (150.0, 32.0);
     let top = values
         .iter()
@@ -207,23 +180,20 @@ pub(super) fn sparkline(values: &[f64], limit: Option<f64>, label: &str) -> Stri
         .enumerate()
         .map(|(i, v)| format!("{:.1},{:.1} ", i as f64 / n * w, py(*v)))
         .collect();
-    let lim = limit
-        .map(|l| {
-            format!(
-                r#"<line class="limit" x1="0" x2="{w}" y1="{y:.1}" y2="{y:.1}"/>"#,
-                y = py(l)
-            )
-        })
-        .unwrap_or_default();
-    format!(
-        r#"<svg class="spark" viewBox="0 0 {w} {h}" role="img" aria-label="{l}"><title>{l}</title>{lim}<polyline class="line profile" points="{pts}"/></svg>"#,
-        l = esc(label)
-    )
+    html! {
+        svg class="spark" viewBox={ "0 0 " (w) " " (h) } role="img" aria-label=(label) {
+            title { (label) }
+            @if let Some(l) = limit {
+                line class="limit" x1="0" x2=(w) y1=(d1(py(l))) y2=(d1(py(l))) {}
+            }
+            polyline class="line profile" points=(pts) {}
+        }
+    }
 }
 
 /// The lobe in polar form: nominal and measured radius `r0 + lift` at `angle_deg`, the
 /// error drawn `magnification` times larger.
-pub(super) fn polar(angle_deg: &[f64], nominal_mm: &[f64], error_um: &[f64], r0_mm: f64) -> String {
+pub(super) fn polar(angle_deg: &[f64], nominal_mm: &[f64], error_um: &[f64], r0_mm: f64) -> Markup {
     let size = 320.0;
     let c = size / 2.0;
     let rmax = nominal_mm.iter().fold(0.0f64, |a, l| a.max(r0_mm + l));
@@ -252,18 +222,21 @@ pub(super) fn polar(angle_deg: &[f64], nominal_mm: &[f64], error_um: &[f64], r0_
         d.push('Z');
         d
     };
-    format!(
-        r#"<svg class="chart polar" viewBox="0 0 {size} {size}" role="img" aria-label="Latest part, polar"><title>Latest part: nominal and measured, error ×{m}</title><line class="grid" x1="{c}" x2="{c}" y1="10" y2="{e}"/><line class="grid" x1="10" x2="{e}" y1="{c}" y2="{c}"/><path class="nominal" d="{n}"/><path class="measured" d="{me}"/><text class="label" x="8" y="16">error drawn ×{m}</text><text class="legend nominal" x="8" y="{l1}">— nominal</text><text class="legend measured" x="8" y="{l2}">— measured</text><text class="tick" x="{e}" y="{ct}" text-anchor="end">0°</text><text class="tick" x="{c4}" y="{top}">90°</text></svg>"#,
-        e = size - 10.0,
-        n = path(false),
-        me = path(true),
-        m = fmt_tick(magnification),
-        l1 = size - 24.0,
-        l2 = size - 10.0,
-        ct = c - 4.0,
-        c4 = c + 4.0,
-        top = 30.0
-    )
+    let (e, m) = (size - 10.0, fmt_tick(magnification));
+    html! {
+        svg class="chart polar" viewBox={ "0 0 " (size) " " (size) } role="img" aria-label="Latest part, polar" {
+            title { "Latest part: nominal and measured, error ×" (m) }
+            line class="grid" x1=(c) x2=(c) y1="10" y2=(e) {}
+            line class="grid" x1="10" x2=(e) y1=(c) y2=(c) {}
+            path class="nominal" d=(path(false)) {}
+            path class="measured" d=(path(true)) {}
+            text class="label" x="8" y="16" { "error drawn ×" (m) }
+            text class="legend nominal" x="8" y=(size - 24.0) { "— nominal" }
+            text class="legend measured" x="8" y=(size - 10.0) { "— measured" }
+            text class="tick" x=(e) y=(c - 4.0) text-anchor="end" { "0°" }
+            text class="tick" x=(c + 4.0) y="30" { "90°" }
+        }
+    }
 }
 
 /// A 1–2–5 magnification that draws the largest error at about a tenth of the radius.

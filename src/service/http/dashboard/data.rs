@@ -2,6 +2,7 @@
 //! a feature's trend, latest part, versions, dressings and events.
 
 use super::FeatureSheet;
+use crate::service::http::ApiCode;
 use crate::service::http::AppState;
 use crate::service::http::api::ApiError;
 use crate::service::metrics::MachineMetrics;
@@ -57,9 +58,8 @@ pub(super) struct OverviewRow {
 }
 
 pub(super) fn unavailable() -> ApiError {
-    ApiError(
-        axum::http::StatusCode::SERVICE_UNAVAILABLE,
-        "store_unavailable",
+    ApiError::new(
+        ApiCode::StoreUnavailable,
         "the history database is not reachable; measurements are kept in the journal".into(),
     )
 }

@@ -4,9 +4,10 @@
 use super::data::{self, diff_um};
 use super::{Dash, names};
 use crate::dfq::{DfqSeries, row_from, write_dfq};
+use crate::service::http::ApiCode;
 use crate::service::http::api::{ApiError, ApiPath, ApiQuery};
 use axum::extract::State;
-use axum::http::{StatusCode, header};
+use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use std::fmt::Write as _;
 
@@ -15,6 +16,7 @@ const DFQ_PARTS: u32 = 500;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
+#[derive(utoipa::ToSchema)]
 pub(super) enum Chart {
     Trend,
     Latest,
@@ -23,6 +25,7 @@ pub(super) enum Chart {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
+#[derive(utoipa::ToSchema)]
 pub(super) enum Format {
     Csv,
     Json,
@@ -30,6 +33,8 @@ pub(super) enum Format {
 
 #[derive(Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(super) struct DataQuery {
     chart: Chart,
     format: Format,
@@ -70,10 +75,11 @@ impl Table {
 }
 
 fn not_found(what: String) -> ApiError {
-    ApiError(StatusCode::NOT_FOUND, "no_data", what)
+    ApiError::new(ApiCode::NoData, what)
 }
 
 /// `GET …/data?chart=trend|latest|diff&format=csv|json[&v=N]`.
+#[utoipa::path(get, path = "/machines/{machine}/features/{lobe}/data", tag = "dashboard", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), DataQuery), responses((status = 200, description = "a chart's data as CSV or JSON", content_type = "text/csv")))]
 pub(super) async fn chart_data(
     State(d): State<Dash>,
     ApiPath((machine, lobe)): ApiPath<(String, String)>,
@@ -110,13 +116,8 @@ pub(super) async fn chart_data(
         }
         Chart::Latest => latest_table(&store, &machine, &lobe).await?,
         Chart::Diff => {
-            let v = q.v.ok_or_else(|| {
-                ApiError(
-                    StatusCode::BAD_REQUEST,
-                    "invalid_query",
-                    "diff needs v".into(),
-                )
-            })?;
+            let v =
+                q.v.ok_or_else(|| ApiError::new(ApiCode::InvalidQuery, "diff needs v".into()))?;
             diff_table(&store, &machine, &lobe, v).await?
         }
     };
@@ -207,6 +208,7 @@ async fn latest_table(
 }
 
 /// `GET …/export.dfq`: the newest parts of the feature as Q-DAS AQDEF.
+#[utoipa::path(get, path = "/machines/{machine}/features/{lobe}/export.dfq", tag = "dashboard", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name")), responses((status = 200, description = "the newest parts as Q-DAS AQDEF", content_type = "text/plain")))]
 pub(super) async fn dfq(
     State(d): State<Dash>,
     ApiPath((machine, lobe)): ApiPath<(String, String)>,

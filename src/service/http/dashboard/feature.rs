@@ -5,9 +5,9 @@
 use super::FeatureSheet;
 use super::charts::{Line, LineChart, Mark, polar};
 use super::data::FeatureData;
-use super::pages::{downloads, esc, feature_url, page, when};
+use super::pages::{downloads, feature_url, page, when};
 use crate::store::MeasurementSummary;
-use std::fmt::Write as _;
+use maud::{Markup, PreEscaped, html};
 
 /// The trend's time unit for a span of parts: its name and length in ms.
 fn unit(span_ms: i64) -> (&'static str, f64) {
@@ -28,7 +28,7 @@ fn trend_chart(
     value: fn(&MeasurementSummary) -> f64,
     limits: Vec<(f64, String)>,
     marks: &[Mark],
-) -> String {
+) -> Markup {
     let newest = parts.last().map_or(0, |p| p.received_at_ms);
     let oldest = parts.first().map_or(0, |p| p.received_at_ms);
     let (name, ms) = unit(newest - oldest);
@@ -57,9 +57,9 @@ fn trend_chart(
     .svg()
 }
 
-fn trend(d: &FeatureData, sheet: Option<&FeatureSheet>, base: &str) -> String {
+fn trend(d: &FeatureData, sheet: Option<&FeatureSheet>, base: &str) -> Markup {
     let Some(first) = d.parts.first() else {
-        return "<p>No part measured yet.</p>".into();
+        return html! { p { "No part measured yet." } };
     };
     let newest = d.parts.last().map_or(0, |p| p.received_at_ms);
     let in_range = |t: i64| t >= first.received_at_ms && t <= newest;
@@ -89,50 +89,26 @@ fn trend(d: &FeatureData, sheet: Option<&FeatureSheet>, base: &str) -> String {
     let limits = band
         .map(|b| vec![(b, format!("tolerance {b} µm"))])
         .unwrap_or_default();
-    let mut s = format!(
-        r#"<section aria-labelledby="trend-h"><h2 id="trend-h">Trend over the last {} parts</h2><p class="legend-text">Dashed red: tolerance. Blue marks: table versions; orange marks: dressings.</p>"#,
-        d.parts.len()
-    );
-    s.push_str(&trend_chart(
-        "max profile error",
-        "µm",
-        "profile",
-        &d.parts,
-        |p| p.max_profile_error_um,
-        limits,
-        &marks,
-    ));
-    s.push_str(&trend_chart(
-        "size (base radius error)",
-        "µm",
-        "size",
-        &d.parts,
-        |p| p.base_radius_error_um,
-        vec![],
-        &marks,
-    ));
-    s.push_str(&trend_chart(
-        "phase error",
-        "°",
-        "phase",
-        &d.parts,
-        |p| p.phase_error_deg,
-        vec![],
-        &marks,
-    ));
-    s.push_str(&downloads(base, "trend", ""));
-    s.push_str("</section>");
-    s
+    html! {
+        section aria-labelledby="trend-h" {
+            h2 id="trend-h" { "Trend over the last " (d.parts.len()) " parts" }
+            p class="legend-text" { "Dashed red: tolerance. Blue marks: table versions; orange marks: dressings." }
+            (trend_chart("max profile error", "µm", "profile", &d.parts, |p| p.max_profile_error_um, limits, &marks))
+            (trend_chart("size (base radius error)", "µm", "size", &d.parts, |p| p.base_radius_error_um, vec![], &marks))
+            (trend_chart("phase error", "°", "phase", &d.parts, |p| p.phase_error_deg, vec![], &marks))
+            (downloads(base, "trend", ""))
+        }
+    }
 }
 
-fn latest(d: &FeatureData, sheet: Option<&FeatureSheet>, base: &str) -> String {
+fn latest(d: &FeatureData, sheet: Option<&FeatureSheet>, base: &str) -> Markup {
     let Some(l) = &d.latest else {
-        return String::new();
+        return html! {};
     };
     let c = &l.curves;
     let n = c.angle_deg.len();
     if n == 0 || c.error_um.len() != n || l.lift_mm.len() != n {
-        return "<p>The latest part's report has no error curve.</p>".into();
+        return html! { p { "The latest part's report has no error curve." } };
     }
     let nominal: Vec<f64> = (0..n)
         .map(|i| l.lift_mm[i] - c.error_um[i] / 1000.0)
@@ -189,44 +165,53 @@ fn latest(d: &FeatureData, sheet: Option<&FeatureSheet>, base: &str) -> String {
         limits,
         marks: vec![],
     };
-    format!(
-        r#"<section aria-labelledby="latest-h"><h2 id="latest-h">Latest part #{id} ({v}, {at})</h2><div class="pair">{p}{u}</div>{dl}</section>"#,
-        id = l.summary.id.0,
-        v = l.summary.verdict.as_str(),
-        at = when(l.summary.received_at_ms),
-        p = polar(&c.angle_deg, &nominal, &c.error_um, r0),
-        u = unrolled.svg(),
-        dl = downloads(base, "latest", ""),
-    )
+    html! {
+        section aria-labelledby="latest-h" {
+            h2 id="latest-h" {
+                "Latest part #" (l.summary.id.0) " (" (l.summary.verdict.as_str()) ", " (when(l.summary.received_at_ms)) ")"
+            }
+            div class="pair" {
+                (polar(&c.angle_deg, &nominal, &c.error_um, r0))
+                (unrolled.svg())
+            }
+            (downloads(base, "latest", ""))
+        }
+    }
 }
 
-fn events(d: &FeatureData, machine: &str) -> String {
-    let mut s = String::from(
-        r#"<section aria-labelledby="events-h"><h2 id="events-h">Events and alarms</h2><table id="events"><thead><tr><th scope="col">When</th><th scope="col">Level</th><th scope="col">Kind</th><th scope="col">Message</th><th scope="col">Acknowledged</th></tr></thead><tbody>"#,
-    );
-    for (e, ack) in &d.events {
-        let acked = match ack {
-            Some(a) => format!("{} ({})", when(a.at_ms), esc(&a.source)),
-            None => format!(
-                r#"<button type="button" class="ack" data-url="/api/v1/machines/{m}/events/{id}/ack">Acknowledge</button>"#,
-                m = esc(machine),
-                id = e.id.0
-            ),
-        };
-        let _ = write!(
-            s,
-            r#"<tr class="{lv}"><td>{at}</td><td>{lv}</td><td>{k}</td><td>{msg}</td><td>{acked}</td></tr>"#,
-            at = when(e.at_ms),
-            lv = e.level.as_str(),
-            k = esc(e.kind.as_str()),
-            msg = esc(&e.message),
-        );
+fn events(d: &FeatureData, machine: &str) -> Markup {
+    html! {
+        section aria-labelledby="events-h" {
+            h2 id="events-h" { "Events and alarms" }
+            table id="events" {
+                thead { tr {
+                    th scope="col" { "When" } th scope="col" { "Level" } th scope="col" { "Kind" }
+                    th scope="col" { "Message" } th scope="col" { "Acknowledged" }
+                } }
+                tbody {
+                    @for (e, ack) in &d.events {
+                        tr class=(e.level.as_str()) {
+                            td { (when(e.at_ms)) }
+                            td { (e.level.as_str()) }
+                            td { (e.kind.as_str()) }
+                            td { (e.message) }
+                            td {
+                                @match ack {
+                                    Some(a) => { (when(a.at_ms)) " (" (a.source) ")" }
+                                    None => {
+                                        button type="button" class="ack" data-url={ "/api/v1/machines/" (machine) "/events/" (e.id.0) "/ack" } { "Acknowledge" }
+                                    }
+                                }
+                            }
+                        }
+                    }
+                    @if d.events.is_empty() {
+                        tr { td colspan="5" { "No events." } }
+                    }
+                }
+            }
+        }
     }
-    if d.events.is_empty() {
-        s.push_str(r#"<tr><td colspan="5">No events.</td></tr>"#);
-    }
-    s.push_str("</tbody></table></section>");
-    s
 }
 
 pub(super) fn feature(
@@ -235,7 +220,7 @@ pub(super) fn feature(
     d: &FeatureData,
     sheet: Option<&FeatureSheet>,
     fragment: bool,
-    capability: &str,
+    capability: Markup,
 ) -> String {
     let base = feature_url(machine, lobe);
     let in_force = d
@@ -243,37 +228,56 @@ pub(super) fn feature(
         .iter()
         .find(|v| v.status == crate::store::TableStatus::Pushed)
         .map_or("none yet".into(), |v| {
-            format!("v{} (T{}): {}", v.version, v.table_number, esc(&v.reason))
+            format!("v{} (T{}): {}", v.version, v.table_number, v.reason)
         });
-    let mut live = format!(
-        r#"<p class="summary">Table on the control: <strong>{in_force}</strong> · <a href="{b}/versions">table versions</a> · <a href="{b}/export.dfq" download>Q-DAS export (.dfq)</a></p>"#,
-        b = esc(&base)
-    );
-    live.push_str(&trend(d, sheet, &base));
-    live.push_str(&latest(d, sheet, &base));
-    live.push_str(&events(d, machine));
-    let setup = sheet
-        .and_then(|s| s.setup_svg.as_deref())
-        .unwrap_or("<p>No setup drawing: the feature is not configured in this service.</p>");
-    let plan = sheet
-        .and_then(|s| s.speed_plan_svg.as_deref())
-        .map_or(String::new(), |svg| {
-            format!(
-                r#"<section aria-labelledby="plan-h"><h2 id="plan-h">Speed plan</h2><div class="setup">{svg}</div></section>"#
-            )
-        });
-    let rest = format!(
-        r#"{capability}<section aria-labelledby="dress-h"><h2 id="dress-h">Report a dressing</h2><form id="dressing" data-url="/api/v1/machines/{m}/dressings"><label for="radius">New wheel radius, mm</label> <input id="radius" name="wheel_radius_mm" type="number" step="0.001" min="5" max="1000" required> <button type="submit">Report dressing</button></form><p id="dressing-result" role="status"></p></section><section aria-labelledby="setup-h"><h2 id="setup-h">Setup drawing</h2><div class="setup">{setup}</div></section>{plan}"#,
-        m = esc(machine)
-    );
-    let crumbs = format!(r#" › {} {}"#, esc(machine), esc(lobe));
+    let live = html! {
+        p class="summary" {
+            "Table on the control: " strong { (in_force) }
+            " · " a href={ (base) "/versions" } { "table versions" }
+            " · " a href={ (base) "/export.dfq" } download { "Q-DAS export (.dfq)" }
+        }
+        (trend(d, sheet, &base))
+        (latest(d, sheet, &base))
+        (events(d, machine))
+    };
+    // The drawings are SVG documents the core renders (escaping its own text): kept as they are.
+    let setup = sheet.and_then(|s| s.setup_svg.as_deref());
+    let plan = sheet.and_then(|s| s.speed_plan_svg.as_deref());
+    let rest = html! {
+        (capability)
+        section aria-labelledby="dress-h" {
+            h2 id="dress-h" { "Report a dressing" }
+            form id="dressing" data-url={ "/api/v1/machines/" (machine) "/dressings" } {
+                label for="radius" { "New wheel radius, mm" } " "
+                input id="radius" name="wheel_radius_mm" type="number" step="0.001" min="5" max="1000" required;
+                " " button type="submit" { "Report dressing" }
+            }
+            p id="dressing-result" role="status" {}
+        }
+        section aria-labelledby="setup-h" {
+            h2 id="setup-h" { "Setup drawing" }
+            div class="setup" {
+                @match setup {
+                    Some(svg) => (PreEscaped(svg)),
+                    None => p { "No setup drawing: the feature is not configured in this service." },
+                }
+            }
+        }
+        @if let Some(svg) = plan {
+            section aria-labelledby="plan-h" {
+                h2 id="plan-h" { "Speed plan" }
+                div class="setup" { (PreEscaped(svg)) }
+            }
+        }
+    };
+    let crumbs = html! { " › " (machine) " " (lobe) };
     page(
         &format!("{machine} {lobe}"),
-        &crumbs,
+        crumbs,
         &base,
         (machine, lobe),
         live,
-        &rest,
+        rest,
         fragment,
     )
 }

@@ -30,6 +30,7 @@ use super::access::Principal;
 use super::api::{ApiError, ApiPath, ApiQuery, feature_name, machine_name};
 use crate::core::analysis::ToleranceBand;
 use crate::recipe::FeatureSetup;
+use crate::service::http::ApiCode;
 use axum::Router;
 use axum::extract::State;
 use axum::http::{StatusCode, header};
@@ -118,6 +119,21 @@ pub(super) struct Dash {
     live: sse::Live,
 }
 
+/// The dashboard's routes, for the API description (`/openapi.json`).
+#[derive(utoipa::OpenApi)]
+#[openapi(paths(
+    overview,
+    feature_page,
+    versions_page,
+    downloads::chart_data,
+    downloads::dfq,
+    sse::events,
+    asset_js,
+    asset_css,
+    asset_icon
+))]
+pub(super) struct DashboardDoc;
+
 pub(super) fn router(app: AppState) -> Router {
     let f = "/machines/{machine}/features/{lobe}";
     let live = sse::Live::new(app.store.clone());
@@ -136,11 +152,15 @@ pub(super) fn router(app: AppState) -> Router {
 
 #[derive(Debug, Default, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
+#[derive(utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(super) struct PageQuery {
     fragment: Option<u8>,
     v: Option<i64>,
 }
 
+/// The plant overview page.
+#[utoipa::path(get, path = "/", tag = "dashboard", params(PageQuery), responses((status = 200, description = "the plant overview", content_type = "text/html")))]
 async fn overview(
     State(d): State<Dash>,
     ApiQuery(q): ApiQuery<PageQuery>,
@@ -154,6 +174,8 @@ fn names(machine: &str, lobe: &str) -> Result<(), ApiError> {
     feature_name(lobe)
 }
 
+/// A feature's page.
+#[utoipa::path(get, path = "/machines/{machine}/features/{lobe}", tag = "dashboard", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), PageQuery), responses((status = 200, description = "a feature: trend, latest part, events, capability, dressing form, setup drawing", content_type = "text/html")))]
 async fn feature_page(
     State(d): State<Dash>,
     ApiPath((machine, lobe)): ApiPath<(String, String)>,
@@ -168,7 +190,7 @@ async fn feature_page(
         Some(sh) if q.fragment.is_none() => {
             capability_panel::panel(&store, &machine, &lobe, sh).await?
         }
-        _ => String::new(),
+        _ => maud::html! {},
     };
     Ok(Html(feature::feature(
         &machine,
@@ -176,10 +198,12 @@ async fn feature_page(
         &fd,
         sheet,
         q.fragment.is_some(),
-        &panel,
+        panel,
     )))
 }
 
+/// A feature's table versions page.
+#[utoipa::path(get, path = "/machines/{machine}/features/{lobe}/versions", tag = "dashboard", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), PageQuery), responses((status = 200, description = "the feature's table versions with rollback", content_type = "text/html")))]
 async fn versions_page(
     State(d): State<Dash>,
     ApiPath((machine, lobe)): ApiPath<(String, String)>,
@@ -199,6 +223,7 @@ async fn versions_page(
 
 /// `POST /api/v1/machines/{machine}/events/{id}/ack`: the caller (an operator, checked by
 /// the access layer), then the event; audited.
+#[utoipa::path(post, path = "/api/v1/machines/{machine}/events/{id}/ack", tag = "writes", params(("machine" = String, Path, description = "machine name"), ("id" = i64, Path, description = "event id")), responses((status = 200, description = "acknowledged (or acknowledged before)", body = super::CommandReply)))]
 pub(super) async fn ack(
     p: Principal,
     State(app): State<AppState>,
@@ -234,9 +259,8 @@ pub(super) async fn ack(
             format!("event {id} was acknowledged before"),
         ),
         AckOutcome::NotFound => {
-            return Err(ApiError(
-                StatusCode::NOT_FOUND,
-                "event_not_found",
+            return Err(ApiError::new(
+                ApiCode::EventNotFound,
                 format!("machine {machine} has no event {id}"),
             ));
         }
@@ -249,14 +273,20 @@ pub(super) async fn ack(
     Ok((status, axum::Json(body)).into_response())
 }
 
+/// The dashboard's script.
+#[utoipa::path(get, path = "/assets/app.js", tag = "dashboard", responses((status = 200, description = "the dashboard's script", content_type = "text/javascript")))]
 async fn asset_js() -> Response {
     asset("text/javascript; charset=utf-8", APP_JS)
 }
 
+/// The dashboard's style sheet.
+#[utoipa::path(get, path = "/assets/app.css", tag = "dashboard", responses((status = 200, description = "the dashboard's style sheet", content_type = "text/css")))]
 async fn asset_css() -> Response {
     asset("text/css; charset=utf-8", APP_CSS)
 }
 
+/// The icon.
+#[utoipa::path(get, path = "/assets/icon.svg", tag = "dashboard", responses((status = 200, description = "the icon", content_type = "image/svg+xml")))]
 async fn asset_icon() -> Response {
     asset("image/svg+xml", ICON_SVG)
 }

@@ -159,6 +159,7 @@ fn encode((id, data): &Frame) -> String {
 }
 
 /// `GET /dashboard/events`: the event stream.
+#[utoipa::path(get, path = "/dashboard/events", tag = "dashboard", responses((status = 200, description = "each new part as a Server-Sent Event (`Last-Event-ID` resumes)", content_type = "text/event-stream")))]
 pub(super) async fn events(
     State(state): State<super::Dash>,
     stopping: Option<axum::Extension<Stopping>>,

@@ -1,0 +1,207 @@
+//! The API's error codes: one enum, each code with its HTTP status. The text of a code is
+//! what clients and tests read (`{"code": "lobe_not_found", …}`), so a variant's text never
+//! changes once released; strum writes it from the variant's name.
+
+use axum::http::StatusCode;
+
+/// Every stable code an API error carries. The wire text is the variant in snake case.
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    strum::IntoStaticStr,
+    strum::Display,
+    strum::EnumIter,
+    serde::Serialize,
+    utoipa::ToSchema,
+)]
+#[strum(serialize_all = "snake_case")]
+#[serde(rename_all = "snake_case")]
+pub enum ApiCode {
+    // Access and transport.
+    Unauthorized,
+    Forbidden,
+    CsrfMismatch,
+    LockedOut,
+    HostNotAllowed,
+    RouteWithoutRole,
+    BodyTimeout,
+    // What the client sent.
+    InvalidBody,
+    InvalidQuery,
+    InvalidPath,
+    InvalidName,
+    InvalidRange,
+    InvalidReason,
+    InvalidVersion,
+    InvalidVersions,
+    InvalidWheelRadius,
+    InvalidInfeed,
+    InvalidWindow,
+    // What the client asked for and is not there.
+    MachineNotFound,
+    LobeNotFound,
+    FeatureNotFound,
+    EventNotFound,
+    MeasurementNotFound,
+    TableVersionNotFound,
+    NoParentVersion,
+    NoData,
+    // Where the machine runs.
+    MachineStopped,
+    MachineElsewhere,
+    ClusterUnavailable,
+    // A write the machine's loop refused or could not carry out.
+    RollbackRefused,
+    FreezeRefused,
+    DressingRefused,
+    CommandFailed,
+    // The history store (the codes of `StoreError`).
+    StoreUnavailable,
+    StoreCorrupt,
+    StoreFull,
+    StoreBusy,
+    NotFound,
+    Conflict,
+    Invalid,
+    MigrationFailed,
+    StoreFailed,
+    // The service itself.
+    ProgramUnreadable,
+    RandomFailed,
+    Internal,
+}
+
+impl ApiCode {
+    /// The code's text on the wire.
+    pub fn as_str(self) -> &'static str {
+        self.into()
+    }
+
+    /// The HTTP status an error with this code answers with. Only the extractors' rejections
+    /// (`invalid_body`, `invalid_query`, `invalid_path`) may answer with axum's own status
+    /// instead (415, 422, 413, …), since axum knows better what was wrong with the request.
+    pub fn status(self) -> StatusCode {
+        use ApiCode::*;
+        match self {
+            Unauthorized => StatusCode::UNAUTHORIZED,
+            Forbidden | CsrfMismatch => StatusCode::FORBIDDEN,
+            LockedOut => StatusCode::TOO_MANY_REQUESTS,
+            HostNotAllowed => StatusCode::MISDIRECTED_REQUEST,
+            BodyTimeout => StatusCode::REQUEST_TIMEOUT,
+            InvalidBody | InvalidQuery | InvalidPath | InvalidName | InvalidRange
+            | InvalidReason | InvalidVersion | InvalidVersions | InvalidWheelRadius
+            | InvalidInfeed | InvalidWindow | Invalid => StatusCode::BAD_REQUEST,
+            MachineNotFound | LobeNotFound | FeatureNotFound | EventNotFound
+            | MeasurementNotFound | TableVersionNotFound | NoParentVersion | NoData | NotFound => {
+                StatusCode::NOT_FOUND
+            }
+            RollbackRefused | FreezeRefused | DressingRefused | Conflict => StatusCode::CONFLICT,
+            // Try again later, or once an operator acted (the code says which).
+            MachineStopped | MachineElsewhere | ClusterUnavailable | StoreUnavailable
+            | StoreCorrupt | StoreFull | StoreBusy => StatusCode::SERVICE_UNAVAILABLE,
+            RouteWithoutRole | CommandFailed | MigrationFailed | StoreFailed
+            | ProgramUnreadable | RandomFailed | Internal => StatusCode::INTERNAL_SERVER_ERROR,
+        }
+    }
+}
+
+impl From<&crate::store::StoreError> for ApiCode {
+    fn from(e: &crate::store::StoreError) -> Self {
+        use crate::store::StoreError;
+        match e {
+            StoreError::Unavailable { .. } => ApiCode::StoreUnavailable,
+            StoreError::Corrupt { .. } => ApiCode::StoreCorrupt,
+            StoreError::Full { .. } => ApiCode::StoreFull,
+            StoreError::Busy { .. } => ApiCode::StoreBusy,
+            StoreError::NotFound { .. } => ApiCode::NotFound,
+            StoreError::Conflict { .. } => ApiCode::Conflict,
+            StoreError::Invalid { .. } => ApiCode::Invalid,
+            StoreError::Migration { .. } => ApiCode::MigrationFailed,
+            StoreError::Backend { .. } => ApiCode::StoreFailed,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use strum::IntoEnumIterator;
+
+    #[test]
+    fn codes_keep_their_wire_text() {
+        // The texts clients read: a renamed variant must not change them.
+        let texts: Vec<&str> = ApiCode::iter().map(ApiCode::as_str).collect();
+        for expected in [
+            "unauthorized",
+            "csrf_mismatch",
+            "host_not_allowed",
+            "route_without_role",
+            "invalid_wheel_radius",
+            "table_version_not_found",
+            "machine_elsewhere",
+            "rollback_refused",
+            "command_failed",
+            "store_unavailable",
+            "migration_failed",
+            "random_failed",
+        ] {
+            assert!(texts.contains(&expected), "{expected} missing: {texts:?}");
+        }
+        assert_eq!(
+            ApiCode::InvalidWheelRadius.to_string(),
+            "invalid_wheel_radius"
+        );
+        let json = serde_json::to_string(&ApiCode::NoParentVersion).unwrap_or_default();
+        assert_eq!(json, "\"no_parent_version\"");
+    }
+
+    #[test]
+    fn a_commands_error_answers_with_its_codes_status() {
+        use crate::service::http::CommandError;
+        let reason = String::from("x");
+        let errors = [
+            CommandError::VersionNotFound {
+                lobe: reason.clone(),
+                version: 3,
+            },
+            CommandError::StoreUnavailable {
+                reason: reason.clone(),
+            },
+            CommandError::Refused {
+                reason: reason.clone(),
+            },
+            CommandError::Failed { reason },
+        ];
+        for refused in [
+            ApiCode::RollbackRefused,
+            ApiCode::FreezeRefused,
+            ApiCode::DressingRefused,
+        ] {
+            for e in &errors {
+                assert_eq!(e.code(refused).status(), e.status(), "{e:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn store_errors_keep_their_codes() {
+        use crate::store::StoreError;
+        let errors = [
+            StoreError::Busy {
+                target: "db".into(),
+                reason: "waited 5 ms".into(),
+            },
+            StoreError::NotFound { what: "x".into() },
+            StoreError::Invalid {
+                field: "x",
+                reason: "y".into(),
+            },
+        ];
+        for e in errors {
+            assert_eq!(ApiCode::from(&e).as_str(), e.code());
+        }
+    }
+}
