@@ -40,7 +40,7 @@ pub(crate) struct RollbackBody {
 }
 
 /// Deliver a stored table version again (as a new version, under the table number not in use).
-pub(super) async fn rollback(
+pub(crate) async fn rollback(
     p: Principal,
     State(state): State<AppState>,
     ApiPath((machine, lobe)): ApiPath<(String, String)>,

@@ -199,7 +199,7 @@ async fn versions_page(
 
 /// `POST /api/v1/machines/{machine}/events/{id}/ack`: the caller (an operator, checked by
 /// the access layer), then the event; audited.
-pub(super) async fn ack(
+pub(crate) async fn ack(
     p: Principal,
     State(app): State<AppState>,
     ApiPath((machine, id)): ApiPath<(String, i64)>,
