@@ -2,8 +2,9 @@
 //! Python `asyncua` package from PyPI (`tests/opcua/client_checks.py`). The real binary runs
 //! one simulated machine with `[opcua]` on; the script browses, reads and compares with the
 //! HTTP API, subscribes, receives an event, calls `Rollback` as a viewer (refused) and as
-//! the admin (delivered, on the share), and is refused a `None` connection, an untrusted
-//! certificate and an anonymous session.
+//! the admin (delivered, on the share), and is refused a `None` connection, a certificate
+//! not yet trusted (then trusted as an operator would: moved from `rejected/` to `trusted/`),
+//! another untrusted one and an anonymous session.
 //!
 //! Skipped with a line saying so when `asyncua` is not installed, unless
 //! `CAMLOOP_REQUIRE_OPCUA=1` (CI sets it and installs the pinned version).
@@ -104,15 +105,6 @@ fn asyncua_browses_reads_subscribes_and_calls_rollback_with_users() {
         .output()
         .unwrap();
     assert!(made.status.success(), "{}", cli_support::stderr(&made));
-    // The trusted client's certificate goes where an operator puts it.
-    let trusted = dir.path().join("var/opcua/pki/trusted/certs");
-    std::fs::create_dir_all(&trusted).unwrap();
-    std::fs::copy(
-        certs.join("trusted.der"),
-        trusted.join("camloop-test-client.der"),
-    )
-    .unwrap();
-
     let (http, opcua) = (free_port(), free_port());
     std::fs::write(dir.path().join("camloop.toml"), config(http, opcua)).unwrap();
     let _service = KillOnDrop::spawn(
@@ -143,6 +135,7 @@ fn asyncua_browses_reads_subscribes_and_calls_rollback_with_users() {
         "endpoint": format!("opc.tcp://localhost:{opcua}/"),
         "http": format!("http://127.0.0.1:{http}"),
         "cert_dir": certs.display().to_string(),
+        "pki": dir.path().join("var/opcua/pki").display().to_string(),
         "admin_password": admin_password,
         "viewer": "vera",
         "viewer_password": viewer_password,

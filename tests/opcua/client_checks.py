@@ -194,8 +194,35 @@ async def rollback(p, user, ns):
     async with c:
         machine = await c.nodes.objects.get_child([f"{ns}:Machines", f"{ns}:{p['machine']}"])
         method = await machine.get_child([f"{ns}:Rollback"])
+        # Back to the version before the one on the control (its text is surely kept).
+        in_force = await (await machine.get_child(
+            [f"{ns}:Features", f"{ns}:{p['feature']}", f"{ns}:TableVersionInForce"])).read_value()
+        back_to = max(1, in_force - 1)
         return await machine.call_method(method, ua.Variant(p["feature"], ua.VariantType.String),
-                                         ua.Variant(1, ua.VariantType.Int64))
+                                         ua.Variant(back_to, ua.VariantType.Int64))
+
+
+async def acknowledge(p, user, ns, event_id):
+    c = await client(p, user)
+    async with c:
+        machine = await c.nodes.objects.get_child([f"{ns}:Machines", f"{ns}:{p['machine']}"])
+        method = await machine.get_child([f"{ns}:AcknowledgeEvent"])
+        return await machine.call_method(method, ua.Variant(event_id, ua.VariantType.Int64))
+
+
+async def acknowledgements(p, ns):
+    """The HTTP ack handler answers for the method: an operator role is needed, and an
+    event the history lacks is not found."""
+    try:
+        await acknowledge(p, (p["viewer"], p["viewer_password"]), ns, 1)
+        fail("AcknowledgeEvent by a viewer was carried out")
+    except ua.uaerrors.BadUserAccessDenied:
+        ok("AcknowledgeEvent by a viewer refused: BadUserAccessDenied")
+    try:
+        await acknowledge(p, ("admin", p["admin_password"]), ns, 987654321)
+        fail("AcknowledgeEvent of an event the history lacks succeeded")
+    except ua.uaerrors.BadNotFound:
+        ok("AcknowledgeEvent of an unknown event: BadNotFound")
 
 
 async def rollbacks(p, ns):
@@ -221,12 +248,44 @@ async def rollbacks(p, ns):
     ok(f"Rollback by admin delivered and on the share as v{new_version}: {message}")
 
 
+async def none_refused_by_server(p):
+    """A client that goes ahead over `None` anyway (its endpoint check bypassed) is refused
+    by the server when it activates the session. Anonymous, so no password travels."""
+    real = Client.find_endpoint
+    Client.find_endpoint = staticmethod(lambda endpoints, mode, uri: endpoints[0])
+    c = Client(p["endpoint"], timeout=10)
+    c.application_uri = APP_URI
+    try:
+        await c.connect()
+        await c.disconnect()
+        fail("a session over None was activated")
+    except (ua.uaerrors.BadTcpEndpointUrlInvalid, ua.uaerrors.BadSecurityPolicyRejected) as e:
+        ok(f"a session over None refused by the server ({type(e).__name__})")
+    finally:
+        Client.find_endpoint = real
+
+
+def trust(p):
+    """What an operator does: moves the refused client's certificate from the server's
+    rejected folder to its trusted folder."""
+    pki = Path(p["pki"])
+    ours = (Path(p["cert_dir"]) / "trusted.der").read_bytes()
+    found = [f for f in (pki / "rejected").glob("*.der") if f.read_bytes() == ours]
+    if len(found) != 1:
+        fail(f"the refused certificate is not in {pki / 'rejected'} once: {found}")
+    found[0].rename(pki / "trusted" / found[0].name)
+    ok(f"moved {found[0].name} from rejected/ to trusted/")
+
+
 async def check(params_file):
     p = json.loads(Path(params_file).read_text())
-    await refused(lambda: client(p, ("admin", p["admin_password"]), secure=False), "a None connection")
-    await refused(lambda: client(p, ("admin", p["admin_password"]), cert="stranger"),
-                  "an untrusted client certificate")
-    await refused(lambda: client(p, None), "an anonymous session")
+    admin = ("admin", p["admin_password"])
+    await refused(lambda: client(p, None, secure=False), "a None connection (by the client: no None endpoint)")
+    await none_refused_by_server(p)
+    await refused(lambda: client(p, admin), "a client certificate not yet trusted")
+    trust(p)
+    await refused(lambda: client(p, admin, cert="stranger"), "another untrusted certificate")
+    await refused(lambda: client(p, None), "an anonymous session (trusted certificate)")
     c = await client(p, ("admin", p["admin_password"]))
     async with c:
         ok("connected with Basic256Sha256 SignAndEncrypt as admin")
@@ -234,6 +293,7 @@ async def check(params_file):
         await latest_matches_http(c, p, ns, features)
         await next_part_and_event(c, p, ns, features)
     await rollbacks(p, ns)
+    await acknowledgements(p, ns)
     print("all OPC UA checks passed", flush=True)
 
 
