@@ -86,3 +86,34 @@ impl OpcUaSection {
         p
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::config::{Config, OpcUaSecurity};
+    use std::path::Path;
+
+    fn parse(text: &str) -> Result<Config, crate::config::ConfigError> {
+        Config::parse(text, Path::new("c.toml"), |_| None)
+    }
+
+    #[test]
+    fn off_by_default_secure_by_default_and_none_only_when_named() {
+        let c = parse("").unwrap();
+        assert!(!c.opcua.enabled);
+        assert_eq!(c.opcua.security, OpcUaSecurity::Basic256Sha256);
+        assert!(!c.opcua.accept_unknown_clients && !c.opcua.anonymous_read);
+        let c = parse("[opcua]\nenabled = true\nsecurity = \"Basic256Sha256+None\"\n").unwrap();
+        assert_eq!(c.opcua.security, OpcUaSecurity::Basic256Sha256AndNone);
+        let e = parse("[opcua]\nenabled = true\nsecurity = \"None\"\n").unwrap_err();
+        assert!(e.to_string().contains("line 3"), "{e}");
+    }
+
+    #[test]
+    fn a_port_of_zero_and_a_bad_host_name_are_refused_with_their_lines() {
+        let e = parse("[opcua]\nenabled = true\nlisten = \"127.0.0.1:0\"\nhost_name = \"a b\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 3: opcua.listen"), "{e}");
+        assert!(e.contains("line 4: opcua.host_name"), "{e}");
+    }
+}

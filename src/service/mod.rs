@@ -11,7 +11,7 @@ mod lease_keeper;
 pub mod machine;
 pub mod metrics;
 pub mod mqtt;
-pub(crate) mod opcua;
+pub mod opcua;
 pub(crate) mod runner;
 pub mod sim_source;
 mod sources;
@@ -168,7 +168,7 @@ pub(crate) async fn start_checked(
     };
 
     // OPC UA: the loops feed it from their start; the server starts with the API state.
-    let (opcua_events, opcua_intake) = opcua::prepare(&config, &checked_machines);
+    let (opcua_events, opcua_intake) = opcua::prepare(&config, &checked_machines)?;
     let mut features = std::collections::BTreeMap::new();
     let mut sheets = std::collections::BTreeMap::new();
     for m in &checked_machines {

@@ -222,3 +222,16 @@ pub(crate) fn date_time(at_ms: i64) -> DateTime {
     const EPOCH_OFFSET_MS: i64 = 11_644_473_600_000;
     DateTime::from(at_ms.saturating_add(EPOCH_OFFSET_MS).saturating_mul(10_000))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unix_milliseconds_become_the_same_instant_in_opc_ua_time() {
+        assert_eq!(date_time(0), DateTime::ymd_hms(1970, 1, 1, 0, 0, 0));
+        // 2026-11-27T10:00:00.250Z: 1 795 773 600 s after the epoch.
+        let at = date_time(1_795_773_600_250);
+        assert_eq!(at.as_chrono().to_rfc3339(), "2026-11-27T10:00:00.250+00:00");
+    }
+}

@@ -3,7 +3,7 @@
 //! One endpoint, `opc.tcp://<host>:<port>/`, Basic256Sha256 with SignAndEncrypt (and an
 //! unsecured `None` endpoint only when the config asks for it, warned at every start).
 //! The server's certificate is made on the first start in the PKI folder (by default
-//! `<var>/opcua/pki/own`); client certificates must be in `<pki>/trusted/certs` unless
+//! `<var>/opcua/pki/own`); client certificates must be in `<pki>/trusted` unless
 //! `accept_unknown_clients` (warned). Users are camloop's users (see [`auth`]).
 //!
 //! The address space (see [`space`]) is fed by [`feed`] from the loops' plant events and
@@ -80,6 +80,8 @@ fn pki_dir(config: &Config) -> PathBuf {
 pub(crate) struct Intake {
     events: mpsc::Receiver<PlantEvent>,
     layout: Vec<MachineLayout>,
+    /// Bound before the machines start, so a port in use stops the start before them.
+    listener: std::net::TcpListener,
 }
 
 /// With `[opcua]` on: the sender the loops feed, and the intake [`start`] takes (made before
@@ -87,14 +89,29 @@ pub(crate) struct Intake {
 pub(crate) fn prepare(
     config: &Config,
     machines: &[crate::config::CheckedMachine],
-) -> (Option<EventSender>, Option<Intake>) {
+) -> anyhow::Result<(Option<EventSender>, Option<Intake>)> {
     if !config.opcua.enabled {
-        return (None, None);
+        return Ok((None, None));
     }
+    let listener = bind(config.opcua.listen)?;
     let (tx, events) = mpsc::channel(INTAKE);
     let sender = EventSender::new(tx, Arc::new(AtomicU64::new(0)));
     let layout = layout(machines);
-    (Some(sender), Some(Intake { events, layout }))
+    let intake = Intake {
+        events,
+        layout,
+        listener,
+    };
+    Ok((Some(sender), Some(intake)))
+}
+
+fn bind(listen: std::net::SocketAddr) -> anyhow::Result<std::net::TcpListener> {
+    let listener = std::net::TcpListener::bind(listen)
+        .with_context(|| format!("opcua: cannot listen on {listen}"))?;
+    listener
+        .set_nonblocking(true)
+        .with_context(|| format!("opcua: cannot listen on {listen}"))?;
+    Ok(listener)
 }
 
 /// Starts the server on `opcua.listen` and its feed from `intake` (none: `[opcua]` is off).
@@ -104,7 +121,12 @@ pub(crate) async fn start(
     intake: Option<Intake>,
     shutdown: &watch::Receiver<bool>,
 ) -> anyhow::Result<Option<OpcUa>> {
-    let Some(Intake { events, layout }) = intake else {
+    let Some(Intake {
+        events,
+        layout,
+        listener,
+    }) = intake
+    else {
         return Ok(None);
     };
     let shutdown = shutdown.clone();
@@ -118,8 +140,7 @@ pub(crate) async fn start(
     let (server, handle) = builder
         .build()
         .map_err(|e| anyhow::anyhow!("opcua: the server cannot be set up: {e}"))?;
-    let listener = tokio::net::TcpListener::bind(section.listen)
-        .await
+    let listener = tokio::net::TcpListener::from_std(listener)
         .with_context(|| format!("opcua: cannot listen on {}", section.listen))?;
     let server = tokio::spawn(async move {
         if let Err(e) = server.run_with(listener).await {
@@ -242,4 +263,51 @@ async fn dressing_counts(
         }
     }
     counts
+}
+
+/// The server as `benches/opcua.rs` runs it: `machines` (name, features) on `listen`,
+/// Basic256Sha256 SignAndEncrypt, its PKI in `pki`, anonymous reading and unknown client
+/// certificates accepted (the bench's clients are anonymous and new); fed from the returned
+/// sender until `shutdown` turns true. Not part of camloop's interface.
+#[doc(hidden)]
+pub async fn bench_server(
+    listen: std::net::SocketAddr,
+    pki: &std::path::Path,
+    machines: Vec<(String, Vec<String>)>,
+    metrics: Arc<crate::service::metrics::Metrics>,
+    store: crate::service::machine::StoreHandle,
+    shutdown: watch::Receiver<bool>,
+) -> anyhow::Result<EventSender> {
+    let text = format!(
+        "[opcua]\nenabled = true\nlisten = \"{listen}\"\nhost_name = \"localhost\"\n\
+         accept_unknown_clients = true\nanonymous_read = true\npki_dir = {pki:?}\n"
+    );
+    let config = Config::parse(&text, std::path::Path::new("bench.toml"), |_| None)?;
+    let layout = machines
+        .into_iter()
+        .map(|(name, features)| MachineLayout {
+            name,
+            recipe: "bench".into(),
+            features,
+        })
+        .collect();
+    let app = AppState {
+        store,
+        metrics,
+        machines: Arc::default(),
+        commands: Arc::default(),
+        auth: Arc::new(crate::service::http::AuthState::new(None, false)),
+        body_timeout: std::time::Duration::from_secs(10),
+        dashboard: Arc::default(),
+        cluster: None,
+    };
+    let (sender, events) = mpsc::channel(INTAKE);
+    let intake = Intake {
+        events,
+        layout,
+        listener: bind(listen)?,
+    };
+    // Runs until shutdown: the server's own watcher cancels it.
+    drop(start(&config, app, Some(intake), &shutdown).await?);
+    Ok(EventSender::new(sender, Arc::new(AtomicU64::new(0))))
 }

@@ -392,3 +392,73 @@ pub(crate) fn nodes_per_machine(features: usize) -> usize {
     let fixed = 1 + 5 + 2 + 2 + 4 * 3;
     fixed + features * (1 + values + analog)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn demo() -> (AddressSpace, Ids) {
+        let mut space = AddressSpace::new();
+        space.add_namespace(NAMESPACE_URI, 2);
+        let ids = Ids { ns: 2 };
+        let layout = MachineLayout {
+            name: "G7".into(),
+            recipe: "demo".into(),
+            features: vec!["IN1".into(), "EX1".into()],
+        };
+        build(&mut space, ids, &[layout]);
+        (space, ids)
+    }
+
+    #[test]
+    fn method_node_ids_name_their_machine_and_method_and_nothing_else_does() {
+        let ids = Ids { ns: 2 };
+        for method in <Method as strum::IntoEnumIterator>::iter() {
+            let id = ids.method("G7", method);
+            assert_eq!(Method::parse(ids, &id), Some(("G7".to_string(), method)));
+            let foreign = NodeId::new(
+                3,
+                match &id.identifier {
+                    opcua::types::Identifier::String(s) => s.as_ref().to_string(),
+                    _ => unreachable!(),
+                },
+            );
+            assert_eq!(Method::parse(ids, &foreign), None, "another namespace");
+        }
+        let value = ids.value("G7", "IN1", FeatureValue::PartId);
+        assert_eq!(Method::parse(ids, &value), None);
+    }
+
+    #[test]
+    fn the_space_has_every_machine_feature_value_unit_and_method() {
+        let (space, ids) = demo();
+        assert!(space.node_exists(&ids.machines()));
+        assert!(space.node_exists(&ids.machine("G7")));
+        for f in ["IN1", "EX1"] {
+            for v in <FeatureValue as strum::IntoEnumIterator>::iter() {
+                assert!(space.node_exists(&ids.value("G7", f, v)), "{f} {v:?}");
+            }
+        }
+        for method in <Method as strum::IntoEnumIterator>::iter() {
+            assert!(space.node_exists(&ids.method("G7", method)), "{method:?}");
+        }
+        // UNECE Rec. 20 packs the code's characters: "4H" is the micrometre.
+        let micrometre = (i32::from(b'4') << 8) | i32::from(b'H');
+        let eu = NodeId::new(2, "Machines/G7/Features/IN1/ProfileError/EngineeringUnits");
+        let Some(opcua::server::address_space::NodeType::Variable(v)) = space.find(&eu) else {
+            panic!("no EngineeringUnits")
+        };
+        let value = v.value(
+            opcua::types::TimestampsToReturn::Neither,
+            &opcua::types::NumericRange::None,
+            &opcua::types::DataEncoding::Binary,
+            0.0,
+        );
+        let Some(Variant::ExtensionObject(o)) = value.value else {
+            panic!("not an extension object: {value:?}")
+        };
+        let info = o.inner_as::<EUInformation>().expect("EUInformation");
+        assert_eq!(info.unit_id, micrometre);
+        assert_eq!(info.display_name.text.as_ref(), "µm");
+    }
+}
