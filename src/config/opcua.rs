@@ -90,6 +90,7 @@ impl OpcUaSection {
 #[cfg(test)]
 mod tests {
     use crate::config::{Config, OpcUaSecurity};
+
     use std::path::Path;
 
     fn parse(text: &str) -> Result<Config, crate::config::ConfigError> {
@@ -98,12 +99,16 @@ mod tests {
 
     #[test]
     fn off_by_default_secure_by_default_and_none_only_when_named() {
-        let c = parse("").unwrap();
-        assert!(!c.opcua.enabled);
-        assert_eq!(c.opcua.security, OpcUaSecurity::Basic256Sha256);
-        assert!(!c.opcua.accept_unknown_clients && !c.opcua.anonymous_read);
-        let c = parse("[opcua]\nenabled = true\nsecurity = \"Basic256Sha256+None\"\n").unwrap();
-        assert_eq!(c.opcua.security, OpcUaSecurity::Basic256Sha256AndNone);
+        let section = |text: &str| toml::from_str::<super::OpcUaSection>(text);
+        let c = section("").unwrap();
+        assert!(!c.enabled);
+        assert_eq!(c.security, OpcUaSecurity::Basic256Sha256);
+        assert!(!c.accept_unknown_clients && !c.anonymous_read);
+        let c = section("enabled = true\nsecurity = \"Basic256Sha256+None\"\n").unwrap();
+        assert_eq!(c.security, OpcUaSecurity::Basic256Sha256AndNone);
+        let e = section("enabled = true\nsecurity = \"None\"\n").unwrap_err();
+        assert!(e.to_string().contains("unknown variant `None`"), "{e}");
+        // In a whole config the line is named.
         let e = parse("[opcua]\nenabled = true\nsecurity = \"None\"\n").unwrap_err();
         assert!(e.to_string().contains("line 3"), "{e}");
     }

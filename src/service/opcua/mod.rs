@@ -26,7 +26,7 @@ use opcua::types::BuildInfo;
 use tokio::sync::{mpsc, watch};
 use tracing::{info, warn};
 
-use crate::config::{Config, OpcUaSecurity};
+use crate::config::{Config, OpcUaSection, OpcUaSecurity};
 use crate::service::http::AppState;
 use crate::service::mqtt::{EventSender, PlantEvent};
 pub(crate) use space::MachineLayout;
@@ -121,6 +121,17 @@ pub(crate) async fn start(
     intake: Option<Intake>,
     shutdown: &watch::Receiver<bool>,
 ) -> anyhow::Result<Option<OpcUa>> {
+    start_with(&config.opcua, pki_dir(config), app, intake, shutdown).await
+}
+
+/// [`start`] with the section and the PKI folder given.
+async fn start_with(
+    section: &OpcUaSection,
+    pki: PathBuf,
+    app: AppState,
+    intake: Option<Intake>,
+    shutdown: &watch::Receiver<bool>,
+) -> anyhow::Result<Option<OpcUa>> {
     let Some(Intake {
         events,
         layout,
@@ -130,13 +141,11 @@ pub(crate) async fn start(
         return Ok(None);
     };
     let shutdown = shutdown.clone();
-    let section = &config.opcua;
-    let pki = pki_dir(config);
     std::fs::create_dir_all(&pki)
         .with_context(|| format!("opcua: PKI folder {}", pki.display()))?;
     let host = section.host();
     let url = format!("opc.tcp://{host}:{}/", section.listen.port());
-    let builder = server_builder(config, &pki, &url, app.clone(), layout.clone());
+    let builder = server_builder(section, &pki, &url, app.clone(), layout.clone());
     let (server, handle) = builder
         .build()
         .map_err(|e| anyhow::anyhow!("opcua: the server cannot be set up: {e}"))?;
@@ -184,13 +193,12 @@ pub(crate) async fn start(
 
 /// The server as configured: endpoints, certificates, users, camloop's nodes.
 fn server_builder(
-    config: &Config,
+    section: &OpcUaSection,
     pki: &std::path::Path,
     url: &str,
     app: AppState,
     layout: Vec<MachineLayout>,
 ) -> ServerBuilder {
-    let section = &config.opcua;
     let host = section.host();
     let users = auth::Users {
         app: app.clone(),
@@ -278,11 +286,14 @@ pub async fn bench_server(
     store: crate::service::machine::StoreHandle,
     shutdown: watch::Receiver<bool>,
 ) -> anyhow::Result<EventSender> {
-    let text = format!(
-        "[opcua]\nenabled = true\nlisten = \"{listen}\"\nhost_name = \"localhost\"\n\
-         accept_unknown_clients = true\nanonymous_read = true\npki_dir = {pki:?}\n"
-    );
-    let config = Config::parse(&text, std::path::Path::new("bench.toml"), |_| None)?;
+    let section = OpcUaSection {
+        enabled: true,
+        listen,
+        host_name: Some("localhost".into()),
+        accept_unknown_clients: true,
+        anonymous_read: true,
+        ..OpcUaSection::default()
+    };
     let layout = machines
         .into_iter()
         .map(|(name, features)| MachineLayout {
@@ -308,6 +319,6 @@ pub async fn bench_server(
         listener: bind(listen)?,
     };
     // Runs until shutdown: the server's own watcher cancels it.
-    drop(start(&config, app, Some(intake), &shutdown).await?);
+    drop(start_with(&section, pki.to_path_buf(), app, Some(intake), &shutdown).await?);
     Ok(EventSender::new(sender, Arc::new(AtomicU64::new(0))))
 }
