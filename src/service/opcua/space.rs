@@ -132,6 +132,9 @@ impl Ids {
     }
 }
 
+/// A method argument: name and type.
+type Arg = (&'static str, DataTypeId);
+
 /// The methods of a machine.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, strum::EnumIter)]
 pub(crate) enum Method {
@@ -152,12 +155,7 @@ impl Method {
     }
 
     /// In and out arguments: name and type.
-    fn arguments(
-        self,
-    ) -> (
-        Vec<(&'static str, DataTypeId)>,
-        Vec<(&'static str, DataTypeId)>,
-    ) {
+    fn arguments(self) -> (Vec<Arg>, Vec<Arg>) {
         use DataTypeId::{DateTime, Int64, String};
         let result_out = vec![
             ("ResultId", Int64),
@@ -357,9 +355,7 @@ fn engineering_units(
 fn add_method(space: &mut AddressSpace, ids: Ids, m: &str, method: Method, parent: NodeId) {
     let id = ids.method(m, method);
     let (inputs, outputs) = method.arguments();
-    let args = |list: Vec<(&str, DataTypeId)>| -> Vec<Argument> {
-        list.into_iter().map(|a| a.into()).collect()
-    };
+    let args = |list: Vec<Arg>| -> Vec<Argument> { list.into_iter().map(|a| a.into()).collect() };
     let opcua::types::Identifier::String(s) = &id.identifier else {
         return;
     };
