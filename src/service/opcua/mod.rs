@@ -51,6 +51,13 @@ pub(crate) fn layout(machines: &[crate::config::CheckedMachine]) -> Vec<MachineL
 /// the next status refresh; only that OPC UA event is lost).
 const INTAKE: usize = 4096;
 
+/// Sessions served at once (the stack's default is 20: a plant has more clients).
+const MAX_SESSIONS: usize = 64;
+
+/// Monitored items per subscription (the stack's default is 1000): a client subscribing to
+/// every value of 50 machines × 8 features needs 5600.
+const MAX_ITEMS_PER_SUBSCRIPTION: usize = 100_000;
+
 /// A running OPC UA server.
 pub(crate) struct OpcUa {
     handle: ServerHandle,
@@ -236,6 +243,9 @@ fn server_builder(
             app,
         }))
         .diagnostics_enabled(false);
+    let limits = builder.limits_mut();
+    limits.max_sessions = MAX_SESSIONS;
+    limits.subscriptions.max_monitored_items_per_sub = MAX_ITEMS_PER_SUBSCRIPTION;
     if section.security == OpcUaSecurity::Basic256Sha256AndNone {
         warn!(
             "opcua.security allows an unsecured endpoint (None): messages travel in clear; passwords are still encrypted with the server's certificate"
