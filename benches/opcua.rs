@@ -379,19 +379,24 @@ fn per_part_case(c: &mut Criterion, publishing: bool) {
         samples.len(),
         percentiles(&mut samples)
     );
-    if let (Some(s), Some((n0, e0))) = (&side, before) {
-        let secs = started_all.elapsed().as_secs_f64();
+    if let Some(s) = side {
+        s.report(before, started_all.elapsed());
+    }
+}
+
+impl Publishing {
+    /// What the OPC UA side did while parts were timed, then stops it.
+    fn report(self, before: Option<(u64, u64)>, took: Duration) {
+        let (n0, e0) = before.unwrap_or_default();
+        let secs = took.as_secs_f64();
         println!(
-            "  OPC UA: {} clients got {:.0} value notifications/s in all; {:.0} part events/s fed; {} cores",
-            CLIENTS,
-            (s.notifications.load(Relaxed) - n0) as f64 / secs,
-            (s.events_sent.load(Relaxed) - e0) as f64 / secs,
+            "  OPC UA: {CLIENTS} clients got {:.0} value notifications/s in all; {:.0} part events/s fed; {} cores",
+            (self.notifications.load(Relaxed) - n0) as f64 / secs,
+            (self.events_sent.load(Relaxed) - e0) as f64 / secs,
             std::thread::available_parallelism().map_or(0, |n| n.get())
         );
-    }
-    if let Some(s) = side {
-        let _ = s.shutdown.send(true);
-        s.runtime.shutdown_timeout(Duration::from_secs(5));
+        let _ = self.shutdown.send(true);
+        self.runtime.shutdown_timeout(Duration::from_secs(5));
     }
 }
 
