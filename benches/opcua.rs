@@ -267,7 +267,8 @@ async fn subscriber(
             })
         })
         .collect();
-    for chunk in items.chunks(1000) {
+    // Small calls: a reply for 1000 items outgrows the default message size.
+    for chunk in items.chunks(100) {
         session
             .create_monitored_items(subscription, TimestampsToReturn::Both, chunk.to_vec())
             .await
