@@ -8,6 +8,7 @@ mod cluster;
 mod http;
 mod keys;
 mod mqtt;
+mod opcua;
 mod values;
 
 pub use auth::AuthSection;
@@ -16,6 +17,7 @@ pub use cluster::ClusterSection;
 pub use http::{HttpSection, network_exposure};
 pub use keys::Lines;
 pub use mqtt::{ENV_MQTT_PASSWORD, MqttSection};
+pub use opcua::{OpcUaSection, OpcUaSecurity};
 
 use crate::names::MachineName;
 use crate::sim::GrinderConfig;
@@ -40,6 +42,8 @@ pub struct Config {
     pub http: HttpSection,
     #[serde(default)]
     pub mqtt: MqttSection,
+    #[serde(default)]
+    pub opcua: OpcUaSection,
     #[serde(default)]
     pub cluster: ClusterSection,
     #[serde(default)]
@@ -319,6 +323,7 @@ impl Config {
         }
         p.extend(self.http.problems(&self.lines));
         p.extend(self.mqtt.problems(&self.lines));
+        p.extend(self.opcua.problems(&self.lines));
         p.extend(self.cluster.problems(&self.lines, url));
         let mut names = std::collections::HashMap::new();
         for (i, m) in self.machines.iter().enumerate() {

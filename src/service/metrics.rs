@@ -215,12 +215,7 @@ impl Metrics {
     }
 
     /// Changes one feature's status.
-    pub(crate) fn update_feature(
-        &self,
-        machine: &str,
-        feature: &str,
-        f: impl FnOnce(&mut FeatureStatus),
-    ) {
+    pub fn update_feature(&self, machine: &str, feature: &str, f: impl FnOnce(&mut FeatureStatus)) {
         let mut map = self.features.lock().unwrap_or_else(|p| p.into_inner());
         f(map
             .entry((machine.to_string(), feature.to_string()))

@@ -11,6 +11,7 @@ mod lease_keeper;
 pub mod machine;
 pub mod metrics;
 pub mod mqtt;
+pub mod opcua;
 pub(crate) mod runner;
 pub mod sim_source;
 mod sources;
@@ -65,6 +66,7 @@ pub struct Running {
     connector: tokio::task::JoinHandle<()>,
     retention: tokio::task::JoinHandle<()>,
     store: StoreHandle,
+    opcua: Option<opcua::OpcUa>,
 }
 
 impl Running {
@@ -89,6 +91,9 @@ impl Running {
             }
         }
         let _ = self.server.await;
+        if let Some(server) = self.opcua {
+            server.stop().await;
+        }
         let _ = self.connector.await;
         let _ = self.retention.await;
         if let Some(s) = self.store.read().await.as_ref() {
@@ -162,6 +167,8 @@ pub(crate) async fn start_checked(
         false => None,
     };
 
+    // OPC UA: the loops feed it from their start; the server starts with the API state.
+    let (opcua_events, opcua_intake) = opcua::prepare(&config, &checked_machines)?;
     let mut features = std::collections::BTreeMap::new();
     let mut sheets = std::collections::BTreeMap::new();
     for m in &checked_machines {
@@ -179,7 +186,10 @@ pub(crate) async fn start_checked(
         metrics: metrics.clone(),
         shutdown: shutdown_rx.clone(),
         parts: options.parts,
-        plant_events: publisher.as_ref().map(mqtt::Publisher::sender),
+        plant_events: mqtt::EventSender::joined(
+            publisher.as_ref().map(mqtt::Publisher::sender),
+            opcua_events,
+        ),
     };
     let commands: runner::CommandRoutes = Arc::default();
     let runner = runner::Runner::new(config.clone(), checked_machines, shared, commands.clone());
@@ -211,7 +221,7 @@ pub(crate) async fn start_checked(
     };
 
     let limits = http::HttpLimits::from_config(&config.http);
-    let app = http::router(http::AppState {
+    let app_state = http::AppState {
         store: store.clone(),
         metrics: metrics.clone(),
         machines: Arc::new(features),
@@ -220,7 +230,9 @@ pub(crate) async fn start_checked(
         body_timeout: limits.body_timeout,
         dashboard: Arc::new(sheets),
         cluster: cluster_view,
-    });
+    };
+    let opcua = opcua::start(&config, app_state.clone(), opcua_intake, &shutdown_rx).await?;
+    let app = http::router(app_state);
     let http_addr = listener.local_addr()?;
     let (policy, tls) = listener_policy(&config, http_addr, shutdown_rx.clone())?;
     info!(listen = %http_addr, tls = tls.is_some(), machines = config.machines.len(), "camloop started");
@@ -253,6 +265,7 @@ pub(crate) async fn start_checked(
         connector,
         retention,
         store,
+        opcua,
     })
 }
 

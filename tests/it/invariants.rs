@@ -171,6 +171,7 @@ fn shipped_service_configurations_parse() {
     for file in [
         "config/camloop.toml",
         "config/crankshaft.toml",
+        "config/opcua.toml",
         "docker/camloop.toml",
         "docker/cluster.toml",
     ] {

@@ -73,6 +73,7 @@ mod loop_sim;
 mod loop_speed_plan;
 mod mqtt_broker;
 mod mqtt_secure;
+mod opcua_asyncua;
 mod program_retarget;
 mod program_settings;
 mod program_svg;

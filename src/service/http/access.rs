@@ -324,7 +324,7 @@ async fn bearer(app: &AppState, token: &str, address: IpAddr) -> Result<Principa
 
 /// Counts and logs one failed sign-in or token, audits it, and locks the user and address
 /// at the fifth failure in 15 minutes.
-pub(super) async fn failed(
+pub(crate) async fn failed(
     app: &AppState,
     kind: &'static str,
     user: Option<&str>,
@@ -361,7 +361,7 @@ pub(super) async fn failed(
 }
 
 /// A refusal while locked out: counted and logged, not audited again (the lock was).
-pub(super) fn locked(
+pub(crate) fn locked(
     app: &AppState,
     user: Option<&str>,
     address: IpAddr,

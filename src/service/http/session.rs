@@ -224,7 +224,7 @@ pub(super) async fn signin(
 
 /// The enabled user `name` whose password is `password`, or why not. A hash is checked even
 /// for an unknown user, so the time taken does not tell which names exist.
-async fn check_password(
+pub(crate) async fn check_password(
     app: &AppState,
     name: Option<&UserName>,
     password: &str,

@@ -42,7 +42,7 @@ pub(crate) struct RollbackBody {
 
 /// Deliver a stored table version again (as a new version, under the table number not in use).
 #[utoipa::path(post, path = "/api/v1/machines/{machine}/lobes/{lobe}/rollback", tag = "writes", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name")), request_body = RollbackBody, responses((status = 200, description = "delivered as a new version", body = CommandReply)))]
-pub(super) async fn rollback(
+pub(crate) async fn rollback(
     p: Principal,
     State(state): State<AppState>,
     ApiPath((machine, lobe)): ApiPath<(String, String)>,

@@ -46,9 +46,31 @@ const INTAKE: usize = 4096;
 pub struct EventSender {
     tx: mpsc::Sender<PlantEvent>,
     refused: Arc<AtomicU64>,
+    /// Another consumer of the same events (the OPC UA server), sent to first.
+    also: Option<Arc<EventSender>>,
 }
 
 impl EventSender {
+    /// A sender into `tx`, counting what a full channel refuses in `refused`.
+    pub(crate) fn new(tx: mpsc::Sender<PlantEvent>, refused: Arc<AtomicU64>) -> Self {
+        Self {
+            tx,
+            refused,
+            also: None,
+        }
+    }
+
+    /// One sender feeding both, or whichever there is.
+    pub(crate) fn joined(a: Option<Self>, b: Option<Self>) -> Option<Self> {
+        match (a, b) {
+            (Some(mut a), Some(b)) => {
+                a.also = Some(Arc::new(b));
+                Some(a)
+            }
+            (a, b) => a.or(b),
+        }
+    }
+
     /// Queues the event of a journal record, if it announces one.
     pub fn record(&self, record: &Pending) {
         if let Some(event) = PlantEvent::from_pending(record) {
@@ -57,6 +79,9 @@ impl EventSender {
     }
 
     pub fn send(&self, event: PlantEvent) {
+        if let Some(other) = &self.also {
+            other.send(event.clone());
+        }
         if self.tx.try_send(event).is_err() {
             self.refused.fetch_add(1, Ordering::Relaxed);
         }
@@ -213,7 +238,7 @@ impl Publisher {
             shutdown,
         ));
         Ok(Self {
-            sender: EventSender { tx, refused },
+            sender: EventSender::new(tx, refused),
             shared,
             tasks: vec![intake, link],
         })

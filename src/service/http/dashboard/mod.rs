@@ -224,7 +224,7 @@ async fn versions_page(
 /// `POST /api/v1/machines/{machine}/events/{id}/ack`: the caller (an operator, checked by
 /// the access layer), then the event; audited.
 #[utoipa::path(post, path = "/api/v1/machines/{machine}/events/{id}/ack", tag = "writes", params(("machine" = String, Path, description = "machine name"), ("id" = i64, Path, description = "event id")), responses((status = 200, description = "acknowledged (or acknowledged before)", body = super::CommandReply)))]
-pub(super) async fn ack(
+pub(crate) async fn ack(
     p: Principal,
     State(app): State<AppState>,
     ApiPath((machine, id)): ApiPath<(String, i64)>,

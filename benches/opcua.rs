@@ -1,0 +1,422 @@
+//! The per-part path of the service with the OPC UA server publishing, against the same path
+//! without it: measurement complete → checks, analysis, learning, guarded table → program
+//! durable on the share → rows committed to SQLite, at 360 points per revolution (as
+//! `benches/service.rs`), printing p50/p99.
+//!
+//! With OPC UA, the server carries 50 machines × 8 features plus the timed machine, whose
+//! events it gets as in the service (the loop's `try_send`). A driver makes every one of the
+//! 50 machines measure a shaft (8 features) every second, updating the feature status and
+//! sending the events, as 50 real machines would every 10 s or so: ten times the load. 20
+//! anonymous clients with Basic256Sha256 SignAndEncrypt sessions each subscribe to every
+//! value of every feature (publishing every 100 ms). Server, driver and clients run on their
+//! own two-thread runtime, as the service's tasks run beside the machine task; the loop is
+//! timed on the bench thread. The core count is printed: they all compete for the cores.
+
+use camloop::core::measure::RawMeasurement;
+use camloop::recipe::Recipe;
+use camloop::service::machine::{MachineLoop, MachinePaths, SourceEvent, StoreHandle};
+use camloop::service::metrics::Metrics;
+use camloop::service::mqtt::PlantEvent;
+use camloop::sim::{CommandedTable, GrinderConfig, PartLabels, SimGrinder, Workpiece};
+use camloop::store::{Store, Verdict};
+use criterion::{Criterion, criterion_group, criterion_main};
+use opcua::client::{ClientBuilder, DataChangeCallback, IdentityToken};
+use opcua::crypto::SecurityPolicy;
+use opcua::types::{
+    MessageSecurityMode, MonitoredItemCreateRequest, NodeId, TimestampsToReturn, UserTokenPolicy,
+};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+use std::time::{Duration, Instant};
+
+const MACHINES: usize = 50;
+const FEATURES: usize = 8;
+const CLIENTS: usize = 20;
+/// The values of a feature's result object (see the address space in docs/src/opcua.md).
+const VALUES: [&str; 14] = [
+    "PartId",
+    "Time",
+    "Verdict",
+    "MaxError",
+    "ProfileError",
+    "SizeError",
+    "PhaseError",
+    "Repeatability",
+    "TableVersionInForce",
+    "WaitingVersion",
+    "LearningFrozen",
+    "FrozenReason",
+    "BlockedByGuard",
+    "GuardReason",
+];
+
+/// Twenty simulated measurements of the demo lobe ground with its nominal table.
+fn measurements(points: u32) -> Vec<RawMeasurement> {
+    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
+    let recipe = Recipe::load(&recipe_path).expect("demo recipe");
+    let setup = recipe.feature_setup(&recipe_path, "IN1").expect("lobe");
+    let camloop::core::compensate::Feature::Cam(g) = setup.feature else {
+        panic!("a cam")
+    };
+    let mut config = GrinderConfig::default();
+    config.gauge.points_per_rev = points;
+    let mut sim = SimGrinder::new(config, Workpiece::Cam(g), 9).expect("sim");
+    let part = setup.feature.part(&setup.nominal).expect("part");
+    let table =
+        CommandedTable::nominal(&part, 360, camloop::core::fit::TableForm::Poly).expect("table");
+    let ground = sim.grind(&table).expect("ground");
+    let labels = PartLabels {
+        machine: "1".into(),
+        part: "1".into(),
+        lobe: "1".into(),
+    };
+    (0..20).map(|_| sim.measure(&ground, &labels)).collect()
+}
+
+/// Memory-backed /dev/shm when there (isolates camloop's cost from the disk's), as
+/// `benches/service.rs`; `CAMLOOP_BENCH_DIR` overrides it.
+fn scratch_root() -> PathBuf {
+    if let Some(dir) = std::env::var_os("CAMLOOP_BENCH_DIR") {
+        return PathBuf::from(dir);
+    }
+    let shm = Path::new("/dev/shm");
+    if shm.is_dir() {
+        shm.to_path_buf()
+    } else {
+        PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+    }
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .expect("a free port")
+        .local_addr()
+        .expect("its address")
+        .port()
+}
+
+fn names() -> Vec<(String, Vec<String>)> {
+    let features: Vec<String> = (1..=FEATURES).map(|f| format!("F{f}")).collect();
+    let mut machines: Vec<(String, Vec<String>)> = (0..MACHINES)
+        .map(|m| (format!("M{m:02}"), features.clone()))
+        .collect();
+    machines.push(("BENCH".into(), vec!["IN1".into()]));
+    machines
+}
+
+/// The OPC UA side: server, driver and clients on their own runtime. Dropping it stops them.
+struct Publishing {
+    runtime: tokio::runtime::Runtime,
+    shutdown: tokio::sync::watch::Sender<bool>,
+    notifications: Arc<AtomicU64>,
+    events_sent: Arc<AtomicU64>,
+}
+
+impl Publishing {
+    fn start(
+        dir: &Path,
+        store: StoreHandle,
+        metrics: Arc<Metrics>,
+    ) -> (Self, camloop::service::mqtt::EventSender) {
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+            .expect("OPC UA runtime");
+        let (shutdown, watch) = tokio::sync::watch::channel(false);
+        let port = free_port();
+        let listen = std::net::SocketAddr::from(([127, 0, 0, 1], port));
+        let pki = dir.join("pki");
+        let sender = runtime
+            .block_on(camloop::service::opcua::bench_server(
+                listen,
+                &pki,
+                names(),
+                metrics.clone(),
+                store,
+                watch,
+            ))
+            .expect("OPC UA server");
+        let notifications = Arc::new(AtomicU64::new(0));
+        let events_sent = Arc::new(AtomicU64::new(0));
+        runtime.spawn(drive(sender.clone(), metrics, events_sent.clone()));
+        let url = format!("opc.tcp://localhost:{port}/");
+        let ready = Arc::new(AtomicU64::new(0));
+        for i in 0..CLIENTS {
+            let client_dir = dir.join(format!("client-{i}"));
+            runtime.spawn(subscriber(
+                url.clone(),
+                client_dir,
+                notifications.clone(),
+                ready.clone(),
+            ));
+        }
+        let started = Instant::now();
+        while ready.load(Relaxed) < CLIENTS as u64 {
+            assert!(
+                started.elapsed() < Duration::from_secs(300),
+                "clients not subscribed in 300 s"
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        let publishing = Publishing {
+            runtime,
+            shutdown,
+            notifications,
+            events_sent,
+        };
+        (publishing, sender)
+    }
+}
+
+/// 50 machines measuring a shaft each per second, round the clock: status and events.
+async fn drive(
+    sender: camloop::service::mqtt::EventSender,
+    metrics: Arc<Metrics>,
+    sent: Arc<AtomicU64>,
+) {
+    let mut tick = tokio::time::interval(Duration::from_millis(1000 / MACHINES as u64));
+    let mut part = 0u64;
+    loop {
+        tick.tick().await;
+        part += 1;
+        let machine = format!("M{:02}", part % MACHINES as u64);
+        for f in 1..=FEATURES {
+            let feature = format!("F{f}");
+            let error_um = (part % 7) as f64 * 0.1;
+            metrics_update(&metrics, &machine, &feature, part, error_um);
+            sender.send(PlantEvent::PartAnalysed {
+                machine: machine.clone(),
+                feature,
+                part: format!("S-{part}"),
+                at_ms: camloop::clock::now_ms(),
+                verdict: Verdict::Pass,
+                max_profile_error_um: error_um,
+                base_radius_error_um: 0.1,
+                phase_error_deg: 0.001,
+                ground_with_version: part,
+            });
+            sent.fetch_add(1, Relaxed);
+        }
+    }
+}
+
+fn metrics_update(metrics: &Metrics, machine: &str, feature: &str, part: u64, error_um: f64) {
+    metrics.update_feature(machine, feature, |f| {
+        f.parts += 1;
+        f.last_part = Some(format!("S-{part}"));
+        f.last_max_error_um = Some(error_um);
+        f.last_profile_error_um = Some(error_um);
+        f.in_force_version = part;
+    });
+}
+
+/// One client: a SignAndEncrypt session, one subscription to every value of every feature.
+async fn subscriber(
+    url: String,
+    dir: PathBuf,
+    notifications: Arc<AtomicU64>,
+    ready: Arc<AtomicU64>,
+) {
+    let mut client = ClientBuilder::new()
+        .application_name("camloop bench client")
+        .application_uri("urn:camloop:bench-client")
+        .product_uri("urn:camloop:bench-client")
+        .pki_dir(dir)
+        .create_sample_keypair(true)
+        .trust_server_certs(true)
+        .session_retry_limit(3)
+        .client()
+        .expect("client");
+    let endpoint = (
+        url.as_str(),
+        SecurityPolicy::Basic256Sha256.to_str(),
+        MessageSecurityMode::SignAndEncrypt,
+        UserTokenPolicy::anonymous(),
+    );
+    let (session, event_loop) = client
+        .connect_to_matching_endpoint(endpoint, IdentityToken::Anonymous)
+        .await
+        .expect("session");
+    let _event_loop = event_loop.spawn();
+    session.wait_for_connection().await;
+    let ns = namespace(&session).await;
+    let counter = notifications.clone();
+    let subscription = session
+        .create_subscription(
+            Duration::from_millis(100),
+            100,
+            10,
+            0,
+            0,
+            true,
+            DataChangeCallback::new(move |_, _| {
+                counter.fetch_add(1, Relaxed);
+            }),
+        )
+        .await
+        .expect("subscription");
+    let items: Vec<MonitoredItemCreateRequest> = names()
+        .iter()
+        .flat_map(|(m, features)| {
+            features.iter().flat_map(move |f| {
+                VALUES
+                    .iter()
+                    .map(move |v| NodeId::new(ns, format!("Machines/{m}/Features/{f}/{v}")).into())
+            })
+        })
+        .collect();
+    // Small calls: a reply for 1000 items outgrows the default message size.
+    for chunk in items.chunks(100) {
+        session
+            .create_monitored_items(subscription, TimestampsToReturn::Both, chunk.to_vec())
+            .await
+            .expect("monitored items");
+    }
+    ready.fetch_add(1, Relaxed);
+    std::future::pending::<()>().await;
+}
+
+/// camloop's namespace index, from the server's namespace array.
+async fn namespace(session: &opcua::client::Session) -> u16 {
+    let array = session
+        .read(
+            &[opcua::types::ReadValueId::from(NodeId::from(
+                opcua::types::VariableId::Server_NamespaceArray,
+            ))],
+            TimestampsToReturn::Neither,
+            0.0,
+        )
+        .await
+        .expect("namespace array");
+    let Some(opcua::types::Variant::Array(a)) = array[0].value.clone() else {
+        panic!("no namespace array")
+    };
+    a.values
+        .iter()
+        .position(
+            |v| matches!(v, opcua::types::Variant::String(s) if s.as_ref() == "urn:camloop:ua"),
+        )
+        .expect("camloop's namespace") as u16
+}
+
+fn per_part(c: &mut Criterion) {
+    for publishing in [false, true] {
+        per_part_case(c, publishing);
+    }
+}
+
+fn per_part_case(c: &mut Criterion, publishing: bool) {
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("runtime");
+    let dir = tempfile::tempdir_in(scratch_root()).expect("temp dir");
+    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
+    let recipe = Recipe::load(&recipe_path).expect("demo recipe");
+    let mut setup = recipe.feature_setup(&recipe_path, "IN1").expect("lobe");
+    setup.request.points = 360;
+    let url = format!("sqlite://{}/bench.db?mode=rwc", dir.path().display());
+    let store = runtime.block_on(Store::connect(&url)).expect("store");
+    let handle: StoreHandle = Arc::new(tokio::sync::RwLock::new(Some(store.clone())));
+    let metrics = Arc::new(Metrics::default());
+    let mut machine = runtime
+        .block_on(MachineLoop::start(
+            "BENCH".into(),
+            vec![setup],
+            MachinePaths {
+                share_dir: dir.path().join("share"),
+                state_dir: dir.path().join("state"),
+            },
+            handle.clone(),
+            metrics.clone(),
+        ))
+        .expect("machine");
+    let side = publishing.then(|| {
+        let (side, sender) = Publishing::start(dir.path(), handle.clone(), metrics.clone());
+        machine.set_plant_events(Some(sender));
+        side
+    });
+    let raws = measurements(360);
+    let mut count = 0usize;
+    let mut samples: Vec<Duration> = Vec::new();
+    let name = match publishing {
+        false => "per_part_path_360_points_sqlite_no_opcua".to_string(),
+        true => {
+            format!("per_part_path_360_points_sqlite_opcua_{MACHINES}x{FEATURES}_{CLIENTS}_clients")
+        }
+    };
+    let before = side
+        .as_ref()
+        .map(|s| (s.notifications.load(Relaxed), s.events_sent.load(Relaxed)));
+    let started_all = Instant::now();
+    c.bench_function(&name, |b| {
+        b.iter_custom(|iters| {
+            let mut total = Duration::ZERO;
+            for _ in 0..iters {
+                let mut raw = raws[count % raws.len()].clone();
+                raw.header.part = format!("bench-{count}");
+                count += 1;
+                let started = Instant::now();
+                runtime.block_on(machine.handle(SourceEvent::Measurement {
+                    raw,
+                    ground_with: None,
+                    done: None,
+                }));
+                let took = started.elapsed();
+                samples.push(took);
+                total += took;
+                runtime.block_on(machine.retry());
+            }
+            total
+        })
+    });
+    if samples.is_empty() {
+        return;
+    }
+    println!(
+        "{name}: {} parts, {}",
+        samples.len(),
+        percentiles(&mut samples)
+    );
+    if let Some(s) = side {
+        s.report(before, started_all.elapsed());
+    }
+}
+
+impl Publishing {
+    /// What the OPC UA side did while parts were timed, then stops it.
+    fn report(self, before: Option<(u64, u64)>, took: Duration) {
+        let (n0, e0) = before.unwrap_or_default();
+        let secs = took.as_secs_f64();
+        println!(
+            "  OPC UA: {CLIENTS} clients got {:.0} value notifications/s in all; {:.0} part events/s fed; {} cores",
+            (self.notifications.load(Relaxed) - n0) as f64 / secs,
+            (self.events_sent.load(Relaxed) - e0) as f64 / secs,
+            std::thread::available_parallelism().map_or(0, |n| n.get())
+        );
+        let _ = self.shutdown.send(true);
+        self.runtime.shutdown_timeout(Duration::from_secs(5));
+    }
+}
+
+/// "p50 …, p99 …, max …" in ms of a non-empty list of durations.
+fn percentiles(samples: &mut [Duration]) -> String {
+    samples.sort();
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    let pct = |p: f64| ms(samples[((samples.len() as f64 - 1.0) * p).round() as usize]);
+    format!(
+        "p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms",
+        pct(0.5),
+        pct(0.99),
+        samples.last().map_or(0.0, |&d| ms(d))
+    )
+}
+
+criterion_group! {
+    name = opcua_bench;
+    config = Criterion::default().sample_size(20).measurement_time(Duration::from_secs(8));
+    targets = per_part
+}
+criterion_main!(opcua_bench);

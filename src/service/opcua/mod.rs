@@ -1,0 +1,334 @@
+//! The OPC UA server inside `camloop run` (`[opcua]`, off by default).
+//!
+//! One endpoint, `opc.tcp://<host>:<port>/`, Basic256Sha256 with SignAndEncrypt (and an
+//! unsecured `None` endpoint only when the config asks for it, warned at every start).
+//! The server's certificate is made on the first start in the PKI folder (by default
+//! `<var>/opcua/pki/own`); client certificates must be in `<pki>/trusted` unless
+//! `accept_unknown_clients` (warned). Users are camloop's users (see [`auth`]).
+//!
+//! The address space (see [`space`]) is fed by [`feed`] from the loops' plant events and
+//! the in-process feature status: the loops never wait on it.
+
+mod auth;
+pub(crate) mod feed;
+mod methods;
+mod nodes;
+pub(crate) mod space;
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicU64;
+
+use anyhow::Context;
+use opcua::server::node_manager::memory::{InMemoryNodeManager, InMemoryNodeManagerBuilder};
+use opcua::server::{ServerBuilder, ServerEndpoint, ServerHandle};
+use opcua::types::BuildInfo;
+use tokio::sync::{mpsc, watch};
+use tracing::{info, warn};
+
+use crate::config::{Config, OpcUaSection, OpcUaSecurity};
+use crate::service::http::AppState;
+use crate::service::mqtt::{EventSender, PlantEvent};
+pub(crate) use space::MachineLayout;
+
+/// The machines as the address space shows them.
+pub(crate) fn layout(machines: &[crate::config::CheckedMachine]) -> Vec<MachineLayout> {
+    machines
+        .iter()
+        .map(|m| MachineLayout {
+            name: m.name.to_string(),
+            recipe: m
+                .recipe_path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            features: m.setups.iter().map(|s| s.name.clone()).collect(),
+        })
+        .collect()
+}
+
+/// Plant events waiting for the feed; beyond it an event is dropped (the values catch up at
+/// the next status refresh; only that OPC UA event is lost).
+const INTAKE: usize = 4096;
+
+/// Sessions served at once (the stack's default is 20: a plant has more clients).
+const MAX_SESSIONS: usize = 64;
+
+/// Monitored items per subscription (the stack's default is 1000): a client subscribing to
+/// every value of 50 machines × 8 features needs 5600.
+const MAX_ITEMS_PER_SUBSCRIPTION: usize = 100_000;
+
+/// A running OPC UA server.
+pub(crate) struct OpcUa {
+    handle: ServerHandle,
+    server: tokio::task::JoinHandle<()>,
+    feed: tokio::task::JoinHandle<()>,
+}
+
+impl OpcUa {
+    /// Stops the server (sessions are closed) and the feed.
+    pub(crate) async fn stop(self) {
+        self.handle.cancel();
+        let _ = self.server.await;
+        self.feed.abort();
+        let _ = self.feed.await;
+    }
+}
+
+/// The folder of the server's certificate store.
+fn pki_dir(config: &Config) -> PathBuf {
+    match &config.opcua.pki_dir {
+        Some(dir) => config.resolve(dir),
+        None => config.var_dir().join("opcua").join("pki"),
+    }
+}
+
+/// What the loops feed before the server starts: their events and the machines.
+pub(crate) struct Intake {
+    events: mpsc::Receiver<PlantEvent>,
+    layout: Vec<MachineLayout>,
+    /// Bound before the machines start, so a port in use stops the start before them.
+    listener: std::net::TcpListener,
+}
+
+/// With `[opcua]` on: the sender the loops feed, and the intake [`start`] takes (made before
+/// the loops start; the server starts once the API state it shares exists).
+pub(crate) fn prepare(
+    config: &Config,
+    machines: &[crate::config::CheckedMachine],
+) -> anyhow::Result<(Option<EventSender>, Option<Intake>)> {
+    if !config.opcua.enabled {
+        return Ok((None, None));
+    }
+    let listener = bind(config.opcua.listen)?;
+    let (tx, events) = mpsc::channel(INTAKE);
+    let sender = EventSender::new(tx, Arc::new(AtomicU64::new(0)));
+    let layout = layout(machines);
+    let intake = Intake {
+        events,
+        layout,
+        listener,
+    };
+    Ok((Some(sender), Some(intake)))
+}
+
+fn bind(listen: std::net::SocketAddr) -> anyhow::Result<std::net::TcpListener> {
+    let listener = std::net::TcpListener::bind(listen)
+        .with_context(|| format!("opcua: cannot listen on {listen}"))?;
+    listener
+        .set_nonblocking(true)
+        .with_context(|| format!("opcua: cannot listen on {listen}"))?;
+    Ok(listener)
+}
+
+/// Starts the server on `opcua.listen` and its feed from `intake` (none: `[opcua]` is off).
+pub(crate) async fn start(
+    config: &Config,
+    app: AppState,
+    intake: Option<Intake>,
+    shutdown: &watch::Receiver<bool>,
+) -> anyhow::Result<Option<OpcUa>> {
+    start_with(&config.opcua, pki_dir(config), app, intake, shutdown).await
+}
+
+/// [`start`] with the section and the PKI folder given.
+async fn start_with(
+    section: &OpcUaSection,
+    pki: PathBuf,
+    app: AppState,
+    intake: Option<Intake>,
+    shutdown: &watch::Receiver<bool>,
+) -> anyhow::Result<Option<OpcUa>> {
+    let Some(Intake {
+        events,
+        layout,
+        listener,
+    }) = intake
+    else {
+        return Ok(None);
+    };
+    let shutdown = shutdown.clone();
+    std::fs::create_dir_all(&pki)
+        .with_context(|| format!("opcua: PKI folder {}", pki.display()))?;
+    let host = section.host();
+    let url = format!("opc.tcp://{host}:{}/", section.listen.port());
+    let builder = server_builder(section, &pki, &url, app.clone(), layout.clone());
+    let (server, handle) = builder
+        .build()
+        .map_err(|e| anyhow::anyhow!("opcua: the server cannot be set up: {e}"))?;
+    let listener = tokio::net::TcpListener::from_std(listener)
+        .with_context(|| format!("opcua: cannot listen on {}", section.listen))?;
+    let server = tokio::spawn(async move {
+        if let Err(e) = server.run_with(listener).await {
+            tracing::error!(error = %e, "OPC UA server stopped");
+        }
+    });
+    let manager = handle
+        .node_managers()
+        .get_of_type::<InMemoryNodeManager<nodes::CamloopNodes>>()
+        .context("opcua: camloop's node manager is missing")?;
+    let ns = handle
+        .get_namespace_index(space::NAMESPACE_URI)
+        .context("opcua: camloop's namespace is missing")?;
+    let mut feed = feed::Feed::new(
+        manager,
+        handle.subscriptions().clone(),
+        space::Ids { ns },
+        app.metrics.clone(),
+        layout.clone(),
+    )
+    .with_store(app.store.clone());
+    feed.dressings = dressing_counts(&app, &layout).await;
+    let feed = tokio::spawn(feed::run(feed, events, shutdown.clone()));
+    let cancel = handle.clone();
+    let mut stop = shutdown;
+    tokio::spawn(async move {
+        let _ = stop.changed().await;
+        cancel.cancel();
+    });
+    let nodes: usize = layout
+        .iter()
+        .map(|m| space::nodes_per_machine(m.features.len()))
+        .sum();
+    info!(endpoint = %url, security = ?section.security, machines = layout.len(), nodes, pki = %pki.display(), "OPC UA server started");
+    Ok(Some(OpcUa {
+        handle,
+        server,
+        feed,
+    }))
+}
+
+/// The server as configured: endpoints, certificates, users, camloop's nodes.
+fn server_builder(
+    section: &OpcUaSection,
+    pki: &std::path::Path,
+    url: &str,
+    app: AppState,
+    layout: Vec<MachineLayout>,
+) -> ServerBuilder {
+    let host = section.host();
+    let users = auth::Users {
+        app: app.clone(),
+        anonymous_read: section.anonymous_read,
+    };
+    let mut builder = ServerBuilder::new()
+        .application_name("camloop")
+        .application_uri(format!("urn:camloop:{host}"))
+        .product_uri("urn:camloop")
+        .build_info(BuildInfo {
+            product_uri: "urn:camloop".into(),
+            manufacturer_name: "camloop".into(),
+            product_name: "camloop".into(),
+            software_version: env!("CARGO_PKG_VERSION").into(),
+            build_number: env!("CARGO_PKG_VERSION").into(),
+            build_date: opcua::types::DateTime::now(),
+        })
+        .create_sample_keypair(true)
+        .certificate_path("own/cert.der")
+        .private_key_path("private/private.pem")
+        .pki_dir(pki)
+        .trust_client_certs(section.accept_unknown_clients)
+        .check_cert_time(true)
+        .host(host.clone())
+        .port(section.listen.port())
+        .discovery_urls(vec![url.to_string()])
+        .add_endpoint(
+            "basic256sha256_sign_encrypt",
+            ServerEndpoint::new_basic256sha256_sign_encrypt("/", &[]),
+        )
+        .default_endpoint("basic256sha256_sign_encrypt")
+        .with_authenticator(Arc::new(users))
+        .with_node_manager(InMemoryNodeManagerBuilder::new(nodes::Builder {
+            layout,
+            app,
+        }))
+        .diagnostics_enabled(false);
+    let limits = builder.limits_mut();
+    limits.max_sessions = MAX_SESSIONS;
+    limits.subscriptions.max_monitored_items_per_sub = MAX_ITEMS_PER_SUBSCRIPTION;
+    if section.security == OpcUaSecurity::Basic256Sha256AndNone {
+        warn!(
+            "opcua.security allows an unsecured endpoint (None): messages travel in clear; passwords are still encrypted with the server's certificate"
+        );
+        let mut none = ServerEndpoint::new_none("/", &[]);
+        none.password_security_policy = Some("Basic256Sha256".into());
+        builder = builder.add_endpoint("none", none);
+    }
+    if section.accept_unknown_clients {
+        warn!("opcua.accept_unknown_clients = true: any client certificate is trusted");
+    }
+    if section.anonymous_read {
+        warn!("opcua.anonymous_read = true: clients without a user may browse, read and subscribe");
+    }
+    builder
+}
+
+/// Each machine's dressings as the store has them at start (0 while it is down).
+async fn dressing_counts(
+    app: &AppState,
+    layout: &[MachineLayout],
+) -> std::collections::HashMap<String, i64> {
+    let mut counts = std::collections::HashMap::new();
+    let Some(store) = app.store.read().await.clone() else {
+        return counts;
+    };
+    for m in layout {
+        if let Ok(list) = store.dressings(&m.name, 10_000).await {
+            counts.insert(
+                m.name.clone(),
+                i64::try_from(list.len()).unwrap_or(i64::MAX),
+            );
+        }
+    }
+    counts
+}
+
+/// The server as `benches/opcua.rs` runs it: `machines` (name, features) on `listen`,
+/// Basic256Sha256 SignAndEncrypt, its PKI in `pki`, anonymous reading and unknown client
+/// certificates accepted (the bench's clients are anonymous and new); fed from the returned
+/// sender until `shutdown` turns true. Not part of camloop's interface.
+#[doc(hidden)]
+pub async fn bench_server(
+    listen: std::net::SocketAddr,
+    pki: &std::path::Path,
+    machines: Vec<(String, Vec<String>)>,
+    metrics: Arc<crate::service::metrics::Metrics>,
+    store: crate::service::machine::StoreHandle,
+    shutdown: watch::Receiver<bool>,
+) -> anyhow::Result<EventSender> {
+    let section = OpcUaSection {
+        enabled: true,
+        listen,
+        host_name: Some("localhost".into()),
+        accept_unknown_clients: true,
+        anonymous_read: true,
+        ..OpcUaSection::default()
+    };
+    let layout = machines
+        .into_iter()
+        .map(|(name, features)| MachineLayout {
+            name,
+            recipe: "bench".into(),
+            features,
+        })
+        .collect();
+    let app = AppState {
+        store,
+        metrics,
+        machines: Arc::default(),
+        commands: Arc::default(),
+        auth: Arc::new(crate::service::http::AuthState::new(None, false)),
+        body_timeout: std::time::Duration::from_secs(10),
+        dashboard: Arc::default(),
+        cluster: None,
+    };
+    let (sender, events) = mpsc::channel(INTAKE);
+    let intake = Intake {
+        events,
+        layout,
+        listener: bind(listen)?,
+    };
+    // Runs until shutdown: the server's own watcher cancels it.
+    drop(start_with(&section, pki.to_path_buf(), app, Some(intake), &shutdown).await?);
+    Ok(EventSender::new(sender, Arc::new(AtomicU64::new(0))))
+}
