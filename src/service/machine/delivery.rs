@@ -98,11 +98,7 @@ impl FeatureLoop {
         if let Err(e) = self.journal.append(std::slice::from_ref(&record)) {
             let reason =
                 format!("{e:#}; the table version's record cannot be journalled: not submitted");
-            return Err(if self.journal.fenced_out() {
-                MachineError::FencedOut { reason }
-            } else {
-                MachineError::Journal { reason }
-            });
+            return Err(self.journal_failed(reason));
         }
         let at_ms = draft.at_ms;
         let request = self.request(draft).map_err(MachineError::failed)?;
@@ -116,6 +112,16 @@ impl FeatureLoop {
             at_ms,
         });
         Ok((version, status, why, records))
+    }
+
+    /// A write's records the journal did not keep: another instance owns the machine now
+    /// (its fence moved), or the journal failed.
+    pub(super) fn journal_failed(&self, reason: String) -> MachineError {
+        if self.journal.fenced_out() {
+            MachineError::FencedOut { reason }
+        } else {
+            MachineError::Journal { reason }
+        }
     }
 
     /// The journal record of a version not yet submitted.

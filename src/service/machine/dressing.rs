@@ -107,11 +107,7 @@ impl FeatureLoop {
                 "machine {}: the dressing's records were not kept",
                 self.name
             );
-            return Err(if self.journal.fenced_out() {
-                MachineError::FencedOut { reason }
-            } else {
-                MachineError::Journal { reason }
-            });
+            return Err(self.journal_failed(reason));
         }
         Ok(Dressed {
             old_radius_mm: old,
