@@ -447,16 +447,14 @@ async fn rollback_part_result(
 
 /// A dressing reported through the API, its outcome as the HTTP side wants it.
 fn dressing_result(
-    result: anyhow::Result<machine::Dressed>,
+    result: Result<machine::Dressed, machine::MachineError>,
 ) -> Result<http::CommandDone, http::CommandError> {
     result
         .map(|d| http::CommandDone {
             version: None,
             message: d.summary,
         })
-        .map_err(|e| http::CommandError::Refused {
-            reason: format!("{e:#}"),
-        })
+        .map_err(http::CommandError::from)
 }
 
 async fn connect_store(config: &Config, store: &StoreHandle) {

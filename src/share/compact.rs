@@ -230,6 +230,65 @@ mod tests {
         assert!(h.apply(again).unwrap_err().0.contains("only a first line"));
     }
 
+    /// A checkpoint line as camloop wrote it before the version status moved to the store
+    /// crate (one definition for share and store): it loads unchanged, each status the
+    /// same tagged JSON.
+    #[test]
+    fn a_checkpoint_written_before_the_status_moved_loads() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("manifest.jsonl");
+        let file = r#"{"name":"CAM.SPF","sha256":"0000000000000000000000000000000000000000000000000000000000000000","bytes":5}"#;
+        let record = |n: u32| {
+            format!(
+                r#"{{"version":{n},"created_at_unix_ms":{n},"table_number":1,"files":[{file}],"reason":"test","measurement_id":null,"learning":{{"gain":0.5}},"rollback_of":null,"refused":null}}"#
+            )
+        };
+        let states = [
+            (1, r#"{"status":"pushed","at_unix_ms":50}"#, true),
+            (2, r#"{"status":"superseded","by":4}"#, false),
+            (
+                3,
+                r#"{"status":"refused","reason":"step too large"}"#,
+                false,
+            ),
+            (
+                4,
+                r#"{"status":"waiting","reason":"share unreachable"}"#,
+                false,
+            ),
+        ];
+        let versions: Vec<String> = states
+            .iter()
+            .map(|(n, status, reached)| {
+                format!(
+                    r#"{{"record":{},"status":{status},"reached_share":{reached},"text_kept":true}}"#,
+                    record(*n)
+                )
+            })
+            .collect();
+        let line = format!(
+            r#"{{"record":"checkpoint","told":4,"forgotten":0,"deliverable":4,"pushed":1,"versions":[{}],"at_unix_ms":60,"archived_lines":9}}"#,
+            versions.join(",")
+        );
+        std::fs::write(&path, format!("{line}\n")).unwrap();
+        let loaded = manifest::load(&path).unwrap();
+        let status = |n: u64| loaded.history.get(n).unwrap().status.clone();
+        assert_eq!(status(1), VersionStatus::Pushed { at_unix_ms: 50 });
+        assert_eq!(status(2), VersionStatus::Superseded { by: 4 });
+        assert_eq!(
+            status(3),
+            VersionStatus::Refused {
+                reason: "step too large".into()
+            }
+        );
+        assert_eq!(
+            status(4),
+            VersionStatus::Waiting {
+                reason: Some("share unreachable".into())
+            }
+        );
+    }
+
     #[test]
     fn an_inconsistent_checkpoint_is_refused() {
         let mut h = History::default();

@@ -75,21 +75,9 @@ pub struct FileRecord {
     pub bytes: u64,
 }
 
-/// Where a version stands.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(tag = "status", rename_all = "snake_case")]
-pub enum VersionStatus {
-    /// Not delivered yet; `reason` is the last failure, if an attempt was made.
-    Waiting { reason: Option<String> },
-    /// Renames began but were not confirmed (a kill or a failure during them).
-    Delivering,
-    /// On the share and verified.
-    Pushed { at_unix_ms: u64 },
-    /// Never pushed, for this reason.
-    Refused { reason: String },
-    /// Not delivered before a newer version was accepted.
-    Superseded { by: u64 },
-}
+/// Where a version stands: the one status of a table version, defined in the store (whose
+/// status column is written from it) and kept in the manifest as the same tagged JSON.
+pub use crate::store::VersionStatus;
 
 /// A version and what happened to it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

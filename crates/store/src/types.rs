@@ -61,6 +61,23 @@ text_enum!(
     /// refused (by a check or by the operator).
     TableStatus, "table status" { Waiting, Pushed, Refused }
 );
+/// Where a table version stands, from its write-ahead record to the share's verdict: the one
+/// status of a version, for the share's manifest (this tagged JSON) and the store alike.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "status", rename_all = "snake_case")]
+pub enum VersionStatus {
+    /// Not delivered yet; `reason` is the last failure, if an attempt was made.
+    Waiting { reason: Option<String> },
+    /// Renames began but were not confirmed (a kill or a failure during them).
+    Delivering,
+    /// On the share and verified.
+    Pushed { at_unix_ms: u64 },
+    /// Never pushed, for this reason.
+    Refused { reason: String },
+    /// Not delivered before a newer version was accepted.
+    Superseded { by: u64 },
+}
+
 text_enum!(
     /// Severity of an event; `Error` means an operator must act.
     EventLevel, "event level" { Info, Warn, Error }

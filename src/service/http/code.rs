@@ -58,6 +58,10 @@ pub enum ApiCode {
     FreezeRefused,
     DressingRefused,
     CommandFailed,
+    /// The machine's journal could not keep a write (disk full, folder unwritable).
+    JournalUnavailable,
+    /// The share's state folder (manifest, kept texts) could not be written.
+    ShareStateFailed,
     // The history store (the codes of `StoreError`).
     StoreUnavailable,
     StoreCorrupt,
@@ -101,8 +105,10 @@ impl ApiCode {
             RollbackRefused | FreezeRefused | DressingRefused | Conflict => StatusCode::CONFLICT,
             // Try again later, or once an operator acted (the code says which).
             MachineStopped | MachineElsewhere | ClusterUnavailable | StoreUnavailable
-            | StoreCorrupt | StoreFull | StoreBusy => StatusCode::SERVICE_UNAVAILABLE,
-            RouteWithoutRole | CommandFailed | MigrationFailed | StoreFailed
+            | StoreCorrupt | StoreFull | StoreBusy | JournalUnavailable => {
+                StatusCode::SERVICE_UNAVAILABLE
+            }
+            RouteWithoutRole | CommandFailed | ShareStateFailed | MigrationFailed | StoreFailed
             | ProgramUnreadable | RandomFailed | Internal => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -144,6 +150,8 @@ mod tests {
             "machine_elsewhere",
             "rollback_refused",
             "command_failed",
+            "journal_unavailable",
+            "share_state_failed",
             "store_unavailable",
             "migration_failed",
             "random_failed",
@@ -171,6 +179,15 @@ mod tests {
                 reason: reason.clone(),
             },
             CommandError::Refused {
+                reason: reason.clone(),
+            },
+            CommandError::JournalUnavailable {
+                reason: reason.clone(),
+            },
+            CommandError::ShareStateFailed {
+                reason: reason.clone(),
+            },
+            CommandError::Elsewhere {
                 reason: reason.clone(),
             },
             CommandError::Failed { reason },

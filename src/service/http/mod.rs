@@ -141,6 +141,15 @@ pub enum CommandError {
     /// Anything else that went wrong on the machine's side: 500 `command_failed`.
     #[error("{reason}")]
     Failed { reason: String },
+    /// The machine's journal could not keep the write: 503 `journal_unavailable`.
+    #[error("{reason}")]
+    JournalUnavailable { reason: String },
+    /// The share's state folder could not be written: 500 `share_state_failed`.
+    #[error("{reason}")]
+    ShareStateFailed { reason: String },
+    /// Another instance of the cluster took the machine meanwhile: 503 `machine_elsewhere`.
+    #[error("{reason}")]
+    Elsewhere { reason: String },
 }
 
 impl CommandError {
@@ -151,7 +160,12 @@ impl CommandError {
             CommandError::VersionNotFound { .. } => StatusCode::NOT_FOUND,
             CommandError::StoreUnavailable { .. } => StatusCode::SERVICE_UNAVAILABLE,
             CommandError::Refused { .. } => StatusCode::CONFLICT,
-            CommandError::Failed { .. } => StatusCode::INTERNAL_SERVER_ERROR,
+            CommandError::Failed { .. } | CommandError::ShareStateFailed { .. } => {
+                StatusCode::INTERNAL_SERVER_ERROR
+            }
+            CommandError::JournalUnavailable { .. } | CommandError::Elsewhere { .. } => {
+                StatusCode::SERVICE_UNAVAILABLE
+            }
         }
     }
 
@@ -162,6 +176,25 @@ impl CommandError {
             CommandError::StoreUnavailable { .. } => ApiCode::StoreUnavailable,
             CommandError::Refused { .. } => refused,
             CommandError::Failed { .. } => ApiCode::CommandFailed,
+            CommandError::JournalUnavailable { .. } => ApiCode::JournalUnavailable,
+            CommandError::ShareStateFailed { .. } => ApiCode::ShareStateFailed,
+            CommandError::Elsewhere { .. } => ApiCode::MachineElsewhere,
+        }
+    }
+}
+
+impl From<crate::service::machine::MachineError> for CommandError {
+    /// A write the machine's loop did not make: a rule's refusal is the command's own 409,
+    /// a journal or state folder that failed is the service's, with its own code.
+    fn from(e: crate::service::machine::MachineError) -> Self {
+        use crate::service::machine::MachineError;
+        let reason = e.to_string();
+        match e {
+            MachineError::Refused { .. } => CommandError::Refused { reason },
+            MachineError::Journal { .. } => CommandError::JournalUnavailable { reason },
+            MachineError::FencedOut { .. } => CommandError::Elsewhere { reason },
+            MachineError::ShareState { .. } => CommandError::ShareStateFailed { reason },
+            MachineError::Failed { .. } => CommandError::Failed { reason },
         }
     }
 }
@@ -179,6 +212,7 @@ impl From<crate::service::machine::RollbackError> for CommandError {
             RollbackError::StoreUnavailable => CommandError::StoreUnavailable {
                 reason: e.to_string(),
             },
+            RollbackError::Delivery(e) => CommandError::from(e),
             e => CommandError::Refused {
                 reason: format!("{e:#}"),
             },

@@ -3,6 +3,7 @@
 
 use super::super::journal::{EventKind, Pending};
 use super::FeatureLoop;
+use super::MachineError;
 use super::memory::{TableLearning, WaitingTable};
 use super::records::event;
 use crate::clock::{now_ms, now_ms_u64};
@@ -12,7 +13,6 @@ use crate::core::program::{Provenance, comment_text};
 use crate::failpoint::crash_point;
 use crate::share::{ProgramFile, PushError, PushRequest, Submitted};
 use crate::store::{EventLevel, TableStatus};
-use anyhow::Context;
 use std::sync::atomic::Ordering;
 use tracing::{error, info, warn};
 
@@ -44,7 +44,7 @@ impl FeatureLoop {
         next: LearningState,
         reason: &str,
         measurement: Option<String>,
-    ) -> anyhow::Result<Vec<Pending>> {
+    ) -> Result<Vec<Pending>, MachineError> {
         let at_ms = now_ms();
         let parent = self.memory.in_force_version;
         let version = self.share.history().next_version();
@@ -65,7 +65,9 @@ impl FeatureLoop {
                 learning.wheel_radius_mm, learning.iteration
             )),
         ];
-        let text = self.render_table(table, &next, &settings)?;
+        let text = self
+            .render_table(table, &next, &settings)
+            .map_err(MachineError::refused)?;
         crash_point("table_rendered");
         let draft = Draft {
             text,
@@ -90,14 +92,16 @@ impl FeatureLoop {
         &mut self,
         draft: Draft,
         next: LearningState,
-    ) -> anyhow::Result<(u64, TableStatus, String, Vec<Pending>)> {
+    ) -> Result<(u64, TableStatus, String, Vec<Pending>), MachineError> {
         let version = self.share.history().next_version();
         let record = self.table_record(&draft, version);
-        self.journal
-            .append(std::slice::from_ref(&record))
-            .context("the table version's record cannot be journalled: not submitted")?;
+        if let Err(e) = self.journal.append(std::slice::from_ref(&record)) {
+            let reason =
+                format!("{e:#}; the table version's record cannot be journalled: not submitted");
+            return Err(self.journal_failed(reason));
+        }
         let at_ms = draft.at_ms;
-        let request = self.request(draft)?;
+        let request = self.request(draft).map_err(MachineError::failed)?;
         let (status, why, mut records) = self.submit_and_deliver(request, version, next, at_ms)?;
         records.push(Pending::TableStatus {
             machine: self.name.clone(),
@@ -108,6 +112,16 @@ impl FeatureLoop {
             at_ms,
         });
         Ok((version, status, why, records))
+    }
+
+    /// A write's records the journal did not keep: another instance owns the machine now
+    /// (its fence moved), or the journal failed.
+    pub(super) fn journal_failed(&self, reason: String) -> MachineError {
+        if self.journal.fenced_out() {
+            MachineError::FencedOut { reason }
+        } else {
+            MachineError::Journal { reason }
+        }
     }
 
     /// The journal record of a version not yet submitted.
@@ -157,15 +171,25 @@ impl FeatureLoop {
         version: u64,
         next: LearningState,
         at_ms: i64,
-    ) -> anyhow::Result<(TableStatus, String, Vec<Pending>)> {
+    ) -> Result<(TableStatus, String, Vec<Pending>), MachineError> {
         let mut records = Vec::new();
-        match self.share.submit(request).context("share state folder")? {
+        let submitted = self
+            .share
+            .submit(request)
+            .map_err(|e| MachineError::ShareState {
+                reason: format!("{e:#}"),
+            })?;
+        match submitted {
             Submitted::Refused { reason, .. } => {
                 error!(machine = %self.name, version, reason = %reason, "table version refused by the share");
                 return Ok((TableStatus::Refused, reason, records));
             }
             Submitted::Accepted { version: v } if v != version => {
-                anyhow::bail!("the share numbered the version {v}, its record says {version}")
+                return Err(MachineError::Failed {
+                    reason: format!(
+                        "the share numbered the version {v}, its record says {version}"
+                    ),
+                });
             }
             Submitted::Accepted { .. } => {}
         }
@@ -205,12 +229,16 @@ impl FeatureLoop {
                 });
                 Ok((TableStatus::Waiting, format!("waiting: {e}"), records))
             }
-            Ok(other) => anyhow::bail!(
-                "the share delivered {:?} instead of the version just submitted, {version}",
-                other.map(|p| p.version)
-            ),
+            Ok(other) => Err(MachineError::Failed {
+                reason: format!(
+                    "the share delivered {:?} instead of the version just submitted, {version}",
+                    other.map(|p| p.version)
+                ),
+            }),
             Err(PushError::Refused { reason, .. }) => Ok((TableStatus::Refused, reason, records)),
-            Err(PushError::State(e)) => Err(e).context("share state folder"),
+            Err(PushError::State(e)) => Err(MachineError::ShareState {
+                reason: format!("{e:#}"),
+            }),
         }
     }
 

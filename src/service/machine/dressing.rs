@@ -3,8 +3,8 @@
 //! infeed, with the wheel's share of the learned size dropped.
 
 use super::super::journal::{EventKind, Pending};
-use super::FeatureLoop;
 use super::records::event;
+use super::{FeatureLoop, MachineError};
 use crate::clock::now_ms;
 use crate::core::compensate;
 use crate::core::learn;
@@ -41,12 +41,14 @@ impl FeatureLoop {
         wheel: &Wheel,
         source: &str,
         first: bool,
-    ) -> anyhow::Result<Dressed> {
-        let wheel_radius_mm = compensate::check_wheel_radius(wheel.radius_mm)?;
+    ) -> Result<Dressed, MachineError> {
+        let wheel_radius_mm =
+            compensate::check_wheel_radius(wheel.radius_mm).map_err(MachineError::refused)?;
         let infeed_um = wheel
             .infeed_um
             .map(learn::check_dresser_infeed)
-            .transpose()?;
+            .transpose()
+            .map_err(MachineError::refused)?;
         let at_ms = now_ms();
         let old = self.memory.wheel_radius_mm;
         info!(machine = %self.name, old_radius_mm = old, new_radius_mm = wheel_radius_mm, infeed_um, source, "wheel dressed: table regenerated for the new radius");
@@ -99,7 +101,14 @@ impl FeatureLoop {
             }
         };
         records.push(self.learning_record(at_ms));
-        self.record(records).await;
+        if !self.record(records).await {
+            // The dressing's own records were not kept: said so, not answered as done.
+            let reason = format!(
+                "machine {}: the dressing's records were not kept",
+                self.name
+            );
+            return Err(self.journal_failed(reason));
+        }
         Ok(Dressed {
             old_radius_mm: old,
             new_radius_mm: wheel_radius_mm,

@@ -12,6 +12,7 @@
 //! - `ingest`: a measurement in (identity, repeats, the turn, guards in a row, records);
 //! - `delivery`: rendering with provenance, the push, retries, the version in force;
 //! - `rollback`, `dressing`: the operator's and the wheel's events;
+//! - `error`: why a write (a delivery, a dressing) did not happen, typed for the API;
 //! - `records`: the journal records and the reject folder;
 //! - `memory`: what a feature's loop remembers between parts;
 //! - `shaft`: the main program of the whole part and the resume point;
@@ -26,6 +27,7 @@ mod charts;
 mod coast;
 mod delivery;
 mod dressing;
+mod error;
 mod feature;
 mod freeze;
 mod guards;
@@ -49,6 +51,7 @@ use std::time::Instant;
 use tracing::{error, info, warn};
 
 pub use dressing::Dressed;
+pub use error::MachineError;
 pub use feature::FeatureLoop;
 pub use ingest::GaugeIds;
 pub use rollback::{RollbackError, RolledBack};
@@ -248,7 +251,8 @@ impl MachineLoop {
                 let r = self
                     .dress(wheel_radius_mm, infeed_um, &source)
                     .await
-                    .map(|_| ());
+                    .map(|_| ())
+                    .map_err(anyhow::Error::from);
                 if let Some(done) = done {
                     let _ = done.send(());
                 }
@@ -376,7 +380,7 @@ impl MachineLoop {
         wheel_radius_mm: f64,
         infeed_um: Option<f64>,
         source: &str,
-    ) -> anyhow::Result<Dressed> {
+    ) -> Result<Dressed, MachineError> {
         let mut summary = Vec::new();
         let mut dressed = None;
         // The wheel's share of the size corrections, what every feature has in common: used
@@ -397,7 +401,9 @@ impl MachineLoop {
             summary.push(format!("{}: {}", feature.feature_name(), d.summary));
             dressed.get_or_insert(d);
         }
-        let mut d = dressed.context("a machine has at least one feature")?;
+        let mut d = dressed.ok_or_else(|| MachineError::Failed {
+            reason: "a machine has at least one feature".into(),
+        })?;
         if self.features.len() > 1 {
             d.summary = summary.join("; ");
         }

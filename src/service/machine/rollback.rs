@@ -28,6 +28,9 @@ pub enum RollbackError {
     },
     #[error("history store unavailable: cannot read the stored version")]
     StoreUnavailable,
+    /// The new version's delivery failed (its journal, the share's state folder, …).
+    #[error(transparent)]
+    Delivery(#[from] super::MachineError),
     #[error(transparent)]
     Other(#[from] anyhow::Error),
 }

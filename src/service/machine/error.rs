@@ -1,0 +1,43 @@
+//! Why a write of a machine's loop (a table delivery, a dressing) did not happen, typed so
+//! the API answers each case with its own code (see `http::CommandError`'s `From`): a rule
+//! that refused is the caller's to hear about (409), a journal or state folder that cannot
+//! be written is the service's fault (503, 500), never reported as a refusal.
+
+/// What went wrong on a machine's write path.
+#[derive(Debug, thiserror::Error)]
+pub enum MachineError {
+    /// A rule refused the write (a wheel radius or infeed out of range, a table the checks
+    /// refuse to render): nothing was changed.
+    #[error("{reason}")]
+    Refused { reason: String },
+    /// The journal could not keep the write's records (disk full, folder unwritable): the
+    /// write-ahead rule holds, so nothing was submitted to the share.
+    #[error("the journal cannot be written: {reason}")]
+    Journal { reason: String },
+    /// Another instance of the cluster owns the machine now: nothing was written here.
+    #[error("another instance owns this machine now: {reason}")]
+    FencedOut { reason: String },
+    /// The share's state folder (manifest, kept texts) could not be written or read.
+    #[error("share state folder: {reason}")]
+    ShareState { reason: String },
+    /// Anything else that went wrong on the machine's side (the share numbered a version
+    /// other than its record says, the main program could not be made).
+    #[error("{reason}")]
+    Failed { reason: String },
+}
+
+impl MachineError {
+    /// A rule's refusal, its text with every cause.
+    pub(super) fn refused(e: impl Into<anyhow::Error>) -> Self {
+        MachineError::Refused {
+            reason: format!("{:#}", e.into()),
+        }
+    }
+
+    /// A failure of the machine's side, its text with every cause.
+    pub(super) fn failed(e: impl Into<anyhow::Error>) -> Self {
+        MachineError::Failed {
+            reason: format!("{:#}", e.into()),
+        }
+    }
+}

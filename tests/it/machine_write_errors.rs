@@ -1,0 +1,66 @@
+//! A machine's write paths say what went wrong, and the API answers each case with its own
+//! code: a dressing a rule refuses is 409 `dressing_refused`, a dressing whose journal cannot
+//! be written is 503 `journal_unavailable`, never reported as a refusal.
+
+use camloop::recipe::Recipe;
+use camloop::service::http::{ApiCode, CommandError};
+use camloop::service::machine::{MachineError, MachineLoop, MachinePaths, StoreHandle};
+use camloop::service::metrics::Metrics;
+use camloop::store::Store;
+use std::path::Path;
+use std::sync::Arc;
+
+async fn machine(dir: &Path) -> MachineLoop {
+    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
+    let recipe = Recipe::load(&recipe_path).unwrap();
+    let setup = recipe.feature_setup(&recipe_path, "IN1").unwrap();
+    let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.display());
+    let store: StoreHandle = Arc::new(tokio::sync::RwLock::new(Some(
+        Store::connect(&url).await.unwrap(),
+    )));
+    let paths = MachinePaths {
+        share_dir: dir.join("share"),
+        state_dir: dir.join("state"),
+    };
+    let metrics = Arc::new(Metrics::default());
+    MachineLoop::start("DRESS1".into(), vec![setup], paths, store, metrics)
+        .await
+        .unwrap()
+}
+
+#[tokio::test]
+async fn a_refused_dressing_and_a_journal_failure_answer_with_different_codes() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut m = machine(dir.path()).await;
+
+    // A radius outside the wheel's range: refused by the rule, nothing written.
+    let refused = m.dress(-1.0, None, "test").await.unwrap_err();
+    assert!(
+        matches!(refused, MachineError::Refused { .. }),
+        "{refused:?}"
+    );
+    let refused = CommandError::from(refused);
+    assert_eq!(
+        refused.code(ApiCode::DressingRefused),
+        ApiCode::DressingRefused
+    );
+    assert_eq!(refused.status().as_u16(), 409);
+
+    // The journal's file replaced by a folder: it cannot be opened for appending (as root
+    // too, unlike a folder without write permission), so the dressing's table cannot be
+    // journalled and, write-ahead, is not submitted.
+    let journal = dir.path().join("state/IN1/journal.jsonl");
+    if journal.exists() {
+        std::fs::remove_file(&journal).unwrap();
+    }
+    std::fs::create_dir(&journal).unwrap();
+    let failed = m.dress(249.5, None, "test").await.unwrap_err();
+    assert!(matches!(failed, MachineError::Journal { .. }), "{failed:?}");
+    let failed = CommandError::from(failed);
+    assert_eq!(
+        failed.code(ApiCode::DressingRefused),
+        ApiCode::JournalUnavailable
+    );
+    assert_eq!(failed.status().as_u16(), 503);
+    assert_eq!(ApiCode::JournalUnavailable.as_str(), "journal_unavailable");
+}
