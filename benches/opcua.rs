@@ -12,12 +12,14 @@
 //! own two-thread runtime, as the service's tasks run beside the machine task; the loop is
 //! timed on the bench thread. The core count is printed: they all compete for the cores.
 
-use camloop::core::measure::RawMeasurement;
+#[path = "support/mod.rs"]
+mod support;
+use support::{measurements, scratch_root};
+
 use camloop::recipe::Recipe;
 use camloop::service::machine::{MachineLoop, MachinePaths, SourceEvent, StoreHandle};
 use camloop::service::metrics::Metrics;
 use camloop::service::mqtt::PlantEvent;
-use camloop::sim::{CommandedTable, GrinderConfig, PartLabels, SimGrinder, Workpiece};
 use camloop::store::{Store, Verdict};
 use criterion::{Criterion, criterion_group, criterion_main};
 use opcua::client::{ClientBuilder, DataChangeCallback, IdentityToken};
@@ -50,43 +52,6 @@ const VALUES: [&str; 14] = [
     "BlockedByGuard",
     "GuardReason",
 ];
-
-/// Twenty simulated measurements of the demo lobe ground with its nominal table.
-fn measurements(points: u32) -> Vec<RawMeasurement> {
-    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
-    let recipe = Recipe::load(&recipe_path).expect("demo recipe");
-    let setup = recipe.feature_setup(&recipe_path, "IN1").expect("lobe");
-    let camloop::core::compensate::Feature::Cam(g) = setup.feature else {
-        panic!("a cam")
-    };
-    let mut config = GrinderConfig::default();
-    config.gauge.points_per_rev = points;
-    let mut sim = SimGrinder::new(config, Workpiece::Cam(g), 9).expect("sim");
-    let part = setup.feature.part(&setup.nominal).expect("part");
-    let table =
-        CommandedTable::nominal(&part, 360, camloop::core::fit::TableForm::Poly).expect("table");
-    let ground = sim.grind(&table).expect("ground");
-    let labels = PartLabels {
-        machine: "1".into(),
-        part: "1".into(),
-        lobe: "1".into(),
-    };
-    (0..20).map(|_| sim.measure(&ground, &labels)).collect()
-}
-
-/// Memory-backed /dev/shm when there (isolates camloop's cost from the disk's), as
-/// `benches/service.rs`; `CAMLOOP_BENCH_DIR` overrides it.
-fn scratch_root() -> PathBuf {
-    if let Some(dir) = std::env::var_os("CAMLOOP_BENCH_DIR") {
-        return PathBuf::from(dir);
-    }
-    let shm = Path::new("/dev/shm");
-    if shm.is_dir() {
-        shm.to_path_buf()
-    } else {
-        PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-    }
-}
 
 fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
