@@ -252,6 +252,24 @@ fn part(n: i64) -> NewMeasurement {
 /// Stores one part and waits until all `n` clients have it. The part is stored at a
 /// spread-out moment of the poller's 250 ms period (a waiting time outside the measurement):
 /// storing right after the previous delivery would always wait the full period.
+/// Stores parts until one reaches all 50 clients: the first part starts the poller, and
+/// the clients are connected once it reaches them.
+async fn wait_for_clients(store: &Store, rx: &mut mpsc::UnboundedReceiver<i64>) {
+    let mut k = 0;
+    loop {
+        k += 1;
+        let id = store.insert_measurement(&part(k)).await.unwrap().0;
+        let deadline = Instant::now() + Duration::from_secs(2);
+        let mut got = 0;
+        while let Ok(Some(x)) = tokio::time::timeout_at(deadline.into(), rx.recv()).await {
+            got += usize::from(x == id);
+            if got == 50 {
+                return;
+            }
+        }
+    }
+}
+
 async fn one_live(
     store: &Store,
     rx: &mut mpsc::UnboundedReceiver<i64>,
@@ -307,22 +325,7 @@ fn bench(c: &mut Criterion) {
     }
 
     let mut rx = rt.block_on(clients(addr, 50));
-    // The first part starts the poller; the clients are connected once it reaches them.
-    rt.block_on(async {
-        let mut k = 0;
-        loop {
-            k += 1;
-            let id = store.insert_measurement(&part(k)).await.unwrap().0;
-            let deadline = Instant::now() + Duration::from_secs(2);
-            let mut got = 0;
-            while let Ok(Some(x)) = tokio::time::timeout_at(deadline.into(), rx.recv()).await {
-                got += usize::from(x == id);
-                if got == 50 {
-                    return;
-                }
-            }
-        }
-    });
+    rt.block_on(wait_for_clients(&store, &mut rx));
     let mut k = 1000;
     let times: Vec<Duration> = rt.block_on(async {
         let mut v = Vec::new();

@@ -106,18 +106,7 @@ async fn breakdown(store: &camloop::store::Store, parts: f64) -> String {
 /// Runs the load on the store at `url` and reports it; `memory` checks flat memory (once is
 /// enough, the PostgreSQL run is for its bytes).
 fn run(dir: &tempfile::TempDir, url: &str, parts: u64, memory: bool) {
-    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
-    let mut text = format!(
-        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"{url}\"\n[http]\nlisten = \"127.0.0.1:0\"\n"
-    );
-    for m in 0..MACHINES {
-        let _ = write!(
-            text,
-            "[[machines]]\nname = \"M{m:02}\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/M{m:02}\"\n[machines.gauge]\nkind = \"sim\"\npart_interval_ms = 1\nseed = {m}\n",
-            recipe.display()
-        );
-    }
-    let config = Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).expect("config");
+    let config = load_config(dir, url);
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
@@ -149,32 +138,7 @@ fn run(dir: &tempfile::TempDir, url: &str, parts: u64, memory: bool) {
         let elapsed_s = started.elapsed().as_secs_f64();
         sampler.abort();
         running.stop().await;
-        // Every machine's rows, counted in the database itself.
-        let store = camloop::store::Store::connect(url).await.expect("store");
-        const COUNT: &str =
-            "SELECT machine, COUNT(*) FROM measurements GROUP BY machine ORDER BY machine";
-        let counts: Vec<(String, i64)> = match store.raw_pool() {
-            camloop::store::RawPool::Sqlite(pool) => sqlx::query_as(COUNT).fetch_all(pool).await,
-            camloop::store::RawPool::Postgres(pool) => sqlx::query_as(COUNT).fetch_all(pool).await,
-        }
-        .expect("count");
-        let backend = store.backend();
-        if let camloop::store::RawPool::Sqlite(_) = store.raw_pool() {
-            store.close().await;
-        }
-        let db_bytes = store_bytes(&store, dir.path()).await.saturating_sub(empty_bytes);
-        let stored = counts.iter().map(|(_, n)| *n as f64).sum::<f64>().max(1.0);
-        let reopened = camloop::store::Store::connect(url).await.expect("store");
-        println!("load: {backend}: bytes per part by table: {}", breakdown(&reopened, stored).await);
-        reopened.close().await;
-        store.close().await;
-        println!(
-            "load: {backend}: {:.1} MiB for {stored} parts, {:.0} bytes ({:.2} KiB) per part (measurement with raw revolutions and report, table version, learning state, events; the empty schema's {empty_bytes} bytes left out); 50 machines at a part every 10 s: {:.2} GB a day",
-            db_bytes as f64 / (1 << 20) as f64,
-            db_bytes as f64 / stored,
-            db_bytes as f64 / stored / 1024.0,
-            db_bytes as f64 / stored * 50.0 * 8640.0 / 1e9,
-        );
+        let counts = report_store(url, dir.path(), empty_bytes).await;
         let samples = samples.lock().unwrap_or_else(|p| p.into_inner()).clone();
         (counts, samples, elapsed_s)
     });
@@ -194,6 +158,74 @@ fn run(dir: &tempfile::TempDir, url: &str, parts: u64, memory: bool) {
             "NOT complete"
         }
     );
+    let (first_half, second_half) = report_memory(&samples, elapsed_s);
+    assert_eq!(total, expected, "measurements were dropped");
+    // The first half warms the caches (SQLite's page caches, the share's kept versions);
+    // after it, what grows with every part is a leak. 10 MiB over the second half's parts
+    // (1,500 in the default run) catches anything from about 7 KB per part up; before the
+    // share forgot settled versions, 19 KB per part leaked this way.
+    if memory {
+        assert!(
+            second_half <= first_half + 10.0,
+            "anonymous memory grew from {first_half:.0} to {second_half:.0} MiB after warm-up"
+        );
+    }
+}
+
+/// The service's config: `MACHINES` simulated machines on the demo lobe, a part every ms.
+fn load_config(dir: &tempfile::TempDir, url: &str) -> Config {
+    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
+    let mut text = format!(
+        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"{url}\"\n[http]\nlisten = \"127.0.0.1:0\"\n"
+    );
+    for m in 0..MACHINES {
+        let _ = write!(
+            text,
+            "[[machines]]\nname = \"M{m:02}\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/M{m:02}\"\n[machines.gauge]\nkind = \"sim\"\npart_interval_ms = 1\nseed = {m}\n",
+            recipe.display()
+        );
+    }
+    Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).expect("config")
+}
+
+/// Prints the store's size per part (whole and by table); returns each machine's
+/// measurement count.
+async fn report_store(url: &str, dir: &Path, empty_bytes: u64) -> Vec<(String, i64)> {
+    // Every machine's rows, counted in the database itself.
+    let store = camloop::store::Store::connect(url).await.expect("store");
+    const COUNT: &str =
+        "SELECT machine, COUNT(*) FROM measurements GROUP BY machine ORDER BY machine";
+    let counts: Vec<(String, i64)> = match store.raw_pool() {
+        camloop::store::RawPool::Sqlite(pool) => sqlx::query_as(COUNT).fetch_all(pool).await,
+        camloop::store::RawPool::Postgres(pool) => sqlx::query_as(COUNT).fetch_all(pool).await,
+    }
+    .expect("count");
+    let backend = store.backend();
+    if let camloop::store::RawPool::Sqlite(_) = store.raw_pool() {
+        store.close().await;
+    }
+    let db_bytes = store_bytes(&store, dir).await.saturating_sub(empty_bytes);
+    let stored = counts.iter().map(|(_, n)| *n as f64).sum::<f64>().max(1.0);
+    let reopened = camloop::store::Store::connect(url).await.expect("store");
+    println!(
+        "load: {backend}: bytes per part by table: {}",
+        breakdown(&reopened, stored).await
+    );
+    reopened.close().await;
+    store.close().await;
+    println!(
+        "load: {backend}: {:.1} MiB for {stored} parts, {:.0} bytes ({:.2} KiB) per part (measurement with raw revolutions and report, table version, learning state, events; the empty schema's {empty_bytes} bytes left out); 50 machines at a part every 10 s: {:.2} GB a day",
+        db_bytes as f64 / (1 << 20) as f64,
+        db_bytes as f64 / stored,
+        db_bytes as f64 / stored / 1024.0,
+        db_bytes as f64 / stored * 50.0 * 8640.0 / 1e9,
+    );
+    counts
+}
+
+/// Prints the memory samples; returns the anonymous memory's peak in the first and the
+/// second half of the run, MiB.
+fn report_memory(samples: &[(f64, (f64, f64))], elapsed_s: f64) -> (f64, f64) {
     let line = |pick: fn(&(f64, f64)) -> f64| {
         samples
             .iter()
@@ -220,15 +252,5 @@ fn run(dir: &tempfile::TempDir, url: &str, parts: u64, memory: bool) {
     println!(
         "load: anonymous memory peak {first_half:.0} MiB in the first half, {second_half:.0} MiB in the second"
     );
-    assert_eq!(total, expected, "measurements were dropped");
-    // The first half warms the caches (SQLite's page caches, the share's kept versions);
-    // after it, what grows with every part is a leak. 10 MiB over the second half's parts
-    // (1,500 in the default run) catches anything from about 7 KB per part up; before the
-    // share forgot settled versions, 19 KB per part leaked this way.
-    if memory {
-        assert!(
-            second_half <= first_half + 10.0,
-            "anonymous memory grew from {first_half:.0} to {second_half:.0} MiB after warm-up"
-        );
-    }
+    (first_half, second_half)
 }

@@ -111,6 +111,17 @@ fn loop_turn(c: &mut Criterion) {
             compensate::learn_and_regenerate(&mut s, black_box(&part), &lobe).expect("table")
         })
     });
+    turn_and_push(c, &state, &part, &lobe);
+}
+
+/// The whole turn through the share, on tmpfs (when there is one) and on disk: learn,
+/// regenerate, render and push.
+fn turn_and_push(
+    c: &mut Criterion,
+    state: &LearningState,
+    part: &PartError<'_>,
+    lobe: &LobeLoop<'_>,
+) {
     let shm = Path::new("/dev/shm");
     let targets: Vec<(&str, PathBuf)> = [
         ("tmpfs", shm.is_dir().then(|| shm.to_path_buf())),
@@ -135,7 +146,7 @@ fn loop_turn(c: &mut Criterion) {
                 b.iter(|| {
                     let mut s = state.clone();
                     let (_, table) =
-                        compensate::learn_and_regenerate(&mut s, black_box(&part), &lobe)
+                        compensate::learn_and_regenerate(&mut s, black_box(part), lobe)
                             .expect("table");
                     let settings = ProgramSettings {
                         table_number: share.next_table_number(),

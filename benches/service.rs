@@ -90,27 +90,7 @@ fn per_part_case(c: &mut Criterion, points: u32, clients: usize) {
         .build()
         .expect("runtime");
     let dir = tempfile::tempdir_in(scratch_root()).expect("temp dir");
-    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
-    let recipe = Recipe::load(&recipe_path).expect("demo recipe");
-    let mut setup = recipe.feature_setup(&recipe_path, "IN1").expect("lobe");
-    setup.request.points = points as usize;
-    let url = format!("sqlite://{}/bench.db?mode=rwc", dir.path().display());
-    let store = runtime.block_on(Store::connect(&url)).expect("store");
-    let mut machine = runtime.block_on(async {
-        let handle: StoreHandle = Arc::new(tokio::sync::RwLock::new(Some(store.clone())));
-        MachineLoop::start(
-            "BENCH".into(),
-            vec![setup],
-            MachinePaths {
-                share_dir: dir.path().join("share"),
-                state_dir: dir.path().join("state"),
-            },
-            handle,
-            Arc::new(Metrics::default()),
-        )
-        .await
-        .expect("machine")
-    });
+    let (store, mut machine) = start_machine(&runtime, &dir, points);
     let readers = (clients > 0).then(|| Readers::start(&store, clients));
     let raws = measurements(points);
     let mut count = 0usize;
@@ -175,6 +155,36 @@ fn per_part_case(c: &mut Criterion, points: u32, clients: usize) {
     if let Some(r) = readers {
         r.runtime.shutdown_background();
     }
+}
+
+/// The demo lobe's machine at `points` per revolution, on a fresh SQLite store in `dir`.
+fn start_machine(
+    runtime: &tokio::runtime::Runtime,
+    dir: &tempfile::TempDir,
+    points: u32,
+) -> (Store, MachineLoop) {
+    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
+    let recipe = Recipe::load(&recipe_path).expect("demo recipe");
+    let mut setup = recipe.feature_setup(&recipe_path, "IN1").expect("lobe");
+    setup.request.points = points as usize;
+    let url = format!("sqlite://{}/bench.db?mode=rwc", dir.path().display());
+    let store = runtime.block_on(Store::connect(&url)).expect("store");
+    let machine = runtime.block_on(async {
+        let handle: StoreHandle = Arc::new(tokio::sync::RwLock::new(Some(store.clone())));
+        MachineLoop::start(
+            "BENCH".into(),
+            vec![setup],
+            MachinePaths {
+                share_dir: dir.path().join("share"),
+                state_dir: dir.path().join("state"),
+            },
+            handle,
+            Arc::new(Metrics::default()),
+        )
+        .await
+        .expect("machine")
+    });
+    (store, machine)
 }
 
 /// "p50 …, p99 …, max …" in ms of a non-empty list of durations.

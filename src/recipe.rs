@@ -17,6 +17,8 @@ use anyhow::{Context, bail};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
+mod check;
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ShaftKind {
@@ -408,159 +410,6 @@ impl Recipe {
         }
     }
 
-    fn problems(&self) -> Vec<String> {
-        let mut p = Vec::new();
-        let positive = |p: &mut Vec<String>, field: String, v: f64| {
-            if !(v.is_finite() && v > 0.0) {
-                p.push(format!("{field} = {v}: must be a number > 0"));
-            }
-        };
-        let finite = |p: &mut Vec<String>, field: String, v: f64| {
-            if !v.is_finite() {
-                p.push(format!("{field} = {v}: must be a finite number"));
-            }
-        };
-        // The part name goes into the API's JSON, DFQ K1001/K1002, the programs' comments
-        // and the dashboard: one plain rule keeps it safe in all of them.
-        if !valid_name(&self.name) {
-            p.push(format!(
-                "name = `{}`: must be 1–32 letters, digits, '-' or '_'",
-                crate::names::quote(&self.name)
-            ));
-        }
-        positive(&mut p, "wheel.radius_mm".into(), self.wheel.radius_mm);
-        match self.kind {
-            ShaftKind::Camshaft if self.lobes.is_empty() => {
-                p.push("a camshaft needs at least one [[lobes]]".into())
-            }
-            ShaftKind::Crankshaft if self.pins.is_empty() => {
-                p.push("a crankshaft needs at least one [[pins]]".into())
-            }
-            ShaftKind::Camshaft if !self.pins.is_empty() => {
-                p.push("a camshaft has lobes, not [[pins]]".into())
-            }
-            ShaftKind::Crankshaft if !self.lobes.is_empty() => {
-                p.push("a crankshaft has pins, not [[lobes]]".into())
-            }
-            _ => {}
-        }
-        if !crate::core::geometry::POINTS_RANGE.contains(&self.table.points) {
-            p.push(format!(
-                "table.points = {}: must be 36 to 36000",
-                self.table.points
-            ));
-        }
-        let (first, last) = self.table.table_numbers;
-        let features = self.feature_names().len() as u32;
-        if first == 0 || last < first {
-            p.push(format!(
-                "table.table_numbers = [{first}, {last}]: must be first ≥ 1 and last ≥ first"
-            ));
-        } else if last - first + 1 < self.table_numbers_needed() {
-            let with_plan = if self.speed_plan.enabled {
-                " (an X and a C pair each, with the speed plan on)"
-            } else {
-                ""
-            };
-            p.push(format!(
-                "table.table_numbers = [{first}, {last}]: {features} features need {} table numbers{with_plan}, the range holds {}",
-                self.table_numbers_needed(),
-                last - first + 1
-            ));
-        }
-        for name in self.feature_names() {
-            if let Err(e) =
-                crate::core::program::validate_program_name(&self.table_program_name(name))
-            {
-                p.push(format!("program.name with feature {name}: {e}"));
-            }
-        }
-        if let Err(e) = self.program.validate() {
-            p.extend(e.0.iter().map(|e| format!("program: {e}")));
-        }
-        if let Err(e) = self.learning.validate() {
-            p.extend(e);
-        }
-        if self.speed_plan.enabled
-            && let Err(e) = self.speed_plan.limits(&self.axis_limits).check()
-        {
-            p.push(format!("speed_plan (with axis_limits): {e}"));
-        }
-        if self.speed_plan.enabled
-            && self.program.c_direction == crate::core::program::CDirection::Reversed
-        {
-            p.push(
-                "speed_plan: enabled with program.c_direction = -1: C's table over the virtual axis is written rising; turn C the other way in the drive, not in the table".into(),
-            );
-        }
-        let mut names = std::collections::HashSet::new();
-        for lobe in &self.lobes {
-            let at = format!("lobes.{}", lobe.name);
-            if !names.insert(lobe.name.clone()) {
-                p.push(format!("{at}: duplicate name"));
-            }
-            if !valid_name(&lobe.name) {
-                p.push(format!(
-                    "{at}: name must be 1–32 letters, digits, '-' or '_'"
-                ));
-            }
-            positive(&mut p, format!("{at}.base_radius_mm"), lobe.base_radius_mm);
-            positive(
-                &mut p,
-                format!("{at}.timing_tolerance_deg"),
-                lobe.timing_tolerance_deg,
-            );
-            for (key, v) in [
-                ("size_tolerance_um", lobe.size_tolerance_um),
-                ("max_error_tolerance_um", lobe.max_error_tolerance_um),
-            ] {
-                v.inspect(|&v| positive(&mut p, format!("{at}.{key}"), v));
-            }
-            finite(&mut p, format!("{at}.phase_deg"), lobe.phase_deg);
-            finite(&mut p, format!("{at}.z_mm"), lobe.z_mm);
-            match (lobe.follower, lobe.roller_radius_mm) {
-                (FollowerKind::Roller, None) => {
-                    p.push(format!("{at}: roller follower needs roller_radius_mm"))
-                }
-                (FollowerKind::Roller, Some(r)) => {
-                    positive(&mut p, format!("{at}.roller_radius_mm"), r)
-                }
-                (_, Some(_)) => p.push(format!(
-                    "{at}: roller_radius_mm is only for a roller follower"
-                )),
-                _ => {}
-            }
-        }
-        for pin in &self.pins {
-            let at = format!("pins.{}", pin.name);
-            if !names.insert(pin.name.clone()) {
-                p.push(format!("{at}: duplicate name"));
-            }
-            if !valid_name(&pin.name) {
-                p.push(format!(
-                    "{at}: name must be 1–32 letters, digits, '-' or '_'"
-                ));
-            }
-            positive(&mut p, format!("{at}.pin_radius_mm"), pin.pin_radius_mm);
-            for (field, v) in [
-                ("index_tolerance_deg", pin.index_tolerance_deg),
-                ("stroke_tolerance_um", pin.stroke_tolerance_um),
-                ("roundness_tolerance_um", pin.roundness_tolerance_um),
-            ] {
-                positive(&mut p, format!("{at}.{field}"), v);
-            }
-            if let Some(v) = pin.diameter_tolerance_um {
-                positive(&mut p, format!("{at}.diameter_tolerance_um"), v);
-            }
-            finite(&mut p, format!("{at}.phase_deg"), pin.phase_deg);
-            finite(&mut p, format!("{at}.z_mm"), pin.z_mm);
-            if !(pin.throw_mm.is_finite() && pin.throw_mm >= 0.0) {
-                p.push(format!("{at}.throw_mm = {}: must be ≥ 0", pin.throw_mm));
-            }
-        }
-        p
-    }
-
     pub fn lobe(&self, name: &str) -> Option<&Lobe> {
         self.lobes.iter().find(|l| l.name == name)
     }
@@ -612,12 +461,4 @@ impl Pin {
             wheel_radius_mm,
         }
     }
-}
-
-/// Names become parts of file names and URLs: keep them plain.
-fn valid_name(name: &str) -> bool {
-    (1..=32).contains(&name.len())
-        && name
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
 }

@@ -95,50 +95,9 @@ pub(crate) fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
     };
     let fingerprint = part_fingerprint(&setup);
     let state_path = dirs.state.join(STATE_FILE);
-    let mut saved = match std::fs::read_to_string(&state_path) {
-        Ok(text) => {
-            let saved: SavedState = serde_json::from_str(&text).with_context(|| {
-                format!("{}: not a camloop learning state", state_path.display())
-            })?;
-            if saved.part_fingerprint != fingerprint {
-                bail!(
-                    "{} belongs to another part ({}); use a new --state folder for {}",
-                    dirs.state.display(),
-                    saved.part_label,
-                    setup.label
-                );
-            }
-            saved
-        }
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            if args.measurement.is_some() {
-                bail!(
-                    "{} has no learning state yet: run once without --measurement to write the nominal table",
-                    dirs.state.display()
-                );
-            }
-            SavedState {
-                part_fingerprint: fingerprint,
-                part_label: setup.label.clone(),
-                wheel_radius_mm: setup.feature.wheel_radius_mm(),
-                learning: LearningState::new(360),
-                last_measurement_sha256: None,
-                previous: None,
-            }
-        }
-        Err(e) => return Err(e).with_context(|| format!("cannot read {}", state_path.display())),
-    };
+    let mut saved = load_state(&args, &dirs, &setup, &state_path, fingerprint)?;
     let mut report = Vec::new();
-    if (saved.wheel_radius_mm - setup.feature.wheel_radius_mm()).abs() > 1e-9 {
-        report.push(format!(
-            "wheel radius {} → {} mm: dressing, learned size reset, shape kept",
-            saved.wheel_radius_mm,
-            setup.feature.wheel_radius_mm()
-        ));
-        let own = learn::size_correction_um(&saved.learning);
-        learn::after_dressing(&mut saved.learning, own);
-        saved.wheel_radius_mm = setup.feature.wheel_radius_mm();
-    }
+    note_dressing(&mut saved, &setup, &mut report);
     let lobe = setup.lobe_loop();
     let (table, reason, measurement_id) = match &args.measurement {
         None => {
@@ -185,6 +144,65 @@ pub(crate) fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
         table.deviation.max_um
     );
     Ok(())
+}
+
+/// The saved learning state of this part, or a fresh one at the nominal table when the
+/// folder has none yet (which only a run without a measurement may start).
+fn load_state(
+    args: &CompensateArgs,
+    dirs: &Dirs,
+    setup: &LobeSetup,
+    state_path: &std::path::Path,
+    fingerprint: String,
+) -> anyhow::Result<SavedState> {
+    let saved = match std::fs::read_to_string(state_path) {
+        Ok(text) => {
+            let saved: SavedState = serde_json::from_str(&text).with_context(|| {
+                format!("{}: not a camloop learning state", state_path.display())
+            })?;
+            if saved.part_fingerprint != fingerprint {
+                bail!(
+                    "{} belongs to another part ({}); use a new --state folder for {}",
+                    dirs.state.display(),
+                    saved.part_label,
+                    setup.label
+                );
+            }
+            saved
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            if args.measurement.is_some() {
+                bail!(
+                    "{} has no learning state yet: run once without --measurement to write the nominal table",
+                    dirs.state.display()
+                );
+            }
+            SavedState {
+                part_fingerprint: fingerprint,
+                part_label: setup.label.clone(),
+                wheel_radius_mm: setup.feature.wheel_radius_mm(),
+                learning: LearningState::new(360),
+                last_measurement_sha256: None,
+                previous: None,
+            }
+        }
+        Err(e) => return Err(e).with_context(|| format!("cannot read {}", state_path.display())),
+    };
+    Ok(saved)
+}
+
+/// A new wheel radius means a dressing: the learned size is reset, the shape kept.
+fn note_dressing(saved: &mut SavedState, setup: &LobeSetup, report: &mut Vec<String>) {
+    if (saved.wheel_radius_mm - setup.feature.wheel_radius_mm()).abs() > 1e-9 {
+        report.push(format!(
+            "wheel radius {} → {} mm: dressing, learned size reset, shape kept",
+            saved.wheel_radius_mm,
+            setup.feature.wheel_radius_mm()
+        ));
+        let own = learn::size_correction_um(&saved.learning);
+        learn::after_dressing(&mut saved.learning, own);
+        saved.wheel_radius_mm = setup.feature.wheel_radius_mm();
+    }
 }
 
 /// Reads the measurement and runs one loop turn on it; returns the next table, the reason

@@ -7,7 +7,7 @@ use crate::core::fit::{self, Deviation, Motion, TableForm};
 use crate::core::program::{comment_text, render_g1_table, render_main_program, render_poly_table};
 use crate::core::setup::setup_view;
 use crate::core::svg::render_setup_svg;
-use crate::core::table::TablePoint;
+use crate::core::table::{PolySegment, TablePoint};
 use clap::{Args, ValueEnum};
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -93,36 +93,68 @@ pub(crate) fn run_table(args: TableArgs) -> anyhow::Result<()> {
         outputs.add(path, table_csv(table_points));
     }
     if let Some(path) = &args.program.program {
-        let comments = vec![
-            comment_text(&loaded.description),
-            format!(
-                "{} points, G1 chords stray up to {:.3} um, POLY cubics up to {:.4} um",
-                points.len(),
-                g1_dev.max_um,
-                poly_dev.max_um
-            ),
-        ];
-        let settings = args.program.table_settings(comments);
-        let text = match form {
-            TableForm::G1 => render_g1_table(&points, &settings),
-            TableForm::Poly => render_poly_table(&segments, &settings),
-        }
-        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-        outputs.add(path, text);
-        if let (Some(main_path), Some(main)) = (
-            &args.program.main_program,
-            args.program.main_settings(args.c_speed_rpm),
-        ) {
-            let text = render_main_program(&main, &settings)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", main_path.display()))?;
-            outputs.add(main_path, text);
-        }
+        let deviations = (g1_dev.max_um, poly_dev.max_um);
+        let table = (&points[..], &segments[..]);
+        add_programs(&mut outputs, &args, path, &loaded, form, table, deviations)?;
     }
     if let Some(path) = &args.svg {
         let view = setup_view(part, &[0.0, 90.0, 180.0, 270.0], &loaded.description)?;
         outputs.add(path, render_setup_svg(&view));
     }
     let mut report = summary(&loaded, &points, form, segments.len());
+    let table = (&points[..], &segments[..]);
+    motion_report(&mut report, &args, table, (g1_dev, poly_dev))?;
+    for path in outputs.commit()? {
+        writeln!(report, "wrote {}", path.display())?;
+    }
+    print!("{report}");
+    Ok(())
+}
+
+/// The table subprogram (G1 or POLY) and, when asked for, the main program that calls it.
+fn add_programs(
+    outputs: &mut Outputs,
+    args: &TableArgs,
+    path: &std::path::Path,
+    loaded: &LoadedPart,
+    form: TableForm,
+    (points, segments): (&[TablePoint], &[PolySegment]),
+    (g1_max_um, poly_max_um): (f64, f64),
+) -> anyhow::Result<()> {
+    let comments = vec![
+        comment_text(&loaded.description),
+        format!(
+            "{} points, G1 chords stray up to {:.3} um, POLY cubics up to {:.4} um",
+            points.len(),
+            g1_max_um,
+            poly_max_um
+        ),
+    ];
+    let settings = args.program.table_settings(comments);
+    let text = match form {
+        TableForm::G1 => render_g1_table(points, &settings),
+        TableForm::Poly => render_poly_table(segments, &settings),
+    }
+    .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    outputs.add(path, text);
+    if let (Some(main_path), Some(main)) = (
+        &args.program.main_program,
+        args.program.main_settings(args.c_speed_rpm),
+    ) {
+        let text = render_main_program(&main, &settings)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", main_path.display()))?;
+        outputs.add(main_path, text);
+    }
+    Ok(())
+}
+
+/// How far each form strays between points, and the X motion each asks at the C speed.
+fn motion_report(
+    report: &mut String,
+    args: &TableArgs,
+    (points, segments): (&[TablePoint], &[PolySegment]),
+    (g1_dev, poly_dev): (Deviation, Deviation),
+) -> std::fmt::Result {
     writeln!(
         report,
         "between points (exact path vs. table, {} samples per gap):",
@@ -139,18 +171,13 @@ pub(crate) fn run_table(args: TableArgs) -> anyhow::Result<()> {
     writeln!(
         report,
         "  G1   {}",
-        motion_text(fit::g1_motion(&points, args.c_speed_rpm))
+        motion_text(fit::g1_motion(points, args.c_speed_rpm))
     )?;
     writeln!(
         report,
         "  POLY {}",
-        motion_text(fit::poly_motion(&segments, args.c_speed_rpm))
-    )?;
-    for path in outputs.commit()? {
-        writeln!(report, "wrote {}", path.display())?;
-    }
-    print!("{report}");
-    Ok(())
+        motion_text(fit::poly_motion(segments, args.c_speed_rpm))
+    )
 }
 
 pub(crate) fn run_plot(args: PlotArgs) -> anyhow::Result<()> {

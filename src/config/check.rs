@@ -115,48 +115,8 @@ pub fn check(config: Config) -> Result<Checked, ConfigError> {
     let mut problems = Vec::new();
     let mut machines = Vec::new();
     for (i, m) in config.machines.iter().enumerate() {
-        let line = |key: &str| config.line(&format!("machines[{i}].{key}"));
-        let label = format!("machines.{}", m.name);
-        let recipe_path = config.resolve(&m.recipe);
-        let setups = match Recipe::load(&recipe_path) {
-            Ok(recipe) => match machine_setups(&recipe, &recipe_path, m) {
-                Ok(setups) => Some(setups),
-                Err(e) => {
-                    let key = if m.features.is_some() {
-                        "features"
-                    } else {
-                        "lobe"
-                    };
-                    let at = if line(key).is_some() { key } else { "recipe" };
-                    problems.push(ConfigProblem::at(line(at), format!("{label}.{at}: {e:#}")));
-                    None
-                }
-            },
-            Err(e) => {
-                problems.push(ConfigProblem::at(
-                    line("recipe"),
-                    format!("{label}.recipe: {e:#}"),
-                ));
-                None
-            }
-        };
-        if let GaugeSection::Can { dbc, .. } = &m.gauge {
-            let names = crate::gauge::GaugeSignalNames::default();
-            if let Err(e) = crate::gauge::GaugeDbc::load(&config.resolve(dbc), &names) {
-                problems.push(ConfigProblem::at(
-                    line("gauge.dbc"),
-                    format!("{label}.gauge.dbc: {e}"),
-                ));
-            }
-        }
-        if let (Ok(name), Some(setups)) = (MachineName::new(&m.name), setups) {
-            machines.push(CheckedMachine {
-                name,
-                recipe_path,
-                setups,
-                sim_c_speed_explicit: config
-                    .sets(&format!("machines[{i}].gauge.grinder.c_speed_rpm")),
-            });
+        if let Some(machine) = check_machine(&config, i, m, &mut problems) {
+            machines.push(machine);
         }
     }
     problems.extend(shared_folders(&config));
@@ -190,6 +150,60 @@ pub fn check(config: Config) -> Result<Checked, ConfigError> {
                 problems,
             })
         }
+    }
+}
+
+/// One `[[machines]]` entry: its recipe and features, its gauge's DBC file. Problems go to
+/// `problems`; the machine comes back only when its name and features are sound.
+fn check_machine(
+    config: &Config,
+    i: usize,
+    m: &MachineSection,
+    problems: &mut Vec<ConfigProblem>,
+) -> Option<CheckedMachine> {
+    let line = |key: &str| config.line(&format!("machines[{i}].{key}"));
+    let label = format!("machines.{}", m.name);
+    let recipe_path = config.resolve(&m.recipe);
+    let setups = match Recipe::load(&recipe_path) {
+        Ok(recipe) => match machine_setups(&recipe, &recipe_path, m) {
+            Ok(setups) => Some(setups),
+            Err(e) => {
+                let key = if m.features.is_some() {
+                    "features"
+                } else {
+                    "lobe"
+                };
+                let at = if line(key).is_some() { key } else { "recipe" };
+                problems.push(ConfigProblem::at(line(at), format!("{label}.{at}: {e:#}")));
+                None
+            }
+        },
+        Err(e) => {
+            problems.push(ConfigProblem::at(
+                line("recipe"),
+                format!("{label}.recipe: {e:#}"),
+            ));
+            None
+        }
+    };
+    if let GaugeSection::Can { dbc, .. } = &m.gauge {
+        let names = crate::gauge::GaugeSignalNames::default();
+        if let Err(e) = crate::gauge::GaugeDbc::load(&config.resolve(dbc), &names) {
+            problems.push(ConfigProblem::at(
+                line("gauge.dbc"),
+                format!("{label}.gauge.dbc: {e}"),
+            ));
+        }
+    }
+    if let (Ok(name), Some(setups)) = (MachineName::new(&m.name), setups) {
+        Some(CheckedMachine {
+            name,
+            recipe_path,
+            setups,
+            sim_c_speed_explicit: config.sets(&format!("machines[{i}].gauge.grinder.c_speed_rpm")),
+        })
+    } else {
+        None
     }
 }
 

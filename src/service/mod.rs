@@ -15,11 +15,11 @@ pub mod opcua;
 pub(crate) mod runner;
 pub mod sim_source;
 mod sources;
+mod startup;
 mod store_guard;
 
 use crate::config::{Checked, Config};
 use crate::store::Store;
-use anyhow::Context;
 use machine::{MachineLoop, SourceEvent, StoreHandle};
 use metrics::Metrics;
 use std::sync::Arc;
@@ -132,55 +132,17 @@ pub(crate) async fn start_checked(
         machines: checked_machines,
         listener,
     } = checked;
-    listener
-        .set_nonblocking(true)
-        .context("cannot set up the HTTP listener")?;
-    let listener =
-        tokio::net::TcpListener::from_std(listener).context("cannot set up the HTTP listener")?;
+    let listener = startup::tokio_listener(listener)?;
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let metrics = Arc::new(Metrics::default());
-    let store: StoreHandle = Arc::new(tokio::sync::RwLock::new(None));
-    connect_store(&config, &store).await;
-    store_guard::guard_start(&store, &config, options.accept_new_database).await?;
-    if let Some(s) = store.read().await.as_ref() {
-        access_setup::ensure_admin(s, &config).await?;
-    }
-    let connector = tokio::spawn(keep_store_connected(
-        config.clone(),
-        store.clone(),
-        shutdown_rx.clone(),
-    ));
+    let (store, connector, retention) =
+        startup::start_store(&config, options.accept_new_database, &shutdown_rx).await?;
 
-    let retention = tokio::spawn(keep_raw_retention(
-        config.database.raw_retention_days,
-        store.clone(),
-        shutdown_rx.clone(),
-    ));
-
-    // MQTT: events to the plant's broker, when `[mqtt]` enables them.
-    let publisher = match config.mqtt.enabled {
-        true => Some(mqtt::Publisher::start(
-            &config.mqtt_settings(),
-            &config.var_dir().join("mqtt"),
-            shutdown_rx.clone(),
-        )?),
-        false => None,
-    };
+    let publisher = startup::start_mqtt(&config, &shutdown_rx)?;
 
     // OPC UA: the loops feed it from their start; the server starts with the API state.
     let (opcua_events, opcua_intake) = opcua::prepare(&config, &checked_machines)?;
-    let mut features = std::collections::BTreeMap::new();
-    let mut sheets = std::collections::BTreeMap::new();
-    for m in &checked_machines {
-        features.insert(
-            m.name.clone(),
-            m.setups.iter().map(|s| s.name.clone()).collect(),
-        );
-        for setup in &m.setups {
-            let sheet = http::FeatureSheet::from_setup(setup);
-            sheets.insert((m.name.to_string(), setup.name.clone()), sheet);
-        }
-    }
+    let (features, sheets) = startup::feature_catalogue(&checked_machines);
     let shared = Shared {
         store: store.clone(),
         metrics: metrics.clone(),
@@ -193,32 +155,8 @@ pub(crate) async fn start_checked(
     };
     let commands: runner::CommandRoutes = Arc::default();
     let runner = runner::Runner::new(config.clone(), checked_machines, shared, commands.clone());
-    let mut cluster_view = None;
-    let (machines, sources_done) = if config.cluster.enabled {
-        let lease = Duration::from_millis(config.cluster.lease_ms);
-        let instance = config.cluster.instance_name();
-        let leases = crate::cluster::Leases::connect(&config.database_url(), &instance, lease)
-            .await
-            .context("cluster")?;
-        info!(instance = %instance, lease_ms = config.cluster.lease_ms, "cluster: joined; machines are taken as leases allow");
-        cluster_view = Some(leases.clone());
-        let task = cluster_task::ClusterTask {
-            leases,
-            url: config.database_url(),
-            lease,
-            machines_dir: config.machines_dir(),
-            runner,
-            metrics: metrics.clone(),
-        };
-        let task = tokio::spawn(task.run(shutdown_rx.clone()));
-        (Machines::Cluster(task), None)
-    } else {
-        let mut done = Vec::new();
-        for name in runner.names() {
-            done.push(runner.start(&name, None).await?);
-        }
-        (Machines::Local(Box::new(runner)), Some(done))
-    };
+    let (machines, sources_done, cluster_view) =
+        startup::start_machines(&config, runner, &metrics, &shutdown_rx).await?;
 
     let limits = http::HttpLimits::from_config(&config.http);
     let app_state = http::AppState {
@@ -245,17 +183,7 @@ pub(crate) async fn start_checked(
         shutdown_rx.clone(),
     ));
 
-    // In a cluster the machines come and go: the service runs until a signal.
-    let machines_done = tokio::spawn(async move {
-        match sources_done {
-            Some(sources) => {
-                for done in sources {
-                    let _ = done.await;
-                }
-            }
-            None => std::future::pending().await,
-        }
-    });
+    let machines_done = tokio::spawn(startup::sources_ended(sources_done));
     Ok(Running {
         http_addr,
         shutdown: shutdown_tx,

@@ -102,20 +102,11 @@ impl SimSource {
                 return;
             }
             let gauge = &self.grinder.gauge;
-            if gauge.master_runs > 0 && shaft + 1 == gauge.master_before_part {
-                // The operator puts the master in before this shaft: a type-1 gauge study.
-                for k in 0..self.stations.len() {
-                    for _ in 0..gauge.master_runs {
-                        if *shutdown.borrow() {
-                            return;
-                        }
-                        if let Some(m) = self.master_run(&mut sim, &dbc, k)
-                            && !send_and_wait(&tx, m, None).await
-                        {
-                            return;
-                        }
-                    }
-                }
+            if gauge.master_runs > 0
+                && shaft + 1 == gauge.master_before_part
+                && !self.gauge_study(&mut sim, &dbc, &tx, &shutdown).await
+            {
+                return;
             }
             // The control runs the main program, which calls the table programs: the tables
             // it couples are what gets ground, at the stations where Z stands.
@@ -126,42 +117,80 @@ impl SimSource {
             if grinds.first().and_then(|(c, _)| self.station_at(c)) == Some(0) || shaft == 0 {
                 shaft += 1;
             }
-            let last = grinds.len().saturating_sub(1);
-            for (i, (coupled, ground_with)) in grinds.into_iter().enumerate() {
-                if *shutdown.borrow() {
-                    // A stop between features interrupts the shaft: the resume point on the
-                    // share names the first feature not gauged.
-                    return;
-                }
-                if let Some(k) = self.station_at(&coupled) {
-                    gauged += 1;
-                    let event = self.grind_and_gauge(&mut sim, &dbc, &coupled, k, shaft, gauged);
-                    if let Some(m) = event
-                        && !send_and_wait(&tx, m, ground_with).await
-                    {
-                        return;
-                    }
-                }
-                if i < last {
-                    sim.after_feature();
-                }
+            let shaft_run = ShaftRun {
+                tx: &tx,
+                shutdown: &shutdown,
+                dbc: &dbc,
+                shaft,
+            };
+            if !self
+                .grind_shaft(&mut sim, grinds, &shaft_run, &mut gauged)
+                .await
+            {
+                return;
             }
-            if let Some(d) = sim.after_part() {
-                // The machine regenerates every table before the next shaft, as it would
-                // between parts.
-                let (done, regenerated) = tokio::sync::oneshot::channel();
-                let event = SourceEvent::Dressing {
-                    wheel_radius_mm: d.believed_wheel_radius_mm,
-                    infeed_um: d.measured_infeed_um,
-                    source: "sim".into(),
-                    done: Some(done),
-                };
-                if tx.send(event).await.is_err() {
-                    return;
-                }
-                let _ = regenerated.await;
+            if let Some(d) = sim.after_part()
+                && !send_dressing(&tx, d).await
+            {
+                return;
             }
         }
+    }
+
+    /// The operator puts the master in before this shaft: a type-1 gauge study, every
+    /// station measured `master_runs` times. False when the run must end.
+    async fn gauge_study(
+        &self,
+        sim: &mut SimGrinder,
+        dbc: &GaugeDbc,
+        tx: &mpsc::Sender<SourceEvent>,
+        shutdown: &watch::Receiver<bool>,
+    ) -> bool {
+        for k in 0..self.stations.len() {
+            for _ in 0..self.grinder.gauge.master_runs {
+                if *shutdown.borrow() {
+                    return false;
+                }
+                if let Some(m) = self.master_run(sim, dbc, k)
+                    && !send_and_wait(tx, m, None).await
+                {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+
+    /// Grinds and gauges each feature the control coupled, in order. False when the run
+    /// must end.
+    async fn grind_shaft(
+        &self,
+        sim: &mut SimGrinder,
+        grinds: Vec<(Coupled, Option<GroundWith>)>,
+        run: &ShaftRun<'_>,
+        gauged: &mut u64,
+    ) -> bool {
+        let last = grinds.len().saturating_sub(1);
+        for (i, (coupled, ground_with)) in grinds.into_iter().enumerate() {
+            if *run.shutdown.borrow() {
+                // A stop between features interrupts the shaft: the resume point on the
+                // share names the first feature not gauged.
+                return false;
+            }
+            if let Some(k) = self.station_at(&coupled) {
+                *gauged += 1;
+                let event = self.grind_and_gauge(sim, run.dbc, &coupled, k, run.shaft, *gauged);
+                if let Some(m) = event
+                    && !send_and_wait(run.tx, m, ground_with).await
+                {
+                    return false;
+                }
+            }
+            if i < last {
+                sim.after_feature();
+            }
+        }
+        true
     }
 
     /// The resume point on the share names a feature after the first: a stop interrupted the
@@ -368,6 +397,32 @@ fn workpiece(feature: Feature) -> Workpiece {
 
 /// Sends one measurement and waits until the machine has its next table out, as a real
 /// machine waits between parts. False when the machine is gone.
+/// What grinding one shaft needs from the run.
+struct ShaftRun<'a> {
+    tx: &'a mpsc::Sender<SourceEvent>,
+    shutdown: &'a watch::Receiver<bool>,
+    dbc: &'a GaugeDbc,
+    /// The shaft's number.
+    shaft: u64,
+}
+
+/// A dressing after the part: the machine regenerates every table before the next shaft,
+/// as it would between parts. False when the receiver is gone.
+async fn send_dressing(tx: &mpsc::Sender<SourceEvent>, d: crate::sim::DressingEvent) -> bool {
+    let (done, regenerated) = tokio::sync::oneshot::channel();
+    let event = SourceEvent::Dressing {
+        wheel_radius_mm: d.believed_wheel_radius_mm,
+        infeed_um: d.measured_infeed_um,
+        source: "sim".into(),
+        done: Some(done),
+    };
+    if tx.send(event).await.is_err() {
+        return false;
+    }
+    let _ = regenerated.await;
+    true
+}
+
 async fn send_and_wait(
     tx: &mpsc::Sender<SourceEvent>,
     raw: crate::core::measure::RawMeasurement,

@@ -19,6 +19,7 @@
 
 mod dressing;
 mod grid;
+mod outcome;
 mod params;
 
 pub use dressing::{
@@ -30,6 +31,7 @@ use grid::CORRECTION_STEP_UM;
 use grid::low_pass;
 use grid::q_gain;
 pub use grid::quantise_correction;
+pub use outcome::{Bounded, BoundedQuantity, LearnError, StepOutcome};
 pub use params::LearningParams;
 use serde::{Deserialize, Serialize};
 
@@ -159,142 +161,6 @@ impl PreviousPart {
     }
 }
 
-/// A limit that bounded a step.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Bounded {
-    /// What the step wanted, µm (lift) or degrees (timing), and the limit it was held to.
-    pub wanted: f64,
-    pub limit: f64,
-    /// Where the lift correction wanted the most, degrees of the feature (lift only).
-    pub angle_deg: Option<f64>,
-    pub quantity: BoundedQuantity,
-}
-
-impl std::fmt::Display for Bounded {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match (self.quantity, self.angle_deg) {
-            (BoundedQuantity::Correction, Some(a)) => write!(
-                f,
-                "correction held to its limit of {} µm (it wanted {:.2} µm at {a:.1}°)",
-                self.limit, self.wanted
-            ),
-            (BoundedQuantity::Correction, None) => write!(
-                f,
-                "correction held to its limit of {} µm (it wanted {:.2} µm)",
-                self.limit, self.wanted
-            ),
-            (BoundedQuantity::Timing, _) => write!(
-                f,
-                "timing correction held to its limit of {}° (it wanted {:.4}°)",
-                self.limit, self.wanted
-            ),
-        }
-    }
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum BoundedQuantity {
-    /// The lift correction, µm (`max_correction_um`).
-    Correction,
-    /// The timing correction, degrees (`max_timing_correction_deg`).
-    Timing,
-}
-
-/// What one learning step decided.
-#[derive(Debug, Clone, PartialEq)]
-pub enum StepOutcome {
-    /// A new correction; the next table must be made from it.
-    Updated {
-        max_error_um: f64,
-        max_correction_um: f64,
-    },
-    /// A repeatable error needed more than a limit allows: the new correction goes as far as
-    /// the limit, and no further.
-    Limited {
-        max_error_um: f64,
-        max_correction_um: f64,
-        bound: Bounded,
-    },
-    /// The part is within `stop_in_tolerance_um`: the correction is kept as it is.
-    InTolerance { max_error_um: f64 },
-    /// Learning is frozen; the correction is kept as it is.
-    Frozen { max_error_um: f64, reason: String },
-    /// The error grew (by more than the divergence margin) on two parts in a row: back to the
-    /// best correction, learning frozen.
-    /// An operator must look at the machine (alarm).
-    Reverted {
-        max_error_um: f64,
-        to_iteration: u32,
-        reason: String,
-    },
-}
-
-/// One line for logs, records and the CLI: the one wording of a step's outcome.
-impl std::fmt::Display for StepOutcome {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            StepOutcome::Updated {
-                max_error_um,
-                max_correction_um,
-            } => write!(
-                f,
-                "learned from max error {max_error_um:.2} µm, correction up to {max_correction_um:.2} µm"
-            ),
-            StepOutcome::Limited {
-                max_error_um,
-                bound,
-                ..
-            } => write!(f, "learned from max error {max_error_um:.2} µm, {bound}"),
-            StepOutcome::InTolerance { max_error_um } => {
-                write!(
-                    f,
-                    "max error {max_error_um:.2} µm within tolerance, table kept"
-                )
-            }
-            StepOutcome::Frozen {
-                max_error_um,
-                reason,
-            } => write!(
-                f,
-                "max error {max_error_um:.2} µm; learning frozen: {reason}"
-            ),
-            StepOutcome::Reverted { reason, .. } => write!(f, "ALARM: {reason}"),
-        }
-    }
-}
-
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum LearnError {
-    #[error("measurement has {got} points per revolution, the learning state {expected}")]
-    GridMismatch { expected: u32, got: usize },
-    #[error("error at {angle_deg}° is not a finite number")]
-    NonFinite { angle_deg: f64 },
-    #[error(
-        "correction would reach {max_um:.2} µm at {angle_deg:.1}°, above the limit of {limit_um} µm"
-    )]
-    CorrectionTooLarge {
-        max_um: f64,
-        angle_deg: f64,
-        limit_um: f64,
-    },
-    #[error(
-        "timing correction would reach {wanted_deg:.4}°, above the limit of {limit_deg}° (timing error {timing_error_deg:.4}°)"
-    )]
-    TimingTooLarge {
-        wanted_deg: f64,
-        limit_deg: f64,
-        timing_error_deg: f64,
-    },
-    #[error(
-        "the correction is at its limit of {limit_um} µm at {angle_deg:.1}° (it would need {wanted_um:.2} µm): nothing more can be learned until the machine is checked or the limit raised"
-    )]
-    AtLimit {
-        wanted_um: f64,
-        angle_deg: f64,
-        limit_um: f64,
-    },
-}
-
 /// Corrections closer than this everywhere are the same table, µm (and degrees / 1000).
 const SAME_CORRECTION_UM: f64 = 0.01;
 
@@ -419,28 +285,7 @@ fn learn_correction(
     let shape: Vec<f64> = part.error_um.iter().map(|e| e - mean).collect();
     let shape = low_pass(&shape, params.cutoff_order, params.rolloff_orders);
     let size = soft_dead(mean, size_band);
-    // The size disturbance the part saw: its size error less the size correction it was
-    // ground with (the plant is 1:1 in size). Its change from part to part is the drift.
-    let in_force_size = state.correction_um.iter().sum::<f64>() / n as f64;
-    let disturbance = mean - in_force_size;
-    next.dressed = false;
-    next.dressing_measured = false;
-    next.last_size_disturbance_um = Some(disturbance);
-    next.last_size_disturbance_part = part.part_number;
-    if state.dressed {
-        // The dresser's error, not drift: the next dressing starts from what this one needed.
-        next.dressing_offset_um = state.dressing_offset_um - params.gain * size;
-    } else if state.dressing_measured {
-        // What the dresser's infeed reading missed: an offset, not drift.
-    } else if let Some(before) = state.last_size_disturbance_um {
-        let parts = match (state.last_size_disturbance_part, part.part_number) {
-            (Some(before), Some(now)) if now > before => (now - before) as f64,
-            _ => 1.0,
-        };
-        let observed = (disturbance - before) / parts;
-        next.size_drift_um_per_part = state.size_drift_um_per_part
-            + params.wear_gain * (observed - state.size_drift_um_per_part);
-    }
+    learn_size_drift(state, next, part, params, mean, size);
     // Right after a dressing the size step is the dresser's offset (or what its infeed
     // reading missed), measured to a few nm over every angle: taken whole, not by the gain
     // (which guards the shape against model mismatch).
@@ -458,30 +303,12 @@ fn learn_correction(
         })
         .collect();
     let wanted = low_pass(&learned, params.cutoff_order, params.rolloff_orders);
-    let (wanted_um, j) = max_abs_at(&wanted);
-    let angle_deg = j as f64 * 360.0 / n as f64;
-    let mut bound = None;
-    next.correction_um = if wanted_um <= params.max_correction_um {
-        wanted
-    } else if !repeatable {
-        return Err(LearnError::CorrectionTooLarge {
-            max_um: wanted_um,
-            angle_deg,
-            limit_um: params.max_correction_um,
-        });
-    } else {
-        bound = Some(Bounded {
-            wanted: wanted_um,
-            limit: params.max_correction_um,
-            angle_deg: Some(angle_deg),
-            quantity: BoundedQuantity::Correction,
-        });
-        within_limit(&wanted, params)
-    };
+    let (correction_um, bound) = held_to_limit(wanted, repeatable, params)?;
+    next.correction_um = correction_um;
     quantise_correction(&mut next.correction_um, params.max_correction_um);
     let timing = learn_timing(state, part, params)?;
     next.timing_correction_deg = timing.0;
-    bound = bound.or(timing.1);
+    let bound = bound.or(timing.1);
     let unchanged = next
         .correction_um
         .iter()
@@ -490,6 +317,82 @@ fn learn_correction(
         && (next.timing_correction_deg - state.timing_correction_deg).abs()
             < SAME_CORRECTION_UM * 1e-3;
     let max_correction_um = max_abs_at(&next.correction_um).0;
+    step_outcome(bound, unchanged, part, max_error_um, max_correction_um)
+}
+
+/// Records the size disturbance this part saw and, when neither a dressing nor a measured
+/// dressing explains its change, learns the size drift per part from it.
+fn learn_size_drift(
+    state: &LearningState,
+    next: &mut LearningState,
+    part: &PartError<'_>,
+    params: &LearningParams,
+    mean_error_um: f64,
+    size_um: f64,
+) {
+    let n = state.points_per_rev as usize;
+    // The size disturbance the part saw: its size error less the size correction it was
+    // ground with (the plant is 1:1 in size). Its change from part to part is the drift.
+    let in_force_size = state.correction_um.iter().sum::<f64>() / n as f64;
+    let disturbance = mean_error_um - in_force_size;
+    next.dressed = false;
+    next.dressing_measured = false;
+    next.last_size_disturbance_um = Some(disturbance);
+    next.last_size_disturbance_part = part.part_number;
+    if state.dressed {
+        // The dresser's error, not drift: the next dressing starts from what this one needed.
+        next.dressing_offset_um = state.dressing_offset_um - params.gain * size_um;
+    } else if state.dressing_measured {
+        // What the dresser's infeed reading missed: an offset, not drift.
+    } else if let Some(before) = state.last_size_disturbance_um {
+        let parts = match (state.last_size_disturbance_part, part.part_number) {
+            (Some(before), Some(now)) if now > before => (now - before) as f64,
+            _ => 1.0,
+        };
+        let observed = (disturbance - before) / parts;
+        next.size_drift_um_per_part = state.size_drift_um_per_part
+            + params.wear_gain * (observed - state.size_drift_um_per_part);
+    }
+}
+
+/// The wanted correction within `max_correction_um`: as it is when it fits, held to the
+/// limit when a repeated part confirms the error is real, refused otherwise (one part alone
+/// may be a bad measurement).
+fn held_to_limit(
+    wanted: Vec<f64>,
+    repeatable: bool,
+    params: &LearningParams,
+) -> Result<(Vec<f64>, Option<Bounded>), LearnError> {
+    let (wanted_um, j) = max_abs_at(&wanted);
+    let angle_deg = j as f64 * 360.0 / wanted.len() as f64;
+    if wanted_um <= params.max_correction_um {
+        Ok((wanted, None))
+    } else if !repeatable {
+        Err(LearnError::CorrectionTooLarge {
+            max_um: wanted_um,
+            angle_deg,
+            limit_um: params.max_correction_um,
+        })
+    } else {
+        let bound = Bounded {
+            wanted: wanted_um,
+            limit: params.max_correction_um,
+            angle_deg: Some(angle_deg),
+            quantity: BoundedQuantity::Correction,
+        };
+        Ok((within_limit(&wanted, params), Some(bound)))
+    }
+}
+
+/// A bounded step that changed nothing is stuck at its limit: an error, so an operator
+/// looks at the machine instead of the loop pushing the same table forever.
+fn step_outcome(
+    bound: Option<Bounded>,
+    unchanged: bool,
+    part: &PartError<'_>,
+    max_error_um: f64,
+    max_correction_um: f64,
+) -> Result<StepOutcome, LearnError> {
     match bound {
         Some(b) if unchanged => Err(match b.quantity {
             BoundedQuantity::Correction => LearnError::AtLimit {

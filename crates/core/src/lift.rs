@@ -268,65 +268,8 @@ impl LiftTable {
         floor_mm: f64,
     ) -> Result<Self, LiftTableError> {
         let file = || origin.to_string();
-        for ((&a, &l), &line) in angles_deg.iter().zip(&lifts_mm).zip(&lines) {
-            if !a.is_finite() {
-                return Err(LiftTableError::NonFiniteAngle {
-                    file: file(),
-                    line,
-                    angle_deg: a,
-                });
-            }
-            if !l.is_finite() {
-                return Err(LiftTableError::NonFiniteLift {
-                    file: file(),
-                    line,
-                    angle_deg: a,
-                });
-            }
-        }
-        for i in 1..angles_deg.len() {
-            let (previous_deg, angle_deg, line) = (angles_deg[i - 1], angles_deg[i], lines[i]);
-            if angle_deg == previous_deg {
-                return Err(LiftTableError::DuplicateAngle {
-                    file: file(),
-                    line,
-                    angle_deg,
-                });
-            }
-            if angle_deg < previous_deg {
-                return Err(LiftTableError::Unsorted {
-                    file: file(),
-                    line,
-                    angle_deg,
-                    previous_deg,
-                });
-            }
-        }
-        // A last point one full turn after the first closes the table: check and drop it.
-        if let (Some(&first), Some(&last)) = (angles_deg.first(), angles_deg.last()) {
-            let n = angles_deg.len();
-            if (last - first - 360.0).abs() < 1e-9 {
-                if (lifts_mm[n - 1] - lifts_mm[0]).abs() > CLOSURE_TOLERANCE_MM {
-                    return Err(LiftTableError::ClosureMismatch {
-                        file: file(),
-                        line: lines[n - 1],
-                        angle_deg: last,
-                        lift_mm: lifts_mm[n - 1],
-                        first_lift_mm: lifts_mm[0],
-                    });
-                }
-                angles_deg.pop();
-                lifts_mm.pop();
-                lines.pop();
-            } else if let Some(i) = angles_deg.iter().position(|&a| a - first >= 360.0) {
-                return Err(LiftTableError::SpansMoreThanOneRevolution {
-                    file: file(),
-                    line: lines[i],
-                    angle_deg: angles_deg[i],
-                    first_deg: first,
-                });
-            }
-        }
+        check_finite_and_rising(&angles_deg, &lifts_mm, &lines, origin)?;
+        drop_closing_point(&mut angles_deg, &mut lifts_mm, &mut lines, origin)?;
         if angles_deg.len() < MIN_POINTS {
             return Err(LiftTableError::TooFewPoints {
                 file: file(),
@@ -440,137 +383,86 @@ impl LiftCurve {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn grid_csv(step_deg: usize, lift: impl Fn(f64) -> f64) -> String {
-        let mut s = String::from("angle_deg,lift_mm\n");
-        for a in (0..360).step_by(step_deg) {
-            s.push_str(&format!("{a},{:.6}\n", lift(a as f64)));
+/// Every angle and lift a finite number, the angles strictly rising.
+fn check_finite_and_rising(
+    angles_deg: &[f64],
+    lifts_mm: &[f64],
+    lines: &[usize],
+    origin: &str,
+) -> Result<(), LiftTableError> {
+    let file = || origin.to_string();
+    for ((&a, &l), &line) in angles_deg.iter().zip(lifts_mm).zip(lines) {
+        if !a.is_finite() {
+            return Err(LiftTableError::NonFiniteAngle {
+                file: file(),
+                line,
+                angle_deg: a,
+            });
         }
-        s
-    }
-
-    fn err(text: &str) -> String {
-        match LiftTable::parse_csv(text, "lobe.csv") {
-            Ok(_) => panic!("table was accepted:\n{text}"),
-            Err(e) => e.to_string(),
-        }
-    }
-
-    #[test]
-    fn accepts_header_comments_and_closing_point() {
-        let mut text = String::from("# exported by a gauge\n");
-        text += &grid_csv(5, |a| if a > 100.0 { 1.0 } else { 0.0 });
-        text += "360,0.0 # closes the period\n";
-        let t = LiftTable::parse_csv(&text, "lobe.csv").unwrap();
-        assert_eq!(t.angles_deg().len(), 72);
-        assert_eq!(t.lifts_mm()[21], 1.0);
-    }
-
-    #[test]
-    fn refuses_bad_tables_naming_file_and_place() {
-        let good = grid_csv(5, |_| 0.0);
-        let cases: Vec<(String, &str)> = vec![
-            (
-                good.replace("\n10,", "\n5,"),
-                "lobe.csv:4: duplicate angle 5°",
-            ),
-            (
-                good.replace("\n15,", "\n8,"),
-                "lobe.csv:5: angle 8° comes after 10°",
-            ),
-            (
-                good.replace("15,0.000000\n20,0.000000\n25,0.000000\n", ""),
-                "lobe.csv: gap of 20.000° between 10° and 30°",
-            ),
-            (
-                grid_csv(10, |_| 0.0).replace("350,0.000000\n", ""),
-                "lobe.csv: 35 points, at least 36",
-            ),
-            (
-                good.replace("\n20,0.000000", "\n20,NaN"),
-                "lobe.csv:6: lift at 20° is not a finite number",
-            ),
-            (
-                good.replace("\n20,0.000000", "\n20,-0.002"),
-                "lobe.csv:6: negative lift -0.002 mm at 20°",
-            ),
-            (
-                good.replace("\n20,0.000000", "\n20,abc"),
-                "lobe.csv:6: lift `abc` is not a number",
-            ),
-            (
-                good.replace("\n20,0.000000", "\n20,0,1"),
-                "lobe.csv:6: expected 2 fields",
-            ),
-            (
-                good + "361,0\n",
-                "lobe.csv:74: angle 361° is more than one revolution",
-            ),
-            (
-                grid_csv(5, |_| 0.0) + "360,0.5\n",
-                "lobe.csv:74: closing point at 360° has lift 0.5 mm",
-            ),
-        ];
-        for (text, expected) in cases {
-            let message = err(&text);
-            assert!(
-                message.starts_with(expected),
-                "expected `{expected}…`, got `{message}`"
-            );
+        if !l.is_finite() {
+            return Err(LiftTableError::NonFiniteLift {
+                file: file(),
+                line,
+                angle_deg: a,
+            });
         }
     }
-
-    #[test]
-    fn wrap_around_gap_is_checked() {
-        let text: String = (0..=340).step_by(5).map(|a| format!("{a},0\n")).collect();
-        assert!(err(&text).contains("gap of 20.000° between 340° and 360°"));
-    }
-
-    #[test]
-    fn small_negative_lift_within_tolerance_is_kept() {
-        let t = LiftTable::parse_csv(&grid_csv(5, |a| if a == 20.0 { -0.0005 } else { 0.0 }), "x")
-            .unwrap();
-        assert_eq!(t.lifts_mm()[4], -0.0005);
-    }
-
-    #[test]
-    fn parses_opticline_and_checks_step_count() {
-        let mut text = String::from("3.0000\n72\n");
-        for a in (0..360).step_by(5) {
-            text += &format!("{a:.2}  {:.4}  0\n", (a as f64).to_radians().sin() + 1.0);
+    for i in 1..angles_deg.len() {
+        let (previous_deg, angle_deg, line) = (angles_deg[i - 1], angles_deg[i], lines[i]);
+        if angle_deg == previous_deg {
+            return Err(LiftTableError::DuplicateAngle {
+                file: file(),
+                line,
+                angle_deg,
+            });
         }
-        let t = LiftTable::parse_opticline(&text, "nominal.txt").unwrap();
-        assert_eq!(t.probe_radius_mm(), Some(3.0));
-        assert_eq!(t.angles_deg().len(), 72);
-        assert!((t.lifts_mm()[18] - 2.0).abs() < 1e-12);
-
-        let short = text.replacen("72\n", "73\n", 1);
-        let e = LiftTable::parse_opticline(&short, "nominal.txt")
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("72 rows, but line 2 announced 73 steps"), "{e}");
-        let bad = text.replacen("3.0000", "three", 1);
-        let e = LiftTable::parse_opticline(&bad, "nominal.txt")
-            .unwrap_err()
-            .to_string();
-        assert_eq!(e, "nominal.txt:1: probe radius `three` is not a number");
-    }
-
-    #[test]
-    fn curve_interpolates_the_table_and_is_periodic() {
-        let t = LiftTable::parse_csv(&grid_csv(1, |a| 4.0 * (1.0 - a.to_radians().cos())), "x")
-            .unwrap();
-        let c = LiftCurve::new(&t);
-        for (a, l) in t.angles_deg().iter().zip(t.lifts_mm()) {
-            assert!((c.lift_mm(*a) - l).abs() < 1e-12);
-            assert!((c.lift_mm(*a + 360.0) - l).abs() < 1e-12);
+        if angle_deg < previous_deg {
+            return Err(LiftTableError::Unsorted {
+                file: file(),
+                line,
+                angle_deg,
+                previous_deg,
+            });
         }
-        // h = 4(1 − cos ψ): h' = 4 sin ψ exactly; the spline's slope at 1° knots is O(h³)
-        // accurate (≈ 4·(0.01745)³/24 ≈ 9e-7 mm/rad), and rounding to 1e-6 mm adds < 1e-4.
-        let s = c.eval(1.0);
-        assert!((s.dh_mm - 4.0 * 1.0f64.sin()).abs() < 2e-4, "{}", s.dh_mm);
     }
+    Ok(())
 }
+
+/// A last point one full turn after the first closes the table: checked against the first
+/// and dropped; a table reaching further than one turn is refused.
+fn drop_closing_point(
+    angles_deg: &mut Vec<f64>,
+    lifts_mm: &mut Vec<f64>,
+    lines: &mut Vec<usize>,
+    origin: &str,
+) -> Result<(), LiftTableError> {
+    let file = || origin.to_string();
+    if let (Some(&first), Some(&last)) = (angles_deg.first(), angles_deg.last()) {
+        let n = angles_deg.len();
+        if (last - first - 360.0).abs() < 1e-9 {
+            if (lifts_mm[n - 1] - lifts_mm[0]).abs() > CLOSURE_TOLERANCE_MM {
+                return Err(LiftTableError::ClosureMismatch {
+                    file: file(),
+                    line: lines[n - 1],
+                    angle_deg: last,
+                    lift_mm: lifts_mm[n - 1],
+                    first_lift_mm: lifts_mm[0],
+                });
+            }
+            angles_deg.pop();
+            lifts_mm.pop();
+            lines.pop();
+        } else if let Some(i) = angles_deg.iter().position(|&a| a - first >= 360.0) {
+            return Err(LiftTableError::SpansMoreThanOneRevolution {
+                file: file(),
+                line: lines[i],
+                angle_deg: angles_deg[i],
+                first_deg: first,
+            });
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;

@@ -375,26 +375,7 @@ impl RevolutionGrid {
         let n = self.points_per_rev as usize;
         let revs = self.revolutions as usize;
         let limit_mm = limits.revolution_limit_um / 1000.0;
-        let mut column = vec![0.0; revs];
-        let median_mm: Vec<f64> = (0..n)
-            .map(|k| {
-                for (r, v) in column.iter_mut().enumerate() {
-                    *v = self.lift_mm[r * n + k];
-                }
-                median(&mut column)
-            })
-            .collect();
-        // (max deviation mm, angle index) per revolution
-        let worst: Vec<(f64, usize)> = self
-            .lift_mm
-            .chunks_exact(n)
-            .map(|row| {
-                let deviations = row.iter().zip(&median_mm).map(|(v, m)| (v - m).abs());
-                deviations
-                    .enumerate()
-                    .fold((0.0, 0), |w, (k, d)| if d > w.0 { (d, k) } else { w })
-            })
-            .collect();
+        let worst = self.worst_deviations();
         let mut used = Vec::with_capacity(revs);
         let mut dropped = Vec::new();
         for (r, &(dev_mm, k)) in worst.iter().enumerate() {
@@ -430,29 +411,7 @@ impl RevolutionGrid {
             .iter()
             .map(|&r| &self.lift_mm[r as usize * n..(r as usize + 1) * n])
             .collect();
-        let count = rows.len() as f64;
-        let mut mean_lift_mm = vec![0.0; n];
-        let mut lo = vec![f64::INFINITY; n];
-        let mut hi = vec![f64::NEG_INFINITY; n];
-        for row in &rows {
-            for (k, &v) in row.iter().enumerate() {
-                mean_lift_mm[k] += v;
-                lo[k] = lo[k].min(v);
-                hi[k] = hi[k].max(v);
-            }
-        }
-        mean_lift_mm.iter_mut().for_each(|m| *m /= count);
-        let mut ss = vec![0.0; n];
-        for row in &rows {
-            for ((s, &v), &m) in ss.iter_mut().zip(row.iter()).zip(&mean_lift_mm) {
-                *s += (v - m) * (v - m);
-            }
-        }
-        let std_um: Vec<f64> = ss
-            .iter()
-            .map(|s| (s / (count - 1.0)).sqrt() * 1000.0)
-            .collect();
-        let range_um: Vec<f64> = hi.iter().zip(&lo).map(|(h, l)| (h - l) * 1000.0).collect();
+        let (mean_lift_mm, std_um, range_um) = per_angle_statistics(&rows, n);
         Ok(AveragedMeasurement {
             origin: self.origin.clone(),
             points_per_rev: self.points_per_rev,
@@ -462,6 +421,31 @@ impl RevolutionGrid {
             revolutions_used: used,
             dropped_revolutions: dropped,
         })
+    }
+
+    /// Each revolution's largest deviation from the per-angle median of all revolutions,
+    /// mm, and the angle index where it is.
+    fn worst_deviations(&self) -> Vec<(f64, usize)> {
+        let n = self.points_per_rev as usize;
+        let revs = self.revolutions as usize;
+        let mut column = vec![0.0; revs];
+        let median_mm: Vec<f64> = (0..n)
+            .map(|k| {
+                for (r, v) in column.iter_mut().enumerate() {
+                    *v = self.lift_mm[r * n + k];
+                }
+                median(&mut column)
+            })
+            .collect();
+        self.lift_mm
+            .chunks_exact(n)
+            .map(|row| {
+                let deviations = row.iter().zip(&median_mm).map(|(v, m)| (v - m).abs());
+                deviations
+                    .enumerate()
+                    .fold((0.0, 0), |w, (k, d)| if d > w.0 { (d, k) } else { w })
+            })
+            .collect()
     }
 }
 
@@ -488,6 +472,35 @@ impl AveragedMeasurement {
     pub(crate) fn angle_deg(&self, k: u32) -> f64 {
         angle_deg(k, self.points_per_rev)
     }
+}
+
+/// Per angle over the revolutions used: the mean lift (mm), the standard deviation and the
+/// range (µm).
+fn per_angle_statistics(rows: &[&[f64]], n: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let count = rows.len() as f64;
+    let mut mean_lift_mm = vec![0.0; n];
+    let mut lo = vec![f64::INFINITY; n];
+    let mut hi = vec![f64::NEG_INFINITY; n];
+    for row in rows {
+        for (k, &v) in row.iter().enumerate() {
+            mean_lift_mm[k] += v;
+            lo[k] = lo[k].min(v);
+            hi[k] = hi[k].max(v);
+        }
+    }
+    mean_lift_mm.iter_mut().for_each(|m| *m /= count);
+    let mut ss = vec![0.0; n];
+    for row in rows {
+        for ((s, &v), &m) in ss.iter_mut().zip(row.iter()).zip(&mean_lift_mm) {
+            *s += (v - m) * (v - m);
+        }
+    }
+    let std_um: Vec<f64> = ss
+        .iter()
+        .map(|s| (s / (count - 1.0)).sqrt() * 1000.0)
+        .collect();
+    let range_um: Vec<f64> = hi.iter().zip(&lo).map(|(h, l)| (h - l) * 1000.0).collect();
+    (mean_lift_mm, std_um, range_um)
 }
 
 #[cfg(test)]

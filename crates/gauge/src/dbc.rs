@@ -207,45 +207,7 @@ fn compile_message<const N: usize>(
         .ok_or_else(|| DbcLoadError::MissingMessage {
             message: message_name.to_owned(),
         })?;
-    if message.size > 8 {
-        return Err(DbcLoadError::MessageTooLong {
-            message: message.name.clone(),
-            size_bytes: message.size,
-        });
-    }
-    let id = match message.id {
-        MessageId::Standard(id) if id > 0x7ff => {
-            return Err(DbcLoadError::BadStandardId {
-                message: message.name.clone(),
-                id,
-            });
-        }
-        MessageId::Standard(id) => CanId::Standard(id),
-        MessageId::Extended(id) => CanId::Extended(id),
-    };
-    let compile = |signal: &can_dbc::Signal| -> Result<SignalCodec, DbcLoadError> {
-        let order = match signal.byte_order {
-            can_dbc::ByteOrder::LittleEndian => ByteOrder::Intel,
-            can_dbc::ByteOrder::BigEndian => ByteOrder::Motorola,
-        };
-        let kind = match dbc.extended_value_type_for_signal(message.id, &signal.name) {
-            Some(SignalExtendedValueType::IEEEfloat32Bit) => RawKind::Float32,
-            Some(SignalExtendedValueType::IEEEdouble64bit) => RawKind::Float64,
-            Some(SignalExtendedValueType::SignedOrUnsignedInteger) | None => {
-                match signal.value_type {
-                    can_dbc::ValueType::Signed => RawKind::Signed,
-                    can_dbc::ValueType::Unsigned => RawKind::Unsigned,
-                }
-            }
-        };
-        SignalCodec::new(signal.start_bit, signal.size, order, kind, message.size).map_err(
-            |source| DbcLoadError::Layout {
-                message: message.name.clone(),
-                signal: signal.name.clone(),
-                source,
-            },
-        )
-    };
+    let id = frame_id(message)?;
     let has_extended_mux = dbc
         .extended_multiplex
         .iter()
@@ -257,52 +219,13 @@ fn compile_message<const N: usize>(
 
     let mut specs = Vec::with_capacity(N);
     for wanted in signal_names {
-        let signal = message
-            .signals
-            .iter()
-            .find(|s| &s.name == wanted)
-            .ok_or_else(|| DbcLoadError::MissingSignal {
-                message: message.name.clone(),
-                signal: wanted.clone(),
-            })?;
-        if !signal.factor.is_finite() || signal.factor == 0.0 || !signal.offset.is_finite() {
-            return Err(DbcLoadError::BadFactor {
-                message: message.name.clone(),
-                signal: signal.name.clone(),
-                factor: signal.factor,
-            });
-        }
-        let multiplexed = match signal.multiplexer_indicator {
-            MultiplexIndicator::Plain | MultiplexIndicator::Multiplexor => None,
-            MultiplexIndicator::MultiplexedSignal(value)
-            | MultiplexIndicator::MultiplexorAndMultiplexedSignal(value) => {
-                match (multiplexor, has_extended_mux) {
-                    (Some(mux), false) => Some((compile(mux)?, value)),
-                    _ => {
-                        return Err(DbcLoadError::Multiplexing {
-                            message: message.name.clone(),
-                            signal: signal.name.clone(),
-                        });
-                    }
-                }
-            }
-        };
-        let (min, max) = (numeric(signal.min), numeric(signal.max));
-        let codec = compile(signal)?;
-        let whole = |x: f64| x.fract() == 0.0 && x.abs() < 9.0e15;
-        // Whole and below 2^53 in magnitude, so the casts are exact.
-        #[allow(clippy::cast_possible_truncation)]
-        let integer_scale = (codec.is_integer() && whole(signal.factor) && whole(signal.offset))
-            .then_some((signal.factor as i64, signal.offset as i64));
-        specs.push(SignalSpec {
-            name: signal.name.clone(),
-            codec,
-            factor: signal.factor,
-            offset: signal.offset,
-            range: (min != 0.0 || max != 0.0).then_some((min, max)),
-            multiplexed,
-            integer_scale,
-        });
+        specs.push(compile_signal(
+            dbc,
+            message,
+            wanted,
+            multiplexor,
+            has_extended_mux,
+        )?);
     }
     let signals: [SignalSpec; N] = specs
         .try_into()
@@ -312,6 +235,107 @@ fn compile_message<const N: usize>(
         id,
         size_bytes: usize::try_from(message.size).expect("size ≤ 8 checked above"),
         signals,
+    })
+}
+
+/// The message's CAN id, once its size fits a classic frame and a standard id fits 11 bits.
+fn frame_id(message: &can_dbc::Message) -> Result<CanId, DbcLoadError> {
+    if message.size > 8 {
+        return Err(DbcLoadError::MessageTooLong {
+            message: message.name.clone(),
+            size_bytes: message.size,
+        });
+    }
+    match message.id {
+        MessageId::Standard(id) if id > 0x7ff => Err(DbcLoadError::BadStandardId {
+            message: message.name.clone(),
+            id,
+        }),
+        MessageId::Standard(id) => Ok(CanId::Standard(id)),
+        MessageId::Extended(id) => Ok(CanId::Extended(id)),
+    }
+}
+
+/// One wanted signal: found, its scaling sound, its multiplexing one the decoder handles.
+fn compile_signal(
+    dbc: &Dbc,
+    message: &can_dbc::Message,
+    wanted: &str,
+    multiplexor: Option<&can_dbc::Signal>,
+    has_extended_mux: bool,
+) -> Result<SignalSpec, DbcLoadError> {
+    let signal = message
+        .signals
+        .iter()
+        .find(|s| s.name == wanted)
+        .ok_or_else(|| DbcLoadError::MissingSignal {
+            message: message.name.clone(),
+            signal: wanted.to_owned(),
+        })?;
+    if !signal.factor.is_finite() || signal.factor == 0.0 || !signal.offset.is_finite() {
+        return Err(DbcLoadError::BadFactor {
+            message: message.name.clone(),
+            signal: signal.name.clone(),
+            factor: signal.factor,
+        });
+    }
+    let multiplexed = match signal.multiplexer_indicator {
+        MultiplexIndicator::Plain | MultiplexIndicator::Multiplexor => None,
+        MultiplexIndicator::MultiplexedSignal(value)
+        | MultiplexIndicator::MultiplexorAndMultiplexedSignal(value) => {
+            match (multiplexor, has_extended_mux) {
+                (Some(mux), false) => Some((compile_codec(dbc, message, mux)?, value)),
+                _ => {
+                    return Err(DbcLoadError::Multiplexing {
+                        message: message.name.clone(),
+                        signal: signal.name.clone(),
+                    });
+                }
+            }
+        }
+    };
+    let (min, max) = (numeric(signal.min), numeric(signal.max));
+    let codec = compile_codec(dbc, message, signal)?;
+    let whole = |x: f64| x.fract() == 0.0 && x.abs() < 9.0e15;
+    // Whole and below 2^53 in magnitude, so the casts are exact.
+    #[allow(clippy::cast_possible_truncation)]
+    let integer_scale = (codec.is_integer() && whole(signal.factor) && whole(signal.offset))
+        .then_some((signal.factor as i64, signal.offset as i64));
+    Ok(SignalSpec {
+        name: signal.name.clone(),
+        codec,
+        factor: signal.factor,
+        offset: signal.offset,
+        range: (min != 0.0 || max != 0.0).then_some((min, max)),
+        multiplexed,
+        integer_scale,
+    })
+}
+
+/// A signal's bit layout and raw type (an extended value type overrides the sign).
+fn compile_codec(
+    dbc: &Dbc,
+    message: &can_dbc::Message,
+    signal: &can_dbc::Signal,
+) -> Result<SignalCodec, DbcLoadError> {
+    let order = match signal.byte_order {
+        can_dbc::ByteOrder::LittleEndian => ByteOrder::Intel,
+        can_dbc::ByteOrder::BigEndian => ByteOrder::Motorola,
+    };
+    let kind = match dbc.extended_value_type_for_signal(message.id, &signal.name) {
+        Some(SignalExtendedValueType::IEEEfloat32Bit) => RawKind::Float32,
+        Some(SignalExtendedValueType::IEEEdouble64bit) => RawKind::Float64,
+        Some(SignalExtendedValueType::SignedOrUnsignedInteger) | None => match signal.value_type {
+            can_dbc::ValueType::Signed => RawKind::Signed,
+            can_dbc::ValueType::Unsigned => RawKind::Unsigned,
+        },
+    };
+    SignalCodec::new(signal.start_bit, signal.size, order, kind, message.size).map_err(|source| {
+        DbcLoadError::Layout {
+            message: message.name.clone(),
+            signal: signal.name.clone(),
+            source,
+        }
     })
 }
 

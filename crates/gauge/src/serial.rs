@@ -270,29 +270,7 @@ impl SerialDecoder {
                 });
                 None
             }
-            (Ok(SerialLine::Start(header)), _) => {
-                let mut crc = Hasher::new();
-                crc_line(&mut crc, text);
-                let previous = std::mem::replace(
-                    &mut self.state,
-                    State::Open {
-                        m: OpenMeasurement::new(header),
-                        crc,
-                    },
-                );
-                match previous {
-                    State::Open { m, .. } => {
-                        problem(line, m.discard(DiscardReason::CutOffByNewStart))
-                    }
-                    State::Idle { stray_samples: 0 } => None,
-                    State::Idle { stray_samples } => problem(
-                        line,
-                        AssemblyProblem::SamplesWithoutStart {
-                            count: stray_samples,
-                        },
-                    ),
-                }
-            }
+            (Ok(SerialLine::Start(header)), _) => self.start(line, text, header),
             (Ok(SerialLine::Sample(s)), State::Open { m, crc }) => {
                 crc_line(crc, text);
                 m.add(s);
@@ -313,30 +291,65 @@ impl SerialDecoder {
                 }),
                 State::Open { .. },
             ) => {
-                let State::Open { mut m, crc } =
+                let State::Open { m, crc } =
                     std::mem::replace(&mut self.state, State::Idle { stray_samples: 0 })
                 else {
                     unreachable!("matched State::Open above")
                 };
-                let received = m.received() as u64;
-                if received != sample_count {
-                    m.spoil(DiscardReason::CountMismatch {
-                        announced: sample_count,
-                        received,
-                    });
-                }
-                let computed = crc.finalize();
-                if computed != crc32 {
-                    m.spoil(DiscardReason::ChecksumMismatch {
-                        announced: crc32,
-                        computed,
-                    });
-                }
-                match m.finish(&self.origin) {
-                    Assembled::Measurement(m) => Some(SerialEvent::Measurement(m)),
-                    Assembled::Problem(p) => problem(line, p),
-                }
+                self.end(line, m, crc, (sample_count, crc32))
             }
+        }
+    }
+
+    /// A start line opens a measurement; one still open is cut off, stray samples reported.
+    fn start(&mut self, line: usize, text: &str, header: MeasurementHeader) -> Option<SerialEvent> {
+        let mut crc = Hasher::new();
+        crc_line(&mut crc, text);
+        let previous = std::mem::replace(
+            &mut self.state,
+            State::Open {
+                m: OpenMeasurement::new(header),
+                crc,
+            },
+        );
+        match previous {
+            State::Open { m, .. } => problem(line, m.discard(DiscardReason::CutOffByNewStart)),
+            State::Idle { stray_samples: 0 } => None,
+            State::Idle { stray_samples } => problem(
+                line,
+                AssemblyProblem::SamplesWithoutStart {
+                    count: stray_samples,
+                },
+            ),
+        }
+    }
+
+    /// The end line of the measurement `m` (taken out of the open state): its announced
+    /// count and CRC checked, then finished.
+    fn end(
+        &self,
+        line: usize,
+        mut m: OpenMeasurement,
+        crc: Hasher,
+        (sample_count, crc32): (u64, u32),
+    ) -> Option<SerialEvent> {
+        let received = m.received() as u64;
+        if received != sample_count {
+            m.spoil(DiscardReason::CountMismatch {
+                announced: sample_count,
+                received,
+            });
+        }
+        let computed = crc.finalize();
+        if computed != crc32 {
+            m.spoil(DiscardReason::ChecksumMismatch {
+                announced: crc32,
+                computed,
+            });
+        }
+        match m.finish(&self.origin) {
+            Assembled::Measurement(m) => Some(SerialEvent::Measurement(m)),
+            Assembled::Problem(p) => problem(line, p),
         }
     }
 

@@ -256,7 +256,31 @@ type Field = (&'static str, f64);
 
 /// The curve's own sizes: finite, and positive where they divide or scale.
 fn check_curve(curve: &Curve) -> Result<(), ContourError> {
-    let (positive, finite): (Vec<Field>, Vec<Field>) = match *curve {
+    let (positive, finite) = curve_fields(curve);
+    for (field, value) in finite {
+        if !value.is_finite() {
+            return Err(ContourError::Value {
+                field,
+                value,
+                rule: "it must be a finite number",
+            });
+        }
+    }
+    for (field, value) in positive {
+        if !(value.is_finite() && value > 0.0) {
+            return Err(ContourError::Value {
+                field,
+                value,
+                rule: "it must be a number > 0 (non-zero for p)",
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The curve's fields that must be positive, and those that must be finite.
+fn curve_fields(curve: &Curve) -> (Vec<Field>, Vec<Field>) {
+    match *curve {
         Curve::Ellipse {
             centre_z_mm,
             centre_x_mm,
@@ -324,26 +348,7 @@ fn check_curve(curve: &Curve) -> Result<(), ContourError> {
             ],
         ),
         Curve::Profile { .. } => (vec![], vec![]),
-    };
-    for (field, value) in finite {
-        if !value.is_finite() {
-            return Err(ContourError::Value {
-                field,
-                value,
-                rule: "it must be a finite number",
-            });
-        }
     }
-    for (field, value) in positive {
-        if !(value.is_finite() && value > 0.0) {
-            return Err(ContourError::Value {
-                field,
-                value,
-                rule: "it must be a number > 0 (non-zero for p)",
-            });
-        }
-    }
-    Ok(())
 }
 
 /// Asymptotes, travel that turns back in z, the axis, and concave radii tighter than the

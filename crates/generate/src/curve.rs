@@ -131,40 +131,19 @@ impl Curve {
                 b_mm,
                 start_deg,
                 end_deg,
-            } => {
-                let d = Self::direction(start_deg, end_deg);
-                let t = (start_deg + d * u) * RAD;
-                let (s, c) = t.sin_cos();
-                Jet {
-                    z: centre_z_mm + a_mm * c,
-                    x: centre_x_mm + b_mm * s,
-                    dz: -a_mm * s * d * RAD,
-                    dx: b_mm * c * d * RAD,
-                    ddz: -a_mm * c * RAD * RAD,
-                    ddx: -b_mm * s * RAD * RAD,
-                }
-            }
+            } => ellipse_jet(
+                (centre_z_mm, centre_x_mm),
+                (a_mm, b_mm),
+                (start_deg, end_deg),
+                u,
+            ),
             Curve::Parabola {
                 vertex_z_mm,
                 vertex_x_mm,
                 p_mm,
                 x_start_mm,
                 x_end_mm,
-            } => {
-                let d = Self::direction(x_start_mm, x_end_mm);
-                let x = x_start_mm + d * u;
-                let w = x - vertex_x_mm;
-                // Along is x, across is z here: z = z0 + w²/(2p).
-                let z = vertex_z_mm + w * w / (2.0 * p_mm);
-                Jet {
-                    z,
-                    x,
-                    dz: w / p_mm * d,
-                    dx: d,
-                    ddz: 1.0 / p_mm,
-                    ddx: 0.0,
-                }
-            }
+            } => parabola_jet((vertex_z_mm, vertex_x_mm), p_mm, (x_start_mm, x_end_mm), u),
             Curve::Sine {
                 mean_x_mm,
                 amplitude_mm,
@@ -191,19 +170,16 @@ impl Curve {
                 centre_z_mm,
                 z_start_mm,
                 z_end_mm,
-            } => {
-                let d = Self::direction(z_start_mm, z_end_mm);
-                let z = z_start_mm + d * u;
-                let w = rate_deg_per_mm * RAD;
-                let t = ((z - centre_z_mm) * rate_deg_per_mm * RAD).tan();
-                let sec2 = 1.0 + t * t;
-                let y = [
-                    mean_x_mm + amplitude_mm * t,
-                    amplitude_mm * w * sec2,
-                    2.0 * amplitude_mm * w * w * sec2 * t,
-                ];
-                graph(z, d, y)
-            }
+            } => tangent_jet(
+                Tangent {
+                    mean_x_mm,
+                    amplitude_mm,
+                    rate_deg_per_mm,
+                    centre_z_mm,
+                },
+                (z_start_mm, z_end_mm),
+                u,
+            ),
             Curve::Profile {
                 ref spline,
                 reversed,
@@ -225,14 +201,7 @@ impl Curve {
     pub(crate) fn exprs(&self, u: Var, t1: Var, t2: Var) -> Option<CurveExprs> {
         let n = Expr::num;
         let v = Expr::var;
-        // start + d·u with d = ±1, written as a sum or a difference.
-        let along = |start: f64, d: f64| {
-            if d > 0.0 {
-                n(start).add(v(u))
-            } else {
-                n(start).sub(v(u))
-            }
-        };
+        let along = |start: f64, d: f64| along(start, d, u);
         Some(match *self {
             Curve::Ellipse {
                 centre_z_mm,
@@ -241,41 +210,24 @@ impl Curve {
                 b_mm,
                 start_deg,
                 end_deg,
-            } => {
-                let d = Self::direction(start_deg, end_deg);
-                let (ra, rb) = (a_mm * a_mm * RAD * RAD, b_mm * b_mm * RAD * RAD);
-                CurveExprs {
-                    pre: vec![
-                        (t1, along(start_deg, d).sin()),
-                        (t2, along(start_deg, d).cos()),
-                    ],
-                    z: n(centre_z_mm).add(n(a_mm).mul(v(t2))),
-                    x: n(centre_x_mm).add(n(b_mm).mul(v(t1))),
-                    // ab·RAD³ / (RAD·sqrt(a² sin² + b² cos²)), as in Jet::weight.
-                    weight: n(a_mm * b_mm * RAD * RAD * RAD).div(
-                        n(ra)
-                            .mul(v(t1).mul(v(t1)))
-                            .add(n(rb).mul(v(t2).mul(v(t2))))
-                            .sqrt(),
-                    ),
-                }
-            }
+            } => ellipse_exprs(
+                (centre_z_mm, centre_x_mm),
+                (a_mm, b_mm),
+                (start_deg, end_deg),
+                [u, t1, t2],
+            ),
             Curve::Parabola {
                 vertex_z_mm,
                 vertex_x_mm,
                 p_mm,
                 x_start_mm,
                 x_end_mm,
-            } => {
-                let d = Self::direction(x_start_mm, x_end_mm);
-                CurveExprs {
-                    pre: vec![(t1, along(x_start_mm - vertex_x_mm, d))],
-                    z: n(vertex_z_mm).add(v(t1).mul(v(t1)).div(n(2.0 * p_mm))),
-                    x: n(vertex_x_mm).add(v(t1)),
-                    weight: n(1.0 / p_mm.abs())
-                        .div(n(1.0).add(v(t1).mul(v(t1)).div(n(p_mm * p_mm))).sqrt()),
-                }
-            }
+            } => parabola_exprs(
+                (vertex_z_mm, vertex_x_mm),
+                p_mm,
+                (x_start_mm, x_end_mm),
+                [u, t1],
+            ),
             Curve::Sine {
                 mean_x_mm,
                 amplitude_mm,
@@ -309,32 +261,159 @@ impl Curve {
                 centre_z_mm,
                 z_start_mm,
                 z_end_mm,
-            } => {
-                let d = Self::direction(z_start_mm, z_end_mm);
-                let w = rate_deg_per_mm * RAD;
-                // t1 = tan, t2 = sec² = 1 + tan².
-                let slope = || n(amplitude_mm * w).mul(v(t2));
-                CurveExprs {
-                    pre: vec![
-                        (
-                            t1,
-                            along(z_start_mm - centre_z_mm, d)
-                                .mul(n(rate_deg_per_mm))
-                                .tan(),
-                        ),
-                        (t2, n(1.0).add(v(t1).mul(v(t1)))),
-                    ],
-                    z: along(z_start_mm, d),
-                    x: n(mean_x_mm).add(n(amplitude_mm).mul(v(t1))),
-                    weight: n(2.0 * amplitude_mm * w * w)
-                        .mul(v(t2))
-                        .mul(v(t1))
-                        .abs()
-                        .div(n(1.0).add(slope().mul(slope())).sqrt()),
-                }
-            }
+            } => tangent_exprs(
+                Tangent {
+                    mean_x_mm,
+                    amplitude_mm,
+                    rate_deg_per_mm,
+                    centre_z_mm,
+                },
+                (z_start_mm, z_end_mm),
+                [u, t1, t2],
+            ),
             Curve::Profile { .. } => return None,
         })
+    }
+}
+
+/// A tangent curve's shape: `x = mean + amplitude·tan(rate·(z − centre))`.
+struct Tangent {
+    mean_x_mm: f64,
+    amplitude_mm: f64,
+    rate_deg_per_mm: f64,
+    centre_z_mm: f64,
+}
+
+/// `start + d·u` with d = ±1, written as a sum or a difference.
+fn along(start: f64, d: f64, u: Var) -> Expr {
+    if d > 0.0 {
+        Expr::num(start).add(Expr::var(u))
+    } else {
+        Expr::num(start).sub(Expr::var(u))
+    }
+}
+
+/// The ellipse's jet at u: centre `(z, x)`, semi-axes `(a, b)`, angles `(start, end)`.
+fn ellipse_jet(centre_mm: (f64, f64), axes_mm: (f64, f64), span_deg: (f64, f64), u: f64) -> Jet {
+    let ((centre_z_mm, centre_x_mm), (a_mm, b_mm)) = (centre_mm, axes_mm);
+    let d = Curve::direction(span_deg.0, span_deg.1);
+    let t = (span_deg.0 + d * u) * RAD;
+    let (s, c) = t.sin_cos();
+    Jet {
+        z: centre_z_mm + a_mm * c,
+        x: centre_x_mm + b_mm * s,
+        dz: -a_mm * s * d * RAD,
+        dx: b_mm * c * d * RAD,
+        ddz: -a_mm * c * RAD * RAD,
+        ddx: -b_mm * s * RAD * RAD,
+    }
+}
+
+/// The parabola's jet at u: vertex `(z, x)`, x running from `x_mm.0` to `x_mm.1`.
+fn parabola_jet(vertex_mm: (f64, f64), p_mm: f64, x_mm: (f64, f64), u: f64) -> Jet {
+    let (vertex_z_mm, vertex_x_mm) = vertex_mm;
+    let d = Curve::direction(x_mm.0, x_mm.1);
+    let x = x_mm.0 + d * u;
+    let w = x - vertex_x_mm;
+    // Along is x, across is z here: z = z0 + w²/(2p).
+    let z = vertex_z_mm + w * w / (2.0 * p_mm);
+    Jet {
+        z,
+        x,
+        dz: w / p_mm * d,
+        dx: d,
+        ddz: 1.0 / p_mm,
+        ddx: 0.0,
+    }
+}
+
+/// The tangent curve's jet at u, z running from `z_mm.0` to `z_mm.1`.
+fn tangent_jet(k: Tangent, z_mm: (f64, f64), u: f64) -> Jet {
+    let d = Curve::direction(z_mm.0, z_mm.1);
+    let z = z_mm.0 + d * u;
+    let w = k.rate_deg_per_mm * RAD;
+    let t = ((z - k.centre_z_mm) * k.rate_deg_per_mm * RAD).tan();
+    let sec2 = 1.0 + t * t;
+    let y = [
+        k.mean_x_mm + k.amplitude_mm * t,
+        k.amplitude_mm * w * sec2,
+        2.0 * k.amplitude_mm * w * w * sec2 * t,
+    ];
+    graph(z, d, y)
+}
+
+/// The ellipse for the control, in the loop variable and the temporaries `[u, t1, t2]`.
+fn ellipse_exprs(
+    centre_mm: (f64, f64),
+    axes_mm: (f64, f64),
+    span_deg: (f64, f64),
+    [u, t1, t2]: [Var; 3],
+) -> CurveExprs {
+    let (n, v) = (Expr::num, Expr::var);
+    let ((centre_z_mm, centre_x_mm), (a_mm, b_mm)) = (centre_mm, axes_mm);
+    let (start_deg, end_deg) = span_deg;
+    let d = Curve::direction(start_deg, end_deg);
+    let (ra, rb) = (a_mm * a_mm * RAD * RAD, b_mm * b_mm * RAD * RAD);
+    CurveExprs {
+        pre: vec![
+            (t1, along(start_deg, d, u).sin()),
+            (t2, along(start_deg, d, u).cos()),
+        ],
+        z: n(centre_z_mm).add(n(a_mm).mul(v(t2))),
+        x: n(centre_x_mm).add(n(b_mm).mul(v(t1))),
+        // ab·RAD³ / (RAD·sqrt(a² sin² + b² cos²)), as in Jet::weight.
+        weight: n(a_mm * b_mm * RAD * RAD * RAD).div(
+            n(ra)
+                .mul(v(t1).mul(v(t1)))
+                .add(n(rb).mul(v(t2).mul(v(t2))))
+                .sqrt(),
+        ),
+    }
+}
+
+/// The parabola for the control, in the loop variable and the temporary `[u, t1]`.
+fn parabola_exprs(
+    vertex_mm: (f64, f64),
+    p_mm: f64,
+    x_mm: (f64, f64),
+    [u, t1]: [Var; 2],
+) -> CurveExprs {
+    let (n, v) = (Expr::num, Expr::var);
+    let (vertex_z_mm, vertex_x_mm) = vertex_mm;
+    let d = Curve::direction(x_mm.0, x_mm.1);
+    CurveExprs {
+        pre: vec![(t1, along(x_mm.0 - vertex_x_mm, d, u))],
+        z: n(vertex_z_mm).add(v(t1).mul(v(t1)).div(n(2.0 * p_mm))),
+        x: n(vertex_x_mm).add(v(t1)),
+        weight: n(1.0 / p_mm.abs()).div(n(1.0).add(v(t1).mul(v(t1)).div(n(p_mm * p_mm))).sqrt()),
+    }
+}
+
+/// The tangent curve for the control, in the loop variable and the temporaries `[u, t1, t2]`.
+fn tangent_exprs(k: Tangent, z_mm: (f64, f64), [u, t1, t2]: [Var; 3]) -> CurveExprs {
+    let (n, v) = (Expr::num, Expr::var);
+    let (z_start_mm, z_end_mm) = z_mm;
+    let d = Curve::direction(z_start_mm, z_end_mm);
+    let w = k.rate_deg_per_mm * RAD;
+    // t1 = tan, t2 = sec² = 1 + tan².
+    let slope = || n(k.amplitude_mm * w).mul(v(t2));
+    CurveExprs {
+        pre: vec![
+            (
+                t1,
+                along(z_start_mm - k.centre_z_mm, d, u)
+                    .mul(n(k.rate_deg_per_mm))
+                    .tan(),
+            ),
+            (t2, n(1.0).add(v(t1).mul(v(t1)))),
+        ],
+        z: along(z_start_mm, d, u),
+        x: n(k.mean_x_mm).add(n(k.amplitude_mm).mul(v(t1))),
+        weight: n(2.0 * k.amplitude_mm * w * w)
+            .mul(v(t2))
+            .mul(v(t1))
+            .abs()
+            .div(n(1.0).add(slope().mul(slope())).sqrt()),
     }
 }
 

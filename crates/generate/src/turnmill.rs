@@ -196,7 +196,52 @@ fn circle_stmts(job: &TurnMillJob, c: &EccentricCircle) -> Vec<Stmt> {
     } else {
         v(RAD).add(n(job.clearance_mm))
     };
-    let mut s = vec![
+    let mut s = centre_stmts(c, phi, path_r);
+    s.extend([
+        Stmt::Move {
+            motion: Motion::Rapid,
+            words: vec![(Axis::C, v(PHI))],
+            feed_mm_min: None,
+        },
+        Stmt::Move {
+            motion: Motion::Rapid,
+            words: at(from, out_r.clone()),
+            feed_mm_min: None,
+        },
+        Stmt::Move {
+            motion: Motion::Linear,
+            words: at(from, v(RAD)),
+            feed_mm_min: Some(job.feed_mm_min),
+        },
+    ]);
+    for k in 0..pieces {
+        let a0 = from + (to - from) * k as f64 / pieces as f64;
+        let a1 = from + (to - from) * (k + 1) as f64 / pieces as f64;
+        let mut words = at(a1, v(RAD));
+        // Centre relative to the arc's start point.
+        let a0m = n(a0 - phi);
+        words.push((Axis::I, n(0.0).sub(v(RAD)).mul(a0m.clone().cos())));
+        words.push((Axis::J, n(0.0).sub(v(RAD)).mul(a0m.sin())));
+        s.push(Stmt::Move {
+            motion: Motion::ArcCcw,
+            words,
+            feed_mm_min: None,
+        });
+    }
+    s.push(Stmt::Move {
+        motion: Motion::Linear,
+        words: at(to, out_r),
+        feed_mm_min: None,
+    });
+    s
+}
+
+/// The circle's header comment and the variables the control works it out from: φ, the
+/// eccentricity and phase, the path radius, and the centre (XC, YC) turned by φ.
+fn centre_stmts(c: &EccentricCircle, phi: f64, path_r: f64) -> Vec<Stmt> {
+    let n = Expr::num;
+    let v = Expr::var;
+    vec![
         Stmt::Comment(format!(
             "{}: radius {} mm at e = {} mm, phase {} deg, drawing angles {} to {} deg, safety {} deg",
             c.label,
@@ -226,40 +271,5 @@ fn circle_stmts(job: &TurnMillJob, c: &EccentricCircle) -> Vec<Stmt> {
                 .mul(n(-1.0))
                 .add(v(PHI).cos().mul(v(ECC).mul(v(PHA).sin()))),
         ),
-        Stmt::Move {
-            motion: Motion::Rapid,
-            words: vec![(Axis::C, v(PHI))],
-            feed_mm_min: None,
-        },
-        Stmt::Move {
-            motion: Motion::Rapid,
-            words: at(from, out_r.clone()),
-            feed_mm_min: None,
-        },
-        Stmt::Move {
-            motion: Motion::Linear,
-            words: at(from, v(RAD)),
-            feed_mm_min: Some(job.feed_mm_min),
-        },
-    ];
-    for k in 0..pieces {
-        let a0 = from + (to - from) * k as f64 / pieces as f64;
-        let a1 = from + (to - from) * (k + 1) as f64 / pieces as f64;
-        let mut words = at(a1, v(RAD));
-        // Centre relative to the arc's start point.
-        let a0m = n(a0 - phi);
-        words.push((Axis::I, n(0.0).sub(v(RAD)).mul(a0m.clone().cos())));
-        words.push((Axis::J, n(0.0).sub(v(RAD)).mul(a0m.sin())));
-        s.push(Stmt::Move {
-            motion: Motion::ArcCcw,
-            words,
-            feed_mm_min: None,
-        });
-    }
-    s.push(Stmt::Move {
-        motion: Motion::Linear,
-        words: at(to, out_r),
-        feed_mm_min: None,
-    });
-    s
+    ]
 }

@@ -246,15 +246,36 @@ impl GrinderConfig {
 
     /// Every problem with the settings, each naming its field; empty when all is well.
     pub fn problems(&self) -> Vec<String> {
-        let mut out = Vec::new();
-        let mut need = |ok: bool, field: &str, value: f64, rule: &str| {
-            if !ok {
-                out.push(format!("{field} = {value} {rule}"));
-            }
-        };
-        let finite = |v: f64| v.is_finite();
-        need(
-            finite(self.c_speed_rpm) && self.c_speed_rpm > 0.0,
+        let mut p = Problems(Vec::new());
+        self.check_numbers(&mut p);
+        for (i, h) in self.harmonics.iter().enumerate() {
+            p.need(
+                h.order >= 1,
+                &format!("harmonics[{i}].order"),
+                h.order as f64,
+                "must be ≥ 1",
+            );
+            p.need(
+                h.amplitude_um.is_finite(),
+                &format!("harmonics[{i}].amplitude_um"),
+                h.amplitude_um,
+                "must be a finite number",
+            );
+            p.need(
+                h.phase_deg.is_finite(),
+                &format!("harmonics[{i}].phase_deg"),
+                h.phase_deg,
+                "must be a finite number",
+            );
+        }
+        self.check_gauge(&mut p);
+        p.0
+    }
+
+    /// The machine's own numbers: speeds, lags, wear, dressing and shaft errors, sampling.
+    fn check_numbers(&self, p: &mut Problems) {
+        p.need(
+            self.c_speed_rpm.is_finite() && self.c_speed_rpm > 0.0,
             "c_speed_rpm",
             self.c_speed_rpm,
             "must be a finite number > 0",
@@ -267,8 +288,8 @@ impl GrinderConfig {
             ("dresser_infeed_sigma_um", self.dresser_infeed_sigma_um),
             ("gauge.noise_sigma_um", self.gauge.noise_sigma_um),
         ] {
-            need(
-                finite(value) && value >= 0.0,
+            p.need(
+                value.is_finite() && value >= 0.0,
                 name,
                 value,
                 "must be a finite number ≥ 0",
@@ -281,42 +302,26 @@ impl GrinderConfig {
             ("shaft.lag_deg_per_100mm", self.shaft.lag_deg_per_100mm),
             ("shaft.harmonic_spread_um", self.shaft.harmonic_spread_um),
         ] {
-            need(finite(value), name, value, "must be a finite number");
+            p.need(value.is_finite(), name, value, "must be a finite number");
         }
-        need(
+        p.need(
             (2..=1000).contains(&self.samples_per_segment),
             "samples_per_segment",
             self.samples_per_segment as f64,
             "must be within 2..=1000",
         );
-        for (i, h) in self.harmonics.iter().enumerate() {
-            need(
-                h.order >= 1,
-                &format!("harmonics[{i}].order"),
-                h.order as f64,
-                "must be ≥ 1",
-            );
-            need(
-                finite(h.amplitude_um),
-                &format!("harmonics[{i}].amplitude_um"),
-                h.amplitude_um,
-                "must be a finite number",
-            );
-            need(
-                finite(h.phase_deg),
-                &format!("harmonics[{i}].phase_deg"),
-                h.phase_deg,
-                "must be a finite number",
-            );
-        }
+    }
+
+    /// The gauge's revolutions and grid, and that every injected fault falls on them.
+    fn check_gauge(&self, p: &mut Problems) {
         let g = &self.gauge;
-        need(
+        p.need(
             g.revolutions >= 1,
             "gauge.revolutions",
             g.revolutions as f64,
             "must be ≥ 1",
         );
-        need(
+        p.need(
             (36..=36_000).contains(&g.points_per_rev),
             "gauge.points_per_rev",
             g.points_per_rev as f64,
@@ -329,7 +334,7 @@ impl GrinderConfig {
                     angle_index,
                     size_um,
                 } => {
-                    need(
+                    p.need(
                         *angle_index < g.points_per_rev,
                         &format!("gauge.faults[{i}].angle_index"),
                         *angle_index as f64,
@@ -342,19 +347,29 @@ impl GrinderConfig {
                     offset_um,
                 } => (*revolution, *offset_um),
             };
-            need(
+            p.need(
                 revolution < g.revolutions,
                 &format!("gauge.faults[{i}].revolution"),
                 revolution as f64,
                 "must be below gauge.revolutions",
             );
-            need(
-                finite(size),
+            p.need(
+                size.is_finite(),
                 &format!("gauge.faults[{i}] size"),
                 size,
                 "must be a finite number",
             );
         }
-        out
+    }
+}
+
+/// Problems found so far, each as `field = value rule`.
+struct Problems(Vec<String>);
+
+impl Problems {
+    fn need(&mut self, ok: bool, field: &str, value: f64, rule: &str) {
+        if !ok {
+            self.0.push(format!("{field} = {value} {rule}"));
+        }
     }
 }

@@ -6,7 +6,8 @@ use super::memory::GuardKind;
 use super::records::{event, keep_reject, raw_revolutions};
 use super::{FeatureLoop, Ingested};
 use crate::clock::now_ms;
-use crate::core::learn::StepOutcome;
+use crate::core::compensate::{CycleError, GuardedTable};
+use crate::core::learn::{LearningState, StepOutcome};
 use crate::core::measure::{MeasurementHeader, RawMeasurement};
 use crate::core::turn::{self, Decision, HoldReason, Measured, TurnError, measurement_sha256};
 use crate::store::{EventLevel, NewMeasurement, Verdict};
@@ -100,19 +101,7 @@ impl FeatureLoop {
         let at_ms = now_ms();
         let sha = measurement_sha256(&raw);
         if self.memory.has_seen(&sha) {
-            info!(machine = %self.name, part = %raw.header.part, origin = %raw.origin, "measurement already learned from: not learned again");
-            let message = format!(
-                "part {} from {} repeats a measurement already used",
-                raw.header.part, raw.origin
-            );
-            let e = event(
-                &self.name,
-                at_ms,
-                EventLevel::Info,
-                EventKind::MeasurementRepeated,
-                message,
-            );
-            self.record(vec![e]).await;
+            self.note_repeat(&raw, at_ms).await;
             return Ok(Ingested::Repeated);
         }
         let hold = match ground_with {
@@ -177,6 +166,31 @@ impl FeatureLoop {
             pushed: self.memory.in_force_version != ground_with,
             text,
         };
+        self.log_part_line(&line, part, ground_with);
+        self.last_line = Some(line);
+        Ok(Ingested::Recorded)
+    }
+
+    /// A measurement seen before is recorded as an event, never learned from twice.
+    async fn note_repeat(&mut self, raw: &RawMeasurement, at_ms: i64) {
+        info!(machine = %self.name, part = %raw.header.part, origin = %raw.origin, "measurement already learned from: not learned again");
+        let message = format!(
+            "part {} from {} repeats a measurement already used",
+            raw.header.part, raw.origin
+        );
+        let e = event(
+            &self.name,
+            at_ms,
+            EventLevel::Info,
+            EventKind::MeasurementRepeated,
+            message,
+        );
+        self.record(vec![e]).await;
+    }
+
+    /// The part's line in the log: INFO for a one-feature machine, else DEBUG.
+    fn log_part_line(&self, line: &PartLine, part: u64, ground_with: u64) {
+        let max_error_um = line.max_error_um;
         if self.main.table_files.len() == 1 {
             info!(
                 machine = %self.name,
@@ -208,8 +222,6 @@ impl FeatureLoop {
                 line.text
             );
         }
-        self.last_line = Some(line);
-        Ok(Ingested::Recorded)
     }
 
     /// A master part's run (see [`crate::core::measure::is_master_part`]): checked, analysed
@@ -254,73 +266,12 @@ impl FeatureLoop {
                 next,
                 table,
             } => {
-                match &outcome {
-                    StepOutcome::Reverted { reason, .. } => {
-                        error!(machine = %self.name, lobe = %self.setup.name, reason = %reason, "learning reverted and frozen: operator action needed");
-                        self.metrics.update(&self.name, |m| m.alarms_total += 1);
-                        records.push(event(
-                            &self.name,
-                            at_ms,
-                            EventLevel::Error,
-                            EventKind::LearningReverted,
-                            reason.clone(),
-                        ));
-                    }
-                    StepOutcome::Limited { bound, .. } => {
-                        let kind = GuardKind::of_bound(bound.quantity);
-                        self.guard_acted(kind, &bound.to_string(), part, at_ms, &mut records);
-                    }
-                    StepOutcome::Updated { .. } | StepOutcome::InTolerance { .. } => {
-                        self.guard_cleared(part, at_ms, &mut records);
-                    }
-                    StepOutcome::Frozen { .. } => {}
-                }
+                self.note_outcome(&outcome, part, at_ms, &mut records);
                 let reason = format!("part {part}: {outcome}");
-                match self
-                    .deliver(&table, *next, &reason, Some(sha.to_string()))
+                self.deliver_table(&table, *next, &reason, sha, &mut records)
                     .await
-                {
-                    Ok(mut more) => {
-                        records.append(&mut more);
-                        self.delivery_line()
-                    }
-                    Err(e) if self.journal.fenced_out() => {
-                        warn!(machine = %self.name, error = format!("{e:#}"), "cluster: another instance owns this machine now; table not recorded here");
-                        format!("table not recorded: {e:#}")
-                    }
-                    Err(e) => {
-                        error!(machine = %self.name, error = format!("{e:#}"), "table not recorded: previous table stays in force");
-                        format!("table not recorded: {e:#}")
-                    }
-                }
             }
-            Decision::Refused(e) => {
-                self.metrics
-                    .update(&self.name, |m| m.tables_refused_total += 1);
-                let in_a_row = self.guard_acted(
-                    GuardKind::of_refusal(&e),
-                    &e.to_string(),
-                    part,
-                    at_ms,
-                    &mut records,
-                );
-                if in_a_row == 1 {
-                    warn!(machine = %self.name, lobe = %self.setup.name, reason = %e, "table refused, previous table stays in force");
-                }
-                let level = if in_a_row == 1 {
-                    EventLevel::Warn
-                } else {
-                    EventLevel::Info
-                };
-                records.push(event(
-                    &self.name,
-                    at_ms,
-                    level,
-                    EventKind::TableRefused,
-                    format!("{} ({in_a_row} in a row): {e}", self.setup.name),
-                ));
-                format!("table refused, previous kept ({in_a_row} in a row)")
-            }
+            Decision::Refused(e) => self.note_refusal(&e, part, at_ms, &mut records),
             Decision::Held(reason) => {
                 info!(machine = %self.name, reason = %reason, "part analysed, not learned from");
                 records.push(event(
@@ -334,6 +285,101 @@ impl FeatureLoop {
             }
         };
         (records, text)
+    }
+
+    /// What a learning step's outcome means for the alarms and the guards' streaks.
+    fn note_outcome(
+        &mut self,
+        outcome: &StepOutcome,
+        part: u64,
+        at_ms: i64,
+        records: &mut Vec<Pending>,
+    ) {
+        match outcome {
+            StepOutcome::Reverted { reason, .. } => {
+                error!(machine = %self.name, lobe = %self.setup.name, reason = %reason, "learning reverted and frozen: operator action needed");
+                self.metrics.update(&self.name, |m| m.alarms_total += 1);
+                records.push(event(
+                    &self.name,
+                    at_ms,
+                    EventLevel::Error,
+                    EventKind::LearningReverted,
+                    reason.clone(),
+                ));
+            }
+            StepOutcome::Limited { bound, .. } => {
+                let kind = GuardKind::of_bound(bound.quantity);
+                self.guard_acted(kind, &bound.to_string(), part, at_ms, records);
+            }
+            StepOutcome::Updated { .. } | StepOutcome::InTolerance { .. } => {
+                self.guard_cleared(part, at_ms, records);
+            }
+            StepOutcome::Frozen { .. } => {}
+        }
+    }
+
+    /// Delivers a new table; returns the log line. A table not recorded leaves the one in
+    /// force (quietly when another instance of the cluster owns the machine now).
+    async fn deliver_table(
+        &mut self,
+        table: &GuardedTable,
+        next: LearningState,
+        reason: &str,
+        sha: &str,
+        records: &mut Vec<Pending>,
+    ) -> String {
+        match self
+            .deliver(table, next, reason, Some(sha.to_string()))
+            .await
+        {
+            Ok(mut more) => {
+                records.append(&mut more);
+                self.delivery_line()
+            }
+            Err(e) if self.journal.fenced_out() => {
+                warn!(machine = %self.name, error = format!("{e:#}"), "cluster: another instance owns this machine now; table not recorded here");
+                format!("table not recorded: {e:#}")
+            }
+            Err(e) => {
+                error!(machine = %self.name, error = format!("{e:#}"), "table not recorded: previous table stays in force");
+                format!("table not recorded: {e:#}")
+            }
+        }
+    }
+
+    /// A refused table: counted, its guard's streak extended, warned about once per streak.
+    fn note_refusal(
+        &mut self,
+        e: &CycleError,
+        part: u64,
+        at_ms: i64,
+        records: &mut Vec<Pending>,
+    ) -> String {
+        self.metrics
+            .update(&self.name, |m| m.tables_refused_total += 1);
+        let in_a_row = self.guard_acted(
+            GuardKind::of_refusal(e),
+            &e.to_string(),
+            part,
+            at_ms,
+            records,
+        );
+        if in_a_row == 1 {
+            warn!(machine = %self.name, lobe = %self.setup.name, reason = %e, "table refused, previous table stays in force");
+        }
+        let level = if in_a_row == 1 {
+            EventLevel::Warn
+        } else {
+            EventLevel::Info
+        };
+        records.push(event(
+            &self.name,
+            at_ms,
+            level,
+            EventKind::TableRefused,
+            format!("{} ({in_a_row} in a row): {e}", self.setup.name),
+        ));
+        format!("table refused, previous kept ({in_a_row} in a row)")
     }
 
     fn measurement_record(

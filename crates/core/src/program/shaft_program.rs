@@ -5,7 +5,7 @@
 use super::ProgramSettings;
 use super::main_program::{MainProgramSettings, coupled_revolutions};
 use super::names::validate_axis_name;
-use super::settings::{SettingError, SettingsErrors, check_comments, check_positive};
+use super::settings::{Resolved, SettingError, SettingsErrors, check_comments, check_positive};
 use super::syntax::{Statement, lines};
 use super::table::{NUMBER_VAR, fmt_fixed, line};
 
@@ -63,45 +63,7 @@ pub fn render_shaft_program(
     stations: &[Station<'_>],
     clear_x_mm: f64,
 ) -> Result<String, SettingsErrors> {
-    let mut errors = Vec::new();
-    if stations.is_empty() {
-        errors.push(SettingError::NoFeatures);
-    }
-    let mut resolved = Vec::new();
-    for s in stations {
-        match s.table.resolve_for_main() {
-            Ok(r) => resolved.push(r),
-            Err(e) => errors.extend(e.0),
-        }
-        if !s.z_mm.is_finite() {
-            errors.push(SettingError::NotFinite {
-                field: "z_mm",
-                value: s.z_mm,
-            });
-        }
-    }
-    if !(1..=999).contains(&main.resume_r_param) {
-        errors.push(SettingError::NotPositive {
-            field: "resume_r_param",
-            value: f64::from(main.resume_r_param),
-        });
-    }
-    if let Err(e) = validate_axis_name("axial", &main.axial_axis) {
-        errors.push(e.into());
-    }
-    check_positive(&mut errors, "revolutions", main.revolutions);
-    check_positive(&mut errors, "c_speed_rpm", main.c_speed_rpm);
-    check_positive(&mut errors, "x_feed_mm_min", main.x_feed_mm_min);
-    check_comments(&mut errors, &main.comment_lines);
-    if !clear_x_mm.is_finite() {
-        errors.push(SettingError::NotFinite {
-            field: "clear_x_mm",
-            value: clear_x_mm,
-        });
-    }
-    if !errors.is_empty() {
-        return Err(SettingsErrors(errors));
-    }
+    let resolved = check_shaft_program(main, stations, clear_x_mm)?;
     let first = &resolved[0];
     let (x, c, n) = (&first.following, &first.leading, NUMBER_VAR);
     let xd = usize::from(first.settings.x_decimals);
@@ -167,6 +129,54 @@ pub fn render_shaft_program(
     line(&mut out, format_args!("G0 {x}={clear}"));
     out.push_str("M30\n");
     Ok(out)
+}
+
+/// Every problem with the settings at once; the stations' resolved tables when none.
+fn check_shaft_program<'a>(
+    main: &MainProgramSettings,
+    stations: &[Station<'a>],
+    clear_x_mm: f64,
+) -> Result<Vec<Resolved<'a>>, SettingsErrors> {
+    let mut errors = Vec::new();
+    if stations.is_empty() {
+        errors.push(SettingError::NoFeatures);
+    }
+    let mut resolved = Vec::new();
+    for s in stations {
+        match s.table.resolve_for_main() {
+            Ok(r) => resolved.push(r),
+            Err(e) => errors.extend(e.0),
+        }
+        if !s.z_mm.is_finite() {
+            errors.push(SettingError::NotFinite {
+                field: "z_mm",
+                value: s.z_mm,
+            });
+        }
+    }
+    if !(1..=999).contains(&main.resume_r_param) {
+        errors.push(SettingError::NotPositive {
+            field: "resume_r_param",
+            value: f64::from(main.resume_r_param),
+        });
+    }
+    if let Err(e) = validate_axis_name("axial", &main.axial_axis) {
+        errors.push(e.into());
+    }
+    check_positive(&mut errors, "revolutions", main.revolutions);
+    check_positive(&mut errors, "c_speed_rpm", main.c_speed_rpm);
+    check_positive(&mut errors, "x_feed_mm_min", main.x_feed_mm_min);
+    check_comments(&mut errors, &main.comment_lines);
+    if !clear_x_mm.is_finite() {
+        errors.push(SettingError::NotFinite {
+            field: "clear_x_mm",
+            value: clear_x_mm,
+        });
+    }
+    if !errors.is_empty() {
+        return Err(SettingsErrors(errors));
+    }
+    Ok(resolved)
 }
 
 /// The resume subprogram: hands the main program the first feature to grind (from 1).

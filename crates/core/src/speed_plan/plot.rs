@@ -35,20 +35,28 @@ pub fn render_plan_svg(plan: &SpeedPlan, title: &str) -> String {
         "<text x=\"{LEFT_PX}\" y=\"24\" font-size=\"15\">{}</text>",
         escape(title)
     );
+    speed_panel(&mut o, plan);
+    usage_panel(&mut o, plan);
+    o.push_str("</svg>\n");
+    o
+}
+
+/// The top panel: the planned C speed against the fastest constant one, with their legend.
+fn speed_panel(o: &mut String, plan: &SpeedPlan) {
     let speed_max = plan
         .points
         .iter()
         .map(|p| p.speed_rpm)
         .fold(plan.constant.speed_rpm, f64::max);
     let speed_top = nice_ceiling(speed_max * 1.05);
-    frame(&mut o, SPEED_TOP_PX, SPEED_H_PX, speed_top, "C speed, rpm");
+    frame(o, SPEED_TOP_PX, SPEED_H_PX, speed_top, "C speed, rpm");
     let constant: Vec<(f64, f64)> = plan
         .points
         .iter()
         .map(|p| (p.c_deg, plan.constant.speed_rpm))
         .collect();
     polyline(
-        &mut o,
+        o,
         &constant,
         SPEED_TOP_PX,
         SPEED_H_PX,
@@ -58,7 +66,7 @@ pub fn render_plan_svg(plan: &SpeedPlan, title: &str) -> String {
     );
     let speed: Vec<(f64, f64)> = plan.points.iter().map(|p| (p.c_deg, p.speed_rpm)).collect();
     polyline(
-        &mut o,
+        o,
         &speed,
         SPEED_TOP_PX,
         SPEED_H_PX,
@@ -85,7 +93,7 @@ pub fn render_plan_svg(plan: &SpeedPlan, title: &str) -> String {
     ];
     for (i, (colour, dash, text)) in legend.iter().enumerate() {
         legend_row(
-            &mut o,
+            o,
             LEFT_PX + 10.0 + 400.0 * i as f64,
             SPEED_TOP_PX - 8.0,
             colour,
@@ -93,16 +101,14 @@ pub fn render_plan_svg(plan: &SpeedPlan, title: &str) -> String {
             text,
         );
     }
-    frame(
-        &mut o,
-        USAGE_TOP_PX,
-        USAGE_H_PX,
-        110.0,
-        "usage of each limit, %",
-    );
+}
+
+/// The bottom panel: each limit's usage in per cent over C, with the 100 % line.
+fn usage_panel(o: &mut String, plan: &SpeedPlan) {
+    frame(o, USAGE_TOP_PX, USAGE_H_PX, 110.0, "usage of each limit, %");
     let limit_line = [(0.0, 100.0), (360.0, 100.0)];
     polyline(
-        &mut o,
+        o,
         &limit_line,
         USAGE_TOP_PX,
         USAGE_H_PX,
@@ -116,16 +122,14 @@ pub fn render_plan_svg(plan: &SpeedPlan, title: &str) -> String {
             .iter()
             .map(|p| (p.c_deg, 100.0 * p.usage[*c as usize]))
             .collect();
-        polyline(&mut o, &usage, USAGE_TOP_PX, USAGE_H_PX, 110.0, colour, "");
+        polyline(o, &usage, USAGE_TOP_PX, USAGE_H_PX, 110.0, colour, "");
     }
     for (i, (c, colour)) in Constraint::ALL.iter().zip(COLOURS).enumerate() {
         let x = LEFT_PX + 10.0 + 270.0 * (i % 3) as f64;
         let y = USAGE_TOP_PX + USAGE_H_PX + 50.0 + 20.0 * (i / 3) as f64;
         let text = format!("{} (max {:.1} %)", c.name(), 100.0 * plan.max_usage(*c));
-        legend_row(&mut o, x, y, colour, "", &text);
+        legend_row(o, x, y, colour, "", &text);
     }
-    o.push_str("</svg>\n");
-    o
 }
 
 fn x_px(c_deg: f64) -> f64 {

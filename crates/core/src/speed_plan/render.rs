@@ -80,23 +80,7 @@ pub fn render_va_table_program(
     tables: &VaTables,
     s: &VaProgramSettings,
 ) -> Result<String, VaProgramError> {
-    let name = validate_program_name(&s.name).map_err(|e| VaProgramError::Name(e.to_string()))?;
-    let axis = |role: &'static str, n: &str| {
-        validate_axis_name(role, n).map_err(|e| VaProgramError::Name(e.to_string()))
-    };
-    let (va, x, c) = (
-        axis("virtual leading", &s.virtual_axis)?,
-        axis("following", &s.x_axis)?,
-        axis("leading", &s.c_axis)?,
-    );
-    if s.x_table == s.c_table {
-        return Err(VaProgramError::SameNumber(s.x_table));
-    }
-    if let Some(bad) = s.comment_lines.iter().find(|l| !printable(l)) {
-        return Err(VaProgramError::Name(format!(
-            "comment line {bad:?} is not printable ASCII"
-        )));
-    }
+    let [name, va, x, c] = checked_va_names(s)?;
     let mut o = String::new();
     let _ = writeln!(o, "%_N_{name}_SPF\n;$PATH=/_N_SPF_DIR");
     let _ = writeln!(
@@ -135,15 +119,6 @@ pub fn render_va_table_program(
     o.push_str("G90 G71 ; absolute, metric: the table sets what it relies on, not the caller\n");
     let _ = writeln!(o, "CL_TNO={} ; the X table's number", s.x_table);
     let _ = writeln!(o, "{C_NUMBER_VAR}={} ; the C table's number", s.c_table);
-    let shifted = |segments: &[PolySegment], by: f64| -> Vec<PolySegment> {
-        segments
-            .iter()
-            .map(|seg| PolySegment {
-                x0_mm: seg.x0_mm + by,
-                ..*seg
-            })
-            .collect()
-    };
     poly_table(
         &mut o,
         &shifted(&tables.x_segments, s.x_offset_mm),
@@ -164,6 +139,40 @@ pub fn render_va_table_program(
     );
     o.push_str("RET\n");
     Ok(o)
+}
+
+/// The subprogram's name and its virtual, X and C axes, canonical; checked with the table
+/// numbers and comments before anything is written.
+fn checked_va_names(s: &VaProgramSettings) -> Result<[String; 4], VaProgramError> {
+    let name = validate_program_name(&s.name).map_err(|e| VaProgramError::Name(e.to_string()))?;
+    let axis = |role: &'static str, n: &str| {
+        validate_axis_name(role, n).map_err(|e| VaProgramError::Name(e.to_string()))
+    };
+    let (va, x, c) = (
+        axis("virtual leading", &s.virtual_axis)?,
+        axis("following", &s.x_axis)?,
+        axis("leading", &s.c_axis)?,
+    );
+    if s.x_table == s.c_table {
+        return Err(VaProgramError::SameNumber(s.x_table));
+    }
+    if let Some(bad) = s.comment_lines.iter().find(|l| !printable(l)) {
+        return Err(VaProgramError::Name(format!(
+            "comment line {bad:?} is not printable ASCII"
+        )));
+    }
+    Ok([name, va, x, c])
+}
+
+/// The segments with their value shifted by `by` (the axis offset).
+fn shifted(segments: &[PolySegment], by: f64) -> Vec<PolySegment> {
+    segments
+        .iter()
+        .map(|seg| PolySegment {
+            x0_mm: seg.x0_mm + by,
+            ..*seg
+        })
+        .collect()
 }
 
 fn printable(text: &str) -> bool {
@@ -309,33 +318,7 @@ pub fn render_va_shaft_program(
     clear_x_mm: f64,
 ) -> Result<String, VaProgramError> {
     use crate::program::{FROM_VAR, RESUME_PROGRAM};
-    let name_error = |e: &dyn std::fmt::Display| VaProgramError::Name(e.to_string());
-    let main_name = validate_program_name(&main.name).map_err(|e| name_error(&e))?;
-    let Some(first) = stations.first() else {
-        return Err(VaProgramError::Name(
-            "a shaft program needs at least one feature".into(),
-        ));
-    };
-    let z = validate_axis_name("axial", &main.axial_axis).map_err(|e| name_error(&e))?;
-    let bad = |v: f64| !(v.is_finite() && v > 0.0);
-    if let Some(st) = stations
-        .iter()
-        .find(|st| bad(st.va_speed_rpm) || !st.z_mm.is_finite())
-    {
-        return Err(VaProgramError::Name(format!(
-            "feature {}: virtual axis speed {} rpm and station {} mm must be finite (speed > 0)",
-            st.label, st.va_speed_rpm, st.z_mm
-        )));
-    }
-    if bad(main.revolutions) || bad(main.x_feed_mm_min) || !clear_x_mm.is_finite() {
-        return Err(VaProgramError::Name(
-            "revolutions and x_feed_mm_min must be > 0, the clearance finite".into(),
-        ));
-    }
-    let names = stations
-        .iter()
-        .map(|st| validate_program_name(&st.table.name).map_err(|e| name_error(&e)))
-        .collect::<Result<Vec<_>, _>>()?;
+    let (main_name, first, z, names) = checked_va_shaft(main, stations, clear_x_mm)?;
     let (x, r) = (&first.table.x_axis, main.resume_r_param);
     let mut o = String::new();
     let _ = writeln!(o, "%_N_{main_name}_MPF\n;$PATH=/_N_MPF_DIR");
@@ -388,4 +371,41 @@ pub fn render_va_shaft_program(
     }
     let _ = writeln!(o, "G0 {x}={clear}\nM30");
     Ok(o)
+}
+
+/// The main program's name, the first station, the axial axis and each feature's
+/// subprogram name, once the settings and every station are sound.
+fn checked_va_shaft<'a, 's>(
+    main: &crate::program::MainProgramSettings,
+    stations: &'s [VaStation<'a>],
+    clear_x_mm: f64,
+) -> Result<(String, &'s VaStation<'a>, String, Vec<String>), VaProgramError> {
+    let name_error = |e: &dyn std::fmt::Display| VaProgramError::Name(e.to_string());
+    let main_name = validate_program_name(&main.name).map_err(|e| name_error(&e))?;
+    let Some(first) = stations.first() else {
+        return Err(VaProgramError::Name(
+            "a shaft program needs at least one feature".into(),
+        ));
+    };
+    let z = validate_axis_name("axial", &main.axial_axis).map_err(|e| name_error(&e))?;
+    let bad = |v: f64| !(v.is_finite() && v > 0.0);
+    if let Some(st) = stations
+        .iter()
+        .find(|st| bad(st.va_speed_rpm) || !st.z_mm.is_finite())
+    {
+        return Err(VaProgramError::Name(format!(
+            "feature {}: virtual axis speed {} rpm and station {} mm must be finite (speed > 0)",
+            st.label, st.va_speed_rpm, st.z_mm
+        )));
+    }
+    if bad(main.revolutions) || bad(main.x_feed_mm_min) || !clear_x_mm.is_finite() {
+        return Err(VaProgramError::Name(
+            "revolutions and x_feed_mm_min must be > 0, the clearance finite".into(),
+        ));
+    }
+    let names = stations
+        .iter()
+        .map(|st| validate_program_name(&st.table.name).map_err(|e| name_error(&e)))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok((main_name, first, z, names))
 }

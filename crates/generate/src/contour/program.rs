@@ -68,6 +68,27 @@ pub(super) fn build_program(
         s.push(mv(Motion::Rapid, vec![(Axis::X, n(x_far))], None));
         s
     };
+    let mut body = roughing_stmts(job, offsets, &approach);
+    body.push(Stmt::Comment("finish pass".to_owned()));
+    body.push(Stmt::Assign(OFS, n(0.0)));
+    body.extend(approach(FINISH_LABEL, job.finish_feed_mm_min));
+    Program {
+        name,
+        plane: Plane::Zx,
+        vars: vec![U, DU, T1, T2, OFS],
+        comments: header_comments(job, law, points, comp, span),
+        body,
+    }
+}
+
+/// The roughing passes, when the job has them: one pass (`approach`) in a loop that steps
+/// the offset down to the finishing allowance.
+fn roughing_stmts(
+    job: &ContourJob,
+    offsets: &[f64],
+    approach: &dyn Fn(u16, f64) -> Vec<Stmt>,
+) -> Vec<Stmt> {
+    let n = Expr::num;
     let mut body = Vec::new();
     if let (Some(r), Some(&first)) = (job.roughing, offsets.first()) {
         let dd = (r.stock_mm - r.allowance_mm) / offsets.len() as f64;
@@ -90,34 +111,36 @@ pub(super) fn build_program(
             },
         });
     }
-    body.push(Stmt::Comment("finish pass".to_owned()));
-    body.push(Stmt::Assign(OFS, n(0.0)));
-    body.extend(approach(FINISH_LABEL, job.finish_feed_mm_min));
+    body
+}
+
+/// The program's header: the chords' tolerance, the step law and the tool's side.
+fn header_comments(
+    job: &ContourJob,
+    law: StepLaw,
+    points: &[(f64, f64)],
+    comp: Compensation,
+    span: f64,
+) -> Vec<String> {
     let side = match comp {
         Compensation::Left => "G41 (tool left of the travel)",
         _ => "G42 (tool right of the travel)",
     };
-    Program {
-        name,
-        plane: Plane::Zx,
-        vars: vec![U, DU, T1, T2, OFS],
-        comments: vec![
-            format!(
-                "contour: {} chords within {:.2} um of the exact curve",
-                points.len() - 1,
-                job.tolerance_mm * 1e3
-            ),
-            format!(
-                "step law: du = {} / sqrt(w(u) + {}), u from 0 to {}",
-                law.kf, law.c0, span
-            ),
-            format!(
-                "nose radius {:.3} mm, {side} in the Z-X plane seen with Z right and X up",
-                job.nose_radius_mm
-            ),
-        ],
-        body,
-    }
+    vec![
+        format!(
+            "contour: {} chords within {:.2} um of the exact curve",
+            points.len() - 1,
+            job.tolerance_mm * 1e3
+        ),
+        format!(
+            "step law: du = {} / sqrt(w(u) + {}), u from 0 to {}",
+            law.kf, law.c0, span
+        ),
+        format!(
+            "nose radius {:.3} mm, {side} in the Z-X plane seen with Z right and X up",
+            job.nose_radius_mm
+        ),
+    ]
 }
 
 const ROUGH_LABEL: u16 = 1;
