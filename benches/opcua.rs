@@ -213,7 +213,9 @@ async fn subscriber(
             Duration::from_millis(100),
             100,
             10,
-            0,
+            // At most 500 values a reply: the default client decodes messages up to 64 KiB
+            // in a few chunks, and a reply with every changed value outgrows it.
+            500,
             0,
             true,
             DataChangeCallback::new(move |_, _| {
