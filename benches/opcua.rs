@@ -14,7 +14,7 @@
 
 #[path = "support/mod.rs"]
 mod support;
-use support::{measurements, scratch_root};
+use support::{measurements, percentiles, scratch_root};
 
 use camloop::recipe::Recipe;
 use camloop::service::machine::{MachineLoop, MachinePaths, SourceEvent, StoreHandle};
@@ -366,19 +366,6 @@ impl Publishing {
         let _ = self.shutdown.send(true);
         self.runtime.shutdown_timeout(Duration::from_secs(5));
     }
-}
-
-/// "p50 …, p99 …, max …" in ms of a non-empty list of durations.
-fn percentiles(samples: &mut [Duration]) -> String {
-    samples.sort();
-    let ms = |d: Duration| d.as_secs_f64() * 1e3;
-    let pct = |p: f64| ms(samples[((samples.len() as f64 - 1.0) * p).round() as usize]);
-    format!(
-        "p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms",
-        pct(0.5),
-        pct(0.99),
-        samples.last().map_or(0.0, |&d| ms(d))
-    )
 }
 
 criterion_group! {

@@ -5,6 +5,7 @@ use camloop::core::measure::RawMeasurement;
 use camloop::recipe::Recipe;
 use camloop::sim::{CommandedTable, GrinderConfig, PartLabels, SimGrinder, Workpiece};
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 /// Twenty simulated measurements of the demo lobe ground with its nominal table.
 pub fn measurements(points: u32) -> Vec<RawMeasurement> {
@@ -42,4 +43,17 @@ pub fn scratch_root() -> PathBuf {
     } else {
         PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
     }
+}
+
+/// "p50 …, p99 …, max …" in ms of a non-empty list of durations.
+pub fn percentiles(samples: &mut [Duration]) -> String {
+    samples.sort();
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    let pct = |p: f64| ms(samples[((samples.len() as f64 - 1.0) * p).round() as usize]);
+    format!(
+        "p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms",
+        pct(0.5),
+        pct(0.99),
+        samples.last().map_or(0.0, |&d| ms(d))
+    )
 }
