@@ -202,6 +202,11 @@ impl FeatureLoop {
                 Ok((TableStatus::Pushed, "pushed to the share".into(), records))
             }
             Err(PushError::Share { version, error: e }) => {
+                // Parts ground while the learning's tables cannot reach the control say
+                // nothing about the learning: the divergence guard's history restarts, or
+                // the wear of the outage (and a dressing in it) would be taken for the
+                // learning diverging as soon as the share is back.
+                self.memory.learning.recent_max_error_um.clear();
                 if self.memory.waiting.is_none() {
                     // Said once per outage, not per part.
                     error!(machine = %self.name, error = %e, in_force = self.memory.in_force_version, "controller share: table not delivered; learning holds on the table in force");
