@@ -293,7 +293,7 @@ fn text(value: &str, max_chars: usize) -> String {
 
 /// `DD.MM.YYYY/HH:MM:SS` (K0004), UTC.
 fn time(ms: i64) -> String {
-    crate::clock::utc_format(ms, "%d.%m.%Y/%H:%M:%S")
+    crate::clock::utc_format(crate::clock::from_ms_clamped(ms), "%d.%m.%Y/%H:%M:%S")
 }
 
 #[cfg(test)]

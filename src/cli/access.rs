@@ -231,7 +231,8 @@ async fn user(store: &Store, action: UserAction, hash: Option<&str>) -> anyhow::
                 } else {
                     "enabled"
                 };
-                let created = crate::clock::utc_text(u64::try_from(u.created_at_ms).unwrap_or(0));
+                let created =
+                    crate::clock::utc_text(crate::clock::from_ms_clamped(u.created_at_ms));
                 println!(
                     "{:<32} {:<9} {:<20} {state}",
                     u.name,
@@ -306,7 +307,8 @@ async fn token(store: &Store, action: TokenAction) -> anyhow::Result<()> {
                     (None, true) => "expired",
                     (None, false) => "live",
                 };
-                let expires = crate::clock::utc_text(u64::try_from(t.expires_at_ms).unwrap_or(0));
+                let expires =
+                    crate::clock::utc_text(crate::clock::from_ms_clamped(t.expires_at_ms));
                 println!(
                     "{:>5} {:<32} {:<9} {:<20} {:<8} {}",
                     t.id.0,
@@ -364,7 +366,7 @@ async fn create_token(
     eprintln!(
         "token {} for {name} ({role}), valid until {} UTC; shown once, keep it secret:",
         id.0,
-        crate::clock::utc_text(u64::try_from(expires_at_ms).unwrap_or(0))
+        crate::clock::utc_text(crate::clock::from_ms_clamped(expires_at_ms))
     );
     println!("{secret}");
     Ok(())
@@ -416,7 +418,7 @@ async fn print_trail(store: &Store, since_ms: i64) -> anyhow::Result<()> {
         after = last.id;
         for r in &rows {
             let e = &r.entry;
-            let t = crate::clock::utc_text(u64::try_from(e.at_ms).unwrap_or(0));
+            let t = crate::clock::utc_text(crate::clock::from_ms_clamped(e.at_ms));
             let target = [
                 e.machine.clone(),
                 e.feature.clone(),

@@ -308,12 +308,14 @@ pub(crate) fn parse_time(text: &str, now_ms: i64) -> anyhow::Result<i64> {
     if t.chars().all(|c| c.is_ascii_digit()) && t.len() > 8 {
         return t.parse().map_err(|_| bad());
     }
-    crate::clock::parse_utc(t).ok_or_else(bad)
+    crate::clock::parse_utc(t)
+        .map(|at| at.as_millisecond())
+        .ok_or_else(bad)
 }
 
 /// `MM-DD HH:MM:SS` in UTC, enough to tell parts apart in a terminal.
 fn format_time(ms: i64) -> String {
-    crate::clock::utc_format(ms, "%m-%d %H:%M:%S")
+    crate::clock::utc_format(crate::clock::from_ms_clamped(ms), "%m-%d %H:%M:%S")
 }
 
 #[cfg(test)]

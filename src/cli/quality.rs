@@ -97,7 +97,7 @@ pub(crate) fn run_capability(args: CapabilityArgs) -> anyhow::Result<()> {
                 } else {
                     format!(
                         " from {}",
-                        crate::clock::utc_text(u64::try_from(*since).unwrap_or(0))
+                        crate::clock::utc_text(crate::clock::from_ms_clamped(*since))
                     )
                 };
                 let title = format!(

@@ -39,6 +39,7 @@ mod pack_numbers;
 mod pack_report;
 mod tables;
 mod types;
+pub mod unix_ms;
 mod users;
 mod views;
 

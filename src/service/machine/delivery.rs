@@ -6,7 +6,7 @@ use super::FeatureLoop;
 use super::MachineError;
 use super::memory::{TableLearning, WaitingTable};
 use super::records::event;
-use crate::clock::{now_ms, now_ms_u64};
+use crate::clock::now_ms;
 use crate::core::compensate::GuardedTable;
 use crate::core::learn::LearningState;
 use crate::core::program::{Provenance, comment_text};
@@ -159,7 +159,7 @@ impl FeatureLoop {
             measurement_id: draft.measurement_id,
             learning: serde_json::to_value(draft.learning.summary())?,
             rollback_of: draft.rollback_of,
-            created_at_unix_ms: draft.at_ms as u64,
+            created_at_unix_ms: crate::clock::from_ms_clamped(draft.at_ms),
         })
     }
 
@@ -293,7 +293,7 @@ impl FeatureLoop {
             camloop_version: env!("CARGO_PKG_VERSION").to_string(),
             table_version: version,
             parent_version: (parent > 0).then_some(parent),
-            created_utc: crate::clock::utc_text(now_ms_u64()),
+            created_utc: crate::clock::utc_text(crate::clock::now()),
             recipe: self.setup.part.clone(),
             feature: self.setup.name.clone(),
             correction_sha256: crate::core::turn::correction_sha256(&learning.correction_um),

@@ -7,7 +7,7 @@ use super::super::journal::{EventKind, Journal, Pending};
 use super::super::metrics::Metrics;
 use super::memory::LoopMemory;
 use super::{MachinePaths, MainProgram, StoreHandle, records};
-use crate::clock::{now_ms, now_ms_u64};
+use crate::clock::{now, now_ms};
 use crate::core::compensate::{self, LobeLoop};
 use crate::core::turn::HoldReason;
 use crate::recipe::FeatureSetup;
@@ -74,7 +74,7 @@ impl FeatureLoop {
             table_pair: setup.table_pair,
             keep_versions: 50,
         };
-        let (mut share, report) = Share::open(config, Box::new(RealFs), Box::new(now_ms_u64))
+        let (mut share, report) = Share::open(config, Box::new(RealFs), Box::new(now))
             .with_context(|| format!("machine {name}: cannot open the share state"))?;
         if let Some(fence) = fence {
             // Every write for this feature (journal, store, share) is fenced from here on.

@@ -9,7 +9,7 @@ use maud::{DOCTYPE, Markup, html};
 
 /// `YYYY-MM-DD HH:MM:SS` UTC.
 pub(super) fn when(ms: i64) -> String {
-    crate::clock::utc_format(ms, "%Y-%m-%d %H:%M:%S")
+    crate::clock::utc_format(crate::clock::from_ms_clamped(ms), "%Y-%m-%d %H:%M:%S")
 }
 
 /// The address of a feature's pages.
