@@ -11,12 +11,6 @@ pub fn now() -> Timestamp {
     Timestamp::now()
 }
 
-/// The current instant as milliseconds since the Unix epoch, for the records that still
-/// carry integer milliseconds.
-pub fn now_ms() -> i64 {
-    now().as_millisecond()
-}
-
 /// An instant as `YYYY-MM-DDTHH:MM:SSZ` (UTC), for provenance written into programs.
 pub(crate) fn utc_text(at: Timestamp) -> String {
     utc_format(at, "%Y-%m-%dT%H:%M:%SZ")
@@ -25,16 +19,6 @@ pub(crate) fn utc_text(at: Timestamp) -> String {
 /// An instant in UTC, written by a `strftime` pattern (jiff's).
 pub(crate) fn utc_format(at: Timestamp, pattern: &str) -> String {
     at.strftime(pattern).to_string()
-}
-
-/// Unix milliseconds as an instant; values outside jiff's range (years −9999 to 9999) are
-/// clamped to its ends, for display of integers read from elsewhere.
-pub(crate) fn from_ms_clamped(unix_ms: i64) -> Timestamp {
-    Timestamp::from_millisecond(unix_ms).unwrap_or(if unix_ms < 0 {
-        Timestamp::MIN
-    } else {
-        Timestamp::MAX
-    })
 }
 
 /// A UTC date or time: `2026-11-21` (midnight), `2026-11-21T10:00:00` or an RFC 3339 time

@@ -9,6 +9,8 @@
 use jiff::Timestamp;
 use serde::{Deserialize, Deserializer, Serializer};
 
+use super::error::StoreError;
+
 /// Writes an instant as its integer milliseconds since the Unix epoch.
 pub fn serialize<S: Serializer>(at: &Timestamp, s: S) -> Result<S::Ok, S::Error> {
     s.serialize_i64(at.as_millisecond())
@@ -44,6 +46,20 @@ pub mod option {
 pub fn from_ms(unix_ms: i64) -> Result<Timestamp, String> {
     Timestamp::from_millisecond(unix_ms)
         .map_err(|_| format!("{unix_ms} ms is not a time within the years -9999 to 9999"))
+}
+
+/// An instant from an integer-millisecond column. A stored value outside jiff's range (only
+/// another program could have written it) is refused, naming the column, never clamped.
+pub(crate) fn instant(unix_ms: i64, column: &'static str) -> Result<Timestamp, StoreError> {
+    from_ms(unix_ms).map_err(|why| StoreError::invalid(column, format!("stored value {why}")))
+}
+
+/// [`instant`] of a column that may be NULL.
+pub(crate) fn instant_opt(
+    unix_ms: Option<i64>,
+    column: &'static str,
+) -> Result<Option<Timestamp>, StoreError> {
+    unix_ms.map(|ms| instant(ms, column)).transpose()
 }
 
 #[cfg(test)]
@@ -82,5 +98,10 @@ mod tests {
             err.contains("9223372036854775807 ms is not a time"),
             "{err}"
         );
+        let err = super::instant(i64::MIN, "received_at_ms").unwrap_err();
+        assert_eq!(err.code(), "invalid");
+        assert!(err.to_string().contains("received_at_ms"), "{err}");
+        assert!(super::instant_opt(Some(253_402_300_800_000), "x").is_err());
+        assert_eq!(super::instant_opt(None, "x").unwrap(), None);
     }
 }
