@@ -43,7 +43,7 @@ pub mod option {
 }
 
 /// Integer milliseconds as an instant, or why not.
-pub fn from_ms(unix_ms: i64) -> Result<Timestamp, String> {
+pub(crate) fn from_ms(unix_ms: i64) -> Result<Timestamp, String> {
     Timestamp::from_millisecond(unix_ms)
         .map_err(|_| format!("{unix_ms} ms is not a time within the years -9999 to 9999"))
 }
