@@ -56,13 +56,21 @@ async fn errors(dir: &Path) -> Vec<(i64, f64)> {
     let mut rows: Vec<(i64, String)> = Vec::new();
     let mut after = None;
     loop {
-        let page = store.export(0, i64::MAX, after, 500).await.unwrap();
+        let page = store
+            .export(
+                jiff::Timestamp::UNIX_EPOCH,
+                jiff::Timestamp::MAX,
+                after,
+                500,
+            )
+            .await
+            .unwrap();
         let Some(last) = page.last() else { break };
         after = Some(last.summary.id);
         rows.extend(
             page.into_iter()
                 .filter(|d| d.summary.machine == "SIM1")
-                .map(|d| (d.summary.received_at_ms, d.analysis_json)),
+                .map(|d| (d.summary.received_at_ms.as_millisecond(), d.analysis_json)),
         );
     }
     rows.into_iter()
@@ -116,7 +124,7 @@ async fn outage(back_after: u64, total: u64) -> Outage {
     immutable(&share, true);
     wait_for_parts(addr, back_after).await;
     immutable(&share, false);
-    let back_at_ms = camloop::clock::now_ms();
+    let back_at_ms = camloop::clock::now().as_millisecond();
     running.machines_done().await;
     running.stop().await;
 

@@ -17,6 +17,11 @@ pub fn sha_of(text: &str) -> String {
         .collect()
 }
 
+/// Unix milliseconds as an instant (the test values are all within jiff's years).
+pub fn ms(unix_ms: i64) -> jiff::Timestamp {
+    jiff::Timestamp::from_millisecond(unix_ms).unwrap()
+}
+
 /// A measurement whose values all derive from `n`, so the test can predict every column.
 pub fn measurement(machine: &str, lobe: &str, n: u32, received_at_ms: i64) -> NewMeasurement {
     let points = 36;
@@ -32,7 +37,7 @@ pub fn measurement(machine: &str, lobe: &str, n: u32, received_at_ms: i64) -> Ne
         machine: MachineName::new(machine).unwrap(),
         part: format!("P-{n:05}"),
         lobe: lobe.into(),
-        received_at_ms,
+        received_at_ms: ms(received_at_ms),
         verdict: if n.is_multiple_of(4) {
             Verdict::Fail
         } else {
@@ -96,6 +101,6 @@ pub fn table(lobe: &str, parent: Option<i64>, text: &str, status: TableStatus) -
         reason: "learned".into(),
         status,
         status_why: "checks passed".into(),
-        created_at_ms: 5_000,
+        created_at_ms: ms(5_000),
     }
 }

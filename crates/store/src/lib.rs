@@ -39,6 +39,7 @@ mod pack_numbers;
 mod pack_report;
 mod tables;
 mod types;
+pub mod unix_ms;
 mod users;
 mod views;
 
@@ -129,6 +130,14 @@ macro_rules! col {
     };
 }
 pub(crate) use col;
+
+/// Reads an integer-millisecond column as an instant (see [`unix_ms::instant`]).
+macro_rules! at_col {
+    ($row:expr, $name:literal, $op:literal) => {
+        $crate::unix_ms::instant($crate::col!($row, $name, $op), $name)?
+    };
+}
+pub(crate) use at_col;
 
 impl Store {
     fn new(pools: Pools, readers: u32, target: String) -> Self {

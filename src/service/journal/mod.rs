@@ -321,7 +321,7 @@ mod tests {
     fn event(message: &str) -> Pending {
         Pending::Event {
             machine: "M1".into(),
-            at_ms: 7,
+            at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
             level: EventLevel::Info,
             kind: EventKind::WheelDressed,
             message: message.into(),
@@ -335,7 +335,7 @@ mod tests {
             machine: "M1".into(),
             lobe: "IN1".into(),
             state: Box::new(state),
-            saved_at_ms: 7 + parts as i64,
+            saved_at_ms: jiff::Timestamp::from_millisecond(7 + parts as i64).unwrap(),
         }
     }
 
@@ -412,7 +412,7 @@ mod tests {
                 reason: "nominal table".into(),
                 status: TableStatus::Waiting,
                 status_why: "waiting: share full".into(),
-                created_at_ms: 7,
+                created_at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
                 measurement_id: None,
                 rollback_of: None,
             },
@@ -422,12 +422,12 @@ mod tests {
                 version: 3,
                 status: TableStatus::Pushed,
                 why: "pushed on retry".into(),
-                at_ms: 8,
+                at_ms: jiff::Timestamp::from_millisecond(8).unwrap(),
             },
             learning(1),
             Pending::Dressing {
                 machine: "M1".into(),
-                at_ms: 7,
+                at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
                 old_radius_mm: 250.0,
                 new_radius_mm: 249.998,
                 infeed_um: Some(2.1),

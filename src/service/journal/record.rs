@@ -8,6 +8,7 @@ use crate::store::{
     EventLevel, FeatureKind, NewDressing, NewEvent, NewMeasurement, NewRecipeSnapshot,
     NewTableVersion, Store, StoreError, TableStatus,
 };
+use jiff::Timestamp;
 use serde::{Deserialize, Serialize};
 
 /// One record waiting for the database.
@@ -36,7 +37,8 @@ pub enum Pending {
         reason: String,
         status: TableStatus,
         status_why: String,
-        created_at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        created_at_ms: Timestamp,
         /// The measurement it was learned from (a replay re-submits the version with it).
         #[serde(default)]
         measurement_id: Option<String>,
@@ -51,11 +53,13 @@ pub enum Pending {
         version: u64,
         status: TableStatus,
         why: String,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
     },
     Event {
         machine: String,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
         level: EventLevel,
         kind: EventKind,
         message: String,
@@ -64,7 +68,8 @@ pub enum Pending {
         machine: String,
         lobe: String,
         state: Box<LoopMemory>,
-        saved_at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        saved_at_ms: Timestamp,
     },
     /// What the machine grinds, kept once per change (the store skips an identical one).
     RecipeSnapshot {
@@ -73,11 +78,13 @@ pub enum Pending {
         lobe: String,
         kind: FeatureKind,
         recipe_json: String,
-        created_at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        created_at_ms: Timestamp,
     },
     Dressing {
         machine: String,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
         old_radius_mm: f64,
         new_radius_mm: f64,
         /// The dresser's measured infeed (radius removed), µm, when it reported one; journal

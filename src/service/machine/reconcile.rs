@@ -12,7 +12,7 @@ use super::FeatureLoop;
 use super::delivery::Draft;
 use super::memory::{TableLearning, WaitingTable};
 use super::records::event;
-use crate::clock::now_ms;
+use crate::clock::now;
 use crate::core::learn::LearningState;
 use crate::share::{Submitted, VersionStatus};
 use crate::store::{EventLevel, TableStatus};
@@ -91,7 +91,7 @@ impl FeatureLoop {
                 _ => {}
             }
         }
-        let at_ms = now_ms();
+        let at_ms = now();
         let mut records = Vec::new();
         for (version, said) in journalled {
             let Some(v) = self.share.history().get(version) else {
@@ -161,7 +161,7 @@ impl FeatureLoop {
         drafts.sort_by_key(|(v, _)| *v);
         let mut records = Vec::new();
         for (version, draft) in drafts {
-            let at_ms = now_ms();
+            let at_ms = now();
             let outcome = match self.share.history().next_version() {
                 next if next == version => {
                     let request = self.request(draft)?;

@@ -1,6 +1,7 @@
 //! What the plant hears: typed events made from the loop's journal records, their topics
 //! and JSON payloads (units in the field names).
 
+use jiff::Timestamp;
 use serde::{Deserialize, Serialize};
 
 use crate::service::journal::{EventKind, Pending};
@@ -17,7 +18,8 @@ pub enum PlantEvent {
         machine: String,
         feature: String,
         part: String,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
         verdict: Verdict,
         max_profile_error_um: f64,
         base_radius_error_um: f64,
@@ -29,7 +31,8 @@ pub enum PlantEvent {
         machine: String,
         feature: String,
         version: u64,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
     },
     TableRefused {
         machine: String,
@@ -37,16 +40,19 @@ pub enum PlantEvent {
         /// The refused version, when one was recorded.
         version: Option<u64>,
         reason: String,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
     },
     LearningFrozen {
         machine: String,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
         reason: String,
     },
     Dressing {
         machine: String,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
         old_radius_mm: f64,
         new_radius_mm: f64,
         /// The dresser's measured infeed, µm, when it reported one.
@@ -56,7 +62,8 @@ pub enum PlantEvent {
     },
     Alarm {
         machine: String,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
         level: EventLevel,
         kind: String,
         message: String,
@@ -212,7 +219,7 @@ impl PlantEvent {
         value.to_string()
     }
 
-    pub fn at_ms(&self) -> i64 {
+    pub fn at_ms(&self) -> Timestamp {
         match self {
             PlantEvent::PartAnalysed { at_ms, .. }
             | PlantEvent::TableDelivered { at_ms, .. }
@@ -230,7 +237,7 @@ fn table_event(
     version: u64,
     status: TableStatus,
     why: String,
-    at_ms: i64,
+    at_ms: Timestamp,
 ) -> Option<PlantEvent> {
     match status {
         TableStatus::Pushed => Some(PlantEvent::TableDelivered {
@@ -262,7 +269,7 @@ mod tests {
             version: 12,
             status: TableStatus::Pushed,
             why: "pushed".into(),
-            at_ms: 5,
+            at_ms: jiff::Timestamp::from_millisecond(5).unwrap(),
         };
         let e = PlantEvent::from_pending(&status).unwrap();
         assert_eq!(e.topic("plant"), "plant/G7/IN1/table_delivered");
@@ -272,7 +279,7 @@ mod tests {
         );
         let dressing = Pending::Dressing {
             machine: "G7".into(),
-            at_ms: 9,
+            at_ms: jiff::Timestamp::from_millisecond(9).unwrap(),
             old_radius_mm: 250.0,
             new_radius_mm: 249.5,
             infeed_um: Some(500.2),
@@ -284,7 +291,7 @@ mod tests {
         assert!(d.payload().contains(r#""infeed_um":500.2"#));
         let event = |kind| Pending::Event {
             machine: "G7".into(),
-            at_ms: 1,
+            at_ms: jiff::Timestamp::from_millisecond(1).unwrap(),
             level: EventLevel::Warn,
             kind,
             message: "diverging".into(),
@@ -301,7 +308,7 @@ mod tests {
             version: 13,
             status: TableStatus::Waiting,
             why: "share down".into(),
-            at_ms: 6,
+            at_ms: jiff::Timestamp::from_millisecond(6).unwrap(),
         };
         assert_eq!(PlantEvent::from_pending(&waiting), None);
     }
@@ -313,7 +320,7 @@ mod tests {
                 machine: "G7".parse().unwrap(),
                 part: part.into(),
                 lobe: "IN1".into(),
-                received_at_ms: 7,
+                received_at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
                 verdict: Verdict::Pass,
                 max_profile_error_um: 0.4,
                 base_radius_error_um: 0.1,

@@ -61,7 +61,7 @@ pub(super) async fn rebuild_versions(
                 reason: format!("{} (rebuilt from the share)", r.reason),
                 status,
                 status_why: why.to_string(),
-                created_at_ms: r.created_at_unix_ms as i64,
+                created_at_ms: r.created_at_unix_ms,
             };
             store.insert_table_version(&t).await?;
             rebuilt += 1;

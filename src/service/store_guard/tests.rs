@@ -49,7 +49,7 @@ async fn add_table(store: &Store) -> i64 {
             reason: "nominal table".into(),
             status: TableStatus::Pushed,
             status_why: "pushed to the share".into(),
-            created_at_ms: 1_000,
+            created_at_ms: jiff::Timestamp::from_millisecond(1_000).unwrap(),
         })
         .await
         .unwrap()
