@@ -84,7 +84,10 @@ struct Server {
 /// The API on port 0 with `limits`, machine SIM1 grinding IN1 (a fake loop), and `store`.
 async fn server(limits: HttpLimits, store: Option<camloop::store::Store>) -> Server {
     let mut machines = BTreeMap::new();
-    machines.insert(MachineName::new("SIM1").unwrap(), vec!["IN1".to_string()]);
+    machines.insert(
+        MachineName::new("SIM1").unwrap(),
+        vec!["IN1".parse().unwrap()],
+    );
     let mut commands = HashMap::new();
     commands.insert("SIM1".to_string(), fake_machine());
     let state = AppState {
