@@ -29,7 +29,7 @@ pub struct User {
 pub struct NewToken {
     pub user: UserId,
     pub label: String,
-    pub sha256: String,
+    pub sha256: camloop_core::digest::Sha256,
     pub role: Role,
     pub created_at_ms: i64,
     pub expires_at_ms: i64,
@@ -210,7 +210,7 @@ impl Store {
              expires_at_ms) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
             t.user.0,
             &t.label,
-            &t.sha256,
+            t.sha256.to_string(),
             t.role.as_str(),
             t.created_at_ms,
             t.expires_at_ms,
@@ -219,7 +219,10 @@ impl Store {
     }
 
     /// The token whose digest is `sha256`, with its user.
-    pub async fn token_grant(&self, sha256: &str) -> Result<Option<TokenGrant>, StoreError> {
+    pub async fn token_grant(
+        &self,
+        sha256: &camloop_core::digest::Sha256,
+    ) -> Result<Option<TokenGrant>, StoreError> {
         const OP: &str = "checking a token";
         with_read!(self, pool => {
             let row: Option<GrantRow> =
@@ -228,7 +231,7 @@ impl Store {
                      u.disabled_at_ms FROM api_tokens t JOIN users u ON u.id = t.user_id \
                      WHERE t.token_sha256 = $1",
                 )
-                .bind(sha256)
+                .bind(sha256.to_string())
                 .fetch_optional(pool)
                 .await
                 .map_err(self.db_error(OP))?;
