@@ -371,9 +371,8 @@ async fn a_whole_part_rollback_names_every_feature_it_takes_back() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_name_off_the_rule_in_a_path_or_query_answers_invalid_name() {
     let s = server(limits(16, 5_000, 5_000), None).await;
-    let get = |path: &str| {
-        format!("GET {path} HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
-    };
+    let get =
+        |path: &str| format!("GET {path} HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n");
     let rule = "only letters, digits, '-' or '_' are allowed";
     let rollback = "/api/v1/machines/SIM1/lobes/IN%201/rollback";
     for (request, message) in [
