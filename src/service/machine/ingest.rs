@@ -129,7 +129,7 @@ impl FeatureLoop {
             }
             Err(e) => return Err(e.into()),
         };
-        let record = self.measurement_record(&raw, &sha, &done.measured, at_ms)?;
+        let record = self.measurement_record(&raw, &sha, &done.measured, at_ms);
         if !self.record(vec![record]).await {
             // Not counted and not remembered: the same reading sent again once the journal
             // can be written is a new measurement, not a repeat.
@@ -244,7 +244,7 @@ impl FeatureLoop {
             }
             Err(e) => return Err(e.into()),
         };
-        let record = self.measurement_record(&raw, &sha, &measured, at_ms)?;
+        let record = self.measurement_record(&raw, &sha, &measured, at_ms);
         if !self.record(vec![record]).await {
             return Ok(Ingested::NotRecorded);
         }
@@ -390,7 +390,7 @@ impl FeatureLoop {
         sha: &Sha256,
         measured: &Measured,
         at_ms: i64,
-    ) -> Result<Pending, crate::names::NameError> {
+    ) -> Pending {
         let report = &measured.report;
         let measurement = NewMeasurement {
             machine: self.name.clone(),
@@ -414,10 +414,10 @@ impl FeatureLoop {
             averaged_lift_mm: measured.averaged.mean_lift_mm.clone(),
             analysis_json: serde_json::to_string(report).unwrap_or_default(),
         };
-        Ok(Pending::Measurement {
+        Pending::Measurement {
             measurement,
             ground_with_version: self.memory.in_force_version,
-        })
+        }
     }
 
     /// A measurement that is not this machine's, or fails the checks: kept among the
