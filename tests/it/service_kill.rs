@@ -35,13 +35,35 @@ fn next(state: &mut u64) -> u64 {
     *state
 }
 
+fn manifest_len(path: &Path) -> u64 {
+    std::fs::metadata(path).map_or(0, |m| m.len())
+}
+
+/// Waits until the manifest has grown past `before` bytes (the service started and delivered
+/// at least one step of a version), at most 120 s, failing early if the service exited.
+fn wait_for_manifest_growth(path: &Path, before: u64, child: &mut process_support::KillOnDrop) {
+    let deadline = std::time::Instant::now() + Duration::from_secs(120);
+    while manifest_len(path) <= before {
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("the service exited ({status}) before writing to the share's manifest");
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the share's manifest did not grow within 120 s of a start"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
 #[test]
 fn killing_the_service_never_leaves_a_version_the_history_does_not_know() {
     let dir = tempfile::tempdir().unwrap();
     let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
     std::fs::write(dir.path().join("camloop.toml"), config(&recipe)).unwrap();
     let mut rng = SEED;
+    let manifest = dir.path().join("var/machines/M7/IN1/share/manifest.jsonl");
     for _ in 0..KILLS {
+        let before = manifest_len(&manifest);
         let mut child = process_support::KillOnDrop::spawn(
             Command::new(env!("CARGO_BIN_EXE_camloop"))
                 .args(["run", "--config", "camloop.toml"])
@@ -50,8 +72,11 @@ fn killing_the_service_never_leaves_a_version_the_history_does_not_know() {
                 .stderr(Stdio::null()),
         )
         .unwrap();
-        // Start-up takes some 100 ms; the kills land anywhere in the parts after it.
-        std::thread::sleep(Duration::from_millis(150 + next(&mut rng) % 700));
+        // The kill lands anywhere in the parts after this start has written to the share's
+        // manifest: start-up takes 100 ms on an idle machine and seconds on a loaded one, so
+        // a kill timed from the spawn alone could land before any part.
+        wait_for_manifest_growth(&manifest, before, &mut child);
+        std::thread::sleep(Duration::from_millis(next(&mut rng) % 700));
         child.kill().unwrap();
         child.wait().unwrap();
     }
