@@ -107,9 +107,9 @@ pub struct LeaseRow {
 #[derive(Debug, Clone, Default)]
 pub struct Renewed {
     /// The leases renewed: machine and epoch.
-    pub renewed: Vec<(String, Epoch)>,
+    pub renewed: Vec<(MachineName, Epoch)>,
     /// Live leases under this instance's name that it does not run, released.
-    pub leftovers: Vec<String>,
+    pub leftovers: Vec<MachineName>,
 }
 
 /// This instance's handle on the lease tables.
@@ -196,7 +196,7 @@ impl Leases {
 
     /// Takes `machine` when nobody holds it (never leased, expired or released): returns the
     /// new epoch, one above the last owner's. `None`: another instance holds it.
-    pub(crate) async fn acquire(&self, machine: &str) -> Result<Option<Epoch>, LeaseError> {
+    pub(crate) async fn acquire(&self, machine: &MachineName) -> Result<Option<Epoch>, LeaseError> {
         let epoch: Option<i64> = sqlx::query_scalar(
             "INSERT INTO camloop_leases (machine, owner, epoch, expires_at, incarnation) \
              VALUES ($1, $2, 1, now() + $3 * interval '1 millisecond', $4) \
@@ -205,7 +205,7 @@ impl Leases {
                incarnation = EXCLUDED.incarnation \
              WHERE camloop_leases.expires_at <= now() RETURNING epoch",
         )
-        .bind(machine)
+        .bind(machine.as_str())
         .bind(&self.instance)
         .bind(self.lease_ms)
         .bind(&self.incarnation)
@@ -220,7 +220,7 @@ impl Leases {
     /// `None` when the lease is no longer this instance's.
     pub(crate) async fn raise_epoch(
         &self,
-        machine: &str,
+        machine: &MachineName,
         epoch: Epoch,
         to: Epoch,
     ) -> Result<Option<Epoch>, LeaseError> {
@@ -229,7 +229,7 @@ impl Leases {
              WHERE machine = $1 AND owner = $2 AND epoch = $3 AND expires_at > now() \
              RETURNING epoch",
         )
-        .bind(machine)
+        .bind(machine.as_str())
         .bind(&self.instance)
         .bind(epoch.db())
         .bind(to.db())
@@ -246,7 +246,7 @@ impl Leases {
     /// rather than renewed forever; those come back second. A lease this process won is
     /// never taken for such a leftover, however recently it was won: the two are told apart
     /// by the process's incarnation, not by a list that a concurrent win could outrun.
-    pub(crate) async fn renew(&self, held: &[(String, Epoch)]) -> Result<Renewed, LeaseError> {
+    pub(crate) async fn renew(&self, held: &[(MachineName, Epoch)]) -> Result<Renewed, LeaseError> {
         let machines: Vec<&str> = held.iter().map(|(m, _)| m.as_str()).collect();
         let epochs: Vec<i64> = held.iter().map(|(_, e)| e.db()).collect();
         let rows = sqlx::query(
@@ -264,8 +264,9 @@ impl Leases {
         .map_err(op("renew the leases"))?;
         let renewed = rows
             .iter()
-            .map(|r| (r.get::<String, _>(0), Epoch::from_db(r.get(1))))
-            .collect();
+            .map(|r| Ok((machine_of(r.get(0))?, Epoch::from_db(r.get(1)))))
+            .collect::<Result<_, sqlx::Error>>()
+            .map_err(op("read the renewed leases"))?;
         let leftovers: Vec<String> = sqlx::query_scalar(
             "UPDATE camloop_leases SET expires_at = now() - interval '1 millisecond' \
              WHERE owner = $1 AND expires_at > now() AND incarnation <> $2 \
@@ -276,16 +277,21 @@ impl Leases {
         .fetch_all(&self.pool)
         .await
         .map_err(op("release leftover leases"))?;
+        let leftovers = leftovers
+            .into_iter()
+            .map(machine_of)
+            .collect::<Result<_, _>>()
+            .map_err(op("read the leftover leases"))?;
         Ok(Renewed { renewed, leftovers })
     }
 
     /// Gives `machine` up at once (its loop has stopped): any instance may take it now.
-    pub async fn release(&self, machine: &str, epoch: Epoch) -> Result<(), LeaseError> {
+    pub async fn release(&self, machine: &MachineName, epoch: Epoch) -> Result<(), LeaseError> {
         sqlx::query(
             "UPDATE camloop_leases SET expires_at = now() - interval '1 millisecond' \
              WHERE machine = $1 AND owner = $2 AND epoch = $3",
         )
-        .bind(machine)
+        .bind(machine.as_str())
         .bind(&self.instance)
         .bind(epoch.db())
         .execute(&self.pool)

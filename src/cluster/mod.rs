@@ -12,15 +12,17 @@ pub mod lease;
 
 pub use lease::{Epoch, LeaseError, LeaseRow, Leases, Renewed};
 
+use crate::names::MachineName;
+
 /// What an instance should do with its machines this round.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct Plan {
     /// Machines to stop and release (more than the fair share is held), least preferred
     /// first.
-    pub shed: Vec<String>,
+    pub shed: Vec<MachineName>,
     /// Free machines to try to take, most preferred first, as many as the fair share has
     /// room for (some may be taken by another instance first).
-    pub take: Vec<String>,
+    pub take: Vec<MachineName>,
 }
 
 /// The machines one instance may hold when `live` instances share `machines`.
@@ -46,16 +48,22 @@ pub(crate) fn preference(instance: &str, machine: &str) -> u64 {
 
 /// The round's plan for `instance`, holding `held`, among `all` machines of which `free`
 /// have no live lease, with `live` instances alive.
-pub fn plan(instance: &str, all: &[String], held: &[String], free: &[String], live: usize) -> Plan {
+pub fn plan(
+    instance: &str,
+    all: &[MachineName],
+    held: &[MachineName],
+    free: &[MachineName],
+    live: usize,
+) -> Plan {
     let fair = fair_share(all.len(), live);
-    let rank = |list: &[String]| {
-        let mut v: Vec<String> = list.to_vec();
+    let rank = |list: &[MachineName]| {
+        let mut v: Vec<MachineName> = list.to_vec();
         v.sort_by_key(|m| std::cmp::Reverse(preference(instance, m)));
         v
     };
     let mut shed = rank(held);
     let keep = shed.len().min(fair);
-    let shed: Vec<String> = shed.split_off(keep).into_iter().rev().collect();
+    let shed: Vec<MachineName> = shed.split_off(keep).into_iter().rev().collect();
     let room = fair.saturating_sub(held.len());
     let take = rank(free).into_iter().take(room).collect();
     Plan { shed, take }
@@ -65,8 +73,10 @@ pub fn plan(instance: &str, all: &[String], held: &[String], free: &[String], li
 mod tests {
     use super::*;
 
-    fn names(n: usize) -> Vec<String> {
-        (1..=n).map(|i| format!("M{i:02}")).collect()
+    fn names(n: usize) -> Vec<MachineName> {
+        (1..=n)
+            .map(|i| MachineName::new(&format!("M{i:02}")).unwrap())
+            .collect()
     }
 
     #[test]
@@ -84,16 +94,16 @@ mod tests {
     fn rounds_converge_to_an_even_split_and_rebalance() {
         let all = names(30);
         let instances = ["a", "b", "c"];
-        let mut held: std::collections::BTreeMap<&str, Vec<String>> =
+        let mut held: std::collections::BTreeMap<&str, Vec<MachineName>> =
             instances.iter().map(|i| (*i, Vec::new())).collect();
         fn round<'a>(
-            all: &[String],
-            held: &mut std::collections::BTreeMap<&'a str, Vec<String>>,
+            all: &[MachineName],
+            held: &mut std::collections::BTreeMap<&'a str, Vec<MachineName>>,
             alive: &[&'a str],
         ) {
             for i in alive {
-                let owned: Vec<String> = held.values().flatten().cloned().collect();
-                let free: Vec<String> =
+                let owned: Vec<MachineName> = held.values().flatten().cloned().collect();
+                let free: Vec<MachineName> =
                     all.iter().filter(|m| !owned.contains(m)).cloned().collect();
                 let p = plan(i, all, &held[i], &free, alive.len());
                 let mine = held.get_mut(i).unwrap();
@@ -114,7 +124,7 @@ mod tests {
         round(&all, &mut held, &instances);
         let counts: Vec<usize> = held.values().map(Vec::len).collect();
         assert_eq!(counts, vec![10, 10, 10]);
-        let mut every: Vec<String> = held.values().flatten().cloned().collect();
+        let mut every: Vec<MachineName> = held.values().flatten().cloned().collect();
         every.sort();
         assert_eq!(every, all, "every machine owned exactly once");
     }
@@ -124,7 +134,7 @@ mod tests {
         let all = names(4);
         let p = plan("a", &all, &all, &[], 2);
         assert_eq!(p.shed.len(), 2);
-        let kept: Vec<&String> = all.iter().filter(|m| !p.shed.contains(m)).collect();
+        let kept: Vec<&MachineName> = all.iter().filter(|m| !p.shed.contains(m)).collect();
         for k in kept {
             for s in &p.shed {
                 assert!(preference("a", k) > preference("a", s));

@@ -13,6 +13,7 @@ use super::lease_keeper::{self, Holding, Keeper, Phase, SharedHoldings};
 use super::metrics::Metrics;
 use super::runner::{Opened, Runner};
 use crate::cluster::{Epoch, LeaseError, Leases, fair_share, plan};
+use crate::names::MachineName;
 use crate::share::{Fence, StateError};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -152,12 +153,12 @@ impl Ctx {
         let live = self.leases.live_instances().await?;
         let rows = self.leases.all().await?;
         let all = self.runner.names();
-        let free: Vec<String> = all
+        let free: Vec<MachineName> = all
             .iter()
-            .filter(|m| !rows.iter().any(|r| r.machine == m.as_str() && r.live))
+            .filter(|m| !rows.iter().any(|r| r.machine == **m && r.live))
             .cloned()
             .collect();
-        let mine: Vec<String> = self.holdings().held.keys().cloned().collect();
+        let mine: Vec<MachineName> = self.holdings().held.keys().cloned().collect();
         let p = plan(self.leases.instance(), &all, &mine, &free, live);
         for m in p.shed {
             self.shed(m, live, work).await?;
@@ -180,7 +181,12 @@ impl Ctx {
 
     /// Hands `machine` over: a running one stops after the part in hand (beside the rest of
     /// the round) and is released then; one never started is released now.
-    async fn shed(&self, m: String, live: usize, work: &mut JoinSet<()>) -> Result<(), LeaseError> {
+    async fn shed(
+        &self,
+        m: MachineName,
+        live: usize,
+        work: &mut JoinSet<()>,
+    ) -> Result<(), LeaseError> {
         let unstarted = {
             let mut h = self.holdings();
             match h.held.get_mut(&m) {
@@ -227,7 +233,7 @@ impl Ctx {
 
     /// Machines whose fence was busy at their opening: opened again, under the same lease.
     fn retry_busy(&self, work: &mut JoinSet<()>) {
-        let busy: Vec<(String, Epoch)> = {
+        let busy: Vec<(MachineName, Epoch)> = {
             let mut h = self.holdings();
             h.held
                 .iter_mut()
@@ -245,7 +251,7 @@ impl Ctx {
 
     /// Tries to win `machine`'s lease; once won it is held (and renewed by the keeper)
     /// while the machine opens beside the rest of the round.
-    async fn take(&self, m: String, work: &mut JoinSet<()>) -> Result<(), LeaseError> {
+    async fn take(&self, m: MachineName, work: &mut JoinSet<()>) -> Result<(), LeaseError> {
         let asked = Instant::now();
         if let Some(epoch) = self.leases.acquire(&m).await? {
             let deadline = asked + self.lease / 2;
@@ -262,7 +268,7 @@ impl Ctx {
         Ok(())
     }
 
-    fn spawn_open(&self, m: String, epoch: Epoch, work: &mut JoinSet<()>) {
+    fn spawn_open(&self, m: MachineName, epoch: Epoch, work: &mut JoinSet<()>) {
         let ctx = self.clone();
         work.spawn(async move {
             let _permit = ctx.gate.acquire().await;
@@ -273,7 +279,7 @@ impl Ctx {
 
     /// Launches an opened machine if its lease is still held; otherwise keeps the lease for
     /// another try (busy fence) or gives it up (any other failure).
-    fn opened(&self, m: &str, result: Result<(Epoch, Opened), OpenError>) {
+    fn opened(&self, m: &MachineName, result: Result<(Epoch, Opened), OpenError>) {
         let mut h = self.holdings();
         let closing = h.closing;
         let Some(x) = h.held.get_mut(m) else {
@@ -305,13 +311,17 @@ impl Ctx {
         h.held.remove(m);
         drop(h);
         let leases = self.leases.clone();
-        let m = m.to_string();
+        let m = m.clone();
         tokio::spawn(async move { leases.release(&m, epoch).await });
     }
 
     /// Raises the machine's fence to the lease's epoch (or past a higher one found there,
     /// raising the lease to match) and opens its loop. Returns the epoch it runs under.
-    async fn open(&self, machine: &str, epoch: Epoch) -> Result<(Epoch, Opened), OpenError> {
+    async fn open(
+        &self,
+        machine: &MachineName,
+        epoch: Epoch,
+    ) -> Result<(Epoch, Opened), OpenError> {
         let dir = self.machines_dir.join(machine);
         let instance = self.leases.instance().to_string();
         // A claim waits at most an eighth of a lease for a write under way; a busy fence is
@@ -352,7 +362,7 @@ impl Ctx {
         self.holdings().closing = true;
         while work.join_next().await.is_some() {}
         self.runner.stop_all().await;
-        let held: Vec<(String, Epoch)> = std::mem::take(&mut self.holdings().held)
+        let held: Vec<(MachineName, Epoch)> = std::mem::take(&mut self.holdings().held)
             .into_iter()
             .map(|(m, x)| (m, x.epoch))
             .collect();

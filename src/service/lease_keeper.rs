@@ -14,6 +14,7 @@
 use super::metrics::Metrics;
 use super::runner::Runner;
 use crate::cluster::{LeaseError, Leases};
+use crate::names::MachineName;
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
@@ -47,7 +48,7 @@ pub(super) struct Holding {
 /// never held across an `await`.
 #[derive(Debug, Default)]
 pub(super) struct Holdings {
-    pub(super) held: BTreeMap<String, Holding>,
+    pub(super) held: BTreeMap<MachineName, Holding>,
     /// The service is stopping: nothing more is opened.
     pub(super) closing: bool,
 }
@@ -154,7 +155,7 @@ impl Keeper {
     /// not renew under the epoch it was asked for is lost: its machine stops.
     async fn renew(&self, leases: &Leases) -> Result<(), LeaseError> {
         let asked = Instant::now();
-        let mine: Vec<(String, crate::cluster::Epoch)> = {
+        let mine: Vec<(MachineName, crate::cluster::Epoch)> = {
             let h = lock(&self.holdings);
             h.held.iter().map(|(m, x)| (m.clone(), x.epoch)).collect()
         };
@@ -162,7 +163,8 @@ impl Keeper {
         for m in &answer.leftovers {
             warn!(machine = %m, "cluster: a lease under this instance's name that runs nowhere (an earlier process, a stop while the database was away) released");
         }
-        let renewed: BTreeMap<String, crate::cluster::Epoch> = answer.renewed.into_iter().collect();
+        let renewed: BTreeMap<MachineName, crate::cluster::Epoch> =
+            answer.renewed.into_iter().collect();
         let mut lost = Vec::new();
         {
             let mut h = lock(&self.holdings);
@@ -189,9 +191,9 @@ impl Keeper {
     /// Stops the machines whose lease could not be renewed in time.
     fn stop_overdue(&self) {
         let now = Instant::now();
-        let overdue: Vec<String> = {
+        let overdue: Vec<MachineName> = {
             let mut h = lock(&self.holdings);
-            let late: Vec<String> = h
+            let late: Vec<MachineName> = h
                 .held
                 .iter()
                 .filter(|(_, x)| x.deadline <= now)

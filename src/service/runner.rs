@@ -9,6 +9,7 @@
 use super::machine::{self, MachineLoop, SourceEvent};
 use super::{Shared, http, machine_task};
 use crate::config::{CheckedMachine, Config};
+use crate::names::MachineName;
 use anyhow::Context;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -34,7 +35,7 @@ pub(super) struct Opened {
 /// The machines of this instance.
 pub(super) struct Runner {
     config: Config,
-    checked: HashMap<String, CheckedMachine>,
+    checked: HashMap<MachineName, CheckedMachine>,
     shared: Shared,
     commands: CommandRoutes,
     running: std::sync::Mutex<HashMap<String, RunningMachine>>,
@@ -47,10 +48,7 @@ impl Runner {
         shared: Shared,
         commands: CommandRoutes,
     ) -> Self {
-        let checked = checked
-            .into_iter()
-            .map(|m| (m.name.to_string(), m))
-            .collect();
+        let checked = checked.into_iter().map(|m| (m.name.clone(), m)).collect();
         Self {
             config,
             checked,
@@ -61,8 +59,8 @@ impl Runner {
     }
 
     /// Every configured machine's name.
-    pub(super) fn names(&self) -> Vec<String> {
-        let mut names: Vec<String> = self.checked.keys().cloned().collect();
+    pub(super) fn names(&self) -> Vec<MachineName> {
+        let mut names: Vec<MachineName> = self.checked.keys().cloned().collect();
         names.sort();
         names
     }
@@ -116,7 +114,7 @@ impl Runner {
         let section = self.section(&name)?;
         let checked = self
             .checked
-            .get(&name)
+            .get(name.as_str())
             .context("an opened machine is configured")?;
         let (stop, stopped) = watch::channel(false);
         let stop = Arc::new(stop);
