@@ -277,7 +277,10 @@ impl History {
                         "v{version} pushed without delivering"
                     )));
                 }
-                v.status = VersionStatus::Pushed { at_unix_ms };
+                v.status = VersionStatus::Pushed {
+                    at_unix_ms,
+                    note: None,
+                };
                 self.deliverable = None;
                 self.pushed += 1;
             }
@@ -496,7 +499,13 @@ mod tests {
         ])
         .unwrap();
         let status = |n| h.get(n).unwrap().status.clone();
-        assert_eq!(status(1), VersionStatus::Pushed { at_unix_ms: 2 });
+        assert_eq!(
+            status(1),
+            VersionStatus::Pushed {
+                at_unix_ms: 2,
+                note: None
+            }
+        );
         assert_eq!(status(2), VersionStatus::Superseded { by: 4 });
         assert!(matches!(status(3), VersionStatus::Refused { .. }));
         assert_eq!(status(4), VersionStatus::Waiting { reason: None });

@@ -5,7 +5,7 @@ use super::chain::{TABLE_VERSIONS, fetch_chain, next_link};
 use super::codec::{CODEC_PACKED, check_json, check_limit, check_name, sha256_hex};
 use super::pack::pack_text;
 use super::{
-    NewTableVersion, Store, StoreError, TableStatus, TableVersion, col, with_read, with_write,
+    NewTableVersion, Store, StoreError, TableVersion, VersionStatus, col, with_read, with_write,
 };
 
 const SELECT_VERSION: &str = "SELECT t.id, t.machine, t.lobe, t.version, t.parent_version, \
@@ -42,6 +42,7 @@ macro_rules! version_summary {
     ($row:expr) => {{
         let row = $row;
         let status: String = col!(row, "status", "reading a table version");
+        let status_at_ms: i64 = col!(row, "at_ms", "reading a table version");
         let table_number: i64 = col!(row, "table_number", "reading a table version");
         TableVersion {
             machine: $crate::codec::machine_of(col!(row, "machine", "reading a table version"))?,
@@ -59,11 +60,40 @@ macro_rules! version_summary {
             learning_params_json: String::new(),
             reason: col!(row, "reason", "reading a table version"),
             created_at_ms: col!(row, "created_at_ms", "reading a table version"),
-            status: TableStatus::parse(&status)?,
-            status_why: col!(row, "why", "reading a table version"),
-            status_at_ms: col!(row, "at_ms", "reading a table version"),
+            status: VersionStatus::from_column(
+                &status,
+                col!(row, "why", "reading a table version"),
+                status_at_ms,
+            )?,
+            status_at_ms,
         }
     }};
+}
+
+/// Returns [`StoreError::NotFound`] from the enclosing function when `$t` names a parent
+/// version that (machine, lobe) does not have: a version derives from a stored one.
+macro_rules! require_parent {
+    ($store:expr, $tx:expr, $t:expr, $op:expr) => {
+        if let Some(parent) = $t.parent_version {
+            let found: Option<i64> = sqlx::query_scalar(
+                "SELECT id FROM table_versions WHERE machine = $1 AND lobe = $2 AND version = $3",
+            )
+            .bind($t.machine.as_str())
+            .bind(&$t.lobe)
+            .bind(parent)
+            .fetch_optional(&mut *$tx)
+            .await
+            .map_err($store.db_error($op))?;
+            if found.is_none() {
+                return Err(StoreError::NotFound {
+                    what: format!(
+                        "parent table version {parent} of machine {} lobe {}",
+                        $t.machine, $t.lobe
+                    ),
+                });
+            }
+        }
+    };
 }
 
 impl Store {
@@ -74,6 +104,7 @@ impl Store {
         check_name("machine", t.machine.as_str())?;
         check_name("lobe", &t.lobe)?;
         check_json("learning_params_json", &t.learning_params_json)?;
+        let (status, why) = t.status.column()?;
         let sha256 = sha256_hex(t.program_text.as_bytes());
         const OP: &str = "inserting a table version";
         with_write!(self, pool => {
@@ -87,25 +118,7 @@ impl Store {
             .execute(&mut *tx)
             .await
             .map_err(self.db_error(OP))?;
-            if let Some(parent) = t.parent_version {
-                let found: Option<i64> = sqlx::query_scalar(
-                    "SELECT id FROM table_versions WHERE machine = $1 AND lobe = $2 AND version = $3",
-                )
-                .bind(t.machine.as_str())
-                .bind(&t.lobe)
-                .bind(parent)
-                .fetch_optional(&mut *tx)
-                .await
-                .map_err(self.db_error(OP))?;
-                if found.is_none() {
-                    return Err(StoreError::NotFound {
-                        what: format!(
-                            "parent table version {parent} of machine {} lobe {}",
-                            t.machine, t.lobe
-                        ),
-                    });
-                }
-            }
+            require_parent!(self, tx, t, OP);
             let (base_id, depth, base) = next_link!(self, tx, TABLE_VERSIONS, t.machine.as_str(), &t.lobe);
             let program = pack_text("program_packed", &t.program_text, &base[0])?;
             let learning = pack_text("learning_packed", &t.learning_params_json, &base[1])?;
@@ -145,8 +158,8 @@ impl Store {
                  VALUES ($1, $2, $3, $4)",
             )
             .bind(id)
-            .bind(t.status.as_str())
-            .bind(&t.status_why)
+            .bind(status)
+            .bind(why)
             .bind(t.created_at_ms)
             .execute(&mut *tx)
             .await
@@ -156,16 +169,16 @@ impl Store {
         })
     }
 
-    /// Appends a status for a stored table version (e.g. waiting → pushed).
+    /// Appends a status for a stored table version (e.g. waiting → pushed), as of `at_ms`.
     pub async fn set_table_status(
         &self,
         machine: &str,
         lobe: &str,
         version: i64,
-        status: TableStatus,
-        why: &str,
+        status: &VersionStatus,
         at_ms: i64,
     ) -> Result<(), StoreError> {
+        let (status, why) = status.column()?;
         with_write!(self, pool => {
             let done = sqlx::query(
                 "INSERT INTO table_version_status (table_version_id, status, why, at_ms) \
@@ -175,7 +188,7 @@ impl Store {
             .bind(machine)
             .bind(lobe)
             .bind(version)
-            .bind(status.as_str())
+            .bind(status)
             .bind(why)
             .bind(at_ms)
             .execute(pool)
@@ -225,10 +238,10 @@ impl Store {
         machine: &str,
         lobe: &str,
         version: i64,
-    ) -> Result<Option<TableStatus>, StoreError> {
+    ) -> Result<Option<VersionStatus>, StoreError> {
         with_write!(self, pool => {
-            let status: Option<String> = sqlx::query_scalar(
-                "SELECT s.status FROM table_versions t JOIN table_version_status s \
+            let status: Option<(String, String, i64)> = sqlx::query_as(
+                "SELECT s.status, s.why, s.at_ms FROM table_versions t JOIN table_version_status s \
                  ON s.table_version_id = t.id WHERE t.machine = $1 AND t.lobe = $2 \
                  AND t.version = $3 ORDER BY s.id DESC LIMIT 1",
             )
@@ -238,7 +251,9 @@ impl Store {
             .fetch_optional(pool)
             .await
             .map_err(self.db_error("looking up a table version's status"))?;
-            status.map(|s| TableStatus::parse(&s)).transpose()
+            status
+                .map(|(status, why, at_ms)| VersionStatus::from_column(&status, why, at_ms))
+                .transpose()
         })
     }
 

@@ -65,7 +65,7 @@ impl Journal {
         let mut records = Vec::new();
         let mut bad = Vec::new();
         for (i, line) in String::from_utf8_lossy(&bytes[..keep]).lines().enumerate() {
-            match serde_json::from_str::<Pending>(line) {
+            match record::read_line(line) {
                 Ok(r) => records.push(r),
                 Err(e) => bad.push(Quarantined {
                     line: i + 1,
@@ -316,7 +316,7 @@ mod tests {
     use super::*;
     use crate::core::learn::LearningParams;
     use crate::service::machine::memory::{LoopMemory, TableLearning};
-    use crate::store::{EventLevel, TableStatus};
+    use crate::store::{EventLevel, VersionStatus};
 
     fn event(message: &str) -> Pending {
         Pending::Event {
@@ -410,18 +410,21 @@ mod tests {
                 program_text: "CTABDEF(X,C,1,1)\nCTABEND\n".into(),
                 learning: table,
                 reason: "nominal table".into(),
-                status: TableStatus::Waiting,
-                status_why: "waiting: share full".into(),
+                status: VersionStatus::Waiting {
+                    reason: Some("waiting: share full".into()),
+                },
                 created_at_ms: 7,
                 measurement_id: None,
                 rollback_of: None,
             },
-            Pending::TableStatus {
+            Pending::VersionStatus {
                 machine: "M1".into(),
                 lobe: "IN1".into(),
                 version: 3,
-                status: TableStatus::Pushed,
-                why: "pushed on retry".into(),
+                status: VersionStatus::Pushed {
+                    at_unix_ms: 8,
+                    note: Some("pushed on retry".into()),
+                },
                 at_ms: 8,
             },
             learning(1),
@@ -459,7 +462,11 @@ mod tests {
         }
         // The version keeps the share's number, and its newest status is the retry's.
         let v = store.table_version("M1", "IN1", 3).await.unwrap().unwrap();
-        assert_eq!((v.version, v.status), (3, TableStatus::Pushed));
+        let pushed = VersionStatus::Pushed {
+            at_unix_ms: 8,
+            note: Some("pushed on retry".into()),
+        };
+        assert_eq!((v.version, v.status), (3, pushed));
         assert_eq!(j.release_durable(&store).await.unwrap(), 6);
         let reopened = Journal::open(dir.path()).unwrap();
         assert_eq!(reopened.records(), [learning(1)]);
