@@ -233,7 +233,8 @@ fn part(n: i64) -> NewMeasurement {
         machine: camloop::names::MachineName::new(&machine(7)).expect("a valid name"),
         part: format!("live-{n}"),
         lobe: "IN1".into(),
-        received_at_ms: T0_MS + MEASUREMENTS * 1000 + n,
+        received_at_ms: jiff::Timestamp::from_millisecond(T0_MS + MEASUREMENTS * 1000 + n)
+            .expect("a time within jiff's years"),
         verdict: Verdict::Pass,
         max_profile_error_um: 0.5,
         base_radius_error_um: 0.1,

@@ -155,7 +155,7 @@ async fn drive(
                 machine: machine.clone(),
                 feature,
                 part: format!("S-{part}"),
-                at_ms: camloop::clock::now_ms(),
+                at_ms: camloop::clock::now(),
                 verdict: Verdict::Pass,
                 max_profile_error_um: error_um,
                 base_radius_error_um: 0.1,

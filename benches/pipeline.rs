@@ -139,7 +139,12 @@ fn turn_and_push(
             keep_versions: 20,
         };
         std::fs::create_dir_all(&config.share_dir).expect("share dir");
-        let (mut share, _) = Share::open(config, Box::new(RealFs), Box::new(|| 0)).expect("share");
+        let (mut share, _) = Share::open(
+            config,
+            Box::new(RealFs),
+            Box::new(|| jiff::Timestamp::UNIX_EPOCH),
+        )
+        .expect("share");
         c.bench_function(
             &format!("loop_turn_360_learn_regenerate_render_push_{name}"),
             |b| {
@@ -165,7 +170,7 @@ fn turn_and_push(
                         measurement_id: None,
                         learning: serde_json::Value::Null,
                         rollback_of: None,
-                        created_at_unix_ms: 0,
+                        created_at_unix_ms: jiff::Timestamp::UNIX_EPOCH,
                     };
                     share.push_once(request).expect("push")
                 })

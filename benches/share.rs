@@ -38,8 +38,12 @@ fn bench_push(c: &mut Criterion, name: &str, root: &std::path::Path) {
         table_pair: (1, 2),
         keep_versions: 10,
     };
-    let (mut share, _) =
-        Share::open(config, Box::new(RealFs), Box::new(|| 0)).expect("open the state folder");
+    let (mut share, _) = Share::open(
+        config,
+        Box::new(RealFs),
+        Box::new(|| jiff::Timestamp::UNIX_EPOCH),
+    )
+    .expect("open the state folder");
     let texts = [table_text(1), table_text(2)];
     c.bench_function(name, |b| {
         b.iter(|| {
@@ -54,7 +58,7 @@ fn bench_push(c: &mut Criterion, name: &str, root: &std::path::Path) {
                 measurement_id: None,
                 learning: serde_json::Value::Null,
                 rollback_of: None,
-                created_at_unix_ms: 0,
+                created_at_unix_ms: jiff::Timestamp::UNIX_EPOCH,
             };
             share.push_once(request).expect("push")
         })

@@ -13,6 +13,7 @@ use crate::names::check_plain_name;
 use crate::store::Role;
 use argon2::password_hash::phc::PasswordHash;
 use argon2::password_hash::{PasswordHasher, PasswordVerifier};
+use jiff::{SignedDuration, Timestamp};
 use std::collections::HashMap;
 use std::fmt;
 use std::net::IpAddr;
@@ -20,10 +21,10 @@ use std::sync::Mutex;
 
 /// Shortest password accepted, characters.
 pub(crate) const MIN_PASSWORD_CHARS: usize = 12;
-/// Failures within [`LOCKOUT_WINDOW_MS`] that lock a user and an address.
+/// Failures within [`LOCKOUT_WINDOW`] that lock a user and an address.
 pub(crate) const LOCKOUT_FAILURES: usize = 5;
 /// The window failures are counted in, and how long a lock lasts: 15 minutes.
-pub(crate) const LOCKOUT_WINDOW_MS: i64 = 15 * 60 * 1000;
+pub(crate) const LOCKOUT_WINDOW: SignedDuration = SignedDuration::from_mins(15);
 /// API tokens start with this, so a leaked one is recognisable (secret scanners, logs).
 pub(crate) const TOKEN_PREFIX: &str = "clt_";
 
@@ -134,14 +135,14 @@ enum Subject {
 
 #[derive(Debug, Default)]
 struct Record {
-    /// Times of failures within the window, ms.
-    failures: Vec<i64>,
-    /// Locked until this time, ms.
-    locked_until_ms: Option<i64>,
+    /// Times of failures within the window.
+    failures: Vec<Timestamp>,
+    /// Locked until this time.
+    locked_until: Option<Timestamp>,
 }
 
 /// Failed sign-ins and tokens per user and per client address: [`LOCKOUT_FAILURES`] within
-/// [`LOCKOUT_WINDOW_MS`] lock both for [`LOCKOUT_WINDOW_MS`]. Kept in memory: a restart
+/// [`LOCKOUT_WINDOW`] lock both for [`LOCKOUT_WINDOW`]. Kept in memory: a restart
 /// forgets it (an attacker who can restart the service has no need to guess).
 #[derive(Debug, Default)]
 pub struct Lockout {
@@ -155,41 +156,43 @@ pub struct Counted {
 }
 
 impl Lockout {
-    /// Until when `user` (when known) or `address` is locked, if either is at `now_ms`.
+    /// Until when `user` (when known) or `address` is locked, if either is at `now`.
     pub(crate) fn locked_until(
         &self,
         user: Option<&str>,
         address: IpAddr,
-        now_ms: i64,
-    ) -> Option<i64> {
+        now: Timestamp,
+    ) -> Option<Timestamp> {
         let records = self.records.lock().unwrap_or_else(|p| p.into_inner());
         let subjects = subjects(user, address);
         subjects
             .iter()
-            .filter_map(|s| records.get(s)?.locked_until_ms)
-            .filter(|&until| until > now_ms)
+            .filter_map(|s| records.get(s)?.locked_until)
+            .filter(|&until| until > now)
             .max()
     }
 
-    /// Counts one failure of `user` (when known) from `address` at `now_ms`.
-    pub fn fail(&self, user: Option<&str>, address: IpAddr, now_ms: i64) -> Counted {
+    /// Counts one failure of `user` (when known) from `address` at `now`.
+    pub fn fail(&self, user: Option<&str>, address: IpAddr, now: Timestamp) -> Counted {
         let mut records = self.records.lock().unwrap_or_else(|p| p.into_inner());
         let mut locked_now = false;
+        let recent = |t: &Timestamp| now.duration_since(*t) < LOCKOUT_WINDOW;
         for s in subjects(user, address) {
             let r = records.entry(s).or_default();
-            r.failures.retain(|&t| now_ms - t < LOCKOUT_WINDOW_MS);
-            r.failures.push(now_ms);
-            let locked = r.locked_until_ms.is_some_and(|u| u > now_ms);
+            r.failures.retain(recent);
+            r.failures.push(now);
+            let locked = r.locked_until.is_some_and(|u| u > now);
             if !locked && r.failures.len() >= LOCKOUT_FAILURES {
-                r.locked_until_ms = Some(now_ms + LOCKOUT_WINDOW_MS);
+                // Saturates at jiff's last instant rather than failing: a lock all the same.
+                let until = now.saturating_add(LOCKOUT_WINDOW);
+                r.locked_until = Some(until.unwrap_or(Timestamp::MAX));
                 r.failures.clear();
                 locked_now = true;
             }
         }
         // Old records go, so a scan of many addresses does not grow the map for ever.
         records.retain(|_, r| {
-            r.locked_until_ms.is_some_and(|u| u > now_ms)
-                || r.failures.iter().any(|&t| now_ms - t < LOCKOUT_WINDOW_MS)
+            r.locked_until.is_some_and(|u| u > now) || r.failures.iter().any(recent)
         });
         Counted { locked_now }
     }
@@ -238,17 +241,18 @@ mod tests {
     fn five_failures_in_fifteen_minutes_lock_user_and_address_for_fifteen_minutes() {
         let l = Lockout::default();
         let (a, b): (IpAddr, IpAddr) = ("10.0.0.1".parse().unwrap(), "10.0.0.2".parse().unwrap());
-        let t0 = 1_000_000;
+        let ms = SignedDuration::from_millis;
+        let t0 = Timestamp::from_millisecond(1_000_000).unwrap();
         for i in 0..4 {
-            assert!(!l.fail(Some("ann"), a, t0 + i).locked_now);
+            assert!(!l.fail(Some("ann"), a, t0 + ms(i)).locked_now);
         }
-        assert_eq!(l.locked_until(Some("ann"), a, t0 + 4), None);
-        assert!(l.fail(Some("ann"), a, t0 + 4).locked_now);
-        let until = t0 + 4 + LOCKOUT_WINDOW_MS;
+        assert_eq!(l.locked_until(Some("ann"), a, t0 + ms(4)), None);
+        assert!(l.fail(Some("ann"), a, t0 + ms(4)).locked_now);
+        let until = t0 + ms(4) + LOCKOUT_WINDOW;
         // The user from elsewhere, and anyone from that address, are locked.
-        assert_eq!(l.locked_until(Some("ann"), b, t0 + 5), Some(until));
-        assert_eq!(l.locked_until(Some("bob"), a, t0 + 5), Some(until));
-        assert_eq!(l.locked_until(Some("bob"), b, t0 + 5), None);
+        assert_eq!(l.locked_until(Some("ann"), b, t0 + ms(5)), Some(until));
+        assert_eq!(l.locked_until(Some("bob"), a, t0 + ms(5)), Some(until));
+        assert_eq!(l.locked_until(Some("bob"), b, t0 + ms(5)), None);
         assert_eq!(
             l.locked_until(Some("ann"), a, until),
             None,
@@ -256,7 +260,7 @@ mod tests {
         );
         // Failures spread over more than the window never lock.
         for i in 0..10 {
-            let at = until + i * (LOCKOUT_WINDOW_MS / 4 + 1);
+            let at = until + (LOCKOUT_WINDOW / 4 + ms(1)) * i;
             assert!(!l.fail(Some("cy"), b, at).locked_now, "failure {i}");
         }
     }

@@ -42,7 +42,7 @@ pub(crate) enum DfqError {
 /// One measured part of a feature.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct DfqRow {
-    pub received_at_ms: i64,
+    pub received_at_ms: jiff::Timestamp,
     /// What identifies the part (K0014): its number as the gauge reported it.
     pub part_ident: String,
     /// Largest |measured − nominal| with nothing fitted, µm; `None` when unknown.
@@ -292,8 +292,8 @@ fn text(value: &str, max_chars: usize) -> String {
 }
 
 /// `DD.MM.YYYY/HH:MM:SS` (K0004), UTC.
-fn time(ms: i64) -> String {
-    crate::clock::utc_format(ms, "%d.%m.%Y/%H:%M:%S")
+fn time(at: jiff::Timestamp) -> String {
+    crate::clock::utc_format(at, "%d.%m.%Y/%H:%M:%S")
 }
 
 #[cfg(test)]

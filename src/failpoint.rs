@@ -60,6 +60,7 @@ pub(crate) fn crash_point(_step: &'static str) {}
 /// The step and count `CAMLOOP_CRASH_AT` names: `<step>` is its first time, `<step>:<n>` its
 /// n-th (n ≥ 1). Step names contain `:` themselves, so only a numeric last part is a count.
 /// `None` for a step no crash point has, or a count of 0.
+#[cfg(any(test, feature = "failpoints"))]
 pub(crate) fn parse_crash_at(text: &str) -> Option<(&'static str, u64)> {
     let (name, nth) = match text.rsplit_once(':') {
         Some((name, n)) if n.bytes().all(|b| b.is_ascii_digit()) && !n.is_empty() => {

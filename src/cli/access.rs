@@ -4,7 +4,7 @@
 
 use super::history::{StoreArgs, connect, parse_time, runtime};
 use crate::auth::{UserName, hash_password, new_token, token_digest};
-use crate::clock::now_ms;
+use crate::clock::now;
 use crate::store::{AuditEntry, AuditResult, NewToken, Role, Store, TokenId};
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand, ValueEnum};
@@ -138,7 +138,7 @@ fn cli_actor() -> String {
 
 fn entry(action: &str, after: serde_json::Value, reason: String) -> AuditEntry {
     AuditEntry {
-        at_ms: now_ms(),
+        at_ms: now(),
         actor: cli_actor(),
         role: Role::Admin,
         client: "local".into(),
@@ -184,7 +184,7 @@ pub(crate) fn run_user(args: UserArgs) -> anyhow::Result<()> {
 }
 
 async fn user(store: &Store, action: UserAction, hash: Option<&str>) -> anyhow::Result<()> {
-    let now = now_ms();
+    let now = now();
     match action {
         UserAction::Add { name, role } => {
             let name = user_name(&name)?;
@@ -231,7 +231,7 @@ async fn user(store: &Store, action: UserAction, hash: Option<&str>) -> anyhow::
                 } else {
                     "enabled"
                 };
-                let created = crate::clock::utc_text(u64::try_from(u.created_at_ms).unwrap_or(0));
+                let created = crate::clock::utc_text(u.created_at_ms);
                 println!(
                     "{:<32} {:<9} {:<20} {state}",
                     u.name,
@@ -244,12 +244,12 @@ async fn user(store: &Store, action: UserAction, hash: Option<&str>) -> anyhow::
     Ok(())
 }
 
-/// A lifetime such as `90d` or `12h`, ms; at most 400 days.
-fn lifetime_ms(text: &str) -> anyhow::Result<i64> {
+/// A lifetime such as `90d` or `12h`; at most 400 days.
+fn lifetime(text: &str) -> anyhow::Result<jiff::SignedDuration> {
     let t = text.trim();
-    let (number, unit_ms) = match t.char_indices().last() {
-        Some((i, 'd')) => (&t[..i], 86_400_000),
-        Some((i, 'h')) => (&t[..i], 3_600_000),
+    let (number, unit_h) = match t.char_indices().last() {
+        Some((i, 'd')) => (&t[..i], 24),
+        Some((i, 'h')) => (&t[..i], 1),
         _ => bail!("--expires `{text}`: give days or hours, like 90d or 12h"),
     };
     let n: i64 = number
@@ -257,11 +257,11 @@ fn lifetime_ms(text: &str) -> anyhow::Result<i64> {
         .ok()
         .filter(|n| *n > 0)
         .with_context(|| format!("--expires `{text}`: not a positive number"))?;
-    let ms = n.saturating_mul(unit_ms);
-    if ms > 400 * 86_400_000 {
+    let hours = n.saturating_mul(unit_h);
+    if hours > 400 * 24 {
         bail!("--expires `{text}`: at most 400 days");
     }
-    Ok(ms)
+    Ok(jiff::SignedDuration::from_hours(hours))
 }
 
 pub(crate) fn run_token(args: TokenArgs) -> anyhow::Result<()> {
@@ -274,7 +274,7 @@ pub(crate) fn run_token(args: TokenArgs) -> anyhow::Result<()> {
 }
 
 async fn token(store: &Store, action: TokenAction) -> anyhow::Result<()> {
-    let now = now_ms();
+    let now = now();
     match action {
         TokenAction::Create {
             user,
@@ -306,7 +306,7 @@ async fn token(store: &Store, action: TokenAction) -> anyhow::Result<()> {
                     (None, true) => "expired",
                     (None, false) => "live",
                 };
-                let expires = crate::clock::utc_text(u64::try_from(t.expires_at_ms).unwrap_or(0));
+                let expires = crate::clock::utc_text(t.expires_at_ms);
                 println!(
                     "{:>5} {:<32} {:<9} {:<20} {:<8} {}",
                     t.id.0,
@@ -330,7 +330,7 @@ async fn create_token(
     expires: &str,
     label: &str,
 ) -> anyhow::Result<()> {
-    let now = now_ms();
+    let now = now();
     let name = user_name(user)?;
     let Some(u) = store
         .user(name.as_str())
@@ -346,7 +346,7 @@ async fn create_token(
         );
     }
     let secret = new_token()?;
-    let expires_at_ms = now + lifetime_ms(expires)?;
+    let expires_at_ms = now + lifetime(expires)?;
     let label: String = label.chars().take(64).collect();
     let t = NewToken {
         user: u.id,
@@ -357,24 +357,24 @@ async fn create_token(
         expires_at_ms,
     };
     let id = store.add_token(&t).await?;
-    let after = serde_json::json!({ "token": id.0, "user": name, "role": role.as_str(), "expires_at_ms": expires_at_ms, "label": label });
+    let after = serde_json::json!({ "token": id.0, "user": name, "role": role.as_str(), "expires_at_ms": expires_at_ms.as_millisecond(), "label": label });
     store
         .append_audit(&entry("token.create", after, String::new()))
         .await?;
     eprintln!(
         "token {} for {name} ({role}), valid until {} UTC; shown once, keep it secret:",
         id.0,
-        crate::clock::utc_text(u64::try_from(expires_at_ms).unwrap_or(0))
+        crate::clock::utc_text(expires_at_ms)
     );
     println!("{secret}");
     Ok(())
 }
 
 pub(crate) fn run_audit(args: AuditArgs) -> anyhow::Result<()> {
-    let now = now_ms();
+    let now = now();
     let since = match &args.since {
         Some(t) => parse_time(t, now)?,
-        None => now - 86_400_000,
+        None => now - jiff::SignedDuration::from_hours(24),
     };
     runtime()?.block_on(async {
         let store = connect(&args.store.store()).await?;
@@ -404,7 +404,7 @@ async fn verify_trail(store: &Store) -> anyhow::Result<()> {
     )
 }
 
-async fn print_trail(store: &Store, since_ms: i64) -> anyhow::Result<()> {
+async fn print_trail(store: &Store, since_ms: jiff::Timestamp) -> anyhow::Result<()> {
     let mut after = 0;
     loop {
         let rows = store
@@ -416,7 +416,7 @@ async fn print_trail(store: &Store, since_ms: i64) -> anyhow::Result<()> {
         after = last.id;
         for r in &rows {
             let e = &r.entry;
-            let t = crate::clock::utc_text(u64::try_from(e.at_ms).unwrap_or(0));
+            let t = crate::clock::utc_text(e.at_ms);
             let target = [
                 e.machine.clone(),
                 e.feature.clone(),

@@ -11,7 +11,7 @@ use super::analyze::load_dbc;
 use super::output::Outputs;
 use super::part::{CamArgs, CrankpinArgs, PartKindArgs, load_cam_table};
 use super::table::{FormArg, table_csv};
-use crate::clock::now_ms_u64;
+use crate::clock::now;
 use crate::core::compensate::{
     self, AxisLimits, Feature, GuardedTable, TableRequest, pin_nominal_lift,
 };
@@ -242,7 +242,7 @@ fn learn_from(
         Decision::Refused(refused) => {
             // Nothing is delivered; the refusal is kept with the measurement it came from.
             let record = Refusal {
-                at_unix_ms: now_ms_u64(),
+                at_unix_ms: now(),
                 measurement: path.display().to_string(),
                 measurement_sha256: id,
                 iteration: saved.learning.iteration,
@@ -272,7 +272,8 @@ fn learn_from(
 /// A refused table as kept in `refusals.jsonl`.
 #[derive(Debug, Serialize)]
 struct Refusal {
-    at_unix_ms: u64,
+    #[serde(with = "crate::clock::unix_ms")]
+    at_unix_ms: jiff::Timestamp,
     measurement: String,
     measurement_sha256: String,
     iteration: u32,
@@ -311,7 +312,7 @@ fn push(
         table_pair: setup.table_pair,
         keep_versions: 50,
     };
-    let (mut share, _report) = Share::open(config, Box::new(RealFs), Box::new(now_ms_u64))
+    let (mut share, _report) = Share::open(config, Box::new(RealFs), Box::new(now))
         .context("cannot open the program share")?;
     let mut settings = setup.program.clone();
     settings.table_number = share.next_table_number();
@@ -337,7 +338,7 @@ fn push(
             "max_correction_um": saved.learning.correction_um.iter().fold(0.0f64, |m, u| m.max(u.abs())),
         }),
         rollback_of: None,
-        created_at_unix_ms: now_ms_u64(),
+        created_at_unix_ms: now(),
     };
     let pushed = share
         .push_once(request)

@@ -2,7 +2,7 @@
 //! service writes, as a table, CSV or JSON.
 
 use super::output::Outputs;
-use crate::clock::now_ms;
+use crate::clock::now;
 use crate::config::{Config, ENV_DATABASE_URL};
 use crate::store::{HistoryFilter, MAX_PAGE, MasterRuns, MeasurementSummary, Store};
 use anyhow::{Context, bail};
@@ -72,7 +72,7 @@ pub struct ExportArgs {
 }
 
 pub(crate) fn run_history(args: HistoryArgs) -> anyhow::Result<()> {
-    let now = now_ms();
+    let now = now();
     let since = args
         .since
         .as_deref()
@@ -124,19 +124,19 @@ pub async fn newest(
 }
 
 pub(crate) fn run_export(args: ExportArgs) -> anyhow::Result<()> {
-    let now = now_ms();
+    let now = now();
     let since = args
         .since
         .as_deref()
         .map(|t| parse_time(t, now))
         .transpose()?
-        .unwrap_or(0);
+        .unwrap_or(jiff::Timestamp::UNIX_EPOCH);
     let until = args
         .until
         .as_deref()
         .map(|t| parse_time(t, now))
         .transpose()?
-        .unwrap_or(now + 1);
+        .unwrap_or(now + jiff::SignedDuration::from_millis(1));
     if since >= until {
         bail!("--since must be before --until");
     }
@@ -243,7 +243,7 @@ fn render(rows: &[MeasurementSummary], format: Format) -> anyhow::Result<String>
                     s,
                     "{},{},{},{},{},{},{},{},{},{},{},{},{}",
                     m.id.0,
-                    m.received_at_ms,
+                    m.received_at_ms.as_millisecond(),
                     csv_field(&m.machine),
                     csv_field(&m.part),
                     csv_field(&m.lobe),
@@ -263,7 +263,7 @@ fn render(rows: &[MeasurementSummary], format: Format) -> anyhow::Result<String>
                 .iter()
                 .map(|m| {
                     serde_json::json!({
-                        "id": m.id.0, "received_at_ms": m.received_at_ms, "machine": m.machine, "part": m.part,
+                        "id": m.id.0, "received_at_ms": m.received_at_ms.as_millisecond(), "machine": m.machine, "part": m.part,
                         "lobe": m.lobe, "verdict": m.verdict.as_str(), "max_profile_error_um": m.max_profile_error_um,
                         "base_radius_error_um": m.base_radius_error_um, "phase_error_deg": m.phase_error_deg,
                         "revolutions_used": m.revolutions_used, "points_per_rev": m.points_per_rev,
@@ -286,7 +286,7 @@ fn csv_field(text: &str) -> String {
 }
 
 /// `2026-11-21`, `2026-11-21T10:00:00Z`, Unix ms, or an age (`90s`, `30m`, `24h`, `7d`).
-pub(crate) fn parse_time(text: &str, now_ms: i64) -> anyhow::Result<i64> {
+pub(crate) fn parse_time(text: &str, now: jiff::Timestamp) -> anyhow::Result<jiff::Timestamp> {
     let t = text.trim();
     let bad = || {
         anyhow::anyhow!(
@@ -294,55 +294,75 @@ pub(crate) fn parse_time(text: &str, now_ms: i64) -> anyhow::Result<i64> {
         )
     };
     if let Some((digits, unit)) = t.char_indices().last().map(|(i, c)| (&t[..i], c))
-        && let Some(scale) = match unit {
-            's' => Some(1_000),
-            'm' => Some(60_000),
-            'h' => Some(3_600_000),
-            'd' => Some(86_400_000),
+        && let Some(unit_s) = match unit {
+            's' => Some(1),
+            'm' => Some(60),
+            'h' => Some(3_600),
+            'd' => Some(86_400),
             _ => None,
         }
         && let Ok(n) = digits.parse::<i64>()
     {
-        return Ok(now_ms - n * scale);
+        // An age too large for jiff's years −9999 to 9999 is refused, not wrapped.
+        return n
+            .checked_mul(unit_s)
+            .and_then(|s| now.checked_sub(jiff::SignedDuration::from_secs(s)).ok())
+            .ok_or_else(bad);
     }
     if t.chars().all(|c| c.is_ascii_digit()) && t.len() > 8 {
-        return t.parse().map_err(|_| bad());
+        return t
+            .parse()
+            .ok()
+            .and_then(|ms| jiff::Timestamp::from_millisecond(ms).ok())
+            .ok_or_else(bad);
     }
     crate::clock::parse_utc(t).ok_or_else(bad)
 }
 
 /// `MM-DD HH:MM:SS` in UTC, enough to tell parts apart in a terminal.
-fn format_time(ms: i64) -> String {
-    crate::clock::utc_format(ms, "%m-%d %H:%M:%S")
+fn format_time(at: jiff::Timestamp) -> String {
+    crate::clock::utc_format(at, "%m-%d %H:%M:%S")
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    fn ms(unix_ms: i64) -> jiff::Timestamp {
+        jiff::Timestamp::from_millisecond(unix_ms).unwrap()
+    }
+
     #[test]
     fn times_parse_in_every_documented_form() {
         // 2026-11-21T00:00:00Z is 1795219200 s after the epoch (20778 days).
-        assert_eq!(parse_time("2026-11-21", 0).unwrap(), 1_795_219_200_000);
         assert_eq!(
-            parse_time("2026-11-21T10:30:00Z", 0).unwrap(),
-            1_795_219_200_000 + 37_800_000
+            parse_time("2026-11-21", ms(0)).unwrap(),
+            ms(1_795_219_200_000)
         );
-        assert_eq!(parse_time("1795219200123", 0).unwrap(), 1_795_219_200_123);
         assert_eq!(
-            parse_time("24h", 100_000_000).unwrap(),
-            100_000_000 - 86_400_000
+            parse_time("2026-11-21T10:30:00Z", ms(0)).unwrap(),
+            ms(1_795_219_200_000 + 37_800_000)
         );
-        assert_eq!(parse_time("7d", 0).unwrap(), -7 * 86_400_000);
+        assert_eq!(
+            parse_time("1795219200123", ms(0)).unwrap(),
+            ms(1_795_219_200_123)
+        );
+        assert_eq!(
+            parse_time("24h", ms(100_000_000)).unwrap(),
+            ms(100_000_000 - 86_400_000)
+        );
+        assert_eq!(parse_time("7d", ms(0)).unwrap(), ms(-7 * 86_400_000));
         assert!(
-            parse_time("yesterday", 0)
+            parse_time("yesterday", ms(0))
                 .unwrap_err()
                 .to_string()
                 .contains("time `yesterday`")
         );
-        assert!(parse_time("2026-13-01", 0).is_err());
+        assert!(parse_time("2026-13-01", ms(0)).is_err());
+        // Beyond the years jiff holds: refused, not wrapped around.
+        assert!(parse_time("9999999999d", ms(0)).is_err());
         assert_eq!(
-            format_time(1_795_219_200_000 + 37_800_000),
+            format_time(ms(1_795_219_200_000 + 37_800_000)),
             "11-21 10:30:00"
         );
     }

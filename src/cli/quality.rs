@@ -2,7 +2,7 @@
 //! same store the service writes, with the limits from the service configuration's recipes.
 
 use super::history::{StoreArgs, connect, parse_time, runtime};
-use crate::clock::now_ms;
+use crate::clock::now;
 use crate::config::Config;
 use crate::quality::{self, FeatureLimits, Window, render, study::gauge_studies};
 use crate::recipe::Recipe;
@@ -61,7 +61,7 @@ pub struct GaugeStudyArgs {
 }
 
 pub(crate) fn run_capability(args: CapabilityArgs) -> anyhow::Result<()> {
-    let now = now_ms();
+    let now = now();
     let time = |t: &Option<String>| t.as_deref().map(|t| parse_time(t, now)).transpose();
     let window = Window {
         last: args.last,
@@ -92,14 +92,9 @@ pub(crate) fn run_capability(args: CapabilityArgs) -> anyhow::Result<()> {
     for (lobe, parts, since, masters, items) in &results {
         match args.format {
             QualityFormat::Table => {
-                let from = if *since == i64::MIN {
-                    String::new()
-                } else {
-                    format!(
-                        " from {}",
-                        crate::clock::utc_text(u64::try_from(*since).unwrap_or(0))
-                    )
-                };
+                let from = since.map_or(String::new(), |at| {
+                    format!(" from {}", crate::clock::utc_text(at))
+                });
                 let title = format!(
                     "{} {lobe}: {parts} parts{from} ({masters} master runs left out)",
                     args.machine
@@ -124,7 +119,7 @@ pub(crate) fn run_capability(args: CapabilityArgs) -> anyhow::Result<()> {
             .iter()
             .map(|(lobe, parts, since, masters, items)| {
                 serde_json::json!({"machine": args.machine, "feature": lobe, "parts": parts,
-                    "since_ms": (*since != i64::MIN).then_some(*since),
+                    "since_ms": since.map(|at| at.as_millisecond()),
                     "master_runs_left_out": masters, "characteristics": items})
             })
             .collect();
@@ -159,8 +154,8 @@ pub(crate) fn run_gauge_study(args: GaugeStudyArgs) -> anyhow::Result<()> {
         QualityFormat::Json => {
             serde_json::to_string_pretty(&serde_json::json!({
                 "machine": args.machine, "feature": args.lobe, "runs": rows.len(),
-                "first_ms": rows.first().map(|r| r.received_at_ms),
-                "last_ms": rows.last().map(|r| r.received_at_ms), "characteristics": items,
+                "first_ms": rows.first().map(|r| r.received_at_ms.as_millisecond()),
+                "last_ms": rows.last().map(|r| r.received_at_ms.as_millisecond()), "characteristics": items,
             }))? + "\n"
         }
         QualityFormat::Table | QualityFormat::Csv => render::gauge_table(

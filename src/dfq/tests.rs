@@ -84,7 +84,7 @@ fn check(text: &str) -> Vec<(String, Option<usize>, String)> {
 
 fn row(id: i64, at_ms: i64, profile: f64) -> DfqRow {
     DfqRow {
-        received_at_ms: at_ms,
+        received_at_ms: jiff::Timestamp::from_millisecond(at_ms).unwrap(),
         part_ident: id.to_string(),
         max_error_um: Some(profile + 1.0),
         profile_error_um: profile,

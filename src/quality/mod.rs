@@ -22,8 +22,8 @@ pub use limits::{CharacteristicLimits, FeatureLimits};
 pub(crate) struct Window {
     /// The newest this many production parts (at most [`MAX_PAGE`]).
     pub last: u32,
-    pub since_ms: Option<i64>,
-    pub until_ms: Option<i64>,
+    pub since_ms: Option<jiff::Timestamp>,
+    pub until_ms: Option<jiff::Timestamp>,
     /// Only parts after the machine's newest wheel dressing.
     pub since_dressing: bool,
     /// Only parts after the feature's recipe last changed (the store's newest snapshot).
@@ -47,7 +47,7 @@ impl Default for Window {
 pub struct PartRow {
     pub id: MeasurementId,
     pub part: String,
-    pub received_at_ms: i64,
+    pub received_at_ms: jiff::Timestamp,
     pub max_profile_error_um: f64,
     pub base_radius_error_um: f64,
     pub phase_error_deg: f64,
@@ -88,19 +88,19 @@ impl PartRow {
 }
 
 /// The window's parts, oldest first: production parts, or (with `masters`) master runs only.
-/// Also returns the start the window took (ms) and how many of the other kind it skipped.
+/// Also returns the start the window took, if any, and how many of the other kind it skipped.
 pub(crate) async fn window_rows(
     store: &Store,
     machine: &str,
     lobe: &str,
     window: &Window,
     masters: bool,
-) -> Result<(Vec<PartRow>, i64, usize), crate::store::StoreError> {
-    let mut since = window.since_ms.unwrap_or(i64::MIN);
+) -> Result<(Vec<PartRow>, Option<jiff::Timestamp>, usize), crate::store::StoreError> {
+    let mut since = window.since_ms;
     if window.since_dressing
         && let Some(d) = store.dressings(machine, 1).await?.first()
     {
-        since = since.max(d.at_ms);
+        since = since.max(Some(d.at_ms));
     }
     if window.since_recipe_change
         && let Some(f) = store
@@ -109,14 +109,17 @@ pub(crate) async fn window_rows(
             .iter()
             .find(|f| f.lobe == lobe)
     {
-        since = since.max(f.created_at_ms);
+        since = since.max(Some(f.created_at_ms));
     }
-    let until = window.until_ms.unwrap_or(i64::MAX);
+    let (start, until) = (
+        since.unwrap_or(jiff::Timestamp::MIN),
+        window.until_ms.unwrap_or(jiff::Timestamp::MAX),
+    );
     let wanted = window.last.clamp(1, MAX_PAGE) as usize;
     let (mut rows, mut skipped, mut before) = (Vec::new(), 0usize, None);
     while rows.len() < wanted {
         let batch = store
-            .feature_measurements(machine, lobe, (since, until), before, 500)
+            .feature_measurements(machine, lobe, (start, until), before, 500)
             .await?;
         let Some(last) = batch.last() else { break };
         before = Some(last.summary.id);

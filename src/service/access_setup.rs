@@ -17,7 +17,7 @@ use tracing::{info, warn};
 pub(crate) fn access_settings(config: &Config) -> AuthState {
     let anonymous_read = config.auth.anonymous_read(config.http.listen);
     let mut auth = AuthState::new(config.api_token.clone(), anonymous_read);
-    auth.session_ms = i64::from(config.auth.session_minutes.max(1)) * 60_000;
+    auth.session = jiff::SignedDuration::from_mins(i64::from(config.auth.session_minutes.max(1)));
     // Under TLS the session cookie is `Secure`: a browser never sends it in clear.
     auth.secure_cookie = config.http.tls();
     if config.api_token.is_some() {
@@ -50,7 +50,7 @@ pub(crate) async fn ensure_admin(
             file.display()
         )
     })?;
-    let now = crate::clock::now_ms();
+    let now = crate::clock::now();
     match store.add_user("admin", Role::Admin, &hash, now).await {
         Ok(_) => {}
         // Instances sharing one database start together: another one made the admin

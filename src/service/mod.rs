@@ -462,7 +462,10 @@ async fn keep_raw_retention(days: u32, store: StoreHandle, mut shutdown: watch::
         let Some(s) = store.read().await.clone() else {
             continue;
         };
-        let cutoff_ms = crate::clock::now_ms() - i64::from(days) * 86_400_000;
+        let age = jiff::SignedDuration::from_hours(i64::from(days) * 24);
+        let cutoff_ms = crate::clock::now()
+            .saturating_sub(age)
+            .unwrap_or(jiff::Timestamp::MIN);
         match s.prune_raw_older_than(cutoff_ms).await {
             Ok(0) => {}
             Ok(n) => info!(

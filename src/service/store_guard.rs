@@ -150,7 +150,8 @@ fn join(problems: &[Problem]) -> String {
 #[derive(Debug, Serialize, Deserialize)]
 struct Remembered {
     store_id: String,
-    created_at_ms: i64,
+    #[serde(with = "crate::clock::unix_ms")]
+    created_at_ms: jiff::Timestamp,
     /// Where the store was, for the operator reading the file (not compared).
     database: String,
     /// When the store was accepted with `--accept-new-database`: how many table versions

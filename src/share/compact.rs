@@ -16,6 +16,7 @@
 use std::fs;
 use std::path::Path;
 
+use jiff::Timestamp;
 use serde::{Deserialize, Serialize};
 
 use super::error::StateError;
@@ -41,7 +42,8 @@ pub struct Checkpoint {
     pub pushed: u64,
     /// The versions held, ascending.
     pub versions: Vec<VersionState>,
-    pub at_unix_ms: u64,
+    #[serde(with = "crate::clock::unix_ms")]
+    pub at_unix_ms: Timestamp,
     /// Lines the manifest had when it was compacted (now in the archive).
     pub archived_lines: usize,
 }
@@ -93,7 +95,7 @@ impl History {
         Ok(())
     }
 
-    fn checkpoint(&self, at_unix_ms: u64, archived_lines: usize) -> Checkpoint {
+    fn checkpoint(&self, at_unix_ms: Timestamp, archived_lines: usize) -> Checkpoint {
         Checkpoint {
             told: self.told,
             forgotten: self.forgotten,
@@ -115,7 +117,7 @@ pub(crate) fn compact(
     temp_dir: &Path,
     history: &History,
     lines: usize,
-    at_unix_ms: u64,
+    at_unix_ms: Timestamp,
 ) -> Result<(), StateError> {
     let manifest = state_dir.join(manifest_name);
     let checkpoint = Record::Checkpoint(Box::new(history.checkpoint(at_unix_ms, lines)));
@@ -141,12 +143,16 @@ pub(crate) fn compact(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn ms(unix_ms: u64) -> jiff::Timestamp {
+        jiff::Timestamp::from_millisecond(unix_ms as i64).unwrap()
+    }
     use crate::share::manifest::{FileRecord, VersionRecord, VersionStatus};
 
     fn version(n: u64) -> Record {
         Record::Version(VersionRecord {
             version: n,
-            created_at_unix_ms: n,
+            created_at_unix_ms: ms(n),
             table_number: 1 + (n as u32 % 2),
             files: vec![FileRecord {
                 name: "CAM.SPF".into(),
@@ -174,11 +180,11 @@ mod tests {
             for r in [
                 Record::Delivering {
                     version: n,
-                    at_unix_ms: n,
+                    at_unix_ms: ms(n),
                 },
                 Record::Pushed {
                     version: n,
-                    at_unix_ms: n,
+                    at_unix_ms: ms(n),
                 },
             ] {
                 text.push_str(&manifest::line(&r));
@@ -186,7 +192,7 @@ mod tests {
             if n > 3 {
                 text.push_str(&manifest::line(&Record::Pruned {
                     version: n - 3,
-                    at_unix_ms: n,
+                    at_unix_ms: ms(n),
                 }));
             }
         }
@@ -201,7 +207,7 @@ mod tests {
             dir.path(),
             &held,
             long.lines,
-            9,
+            ms(9),
         )
         .unwrap();
         assert_eq!(
@@ -224,12 +230,12 @@ mod tests {
         let mut h = short.history;
         h.apply(Record::Delivering {
             version: 51,
-            at_unix_ms: 60,
+            at_unix_ms: ms(60),
         })
         .unwrap();
         h.apply(version(52)).unwrap();
         // Only a first line may be a checkpoint.
-        let again = Record::Checkpoint(Box::new(h.checkpoint(0, 0)));
+        let again = Record::Checkpoint(Box::new(h.checkpoint(ms(0), 0)));
         assert!(h.apply(again).unwrap_err().0.contains("only a first line"));
     }
 
@@ -302,7 +308,7 @@ mod tests {
     fn an_inconsistent_checkpoint_is_refused() {
         let mut h = History::default();
         h.apply(version(1)).unwrap();
-        let mut c = h.checkpoint(0, 1);
+        let mut c = h.checkpoint(ms(0), 1);
         c.told = 0;
         assert!(c.clone().into_history().is_err());
         c.told = 1;

@@ -9,6 +9,7 @@
 
 use std::path::Path;
 
+use jiff::Timestamp;
 use serde::{Deserialize, Serialize};
 
 use super::error::StateError;
@@ -22,16 +23,29 @@ pub enum Record {
     /// A push attempt failed; the version waits. Written when the reason changes.
     Waiting {
         version: u64,
-        at_unix_ms: u64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_unix_ms: Timestamp,
         reason: String,
     },
     /// Temporaries are on the share and the renames begin: from here on the control may
     /// see this version's files.
-    Delivering { version: u64, at_unix_ms: u64 },
+    Delivering {
+        version: u64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_unix_ms: Timestamp,
+    },
     /// All files renamed, the folder flushed, every file read back and verified.
-    Pushed { version: u64, at_unix_ms: u64 },
+    Pushed {
+        version: u64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_unix_ms: Timestamp,
+    },
     /// The kept text was removed (older than the kept versions); the record stays.
-    Pruned { version: u64, at_unix_ms: u64 },
+    Pruned {
+        version: u64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_unix_ms: Timestamp,
+    },
     /// The first line of a compacted manifest: the versions held when it was compacted
     /// (see [`super::compact`]); the lines before it went to the archive file.
     Checkpoint(Box<super::compact::Checkpoint>),
@@ -42,8 +56,9 @@ pub enum Record {
 pub struct VersionRecord {
     /// 1, 2, 3, … without gaps.
     pub version: u64,
-    /// Given by the caller, Unix time in milliseconds (UTC).
-    pub created_at_unix_ms: u64,
+    /// Given by the caller; written as Unix time in milliseconds.
+    #[serde(with = "crate::clock::unix_ms")]
+    pub created_at_unix_ms: Timestamp,
     /// The curve-table number the program defines.
     pub table_number: u32,
     /// The program files, in rename order.
@@ -277,6 +292,8 @@ impl History {
                         "v{version} pushed without delivering"
                     )));
                 }
+                // The status keeps integer milliseconds; an instant before 1970 reads as 0.
+                let at_unix_ms = u64::try_from(at_unix_ms.as_millisecond()).unwrap_or(0);
                 v.status = VersionStatus::Pushed {
                     at_unix_ms,
                     note: None,
@@ -374,10 +391,14 @@ pub(crate) fn line(record: &Record) -> String {
 mod tests {
     use super::*;
 
+    fn ms(unix_ms: u64) -> jiff::Timestamp {
+        jiff::Timestamp::from_millisecond(unix_ms as i64).unwrap()
+    }
+
     fn version(n: u64, refused: Option<&str>) -> Record {
         Record::Version(VersionRecord {
             version: n,
-            created_at_unix_ms: 1000 * n,
+            created_at_unix_ms: ms(1000 * n),
             table_number: 1,
             files: vec![FileRecord {
                 name: "CAM_T1.SPF".into(),
@@ -408,17 +429,17 @@ mod tests {
     fn settled_versions_are_forgotten_but_not_the_one_on_the_share() {
         let at = |version| Record::Pruned {
             version,
-            at_unix_ms: 0,
+            at_unix_ms: ms(0),
         };
         let mut h = fold(vec![
             version(1, None),
             Record::Delivering {
                 version: 1,
-                at_unix_ms: 1,
+                at_unix_ms: ms(1),
             },
             Record::Pushed {
                 version: 1,
-                at_unix_ms: 2,
+                at_unix_ms: ms(2),
             },
             version(2, None),
             version(3, Some("guard")),
@@ -446,11 +467,11 @@ mod tests {
         for r in [
             Record::Delivering {
                 version: 5,
-                at_unix_ms: 3,
+                at_unix_ms: ms(3),
             },
             Record::Pushed {
                 version: 5,
-                at_unix_ms: 4,
+                at_unix_ms: ms(4),
             },
         ] {
             h.apply(r).unwrap();
@@ -472,7 +493,7 @@ mod tests {
         assert_eq!(serde_json::from_str::<Record>(&text).unwrap(), r);
         let w = Record::Waiting {
             version: 1,
-            at_unix_ms: 7,
+            at_unix_ms: ms(7),
             reason: "share /x is missing".into(),
         };
         assert_eq!(
@@ -487,11 +508,11 @@ mod tests {
             version(1, None),
             Record::Delivering {
                 version: 1,
-                at_unix_ms: 1,
+                at_unix_ms: ms(1),
             },
             Record::Pushed {
                 version: 1,
-                at_unix_ms: 2,
+                at_unix_ms: ms(2),
             },
             version(2, None),
             version(3, Some("table 1 is in use")),
@@ -524,7 +545,7 @@ mod tests {
         );
         let pushed = Record::Pushed {
             version: 1,
-            at_unix_ms: 0,
+            at_unix_ms: ms(0),
         };
         assert!(
             fold(vec![version(1, None), pushed.clone()])
@@ -534,7 +555,7 @@ mod tests {
         );
         let delivering = Record::Delivering {
             version: 1,
-            at_unix_ms: 0,
+            at_unix_ms: ms(0),
         };
         assert!(
             fold(vec![version(1, Some("no")), delivering])
@@ -544,7 +565,7 @@ mod tests {
         );
         let pruned = Record::Pruned {
             version: 1,
-            at_unix_ms: 0,
+            at_unix_ms: ms(0),
         };
         assert!(
             fold(vec![version(1, None), pruned.clone(), pruned])

@@ -52,8 +52,8 @@ pub struct PushRequest {
     pub learning: serde_json::Value,
     /// Set for a rollback: the version whose text this re-pushes.
     pub rollback_of: Option<u64>,
-    /// Unix time in milliseconds (UTC), from the caller's clock.
-    pub created_at_unix_ms: u64,
+    /// From the caller's clock.
+    pub created_at_unix_ms: jiff::Timestamp,
 }
 
 /// Outcome of recording a request.
@@ -91,8 +91,8 @@ pub struct OpenReport {
     pub share_unavailable: Option<ShareError>,
 }
 
-/// Unix time in milliseconds (UTC); the only clock the adapter reads (for status records).
-pub type Clock = Box<dyn FnMut() -> u64 + Send>;
+/// The only clock the adapter reads (for status records).
+pub type Clock = Box<dyn FnMut() -> jiff::Timestamp + Send>;
 
 /// The program share with its version history. One `Share` per state folder: two processes
 /// on the same state folder are not supported.
@@ -305,7 +305,7 @@ impl Share {
     pub fn rollback_request(
         &self,
         version: u64,
-        created_at_unix_ms: u64,
+        created_at_unix_ms: jiff::Timestamp,
     ) -> Result<PushRequest, StateError> {
         let kept = self.held(version)?;
         let record = kept.record.clone();

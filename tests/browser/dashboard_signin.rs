@@ -90,7 +90,7 @@ async fn signing_in_csrf_and_lockout_in_a_real_browser() {
     let base = format!("http://{addr}");
     let store = Store::connect(&url).await.unwrap();
     let hash = camloop::auth::hash_password(PASSWORD).unwrap();
-    let now = camloop::clock::now_ms();
+    let now = camloop::clock::now();
     store
         .add_user("op", Role::Operator, &hash, now)
         .await
@@ -171,7 +171,10 @@ async fn signing_in_csrf_and_lockout_in_a_real_browser() {
         1,
         "nothing dressed: {body}"
     );
-    let rows = store.audit(0, 0, 100, false).await.unwrap();
+    let rows = store
+        .audit(jiff::Timestamp::UNIX_EPOCH, 0, 100, false)
+        .await
+        .unwrap();
     let csrf = rows
         .iter()
         .find(|r| r.entry.action == "csrf")
@@ -217,7 +220,10 @@ async fn signing_in_csrf_and_lockout_in_a_real_browser() {
     let page = sign_in(&c, &base, "op", PASSWORD).await;
     assert!(page.contains("Locked out"), "{page}");
     assert_eq!(c.current_url().await.unwrap().path(), "/signin");
-    let rows = store.audit(0, 0, 100, false).await.unwrap();
+    let rows = store
+        .audit(jiff::Timestamp::UNIX_EPOCH, 0, 100, false)
+        .await
+        .unwrap();
     let failed: Vec<_> = rows
         .iter()
         .filter(|r| r.entry.action == "signin" && r.entry.result.as_str() == "refused")

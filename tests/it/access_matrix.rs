@@ -86,7 +86,7 @@ fn refused(status: u16, location: &str, text: &str) -> bool {
 
 /// Users viewer, operator, engineer, admin, each with a token of its own role.
 async fn tokens(store: &Store) -> Vec<(Role, String)> {
-    let now = camloop::clock::now_ms();
+    let now = camloop::clock::now();
     let mut out = Vec::new();
     for role in Role::ALL {
         let hash = hash_password("a-password-of-the-right-length").unwrap();
@@ -102,7 +102,7 @@ async fn tokens(store: &Store) -> Vec<(Role, String)> {
             sha256: token_digest(&secret),
             role,
             created_at_ms: now,
-            expires_at_ms: now + 3_600_000,
+            expires_at_ms: now + jiff::SignedDuration::from_hours(1),
         };
         store.add_token(&t).await.unwrap();
         out.push((role, secret));
@@ -194,13 +194,13 @@ async fn tokens_carry_a_ceiling_expire_are_revoked_and_five_wrong_ones_lock_the_
         assert_eq!(mode, 0o600, "the password file is the owner's only");
     }
     let store = Store::connect(&url).await.unwrap();
-    let now = camloop::clock::now_ms();
+    let now = camloop::clock::now();
     let hash = hash_password("a-password-of-the-right-length").unwrap();
     let eng = store
         .add_user("eng", Role::Engineer, &hash, now)
         .await
         .unwrap();
-    let make = |role: Role, expires_at_ms: i64| {
+    let make = |role: Role, expires_at_ms: jiff::Timestamp| {
         let secret = new_token().unwrap();
         let t = NewToken {
             user: eng,
@@ -212,9 +212,10 @@ async fn tokens_carry_a_ceiling_expire_are_revoked_and_five_wrong_ones_lock_the_
         };
         (secret, t)
     };
-    let (viewer_of_eng, t1) = make(Role::Viewer, now + 3_600_000);
-    let (expired, t2) = make(Role::Engineer, now - 1);
-    let (revoked, t3) = make(Role::Engineer, now + 3_600_000);
+    let hour = jiff::SignedDuration::from_hours(1);
+    let (viewer_of_eng, t1) = make(Role::Viewer, now + hour);
+    let (expired, t2) = make(Role::Engineer, now - jiff::SignedDuration::from_millis(1));
+    let (revoked, t3) = make(Role::Engineer, now + hour);
     store.add_token(&t1).await.unwrap();
     store.add_token(&t2).await.unwrap();
     let revoked_id = store.add_token(&t3).await.unwrap();
@@ -254,7 +255,10 @@ async fn tokens_carry_a_ceiling_expire_are_revoked_and_five_wrong_ones_lock_the_
         "{metrics}"
     );
     // Every failure is in the audit trail, with the address; the chain holds.
-    let rows = store.audit(0, 0, 100, false).await.unwrap();
+    let rows = store
+        .audit(jiff::Timestamp::UNIX_EPOCH, 0, 100, false)
+        .await
+        .unwrap();
     let failures: Vec<_> = rows.iter().filter(|r| r.entry.action == "token").collect();
     assert_eq!(failures.len(), 5, "{rows:?}");
     assert!(
@@ -331,7 +335,10 @@ async fn an_engineer_freezes_and_resumes_learning_and_the_trail_says_who() {
     assert_eq!(status, 200, "{body}");
     let (_, metrics) = service_support::get(addr, "/metrics").await;
     assert_eq!(frozen_metric(&metrics).as_deref(), Some("0"), "{metrics}");
-    let rows = store.audit(0, 0, 100, false).await.unwrap();
+    let rows = store
+        .audit(jiff::Timestamp::UNIX_EPOCH, 0, 100, false)
+        .await
+        .unwrap();
     let changes: Vec<_> = rows
         .iter()
         .filter(|r| r.entry.action.starts_with("learning."))

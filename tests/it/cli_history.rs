@@ -45,7 +45,10 @@ async fn newest_pages_through_the_store_until_it_has_n_rows() {
     };
     // Pages of 10: 23 rows take three queries and come out newest first, none twice.
     let rows = newest(&store, filter.clone(), 23, 10).await.unwrap();
-    let times: Vec<i64> = rows.iter().map(|m| m.received_at_ms).collect();
+    let times: Vec<i64> = rows
+        .iter()
+        .map(|m| m.received_at_ms.as_millisecond())
+        .collect();
     let expected: Vec<i64> = (3..=25).rev().map(|i| i * 1000).collect();
     assert_eq!(times, expected);
     // More asked than there are: all 25.

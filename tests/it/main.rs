@@ -48,6 +48,7 @@ mod control_coupling;
 mod crank_service;
 mod dashboard_http;
 mod docs;
+mod docs_commands;
 mod gauge_can;
 mod gauge_can_live;
 mod gauge_drop_complete;

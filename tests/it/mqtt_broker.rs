@@ -200,7 +200,7 @@ fn part(n: u32) -> PlantEvent {
         machine: "M1".into(),
         feature: "IN1".into(),
         part: format!("P{n}"),
-        at_ms: 1_000 * i64::from(n),
+        at_ms: jiff::Timestamp::from_millisecond(1_000 * i64::from(n)).unwrap(),
         verdict: Verdict::Pass,
         max_profile_error_um: 0.5 * f64::from(n),
         base_radius_error_um: -0.25,

@@ -210,7 +210,7 @@ async fn a_wrong_password_is_refused_and_the_right_one_delivers_over_tls() {
         machine: "M1".into(),
         feature: "IN1".into(),
         part: "P1".into(),
-        at_ms: 1,
+        at_ms: jiff::Timestamp::from_millisecond(1).unwrap(),
         verdict: Verdict::Pass,
         max_profile_error_um: 1.5,
         base_radius_error_um: 0.0,

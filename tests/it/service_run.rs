@@ -482,7 +482,7 @@ async fn raw_revolutions_past_the_retention_are_dropped() {
     let dir = tempfile::tempdir().unwrap();
     let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
     let store = camloop::store::Store::connect(&url).await.unwrap();
-    let now = camloop::clock::now_ms();
+    let now = camloop::clock::now().as_millisecond();
     let day_ms = 86_400_000;
     let old = store
         .insert_measurement(&store_support::data::measurement(

@@ -87,11 +87,7 @@ fn verify_program(text: &str) -> Result<u64, String> {
 
 /// Child: push until 1,000 versions are pushed in total, across all runs.
 fn pusher(root: &Path) {
-    let clock = Box::new(|| {
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_millis() as u64)
-    });
+    let clock = Box::new(camloop::clock::now);
     let (mut share, _) = Share::open(config(root), Box::new(RealFs), clock).unwrap();
     if share.history().waiting().is_some() {
         share.deliver().unwrap();
@@ -122,7 +118,7 @@ fn pusher(root: &Path) {
             measurement_id: None,
             learning: serde_json::Value::Null,
             rollback_of: None,
-            created_at_unix_ms: version,
+            created_at_unix_ms: jiff::Timestamp::from_millisecond(version as i64).unwrap(),
         };
         share.push_once(request).unwrap();
         pushed += 1;

@@ -46,7 +46,12 @@ fn a_long_run_compacts_the_manifest_and_a_restart_resumes_from_the_checkpoint() 
     assert!(matches!(last.status, VersionStatus::Pushed { .. }));
     // The kept texts of the newest versions survived compaction: a rollback finds them.
     assert_eq!(share.kept_files(159).unwrap().len(), 1);
-    let rollback = share.rollback_request(158, 1_800_000_000_000).unwrap();
+    let rollback = share
+        .rollback_request(
+            158,
+            jiff::Timestamp::from_millisecond(1_800_000_000_000).unwrap(),
+        )
+        .unwrap();
     assert_eq!(rollback.rollback_of, Some(158));
     assert_eq!(
         share.push_once(next_request(&share, 161)).unwrap().version,

@@ -227,7 +227,12 @@ fn rollback_repushes_a_kept_text_as_a_new_version() {
         })
         .collect();
     // v1: table 1, v2: table 2, v3: table 1. The next table is 2, so v2 goes back as is.
-    let rollback = share.rollback_request(2, 1_700_000_100_000).unwrap();
+    let rollback = share
+        .rollback_request(
+            2,
+            jiff::Timestamp::from_millisecond(1_700_000_100_000).unwrap(),
+        )
+        .unwrap();
     assert_eq!(rollback.reason, "rollback to v2");
     assert_eq!(rollback.rollback_of, Some(2));
     assert_eq!(rollback.measurement_id.as_deref(), Some("m2"));
@@ -243,7 +248,12 @@ fn rollback_repushes_a_kept_text_as_a_new_version() {
 
     // v3 defines table 1, which is next now: fine. But v2 again would redefine table 2,
     // which the control may be running since v4: refused, and recorded as refused.
-    let again = share.rollback_request(2, 1_700_000_200_000).unwrap();
+    let again = share
+        .rollback_request(
+            2,
+            jiff::Timestamp::from_millisecond(1_700_000_200_000).unwrap(),
+        )
+        .unwrap();
     let err = share.push_once(again.clone()).unwrap_err();
     assert!(
         err.to_string()
@@ -265,7 +275,7 @@ fn rollback_repushes_a_kept_text_as_a_new_version() {
         assert!(share.history().get(v).unwrap().record.rollback_of.is_none());
     }
     assert!(matches!(
-        share.rollback_request(9, 0),
+        share.rollback_request(9, jiff::Timestamp::from_millisecond(0).unwrap()),
         Err(StateError::UnknownVersion(9))
     ));
 }
@@ -282,7 +292,7 @@ fn only_the_newest_kept_versions_keep_their_text() {
     assert_eq!(names(&d.state.join(VERSIONS_DIR)), ["v000003", "v000004"]);
     assert!(matches!(share.kept_files(1), Err(StateError::NoText(1))));
     assert!(matches!(
-        share.rollback_request(2, 0),
+        share.rollback_request(2, jiff::Timestamp::from_millisecond(0).unwrap()),
         Err(StateError::NoText(2))
     ));
     // The records stay in the manifest: four versions, all pushed. In memory the share

@@ -8,7 +8,7 @@
 use crate::store_support;
 
 use camloop::store::{NewTableVersion, Store, VersionStatus};
-use store_support::data::sha_of;
+use store_support::data::{ms, sha_of};
 
 /// A curve-table program whose numbers move with `v` as a learned correction moves them.
 fn program(v: i64) -> String {
@@ -56,14 +56,14 @@ async fn take_turns(url: &str) {
             status: VersionStatus::Waiting {
                 reason: Some("waiting".into()),
             },
-            created_at_ms: v * 10,
+            created_at_ms: ms(v * 10),
         };
         assert_eq!(store.insert_table_version(&t).await.unwrap(), v);
         // Learning snapshots: the meaning changes every 4 parts (a row is added), else the
         // newest row is replaced, by whichever handle writes this part.
         let meaning = sha_of(&format!("mode {}", v / 4));
         store
-            .save_learning_snapshot("M1", "IN1", &state(v), Some(&meaning), v * 10)
+            .save_learning_snapshot("M1", "IN1", &state(v), Some(&meaning), ms(v * 10))
             .await
             .unwrap();
         let other = if std::ptr::eq(store, &a) { &b } else { &a };
@@ -90,7 +90,7 @@ async fn take_turns(url: &str) {
         // The snapshot of each meaning's last part is kept; the others were replaced.
         let kept = v == 40 || (v + 1) % 4 == 0;
         let exists = fresh
-            .learning_state_exists("M1", "IN1", &state(v), v * 10)
+            .learning_state_exists("M1", "IN1", &state(v), ms(v * 10))
             .await
             .unwrap();
         assert_eq!(exists, kept, "learning state of part {v}");

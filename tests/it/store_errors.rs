@@ -5,7 +5,7 @@
 use crate::store_support;
 
 use camloop::store::{Store, StoreError};
-use store_support::data::measurement;
+use store_support::data::{measurement, ms};
 
 #[tokio::test]
 async fn sqlite_reopens_with_its_data() {
@@ -160,7 +160,10 @@ async fn sqlite_pages_damaged_in_the_middle_are_corrupt_on_query() {
     let store = Store::connect(&format!("sqlite://{}", path.display()))
         .await
         .unwrap();
-    let e = store.export(0, i64::MAX, None, 1000).await.unwrap_err();
+    let e = store
+        .export(ms(0), jiff::Timestamp::MAX, None, 1000)
+        .await
+        .unwrap_err();
     assert_corrupt(&e, &path, "database disk image is malformed");
     assert!(e.detail().unwrap().starts_with("exporting measurements: "));
 }
@@ -311,7 +314,7 @@ async fn postgres_readers_stuck_behind_a_lock_never_hold_up_a_writer() {
     t.store
         .insert_event(&camloop::store::NewEvent {
             machine: "M1".parse().unwrap(),
-            at_ms: 1,
+            at_ms: ms(1),
             level: camloop::store::EventLevel::Info,
             kind: camloop::store::EventKind::MeasurementRepeated,
             message: "written while every reader waits".into(),
@@ -421,6 +424,38 @@ async fn rows_with_a_bad_machine_name_or_event_kind_are_invalid_not_a_panic() {
         assert_eq!(err.code(), "invalid", "{err}");
         assert!(err.to_string().contains("machine"), "{err}");
         assert!(err.to_string().contains("bad name!"), "{err}");
+    }
+}
+
+/// Times are kept as integer milliseconds; one outside the years an instant can hold
+/// (−9999 to 9999), written by hand, comes back as an `invalid` error naming its column, on
+/// both backends: never a panic, never a clamped time.
+#[tokio::test]
+async fn a_stored_time_no_instant_has_is_invalid_not_a_panic() {
+    let mut stores = vec![store_support::sqlite().await];
+    stores.extend(store_support::postgres("a_stored_time_no_instant_has").await);
+    for t in &stores {
+        let rows = [
+            "INSERT INTO machines (name, first_seen_ms) VALUES ('M1', 1)",
+            "INSERT INTO events (machine, at_ms, level, kind, message) \
+             VALUES ('M1', 9223372036854775807, 'info', 'share_back', 'by hand')",
+            "INSERT INTO dressings (machine, at_ms, old_radius_mm, new_radius_mm, source) \
+             VALUES ('M1', -400000000000000, 250.0, 249.9, 'by hand')",
+        ];
+        raw_execute(&t.store, &rows).await;
+        let filter = camloop::store::EventFilter {
+            limit: 10,
+            ..Default::default()
+        };
+        let err = t.store.events(&filter).await.unwrap_err();
+        assert_eq!(err.code(), "invalid", "{err}");
+        assert!(err.to_string().contains("at_ms"), "{err}");
+        assert!(err.to_string().contains("9223372036854775807 ms"), "{err}");
+        let err = t.store.dressings("M1", 10).await.unwrap_err();
+        assert_eq!(err.code(), "invalid", "{err}");
+        assert!(err.to_string().contains("-400000000000000 ms"), "{err}");
+        // The machine's own time is in range and reads.
+        assert_eq!(t.store.machines().await.unwrap().len(), 1);
     }
 }
 

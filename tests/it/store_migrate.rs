@@ -12,7 +12,7 @@ use std::borrow::Cow;
 
 use camloop::store::{NewTableVersion, REPORT_STEP, RawPool, Store, VersionStatus};
 use sqlx::migrate::{Migration, Migrator};
-use store_support::data::{measurement, sha_of};
+use store_support::data::{measurement, ms, sha_of};
 
 /// Table versions and learning states written before the migration: more than one chain
 /// (16 rows) long, so conversion starts a second chain.
@@ -115,7 +115,7 @@ macro_rules! write_old_rows {
                  0.0, 3, $3, 'test', $4) RETURNING id",
             )
             .bind(&m.part)
-            .bind(m.received_at_ms)
+            .bind(m.received_at_ms.as_millisecond())
             .bind(i64::from(m.points_per_rev))
             .bind(&m.sha256)
             .fetch_one(pool)
@@ -193,7 +193,10 @@ fn assert_report_close(stored: &str, written: &str) {
 
 /// Everything written before reads back as the version-1 reader gave it.
 async fn check_old_rows(store: &Store) {
-    let export = store.export(0, i64::MAX, None, 100).await.unwrap();
+    let export = store
+        .export(ms(0), jiff::Timestamp::MAX, None, 100)
+        .await
+        .unwrap();
     assert_eq!(export.len(), 5);
     for (n, d) in export.iter().enumerate() {
         let m = measurement("M1", "in1", n as u32, 1_000 * n as i64);
@@ -235,13 +238,13 @@ async fn check_old_rows(store: &Store) {
     assert_eq!(newest.state_json, state(OLD_ROWS));
     assert!(
         store
-            .learning_state_exists("M1", "in1", &state(3), 30)
+            .learning_state_exists("M1", "in1", &state(3), ms(30))
             .await
             .unwrap()
     );
     assert!(
         !store
-            .learning_state_exists("M1", "in1", &state(3), 31)
+            .learning_state_exists("M1", "in1", &state(3), ms(31))
             .await
             .unwrap()
     );
@@ -263,7 +266,7 @@ async fn check_new_rows(store: &Store) {
             status: VersionStatus::Waiting {
                 reason: Some("waiting".into()),
             },
-            created_at_ms: v * 10,
+            created_at_ms: ms(v * 10),
         };
         assert_eq!(store.insert_table_version(&t).await.unwrap(), v);
     }
@@ -281,7 +284,7 @@ async fn check_new_rows(store: &Store) {
     ];
     for (v, meaning) in saves {
         store
-            .save_learning_snapshot("M1", "in1", &state(v), Some(meaning), v * 10)
+            .save_learning_snapshot("M1", "in1", &state(v), Some(meaning), ms(v * 10))
             .await
             .unwrap();
         assert_eq!(
@@ -297,31 +300,31 @@ async fn check_new_rows(store: &Store) {
     // 101 was replaced by 102 (same meaning), 103 by 104; the old rows all stay.
     assert!(
         !store
-            .learning_state_exists("M1", "in1", &state(101), 1010)
+            .learning_state_exists("M1", "in1", &state(101), ms(1010))
             .await
             .unwrap()
     );
     assert!(
         store
-            .learning_state_exists("M1", "in1", &state(102), 1020)
+            .learning_state_exists("M1", "in1", &state(102), ms(1020))
             .await
             .unwrap()
     );
     assert!(
         !store
-            .learning_state_exists("M1", "in1", &state(103), 1030)
+            .learning_state_exists("M1", "in1", &state(103), ms(1030))
             .await
             .unwrap()
     );
     assert!(
         store
-            .learning_state_exists("M1", "in1", &state(104), 1040)
+            .learning_state_exists("M1", "in1", &state(104), ms(1040))
             .await
             .unwrap()
     );
     assert!(
         store
-            .learning_state_exists("M1", "in1", &state(OLD_ROWS), OLD_ROWS * 10)
+            .learning_state_exists("M1", "in1", &state(OLD_ROWS), ms(OLD_ROWS * 10))
             .await
             .unwrap()
     );

@@ -5,7 +5,7 @@
 
 use crate::store_support;
 
-use store_support::data::{LIFT_TOL_MM, all_pages, filter, measurement, sha_of, table};
+use store_support::data::{LIFT_TOL_MM, all_pages, filter, measurement, ms, sha_of, table};
 
 use camloop::store::{
     EventFilter, EventKind, EventLevel, FeatureKind, HistoryFilter, MeasurementId,
@@ -23,7 +23,7 @@ async fn story(store: &Store) {
         lobe: lobe.into(),
         kind,
         recipe_json: json.into(),
-        created_at_ms: 1_000,
+        created_at_ms: ms(1_000),
     };
     let r1 = store
         .insert_recipe_snapshot(&snap("in1", FeatureKind::Lobe, r#"{"base_radius_mm":18}"#))
@@ -88,8 +88,8 @@ async fn story(store: &Store) {
     assert_eq!(
         names,
         [
-            ("M1".parse().unwrap(), 1_000),
-            ("M2".parse().unwrap(), 10_000 + 40_000)
+            ("M1".parse().unwrap(), ms(1_000)),
+            ("M2".parse().unwrap(), ms(10_000 + 40_000))
         ]
     );
 
@@ -127,7 +127,7 @@ async fn story(store: &Store) {
 
     // History: the expectation is computed here from what was inserted, newest first.
     let expect = |keep: &dyn Fn(&NewMeasurement) -> bool| {
-        let mut v: Vec<(i64, MeasurementId)> = inserted
+        let mut v: Vec<(jiff::Timestamp, MeasurementId)> = inserted
             .iter()
             .filter(|(_, m)| keep(m))
             .map(|(id, m)| (m.received_at_ms, *id))
@@ -172,15 +172,15 @@ async fn story(store: &Store) {
     );
 
     let window = HistoryFilter {
-        since_ms: Some(15_000),
-        until_ms: Some(20_000),
+        since_ms: Some(ms(15_000)),
+        until_ms: Some(ms(20_000)),
         ..lobe_in1.clone()
     };
     assert_eq!(
         ids(all_pages(store, window).await),
         expect(&|m| m.machine == "M1"
             && m.lobe == "in1"
-            && (15_000..20_000).contains(&m.received_at_ms))
+            && (ms(15_000)..ms(20_000)).contains(&m.received_at_ms))
     );
     let empty = store.measurement_history(&filter("nobody")).await.unwrap();
     assert!(empty.items.is_empty() && empty.next_cursor.is_none());
@@ -215,7 +215,7 @@ async fn story(store: &Store) {
                 at_unix_ms: 6_000,
                 note: Some("pushed to share".into()),
             },
-            6_000,
+            ms(6_000),
         )
         .await
         .unwrap();
@@ -255,7 +255,7 @@ async fn story(store: &Store) {
     );
     assert_eq!(
         (first.status.why(), first.status_at_ms),
-        ("pushed to share", 6_000)
+        ("pushed to share", ms(6_000))
     );
     assert_eq!(first.program_text, "CTABDEF(11)\nv1");
     assert_eq!(first.table_number, 11);
@@ -281,7 +281,7 @@ async fn story(store: &Store) {
                 "in1",
                 42,
                 &VersionStatus::Refused { reason: "x".into() },
-                1
+                ms(1)
             )
             .await,
         Err(StoreError::NotFound { .. })
@@ -292,7 +292,7 @@ async fn story(store: &Store) {
         VersionStatus::Superseded { by: 2 },
     ] {
         let e = store
-            .set_table_status("M1", "in1", 1, &share_only, 7_000)
+            .set_table_status("M1", "in1", 1, &share_only, ms(7_000))
             .await
             .unwrap_err();
         assert!(
@@ -314,15 +314,15 @@ async fn story(store: &Store) {
             .is_none()
     );
     store
-        .save_learning_state("M1", "in1", r#"{"k":1}"#, 7_000)
+        .save_learning_state("M1", "in1", r#"{"k":1}"#, ms(7_000))
         .await
         .unwrap();
     store
-        .save_learning_state("M1", "in1", r#"{"k":2}"#, 8_000)
+        .save_learning_state("M1", "in1", r#"{"k":2}"#, ms(8_000))
         .await
         .unwrap();
     store
-        .save_learning_state("M1", "ex1", r#"{"k":9}"#, 9_000)
+        .save_learning_state("M1", "ex1", r#"{"k":9}"#, ms(9_000))
         .await
         .unwrap();
     let state = store
@@ -332,7 +332,7 @@ async fn story(store: &Store) {
         .unwrap();
     assert_eq!(
         (state.state_json.as_str(), state.saved_at_ms),
-        (r#"{"k":2}"#, 8_000)
+        (r#"{"k":2}"#, ms(8_000))
     );
 
     // Dressings and events.
@@ -345,7 +345,7 @@ async fn story(store: &Store) {
         store
             .insert_dressing(&NewDressing {
                 machine: "M1".parse().unwrap(),
-                at_ms: at,
+                at_ms: ms(at),
                 old_radius_mm: old_mm,
                 new_radius_mm: new_mm,
                 infeed_um: infeed,
@@ -356,7 +356,7 @@ async fn story(store: &Store) {
     }
     let dressings = store.dressings("M1", 10).await.unwrap();
     assert_eq!(dressings.len(), 2);
-    assert_eq!(dressings[0].at_ms, 30_000);
+    assert_eq!(dressings[0].at_ms, ms(30_000));
     // Doubles round-trip exactly through REAL / DOUBLE PRECISION.
     assert_eq!(
         (dressings[0].old_radius_mm, dressings[0].new_radius_mm),
@@ -375,7 +375,7 @@ async fn story(store: &Store) {
         let id = store
             .insert_event(&NewEvent {
                 machine: "M1".parse().unwrap(),
-                at_ms: at,
+                at_ms: ms(at),
                 level,
                 kind,
                 message: format!("{} at {at}", kind.as_str()),
@@ -399,7 +399,7 @@ async fn story(store: &Store) {
     let errors = store
         .events(&EventFilter {
             level: Some(EventLevel::Error),
-            since_ms: Some(2),
+            since_ms: Some(ms(2)),
             limit: 10,
             ..EventFilter::default()
         })
@@ -412,7 +412,10 @@ async fn story(store: &Store) {
     let mut exported = Vec::new();
     let mut after = None;
     loop {
-        let page = store.export(0, i64::MAX, after, 16).await.unwrap();
+        let page = store
+            .export(ms(0), jiff::Timestamp::MAX, after, 16)
+            .await
+            .unwrap();
         let Some(last) = page.last() else { break };
         after = Some(last.summary.id);
         exported.extend(page);
@@ -425,7 +428,7 @@ async fn story(store: &Store) {
     );
 
     // Retention: raw blobs before the cutoff go, summaries and averaged profiles stay.
-    let cutoff = 20_000;
+    let cutoff = ms(20_000);
     let old = inserted
         .iter()
         .filter(|(_, m)| m.received_at_ms < cutoff)

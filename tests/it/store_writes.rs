@@ -4,7 +4,7 @@
 
 use crate::store_support;
 
-use store_support::data::{filter, measurement, table};
+use store_support::data::{filter, measurement, ms, table};
 
 use camloop::store::{
     EventKind, EventLevel, HistoryFilter, NewDressing, NewEvent, NewMeasurement, Store, StoreError,
@@ -17,13 +17,13 @@ async fn idempotent(store: &Store) {
     assert_eq!(a, b);
     // Same hash, later arrival: still the stored measurement, nothing new written.
     let late = NewMeasurement {
-        received_at_ms: 2_000,
+        received_at_ms: ms(2_000),
         ..m.clone()
     };
     assert_eq!(store.insert_measurement(&late).await.unwrap(), a);
     let page = store.measurement_history(&filter("M9")).await.unwrap();
     assert_eq!(page.items.len(), 1);
-    assert_eq!(page.items[0].received_at_ms, 1_000);
+    assert_eq!(page.items[0].received_at_ms, ms(1_000));
 
     // Refused input names the field and writes nothing.
     let mut short = measurement("M9", "in1", 2, 3_000);
@@ -84,32 +84,32 @@ async fn replay_lookups(store: &Store) {
     store.insert_table_version(&t).await.unwrap();
     assert!(
         store
-            .table_version_exists("M1", "in1", 5_000, &t.program_text)
+            .table_version_exists("M1", "in1", ms(5_000), &t.program_text)
             .await
             .unwrap()
     );
     assert!(
         !store
-            .table_version_exists("M1", "in1", 5_001, &t.program_text)
+            .table_version_exists("M1", "in1", ms(5_001), &t.program_text)
             .await
             .unwrap()
     );
     assert!(
         !store
-            .table_version_exists("M1", "in1", 5_000, "other")
+            .table_version_exists("M1", "in1", ms(5_000), "other")
             .await
             .unwrap()
     );
     assert!(
         !store
-            .table_version_exists("M1", "ex1", 5_000, &t.program_text)
+            .table_version_exists("M1", "ex1", ms(5_000), &t.program_text)
             .await
             .unwrap()
     );
 
     let e = NewEvent {
         machine: "M1".parse().unwrap(),
-        at_ms: 7_000,
+        at_ms: ms(7_000),
         level: EventLevel::Warn,
         kind: EventKind::TableRefused,
         message: "grindability".into(),
@@ -123,25 +123,25 @@ async fn replay_lookups(store: &Store) {
     assert!(!store.event_exists(&other).await.unwrap());
 
     store
-        .save_learning_state("M1", "in1", r#"{"i":1}"#, 8_000)
+        .save_learning_state("M1", "in1", r#"{"i":1}"#, ms(8_000))
         .await
         .unwrap();
     assert!(
         store
-            .learning_state_exists("M1", "in1", r#"{"i":1}"#, 8_000)
+            .learning_state_exists("M1", "in1", r#"{"i":1}"#, ms(8_000))
             .await
             .unwrap()
     );
     assert!(
         !store
-            .learning_state_exists("M1", "in1", r#"{"i":2}"#, 8_000)
+            .learning_state_exists("M1", "in1", r#"{"i":2}"#, ms(8_000))
             .await
             .unwrap()
     );
 
     let d = NewDressing {
         machine: "M1".parse().unwrap(),
-        at_ms: 9_000,
+        at_ms: ms(9_000),
         old_radius_mm: 250.0,
         new_radius_mm: 249.98,
         infeed_um: Some(20.2),
@@ -150,7 +150,7 @@ async fn replay_lookups(store: &Store) {
     store.insert_dressing(&d).await.unwrap();
     assert!(store.dressing_exists(&d).await.unwrap());
     let later = NewDressing {
-        at_ms: 9_001,
+        at_ms: ms(9_001),
         ..d.clone()
     };
     assert!(!store.dressing_exists(&later).await.unwrap());

@@ -35,10 +35,10 @@ pub fn config(dirs: &Dirs, keep_versions: usize) -> ShareConfig {
 
 /// A clock starting at 2023-11-14T22:13:20Z that advances 1 s per reading.
 pub fn clock() -> Clock {
-    let mut now_ms = 1_700_000_000_000_u64;
+    let mut now = jiff::Timestamp::from_second(1_700_000_000).unwrap();
     Box::new(move || {
-        now_ms += 1000;
-        now_ms
+        now += jiff::SignedDuration::from_secs(1);
+        now
     })
 }
 
@@ -85,7 +85,8 @@ pub fn next_request(share: &Share, tag: u32) -> PushRequest {
         measurement_id: Some(format!("m{tag}")),
         learning: serde_json::json!({ "gain": 0.5, "tag": tag }),
         rollback_of: None,
-        created_at_unix_ms: 1_700_000_000_000 + u64::from(tag),
+        created_at_unix_ms: jiff::Timestamp::from_millisecond(1_700_000_000_000 + i64::from(tag))
+            .unwrap(),
     }
 }
 

@@ -18,6 +18,11 @@ pub fn sha_of(text: &str) -> String {
         .collect()
 }
 
+/// Unix milliseconds as an instant (the test values are all within jiff's years).
+pub fn ms(unix_ms: i64) -> jiff::Timestamp {
+    jiff::Timestamp::from_millisecond(unix_ms).unwrap()
+}
+
 /// A measurement whose values all derive from `n`, so the test can predict every column.
 pub fn measurement(machine: &str, lobe: &str, n: u32, received_at_ms: i64) -> NewMeasurement {
     let points = 36;
@@ -33,7 +38,7 @@ pub fn measurement(machine: &str, lobe: &str, n: u32, received_at_ms: i64) -> Ne
         machine: MachineName::new(machine).unwrap(),
         part: format!("P-{n:05}"),
         lobe: lobe.into(),
-        received_at_ms,
+        received_at_ms: ms(received_at_ms),
         verdict: if n.is_multiple_of(4) {
             Verdict::Fail
         } else {
@@ -98,6 +103,6 @@ pub fn table(lobe: &str, parent: Option<i64>, text: &str, status: &str) -> NewTa
         learning_params_json: r#"{"gain":0.6}"#.into(),
         reason: "learned".into(),
         status: VersionStatus::from_column(status, "checks passed".into(), 5_000).unwrap(),
-        created_at_ms: 5_000,
+        created_at_ms: ms(5_000),
     }
 }

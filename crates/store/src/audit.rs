@@ -19,7 +19,8 @@ pub const MAX_AUDIT_PAGE: u32 = 1000;
 /// One thing someone did (or tried to).
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
 pub struct AuditEntry {
-    pub at_ms: i64,
+    #[serde(with = "crate::unix_ms")]
+    pub at_ms: jiff::Timestamp,
     /// A user name, `anonymous`, `api-token` (the deprecated shared token) or `cli:<login>`.
     pub actor: String,
     pub role: Role,
@@ -79,7 +80,7 @@ const COLUMNS: &str = "SELECT id, at_ms, actor, role, client, action, machine, f
 /// entry's fields as a JSON array (serde_json writes it the same way every time).
 pub(crate) fn audit_digest(prev: &str, e: &AuditEntry) -> String {
     let fields = serde_json::json!([
-        e.at_ms,
+        e.at_ms.as_millisecond(),
         e.actor,
         e.role.as_str(),
         e.client,
@@ -99,7 +100,7 @@ fn row_from(r: AuditDbRow) -> Result<(AuditRow, String, String), StoreError> {
     let (id, at_ms, actor, role, client, action, machine, feature, version, before, after) =
         (r.0, r.1, r.2, r.3, r.4, r.5, r.6, r.7, r.8, r.9, r.10);
     let entry = AuditEntry {
-        at_ms,
+        at_ms: super::unix_ms::instant(at_ms, "at_ms")?,
         actor,
         role: Role::parse(&role)?,
         client,
@@ -142,7 +143,7 @@ impl Store {
                  before_json, after_json, result, reason, prev_sha256, row_sha256) \
                  VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14) RETURNING id",
             )
-            .bind(e.at_ms)
+            .bind(e.at_ms.as_millisecond())
             .bind(&e.actor)
             .bind(e.role.as_str())
             .bind(&e.client)
@@ -168,7 +169,7 @@ impl Store {
     /// newest first when `newest_first`, else oldest first.
     pub async fn audit(
         &self,
-        since_ms: i64,
+        since_ms: jiff::Timestamp,
         after_id: i64,
         limit: u32,
         newest_first: bool,
@@ -180,7 +181,7 @@ impl Store {
             let rows: Vec<AuditDbRow> = sqlx::query_as(&format!(
                 "{COLUMNS} WHERE at_ms >= $1 AND id > $2 ORDER BY id {order} LIMIT $3"
             ))
-            .bind(since_ms)
+            .bind(since_ms.as_millisecond())
             .bind(after_id)
             .bind(limit)
             .fetch_all(pool)

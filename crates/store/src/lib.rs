@@ -40,6 +40,7 @@ mod pack_report;
 mod status;
 mod tables;
 mod types;
+pub mod unix_ms;
 mod users;
 mod views;
 
@@ -130,6 +131,14 @@ macro_rules! col {
     };
 }
 pub(crate) use col;
+
+/// Reads an integer-millisecond column as an instant (see [`unix_ms::instant`]).
+macro_rules! at_col {
+    ($row:expr, $name:literal, $op:literal) => {
+        $crate::unix_ms::instant($crate::col!($row, $name, $op), $name)?
+    };
+}
+pub(crate) use at_col;
 
 impl Store {
     fn new(pools: Pools, readers: u32, target: String) -> Self {

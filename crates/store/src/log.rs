@@ -7,10 +7,11 @@ use super::codec::{
 };
 use super::measurements::{Bind, Conditions, fetch_all_dynamic};
 use super::pack::pack_text;
+use super::unix_ms::instant;
 use super::{
     Dressing, DressingId, Event, EventFilter, EventId, EventKind, EventLevel, Feature, FeatureKind,
     LearningState, Machine, NewDressing, NewEvent, NewRecipeSnapshot, RecipeSnapshotId, Store,
-    StoreError, col, with_read, with_write,
+    StoreError, at_col, col, with_read, with_write,
 };
 
 /// The newest learning state of (machine, lobe) when it has meaning `$3` and no row is
@@ -97,7 +98,7 @@ impl Store {
             let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
             sqlx::query(ENSURE_MACHINE)
                 .bind(r.machine.as_str())
-                .bind(r.created_at_ms)
+                .bind(r.created_at_ms.as_millisecond())
                 .execute(&mut *tx)
                 .await
                 .map_err(self.db_error(OP))?;
@@ -126,7 +127,7 @@ impl Store {
             .bind(r.kind.as_str())
             .bind(&r.recipe_json)
             .bind(&sha256)
-            .bind(r.created_at_ms)
+            .bind(r.created_at_ms.as_millisecond())
             .fetch_one(&mut *tx)
             .await
             .map_err(self.db_error(OP))?;
@@ -145,7 +146,10 @@ impl Store {
                     .map_err(self.db_error("listing machines"))?;
             rows.into_iter()
                 .map(|(name, first_seen_ms)| {
-                    Ok(Machine { name: machine_of(name)?, first_seen_ms })
+                    Ok(Machine {
+                        name: machine_of(name)?,
+                        first_seen_ms: instant(first_seen_ms, "first_seen_ms")?,
+                    })
                 })
                 .collect()
         })
@@ -173,7 +177,7 @@ impl Store {
                         lobe: col!(row, "lobe", "reading a feature"),
                         kind: FeatureKind::parse(&kind)?,
                         recipe_json: col!(row, "recipe_json", "reading a feature"),
-                        created_at_ms: col!(row, "created_at_ms", "reading a feature"),
+                        created_at_ms: at_col!(row, "created_at_ms", "reading a feature"),
                     })
                 })
                 .collect()
@@ -192,7 +196,7 @@ impl Store {
             self,
             "inserting a dressing",
             d.machine.as_str(),
-            d.at_ms,
+            d.at_ms.as_millisecond(),
             "INSERT INTO dressings (machine, at_ms, old_radius_mm, new_radius_mm, source, \
              infeed_um) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
             d.old_radius_mm,
@@ -212,7 +216,7 @@ impl Store {
                  AND new_radius_mm = $3 LIMIT 1",
             )
             .bind(d.machine.as_str())
-            .bind(d.at_ms)
+            .bind(d.at_ms.as_millisecond())
             .bind(d.new_radius_mm)
             .fetch_optional(pool)
             .await
@@ -240,7 +244,7 @@ impl Store {
                     Ok(Dressing {
                         id: DressingId(id),
                         machine: machine_of(machine)?,
-                        at_ms,
+                        at_ms: instant(at_ms, "at_ms")?,
                         old_radius_mm,
                         new_radius_mm,
                         infeed_um,
@@ -258,7 +262,7 @@ impl Store {
             self,
             "inserting an event",
             e.machine.as_str(),
-            e.at_ms,
+            e.at_ms.as_millisecond(),
             "INSERT INTO events (machine, at_ms, level, kind, message) \
              VALUES ($1, $2, $3, $4, $5) RETURNING id",
             e.level.as_str(),
@@ -277,7 +281,7 @@ impl Store {
                  AND message = $4 LIMIT 1",
             )
             .bind(e.machine.as_str())
-            .bind(e.at_ms)
+            .bind(e.at_ms.as_millisecond())
             .bind(e.kind.as_str())
             .bind(&e.message)
             .fetch_optional(pool)
@@ -295,10 +299,10 @@ impl Store {
             c.push("machine = ?", [Bind::Text(machine.clone())]);
         }
         if let Some(since) = filter.since_ms {
-            c.push("at_ms >= ?", [Bind::I64(since)]);
+            c.push("at_ms >= ?", [Bind::I64(since.as_millisecond())]);
         }
         if let Some(until) = filter.until_ms {
-            c.push("at_ms < ?", [Bind::I64(until)]);
+            c.push("at_ms < ?", [Bind::I64(until.as_millisecond())]);
         }
         if let Some(level) = filter.level {
             c.push("level = ?", [Bind::Text(level.as_str().to_owned())]);
@@ -320,7 +324,7 @@ impl Store {
                     Ok(Event {
                         id: EventId(col!(row, "id", "reading an event")),
                         machine: machine_of(col!(row, "machine", "reading an event"))?,
-                        at_ms: col!(row, "at_ms", "reading an event"),
+                        at_ms: at_col!(row, "at_ms", "reading an event"),
                         level: EventLevel::parse(&level)?,
                         kind: EventKind::parse(&kind)?,
                         message: col!(row, "message", "reading an event"),
@@ -337,7 +341,7 @@ impl Store {
         machine: &str,
         lobe: &str,
         state_json: &str,
-        saved_at_ms: i64,
+        saved_at_ms: jiff::Timestamp,
     ) -> Result<(), StoreError> {
         self.save_learning_snapshot(machine, lobe, state_json, None, saved_at_ms)
             .await
@@ -354,7 +358,7 @@ impl Store {
         lobe: &str,
         state_json: &str,
         meaning_sha256: Option<&str>,
-        saved_at_ms: i64,
+        saved_at_ms: jiff::Timestamp,
     ) -> Result<(), StoreError> {
         check_name("machine", machine)?;
         check_name("lobe", lobe)?;
@@ -368,7 +372,7 @@ impl Store {
             let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
             sqlx::query(ENSURE_MACHINE)
                 .bind(machine)
-                .bind(saved_at_ms)
+                .bind(saved_at_ms.as_millisecond())
                 .execute(&mut *tx)
                 .await
                 .map_err(self.db_error(OP))?;
@@ -384,7 +388,7 @@ impl Store {
             };
             match replace {
                 Some((id, base_id)) => {
-                    replace_state!(self, tx, (machine, lobe), (id, base_id), state_json, &state_sha256, saved_at_ms, OP);
+                    replace_state!(self, tx, (machine, lobe), (id, base_id), state_json, &state_sha256, saved_at_ms.as_millisecond(), OP);
                 }
                 None => {
                     let (base_id, depth, base) = next_link!(self, tx, LEARNING_STATES, machine, lobe);
@@ -396,7 +400,7 @@ impl Store {
                     )
                     .bind(machine)
                     .bind(lobe)
-                    .bind(saved_at_ms)
+                    .bind(saved_at_ms.as_millisecond())
                     .bind(CODEC_PACKED)
                     .bind(base_id)
                     .bind(depth)
@@ -426,7 +430,7 @@ impl Store {
         machine: &str,
         lobe: &str,
         state_json: &str,
-        saved_at_ms: i64,
+        saved_at_ms: jiff::Timestamp,
     ) -> Result<bool, StoreError> {
         let state_sha256 = sha256_hex(state_json.as_bytes());
         with_write!(self, pool => {
@@ -436,7 +440,7 @@ impl Store {
             )
             .bind(machine)
             .bind(lobe)
-            .bind(saved_at_ms)
+            .bind(saved_at_ms.as_millisecond())
             .bind(&state_sha256)
             .bind(state_json)
             .fetch_optional(pool)
@@ -455,7 +459,7 @@ impl Store {
         machine: &str,
         lobe: &str,
         state_json: &str,
-        saved_at_ms: i64,
+        saved_at_ms: jiff::Timestamp,
     ) -> Result<bool, StoreError> {
         let state_sha256 = sha256_hex(state_json.as_bytes());
         with_write!(self, pool => {
@@ -469,8 +473,8 @@ impl Store {
             .await
             .map_err(self.db_error("looking up a learning state"))?;
             Ok(newest.is_some_and(|(at, sha, text)| {
-                at > saved_at_ms
-                    || (at == saved_at_ms
+                at > saved_at_ms.as_millisecond()
+                    || (at == saved_at_ms.as_millisecond()
                         && (sha.as_deref() == Some(state_sha256.as_str())
                             || text.as_deref() == Some(state_json)))
             }))
@@ -505,6 +509,7 @@ impl Store {
                             format!("learning state of machine {machine} lobe {lobe} does not match its SHA-256"),
                         ));
                     }
+                    let saved_at_ms = instant(saved_at_ms, "saved_at_ms")?;
                     Ok(Some(LearningState { state_json, saved_at_ms }))
                 }
             }

@@ -9,7 +9,8 @@ use super::pack::{pack_profile, pack_revolutions, unpack_profile, unpack_revolut
 use super::pack_report::{pack_report, unpack_report};
 use super::{
     HistoryFilter, MasterRuns, MeasurementDetail, MeasurementId, MeasurementSummary,
-    NewMeasurement, Page, RecipeSnapshotId, Store, StoreError, Verdict, col, with_read, with_write,
+    NewMeasurement, Page, RecipeSnapshotId, Store, StoreError, Verdict, at_col, col, with_read,
+    with_write,
 };
 use camloop_core::measure::MASTER_PART_PREFIX;
 
@@ -89,7 +90,7 @@ macro_rules! summary_from_row {
             machine: $crate::codec::machine_of(col!(row, "machine", "reading a measurement"))?,
             part: col!(row, "part", "reading a measurement"),
             lobe: col!(row, "lobe", "reading a measurement"),
-            received_at_ms: col!(row, "received_at_ms", "reading a measurement"),
+            received_at_ms: at_col!(row, "received_at_ms", "reading a measurement"),
             verdict: Verdict::parse(&verdict)?,
             max_profile_error_um: col!(row, "max_profile_error_um", "reading a measurement"),
             base_radius_error_um: col!(row, "base_radius_error_um", "reading a measurement"),
@@ -266,7 +267,7 @@ impl Store {
                  ON CONFLICT (name) DO NOTHING",
             )
             .bind(m.machine.as_str())
-            .bind(m.received_at_ms)
+            .bind(m.received_at_ms.as_millisecond())
             .execute(&mut *tx)
             .await
             .map_err(self.db_error(OP))?;
@@ -280,7 +281,7 @@ impl Store {
             .bind(m.machine.as_str())
             .bind(&m.part)
             .bind(&m.lobe)
-            .bind(m.received_at_ms)
+            .bind(m.received_at_ms.as_millisecond())
             .bind(m.verdict.as_str())
             .bind(m.max_profile_error_um)
             .bind(m.base_radius_error_um)
@@ -335,10 +336,10 @@ impl Store {
             c.push("m.lobe = ?", [Bind::Text(lobe.clone())]);
         }
         if let Some(since) = filter.since_ms {
-            c.push("m.received_at_ms >= ?", [Bind::I64(since)]);
+            c.push("m.received_at_ms >= ?", [Bind::I64(since.as_millisecond())]);
         }
         if let Some(until) = filter.until_ms {
-            c.push("m.received_at_ms < ?", [Bind::I64(until)]);
+            c.push("m.received_at_ms < ?", [Bind::I64(until.as_millisecond())]);
         }
         if let Some(verdict) = filter.verdict {
             c.push("m.verdict = ?", [Bind::Text(verdict.as_str().to_owned())]);
@@ -380,7 +381,7 @@ impl Store {
             items.truncate(filter.limit as usize);
             items
                 .last()
-                .map(|s| encode_cursor(s.received_at_ms, s.id.0))
+                .map(|s| encode_cursor(s.received_at_ms.as_millisecond(), s.id.0))
         } else {
             None
         };
@@ -438,8 +439,8 @@ impl Store {
     /// after `after` (exclusive), at most `limit`: call again with the last id to continue.
     pub async fn export(
         &self,
-        since_ms: i64,
-        until_ms: i64,
+        since_ms: jiff::Timestamp,
+        until_ms: jiff::Timestamp,
         after: Option<MeasurementId>,
         limit: u32,
     ) -> Result<Vec<MeasurementDetail>, StoreError> {
@@ -453,8 +454,8 @@ impl Store {
         );
         with_read!(self, pool => {
             let rows = sqlx::query(&sql)
-                .bind(since_ms)
-                .bind(until_ms)
+                .bind(since_ms.as_millisecond())
+                .bind(until_ms.as_millisecond())
                 .bind(after.map_or(i64::MIN, |a| a.0))
                 .bind(limit)
                 .fetch_all(pool)
@@ -471,7 +472,7 @@ impl Store {
         &self,
         machine: &str,
         lobe: &str,
-        (since_ms, until_ms): (i64, i64),
+        (since_ms, until_ms): (jiff::Timestamp, jiff::Timestamp),
         before: Option<MeasurementId>,
         limit: u32,
     ) -> Result<Vec<MeasurementDetail>, StoreError> {
@@ -488,8 +489,8 @@ impl Store {
             let rows = sqlx::query(&sql)
                 .bind(machine)
                 .bind(lobe)
-                .bind(since_ms)
-                .bind(until_ms)
+                .bind(since_ms.as_millisecond())
+                .bind(until_ms.as_millisecond())
                 .bind(before.map_or(i64::MAX, |b| b.0))
                 .bind(limit)
                 .fetch_all(pool)
@@ -534,14 +535,17 @@ impl Store {
 
     /// Retention: drops the raw revolutions of measurements received before `cutoff_ms`,
     /// keeping their summaries, averaged profiles and reports. Returns how many were pruned.
-    pub async fn prune_raw_older_than(&self, cutoff_ms: i64) -> Result<u64, StoreError> {
+    pub async fn prune_raw_older_than(
+        &self,
+        cutoff_ms: jiff::Timestamp,
+    ) -> Result<u64, StoreError> {
         with_write!(self, pool => {
             let done = sqlx::query(
                 "UPDATE measurement_data SET raw_revolutions = NULL \
                  WHERE raw_revolutions IS NOT NULL AND measurement_id IN \
                  (SELECT id FROM measurements WHERE received_at_ms < $1)",
             )
-            .bind(cutoff_ms)
+            .bind(cutoff_ms.as_millisecond())
             .execute(pool)
             .await
             .map_err(self.db_error("pruning raw revolutions"))?;

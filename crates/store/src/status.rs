@@ -15,6 +15,15 @@ use super::{StoreError, VersionStatus};
 /// store refuses to write them rather than fold them into a status it would read back as
 /// another.
 impl VersionStatus {
+    /// Pushed at `at`, learned as `note` says; an instant before 1970 reads as 0, as in the
+    /// share's manifest (its times are unsigned milliseconds).
+    pub fn pushed_at(at: jiff::Timestamp, note: impl Into<String>) -> Self {
+        VersionStatus::Pushed {
+            at_unix_ms: u64::try_from(at.as_millisecond()).unwrap_or(0),
+            note: Some(note.into()),
+        }
+    }
+
     /// The `status` column's text.
     pub fn name(&self) -> &'static str {
         match self {

@@ -5,7 +5,8 @@ use super::chain::{TABLE_VERSIONS, fetch_chain, next_link};
 use super::codec::{CODEC_PACKED, check_json, check_limit, check_name, sha256_hex};
 use super::pack::pack_text;
 use super::{
-    NewTableVersion, Store, StoreError, TableVersion, VersionStatus, col, with_read, with_write,
+    NewTableVersion, Store, StoreError, TableVersion, VersionStatus, at_col, col, with_read,
+    with_write,
 };
 
 const SELECT_VERSION: &str = "SELECT t.id, t.machine, t.lobe, t.version, t.parent_version, \
@@ -59,13 +60,13 @@ macro_rules! version_summary {
             sha256: col!(row, "sha256", "reading a table version"),
             learning_params_json: String::new(),
             reason: col!(row, "reason", "reading a table version"),
-            created_at_ms: col!(row, "created_at_ms", "reading a table version"),
+            created_at_ms: at_col!(row, "created_at_ms", "reading a table version"),
             status: VersionStatus::from_column(
                 &status,
                 col!(row, "why", "reading a table version"),
                 status_at_ms,
             )?,
-            status_at_ms,
+            status_at_ms: $crate::unix_ms::instant(status_at_ms, "at_ms")?,
         }
     }};
 }
@@ -114,7 +115,7 @@ impl Store {
                  ON CONFLICT (name) DO NOTHING",
             )
             .bind(t.machine.as_str())
-            .bind(t.created_at_ms)
+            .bind(t.created_at_ms.as_millisecond())
             .execute(&mut *tx)
             .await
             .map_err(self.db_error(OP))?;
@@ -137,7 +138,7 @@ impl Store {
             .bind(i64::from(t.table_number))
             .bind(&sha256)
             .bind(&t.reason)
-            .bind(t.created_at_ms)
+            .bind(t.created_at_ms.as_millisecond())
             .bind(t.version)
             .bind(CODEC_PACKED)
             .bind(base_id)
@@ -160,7 +161,7 @@ impl Store {
             .bind(id)
             .bind(status)
             .bind(why)
-            .bind(t.created_at_ms)
+            .bind(t.created_at_ms.as_millisecond())
             .execute(&mut *tx)
             .await
             .map_err(self.db_error(OP))?;
@@ -176,7 +177,7 @@ impl Store {
         lobe: &str,
         version: i64,
         status: &VersionStatus,
-        at_ms: i64,
+        at_ms: jiff::Timestamp,
     ) -> Result<(), StoreError> {
         let (status, why) = status.column()?;
         with_write!(self, pool => {
@@ -190,7 +191,7 @@ impl Store {
             .bind(version)
             .bind(status)
             .bind(why)
-            .bind(at_ms)
+            .bind(at_ms.as_millisecond())
             .execute(pool)
             .await
             .map_err(self.db_error("recording a table status"))?;
@@ -210,7 +211,7 @@ impl Store {
         &self,
         machine: &str,
         lobe: &str,
-        created_at_ms: i64,
+        created_at_ms: jiff::Timestamp,
         program_text: &str,
     ) -> Result<bool, StoreError> {
         let sha256 = sha256_hex(program_text.as_bytes());
@@ -221,7 +222,7 @@ impl Store {
             )
             .bind(machine)
             .bind(lobe)
-            .bind(created_at_ms)
+            .bind(created_at_ms.as_millisecond())
             .bind(&sha256)
             .fetch_optional(pool)
             .await

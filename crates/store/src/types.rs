@@ -1,7 +1,9 @@
 //! The store's vocabulary: id newtypes, what callers write (`New*`), what they read back,
-//! and the filters of the history queries. Times are unix milliseconds, lifts mm, errors µm.
+//! and the filters of the history queries. Times are instants ([`Timestamp`]; kept as unix
+//! milliseconds in the database and named after those columns), lifts mm, errors µm.
 
 use camloop_core::names::MachineName;
+use jiff::Timestamp;
 use serde::{Deserialize, Serialize};
 
 use super::error::StoreError;
@@ -149,7 +151,7 @@ pub struct NewRecipeSnapshot {
     pub kind: FeatureKind,
     /// Must parse as JSON; kept verbatim.
     pub recipe_json: String,
-    pub created_at_ms: i64,
+    pub created_at_ms: Timestamp,
 }
 
 /// A lobe or pin known on a machine, with its latest recipe snapshot.
@@ -160,14 +162,14 @@ pub struct Feature {
     pub kind: FeatureKind,
     pub recipe_snapshot: RecipeSnapshotId,
     pub recipe_json: String,
-    pub created_at_ms: i64,
+    pub created_at_ms: Timestamp,
 }
 
 /// A machine the store has seen (created by its first write).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Machine {
     pub name: MachineName,
-    pub first_seen_ms: i64,
+    pub first_seen_ms: Timestamp,
 }
 
 /// One analysed measurement to append.
@@ -182,7 +184,8 @@ pub struct NewMeasurement {
     pub machine: MachineName,
     pub part: String,
     pub lobe: String,
-    pub received_at_ms: i64,
+    #[serde(with = "crate::unix_ms")]
+    pub received_at_ms: Timestamp,
     pub verdict: Verdict,
     pub max_profile_error_um: f64,
     pub base_radius_error_um: f64,
@@ -213,7 +216,7 @@ pub struct MeasurementSummary {
     pub machine: MachineName,
     pub part: String,
     pub lobe: String,
-    pub received_at_ms: i64,
+    pub received_at_ms: Timestamp,
     pub verdict: Verdict,
     pub max_profile_error_um: f64,
     pub base_radius_error_um: f64,
@@ -241,9 +244,9 @@ pub struct HistoryFilter {
     pub machine: String,
     pub lobe: Option<String>,
     /// Inclusive lower bound on `received_at_ms`.
-    pub since_ms: Option<i64>,
+    pub since_ms: Option<Timestamp>,
     /// Exclusive upper bound on `received_at_ms`.
-    pub until_ms: Option<i64>,
+    pub until_ms: Option<Timestamp>,
     pub verdict: Option<Verdict>,
     /// Page size, 1 to [`MAX_PAGE`].
     pub limit: u32,
@@ -297,7 +300,7 @@ pub struct NewTableVersion {
     /// Its first status, and why ("waiting for operator", "pushed to share", "step too
     /// large"); the store keeps `created_at_ms` as the status's time.
     pub status: VersionStatus,
-    pub created_at_ms: i64,
+    pub created_at_ms: Timestamp,
 }
 
 /// A stored table version with its latest status.
@@ -314,16 +317,16 @@ pub struct TableVersion {
     pub sha256: String,
     pub learning_params_json: String,
     pub reason: String,
-    pub created_at_ms: i64,
+    pub created_at_ms: Timestamp,
     pub status: VersionStatus,
-    pub status_at_ms: i64,
+    pub status_at_ms: Timestamp,
 }
 
 /// A wheel dressing: the wheel radius camloop believed before and after.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NewDressing {
     pub machine: MachineName,
-    pub at_ms: i64,
+    pub at_ms: Timestamp,
     pub old_radius_mm: f64,
     pub new_radius_mm: f64,
     /// The dresser's measured infeed (radius removed), µm, when it reported one.
@@ -337,7 +340,7 @@ pub struct NewDressing {
 pub struct Dressing {
     pub id: DressingId,
     pub machine: MachineName,
-    pub at_ms: i64,
+    pub at_ms: Timestamp,
     pub old_radius_mm: f64,
     pub new_radius_mm: f64,
     /// `None` for dressings reported without it, and for rows older than the column.
@@ -349,7 +352,7 @@ pub struct Dressing {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct NewEvent {
     pub machine: MachineName,
-    pub at_ms: i64,
+    pub at_ms: Timestamp,
     pub level: EventLevel,
     pub kind: EventKind,
     pub message: String,
@@ -360,7 +363,7 @@ pub struct NewEvent {
 pub struct Event {
     pub id: EventId,
     pub machine: MachineName,
-    pub at_ms: i64,
+    pub at_ms: Timestamp,
     pub level: EventLevel,
     pub kind: EventKind,
     pub message: String,
@@ -371,9 +374,9 @@ pub struct Event {
 pub struct EventFilter {
     pub machine: Option<String>,
     /// Inclusive.
-    pub since_ms: Option<i64>,
+    pub since_ms: Option<Timestamp>,
     /// Exclusive.
-    pub until_ms: Option<i64>,
+    pub until_ms: Option<Timestamp>,
     pub level: Option<EventLevel>,
     /// 1 to [`MAX_PAGE`].
     pub limit: u32,
@@ -383,7 +386,7 @@ pub struct EventFilter {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct LearningState {
     pub state_json: String,
-    pub saved_at_ms: i64,
+    pub saved_at_ms: Timestamp,
 }
 
 text_enum!(

@@ -2,6 +2,9 @@
 //! digests (see `crate::auth`); neither can be read back. A user is disabled, never
 //! deleted, so the audit trail's names keep meaning someone.
 
+use jiff::Timestamp;
+
+use super::unix_ms::{instant, instant_opt};
 use super::{Role, Store, StoreError, with_read, with_write};
 
 /// Row id of a user.
@@ -20,8 +23,8 @@ pub struct User {
     pub role: Role,
     /// argon2id, PHC string.
     pub password_hash: String,
-    pub created_at_ms: i64,
-    pub disabled_at_ms: Option<i64>,
+    pub created_at_ms: Timestamp,
+    pub disabled_at_ms: Option<Timestamp>,
 }
 
 /// A token to keep: its digest, whose it is, its role ceiling and when it runs out.
@@ -31,8 +34,8 @@ pub struct NewToken {
     pub label: String,
     pub sha256: String,
     pub role: Role,
-    pub created_at_ms: i64,
-    pub expires_at_ms: i64,
+    pub created_at_ms: Timestamp,
+    pub expires_at_ms: Timestamp,
 }
 
 /// A token with its user, as the service checks it.
@@ -43,9 +46,9 @@ pub struct TokenGrant {
     pub user_role: Role,
     /// The token's ceiling.
     pub role: Role,
-    pub expires_at_ms: i64,
-    pub revoked_at_ms: Option<i64>,
-    pub user_disabled_at_ms: Option<i64>,
+    pub expires_at_ms: Timestamp,
+    pub revoked_at_ms: Option<Timestamp>,
+    pub user_disabled_at_ms: Option<Timestamp>,
 }
 
 /// A token as listed (no digest).
@@ -55,9 +58,9 @@ pub struct TokenInfo {
     pub user: String,
     pub label: String,
     pub role: Role,
-    pub created_at_ms: i64,
-    pub expires_at_ms: i64,
-    pub revoked_at_ms: Option<i64>,
+    pub created_at_ms: Timestamp,
+    pub expires_at_ms: Timestamp,
+    pub revoked_at_ms: Option<Timestamp>,
 }
 
 const USER_COLUMNS: &str =
@@ -80,8 +83,8 @@ fn user_from(row: UserRow) -> Result<User, StoreError> {
         name,
         role: Role::parse(&role)?,
         password_hash,
-        created_at_ms,
-        disabled_at_ms,
+        created_at_ms: instant(created_at_ms, "created_at_ms")?,
+        disabled_at_ms: instant_opt(disabled_at_ms, "disabled_at_ms")?,
     })
 }
 
@@ -121,7 +124,7 @@ impl Store {
         name: &str,
         role: Role,
         password_hash: &str,
-        at_ms: i64,
+        at_ms: Timestamp,
     ) -> Result<UserId, StoreError> {
         const OP: &str = "adding a user";
         if self.user(name).await?.is_some() {
@@ -138,7 +141,7 @@ impl Store {
             name,
             role.as_str(),
             password_hash,
-            at_ms,
+            at_ms.as_millisecond(),
         )
         .map(UserId)
     }
@@ -176,27 +179,27 @@ impl Store {
         &self,
         name: &str,
         password_hash: &str,
-        at_ms: i64,
+        at_ms: Timestamp,
     ) -> Result<bool, StoreError> {
         changed_one!(
             self,
             "changing a password",
             "UPDATE users SET password_hash = $1, changed_at_ms = $2 WHERE name = $3",
             password_hash,
-            at_ms,
+            at_ms.as_millisecond(),
             name,
         )
     }
 
     /// Disables a user (its tokens and sessions stop working); false when there is no such
     /// user or it was disabled already.
-    pub async fn disable_user(&self, name: &str, at_ms: i64) -> Result<bool, StoreError> {
+    pub async fn disable_user(&self, name: &str, at_ms: Timestamp) -> Result<bool, StoreError> {
         changed_one!(
             self,
             "disabling a user",
             "UPDATE users SET disabled_at_ms = $1, changed_at_ms = $1 \
              WHERE name = $2 AND disabled_at_ms IS NULL",
-            at_ms,
+            at_ms.as_millisecond(),
             name,
         )
     }
@@ -212,8 +215,8 @@ impl Store {
             &t.label,
             &t.sha256,
             t.role.as_str(),
-            t.created_at_ms,
-            t.expires_at_ms,
+            t.created_at_ms.as_millisecond(),
+            t.expires_at_ms.as_millisecond(),
         )
         .map(TokenId)
     }
@@ -238,9 +241,9 @@ impl Store {
                     user,
                     user_role: Role::parse(&user_role)?,
                     role: Role::parse(&role)?,
-                    expires_at_ms: expires,
-                    revoked_at_ms: revoked,
-                    user_disabled_at_ms: disabled,
+                    expires_at_ms: instant(expires, "expires_at_ms")?,
+                    revoked_at_ms: instant_opt(revoked, "revoked_at_ms")?,
+                    user_disabled_at_ms: instant_opt(disabled, "disabled_at_ms")?,
                 })
             })
             .transpose()
@@ -248,12 +251,12 @@ impl Store {
     }
 
     /// Revokes a token; false when there is no such token or it was revoked already.
-    pub async fn revoke_token(&self, id: TokenId, at_ms: i64) -> Result<bool, StoreError> {
+    pub async fn revoke_token(&self, id: TokenId, at_ms: Timestamp) -> Result<bool, StoreError> {
         changed_one!(
             self,
             "revoking a token",
             "UPDATE api_tokens SET revoked_at_ms = $1 WHERE id = $2 AND revoked_at_ms IS NULL",
-            at_ms,
+            at_ms.as_millisecond(),
             id.0,
         )
     }
@@ -276,9 +279,9 @@ impl Store {
                         user,
                         label,
                         role: Role::parse(&role)?,
-                        created_at_ms: created,
-                        expires_at_ms: expires,
-                        revoked_at_ms: revoked,
+                        created_at_ms: instant(created, "created_at_ms")?,
+                        expires_at_ms: instant(expires, "expires_at_ms")?,
+                        revoked_at_ms: instant_opt(revoked, "revoked_at_ms")?,
                     })
                 })
                 .collect()

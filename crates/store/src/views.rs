@@ -2,14 +2,19 @@
 //! and alarms (appended, once per event), and the learning state read through the readers'
 //! gate (the machine loop reads it through the writer; a dashboard must never take that).
 
+use jiff::Timestamp;
+
 use super::codec::check_limit;
-use super::{EventId, LearningState, Store, StoreError, VersionStatus, col, with_read, with_write};
+use super::unix_ms::instant;
+use super::{
+    EventId, LearningState, Store, StoreError, VersionStatus, at_col, col, with_read, with_write,
+};
 
 /// An event's acknowledgement.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct EventAck {
     pub event: EventId,
-    pub at_ms: i64,
+    pub at_ms: Timestamp,
     /// Who acknowledged ("dashboard").
     pub source: String,
 }
@@ -20,7 +25,7 @@ pub struct TableVersionHead {
     pub version: i64,
     pub table_number: u32,
     pub reason: String,
-    pub created_at_ms: i64,
+    pub created_at_ms: Timestamp,
     pub status: VersionStatus,
 }
 
@@ -42,7 +47,7 @@ impl Store {
         &self,
         machine: &str,
         id: EventId,
-        at_ms: i64,
+        at_ms: Timestamp,
         source: &str,
     ) -> Result<AckOutcome, StoreError> {
         const OP: &str = "acknowledging an event";
@@ -63,7 +68,7 @@ impl Store {
                  ON CONFLICT (event_id) DO NOTHING",
             )
             .bind(id.0)
-            .bind(at_ms)
+            .bind(at_ms.as_millisecond())
             .bind(source)
             .execute(&mut *tx)
             .await
@@ -102,7 +107,7 @@ impl Store {
                 .map(|row| {
                     Ok(EventAck {
                         event: EventId(col!(row, "event_id", "reading an acknowledgement")),
-                        at_ms: col!(row, "at_ms", "reading an acknowledgement"),
+                        at_ms: at_col!(row, "at_ms", "reading an acknowledgement"),
                         source: col!(row, "source", "reading an acknowledgement"),
                     })
                 })
@@ -126,7 +131,11 @@ impl Store {
             .fetch_optional(pool)
             .await
             .map_err(self.db_error("loading learning state"))?;
-            Ok(row.map(|(state_json, saved_at_ms)| LearningState { state_json, saved_at_ms }))
+            row.map(|(state_json, saved_at_ms)| {
+                let saved_at_ms = instant(saved_at_ms, "saved_at_ms")?;
+                Ok(LearningState { state_json, saved_at_ms })
+            })
+            .transpose()
         })
     }
 
@@ -163,7 +172,7 @@ impl Store {
                             StoreError::invalid("table_number", format!("stored value {number} out of range"))
                         })?,
                         reason: col!(row, "reason", "reading a table version"),
-                        created_at_ms: col!(row, "created_at_ms", "reading a table version"),
+                        created_at_ms: at_col!(row, "created_at_ms", "reading a table version"),
                         status: VersionStatus::from_column(
                             &status,
                             col!(row, "why", "reading a table version"),

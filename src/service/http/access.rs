@@ -33,8 +33,8 @@ pub struct AuthState {
     pub anonymous_read: bool,
     /// Session cookies carry `Secure` (set when the listener serves TLS).
     pub secure_cookie: bool,
-    /// How long a session lasts after sign-in, ms.
-    pub session_ms: i64,
+    /// How long a session lasts after sign-in.
+    pub session: jiff::SignedDuration,
     pub sessions: super::session::Sessions,
     pub lockout: Lockout,
 }
@@ -46,7 +46,7 @@ impl AuthState {
             legacy_token,
             anonymous_read,
             secure_cookie: false,
-            session_ms: 8 * 3600 * 1000,
+            session: jiff::SignedDuration::from_hours(8),
             sessions: Default::default(),
             lockout: Lockout::default(),
         }
@@ -88,7 +88,7 @@ impl Principal {
     /// An audit entry by this caller now; the caller fills the target and change.
     pub fn audit(&self, action: &str, result: AuditResult, reason: String) -> AuditEntry {
         AuditEntry {
-            at_ms: crate::clock::now_ms(),
+            at_ms: crate::clock::now(),
             actor: self.actor.clone(),
             role: self.role.unwrap_or(Role::Viewer),
             client: self.client(),
@@ -240,7 +240,7 @@ async fn identify(
         return bearer(app, std::str::from_utf8(token).unwrap_or(""), address).await;
     }
     if let Some(key) = cookie(headers, SESSION_COOKIE) {
-        let now = crate::clock::now_ms();
+        let now = crate::clock::now();
         if let Some(s) = auth.sessions.get(&key, now) {
             // The user may have been disabled or changed since sign-in (by the command line).
             let store = super::routes::store(app).await?;
@@ -268,7 +268,7 @@ async fn identify(
 /// A bearer token: the shared one, or a user's token from the store.
 async fn bearer(app: &AppState, token: &str, address: IpAddr) -> Result<Principal, ApiError> {
     let auth = &app.auth;
-    let now = crate::clock::now_ms();
+    let now = crate::clock::now();
     if let Some(until) = auth.lockout.locked_until(None, address, now) {
         return Err(locked(app, None, address, until));
     }
@@ -331,7 +331,7 @@ pub(crate) async fn failed(
     address: IpAddr,
     why: &str,
 ) {
-    let now = crate::clock::now_ms();
+    let now = crate::clock::now();
     let counted = app.auth.lockout.fail(user, address, now);
     let user_text = user.unwrap_or("-");
     warn!(kind, user = user_text, client = %address, why, "authentication failed");
@@ -365,9 +365,9 @@ pub(crate) fn locked(
     app: &AppState,
     user: Option<&str>,
     address: IpAddr,
-    until_ms: i64,
+    until: jiff::Timestamp,
 ) -> ApiError {
-    let left_s = (until_ms - crate::clock::now_ms()).max(0) / 1000 + 1;
+    let left_s = until.duration_since(crate::clock::now()).as_secs().max(0) + 1;
     warn!(user = user.unwrap_or("-"), client = %address, left_s, "refused: locked out");
     app.metrics
         .update_access(|a| *a.failures.entry("locked").or_default() += 1);

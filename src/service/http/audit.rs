@@ -48,7 +48,9 @@ pub async fn record(app: &AppState, entry: AuditEntry) {
 #[into_params(parameter_in = Query)]
 pub(super) struct AuditQuery {
     /// From this time, Unix ms.
-    since_ms: Option<i64>,
+    #[serde(default, with = "crate::clock::unix_ms::option")]
+    #[param(value_type = Option<i64>)]
+    since_ms: Option<jiff::Timestamp>,
     /// At most this many (default 200, at most 1000).
     limit: Option<u32>,
 }
@@ -68,7 +70,12 @@ pub(super) async fn audit(
 ) -> Result<Json<AuditReply>, ApiError> {
     let store = super::routes::store(&app).await?;
     let items = store
-        .audit(q.since_ms.unwrap_or(0), 0, q.limit.unwrap_or(200), true)
+        .audit(
+            q.since_ms.unwrap_or(jiff::Timestamp::UNIX_EPOCH),
+            0,
+            q.limit.unwrap_or(200),
+            true,
+        )
         .await?;
     Ok(Json(AuditReply { items }))
 }
@@ -77,6 +84,35 @@ pub(super) async fn audit(
 #[utoipa::path(get, path = "/audit", tag = "dashboard", responses((status = 200, description = "the audit trail as a page", content_type = "text/html")))]
 pub(super) async fn audit_page(State(app): State<AppState>) -> Result<Html<String>, ApiError> {
     let store = super::routes::store(&app).await?;
-    let rows = store.audit(0, 0, 200, true).await?;
+    let rows = store
+        .audit(jiff::Timestamp::UNIX_EPOCH, 0, 200, true)
+        .await?;
     Ok(Html(super::dashboard::audit_html(&rows)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::AuditQuery;
+    use axum::extract::Query;
+
+    fn query(uri: &str) -> Result<AuditQuery, String> {
+        let uri: axum::http::Uri = uri.parse().unwrap();
+        Query::<AuditQuery>::try_from_uri(&uri)
+            .map(|q| q.0)
+            .map_err(|e| e.body_text())
+    }
+
+    /// The time a query names is an instant from its integer milliseconds, checked once
+    /// where the query is read: one no instant has is refused there, not passed on.
+    #[test]
+    fn a_query_time_is_read_as_an_instant_and_checked_at_the_edge() {
+        let q = query("/api/v1/audit?since_ms=1795443845123").unwrap();
+        assert_eq!(
+            q.since_ms.map(|t| t.to_string()),
+            Some("2026-11-23T14:24:05.123Z".into())
+        );
+        assert_eq!(query("/api/v1/audit?limit=5").unwrap().since_ms, None);
+        let err = query("/api/v1/audit?since_ms=9223372036854775807").unwrap_err();
+        assert!(err.contains("not a time"), "{err}");
+    }
 }

@@ -52,7 +52,7 @@ fn bad_window(text: &str) -> ApiError {
 }
 
 /// The window a query names.
-pub(crate) fn parse_window(text: &str, now_ms: i64) -> Result<Window, ApiError> {
+pub(crate) fn parse_window(text: &str, now: jiff::Timestamp) -> Result<Window, ApiError> {
     let mut w = Window::default();
     let parts = |n: &str| {
         n.parse::<u32>()
@@ -65,7 +65,7 @@ pub(crate) fn parse_window(text: &str, now_ms: i64) -> Result<Window, ApiError> 
         Some(("parts", n)) => w.last = parts(n).ok_or_else(|| bad_window(text))?,
         Some(("since", t)) => {
             w.since_ms =
-                Some(crate::cli::history::parse_time(t, now_ms).map_err(|_| bad_window(text))?);
+                Some(crate::cli::history::parse_time(t, now).map_err(|_| bad_window(text))?);
             w.last = crate::store::MAX_PAGE;
         }
         None => w.last = parts(text).ok_or_else(|| bad_window(text))?,
@@ -87,7 +87,7 @@ pub(super) async fn capability(
     machine_name(&machine)?;
     feature_name(&feature)?;
     let window_text = q.window.unwrap_or_else(|| "parts:125".into());
-    let window = parse_window(&window_text, crate::clock::now_ms())?;
+    let window = parse_window(&window_text, crate::clock::now())?;
     let Some(sheet) = state.dashboard.get(&(machine.clone(), feature.clone())) else {
         return Err(ApiError::new(
             ApiCode::FeatureNotFound,
@@ -105,7 +105,7 @@ pub(super) async fn capability(
         feature,
         window: window_text,
         parts: rows.len(),
-        since_ms: (since != i64::MIN).then_some(since),
+        since_ms: since.map(|at| at.as_millisecond()),
         master_runs_left_out: masters,
     }))
 }

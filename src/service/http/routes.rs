@@ -179,7 +179,7 @@ pub(super) async fn machines(
                 out.len() - 1
             }
         };
-        out[i].first_seen_ms = Some(m.first_seen_ms);
+        out[i].first_seen_ms = Some(m.first_seen_ms.as_millisecond());
         for f in store.features(&m.name).await? {
             let lobes = &mut out[i].lobes;
             let j = match lobes
@@ -217,9 +217,13 @@ pub(super) struct HistoryQuery {
     /// Only this lobe or pin.
     lobe: Option<String>,
     /// From this time, Unix ms.
-    since_ms: Option<i64>,
+    #[serde(default, with = "crate::clock::unix_ms::option")]
+    #[param(value_type = Option<i64>)]
+    since_ms: Option<jiff::Timestamp>,
     /// Before this time, Unix ms.
-    until_ms: Option<i64>,
+    #[serde(default, with = "crate::clock::unix_ms::option")]
+    #[param(value_type = Option<i64>)]
+    until_ms: Option<jiff::Timestamp>,
     /// Only this verdict: `pass` or `fail`.
     verdict: Option<String>,
     /// At most this many (default 100).
@@ -266,7 +270,7 @@ impl From<crate::store::MeasurementSummary> for MeasurementItem {
             machine: m.machine.into(),
             part: m.part,
             lobe: m.lobe,
-            received_at_ms: m.received_at_ms,
+            received_at_ms: m.received_at_ms.as_millisecond(),
             max_profile_error_um: m.max_profile_error_um,
             base_radius_error_um: m.base_radius_error_um,
             phase_error_deg: m.phase_error_deg,
@@ -355,7 +359,7 @@ pub(super) async fn measurement(
         id,
         machine: detail.summary.machine.into(),
         lobe: detail.summary.lobe,
-        received_at_ms: detail.summary.received_at_ms,
+        received_at_ms: detail.summary.received_at_ms.as_millisecond(),
         averaged_lift_mm: detail.averaged_lift_mm,
         raw_kept: detail.raw_lift_mm.is_some(),
         analysis,
@@ -406,7 +410,7 @@ pub(super) async fn tables(
             reason: t.reason,
             status: t.status.name(),
             status_why: t.status.why().to_string(),
-            created_at_ms: t.created_at_ms,
+            created_at_ms: t.created_at_ms.as_millisecond(),
         })
         .collect();
     Ok(Json(Items { items }))
@@ -542,7 +546,7 @@ pub(super) async fn dressings(
     let items = dressings
         .into_iter()
         .map(|d| DressingItem {
-            at_ms: d.at_ms,
+            at_ms: d.at_ms.as_millisecond(),
             old_radius_mm: d.old_radius_mm,
             new_radius_mm: d.new_radius_mm,
             infeed_um: d.infeed_um,
@@ -577,7 +581,7 @@ pub(super) async fn events(
     let items = events
         .into_iter()
         .map(|e| EventItem {
-            at_ms: e.at_ms,
+            at_ms: e.at_ms.as_millisecond(),
             level: e.level.as_str(),
             kind: e.kind.as_str().to_owned(),
             message: e.message,

@@ -36,7 +36,7 @@ const MAX_SESSIONS: usize = 10_000;
 pub struct Session {
     pub user: String,
     pub csrf: String,
-    pub expires_at_ms: i64,
+    pub expires_at_ms: jiff::Timestamp,
 }
 
 /// Live sessions by the SHA-256 of their key.
@@ -47,7 +47,11 @@ pub struct Sessions {
 
 impl Sessions {
     /// A new session for `user` until `expires_at_ms`: its key (for the cookie) and itself.
-    pub fn create(&self, user: &str, expires_at_ms: i64) -> Result<(String, Session), ApiError> {
+    pub fn create(
+        &self,
+        user: &str,
+        expires_at_ms: jiff::Timestamp,
+    ) -> Result<(String, Session), ApiError> {
         let random =
             |n| random_hex(n).map_err(|e| ApiError::new(ApiCode::RandomFailed, e.to_string()));
         let key = random(32)?;
@@ -57,7 +61,7 @@ impl Sessions {
             expires_at_ms,
         };
         let mut map = self.map.lock().unwrap_or_else(|p| p.into_inner());
-        let now = crate::clock::now_ms();
+        let now = crate::clock::now();
         map.retain(|_, s| s.expires_at_ms > now);
         if map.len() >= MAX_SESSIONS
             && let Some(oldest) = map
@@ -71,11 +75,11 @@ impl Sessions {
         Ok((key, session))
     }
 
-    /// The live session of `key` at `now_ms`.
-    pub fn get(&self, key: &str, now_ms: i64) -> Option<Session> {
+    /// The live session of `key` at `now`.
+    pub fn get(&self, key: &str, now: jiff::Timestamp) -> Option<Session> {
         let map = self.map.lock().unwrap_or_else(|p| p.into_inner());
         map.get(&token_digest(key))
-            .filter(|s| s.expires_at_ms > now_ms)
+            .filter(|s| s.expires_at_ms > now)
             .cloned()
     }
 
@@ -95,6 +99,12 @@ pub fn cookie(headers: &HeaderMap, name: &str) -> Option<String> {
         .filter_map(|pair| pair.trim().split_once('='))
         .find(|(k, _)| *k == name)
         .map(|(_, v)| v.to_string())
+}
+
+/// `now` plus `lasting`, at most jiff's last instant (a configured session length is not
+/// bounded by the years jiff holds).
+fn until(now: jiff::Timestamp, lasting: jiff::SignedDuration) -> jiff::Timestamp {
+    now.saturating_add(lasting).unwrap_or(jiff::Timestamp::MAX)
 }
 
 fn set_cookie(app: &AppState, name: &str, value: &str, path: &str, max_age_s: i64) -> String {
@@ -177,7 +187,7 @@ pub(super) async fn signin(
         return signin_form(&app, form.next.as_deref(), message, StatusCode::FORBIDDEN);
     }
     let name = UserName::new(&form.name).ok();
-    let now = crate::clock::now_ms();
+    let now = crate::clock::now();
     let user_text = name.as_ref().map(UserName::as_str);
     if let Some(until) = app.auth.lockout.locked_until(user_text, address, now) {
         let e = locked(&app, user_text, address, until);
@@ -200,7 +210,7 @@ pub(super) async fn signin(
     let (key, _) = app
         .auth
         .sessions
-        .create(&user.name, now + app.auth.session_ms)?;
+        .create(&user.name, until(now, app.auth.session))?;
     let p = Principal {
         actor: user.name.clone(),
         role: Some(user.role),
@@ -208,7 +218,7 @@ pub(super) async fn signin(
         via: Via::Anonymous,
     };
     super::audit::record(&app, p.audit("signin", AuditResult::Ok, "password".into())).await;
-    let cookie = set_cookie(&app, SESSION_COOKIE, &key, "/", app.auth.session_ms / 1000);
+    let cookie = set_cookie(&app, SESSION_COOKIE, &key, "/", app.auth.session.as_secs());
     let clear = set_cookie(&app, SIGNIN_COOKIE, "", "/signin", 0);
     let mut r = Redirect::to(&local_path(form.next.as_deref())).into_response();
     r.headers_mut().append(

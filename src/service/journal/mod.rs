@@ -321,7 +321,7 @@ mod tests {
     fn event(message: &str) -> Pending {
         Pending::Event {
             machine: "M1".into(),
-            at_ms: 7,
+            at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
             level: EventLevel::Info,
             kind: EventKind::WheelDressed,
             message: message.into(),
@@ -335,7 +335,7 @@ mod tests {
             machine: "M1".into(),
             lobe: "IN1".into(),
             state: Box::new(state),
-            saved_at_ms: 7 + parts as i64,
+            saved_at_ms: jiff::Timestamp::from_millisecond(7 + parts as i64).unwrap(),
         }
     }
 
@@ -406,7 +406,10 @@ mod tests {
             at_unix_ms: 9,
             note: Some("pushed to the share on retry".into()),
         };
-        assert_eq!((v.status, v.status_at_ms), (pushed, 9));
+        assert_eq!(
+            (v.status, v.status_at_ms),
+            (pushed, jiff::Timestamp::from_millisecond(9).unwrap())
+        );
         let crate::store::RawPool::Sqlite(pool) = store.raw_pool() else {
             panic!("a SQLite store")
         };
@@ -450,7 +453,7 @@ mod tests {
                 status: VersionStatus::Waiting {
                     reason: Some("waiting: share full".into()),
                 },
-                created_at_ms: 7,
+                created_at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
                 measurement_id: None,
                 rollback_of: None,
             },
@@ -462,12 +465,12 @@ mod tests {
                     at_unix_ms: 8,
                     note: Some("pushed on retry".into()),
                 },
-                at_ms: 8,
+                at_ms: jiff::Timestamp::from_millisecond(8).unwrap(),
             },
             learning(1),
             Pending::Dressing {
                 machine: "M1".into(),
-                at_ms: 7,
+                at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
                 old_radius_mm: 250.0,
                 new_radius_mm: 249.998,
                 infeed_um: Some(2.1),

@@ -8,6 +8,7 @@ use crate::store::{
     EventLevel, FeatureKind, NewDressing, NewEvent, NewMeasurement, NewRecipeSnapshot,
     NewTableVersion, Store, StoreError, VersionStatus,
 };
+use jiff::Timestamp;
 use serde::{Deserialize, Serialize};
 
 /// One record waiting for the database.
@@ -36,7 +37,8 @@ pub enum Pending {
         reason: String,
         /// Its first status, with why (lines written before it was typed: see [`read_line`]).
         status: VersionStatus,
-        created_at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        created_at_ms: Timestamp,
         /// The measurement it was learned from (a replay re-submits the version with it).
         #[serde(default)]
         measurement_id: Option<String>,
@@ -51,11 +53,13 @@ pub enum Pending {
         lobe: String,
         version: u64,
         status: VersionStatus,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
     },
     Event {
         machine: String,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
         level: EventLevel,
         kind: EventKind,
         message: String,
@@ -64,7 +68,8 @@ pub enum Pending {
         machine: String,
         lobe: String,
         state: Box<LoopMemory>,
-        saved_at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        saved_at_ms: Timestamp,
     },
     /// What the machine grinds, kept once per change (the store skips an identical one).
     RecipeSnapshot {
@@ -73,11 +78,13 @@ pub enum Pending {
         lobe: String,
         kind: FeatureKind,
         recipe_json: String,
-        created_at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        created_at_ms: Timestamp,
     },
     Dressing {
         machine: String,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
         old_radius_mm: f64,
         new_radius_mm: f64,
         /// The dresser's measured infeed (radius removed), µm, when it reported one; journal
@@ -437,7 +444,10 @@ mod tests {
             at_unix_ms: 9,
             note,
         };
-        assert_eq!((status, *at_ms), (&pushed, 9));
+        assert_eq!(
+            (status, *at_ms),
+            (&pushed, jiff::Timestamp::from_millisecond(9).unwrap())
+        );
         let Pending::VersionStatus { status, .. } = read(&refused) else {
             panic!("a status record")
         };

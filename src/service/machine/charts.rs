@@ -117,7 +117,7 @@ impl FeatureLoop {
         &mut self,
         part: &str,
         measured: &Measured,
-        at_ms: i64,
+        at_ms: jiff::Timestamp,
     ) -> Vec<Pending> {
         let report = &measured.report;
         let values = PartValues {

@@ -4,7 +4,7 @@
 //! part. Without this, the feature's next part carries one part of drift more.
 
 use super::FeatureLoop;
-use crate::clock::now_ms;
+use crate::clock::now;
 use crate::core::compensate;
 use tracing::{debug, warn};
 
@@ -17,7 +17,7 @@ impl FeatureLoop {
         let learning = &self.memory.learning;
         let drift = learning.size_drift_um_per_part;
         if drift.abs() < 1e-3 || learning.frozen.is_some() || self.memory.waiting.is_some() {
-            let record = self.learning_record(now_ms());
+            let record = self.learning_record(now());
             self.record(vec![record]).await;
             return;
         }
@@ -35,7 +35,7 @@ impl FeatureLoop {
         debug!(machine = %self.name, lobe = %self.setup.name, "{reason}");
         match self.deliver(&table, next, &reason, None).await {
             Ok(mut records) => {
-                records.push(self.learning_record(now_ms()));
+                records.push(self.learning_record(now()));
                 self.record(records).await;
             }
             Err(e) => {

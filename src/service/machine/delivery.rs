@@ -6,7 +6,7 @@ use super::FeatureLoop;
 use super::MachineError;
 use super::memory::{TableLearning, WaitingTable};
 use super::records::event;
-use crate::clock::{now_ms, now_ms_u64};
+use crate::clock::now;
 use crate::core::compensate::GuardedTable;
 use crate::core::learn::LearningState;
 use crate::core::program::{Provenance, comment_text};
@@ -29,7 +29,7 @@ pub(super) struct Draft {
     pub(super) reason: String,
     pub(super) measurement_id: Option<String>,
     pub(super) rollback_of: Option<u64>,
-    pub(super) at_ms: i64,
+    pub(super) at_ms: jiff::Timestamp,
 }
 
 impl FeatureLoop {
@@ -45,7 +45,7 @@ impl FeatureLoop {
         reason: &str,
         measurement: Option<String>,
     ) -> Result<Vec<Pending>, MachineError> {
-        let at_ms = now_ms();
+        let at_ms = now();
         let parent = self.memory.in_force_version;
         let version = self.share.history().next_version();
         let learning = TableLearning {
@@ -159,7 +159,7 @@ impl FeatureLoop {
             measurement_id: draft.measurement_id,
             learning: serde_json::to_value(draft.learning.summary())?,
             rollback_of: draft.rollback_of,
-            created_at_unix_ms: draft.at_ms as u64,
+            created_at_unix_ms: draft.at_ms,
         })
     }
 
@@ -170,7 +170,7 @@ impl FeatureLoop {
         request: PushRequest,
         version: u64,
         next: LearningState,
-        at_ms: i64,
+        at_ms: jiff::Timestamp,
     ) -> Result<(VersionStatus, Vec<Pending>), MachineError> {
         let mut records = Vec::new();
         let submitted = self
@@ -199,13 +199,15 @@ impl FeatureLoop {
                 self.memory.learning = next;
                 self.memory.in_force_version = version;
                 self.on_delivered(self.memory.wheel_radius_mm);
-                let pushed = VersionStatus::Pushed {
-                    at_unix_ms: at_ms as u64,
-                    note: Some("pushed to the share".into()),
-                };
+                let pushed = VersionStatus::pushed_at(at_ms, "pushed to the share");
                 Ok((pushed, records))
             }
             Err(PushError::Share { version, error: e }) => {
+                // Parts ground while the learning's tables cannot reach the control say
+                // nothing about the learning: the divergence guard's history restarts, or
+                // the wear of the outage (and a dressing in it) would be taken for the
+                // learning diverging as soon as the share is back.
+                self.memory.learning.recent_max_error_um.clear();
                 if self.memory.waiting.is_none() {
                     // Said once per outage, not per part.
                     error!(machine = %self.name, error = %e, in_force = self.memory.in_force_version, "controller share: table not delivered; learning holds on the table in force");
@@ -300,7 +302,7 @@ impl FeatureLoop {
             camloop_version: env!("CARGO_PKG_VERSION").to_string(),
             table_version: version,
             parent_version: (parent > 0).then_some(parent),
-            created_utc: crate::clock::utc_text(now_ms_u64()),
+            created_utc: crate::clock::utc_text(crate::clock::now()),
             recipe: self.setup.part.clone(),
             feature: self.setup.name.clone(),
             correction_sha256: crate::core::turn::correction_sha256(&learning.correction_um),
@@ -343,7 +345,7 @@ impl FeatureLoop {
             info!(machine = %self.name, "disk space back: journal reserve restored, learning resumes");
             let e = event(
                 &self.name,
-                now_ms(),
+                now(),
                 EventLevel::Info,
                 EventKind::DiskSpaceBack,
                 "disk space back: journal reserve restored, learning resumes".into(),
@@ -366,7 +368,7 @@ impl FeatureLoop {
         match self.share.deliver() {
             Ok(Some(p)) => {
                 info!(machine = %self.name, version = p.version, "controller share: waiting table delivered, learning resumes from it");
-                let at_ms = now_ms();
+                let at_ms = now();
                 let radius = self.memory.delivered(p.version);
                 self.on_delivered(radius.unwrap_or(self.memory.wheel_radius_mm));
                 let records = vec![
@@ -374,10 +376,7 @@ impl FeatureLoop {
                         machine: self.name.clone(),
                         lobe: self.setup.name.clone(),
                         version: p.version,
-                        status: VersionStatus::Pushed {
-                            at_unix_ms: at_ms as u64,
-                            note: Some("pushed to the share on retry".into()),
-                        },
+                        status: VersionStatus::pushed_at(at_ms, "pushed to the share on retry"),
                         at_ms,
                     },
                     event(

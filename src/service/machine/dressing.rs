@@ -5,7 +5,7 @@
 use super::super::journal::{EventKind, Pending};
 use super::records::event;
 use super::{FeatureLoop, MachineError};
-use crate::clock::now_ms;
+use crate::clock::now;
 use crate::core::compensate;
 use crate::core::learn;
 use crate::store::EventLevel;
@@ -49,7 +49,7 @@ impl FeatureLoop {
             .map(learn::check_dresser_infeed)
             .transpose()
             .map_err(MachineError::refused)?;
-        let at_ms = now_ms();
+        let at_ms = now();
         let old = self.memory.wheel_radius_mm;
         info!(machine = %self.name, old_radius_mm = old, new_radius_mm = wheel_radius_mm, infeed_um, source, "wheel dressed: table regenerated for the new radius");
         let how = self.move_correction(old, wheel_radius_mm, infeed_um, wheel.share_um);

@@ -7,7 +7,7 @@ use super::super::journal::{EventKind, Journal, Pending};
 use super::super::metrics::Metrics;
 use super::memory::LoopMemory;
 use super::{MachinePaths, MainProgram, StoreHandle, records};
-use crate::clock::{now_ms, now_ms_u64};
+use crate::clock::now;
 use crate::core::compensate::{self, LobeLoop};
 use crate::core::turn::HoldReason;
 use crate::recipe::FeatureSetup;
@@ -74,7 +74,7 @@ impl FeatureLoop {
             table_pair: setup.table_pair,
             keep_versions: 50,
         };
-        let (mut share, report) = Share::open(config, Box::new(RealFs), Box::new(now_ms_u64))
+        let (mut share, report) = Share::open(config, Box::new(RealFs), Box::new(now))
             .with_context(|| format!("machine {name}: cannot open the share state"))?;
         if let Some(fence) = fence {
             // Every write for this feature (journal, store, share) is fenced from here on.
@@ -111,7 +111,7 @@ impl FeatureLoop {
     /// Reconciles the memory with the share, reports a quarantined journal, and makes sure
     /// the share holds a table.
     async fn after_start(&mut self, report: &crate::share::OpenReport) -> anyhow::Result<()> {
-        let at_ms = now_ms();
+        let at_ms = now();
         self.setup.feature = self
             .setup
             .feature
@@ -164,7 +164,7 @@ impl FeatureLoop {
     }
 
     /// What this machine grinds, as the store keeps it (skipped there when unchanged).
-    fn recipe_snapshot(&self, at_ms: i64) -> Pending {
+    fn recipe_snapshot(&self, at_ms: jiff::Timestamp) -> Pending {
         let s = &self.setup;
         let recipe = RecipeRecord {
             label: &s.label,
@@ -264,7 +264,7 @@ impl FeatureLoop {
 
     /// Whether learning must hold because the disk is full: the journal runs on its reserve
     /// (measurements are still kept), or could not write at all. Said once when it starts.
-    pub(super) async fn disk_full_hold(&mut self, at_ms: i64) -> Option<HoldReason> {
+    pub(super) async fn disk_full_hold(&mut self, at_ms: jiff::Timestamp) -> Option<HoldReason> {
         if !self.journal.on_reserve() {
             return None;
         }
@@ -302,7 +302,7 @@ impl FeatureLoop {
 
     /// The loop's memory as a record; through the journal it is also what a restart resumes
     /// from.
-    pub(super) fn learning_record(&self, at_ms: i64) -> Pending {
+    pub(super) fn learning_record(&self, at_ms: jiff::Timestamp) -> Pending {
         Pending::Learning {
             machine: self.name.clone(),
             lobe: self.setup.name.clone(),

@@ -4,7 +4,7 @@
 //! revert guard judges only parts ground after the decision.
 
 use super::FeatureLoop;
-use crate::clock::now_ms;
+use crate::clock::now;
 use tracing::info;
 
 impl FeatureLoop {
@@ -16,7 +16,7 @@ impl FeatureLoop {
             self.memory.learning.recent_max_error_um.clear();
         }
         self.memory.learning.frozen = frozen;
-        let record = self.learning_record(now_ms());
+        let record = self.learning_record(now());
         self.record(vec![record]).await;
         self.publish_start_status();
         info!(machine = %self.name, lobe = %self.setup.name, frozen = ?self.memory.learning.frozen, "learning frozen state set by hand");

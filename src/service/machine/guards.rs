@@ -19,7 +19,7 @@ impl FeatureLoop {
         kind: GuardKind,
         reason: &str,
         part: u64,
-        at_ms: i64,
+        at_ms: jiff::Timestamp,
         records: &mut Vec<Pending>,
     ) -> u32 {
         let streak = match self.memory.guard.take() {
@@ -64,7 +64,12 @@ impl FeatureLoop {
     }
 
     /// A part learned from with no guard acting ends a streak (and its alarm).
-    pub(super) fn guard_cleared(&mut self, part: u64, at_ms: i64, records: &mut Vec<Pending>) {
+    pub(super) fn guard_cleared(
+        &mut self,
+        part: u64,
+        at_ms: jiff::Timestamp,
+        records: &mut Vec<Pending>,
+    ) {
         let Some(streak) = self.memory.guard.take() else {
             return;
         };

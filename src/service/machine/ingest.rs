@@ -5,7 +5,7 @@ use super::super::journal::{EventKind, Pending};
 use super::memory::GuardKind;
 use super::records::{event, keep_reject, raw_revolutions};
 use super::{FeatureLoop, Ingested};
-use crate::clock::now_ms;
+use crate::clock::now;
 use crate::core::compensate::{CycleError, GuardedTable};
 use crate::core::learn::{LearningState, StepOutcome};
 use crate::core::measure::{MeasurementHeader, RawMeasurement};
@@ -98,7 +98,7 @@ impl FeatureLoop {
         raw: RawMeasurement,
         ground_with: Option<u64>,
     ) -> anyhow::Result<Ingested> {
-        let at_ms = now_ms();
+        let at_ms = now();
         let sha = measurement_sha256(&raw);
         if self.memory.has_seen(&sha) {
             self.note_repeat(&raw, at_ms).await;
@@ -172,7 +172,7 @@ impl FeatureLoop {
     }
 
     /// A measurement seen before is recorded as an event, never learned from twice.
-    async fn note_repeat(&mut self, raw: &RawMeasurement, at_ms: i64) {
+    async fn note_repeat(&mut self, raw: &RawMeasurement, at_ms: jiff::Timestamp) {
         info!(machine = %self.name, part = %raw.header.part, origin = %raw.origin, "measurement already learned from: not learned again");
         let message = format!(
             "part {} from {} repeats a measurement already used",
@@ -228,7 +228,7 @@ impl FeatureLoop {
     /// and recorded for the gauge study, never a step of learning (the turn is not taken),
     /// never counted as a part, never the previous part of the next one.
     pub(crate) async fn on_master(&mut self, raw: RawMeasurement) -> anyhow::Result<Ingested> {
-        let at_ms = now_ms();
+        let at_ms = now();
         let sha = measurement_sha256(&raw);
         if self.memory.has_seen(&sha) {
             return Ok(Ingested::Repeated);
@@ -257,7 +257,7 @@ impl FeatureLoop {
         decision: Decision,
         sha: &str,
         part: u64,
-        at_ms: i64,
+        at_ms: jiff::Timestamp,
     ) -> (Vec<Pending>, String) {
         let mut records = Vec::new();
         let text = match decision {
@@ -292,7 +292,7 @@ impl FeatureLoop {
         &mut self,
         outcome: &StepOutcome,
         part: u64,
-        at_ms: i64,
+        at_ms: jiff::Timestamp,
         records: &mut Vec<Pending>,
     ) {
         match outcome {
@@ -352,7 +352,7 @@ impl FeatureLoop {
         &mut self,
         e: &CycleError,
         part: u64,
-        at_ms: i64,
+        at_ms: jiff::Timestamp,
         records: &mut Vec<Pending>,
     ) -> String {
         self.metrics
@@ -387,7 +387,7 @@ impl FeatureLoop {
         raw: &RawMeasurement,
         sha: &str,
         measured: &Measured,
-        at_ms: i64,
+        at_ms: jiff::Timestamp,
     ) -> Result<Pending, crate::names::NameError> {
         let report = &measured.report;
         let measurement = NewMeasurement {
@@ -425,7 +425,7 @@ impl FeatureLoop {
         raw: &RawMeasurement,
         sha: &str,
         reason: &str,
-        at_ms: i64,
+        at_ms: jiff::Timestamp,
     ) {
         warn!(machine = %self.name, lobe = %self.setup.name, origin = %raw.origin, reason = %reason, "measurement rejected");
         let dir = self.share.config().state_dir.with_file_name("rejected");

@@ -40,7 +40,7 @@ mod rollback;
 mod shaft;
 
 use super::metrics::Metrics;
-use crate::clock::now_ms;
+use crate::clock::now;
 use crate::core::turn::measurement_sha256;
 use crate::recipe::FeatureSetup;
 use crate::store::Store;
@@ -295,7 +295,7 @@ impl MachineLoop {
                 // Kept and recorded by the first feature's loop: it belongs to none.
                 let sha = measurement_sha256(&raw);
                 let first = &mut self.features[0];
-                first.reject(&raw, &sha, &reason, now_ms()).await;
+                first.reject(&raw, &sha, &reason, now()).await;
                 return Ok(Ingested::Rejected { reason });
             }
         };

@@ -12,7 +12,7 @@ use super::FeatureLoop;
 use super::delivery::Draft;
 use super::memory::{TableLearning, WaitingTable};
 use super::records::event;
-use crate::clock::now_ms;
+use crate::clock::now;
 use crate::core::learn::LearningState;
 use crate::share::{Submitted, VersionStatus};
 use crate::store::EventLevel;
@@ -91,17 +91,17 @@ impl FeatureLoop {
                 _ => {}
             }
         }
-        let at_ms = now_ms();
+        let at_ms = now();
         let mut records = Vec::new();
         for (version, said) in journalled {
             let Some(v) = self.share.history().get(version) else {
                 continue;
             };
             let status = match &v.status {
-                VersionStatus::Pushed { .. } => VersionStatus::Pushed {
-                    at_unix_ms: at_ms as u64,
-                    note: Some("pushed to the share (its manifest, read at start)".to_string()),
-                },
+                VersionStatus::Pushed { .. } => VersionStatus::pushed_at(
+                    at_ms,
+                    "pushed to the share (its manifest, read at start)",
+                ),
                 refused @ VersionStatus::Refused { .. } => refused.clone(),
                 _ => continue,
             };
@@ -160,7 +160,7 @@ impl FeatureLoop {
         drafts.sort_by_key(|(v, _)| *v);
         let mut records = Vec::new();
         for (version, draft) in drafts {
-            let at_ms = now_ms();
+            let at_ms = now();
             let outcome = match self.share.history().next_version() {
                 next if next == version => {
                     let request = self.request(draft)?;

@@ -8,7 +8,7 @@ use std::path::Path;
 
 pub(super) fn event(
     machine: &str,
-    at_ms: i64,
+    at_ms: jiff::Timestamp,
     level: EventLevel,
     kind: EventKind,
     message: String,

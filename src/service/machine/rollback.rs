@@ -5,7 +5,7 @@ use super::super::journal::EventKind;
 use super::FeatureLoop;
 use super::memory::TableLearning;
 use super::records::event;
-use crate::clock::{now_ms, now_ms_u64};
+use crate::clock::now;
 use crate::core::program::retarget_table_program;
 use crate::store::EventLevel;
 use anyhow::Context;
@@ -63,7 +63,7 @@ impl FeatureLoop {
             });
         }
         let (text, learning, number) = self.rollback_program(lobe, version).await?;
-        let at_ms = now_ms();
+        let at_ms = now();
         let reason = format!("rollback to v{version}");
         let mut next = self.memory.learning.clone();
         if learning.correction_um.len() == next.correction_um.len() {
@@ -132,7 +132,7 @@ impl FeatureLoop {
                 )
             })?;
         let number = self.share.next_table_number();
-        let text = match self.share.rollback_request(version, now_ms_u64()) {
+        let text = match self.share.rollback_request(version, now()) {
             Ok(r) => r
                 .files
                 .into_iter()

@@ -1,6 +1,7 @@
 //! What the plant hears: typed events made from the loop's journal records, their topics
 //! and JSON payloads (units in the field names).
 
+use jiff::Timestamp;
 use serde::{Deserialize, Serialize};
 
 use crate::service::journal::{EventKind, Pending};
@@ -17,7 +18,8 @@ pub enum PlantEvent {
         machine: String,
         feature: String,
         part: String,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
         verdict: Verdict,
         max_profile_error_um: f64,
         base_radius_error_um: f64,
@@ -29,7 +31,8 @@ pub enum PlantEvent {
         machine: String,
         feature: String,
         version: u64,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
     },
     TableRefused {
         machine: String,
@@ -37,16 +40,19 @@ pub enum PlantEvent {
         /// The refused version, when one was recorded.
         version: Option<u64>,
         reason: String,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
     },
     LearningFrozen {
         machine: String,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
         reason: String,
     },
     Dressing {
         machine: String,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
         old_radius_mm: f64,
         new_radius_mm: f64,
         /// The dresser's measured infeed, µm, when it reported one.
@@ -56,7 +62,8 @@ pub enum PlantEvent {
     },
     Alarm {
         machine: String,
-        at_ms: i64,
+        #[serde(with = "crate::clock::unix_ms")]
+        at_ms: Timestamp,
         level: EventLevel,
         kind: String,
         message: String,
@@ -210,7 +217,7 @@ impl PlantEvent {
         value.to_string()
     }
 
-    pub fn at_ms(&self) -> i64 {
+    pub fn at_ms(&self) -> Timestamp {
         match self {
             PlantEvent::PartAnalysed { at_ms, .. }
             | PlantEvent::TableDelivered { at_ms, .. }
@@ -227,7 +234,7 @@ fn table_event(
     feature: String,
     version: u64,
     status: VersionStatus,
-    at_ms: i64,
+    at_ms: Timestamp,
 ) -> Option<PlantEvent> {
     match status {
         VersionStatus::Pushed { .. } => Some(PlantEvent::TableDelivered {
@@ -264,7 +271,7 @@ mod tests {
                 at_unix_ms: 5,
                 note: Some("pushed".into()),
             },
-            at_ms: 5,
+            at_ms: jiff::Timestamp::from_millisecond(5).unwrap(),
         };
         let e = PlantEvent::from_pending(&status).unwrap();
         assert_eq!(e.topic("plant"), "plant/G7/IN1/table_delivered");
@@ -274,7 +281,7 @@ mod tests {
         );
         let dressing = Pending::Dressing {
             machine: "G7".into(),
-            at_ms: 9,
+            at_ms: jiff::Timestamp::from_millisecond(9).unwrap(),
             old_radius_mm: 250.0,
             new_radius_mm: 249.5,
             infeed_um: Some(500.2),
@@ -286,7 +293,7 @@ mod tests {
         assert!(d.payload().contains(r#""infeed_um":500.2"#));
         let event = |kind| Pending::Event {
             machine: "G7".into(),
-            at_ms: 1,
+            at_ms: jiff::Timestamp::from_millisecond(1).unwrap(),
             level: EventLevel::Warn,
             kind,
             message: "diverging".into(),
@@ -304,7 +311,7 @@ mod tests {
             status: VersionStatus::Waiting {
                 reason: Some("share down".into()),
             },
-            at_ms: 6,
+            at_ms: jiff::Timestamp::from_millisecond(6).unwrap(),
         };
         assert_eq!(PlantEvent::from_pending(&waiting), None);
     }
@@ -316,7 +323,7 @@ mod tests {
                 machine: "G7".parse().unwrap(),
                 part: part.into(),
                 lobe: "IN1".into(),
-                received_at_ms: 7,
+                received_at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
                 verdict: Verdict::Pass,
                 max_profile_error_um: 0.4,
                 base_radius_error_um: 0.1,

@@ -154,7 +154,7 @@ impl Shared {
                 "client_id": self.client_id,
                 "dropped_events": dropped,
                 "queue_max_events": self.max,
-                "at_ms": crate::clock::now_ms(),
+                "at_ms": crate::clock::now().as_millisecond(),
             });
             let topic = format!("{prefix}/{}/queue_dropped", self.client_id);
             warn!(

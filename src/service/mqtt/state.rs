@@ -37,7 +37,8 @@ pub(crate) struct FeatureState {
     pub last_verdict: Option<Verdict>,
     /// The sequence number of the event that last changed this state.
     pub seq: u64,
-    pub at_ms: i64,
+    #[serde(with = "crate::clock::unix_ms")]
+    pub at_ms: jiff::Timestamp,
 }
 
 #[derive(Debug, Default, Serialize, Deserialize)]
@@ -178,7 +179,7 @@ mod tests {
             machine: "M1".into(),
             feature: "IN1".into(),
             part: format!("P{n}"),
-            at_ms: i64::from(n),
+            at_ms: jiff::Timestamp::from_millisecond(i64::from(n)).unwrap(),
             verdict,
             max_profile_error_um: 1.0,
             base_radius_error_um: 0.0,
@@ -190,7 +191,7 @@ mod tests {
     fn alarm(kind: &str) -> PlantEvent {
         PlantEvent::Alarm {
             machine: "M1".into(),
-            at_ms: 9,
+            at_ms: jiff::Timestamp::from_millisecond(9).unwrap(),
             level: EventLevel::Warn,
             kind: kind.into(),
             message: "m".into(),
@@ -222,7 +223,7 @@ mod tests {
         assert_eq!(s["alarms"], serde_json::json!(["blocked_by_guard"]));
         let frozen = PlantEvent::LearningFrozen {
             machine: "M1".into(),
-            at_ms: 10,
+            at_ms: jiff::Timestamp::from_millisecond(10).unwrap(),
             reason: "diverging".into(),
         };
         assert_eq!(state(&mut t, &frozen).1["frozen"], true);
@@ -230,7 +231,7 @@ mod tests {
             machine: "M1".into(),
             feature: "IN1".into(),
             version: 7,
-            at_ms: 11,
+            at_ms: jiff::Timestamp::from_millisecond(11).unwrap(),
         };
         let (_, s) = state(&mut t, &delivered);
         assert_eq!(

@@ -46,7 +46,7 @@ impl AuthManager for Users {
             |why: &str| Error::new(StatusCode::BadIdentityTokenRejected, why.to_string());
         let name = crate::auth::UserName::new(username).ok();
         let user_text = name.as_ref().map(crate::auth::UserName::as_str);
-        let now = crate::clock::now_ms();
+        let now = crate::clock::now();
         if let Some(until) = self
             .app
             .auth

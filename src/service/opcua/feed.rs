@@ -60,7 +60,7 @@ impl Feed {
             last: HashMap::new(),
             journal_failing: HashMap::new(),
             event_seq: 0,
-            started_ms: crate::clock::now_ms(),
+            started_ms: crate::clock::now().as_millisecond(),
             repeatability: None,
         }
     }
@@ -162,7 +162,7 @@ impl Feed {
         kind: &str,
         sev: u16,
         body: String,
-        at_ms: i64,
+        at_ms: jiff::Timestamp,
     ) {
         let ty = self.ids.alarm_type();
         self.emit(machine, source, ty, sev, format!("{kind}: {body}"), at_ms);
@@ -177,7 +177,7 @@ impl Feed {
         ty: NodeId,
         severity: u16,
         message: String,
-        at_ms: i64,
+        at_ms: jiff::Timestamp,
     ) {
         self.event_seq += 1;
         let id = ByteString::from(format!("{}-{}", self.started_ms, self.event_seq).into_bytes());
@@ -210,7 +210,7 @@ impl Feed {
             let failing = machines.get(&m.name).is_some_and(|x| x.journal_failing > 0);
             let was = self.journal_failing.insert(m.name.clone(), failing);
             if failing && was != Some(true) {
-                let at = crate::clock::now_ms();
+                let at = crate::clock::now();
                 let text =
                     "the journal cannot be written (disk full?): records are not kept".to_string();
                 self.alarm(

@@ -199,7 +199,7 @@ pub(crate) fn result_outputs(s: &MeasurementSummary) -> Vec<Variant> {
         "machine": s.machine,
         "part": s.part,
         "feature": s.lobe,
-        "received_at_ms": s.received_at_ms,
+        "received_at_ms": s.received_at_ms.as_millisecond(),
         "verdict": s.verdict.as_str(),
         "max_profile_error_um": s.max_profile_error_um,
         "base_radius_error_um": s.base_radius_error_um,
@@ -216,10 +216,11 @@ pub(crate) fn result_outputs(s: &MeasurementSummary) -> Vec<Variant> {
     ]
 }
 
-/// An OPC UA DateTime from Unix milliseconds.
-pub(crate) fn date_time(at_ms: i64) -> DateTime {
+/// An OPC UA DateTime from an instant (to the millisecond, as camloop keeps times).
+pub(crate) fn date_time(at: jiff::Timestamp) -> DateTime {
     // OPC UA counts 100 ns ticks from 1601-01-01, 11 644 473 600 s before the Unix epoch.
     const EPOCH_OFFSET_MS: i64 = 11_644_473_600_000;
+    let at_ms = at.as_millisecond();
     DateTime::from(at_ms.saturating_add(EPOCH_OFFSET_MS).saturating_mul(10_000))
 }
 
@@ -229,9 +230,10 @@ mod tests {
 
     #[test]
     fn unix_milliseconds_become_the_same_instant_in_opc_ua_time() {
-        assert_eq!(date_time(0), DateTime::ymd_hms(1970, 1, 1, 0, 0, 0));
+        let ms = |unix_ms| jiff::Timestamp::from_millisecond(unix_ms).unwrap();
+        assert_eq!(date_time(ms(0)), DateTime::ymd_hms(1970, 1, 1, 0, 0, 0));
         // 2026-11-27T10:00:00.250Z: 1 795 773 600 s after the epoch.
-        let at = date_time(1_795_773_600_250);
+        let at = date_time(ms(1_795_773_600_250));
         assert_eq!(at.as_chrono().to_rfc3339(), "2026-11-27T10:00:00.250+00:00");
     }
 }

@@ -51,7 +51,7 @@ async fn add_table(store: &Store) -> i64 {
                 at_unix_ms: 1_000,
                 note: Some("pushed to the share".into()),
             },
-            created_at_ms: 1_000,
+            created_at_ms: jiff::Timestamp::from_millisecond(1_000).unwrap(),
         })
         .await
         .unwrap()

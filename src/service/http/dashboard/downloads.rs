@@ -105,7 +105,7 @@ pub(super) async fn chart_data(
                     .map(|p| {
                         vec![
                             p.id.0 as f64,
-                            p.received_at_ms as f64,
+                            p.received_at_ms.as_millisecond() as f64,
                             p.max_profile_error_um,
                             p.base_radius_error_um,
                             p.phase_error_deg,

@@ -29,8 +29,13 @@ fn trend_chart(
     limits: Vec<(f64, String)>,
     marks: &[Mark],
 ) -> Markup {
-    let newest = parts.last().map_or(0, |p| p.received_at_ms);
-    let oldest = parts.first().map_or(0, |p| p.received_at_ms);
+    // The chart's x axis is in milliseconds before the newest part.
+    let newest = parts
+        .last()
+        .map_or(0, |p| p.received_at_ms.as_millisecond());
+    let oldest = parts
+        .first()
+        .map_or(0, |p| p.received_at_ms.as_millisecond());
     let (name, ms) = unit(newest - oldest);
     LineChart {
         title: title.into(),
@@ -41,7 +46,10 @@ fn trend_chart(
             class,
             points: parts
                 .iter()
-                .map(|p| ((p.received_at_ms - newest) as f64 / ms, value(p)))
+                .map(|p| {
+                    let at_ms = p.received_at_ms.as_millisecond();
+                    ((at_ms - newest) as f64 / ms, value(p))
+                })
                 .collect(),
         }],
         limits,
@@ -61,10 +69,13 @@ fn trend(d: &FeatureData, sheet: Option<&FeatureSheet>, base: &str) -> Markup {
     let Some(first) = d.parts.first() else {
         return html! { p { "No part measured yet." } };
     };
-    let newest = d.parts.last().map_or(0, |p| p.received_at_ms);
-    let in_range = |t: i64| t >= first.received_at_ms && t <= newest;
-    let (_, ms) = unit(newest - first.received_at_ms);
-    let x = |t: i64| (t - newest) as f64 / ms;
+    let newest = d
+        .parts
+        .last()
+        .map_or(first.received_at_ms, |p| p.received_at_ms);
+    let in_range = |t: jiff::Timestamp| t >= first.received_at_ms && t <= newest;
+    let (_, ms) = unit(newest.as_millisecond() - first.received_at_ms.as_millisecond());
+    let x = |t: jiff::Timestamp| (t.as_millisecond() - newest.as_millisecond()) as f64 / ms;
     let mut marks: Vec<Mark> = d
         .dressings
         .iter()

@@ -231,7 +231,7 @@ pub(crate) async fn ack(
 ) -> Result<Response, ApiError> {
     machine_name(&machine)?;
     let store = data::store(&app).await?;
-    let at = crate::clock::now_ms();
+    let at = crate::clock::now();
     use crate::store::{AckOutcome, AuditResult};
     let outcome = store
         .acknowledge_event(&machine, crate::store::EventId(id), at, &p.actor)

@@ -8,8 +8,8 @@ use crate::store::TableVersion;
 use maud::{DOCTYPE, Markup, html};
 
 /// `YYYY-MM-DD HH:MM:SS` UTC.
-pub(super) fn when(ms: i64) -> String {
-    crate::clock::utc_format(ms, "%Y-%m-%d %H:%M:%S")
+pub(super) fn when(at: jiff::Timestamp) -> String {
+    crate::clock::utc_format(at, "%Y-%m-%d %H:%M:%S")
 }
 
 /// The address of a feature's pages.

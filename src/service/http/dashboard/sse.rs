@@ -53,7 +53,7 @@ impl From<&MeasurementSummary> for PartEvent {
             machine: m.machine.to_string(),
             lobe: m.lobe.clone(),
             part: m.part.clone(),
-            received_at_ms: m.received_at_ms,
+            received_at_ms: m.received_at_ms.as_millisecond(),
             verdict: m.verdict.as_str(),
             max_profile_error_um: m.max_profile_error_um,
             base_radius_error_um: m.base_radius_error_um,
