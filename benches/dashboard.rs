@@ -155,7 +155,7 @@ async fn serve(store: Store) -> (SocketAddr, watch::Sender<bool>) {
     for i in 0..MACHINES {
         machines.insert(
             MachineName::new(&machine(i)).unwrap(),
-            vec!["IN1".to_string()],
+            vec!["IN1".parse().unwrap()],
         );
         sheets.insert((machine(i), "IN1".to_string()), sheet.clone());
     }
@@ -232,7 +232,7 @@ fn part(n: i64) -> NewMeasurement {
     NewMeasurement {
         machine: camloop::names::MachineName::new(&machine(7)).expect("a valid name"),
         part: format!("live-{n}"),
-        lobe: "IN1".into(),
+        lobe: "IN1".parse().unwrap(),
         received_at_ms: jiff::Timestamp::from_millisecond(T0_MS + MEASUREMENTS * 1000 + n)
             .expect("a time within jiff's years"),
         verdict: Verdict::Pass,
@@ -242,7 +242,7 @@ fn part(n: i64) -> NewMeasurement {
         revolutions_used: 3,
         points_per_rev: POINTS as u32,
         origin: "bench".into(),
-        sha256: format!("{:064x}", 1u64 << 40 | n as u64),
+        sha256: format!("{:064x}", 1u64 << 40 | n as u64).parse().unwrap(),
         recipe_snapshot: None,
         raw_lift_mm: Vec::new(),
         averaged_lift_mm: vec![1.5; POINTS],

@@ -152,8 +152,8 @@ async fn drive(
             let error_um = (part % 7) as f64 * 0.1;
             metrics_update(&metrics, &machine, &feature, part, error_um);
             sender.send(PlantEvent::PartAnalysed {
-                machine: machine.clone(),
-                feature,
+                machine: machine.parse().unwrap(),
+                feature: feature.parse().unwrap(),
                 part: format!("S-{part}"),
                 at_ms: camloop::clock::now(),
                 verdict: Verdict::Pass,
@@ -290,7 +290,7 @@ fn per_part_case(c: &mut Criterion, publishing: bool) {
     let metrics = Arc::new(Metrics::default());
     let mut machine = runtime
         .block_on(MachineLoop::start(
-            "BENCH".into(),
+            "BENCH".parse().unwrap(),
             vec![setup],
             MachinePaths {
                 share_dir: dir.path().join("share"),

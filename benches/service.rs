@@ -48,13 +48,9 @@ impl Readers {
         for i in 0..clients {
             let (store, served, refused) = (store.clone(), served.clone(), refused.clone());
             runtime.spawn(async move {
-                let history = HistoryFilter {
-                    machine: "BENCH".into(),
-                    limit: 100,
-                    ..HistoryFilter::default()
-                };
+                let history = HistoryFilter::new("BENCH".parse().unwrap(), 100);
                 let events = EventFilter {
-                    machine: Some("BENCH".into()),
+                    machine: Some("BENCH".parse().unwrap()),
                     limit: 100,
                     ..EventFilter::default()
                 };
@@ -172,7 +168,7 @@ fn start_machine(
     let machine = runtime.block_on(async {
         let handle: StoreHandle = Arc::new(tokio::sync::RwLock::new(Some(store.clone())));
         MachineLoop::start(
-            "BENCH".into(),
+            "BENCH".parse().unwrap(),
             vec![setup],
             MachinePaths {
                 share_dir: dir.path().join("share"),

@@ -84,7 +84,7 @@ fn shaft_case(c: &mut Criterion, points: u32) {
     let mut machine = runtime.block_on(async {
         let handle: StoreHandle = Arc::new(tokio::sync::RwLock::new(Some(store)));
         MachineLoop::start(
-            "BENCH".into(),
+            "BENCH".parse().unwrap(),
             setups,
             MachinePaths {
                 share_dir: dir.path().join("share"),

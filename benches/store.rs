@@ -44,10 +44,8 @@ fn bench_backend(c: &mut Criterion, rt: &tokio::runtime::Runtime, store: &Store)
     let mut group = c.benchmark_group(format!("history_{}", store.backend()));
     group.sample_size(30);
     let lobe = HistoryFilter {
-        machine: "M3".into(),
-        lobe: Some("L7".into()),
-        limit: 1000,
-        ..HistoryFilter::default()
+        lobe: Some("L7".parse().expect("a plain name")),
+        ..HistoryFilter::new("M3".parse().expect("a plain name"), 1000)
     };
     let first = rt
         .block_on(store.measurement_history(&lobe))

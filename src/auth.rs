@@ -104,9 +104,9 @@ pub fn new_token() -> Result<String, AuthError> {
     Ok(format!("{TOKEN_PREFIX}{}", random_hex(32)?))
 }
 
-/// What the store keeps of a token or a session key: its SHA-256, hex.
-pub fn token_digest(token: &str) -> String {
-    crate::digest::sha256_hex(token.as_bytes())
+/// What the store keeps of a token or a session key: its SHA-256.
+pub fn token_digest(token: &str) -> crate::digest::Sha256 {
+    crate::digest::Sha256::of(token.as_bytes())
 }
 
 /// A random password for the first `admin`: 24 characters from a 64-letter alphabet
@@ -230,7 +230,7 @@ mod tests {
         let (a, b) = (new_token().unwrap(), new_token().unwrap());
         assert_ne!(a, b);
         assert_eq!(a.len(), TOKEN_PREFIX.len() + 64);
-        assert_eq!(token_digest(&a).len(), 64);
+        assert_eq!(token_digest(&a).to_string().len(), 64);
         assert_ne!(token_digest(&a), a);
         let p = random_password().unwrap();
         assert_eq!(p.chars().count(), 24);

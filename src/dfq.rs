@@ -12,6 +12,7 @@
 //! K-field notation (K0001 value, K0002 attribute, K0004 time, K0014 part ident), so every
 //! value names its characteristic; times are UTC.
 
+use crate::names::{FeatureName, MachineName};
 use std::fmt::Write as _;
 
 /// Longest texts the format allows in the fields written (published field list).
@@ -34,6 +35,7 @@ pub(crate) enum DfqError {
     Empty,
     #[error("{feature}: {field} is not a finite number")]
     NotFinite {
+        /// Which value: machine, feature and part.
         feature: String,
         field: &'static str,
     },
@@ -55,8 +57,8 @@ pub(crate) struct DfqRow {
 /// A feature (lobe or pin) of a machine and its measured parts, oldest first.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct DfqSeries {
-    pub machine: String,
-    pub feature: String,
+    pub machine: MachineName,
+    pub feature: FeatureName,
     /// The profile tolerance as (lower, upper) µm, when the feature has one band all round.
     pub profile_band_um: Option<(f64, f64)>,
     /// The recipe's other tolerances, where it gives them.

@@ -13,6 +13,7 @@ use crate::core::measure::AssemblyLimits;
 use crate::core::program::ProgramSettings;
 use crate::core::speed_plan::SpeedPlanSettings;
 use crate::core::turn::TurnSetup;
+use crate::names::FeatureName;
 use anyhow::{Context, bail};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -192,7 +193,7 @@ pub struct FeatureSetup {
     /// The recipe's part name.
     pub part: String,
     /// The lobe's or pin's name in the recipe.
-    pub name: String,
+    pub name: FeatureName,
     /// "PART lobe NAME" or "PART pin NAME", for messages and program comments.
     pub label: String,
     pub nominal: LiftTable,
@@ -318,7 +319,7 @@ impl Recipe {
         program.name = self.table_program_name(name);
         Ok(FeatureSetup {
             part: self.name.clone(),
-            name: name.to_string(),
+            name: FeatureName::new(name)?,
             label,
             nominal,
             feature,

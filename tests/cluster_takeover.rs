@@ -421,14 +421,15 @@ async fn check_history(root: &Path, url: &str, dropped: &[(String, Vec<Dropped>)
             let epoch = v
                 .record
                 .epoch
-                .unwrap_or_else(|| panic!("{m} v{version} has no epoch"));
+                .unwrap_or_else(|| panic!("{m} v{version} has no epoch"))
+                .0;
             assert!(
                 epoch >= last_epoch,
                 "{m} v{version}: epoch {epoch} after {last_epoch}"
             );
             last_epoch = epoch;
             let row = store
-                .table_version(m, "IN1", version as i64)
+                .table_version(&m.parse().unwrap(), &"IN1".parse().unwrap(), version as i64)
                 .await
                 .unwrap()
                 .unwrap_or_else(|| panic!("{m} v{version} is on the share, not in the store"));

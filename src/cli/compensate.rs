@@ -15,6 +15,7 @@ use crate::clock::now;
 use crate::core::compensate::{
     self, AxisLimits, Feature, GuardedTable, TableRequest, pin_nominal_lift,
 };
+use crate::core::digest::Sha256;
 use crate::core::fit::TableForm;
 use crate::core::geometry::CrankpinGeometry;
 use crate::core::learn::{self, LearningParams, LearningState, PreviousPart};
@@ -74,7 +75,7 @@ struct SavedState {
     wheel_radius_mm: f64,
     learning: LearningState,
     /// SHA-256 of the last measurement learned from.
-    last_measurement_sha256: Option<String>,
+    last_measurement_sha256: Option<Sha256>,
     /// What the last measurement measured, learned from or refused.
     #[serde(default)]
     previous: Option<PreviousPart>,
@@ -121,7 +122,7 @@ pub(crate) fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
         &setup,
         &table,
         &reason,
-        measurement_id.clone(),
+        measurement_id.map(|id| id.to_string()),
         &saved,
     )?;
     saved.last_measurement_sha256 = measurement_id.or(saved.last_measurement_sha256);
@@ -213,11 +214,11 @@ fn learn_from(
     dbc_path: Option<&Path>,
     setup: &LobeSetup,
     saved: &mut SavedState,
-) -> anyhow::Result<(GuardedTable, String, String)> {
+) -> anyhow::Result<(GuardedTable, String, Sha256)> {
     let dbc = load_dbc(dbc_path)?;
     let raw = read_measurement_file(path, &dbc)?;
     let id = measurement_sha256(&raw);
-    if saved.last_measurement_sha256.as_deref() == Some(id.as_str()) {
+    if saved.last_measurement_sha256 == Some(id) {
         bail!(
             "{}: this measurement was already learned from (iteration {})",
             path.display(),
@@ -275,7 +276,7 @@ struct Refusal {
     #[serde(with = "crate::clock::unix_ms")]
     at_unix_ms: jiff::Timestamp,
     measurement: String,
-    measurement_sha256: String,
+    measurement_sha256: Sha256,
     iteration: u32,
     reason: String,
 }
@@ -403,7 +404,7 @@ fn flag_setup(
     };
     LobeSetup {
         part: "PART".to_string(),
-        name: "LOBE".to_string(),
+        name: crate::names::FeatureName::new("LOBE").expect("a plain name"),
         label,
         nominal,
         feature,

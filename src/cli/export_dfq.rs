@@ -4,6 +4,7 @@
 
 use crate::config::Config;
 use crate::dfq::{DfqSeries, row_from, write_dfq};
+use crate::names::MachineName;
 use crate::recipe::Recipe;
 use crate::store::{MeasurementDetail, Store};
 use anyhow::bail;
@@ -16,11 +17,11 @@ pub(crate) async fn recipe_parts(
     store: &Store,
     rows: &[MeasurementDetail],
 ) -> anyhow::Result<BTreeMap<(String, String), String>> {
-    let machines: BTreeSet<&str> = rows.iter().map(|d| d.summary.machine.as_str()).collect();
+    let machines: BTreeSet<&MachineName> = rows.iter().map(|d| &d.summary.machine).collect();
     let mut out = BTreeMap::new();
     for m in machines {
         for f in store.features(m).await? {
-            out.insert((m.to_string(), f.lobe), f.part);
+            out.insert((m.to_string(), f.lobe.to_string()), f.part);
         }
     }
     Ok(out)
@@ -40,7 +41,7 @@ impl DfqExport<'_> {
     /// The `.dfq` text of `rows` (oldest first).
     pub fn text(&self, rows: &[MeasurementDetail]) -> anyhow::Result<String> {
         let recipe = |d: &MeasurementDetail| {
-            let key = (d.summary.machine.to_string(), d.summary.lobe.clone());
+            let key = (d.summary.machine.to_string(), d.summary.lobe.to_string());
             self.recipes.get(&key).cloned().unwrap_or_default()
         };
         let parts: BTreeSet<String> = rows.iter().map(recipe).collect();
@@ -61,11 +62,11 @@ impl DfqExport<'_> {
         };
         for d in rows.iter().filter(production) {
             let s = &d.summary;
-            let key = (s.machine.to_string(), s.lobe.clone());
+            let key = (s.machine.to_string(), s.lobe.to_string());
             series
                 .entry(key.clone())
                 .or_insert_with(|| DfqSeries {
-                    machine: s.machine.to_string(),
+                    machine: s.machine.clone(),
                     feature: s.lobe.clone(),
                     profile_band_um: bands.get(&key).and_then(|b| b.0),
                     limits: bands.get(&key).map(|b| b.1).unwrap_or_default(),

@@ -4,6 +4,7 @@
 use super::output::Outputs;
 use crate::clock::now;
 use crate::config::{Config, ENV_DATABASE_URL};
+use crate::names::{FeatureName, MachineName};
 use crate::store::{HistoryFilter, MAX_PAGE, MasterRuns, MeasurementSummary, Store};
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
@@ -33,9 +34,9 @@ pub struct StoreArgs {
 #[derive(Debug, Args)]
 pub struct HistoryArgs {
     #[arg(long)]
-    pub machine: String,
+    pub machine: MachineName,
     #[arg(long)]
-    pub lobe: Option<String>,
+    pub lobe: Option<FeatureName>,
     /// From this time: `2026-11-21`, `2026-11-21T10:00:00Z`, Unix ms, or an age like `24h`, `7d`.
     #[arg(long, value_name = "TIME")]
     pub since: Option<String>,
@@ -82,7 +83,6 @@ pub(crate) fn run_history(args: HistoryArgs) -> anyhow::Result<()> {
     let rows = runtime.block_on(async {
         let store = connect(&args.store).await?;
         let filter = HistoryFilter {
-            machine: args.machine.clone(),
             lobe: args.lobe.clone(),
             since_ms: since,
             masters: if args.masters {
@@ -90,7 +90,7 @@ pub(crate) fn run_history(args: HistoryArgs) -> anyhow::Result<()> {
             } else {
                 MasterRuns::Excluded
             },
-            ..HistoryFilter::default()
+            ..HistoryFilter::new(args.machine.clone(), 0)
         };
         let rows = newest(&store, filter, args.last, MAX_PAGE).await;
         store.close().await;

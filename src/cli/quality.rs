@@ -4,6 +4,7 @@
 use super::history::{StoreArgs, connect, parse_time, runtime};
 use crate::clock::now;
 use crate::config::Config;
+use crate::names::{FeatureName, MachineName};
 use crate::quality::{self, FeatureLimits, Window, render, study::gauge_studies};
 use crate::recipe::Recipe;
 use anyhow::{Context, bail};
@@ -20,10 +21,10 @@ pub enum QualityFormat {
 #[derive(Debug, Args)]
 pub struct CapabilityArgs {
     #[arg(long)]
-    pub machine: String,
+    pub machine: MachineName,
     /// One lobe or pin; default: every feature of the machine.
     #[arg(long)]
-    pub lobe: Option<String>,
+    pub lobe: Option<FeatureName>,
     /// The newest N production parts (master runs never count).
     #[arg(long, value_name = "N", default_value_t = 125)]
     pub last: u32,
@@ -48,9 +49,9 @@ pub struct CapabilityArgs {
 #[derive(Debug, Args)]
 pub struct GaugeStudyArgs {
     #[arg(long)]
-    pub machine: String,
+    pub machine: MachineName,
     #[arg(long)]
-    pub lobe: String,
+    pub lobe: FeatureName,
     /// The newest N master runs.
     #[arg(long, value_name = "N", default_value_t = 50)]
     pub last: u32,
@@ -130,7 +131,7 @@ pub(crate) fn run_capability(args: CapabilityArgs) -> anyhow::Result<()> {
 }
 
 pub(crate) fn run_gauge_study(args: GaugeStudyArgs) -> anyhow::Result<()> {
-    let limits = feature_limits(&args.store.config, &args.machine, Some(&args.lobe))?;
+    let limits = feature_limits(&args.store.config, &args.machine, Some(args.lobe.as_str()))?;
     let l = &limits[0].1;
     let window = Window {
         last: args.last,
@@ -178,7 +179,7 @@ fn feature_limits(
     config: &Path,
     machine: &str,
     lobe: Option<&str>,
-) -> anyhow::Result<Vec<(String, FeatureLimits)>> {
+) -> anyhow::Result<Vec<(FeatureName, FeatureLimits)>> {
     let text = std::fs::read_to_string(config).with_context(|| {
         format!("the limits come from the recipes of the service configuration: cannot read {} (give --config)", config.display())
     })?;
@@ -199,7 +200,7 @@ fn feature_limits(
         .into_iter()
         .map(|f| {
             let setup = recipe.feature_setup(&path, &f)?;
-            Ok((f, FeatureLimits::from_setup(&setup)))
+            Ok((setup.name.clone(), FeatureLimits::from_setup(&setup)))
         })
         .collect()
 }

@@ -3,6 +3,7 @@
 //! have to agree. The tables are the cluster's own coordination state (not history), made
 //! by the first instance that joins.
 
+use crate::names::MachineName;
 use sqlx::Row;
 use sqlx::postgres::{PgConnectOptions, PgPool, PgPoolOptions};
 use std::time::Duration;
@@ -45,12 +46,59 @@ fn op(op: &'static str) -> impl FnOnce(sqlx::Error) -> LeaseError {
     move |source| LeaseError { op, source }
 }
 
+/// A lease's fencing epoch: one above the previous owner's, carried by every push of the
+/// owner (the machine's fence file, the share's manifest). `BIGINT` in the database,
+/// written there and read back by [`Epoch::db`] and [`Epoch::from_db`].
+#[derive(
+    Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
+#[serde(transparent)]
+pub struct Epoch(pub u64);
+
+/// Debug as the number, as epochs showed before they were typed.
+impl std::fmt::Debug for Epoch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        std::fmt::Debug::fmt(&self.0, f)
+    }
+}
+
+impl Epoch {
+    /// The next owner's epoch.
+    pub fn next(self) -> Epoch {
+        Epoch(self.0 + 1)
+    }
+
+    /// The column's value (epochs start at 1 and rise by one a take: far below `i64::MAX`).
+    pub(crate) fn db(self) -> i64 {
+        self.0 as i64
+    }
+
+    pub(crate) fn from_db(value: i64) -> Epoch {
+        Epoch(value as u64)
+    }
+}
+
+impl std::fmt::Display for Epoch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        std::fmt::Display::fmt(&self.0, f)
+    }
+}
+
+/// A machine name read back from the lease table: one that fails the rule (a row written
+/// outside camloop) is a decode error naming the column, never a panic.
+fn machine_of(text: String) -> Result<MachineName, sqlx::Error> {
+    MachineName::try_from(text).map_err(|e| sqlx::Error::ColumnDecode {
+        index: "camloop_leases.machine".into(),
+        source: Box::new(e),
+    })
+}
+
 /// One machine's lease as the database holds it.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct LeaseRow {
-    pub machine: String,
+    pub machine: MachineName,
     pub owner: String,
-    pub epoch: u64,
+    pub epoch: Epoch,
     /// Whether it is still running (not expired, not released).
     pub live: bool,
 }
@@ -59,7 +107,7 @@ pub struct LeaseRow {
 #[derive(Debug, Clone, Default)]
 pub struct Renewed {
     /// The leases renewed: machine and epoch.
-    pub renewed: Vec<(String, u64)>,
+    pub renewed: Vec<(String, Epoch)>,
     /// Live leases under this instance's name that it does not run, released.
     pub leftovers: Vec<String>,
 }
@@ -148,7 +196,7 @@ impl Leases {
 
     /// Takes `machine` when nobody holds it (never leased, expired or released): returns the
     /// new epoch, one above the last owner's. `None`: another instance holds it.
-    pub(crate) async fn acquire(&self, machine: &str) -> Result<Option<u64>, LeaseError> {
+    pub(crate) async fn acquire(&self, machine: &str) -> Result<Option<Epoch>, LeaseError> {
         let epoch: Option<i64> = sqlx::query_scalar(
             "INSERT INTO camloop_leases (machine, owner, epoch, expires_at, incarnation) \
              VALUES ($1, $2, 1, now() + $3 * interval '1 millisecond', $4) \
@@ -164,7 +212,7 @@ impl Leases {
         .fetch_optional(&self.pool)
         .await
         .map_err(op("acquire a lease"))?;
-        Ok(epoch.map(|e| e as u64))
+        Ok(epoch.map(Epoch::from_db))
     }
 
     /// Raises the epoch of a lease this instance holds to `to` (the machine's fence was
@@ -173,9 +221,9 @@ impl Leases {
     pub(crate) async fn raise_epoch(
         &self,
         machine: &str,
-        epoch: u64,
-        to: u64,
-    ) -> Result<Option<u64>, LeaseError> {
+        epoch: Epoch,
+        to: Epoch,
+    ) -> Result<Option<Epoch>, LeaseError> {
         let raised: Option<i64> = sqlx::query_scalar(
             "UPDATE camloop_leases SET epoch = $4 \
              WHERE machine = $1 AND owner = $2 AND epoch = $3 AND expires_at > now() \
@@ -183,12 +231,12 @@ impl Leases {
         )
         .bind(machine)
         .bind(&self.instance)
-        .bind(epoch as i64)
-        .bind(to as i64)
+        .bind(epoch.db())
+        .bind(to.db())
         .fetch_optional(&self.pool)
         .await
         .map_err(op("raise a lease's epoch"))?;
-        Ok(raised.map(|e| e as u64))
+        Ok(raised.map(Epoch::from_db))
     }
 
     /// Extends the leases this instance runs (`held`: machine and epoch) and returns those
@@ -198,9 +246,9 @@ impl Leases {
     /// rather than renewed forever; those come back second. A lease this process won is
     /// never taken for such a leftover, however recently it was won: the two are told apart
     /// by the process's incarnation, not by a list that a concurrent win could outrun.
-    pub(crate) async fn renew(&self, held: &[(String, u64)]) -> Result<Renewed, LeaseError> {
+    pub(crate) async fn renew(&self, held: &[(String, Epoch)]) -> Result<Renewed, LeaseError> {
         let machines: Vec<&str> = held.iter().map(|(m, _)| m.as_str()).collect();
-        let epochs: Vec<i64> = held.iter().map(|(_, e)| *e as i64).collect();
+        let epochs: Vec<i64> = held.iter().map(|(_, e)| e.db()).collect();
         let rows = sqlx::query(
             "UPDATE camloop_leases SET expires_at = now() + $2 * interval '1 millisecond' \
              WHERE owner = $1 AND expires_at > now() \
@@ -216,7 +264,7 @@ impl Leases {
         .map_err(op("renew the leases"))?;
         let renewed = rows
             .iter()
-            .map(|r| (r.get::<String, _>(0), r.get::<i64, _>(1) as u64))
+            .map(|r| (r.get::<String, _>(0), Epoch::from_db(r.get(1))))
             .collect();
         let leftovers: Vec<String> = sqlx::query_scalar(
             "UPDATE camloop_leases SET expires_at = now() - interval '1 millisecond' \
@@ -232,14 +280,14 @@ impl Leases {
     }
 
     /// Gives `machine` up at once (its loop has stopped): any instance may take it now.
-    pub async fn release(&self, machine: &str, epoch: u64) -> Result<(), LeaseError> {
+    pub async fn release(&self, machine: &str, epoch: Epoch) -> Result<(), LeaseError> {
         sqlx::query(
             "UPDATE camloop_leases SET expires_at = now() - interval '1 millisecond' \
              WHERE machine = $1 AND owner = $2 AND epoch = $3",
         )
         .bind(machine)
         .bind(&self.instance)
-        .bind(epoch as i64)
+        .bind(epoch.db())
         .execute(&self.pool)
         .await
         .map_err(op("release a lease"))?;
@@ -264,14 +312,15 @@ impl Leases {
         .fetch_all(&self.pool)
         .await
         .map_err(op("read the leases"))?;
-        Ok(rows
-            .iter()
-            .map(|r| LeaseRow {
-                machine: r.get(0),
-                owner: r.get(1),
-                epoch: r.get::<i64, _>(2) as u64,
-                live: r.get(3),
+        rows.iter()
+            .map(|r| {
+                Ok(LeaseRow {
+                    machine: machine_of(r.get(0)).map_err(op("read the leases"))?,
+                    owner: r.get(1),
+                    epoch: Epoch::from_db(r.get(2)),
+                    live: r.get(3),
+                })
             })
-            .collect())
+            .collect()
     }
 }

@@ -10,7 +10,7 @@
 
 pub mod lease;
 
-pub use lease::{LeaseError, LeaseRow, Leases, Renewed};
+pub use lease::{Epoch, LeaseError, LeaseRow, Leases, Renewed};
 
 /// What an instance should do with its machines this round.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]

@@ -95,8 +95,8 @@ fn row(id: i64, at_ms: i64, profile: f64) -> DfqRow {
 
 fn series(feature: &str, band: Option<(f64, f64)>, rows: Vec<DfqRow>) -> DfqSeries {
     DfqSeries {
-        machine: "GR1".into(),
-        feature: feature.into(),
+        machine: "GR1".parse().unwrap(),
+        feature: feature.parse().unwrap(),
         profile_band_um: band,
         limits: crate::dfq::DfqLimits::default(),
         rows,

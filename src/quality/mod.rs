@@ -14,6 +14,7 @@ use crate::core::capability::{
     self, Capability, Characteristic, PartValues, chart::ChartLimits, chart::ChartPoint,
 };
 use crate::core::measure::is_master_part;
+use crate::names::{FeatureName, MachineName};
 use crate::store::{MAX_PAGE, MeasurementDetail, MeasurementId, Store};
 pub use limits::{CharacteristicLimits, FeatureLimits};
 
@@ -91,8 +92,8 @@ impl PartRow {
 /// Also returns the start the window took, if any, and how many of the other kind it skipped.
 pub(crate) async fn window_rows(
     store: &Store,
-    machine: &str,
-    lobe: &str,
+    machine: &MachineName,
+    lobe: &FeatureName,
     window: &Window,
     masters: bool,
 ) -> Result<(Vec<PartRow>, Option<jiff::Timestamp>, usize), crate::store::StoreError> {
@@ -107,7 +108,7 @@ pub(crate) async fn window_rows(
             .features(machine)
             .await?
             .iter()
-            .find(|f| f.lobe == lobe)
+            .find(|f| f.lobe == *lobe)
     {
         since = since.max(Some(f.created_at_ms));
     }

@@ -197,9 +197,8 @@ fn check_pin(p: &mut Problems, names: &mut HashSet<String>, pin: &Pin) {
 }
 
 /// Names become parts of file names and URLs: keep them plain.
+/// The rule of machine names ([`crate::names::check_plain_name`]), so a recipe's feature
+/// name is always a valid [`crate::names::FeatureName`].
 fn valid_name(name: &str) -> bool {
-    (1..=32).contains(&name.len())
-        && name
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+    crate::names::check_plain_name(name).is_ok()
 }

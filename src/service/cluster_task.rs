@@ -12,7 +12,7 @@
 use super::lease_keeper::{self, Holding, Keeper, Phase, SharedHoldings};
 use super::metrics::Metrics;
 use super::runner::{Opened, Runner};
-use crate::cluster::{LeaseError, Leases, fair_share, plan};
+use crate::cluster::{Epoch, LeaseError, Leases, fair_share, plan};
 use crate::share::{Fence, StateError};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -154,7 +154,7 @@ impl Ctx {
         let all = self.runner.names();
         let free: Vec<String> = all
             .iter()
-            .filter(|m| !rows.iter().any(|r| r.machine == **m && r.live))
+            .filter(|m| !rows.iter().any(|r| r.machine == m.as_str() && r.live))
             .cloned()
             .collect();
         let mine: Vec<String> = self.holdings().held.keys().cloned().collect();
@@ -227,7 +227,7 @@ impl Ctx {
 
     /// Machines whose fence was busy at their opening: opened again, under the same lease.
     fn retry_busy(&self, work: &mut JoinSet<()>) {
-        let busy: Vec<(String, u64)> = {
+        let busy: Vec<(String, Epoch)> = {
             let mut h = self.holdings();
             h.held
                 .iter_mut()
@@ -262,7 +262,7 @@ impl Ctx {
         Ok(())
     }
 
-    fn spawn_open(&self, m: String, epoch: u64, work: &mut JoinSet<()>) {
+    fn spawn_open(&self, m: String, epoch: Epoch, work: &mut JoinSet<()>) {
         let ctx = self.clone();
         work.spawn(async move {
             let _permit = ctx.gate.acquire().await;
@@ -273,7 +273,7 @@ impl Ctx {
 
     /// Launches an opened machine if its lease is still held; otherwise keeps the lease for
     /// another try (busy fence) or gives it up (any other failure).
-    fn opened(&self, m: &str, result: Result<(u64, Opened), OpenError>) {
+    fn opened(&self, m: &str, result: Result<(Epoch, Opened), OpenError>) {
         let mut h = self.holdings();
         let closing = h.closing;
         let Some(x) = h.held.get_mut(m) else {
@@ -286,7 +286,7 @@ impl Ctx {
             Ok((epoch, opened)) => match self.runner.launch(opened) {
                 Ok(_) => {
                     x.phase = Phase::Running;
-                    info!(machine = %m, epoch, "cluster: machine taken");
+                    info!(machine = %m, epoch = epoch.0, "cluster: machine taken");
                     return;
                 }
                 Err(e) => format!("{e:#}"),
@@ -311,13 +311,13 @@ impl Ctx {
 
     /// Raises the machine's fence to the lease's epoch (or past a higher one found there,
     /// raising the lease to match) and opens its loop. Returns the epoch it runs under.
-    async fn open(&self, machine: &str, epoch: u64) -> Result<(u64, Opened), OpenError> {
+    async fn open(&self, machine: &str, epoch: Epoch) -> Result<(Epoch, Opened), OpenError> {
         let dir = self.machines_dir.join(machine);
         let instance = self.leases.instance().to_string();
         // A claim waits at most an eighth of a lease for a write under way; a busy fence is
         // tried again at the next round.
         let wait = self.lease / 8;
-        let claim = |epoch: u64| {
+        let claim = |epoch: Epoch| {
             let dir = dir.clone();
             let instance = instance.clone();
             tokio::task::spawn_blocking(move || Fence::claim(&dir, epoch, &instance, wait))
@@ -326,10 +326,10 @@ impl Ctx {
             Ok(f) => f,
             Err(StateError::Fenced { current, .. }) => {
                 // The lease table was made again (a new database): continue above the fence.
-                warn!(machine = %machine, lease_epoch = epoch, fence_epoch = current, "cluster: the machine's fence is ahead of its lease; lease raised past it");
+                warn!(machine = %machine, lease_epoch = epoch.0, fence_epoch = current.0, "cluster: the machine's fence is ahead of its lease; lease raised past it");
                 let raised = self
                     .leases
-                    .raise_epoch(machine, epoch, current + 1)
+                    .raise_epoch(machine, epoch, current.next())
                     .await?
                     .ok_or(OpenError::LostWhileRaising)?;
                 if let Some(x) = self.holdings().held.get_mut(machine)
@@ -352,7 +352,7 @@ impl Ctx {
         self.holdings().closing = true;
         while work.join_next().await.is_some() {}
         self.runner.stop_all().await;
-        let held: Vec<(String, u64)> = std::mem::take(&mut self.holdings().held)
+        let held: Vec<(String, Epoch)> = std::mem::take(&mut self.holdings().held)
             .into_iter()
             .map(|(m, x)| (m, x.epoch))
             .collect();

@@ -3,6 +3,7 @@
 
 use super::machine::{Ingested, SourceEvent};
 use crate::gauge::{DropFolder, Settle};
+use crate::names::MachineName;
 use std::time::Duration;
 use tokio::sync::{mpsc, watch};
 use tracing::{error, warn};
@@ -10,7 +11,7 @@ use tracing::{error, warn};
 /// Measurement files dropped into a folder (taken when complete, moved to processed/ or
 /// rejected/ with a reason).
 pub(super) async fn run(
-    machine: String,
+    machine: MachineName,
     folder: std::path::PathBuf,
     poll_ms: u64,
     options: crate::gauge::DropOptions,

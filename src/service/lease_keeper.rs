@@ -36,7 +36,7 @@ pub(super) enum Phase {
 /// One lease this instance holds.
 #[derive(Debug, Clone)]
 pub(super) struct Holding {
-    pub(super) epoch: u64,
+    pub(super) epoch: crate::cluster::Epoch,
     /// Stopped by then unless renewed: half a lease after the last renewal was asked for,
     /// so before the database lets another instance take it.
     pub(super) deadline: Instant,
@@ -154,7 +154,7 @@ impl Keeper {
     /// not renew under the epoch it was asked for is lost: its machine stops.
     async fn renew(&self, leases: &Leases) -> Result<(), LeaseError> {
         let asked = Instant::now();
-        let mine: Vec<(String, u64)> = {
+        let mine: Vec<(String, crate::cluster::Epoch)> = {
             let h = lock(&self.holdings);
             h.held.iter().map(|(m, x)| (m.clone(), x.epoch)).collect()
         };
@@ -162,7 +162,7 @@ impl Keeper {
         for m in &answer.leftovers {
             warn!(machine = %m, "cluster: a lease under this instance's name that runs nowhere (an earlier process, a stop while the database was away) released");
         }
-        let renewed: BTreeMap<String, u64> = answer.renewed.into_iter().collect();
+        let renewed: BTreeMap<String, crate::cluster::Epoch> = answer.renewed.into_iter().collect();
         let mut lost = Vec::new();
         {
             let mut h = lock(&self.holdings);

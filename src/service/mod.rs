@@ -19,6 +19,7 @@ mod startup;
 mod store_guard;
 
 use crate::config::{Checked, Config};
+use crate::names::FeatureName;
 use crate::store::Store;
 use machine::{MachineLoop, SourceEvent, StoreHandle};
 use metrics::Metrics;
@@ -343,11 +344,11 @@ fn fenced_out(machine: &MachineLoop) {
 /// A rollback asked for through the API, its outcome as the HTTP side wants it.
 async fn rollback_result(
     machine: &mut MachineLoop,
-    lobe: &str,
+    lobe: &FeatureName,
     version: i64,
 ) -> Result<http::CommandDone, http::CommandError> {
     let v = u64::try_from(version).map_err(|_| http::CommandError::VersionNotFound {
-        lobe: lobe.to_string(),
+        lobe: lobe.clone(),
         version,
     })?;
     let done = machine.rollback(lobe, v).await?;
@@ -360,7 +361,7 @@ async fn rollback_result(
 /// A whole-part rollback asked for through the API.
 async fn rollback_part_result(
     machine: &mut MachineLoop,
-    versions: &[(String, u64)],
+    versions: &[(FeatureName, u64)],
 ) -> Result<http::CommandDone, http::CommandError> {
     let done = machine.rollback_part(versions).await?;
     Ok(http::CommandDone {

@@ -95,7 +95,7 @@ impl Runner {
             state_dir: self.config.machines_dir().join(name),
         };
         let mut machine = MachineLoop::start_owned(
-            name.to_string(),
+            checked.name.clone(),
             checked.setups.clone(),
             paths,
             fence,

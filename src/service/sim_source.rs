@@ -8,6 +8,7 @@
 use super::machine::{GroundWith, MachineLoop, SourceEvent};
 use crate::core::compensate::Feature;
 use crate::gauge::{Assembled, Assembler, GaugeDbc};
+use crate::names::{FeatureName, MachineName};
 use crate::sim::{
     CommandedTable, Control, Coupled, GrinderConfig, PartLabels, SimGrinder, Workpiece,
     measurement_frames,
@@ -27,7 +28,7 @@ const STATION_WINDOW_MM: f64 = 0.5;
 
 /// One feature of the simulated shaft: where it is and what it is.
 pub(crate) struct SimStation {
-    pub name: String,
+    pub name: FeatureName,
     pub feature: Feature,
     pub z_mm: f64,
     /// The newest part (shaft) number this feature was ground for before this run.
@@ -40,7 +41,7 @@ pub(crate) struct SimStation {
 }
 
 pub(crate) struct SimSource {
-    pub machine: String,
+    pub machine: MachineName,
     pub grinder: GrinderConfig,
     pub seed: u64,
     pub stations: Vec<SimStation>,
@@ -58,7 +59,7 @@ impl SimSource {
             .features()
             .iter()
             .map(|f| SimStation {
-                name: f.feature_name().to_string(),
+                name: f.feature_name().clone(),
                 feature: f.feature(),
                 z_mm: f.setup().z_mm,
                 parts_done: f.memory().last_part_number().unwrap_or(f.memory().parts),

@@ -4,6 +4,7 @@
 use super::machine::{MachineLoop, SourceEvent};
 use super::{drop_source, sim_source};
 use crate::config::{Config, GaugeSection, MachineSection};
+use crate::names::MachineName;
 use anyhow::Context;
 use std::time::Duration;
 use tokio::sync::{mpsc, watch};
@@ -37,7 +38,7 @@ pub(super) fn spawn(
                 warn!(machine = %m.name, sim_rpm = grinder.c_speed_rpm, recipe_rpm, "the simulator grinds at its own C speed (gauge.grinder.c_speed_rpm), not the recipe's");
             }
             let source = sim_source::SimSource {
-                machine: m.name.clone(),
+                machine: machine.name.clone(),
                 grinder,
                 seed: *seed,
                 stations: sim_source::SimSource::stations(machine),
@@ -51,7 +52,7 @@ pub(super) fn spawn(
             folder, poll_ms, ..
         } => {
             tokio::spawn(drop_source::run(
-                m.name.clone(),
+                machine.name.clone(),
                 config.resolve(folder),
                 *poll_ms,
                 m.gauge.drop_options().unwrap_or_default(),
@@ -67,14 +68,14 @@ pub(super) fn spawn(
                 interface: interface.clone(),
                 dbc: Box::new(dbc),
             };
-            tokio::spawn(live_source(m.name.clone(), spec, tx, shutdown));
+            tokio::spawn(live_source(machine.name.clone(), spec, tx, shutdown));
         }
         GaugeSection::Serial { port, baud } => {
             let spec = LiveSpec::Serial {
                 port: port.clone(),
                 baud: *baud,
             };
-            tokio::spawn(live_source(m.name.clone(), spec, tx, shutdown));
+            tokio::spawn(live_source(machine.name.clone(), spec, tx, shutdown));
         }
     }
     Ok(())
@@ -143,7 +144,7 @@ impl LiveGauge {
 /// A live gauge. One that cannot be opened (missing device, a kernel without SocketCAN) or
 /// that fails is an ERROR naming it, retried every 10 s; never a panic, never fatal.
 async fn live_source(
-    machine: String,
+    machine: MachineName,
     spec: LiveSpec,
     tx: mpsc::Sender<SourceEvent>,
     mut shutdown: watch::Receiver<bool>,

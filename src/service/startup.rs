@@ -45,7 +45,7 @@ pub(super) async fn start_store(
 }
 
 /// Each machine's feature names.
-type FeatureNames = BTreeMap<crate::names::MachineName, Vec<String>>;
+type FeatureNames = BTreeMap<crate::names::MachineName, Vec<crate::names::FeatureName>>;
 /// Each (machine, feature)'s sheet.
 type SheetMap = BTreeMap<(String, String), http::FeatureSheet>;
 
@@ -62,7 +62,7 @@ pub(super) fn feature_catalogue(
         );
         for setup in &m.setups {
             let sheet = http::FeatureSheet::from_setup(setup);
-            sheets.insert((m.name.to_string(), setup.name.clone()), sheet);
+            sheets.insert((m.name.to_string(), setup.name.to_string()), sheet);
         }
     }
     (features, sheets)

@@ -25,6 +25,7 @@ mod rebuild;
 use super::journal::Pending;
 use super::machine::StoreHandle;
 use crate::config::Config;
+use crate::names::{FeatureName, MachineName};
 use crate::store::{Store, StoreError, StoreIdentity};
 
 /// The file in the var folder that remembers which store camloop last wrote.
@@ -33,8 +34,8 @@ pub(crate) const IDENTITY_FILE: &str = "store-identity";
 /// What camloop's own state says one machine's store must hold.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub(crate) struct MachineExpectation {
-    pub machine: String,
-    pub lobe: String,
+    pub machine: MachineName,
+    pub lobe: FeatureName,
     /// The newest version in the machine's share manifest, `None` before the first.
     pub newest_share_version: Option<u64>,
     /// Table versions still in the journal, not yet written to the store: a store that was
@@ -65,8 +66,8 @@ pub(crate) enum Problem {
     },
     /// The share holds newer table versions than the store and the journal together.
     BehindShare {
-        machine: String,
-        lobe: String,
+        machine: MachineName,
+        lobe: FeatureName,
         share_version: u64,
         store_version: Option<i64>,
     },
@@ -163,8 +164,8 @@ struct Remembered {
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 struct Behind {
-    machine: String,
-    lobe: String,
+    machine: MachineName,
+    lobe: FeatureName,
     versions: u64,
 }
 
@@ -286,8 +287,15 @@ pub(crate) async fn accept_new_store(
 pub(crate) fn expectations(config: &Config) -> Vec<MachineExpectation> {
     let mut out = Vec::new();
     for m in &config.machines {
-        let machine_dir = config.machines_dir().join(&m.name);
+        // The config's check refuses a name off the rule before anything runs.
+        let Ok(name) = MachineName::new(&m.name) else {
+            continue;
+        };
+        let machine_dir = config.machines_dir().join(&name);
         for lobe in crate::config::configured_features(config, m) {
+            let Ok(lobe) = FeatureName::new(&lobe) else {
+                continue;
+            };
             let state_dir = machine_dir.join(&lobe);
             let manifest = state_dir.join("share").join(crate::share::MANIFEST_FILE);
             let newest_share_version = crate::share::load_manifest(&manifest)
@@ -301,12 +309,12 @@ pub(crate) fn expectations(config: &Config) -> Vec<MachineExpectation> {
                     .filter_map(|line| serde_json::from_str::<Pending>(line).ok())
                     .filter(|r| {
                         matches!(r, Pending::Table { machine, lobe: l, .. }
-                            if *machine == m.name && *l == lobe)
+                            if *machine == name && *l == lobe)
                     })
                     .count() as u64
             });
             out.push(MachineExpectation {
-                machine: m.name.clone(),
+                machine: name.clone(),
                 lobe,
                 newest_share_version,
                 tables_in_journal,

@@ -156,7 +156,7 @@ mod tests {
             table_number: 1 + (n as u32 % 2),
             files: vec![FileRecord {
                 name: "CAM.SPF".into(),
-                sha256: "00".repeat(32),
+                sha256: "00".repeat(32).parse().unwrap(),
                 bytes: 5,
             }],
             reason: "test".into(),

@@ -7,6 +7,8 @@
 use std::io;
 use std::path::{Path, PathBuf};
 
+use crate::cluster::Epoch;
+use crate::core::digest::Sha256;
 use crate::core::program::TablePairError;
 
 /// Why a push to the controller share failed. The version stays waiting and is retried.
@@ -29,8 +31,8 @@ pub enum ShareError {
     #[error("{} read back with sha256 {found}, expected {expected}", path.display())]
     VerifyFailed {
         path: PathBuf,
-        expected: String,
-        found: String,
+        expected: Sha256,
+        found: Sha256,
     },
 }
 
@@ -74,7 +76,7 @@ pub enum StateError {
         reason: String,
     },
     #[error("kept text {} does not match its manifest sha256 {expected}", path.display())]
-    TextMismatch { path: PathBuf, expected: String },
+    TextMismatch { path: PathBuf, expected: Sha256 },
     #[error("version v{0} is not in the history")]
     UnknownVersion(u64),
     #[error("version v{0} has no kept text (refused, or pruned beyond the kept versions)")]
@@ -90,8 +92,8 @@ pub enum StateError {
     )]
     Fenced {
         dir: PathBuf,
-        mine: u64,
-        current: u64,
+        mine: Epoch,
+        current: Epoch,
     },
     /// The fence stayed locked while a claim waited: the owner is mid-write, or paused while
     /// writing (a stopped process keeps its lock). The claim is tried again later.

@@ -14,6 +14,8 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use crate::cluster::Epoch;
+
 const FENCE_FILE: &str = "fence";
 const LOCK_FILE: &str = "fence.lock";
 
@@ -21,7 +23,7 @@ const LOCK_FILE: &str = "fence.lock";
 #[derive(Debug, Clone)]
 pub struct Fence {
     dir: PathBuf,
-    epoch: u64,
+    epoch: Epoch,
 }
 
 /// The fence locked and checked; unlocked when dropped.
@@ -36,7 +38,12 @@ impl Fence {
     /// lock, and a claim must never take the fence from under a write). Refused with
     /// [`StateError::Fenced`] when the fence already holds a higher epoch (an owner newer
     /// than this lease); an equal one is this owner's own, claimed again.
-    pub fn claim(dir: &Path, epoch: u64, owner: &str, wait: Duration) -> Result<Fence, StateError> {
+    pub fn claim(
+        dir: &Path,
+        epoch: Epoch,
+        owner: &str,
+        wait: Duration,
+    ) -> Result<Fence, StateError> {
         std::fs::create_dir_all(dir).map_err(StateError::io("create", dir))?;
         let lock = lock_within(dir, wait)?;
         let current = read_epoch(dir)?;
@@ -64,7 +71,7 @@ impl Fence {
         })
     }
 
-    pub fn epoch(&self) -> u64 {
+    pub fn epoch(&self) -> Epoch {
         self.epoch
     }
 
@@ -84,16 +91,17 @@ impl Fence {
 }
 
 /// The highest epoch claimed in `dir` (0: none yet).
-pub fn read_epoch(dir: &Path) -> Result<u64, StateError> {
+pub fn read_epoch(dir: &Path) -> Result<Epoch, StateError> {
     let path = dir.join(FENCE_FILE);
     let text = match std::fs::read_to_string(&path) {
         Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(0),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Epoch(0)),
         Err(e) => return Err(StateError::io("read", &path)(e)),
     };
     text.split_whitespace()
         .nth(1)
         .and_then(|n| n.parse().ok())
+        .map(Epoch)
         .ok_or_else(|| StateError::CorruptManifest {
             path,
             line: 1,
@@ -152,51 +160,56 @@ mod tests {
     #[test]
     fn a_newer_claim_fences_the_older_owner_out() {
         let dir = tempfile::tempdir().unwrap();
-        let old = Fence::claim(dir.path(), 3, "a", WAIT).unwrap();
+        let old = Fence::claim(dir.path(), Epoch(3), "a", WAIT).unwrap();
         assert!(old.hold().is_ok());
-        let new = Fence::claim(dir.path(), 4, "b", WAIT).unwrap();
+        let new = Fence::claim(dir.path(), Epoch(4), "b", WAIT).unwrap();
         match old.hold() {
-            Err(StateError::Fenced { mine, current, .. }) => assert_eq!((mine, current), (3, 4)),
+            Err(StateError::Fenced { mine, current, .. }) => {
+                assert_eq!((mine, current), (Epoch(3), Epoch(4)))
+            }
             other => panic!("the old owner still holds the fence: {other:?}"),
         }
         assert!(new.hold().is_ok());
         // An owner with an older lease cannot take the fence back.
         assert!(matches!(
-            Fence::claim(dir.path(), 3, "a", WAIT),
-            Err(StateError::Fenced { current: 4, .. })
+            Fence::claim(dir.path(), Epoch(3), "a", WAIT),
+            Err(StateError::Fenced {
+                current: Epoch(4),
+                ..
+            })
         ));
-        assert_eq!(read_epoch(dir.path()).unwrap(), 4);
+        assert_eq!(read_epoch(dir.path()).unwrap(), Epoch(4));
     }
 
     #[test]
     fn a_claim_waits_for_a_push_under_way() {
         let dir = tempfile::tempdir().unwrap();
-        let old = Fence::claim(dir.path(), 1, "a", WAIT).unwrap();
+        let old = Fence::claim(dir.path(), Epoch(1), "a", WAIT).unwrap();
         let held = old.hold().unwrap();
         let path = dir.path().to_path_buf();
         let claimer =
-            std::thread::spawn(move || Fence::claim(&path, 2, "b", WAIT).map(|f| f.epoch()));
+            std::thread::spawn(move || Fence::claim(&path, Epoch(2), "b", WAIT).map(|f| f.epoch()));
         std::thread::sleep(std::time::Duration::from_millis(100));
         // Still the old owner's while it holds the lock.
-        assert_eq!(read_epoch(dir.path()).unwrap(), 1);
+        assert_eq!(read_epoch(dir.path()).unwrap(), Epoch(1));
         assert!(!claimer.is_finished());
         drop(held);
-        assert_eq!(claimer.join().unwrap().unwrap(), 2);
+        assert_eq!(claimer.join().unwrap().unwrap(), Epoch(2));
         assert!(old.hold().is_err());
     }
 
     #[test]
     fn a_claim_gives_up_on_an_owner_paused_mid_write() {
         let dir = tempfile::tempdir().unwrap();
-        let old = Fence::claim(dir.path(), 1, "a", WAIT).unwrap();
+        let old = Fence::claim(dir.path(), Epoch(1), "a", WAIT).unwrap();
         let _held = old.hold().unwrap();
         let started = Instant::now();
-        match Fence::claim(dir.path(), 2, "b", Duration::from_millis(200)) {
+        match Fence::claim(dir.path(), Epoch(2), "b", Duration::from_millis(200)) {
             Err(StateError::FenceBusy { waited_ms, .. }) => assert!(waited_ms >= 200),
             other => panic!("a claim took the fence from under a write: {other:?}"),
         }
         assert!(started.elapsed() >= Duration::from_millis(200));
         // Nothing changed: the owner mid-write still owns it.
-        assert_eq!(read_epoch(dir.path()).unwrap(), 1);
+        assert_eq!(read_epoch(dir.path()).unwrap(), Epoch(1));
     }
 }

@@ -7,6 +7,7 @@
 //! line is rewritten. A kill can only tear the last line; an unterminated last line is
 //! ignored on reading and cut off when the state folder is opened for writing.
 
+use crate::core::digest::Sha256;
 use std::path::Path;
 
 use jiff::Timestamp;
@@ -76,7 +77,7 @@ pub struct VersionRecord {
     /// The fencing epoch of the owner that made it, with several instances (see
     /// [`super::Fence`]); absent for a single instance.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub epoch: Option<u64>,
+    pub epoch: Option<crate::cluster::Epoch>,
 }
 
 /// One program file of a version.
@@ -84,8 +85,8 @@ pub struct VersionRecord {
 pub struct FileRecord {
     /// Plain file name on the share (no folder).
     pub name: String,
-    /// SHA-256 of the file's bytes, lower-case hex.
-    pub sha256: String,
+    /// SHA-256 of the file's bytes (lower-case hex in the manifest).
+    pub sha256: Sha256,
     /// Length in bytes.
     pub bytes: u64,
 }
@@ -402,7 +403,7 @@ mod tests {
             table_number: 1,
             files: vec![FileRecord {
                 name: "CAM_T1.SPF".into(),
-                sha256: "00".repeat(32),
+                sha256: "00".repeat(32).parse().unwrap(),
                 bytes: 5,
             }],
             reason: "test".into(),

@@ -5,9 +5,10 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use super::error::StateError;
-use super::fs::{create_temp, is_temp_name, sha256_hex, sync_dir, write_synced};
+use super::fs::{create_temp, is_temp_name, sync_dir, write_synced};
 use super::manifest::{FileRecord, History};
 use super::store::ProgramFile;
+use crate::core::digest::Sha256;
 
 /// Folder of a version's kept text inside `versions_dir`: `v000042`.
 pub(crate) fn version_dir(versions_dir: &Path, version: u64) -> PathBuf {
@@ -69,10 +70,10 @@ pub(crate) fn read_kept(dir: &Path, files: &[FileRecord]) -> Result<Vec<ProgramF
             let bytes = fs::read(&path).map_err(StateError::io("read kept text", &path))?;
             let text = String::from_utf8(bytes)
                 .ok()
-                .filter(|t| sha256_hex(t.as_bytes()) == f.sha256)
+                .filter(|t| Sha256::of(t.as_bytes()) == f.sha256)
                 .ok_or_else(|| StateError::TextMismatch {
                     path: path.clone(),
-                    expected: f.sha256.clone(),
+                    expected: f.sha256,
                 })?;
             Ok(ProgramFile {
                 name: f.name.clone(),
@@ -148,7 +149,7 @@ mod tests {
         let kept = version_dir(dir.path(), 3);
         let record = |text: &str| FileRecord {
             name: "CAM_T1.SPF".into(),
-            sha256: sha256_hex(text.as_bytes()),
+            sha256: Sha256::of(text.as_bytes()),
             bytes: text.len() as u64,
         };
         assert_eq!(read_kept(&kept, &[record(&files[0].text)]).unwrap(), files);

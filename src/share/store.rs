@@ -5,9 +5,10 @@ use std::fs;
 use std::path::PathBuf;
 
 use super::error::{PushError, ShareError, StateError};
-use super::fs::{ShareFs, bad_file_name, is_temp_name, sha256_hex};
+use super::fs::{ShareFs, bad_file_name, is_temp_name};
 use super::manifest::{self, FileRecord, History, Record, VersionRecord, VersionStatus};
 use super::state::{clean_versions_dir, cut_manifest, read_kept, store_text, version_dir};
+use crate::core::digest::Sha256;
 use crate::core::program::{check_table_pair, next_table_number};
 use crate::failpoint::crash_point;
 
@@ -212,7 +213,7 @@ impl Share {
                 .iter()
                 .map(|f| FileRecord {
                     name: f.name.clone(),
-                    sha256: sha256_hex(f.text.as_bytes()),
+                    sha256: Sha256::of(f.text.as_bytes()),
                     bytes: f.text.len() as u64,
                 })
                 .collect(),
@@ -441,11 +442,11 @@ impl Share {
                 .fs
                 .read(path)
                 .map_err(|e| fail(ShareError::classify(&share, "read back", path, e)))?;
-            let found = sha256_hex(&bytes);
+            let found = Sha256::of(&bytes);
             if found != file.sha256 {
                 return Err(fail(ShareError::VerifyFailed {
                     path: path.clone(),
-                    expected: file.sha256.clone(),
+                    expected: file.sha256,
                     found,
                 }));
             }

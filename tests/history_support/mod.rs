@@ -4,12 +4,22 @@
 
 #![allow(dead_code)]
 
+use camloop::names::{FeatureName, MachineName};
 use camloop::share::{VersionStatus, load_manifest};
 use camloop::store::{RawPool, Store};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// A feature's state folder: `<var>/machines/<machine>/<lobe>`.
+/// The typed names of the strings the helpers take (every test uses plain names).
+fn m(machine: &str) -> MachineName {
+    machine.parse().expect("a plain machine name")
+}
+
+fn f(lobe: &str) -> FeatureName {
+    lobe.parse().expect("a plain lobe name")
+}
+
 pub fn feature_dir(var: &Path, machine: &str, lobe: &str) -> PathBuf {
     var.join("machines").join(machine).join(lobe)
 }
@@ -84,7 +94,10 @@ pub async fn resumed_memory(
     if journalled.is_some() {
         return journalled;
     }
-    let stored = store.load_learning_state(machine, lobe).await.unwrap()?;
+    let stored = store
+        .load_learning_state(&m(machine), &f(lobe))
+        .await
+        .unwrap()?;
     Some(serde_json::from_str(&stored.state_json).unwrap())
 }
 
@@ -132,7 +145,7 @@ pub async fn agreement(var: &Path, store: &Store, machine: &str, lobe: &str) -> 
             made_from.entry(m).or_default().push(version);
         }
         let Some(row) = store
-            .table_version(machine, lobe, version as i64)
+            .table_version(&m(machine), &f(lobe), version as i64)
             .await
             .unwrap()
         else {
@@ -162,7 +175,10 @@ pub async fn agreement(var: &Path, store: &Store, machine: &str, lobe: &str) -> 
         }
         a.pushed += usize::from(matches!(v.status, VersionStatus::Pushed { .. }));
     }
-    let stored = store.table_versions(machine, lobe, 1000).await.unwrap();
+    let stored = store
+        .table_versions(&m(machine), &f(lobe), 1000)
+        .await
+        .unwrap();
     for row in stored
         .iter()
         .filter(|r| !a.versions.contains(&(r.version as u64)))
@@ -176,7 +192,7 @@ pub async fn agreement(var: &Path, store: &Store, machine: &str, lobe: &str) -> 
         .map(|(m, versions)| format!("measurement {m} made versions {versions:?}"))
         .collect();
     a.in_force_version = store
-        .load_learning_state(machine, lobe)
+        .load_learning_state(&m(machine), &f(lobe))
         .await
         .unwrap()
         .and_then(|s| serde_json::from_str::<serde_json::Value>(&s.state_json).ok())
@@ -194,7 +210,7 @@ async fn stuck(var: &Path, store: &Store, machine: &str, lobe: &str) -> Vec<Stri
             Some("table") => {
                 let v = record["version"].as_i64().unwrap();
                 if store
-                    .table_version(machine, lobe, v)
+                    .table_version(&m(machine), &f(lobe), v)
                     .await
                     .unwrap()
                     .is_none()

@@ -39,10 +39,7 @@ async fn store_with(dir: &std::path::Path, n: u32) -> (Store, String) {
 async fn newest_pages_through_the_store_until_it_has_n_rows() {
     let dir = tempfile::tempdir().unwrap();
     let (store, _) = store_with(dir.path(), 25).await;
-    let filter = HistoryFilter {
-        machine: "M1".into(),
-        ..HistoryFilter::default()
-    };
+    let filter = HistoryFilter::new("M1".parse().unwrap(), 0);
     // Pages of 10: 23 rows take three queries and come out newest first, none twice.
     let rows = newest(&store, filter.clone(), 23, 10).await.unwrap();
     let times: Vec<i64> = rows

@@ -57,10 +57,8 @@ struct PinPart {
 async fn pin_parts(store: &Store, machine: &str, pin: &str, phase_deg: f64) -> Vec<PinPart> {
     let page = store
         .measurement_history(&HistoryFilter {
-            machine: machine.into(),
-            lobe: Some(pin.into()),
-            limit: 10_000,
-            ..HistoryFilter::default()
+            lobe: Some(pin.parse().unwrap()),
+            ..HistoryFilter::new(machine.parse().unwrap(), 10_000)
         })
         .await
         .unwrap();

@@ -24,7 +24,10 @@ struct Server {
 /// The API (no store, no machine loops: the checks under test come first) on 127.0.0.1:0.
 async fn server(max_connections: usize, per_client: usize) -> Server {
     let mut machines = BTreeMap::new();
-    machines.insert(MachineName::new("SIM1").unwrap(), vec!["IN1".to_string()]);
+    machines.insert(
+        MachineName::new("SIM1").unwrap(),
+        vec!["IN1".parse().unwrap()],
+    );
     let limits = HttpLimits {
         max_connections,
         max_connections_per_client: per_client,

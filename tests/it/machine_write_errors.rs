@@ -23,9 +23,15 @@ async fn machine(dir: &Path) -> MachineLoop {
         state_dir: dir.join("state"),
     };
     let metrics = Arc::new(Metrics::default());
-    MachineLoop::start("DRESS1".into(), vec![setup], paths, store, metrics)
-        .await
-        .unwrap()
+    MachineLoop::start(
+        "DRESS1".parse().unwrap(),
+        vec![setup],
+        paths,
+        store,
+        metrics,
+    )
+    .await
+    .unwrap()
 }
 
 #[tokio::test]

@@ -197,8 +197,8 @@ async fn until(
 
 fn part(n: u32) -> PlantEvent {
     PlantEvent::PartAnalysed {
-        machine: "M1".into(),
-        feature: "IN1".into(),
+        machine: "M1".parse().unwrap(),
+        feature: "IN1".parse().unwrap(),
         part: format!("P{n}"),
         at_ms: jiff::Timestamp::from_millisecond(1_000 * i64::from(n)).unwrap(),
         verdict: Verdict::Pass,

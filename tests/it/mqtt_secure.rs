@@ -207,8 +207,8 @@ async fn a_wrong_password_is_refused_and_the_right_one_delivers_over_tls() {
     let (stop, shutdown) = watch::channel(false);
     let publisher = Publisher::start(&settings, &dir.path().join("queue"), shutdown).unwrap();
     publisher.sender().send(PlantEvent::PartAnalysed {
-        machine: "M1".into(),
-        feature: "IN1".into(),
+        machine: "M1".parse().unwrap(),
+        feature: "IN1".parse().unwrap(),
         part: "P1".into(),
         at_ms: jiff::Timestamp::from_millisecond(1).unwrap(),
         verdict: Verdict::Pass,

@@ -30,9 +30,10 @@ fn provenance(version: u64, parent: Option<u64>) -> Provenance {
         parent_version: parent,
         created_utc: "2026-11-23T14:05:00Z".to_owned(),
         recipe: "demo-cam".to_owned(),
-        feature: "intake".to_owned(),
+        feature: "intake".parse().unwrap(),
         correction_sha256: "9f86d081884c7d659a2feaa0c55ad015a3bf4f1b2b0b822cd15d6c15b0f00a08"
-            .to_owned(),
+            .parse()
+            .unwrap(),
     }
 }
 
@@ -67,12 +68,12 @@ fn provenance_golden() {
 #[test]
 fn provenance_text_is_made_safe_for_a_comment() {
     let mut p = provenance(3, Some(2));
-    p.recipe = "Nocken °1\nCTABDEF(X,C,9,1)".to_owned();
-    // `°` is spelled out; the line break has no spelling and becomes `?`.
-    p.feature = "in;take".to_owned();
+    // `°` is spelled out; the line break has no spelling and becomes `?`. (The feature's
+    // name is a `FeatureName`: plain by its type, it has no such characters to carry.)
+    p.recipe = "Nocken; °1\nCTABDEF(X,C,9,1)".to_owned();
     let program = render(1, Some(p));
     assert!(
-        program.contains("\n; recipe: Nocken  deg1?CTABDEF(X,C,9,1)\n"),
+        program.contains("\n; recipe: Nocken;  deg1?CTABDEF(X,C,9,1)\n"),
         "{program}"
     );
     // The line break became `?`: no block was injected, and the program is plain ASCII.

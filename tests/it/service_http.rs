@@ -84,7 +84,10 @@ struct Server {
 /// The API on port 0 with `limits`, machine SIM1 grinding IN1 (a fake loop), and `store`.
 async fn server(limits: HttpLimits, store: Option<camloop::store::Store>) -> Server {
     let mut machines = BTreeMap::new();
-    machines.insert(MachineName::new("SIM1").unwrap(), vec!["IN1".to_string()]);
+    machines.insert(
+        MachineName::new("SIM1").unwrap(),
+        vec!["IN1".parse().unwrap()],
+    );
     let mut commands = HashMap::new();
     commands.insert("SIM1".to_string(), fake_machine());
     let state = AppState {
@@ -359,5 +362,51 @@ async fn a_whole_part_rollback_names_every_feature_it_takes_back() {
     for bad in [r#"{"versions": {}}"#, r#"{"versions": {"IN1": 0}}"#] {
         let (status, body) = exchange(s.addr, &post_request(path, bad, Some(TOKEN))).await;
         assert_eq!(status, 400, "{bad}: {body}");
+    }
+}
+
+/// A lobe or pin name off the rule, in a path or in a query, answers 400 `invalid_name`
+/// with the rule's message (the typed extractors refuse it before a store or a machine is
+/// asked: this server has no store); a bad machine name likewise.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_name_off_the_rule_in_a_path_or_query_answers_invalid_name() {
+    let s = server(limits(16, 5_000, 5_000), None).await;
+    let get =
+        |path: &str| format!("GET {path} HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n");
+    let rule = "only letters, digits, '-' or '_' are allowed";
+    let rollback = "/api/v1/machines/SIM1/lobes/IN%201/rollback";
+    for (request, message) in [
+        (
+            get("/api/v1/machines/SIM1/lobes/IN%201/tables"),
+            format!("lobe: name `IN 1` has ` ` at character 3: {rule}"),
+        ),
+        (
+            get("/api/v1/machines/SIM1/lobes/IN.1/tables/3/program"),
+            format!("lobe: name `IN.1` has `.` at character 3: {rule}"),
+        ),
+        (
+            get("/api/v1/machines/SIM1/features/I%3BN/capability"),
+            format!("lobe: name `I;N` has `;` at character 2: {rule}"),
+        ),
+        (
+            get("/api/v1/machines/SIM1/measurements?lobe=IN%2B1"),
+            format!("lobe: name `IN+1` has `+` at character 3: {rule}"),
+        ),
+        (
+            post_request(rollback, r#"{"version":3}"#, Some(TOKEN)),
+            format!("lobe: name `IN 1` has ` ` at character 3: {rule}"),
+        ),
+        (
+            get("/api/v1/machines/S%20M1/measurements?lobe=IN1"),
+            format!("machine: name `S M1` has ` ` at character 2: {rule}"),
+        ),
+    ] {
+        let (status, body) = exchange(s.addr, &request).await;
+        let reply = json(&body);
+        assert_eq!(
+            (status, reply["code"].as_str(), reply["message"].as_str()),
+            (400, Some("invalid_name"), Some(message.as_str())),
+            "{request}"
+        );
     }
 }

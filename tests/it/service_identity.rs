@@ -48,7 +48,7 @@ async fn machine(dir: &Path, metrics: Arc<Metrics>) -> MachineLoop {
         share_dir: dir.join("share"),
         state_dir: dir.join("state"),
     };
-    MachineLoop::start("DROP1".into(), vec![setup], paths, store, metrics)
+    MachineLoop::start("DROP1".parse().unwrap(), vec![setup], paths, store, metrics)
         .await
         .unwrap()
 }
@@ -172,11 +172,10 @@ async fn drop_files_are_moved_by_the_verdict_and_learned_once() {
     let url = format!("sqlite://{}/db.sqlite", dir.path().display());
     let store = Store::connect(&url).await.unwrap();
     let history = store
-        .measurement_history(&camloop::store::HistoryFilter {
-            machine: "DROP1".into(),
-            limit: 100,
-            ..Default::default()
-        })
+        .measurement_history(&camloop::store::HistoryFilter::new(
+            "DROP1".parse().unwrap(),
+            100,
+        ))
         .await
         .unwrap();
     assert_eq!(history.items.len(), 1, "learned from once");

@@ -58,7 +58,7 @@ async fn machine(dir: &Path) -> MachineLoop {
         state_dir: dir.join("state"),
     };
     MachineLoop::start(
-        "M2".into(),
+        "M2".parse().unwrap(),
         setups(),
         paths,
         store,
@@ -174,7 +174,7 @@ async fn swapped_lobes_are_refused_or_rejected_never_learned_crosswise() {
     };
     let before = versions(&m);
     let e = m
-        .rollback_part(&[("IN1".into(), 1), ("IN2".into(), 99)])
+        .rollback_part(&[("IN1".parse().unwrap(), 1), ("IN2".parse().unwrap(), 99)])
         .await
         .unwrap_err();
     assert!(e.to_string().contains("version 99"), "{e}");
@@ -184,7 +184,7 @@ async fn swapped_lobes_are_refused_or_rejected_never_learned_crosswise() {
         "nothing pushed when one version is missing"
     );
     let done = m
-        .rollback_part(&[("IN1".into(), 1), ("IN2".into(), 1)])
+        .rollback_part(&[("IN1".parse().unwrap(), 1), ("IN2".parse().unwrap(), 1)])
         .await
         .unwrap();
     assert_eq!(done.len(), 2);

@@ -41,10 +41,8 @@ struct Part {
 async fn parts_of(store: &Store, lobe: &str) -> Vec<Part> {
     let page = store
         .measurement_history(&HistoryFilter {
-            machine: "SIM8".into(),
-            lobe: Some(lobe.into()),
-            limit: 10_000,
-            ..HistoryFilter::default()
+            lobe: Some(lobe.parse().unwrap()),
+            ..HistoryFilter::new("SIM8".parse().unwrap(), 10_000)
         })
         .await
         .unwrap();
@@ -235,7 +233,7 @@ async fn a_stop_mid_shaft_resumes_each_lobe_where_it_was() {
     let mut before = BTreeMap::new();
     for lobe in LOBES {
         let state = store
-            .load_learning_state("SIM8", lobe)
+            .load_learning_state(&"SIM8".parse().unwrap(), &lobe.parse().unwrap())
             .await
             .unwrap()
             .unwrap();
@@ -256,10 +254,8 @@ async fn a_stop_mid_shaft_resumes_each_lobe_where_it_was() {
     for lobe in LOBES {
         let numbers: Vec<u64> = store
             .measurement_history(&HistoryFilter {
-                machine: "SIM8".into(),
-                lobe: Some(lobe.into()),
-                limit: 100,
-                ..HistoryFilter::default()
+                lobe: Some(lobe.parse().unwrap()),
+                ..HistoryFilter::new("SIM8".parse().unwrap(), 100)
             })
             .await
             .unwrap()
@@ -271,7 +267,7 @@ async fn a_stop_mid_shaft_resumes_each_lobe_where_it_was() {
         // The resumed run finished shaft 4; the next run was shaft 5.
         assert_eq!(numbers, vec![1, 2, 3, 4, 5], "{lobe}");
         let state = store
-            .load_learning_state("SIM8", lobe)
+            .load_learning_state(&"SIM8".parse().unwrap(), &lobe.parse().unwrap())
             .await
             .unwrap()
             .unwrap();

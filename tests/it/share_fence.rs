@@ -5,6 +5,7 @@
 
 use crate::share_support;
 
+use camloop::cluster::Epoch;
 use camloop::share::{Fence, PushError, StateError, Submitted, load_manifest};
 use share_support::{dirs, names, next_request, open};
 
@@ -12,7 +13,7 @@ use share_support::{dirs, names, next_request, open};
 const WAIT: std::time::Duration = std::time::Duration::from_secs(10);
 
 fn is_fenced(e: &StateError, mine: u64, current: u64) -> bool {
-    matches!(e, StateError::Fenced { mine: m, current: c, .. } if (*m, *c) == (mine, current))
+    matches!(e, StateError::Fenced { mine: m, current: c, .. } if (m.0, c.0) == (mine, current))
 }
 
 #[test]
@@ -20,7 +21,7 @@ fn an_owner_fenced_out_can_neither_record_nor_deliver() {
     let d = dirs();
     let machine = d.root.path().join("machine");
     let (mut old, _) = open(&d, 5);
-    old.set_fence(Fence::claim(&machine, 1, "a", WAIT).unwrap());
+    old.set_fence(Fence::claim(&machine, Epoch(1), "a", WAIT).unwrap());
     let v1 = old.push_once(next_request(&old, 1)).unwrap();
     assert_eq!(v1.version, 1);
     // v2 is recorded by the old owner, not yet delivered, when the new owner claims.
@@ -28,7 +29,7 @@ fn an_owner_fenced_out_can_neither_record_nor_deliver() {
         panic!("v2 not accepted")
     };
 
-    let new_fence = Fence::claim(&machine, 2, "b", WAIT).unwrap();
+    let new_fence = Fence::claim(&machine, Epoch(2), "b", WAIT).unwrap();
     match old.deliver() {
         Err(PushError::State(e)) => assert!(is_fenced(&e, 1, 2), "{e}"),
         other => panic!("the old owner delivered after the claim: {other:?}"),
@@ -54,7 +55,7 @@ fn an_owner_fenced_out_can_neither_record_nor_deliver() {
     let epochs: Vec<(u64, Option<u64>)> = history
         .versions()
         .iter()
-        .map(|v| (v.record.version, v.record.epoch))
+        .map(|v| (v.record.version, v.record.epoch.map(|e| e.0)))
         .collect();
     // v2 was recorded under epoch 1 and delivered under 2: a version keeps the epoch of the
     // owner that recorded it, and versions never go back to an older epoch.

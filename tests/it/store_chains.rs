@@ -46,7 +46,7 @@ async fn take_turns(url: &str) {
         let store = if (v / 3) % 2 == 0 { &a } else { &b };
         let t = NewTableVersion {
             machine: "M1".parse().unwrap(),
-            lobe: "IN1".into(),
+            lobe: "IN1".parse().unwrap(),
             version: Some(v),
             parent_version: (v > 1).then_some(v - 1),
             table_number: 7,
@@ -63,19 +63,28 @@ async fn take_turns(url: &str) {
         // newest row is replaced, by whichever handle writes this part.
         let meaning = sha_of(&format!("mode {}", v / 4));
         store
-            .save_learning_snapshot("M1", "IN1", &state(v), Some(&meaning), ms(v * 10))
+            .save_learning_snapshot(
+                &"M1".parse().unwrap(),
+                &"IN1".parse().unwrap(),
+                &state(v),
+                Some(&meaning),
+                ms(v * 10),
+            )
             .await
             .unwrap();
         let other = if std::ptr::eq(store, &a) { &b } else { &a };
         let newest = other
-            .load_learning_state("M1", "IN1")
+            .load_learning_state(&"M1".parse().unwrap(), &"IN1".parse().unwrap())
             .await
             .unwrap()
             .unwrap();
         assert_eq!(newest.state_json, state(v), "part {v}");
     }
     let fresh = Store::connect(url).await.unwrap();
-    let versions = fresh.table_versions("M1", "IN1", 100).await.unwrap();
+    let versions = fresh
+        .table_versions(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), 100)
+        .await
+        .unwrap();
     assert_eq!(versions.len(), 40);
     for t in versions {
         assert_eq!(t.program_text, program(t.version), "v{}", t.version);
@@ -90,7 +99,12 @@ async fn take_turns(url: &str) {
         // The snapshot of each meaning's last part is kept; the others were replaced.
         let kept = v == 40 || (v + 1) % 4 == 0;
         let exists = fresh
-            .learning_state_exists("M1", "IN1", &state(v), ms(v * 10))
+            .learning_state_exists(
+                &"M1".parse().unwrap(),
+                &"IN1".parse().unwrap(),
+                &state(v),
+                ms(v * 10),
+            )
             .await
             .unwrap();
         assert_eq!(exists, kept, "learning state of part {v}");

@@ -451,11 +451,48 @@ async fn a_stored_time_no_instant_has_is_invalid_not_a_panic() {
         assert_eq!(err.code(), "invalid", "{err}");
         assert!(err.to_string().contains("at_ms"), "{err}");
         assert!(err.to_string().contains("9223372036854775807 ms"), "{err}");
-        let err = t.store.dressings("M1", 10).await.unwrap_err();
+        let err = t
+            .store
+            .dressings(&"M1".parse().unwrap(), 10)
+            .await
+            .unwrap_err();
         assert_eq!(err.code(), "invalid", "{err}");
         assert!(err.to_string().contains("-400000000000000 ms"), "{err}");
         // The machine's own time is in range and reads.
         assert_eq!(t.store.machines().await.unwrap().len(), 1);
+    }
+}
+
+/// A measurement row whose lobe fails the name rule, or whose digest is not 64 lower-case
+/// hex digits (both written outside camloop), is an `invalid` error naming the column and
+/// the value, never a panic; put right, the row reads again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rows_with_a_bad_lobe_name_or_digest_are_invalid_not_a_panic() {
+    let mut stores = vec![store_support::sqlite().await];
+    stores.extend(store_support::postgres("rows_with_a_bad_lobe").await);
+    for t in &stores {
+        let m = store_support::data::measurement("M1", "IN1", 1, 1_000);
+        t.store.insert_measurement(&m).await.unwrap();
+        let history = store_support::data::filter("M1");
+        for (set, column, value) in [
+            ("lobe = 'in 1'", "lobe", "in 1"),
+            ("lobe = 'IN1', sha256 = 'ABC'", "sha256", "ABC"),
+        ] {
+            raw_execute(&t.store, &[&format!("UPDATE measurements SET {set}")]).await;
+            let err = t.store.measurement_history(&history).await.unwrap_err();
+            assert_eq!(err.code(), "invalid", "{err}");
+            assert!(err.to_string().contains(column), "{err}");
+            assert!(err.to_string().contains(value), "{err}");
+        }
+        let sha = m.sha256.to_string();
+        raw_execute(
+            &t.store,
+            &[&format!("UPDATE measurements SET sha256 = '{sha}'")],
+        )
+        .await;
+        let page = t.store.measurement_history(&history).await.unwrap();
+        assert_eq!(page.items[0].sha256, m.sha256);
+        assert_eq!(page.items[0].lobe, "IN1");
     }
 }
 

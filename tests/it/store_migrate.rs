@@ -117,7 +117,7 @@ macro_rules! write_old_rows {
             .bind(&m.part)
             .bind(m.received_at_ms.as_millisecond())
             .bind(i64::from(m.points_per_rev))
-            .bind(&m.sha256)
+            .bind(m.sha256.to_string())
             .fetch_one(pool)
             .await
             .unwrap();
@@ -144,7 +144,7 @@ macro_rules! write_old_rows {
             .bind(v)
             .bind((v > 1).then_some(v - 1))
             .bind(program(v))
-            .bind(sha_of(&program(v)))
+            .bind(sha_of(&program(v)).to_string())
             .bind(learning(v))
             .bind(v * 10)
             .fetch_one(pool)
@@ -217,13 +217,16 @@ async fn check_old_rows(store: &Store) {
         }
         assert_report_close(&d.analysis_json, &report(n as u32));
     }
-    let dressings = store.dressings("M1", 10).await.unwrap();
+    let dressings = store.dressings(&"M1".parse().unwrap(), 10).await.unwrap();
     assert_eq!(dressings.len(), 1);
     assert_eq!(
         (dressings[0].new_radius_mm, dressings[0].infeed_um),
         (249.98, None)
     );
-    let versions = store.table_versions("M1", "in1", 100).await.unwrap();
+    let versions = store
+        .table_versions(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 100)
+        .await
+        .unwrap();
     assert_eq!(versions.len() as i64, OLD_ROWS);
     for t in &versions {
         assert_eq!(t.program_text, program(t.version), "v{}", t.version);
@@ -231,20 +234,30 @@ async fn check_old_rows(store: &Store) {
         assert_eq!(t.status.name(), "pushed");
     }
     let newest = store
-        .load_learning_state("M1", "in1")
+        .load_learning_state(&"M1".parse().unwrap(), &"in1".parse().unwrap())
         .await
         .unwrap()
         .unwrap();
     assert_eq!(newest.state_json, state(OLD_ROWS));
     assert!(
         store
-            .learning_state_exists("M1", "in1", &state(3), ms(30))
+            .learning_state_exists(
+                &"M1".parse().unwrap(),
+                &"in1".parse().unwrap(),
+                &state(3),
+                ms(30)
+            )
             .await
             .unwrap()
     );
     assert!(
         !store
-            .learning_state_exists("M1", "in1", &state(3), ms(31))
+            .learning_state_exists(
+                &"M1".parse().unwrap(),
+                &"in1".parse().unwrap(),
+                &state(3),
+                ms(31)
+            )
             .await
             .unwrap()
     );
@@ -256,7 +269,7 @@ async fn check_new_rows(store: &Store) {
     for v in OLD_ROWS + 1..=OLD_ROWS + 3 {
         let t = NewTableVersion {
             machine: "M1".parse().unwrap(),
-            lobe: "in1".into(),
+            lobe: "in1".parse().unwrap(),
             version: Some(v),
             parent_version: Some(v - 1),
             table_number: 2,
@@ -270,7 +283,11 @@ async fn check_new_rows(store: &Store) {
         };
         assert_eq!(store.insert_table_version(&t).await.unwrap(), v);
     }
-    for t in store.table_versions("M1", "in1", 100).await.unwrap() {
+    for t in store
+        .table_versions(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 100)
+        .await
+        .unwrap()
+    {
         assert_eq!(t.program_text, program(t.version));
         assert_eq!(t.learning_params_json, learning(t.version));
     }
@@ -284,12 +301,18 @@ async fn check_new_rows(store: &Store) {
     ];
     for (v, meaning) in saves {
         store
-            .save_learning_snapshot("M1", "in1", &state(v), Some(meaning), ms(v * 10))
+            .save_learning_snapshot(
+                &"M1".parse().unwrap(),
+                &"in1".parse().unwrap(),
+                &state(v),
+                Some(meaning),
+                ms(v * 10),
+            )
             .await
             .unwrap();
         assert_eq!(
             store
-                .load_learning_state("M1", "in1")
+                .load_learning_state(&"M1".parse().unwrap(), &"in1".parse().unwrap())
                 .await
                 .unwrap()
                 .unwrap()
@@ -300,31 +323,56 @@ async fn check_new_rows(store: &Store) {
     // 101 was replaced by 102 (same meaning), 103 by 104; the old rows all stay.
     assert!(
         !store
-            .learning_state_exists("M1", "in1", &state(101), ms(1010))
+            .learning_state_exists(
+                &"M1".parse().unwrap(),
+                &"in1".parse().unwrap(),
+                &state(101),
+                ms(1010)
+            )
             .await
             .unwrap()
     );
     assert!(
         store
-            .learning_state_exists("M1", "in1", &state(102), ms(1020))
+            .learning_state_exists(
+                &"M1".parse().unwrap(),
+                &"in1".parse().unwrap(),
+                &state(102),
+                ms(1020)
+            )
             .await
             .unwrap()
     );
     assert!(
         !store
-            .learning_state_exists("M1", "in1", &state(103), ms(1030))
+            .learning_state_exists(
+                &"M1".parse().unwrap(),
+                &"in1".parse().unwrap(),
+                &state(103),
+                ms(1030)
+            )
             .await
             .unwrap()
     );
     assert!(
         store
-            .learning_state_exists("M1", "in1", &state(104), ms(1040))
+            .learning_state_exists(
+                &"M1".parse().unwrap(),
+                &"in1".parse().unwrap(),
+                &state(104),
+                ms(1040)
+            )
             .await
             .unwrap()
     );
     assert!(
         store
-            .learning_state_exists("M1", "in1", &state(OLD_ROWS), ms(OLD_ROWS * 10))
+            .learning_state_exists(
+                &"M1".parse().unwrap(),
+                &"in1".parse().unwrap(),
+                &state(OLD_ROWS),
+                ms(OLD_ROWS * 10)
+            )
             .await
             .unwrap()
     );
@@ -348,7 +396,10 @@ async fn after_migration(store: &Store) {
 }
 
 async fn check_old_rows_again(store: &Store) {
-    let versions = store.table_versions("M1", "in1", 100).await.unwrap();
+    let versions = store
+        .table_versions(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 100)
+        .await
+        .unwrap();
     assert_eq!(versions.len() as i64, OLD_ROWS + 3);
     assert!(
         versions
@@ -396,7 +447,10 @@ async fn a_version_1_postgres_database_is_packed_in_place_and_reads_the_same() {
     let store = Store::connect(&server.url()).await.unwrap();
     after_migration(&store).await;
     // New identities continue after the copied rows' ids.
-    let next = store.table_versions("M1", "in1", 1).await.unwrap();
+    let next = store
+        .table_versions(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 1)
+        .await
+        .unwrap();
     assert_eq!(next[0].version, OLD_ROWS + 3);
     store.close().await;
 }

@@ -20,7 +20,7 @@ async fn story(store: &Store) {
     let snap = |lobe: &str, kind, json: &str| NewRecipeSnapshot {
         machine: "M1".parse().unwrap(),
         part: "CAM-7".into(),
-        lobe: lobe.into(),
+        lobe: lobe.parse().unwrap(),
         kind,
         recipe_json: json.into(),
         created_at_ms: ms(1_000),
@@ -47,7 +47,7 @@ async fn story(store: &Store) {
         .insert_recipe_snapshot(&snap("pin1", FeatureKind::Pin, r#"{"throw_mm":45}"#))
         .await
         .unwrap();
-    let features = store.features("M1").await.unwrap();
+    let features = store.features(&"M1".parse().unwrap()).await.unwrap();
     let seen: Vec<_> = features
         .iter()
         .map(|f| (f.lobe.as_str(), f.kind, f.recipe_snapshot))
@@ -138,7 +138,7 @@ async fn story(store: &Store) {
     let ids = |v: Vec<MeasurementSummary>| v.into_iter().map(|s| s.id).collect::<Vec<_>>();
 
     let lobe_in1 = HistoryFilter {
-        lobe: Some("in1".into()),
+        lobe: Some("in1".parse().unwrap()),
         ..filter("M1")
     };
     let got = ids(all_pages(store, lobe_in1.clone()).await);
@@ -196,7 +196,7 @@ async fn story(store: &Store) {
     // Table versions: numbered per lobe, status appended.
     assert!(
         store
-            .latest_table_version("M1", "in1")
+            .latest_table_version(&"M1".parse().unwrap(), &"in1".parse().unwrap())
             .await
             .unwrap()
             .is_none()
@@ -208,8 +208,8 @@ async fn story(store: &Store) {
     assert_eq!(v1, 1);
     store
         .set_table_status(
-            "M1",
-            "in1",
+            &"M1".parse().unwrap(),
+            &"in1".parse().unwrap(),
             1,
             &VersionStatus::Pushed {
                 at_unix_ms: 6_000,
@@ -233,7 +233,7 @@ async fn story(store: &Store) {
         "numbering is per lobe"
     );
     let latest = store
-        .latest_table_version("M1", "in1")
+        .latest_table_version(&"M1".parse().unwrap(), &"in1".parse().unwrap())
         .await
         .unwrap()
         .unwrap();
@@ -245,7 +245,11 @@ async fn story(store: &Store) {
         }
     );
     assert_eq!(latest.sha256, sha_of("CTABDEF(12)\nv2"));
-    let first = store.table_version("M1", "in1", 1).await.unwrap().unwrap();
+    let first = store
+        .table_version(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 1)
+        .await
+        .unwrap()
+        .unwrap();
     assert_eq!(
         first.status,
         VersionStatus::Pushed {
@@ -261,7 +265,7 @@ async fn story(store: &Store) {
     assert_eq!(first.table_number, 11);
     assert_eq!(first.learning_params_json, r#"{"gain":0.6}"#);
     let listed: Vec<i64> = store
-        .table_versions("M1", "in1", 10)
+        .table_versions(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 10)
         .await
         .unwrap()
         .iter()
@@ -277,8 +281,8 @@ async fn story(store: &Store) {
     assert!(matches!(
         store
             .set_table_status(
-                "M1",
-                "in1",
+                &"M1".parse().unwrap(),
+                &"in1".parse().unwrap(),
                 42,
                 &VersionStatus::Refused { reason: "x".into() },
                 ms(1)
@@ -287,12 +291,13 @@ async fn story(store: &Store) {
         Err(StoreError::NotFound { .. })
     ));
     // The share's own states are never the store's: refused, naming the state, nothing kept.
+    let (m1, in1) = ("M1".parse().unwrap(), "in1".parse().unwrap());
     for share_only in [
         VersionStatus::Delivering,
         VersionStatus::Superseded { by: 2 },
     ] {
         let e = store
-            .set_table_status("M1", "in1", 1, &share_only, ms(7_000))
+            .set_table_status(&m1, &in1, 1, &share_only, ms(7_000))
             .await
             .unwrap_err();
         assert!(
@@ -301,32 +306,53 @@ async fn story(store: &Store) {
             share_only.name()
         );
     }
-    let first_again = store.table_version("M1", "in1", 1).await.unwrap().unwrap();
+    let first_again = store.table_version(&m1, &in1, 1).await.unwrap().unwrap();
     assert_eq!(first_again.status.name(), "pushed");
-    assert!(store.table_version("M1", "in1", 3).await.unwrap().is_none());
+    assert!(
+        store
+            .table_version(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 3)
+            .await
+            .unwrap()
+            .is_none()
+    );
 
     // Learning state: newest snapshot wins.
     assert!(
         store
-            .load_learning_state("M1", "in1")
+            .load_learning_state(&"M1".parse().unwrap(), &"in1".parse().unwrap())
             .await
             .unwrap()
             .is_none()
     );
     store
-        .save_learning_state("M1", "in1", r#"{"k":1}"#, ms(7_000))
+        .save_learning_state(
+            &"M1".parse().unwrap(),
+            &"in1".parse().unwrap(),
+            r#"{"k":1}"#,
+            ms(7_000),
+        )
         .await
         .unwrap();
     store
-        .save_learning_state("M1", "in1", r#"{"k":2}"#, ms(8_000))
+        .save_learning_state(
+            &"M1".parse().unwrap(),
+            &"in1".parse().unwrap(),
+            r#"{"k":2}"#,
+            ms(8_000),
+        )
         .await
         .unwrap();
     store
-        .save_learning_state("M1", "ex1", r#"{"k":9}"#, ms(9_000))
+        .save_learning_state(
+            &"M1".parse().unwrap(),
+            &"ex1".parse().unwrap(),
+            r#"{"k":9}"#,
+            ms(9_000),
+        )
         .await
         .unwrap();
     let state = store
-        .load_learning_state("M1", "in1")
+        .load_learning_state(&"M1".parse().unwrap(), &"in1".parse().unwrap())
         .await
         .unwrap()
         .unwrap();
@@ -354,7 +380,7 @@ async fn story(store: &Store) {
             .await
             .unwrap();
     }
-    let dressings = store.dressings("M1", 10).await.unwrap();
+    let dressings = store.dressings(&"M1".parse().unwrap(), 10).await.unwrap();
     assert_eq!(dressings.len(), 2);
     assert_eq!(dressings[0].at_ms, ms(30_000));
     // Doubles round-trip exactly through REAL / DOUBLE PRECISION.
@@ -386,7 +412,7 @@ async fn story(store: &Store) {
     }
     let events = store
         .events(&EventFilter {
-            machine: Some("M1".into()),
+            machine: Some("M1".parse().unwrap()),
             limit: 10,
             ..EventFilter::default()
         })

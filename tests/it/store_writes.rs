@@ -84,25 +84,45 @@ async fn replay_lookups(store: &Store) {
     store.insert_table_version(&t).await.unwrap();
     assert!(
         store
-            .table_version_exists("M1", "in1", ms(5_000), &t.program_text)
+            .table_version_exists(
+                &"M1".parse().unwrap(),
+                &"in1".parse().unwrap(),
+                ms(5_000),
+                &t.program_text
+            )
             .await
             .unwrap()
     );
     assert!(
         !store
-            .table_version_exists("M1", "in1", ms(5_001), &t.program_text)
+            .table_version_exists(
+                &"M1".parse().unwrap(),
+                &"in1".parse().unwrap(),
+                ms(5_001),
+                &t.program_text
+            )
             .await
             .unwrap()
     );
     assert!(
         !store
-            .table_version_exists("M1", "in1", ms(5_000), "other")
+            .table_version_exists(
+                &"M1".parse().unwrap(),
+                &"in1".parse().unwrap(),
+                ms(5_000),
+                "other"
+            )
             .await
             .unwrap()
     );
     assert!(
         !store
-            .table_version_exists("M1", "ex1", ms(5_000), &t.program_text)
+            .table_version_exists(
+                &"M1".parse().unwrap(),
+                &"ex1".parse().unwrap(),
+                ms(5_000),
+                &t.program_text
+            )
             .await
             .unwrap()
     );
@@ -123,18 +143,33 @@ async fn replay_lookups(store: &Store) {
     assert!(!store.event_exists(&other).await.unwrap());
 
     store
-        .save_learning_state("M1", "in1", r#"{"i":1}"#, ms(8_000))
+        .save_learning_state(
+            &"M1".parse().unwrap(),
+            &"in1".parse().unwrap(),
+            r#"{"i":1}"#,
+            ms(8_000),
+        )
         .await
         .unwrap();
     assert!(
         store
-            .learning_state_exists("M1", "in1", r#"{"i":1}"#, ms(8_000))
+            .learning_state_exists(
+                &"M1".parse().unwrap(),
+                &"in1".parse().unwrap(),
+                r#"{"i":1}"#,
+                ms(8_000)
+            )
             .await
             .unwrap()
     );
     assert!(
         !store
-            .learning_state_exists("M1", "in1", r#"{"i":2}"#, ms(8_000))
+            .learning_state_exists(
+                &"M1".parse().unwrap(),
+                &"in1".parse().unwrap(),
+                r#"{"i":2}"#,
+                ms(8_000)
+            )
             .await
             .unwrap()
     );
@@ -220,7 +255,10 @@ async fn concurrent_writers(store: &Store) {
     versions.sort();
     let expected: Vec<i64> = (1..=versions.len() as i64).collect();
     assert_eq!(versions, expected, "numbers are distinct and without gaps");
-    let stored = store.table_versions("MC", "in1", 100).await.unwrap();
+    let stored = store
+        .table_versions(&"MC".parse().unwrap(), &"in1".parse().unwrap(), 100)
+        .await
+        .unwrap();
     assert_eq!(stored.len(), versions.len());
 }
 

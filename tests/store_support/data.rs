@@ -11,11 +11,13 @@ use sha2::{Digest, Sha256};
 /// Blob quantisation is 0.1 µm = 1e-4 mm, so a stored lift is within half of that.
 pub const LIFT_TOL_MM: f64 = 0.5e-4 + 1e-12;
 
-pub fn sha_of(text: &str) -> String {
-    Sha256::digest(text.as_bytes())
+/// SHA-256 of `text`, computed here independently of the core's digest.
+pub fn sha_of(text: &str) -> camloop::digest::Sha256 {
+    let hex: String = Sha256::digest(text.as_bytes())
         .iter()
         .map(|b| format!("{b:02x}"))
-        .collect()
+        .collect();
+    hex.parse().unwrap()
 }
 
 /// Unix milliseconds as an instant (the test values are all within jiff's years).
@@ -37,7 +39,7 @@ pub fn measurement(machine: &str, lobe: &str, n: u32, received_at_ms: i64) -> Ne
     NewMeasurement {
         machine: MachineName::new(machine).unwrap(),
         part: format!("P-{n:05}"),
-        lobe: lobe.into(),
+        lobe: lobe.parse().unwrap(),
         received_at_ms: ms(received_at_ms),
         verdict: if n.is_multiple_of(4) {
             Verdict::Fail
@@ -62,11 +64,7 @@ pub fn measurement(machine: &str, lobe: &str, n: u32, received_at_ms: i64) -> Ne
 }
 
 pub fn filter(machine: &str) -> HistoryFilter {
-    HistoryFilter {
-        machine: machine.into(),
-        limit: 7,
-        ..HistoryFilter::default()
-    }
+    HistoryFilter::new(machine.parse().unwrap(), 7)
 }
 
 /// Follows cursors to the end; checks each page's size against the limit.
@@ -96,7 +94,7 @@ pub fn table(lobe: &str, parent: Option<i64>, text: &str, status: &str) -> NewTa
     NewTableVersion {
         version: None,
         machine: MachineName::new("M1").unwrap(),
-        lobe: lobe.into(),
+        lobe: lobe.parse().unwrap(),
         parent_version: parent,
         table_number: 11,
         program_text: text.into(),

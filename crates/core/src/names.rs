@@ -7,14 +7,151 @@ use std::fmt;
 /// Longest machine name, in characters.
 pub(crate) const MAX_NAME_LEN: usize = 32;
 
-/// A machine name that passed [`MachineName::new`]; the only way to make one.
-/// Deserialising checks the rule too, so a name read from a file or a request is valid once
-/// it is a `MachineName`.
-#[derive(
-    Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize,
-)]
-#[serde(try_from = "String", into = "String")]
-pub struct MachineName(String);
+/// Defines a name type checked by [`check_plain_name`]: constructors, serde through the
+/// rule (`try_from = "String"`, so the text on the wire, in files and in the database stays
+/// the bare string), and the text views. Written once for every kind of name.
+macro_rules! plain_name {
+    ($(#[$doc:meta])* $name:ident) => {
+        $(#[$doc])*
+        #[derive(
+            Clone, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize,
+        )]
+        #[serde(try_from = "String", into = "String")]
+        pub struct $name(String);
+
+        impl $name {
+            /// Checks `name` against the rule.
+            pub fn new(name: &str) -> Result<Self, NameError> {
+                check_plain_name(name)?;
+                Ok(Self(name.to_string()))
+            }
+
+            pub fn as_str(&self) -> &str {
+                &self.0
+            }
+        }
+
+        /// Debug as the text (`"SIM1"`), as messages showed names before they were typed.
+        impl fmt::Debug for $name {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                fmt::Debug::fmt(&self.0, f)
+            }
+        }
+
+        impl fmt::Display for $name {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str(&self.0)
+            }
+        }
+
+        /// A name reads as the text it is wherever text is asked for (`&name` where a `&str`
+        /// is expected), so typed records pass through the text-keyed layers without
+        /// conversions.
+        impl std::ops::Deref for $name {
+            type Target = str;
+
+            fn deref(&self) -> &str {
+                &self.0
+            }
+        }
+
+        impl PartialEq<str> for $name {
+            fn eq(&self, other: &str) -> bool {
+                self.0 == other
+            }
+        }
+
+        impl PartialEq<&str> for $name {
+            fn eq(&self, other: &&str) -> bool {
+                self.0 == *other
+            }
+        }
+
+        impl PartialEq<String> for $name {
+            fn eq(&self, other: &String) -> bool {
+                self.0 == *other
+            }
+        }
+
+        impl PartialEq<$name> for String {
+            fn eq(&self, other: &$name) -> bool {
+                *self == other.0
+            }
+        }
+
+        impl PartialEq<$name> for str {
+            fn eq(&self, other: &$name) -> bool {
+                self == other.0
+            }
+        }
+
+        impl PartialEq<$name> for &str {
+            fn eq(&self, other: &$name) -> bool {
+                *self == other.0
+            }
+        }
+
+        impl AsRef<str> for $name {
+            fn as_ref(&self) -> &str {
+                &self.0
+            }
+        }
+
+        /// A name is also a folder name (`var/machines/<name>/`, a feature's state folder).
+        impl AsRef<std::path::Path> for $name {
+            fn as_ref(&self) -> &std::path::Path {
+                self.0.as_ref()
+            }
+        }
+
+        impl std::borrow::Borrow<str> for $name {
+            fn borrow(&self) -> &str {
+                &self.0
+            }
+        }
+
+        impl From<$name> for String {
+            fn from(name: $name) -> String {
+                name.0
+            }
+        }
+
+        impl TryFrom<String> for $name {
+            type Error = NameError;
+            fn try_from(name: String) -> Result<Self, NameError> {
+                check_plain_name(&name)?;
+                Ok(Self(name))
+            }
+        }
+
+        impl TryFrom<&str> for $name {
+            type Error = NameError;
+            fn try_from(name: &str) -> Result<Self, NameError> {
+                Self::new(name)
+            }
+        }
+
+        impl std::str::FromStr for $name {
+            type Err = NameError;
+            fn from_str(s: &str) -> Result<Self, NameError> {
+                Self::new(s)
+            }
+        }
+    };
+}
+
+plain_name!(
+    /// A machine name that passed [`MachineName::new`]; the only way to make one.
+    /// Deserialising checks the rule too, so a name read from a file or a request is valid
+    /// once it is a `MachineName`.
+    MachineName
+);
+
+plain_name!(
+    /// A lobe's or pin's name (a recipe's feature): the recipe checks it by the same rule at
+    /// load, and it keys the store, the journal, MQTT topics and URL paths like a machine.
+    FeatureName
+);
 
 /// Why a name was refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -32,73 +169,6 @@ pub enum NameError {
         /// 1-based.
         position: usize,
     },
-}
-
-impl MachineName {
-    /// Checks `name` against the rule.
-    pub fn new(name: &str) -> Result<Self, NameError> {
-        check_plain_name(name)?;
-        Ok(Self(name.to_string()))
-    }
-
-    pub fn as_str(&self) -> &str {
-        &self.0
-    }
-}
-
-impl fmt::Display for MachineName {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-/// A name reads as the text it is wherever text is asked for (`&name` where a `&str` is
-/// expected), so typed records pass through the text-keyed layers without conversions.
-impl std::ops::Deref for MachineName {
-    type Target = str;
-
-    fn deref(&self) -> &str {
-        &self.0
-    }
-}
-
-impl PartialEq<str> for MachineName {
-    fn eq(&self, other: &str) -> bool {
-        self.0 == other
-    }
-}
-
-impl PartialEq<&str> for MachineName {
-    fn eq(&self, other: &&str) -> bool {
-        self.0 == *other
-    }
-}
-
-impl AsRef<str> for MachineName {
-    fn as_ref(&self) -> &str {
-        &self.0
-    }
-}
-
-impl From<MachineName> for String {
-    fn from(name: MachineName) -> String {
-        name.0
-    }
-}
-
-impl TryFrom<String> for MachineName {
-    type Error = NameError;
-    fn try_from(name: String) -> Result<Self, NameError> {
-        check_plain_name(&name)?;
-        Ok(Self(name))
-    }
-}
-
-impl std::str::FromStr for MachineName {
-    type Err = NameError;
-    fn from_str(s: &str) -> Result<Self, NameError> {
-        Self::new(s)
-    }
 }
 
 /// The rule itself, for names that are not machines but live in the same places (lobes and
@@ -211,5 +281,25 @@ mod tests {
         assert_eq!(serde_json::to_string(&ok).unwrap(), "\"SIM1\"");
         let bad = serde_json::from_str::<MachineName>("\"../etc\"").unwrap_err();
         assert!(bad.to_string().contains("only letters, digits"), "{bad}");
+    }
+
+    /// A feature name follows the machines' rule, with the same messages, and its JSON text
+    /// is the bare string.
+    #[test]
+    fn feature_names_follow_the_same_rule_and_round_trip_as_text() {
+        assert_eq!(FeatureName::new("lobe_1-a").unwrap(), "lobe_1-a");
+        assert_eq!(FeatureName::new(""), Err(NameError::Empty));
+        assert_eq!(
+            FeatureName::new("in 1").unwrap_err().to_string(),
+            "name `in 1` has ` ` at character 3: only letters, digits, '-' or '_' are allowed"
+        );
+        assert!(matches!(
+            "x".repeat(33).parse::<FeatureName>(),
+            Err(NameError::TooLong { len: 33, .. })
+        ));
+        let ok: FeatureName = serde_json::from_str("\"IN1\"").unwrap();
+        assert_eq!(serde_json::to_string(&ok).unwrap(), "\"IN1\"");
+        let bad = serde_json::from_str::<FeatureName>("\"a/b\"").unwrap_err();
+        assert!(bad.to_string().contains("`/` at character 2"), "{bad}");
     }
 }

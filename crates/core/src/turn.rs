@@ -277,7 +277,7 @@ fn max_abs(values: &[f64]) -> f64 {
 /// file dropped twice, or under another name, is recognised as the same measurement.
 /// Binary rather than text: formatting 1,000+ floats per part cost more than the rest of
 /// the turn's bookkeeping.
-pub fn measurement_sha256(raw: &RawMeasurement) -> String {
+pub fn measurement_sha256(raw: &RawMeasurement) -> crate::digest::Sha256 {
     use sha2::Digest as _;
     let h = &raw.header;
     let mut hasher = sha2::Sha256::new();
@@ -295,18 +295,18 @@ pub fn measurement_sha256(raw: &RawMeasurement) -> String {
     }
     hasher.update((raw.samples.len() as u64).to_le_bytes());
     hasher.update(&samples);
-    crate::digest::lower_hex(&hasher.finalize())
+    crate::digest::Sha256::from_hasher(hasher)
 }
 
 /// SHA-256 of a correction (µm per gauge angle, exact bits), as written into each table
 /// program's provenance so an operator can tell two tables' corrections apart.
-pub fn correction_sha256(correction_um: &[f64]) -> String {
+pub fn correction_sha256(correction_um: &[f64]) -> crate::digest::Sha256 {
     use sha2::Digest as _;
     let mut hasher = sha2::Sha256::new();
     for u in correction_um {
         hasher.update(u.to_bits().to_le_bytes());
     }
-    crate::digest::lower_hex(&hasher.finalize())
+    crate::digest::Sha256::from_hasher(hasher)
 }
 
 #[cfg(test)]
@@ -343,7 +343,7 @@ mod tests {
     fn measurement_identity_is_the_content() {
         let base = measurement("M1", "P7", &[0.0, 1.25, 2.5]);
         let sha = measurement_sha256(&base);
-        assert_eq!(sha.len(), 64);
+        assert_eq!(sha.to_string().len(), 64);
         let mut elsewhere = base.clone();
         elsewhere.origin = "drop/processed/copy.csv".into();
         assert_eq!(sha, measurement_sha256(&elsewhere));

@@ -103,6 +103,24 @@ pub(crate) fn machine_of(text: String) -> Result<camloop_core::names::MachineNam
         .map_err(|e| StoreError::invalid("machine", e.to_string()))
 }
 
+/// A lobe or pin name read back, by the same rule as machines: a refusal names the column.
+pub(crate) fn feature_of(
+    column: &'static str,
+    text: String,
+) -> Result<camloop_core::names::FeatureName, StoreError> {
+    camloop_core::names::FeatureName::try_from(text)
+        .map_err(|e| StoreError::invalid(column, e.to_string()))
+}
+
+/// A digest read back (64 lower-case hex digits, as every write stores it).
+pub(crate) fn sha256_of(
+    column: &'static str,
+    text: String,
+) -> Result<camloop_core::digest::Sha256, StoreError> {
+    text.parse()
+        .map_err(|e: camloop_core::digest::Sha256Error| StoreError::invalid(column, e.to_string()))
+}
+
 pub(crate) fn check_json(field: &'static str, text: &str) -> Result<(), StoreError> {
     serde_json::from_str::<serde::de::IgnoredAny>(text)
         .map(|_| ())
@@ -124,20 +142,6 @@ pub(crate) fn check_limit(limit: u32) -> Result<i64, StoreError> {
         ));
     }
     Ok(i64::from(limit))
-}
-
-pub(crate) fn check_sha256(field: &'static str, hex: &str) -> Result<(), StoreError> {
-    if hex.len() != 64
-        || !hex
-            .bytes()
-            .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
-    {
-        return Err(StoreError::invalid(
-            field,
-            "must be 64 lower-case hex digits",
-        ));
-    }
-    Ok(())
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 
 use super::chain::{LEARNING_STATES, fetch_chain, next_link, texts_of};
 use super::codec::{
-    CODEC_PACKED, check_finite, check_json, check_limit, check_name, check_sha256, machine_of,
+    CODEC_PACKED, check_finite, check_json, check_limit, check_name, feature_of, machine_of,
     sha256_hex,
 };
 use super::measurements::{Bind, Conditions, fetch_all_dynamic};
@@ -13,6 +13,8 @@ use super::{
     LearningState, Machine, NewDressing, NewEvent, NewRecipeSnapshot, RecipeSnapshotId, Store,
     StoreError, at_col, col, with_read, with_write,
 };
+use camloop_core::digest::Sha256;
+use camloop_core::names::{FeatureName, MachineName};
 
 /// The newest learning state of (machine, lobe) when it has meaning `$3` and no row is
 /// packed against it: the one a snapshot with the same meaning replaces.
@@ -108,7 +110,7 @@ impl Store {
             )
             .bind(r.machine.as_str())
             .bind(&r.part)
-            .bind(&r.lobe)
+            .bind(r.lobe.as_str())
             .fetch_optional(&mut *tx)
             .await
             .map_err(self.db_error(OP))?;
@@ -123,7 +125,7 @@ impl Store {
             )
             .bind(r.machine.as_str())
             .bind(&r.part)
-            .bind(&r.lobe)
+            .bind(r.lobe.as_str())
             .bind(r.kind.as_str())
             .bind(&r.recipe_json)
             .bind(&sha256)
@@ -156,7 +158,8 @@ impl Store {
     }
 
     /// Lobes and pins of a machine with their newest recipe snapshot, by part then lobe.
-    pub async fn features(&self, machine: &str) -> Result<Vec<Feature>, StoreError> {
+    pub async fn features(&self, machine: &MachineName) -> Result<Vec<Feature>, StoreError> {
+        let machine = machine.as_str();
         with_read!(self, pool => {
             let rows = sqlx::query(
                 "SELECT r.id, r.part, r.lobe, r.kind, r.recipe_json, r.created_at_ms \
@@ -174,7 +177,7 @@ impl Store {
                     Ok(Feature {
                         recipe_snapshot: RecipeSnapshotId(col!(row, "id", "reading a feature")),
                         part: col!(row, "part", "reading a feature"),
-                        lobe: col!(row, "lobe", "reading a feature"),
+                        lobe: feature_of("lobe", col!(row, "lobe", "reading a feature"))?,
                         kind: FeatureKind::parse(&kind)?,
                         recipe_json: col!(row, "recipe_json", "reading a feature"),
                         created_at_ms: at_col!(row, "created_at_ms", "reading a feature"),
@@ -226,7 +229,12 @@ impl Store {
     }
 
     /// The newest `limit` dressings of a machine, newest first.
-    pub async fn dressings(&self, machine: &str, limit: u32) -> Result<Vec<Dressing>, StoreError> {
+    pub async fn dressings(
+        &self,
+        machine: &MachineName,
+        limit: u32,
+    ) -> Result<Vec<Dressing>, StoreError> {
+        let machine = machine.as_str();
         let limit = check_limit(limit)?;
         with_read!(self, pool => {
             type Row = (i64, String, i64, f64, f64, String, Option<f64>);
@@ -296,7 +304,7 @@ impl Store {
         let limit = check_limit(filter.limit)?;
         let mut c = Conditions::default();
         if let Some(machine) = &filter.machine {
-            c.push("machine = ?", [Bind::Text(machine.clone())]);
+            c.push("machine = ?", [Bind::Text(machine.to_string())]);
         }
         if let Some(since) = filter.since_ms {
             c.push("at_ms >= ?", [Bind::I64(since.as_millisecond())]);
@@ -338,8 +346,8 @@ impl Store {
     /// Every call keeps a row (see [`Store::save_learning_snapshot`] to keep fewer).
     pub async fn save_learning_state(
         &self,
-        machine: &str,
-        lobe: &str,
+        machine: &MachineName,
+        lobe: &FeatureName,
         state_json: &str,
         saved_at_ms: jiff::Timestamp,
     ) -> Result<(), StoreError> {
@@ -354,18 +362,17 @@ impl Store {
     /// plus the latest. `None` always adds a row.
     pub async fn save_learning_snapshot(
         &self,
-        machine: &str,
-        lobe: &str,
+        machine: &MachineName,
+        lobe: &FeatureName,
         state_json: &str,
-        meaning_sha256: Option<&str>,
+        meaning_sha256: Option<&Sha256>,
         saved_at_ms: jiff::Timestamp,
     ) -> Result<(), StoreError> {
+        let (machine, lobe) = (machine.as_str(), lobe.as_str());
         check_name("machine", machine)?;
         check_name("lobe", lobe)?;
         check_json("state_json", state_json)?;
-        if let Some(m) = meaning_sha256 {
-            check_sha256("meaning_sha256", m)?;
-        }
+        let meaning_sha256 = meaning_sha256.map(Sha256::to_string);
         let state_sha256 = sha256_hex(state_json.as_bytes());
         const OP: &str = "saving learning state";
         with_write!(self, pool => {
@@ -376,7 +383,7 @@ impl Store {
                 .execute(&mut *tx)
                 .await
                 .map_err(self.db_error(OP))?;
-            let replace: Option<(i64, Option<i64>)> = match meaning_sha256 {
+            let replace: Option<(i64, Option<i64>)> = match &meaning_sha256 {
                 None => None,
                 Some(meaning) => sqlx::query_as(REPLACEABLE_STATE)
                     .bind(machine)
@@ -427,11 +434,12 @@ impl Store {
     /// replayed after a crash recognises what it had already written.
     pub async fn learning_state_exists(
         &self,
-        machine: &str,
-        lobe: &str,
+        machine: &MachineName,
+        lobe: &FeatureName,
         state_json: &str,
         saved_at_ms: jiff::Timestamp,
     ) -> Result<bool, StoreError> {
+        let (machine, lobe) = (machine.as_str(), lobe.as_str());
         let state_sha256 = sha256_hex(state_json.as_bytes());
         with_write!(self, pool => {
             let found: Option<i64> = sqlx::query_scalar(
@@ -456,11 +464,12 @@ impl Store {
     /// snapshot may have been replaced by a later one with the same meaning.
     pub async fn learning_state_covered(
         &self,
-        machine: &str,
-        lobe: &str,
+        machine: &MachineName,
+        lobe: &FeatureName,
         state_json: &str,
         saved_at_ms: jiff::Timestamp,
     ) -> Result<bool, StoreError> {
+        let (machine, lobe) = (machine.as_str(), lobe.as_str());
         let state_sha256 = sha256_hex(state_json.as_bytes());
         with_write!(self, pool => {
             let newest: Option<(i64, Option<String>, Option<String>)> = sqlx::query_as(
@@ -484,9 +493,10 @@ impl Store {
     /// The newest learning-state snapshot of (machine, lobe), or `None` before the first save.
     pub async fn load_learning_state(
         &self,
-        machine: &str,
-        lobe: &str,
+        machine: &MachineName,
+        lobe: &FeatureName,
     ) -> Result<Option<LearningState>, StoreError> {
+        let (machine, lobe) = (machine.as_str(), lobe.as_str());
         with_write!(self, pool => {
             let row: Option<(i64, i64, Option<String>)> = sqlx::query_as(
                 "SELECT id, saved_at_ms, state_sha256 FROM learning_states \

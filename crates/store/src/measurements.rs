@@ -2,8 +2,8 @@
 //! raw-blob retention.
 
 use super::codec::{
-    CODEC_PACKED, CODEC_PLAIN, check_finite, check_json, check_limit, check_name, check_sha256,
-    decode_cursor, decode_units, encode_cursor, encode_units, units_to_mm,
+    CODEC_PACKED, CODEC_PLAIN, check_finite, check_json, check_limit, check_name, decode_cursor,
+    decode_units, encode_cursor, encode_units, units_to_mm,
 };
 use super::pack::{pack_profile, pack_revolutions, unpack_profile, unpack_revolutions};
 use super::pack_report::{pack_report, unpack_report};
@@ -13,6 +13,7 @@ use super::{
     with_write,
 };
 use camloop_core::measure::MASTER_PART_PREFIX;
+use camloop_core::names::{FeatureName, MachineName};
 
 const SUMMARY_COLUMNS: &str = "m.id, m.machine, m.part, m.lobe, m.received_at_ms, m.verdict, \
      m.max_profile_error_um, m.base_radius_error_um, m.phase_error_deg, m.revolutions_used, \
@@ -89,7 +90,7 @@ macro_rules! summary_from_row {
             id: MeasurementId(col!(row, "id", "reading a measurement")),
             machine: $crate::codec::machine_of(col!(row, "machine", "reading a measurement"))?,
             part: col!(row, "part", "reading a measurement"),
-            lobe: col!(row, "lobe", "reading a measurement"),
+            lobe: $crate::codec::feature_of("lobe", col!(row, "lobe", "reading a measurement"))?,
             received_at_ms: at_col!(row, "received_at_ms", "reading a measurement"),
             verdict: Verdict::parse(&verdict)?,
             max_profile_error_um: col!(row, "max_profile_error_um", "reading a measurement"),
@@ -98,7 +99,10 @@ macro_rules! summary_from_row {
             revolutions_used: to_u32("revolutions_used", revolutions_used)?,
             points_per_rev: to_u32("points_per_rev", points_per_rev)?,
             origin: col!(row, "origin", "reading a measurement"),
-            sha256: col!(row, "sha256", "reading a measurement"),
+            sha256: $crate::codec::sha256_of(
+                "sha256",
+                col!(row, "sha256", "reading a measurement"),
+            )?,
             recipe_snapshot: recipe.map(RecipeSnapshotId),
         }
     }};
@@ -217,7 +221,6 @@ fn check_measurement(m: &NewMeasurement) -> Result<(), StoreError> {
     check_name("machine", m.machine.as_str())?;
     check_name("part", &m.part)?;
     check_name("lobe", &m.lobe)?;
-    check_sha256("sha256", &m.sha256)?;
     check_json("analysis_json", &m.analysis_json)?;
     check_finite("max_profile_error_um", m.max_profile_error_um)?;
     check_finite("base_radius_error_um", m.base_radius_error_um)?;
@@ -280,7 +283,7 @@ impl Store {
             )
             .bind(m.machine.as_str())
             .bind(&m.part)
-            .bind(&m.lobe)
+            .bind(m.lobe.as_str())
             .bind(m.received_at_ms.as_millisecond())
             .bind(m.verdict.as_str())
             .bind(m.max_profile_error_um)
@@ -289,7 +292,7 @@ impl Store {
             .bind(i64::from(m.revolutions_used))
             .bind(i64::from(m.points_per_rev))
             .bind(&m.origin)
-            .bind(&m.sha256)
+            .bind(m.sha256.to_string())
             .bind(m.recipe_snapshot.map(|r| r.0))
             .fetch_optional(&mut *tx)
             .await
@@ -311,7 +314,7 @@ impl Store {
                     id
                 }
                 None => sqlx::query_scalar("SELECT id FROM measurements WHERE sha256 = $1")
-                    .bind(&m.sha256)
+                    .bind(m.sha256.to_string())
                     .fetch_one(&mut *tx)
                     .await
                     .map_err(self.db_error(OP))?,
@@ -331,9 +334,9 @@ impl Store {
         check_name("machine", &filter.machine)?;
         let limit = check_limit(filter.limit)?;
         let mut c = Conditions::default();
-        c.push("m.machine = ?", [Bind::Text(filter.machine.clone())]);
+        c.push("m.machine = ?", [Bind::Text(filter.machine.to_string())]);
         if let Some(lobe) = &filter.lobe {
-            c.push("m.lobe = ?", [Bind::Text(lobe.clone())]);
+            c.push("m.lobe = ?", [Bind::Text(lobe.to_string())]);
         }
         if let Some(since) = filter.since_ms {
             c.push("m.received_at_ms >= ?", [Bind::I64(since.as_millisecond())]);
@@ -392,7 +395,7 @@ impl Store {
     /// oldest first: what answers "did shaft 1234 pass, lobe by lobe". At most `MAX_PAGE`.
     pub async fn part_measurements(
         &self,
-        machine: &str,
+        machine: &MachineName,
         part: &str,
     ) -> Result<Vec<MeasurementSummary>, StoreError> {
         check_name("machine", machine)?;
@@ -403,7 +406,7 @@ impl Store {
         );
         with_read!(self, pool => {
             let rows = sqlx::query(&sql)
-                .bind(machine)
+                .bind(machine.as_str())
                 .bind(part)
                 .fetch_all(pool)
                 .await
@@ -470,8 +473,8 @@ impl Store {
     /// at most `limit`: the window of a capability study or a control chart.
     pub async fn feature_measurements(
         &self,
-        machine: &str,
-        lobe: &str,
+        machine: &MachineName,
+        lobe: &FeatureName,
         (since_ms, until_ms): (jiff::Timestamp, jiff::Timestamp),
         before: Option<MeasurementId>,
         limit: u32,
@@ -487,8 +490,8 @@ impl Store {
         );
         with_read!(self, pool => {
             let rows = sqlx::query(&sql)
-                .bind(machine)
-                .bind(lobe)
+                .bind(machine.as_str())
+                .bind(lobe.as_str())
                 .bind(since_ms.as_millisecond())
                 .bind(until_ms.as_millisecond())
                 .bind(before.map_or(i64::MAX, |b| b.0))

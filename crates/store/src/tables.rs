@@ -8,6 +8,7 @@ use super::{
     NewTableVersion, Store, StoreError, TableVersion, VersionStatus, at_col, col, with_read,
     with_write,
 };
+use camloop_core::names::{FeatureName, MachineName};
 
 const SELECT_VERSION: &str = "SELECT t.id, t.machine, t.lobe, t.version, t.parent_version, \
      t.table_number, t.sha256, t.reason, \
@@ -26,7 +27,7 @@ macro_rules! version_from_row {
         let mut texts = fetch_chain!($store, $pool, TABLE_VERSIONS, id).into_iter();
         v.program_text = texts.next().unwrap_or_default();
         v.learning_params_json = texts.next().unwrap_or_default();
-        if sha256_hex(v.program_text.as_bytes()) != v.sha256 {
+        if camloop_core::digest::Sha256::of(v.program_text.as_bytes()) != v.sha256 {
             return Err(StoreError::invalid(
                 "program_text",
                 format!(
@@ -47,7 +48,7 @@ macro_rules! version_summary {
         let table_number: i64 = col!(row, "table_number", "reading a table version");
         TableVersion {
             machine: $crate::codec::machine_of(col!(row, "machine", "reading a table version"))?,
-            lobe: col!(row, "lobe", "reading a table version"),
+            lobe: $crate::codec::feature_of("lobe", col!(row, "lobe", "reading a table version"))?,
             version: col!(row, "version", "reading a table version"),
             parent_version: col!(row, "parent_version", "reading a table version"),
             table_number: u32::try_from(table_number).map_err(|_| {
@@ -57,7 +58,10 @@ macro_rules! version_summary {
                 )
             })?,
             program_text: String::new(),
-            sha256: col!(row, "sha256", "reading a table version"),
+            sha256: $crate::codec::sha256_of(
+                "sha256",
+                col!(row, "sha256", "reading a table version"),
+            )?,
             learning_params_json: String::new(),
             reason: col!(row, "reason", "reading a table version"),
             created_at_ms: at_col!(row, "created_at_ms", "reading a table version"),
@@ -80,7 +84,7 @@ macro_rules! require_parent {
                 "SELECT id FROM table_versions WHERE machine = $1 AND lobe = $2 AND version = $3",
             )
             .bind($t.machine.as_str())
-            .bind(&$t.lobe)
+            .bind($t.lobe.as_str())
             .bind(parent)
             .fetch_optional(&mut *$tx)
             .await
@@ -120,7 +124,7 @@ impl Store {
             .await
             .map_err(self.db_error(OP))?;
             require_parent!(self, tx, t, OP);
-            let (base_id, depth, base) = next_link!(self, tx, TABLE_VERSIONS, t.machine.as_str(), &t.lobe);
+            let (base_id, depth, base) = next_link!(self, tx, TABLE_VERSIONS, t.machine.as_str(), t.lobe.as_str());
             let program = pack_text("program_packed", &t.program_text, &base[0])?;
             let learning = pack_text("learning_packed", &t.learning_params_json, &base[1])?;
             let (id, version): (i64, i64) = sqlx::query_as(
@@ -133,7 +137,7 @@ impl Store {
                  RETURNING id, version",
             )
             .bind(t.machine.as_str())
-            .bind(&t.lobe)
+            .bind(t.lobe.as_str())
             .bind(t.parent_version)
             .bind(i64::from(t.table_number))
             .bind(&sha256)
@@ -149,7 +153,7 @@ impl Store {
             .await
             .map_err(self.db_error(OP))?;
             self.chains.put(
-                (TABLE_VERSIONS.table, t.machine.as_str(), &t.lobe),
+                (TABLE_VERSIONS.table, t.machine.as_str(), t.lobe.as_str()),
                 id,
                 vec![program, learning],
                 vec![t.program_text.clone(), t.learning_params_json.clone()],
@@ -173,13 +177,14 @@ impl Store {
     /// Appends a status for a stored table version (e.g. waiting → pushed), as of `at_ms`.
     pub async fn set_table_status(
         &self,
-        machine: &str,
-        lobe: &str,
+        machine: &MachineName,
+        lobe: &FeatureName,
         version: i64,
         status: &VersionStatus,
         at_ms: jiff::Timestamp,
     ) -> Result<(), StoreError> {
         let (status, why) = status.column()?;
+        let (machine, lobe) = (machine.as_str(), lobe.as_str());
         with_write!(self, pool => {
             let done = sqlx::query(
                 "INSERT INTO table_version_status (table_version_id, status, why, at_ms) \
@@ -209,11 +214,12 @@ impl Store {
     /// written.
     pub async fn table_version_exists(
         &self,
-        machine: &str,
-        lobe: &str,
+        machine: &MachineName,
+        lobe: &FeatureName,
         created_at_ms: jiff::Timestamp,
         program_text: &str,
     ) -> Result<bool, StoreError> {
+        let (machine, lobe) = (machine.as_str(), lobe.as_str());
         let sha256 = sha256_hex(program_text.as_bytes());
         with_write!(self, pool => {
             let found: Option<i64> = sqlx::query_scalar(
@@ -236,10 +242,11 @@ impl Store {
     /// table record, and must never wait behind history readers.
     pub async fn table_version_status(
         &self,
-        machine: &str,
-        lobe: &str,
+        machine: &MachineName,
+        lobe: &FeatureName,
         version: i64,
     ) -> Result<Option<VersionStatus>, StoreError> {
+        let (machine, lobe) = (machine.as_str(), lobe.as_str());
         with_write!(self, pool => {
             let status: Option<(String, String, i64)> = sqlx::query_as(
                 "SELECT s.status, s.why, s.at_ms FROM table_versions t JOIN table_version_status s \
@@ -261,8 +268,8 @@ impl Store {
     /// The highest-numbered table version of (machine, lobe), whatever its status.
     pub async fn latest_table_version(
         &self,
-        machine: &str,
-        lobe: &str,
+        machine: &MachineName,
+        lobe: &FeatureName,
     ) -> Result<Option<TableVersion>, StoreError> {
         Ok(self
             .table_versions(machine, lobe, 1)
@@ -274,10 +281,11 @@ impl Store {
     /// The newest `limit` table versions of (machine, lobe), highest version first.
     pub async fn table_versions(
         &self,
-        machine: &str,
-        lobe: &str,
+        machine: &MachineName,
+        lobe: &FeatureName,
         limit: u32,
     ) -> Result<Vec<TableVersion>, StoreError> {
+        let (machine, lobe) = (machine.as_str(), lobe.as_str());
         let limit = check_limit(limit)?;
         let sql = format!("{SELECT_VERSION} ORDER BY t.version DESC LIMIT $3");
         with_read!(self, pool => {
@@ -299,10 +307,11 @@ impl Store {
     /// One table version, or `None`.
     pub async fn table_version(
         &self,
-        machine: &str,
-        lobe: &str,
+        machine: &MachineName,
+        lobe: &FeatureName,
         version: i64,
     ) -> Result<Option<TableVersion>, StoreError> {
+        let (machine, lobe) = (machine.as_str(), lobe.as_str());
         let sql = format!("{SELECT_VERSION} AND t.version = $3");
         with_read!(self, pool => {
             let row = sqlx::query(&sql)

@@ -2,7 +2,8 @@
 //! and the filters of the history queries. Times are instants ([`Timestamp`]; kept as unix
 //! milliseconds in the database and named after those columns), lifts mm, errors µm.
 
-use camloop_core::names::MachineName;
+use camloop_core::digest::Sha256;
+use camloop_core::names::{FeatureName, MachineName};
 use jiff::Timestamp;
 use serde::{Deserialize, Serialize};
 
@@ -147,7 +148,7 @@ pub struct NewRecipeSnapshot {
     pub machine: MachineName,
     pub part: String,
     /// Lobe or pin name within the part.
-    pub lobe: String,
+    pub lobe: FeatureName,
     pub kind: FeatureKind,
     /// Must parse as JSON; kept verbatim.
     pub recipe_json: String,
@@ -158,7 +159,7 @@ pub struct NewRecipeSnapshot {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Feature {
     pub part: String,
-    pub lobe: String,
+    pub lobe: FeatureName,
     pub kind: FeatureKind,
     pub recipe_snapshot: RecipeSnapshotId,
     pub recipe_json: String,
@@ -183,7 +184,7 @@ pub struct Machine {
 pub struct NewMeasurement {
     pub machine: MachineName,
     pub part: String,
-    pub lobe: String,
+    pub lobe: FeatureName,
     #[serde(with = "crate::unix_ms")]
     pub received_at_ms: Timestamp,
     pub verdict: Verdict,
@@ -195,9 +196,9 @@ pub struct NewMeasurement {
     pub points_per_rev: u32,
     /// Where the measurement came from ("can0", a file path, …).
     pub origin: String,
-    /// SHA-256 of the measurement as received, 64 lower-case hex digits. Inserting the same
-    /// hash again returns the stored id and writes nothing.
-    pub sha256: String,
+    /// SHA-256 of the measurement as received (64 lower-case hex digits as text). Inserting
+    /// the same hash again returns the stored id and writes nothing.
+    pub sha256: Sha256,
     /// Journal records never carry one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub recipe_snapshot: Option<RecipeSnapshotId>,
@@ -215,7 +216,7 @@ pub struct MeasurementSummary {
     pub id: MeasurementId,
     pub machine: MachineName,
     pub part: String,
-    pub lobe: String,
+    pub lobe: FeatureName,
     pub received_at_ms: Timestamp,
     pub verdict: Verdict,
     pub max_profile_error_um: f64,
@@ -224,7 +225,7 @@ pub struct MeasurementSummary {
     pub revolutions_used: u32,
     pub points_per_rev: u32,
     pub origin: String,
-    pub sha256: String,
+    pub sha256: Sha256,
     pub recipe_snapshot: Option<RecipeSnapshotId>,
 }
 
@@ -239,10 +240,10 @@ pub struct MeasurementDetail {
 }
 
 /// Which measurements the history query lists, newest first.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct HistoryFilter {
-    pub machine: String,
-    pub lobe: Option<String>,
+    pub machine: MachineName,
+    pub lobe: Option<FeatureName>,
     /// Inclusive lower bound on `received_at_ms`.
     pub since_ms: Option<Timestamp>,
     /// Exclusive upper bound on `received_at_ms`.
@@ -254,6 +255,23 @@ pub struct HistoryFilter {
     pub cursor: Option<String>,
     /// Production parts, master runs (part ids `MASTER…`), or both.
     pub masters: MasterRuns,
+}
+
+impl HistoryFilter {
+    /// The first `limit` measurements of `machine`, every lobe, time and verdict, masters
+    /// included: the base the callers narrow with struct update syntax.
+    pub fn new(machine: MachineName, limit: u32) -> Self {
+        Self {
+            machine,
+            lobe: None,
+            since_ms: None,
+            until_ms: None,
+            verdict: None,
+            limit,
+            cursor: None,
+            masters: MasterRuns::Included,
+        }
+    }
 }
 
 /// Which kind of part a history lists: master runs are a gauge study's, never production
@@ -284,7 +302,7 @@ pub struct Page<T> {
 #[derive(Debug, Clone, PartialEq)]
 pub struct NewTableVersion {
     pub machine: MachineName,
-    pub lobe: String,
+    pub lobe: FeatureName,
     /// Its number: the share's version (camloop keeps one version counter, the share's), or
     /// `None` for one more than the highest stored.
     pub version: Option<i64>,
@@ -307,14 +325,14 @@ pub struct NewTableVersion {
 #[derive(Debug, Clone, PartialEq)]
 pub struct TableVersion {
     pub machine: MachineName,
-    pub lobe: String,
+    pub lobe: FeatureName,
     /// 1, 2, 3, … per (machine, lobe).
     pub version: i64,
     pub parent_version: Option<i64>,
     pub table_number: u32,
     pub program_text: String,
-    /// SHA-256 of `program_text` (UTF-8), lower-case hex, computed by the store.
-    pub sha256: String,
+    /// SHA-256 of `program_text` (UTF-8), computed by the store.
+    pub sha256: Sha256,
     pub learning_params_json: String,
     pub reason: String,
     pub created_at_ms: Timestamp,
@@ -372,7 +390,7 @@ pub struct Event {
 /// Which events to list, newest first.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct EventFilter {
-    pub machine: Option<String>,
+    pub machine: Option<MachineName>,
     /// Inclusive.
     pub since_ms: Option<Timestamp>,
     /// Exclusive.

@@ -32,7 +32,7 @@ pub struct User {
 pub struct NewToken {
     pub user: UserId,
     pub label: String,
-    pub sha256: String,
+    pub sha256: camloop_core::digest::Sha256,
     pub role: Role,
     pub created_at_ms: Timestamp,
     pub expires_at_ms: Timestamp,
@@ -213,7 +213,7 @@ impl Store {
              expires_at_ms) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
             t.user.0,
             &t.label,
-            &t.sha256,
+            t.sha256.to_string(),
             t.role.as_str(),
             t.created_at_ms.as_millisecond(),
             t.expires_at_ms.as_millisecond(),
@@ -222,7 +222,10 @@ impl Store {
     }
 
     /// The token whose digest is `sha256`, with its user.
-    pub async fn token_grant(&self, sha256: &str) -> Result<Option<TokenGrant>, StoreError> {
+    pub async fn token_grant(
+        &self,
+        sha256: &camloop_core::digest::Sha256,
+    ) -> Result<Option<TokenGrant>, StoreError> {
         const OP: &str = "checking a token";
         with_read!(self, pool => {
             let row: Option<GrantRow> =
@@ -231,7 +234,7 @@ impl Store {
                      u.disabled_at_ms FROM api_tokens t JOIN users u ON u.id = t.user_id \
                      WHERE t.token_sha256 = $1",
                 )
-                .bind(sha256)
+                .bind(sha256.to_string())
                 .fetch_optional(pool)
                 .await
                 .map_err(self.db_error(OP))?;

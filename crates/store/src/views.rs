@@ -9,6 +9,7 @@ use super::unix_ms::instant;
 use super::{
     EventId, LearningState, Store, StoreError, VersionStatus, at_col, col, with_read, with_write,
 };
+use camloop_core::names::{FeatureName, MachineName};
 
 /// An event's acknowledgement.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -45,11 +46,12 @@ impl Store {
     /// changes nothing and says so.
     pub async fn acknowledge_event(
         &self,
-        machine: &str,
+        machine: &MachineName,
         id: EventId,
         at_ms: Timestamp,
         source: &str,
     ) -> Result<AckOutcome, StoreError> {
+        let machine = machine.as_str();
         const OP: &str = "acknowledging an event";
         with_write!(self, pool => {
             let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
@@ -86,10 +88,11 @@ impl Store {
     /// `limit`.
     pub async fn event_acks(
         &self,
-        machine: &str,
+        machine: &MachineName,
         from: EventId,
         limit: u32,
     ) -> Result<Vec<EventAck>, StoreError> {
+        let machine = machine.as_str();
         let limit = check_limit(limit)?;
         with_read!(self, pool => {
             let rows = sqlx::query(
@@ -118,9 +121,10 @@ impl Store {
     /// The newest learning-state snapshot of (machine, lobe), read through the readers' gate.
     pub async fn learning_state_for_view(
         &self,
-        machine: &str,
-        lobe: &str,
+        machine: &MachineName,
+        lobe: &FeatureName,
     ) -> Result<Option<LearningState>, StoreError> {
+        let (machine, lobe) = (machine.as_str(), lobe.as_str());
         with_read!(self, pool => {
             let row: Option<(String, i64)> = sqlx::query_as(
                 "SELECT state_json, saved_at_ms FROM learning_states \
@@ -143,10 +147,11 @@ impl Store {
     /// first: the overview and the trend read these, never the program texts.
     pub async fn table_version_heads(
         &self,
-        machine: &str,
-        lobe: &str,
+        machine: &MachineName,
+        lobe: &FeatureName,
         limit: u32,
     ) -> Result<Vec<TableVersionHead>, StoreError> {
+        let (machine, lobe) = (machine.as_str(), lobe.as_str());
         let limit = check_limit(limit)?;
         with_read!(self, pool => {
             let rows = sqlx::query(

@@ -5,9 +5,9 @@
 use super::AppState;
 pub use super::access::Authorized;
 pub use super::code::ApiCode;
-use crate::names::{MachineName, check_plain_name};
+use crate::names::{FeatureName, MachineName};
 use axum::Json;
-use axum::extract::{FromRequest, FromRequestParts, Path, Query, Request};
+use axum::extract::{FromRequest, FromRequestParts, Path, Query, RawPathParams, Request};
 use axum::http::StatusCode;
 use axum::http::request::Parts;
 use axum::response::{IntoResponse, Response};
@@ -86,8 +86,20 @@ pub fn machine_name(name: &str) -> Result<MachineName, ApiError> {
 }
 
 /// A lobe or pin name from a path or query: the same rule as machine names.
-pub(crate) fn feature_name(name: &str) -> Result<(), ApiError> {
-    check_plain_name(name).map_err(|e| ApiError::new(ApiCode::InvalidName, format!("lobe: {e}")))
+pub(crate) fn feature_name(name: &str) -> Result<FeatureName, ApiError> {
+    FeatureName::new(name).map_err(|e| ApiError::new(ApiCode::InvalidName, format!("lobe: {e}")))
+}
+
+/// The first name among a request's path or query parameters that fails the rule, as the
+/// API's `invalid_name` error. The typed extractors refuse such a request already (names
+/// deserialise as [`MachineName`] and [`FeatureName`]); this says which name, and why,
+/// with the code clients match on, rather than a generic path or query error.
+fn name_refusal<'a>(params: impl IntoIterator<Item = (&'a str, &'a str)>) -> Option<ApiError> {
+    params.into_iter().find_map(|(key, value)| match key {
+        "machine" => machine_name(value).err(),
+        "lobe" | "feature" => feature_name(value).err(),
+        _ => None,
+    })
 }
 
 /// axum's JSON body extractor, its rejections as the API's `{code, message}` errors. The body
@@ -140,12 +152,18 @@ impl<S: Send + Sync, T: serde::de::DeserializeOwned> FromRequestParts<S> for Api
     type Rejection = ApiError;
 
     async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, ApiError> {
-        Query::<T>::from_request_parts(parts, state)
-            .await
-            .map(|Query(v)| ApiQuery(v))
-            .map_err(|r| {
-                ApiError::rejected(r.status(), ApiCode::InvalidQuery, clip(&r.body_text()))
-            })
+        match Query::<T>::from_request_parts(parts, state).await {
+            Ok(Query(v)) => Ok(ApiQuery(v)),
+            Err(r) => {
+                let pairs = Query::<Vec<(String, String)>>::try_from_uri(&parts.uri)
+                    .map(|Query(pairs)| pairs)
+                    .unwrap_or_default();
+                let named = pairs.iter().map(|(k, v)| (k.as_str(), v.as_str()));
+                Err(name_refusal(named).unwrap_or_else(|| {
+                    ApiError::rejected(r.status(), ApiCode::InvalidQuery, clip(&r.body_text()))
+                }))
+            }
+        }
     }
 }
 
@@ -156,10 +174,16 @@ impl<S: Send + Sync, T: serde::de::DeserializeOwned + Send> FromRequestParts<S> 
     type Rejection = ApiError;
 
     async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, ApiError> {
-        Path::<T>::from_request_parts(parts, state)
-            .await
-            .map(|Path(v)| ApiPath(v))
-            .map_err(|r| ApiError::rejected(r.status(), ApiCode::InvalidPath, clip(&r.body_text())))
+        match Path::<T>::from_request_parts(parts, state).await {
+            Ok(Path(v)) => Ok(ApiPath(v)),
+            Err(r) => {
+                let raw = RawPathParams::from_request_parts(parts, state).await.ok();
+                let named = raw.iter().flat_map(|p| p.iter());
+                Err(name_refusal(named).unwrap_or_else(|| {
+                    ApiError::rejected(r.status(), ApiCode::InvalidPath, clip(&r.body_text()))
+                }))
+            }
+        }
     }
 }
 

@@ -8,8 +8,9 @@
 //! machine's last wheel dressing) or `recipe` (since the feature's recipe last changed).
 
 use super::AppState;
-use super::api::{ApiError, ApiPath, ApiQuery, feature_name, machine_name};
+use super::api::{ApiError, ApiPath, ApiQuery};
 use super::routes::store;
+use crate::names::{FeatureName, MachineName};
 use crate::quality::{self, CharacteristicStudy, Window};
 use crate::service::http::ApiCode;
 use axum::Json;
@@ -30,8 +31,10 @@ pub(super) struct CapabilityQuery {
 
 #[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct CapabilityReply {
-    machine: String,
-    feature: String,
+    #[schema(value_type = String)]
+    machine: MachineName,
+    #[schema(value_type = String)]
+    feature: FeatureName,
     /// The window as asked.
     window: String,
     parts: usize,
@@ -81,14 +84,15 @@ pub(crate) fn parse_window(text: &str, now: jiff::Timestamp) -> Result<Window, A
 #[utoipa::path(get, path = "/api/v1/machines/{machine}/features/{feature}/capability", tag = "quality", params(("machine" = String, Path, description = "machine name"), ("feature" = String, Path, description = "lobe or pin name"), CapabilityQuery), responses((status = 200, description = "process capability of every characteristic of the feature", body = CapabilityReply)))]
 pub(super) async fn capability(
     State(state): State<AppState>,
-    ApiPath((machine, feature)): ApiPath<(String, String)>,
+    ApiPath((machine, feature)): ApiPath<(MachineName, FeatureName)>,
     ApiQuery(q): ApiQuery<CapabilityQuery>,
 ) -> Result<Json<CapabilityReply>, ApiError> {
-    machine_name(&machine)?;
-    feature_name(&feature)?;
     let window_text = q.window.unwrap_or_else(|| "parts:125".into());
     let window = parse_window(&window_text, crate::clock::now())?;
-    let Some(sheet) = state.dashboard.get(&(machine.clone(), feature.clone())) else {
+    let Some(sheet) = state
+        .dashboard
+        .get(&(machine.to_string(), feature.to_string()))
+    else {
         return Err(ApiError::new(
             ApiCode::FeatureNotFound,
             format!(

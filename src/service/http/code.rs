@@ -172,7 +172,7 @@ mod tests {
         let reason = String::from("x");
         let errors = [
             CommandError::VersionNotFound {
-                lobe: reason.clone(),
+                lobe: "x".parse().unwrap(),
                 version: 3,
             },
             CommandError::StoreUnavailable {

@@ -35,6 +35,7 @@ mod writes;
 
 pub use access::{AuthState, Principal, ROUTES, RouteRule};
 pub use api::{ApiError, ApiJson, ApiPath, ApiQuery, Authorized};
+pub(crate) use api::{feature_name, machine_name};
 pub use audit::record as record_audit;
 pub use code::ApiCode;
 pub use dashboard::{FeatureSheet, FeatureSheets, Stopping};
@@ -51,7 +52,7 @@ pub(crate) use writes::{RollbackBody, rollback as rollback_write};
 
 use super::machine::StoreHandle;
 use super::metrics::Metrics;
-use crate::names::MachineName;
+use crate::names::{FeatureName, MachineName};
 use axum::Router;
 use axum::routing::{get, post};
 use std::collections::BTreeMap;
@@ -64,7 +65,7 @@ pub struct AppState {
     pub metrics: Arc<Metrics>,
     /// Every configured machine with the names of the lobes or pins it grinds, in grinding
     /// order.
-    pub machines: Arc<BTreeMap<MachineName, Vec<String>>>,
+    pub machines: Arc<BTreeMap<MachineName, Vec<FeatureName>>>,
     /// Per machine (by name), the channel to its loop for write requests.
     /// The machines running on this instance (in a cluster, those it holds now).
     pub commands: crate::service::runner::CommandRoutes,
@@ -88,7 +89,7 @@ pub enum Command {
     /// Deliver stored table `version` of `lobe` again, as a new version under the table
     /// number not in use, and restore the correction it was made from.
     Rollback {
-        lobe: String,
+        lobe: FeatureName,
         version: i64,
         reply: Reply,
     },
@@ -103,14 +104,14 @@ pub enum Command {
     },
     /// Freeze the learning of `lobe` with this reason, or (`None`) let it learn again.
     Freeze {
-        lobe: String,
+        lobe: FeatureName,
         frozen: Option<String>,
         reply: Reply,
     },
     /// Roll several features back together (a whole part: one version of each); every
     /// version is checked before any is pushed.
     RollbackPart {
-        versions: Vec<(String, u64)>,
+        versions: Vec<(FeatureName, u64)>,
         reply: Reply,
     },
 }
@@ -130,7 +131,7 @@ pub struct CommandDone {
 pub enum CommandError {
     /// The version asked for does not exist for the lobe: 404 `table_version_not_found`.
     #[error("version {version} of {lobe} not found")]
-    VersionNotFound { lobe: String, version: i64 },
+    VersionNotFound { lobe: FeatureName, version: i64 },
     /// The history database is needed and not reachable: 503 `store_unavailable`.
     #[error("the history database is not reachable: {reason}")]
     StoreUnavailable { reason: String },

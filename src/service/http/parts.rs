@@ -3,8 +3,9 @@
 //! (or none), and the part's verdict.
 
 use super::AppState;
-use super::api::{ApiError, ApiPath, machine_name};
+use super::api::{ApiError, ApiPath};
 use super::routes::{MeasurementItem, store};
+use crate::names::{FeatureName, MachineName};
 use crate::service::http::ApiCode;
 use axum::Json;
 use axum::extract::State;
@@ -13,18 +14,21 @@ use serde::Serialize;
 /// The reply: the part's verdict and its features in grinding order.
 #[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct PartReply {
-    machine: String,
+    #[schema(value_type = String)]
+    machine: MachineName,
     part: String,
     /// Every feature the machine grinds was measured on this part and passed its bands.
     pass: bool,
     /// Features of the machine with no measurement of this part (not yet gauged, or lost).
-    missing: Vec<String>,
+    #[schema(value_type = Vec<String>)]
+    missing: Vec<FeatureName>,
     features: Vec<PartFeature>,
 }
 
 #[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct PartFeature {
-    lobe: String,
+    #[schema(value_type = String)]
+    lobe: FeatureName,
     /// The newest measurement of this feature on this part, if any.
     measurement: Option<MeasurementItem>,
     /// Measurements of it on this part (more than one: it was gauged again).
@@ -35,9 +39,8 @@ pub(super) struct PartFeature {
 #[utoipa::path(get, path = "/api/v1/machines/{machine}/parts/{part}", tag = "history", params(("machine" = String, Path, description = "machine name"), ("part" = String, Path, description = "part id")), responses((status = 200, description = "the part, feature by feature, and whether it passed", body = PartReply)))]
 pub(super) async fn part(
     State(state): State<AppState>,
-    ApiPath((machine, part)): ApiPath<(String, String)>,
+    ApiPath((machine, part)): ApiPath<(MachineName, String)>,
 ) -> Result<Json<PartReply>, ApiError> {
-    let name = machine_name(&machine)?;
     if !crate::names::valid_part_ident(&part) {
         return Err(ApiError::new(
             ApiCode::InvalidName,
@@ -52,7 +55,7 @@ pub(super) async fn part(
         .part_measurements(&machine, &part)
         .await?;
     // Configured features first, in grinding order; then any the history alone knows.
-    let mut lobes: Vec<String> = state.machines.get(&name).cloned().unwrap_or_default();
+    let mut lobes: Vec<FeatureName> = state.machines.get(&machine).cloned().unwrap_or_default();
     for r in &rows {
         if !lobes.contains(&r.lobe) {
             lobes.push(r.lobe.clone());
@@ -69,7 +72,7 @@ pub(super) async fn part(
             }
         })
         .collect();
-    let missing: Vec<String> = features
+    let missing: Vec<FeatureName> = features
         .iter()
         .filter(|f| f.measurement.is_none())
         .map(|f| f.lobe.clone())

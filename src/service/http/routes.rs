@@ -2,7 +2,9 @@
 //! Each reply is a typed record serialised as JSON; errors are `{code, message}`.
 
 use super::AppState;
-use super::api::{ApiError, ApiPath, ApiQuery, feature_name, machine_name};
+use super::api::{ApiError, ApiPath, ApiQuery};
+use crate::core::digest::Sha256;
+use crate::names::{FeatureName, MachineName};
 use crate::service::http::ApiCode;
 use crate::store::{EventFilter, HistoryFilter, MasterRuns, MeasurementId, Store, Verdict};
 use axum::Json;
@@ -59,7 +61,8 @@ pub struct MachinesReply {
 
 #[derive(Debug, Serialize, utoipa::ToSchema)]
 pub struct MachineInfo {
-    pub name: String,
+    #[schema(value_type = String)]
+    pub name: MachineName,
     /// In this service's configuration (else only in the history).
     pub configured: bool,
     /// When the store first saw it; `None` before its first record.
@@ -69,7 +72,8 @@ pub struct MachineInfo {
 
 #[derive(Debug, Serialize, utoipa::ToSchema)]
 pub struct LobeInfo {
-    pub lobe: String,
+    #[schema(value_type = String)]
+    pub lobe: FeatureName,
     /// The part (recipe) name, once the store has a record of it.
     pub part: Option<String>,
     /// "lobe" or "pin", once the store has a record of it.
@@ -93,7 +97,8 @@ pub(super) struct ClusterReply {
 
 #[derive(Debug, Serialize, utoipa::ToSchema)]
 struct LeaseInfo {
-    machine: String,
+    #[schema(value_type = String)]
+    machine: MachineName,
     owner: String,
     /// The fencing epoch: raised at every change of owner.
     epoch: u64,
@@ -124,7 +129,7 @@ pub(super) async fn cluster(State(state): State<AppState>) -> Result<Json<Cluste
             here: here(r),
             machine: r.machine.clone(),
             owner: r.owner.clone(),
-            epoch: r.epoch,
+            epoch: r.epoch.0,
             live: r.live,
         })
         .collect();
@@ -146,7 +151,7 @@ pub(super) async fn machines(
         .machines
         .iter()
         .map(|(name, lobes)| MachineInfo {
-            name: name.to_string(),
+            name: name.clone(),
             configured: true,
             first_seen_ms: None,
             lobes: lobes
@@ -158,7 +163,7 @@ pub(super) async fn machines(
                     configured: true,
                     status: Some(
                         statuses
-                            .get(&(name.to_string(), l.clone()))
+                            .get(&(name.to_string(), l.to_string()))
                             .cloned()
                             .unwrap_or_default(),
                     ),
@@ -167,11 +172,11 @@ pub(super) async fn machines(
         })
         .collect();
     for m in store.machines().await? {
-        let i = match out.iter().position(|o| o.name == *m.name) {
+        let i = match out.iter().position(|o| o.name == m.name) {
             Some(i) => i,
             None => {
                 out.push(MachineInfo {
-                    name: m.name.to_string(),
+                    name: m.name.clone(),
                     configured: false,
                     first_seen_ms: None,
                     lobes: Vec::new(),
@@ -215,7 +220,8 @@ pub(super) async fn machines(
 #[into_params(parameter_in = Query)]
 pub(super) struct HistoryQuery {
     /// Only this lobe or pin.
-    lobe: Option<String>,
+    #[param(value_type = Option<String>)]
+    lobe: Option<FeatureName>,
     /// From this time, Unix ms.
     #[serde(default, with = "crate::clock::unix_ms::option")]
     #[param(value_type = Option<i64>)]
@@ -249,9 +255,11 @@ pub(super) struct HistoryPage {
 #[derive(Debug, Serialize, Clone, utoipa::ToSchema)]
 pub(super) struct MeasurementItem {
     id: i64,
-    machine: String,
+    #[schema(value_type = String)]
+    machine: MachineName,
     part: String,
-    lobe: String,
+    #[schema(value_type = String)]
+    lobe: FeatureName,
     received_at_ms: i64,
     verdict: &'static str,
     max_profile_error_um: f64,
@@ -267,7 +275,7 @@ impl From<crate::store::MeasurementSummary> for MeasurementItem {
         Self {
             id: m.id.0,
             verdict: m.verdict.as_str(),
-            machine: m.machine.into(),
+            machine: m.machine,
             part: m.part,
             lobe: m.lobe,
             received_at_ms: m.received_at_ms.as_millisecond(),
@@ -286,13 +294,9 @@ impl From<crate::store::MeasurementSummary> for MeasurementItem {
 #[utoipa::path(get, path = "/api/v1/machines/{machine}/measurements", tag = "history", params(("machine" = String, Path, description = "machine name"), HistoryQuery), responses((status = 200, description = "measurements, newest first, keyset-paged", body = HistoryPage)))]
 pub(super) async fn history(
     State(state): State<AppState>,
-    ApiPath(machine): ApiPath<String>,
+    ApiPath(machine): ApiPath<MachineName>,
     ApiQuery(q): ApiQuery<HistoryQuery>,
 ) -> Result<Json<HistoryPage>, ApiError> {
-    machine_name(&machine)?;
-    if let Some(l) = &q.lobe {
-        feature_name(l)?;
-    }
     if let (Some(a), Some(b)) = (q.since_ms, q.until_ms)
         && a >= b
     {
@@ -329,8 +333,10 @@ pub(super) async fn history(
 #[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct MeasurementReply {
     id: i64,
-    machine: String,
-    lobe: String,
+    #[schema(value_type = String)]
+    machine: MachineName,
+    #[schema(value_type = String)]
+    lobe: FeatureName,
     received_at_ms: i64,
     averaged_lift_mm: Vec<f64>,
     raw_kept: bool,
@@ -357,7 +363,7 @@ pub(super) async fn measurement(
     let analysis = serde_json::from_str(&detail.analysis_json).unwrap_or_default();
     Ok(Json(MeasurementReply {
         id,
-        machine: detail.summary.machine.into(),
+        machine: detail.summary.machine,
         lobe: detail.summary.lobe,
         received_at_ms: detail.summary.received_at_ms.as_millisecond(),
         averaged_lift_mm: detail.averaged_lift_mm,
@@ -380,7 +386,8 @@ pub(super) struct TableItem {
     version: i64,
     parent_version: Option<i64>,
     table_number: u32,
-    sha256: String,
+    #[schema(value_type = String)]
+    sha256: Sha256,
     reason: String,
     status: &'static str,
     status_why: String,
@@ -391,11 +398,9 @@ pub(super) struct TableItem {
 #[utoipa::path(get, path = "/api/v1/machines/{machine}/lobes/{lobe}/tables", tag = "tables", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), LimitQuery), responses((status = 200, description = "table versions, newest first", body = Items<TableItem>)))]
 pub(super) async fn tables(
     State(state): State<AppState>,
-    ApiPath((machine, lobe)): ApiPath<(String, String)>,
+    ApiPath((machine, lobe)): ApiPath<(MachineName, FeatureName)>,
     ApiQuery(q): ApiQuery<LimitQuery>,
 ) -> Result<Json<Items<TableItem>>, ApiError> {
-    machine_name(&machine)?;
-    feature_name(&lobe)?;
     let versions = store(&state)
         .await?
         .table_versions(&machine, &lobe, q.limit.unwrap_or(50))
@@ -420,10 +425,8 @@ pub(super) async fn tables(
 #[utoipa::path(get, path = "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/program", tag = "tables", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), ("version" = i64, Path, description = "table version")), responses((status = 200, description = "the program text of the version", content_type = "text/plain")))]
 pub(super) async fn program(
     State(state): State<AppState>,
-    ApiPath((machine, lobe, version)): ApiPath<(String, String, i64)>,
+    ApiPath((machine, lobe, version)): ApiPath<(MachineName, FeatureName, i64)>,
 ) -> Result<Response, ApiError> {
-    machine_name(&machine)?;
-    feature_name(&lobe)?;
     let t = store(&state)
         .await?
         .table_version(&machine, &lobe, version)
@@ -466,10 +469,8 @@ pub(super) struct DiffPoint {
 #[utoipa::path(get, path = "/api/v1/machines/{machine}/lobes/{lobe}/tables/{version}/diff", tag = "tables", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), ("version" = i64, Path, description = "table version")), responses((status = 200, description = "X of the version minus X of its parent at every table point, µm", body = DiffReply)))]
 pub(super) async fn diff(
     State(state): State<AppState>,
-    ApiPath((machine, lobe, version)): ApiPath<(String, String, i64)>,
+    ApiPath((machine, lobe, version)): ApiPath<(MachineName, FeatureName, i64)>,
 ) -> Result<Json<DiffReply>, ApiError> {
-    machine_name(&machine)?;
-    feature_name(&lobe)?;
     let store = store(&state).await?;
     let newer = store
         .table_version(&machine, &lobe, version)
@@ -537,10 +538,9 @@ pub(super) struct DressingItem {
 #[utoipa::path(get, path = "/api/v1/machines/{machine}/dressings", tag = "history", params(("machine" = String, Path, description = "machine name"), LimitQuery), responses((status = 200, description = "wheel dressings, newest first", body = Items<DressingItem>)))]
 pub(super) async fn dressings(
     State(state): State<AppState>,
-    ApiPath(machine): ApiPath<String>,
+    ApiPath(machine): ApiPath<MachineName>,
     ApiQuery(q): ApiQuery<LimitQuery>,
 ) -> Result<Json<Items<DressingItem>>, ApiError> {
-    machine_name(&machine)?;
     let limit = q.limit.unwrap_or(100);
     let dressings = store(&state).await?.dressings(&machine, limit).await?;
     let items = dressings
@@ -568,10 +568,9 @@ pub(super) struct EventItem {
 #[utoipa::path(get, path = "/api/v1/machines/{machine}/events", tag = "history", params(("machine" = String, Path, description = "machine name"), LimitQuery), responses((status = 200, description = "alarms and events, newest first", body = Items<EventItem>)))]
 pub(super) async fn events(
     State(state): State<AppState>,
-    ApiPath(machine): ApiPath<String>,
+    ApiPath(machine): ApiPath<MachineName>,
     ApiQuery(q): ApiQuery<LimitQuery>,
 ) -> Result<Json<Items<EventItem>>, ApiError> {
-    machine_name(&machine)?;
     let filter = EventFilter {
         machine: Some(machine),
         limit: q.limit.unwrap_or(100),

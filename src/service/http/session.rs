@@ -42,7 +42,7 @@ pub struct Session {
 /// Live sessions by the SHA-256 of their key.
 #[derive(Debug, Default)]
 pub struct Sessions {
-    map: Mutex<HashMap<String, Session>>,
+    map: Mutex<HashMap<crate::digest::Sha256, Session>>,
 }
 
 impl Sessions {
@@ -67,7 +67,7 @@ impl Sessions {
             && let Some(oldest) = map
                 .iter()
                 .min_by_key(|(_, s)| s.expires_at_ms)
-                .map(|(k, _)| k.clone())
+                .map(|(k, _)| *k)
         {
             map.remove(&oldest);
         }

@@ -4,9 +4,9 @@
 //! part. Every write that reaches a machine is audited with its outcome.
 
 use super::access::Principal;
-use super::api::{ApiError, ApiJson, ApiPath, feature_name, machine_name};
+use super::api::{ApiError, ApiJson, ApiPath, feature_name};
 use super::{AppState, Command, CommandDone, CommandError, Reply};
-use crate::names::MachineName;
+use crate::names::{FeatureName, MachineName};
 use crate::service::http::ApiCode;
 use crate::store::AuditResult;
 use axum::Json;
@@ -45,11 +45,10 @@ pub(crate) struct RollbackBody {
 pub(crate) async fn rollback(
     p: Principal,
     State(state): State<AppState>,
-    ApiPath((machine, lobe)): ApiPath<(String, String)>,
+    ApiPath((machine, lobe)): ApiPath<(MachineName, FeatureName)>,
     ApiJson(body): ApiJson<RollbackBody>,
 ) -> Result<Json<CommandReply>, ApiError> {
-    let machine = configured(&state, &machine)?;
-    feature_name(&lobe)?;
+    let machine = configured(&state, machine)?;
     let ground = state
         .machines
         .get(&machine)
@@ -70,7 +69,7 @@ pub(crate) async fn rollback(
     let before = in_force(&state, &machine, std::slice::from_ref(&lobe));
     let mut entry = p.audit("rollback", AuditResult::Ok, String::new());
     entry.machine = Some(machine.to_string());
-    entry.feature = Some(lobe.clone());
+    entry.feature = Some(lobe.to_string());
     entry.version = Some(version);
     entry.before = Some(before);
     let done = command(&state, &machine, ApiCode::RollbackRefused, |reply| {
@@ -89,12 +88,12 @@ pub(crate) async fn rollback(
 }
 
 /// The table versions on the control of `features` of `machine`, as JSON.
-fn in_force(state: &AppState, machine: &MachineName, features: &[String]) -> String {
+fn in_force(state: &AppState, machine: &MachineName, features: &[FeatureName]) -> String {
     let statuses = state.metrics.features();
     let versions: std::collections::BTreeMap<&str, i64> = features
         .iter()
         .filter_map(|f| {
-            let s = statuses.get(&(machine.to_string(), f.clone()))?;
+            let s = statuses.get(&(machine.to_string(), f.to_string()))?;
             Some((f.as_str(), i64::try_from(s.in_force_version).ok()?))
         })
         .collect();
@@ -138,10 +137,10 @@ pub(crate) struct PartRollbackBody {
 pub(super) async fn rollback_part(
     p: Principal,
     State(state): State<AppState>,
-    ApiPath(machine): ApiPath<String>,
+    ApiPath(machine): ApiPath<MachineName>,
     ApiJson(body): ApiJson<PartRollbackBody>,
 ) -> Result<Json<CommandReply>, ApiError> {
-    let machine = configured(&state, &machine)?;
+    let machine = configured(&state, machine)?;
     let grinds = state.machines.get(&machine).cloned().unwrap_or_default();
     if body.versions.is_empty() {
         return Err(ApiError::new(
@@ -151,7 +150,7 @@ pub(super) async fn rollback_part(
     }
     let mut versions = Vec::new();
     for (lobe, version) in body.versions {
-        feature_name(&lobe)?;
+        let lobe = feature_name(&lobe)?;
         if !grinds.contains(&lobe) {
             return Err(ApiError::new(
                 ApiCode::LobeNotFound,
@@ -172,7 +171,7 @@ pub(super) async fn rollback_part(
         }
         versions.push((lobe, v));
     }
-    let features: Vec<String> = versions.iter().map(|(f, _)| f.clone()).collect();
+    let features: Vec<FeatureName> = versions.iter().map(|(f, _)| f.clone()).collect();
     let mut entry = p.audit("rollback_part", AuditResult::Ok, String::new());
     entry.machine = Some(machine.to_string());
     entry.before = Some(in_force(&state, &machine, &features));
@@ -209,11 +208,10 @@ pub(crate) struct FreezeBody {
 pub(super) async fn freeze(
     p: Principal,
     State(state): State<AppState>,
-    ApiPath((machine, lobe)): ApiPath<(String, String)>,
+    ApiPath((machine, lobe)): ApiPath<(MachineName, FeatureName)>,
     ApiJson(body): ApiJson<FreezeBody>,
 ) -> Result<Json<CommandReply>, ApiError> {
-    let machine = configured(&state, &machine)?;
-    feature_name(&lobe)?;
+    let machine = configured(&state, machine)?;
     if !state
         .machines
         .get(&machine)
@@ -238,7 +236,7 @@ pub(super) async fn freeze(
     let status = |s: &AppState| {
         let f = s.metrics.features();
         let now = f
-            .get(&(machine.to_string(), lobe.clone()))
+            .get(&(machine.to_string(), lobe.to_string()))
             .and_then(|f| f.frozen.clone());
         serde_json::json!({ "frozen": now }).to_string()
     };
@@ -249,7 +247,7 @@ pub(super) async fn freeze(
     };
     let mut entry = p.audit(action, AuditResult::Ok, String::new());
     entry.machine = Some(machine.to_string());
-    entry.feature = Some(lobe.clone());
+    entry.feature = Some(lobe.to_string());
     entry.before = Some(status(&state));
     let done = command(&state, &machine, ApiCode::FreezeRefused, |reply| {
         Command::Freeze {
@@ -279,10 +277,10 @@ pub(crate) struct DressingBody {
 pub(super) async fn dress(
     p: Principal,
     State(state): State<AppState>,
-    ApiPath(machine): ApiPath<String>,
+    ApiPath(machine): ApiPath<MachineName>,
     ApiJson(body): ApiJson<DressingBody>,
 ) -> Result<Json<CommandReply>, ApiError> {
-    let machine = configured(&state, &machine)?;
+    let machine = configured(&state, machine)?;
     let radius = crate::core::compensate::check_wheel_radius(body.wheel_radius_mm)
         .map_err(|e| ApiError::new(ApiCode::InvalidWheelRadius, e.to_string()))?;
     let infeed_um = body
@@ -314,11 +312,11 @@ pub(super) async fn dress(
     Ok(Json(done?.into()))
 }
 
-/// A machine of this service: a valid name that is configured, else 400 or 404.
-fn configured(state: &AppState, machine: &str) -> Result<MachineName, ApiError> {
-    let name = machine_name(machine)?;
-    if state.machines.contains_key(&name) {
-        Ok(name)
+/// A machine of this service: one that is configured, else 404 (the name's rule was checked
+/// where it was read).
+fn configured(state: &AppState, machine: MachineName) -> Result<MachineName, ApiError> {
+    if state.machines.contains_key(&machine) {
+        Ok(machine)
     } else {
         Err(ApiError::new(
             ApiCode::MachineNotFound,

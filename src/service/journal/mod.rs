@@ -320,7 +320,7 @@ mod tests {
 
     fn event(message: &str) -> Pending {
         Pending::Event {
-            machine: "M1".into(),
+            machine: "M1".parse().unwrap(),
             at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
             level: EventLevel::Info,
             kind: EventKind::WheelDressed,
@@ -332,8 +332,8 @@ mod tests {
         let mut state = LoopMemory::new(250.0);
         state.parts = parts;
         Pending::Learning {
-            machine: "M1".into(),
-            lobe: "IN1".into(),
+            machine: "M1".parse().unwrap(),
+            lobe: "IN1".parse().unwrap(),
             state: Box::new(state),
             saved_at_ms: jiff::Timestamp::from_millisecond(7 + parts as i64).unwrap(),
         }
@@ -401,7 +401,11 @@ mod tests {
         let mut j = Journal::open(dir.path()).unwrap();
         assert!(j.quarantined().is_empty(), "{:?}", j.quarantined());
         assert_eq!(j.flush(&store).await.unwrap(), 2);
-        let v = store.table_version("M1", "IN1", 1).await.unwrap().unwrap();
+        let v = store
+            .table_version(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), 1)
+            .await
+            .unwrap()
+            .unwrap();
         let pushed = VersionStatus::Pushed {
             at_unix_ms: 9,
             note: Some("pushed to the share on retry".into()),
@@ -442,8 +446,8 @@ mod tests {
         let records = [
             event("a"),
             Pending::Table {
-                machine: "M1".into(),
-                lobe: "IN1".into(),
+                machine: "M1".parse().unwrap(),
+                lobe: "IN1".parse().unwrap(),
                 version: 3,
                 parent_version: None,
                 table_number: 1,
@@ -458,8 +462,8 @@ mod tests {
                 rollback_of: None,
             },
             Pending::VersionStatus {
-                machine: "M1".into(),
-                lobe: "IN1".into(),
+                machine: "M1".parse().unwrap(),
+                lobe: "IN1".parse().unwrap(),
                 version: 3,
                 status: VersionStatus::Pushed {
                     at_unix_ms: 8,
@@ -469,7 +473,7 @@ mod tests {
             },
             learning(1),
             Pending::Dressing {
-                machine: "M1".into(),
+                machine: "M1".parse().unwrap(),
                 at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
                 old_radius_mm: 250.0,
                 new_radius_mm: 249.998,
@@ -501,7 +505,11 @@ mod tests {
             assert_eq!(n, rows, "{table}");
         }
         // The version keeps the share's number, and its newest status is the retry's.
-        let v = store.table_version("M1", "IN1", 3).await.unwrap().unwrap();
+        let v = store
+            .table_version(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), 3)
+            .await
+            .unwrap()
+            .unwrap();
         let pushed = VersionStatus::Pushed {
             at_unix_ms: 8,
             note: Some("pushed on retry".into()),

@@ -2,7 +2,8 @@
 //! into the store (once, even when replayed after a crash).
 
 use super::super::machine::memory::{LoopMemory, TableLearning};
-use crate::names::MachineName;
+use crate::core::digest::Sha256;
+use crate::names::{FeatureName, MachineName};
 pub use crate::store::EventKind;
 use crate::store::{
     EventLevel, FeatureKind, NewDressing, NewEvent, NewMeasurement, NewRecipeSnapshot,
@@ -25,8 +26,8 @@ pub enum Pending {
         ground_with_version: u64,
     },
     Table {
-        machine: String,
-        lobe: String,
+        machine: MachineName,
+        lobe: FeatureName,
         /// The share's version number (the one version counter).
         version: u64,
         /// The version in force when this one was made.
@@ -49,15 +50,15 @@ pub enum Pending {
     /// A later status of a recorded version (e.g. waiting → pushed once the share is back).
     #[serde(rename = "table_status")]
     VersionStatus {
-        machine: String,
-        lobe: String,
+        machine: MachineName,
+        lobe: FeatureName,
         version: u64,
         status: VersionStatus,
         #[serde(with = "crate::clock::unix_ms")]
         at_ms: Timestamp,
     },
     Event {
-        machine: String,
+        machine: MachineName,
         #[serde(with = "crate::clock::unix_ms")]
         at_ms: Timestamp,
         level: EventLevel,
@@ -65,24 +66,24 @@ pub enum Pending {
         message: String,
     },
     Learning {
-        machine: String,
-        lobe: String,
+        machine: MachineName,
+        lobe: FeatureName,
         state: Box<LoopMemory>,
         #[serde(with = "crate::clock::unix_ms")]
         saved_at_ms: Timestamp,
     },
     /// What the machine grinds, kept once per change (the store skips an identical one).
     RecipeSnapshot {
-        machine: String,
+        machine: MachineName,
         part: String,
-        lobe: String,
+        lobe: FeatureName,
         kind: FeatureKind,
         recipe_json: String,
         #[serde(with = "crate::clock::unix_ms")]
         created_at_ms: Timestamp,
     },
     Dressing {
-        machine: String,
+        machine: MachineName,
         #[serde(with = "crate::clock::unix_ms")]
         at_ms: Timestamp,
         old_radius_mm: f64,
@@ -107,7 +108,7 @@ impl Pending {
                 kind,
                 message,
             } => Some(NewEvent {
-                machine: machine_name(machine)?,
+                machine: machine.clone(),
                 at_ms: *at_ms,
                 level: *level,
                 kind: *kind,
@@ -155,7 +156,7 @@ impl Pending {
                 infeed_um,
                 source,
             } => Some(NewDressing {
-                machine: machine_name(machine)?,
+                machine: machine.clone(),
                 at_ms: *at_ms,
                 old_radius_mm: *old_radius_mm,
                 new_radius_mm: *new_radius_mm,
@@ -207,12 +208,6 @@ fn column_status(value: &mut serde_json::Value) -> Result<bool, StoreError> {
     record.remove(why_key);
     record.insert("status".into(), status);
     Ok(true)
-}
-
-/// The journal names machines as the machine loop does, in text; the store takes the
-/// checked name (the config checked it once already, so this refuses nothing it wrote).
-fn machine_name(text: &str) -> Result<MachineName, StoreError> {
-    MachineName::new(text).map_err(|e| StoreError::invalid("machine", e.to_string()))
 }
 
 /// [`apply`] for a record read back after a crash: skipped when the store already holds it
@@ -274,7 +269,7 @@ fn state_json(state: &LoopMemory) -> Result<String, StoreError> {
 /// not, and why), which part gave the best correction, the wheel and the grid. A snapshot
 /// that differs only in its counters, recent errors, remembered measurements or correction
 /// replaces the newest one: every correction is kept exactly with its table version.
-fn meaning_sha256(state: &LoopMemory) -> Result<String, StoreError> {
+fn meaning_sha256(state: &LoopMemory) -> Result<Sha256, StoreError> {
     #[derive(Serialize)]
     struct Meaning<'a> {
         schema: u32,
@@ -291,7 +286,7 @@ fn meaning_sha256(state: &LoopMemory) -> Result<String, StoreError> {
         wheel_radius_mm: state.wheel_radius_mm,
     };
     serde_json::to_vec(&meaning)
-        .map(|bytes| crate::store::sha256_hex(&bytes))
+        .map(|bytes| Sha256::of(&bytes))
         .map_err(|e| StoreError::invalid("learning state", e.to_string()))
 }
 
@@ -374,7 +369,7 @@ async fn insert_table(store: &Store, record: Pending) -> Result<(), StoreError> 
     let learning_params_json = serde_json::to_string(&learning)
         .map_err(|e| StoreError::invalid("table learning", e.to_string()))?;
     let t = NewTableVersion {
-        machine: machine_name(&machine)?,
+        machine,
         lobe,
         version: Some(version as i64),
         parent_version,
@@ -401,7 +396,7 @@ async fn insert_snapshot(store: &Store, record: Pending) -> Result<(), StoreErro
         return Ok(());
     };
     let r = NewRecipeSnapshot {
-        machine: machine_name(&machine)?,
+        machine,
         part,
         lobe,
         kind,
@@ -465,13 +460,15 @@ mod tests {
 
     /// A measurement line as builds before the shared record wrote it (its fields flat
     /// beside the tag, no recipe snapshot) reads as the store's record, and is written back
-    /// as the same JSON: journals left by a stopped service still replay.
+    /// as the same JSON: journals left by a stopped service still replay. (Its digest is a
+    /// real one: the store never took anything but 64 lower-case hex digits.)
     #[test]
     fn a_measurement_line_of_the_flat_format_reads_and_writes_back_the_same() {
         let line = r#"{"record":"measurement","machine":"G7","part":"S-1","lobe":"IN1",
             "received_at_ms":7,"verdict":"fail","max_profile_error_um":2.5,
             "base_radius_error_um":-0.25,"phase_error_deg":0.125,"revolutions_used":3,
-            "points_per_rev":4,"origin":"can0","sha256":"ab","ground_with_version":5,
+            "points_per_rev":4,"origin":"can0","ground_with_version":5,
+            "sha256":"ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad",
             "raw_lift_mm":[[0.0,1.5]],"averaged_lift_mm":[0.5,1.0],"analysis_json":"{}"}"#;
         let record: Pending = serde_json::from_str(line).unwrap();
         let Pending::Measurement {

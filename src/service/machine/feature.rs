@@ -9,7 +9,9 @@ use super::memory::LoopMemory;
 use super::{MachinePaths, MainProgram, StoreHandle, records};
 use crate::clock::now;
 use crate::core::compensate::{self, LobeLoop};
+use crate::core::digest::Sha256;
 use crate::core::turn::HoldReason;
+use crate::names::{FeatureName, MachineName};
 use crate::recipe::FeatureSetup;
 use crate::share::{RealFs, Share, ShareConfig};
 use crate::store::{EventLevel, FeatureKind};
@@ -22,7 +24,7 @@ use tracing::{error, warn};
 /// One feature's loop with everything it owns.
 pub struct FeatureLoop {
     /// The machine's name (records and metrics are the machine's, with the feature).
-    pub name: String,
+    pub name: MachineName,
     pub(super) setup: FeatureSetup,
     pub(super) memory: LoopMemory,
     pub(super) share: Share,
@@ -51,7 +53,7 @@ impl FeatureLoop {
     /// a restart resumes where the loop was), and share. Delivers the table of the current
     /// correction (and the main program) when the share lacks them.
     pub(super) async fn start(
-        name: String,
+        name: MachineName,
         setup: FeatureSetup,
         paths: MachinePaths,
         fence: Option<crate::share::Fence>,
@@ -220,7 +222,7 @@ impl FeatureLoop {
     }
 
     /// The lobe or pin this loop grinds.
-    pub(crate) fn feature_name(&self) -> &str {
+    pub(crate) fn feature_name(&self) -> &FeatureName {
         &self.setup.name
     }
 
@@ -319,7 +321,7 @@ struct RecipeRecord<'a> {
     nominal_origin: &'a str,
     nominal_points: usize,
     /// SHA-256 of the nominal lift values (exact bits).
-    nominal_sha256: String,
+    nominal_sha256: Sha256,
     wheel_radius_mm: f64,
     x_zero_mm: f64,
     program: &'a str,
@@ -333,7 +335,7 @@ struct RecipeRecord<'a> {
 /// the newest learning state), else the store's. A store that answers with an error is an
 /// error here, never "no state": starting from nominal would silently forget the loop.
 async fn load_memory(
-    name: &str,
+    name: &MachineName,
     setup: &FeatureSetup,
     journal: &Journal,
     store: &StoreHandle,
@@ -353,7 +355,7 @@ async fn load_memory(
                 && m.lobe == setup.name
             {
                 memory.parts += 1;
-                memory.remember(m.sha256.clone());
+                memory.remember(m.sha256);
                 memory.last_part = Some(m.part.clone());
             }
         }

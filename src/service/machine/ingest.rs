@@ -7,9 +7,11 @@ use super::records::{event, keep_reject, raw_revolutions};
 use super::{FeatureLoop, Ingested};
 use crate::clock::now;
 use crate::core::compensate::{CycleError, GuardedTable};
+use crate::core::digest::Sha256;
 use crate::core::learn::{LearningState, StepOutcome};
 use crate::core::measure::{MeasurementHeader, RawMeasurement};
 use crate::core::turn::{self, Decision, HoldReason, Measured, TurnError, measurement_sha256};
+use crate::names::{FeatureName, MachineName};
 use crate::store::{EventLevel, NewMeasurement, Verdict};
 use tracing::{debug, error, info, warn};
 
@@ -18,16 +20,16 @@ use tracing::{debug, error, info, warn};
 /// machine) and a feature is its position in the recipe, from 1.
 #[derive(Debug, Clone)]
 pub struct GaugeIds {
-    machine: String,
-    features: Vec<String>,
+    machine: MachineName,
+    features: Vec<FeatureName>,
 }
 
 const BUS_ID: &str = "1";
 
 impl GaugeIds {
-    pub fn new(machine: &str, setups: &[crate::recipe::FeatureSetup]) -> Self {
+    pub fn new(machine: &MachineName, setups: &[crate::recipe::FeatureSetup]) -> Self {
         Self {
-            machine: machine.to_string(),
+            machine: machine.clone(),
             features: setups.iter().map(|s| s.name.clone()).collect(),
         }
     }
@@ -78,7 +80,7 @@ impl GaugeIds {
 /// What the newest part of a feature came to, for the machine's line per shaft.
 #[derive(Debug, Clone)]
 pub(crate) struct PartLine {
-    pub feature: String,
+    pub feature: FeatureName,
     /// The part (shaft) number the gauge gave.
     pub part: String,
     pub max_error_um: f64,
@@ -127,7 +129,7 @@ impl FeatureLoop {
             }
             Err(e) => return Err(e.into()),
         };
-        let record = self.measurement_record(&raw, &sha, &done.measured, at_ms)?;
+        let record = self.measurement_record(&raw, &sha, &done.measured, at_ms);
         if !self.record(vec![record]).await {
             // Not counted and not remembered: the same reading sent again once the journal
             // can be written is a new measurement, not a repeat.
@@ -136,7 +138,7 @@ impl FeatureLoop {
             return Ok(Ingested::NotRecorded);
         }
         self.memory.parts += 1;
-        self.memory.remember(sha.clone());
+        self.memory.remember(sha);
         self.memory.previous = Some(done.measured.as_previous());
         self.memory.last_part = Some(raw.header.part.clone());
         let part = self.memory.parts;
@@ -242,7 +244,7 @@ impl FeatureLoop {
             }
             Err(e) => return Err(e.into()),
         };
-        let record = self.measurement_record(&raw, &sha, &measured, at_ms)?;
+        let record = self.measurement_record(&raw, &sha, &measured, at_ms);
         if !self.record(vec![record]).await {
             return Ok(Ingested::NotRecorded);
         }
@@ -255,7 +257,7 @@ impl FeatureLoop {
     async fn decide(
         &mut self,
         decision: Decision,
-        sha: &str,
+        sha: &Sha256,
         part: u64,
         at_ms: jiff::Timestamp,
     ) -> (Vec<Pending>, String) {
@@ -325,7 +327,7 @@ impl FeatureLoop {
         table: &GuardedTable,
         next: LearningState,
         reason: &str,
-        sha: &str,
+        sha: &Sha256,
         records: &mut Vec<Pending>,
     ) -> String {
         match self
@@ -385,13 +387,13 @@ impl FeatureLoop {
     fn measurement_record(
         &self,
         raw: &RawMeasurement,
-        sha: &str,
+        sha: &Sha256,
         measured: &Measured,
         at_ms: jiff::Timestamp,
-    ) -> Result<Pending, crate::names::NameError> {
+    ) -> Pending {
         let report = &measured.report;
         let measurement = NewMeasurement {
-            machine: crate::names::MachineName::new(&self.name)?,
+            machine: self.name.clone(),
             part: raw.header.part.clone(),
             lobe: self.setup.name.clone(),
             received_at_ms: at_ms,
@@ -406,16 +408,16 @@ impl FeatureLoop {
             revolutions_used: measured.averaged.revolutions_used.len() as u32,
             points_per_rev: measured.averaged.points_per_rev,
             origin: raw.origin.clone(),
-            sha256: sha.to_string(),
+            sha256: *sha,
             recipe_snapshot: None,
             raw_lift_mm: raw_revolutions(raw),
             averaged_lift_mm: measured.averaged.mean_lift_mm.clone(),
             analysis_json: serde_json::to_string(report).unwrap_or_default(),
         };
-        Ok(Pending::Measurement {
+        Pending::Measurement {
             measurement,
             ground_with_version: self.memory.in_force_version,
-        })
+        }
     }
 
     /// A measurement that is not this machine's, or fails the checks: kept among the
@@ -423,7 +425,7 @@ impl FeatureLoop {
     pub(super) async fn reject(
         &mut self,
         raw: &RawMeasurement,
-        sha: &str,
+        sha: &Sha256,
         reason: &str,
         at_ms: jiff::Timestamp,
     ) {

@@ -4,6 +4,7 @@
 //! the store, and a restart resumes from the newest copy.
 
 use crate::core::compensate::CycleError;
+use crate::core::digest::Sha256;
 use crate::core::learn::{
     BoundedQuantity, LearnError, LearningParams, LearningState, PreviousPart,
 };
@@ -47,7 +48,7 @@ pub struct LoopMemory {
     pub parts: u64,
     /// Content identities (SHA-256) of the newest measurements, oldest first.
     #[serde(default)]
-    pub recent_measurements: Vec<String>,
+    pub recent_measurements: Vec<Sha256>,
     /// What the previous part measured: the next step's evidence that an error repeats.
     #[serde(default)]
     pub previous: Option<PreviousPart>,
@@ -168,11 +169,11 @@ impl LoopMemory {
     }
 
     /// Whether this measurement identity was seen among the newest ones.
-    pub(crate) fn has_seen(&self, sha256: &str) -> bool {
-        self.recent_measurements.iter().any(|s| s == sha256)
+    pub(crate) fn has_seen(&self, sha256: &Sha256) -> bool {
+        self.recent_measurements.contains(sha256)
     }
 
-    pub fn remember(&mut self, sha256: String) {
+    pub fn remember(&mut self, sha256: Sha256) {
         self.recent_measurements.push(sha256);
         let excess = self
             .recent_measurements
@@ -211,7 +212,7 @@ pub struct TableLearningSummary {
     pub iteration: u32,
     pub params: LearningParams,
     pub wheel_radius_mm: f64,
-    pub correction_sha256: String,
+    pub correction_sha256: Sha256,
     #[serde(default)]
     pub timing_correction_deg: f64,
 }
@@ -268,11 +269,12 @@ mod tests {
 
     #[test]
     fn remembers_a_bounded_number_of_identities() {
+        let id = |i: u32| Sha256::of(&i.to_le_bytes());
         let mut m = LoopMemory::new(250.0);
         for i in 0..300 {
-            m.remember(format!("{i}"));
+            m.remember(id(i));
         }
         assert_eq!(m.recent_measurements.len(), RECENT_MEASUREMENTS);
-        assert!(m.has_seen("299") && m.has_seen("44") && !m.has_seen("43"));
+        assert!(m.has_seen(&id(299)) && m.has_seen(&id(44)) && !m.has_seen(&id(43)));
     }
 }

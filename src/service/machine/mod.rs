@@ -42,6 +42,7 @@ mod shaft;
 use super::metrics::Metrics;
 use crate::clock::now;
 use crate::core::turn::measurement_sha256;
+use crate::names::{FeatureName, MachineName};
 use crate::recipe::FeatureSetup;
 use crate::store::Store;
 use anyhow::Context;
@@ -121,7 +122,7 @@ pub struct MachinePaths {
 
 /// A machine: the loops of its features and the main program that grinds them in turn.
 pub struct MachineLoop {
-    pub name: String,
+    pub name: MachineName,
     features: Vec<FeatureLoop>,
     ids: GaugeIds,
     main: Arc<MainProgram>,
@@ -137,7 +138,7 @@ impl MachineLoop {
     /// else the store; a restart resumes where each was), the resume point, and the main
     /// program once every table is on the share.
     pub async fn start(
-        name: String,
+        name: MachineName,
         setups: Vec<FeatureSetup>,
         paths: MachinePaths,
         store: StoreHandle,
@@ -149,7 +150,7 @@ impl MachineLoop {
     /// [`Self::start`] for an owner in a cluster: every feature's share state is fenced
     /// with the owner's epoch (see [`crate::share::Fence`]).
     pub(crate) async fn start_owned(
-        name: String,
+        name: MachineName,
         setups: Vec<FeatureSetup>,
         paths: MachinePaths,
         fence: Option<crate::share::Fence>,
@@ -413,14 +414,14 @@ impl MachineLoop {
     /// Rolls feature `lobe` back to its `version`.
     pub async fn rollback(
         &mut self,
-        lobe: &str,
+        lobe: &FeatureName,
         version: u64,
     ) -> Result<RolledBack, RollbackError> {
         let Some(feature) = self.features.iter_mut().find(|f| f.feature_name() == lobe) else {
             return Err(RollbackError::UnknownFeature {
                 machine: self.name.clone(),
                 grinds: self.feature_names().join(", "),
-                asked: lobe.to_string(),
+                asked: lobe.clone(),
             });
         };
         feature.rollback(lobe, version).await
@@ -430,7 +431,7 @@ impl MachineLoop {
     /// or `None` when the machine does not grind `lobe`.
     pub(crate) async fn set_frozen(
         &mut self,
-        lobe: &str,
+        lobe: &FeatureName,
         frozen: Option<String>,
     ) -> Option<Option<String>> {
         let feature = self
@@ -444,7 +445,7 @@ impl MachineLoop {
     /// version is checked first; nothing is pushed unless all of them can be.
     pub async fn rollback_part(
         &mut self,
-        versions: &[(String, u64)],
+        versions: &[(FeatureName, u64)],
     ) -> Result<Vec<RolledBack>, RollbackError> {
         for (lobe, version) in versions {
             let names = self.feature_names().join(", ");
@@ -465,7 +466,10 @@ impl MachineLoop {
     }
 
     pub(crate) fn feature_names(&self) -> Vec<&str> {
-        self.features.iter().map(|f| f.feature_name()).collect()
+        self.features
+            .iter()
+            .map(|f| f.feature_name().as_str())
+            .collect()
     }
 
     /// Retries what waits, feature by feature.

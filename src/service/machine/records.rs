@@ -2,19 +2,21 @@
 //! kept on disk with their reason.
 
 use super::super::journal::{EventKind, Pending};
+use crate::core::digest::Sha256;
 use crate::core::measure::RawMeasurement;
+use crate::names::MachineName;
 use crate::store::EventLevel;
 use std::path::Path;
 
 pub(super) fn event(
-    machine: &str,
+    machine: &MachineName,
     at_ms: jiff::Timestamp,
     level: EventLevel,
     kind: EventKind,
     message: String,
 ) -> Pending {
     Pending::Event {
-        machine: machine.to_string(),
+        machine: machine.clone(),
         at_ms,
         level,
         kind,
@@ -43,7 +45,7 @@ pub(super) fn raw_revolutions(raw: &RawMeasurement) -> Vec<Vec<f64>> {
 pub(super) fn keep_reject(
     dir: &Path,
     raw: &RawMeasurement,
-    sha: &str,
+    sha: &Sha256,
     reason: &str,
 ) -> std::io::Result<()> {
     std::fs::create_dir_all(dir)?;
@@ -60,7 +62,8 @@ pub(super) fn keep_reject(
         let angle = f64::from(s.angle_index) * 360.0 / f64::from(raw.header.points_per_rev.max(1));
         csv.push_str(&format!("{},{angle},{}\n", s.revolution, s.lift_mm));
     }
-    let stem = &sha[..16.min(sha.len())];
+    let hex = sha.to_string();
+    let stem = &hex[..16];
     std::fs::write(dir.join(format!("{stem}.csv")), csv)?;
     std::fs::write(
         dir.join(format!("{stem}.reason.txt")),

@@ -7,6 +7,7 @@ use super::memory::TableLearning;
 use super::records::event;
 use crate::clock::now;
 use crate::core::program::retarget_table_program;
+use crate::names::{FeatureName, MachineName};
 use crate::store::EventLevel;
 use anyhow::Context;
 use tracing::info;
@@ -16,14 +17,14 @@ use tracing::info;
 pub enum RollbackError {
     #[error("machine {machine} grinds {grinds}, not {asked}")]
     UnknownFeature {
-        machine: String,
+        machine: MachineName,
         grinds: String,
-        asked: String,
+        asked: FeatureName,
     },
     #[error("version {version} of {machine} {lobe} not found")]
     NotFound {
-        machine: String,
-        lobe: String,
+        machine: MachineName,
+        lobe: FeatureName,
         version: u64,
     },
     #[error("history store unavailable: cannot read the stored version")]
@@ -52,14 +53,14 @@ impl FeatureLoop {
     /// timing for the plan in force (its two tables have two numbers to move).
     pub async fn rollback(
         &mut self,
-        lobe: &str,
+        lobe: &FeatureName,
         version: u64,
     ) -> Result<RolledBack, RollbackError> {
-        if lobe != self.setup.name {
+        if *lobe != self.setup.name {
             return Err(RollbackError::UnknownFeature {
                 machine: self.name.clone(),
-                grinds: self.setup.name.clone(),
-                asked: lobe.to_string(),
+                grinds: self.setup.name.to_string(),
+                asked: lobe.clone(),
             });
         }
         let (text, learning, number) = self.rollback_program(lobe, version).await?;
@@ -82,7 +83,7 @@ impl FeatureLoop {
         };
         let (new_version, status, mut records) = self.push(draft, next)?;
         let why = status.why();
-        info!(machine = %self.name, lobe, version, new_version, table_number = number, status = status.name(), "rollback");
+        info!(machine = %self.name, lobe = lobe.as_str(), version, new_version, table_number = number, status = status.name(), "rollback");
         records.extend([
             event(
                 &self.name,
@@ -105,7 +106,7 @@ impl FeatureLoop {
     /// The program of `version` retargeted to the free table number, with its learning.
     pub(super) async fn rollback_program(
         &mut self,
-        lobe: &str,
+        lobe: &FeatureName,
         version: u64,
     ) -> Result<(String, TableLearning, u32), RollbackError> {
         let store = self
@@ -120,7 +121,7 @@ impl FeatureLoop {
             .context("reading the stored version")?
             .ok_or_else(|| RollbackError::NotFound {
                 machine: self.name.clone(),
-                lobe: lobe.to_string(),
+                lobe: lobe.clone(),
                 version,
             })?;
         // A version rebuilt from the share's manifest (after a new database was accepted)

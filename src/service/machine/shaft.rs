@@ -41,7 +41,7 @@ struct PlannedMain {
     main: MainProgramSettings,
     /// Each feature's name, table settings (names and axes: the numbers come back from the
     /// table program) and station.
-    stations: Vec<(String, VaProgramSettings, f64)>,
+    stations: Vec<(crate::names::FeatureName, VaProgramSettings, f64)>,
     clear_x_mm: f64,
     /// The virtual axis' speed of the table on the share, by feature name.
     va_speeds_rpm: Mutex<BTreeMap<String, f64>>,
@@ -134,7 +134,7 @@ impl MainProgram {
         }
         let mut stations = Vec::with_capacity(planned.stations.len());
         for (name, settings, z_mm) in &planned.stations {
-            let Some(&va_speed_rpm) = speeds.get(name) else {
+            let Some(&va_speed_rpm) = speeds.get(name.as_str()) else {
                 return Ok(None);
             };
             stations.push(VaStation {
@@ -246,7 +246,7 @@ pub(super) fn adopt_single_feature_layout(state_dir: &Path, setups: &[FeatureSet
     })();
     match moved {
         Ok(()) => {
-            info!(folder = %state_dir.display(), feature, "state folder from a one-feature machine moved into the feature's folder")
+            info!(folder = %state_dir.display(), feature = feature.as_str(), "state folder from a one-feature machine moved into the feature's folder")
         }
         Err(e) => {
             warn!(folder = %state_dir.display(), error = %e, "state folder from a one-feature machine could not be moved")

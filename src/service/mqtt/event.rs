@@ -4,19 +4,25 @@
 use jiff::Timestamp;
 use serde::{Deserialize, Serialize};
 
+use crate::names::{FeatureName, MachineName};
 use crate::service::journal::{EventKind, Pending};
 use crate::store::{EventLevel, Verdict, VersionStatus};
 
 /// Topic level for events that concern the machine rather than one feature.
 pub const MACHINE_LEVEL: &str = "machine";
 
+/// [`MACHINE_LEVEL`] where a feature's name goes (a topic level, a payload's `feature`).
+fn machine_level() -> FeatureName {
+    FeatureName::new(MACHINE_LEVEL).expect("`machine` follows the name rule")
+}
+
 /// One event for the broker.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "event", rename_all = "snake_case")]
 pub enum PlantEvent {
     PartAnalysed {
-        machine: String,
-        feature: String,
+        machine: MachineName,
+        feature: FeatureName,
         part: String,
         #[serde(with = "crate::clock::unix_ms")]
         at_ms: Timestamp,
@@ -28,15 +34,15 @@ pub enum PlantEvent {
         ground_with_version: u64,
     },
     TableDelivered {
-        machine: String,
-        feature: String,
+        machine: MachineName,
+        feature: FeatureName,
         version: u64,
         #[serde(with = "crate::clock::unix_ms")]
         at_ms: Timestamp,
     },
     TableRefused {
-        machine: String,
-        feature: String,
+        machine: MachineName,
+        feature: FeatureName,
         /// The refused version, when one was recorded.
         version: Option<u64>,
         reason: String,
@@ -44,13 +50,13 @@ pub enum PlantEvent {
         at_ms: Timestamp,
     },
     LearningFrozen {
-        machine: String,
+        machine: MachineName,
         #[serde(with = "crate::clock::unix_ms")]
         at_ms: Timestamp,
         reason: String,
     },
     Dressing {
-        machine: String,
+        machine: MachineName,
         #[serde(with = "crate::clock::unix_ms")]
         at_ms: Timestamp,
         old_radius_mm: f64,
@@ -61,7 +67,7 @@ pub enum PlantEvent {
         source: String,
     },
     Alarm {
-        machine: String,
+        machine: MachineName,
         #[serde(with = "crate::clock::unix_ms")]
         at_ms: Timestamp,
         level: EventLevel,
@@ -86,7 +92,7 @@ impl PlantEvent {
                 measurement: m,
                 ground_with_version,
             } => PlantEvent::PartAnalysed {
-                machine: m.machine.into(),
+                machine: m.machine,
                 feature: m.lobe,
                 part: m.part,
                 at_ms: m.received_at_ms,
@@ -117,30 +123,7 @@ impl PlantEvent {
                 level,
                 kind,
                 message,
-            } => match kind {
-                EventKind::LearningReverted => PlantEvent::LearningFrozen {
-                    machine,
-                    at_ms,
-                    reason: message,
-                },
-                // A table refused by the loop's checks before it got a version.
-                EventKind::TableRefused => PlantEvent::TableRefused {
-                    machine,
-                    feature: MACHINE_LEVEL.to_owned(),
-                    version: None,
-                    reason: message,
-                    at_ms,
-                },
-                // Told by the dressing record itself.
-                EventKind::WheelDressed => return None,
-                _ => PlantEvent::Alarm {
-                    machine,
-                    at_ms,
-                    level,
-                    kind: kind.as_str().to_owned(),
-                    message,
-                },
-            },
+            } => event_of(machine, at_ms, level, kind, message)?,
             Pending::Dressing {
                 machine,
                 at_ms,
@@ -160,7 +143,7 @@ impl PlantEvent {
         })
     }
 
-    pub fn machine(&self) -> &str {
+    pub fn machine(&self) -> &MachineName {
         match self {
             PlantEvent::PartAnalysed { machine, .. }
             | PlantEvent::TableDelivered { machine, .. }
@@ -173,11 +156,17 @@ impl PlantEvent {
 
     /// The feature (lobe or pin) it concerns, or [`MACHINE_LEVEL`].
     pub fn feature(&self) -> &str {
+        self.feature_name()
+            .map_or(MACHINE_LEVEL, FeatureName::as_str)
+    }
+
+    /// The feature's name, for the events that carry one.
+    pub(crate) fn feature_name(&self) -> Option<&FeatureName> {
         match self {
             PlantEvent::PartAnalysed { feature, .. }
             | PlantEvent::TableDelivered { feature, .. }
-            | PlantEvent::TableRefused { feature, .. } => feature,
-            _ => MACHINE_LEVEL,
+            | PlantEvent::TableRefused { feature, .. } => Some(feature),
+            _ => None,
         }
     }
 
@@ -229,9 +218,43 @@ impl PlantEvent {
     }
 }
 
+/// The plant's event for a loop event, if it has one of its own.
+fn event_of(
+    machine: MachineName,
+    at_ms: Timestamp,
+    level: EventLevel,
+    kind: EventKind,
+    message: String,
+) -> Option<PlantEvent> {
+    Some(match kind {
+        EventKind::LearningReverted => PlantEvent::LearningFrozen {
+            machine,
+            at_ms,
+            reason: message,
+        },
+        // A table refused by the loop's checks before it got a version.
+        EventKind::TableRefused => PlantEvent::TableRefused {
+            machine,
+            feature: machine_level(),
+            version: None,
+            reason: message,
+            at_ms,
+        },
+        // Told by the dressing record itself.
+        EventKind::WheelDressed => return None,
+        _ => PlantEvent::Alarm {
+            machine,
+            at_ms,
+            level,
+            kind: kind.as_str().to_owned(),
+            message,
+        },
+    })
+}
+
 fn table_event(
-    machine: String,
-    feature: String,
+    machine: MachineName,
+    feature: FeatureName,
     version: u64,
     status: VersionStatus,
     at_ms: Timestamp,
@@ -264,8 +287,8 @@ mod tests {
     #[test]
     fn records_map_to_events_with_topics_and_unit_named_fields() {
         let status = Pending::VersionStatus {
-            machine: "G7".into(),
-            lobe: "IN1".into(),
+            machine: "G7".parse().unwrap(),
+            lobe: "IN1".parse().unwrap(),
             version: 12,
             status: VersionStatus::Pushed {
                 at_unix_ms: 5,
@@ -280,7 +303,7 @@ mod tests {
             r#"{"event":"table_delivered","machine":"G7","feature":"IN1","version":12,"at_ms":5}"#
         );
         let dressing = Pending::Dressing {
-            machine: "G7".into(),
+            machine: "G7".parse().unwrap(),
             at_ms: jiff::Timestamp::from_millisecond(9).unwrap(),
             old_radius_mm: 250.0,
             new_radius_mm: 249.5,
@@ -292,7 +315,7 @@ mod tests {
         assert!(d.payload().contains(r#""new_radius_mm":249.5"#));
         assert!(d.payload().contains(r#""infeed_um":500.2"#));
         let event = |kind| Pending::Event {
-            machine: "G7".into(),
+            machine: "G7".parse().unwrap(),
             at_ms: jiff::Timestamp::from_millisecond(1).unwrap(),
             level: EventLevel::Warn,
             kind,
@@ -305,8 +328,8 @@ mod tests {
         assert_eq!(name(EventKind::RunRule), Some("alarm"));
         assert_eq!(name(EventKind::WheelDressed), None);
         let waiting = Pending::VersionStatus {
-            machine: "G7".into(),
-            lobe: "IN1".into(),
+            machine: "G7".parse().unwrap(),
+            lobe: "IN1".parse().unwrap(),
             version: 13,
             status: VersionStatus::Waiting {
                 reason: Some("share down".into()),
@@ -322,7 +345,7 @@ mod tests {
             measurement: crate::store::NewMeasurement {
                 machine: "G7".parse().unwrap(),
                 part: part.into(),
-                lobe: "IN1".into(),
+                lobe: "IN1".parse().unwrap(),
                 received_at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
                 verdict: Verdict::Pass,
                 max_profile_error_um: 0.4,
@@ -331,7 +354,7 @@ mod tests {
                 revolutions_used: 3,
                 points_per_rev: 360,
                 origin: "gauge".into(),
-                sha256: "0".repeat(64),
+                sha256: "0".repeat(64).parse().unwrap(),
                 recipe_snapshot: None,
                 raw_lift_mm: Vec::new(),
                 averaged_lift_mm: Vec::new(),

@@ -16,16 +16,17 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::event::{MACHINE_LEVEL, PlantEvent};
+use crate::names::{FeatureName, MachineName};
 use crate::store::Verdict;
 
 /// State file name in the queue folder.
 pub(crate) const STATE_FILE: &str = "state.json";
 
 /// One feature's current state, as retained on its state topic.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub(crate) struct FeatureState {
-    pub machine: String,
-    pub feature: String,
+    pub machine: MachineName,
+    pub feature: FeatureName,
     /// Any alarm in force (machine-wide ones included).
     pub alarm: bool,
     /// The alarms in force, by kind (`blocked_by_guard`, `table_refused`, …).
@@ -46,14 +47,14 @@ struct Machine {
     alarms: BTreeSet<String>,
     frozen: bool,
     /// Per feature: its own alarms and facts (machine-wide ones are merged when shown).
-    features: BTreeMap<String, FeatureState>,
+    features: BTreeMap<FeatureName, FeatureState>,
 }
 
 /// The states of every machine seen, and the next sequence number.
 #[derive(Debug, Default, Serialize, Deserialize)]
 pub(crate) struct Tracker {
     next_seq: u64,
-    machines: BTreeMap<String, Machine>,
+    machines: BTreeMap<MachineName, Machine>,
     #[serde(skip)]
     path: PathBuf,
 }
@@ -91,7 +92,7 @@ impl Tracker {
     pub fn apply(&mut self, event: &PlantEvent, prefix: &str) -> (u64, Vec<(String, String)>) {
         self.next_seq += 1;
         let seq = self.next_seq;
-        let m = self.machines.entry(event.machine().to_owned()).or_default();
+        let m = self.machines.entry(event.machine().clone()).or_default();
         let feature = event.feature();
         match event {
             PlantEvent::LearningFrozen { .. } => m.frozen = true,
@@ -105,20 +106,30 @@ impl Tracker {
             }
             _ => {}
         }
-        let touched: Vec<String> = if feature == MACHINE_LEVEL {
-            let mut all: Vec<String> = m.features.keys().cloned().collect();
+        let touched: Vec<FeatureName> = if feature == MACHINE_LEVEL {
+            let mut all: Vec<FeatureName> = m.features.keys().cloned().collect();
             if all.is_empty() {
-                all.push(MACHINE_LEVEL.to_owned());
+                all.push(FeatureName::new(MACHINE_LEVEL).expect("`machine` follows the name rule"));
             }
             all
         } else {
-            vec![feature.to_owned()]
+            event.feature_name().into_iter().cloned().collect()
         };
         let mut out = Vec::new();
         for f in touched {
-            let s = m.features.entry(f.clone()).or_default();
-            s.machine = event.machine().to_owned();
-            s.feature = f.clone();
+            let s = m.features.entry(f.clone()).or_insert_with(|| FeatureState {
+                machine: event.machine().clone(),
+                feature: f.clone(),
+                alarm: false,
+                alarms: BTreeSet::new(),
+                version_in_force: None,
+                frozen: false,
+                last_part: None,
+                last_verdict: None,
+                seq: 0,
+                at_ms: jiff::Timestamp::UNIX_EPOCH,
+            });
+            s.machine = event.machine().clone();
             feature_facts(s, event);
             s.seq = seq;
             s.at_ms = event.at_ms();
@@ -176,8 +187,8 @@ mod tests {
 
     fn part(n: u32, verdict: Verdict) -> PlantEvent {
         PlantEvent::PartAnalysed {
-            machine: "M1".into(),
-            feature: "IN1".into(),
+            machine: "M1".parse().unwrap(),
+            feature: "IN1".parse().unwrap(),
             part: format!("P{n}"),
             at_ms: jiff::Timestamp::from_millisecond(i64::from(n)).unwrap(),
             verdict,
@@ -190,7 +201,7 @@ mod tests {
 
     fn alarm(kind: &str) -> PlantEvent {
         PlantEvent::Alarm {
-            machine: "M1".into(),
+            machine: "M1".parse().unwrap(),
             at_ms: jiff::Timestamp::from_millisecond(9).unwrap(),
             level: EventLevel::Warn,
             kind: kind.into(),
@@ -222,14 +233,14 @@ mod tests {
         );
         assert_eq!(s["alarms"], serde_json::json!(["blocked_by_guard"]));
         let frozen = PlantEvent::LearningFrozen {
-            machine: "M1".into(),
+            machine: "M1".parse().unwrap(),
             at_ms: jiff::Timestamp::from_millisecond(10).unwrap(),
             reason: "diverging".into(),
         };
         assert_eq!(state(&mut t, &frozen).1["frozen"], true);
         let delivered = PlantEvent::TableDelivered {
-            machine: "M1".into(),
-            feature: "IN1".into(),
+            machine: "M1".parse().unwrap(),
+            feature: "IN1".parse().unwrap(),
             version: 7,
             at_ms: jiff::Timestamp::from_millisecond(11).unwrap(),
         };

@@ -3,6 +3,7 @@
 //! values and OPC UA events. Runs on its own task: the loops only `try_send` into its
 //! channel, and the OPC UA stack drops or lags a slow client without ever waiting here.
 
+use crate::names::{FeatureName, MachineName};
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
@@ -39,7 +40,7 @@ pub(crate) struct Feed {
     journal_failing: HashMap<String, bool>,
     event_seq: u64,
     started_ms: i64,
-    repeatability: Option<mpsc::Sender<(String, String, String)>>,
+    repeatability: Option<mpsc::Sender<(MachineName, FeatureName, String)>>,
 }
 
 impl Feed {
@@ -111,7 +112,7 @@ impl Feed {
                     self.stage(self.ids.value(&machine, feature, v), value, staged);
                 }
                 if let Some(tx) = &self.repeatability {
-                    let _ = tx.try_send((machine.clone(), feature.clone(), part.clone()));
+                    let _ = tx.try_send((e.machine().clone(), feature.clone(), part.clone()));
                 }
                 let message = serde_json::json!({
                     "part": part, "feature": feature, "verdict": verdict.as_str(),
@@ -354,7 +355,7 @@ pub(crate) async fn run(
 /// Sets each part's repeatability (the largest per-angle spread over the revolutions, µm)
 /// once its measurement is in the store; gives up on a part after 5 s.
 async fn repeatability_task(
-    mut rx: mpsc::Receiver<(String, String, String)>,
+    mut rx: mpsc::Receiver<(MachineName, FeatureName, String)>,
     store: StoreHandle,
     manager: Arc<InMemoryNodeManager<CamloopNodes>>,
     subscriptions: Arc<SubscriptionCache>,
@@ -374,13 +375,13 @@ async fn repeatability_task(
 
 async fn repeatability_of(
     store: &StoreHandle,
-    machine: &str,
-    feature: &str,
+    machine: &MachineName,
+    feature: &FeatureName,
     part: &str,
 ) -> Option<f64> {
     let s = store.read().await.clone()?;
     let rows = s.part_measurements(machine, part).await.ok()?;
-    let row = rows.iter().rev().find(|r| r.lobe == feature)?;
+    let row = rows.iter().rev().find(|r| r.lobe == *feature)?;
     let detail = s.measurement(row.id).await.ok()??;
     let json: serde_json::Value = serde_json::from_str(&detail.analysis_json).ok()?;
     find_number(&json, "repeatability_max_um", 3)

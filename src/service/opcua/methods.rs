@@ -2,6 +2,7 @@
 //! handlers (same checks, same command to the machine's loop, same audit row), with the
 //! role the API route needs; `GetLatestResult` and `GetResultById` read the history store.
 
+use crate::names::{FeatureName, MachineName};
 use axum::extract::State;
 use opcua::types::{DateTime, StatusCode, Variant};
 use tracing::{info, warn};
@@ -99,7 +100,9 @@ async fn rollback(
     let body: http::RollbackBody =
         serde_json::from_value(serde_json::json!({ "version": version }))
             .map_err(|_| StatusCode::BadInvalidArgument)?;
-    let path = ApiPath((machine.to_string(), feature.as_ref().to_string()));
+    let machine = http::machine_name(machine).map_err(status)?;
+    let feature = http::feature_name(feature.as_ref()).map_err(status)?;
+    let path = ApiPath((machine, feature));
     let reply = http::rollback_write(p, State(app.clone()), path, ApiJson(body))
         .await
         .map_err(status)?;
@@ -119,7 +122,7 @@ async fn acknowledge(
         .first()
         .and_then(int)
         .ok_or(StatusCode::BadInvalidArgument)?;
-    let path = ApiPath((machine.to_string(), id));
+    let path = ApiPath((http::machine_name(machine).map_err(status)?, id));
     http::ack_write(p, State(app.clone()), path)
         .await
         .map_err(status)?;
@@ -164,18 +167,25 @@ async fn read_method(
     let unavailable = |_| StatusCode::BadResourceUnavailable;
     let summary = match (method, args.first()) {
         (Method::GetLatestResult, Some(Variant::String(feature))) => {
-            let filter = HistoryFilter {
-                machine: machine.to_string(),
-                lobe: Some(feature.as_ref().to_string()),
-                limit: 1,
-                masters: crate::store::MasterRuns::Excluded,
-                ..HistoryFilter::default()
-            };
-            let page = store
-                .measurement_history(&filter)
-                .await
-                .map_err(unavailable)?;
-            page.items.into_iter().next()
+            // A name off the rule names no feature: no result, as for an unknown one.
+            match (
+                MachineName::new(machine),
+                FeatureName::new(feature.as_ref()),
+            ) {
+                (Ok(machine), Ok(lobe)) => {
+                    let filter = HistoryFilter {
+                        lobe: Some(lobe),
+                        masters: crate::store::MasterRuns::Excluded,
+                        ..HistoryFilter::new(machine, 1)
+                    };
+                    let page = store
+                        .measurement_history(&filter)
+                        .await
+                        .map_err(unavailable)?;
+                    page.items.into_iter().next()
+                }
+                _ => None,
+            }
         }
         (Method::GetResultById, Some(v)) => {
             let id = int(v).ok_or(StatusCode::BadInvalidArgument)?;

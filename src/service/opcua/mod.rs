@@ -42,7 +42,7 @@ pub(crate) fn layout(machines: &[crate::config::CheckedMachine]) -> Vec<MachineL
                 .file_stem()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default(),
-            features: m.setups.iter().map(|s| s.name.clone()).collect(),
+            features: m.setups.iter().map(|s| s.name.to_string()).collect(),
         })
         .collect()
 }
@@ -273,7 +273,11 @@ async fn dressing_counts(
         return counts;
     };
     for m in layout {
-        if let Ok(list) = store.dressings(&m.name, 10_000).await {
+        // The layout's names are the configured machines' (valid by the config's check).
+        let Ok(name) = crate::names::MachineName::new(&m.name) else {
+            continue;
+        };
+        if let Ok(list) = store.dressings(&name, 10_000).await {
             counts.insert(
                 m.name.clone(),
                 i64::try_from(list.len()).unwrap_or(i64::MAX),

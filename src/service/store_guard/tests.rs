@@ -28,8 +28,8 @@ impl Site {
 
 fn share_at(version: Option<u64>, tables_in_journal: u64) -> Vec<MachineExpectation> {
     vec![MachineExpectation {
-        machine: "SIM1".into(),
-        lobe: "IN1".into(),
+        machine: "SIM1".parse().unwrap(),
+        lobe: "IN1".parse().unwrap(),
         newest_share_version: version,
         tables_in_journal,
         state_dir: PathBuf::from("/nonexistent/camloop-state"),
@@ -40,7 +40,7 @@ async fn add_table(store: &Store) -> i64 {
     store
         .insert_table_version(&NewTableVersion {
             machine: "SIM1".parse().unwrap(),
-            lobe: "IN1".into(),
+            lobe: "IN1".parse().unwrap(),
             version: None,
             parent_version: None,
             table_number: 11,
@@ -286,7 +286,7 @@ async fn the_service_refuses_to_start_on_a_truncated_database() {
     // The version index is rebuilt from the share: its newest version is in the new store
     // under its own number, with its program text.
     let newest = store
-        .latest_table_version("SIM1", "IN1")
+        .latest_table_version(&"SIM1".parse().unwrap(), &"IN1".parse().unwrap())
         .await
         .unwrap()
         .unwrap();

@@ -38,7 +38,7 @@ pub(crate) fn provenance_lines(p: &Provenance) -> Vec<String> {
         comment_text(&p.created_utc),
         comment_text(&p.recipe),
         comment_text(&p.feature),
-        comment_text(&p.correction_sha256),
+        p.correction_sha256.to_string(),
     ];
     KEYS.iter()
         .zip(values)

@@ -86,9 +86,9 @@ pub struct Provenance {
     /// Recipe name.
     pub recipe: String,
     /// Lobe or pin of the recipe.
-    pub feature: String,
-    /// SHA-256 (hex) of the correction the table carries.
-    pub correction_sha256: String,
+    pub feature: crate::names::FeatureName,
+    /// SHA-256 of the correction the table carries.
+    pub correction_sha256: crate::digest::Sha256,
 }
 
 /// How a curve-table subprogram is written. `Default` gives a valid program: `CAMLOOP_TABLE`,

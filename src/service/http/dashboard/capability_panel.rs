@@ -6,6 +6,7 @@
 use super::FeatureSheet;
 use super::charts::{Line, LineChart, Mark};
 use crate::core::capability::{Capability, Index};
+use crate::names::{FeatureName, MachineName};
 use crate::quality::{self, CharacteristicStudy, Window, study::GaugeItem};
 use crate::store::{Store, StoreError};
 use maud::{Markup, html};
@@ -17,8 +18,8 @@ const BINS: usize = 16;
 /// The panel's HTML.
 pub(super) async fn panel(
     store: &Store,
-    machine: &str,
-    lobe: &str,
+    machine: &MachineName,
+    lobe: &FeatureName,
     sheet: &FeatureSheet,
 ) -> Result<Markup, StoreError> {
     let (rows, _, _) =

@@ -2,6 +2,7 @@
 //! a feature's trend, latest part, versions, dressings and events.
 
 use super::FeatureSheet;
+use crate::names::{FeatureName, MachineName};
 use crate::service::http::ApiCode;
 use crate::service::http::AppState;
 use crate::service::http::api::ApiError;
@@ -47,8 +48,8 @@ impl MachineState {
 
 /// One (machine, feature) line of the overview.
 pub(super) struct OverviewRow {
-    pub machine: String,
-    pub lobe: String,
+    pub machine: MachineName,
+    pub lobe: FeatureName,
     pub state: MachineState,
     /// The newest parts, oldest first.
     pub recent: Vec<MeasurementSummary>,
@@ -72,15 +73,15 @@ pub(super) async fn store(app: &AppState) -> Result<Store, ApiError> {
 pub(super) async fn features(
     app: &AppState,
     store: &Store,
-) -> Result<BTreeMap<String, BTreeSet<String>>, ApiError> {
-    let mut out: BTreeMap<String, BTreeSet<String>> = app
+) -> Result<BTreeMap<MachineName, BTreeSet<FeatureName>>, ApiError> {
+    let mut out: BTreeMap<MachineName, BTreeSet<FeatureName>> = app
         .machines
         .iter()
-        .map(|(m, lobes)| (m.to_string(), lobes.iter().cloned().collect()))
+        .map(|(m, lobes)| (m.clone(), lobes.iter().cloned().collect()))
         .collect();
     for m in store.machines().await? {
         let lobes = store.features(&m.name).await?;
-        out.entry(m.name.into())
+        out.entry(m.name)
             .or_default()
             .extend(lobes.into_iter().map(|f| f.lobe));
     }
@@ -98,9 +99,14 @@ pub(super) async fn overview(app: &AppState) -> Result<Vec<OverviewRow>, ApiErro
             recent.reverse();
             let versions = store.table_version_heads(&machine, &lobe, 20).await?;
             let frozen = learning(&store, &machine, &lobe).await?.frozen.is_some();
-            let sheet = app.dashboard.get(&(machine.clone(), lobe.clone()));
+            let sheet = app.dashboard.get(&(machine.to_string(), lobe.to_string()));
             rows.push(OverviewRow {
-                state: state(metrics.get(&machine), &events, frozen, recent.is_empty()),
+                state: state(
+                    metrics.get(machine.as_str()),
+                    &events,
+                    frozen,
+                    recent.is_empty(),
+                ),
                 band_um: sheet.and_then(FeatureSheet::symmetric_band_um),
                 in_force: versions
                     .into_iter()
@@ -140,16 +146,14 @@ fn state(
 /// gauge study's (the capability panel shows them), never a point of the trend.
 pub(super) async fn history(
     store: &Store,
-    machine: &str,
-    lobe: &str,
+    machine: &MachineName,
+    lobe: &FeatureName,
     n: u32,
 ) -> Result<Vec<MeasurementSummary>, ApiError> {
     let filter = HistoryFilter {
-        machine: machine.to_string(),
-        lobe: Some(lobe.to_string()),
-        limit: n,
+        lobe: Some(lobe.clone()),
         masters: MasterRuns::Excluded,
-        ..HistoryFilter::default()
+        ..HistoryFilter::new(machine.clone(), n)
     };
     Ok(store.measurement_history(&filter).await?.items)
 }
@@ -157,10 +161,10 @@ pub(super) async fn history(
 /// The machine's newest events with their acknowledgements, newest first.
 pub(super) async fn events(
     store: &Store,
-    machine: &str,
+    machine: &MachineName,
 ) -> Result<Vec<(Event, Option<EventAck>)>, ApiError> {
     let filter = EventFilter {
-        machine: Some(machine.to_string()),
+        machine: Some(machine.clone()),
         limit: EVENTS,
         ..EventFilter::default()
     };
@@ -194,8 +198,8 @@ struct Memory {
 
 pub(super) async fn learning(
     store: &Store,
-    machine: &str,
-    lobe: &str,
+    machine: &MachineName,
+    lobe: &FeatureName,
 ) -> Result<Learning, ApiError> {
     let state = store.learning_state_for_view(machine, lobe).await?;
     Ok(state
@@ -236,8 +240,8 @@ pub(super) struct FeatureData {
 
 pub(super) async fn feature(
     store: &Store,
-    machine: &str,
-    lobe: &str,
+    machine: &MachineName,
+    lobe: &FeatureName,
 ) -> Result<FeatureData, ApiError> {
     let mut parts = history(store, machine, lobe, TREND_PARTS).await?;
     parts.reverse();

@@ -1,9 +1,10 @@
 //! Downloads: the data of every chart as CSV or JSON, and a feature's parts as a Q-DAS
 //! `.dfq` file.
 
+use super::Dash;
 use super::data::{self, diff_um};
-use super::{Dash, names};
 use crate::dfq::{DfqSeries, row_from, write_dfq};
+use crate::names::{FeatureName, MachineName};
 use crate::service::http::ApiCode;
 use crate::service::http::api::{ApiError, ApiPath, ApiQuery};
 use axum::extract::State;
@@ -82,10 +83,9 @@ fn not_found(what: String) -> ApiError {
 #[utoipa::path(get, path = "/machines/{machine}/features/{lobe}/data", tag = "dashboard", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), DataQuery), responses((status = 200, description = "a chart's data as CSV or JSON", content_type = "text/csv")))]
 pub(super) async fn chart_data(
     State(d): State<Dash>,
-    ApiPath((machine, lobe)): ApiPath<(String, String)>,
+    ApiPath((machine, lobe)): ApiPath<(MachineName, FeatureName)>,
     ApiQuery(q): ApiQuery<DataQuery>,
 ) -> Result<Response, ApiError> {
-    names(&machine, &lobe)?;
     let store = data::store(&d.app).await?;
     let table = match q.chart {
         Chart::Trend => {
@@ -142,8 +142,8 @@ pub(super) async fn chart_data(
 
 async fn diff_table(
     store: &crate::store::Store,
-    machine: &str,
-    lobe: &str,
+    machine: &MachineName,
+    lobe: &FeatureName,
     v: i64,
 ) -> Result<Table, ApiError> {
     let newer = store
@@ -168,8 +168,8 @@ async fn diff_table(
 
 async fn latest_table(
     store: &crate::store::Store,
-    machine: &str,
-    lobe: &str,
+    machine: &MachineName,
+    lobe: &FeatureName,
 ) -> Result<Table, ApiError> {
     let fd = data::feature(store, machine, lobe).await?;
     let l = fd
@@ -211,9 +211,8 @@ async fn latest_table(
 #[utoipa::path(get, path = "/machines/{machine}/features/{lobe}/export.dfq", tag = "dashboard", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name")), responses((status = 200, description = "the newest parts as Q-DAS AQDEF", content_type = "text/plain")))]
 pub(super) async fn dfq(
     State(d): State<Dash>,
-    ApiPath((machine, lobe)): ApiPath<(String, String)>,
+    ApiPath((machine, lobe)): ApiPath<(MachineName, FeatureName)>,
 ) -> Result<Response, ApiError> {
-    names(&machine, &lobe)?;
     let store = data::store(&d.app).await?;
     let mut parts = data::history(&store, &machine, &lobe, DFQ_PARTS).await?;
     parts.reverse();
@@ -232,7 +231,10 @@ pub(super) async fn dfq(
             detail.as_ref().map(|d| d.analysis_json.as_str()),
         ));
     }
-    let sheet = d.app.dashboard.get(&(machine.clone(), lobe.clone()));
+    let sheet = d
+        .app
+        .dashboard
+        .get(&(machine.to_string(), lobe.to_string()));
     let series = DfqSeries {
         machine: machine.clone(),
         feature: lobe.clone(),

@@ -27,8 +27,9 @@ pub use sse::Stopping;
 
 use super::AppState;
 use super::access::Principal;
-use super::api::{ApiError, ApiPath, ApiQuery, feature_name, machine_name};
+use super::api::{ApiError, ApiPath, ApiQuery};
 use crate::core::analysis::ToleranceBand;
+use crate::names::{FeatureName, MachineName};
 use crate::recipe::FeatureSetup;
 use crate::service::http::ApiCode;
 use axum::Router;
@@ -169,22 +170,19 @@ async fn overview(
     Ok(Html(pages::overview(&rows, q.fragment.is_some())))
 }
 
-fn names(machine: &str, lobe: &str) -> Result<(), ApiError> {
-    machine_name(machine)?;
-    feature_name(lobe)
-}
-
 /// A feature's page.
 #[utoipa::path(get, path = "/machines/{machine}/features/{lobe}", tag = "dashboard", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), PageQuery), responses((status = 200, description = "a feature: trend, latest part, events, capability, dressing form, setup drawing", content_type = "text/html")))]
 async fn feature_page(
     State(d): State<Dash>,
-    ApiPath((machine, lobe)): ApiPath<(String, String)>,
+    ApiPath((machine, lobe)): ApiPath<(MachineName, FeatureName)>,
     ApiQuery(q): ApiQuery<PageQuery>,
 ) -> Result<Html<String>, ApiError> {
-    names(&machine, &lobe)?;
     let store = data::store(&d.app).await?;
     let fd = data::feature(&store, &machine, &lobe).await?;
-    let sheet = d.app.dashboard.get(&(machine.clone(), lobe.clone()));
+    let sheet = d
+        .app
+        .dashboard
+        .get(&(machine.to_string(), lobe.to_string()));
     // Only on a full page: the live refresh after each part redraws the live part alone.
     let panel = match sheet {
         Some(sh) if q.fragment.is_none() => {
@@ -206,10 +204,9 @@ async fn feature_page(
 #[utoipa::path(get, path = "/machines/{machine}/features/{lobe}/versions", tag = "dashboard", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name"), PageQuery), responses((status = 200, description = "the feature's table versions with rollback", content_type = "text/html")))]
 async fn versions_page(
     State(d): State<Dash>,
-    ApiPath((machine, lobe)): ApiPath<(String, String)>,
+    ApiPath((machine, lobe)): ApiPath<(MachineName, FeatureName)>,
     ApiQuery(q): ApiQuery<PageQuery>,
 ) -> Result<Html<String>, ApiError> {
-    names(&machine, &lobe)?;
     let store = data::store(&d.app).await?;
     let versions = store.table_versions(&machine, &lobe, 50).await?;
     Ok(Html(pages::versions(
@@ -227,9 +224,8 @@ async fn versions_page(
 pub(crate) async fn ack(
     p: Principal,
     State(app): State<AppState>,
-    ApiPath((machine, id)): ApiPath<(String, i64)>,
+    ApiPath((machine, id)): ApiPath<(MachineName, i64)>,
 ) -> Result<Response, ApiError> {
-    machine_name(&machine)?;
     let store = data::store(&app).await?;
     let at = crate::clock::now();
     use crate::store::{AckOutcome, AuditResult};
@@ -237,7 +233,7 @@ pub(crate) async fn ack(
         .acknowledge_event(&machine, crate::store::EventId(id), at, &p.actor)
         .await;
     let mut entry = p.audit("acknowledge", AuditResult::Ok, String::new());
-    entry.machine = Some(machine.clone());
+    entry.machine = Some(machine.to_string());
     entry.after = Some(format!("{{\"event\":{id}}}"));
     entry.reason = match &outcome {
         Ok(AckOutcome::Acknowledged) => "acknowledged".into(),

@@ -173,7 +173,7 @@ fn versions_table(lobe: &str, base: &str, api: &str, versions: &[TableVersion]) 
                         td { (when(v.created_at_ms)) }
                         td {
                             a href={ (api) "/tables/" (n) "/program" } download={ (lobe) "_v" (n) ".spf" } title=(v.sha256) {
-                                (v.sha256.get(..12).unwrap_or(&v.sha256)) "…"
+                                (v.sha256.to_string()[..12]) "…"
                             }
                         }
                         td { button type="button" class="rollback" data-url={ (api) "/rollback" } data-version=(n) { "Roll back to v" (n) } }

@@ -9,6 +9,7 @@
 //! sends `Last-Event-ID` and gets the parts it missed.
 
 use crate::core::measure::is_master_part;
+use crate::names::{FeatureName, MachineName};
 use crate::service::machine::StoreHandle;
 use crate::store::{MeasurementId, MeasurementSummary};
 use axum::extract::State;
@@ -36,8 +37,8 @@ pub struct Stopping(pub watch::Receiver<bool>);
 #[derive(Debug, Clone, serde::Serialize)]
 pub(super) struct PartEvent {
     pub id: i64,
-    pub machine: String,
-    pub lobe: String,
+    pub machine: MachineName,
+    pub lobe: FeatureName,
     pub part: String,
     pub received_at_ms: i64,
     pub verdict: &'static str,
@@ -50,7 +51,7 @@ impl From<&MeasurementSummary> for PartEvent {
     fn from(m: &MeasurementSummary) -> Self {
         Self {
             id: m.id.0,
-            machine: m.machine.to_string(),
+            machine: m.machine.clone(),
             lobe: m.lobe.clone(),
             part: m.part.clone(),
             received_at_ms: m.received_at_ms.as_millisecond(),
