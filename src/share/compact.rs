@@ -221,7 +221,10 @@ mod tests {
         assert_eq!(short.history.waiting().unwrap().record.version, 51);
         assert_eq!(
             short.history.last_pushed().unwrap().status,
-            VersionStatus::Pushed { at_unix_ms: 50 }
+            VersionStatus::Pushed {
+                at_unix_ms: 50,
+                note: None
+            }
         );
         assert!(short.history.is_forgotten(10));
         let mut h = short.history;
@@ -279,7 +282,13 @@ mod tests {
         std::fs::write(&path, format!("{line}\n")).unwrap();
         let loaded = manifest::load(&path).unwrap();
         let status = |n: u64| loaded.history.get(n).unwrap().status.clone();
-        assert_eq!(status(1), VersionStatus::Pushed { at_unix_ms: 50 });
+        assert_eq!(
+            status(1),
+            VersionStatus::Pushed {
+                at_unix_ms: 50,
+                note: None
+            }
+        );
         assert_eq!(status(2), VersionStatus::Superseded { by: 4 });
         assert_eq!(
             status(3),

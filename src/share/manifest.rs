@@ -295,7 +295,10 @@ impl History {
                 }
                 // The status keeps integer milliseconds; an instant before 1970 reads as 0.
                 let at_unix_ms = u64::try_from(at_unix_ms.as_millisecond()).unwrap_or(0);
-                v.status = VersionStatus::Pushed { at_unix_ms };
+                v.status = VersionStatus::Pushed {
+                    at_unix_ms,
+                    note: None,
+                };
                 self.deliverable = None;
                 self.pushed += 1;
             }
@@ -518,7 +521,13 @@ mod tests {
         ])
         .unwrap();
         let status = |n| h.get(n).unwrap().status.clone();
-        assert_eq!(status(1), VersionStatus::Pushed { at_unix_ms: 2 });
+        assert_eq!(
+            status(1),
+            VersionStatus::Pushed {
+                at_unix_ms: 2,
+                note: None
+            }
+        );
         assert_eq!(status(2), VersionStatus::Superseded { by: 4 });
         assert!(matches!(status(3), VersionStatus::Refused { .. }));
         assert_eq!(status(4), VersionStatus::Waiting { reason: None });

@@ -6,7 +6,7 @@
 
 use camloop::names::{FeatureName, MachineName};
 use camloop::share::{VersionStatus, load_manifest};
-use camloop::store::{RawPool, Store, TableStatus};
+use camloop::store::{RawPool, Store};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
@@ -159,14 +159,13 @@ pub async fn agreement(var: &Path, store: &Store, machine: &str, lobe: &str) -> 
             ));
         }
         let expected = match &v.status {
-            VersionStatus::Pushed { .. } => Some(TableStatus::Pushed),
-            VersionStatus::Refused { .. } => Some(TableStatus::Refused),
+            VersionStatus::Pushed { .. } | VersionStatus::Refused { .. } => Some(v.status.name()),
             _ => None,
         };
-        if expected.is_some_and(|e| e != row.status) {
+        if expected.is_some_and(|e| e != row.status.name()) {
             a.mismatches.push(format!(
-                "v{version}: {:?} in the store ({}), {:?} on the share",
-                row.status, row.status_why, v.status
+                "v{version}: {:?} in the store, {:?} on the share",
+                row.status, v.status
             ));
         }
         if v.text_kept && row.sha256 != v.record.files[0].sha256 {

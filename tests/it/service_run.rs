@@ -83,6 +83,13 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
     let versions = tables["items"].as_array().unwrap();
     assert_eq!(versions.len(), 6, "{body}");
     assert!(versions.iter().all(|v| v["status"] == "pushed"));
+    // Why, as the store's row says it (the text the API has always shown).
+    assert!(
+        versions
+            .iter()
+            .all(|v| v["status_why"] == "pushed to the share"),
+        "{body}"
+    );
     let newest = versions[0]["version"].as_i64().unwrap();
     let (status, program) = get(
         addr,

@@ -75,7 +75,8 @@ fn a_push_puts_the_exact_program_on_the_share_and_records_it() {
     assert_eq!(
         share.history().get(1).unwrap().status,
         VersionStatus::Pushed {
-            at_unix_ms: 1_700_000_002_000
+            at_unix_ms: 1_700_000_002_000,
+            note: None
         }
     );
 }

@@ -7,7 +7,7 @@
 
 use crate::store_support;
 
-use camloop::store::{NewTableVersion, Store, TableStatus};
+use camloop::store::{NewTableVersion, Store, VersionStatus};
 use store_support::data::{ms, sha_of};
 
 /// A curve-table program whose numbers move with `v` as a learned correction moves them.
@@ -53,8 +53,9 @@ async fn take_turns(url: &str) {
             program_text: program(v),
             learning_params_json: learning(v),
             reason: format!("part {v}"),
-            status: TableStatus::Waiting,
-            status_why: "waiting".into(),
+            status: VersionStatus::Waiting {
+                reason: Some("waiting".into()),
+            },
             created_at_ms: ms(v * 10),
         };
         assert_eq!(store.insert_table_version(&t).await.unwrap(), v);

@@ -10,7 +10,7 @@ use crate::store_support;
 
 use std::borrow::Cow;
 
-use camloop::store::{NewTableVersion, REPORT_STEP, RawPool, Store, TableStatus};
+use camloop::store::{NewTableVersion, REPORT_STEP, RawPool, Store, VersionStatus};
 use sqlx::migrate::{Migration, Migrator};
 use store_support::data::{measurement, ms, sha_of};
 
@@ -231,7 +231,7 @@ async fn check_old_rows(store: &Store) {
     for t in &versions {
         assert_eq!(t.program_text, program(t.version), "v{}", t.version);
         assert_eq!(t.learning_params_json, learning(t.version));
-        assert_eq!(t.status, TableStatus::Pushed);
+        assert_eq!(t.status.name(), "pushed");
     }
     let newest = store
         .load_learning_state(&"M1".parse().unwrap(), &"in1".parse().unwrap())
@@ -276,8 +276,9 @@ async fn check_new_rows(store: &Store) {
             program_text: program(v),
             learning_params_json: learning(v),
             reason: "learned".into(),
-            status: TableStatus::Waiting,
-            status_why: "waiting".into(),
+            status: VersionStatus::Waiting {
+                reason: Some("waiting".into()),
+            },
             created_at_ms: ms(v * 10),
         };
         assert_eq!(store.insert_table_version(&t).await.unwrap(), v);

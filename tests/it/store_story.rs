@@ -10,7 +10,7 @@ use store_support::data::{LIFT_TOL_MM, all_pages, filter, measurement, ms, sha_o
 use camloop::store::{
     EventFilter, EventKind, EventLevel, FeatureKind, HistoryFilter, MeasurementId,
     MeasurementSummary, NewDressing, NewEvent, NewMeasurement, NewRecipeSnapshot, Store,
-    StoreError, TableStatus, Verdict,
+    StoreError, Verdict, VersionStatus,
 };
 
 async fn story(store: &Store) {
@@ -202,7 +202,7 @@ async fn story(store: &Store) {
             .is_none()
     );
     let v1 = store
-        .insert_table_version(&table("in1", None, "CTABDEF(11)\nv1", TableStatus::Waiting))
+        .insert_table_version(&table("in1", None, "CTABDEF(11)\nv1", "waiting"))
         .await
         .unwrap();
     assert_eq!(v1, 1);
@@ -211,25 +211,22 @@ async fn story(store: &Store) {
             &"M1".parse().unwrap(),
             &"in1".parse().unwrap(),
             1,
-            TableStatus::Pushed,
-            "pushed to share",
+            &VersionStatus::Pushed {
+                at_unix_ms: 6_000,
+                note: Some("pushed to share".into()),
+            },
             ms(6_000),
         )
         .await
         .unwrap();
     let v2 = store
-        .insert_table_version(&table(
-            "in1",
-            Some(1),
-            "CTABDEF(12)\nv2",
-            TableStatus::Refused,
-        ))
+        .insert_table_version(&table("in1", Some(1), "CTABDEF(12)\nv2", "refused"))
         .await
         .unwrap();
     assert_eq!(v2, 2);
     assert_eq!(
         store
-            .insert_table_version(&table("ex1", None, "x", TableStatus::Waiting))
+            .insert_table_version(&table("ex1", None, "x", "waiting"))
             .await
             .unwrap(),
         1,
@@ -241,16 +238,27 @@ async fn story(store: &Store) {
         .unwrap()
         .unwrap();
     assert_eq!((latest.version, latest.parent_version), (2, Some(1)));
-    assert_eq!(latest.status, TableStatus::Refused);
+    assert_eq!(
+        latest.status,
+        VersionStatus::Refused {
+            reason: "checks passed".into()
+        }
+    );
     assert_eq!(latest.sha256, sha_of("CTABDEF(12)\nv2"));
     let first = store
         .table_version(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 1)
         .await
         .unwrap()
         .unwrap();
-    assert_eq!(first.status, TableStatus::Pushed);
     assert_eq!(
-        (first.status_why.as_str(), first.status_at_ms),
+        first.status,
+        VersionStatus::Pushed {
+            at_unix_ms: 6_000,
+            note: Some("pushed to share".into())
+        }
+    );
+    assert_eq!(
+        (first.status.why(), first.status_at_ms),
         ("pushed to share", ms(6_000))
     );
     assert_eq!(first.program_text, "CTABDEF(11)\nv1");
@@ -266,7 +274,7 @@ async fn story(store: &Store) {
     assert_eq!(listed, [2, 1]);
     assert!(matches!(
         store
-            .insert_table_version(&table("in1", Some(99), "y", TableStatus::Waiting))
+            .insert_table_version(&table("in1", Some(99), "y", "waiting"))
             .await,
         Err(StoreError::NotFound { .. })
     ));
@@ -276,13 +284,30 @@ async fn story(store: &Store) {
                 &"M1".parse().unwrap(),
                 &"in1".parse().unwrap(),
                 42,
-                TableStatus::Pushed,
-                "x",
+                &VersionStatus::Refused { reason: "x".into() },
                 ms(1)
             )
             .await,
         Err(StoreError::NotFound { .. })
     ));
+    // The share's own states are never the store's: refused, naming the state, nothing kept.
+    let (m1, in1) = ("M1".parse().unwrap(), "in1".parse().unwrap());
+    for share_only in [
+        VersionStatus::Delivering,
+        VersionStatus::Superseded { by: 2 },
+    ] {
+        let e = store
+            .set_table_status(&m1, &in1, 1, &share_only, ms(7_000))
+            .await
+            .unwrap_err();
+        assert!(
+            e.to_string().contains(share_only.name()),
+            "{e} names {}",
+            share_only.name()
+        );
+    }
+    let first_again = store.table_version(&m1, &in1, 1).await.unwrap().unwrap();
+    assert_eq!(first_again.status.name(), "pushed");
     assert!(
         store
             .table_version(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 3)

@@ -8,7 +8,6 @@ use store_support::data::{filter, measurement, ms, table};
 
 use camloop::store::{
     EventKind, EventLevel, HistoryFilter, NewDressing, NewEvent, NewMeasurement, Store, StoreError,
-    TableStatus,
 };
 
 async fn idempotent(store: &Store) {
@@ -81,12 +80,7 @@ async fn idempotent_insert_on_postgres() {
 /// look-up finds the stored record and nothing that differs in one identifying field; and
 /// the durability call answers yes on an idle store.
 async fn replay_lookups(store: &Store) {
-    let t = table(
-        "in1",
-        None,
-        "CTABDEF(X,C,11,1)\nCTABEND\n",
-        TableStatus::Pushed,
-    );
+    let t = table("in1", None, "CTABDEF(X,C,11,1)\nCTABEND\n", "pushed");
     store.insert_table_version(&t).await.unwrap();
     assert!(
         store
@@ -245,7 +239,7 @@ async fn concurrent_writers(store: &Store) {
     for n in 0..8 {
         let store = store.clone();
         set.spawn(async move {
-            let mut t = table("in1", None, &format!("v{n}"), TableStatus::Waiting);
+            let mut t = table("in1", None, &format!("v{n}"), "waiting");
             t.machine = "MC".parse().unwrap();
             store.insert_table_version(&t).await
         });

@@ -3,7 +3,8 @@
 
 use camloop::names::MachineName;
 use camloop::store::{
-    HistoryFilter, MeasurementSummary, NewMeasurement, NewTableVersion, Store, TableStatus, Verdict,
+    HistoryFilter, MeasurementSummary, NewMeasurement, NewTableVersion, Store, Verdict,
+    VersionStatus,
 };
 use sha2::{Digest, Sha256};
 
@@ -87,7 +88,9 @@ pub async fn all_pages(store: &Store, mut f: HistoryFilter) -> Vec<MeasurementSu
     }
 }
 
-pub fn table(lobe: &str, parent: Option<i64>, text: &str, status: TableStatus) -> NewTableVersion {
+/// A table version whose first status is `status` (the store's name: "waiting", "pushed",
+/// "refused") because "checks passed", at 5 000 ms.
+pub fn table(lobe: &str, parent: Option<i64>, text: &str, status: &str) -> NewTableVersion {
     NewTableVersion {
         version: None,
         machine: MachineName::new("M1").unwrap(),
@@ -97,8 +100,7 @@ pub fn table(lobe: &str, parent: Option<i64>, text: &str, status: TableStatus) -
         program_text: text.into(),
         learning_params_json: r#"{"gain":0.6}"#.into(),
         reason: "learned".into(),
-        status,
-        status_why: "checks passed".into(),
+        status: VersionStatus::from_column(status, "checks passed".into(), 5_000).unwrap(),
         created_at_ms: ms(5_000),
     }
 }

@@ -37,6 +37,7 @@ mod measurements;
 mod pack;
 mod pack_numbers;
 mod pack_report;
+mod status;
 mod tables;
 mod types;
 pub mod unix_ms;

@@ -52,6 +52,37 @@ macro_rules! append_logged {
     };
 }
 
+/// Replaces learning state row `$id` (packed against `$base_id`) of (machine, lobe) with
+/// `$state_json` saved at `$saved_at_ms`, in transaction `$tx`: a snapshot with the same
+/// meaning as the newest, which nothing is packed against yet.
+macro_rules! replace_state {
+    ($store:expr, $tx:expr, ($machine:expr, $lobe:expr), ($id:expr, $base_id:expr),
+     $state_json:expr, $state_sha256:expr, $saved_at_ms:expr, $op:expr) => {{
+        let base = match $base_id {
+            Some(b) => texts_of!($store, $tx, LEARNING_STATES, $machine, $lobe, b).remove(0),
+            None => String::new(),
+        };
+        let packed = pack_text("state_packed", $state_json, &base)?;
+        $store.chains.put(
+            (LEARNING_STATES.table, $machine, $lobe),
+            $id,
+            vec![packed.clone()],
+            vec![$state_json.to_string()],
+        );
+        sqlx::query(
+            "UPDATE learning_states SET state_packed = $1, state_sha256 = $2, \
+             saved_at_ms = $3 WHERE id = $4",
+        )
+        .bind(packed)
+        .bind($state_sha256)
+        .bind($saved_at_ms)
+        .bind($id)
+        .execute(&mut *$tx)
+        .await
+        .map_err($store.db_error($op))?;
+    }};
+}
+
 impl Store {
     /// Keeps a recipe snapshot of one lobe or pin. When the newest snapshot of that
     /// (machine, part, lobe) has the same JSON text, returns its id and writes nothing.
@@ -364,28 +395,7 @@ impl Store {
             };
             match replace {
                 Some((id, base_id)) => {
-                    let base = match base_id {
-                        Some(b) => texts_of!(self, tx, LEARNING_STATES, machine, lobe, b).remove(0),
-                        None => String::new(),
-                    };
-                    let packed = pack_text("state_packed", state_json, &base)?;
-                    self.chains.put(
-                        (LEARNING_STATES.table, machine, lobe),
-                        id,
-                        vec![packed.clone()],
-                        vec![state_json.to_string()],
-                    );
-                    sqlx::query(
-                        "UPDATE learning_states SET state_packed = $1, state_sha256 = $2, \
-                         saved_at_ms = $3 WHERE id = $4",
-                    )
-                    .bind(packed)
-                    .bind(&state_sha256)
-                    .bind(saved_at_ms.as_millisecond())
-                    .bind(id)
-                    .execute(&mut *tx)
-                    .await
-                    .map_err(self.db_error(OP))?;
+                    replace_state!(self, tx, (machine, lobe), (id, base_id), state_json, &state_sha256, saved_at_ms.as_millisecond(), OP);
                 }
                 None => {
                     let (base_id, depth, base) = next_link!(self, tx, LEARNING_STATES, machine, lobe);

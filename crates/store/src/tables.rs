@@ -5,7 +5,7 @@ use super::chain::{TABLE_VERSIONS, fetch_chain, next_link};
 use super::codec::{CODEC_PACKED, check_json, check_limit, check_name, sha256_hex};
 use super::pack::pack_text;
 use super::{
-    NewTableVersion, Store, StoreError, TableStatus, TableVersion, at_col, col, with_read,
+    NewTableVersion, Store, StoreError, TableVersion, VersionStatus, at_col, col, with_read,
     with_write,
 };
 use camloop_core::names::{FeatureName, MachineName};
@@ -44,6 +44,7 @@ macro_rules! version_summary {
     ($row:expr) => {{
         let row = $row;
         let status: String = col!(row, "status", "reading a table version");
+        let status_at_ms: i64 = col!(row, "at_ms", "reading a table version");
         let table_number: i64 = col!(row, "table_number", "reading a table version");
         TableVersion {
             machine: $crate::codec::machine_of(col!(row, "machine", "reading a table version"))?,
@@ -64,11 +65,40 @@ macro_rules! version_summary {
             learning_params_json: String::new(),
             reason: col!(row, "reason", "reading a table version"),
             created_at_ms: at_col!(row, "created_at_ms", "reading a table version"),
-            status: TableStatus::parse(&status)?,
-            status_why: col!(row, "why", "reading a table version"),
-            status_at_ms: at_col!(row, "at_ms", "reading a table version"),
+            status: VersionStatus::from_column(
+                &status,
+                col!(row, "why", "reading a table version"),
+                status_at_ms,
+            )?,
+            status_at_ms: $crate::unix_ms::instant(status_at_ms, "at_ms")?,
         }
     }};
+}
+
+/// Returns [`StoreError::NotFound`] from the enclosing function when `$t` names a parent
+/// version that (machine, lobe) does not have: a version derives from a stored one.
+macro_rules! require_parent {
+    ($store:expr, $tx:expr, $t:expr, $op:expr) => {
+        if let Some(parent) = $t.parent_version {
+            let found: Option<i64> = sqlx::query_scalar(
+                "SELECT id FROM table_versions WHERE machine = $1 AND lobe = $2 AND version = $3",
+            )
+            .bind($t.machine.as_str())
+            .bind($t.lobe.as_str())
+            .bind(parent)
+            .fetch_optional(&mut *$tx)
+            .await
+            .map_err($store.db_error($op))?;
+            if found.is_none() {
+                return Err(StoreError::NotFound {
+                    what: format!(
+                        "parent table version {parent} of machine {} lobe {}",
+                        $t.machine, $t.lobe
+                    ),
+                });
+            }
+        }
+    };
 }
 
 impl Store {
@@ -79,6 +109,7 @@ impl Store {
         check_name("machine", t.machine.as_str())?;
         check_name("lobe", &t.lobe)?;
         check_json("learning_params_json", &t.learning_params_json)?;
+        let (status, why) = t.status.column()?;
         let sha256 = sha256_hex(t.program_text.as_bytes());
         const OP: &str = "inserting a table version";
         with_write!(self, pool => {
@@ -92,25 +123,7 @@ impl Store {
             .execute(&mut *tx)
             .await
             .map_err(self.db_error(OP))?;
-            if let Some(parent) = t.parent_version {
-                let found: Option<i64> = sqlx::query_scalar(
-                    "SELECT id FROM table_versions WHERE machine = $1 AND lobe = $2 AND version = $3",
-                )
-                .bind(t.machine.as_str())
-                .bind(t.lobe.as_str())
-                .bind(parent)
-                .fetch_optional(&mut *tx)
-                .await
-                .map_err(self.db_error(OP))?;
-                if found.is_none() {
-                    return Err(StoreError::NotFound {
-                        what: format!(
-                            "parent table version {parent} of machine {} lobe {}",
-                            t.machine, t.lobe
-                        ),
-                    });
-                }
-            }
+            require_parent!(self, tx, t, OP);
             let (base_id, depth, base) = next_link!(self, tx, TABLE_VERSIONS, t.machine.as_str(), t.lobe.as_str());
             let program = pack_text("program_packed", &t.program_text, &base[0])?;
             let learning = pack_text("learning_packed", &t.learning_params_json, &base[1])?;
@@ -150,8 +163,8 @@ impl Store {
                  VALUES ($1, $2, $3, $4)",
             )
             .bind(id)
-            .bind(t.status.as_str())
-            .bind(&t.status_why)
+            .bind(status)
+            .bind(why)
             .bind(t.created_at_ms.as_millisecond())
             .execute(&mut *tx)
             .await
@@ -161,16 +174,16 @@ impl Store {
         })
     }
 
-    /// Appends a status for a stored table version (e.g. waiting → pushed).
+    /// Appends a status for a stored table version (e.g. waiting → pushed), as of `at_ms`.
     pub async fn set_table_status(
         &self,
         machine: &MachineName,
         lobe: &FeatureName,
         version: i64,
-        status: TableStatus,
-        why: &str,
+        status: &VersionStatus,
         at_ms: jiff::Timestamp,
     ) -> Result<(), StoreError> {
+        let (status, why) = status.column()?;
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
         with_write!(self, pool => {
             let done = sqlx::query(
@@ -181,7 +194,7 @@ impl Store {
             .bind(machine)
             .bind(lobe)
             .bind(version)
-            .bind(status.as_str())
+            .bind(status)
             .bind(why)
             .bind(at_ms.as_millisecond())
             .execute(pool)
@@ -232,11 +245,11 @@ impl Store {
         machine: &MachineName,
         lobe: &FeatureName,
         version: i64,
-    ) -> Result<Option<TableStatus>, StoreError> {
+    ) -> Result<Option<VersionStatus>, StoreError> {
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
         with_write!(self, pool => {
-            let status: Option<String> = sqlx::query_scalar(
-                "SELECT s.status FROM table_versions t JOIN table_version_status s \
+            let status: Option<(String, String, i64)> = sqlx::query_as(
+                "SELECT s.status, s.why, s.at_ms FROM table_versions t JOIN table_version_status s \
                  ON s.table_version_id = t.id WHERE t.machine = $1 AND t.lobe = $2 \
                  AND t.version = $3 ORDER BY s.id DESC LIMIT 1",
             )
@@ -246,7 +259,9 @@ impl Store {
             .fetch_optional(pool)
             .await
             .map_err(self.db_error("looking up a table version's status"))?;
-            status.map(|s| TableStatus::parse(&s)).transpose()
+            status
+                .map(|(status, why, at_ms)| VersionStatus::from_column(&status, why, at_ms))
+                .transpose()
         })
     }
 

@@ -59,11 +59,6 @@ text_enum!(
     /// Whether a measured lobe or pin was within tolerance.
     Verdict, "verdict" { Pass, Fail }
 );
-text_enum!(
-    /// What happened to a table version: waiting for a decision, pushed to the control, or
-    /// refused (by a check or by the operator).
-    TableStatus, "table status" { Waiting, Pushed, Refused }
-);
 /// Where a table version stands, from its write-ahead record to the share's verdict: the one
 /// status of a version, for the share's manifest (this tagged JSON) and the store alike.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -74,7 +69,13 @@ pub enum VersionStatus {
     /// Renames began but were not confirmed (a kill or a failure during them).
     Delivering,
     /// On the share and verified.
-    Pushed { at_unix_ms: u64 },
+    Pushed {
+        at_unix_ms: u64,
+        /// How camloop learned it, as the store keeps it ("pushed to the share on retry");
+        /// the share's manifest never writes one.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        note: Option<String>,
+    },
     /// Never pushed, for this reason.
     Refused { reason: String },
     /// Not delivered before a newer version was accepted.
@@ -314,9 +315,9 @@ pub struct NewTableVersion {
     pub learning_params_json: String,
     /// Why the version was made ("learned from part 1234", "wheel dressed", …).
     pub reason: String,
-    pub status: TableStatus,
-    /// Why it has that status ("waiting for operator", "pushed to share", "step too large").
-    pub status_why: String,
+    /// Its first status, and why ("waiting for operator", "pushed to share", "step too
+    /// large"); the store keeps `created_at_ms` as the status's time.
+    pub status: VersionStatus,
     pub created_at_ms: Timestamp,
 }
 
@@ -335,8 +336,7 @@ pub struct TableVersion {
     pub learning_params_json: String,
     pub reason: String,
     pub created_at_ms: Timestamp,
-    pub status: TableStatus,
-    pub status_why: String,
+    pub status: VersionStatus,
     pub status_at_ms: Timestamp,
 }
 

@@ -7,7 +7,7 @@ use jiff::Timestamp;
 use super::codec::check_limit;
 use super::unix_ms::instant;
 use super::{
-    EventId, LearningState, Store, StoreError, TableStatus, at_col, col, with_read, with_write,
+    EventId, LearningState, Store, StoreError, VersionStatus, at_col, col, with_read, with_write,
 };
 use camloop_core::names::{FeatureName, MachineName};
 
@@ -27,7 +27,7 @@ pub struct TableVersionHead {
     pub table_number: u32,
     pub reason: String,
     pub created_at_ms: Timestamp,
-    pub status: TableStatus,
+    pub status: VersionStatus,
 }
 
 /// What acknowledging an event did.
@@ -155,7 +155,7 @@ impl Store {
         let limit = check_limit(limit)?;
         with_read!(self, pool => {
             let rows = sqlx::query(
-                "SELECT t.version, t.table_number, t.reason, t.created_at_ms, s.status \
+                "SELECT t.version, t.table_number, t.reason, t.created_at_ms, s.status, s.why, s.at_ms \
                  FROM table_versions t JOIN table_version_status s ON s.id = \
                  (SELECT MAX(s2.id) FROM table_version_status s2 WHERE s2.table_version_id = t.id) \
                  WHERE t.machine = $1 AND t.lobe = $2 ORDER BY t.version DESC LIMIT $3",
@@ -170,6 +170,7 @@ impl Store {
                 .map(|row| {
                     let status: String = col!(row, "status", "reading a table version");
                     let number: i64 = col!(row, "table_number", "reading a table version");
+                    let at_ms: i64 = col!(row, "at_ms", "reading a table version");
                     Ok(TableVersionHead {
                         version: col!(row, "version", "reading a table version"),
                         table_number: u32::try_from(number).map_err(|_| {
@@ -177,7 +178,11 @@ impl Store {
                         })?,
                         reason: col!(row, "reason", "reading a table version"),
                         created_at_ms: at_col!(row, "created_at_ms", "reading a table version"),
-                        status: TableStatus::parse(&status)?,
+                        status: VersionStatus::from_column(
+                            &status,
+                            col!(row, "why", "reading a table version"),
+                            at_ms,
+                        )?,
                     })
                 })
                 .collect()

@@ -413,8 +413,8 @@ pub(super) async fn tables(
             table_number: t.table_number,
             sha256: t.sha256,
             reason: t.reason,
-            status: t.status.as_str(),
-            status_why: t.status_why,
+            status: t.status.name(),
+            status_why: t.status.why().to_string(),
             created_at_ms: t.created_at_ms.as_millisecond(),
         })
         .collect();

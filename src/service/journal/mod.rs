@@ -65,7 +65,7 @@ impl Journal {
         let mut records = Vec::new();
         let mut bad = Vec::new();
         for (i, line) in String::from_utf8_lossy(&bytes[..keep]).lines().enumerate() {
-            match serde_json::from_str::<Pending>(line) {
+            match record::read_line(line) {
                 Ok(r) => records.push(r),
                 Err(e) => bad.push(Quarantined {
                     line: i + 1,
@@ -316,7 +316,7 @@ mod tests {
     use super::*;
     use crate::core::learn::LearningParams;
     use crate::service::machine::memory::{LoopMemory, TableLearning};
-    use crate::store::{EventLevel, TableStatus};
+    use crate::store::{EventLevel, VersionStatus};
 
     fn event(message: &str) -> Pending {
         Pending::Event {
@@ -383,6 +383,50 @@ mod tests {
         assert!(Journal::open(dir.path()).unwrap().quarantined().is_empty());
     }
 
+    /// A journal left by a build whose table records spelled the status as the store's
+    /// columns (`status` beside `status_why` or `why`) replays into the store with the same
+    /// status and text, nothing quarantined.
+    #[tokio::test]
+    async fn a_journal_with_column_spelled_statuses_replays() {
+        let dir = tempfile::tempdir().unwrap();
+        let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
+        let store = Store::connect(&url).await.unwrap();
+        let table = r#"{"record":"table","machine":"M1","lobe":"IN1","version":1,"parent_version":null,"table_number":1,"program_text":"CTABDEF(X,C,1,1)\nCTABEND\n","learning":{"iteration":0,"params":{},"wheel_radius_mm":250.0,"correction_um":[0.0],"timing_correction_deg":0.0},"reason":"nominal table","status":"waiting","status_why":"waiting: share full","created_at_ms":7}"#;
+        let later = r#"{"record":"table_status","machine":"M1","lobe":"IN1","version":1,"status":"pushed","why":"pushed to the share on retry","at_ms":9}"#;
+        std::fs::write(
+            dir.path().join("journal.jsonl"),
+            format!("{table}\n{later}\n"),
+        )
+        .unwrap();
+        let mut j = Journal::open(dir.path()).unwrap();
+        assert!(j.quarantined().is_empty(), "{:?}", j.quarantined());
+        assert_eq!(j.flush(&store).await.unwrap(), 2);
+        let v = store
+            .table_version(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), 1)
+            .await
+            .unwrap()
+            .unwrap();
+        let pushed = VersionStatus::Pushed {
+            at_unix_ms: 9,
+            note: Some("pushed to the share on retry".into()),
+        };
+        assert_eq!(
+            (v.status, v.status_at_ms),
+            (pushed, jiff::Timestamp::from_millisecond(9).unwrap())
+        );
+        let crate::store::RawPool::Sqlite(pool) = store.raw_pool() else {
+            panic!("a SQLite store")
+        };
+        let rows: Vec<(String, String, i64)> =
+            sqlx::query_as("SELECT status, why, at_ms FROM table_version_status ORDER BY id")
+                .fetch_all(pool)
+                .await
+                .unwrap();
+        let first = ("waiting".to_string(), "waiting: share full".to_string(), 7);
+        let second = ("pushed".into(), "pushed to the share on retry".into(), 9);
+        assert_eq!(rows, [first, second]);
+    }
+
     /// Every kind of record replayed after a crash (written, not yet released) is recognised
     /// in the store and not written again; a second event that differs only in its message
     /// still goes in. After the release the newest learning state stays in the journal, so
@@ -410,18 +454,21 @@ mod tests {
                 program_text: "CTABDEF(X,C,1,1)\nCTABEND\n".into(),
                 learning: table,
                 reason: "nominal table".into(),
-                status: TableStatus::Waiting,
-                status_why: "waiting: share full".into(),
+                status: VersionStatus::Waiting {
+                    reason: Some("waiting: share full".into()),
+                },
                 created_at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
                 measurement_id: None,
                 rollback_of: None,
             },
-            Pending::TableStatus {
+            Pending::VersionStatus {
                 machine: "M1".parse().unwrap(),
                 lobe: "IN1".parse().unwrap(),
                 version: 3,
-                status: TableStatus::Pushed,
-                why: "pushed on retry".into(),
+                status: VersionStatus::Pushed {
+                    at_unix_ms: 8,
+                    note: Some("pushed on retry".into()),
+                },
                 at_ms: jiff::Timestamp::from_millisecond(8).unwrap(),
             },
             learning(1),
@@ -463,7 +510,11 @@ mod tests {
             .await
             .unwrap()
             .unwrap();
-        assert_eq!((v.version, v.status), (3, TableStatus::Pushed));
+        let pushed = VersionStatus::Pushed {
+            at_unix_ms: 8,
+            note: Some("pushed on retry".into()),
+        };
+        assert_eq!((v.version, v.status), (3, pushed));
         assert_eq!(j.release_durable(&store).await.unwrap(), 6);
         let reopened = Journal::open(dir.path()).unwrap();
         assert_eq!(reopened.records(), [learning(1)]);

@@ -7,7 +7,7 @@ use crate::names::{FeatureName, MachineName};
 pub use crate::store::EventKind;
 use crate::store::{
     EventLevel, FeatureKind, NewDressing, NewEvent, NewMeasurement, NewRecipeSnapshot,
-    NewTableVersion, Store, StoreError, TableStatus,
+    NewTableVersion, Store, StoreError, VersionStatus,
 };
 use jiff::Timestamp;
 use serde::{Deserialize, Serialize};
@@ -36,8 +36,8 @@ pub enum Pending {
         program_text: String,
         learning: TableLearning,
         reason: String,
-        status: TableStatus,
-        status_why: String,
+        /// Its first status, with why (lines written before it was typed: see [`read_line`]).
+        status: VersionStatus,
         #[serde(with = "crate::clock::unix_ms")]
         created_at_ms: Timestamp,
         /// The measurement it was learned from (a replay re-submits the version with it).
@@ -48,12 +48,12 @@ pub enum Pending {
         rollback_of: Option<u64>,
     },
     /// A later status of a recorded version (e.g. waiting → pushed once the share is back).
-    TableStatus {
+    #[serde(rename = "table_status")]
+    VersionStatus {
         machine: MachineName,
         lobe: FeatureName,
         version: u64,
-        status: TableStatus,
-        why: String,
+        status: VersionStatus,
         #[serde(with = "crate::clock::unix_ms")]
         at_ms: Timestamp,
     },
@@ -126,7 +126,7 @@ impl Pending {
             Pending::Table { .. } => Some("journaled:table_version"),
             Pending::Learning { .. } => Some("journaled:learning_state"),
             Pending::Dressing { .. } => Some("journaled:dressing"),
-            Pending::TableStatus { .. }
+            Pending::VersionStatus { .. }
             | Pending::Event { .. }
             | Pending::RecipeSnapshot { .. } => None,
         }
@@ -137,7 +137,7 @@ impl Pending {
         match self {
             Pending::Measurement { .. } => "store_commit:measurement",
             Pending::Table { .. } => "store_commit:table_version",
-            Pending::TableStatus { .. } => "store_commit:table_status",
+            Pending::VersionStatus { .. } => "store_commit:table_status",
             Pending::Event { .. } => "store_commit:event",
             Pending::Learning { .. } => "store_commit:learning_state",
             Pending::RecipeSnapshot { .. } => "store_commit:recipe_snapshot",
@@ -168,6 +168,48 @@ impl Pending {
     }
 }
 
+/// Reads one journal line. Table records written before they carried the share's status
+/// type spell it as the store's columns: `"status":"pushed"` beside `status_why` (a table)
+/// or `why` (a later status), with the record's time; those are read through the store's
+/// own [`VersionStatus::from_column`], so a journal left by a stopped service still replays.
+pub(super) fn read_line(line: &str) -> serde_json::Result<Pending> {
+    serde_json::from_str(line).or_else(|error| {
+        let mut value: serde_json::Value = serde_json::from_str(line)?;
+        match column_status(&mut value) {
+            Ok(true) => serde_json::from_value(value),
+            Ok(false) => Err(error),
+            Err(e) => Err(serde::de::Error::custom(e)),
+        }
+    })
+}
+
+/// Rewrites a table record's column-spelled status as the typed one; false when `value`
+/// is no such record.
+fn column_status(value: &mut serde_json::Value) -> Result<bool, StoreError> {
+    use serde_json::Value;
+    let Some(record) = value.as_object_mut() else {
+        return Ok(false);
+    };
+    let (why_key, at_key) = match record.get("record").and_then(Value::as_str) {
+        Some("table") => ("status_why", "created_at_ms"),
+        Some("table_status") => ("why", "at_ms"),
+        _ => return Ok(false),
+    };
+    let (Some(Value::String(status)), Some(Value::String(why)), Some(at_ms)) = (
+        record.get("status"),
+        record.get(why_key),
+        record.get(at_key).and_then(Value::as_i64),
+    ) else {
+        return Ok(false);
+    };
+    let status = VersionStatus::from_column(status, why.clone(), at_ms)?;
+    let status = serde_json::to_value(status)
+        .map_err(|e| StoreError::invalid("table status", e.to_string()))?;
+    record.remove(why_key);
+    record.insert("status".into(), status);
+    Ok(true)
+}
+
 /// [`apply`] for a record read back after a crash: skipped when the store already holds it
 /// (measurements are idempotent by their SHA-256 anyway).
 pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), StoreError> {
@@ -183,7 +225,7 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
             .table_version_status(machine, lobe, *version as i64)
             .await?
             .is_some(),
-        Pending::TableStatus {
+        Pending::VersionStatus {
             machine,
             lobe,
             version,
@@ -192,7 +234,7 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
         } => store
             .table_version_status(machine, lobe, *version as i64)
             .await?
-            .is_some_and(|s| s == *status),
+            .is_some_and(|s| s.name() == status.name()),
         Pending::Event { .. } => match record.event()? {
             Some(e) => store.event_exists(&e).await?,
             None => false,
@@ -254,16 +296,15 @@ pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreEr
             store.insert_measurement(&measurement).await.map(|_| ())
         }
         record @ Pending::Table { .. } => insert_table(store, record).await,
-        Pending::TableStatus {
+        Pending::VersionStatus {
             machine,
             lobe,
             version,
             status,
-            why,
             at_ms,
         } => {
             store
-                .set_table_status(&machine, &lobe, version as i64, status, &why, at_ms)
+                .set_table_status(&machine, &lobe, version as i64, &status, at_ms)
                 .await
         }
         Pending::Event { .. } => match record.event()? {
@@ -306,7 +347,6 @@ async fn insert_table(store: &Store, record: Pending) -> Result<(), StoreError> 
         learning,
         reason,
         status,
-        status_why,
         created_at_ms,
         ..
     } = record
@@ -338,7 +378,6 @@ async fn insert_table(store: &Store, record: Pending) -> Result<(), StoreError> 
         learning_params_json,
         reason,
         status,
-        status_why,
         created_at_ms,
     };
     store.insert_table_version(&t).await.map(|_| ())
@@ -371,6 +410,53 @@ async fn insert_snapshot(store: &Store, record: Pending) -> Result<(), StoreErro
 mod tests {
     use super::*;
     use crate::store::Verdict;
+
+    /// Table lines as builds before the typed status wrote them (the status as the store's
+    /// column pair) read as the typed status with the same text, and are written back in the
+    /// typed form, which reads again as the same record.
+    #[test]
+    fn table_lines_with_the_status_as_columns_read_as_the_typed_status() {
+        let table = r#"{"record":"table","machine":"G7","lobe":"IN1","version":3,
+            "parent_version":null,"table_number":1,"program_text":"CTABEND","learning":
+            {"iteration":0,"params":{},"wheel_radius_mm":250.0,"correction_um":[0.0],
+            "timing_correction_deg":0.0},"reason":"learned","status":"waiting",
+            "status_why":"submitted to the share","created_at_ms":7}"#;
+        let later = r#"{"record":"table_status","machine":"G7","lobe":"IN1","version":3,
+            "status":"pushed","why":"pushed to the share on retry","at_ms":9}"#;
+        let refused = later.replace(r#""pushed""#, r#""refused""#);
+        let read = |line: &str| read_line(line).unwrap_or_else(|e| panic!("{e}: {line}"));
+        let Pending::Table { status, .. } = read(table) else {
+            panic!("a table record")
+        };
+        let submitted = Some("submitted to the share".to_string());
+        assert_eq!(status, VersionStatus::Waiting { reason: submitted });
+        let record = read(later);
+        let Pending::VersionStatus { status, at_ms, .. } = &record else {
+            panic!("a status record")
+        };
+        let note = Some("pushed to the share on retry".to_string());
+        let pushed = VersionStatus::Pushed {
+            at_unix_ms: 9,
+            note,
+        };
+        assert_eq!(
+            (status, *at_ms),
+            (&pushed, jiff::Timestamp::from_millisecond(9).unwrap())
+        );
+        let Pending::VersionStatus { status, .. } = read(&refused) else {
+            panic!("a status record")
+        };
+        assert_eq!(status.why(), "pushed to the share on retry");
+        assert_eq!(status.name(), "refused");
+        // Written back typed; the typed line reads as the same record.
+        let typed = serde_json::to_string(&record).unwrap();
+        assert!(typed.contains(r#""status":{"status":"pushed""#), "{typed}");
+        assert_eq!(read(&typed), record);
+        // A status no build ever wrote is an error naming it, not a record.
+        let unknown = later.replace(r#""pushed""#, r#""delivered""#);
+        let e = read_line(&unknown).unwrap_err().to_string();
+        assert!(e.contains("unknown value `delivered`"), "{e}");
+    }
 
     /// A measurement line as builds before the shared record wrote it (its fields flat
     /// beside the tag, no recipe snapshot) reads as the store's record, and is written back

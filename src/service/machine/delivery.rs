@@ -12,7 +12,7 @@ use crate::core::learn::LearningState;
 use crate::core::program::{Provenance, comment_text};
 use crate::failpoint::crash_point;
 use crate::share::{ProgramFile, PushError, PushRequest, Submitted};
-use crate::store::{EventLevel, TableStatus};
+use crate::store::{EventLevel, VersionStatus};
 use std::sync::atomic::Ordering;
 use tracing::{error, info, warn};
 
@@ -78,7 +78,7 @@ impl FeatureLoop {
             rollback_of: None,
             at_ms,
         };
-        let (_, _, _, records) = self.push(draft, next)?;
+        let (_, _, records) = self.push(draft, next)?;
         Ok(records)
     }
 
@@ -92,7 +92,7 @@ impl FeatureLoop {
         &mut self,
         draft: Draft,
         next: LearningState,
-    ) -> Result<(u64, TableStatus, String, Vec<Pending>), MachineError> {
+    ) -> Result<(u64, VersionStatus, Vec<Pending>), MachineError> {
         let version = self.share.history().next_version();
         let record = self.table_record(&draft, version);
         if let Err(e) = self.journal.append(std::slice::from_ref(&record)) {
@@ -102,16 +102,15 @@ impl FeatureLoop {
         }
         let at_ms = draft.at_ms;
         let request = self.request(draft).map_err(MachineError::failed)?;
-        let (status, why, mut records) = self.submit_and_deliver(request, version, next, at_ms)?;
-        records.push(Pending::TableStatus {
+        let (status, mut records) = self.submit_and_deliver(request, version, next, at_ms)?;
+        records.push(Pending::VersionStatus {
             machine: self.name.clone(),
             lobe: self.setup.name.clone(),
             version,
-            status,
-            why: why.clone(),
+            status: status.clone(),
             at_ms,
         });
-        Ok((version, status, why, records))
+        Ok((version, status, records))
     }
 
     /// A write's records the journal did not keep: another instance owns the machine now
@@ -136,8 +135,9 @@ impl FeatureLoop {
             program_text: draft.text.clone(),
             learning: draft.learning.clone(),
             reason: draft.reason.clone(),
-            status: TableStatus::Waiting,
-            status_why: SUBMITTED.into(),
+            status: VersionStatus::Waiting {
+                reason: Some(SUBMITTED.into()),
+            },
             created_at_ms: draft.at_ms,
             measurement_id: draft.measurement_id.clone(),
             rollback_of: draft.rollback_of,
@@ -163,15 +163,15 @@ impl FeatureLoop {
         })
     }
 
-    /// Submits `request` as `version` and delivers it: its status, why, and the records of
-    /// what happened on the way.
+    /// Submits `request` as `version` and delivers it: its status (with why), and the
+    /// records of what happened on the way.
     fn submit_and_deliver(
         &mut self,
         request: PushRequest,
         version: u64,
         next: LearningState,
         at_ms: jiff::Timestamp,
-    ) -> Result<(TableStatus, String, Vec<Pending>), MachineError> {
+    ) -> Result<(VersionStatus, Vec<Pending>), MachineError> {
         let mut records = Vec::new();
         let submitted = self
             .share
@@ -182,7 +182,7 @@ impl FeatureLoop {
         match submitted {
             Submitted::Refused { reason, .. } => {
                 error!(machine = %self.name, version, reason = %reason, "table version refused by the share");
-                return Ok((TableStatus::Refused, reason, records));
+                return Ok((VersionStatus::Refused { reason }, records));
             }
             Submitted::Accepted { version: v } if v != version => {
                 return Err(MachineError::Failed {
@@ -199,7 +199,8 @@ impl FeatureLoop {
                 self.memory.learning = next;
                 self.memory.in_force_version = version;
                 self.on_delivered(self.memory.wheel_radius_mm);
-                Ok((TableStatus::Pushed, "pushed to the share".into(), records))
+                let pushed = VersionStatus::pushed_at(at_ms, "pushed to the share");
+                Ok((pushed, records))
             }
             Err(PushError::Share { version, error: e }) => {
                 // Parts ground while the learning's tables cannot reach the control say
@@ -232,7 +233,8 @@ impl FeatureLoop {
                     m.share_waiting = 1;
                     m.learning_held = 1;
                 });
-                Ok((TableStatus::Waiting, format!("waiting: {e}"), records))
+                let reason = Some(format!("waiting: {e}"));
+                Ok((VersionStatus::Waiting { reason }, records))
             }
             Ok(other) => Err(MachineError::Failed {
                 reason: format!(
@@ -240,7 +242,9 @@ impl FeatureLoop {
                     other.map(|p| p.version)
                 ),
             }),
-            Err(PushError::Refused { reason, .. }) => Ok((TableStatus::Refused, reason, records)),
+            Err(PushError::Refused { reason, .. }) => {
+                Ok((VersionStatus::Refused { reason }, records))
+            }
             Err(PushError::State(e)) => Err(MachineError::ShareState {
                 reason: format!("{e:#}"),
             }),
@@ -368,12 +372,11 @@ impl FeatureLoop {
                 let radius = self.memory.delivered(p.version);
                 self.on_delivered(radius.unwrap_or(self.memory.wheel_radius_mm));
                 let records = vec![
-                    Pending::TableStatus {
+                    Pending::VersionStatus {
                         machine: self.name.clone(),
                         lobe: self.setup.name.clone(),
                         version: p.version,
-                        status: TableStatus::Pushed,
-                        why: "pushed to the share on retry".into(),
+                        status: VersionStatus::pushed_at(at_ms, "pushed to the share on retry"),
                         at_ms,
                     },
                     event(

@@ -15,7 +15,7 @@ use super::records::event;
 use crate::clock::now;
 use crate::core::learn::LearningState;
 use crate::share::{Submitted, VersionStatus};
-use crate::store::{EventLevel, TableStatus};
+use crate::store::EventLevel;
 use anyhow::Context;
 use tracing::{error, info, warn};
 
@@ -80,13 +80,13 @@ impl FeatureLoop {
                     status,
                     ..
                 }
-                | Pending::TableStatus {
+                | Pending::VersionStatus {
                     lobe,
                     version,
                     status,
                     ..
                 } if lobe == mine => {
-                    journalled.insert(*version, *status);
+                    journalled.insert(*version, status.name());
                 }
                 _ => {}
             }
@@ -97,22 +97,21 @@ impl FeatureLoop {
             let Some(v) = self.share.history().get(version) else {
                 continue;
             };
-            let (status, why) = match &v.status {
-                VersionStatus::Pushed { .. } => (
-                    TableStatus::Pushed,
-                    "pushed to the share (its manifest, read at start)".to_string(),
+            let status = match &v.status {
+                VersionStatus::Pushed { .. } => VersionStatus::pushed_at(
+                    at_ms,
+                    "pushed to the share (its manifest, read at start)",
                 ),
-                VersionStatus::Refused { reason } => (TableStatus::Refused, reason.clone()),
+                refused @ VersionStatus::Refused { .. } => refused.clone(),
                 _ => continue,
             };
-            if status != said {
-                info!(machine = %self.name, feature = %mine, version, status = status.as_str(), "status taken from the share's manifest");
-                records.push(Pending::TableStatus {
+            if status.name() != said {
+                info!(machine = %self.name, feature = %mine, version, status = status.name(), "status taken from the share's manifest");
+                records.push(Pending::VersionStatus {
                     machine: self.name.clone(),
                     lobe: mine.clone(),
                     version,
                     status,
-                    why,
                     at_ms,
                 });
             }
@@ -176,12 +175,13 @@ impl FeatureLoop {
                 next => format!("journalled as v{version} but the share is at v{next}"),
             };
             error!(machine = %self.name, feature = %mine, version, reason = %outcome, "journalled version not submitted");
-            records.push(Pending::TableStatus {
+            records.push(Pending::VersionStatus {
                 machine: self.name.clone(),
                 lobe: mine.clone(),
                 version,
-                status: TableStatus::Refused,
-                why: outcome.clone(),
+                status: VersionStatus::Refused {
+                    reason: outcome.clone(),
+                },
                 at_ms,
             });
             records.push(event(

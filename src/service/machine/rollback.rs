@@ -81,8 +81,9 @@ impl FeatureLoop {
             rollback_of: Some(version),
             at_ms,
         };
-        let (new_version, status, why, mut records) = self.push(draft, next)?;
-        info!(machine = %self.name, lobe = lobe.as_str(), version, new_version, table_number = number, status = status.as_str(), "rollback");
+        let (new_version, status, mut records) = self.push(draft, next)?;
+        let why = status.why();
+        info!(machine = %self.name, lobe = lobe.as_str(), version, new_version, table_number = number, status = status.name(), "rollback");
         records.extend([
             event(
                 &self.name,

@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::names::{FeatureName, MachineName};
 use crate::service::journal::{EventKind, Pending};
-use crate::store::{EventLevel, TableStatus, Verdict};
+use crate::store::{EventLevel, Verdict, VersionStatus};
 
 /// Topic level for events that concern the machine rather than one feature.
 pub const MACHINE_LEVEL: &str = "machine";
@@ -107,18 +107,16 @@ impl PlantEvent {
                 lobe,
                 version,
                 status,
-                status_why,
                 created_at_ms,
                 ..
-            } => table_event(machine, lobe, version, status, status_why, created_at_ms)?,
-            Pending::TableStatus {
+            } => table_event(machine, lobe, version, status, created_at_ms)?,
+            Pending::VersionStatus {
                 machine,
                 lobe,
                 version,
                 status,
-                why,
                 at_ms,
-            } => table_event(machine, lobe, version, status, why, at_ms)?,
+            } => table_event(machine, lobe, version, status, at_ms)?,
             Pending::Event {
                 machine,
                 at_ms,
@@ -258,25 +256,27 @@ fn table_event(
     machine: MachineName,
     feature: FeatureName,
     version: u64,
-    status: TableStatus,
-    why: String,
+    status: VersionStatus,
     at_ms: Timestamp,
 ) -> Option<PlantEvent> {
     match status {
-        TableStatus::Pushed => Some(PlantEvent::TableDelivered {
+        VersionStatus::Pushed { .. } => Some(PlantEvent::TableDelivered {
             machine,
             feature,
             version,
             at_ms,
         }),
-        TableStatus::Refused => Some(PlantEvent::TableRefused {
+        VersionStatus::Refused { reason } => Some(PlantEvent::TableRefused {
             machine,
             feature,
             version: Some(version),
-            reason: why,
+            reason,
             at_ms,
         }),
-        TableStatus::Waiting => None,
+        // Not the plant's news yet: the share's own states never reach the journal.
+        VersionStatus::Waiting { .. }
+        | VersionStatus::Delivering
+        | VersionStatus::Superseded { .. } => None,
     }
 }
 
@@ -286,12 +286,14 @@ mod tests {
 
     #[test]
     fn records_map_to_events_with_topics_and_unit_named_fields() {
-        let status = Pending::TableStatus {
+        let status = Pending::VersionStatus {
             machine: "G7".parse().unwrap(),
             lobe: "IN1".parse().unwrap(),
             version: 12,
-            status: TableStatus::Pushed,
-            why: "pushed".into(),
+            status: VersionStatus::Pushed {
+                at_unix_ms: 5,
+                note: Some("pushed".into()),
+            },
             at_ms: jiff::Timestamp::from_millisecond(5).unwrap(),
         };
         let e = PlantEvent::from_pending(&status).unwrap();
@@ -325,12 +327,13 @@ mod tests {
         assert_eq!(name(EventKind::LearningHeld), Some("alarm"));
         assert_eq!(name(EventKind::RunRule), Some("alarm"));
         assert_eq!(name(EventKind::WheelDressed), None);
-        let waiting = Pending::TableStatus {
+        let waiting = Pending::VersionStatus {
             machine: "G7".parse().unwrap(),
             lobe: "IN1".parse().unwrap(),
             version: 13,
-            status: TableStatus::Waiting,
-            why: "share down".into(),
+            status: VersionStatus::Waiting {
+                reason: Some("share down".into()),
+            },
             at_ms: jiff::Timestamp::from_millisecond(6).unwrap(),
         };
         assert_eq!(PlantEvent::from_pending(&waiting), None);

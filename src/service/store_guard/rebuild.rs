@@ -6,7 +6,7 @@
 
 use super::MachineExpectation;
 use crate::share::{MANIFEST_FILE, VERSIONS_DIR, VersionStatus, load_manifest, version_dir};
-use crate::store::{NewTableVersion, Store, StoreError, TableStatus};
+use crate::store::{NewTableVersion, Store, StoreError};
 
 /// Inserts the kept versions the store lacks; returns how many went in.
 pub(super) async fn rebuild_versions(
@@ -37,17 +37,18 @@ pub(super) async fn rebuild_versions(
             let Ok(program_text) = std::fs::read_to_string(dir.join(&file.name)) else {
                 continue;
             };
-            let (status, why) = match &v.status {
-                VersionStatus::Pushed { .. } => {
-                    (TableStatus::Pushed, "pushed (from the share's manifest)")
-                }
-                VersionStatus::Refused { .. } => {
-                    (TableStatus::Refused, "refused (from the share's manifest)")
-                }
-                _ => (
-                    TableStatus::Waiting,
-                    "not confirmed on the share (from its manifest)",
+            // The share's own states (delivering, superseded) are waiting to the store.
+            let status = match &v.status {
+                VersionStatus::Pushed { .. } => VersionStatus::pushed_at(
+                    r.created_at_unix_ms,
+                    "pushed (from the share's manifest)",
                 ),
+                VersionStatus::Refused { .. } => VersionStatus::Refused {
+                    reason: "refused (from the share's manifest)".into(),
+                },
+                _ => VersionStatus::Waiting {
+                    reason: Some("not confirmed on the share (from its manifest)".into()),
+                },
             };
             let t = NewTableVersion {
                 machine: crate::names::MachineName::new(&e.machine)
@@ -60,7 +61,6 @@ pub(super) async fn rebuild_versions(
                 learning_params_json: r.learning.to_string(),
                 reason: format!("{} (rebuilt from the share)", r.reason),
                 status,
-                status_why: why.to_string(),
                 created_at_ms: r.created_at_unix_ms,
             };
             store.insert_table_version(&t).await?;

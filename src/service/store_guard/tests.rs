@@ -2,7 +2,7 @@
 //! to start on an emptied database, then starting once it is accepted.
 
 use super::*;
-use crate::store::{NewTableVersion, TableStatus};
+use crate::store::{NewTableVersion, VersionStatus};
 
 struct Site {
     dir: tempfile::TempDir,
@@ -47,8 +47,10 @@ async fn add_table(store: &Store) -> i64 {
             program_text: "CTABDEF\nCTABEND\n".into(),
             learning_params_json: "{}".into(),
             reason: "nominal table".into(),
-            status: TableStatus::Pushed,
-            status_why: "pushed to the share".into(),
+            status: VersionStatus::Pushed {
+                at_unix_ms: 1_000,
+                note: Some("pushed to the share".into()),
+            },
             created_at_ms: jiff::Timestamp::from_millisecond(1_000).unwrap(),
         })
         .await

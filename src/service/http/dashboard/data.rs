@@ -9,7 +9,7 @@ use crate::service::http::api::ApiError;
 use crate::service::metrics::MachineMetrics;
 use crate::store::{
     Dressing, Event, EventAck, EventFilter, EventId, EventLevel, HistoryFilter, MasterRuns,
-    MeasurementSummary, Store, TableStatus, TableVersion, TableVersionHead,
+    MeasurementSummary, Store, TableVersion, TableVersionHead, VersionStatus,
 };
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -110,7 +110,7 @@ pub(super) async fn overview(app: &AppState) -> Result<Vec<OverviewRow>, ApiErro
                 band_um: sheet.and_then(FeatureSheet::symmetric_band_um),
                 in_force: versions
                     .into_iter()
-                    .find(|v| v.status == TableStatus::Pushed),
+                    .find(|v| matches!(v.status, VersionStatus::Pushed { .. })),
                 machine: machine.clone(),
                 lobe,
                 recent,

@@ -237,7 +237,7 @@ pub(super) fn feature(
     let in_force = d
         .versions
         .iter()
-        .find(|v| v.status == crate::store::TableStatus::Pushed)
+        .find(|v| matches!(v.status, crate::store::VersionStatus::Pushed { .. }))
         .map_or("none yet".into(), |v| {
             format!("v{} (T{}): {}", v.version, v.table_number, v.reason)
         });

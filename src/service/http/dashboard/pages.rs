@@ -168,7 +168,7 @@ fn versions_table(lobe: &str, base: &str, api: &str, versions: &[TableVersion]) 
                         th scope="row" { a href={ (base) "/versions?v=" (n) } { "v" (n) } }
                         td { @match v.parent_version { Some(p) => { "v" (p) }, None => "—" } }
                         td { "T" (v.table_number) }
-                        td title=(v.status_why) { (v.status.as_str()) }
+                        td title=(v.status.why()) { (v.status.name()) }
                         td { (v.reason) }
                         td { (when(v.created_at_ms)) }
                         td {
