@@ -203,36 +203,7 @@ impl FeatureLoop {
                 Ok((pushed, records))
             }
             Err(PushError::Share { version, error: e }) => {
-                // Parts ground while the learning's tables cannot reach the control say
-                // nothing about the learning: the divergence guard's history restarts, or
-                // the wear of the outage (and a dressing in it) would be taken for the
-                // learning diverging as soon as the share is back.
-                self.memory.learning.recent_max_error_um.clear();
-                if self.memory.waiting.is_none() {
-                    // Said once per outage, not per part.
-                    error!(machine = %self.name, error = %e, in_force = self.memory.in_force_version, "controller share: table not delivered; learning holds on the table in force");
-                    let message = format!(
-                        "{e}: parts are ground with v{} and learned from it alone until the share takes v{version} or a newer table",
-                        self.memory.in_force_version
-                    );
-                    records.push(event(
-                        &self.name,
-                        at_ms,
-                        EventLevel::Error,
-                        EventKind::ShareUnavailable,
-                        message,
-                    ));
-                    self.metrics.update(&self.name, |m| m.alarms_total += 1);
-                }
-                self.memory.waiting = Some(WaitingTable {
-                    version,
-                    learning: next,
-                    wheel_radius_mm: self.memory.wheel_radius_mm,
-                });
-                self.metrics.update(&self.name, |m| {
-                    m.share_waiting = 1;
-                    m.learning_held = 1;
-                });
+                self.hold_for_the_share(version, next, &e, at_ms, &mut records);
                 let reason = Some(format!("waiting: {e}"));
                 Ok((VersionStatus::Waiting { reason }, records))
             }
@@ -249,6 +220,48 @@ impl FeatureLoop {
                 reason: format!("{e:#}"),
             }),
         }
+    }
+
+    /// The share cannot take `version`: it waits (with the learning state it was made from)
+    /// while parts go on being ground and learned from the table in force.
+    fn hold_for_the_share(
+        &mut self,
+        version: u64,
+        next: LearningState,
+        e: &dyn std::fmt::Display,
+        at_ms: jiff::Timestamp,
+        records: &mut Vec<Pending>,
+    ) {
+        // Parts ground while the learning's tables cannot reach the control say
+        // nothing about the learning: the divergence guard's history restarts, or
+        // the wear of the outage (and a dressing in it) would be taken for the
+        // learning diverging as soon as the share is back.
+        self.memory.learning.recent_max_error_um.clear();
+        if self.memory.waiting.is_none() {
+            // Said once per outage, not per part.
+            error!(machine = %self.name, error = %e, in_force = self.memory.in_force_version, "controller share: table not delivered; learning holds on the table in force");
+            let message = format!(
+                "{e}: parts are ground with v{} and learned from it alone until the share takes v{version} or a newer table",
+                self.memory.in_force_version
+            );
+            records.push(event(
+                &self.name,
+                at_ms,
+                EventLevel::Error,
+                EventKind::ShareUnavailable,
+                message,
+            ));
+            self.metrics.update(&self.name, |m| m.alarms_total += 1);
+        }
+        self.memory.waiting = Some(WaitingTable {
+            version,
+            learning: next,
+            wheel_radius_mm: self.memory.wheel_radius_mm,
+        });
+        self.metrics.update(&self.name, |m| {
+            m.share_waiting = 1;
+            m.learning_held = 1;
+        });
     }
 
     fn on_delivered(&self, wheel_radius_mm: f64) {
