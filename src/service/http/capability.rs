@@ -38,6 +38,11 @@ pub(super) struct CapabilityReply {
     /// Start of the window, Unix ms, when it has one.
     since_ms: Option<i64>,
     master_runs_left_out: usize,
+    /// True when a characteristic's figures rest on fewer than `min_values` values: they
+    /// are shown, but only indicative (each characteristic carries its own `indicative`).
+    indicative: bool,
+    /// The values a capability study needs (AIAG SPC manual: 100).
+    min_values: usize,
     #[schema(value_type = Vec<Object>)]
     characteristics: Vec<CharacteristicStudy>,
 }
@@ -99,8 +104,11 @@ pub(super) async fn capability(
     let store = store(&state).await?;
     let (rows, since, masters) =
         quality::window_rows(&store, &machine, &feature, &window, false).await?;
+    let characteristics = quality::study(&rows, &sheet.limits, q.chart.unwrap_or(false));
     Ok(Json(CapabilityReply {
-        characteristics: quality::study(&rows, &sheet.limits, q.chart.unwrap_or(false)),
+        indicative: characteristics.iter().any(|c| c.indicative),
+        min_values: quality::MIN_CAPABILITY_VALUES,
+        characteristics,
         machine,
         feature,
         window: window_text,
