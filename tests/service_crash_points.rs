@@ -117,18 +117,8 @@ fn run(dir: &Path, parts: u64, crash: Option<&str>, log: &str) -> (ExitStatus, S
         command.env(CRASH_AT_VAR, c);
     }
     let mut child = process_support::KillOnDrop::spawn(&mut command).unwrap();
-    let started = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status;
-        }
-        assert!(
-            started.elapsed() < RUN_LIMIT,
-            "camloop ({crash:?}) still running after {RUN_LIMIT:?}"
-        );
-        // Polls the child's exit (the condition), bounded above.
-        std::thread::sleep(Duration::from_millis(10));
-    };
+    let what = format!("camloop ({crash:?})");
+    let status = child.exit_within(RUN_LIMIT, Duration::from_millis(10), &what);
     let stderr = std::fs::read_to_string(dir.join(format!("{log}.err"))).unwrap();
     let stdout = std::fs::read_to_string(dir.join(format!("{log}.log"))).unwrap();
     let tail: Vec<&str> = stdout.lines().rev().take(12).collect();

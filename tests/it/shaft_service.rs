@@ -4,6 +4,7 @@
 //! errors (deflection and torsion along Z, a harmonic of each lobe's own) and a gauge that
 //! now and then names the wrong lobe or one the shaft lacks. Each lobe has its own loop.
 
+use crate::history_support::parts_with_reports;
 use crate::service_support;
 
 use camloop::config::Config;
@@ -39,19 +40,8 @@ struct Part {
 }
 
 async fn parts_of(store: &Store, lobe: &str) -> Vec<Part> {
-    let page = store
-        .measurement_history(&HistoryFilter {
-            machine: "SIM8".into(),
-            lobe: Some(lobe.into()),
-            limit: 10_000,
-            ..HistoryFilter::default()
-        })
-        .await
-        .unwrap();
     let mut out = Vec::new();
-    for s in page.items.iter().rev() {
-        let detail = store.measurement(s.id).await.unwrap().unwrap();
-        let report: serde_json::Value = serde_json::from_str(&detail.analysis_json).unwrap();
+    for (s, report) in parts_with_reports(store, "SIM8", lobe).await {
         let max_lift_um = report["error_um"]
             .as_array()
             .unwrap()

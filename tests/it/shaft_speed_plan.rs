@@ -9,7 +9,7 @@ use crate::cli_support::repo;
 use crate::process_support::KillOnDrop;
 use std::path::Path;
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// The demo camshaft's recipe with the plan on (and the table numbers it needs), lift files
 /// found where the repository keeps them.
@@ -47,17 +47,8 @@ fn run(dir: &Path, config: &str, parts: u32, bound: Duration) -> String {
             .stderr(Stdio::from(std::fs::File::create(&err).unwrap())),
     )
     .unwrap();
-    let started = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status;
-        }
-        assert!(
-            started.elapsed() < bound,
-            "camloop run did not finish {parts} parts within {bound:?}"
-        );
-        std::thread::sleep(Duration::from_millis(200));
-    };
+    let what = format!("camloop run of {parts} parts");
+    let status = child.exit_within(bound, Duration::from_millis(200), &what);
     let log = std::fs::read_to_string(&out).unwrap() + &std::fs::read_to_string(&err).unwrap();
     assert!(status.success(), "{log}");
     log
