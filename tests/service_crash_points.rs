@@ -17,7 +17,7 @@ use history_support::{agreement, journal_measurements, resumed_memory, stored_me
 use std::collections::BTreeSet;
 use std::os::unix::process::ExitStatusExt;
 use std::path::Path;
-use std::process::{Command, ExitStatus};
+use std::process::ExitStatus;
 use std::time::{Duration, Instant};
 
 const MACHINE: &str = "M7";
@@ -100,16 +100,9 @@ fn crash_at(step: &str, features: u64) -> (u64, u64) {
 fn run(dir: &Path, parts: u64, crash: Option<&str>, log: &str) -> (ExitStatus, String) {
     let stderr = std::fs::File::create(dir.join(format!("{log}.err"))).unwrap();
     let stdout = std::fs::File::create(dir.join(format!("{log}.log"))).unwrap();
-    let mut command = Command::new(env!("CARGO_BIN_EXE_camloop"));
+    let mut command = process_support::camloop_run(dir);
     command
-        .args([
-            "run",
-            "--config",
-            "camloop.toml",
-            "--parts",
-            &parts.to_string(),
-        ])
-        .current_dir(dir)
+        .args(["--parts", &parts.to_string()])
         .env_remove(CRASH_AT_VAR)
         .stdout(stdout)
         .stderr(stderr);

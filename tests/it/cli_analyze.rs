@@ -3,7 +3,7 @@
 
 use crate::cli_support;
 
-use cli_support::{camloop, camloop_ok, crankpin_args, flat_cam_args, json_file};
+use cli_support::{camloop, camloop_ok, crankpin_args, flat_cam_args, json_file, refusal};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -94,9 +94,7 @@ fn a_log_with_a_cut_off_measurement_is_refused_naming_the_file() {
     let lift = write_fixture_nominal(dir.path());
     let log = fixture("gauge_cutoff.log");
     let out = analyze_demo_cam(&lift, &log, &[], dir.path());
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(err.lines().count(), 1, "{err}");
+    let err = refusal(&out);
     assert!(err.contains("gauge_cutoff.log"), "{err}");
 }
 

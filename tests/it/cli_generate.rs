@@ -3,7 +3,7 @@
 
 use crate::cli_support;
 
-use cli_support::{assert_nothing_written, camloop, camloop_ok, repo, stderr};
+use cli_support::{assert_nothing_written, camloop, camloop_ok, refusal, repo, stderr};
 
 #[test]
 fn contour_writes_the_program_and_reports_the_fixed_step_figure() {
@@ -65,9 +65,7 @@ fn contour_refusal_is_one_line_with_the_reason_and_writes_nothing() {
         &[&SINE[..], &["--nose-radius-mm", "6", "--out", "s.mpf"]].concat(),
         dir.path(),
     );
-    assert!(!out.status.success());
-    let err = stderr(&out);
-    assert_eq!(err.lines().count(), 1, "{err}");
+    let err = refusal(&out);
     assert!(
         err.contains("nose radius 6 mm is larger than the concave radius 5.066"),
         "{err}"

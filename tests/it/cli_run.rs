@@ -3,7 +3,7 @@
 
 use crate::cli_support;
 
-use cli_support::{camloop, camloop_ok, json_file};
+use cli_support::{camloop, camloop_ok, json_file, refusal};
 use std::path::Path;
 
 #[test]
@@ -95,9 +95,7 @@ fn a_bad_configuration_is_refused_with_every_problem() {
     )
     .unwrap();
     let out = camloop(&["run", "--config", "bad.toml"], dir.path());
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(err.lines().count(), 1, "{err}");
+    let err = refusal(&out);
     assert!(
         err.contains("bad.toml: line 2: database.url")
             && err.contains("line 4: machines.a b: name `a b`"),
@@ -134,9 +132,7 @@ fn every_problem_is_reported_before_the_database_or_a_share_is_touched() {
         &["run", "--config", "camloop.toml", "--parts", "1"],
         dir.path(),
     );
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(err.lines().count(), 1, "{err}");
+    let err = refusal(&out);
     let line = |marker: &str| config.lines().position(|l| l.contains(marker)).unwrap() + 1;
     let second_m2 = config
         .lines()

@@ -3,7 +3,7 @@
 
 use crate::cli_support;
 
-use cli_support::{camloop, camloop_ok, flat_cam_args, repo, stderr};
+use cli_support::{camloop, camloop_ok, flat_cam_args, refusal, repo};
 
 #[test]
 fn the_demo_intake_lobe_plan_prints_the_time_saved_and_what_binds() {
@@ -56,8 +56,6 @@ fn a_bad_limit_is_named_on_one_line() {
         ],
         dir.path(),
     );
-    assert!(!out.status.success());
-    let err = stderr(&out);
-    assert_eq!(err.lines().count(), 1, "{err}");
+    let err = refusal(&out);
     assert!(err.contains("q_w_max_mm3_mm_s = 0"), "{err}");
 }

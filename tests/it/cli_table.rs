@@ -3,7 +3,8 @@
 use crate::cli_support;
 
 use cli_support::{
-    assert_nothing_written, camloop, camloop_ok, crankpin_args, flat_cam_args, repo, stderr,
+    assert_nothing_written, camloop, camloop_ok, crankpin_args, flat_cam_args, refusal, repo,
+    stderr,
 };
 use std::path::{Path, PathBuf};
 
@@ -23,9 +24,7 @@ fn quantised_engine_lift_is_refused_with_the_angle_range_and_nothing_written() {
         &flat_cam_args("table", &fixture, &["--csv", "t.csv"]),
         dir.path(),
     );
-    assert!(!out.status.success());
-    let err = stderr(&out);
-    assert_eq!(err.lines().count(), 1, "one line on stderr: {err}");
+    let err = refusal(&out);
     assert!(err.contains("ecn-sandia-h2-intake.csv"), "{err}");
     assert!(err.contains("negative radius of curvature"), "{err}");
     assert!(err.contains("between 254.56° and 255.59°"), "{err}");
@@ -239,9 +238,7 @@ fn invalid_program_name_writes_nothing_at_all() {
         ),
         dir.path(),
     );
-    assert!(!out.status.success());
-    let err = stderr(&out);
-    assert_eq!(err.lines().count(), 1, "{err}");
+    let err = refusal(&out);
     assert!(
         err.contains("CYCLE_CAM.SPF") && err.contains("CYCLE"),
         "{err}"

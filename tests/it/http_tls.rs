@@ -13,7 +13,7 @@ use std::process::{Command, Stdio};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use process_support::{KillOnDrop, free_port};
+use process_support::{KillOnDrop, camloop_run, free_port};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 use tokio_rustls::TlsConnector;
@@ -36,14 +36,7 @@ fn config(listen: &str, http_extra: &str) -> String {
 }
 
 fn run(dir: &Path, log: Stdio) -> KillOnDrop {
-    KillOnDrop::spawn(
-        Command::new(env!("CARGO_BIN_EXE_camloop"))
-            .args(["run", "--config", "camloop.toml"])
-            .current_dir(dir)
-            .stdout(log)
-            .stderr(Stdio::null()),
-    )
-    .unwrap()
+    KillOnDrop::spawn(camloop_run(dir).stdout(log)).unwrap()
 }
 
 /// A client trusting only the certificate in `cert_pem`.

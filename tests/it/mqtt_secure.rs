@@ -7,7 +7,7 @@
 use crate::process_support;
 
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -15,7 +15,7 @@ use crate::mqtt_support::{DEADLINE, Message, mosquitto, root_user_line, subscrib
 use camloop::config::{MqttSection, Secret};
 use camloop::service::mqtt::{PlantEvent, Publisher};
 use camloop::store::Verdict;
-use process_support::{KillOnDrop, free_port};
+use process_support::{KillOnDrop, camloop_run, free_port};
 use rumqttc::{AsyncClient, ConnectionError, MqttOptions};
 use rumqttc::{TlsConfiguration, Transport};
 use tokio::sync::{mpsc, watch};
@@ -216,15 +216,8 @@ async fn the_broker_publishes_the_last_will_when_camloop_is_killed() {
     );
     std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
     let mut rx = subscriber("listener", port, &cert, "camloop/#").await;
-    let mut camloop = KillOnDrop::spawn(
-        Command::new(env!("CARGO_BIN_EXE_camloop"))
-            .args(["run", "--config", "camloop.toml"])
-            .env("CAMLOOP_MQTT_PASSWORD", PASSWORD)
-            .current_dir(dir.path())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null()),
-    )
-    .unwrap();
+    let mut run = camloop_run(dir.path());
+    let mut camloop = KillOnDrop::spawn(run.env("CAMLOOP_MQTT_PASSWORD", PASSWORD)).unwrap();
     let status = "camloop/camloop/status";
     assert_eq!(next_on(&mut rx, status).await.0, "online");
     // A part's state arrives: the link is in use when the process dies.

@@ -16,7 +16,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use crate::cli_support;
-use crate::process_support::{KillOnDrop, free_port};
+use crate::process_support::{KillOnDrop, camloop_run, free_port};
 
 /// The longest the service may take to start (a first start makes the server's RSA key and
 /// migrates the database; on a loaded 2-core machine seconds): a failure, not a pace.
@@ -99,14 +99,7 @@ fn asyncua_browses_reads_subscribes_and_calls_rollback_with_users() {
     assert!(made.status.success(), "{}", cli_support::stderr(&made));
     let (http, opcua) = (free_port(), free_port());
     std::fs::write(dir.path().join("camloop.toml"), config(http, opcua)).unwrap();
-    let _service = KillOnDrop::spawn(
-        Command::new(env!("CARGO_BIN_EXE_camloop"))
-            .args(["run", "--config", "camloop.toml"])
-            .current_dir(dir.path())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null()),
-    )
-    .unwrap();
+    let _service = KillOnDrop::spawn(&mut camloop_run(dir.path())).unwrap();
     let password_file = dir.path().join("var/admin-password");
     wait_for("the admin password file", START_BOUND, || {
         password_file.exists()

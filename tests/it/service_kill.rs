@@ -13,7 +13,6 @@ use crate::process_support;
 
 use camloop::store::Store;
 use std::path::Path;
-use std::process::{Command, Stdio};
 use std::time::Duration;
 
 const KILLS: usize = 14;
@@ -42,14 +41,9 @@ fn killing_the_service_never_leaves_a_version_the_history_does_not_know() {
     std::fs::write(dir.path().join("camloop.toml"), config(&recipe)).unwrap();
     let mut rng = SEED;
     for _ in 0..KILLS {
-        let mut child = process_support::KillOnDrop::spawn(
-            Command::new(env!("CARGO_BIN_EXE_camloop"))
-                .args(["run", "--config", "camloop.toml"])
-                .current_dir(dir.path())
-                .stdout(Stdio::null())
-                .stderr(Stdio::null()),
-        )
-        .unwrap();
+        let mut child =
+            process_support::KillOnDrop::spawn(&mut process_support::camloop_run(dir.path()))
+                .unwrap();
         // Start-up takes some 100 ms; the kills land anywhere in the parts after it.
         std::thread::sleep(Duration::from_millis(150 + next(&mut rng) % 700));
         child.kill().unwrap();

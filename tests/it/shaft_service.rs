@@ -224,13 +224,7 @@ async fn a_stop_mid_shaft_resumes_each_lobe_where_it_was() {
     let store = Store::connect(&url).await.unwrap();
     let mut before = BTreeMap::new();
     for lobe in LOBES {
-        let state = store
-            .load_learning_state("SIM8", lobe)
-            .await
-            .unwrap()
-            .unwrap();
-        let memory: serde_json::Value = serde_json::from_str(&state.state_json).unwrap();
-        before.insert(lobe, memory["learning"]["iteration"].as_u64().unwrap());
+        before.insert(lobe, learned_parts(&store, lobe).await);
     }
     // Lobes before the resume point have 4 parts learned from, the rest 3.
     for (k, lobe) in LOBES.iter().enumerate() {
@@ -260,16 +254,17 @@ async fn a_stop_mid_shaft_resumes_each_lobe_where_it_was() {
             .collect();
         // The resumed run finished shaft 4; the next run was shaft 5.
         assert_eq!(numbers, vec![1, 2, 3, 4, 5], "{lobe}");
-        let state = store
-            .load_learning_state("SIM8", lobe)
-            .await
-            .unwrap()
-            .unwrap();
-        let memory: serde_json::Value = serde_json::from_str(&state.state_json).unwrap();
-        assert_eq!(
-            memory["learning"]["iteration"].as_u64().unwrap(),
-            5,
-            "{lobe}"
-        );
+        assert_eq!(learned_parts(&store, lobe).await, 5, "{lobe}");
     }
+}
+
+/// How many parts SIM8's `lobe` has learned from: the stored learning state's iteration.
+async fn learned_parts(store: &Store, lobe: &str) -> u64 {
+    let state = store
+        .load_learning_state("SIM8", lobe)
+        .await
+        .unwrap()
+        .expect("a stored learning state");
+    let memory: serde_json::Value = serde_json::from_str(&state.state_json).unwrap();
+    memory["learning"]["iteration"].as_u64().unwrap()
 }

@@ -6,9 +6,9 @@
 //! the virtual axis exceeds an X limit is refused, never delivered.
 
 use crate::cli_support::repo;
-use crate::process_support::KillOnDrop;
+use crate::process_support::{KillOnDrop, camloop_run};
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use std::time::Duration;
 
 /// The demo camshaft's recipe with the plan on (and the table numbers it needs), lift files
@@ -34,15 +34,8 @@ fn run(dir: &Path, config: &str, parts: u32, bound: Duration) -> String {
     std::fs::write(dir.join("camloop.toml"), config).unwrap();
     let (out, err) = (dir.join("out.log"), dir.join("err.log"));
     let mut child = KillOnDrop::spawn(
-        Command::new(env!("CARGO_BIN_EXE_camloop"))
-            .args([
-                "run",
-                "--config",
-                "camloop.toml",
-                "--parts",
-                &parts.to_string(),
-            ])
-            .current_dir(dir)
+        camloop_run(dir)
+            .args(["--parts", &parts.to_string()])
             .stdout(Stdio::from(std::fs::File::create(&out).unwrap()))
             .stderr(Stdio::from(std::fs::File::create(&err).unwrap())),
     )

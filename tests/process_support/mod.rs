@@ -4,13 +4,26 @@
 
 #![allow(dead_code)]
 
-use std::process::{Child, Command, ExitStatus};
+use std::path::Path;
+use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 /// A free TCP port on localhost, for a process the test starts to listen on.
 pub fn free_port() -> u16 {
     let l = std::net::TcpListener::bind("127.0.0.1:0").expect("a free port");
     l.local_addr().expect("its address").port()
+}
+
+/// The service as a user starts it: `camloop run --config camloop.toml` in `dir`, its output
+/// discarded (a caller may set its own, or an environment, before spawning it).
+pub fn camloop_run(dir: &Path) -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_camloop"));
+    command
+        .args(["run", "--config", "camloop.toml"])
+        .current_dir(dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null());
+    command
 }
 
 /// A running child, killed (SIGKILL) and reaped when dropped unless it has been waited for.
