@@ -117,3 +117,30 @@ pub(super) async fn capability(
         master_runs_left_out: masters,
     }))
 }
+
+#[cfg(test)]
+mod tests {
+    /// The marks of a small window are in the published schema, with the types the reply
+    /// writes, so a client generated from `/openapi.json` sees them.
+    #[test]
+    fn the_schema_carries_the_indicative_fields() {
+        let doc = serde_json::to_value(super::super::openapi::document()).unwrap_or_default();
+        let path = "/api/v1/machines/{machine}/features/{feature}/capability";
+        let reply = &doc["paths"][path]["get"]["responses"]["200"]["content"]["application/json"]["schema"]
+            ["$ref"];
+        let name = reply.as_str().and_then(|r| r.rsplit('/').next());
+        let schema = &doc["components"]["schemas"][name.unwrap_or_default()];
+        assert_eq!(
+            schema["properties"]["indicative"]["type"], "boolean",
+            "{schema}"
+        );
+        assert_eq!(
+            schema["properties"]["min_values"]["type"], "integer",
+            "{schema}"
+        );
+        let required = schema["required"].as_array().cloned().unwrap_or_default();
+        for field in ["indicative", "min_values"] {
+            assert!(required.iter().any(|r| r == field), "{field}: {schema}");
+        }
+    }
+}
