@@ -1,25 +1,16 @@
 //! Table generation speed: a 3600-point flat-follower table from a 1° lift table, and the
 //! POLY fit of a 360-point table (with and without the deviation check against the exact path).
 
+#[path = "support/mod.rs"]
+mod support;
+use support::demo_cam;
+
 use camloop::core::fit;
-use camloop::core::geometry::{CamGeometry, Follower, Part};
-use camloop::core::lift::{LiftCurve, LiftTable};
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 
-fn demo_part() -> Part {
-    let text = include_str!("../config/parts/demo-intake-lobe.csv");
-    let table = LiftTable::parse_csv(text, "demo-intake-lobe.csv").expect("shipped table is valid");
-    let geometry = CamGeometry {
-        base_radius_mm: 20.0,
-        follower: Follower::Flat,
-        wheel_radius_mm: 250.0,
-    };
-    Part::cam(geometry, LiftCurve::new(&table)).expect("shipped part is grindable")
-}
-
 fn benches(c: &mut Criterion) {
-    let part = demo_part();
+    let (_, part) = demo_cam();
     c.bench_function("flat_table_3600_points", |b| {
         b.iter(|| part.wheel_table(black_box(3600)).expect("table"))
     });

@@ -14,13 +14,14 @@
 
 #[path = "support/mod.rs"]
 mod support;
-use support::{measurements, percentiles, scratch_root};
+use support::{
+    demo_lobe, machine_runtime, measurements, next_part, scratch_root, start_machine, time_parts,
+};
 
-use camloop::recipe::Recipe;
-use camloop::service::machine::{MachineLoop, MachinePaths, SourceEvent, StoreHandle};
+use camloop::service::machine::StoreHandle;
 use camloop::service::metrics::Metrics;
 use camloop::service::mqtt::PlantEvent;
-use camloop::store::{Store, Verdict};
+use camloop::store::Verdict;
 use criterion::{Criterion, criterion_group, criterion_main};
 use opcua::client::{ClientBuilder, DataChangeCallback, IdentityToken};
 use opcua::crypto::SecurityPolicy;
@@ -275,39 +276,17 @@ fn per_part(c: &mut Criterion) {
 }
 
 fn per_part_case(c: &mut Criterion, publishing: bool) {
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .expect("runtime");
+    let runtime = machine_runtime();
     let dir = tempfile::tempdir_in(scratch_root()).expect("temp dir");
-    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
-    let recipe = Recipe::load(&recipe_path).expect("demo recipe");
-    let mut setup = recipe.feature_setup(&recipe_path, "IN1").expect("lobe");
-    setup.request.points = 360;
-    let url = format!("sqlite://{}/bench.db?mode=rwc", dir.path().display());
-    let store = runtime.block_on(Store::connect(&url)).expect("store");
-    let handle: StoreHandle = Arc::new(tokio::sync::RwLock::new(Some(store.clone())));
     let metrics = Arc::new(Metrics::default());
-    let mut machine = runtime
-        .block_on(MachineLoop::start(
-            "BENCH".parse().unwrap(),
-            vec![setup],
-            MachinePaths {
-                share_dir: dir.path().join("share"),
-                state_dir: dir.path().join("state"),
-            },
-            handle.clone(),
-            metrics.clone(),
-        ))
-        .expect("machine");
+    let (_, handle, mut machine) =
+        start_machine(&runtime, dir.path(), vec![demo_lobe(360)], metrics.clone());
     let side = publishing.then(|| {
         let (side, sender) = Publishing::start(dir.path(), handle.clone(), metrics.clone());
         machine.set_plant_events(Some(sender));
         side
     });
     let raws = measurements(360);
-    let mut count = 0usize;
-    let mut samples: Vec<Duration> = Vec::new();
     let name = match publishing {
         false => "per_part_path_360_points_sqlite_no_opcua".to_string(),
         true => {
@@ -318,35 +297,12 @@ fn per_part_case(c: &mut Criterion, publishing: bool) {
         .as_ref()
         .map(|s| (s.notifications.load(Relaxed), s.events_sent.load(Relaxed)));
     let started_all = Instant::now();
-    c.bench_function(&name, |b| {
-        b.iter_custom(|iters| {
-            let mut total = Duration::ZERO;
-            for _ in 0..iters {
-                let mut raw = raws[count % raws.len()].clone();
-                raw.header.part = format!("bench-{count}");
-                count += 1;
-                let started = Instant::now();
-                runtime.block_on(machine.handle(SourceEvent::Measurement {
-                    raw,
-                    ground_with: None,
-                    done: None,
-                }));
-                let took = started.elapsed();
-                samples.push(took);
-                total += took;
-                runtime.block_on(machine.retry());
-            }
-            total
-        })
+    let mut times = time_parts(c, &name, &runtime, &mut machine, |count| {
+        next_part(&raws, count)
     });
-    if samples.is_empty() {
+    if !times.print_parts(&name) {
         return;
     }
-    println!(
-        "{name}: {} parts, {}",
-        samples.len(),
-        percentiles(&mut samples)
-    );
     if let Some(s) = side {
         s.report(before, started_all.elapsed());
     }

@@ -14,14 +14,14 @@
 
 #[path = "support/mod.rs"]
 mod support;
-use support::{measurements, percentiles, scratch_root};
+use support::{
+    demo_lobe, machine_runtime, measurements, next_part, percentiles, scratch_root, start_machine,
+    time_parts,
+};
 
-use camloop::recipe::Recipe;
-use camloop::service::machine::{MachineLoop, MachinePaths, SourceEvent, StoreHandle};
 use camloop::service::metrics::Metrics;
 use camloop::store::{EventFilter, HistoryFilter, Store};
 use criterion::{Criterion, criterion_group, criterion_main};
-use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -81,17 +81,13 @@ fn per_part(c: &mut Criterion) {
 }
 
 fn per_part_case(c: &mut Criterion, points: u32, clients: usize) {
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .expect("runtime");
+    let runtime = machine_runtime();
     let dir = tempfile::tempdir_in(scratch_root()).expect("temp dir");
-    let (store, mut machine) = start_machine(&runtime, &dir, points);
+    let metrics = Arc::new(Metrics::default());
+    let (store, _, mut machine) =
+        start_machine(&runtime, dir.path(), vec![demo_lobe(points)], metrics);
     let readers = (clients > 0).then(|| Readers::start(&store, clients));
     let raws = measurements(points);
-    let mut count = 0usize;
-    let mut samples: Vec<Duration> = Vec::new();
-    let mut between: Vec<Duration> = Vec::new();
     let name = match clients {
         0 => format!("per_part_path_{points}_points_sqlite"),
         n => format!("per_part_path_{points}_points_sqlite_{n}_readers"),
@@ -100,43 +96,15 @@ fn per_part_case(c: &mut Criterion, points: u32, clients: usize) {
         .as_ref()
         .map(|r| r.served.load(std::sync::atomic::Ordering::Relaxed));
     let started_all = Instant::now();
-    c.bench_function(&name, |b| {
-        b.iter_custom(|iters| {
-            let mut total = Duration::ZERO;
-            for _ in 0..iters {
-                let mut raw = raws[count % raws.len()].clone();
-                // A new part number makes every measurement new (identity is the content,
-                // so a repeat would be skipped, not processed).
-                raw.header.part = format!("bench-{count}");
-                count += 1;
-                let started = Instant::now();
-                runtime.block_on(machine.handle(SourceEvent::Measurement {
-                    raw,
-                    ground_with: None,
-                    done: None,
-                }));
-                let took = started.elapsed();
-                samples.push(took);
-                total += took;
-                let started = Instant::now();
-                runtime.block_on(machine.retry());
-                between.push(started.elapsed());
-            }
-            total
-        })
+    let mut times = time_parts(c, &name, &runtime, &mut machine, |count| {
+        next_part(&raws, count)
     });
-    if samples.is_empty() {
-        // `--profile-time` runs without collecting samples.
+    if !times.print_parts(&name) {
         return;
     }
     println!(
-        "{name}: {} parts, {}",
-        samples.len(),
-        percentiles(&mut samples)
-    );
-    println!(
         "  journal release and checkpoint between parts (not in the path): {}",
-        percentiles(&mut between)
+        percentiles(&mut times.between)
     );
     if let (Some(r), Some(before)) = (&readers, reads_before) {
         use std::sync::atomic::Ordering::Relaxed;
@@ -151,36 +119,6 @@ fn per_part_case(c: &mut Criterion, points: u32, clients: usize) {
     if let Some(r) = readers {
         r.runtime.shutdown_background();
     }
-}
-
-/// The demo lobe's machine at `points` per revolution, on a fresh SQLite store in `dir`.
-fn start_machine(
-    runtime: &tokio::runtime::Runtime,
-    dir: &tempfile::TempDir,
-    points: u32,
-) -> (Store, MachineLoop) {
-    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
-    let recipe = Recipe::load(&recipe_path).expect("demo recipe");
-    let mut setup = recipe.feature_setup(&recipe_path, "IN1").expect("lobe");
-    setup.request.points = points as usize;
-    let url = format!("sqlite://{}/bench.db?mode=rwc", dir.path().display());
-    let store = runtime.block_on(Store::connect(&url)).expect("store");
-    let machine = runtime.block_on(async {
-        let handle: StoreHandle = Arc::new(tokio::sync::RwLock::new(Some(store.clone())));
-        MachineLoop::start(
-            "BENCH".parse().unwrap(),
-            vec![setup],
-            MachinePaths {
-                share_dir: dir.path().join("share"),
-                state_dir: dir.path().join("state"),
-            },
-            handle,
-            Arc::new(Metrics::default()),
-        )
-        .await
-        .expect("machine")
-    });
-    (store, machine)
 }
 
 criterion_group! {

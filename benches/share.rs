@@ -3,30 +3,14 @@
 //! folder, read back, verify, append the manifest lines (8 fsyncs in all, 9 once pruning
 //! starts).
 
-use camloop::core::program::{ProgramSettings, render_g1_table};
-use camloop::core::table::TablePoint;
-use camloop::share::{ProgramFile, PushRequest, RealFs, Share, ShareConfig};
-use criterion::{Criterion, criterion_group, criterion_main};
+// The share tests' table programs; the bench uses only those.
+#[allow(dead_code)]
+#[path = "../tests/share_support/mod.rs"]
+mod share_support;
+use share_support::table_program;
 
-fn table_text(table: u32) -> String {
-    let points: Vec<TablePoint> = (0..360)
-        .map(|i| {
-            let c_deg = f64::from(i);
-            let x_mm = 20.0 + 2.0 * c_deg.to_radians().sin();
-            TablePoint {
-                c_deg,
-                d_mm: x_mm,
-                x_mm,
-            }
-        })
-        .collect();
-    let settings = ProgramSettings {
-        name: format!("CAM_T{table}"),
-        table_number: table,
-        ..ProgramSettings::default()
-    };
-    render_g1_table(&points, &settings).expect("a valid table")
-}
+use camloop::share::{PushRequest, RealFs, Share, ShareConfig};
+use criterion::{Criterion, criterion_group, criterion_main};
 
 /// Bench pushes into a share and a state folder under `root`.
 fn bench_push(c: &mut Criterion, name: &str, root: &std::path::Path) {
@@ -44,15 +28,12 @@ fn bench_push(c: &mut Criterion, name: &str, root: &std::path::Path) {
         Box::new(|| jiff::Timestamp::UNIX_EPOCH),
     )
     .expect("open the state folder");
-    let texts = [table_text(1), table_text(2)];
+    let programs = [table_program(1, 0), table_program(2, 0)];
     c.bench_function(name, |b| {
         b.iter(|| {
             let table = share.next_table_number();
             let request = PushRequest {
-                files: vec![ProgramFile {
-                    name: format!("CAM_T{table}.SPF"),
-                    text: texts[table as usize - 1].clone(),
-                }],
+                files: vec![programs[table as usize - 1].clone()],
                 table_number: table,
                 reason: "bench".into(),
                 measurement_id: None,

@@ -17,7 +17,7 @@ use history_support::{agreement, journal_measurements, resumed_memory, stored_me
 use std::collections::BTreeSet;
 use std::os::unix::process::ExitStatusExt;
 use std::path::Path;
-use std::process::{Command, ExitStatus};
+use std::process::ExitStatus;
 use std::time::{Duration, Instant};
 
 const MACHINE: &str = "M7";
@@ -100,16 +100,9 @@ fn crash_at(step: &str, features: u64) -> (u64, u64) {
 fn run(dir: &Path, parts: u64, crash: Option<&str>, log: &str) -> (ExitStatus, String) {
     let stderr = std::fs::File::create(dir.join(format!("{log}.err"))).unwrap();
     let stdout = std::fs::File::create(dir.join(format!("{log}.log"))).unwrap();
-    let mut command = Command::new(env!("CARGO_BIN_EXE_camloop"));
+    let mut command = process_support::camloop_run(dir);
     command
-        .args([
-            "run",
-            "--config",
-            "camloop.toml",
-            "--parts",
-            &parts.to_string(),
-        ])
-        .current_dir(dir)
+        .args(["--parts", &parts.to_string()])
         .env_remove(CRASH_AT_VAR)
         .stdout(stdout)
         .stderr(stderr);
@@ -117,18 +110,8 @@ fn run(dir: &Path, parts: u64, crash: Option<&str>, log: &str) -> (ExitStatus, S
         command.env(CRASH_AT_VAR, c);
     }
     let mut child = process_support::KillOnDrop::spawn(&mut command).unwrap();
-    let started = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status;
-        }
-        assert!(
-            started.elapsed() < RUN_LIMIT,
-            "camloop ({crash:?}) still running after {RUN_LIMIT:?}"
-        );
-        // Polls the child's exit (the condition), bounded above.
-        std::thread::sleep(Duration::from_millis(10));
-    };
+    let what = format!("camloop ({crash:?})");
+    let status = child.exit_within(RUN_LIMIT, Duration::from_millis(10), &what);
     let stderr = std::fs::read_to_string(dir.join(format!("{log}.err"))).unwrap();
     let stdout = std::fs::read_to_string(dir.join(format!("{log}.log"))).unwrap();
     let tail: Vec<&str> = stdout.lines().rev().take(12).collect();

@@ -121,7 +121,9 @@ pub(crate) fn run_capability(args: CapabilityArgs) -> anyhow::Result<()> {
             .map(|(lobe, parts, since, masters, items)| {
                 serde_json::json!({"machine": args.machine, "feature": lobe, "parts": parts,
                     "since_ms": since.map(|at| at.as_millisecond()),
-                    "master_runs_left_out": masters, "characteristics": items})
+                    "master_runs_left_out": masters,
+                    "indicative": items.iter().any(|c| c.indicative),
+                    "min_values": quality::MIN_CAPABILITY_VALUES, "characteristics": items})
             })
             .collect();
         text = serde_json::to_string_pretty(&items)? + "\n";

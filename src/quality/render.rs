@@ -15,9 +15,13 @@ fn index(i: Option<Index>) -> String {
     })
 }
 
-/// One line per characteristic, then the notes: methods, missing limits and indices.
+/// One line per characteristic, then the notes: methods, missing limits and indices. Under
+/// the title, a line marking the figures indicative when the window is too small.
 pub(crate) fn capability_table(title: &str, items: &[CharacteristicStudy]) -> String {
     let mut s = format!("{title}\n");
+    if let Some(why) = super::indicative_reason(items) {
+        let _ = writeln!(s, "indicative only: {why}");
+    }
     let _ = writeln!(
         s,
         "{:<14} {:>4} {:>4} {:>9} {:>8} {:>8} {:>8} {:>8}  {:<14} {:>12} {:>12} {:>12} {:>12} {:>10} {:>7}",

@@ -6,7 +6,7 @@
 
 use camloop::names::{FeatureName, MachineName};
 use camloop::share::{VersionStatus, load_manifest};
-use camloop::store::{RawPool, Store};
+use camloop::store::{HistoryFilter, MeasurementSummary, RawPool, Store};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
@@ -55,6 +55,28 @@ pub fn journal_measurements(var: &Path, machine: &str, lobe: &str) -> BTreeSet<S
         .filter(|r| r["record"] == "measurement")
         .map(|r| r["sha256"].as_str().unwrap().to_string())
         .collect()
+}
+
+/// The feature's stored parts, oldest first (up to 10,000), each with its analysis report.
+pub async fn parts_with_reports(
+    store: &Store,
+    machine: &str,
+    lobe: &str,
+) -> Vec<(MeasurementSummary, serde_json::Value)> {
+    let filter = HistoryFilter {
+        machine: machine.into(),
+        lobe: Some(lobe.into()),
+        limit: 10_000,
+        ..HistoryFilter::default()
+    };
+    let page = store.measurement_history(&filter).await.unwrap();
+    let mut out = Vec::new();
+    for s in page.items.into_iter().rev() {
+        let detail = store.measurement(s.id).await.unwrap().unwrap();
+        let report = serde_json::from_str(&detail.analysis_json).unwrap();
+        out.push((s, report));
+    }
+    out
 }
 
 /// Each measurement identity the store holds for the feature, with its row count.

@@ -3,7 +3,7 @@
 
 use crate::cli_support;
 
-use cli_support::camloop;
+use cli_support::{camloop, camloop_ok, crankpin_args, flat_cam_args, json_file, refusal};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -30,20 +30,7 @@ fn write_fixture_nominal(dir: &Path) -> String {
 /// `camloop analyze cam` of `log` against `lift` on the fixture's cam (flat follower,
 /// base radius 20 mm, wheel 250 mm), with `extra` arguments.
 fn analyze_demo_cam(lift: &str, log: &str, extra: &[&str], dir: &Path) -> std::process::Output {
-    let mut args = vec![
-        "analyze",
-        "cam",
-        "--lift",
-        lift,
-        "--follower",
-        "flat",
-        "--base-radius",
-        "20",
-        "--wheel-radius",
-        "250",
-        "--measurement",
-        log,
-    ];
+    let mut args = flat_cam_args("analyze", lift, &["--measurement", log]);
     args.extend_from_slice(extra);
     camloop(&args, dir)
 }
@@ -59,9 +46,7 @@ fn can_log_is_analysed_against_its_nominal() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("report.json")).unwrap())
-            .unwrap();
+    let json: serde_json::Value = json_file(&dir.path().join("report.json"));
     for field in [
         "error_um",
         "profile_error_um",
@@ -109,9 +94,7 @@ fn a_log_with_a_cut_off_measurement_is_refused_naming_the_file() {
     let lift = write_fixture_nominal(dir.path());
     let log = fixture("gauge_cutoff.log");
     let out = analyze_demo_cam(&lift, &log, &[], dir.path());
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(err.lines().count(), 1, "{err}");
+    let err = refusal(&out);
     assert!(err.contains("gauge_cutoff.log"), "{err}");
 }
 
@@ -129,31 +112,14 @@ fn crankpin_index_throw_and_diameter_are_reported() {
         }
     }
     std::fs::write(dir.path().join("pin.csv"), s).unwrap();
-    let out = camloop(
-        &[
+    camloop_ok(
+        &crankpin_args(
             "analyze",
-            "crankpin",
-            "--throw",
-            "45",
-            "--pin-radius",
-            "30",
-            "--wheel-radius",
-            "300",
-            "--measurement",
-            "pin.csv",
-            "--json",
-            "pin.json",
-        ],
+            &["--measurement", "pin.csv", "--json", "pin.json"],
+        ),
         dir.path(),
     );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("pin.json")).unwrap())
-            .unwrap();
+    let json: serde_json::Value = json_file(&dir.path().join("pin.json"));
     // Written with 1e-7 mm: the figures are exact to well under 0.01 µm and 1e-4°.
     assert!((json["throw_error_um"].as_f64().unwrap() - 3.0).abs() < 0.01);
     assert!((json["diameter_error_um"].as_f64().unwrap() - 4.0).abs() < 0.01);

@@ -4,7 +4,7 @@
 
 use crate::cli_support;
 
-use cli_support::{camloop, stderr};
+use cli_support::{camloop_ok, run_demo_lobe};
 use serde_json::Value;
 use std::path::Path;
 
@@ -12,33 +12,32 @@ const PARTS: usize = 30;
 const MASTER_RUNS: usize = 12;
 
 fn run_service(dir: &Path) -> String {
-    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
-    let config = format!(
-        "[database]\nurl = \"sqlite://var/camloop.db?mode=rwc\"\n[service]\nvar_dir = \"var\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
-         [[machines]]\nname = \"M7\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/M7\"\n[machines.gauge]\nkind = \"sim\"\npart_interval_ms = 10\n\
-         [machines.gauge.grinder.gauge]\nmaster_runs = {MASTER_RUNS}\nmaster_before_part = 3\n",
-        recipe.display()
+    let gauge = format!(
+        "[machines.gauge.grinder.gauge]\nmaster_runs = {MASTER_RUNS}\nmaster_before_part = 3\n"
     );
-    std::fs::write(dir.join("camloop.toml"), config).unwrap();
-    let out = camloop(
-        &[
-            "run",
-            "--config",
-            "camloop.toml",
-            "--parts",
-            &PARTS.to_string(),
-        ],
-        dir,
-    );
-    let log = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(out.status.success(), "{log}\n{}", stderr(&out));
-    log
+    run_demo_lobe(dir, PARTS as u32, 10, &gauge)
 }
 
-fn json(dir: &Path, args: &[&str]) -> Value {
-    let out = camloop(args, dir);
-    assert!(out.status.success(), "{}", stderr(&out));
-    serde_json::from_slice(&out.stdout).unwrap()
+/// `camloop COMMAND --machine M7 EXTRA…` on the run's store, with the limits from its
+/// configuration: what it prints.
+fn quality(dir: &Path, command: &str, extra: &[&str]) -> String {
+    let mut args = vec![
+        command,
+        "--machine",
+        "M7",
+        "--database",
+        "sqlite://var/camloop.db",
+        "--config",
+        "camloop.toml",
+    ];
+    args.extend_from_slice(extra);
+    String::from_utf8(camloop_ok(&args, dir).stdout).unwrap()
+}
+
+/// [`quality`] with `--format json`, parsed.
+fn json(dir: &Path, command: &str, extra: &[&str]) -> Value {
+    let text = quality(dir, command, &[extra, &["--format", "json"]].concat());
+    serde_json::from_str(&text).unwrap()
 }
 
 #[test]
@@ -60,21 +59,7 @@ fn masters_feed_the_gauge_study_and_never_the_loop_or_the_capability() {
         parts[PARTS - 1]
     );
 
-    let db = "sqlite://var/camloop.db";
-    let cap = json(
-        dir.path(),
-        &[
-            "capability",
-            "--machine",
-            "M7",
-            "--format",
-            "json",
-            "--database",
-            db,
-            "--config",
-            "camloop.toml",
-        ],
-    );
+    let cap = json(dir.path(), "capability", &[]);
     let feature = &cap[0];
     assert_eq!(feature["feature"], "IN1");
     assert_eq!(feature["parts"].as_u64(), Some(PARTS as u64));
@@ -82,6 +67,8 @@ fn masters_feed_the_gauge_study_and_never_the_loop_or_the_capability() {
         feature["master_runs_left_out"].as_u64(),
         Some(MASTER_RUNS as u64)
     );
+    // 30 parts: the figures are there, marked indicative (fewer than 100 values).
+    assert_eq!(feature["indicative"], true, "{feature}");
     let by = |name: &str| {
         feature["characteristics"]
             .as_array()
@@ -121,22 +108,7 @@ fn masters_feed_the_gauge_study_and_never_the_loop_or_the_capability() {
             > 0.0
     );
 
-    let study = json(
-        dir.path(),
-        &[
-            "gauge-study",
-            "--machine",
-            "M7",
-            "--lobe",
-            "IN1",
-            "--format",
-            "json",
-            "--database",
-            db,
-            "--config",
-            "camloop.toml",
-        ],
-    );
+    let study = json(dir.path(), "gauge-study", &["--lobe", "IN1"]);
     assert_eq!(study["runs"].as_u64(), Some(MASTER_RUNS as u64));
     let items = study["characteristics"].as_array().unwrap();
     let timing = items
@@ -162,4 +134,45 @@ fn masters_feed_the_gauge_study_and_never_the_loop_or_the_capability() {
         max["study"].is_null() && note.contains("does not apply"),
         "{max}"
     );
+}
+
+/// Below 100 values (the AIAG SPC manual's minimum for a capability study) the figures are
+/// shown and marked indicative: a line in the table, a field in the JSON; at 100 neither.
+#[test]
+fn a_window_under_100_values_is_marked_indicative() {
+    let dir = tempfile::tempdir().unwrap();
+    // A few more parts than the window, should the loop reject one.
+    run_demo_lobe(dir.path(), 110, 1, "");
+    let table = |last: &str| quality(dir.path(), "capability", &["--lobe", "IN1", "--last", last]);
+    let small = table("7");
+    assert!(
+        small.lines().nth(1).is_some_and(|l| l
+            .starts_with("indicative only: 7 values, fewer than the 100 a capability study needs")),
+        "{small}"
+    );
+    // Marked, not hidden: the timing row still carries its indices.
+    let timing = small
+        .lines()
+        .find(|l| l.starts_with("timing"))
+        .unwrap_or("");
+    assert!(
+        !timing.contains("no statistics") && timing.contains('('),
+        "{small}"
+    );
+    let large = table("100");
+    assert!(!large.contains("indicative"), "{large}");
+    for (last, indicative) in [("7", true), ("100", false)] {
+        let reply = json(dir.path(), "capability", &["--lobe", "IN1", "--last", last]);
+        let feature = &reply[0];
+        assert_eq!(feature["parts"].to_string(), last, "{feature}");
+        assert_eq!(feature["indicative"], indicative, "{feature}");
+        assert_eq!(feature["min_values"], 100, "{feature}");
+        for c in feature["characteristics"].as_array().unwrap() {
+            assert_eq!(c["indicative"], indicative, "{c}");
+            assert_eq!(c["capability"]["n"].to_string(), last, "{c}");
+            if c["characteristic"] == "timing" {
+                assert!(c["capability"]["indices"]["cpk"]["value"].is_f64(), "{c}");
+            }
+        }
+    }
 }

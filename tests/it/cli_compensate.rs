@@ -9,7 +9,7 @@ use camloop::core::lift::{LiftCurve, LiftTable};
 use camloop::core::program::{ParsedShape, parse_table_program};
 use camloop::sim::cell::{JUDGE_POINTS, judge};
 use camloop::sim::{CommandedTable, GrinderConfig, PartLabels, SimGrinder, TableShape, Workpiece};
-use cli_support::{camloop, stderr};
+use cli_support::{camloop, camloop_ok, crankpin_args, refusal, stderr};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -81,8 +81,7 @@ fn a_script_drives_the_loop_to_below_1_3_um_and_guards_hold() {
         "--program",
         "share/DEMO_CAM_TABLE.SPF",
     ];
-    let out = camloop(&base, d);
-    assert!(out.status.success(), "{}", stderr(&out));
+    camloop_ok(&base, d);
     let program = d.join("share/DEMO_CAM_TABLE.SPF");
 
     let nominal = LiftTable::parse_csv(
@@ -159,9 +158,7 @@ fn a_script_drives_the_loop_to_below_1_3_um_and_guards_hold() {
     let mut bad = base.to_vec();
     bad.extend(["--measurement", "bad.csv"]);
     let out = camloop(&bad, d);
-    assert!(!out.status.success());
-    let err = stderr(&out);
-    assert_eq!(err.lines().count(), 1, "{err}");
+    let err = refusal(&out);
     assert!(
         err.contains("previous table stays in force") && err.contains("above the limit of 50 µm"),
         "{err}"
@@ -182,8 +179,7 @@ fn a_script_drives_the_loop_to_below_1_3_um_and_guards_hold() {
     // After a dressing (smaller wheel in the recipe) the same correction is regenerated for
     // the new wheel: the table changes by about the radius change, the shape stays.
     recipe_in(d, 249.98);
-    let out = camloop(&base, d);
-    assert!(out.status.success(), "{}", stderr(&out));
+    let out = camloop_ok(&base, d);
     assert!(
         String::from_utf8_lossy(&out.stdout).contains("dressing"),
         "{}",
@@ -269,26 +265,13 @@ fn a_new_state_needs_the_nominal_run_first_and_a_state_belongs_to_one_part() {
 fn a_crankpin_by_flags_gets_its_round_table_first() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let out = camloop(
-        &[
+    camloop_ok(
+        &crankpin_args(
             "compensate",
-            "crankpin",
-            "--throw",
-            "45",
-            "--pin-radius",
-            "30",
-            "--wheel-radius",
-            "300",
-            "--state",
-            "st",
-            "--program",
-            "PIN.SPF",
-            "--form",
-            "poly",
-        ],
+            &["--state", "st", "--program", "PIN.SPF", "--form", "poly"],
+        ),
         d,
     );
-    assert!(out.status.success(), "{}", stderr(&out));
     // The nominal table of a round pin: X = d − R − r_p swings between −b and +b.
     let parsed = parse_table_program(&std::fs::read_to_string(d.join("PIN.SPF")).unwrap()).unwrap();
     let ParsedShape::Poly(segments) = parsed.shape else {

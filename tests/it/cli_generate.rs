@@ -3,12 +3,12 @@
 
 use crate::cli_support;
 
-use cli_support::{camloop, repo, stderr};
+use cli_support::{assert_nothing_written, camloop, camloop_ok, refusal, repo, stderr};
 
 #[test]
 fn contour_writes_the_program_and_reports_the_fixed_step_figure() {
     let dir = tempfile::tempdir().unwrap();
-    let out = camloop(
+    let out = camloop_ok(
         &[
             "contour",
             "ellipse",
@@ -31,7 +31,6 @@ fn contour_writes_the_program_and_reports_the_fixed_step_figure() {
         ],
         dir.path(),
     );
-    assert!(out.status.success(), "{}", stderr(&out));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("117 chords"), "{stdout}");
     assert!(stdout.contains("fixed step needs 130 chords"), "{stdout}");
@@ -42,55 +41,38 @@ fn contour_writes_the_program_and_reports_the_fixed_step_figure() {
     );
 }
 
+/// A sine contour of 2 mm amplitude on a 20 mm wavelength along 40 mm of Z: its concave
+/// radius is 5.066 mm.
+const SINE: [&str; 12] = [
+    "contour",
+    "sine",
+    "--mean-x-mm",
+    "20",
+    "--amplitude-mm",
+    "2",
+    "--wavelength-mm",
+    "20",
+    "--z-start-mm",
+    "0",
+    "--z-end-mm",
+    "-40",
+];
+
 #[test]
 fn contour_refusal_is_one_line_with_the_reason_and_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let out = camloop(
-        &[
-            "contour",
-            "sine",
-            "--mean-x-mm",
-            "20",
-            "--amplitude-mm",
-            "2",
-            "--wavelength-mm",
-            "20",
-            "--z-start-mm",
-            "0",
-            "--z-end-mm",
-            "-40",
-            "--nose-radius-mm",
-            "6",
-            "--out",
-            "s.mpf",
-        ],
+        &[&SINE[..], &["--nose-radius-mm", "6", "--out", "s.mpf"]].concat(),
         dir.path(),
     );
-    assert!(!out.status.success());
-    let err = stderr(&out);
-    assert_eq!(err.lines().count(), 1, "{err}");
+    let err = refusal(&out);
     assert!(
         err.contains("nose radius 6 mm is larger than the concave radius 5.066"),
         "{err}"
     );
-    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    assert_nothing_written(dir.path());
     let out = camloop(
-        &[
-            "contour",
-            "sine",
-            "--mean-x-mm",
-            "20",
-            "--amplitude-mm",
-            "2",
-            "--wavelength-mm",
-            "20",
-            "--z-start-mm",
-            "0",
-            "--z-end-mm",
-            "-40",
-            "--tolerance-um",
-            "0.1",
-        ],
+        &[&SINE[..], &["--tolerance-um", "0.1"]].concat(),
         dir.path(),
     );
     assert!(
@@ -104,8 +86,7 @@ fn contour_refusal_is_one_line_with_the_reason_and_writes_nothing() {
 fn turnmill_job_file_to_program_and_unknown_keys_refused_with_the_line() {
     let dir = tempfile::tempdir().unwrap();
     let job = repo("tests/fixtures/turnmill-crank.toml");
-    let out = camloop(&["turnmill", "--job", &job, "--out", "c.mpf"], dir.path());
-    assert!(out.status.success(), "{}", stderr(&out));
+    camloop_ok(&["turnmill", "--job", &job, "--out", "c.mpf"], dir.path());
     let text = std::fs::read_to_string(dir.path().join("c.mpf")).unwrap();
     assert!(text.contains("DEF REAL PHI,ECC,PHA,RAD,XC,YC"), "{text}");
     assert_eq!(text.matches("G0 C=PHI").count(), 3);
@@ -129,7 +110,7 @@ fn turnmill_job_file_to_program_and_unknown_keys_refused_with_the_line() {
 #[test]
 fn planing_resumes_after_the_segments_done() {
     let dir = tempfile::tempdir().unwrap();
-    let out = camloop(
+    camloop_ok(
         &[
             "planing",
             "--ratio-deg-per-mm",
@@ -149,7 +130,6 @@ fn planing_resumes_after_the_segments_done() {
         ],
         dir.path(),
     );
-    assert!(out.status.success(), "{}", stderr(&out));
     let text = std::fs::read_to_string(dir.path().join("p.mpf")).unwrap();
     assert!(
         text.contains("; segment 5 of 6") && !text.contains("; segment 4 of 6"),

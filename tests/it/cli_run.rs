@@ -3,7 +3,7 @@
 
 use crate::cli_support;
 
-use cli_support::camloop;
+use cli_support::{camloop, camloop_ok, json_file, refusal};
 use std::path::Path;
 
 #[test]
@@ -37,7 +37,7 @@ fn the_service_runs_its_parts_and_the_history_shows_them() {
     assert!(dir.path().join("share/M7/DEMO_CAM_TABLE.SPF").exists());
 
     let db = "sqlite://var/camloop.db";
-    let out = camloop(
+    let out = camloop_ok(
         &[
             "history",
             "--machine",
@@ -49,16 +49,11 @@ fn the_service_runs_its_parts_and_the_history_shows_them() {
         ],
         dir.path(),
     );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let csv = String::from_utf8_lossy(&out.stdout);
     assert_eq!(csv.lines().count(), 5, "{csv}");
     assert!(csv.starts_with("id,received_at_ms,machine,part,lobe,verdict,"));
 
-    let out = camloop(
+    camloop_ok(
         &[
             "export",
             "--format",
@@ -72,14 +67,7 @@ fn the_service_runs_its_parts_and_the_history_shows_them() {
         ],
         dir.path(),
     );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("all.json")).unwrap())
-            .unwrap();
+    let json: serde_json::Value = json_file(&dir.path().join("all.json"));
     assert_eq!(json.as_array().unwrap().len(), 4);
 
     let out = camloop(
@@ -107,9 +95,7 @@ fn a_bad_configuration_is_refused_with_every_problem() {
     )
     .unwrap();
     let out = camloop(&["run", "--config", "bad.toml"], dir.path());
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(err.lines().count(), 1, "{err}");
+    let err = refusal(&out);
     assert!(
         err.contains("bad.toml: line 2: database.url")
             && err.contains("line 4: machines.a b: name `a b`"),
@@ -146,9 +132,7 @@ fn every_problem_is_reported_before_the_database_or_a_share_is_touched() {
         &["run", "--config", "camloop.toml", "--parts", "1"],
         dir.path(),
     );
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(err.lines().count(), 1, "{err}");
+    let err = refusal(&out);
     let line = |marker: &str| config.lines().position(|l| l.contains(marker)).unwrap() + 1;
     let second_m2 = config
         .lines()

@@ -3,32 +3,20 @@
 
 use crate::cli_support;
 
-use cli_support::{camloop, repo, stderr};
+use cli_support::{camloop, camloop_ok, flat_cam_args, refusal, repo};
 
 #[test]
 fn the_demo_intake_lobe_plan_prints_the_time_saved_and_what_binds() {
     let dir = tempfile::tempdir().unwrap();
     let lift = repo("config/parts/demo-intake-lobe.csv");
-    let out = camloop(
-        &[
+    let out = camloop_ok(
+        &flat_cam_args(
             "speed-plan",
-            "cam",
-            "--lift",
             &lift,
-            "--follower",
-            "flat",
-            "--base-radius",
-            "20",
-            "--wheel-radius",
-            "250",
-            "--svg",
-            "plan.svg",
-            "--program",
-            "PLAN.SPF",
-        ],
+            &["--svg", "plan.svg", "--program", "PLAN.SPF"],
+        ),
         dir.path(),
     );
-    assert!(out.status.success(), "{}", stderr(&out));
     let text = String::from_utf8(out.stdout).unwrap();
     // The demo's defaults make the fastest constant speed the demo's 30 rpm (to 0.1 rpm).
     assert!(text.contains("fastest constant C speed: 30.0"), "{text}");
@@ -68,8 +56,6 @@ fn a_bad_limit_is_named_on_one_line() {
         ],
         dir.path(),
     );
-    assert!(!out.status.success());
-    let err = stderr(&out);
-    assert_eq!(err.lines().count(), 1, "{err}");
+    let err = refusal(&out);
     assert!(err.contains("q_w_max_mm3_mm_s = 0"), "{err}");
 }

@@ -2,7 +2,10 @@
 
 use crate::cli_support;
 
-use cli_support::{camloop, repo, stderr};
+use cli_support::{
+    assert_nothing_written, camloop, camloop_ok, crankpin_args, flat_cam_args, refusal, repo,
+    stderr,
+};
 use std::path::{Path, PathBuf};
 
 /// The real engine lift shipped with the project docs; looked for beside the repo.
@@ -18,59 +21,25 @@ fn quantised_engine_lift_is_refused_with_the_angle_range_and_nothing_written() {
     let dir = tempfile::tempdir().unwrap();
     let fixture = ecn_fixture().display().to_string();
     let out = camloop(
-        &[
-            "table",
-            "cam",
-            "--lift",
-            &fixture,
-            "--follower",
-            "flat",
-            "--base-radius",
-            "20",
-            "--wheel-radius",
-            "250",
-            "--csv",
-            "t.csv",
-        ],
+        &flat_cam_args("table", &fixture, &["--csv", "t.csv"]),
         dir.path(),
     );
-    assert!(!out.status.success());
-    let err = stderr(&out);
-    assert_eq!(err.lines().count(), 1, "one line on stderr: {err}");
+    let err = refusal(&out);
     assert!(err.contains("ecn-sandia-h2-intake.csv"), "{err}");
     assert!(err.contains("negative radius of curvature"), "{err}");
     assert!(err.contains("between 254.56° and 255.59°"), "{err}");
     assert!(!dir.path().join("t.csv").exists());
-    assert_eq!(
-        std::fs::read_dir(dir.path()).unwrap().count(),
-        0,
-        "no temporary left behind"
-    );
+    assert_nothing_written(dir.path());
 }
 
 #[test]
 fn smoothing_makes_it_grindable_and_reports_the_change() {
     let dir = tempfile::tempdir().unwrap();
     let fixture = ecn_fixture().display().to_string();
-    let out = camloop(
-        &[
-            "table",
-            "cam",
-            "--lift",
-            &fixture,
-            "--follower",
-            "flat",
-            "--base-radius",
-            "20",
-            "--wheel-radius",
-            "250",
-            "--smooth",
-            "--csv",
-            "t.csv",
-        ],
+    let out = camloop_ok(
+        &flat_cam_args("table", &fixture, &["--smooth", "--csv", "t.csv"]),
         dir.path(),
     );
-    assert!(out.status.success(), "{}", stderr(&out));
     let text = String::from_utf8_lossy(&out.stdout);
     let line = text
         .lines()
@@ -95,26 +64,10 @@ fn smoothing_makes_it_grindable_and_reports_the_change() {
 fn csv_has_one_row_per_point_on_the_uniform_grid_with_nine_decimals() {
     let dir = tempfile::tempdir().unwrap();
     let lift = repo("config/parts/demo-intake-lobe.csv");
-    let out = camloop(
-        &[
-            "table",
-            "cam",
-            "--lift",
-            &lift,
-            "--follower",
-            "flat",
-            "--base-radius",
-            "20",
-            "--wheel-radius",
-            "250",
-            "--points",
-            "720",
-            "--csv",
-            "out/t.csv",
-        ],
+    camloop_ok(
+        &flat_cam_args("table", &lift, &["--points", "720", "--csv", "out/t.csv"]),
         dir.path(),
     );
-    assert!(out.status.success(), "{}", stderr(&out));
     let csv = std::fs::read_to_string(dir.path().join("out/t.csv")).unwrap();
     let mut lines = csv.lines();
     assert_eq!(lines.next(), Some("c_deg,d_mm,x_mm"));
@@ -144,56 +97,15 @@ fn bad_input_gives_one_clear_line_and_keeps_existing_outputs() {
     let lift = repo("config/parts/demo-intake-lobe.csv");
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (
-            vec![
-                "table",
-                "cam",
-                "--lift",
-                "missing.csv",
-                "--follower",
-                "flat",
-                "--base-radius",
-                "20",
-                "--wheel-radius",
-                "250",
-                "--csv",
-                "t.csv",
-            ],
+            flat_cam_args("table", "missing.csv", &["--csv", "t.csv"]),
             "cannot read lift table missing.csv",
         ),
         (
-            vec![
-                "table",
-                "cam",
-                "--lift",
-                "short.csv",
-                "--follower",
-                "flat",
-                "--base-radius",
-                "20",
-                "--wheel-radius",
-                "250",
-                "--csv",
-                "t.csv",
-            ],
+            flat_cam_args("table", "short.csv", &["--csv", "t.csv"]),
             "short.csv: 3 points, at least 36 are needed",
         ),
         (
-            vec![
-                "table",
-                "cam",
-                "--lift",
-                &lift,
-                "--follower",
-                "flat",
-                "--base-radius",
-                "20",
-                "--wheel-radius",
-                "250",
-                "--points",
-                "10",
-                "--csv",
-                "t.csv",
-            ],
+            flat_cam_args("table", &lift, &["--points", "10", "--csv", "t.csv"]),
             "10 points per revolution is outside 36..=36000",
         ),
         (
@@ -266,32 +178,25 @@ fn bad_input_gives_one_clear_line_and_keeps_existing_outputs() {
 fn program_main_program_and_svg_are_written_together() {
     let dir = tempfile::tempdir().unwrap();
     let lift = repo("config/parts/demo-intake-lobe.csv");
-    let out = camloop(
-        &[
+    camloop_ok(
+        &flat_cam_args(
             "table",
-            "cam",
-            "--lift",
             &lift,
-            "--follower",
-            "flat",
-            "--base-radius",
-            "20",
-            "--wheel-radius",
-            "250",
-            "--form",
-            "poly",
-            "--program",
-            "nc/CAM_T2.SPF",
-            "--table-number",
-            "2",
-            "--main-program",
-            "nc/CAM_GRIND.MPF",
-            "--svg",
-            "setup.svg",
-        ],
+            &[
+                "--form",
+                "poly",
+                "--program",
+                "nc/CAM_T2.SPF",
+                "--table-number",
+                "2",
+                "--main-program",
+                "nc/CAM_GRIND.MPF",
+                "--svg",
+                "setup.svg",
+            ],
+        ),
         dir.path(),
     );
-    assert!(out.status.success(), "{}", stderr(&out));
     let spf = std::fs::read_to_string(dir.path().join("nc/CAM_T2.SPF")).unwrap();
     let lines: Vec<&str> = spf.lines().collect();
     assert_eq!(lines[0], "%_N_CAM_T2_SPF");
@@ -326,57 +231,25 @@ fn invalid_program_name_writes_nothing_at_all() {
     let dir = tempfile::tempdir().unwrap();
     let lift = repo("config/parts/demo-intake-lobe.csv");
     let out = camloop(
-        &[
+        &flat_cam_args(
             "table",
-            "cam",
-            "--lift",
             &lift,
-            "--follower",
-            "flat",
-            "--base-radius",
-            "20",
-            "--wheel-radius",
-            "250",
-            "--csv",
-            "t.csv",
-            "--program",
-            "CYCLE_CAM.SPF",
-        ],
+            &["--csv", "t.csv", "--program", "CYCLE_CAM.SPF"],
+        ),
         dir.path(),
     );
-    assert!(!out.status.success());
-    let err = stderr(&out);
-    assert_eq!(err.lines().count(), 1, "{err}");
+    let err = refusal(&out);
     assert!(
         err.contains("CYCLE_CAM.SPF") && err.contains("CYCLE"),
         "{err}"
     );
-    assert_eq!(
-        std::fs::read_dir(dir.path()).unwrap().count(),
-        0,
-        "nothing written"
-    );
+    assert_nothing_written(dir.path());
 }
 
 #[test]
 fn plot_draws_the_crankpin_with_four_wheels() {
     let dir = tempfile::tempdir().unwrap();
-    let out = camloop(
-        &[
-            "plot",
-            "crankpin",
-            "--throw",
-            "45",
-            "--pin-radius",
-            "30",
-            "--wheel-radius",
-            "300",
-            "--svg",
-            "pin.svg",
-        ],
-        dir.path(),
-    );
-    assert!(out.status.success(), "{}", stderr(&out));
+    camloop_ok(&crankpin_args("plot", &["--svg", "pin.svg"]), dir.path());
     let svg = std::fs::read_to_string(dir.path().join("pin.svg")).unwrap();
     for label in ["c = 0°", "c = 90°", "c = 180°", "c = 270°"] {
         assert!(svg.contains(label), "{label} missing");

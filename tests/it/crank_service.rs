@@ -3,11 +3,12 @@
 //! repeatable error beyond the limit is learned up to it; the demo crankshaft's four pins each
 //! converge in roundness, index angle and stroke.
 
+use crate::history_support::parts_with_reports;
 use crate::service_support;
 
 use camloop::config::Config;
 use camloop::service::{self, RunOptions};
-use camloop::store::{HistoryFilter, Store};
+use camloop::store::Store;
 use service_support::{get, json};
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
@@ -55,17 +56,8 @@ struct PinPart {
 }
 
 async fn pin_parts(store: &Store, machine: &str, pin: &str, phase_deg: f64) -> Vec<PinPart> {
-    let page = store
-        .measurement_history(&HistoryFilter {
-            lobe: Some(pin.parse().unwrap()),
-            ..HistoryFilter::new(machine.parse().unwrap(), 10_000)
-        })
-        .await
-        .unwrap();
     let mut out = Vec::new();
-    for s in page.items.iter().rev() {
-        let detail = store.measurement(s.id).await.unwrap().unwrap();
-        let report: serde_json::Value = serde_json::from_str(&detail.analysis_json).unwrap();
+    for (s, report) in parts_with_reports(store, machine, pin).await {
         let values = |key: &str| -> Vec<f64> {
             report[key]
                 .as_array()

@@ -100,6 +100,12 @@ async fn pages_downloads_and_acknowledgements_agree_with_the_api() {
     // The capability panel, and the API it quotes: every part of the window, the four
     // characteristics of a lobe, the chart on request; a bad window or feature is refused.
     assert!(page.contains(r#"<table id="capability">"#), "{page}");
+    // 4 parts: the figures are shown, marked indicative (fewer than the 100 values a
+    // capability study needs).
+    assert!(
+        page.contains(r#"<p id="capability-indicative" class="indicative" role="note"><strong>Indicative only: </strong>4 values, fewer than the 100 a capability study needs"#),
+        "{page}"
+    );
     assert!(
         page.contains(&format!(
             "Gauge study (type 1, latest {MASTER_RUNS} master runs)"
@@ -122,6 +128,11 @@ async fn pages_downloads_and_acknowledgements_agree_with_the_api() {
         .unwrap();
     assert_eq!(timing["capability"]["n"].as_u64(), Some(PARTS as u64));
     assert_eq!(timing["chart"]["points"].as_array().unwrap().len(), PARTS);
+    assert_eq!(
+        (&cap["indicative"], &cap["min_values"]),
+        (&true.into(), &100.into())
+    );
+    assert_eq!(timing["indicative"], true, "{timing}");
     for (path, status_code, code) in [
         (
             "/api/v1/machines/SIM1/features/IN1/capability?window=weekly",
@@ -356,4 +367,39 @@ fn cli_export(dir: &std::path::Path, url: &str, parts: &[(i64, String, f64)]) {
     let f = fields(&String::from_utf8(o.stdout).unwrap());
     assert_eq!(values(&f, "K0001", Some(2)), expected);
     assert!(values(&f, "K2111", Some(2)).is_empty());
+}
+
+/// At 100 values the capability is a study, below it indicative: the API's field, and the
+/// panel's note (the page's window is the newest 125 parts) only when it applies.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn capability_under_100_values_is_marked_indicative() {
+    const PARTS: u64 = 100;
+    let dir = tempfile::tempdir().unwrap();
+    let url = format!("sqlite://{}/var/camloop.db?mode=rwc", dir.path().display());
+    let config = service_support::sim_config(dir.path(), &url, 1, 5, |_| None);
+    let mut running = service::start(config, RunOptions::parts(PARTS))
+        .await
+        .unwrap();
+    running.machines_done().await;
+    let addr = running.http_addr;
+    for (window, indicative) in [(7, true), (PARTS, false)] {
+        let path = format!("/api/v1/machines/SIM1/features/IN1/capability?window=parts:{window}");
+        let (status, body) = get(addr, &path).await;
+        assert_eq!(status, 200, "{body}");
+        let cap = json(&body);
+        assert_eq!(cap["parts"], window, "{body}");
+        assert_eq!(cap["indicative"], indicative, "{body}");
+        for c in cap["characteristics"].as_array().unwrap() {
+            assert_eq!(
+                (&c["capability"]["n"], &c["indicative"]),
+                (&window.into(), &indicative.into()),
+                "{c}"
+            );
+        }
+    }
+    let (status, page) = get(addr, "/machines/SIM1/features/IN1").await;
+    assert_eq!(status, 200);
+    assert!(page.contains("Capability (newest 100 parts)"), "{page}");
+    assert!(!page.contains("indicative"), "{page}");
+    running.stop().await;
 }

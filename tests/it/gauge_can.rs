@@ -2,6 +2,7 @@
 //! tools/encode_candump.py (cantools + python-can, from config/gauge.dbc); here they are
 //! decoded by camloop and compared with the script's lift formula re-computed in Rust.
 
+use crate::fixture_support::{encoder_lift_mm, fixture_text};
 use std::path::PathBuf;
 
 use camloop::core::measure::RawMeasurement;
@@ -9,20 +10,6 @@ use camloop::gauge::{
     AssemblyProblem, CandumpIssue, DiscardReason, GaugeDbc, GaugeSignalNames,
     read_candump_measurements,
 };
-
-fn fixture(name: &str) -> String {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures")
-        .join(name);
-    std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
-
-/// The formula documented in tools/encode_candump.py.
-fn lift_mm(revolution: u32, angle_index: u32, points_per_rev: u32) -> f64 {
-    let theta = 2.0 * std::f64::consts::PI * f64::from(angle_index) / f64::from(points_per_rev);
-    6.2 * ((1.0 - theta.cos()) / 2.0).powi(2) + 0.0015 * (5.0 * theta + f64::from(revolution)).sin()
-        - 0.0008
-}
 
 /// cantools rounds to the DBC resolution (0.0001 mm), so a right decoder is within half of
 /// it; 1e-12 mm covers the binary representation of the factor and libm differences.
@@ -39,14 +26,14 @@ fn assert_matches_formula(m: &RawMeasurement) {
     assert_eq!(order, expected, "samples in arrival order");
     let mut worst = 0.0f64;
     for s in &m.samples {
-        let err = (s.lift_mm - lift_mm(s.revolution, s.angle_index, ppr)).abs();
+        let err = (s.lift_mm - encoder_lift_mm(s.revolution, s.angle_index, ppr)).abs();
         assert!(
             err <= TOLERANCE_MM,
             "rev {} index {}: decoded {} mm, formula {} mm",
             s.revolution,
             s.angle_index,
             s.lift_mm,
-            lift_mm(s.revolution, s.angle_index, ppr)
+            encoder_lift_mm(s.revolution, s.angle_index, ppr)
         );
         worst = worst.max(err);
     }
@@ -60,7 +47,7 @@ fn assert_matches_formula(m: &RawMeasurement) {
 #[test]
 fn a_cantools_encoded_measurement_decodes_to_the_formula() {
     let report = read_candump_measurements(
-        &fixture("gauge_3x360.log"),
+        &fixture_text("gauge_3x360.log"),
         &GaugeDbc::builtin(),
         "gauge_3x360.log",
     );
@@ -84,8 +71,11 @@ fn a_cantools_encoded_measurement_decodes_to_the_formula() {
 
 #[test]
 fn a_cut_off_measurement_is_reported_and_the_next_one_kept() {
-    let report =
-        read_candump_measurements(&fixture("gauge_cutoff.log"), &GaugeDbc::builtin(), "cutoff");
+    let report = read_candump_measurements(
+        &fixture_text("gauge_cutoff.log"),
+        &GaugeDbc::builtin(),
+        "cutoff",
+    );
     assert_eq!(report.measurements.len(), 1);
     assert_eq!(report.measurements[0].header.lobe, "2");
     assert_matches_formula(&report.measurements[0]);

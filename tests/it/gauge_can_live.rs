@@ -2,19 +2,12 @@
 //! error (never panic); the listener itself is driven by a recorded log through the same
 //! `FrameSource` interface the socket implements.
 
-use std::path::PathBuf;
+use crate::fixture_support::fixture_text;
 
 use camloop::gauge::{
     AssemblyProblem, CanEvent, CanGauge, CandumpReplay, DiscardReason, GaugeDbc,
     read_candump_measurements,
 };
-
-fn fixture(name: &str) -> String {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures")
-        .join(name);
-    std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
 
 #[tokio::test]
 async fn opening_a_missing_interface_is_a_clear_error() {
@@ -52,7 +45,7 @@ fn opening_outside_a_runtime_is_an_error_not_a_panic() {
 
 #[tokio::test]
 async fn the_listener_hears_what_the_log_replay_reads() {
-    let text = fixture("gauge_cutoff.log");
+    let text = fixture_text("gauge_cutoff.log");
     let mut gauge = CanGauge::new(CandumpReplay::new(&text), GaugeDbc::builtin(), "bus");
     let mut events = Vec::new();
     while let Some(e) = gauge.next_event().await.expect("a replay cannot fail") {

@@ -2,9 +2,8 @@
 //! and the assembler), byte for byte the same as cantools on the committed fixture, typed
 //! errors for what cannot be sent, and the simulated gauge feeding the real decoder.
 
+use crate::fixture_support::fixture_text;
 use crate::sim_support;
-
-use std::path::PathBuf;
 
 use camloop::core::fit::TableForm;
 use camloop::core::geometry::Follower;
@@ -23,13 +22,6 @@ use sim_support::{demo_sim, demo_table};
 /// Half the shipped DBC's lift resolution (0.1 µm), mm, plus 1e-12 mm for the binary
 /// representation of the factor 0.0001 (raw · factor is off by < 1e-16 relative).
 const HALF_STEP_MM: f64 = 0.5e-4 + 1e-12;
-
-fn fixture(name: &str) -> String {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures")
-        .join(name);
-    std::fs::read_to_string(&path).expect("committed fixture")
-}
 
 /// Decodes every frame and feeds the assembler; returns the one measurement delivered.
 fn decode_all(dbc: &GaugeDbc, frames: &[(CanId, Vec<u8>)], origin: &str) -> RawMeasurement {
@@ -129,7 +121,7 @@ fn a_4x360_measurement_round_trips_through_decoder_and_assembler() {
 #[test]
 fn the_cantools_fixture_is_reproduced_byte_for_byte() {
     let dbc = GaugeDbc::builtin();
-    let log = fixture("gauge_3x360.log");
+    let log = fixture_text("gauge_3x360.log");
     let mut counts = [0usize; 3];
     for (n, line) in log.lines().enumerate() {
         let record = parse_candump_line(line).expect("fixture line");

@@ -1,23 +1,11 @@
 //! `read_measurement_file`: one measurement from a `.csv` or candump `.log`, errors naming
 //! the file. Fixtures come from tools/encode_candump.py and tools/encode_text_fixtures.py.
 
-use std::path::{Path, PathBuf};
+use crate::fixture_support::{encoder_lift_mm, fixture_path};
+use std::path::Path;
 
 use camloop::gauge::file::MAX_FILE_BYTES;
 use camloop::gauge::{GaugeDbc, read_measurement_file};
-
-fn fixture(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures")
-        .join(name)
-}
-
-/// The formula documented in tools/encode_candump.py.
-fn lift_mm(revolution: u32, angle_index: u32, points_per_rev: u32) -> f64 {
-    let theta = 2.0 * std::f64::consts::PI * f64::from(angle_index) / f64::from(points_per_rev);
-    6.2 * ((1.0 - theta.cos()) / 2.0).powi(2) + 0.0015 * (5.0 * theta + f64::from(revolution)).sin()
-        - 0.0008
-}
 
 fn read(path: &Path) -> Result<camloop::core::measure::RawMeasurement, String> {
     read_measurement_file(path, &GaugeDbc::builtin()).map_err(|e| e.to_string())
@@ -29,7 +17,7 @@ fn csv_fixtures_read_with_identity_and_grid() {
         ("M3_P1234_L2_20240501T101500.csv", 360),
         ("lobe_scan_720.csv", 720),
     ] {
-        let m = read(&fixture(name)).expect("valid fixture");
+        let m = read(&fixture_path(name)).expect("valid fixture");
         assert_eq!(
             (
                 m.header.machine.as_str(),
@@ -41,12 +29,12 @@ fn csv_fixtures_read_with_identity_and_grid() {
         );
         assert_eq!((m.header.revolutions, m.header.points_per_rev), (3, ppr));
         assert_eq!(m.samples.len(), 3 * ppr as usize);
-        assert_eq!(m.origin, fixture(name).display().to_string());
+        assert_eq!(m.origin, fixture_path(name).display().to_string());
         for (n, s) in m.samples.iter().enumerate() {
             let n = u32::try_from(n).expect("small");
             assert_eq!((s.revolution, s.angle_index), (n / ppr, n % ppr));
             // Written with 6 decimals: within half a nm (+1e-12 for binary parsing).
-            let expected = lift_mm(s.revolution, s.angle_index, ppr);
+            let expected = encoder_lift_mm(s.revolution, s.angle_index, ppr);
             assert!(
                 (s.lift_mm - expected).abs() <= 0.5e-6 + 1e-12,
                 "{name} sample {n}"
@@ -57,21 +45,21 @@ fn csv_fixtures_read_with_identity_and_grid() {
 
 #[test]
 fn a_candump_log_with_one_measurement_reads() {
-    let m = read(&fixture("gauge_3x360.log")).expect("one clean measurement");
+    let m = read(&fixture_path("gauge_3x360.log")).expect("one clean measurement");
     assert_eq!(m.header.lobe, "2");
     assert_eq!(m.samples.len(), 1080);
     // cantools rounding to 0.0001 mm: within half a step.
     let worst = m
         .samples
         .iter()
-        .map(|s| (s.lift_mm - lift_mm(s.revolution, s.angle_index, 360)).abs())
+        .map(|s| (s.lift_mm - encoder_lift_mm(s.revolution, s.angle_index, 360)).abs())
         .fold(0.0, f64::max);
     assert!(worst <= 0.00005 + 1e-12, "{worst}");
 }
 
 #[test]
 fn errors_name_the_file() {
-    let cutoff = fixture("gauge_cutoff.log");
+    let cutoff = fixture_path("gauge_cutoff.log");
     assert_eq!(
         read(&cutoff),
         Err(format!(
@@ -81,7 +69,7 @@ fn errors_name_the_file() {
     );
     let dir = tempfile::tempdir().expect("tempdir");
     let two = dir.path().join("two.log");
-    let one = std::fs::read_to_string(fixture("gauge_3x360.log")).expect("read");
+    let one = std::fs::read_to_string(fixture_path("gauge_3x360.log")).expect("read");
     std::fs::write(&two, format!("{one}{one}")).expect("write");
     assert_eq!(
         read(&two),
@@ -135,7 +123,7 @@ fn csv_rows(labels: &[u32]) -> String {
     for (n, label) in labels.iter().enumerate() {
         let n = u32::try_from(n).expect("few");
         for k in 0..360 {
-            text.push_str(&format!("{label},{k},{:.6}\n", lift_mm(n, k, 360)));
+            text.push_str(&format!("{label},{k},{:.6}\n", encoder_lift_mm(n, k, 360)));
         }
     }
     text

@@ -2,26 +2,12 @@
 //! the master end, the adapter opens the slave end by its path with tokio-serial. The text
 //! is a fixture written by tools/encode_text_fixtures.py (checksum from Python's zlib).
 
-use std::path::PathBuf;
+use crate::fixture_support::{encoder_lift_mm, fixture_text};
 
 use camloop::core::measure::RawMeasurement;
 use camloop::gauge::{SerialEvent, SerialGauge, decode_serial_text};
 use tokio::io::AsyncWriteExt;
 use tokio_serial::SerialPort;
-
-fn fixture(name: &str) -> String {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures")
-        .join(name);
-    std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
-
-/// The formula documented in tools/encode_candump.py.
-fn lift_mm(revolution: u32, angle_index: u32, points_per_rev: u32) -> f64 {
-    let theta = 2.0 * std::f64::consts::PI * f64::from(angle_index) / f64::from(points_per_rev);
-    6.2 * ((1.0 - theta.cos()) / 2.0).powi(2) + 0.0015 * (5.0 * theta + f64::from(revolution)).sin()
-        - 0.0008
-}
 
 fn assert_fixture_measurement(m: &RawMeasurement) {
     assert_eq!(
@@ -38,7 +24,7 @@ fn assert_fixture_measurement(m: &RawMeasurement) {
         let n = u32::try_from(n).expect("small");
         assert_eq!((s.revolution, s.angle_index), (n / 360, n % 360));
         // Printed with 6 decimals: within half a nm, plus 1e-12 for binary parsing.
-        let expected = lift_mm(s.revolution, s.angle_index, 360);
+        let expected = encoder_lift_mm(s.revolution, s.angle_index, 360);
         assert!(
             (s.lift_mm - expected).abs() <= 0.5e-6 + 1e-12,
             "{} vs {expected}",
@@ -49,7 +35,7 @@ fn assert_fixture_measurement(m: &RawMeasurement) {
 
 #[test]
 fn the_python_written_fixture_decodes_with_a_matching_checksum() {
-    let events = decode_serial_text(&fixture("gauge_serial_3x360.txt"), "fixture");
+    let events = decode_serial_text(&fixture_text("gauge_serial_3x360.txt"), "fixture");
     assert_eq!(events.len(), 1, "{events:?}");
     let SerialEvent::Measurement(m) = &events[0] else {
         panic!("{events:?}")
@@ -68,7 +54,7 @@ async fn a_measurement_arrives_through_a_pseudo_terminal() {
 
     // Noise before the measurement, then the fixture; written from a task because the pty
     // buffer holds only a few kB and the adapter must drain it meanwhile.
-    let text = format!("garbage line\n{}", fixture("gauge_serial_3x360.txt"));
+    let text = format!("garbage line\n{}", fixture_text("gauge_serial_3x360.txt"));
     let writer = tokio::spawn(async move {
         master.write_all(text.as_bytes()).await.expect("write");
         master.flush().await.expect("flush");

@@ -46,6 +46,19 @@ fn ellipse_job(tolerance_mm: f64, roughing: Option<Roughing>) -> ContourJob {
 /// the arc whose tangent is parallel to the chord is at the mid-angle of its end angles,
 /// and that point is the farthest from the chord's line. The end angles come from the
 /// written points by inverting the ellipse (atan2), not from the generator.
+/// A sine of 2 mm amplitude on a 20 mm wavelength about X = 20 mm, over 40 mm of Z: its
+/// concave radius is 5.066 mm.
+fn sine() -> Curve {
+    Curve::Sine {
+        mean_x_mm: 20.0,
+        amplitude_mm: 2.0,
+        wavelength_mm: 20.0,
+        phase_deg: 0.0,
+        z_start_mm: 0.0,
+        z_end_mm: -40.0,
+    }
+}
+
 fn ellipse_chord_deviation(p: (f64, f64), q: (f64, f64)) -> f64 {
     let angle = |(z, x): (f64, f64)| ((x - XC) / B).atan2((z - ZC) / A);
     let (t0, t1) = (angle(p), angle(q));
@@ -118,17 +131,7 @@ fn parabola_sine_tangent_and_a_slender_ellipse_within_the_tolerance() {
                 x_end_mm: 25.0,
             },
         ),
-        (
-            "sine",
-            Curve::Sine {
-                mean_x_mm: 20.0,
-                amplitude_mm: 2.0,
-                wavelength_mm: 20.0,
-                phase_deg: 0.0,
-                z_start_mm: 0.0,
-                z_end_mm: -40.0,
-            },
-        ),
+        ("sine", sine()),
         (
             "tangent",
             Curve::Tangent {
@@ -438,14 +441,7 @@ fn refusals_name_the_reason() {
         Err(ContourError::ToleranceBelowResolution { .. })
     ));
     let mut job = ellipse_job(2e-3, None);
-    job.curve = Curve::Sine {
-        mean_x_mm: 20.0,
-        amplitude_mm: 2.0,
-        wavelength_mm: 20.0,
-        phase_deg: 0.0,
-        z_start_mm: 0.0,
-        z_end_mm: -40.0,
-    };
+    job.curve = sine();
     job.nose_radius_mm = 6.0;
     let e = generate(&job).unwrap_err();
     assert!(

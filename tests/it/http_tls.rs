@@ -13,7 +13,7 @@ use std::process::{Command, Stdio};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use process_support::KillOnDrop;
+use process_support::{KillOnDrop, camloop_run, free_port};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 use tokio_rustls::TlsConnector;
@@ -23,11 +23,6 @@ use tokio_rustls::rustls::pki_types::{CertificateDer, ServerName, pem::PemObject
 
 /// Longest wait for the service to come up or take a new certificate; a failure, not a pace.
 const DEADLINE: Duration = Duration::from_secs(30);
-
-fn free_port() -> u16 {
-    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    l.local_addr().unwrap().port()
-}
 
 fn config(listen: &str, http_extra: &str) -> String {
     let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
@@ -41,14 +36,7 @@ fn config(listen: &str, http_extra: &str) -> String {
 }
 
 fn run(dir: &Path, log: Stdio) -> KillOnDrop {
-    KillOnDrop::spawn(
-        Command::new(env!("CARGO_BIN_EXE_camloop"))
-            .args(["run", "--config", "camloop.toml"])
-            .current_dir(dir)
-            .stdout(log)
-            .stderr(Stdio::null()),
-    )
-    .unwrap()
+    KillOnDrop::spawn(camloop_run(dir).stdout(log)).unwrap()
 }
 
 /// A client trusting only the certificate in `cert_pem`.

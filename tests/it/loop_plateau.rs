@@ -4,39 +4,22 @@
 //! nothing fitted, on a 0.1° grid (not the gauge's noisy reading), over parts 10 to 60. Run
 //! with `--nocapture` for the table; the manual's "Pushing the plateau" (docs/src/controller.md) quotes it.
 
-use camloop::core::compensate::{AxisLimits, Feature, TableRequest};
+use crate::sim_support::demo_cell;
 use camloop::core::fit::TableForm;
-use camloop::core::geometry::{CamGeometry, Follower};
 use camloop::core::learn::LearningParams;
-use camloop::core::lift::LiftTable;
-use camloop::core::speed_plan::SpeedPlanSettings;
 use camloop::sim::GrinderConfig;
 use camloop::sim::cell::{self, CellSetup, Method};
 
 fn setup(params: LearningParams, form: TableForm) -> CellSetup {
-    let text = include_str!("../../config/parts/demo-intake-lobe.csv");
-    CellSetup {
-        nominal: LiftTable::parse_csv(text, "demo-intake-lobe.csv").unwrap(),
-        feature: Feature::Cam(CamGeometry {
-            base_radius_mm: 20.0,
-            follower: Follower::Flat,
-            wheel_radius_mm: 250.0,
-        }),
-        request: TableRequest {
-            points: 360,
-            form,
-            poly_tolerance_um: 0.1,
-        },
-        params,
-        limits: AxisLimits::default(),
-        grinder: GrinderConfig {
-            wear_um_per_part: 0.15,
-            dress_every_parts: 0,
-            ..GrinderConfig::default()
-        },
-        seed: 11,
-        speed_plan: SpeedPlanSettings::default(),
-    }
+    let grinder = GrinderConfig {
+        wear_um_per_part: 0.15,
+        dress_every_parts: 0,
+        ..GrinderConfig::default()
+    };
+    let mut setup = demo_cell(grinder, 11);
+    setup.params = params;
+    setup.request.form = form;
+    setup
 }
 
 /// (mean, max) of the true max lift error over parts 10..=60.

@@ -3,11 +3,11 @@
 //! by part, with wear and two dressings over 100 parts. The per-part report is printed (run
 //! with `--nocapture`) and written to `loop_sim_report.txt` in the test's target folder.
 
+use crate::sim_support::demo_cell;
 use camloop::core::compensate::{AxisLimits, Feature, TableRequest, pin_nominal_lift};
 use camloop::core::fit::TableForm;
-use camloop::core::geometry::{CamGeometry, CrankpinGeometry, Follower};
+use camloop::core::geometry::CrankpinGeometry;
 use camloop::core::learn::LearningParams;
-use camloop::core::lift::LiftTable;
 use camloop::core::speed_plan::SpeedPlanSettings;
 use camloop::sim::GrinderConfig;
 use camloop::sim::cell::{self, CellRun, CellSetup, Method};
@@ -16,31 +16,12 @@ use std::fmt::Write as _;
 const PARTS: u32 = 100;
 
 fn setup() -> CellSetup {
-    let text = include_str!("../../config/parts/demo-intake-lobe.csv");
-    let nominal = LiftTable::parse_csv(text, "demo-intake-lobe.csv").unwrap();
+    // Two dressings within the 100 parts (after parts 40 and 80), wear in between.
     let grinder = GrinderConfig {
-        // Two dressings within the 100 parts (after parts 40 and 80), wear in between.
         dress_every_parts: 40,
         ..GrinderConfig::default()
     };
-    CellSetup {
-        nominal,
-        feature: Feature::Cam(CamGeometry {
-            base_radius_mm: 20.0,
-            follower: Follower::Flat,
-            wheel_radius_mm: 250.0,
-        }),
-        request: TableRequest {
-            points: 360,
-            form: TableForm::Poly,
-            poly_tolerance_um: 0.1,
-        },
-        params: LearningParams::default(),
-        limits: AxisLimits::default(),
-        grinder,
-        seed: 7,
-        speed_plan: SpeedPlanSettings::default(),
-    }
+    demo_cell(grinder, 7)
 }
 
 fn report(runs: &[(&str, &CellRun)]) -> String {

@@ -7,44 +7,20 @@
 //! across two dressings (the plan is made again for each new wheel radius, the correction is
 //! kept).
 
-use camloop::core::compensate::{AxisLimits, Feature, TableRequest};
-use camloop::core::fit::TableForm;
-use camloop::core::geometry::{CamGeometry, Follower};
-use camloop::core::learn::LearningParams;
-use camloop::core::lift::LiftTable;
-use camloop::core::speed_plan::SpeedPlanSettings;
+use crate::sim_support::demo_cell;
 use camloop::sim::GrinderConfig;
 use camloop::sim::cell::{self, CellRun, CellSetup, Method};
 
 const PARTS: u32 = 100;
 
 fn setup(enabled: bool) -> CellSetup {
-    let text = include_str!("../../config/parts/demo-intake-lobe.csv");
-    CellSetup {
-        nominal: LiftTable::parse_csv(text, "demo-intake-lobe.csv").unwrap(),
-        feature: Feature::Cam(CamGeometry {
-            base_radius_mm: 20.0,
-            follower: Follower::Flat,
-            wheel_radius_mm: 250.0,
-        }),
-        request: TableRequest {
-            points: 360,
-            form: TableForm::Poly,
-            poly_tolerance_um: 0.1,
-        },
-        params: LearningParams::default(),
-        // The demo camshaft's limits and removal limit (config/parts/demo-camshaft.toml).
-        limits: AxisLimits::default(),
-        grinder: GrinderConfig {
-            dress_every_parts: 40,
-            ..GrinderConfig::default()
-        },
-        seed: 7,
-        speed_plan: SpeedPlanSettings {
-            enabled,
-            ..SpeedPlanSettings::default()
-        },
-    }
+    let grinder = GrinderConfig {
+        dress_every_parts: 40,
+        ..GrinderConfig::default()
+    };
+    let mut setup = demo_cell(grinder, 7);
+    setup.speed_plan.enabled = enabled;
+    setup
 }
 
 fn worst_from_part_4(run: &CellRun, figure: impl Fn(&cell::PartFigures) -> f64) -> f64 {

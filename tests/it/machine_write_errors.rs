@@ -2,36 +2,16 @@
 //! code: a dressing a rule refuses is 409 `dressing_refused`, a dressing whose journal cannot
 //! be written is 503 `journal_unavailable`, never reported as a refusal.
 
-use camloop::recipe::Recipe;
+use crate::machine_support::{demo_lobe_setup, start_machine};
 use camloop::service::http::{ApiCode, CommandError};
-use camloop::service::machine::{MachineError, MachineLoop, MachinePaths, StoreHandle};
+use camloop::service::machine::{MachineError, MachineLoop};
 use camloop::service::metrics::Metrics;
-use camloop::store::Store;
 use std::path::Path;
 use std::sync::Arc;
 
 async fn machine(dir: &Path) -> MachineLoop {
-    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
-    let recipe = Recipe::load(&recipe_path).unwrap();
-    let setup = recipe.feature_setup(&recipe_path, "IN1").unwrap();
-    let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.display());
-    let store: StoreHandle = Arc::new(tokio::sync::RwLock::new(Some(
-        Store::connect(&url).await.unwrap(),
-    )));
-    let paths = MachinePaths {
-        share_dir: dir.join("share"),
-        state_dir: dir.join("state"),
-    };
     let metrics = Arc::new(Metrics::default());
-    MachineLoop::start(
-        "DRESS1".parse().unwrap(),
-        vec![setup],
-        paths,
-        store,
-        metrics,
-    )
-    .await
-    .unwrap()
+    start_machine(dir, "DRESS1", vec![demo_lobe_setup()], metrics).await
 }
 
 #[tokio::test]

@@ -6,10 +6,16 @@
 mod cli_support;
 #[path = "../common/cycloid_cam.rs"]
 mod cycloid_cam;
+#[path = "../fixture_support/mod.rs"]
+mod fixture_support;
 #[path = "../gauge_drop_support/mod.rs"]
 mod gauge_drop_support;
 #[path = "../history_support/mod.rs"]
 mod history_support;
+#[path = "../machine_support/mod.rs"]
+mod machine_support;
+#[path = "../mqtt_support/mod.rs"]
+mod mqtt_support;
 #[path = "../process_support/mod.rs"]
 mod process_support;
 #[path = "../rs274_support/mod.rs"]

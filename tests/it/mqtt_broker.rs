@@ -3,58 +3,27 @@
 //! while the broker is away, events wait on disk up to the bound, the oldest are dropped
 //! beyond it, and when the broker is back the drop count is published, then the rest.
 
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
-use std::time::Duration;
 
+use crate::mqtt_support::{DEADLINE, Message, mosquitto, root_user_line, stop, subscribe};
+use crate::process_support::{KillOnDrop, free_port};
 use camloop::config::{Config, MqttSection};
 use camloop::service::mqtt::{PlantEvent, Progress, Publisher};
 use camloop::service::{self, RunOptions};
 use camloop::store::Verdict;
-use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
+use rumqttc::MqttOptions;
 use tokio::sync::{mpsc, watch};
 
-/// Longest wait for anything the broker or the publisher should do; a failure, not a pace.
-const DEADLINE: Duration = Duration::from_secs(30);
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-fn is_root() -> bool {
-    std::fs::read_to_string("/proc/self/status")
-        .unwrap_or_default()
-        .lines()
-        .any(|l| l.starts_with("Uid:") && l.split_whitespace().nth(1) == Some("0"))
-}
-
-/// A running mosquitto, killed if the test fails before stopping it.
-struct Broker(Option<Child>);
-
-impl Drop for Broker {
-    fn drop(&mut self) {
-        if let Some(mut child) = self.0.take() {
-            let _ = child.kill();
-            let _ = child.wait();
-        }
-    }
-}
-
 /// Starts mosquitto on `port`, persisting sessions in `dir`; returns once it says it runs.
-fn broker(port: u16, dir: &Path) -> Broker {
+fn broker(port: u16, dir: &Path) -> KillOnDrop {
     let conf = dir.join("mosquitto.conf");
-    let user = if is_root() { "user root\n" } else { "" };
     std::fs::write(
         &conf,
         format!(
             "listener {port} 127.0.0.1\nallow_anonymous true\npersistence true\n\
-             persistence_location {}/\nlog_dest stderr\nlog_type all\n{user}",
-            dir.display()
+             persistence_location {}/\nlog_dest stderr\nlog_type all\n{}",
+            dir.display(),
+            root_user_line()
         ),
     )
     .unwrap();
@@ -62,92 +31,32 @@ fn broker(port: u16, dir: &Path) -> Broker {
         .into_iter()
         .find(|p| Path::new(p).exists())
         .unwrap_or("mosquitto");
-    let mut child = Command::new(exe)
-        .arg("-c")
-        .arg(&conf)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap_or_else(|e| panic!("mosquitto cannot start ({e}): install Debian's mosquitto"));
-    // Its log goes to stderr, which is not buffered: the line arrives when it is written.
-    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-    let mut seen = Vec::new();
-    loop {
-        match lines.next() {
-            Some(Ok(line)) => {
-                let running = line.contains(" running");
-                seen.push(line);
-                if running {
-                    break;
-                }
-            }
-            _ => panic!("mosquitto stopped before running: {seen:?}"),
-        }
-    }
-    // Keep reading its log so it never blocks on a full pipe.
-    std::thread::spawn(move || for _ in lines {});
-    Broker(Some(child))
+    mosquitto(exe, &conf)
 }
 
-/// Stops the broker as an operator would (SIGTERM: it saves its sessions) and waits.
-fn stop(mut broker: Broker) {
-    let mut child = broker.0.take().unwrap();
-    let status = Command::new("kill")
-        .arg("-TERM")
-        .arg(child.id().to_string())
-        .status()
-        .unwrap();
-    assert!(status.success());
-    child.wait().unwrap();
-}
-
-/// A subscriber on `filter` with a persistent session: what the broker sends it while it
-/// reconnects is kept for it. Messages come out as (topic, payload, retained).
+/// A subscriber on `filter`; with `clean` false its session persists: what the broker sends
+/// it while it reconnects is kept for it. Messages come out as (topic, payload, retained).
 async fn subscriber(
     port: u16,
     id: &str,
     filter: &str,
     clean: bool,
-) -> mpsc::UnboundedReceiver<(String, serde_json::Value, bool)> {
+) -> mpsc::UnboundedReceiver<Message<serde_json::Value>> {
     let mut options = MqttOptions::new(id, "127.0.0.1", port);
     options.set_clean_session(clean);
-    let (client, mut eventloop) = AsyncClient::new(options, 16);
-    let (tx, rx) = mpsc::unbounded_channel();
-    let (subscribed_tx, mut subscribed) = mpsc::channel(1);
-    let filter = filter.to_owned();
-    tokio::spawn(async move {
-        loop {
-            match eventloop.poll().await {
-                Ok(Event::Incoming(Packet::ConnAck(_))) => {
-                    client.subscribe(&filter, QoS::AtLeastOnce).await.unwrap();
-                }
-                Ok(Event::Incoming(Packet::SubAck(_))) => {
-                    let _ = subscribed_tx.try_send(());
-                }
-                Ok(Event::Incoming(Packet::Publish(p))) => {
-                    // The status topic says `online`/`offline`, the rest is JSON.
-                    let payload = serde_json::from_slice(&p.payload).unwrap_or_else(|_| {
-                        String::from_utf8_lossy(&p.payload).into_owned().into()
-                    });
-                    if tx.send((p.topic, payload, p.retain)).is_err() {
-                        return;
-                    }
-                }
-                Ok(_) => {}
-                // The broker is away: rumqttc reconnects on the next poll; pace the retries.
-                Err(_) => tokio::time::sleep(Duration::from_millis(50)).await,
-            }
-        }
-    });
-    tokio::time::timeout(DEADLINE, subscribed.recv())
+    // The status topic says `online`/`offline`, the rest is JSON.
+    let decode = |p: &[u8]| {
+        serde_json::from_slice::<serde_json::Value>(p)
+            .unwrap_or_else(|_| String::from_utf8_lossy(p).into_owned().into())
+    };
+    subscribe(options, filter, decode)
         .await
-        .expect("subscribed");
-    rx
+        .expect("subscribed")
 }
 
 async fn next(
-    rx: &mut mpsc::UnboundedReceiver<(String, serde_json::Value, bool)>,
-) -> (String, serde_json::Value, bool) {
+    rx: &mut mpsc::UnboundedReceiver<Message<serde_json::Value>>,
+) -> Message<serde_json::Value> {
     tokio::time::timeout(DEADLINE, rx.recv())
         .await
         .expect("a message within the deadline")
@@ -157,8 +66,8 @@ async fn next(
 /// The next message published since the subscription: retained copies that the broker
 /// hands out on (re)subscribing, and the publisher's `online`/`offline` status, are skipped.
 async fn next_live(
-    rx: &mut mpsc::UnboundedReceiver<(String, serde_json::Value, bool)>,
-) -> (String, serde_json::Value, bool) {
+    rx: &mut mpsc::UnboundedReceiver<Message<serde_json::Value>>,
+) -> Message<serde_json::Value> {
     loop {
         let m = next(rx).await;
         if !m.2 && !m.0.ends_with("/status") {
@@ -172,9 +81,9 @@ async fn next_live(
 /// stopped comes again when both are back (seen with both cores busy). Only those may come
 /// again; anything else is returned and judged by the caller.
 async fn next_after_redelivery(
-    rx: &mut mpsc::UnboundedReceiver<(String, serde_json::Value, bool)>,
+    rx: &mut mpsc::UnboundedReceiver<Message<serde_json::Value>>,
     seen: u64,
-) -> (String, serde_json::Value, bool) {
+) -> Message<serde_json::Value> {
     loop {
         let m = next_live(rx).await;
         let again =
@@ -211,7 +120,7 @@ fn part(n: u32) -> PlantEvent {
 
 /// Receives part `n`'s event (sequence number `seq`) and then the feature's state.
 async fn expect_part(
-    rx: &mut mpsc::UnboundedReceiver<(String, serde_json::Value, bool)>,
+    rx: &mut mpsc::UnboundedReceiver<Message<serde_json::Value>>,
     n: u32,
     seq: u64,
 ) {

@@ -6,29 +6,22 @@
 
 use crate::process_support;
 
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::sync::Arc;
 use std::time::Duration;
 
+use crate::mqtt_support::{DEADLINE, Message, mosquitto, root_user_line, subscribe};
 use camloop::config::{MqttSection, Secret};
 use camloop::service::mqtt::{PlantEvent, Publisher};
 use camloop::store::Verdict;
-use process_support::KillOnDrop;
-use rumqttc::{AsyncClient, ConnectionError, Event, MqttOptions, Packet, QoS};
+use process_support::{KillOnDrop, camloop_run, free_port};
+use rumqttc::{AsyncClient, ConnectionError, MqttOptions};
 use rumqttc::{TlsConfiguration, Transport};
 use tokio::sync::{mpsc, watch};
 
-/// Longest wait for anything the broker or camloop should do; a failure, not a pace.
-const DEADLINE: Duration = Duration::from_secs(30);
 const USER: &str = "camloop";
 const PASSWORD: &str = "correct horse battery";
-
-fn free_port() -> u16 {
-    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    l.local_addr().unwrap().port()
-}
 
 fn found(exe: &str) -> Option<String> {
     ["/usr/sbin/", "/usr/bin/"]
@@ -66,35 +59,14 @@ fn secure_broker(port: u16, dir: &Path, (exe, passwd): &(String, String)) -> (Ki
         .status()
         .unwrap();
     assert!(made.success(), "mosquitto_passwd failed");
-    let root = std::fs::read_to_string("/proc/self/status")
-        .unwrap_or_default()
-        .lines()
-        .any(|l| l.starts_with("Uid:") && l.split_whitespace().nth(1) == Some("0"));
     let d = dir.display();
     let conf = format!(
         "listener {port} 127.0.0.1\ncertfile {d}/cert.pem\nkeyfile {d}/key.pem\n\
          allow_anonymous false\npassword_file {d}/passwd\nlog_dest stderr\nlog_type all\n{}",
-        if root { "user root\n" } else { "" }
+        root_user_line()
     );
     std::fs::write(dir.join("mosquitto.conf"), conf).unwrap();
-    let mut child = KillOnDrop::spawn(
-        Command::new(exe)
-            .arg("-c")
-            .arg(dir.join("mosquitto.conf"))
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped()),
-    )
-    .unwrap();
-    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-    let mut seen = Vec::new();
-    loop {
-        match lines.next() {
-            Some(Ok(line)) if line.contains(" running") => break,
-            Some(Ok(line)) => seen.push(line),
-            _ => panic!("mosquitto stopped before running: {seen:?}"),
-        }
-    }
-    std::thread::spawn(move || for _ in lines {});
+    let child = mosquitto(exe, &dir.join("mosquitto.conf"));
     (child, cert)
 }
 
@@ -115,42 +87,16 @@ async fn subscriber(
     port: u16,
     cert: &str,
     filter: &str,
-) -> mpsc::UnboundedReceiver<(String, String, bool)> {
-    let (client, mut eventloop) = AsyncClient::new(client_options(id, port, cert, PASSWORD), 16);
-    let (tx, rx) = mpsc::unbounded_channel();
-    let (ready_tx, mut ready) = mpsc::channel(1);
-    let filter = filter.to_owned();
-    tokio::spawn(async move {
-        loop {
-            match eventloop.poll().await {
-                Ok(Event::Incoming(Packet::ConnAck(_))) => {
-                    client.subscribe(&filter, QoS::AtLeastOnce).await.unwrap();
-                }
-                Ok(Event::Incoming(Packet::SubAck(_))) => {
-                    let _ = ready_tx.try_send(());
-                }
-                Ok(Event::Incoming(Packet::Publish(p))) => {
-                    let text = String::from_utf8_lossy(&p.payload).into_owned();
-                    if tx.send((p.topic, text, p.retain)).is_err() {
-                        return;
-                    }
-                }
-                Ok(_) => {}
-                Err(_) => tokio::time::sleep(Duration::from_millis(50)).await,
-            }
-        }
-    });
-    tokio::time::timeout(DEADLINE, ready.recv())
+) -> mpsc::UnboundedReceiver<Message<String>> {
+    let options = client_options(id, port, cert, PASSWORD);
+    let text = |p: &[u8]| String::from_utf8_lossy(p).into_owned();
+    subscribe(options, filter, text)
         .await
-        .expect("the subscriber connects over TLS with the right password");
-    rx
+        .expect("the subscriber connects over TLS with the right password")
 }
 
 /// The next message on `topic` (others skipped), within the deadline.
-async fn next_on(
-    rx: &mut mpsc::UnboundedReceiver<(String, String, bool)>,
-    topic: &str,
-) -> (String, bool) {
+async fn next_on(rx: &mut mpsc::UnboundedReceiver<Message<String>>, topic: &str) -> (String, bool) {
     loop {
         let (t, payload, retained) = tokio::time::timeout(DEADLINE, rx.recv())
             .await
@@ -270,15 +216,8 @@ async fn the_broker_publishes_the_last_will_when_camloop_is_killed() {
     );
     std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
     let mut rx = subscriber("listener", port, &cert, "camloop/#").await;
-    let mut camloop = KillOnDrop::spawn(
-        Command::new(env!("CARGO_BIN_EXE_camloop"))
-            .args(["run", "--config", "camloop.toml"])
-            .env("CAMLOOP_MQTT_PASSWORD", PASSWORD)
-            .current_dir(dir.path())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null()),
-    )
-    .unwrap();
+    let mut run = camloop_run(dir.path());
+    let mut camloop = KillOnDrop::spawn(run.env("CAMLOOP_MQTT_PASSWORD", PASSWORD)).unwrap();
     let status = "camloop/camloop/status";
     assert_eq!(next_on(&mut rx, status).await.0, "online");
     // A part's state arrives: the link is in use when the process dies.

@@ -16,7 +16,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use crate::cli_support;
-use crate::process_support::KillOnDrop;
+use crate::process_support::{KillOnDrop, camloop_run, free_port};
 
 /// The longest the service may take to start (a first start makes the server's RSA key and
 /// migrates the database; on a loaded 2-core machine seconds): a failure, not a pace.
@@ -28,14 +28,6 @@ const SCRIPT_BOUND: Duration = Duration::from_secs(300);
 /// Seconds between parts: slow enough that the rollback's table is still on the share when
 /// it is read, fast enough that the next part comes soon.
 const PART_INTERVAL_S: f64 = 2.0;
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
 
 /// Whether the pinned client is importable; panics when CI requires it.
 fn asyncua_present() -> bool {
@@ -107,14 +99,7 @@ fn asyncua_browses_reads_subscribes_and_calls_rollback_with_users() {
     assert!(made.status.success(), "{}", cli_support::stderr(&made));
     let (http, opcua) = (free_port(), free_port());
     std::fs::write(dir.path().join("camloop.toml"), config(http, opcua)).unwrap();
-    let _service = KillOnDrop::spawn(
-        Command::new(env!("CARGO_BIN_EXE_camloop"))
-            .args(["run", "--config", "camloop.toml"])
-            .current_dir(dir.path())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null()),
-    )
-    .unwrap();
+    let _service = KillOnDrop::spawn(&mut camloop_run(dir.path())).unwrap();
     let password_file = dir.path().join("var/admin-password");
     wait_for("the admin password file", START_BOUND, || {
         password_file.exists()
@@ -155,17 +140,11 @@ fn asyncua_browses_reads_subscribes_and_calls_rollback_with_users() {
             .stderr(Stdio::piped()),
     )
     .unwrap();
-    let start = Instant::now();
-    let status = loop {
-        if let Some(status) = run.try_wait().unwrap() {
-            break status;
-        }
-        assert!(
-            start.elapsed() < SCRIPT_BOUND,
-            "the asyncua checks took over {SCRIPT_BOUND:?}"
-        );
-        std::thread::sleep(Duration::from_millis(200));
-    };
+    let status = run.exit_within(
+        SCRIPT_BOUND,
+        Duration::from_millis(200),
+        "the asyncua checks",
+    );
     let mut out = String::new();
     let mut err = String::new();
     use std::io::Read as _;

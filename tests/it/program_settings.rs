@@ -245,6 +245,12 @@ fn defaults_are_valid_and_as_documented() {
     assert_eq!(s.memory, None);
 }
 
+/// The messages of every problem `validate` finds in `s`, which it must refuse.
+fn refusals(s: &ProgramSettings) -> Vec<String> {
+    let problems = s.validate().expect_err("the settings are refused");
+    problems.0.iter().map(|e| e.to_string()).collect()
+}
+
 #[test]
 fn validation_reports_every_problem() {
     let s = ProgramSettings {
@@ -264,13 +270,7 @@ fn validation_reports_every_problem() {
         ..ProgramSettings::default()
     };
     // Compared by message: NaN in an error makes `==` on the values useless.
-    let messages: Vec<String> = s
-        .validate()
-        .unwrap_err()
-        .0
-        .iter()
-        .map(|e| e.to_string())
-        .collect();
+    let messages = refusals(&s);
     assert_eq!(
         messages,
         [
@@ -297,13 +297,7 @@ fn decimals_finer_than_the_control_resolution_are_refused_with_the_rest() {
         c_increments_per_deg: 1000,
         ..ProgramSettings::default()
     };
-    let messages: Vec<String> = s
-        .validate()
-        .unwrap_err()
-        .0
-        .iter()
-        .map(|e| e.to_string())
-        .collect();
+    let messages = refusals(&s);
     assert_eq!(
         messages,
         [

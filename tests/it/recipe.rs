@@ -53,24 +53,20 @@ fn demo_recipe_has_the_documented_values() {
     assert_eq!(recipe.axis_limits.c_max_accel_deg_s2, 3600.0);
 }
 
+/// A camshaft recipe of one flat-follower lobe L1 on a 250 mm wheel, with `sections` (TOML
+/// tables) between the wheel and the lobe.
+fn one_lobe_recipe(sections: &str) -> String {
+    format!(
+        "name = \"X\"\nkind = \"camshaft\"\n[wheel]\nradius_mm = 250\n{sections}[[lobes]]\n\
+         name = \"L1\"\nlift = \"a.csv\"\nfollower = \"flat\"\nbase_radius_mm = 20\n"
+    )
+}
+
 #[test]
 fn an_enabled_speed_plan_with_a_bad_limit_is_named() {
-    let text = r#"
-name = "X"
-kind = "camshaft"
-[wheel]
-radius_mm = 250
-[axis_limits]
-c_max_accel_deg_s2 = 0
-[speed_plan]
-enabled = true
-[[lobes]]
-name = "L1"
-lift = "a.csv"
-follower = "flat"
-base_radius_mm = 20
-"#;
-    let e = Recipe::parse(text, "bad.toml").unwrap_err().to_string();
+    let text =
+        one_lobe_recipe("[axis_limits]\nc_max_accel_deg_s2 = 0\n[speed_plan]\nenabled = true\n");
+    let e = Recipe::parse(&text, "bad.toml").unwrap_err().to_string();
     assert!(e.contains("speed_plan (with axis_limits)"), "{e}");
     assert!(e.contains("c_max_accel_deg_s2 = 0"), "{e}");
 }
@@ -79,24 +75,10 @@ base_radius_mm = 20
 /// plan is refused, saying where to reverse it instead.
 #[test]
 fn an_enabled_speed_plan_with_c_reversed_is_refused() {
-    let text = r#"
-name = "X"
-kind = "camshaft"
-[wheel]
-radius_mm = 250
-[table]
-table_numbers = [1, 4]
-[program]
-c_direction = -1
-[speed_plan]
-enabled = true
-[[lobes]]
-name = "L1"
-lift = "a.csv"
-follower = "flat"
-base_radius_mm = 20
-"#;
-    let e = Recipe::parse(text, "reversed.toml")
+    let text = one_lobe_recipe(
+        "[table]\ntable_numbers = [1, 4]\n[program]\nc_direction = -1\n[speed_plan]\nenabled = true\n",
+    );
+    let e = Recipe::parse(&text, "reversed.toml")
         .unwrap_err()
         .to_string();
     assert!(

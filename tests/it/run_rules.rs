@@ -11,7 +11,7 @@
 
 use crate::cli_support;
 
-use cli_support::{camloop, stderr};
+use cli_support::run_demo_lobe;
 use std::path::Path;
 
 const PARTS: u32 = 200;
@@ -19,26 +19,10 @@ const BASELINE_END: u32 = 30; // 5 start-up parts and 25 baseline parts
 const DRIFT_FROM: u32 = 130;
 
 fn run(dir: &Path, gauge: &str) -> Vec<(u32, String)> {
-    let recipe = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
-    let config = format!(
-        "[database]\nurl = \"sqlite://var/camloop.db?mode=rwc\"\n[service]\nvar_dir = \"var\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
-         [[machines]]\nname = \"M7\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share/M7\"\n[machines.gauge]\nkind = \"sim\"\npart_interval_ms = 1\n\
-         [machines.gauge.grinder]\ndress_every_parts = 0\n[machines.gauge.grinder.gauge]\n{gauge}\n",
-        recipe.display()
+    let grinder = format!(
+        "[machines.gauge.grinder]\ndress_every_parts = 0\n[machines.gauge.grinder.gauge]\n{gauge}\n"
     );
-    std::fs::write(dir.join("camloop.toml"), config).unwrap();
-    let out = camloop(
-        &[
-            "run",
-            "--config",
-            "camloop.toml",
-            "--parts",
-            &PARTS.to_string(),
-        ],
-        dir,
-    );
-    let log = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(out.status.success(), "{log}\n{}", stderr(&out));
+    let log = run_demo_lobe(dir, PARTS, 1, &grinder);
     let parts = log.lines().filter(|l| l.contains("M7 IN1 part")).count();
     assert!(parts as u32 >= PARTS - 5, "{log}");
     // "run rule: IN1 size: 7 in a row … at part 57 (…"

@@ -4,12 +4,12 @@
 //! from a second time.
 
 use crate::gauge_drop_support;
+use crate::machine_support::{demo_lobe_setup, nominal_measurement, start_machine};
 
 use camloop::core::measure::RawMeasurement;
-use camloop::recipe::Recipe;
-use camloop::service::machine::{MachineLoop, MachinePaths, SourceEvent, StoreHandle};
+use camloop::service::machine::{MachineLoop, SourceEvent};
 use camloop::service::metrics::{MachineMetrics, Metrics};
-use camloop::sim::{CommandedTable, GrinderConfig, PartLabels, SimGrinder, Workpiece};
+use camloop::sim::PartLabels;
 use camloop::store::Store;
 use gauge_drop_support::measurement_csv;
 use std::path::Path;
@@ -17,40 +17,16 @@ use std::sync::Arc;
 
 /// A measurement of the demo lobe ground with its nominal table, labelled as given.
 fn measurement(machine: &str, part: &str, lobe: &str, seed: u64) -> RawMeasurement {
-    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
-    let recipe = Recipe::load(&recipe_path).unwrap();
-    let setup = recipe.feature_setup(&recipe_path, "IN1").unwrap();
-    let camloop::core::compensate::Feature::Cam(g) = setup.feature else {
-        panic!("a cam")
-    };
-    let mut sim = SimGrinder::new(GrinderConfig::default(), Workpiece::Cam(g), seed).unwrap();
-    let part_geometry = setup.feature.part(&setup.nominal).unwrap();
-    let table =
-        CommandedTable::nominal(&part_geometry, 360, camloop::core::fit::TableForm::Poly).unwrap();
-    let ground = sim.grind(&table).unwrap();
     let labels = PartLabels {
         machine: machine.into(),
         part: part.into(),
         lobe: lobe.into(),
     };
-    sim.measure(&ground, &labels)
+    nominal_measurement(&demo_lobe_setup(), labels, seed)
 }
 
 async fn machine(dir: &Path, metrics: Arc<Metrics>) -> MachineLoop {
-    let recipe_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe.toml");
-    let recipe = Recipe::load(&recipe_path).unwrap();
-    let setup = recipe.feature_setup(&recipe_path, "IN1").unwrap();
-    let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.display());
-    let store: StoreHandle = Arc::new(tokio::sync::RwLock::new(Some(
-        Store::connect(&url).await.unwrap(),
-    )));
-    let paths = MachinePaths {
-        share_dir: dir.join("share"),
-        state_dir: dir.join("state"),
-    };
-    MachineLoop::start("DROP1".parse().unwrap(), vec![setup], paths, store, metrics)
-        .await
-        .unwrap()
+    start_machine(dir, "DROP1", vec![demo_lobe_setup()], metrics).await
 }
 
 async fn feed(machine: &mut MachineLoop, raw: RawMeasurement) {

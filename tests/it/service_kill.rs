@@ -13,7 +13,6 @@ use crate::process_support;
 
 use camloop::store::Store;
 use std::path::Path;
-use std::process::{Command, Stdio};
 use std::time::Duration;
 
 const KILLS: usize = 14;
@@ -64,14 +63,9 @@ fn killing_the_service_never_leaves_a_version_the_history_does_not_know() {
     let manifest = dir.path().join("var/machines/M7/IN1/share/manifest.jsonl");
     for _ in 0..KILLS {
         let before = manifest_len(&manifest);
-        let mut child = process_support::KillOnDrop::spawn(
-            Command::new(env!("CARGO_BIN_EXE_camloop"))
-                .args(["run", "--config", "camloop.toml"])
-                .current_dir(dir.path())
-                .stdout(Stdio::null())
-                .stderr(Stdio::null()),
-        )
-        .unwrap();
+        let mut child =
+            process_support::KillOnDrop::spawn(&mut process_support::camloop_run(dir.path()))
+                .unwrap();
         // The kill lands anywhere in the parts after this start has written to the share's
         // manifest: start-up takes 100 ms on an idle machine and seconds on a loaded one, so
         // a kill timed from the spawn alone could land before any part.

@@ -283,21 +283,12 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
         (400, "invalid_infeed".into()),
         "{body}"
     );
-    let (status, body) = post(
+    dressing_accepted(
         addr,
-        path,
         r#"{"wheel_radius_mm":249.9,"infeed_um":52.0}"#,
-        Some(TOKEN),
+        "249.95 → 249.9 mm (dresser infeed 52.00 µm: size step +2.00 µm)",
     )
     .await;
-    assert_eq!(status, 200, "{body}");
-    assert!(
-        json(&body)["message"]
-            .as_str()
-            .unwrap()
-            .contains("249.95 → 249.9 mm (dresser infeed 52.00 µm: size step +2.00 µm)"),
-        "{body}"
-    );
     let (_, body) = get(addr, path).await;
     assert_eq!(json(&body)["items"][0]["infeed_um"], 52.0, "{body}");
     assert!(json(&body)["items"][1]["infeed_um"].is_null(), "{body}");
@@ -322,21 +313,12 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
     // An infeed that cannot go with the radius change (0.4 mm less radius told, nothing
     // removed: a wheel change, or a wrong report) is not used: the size step would be beyond
     // the correction limit, so the wheel's share of the learned size is replaced instead.
-    let (status, body) = post(
+    dressing_accepted(
         addr,
-        path,
         r#"{"wheel_radius_mm":249.5,"infeed_um":0.0}"#,
-        Some(TOKEN),
+        "(no usable infeed: the wheel's share of the learned size replaced)",
     )
     .await;
-    assert_eq!(status, 200, "{body}");
-    assert!(
-        json(&body)["message"]
-            .as_str()
-            .unwrap()
-            .contains("(no usable infeed: the wheel's share of the learned size replaced)"),
-        "{body}"
-    );
 
     running.stop().await;
 }
@@ -446,6 +428,15 @@ async fn a_database_that_is_down_loses_nothing() {
         .find(|p| matches!(p, camloop::service::journal::Pending::Learning { .. }))
         .cloned();
     assert_eq!(reopened.records().to_vec(), Vec::from_iter(newest_learning));
+}
+
+/// Reports a dressing of SIM1 (`body`) with the writer's token: it must be accepted with a
+/// message that says `said`.
+async fn dressing_accepted(addr: std::net::SocketAddr, body: &str, said: &str) {
+    let (status, reply) = post(addr, "/api/v1/machines/SIM1/dressings", body, Some(TOKEN)).await;
+    assert_eq!(status, 200, "{reply}");
+    let message = json(&reply)["message"].as_str().unwrap().to_owned();
+    assert!(message.contains(said), "{reply}");
 }
 
 /// Rows of machine SIM1 in the store: measurements, table versions, events, learning states.

@@ -4,14 +4,12 @@
 //! far beyond any timing correction) or, when the control reports which table ground the
 //! part, rejected before any loop sees them. Never is one lobe learned from the other's part.
 
+use crate::machine_support::{nominal_measurement, start_machine};
 use camloop::core::measure::RawMeasurement;
 use camloop::recipe::{FeatureSetup, Recipe};
-use camloop::service::machine::{
-    GroundWith, Ingested, MachineLoop, MachinePaths, SourceEvent, StoreHandle,
-};
+use camloop::service::machine::{GroundWith, Ingested, MachineLoop, SourceEvent};
 use camloop::service::metrics::Metrics;
-use camloop::sim::{CommandedTable, GrinderConfig, PartLabels, SimGrinder, Workpiece};
-use camloop::store::Store;
+use camloop::sim::PartLabels;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -27,20 +25,12 @@ fn setups() -> Vec<FeatureSetup> {
 /// A measurement of `setup` ground from its nominal table, read in the shaft's frame (the
 /// gauge's index 0 at the shaft datum, the lobe at its phase), labelled `lobe`.
 fn measurement(setup: &FeatureSetup, part: &str, lobe: &str, seed: u64) -> RawMeasurement {
-    let camloop::core::compensate::Feature::Cam(g) = setup.feature else {
-        panic!("a cam")
-    };
-    let mut sim = SimGrinder::new(GrinderConfig::default(), Workpiece::Cam(g), seed).unwrap();
-    let geometry = setup.feature.part(&setup.nominal).unwrap();
-    let table =
-        CommandedTable::nominal(&geometry, 360, camloop::core::fit::TableForm::Poly).unwrap();
-    let ground = sim.grind(&table).unwrap();
     let labels = PartLabels {
         machine: "M2".into(),
         part: part.into(),
         lobe: lobe.into(),
     };
-    let mut raw = sim.measure(&ground, &labels);
+    let mut raw = nominal_measurement(setup, labels, seed);
     let shift = (setup.phase_deg / 360.0 * 360.0).round() as u32;
     for s in &mut raw.samples {
         s.angle_index = (s.angle_index + shift) % 360;
@@ -49,23 +39,7 @@ fn measurement(setup: &FeatureSetup, part: &str, lobe: &str, seed: u64) -> RawMe
 }
 
 async fn machine(dir: &Path) -> MachineLoop {
-    let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.display());
-    let store: StoreHandle = Arc::new(tokio::sync::RwLock::new(Some(
-        Store::connect(&url).await.unwrap(),
-    )));
-    let paths = MachinePaths {
-        share_dir: dir.join("share"),
-        state_dir: dir.join("state"),
-    };
-    MachineLoop::start(
-        "M2".parse().unwrap(),
-        setups(),
-        paths,
-        store,
-        Arc::new(Metrics::default()),
-    )
-    .await
-    .unwrap()
+    start_machine(dir, "M2", setups(), Arc::new(Metrics::default())).await
 }
 
 async fn feed(

@@ -4,6 +4,7 @@
 //! errors (deflection and torsion along Z, a harmonic of each lobe's own) and a gauge that
 //! now and then names the wrong lobe or one the shaft lacks. Each lobe has its own loop.
 
+use crate::history_support::parts_with_reports;
 use crate::service_support;
 
 use camloop::config::Config;
@@ -39,17 +40,8 @@ struct Part {
 }
 
 async fn parts_of(store: &Store, lobe: &str) -> Vec<Part> {
-    let page = store
-        .measurement_history(&HistoryFilter {
-            lobe: Some(lobe.parse().unwrap()),
-            ..HistoryFilter::new("SIM8".parse().unwrap(), 10_000)
-        })
-        .await
-        .unwrap();
     let mut out = Vec::new();
-    for s in page.items.iter().rev() {
-        let detail = store.measurement(s.id).await.unwrap().unwrap();
-        let report: serde_json::Value = serde_json::from_str(&detail.analysis_json).unwrap();
+    for (s, report) in parts_with_reports(store, "SIM8", lobe).await {
         let max_lift_um = report["error_um"]
             .as_array()
             .unwrap()
@@ -232,13 +224,7 @@ async fn a_stop_mid_shaft_resumes_each_lobe_where_it_was() {
     let store = Store::connect(&url).await.unwrap();
     let mut before = BTreeMap::new();
     for lobe in LOBES {
-        let state = store
-            .load_learning_state(&"SIM8".parse().unwrap(), &lobe.parse().unwrap())
-            .await
-            .unwrap()
-            .unwrap();
-        let memory: serde_json::Value = serde_json::from_str(&state.state_json).unwrap();
-        before.insert(lobe, memory["learning"]["iteration"].as_u64().unwrap());
+        before.insert(lobe, learned_parts(&store, lobe).await);
     }
     // Lobes before the resume point have 4 parts learned from, the rest 3.
     for (k, lobe) in LOBES.iter().enumerate() {
@@ -266,16 +252,17 @@ async fn a_stop_mid_shaft_resumes_each_lobe_where_it_was() {
             .collect();
         // The resumed run finished shaft 4; the next run was shaft 5.
         assert_eq!(numbers, vec![1, 2, 3, 4, 5], "{lobe}");
-        let state = store
-            .load_learning_state(&"SIM8".parse().unwrap(), &lobe.parse().unwrap())
-            .await
-            .unwrap()
-            .unwrap();
-        let memory: serde_json::Value = serde_json::from_str(&state.state_json).unwrap();
-        assert_eq!(
-            memory["learning"]["iteration"].as_u64().unwrap(),
-            5,
-            "{lobe}"
-        );
+        assert_eq!(learned_parts(&store, lobe).await, 5, "{lobe}");
     }
+}
+
+/// How many parts SIM8's `lobe` has learned from: the stored learning state's iteration.
+async fn learned_parts(store: &Store, lobe: &str) -> u64 {
+    let state = store
+        .load_learning_state("SIM8", lobe)
+        .await
+        .unwrap()
+        .expect("a stored learning state");
+    let memory: serde_json::Value = serde_json::from_str(&state.state_json).unwrap();
+    memory["learning"]["iteration"].as_u64().unwrap()
 }

@@ -6,10 +6,10 @@
 //! the virtual axis exceeds an X limit is refused, never delivered.
 
 use crate::cli_support::repo;
-use crate::process_support::KillOnDrop;
+use crate::process_support::{KillOnDrop, camloop_run};
 use std::path::Path;
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::process::Stdio;
+use std::time::Duration;
 
 /// The demo camshaft's recipe with the plan on (and the table numbers it needs), lift files
 /// found where the repository keeps them.
@@ -34,30 +34,14 @@ fn run(dir: &Path, config: &str, parts: u32, bound: Duration) -> String {
     std::fs::write(dir.join("camloop.toml"), config).unwrap();
     let (out, err) = (dir.join("out.log"), dir.join("err.log"));
     let mut child = KillOnDrop::spawn(
-        Command::new(env!("CARGO_BIN_EXE_camloop"))
-            .args([
-                "run",
-                "--config",
-                "camloop.toml",
-                "--parts",
-                &parts.to_string(),
-            ])
-            .current_dir(dir)
+        camloop_run(dir)
+            .args(["--parts", &parts.to_string()])
             .stdout(Stdio::from(std::fs::File::create(&out).unwrap()))
             .stderr(Stdio::from(std::fs::File::create(&err).unwrap())),
     )
     .unwrap();
-    let started = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status;
-        }
-        assert!(
-            started.elapsed() < bound,
-            "camloop run did not finish {parts} parts within {bound:?}"
-        );
-        std::thread::sleep(Duration::from_millis(200));
-    };
+    let what = format!("camloop run of {parts} parts");
+    let status = child.exit_within(bound, Duration::from_millis(200), &what);
     let log = std::fs::read_to_string(&out).unwrap() + &std::fs::read_to_string(&err).unwrap();
     assert!(status.success(), "{log}");
     log

@@ -4,7 +4,27 @@
 
 #![allow(dead_code)]
 
-use std::process::{Child, Command};
+use std::path::Path;
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+/// A free TCP port on localhost, for a process the test starts to listen on.
+pub fn free_port() -> u16 {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").expect("a free port");
+    l.local_addr().expect("its address").port()
+}
+
+/// The service as a user starts it: `camloop run --config camloop.toml` in `dir`, its output
+/// discarded (a caller may set its own, or an environment, before spawning it).
+pub fn camloop_run(dir: &Path) -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_camloop"));
+    command
+        .args(["run", "--config", "camloop.toml"])
+        .current_dir(dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null());
+    command
+}
 
 /// A running child, killed (SIGKILL) and reaped when dropped unless it has been waited for.
 #[derive(Debug)]
@@ -26,6 +46,24 @@ impl KillOnDrop {
             "kill {signal} {} failed",
             self.0.id()
         );
+    }
+}
+
+impl KillOnDrop {
+    /// Waits for the child to exit, polling every `poll` (the exit is the condition); a
+    /// failure saying `what` did not finish when it runs past `bound`.
+    pub fn exit_within(&mut self, bound: Duration, poll: Duration, what: &str) -> ExitStatus {
+        let started = Instant::now();
+        loop {
+            if let Some(status) = self.0.try_wait().expect("the child's status") {
+                return status;
+            }
+            assert!(
+                started.elapsed() < bound,
+                "{what}: still running after {bound:?}"
+            );
+            std::thread::sleep(poll);
+        }
     }
 }
 

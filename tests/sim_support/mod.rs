@@ -4,9 +4,13 @@
 pub mod brute;
 pub use crate::support::golden;
 
+use camloop::core::compensate::{AxisLimits, Feature, TableRequest};
 use camloop::core::fit::TableForm;
 use camloop::core::geometry::{CamGeometry, CrankpinGeometry, Follower, Part};
+use camloop::core::learn::LearningParams;
 use camloop::core::lift::{LiftCurve, LiftTable};
+use camloop::core::speed_plan::SpeedPlanSettings;
+use camloop::sim::cell::CellSetup;
 use camloop::sim::{CommandedTable, GrinderConfig, SimGrinder, Workpiece};
 
 pub const BASE_RADIUS_MM: f64 = 20.0;
@@ -37,6 +41,27 @@ pub fn demo_table(follower: Follower, points: usize, form: TableForm) -> Command
 
 pub fn demo_sim(config: GrinderConfig, follower: Follower, seed: u64) -> SimGrinder {
     SimGrinder::new(config, Workpiece::Cam(demo_geometry(follower)), seed).expect("sim")
+}
+
+/// The simulated cell on the demo lobe (flat follower, 20 mm base circle, 250 mm wheel), a
+/// 360-point POLY table to 0.1 µm, the shipped learning, the demo camshaft's axis limits and the speed plan (off), on
+/// `grinder` with noise `seed`. Tests change the one thing they study.
+pub fn demo_cell(grinder: GrinderConfig, seed: u64) -> CellSetup {
+    let text = include_str!("../../config/parts/demo-intake-lobe.csv");
+    CellSetup {
+        nominal: LiftTable::parse_csv(text, "demo-intake-lobe.csv").expect("shipped table"),
+        feature: Feature::Cam(demo_geometry(Follower::Flat)),
+        request: TableRequest {
+            points: 360,
+            form: TableForm::Poly,
+            poly_tolerance_um: 0.1,
+        },
+        params: LearningParams::default(),
+        limits: AxisLimits::default(),
+        grinder,
+        seed,
+        speed_plan: SpeedPlanSettings::default(),
+    }
 }
 
 /// Nominal lift at ψ_j = j·360°/n, mm.

@@ -41,6 +41,11 @@ pub(super) struct CapabilityReply {
     /// Start of the window, Unix ms, when it has one.
     since_ms: Option<i64>,
     master_runs_left_out: usize,
+    /// True when a characteristic's figures rest on fewer than `min_values` values: they
+    /// are shown, but only indicative (each characteristic carries its own `indicative`).
+    indicative: bool,
+    /// The values a capability study needs (AIAG SPC manual: 100).
+    min_values: usize,
     #[schema(value_type = Vec<Object>)]
     characteristics: Vec<CharacteristicStudy>,
 }
@@ -103,8 +108,11 @@ pub(super) async fn capability(
     let store = store(&state).await?;
     let (rows, since, masters) =
         quality::window_rows(&store, &machine, &feature, &window, false).await?;
+    let characteristics = quality::study(&rows, &sheet.limits, q.chart.unwrap_or(false));
     Ok(Json(CapabilityReply {
-        characteristics: quality::study(&rows, &sheet.limits, q.chart.unwrap_or(false)),
+        indicative: characteristics.iter().any(|c| c.indicative),
+        min_values: quality::MIN_CAPABILITY_VALUES,
+        characteristics,
         machine,
         feature,
         window: window_text,
@@ -112,4 +120,31 @@ pub(super) async fn capability(
         since_ms: since.map(|at| at.as_millisecond()),
         master_runs_left_out: masters,
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    /// The marks of a small window are in the published schema, with the types the reply
+    /// writes, so a client generated from `/openapi.json` sees them.
+    #[test]
+    fn the_schema_carries_the_indicative_fields() {
+        let doc = serde_json::to_value(super::super::openapi::document()).unwrap_or_default();
+        let path = "/api/v1/machines/{machine}/features/{feature}/capability";
+        let reply = &doc["paths"][path]["get"]["responses"]["200"]["content"]["application/json"]["schema"]
+            ["$ref"];
+        let name = reply.as_str().and_then(|r| r.rsplit('/').next());
+        let schema = &doc["components"]["schemas"][name.unwrap_or_default()];
+        assert_eq!(
+            schema["properties"]["indicative"]["type"], "boolean",
+            "{schema}"
+        );
+        assert_eq!(
+            schema["properties"]["min_values"]["type"], "integer",
+            "{schema}"
+        );
+        let required = schema["required"].as_array().cloned().unwrap_or_default();
+        for field in ["indicative", "min_values"] {
+            assert!(required.iter().any(|r| r == field), "{field}: {schema}");
+        }
+    }
 }

@@ -39,6 +39,11 @@ pub(super) async fn panel(
                 code { "/api/v1/machines/" (machine) "/features/" (lobe) "/capability?window=parts:125&chart=true" }
                 "."
             }
+            @if let Some(why) = quality::indicative_reason(&items) {
+                p id="capability-indicative" class="indicative" role="note" {
+                    strong { "Indicative only: " } (why) "."
+                }
+            }
             (indices_table(&items))
             @for it in &items {
                 div class="pair" {
@@ -134,7 +139,10 @@ fn indices_table(items: &[CharacteristicStudy]) -> Markup {
                         td { (idx(ix.map(|i| i.ppk))) }
                         td { (ix.map_or("–".into(), |i| format!("{:.1} ppm", i.expected_share_out * 1e6))) }
                         td { (ix.map_or("–".into(), |i| format!("{:.1} %", i.observed_share_out * 100.0))) }
-                        td { (it.note.as_deref().unwrap_or("")) }
+                        td {
+                            @if it.indicative { "indicative (n < " (quality::MIN_CAPABILITY_VALUES) ") " }
+                            (it.note.as_deref().unwrap_or(""))
+                        }
                     }
                 }
             }
