@@ -132,7 +132,7 @@ pub fn start_machine(
     };
     let machine = runtime
         .block_on(MachineLoop::start(
-            "BENCH".into(),
+            "BENCH".parse().expect("a machine name"),
             setups,
             paths,
             handle.clone(),

@@ -64,10 +64,8 @@ pub async fn parts_with_reports(
     lobe: &str,
 ) -> Vec<(MeasurementSummary, serde_json::Value)> {
     let filter = HistoryFilter {
-        machine: machine.into(),
-        lobe: Some(lobe.into()),
-        limit: 10_000,
-        ..HistoryFilter::default()
+        lobe: Some(lobe.parse().unwrap()),
+        ..HistoryFilter::new(machine.parse().unwrap(), 10_000)
     };
     let page = store.measurement_history(&filter).await.unwrap();
     let mut out = Vec::new();

@@ -8,7 +8,8 @@ fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
-fn chapters() -> Vec<PathBuf> {
+/// The book's chapters, sorted.
+pub(crate) fn chapters() -> Vec<PathBuf> {
     let mut out: Vec<PathBuf> = std::fs::read_dir(root().join("docs/src"))
         .unwrap()
         .map(|e| e.unwrap().path())

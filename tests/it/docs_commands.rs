@@ -21,13 +21,7 @@ fn root() -> &'static Path {
 
 fn documents() -> Vec<PathBuf> {
     let mut docs = vec![root().join("README.md")];
-    let mut chapters: Vec<PathBuf> = std::fs::read_dir(root().join("docs/src"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "md"))
-        .collect();
-    chapters.sort();
-    docs.extend(chapters);
+    docs.extend(crate::docs::chapters());
     docs
 }
 

@@ -259,7 +259,7 @@ async fn a_stop_mid_shaft_resumes_each_lobe_where_it_was() {
 /// How many parts SIM8's `lobe` has learned from: the stored learning state's iteration.
 async fn learned_parts(store: &Store, lobe: &str) -> u64 {
     let state = store
-        .load_learning_state("SIM8", lobe)
+        .load_learning_state(&"SIM8".parse().unwrap(), &lobe.parse().unwrap())
         .await
         .unwrap()
         .expect("a stored learning state");

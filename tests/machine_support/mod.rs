@@ -48,7 +48,7 @@ pub async fn start_machine(
         share_dir: dir.join("share"),
         state_dir: dir.join("state"),
     };
-    MachineLoop::start(name.into(), setups, paths, store, metrics)
+    MachineLoop::start(name.parse().unwrap(), setups, paths, store, metrics)
         .await
         .unwrap()
 }

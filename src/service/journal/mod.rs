@@ -427,15 +427,9 @@ mod tests {
         assert_eq!(rows, [first, second]);
     }
 
-    /// Every kind of record replayed after a crash (written, not yet released) is recognised
-    /// in the store and not written again; a second event that differs only in its message
-    /// still goes in. After the release the newest learning state stays in the journal, so
-    /// a restart with the database down still finds the loop's memory.
-    #[tokio::test]
-    async fn a_replay_writes_nothing_twice() {
-        let dir = tempfile::tempdir().unwrap();
-        let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
-        let store = Store::connect(&url).await.unwrap();
+    /// One record of every kind the journal carries: an event, a table version (waiting),
+    /// its later status (pushed), a learning state and a dressing.
+    fn every_kind_of_record() -> Vec<Pending> {
         let table = TableLearning {
             iteration: 0,
             params: LearningParams::default(),
@@ -443,7 +437,7 @@ mod tests {
             correction_um: vec![0.0; 4],
             timing_correction_deg: 0.0,
         };
-        let records = [
+        vec![
             event("a"),
             Pending::Table {
                 machine: "M1".parse().unwrap(),
@@ -480,7 +474,19 @@ mod tests {
                 infeed_um: Some(2.1),
                 source: "api".into(),
             },
-        ];
+        ]
+    }
+
+    /// Every kind of record replayed after a crash (written, not yet released) is recognised
+    /// in the store and not written again; a second event that differs only in its message
+    /// still goes in. After the release the newest learning state stays in the journal, so
+    /// a restart with the database down still finds the loop's memory.
+    #[tokio::test]
+    async fn a_replay_writes_nothing_twice() {
+        let dir = tempfile::tempdir().unwrap();
+        let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
+        let store = Store::connect(&url).await.unwrap();
+        let records = every_kind_of_record();
         let mut j = Journal::open(dir.path()).unwrap();
         j.append(&records).unwrap();
         assert_eq!(j.flush(&store).await.unwrap(), 5);
