@@ -157,7 +157,13 @@ async fn serve(store: Store) -> (SocketAddr, watch::Sender<bool>) {
             MachineName::new(&machine(i)).unwrap(),
             vec!["IN1".parse().unwrap()],
         );
-        sheets.insert((machine(i), "IN1".to_string()), sheet.clone());
+        sheets.insert(
+            (
+                MachineName::new(&machine(i)).unwrap(),
+                "IN1".parse().unwrap(),
+            ),
+            sheet.clone(),
+        );
     }
     let limits = HttpLimits {
         max_connections: 256,

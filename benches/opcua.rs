@@ -18,6 +18,7 @@ use support::{
     demo_lobe, machine_runtime, measurements, next_part, scratch_root, start_machine, time_parts,
 };
 
+use camloop::names::{FeatureName, MachineName};
 use camloop::service::machine::StoreHandle;
 use camloop::service::metrics::Metrics;
 use camloop::service::mqtt::PlantEvent;
@@ -62,12 +63,20 @@ fn free_port() -> u16 {
         .port()
 }
 
-fn names() -> Vec<(String, Vec<String>)> {
-    let features: Vec<String> = (1..=FEATURES).map(|f| format!("F{f}")).collect();
-    let mut machines: Vec<(String, Vec<String>)> = (0..MACHINES)
-        .map(|m| (format!("M{m:02}"), features.clone()))
+fn names() -> Vec<(MachineName, Vec<FeatureName>)> {
+    let features: Vec<FeatureName> = (1..=FEATURES)
+        .map(|f| format!("F{f}").parse().expect("a bench name"))
         .collect();
-    machines.push(("BENCH".into(), vec!["IN1".into()]));
+    let mut machines: Vec<(MachineName, Vec<FeatureName>)> = (0..MACHINES)
+        .map(|m| {
+            (
+                format!("M{m:02}").parse().expect("a bench name"),
+                features.clone(),
+            )
+        })
+        .collect();
+    let bench = "BENCH".parse().expect("a bench name");
+    machines.push((bench, vec!["IN1".parse().expect("a bench name")]));
     machines
 }
 
@@ -147,14 +156,16 @@ async fn drive(
     loop {
         tick.tick().await;
         part += 1;
-        let machine = format!("M{:02}", part % MACHINES as u64);
+        let machine: MachineName = format!("M{:02}", part % MACHINES as u64)
+            .parse()
+            .expect("a bench name");
         for f in 1..=FEATURES {
-            let feature = format!("F{f}");
+            let feature: FeatureName = format!("F{f}").parse().expect("a bench name");
             let error_um = (part % 7) as f64 * 0.1;
             metrics_update(&metrics, &machine, &feature, part, error_um);
             sender.send(PlantEvent::PartAnalysed {
-                machine: machine.parse().unwrap(),
-                feature: feature.parse().unwrap(),
+                machine: machine.clone(),
+                feature: feature.clone(),
                 part: format!("S-{part}"),
                 at_ms: camloop::clock::now(),
                 verdict: Verdict::Pass,
@@ -168,7 +179,13 @@ async fn drive(
     }
 }
 
-fn metrics_update(metrics: &Metrics, machine: &str, feature: &str, part: u64, error_um: f64) {
+fn metrics_update(
+    metrics: &Metrics,
+    machine: &MachineName,
+    feature: &FeatureName,
+    part: u64,
+    error_um: f64,
+) {
     metrics.update_feature(machine, feature, |f| {
         f.parts += 1;
         f.last_part = Some(format!("S-{part}"));

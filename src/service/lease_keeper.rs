@@ -211,7 +211,7 @@ impl Keeper {
 
     /// A lease is gone: its machine is told to stop now, and its task awaited on the
     /// service's runtime (the keeper never waits for a part in hand).
-    fn lose(&self, machine: &str, why: &str) {
+    fn lose(&self, machine: &MachineName, why: &str) {
         error!(machine = %machine, "{why}");
         self.metrics.update(machine, |m| m.leases_lost_total += 1);
         if let Some(task) = self.runner.signal_stop(machine) {

@@ -1,6 +1,7 @@
 //! Prometheus metrics of the service, kept per machine and rendered in the text exposition
 //! format at `/metrics`.
 
+use crate::names::{FeatureName, MachineName};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::sync::Mutex;
@@ -184,8 +185,8 @@ const FEATURE_FAMILIES: [FeatureFamily; 5] = [
 
 #[derive(Debug, Default)]
 pub struct Metrics {
-    machines: Mutex<BTreeMap<String, MachineMetrics>>,
-    features: Mutex<BTreeMap<(String, String), FeatureStatus>>,
+    machines: Mutex<BTreeMap<MachineName, MachineMetrics>>,
+    features: Mutex<BTreeMap<(MachineName, FeatureName), FeatureStatus>>,
     access: Mutex<AccessMetrics>,
 }
 
@@ -202,12 +203,12 @@ pub struct AccessMetrics {
 
 impl Metrics {
     /// Changes one machine's metrics.
-    pub fn update(&self, machine: &str, f: impl FnOnce(&mut MachineMetrics)) {
+    pub fn update(&self, machine: &MachineName, f: impl FnOnce(&mut MachineMetrics)) {
         let mut map = self.machines.lock().unwrap_or_else(|p| p.into_inner());
-        f(map.entry(machine.to_string()).or_default());
+        f(map.entry(machine.clone()).or_default());
     }
 
-    pub fn snapshot(&self) -> BTreeMap<String, MachineMetrics> {
+    pub fn snapshot(&self) -> BTreeMap<MachineName, MachineMetrics> {
         self.machines
             .lock()
             .unwrap_or_else(|p| p.into_inner())
@@ -215,15 +216,18 @@ impl Metrics {
     }
 
     /// Changes one feature's status.
-    pub fn update_feature(&self, machine: &str, feature: &str, f: impl FnOnce(&mut FeatureStatus)) {
+    pub fn update_feature(
+        &self,
+        machine: &MachineName,
+        feature: &FeatureName,
+        f: impl FnOnce(&mut FeatureStatus),
+    ) {
         let mut map = self.features.lock().unwrap_or_else(|p| p.into_inner());
-        f(map
-            .entry((machine.to_string(), feature.to_string()))
-            .or_default());
+        f(map.entry((machine.clone(), feature.clone())).or_default());
     }
 
     /// Every feature's status, by (machine, feature).
-    pub fn features(&self) -> BTreeMap<(String, String), FeatureStatus> {
+    pub fn features(&self) -> BTreeMap<(MachineName, FeatureName), FeatureStatus> {
         self.features
             .lock()
             .unwrap_or_else(|p| p.into_inner())
@@ -298,7 +302,7 @@ mod tests {
     #[test]
     fn renders_every_family_per_machine() {
         let m = Metrics::default();
-        m.update("M1", |x| {
+        m.update(&"M1".parse().unwrap(), |x| {
             x.parts_total = 3;
             x.last_max_error_um = 0.5;
         });
@@ -312,7 +316,7 @@ mod tests {
             "{text}"
         );
         assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 3);
-        m.update_feature("M1", "IN1", |f| {
+        m.update_feature(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), |f| {
             f.last_max_error_um = Some(0.7);
             f.blocked_by_guard = Some("correction at its limit".into());
         });

@@ -8,6 +8,7 @@ use super::{
     keep_store_connected, runner, store_guard,
 };
 use crate::config::Config;
+use crate::names::{FeatureName, MachineName};
 use anyhow::Context;
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -45,9 +46,9 @@ pub(super) async fn start_store(
 }
 
 /// Each machine's feature names.
-type FeatureNames = BTreeMap<crate::names::MachineName, Vec<crate::names::FeatureName>>;
+type FeatureNames = BTreeMap<MachineName, Vec<FeatureName>>;
 /// Each (machine, feature)'s sheet.
-type SheetMap = BTreeMap<(String, String), http::FeatureSheet>;
+type SheetMap = BTreeMap<(MachineName, FeatureName), http::FeatureSheet>;
 
 /// Each machine's feature names (for the API) and feature sheets (for the dashboard).
 pub(super) fn feature_catalogue(
@@ -62,7 +63,7 @@ pub(super) fn feature_catalogue(
         );
         for setup in &m.setups {
             let sheet = http::FeatureSheet::from_setup(setup);
-            sheets.insert((m.name.to_string(), setup.name.to_string()), sheet);
+            sheets.insert((m.name.clone(), setup.name.clone()), sheet);
         }
     }
     (features, sheets)

@@ -94,10 +94,7 @@ pub(super) async fn capability(
 ) -> Result<Json<CapabilityReply>, ApiError> {
     let window_text = q.window.unwrap_or_else(|| "parts:125".into());
     let window = parse_window(&window_text, crate::clock::now())?;
-    let Some(sheet) = state
-        .dashboard
-        .get(&(machine.to_string(), feature.to_string()))
-    else {
+    let Some(sheet) = state.dashboard.get(&(machine.clone(), feature.clone())) else {
         return Err(ApiError::new(
             ApiCode::FeatureNotFound,
             format!(

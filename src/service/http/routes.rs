@@ -163,7 +163,7 @@ pub(super) async fn machines(
                     configured: true,
                     status: Some(
                         statuses
-                            .get(&(name.to_string(), l.to_string()))
+                            .get(&(name.clone(), l.clone()))
                             .cloned()
                             .unwrap_or_default(),
                     ),

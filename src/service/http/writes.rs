@@ -93,7 +93,7 @@ fn in_force(state: &AppState, machine: &MachineName, features: &[FeatureName]) -
     let versions: std::collections::BTreeMap<&str, i64> = features
         .iter()
         .filter_map(|f| {
-            let s = statuses.get(&(machine.to_string(), f.to_string()))?;
+            let s = statuses.get(&(machine.clone(), f.clone()))?;
             Some((f.as_str(), i64::try_from(s.in_force_version).ok()?))
         })
         .collect();
@@ -236,7 +236,7 @@ pub(super) async fn freeze(
     let status = |s: &AppState| {
         let f = s.metrics.features();
         let now = f
-            .get(&(machine.to_string(), lobe.to_string()))
+            .get(&(machine.clone(), lobe.clone()))
             .and_then(|f| f.frozen.clone());
         serde_json::json!({ "frozen": now }).to_string()
     };

@@ -35,9 +35,9 @@ pub(crate) struct Feed {
     pub(crate) ids: Ids,
     pub(crate) metrics: Arc<Metrics>,
     pub(crate) layout: Vec<MachineLayout>,
-    pub(crate) dressings: HashMap<String, i64>,
+    pub(crate) dressings: HashMap<MachineName, i64>,
     last: HashMap<NodeId, Variant>,
-    journal_failing: HashMap<String, bool>,
+    journal_failing: HashMap<MachineName, bool>,
     event_seq: u64,
     started_ms: i64,
     repeatability: Option<mpsc::Sender<(MachineName, FeatureName, String)>>,
@@ -124,7 +124,7 @@ impl Feed {
                 self.emit(&machine, feature, ty, severity, message, *at_ms);
             }
             PlantEvent::Dressing { at_ms, .. } => {
-                let n = self.dressings.entry(machine.clone()).or_default();
+                let n = self.dressings.entry(e.machine().clone()).or_default();
                 *n += 1;
                 let n = *n;
                 self.stage(self.ids.dressing_count(&machine), Variant::from(n), staged);

@@ -15,6 +15,7 @@ mod methods;
 mod nodes;
 pub(crate) mod space;
 
+use crate::names::{FeatureName, MachineName};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::AtomicU64;
@@ -36,13 +37,13 @@ pub(crate) fn layout(machines: &[crate::config::CheckedMachine]) -> Vec<MachineL
     machines
         .iter()
         .map(|m| MachineLayout {
-            name: m.name.to_string(),
+            name: m.name.clone(),
             recipe: m
                 .recipe_path
                 .file_stem()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default(),
-            features: m.setups.iter().map(|s| s.name.to_string()).collect(),
+            features: m.setups.iter().map(|s| s.name.clone()).collect(),
         })
         .collect()
 }
@@ -267,17 +268,13 @@ fn server_builder(
 async fn dressing_counts(
     app: &AppState,
     layout: &[MachineLayout],
-) -> std::collections::HashMap<String, i64> {
+) -> std::collections::HashMap<MachineName, i64> {
     let mut counts = std::collections::HashMap::new();
     let Some(store) = app.store.read().await.clone() else {
         return counts;
     };
     for m in layout {
-        // The layout's names are the configured machines' (valid by the config's check).
-        let Ok(name) = crate::names::MachineName::new(&m.name) else {
-            continue;
-        };
-        if let Ok(list) = store.dressings(&name, 10_000).await {
+        if let Ok(list) = store.dressings(&m.name, 10_000).await {
             counts.insert(
                 m.name.clone(),
                 i64::try_from(list.len()).unwrap_or(i64::MAX),
@@ -295,7 +292,7 @@ async fn dressing_counts(
 pub async fn bench_server(
     listen: std::net::SocketAddr,
     pki: &std::path::Path,
-    machines: Vec<(String, Vec<String>)>,
+    machines: Vec<(MachineName, Vec<FeatureName>)>,
     metrics: Arc<crate::service::metrics::Metrics>,
     store: crate::service::machine::StoreHandle,
     shutdown: watch::Receiver<bool>,

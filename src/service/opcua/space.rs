@@ -3,6 +3,7 @@
 //! `Results` folder after the OPC 40001-101 pattern, the two write methods, and the event
 //! types camloop raises. Node ids are strings in camloop's namespace, built here only.
 
+use crate::names::{FeatureName, MachineName};
 use opcua::server::address_space::{
     AccessLevel, AddressSpace, EventNotifier, MethodBuilder, ObjectBuilder, ObjectTypeBuilder,
     VariableBuilder,
@@ -23,11 +24,11 @@ const UNECE_URI: &str = "http://www.opcfoundation.org/UA/units/un/cefact";
 /// One machine as the address space shows it.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub(crate) struct MachineLayout {
-    pub(crate) name: String,
+    pub(crate) name: MachineName,
     /// The recipe (part) name.
     pub(crate) recipe: String,
     /// Its features in grinding order.
-    pub(crate) features: Vec<String>,
+    pub(crate) features: Vec<FeatureName>,
 }
 
 /// Which value of a feature's result object a variable holds.
@@ -235,7 +236,7 @@ fn machine(space: &mut AddressSpace, ids: Ids, m: &MachineLayout) {
         .component_of(node.clone())
         .insert(space);
     let fixed = [
-        ("Name", m.name.clone()),
+        ("Name", m.name.to_string()),
         ("Recipe", m.recipe.clone()),
         ("SoftwareVersion", env!("CARGO_PKG_VERSION").to_string()),
         ("Manufacturer", "camloop".to_string()),
@@ -398,9 +399,9 @@ mod tests {
         space.add_namespace(NAMESPACE_URI, 2);
         let ids = Ids { ns: 2 };
         let layout = MachineLayout {
-            name: "G7".into(),
+            name: "G7".parse().unwrap(),
             recipe: "demo".into(),
-            features: vec!["IN1".into(), "EX1".into()],
+            features: vec!["IN1".parse().unwrap(), "EX1".parse().unwrap()],
         };
         build(&mut space, ids, &[layout]);
         (space, ids)

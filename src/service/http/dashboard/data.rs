@@ -99,7 +99,7 @@ pub(super) async fn overview(app: &AppState) -> Result<Vec<OverviewRow>, ApiErro
             recent.reverse();
             let versions = store.table_version_heads(&machine, &lobe, 20).await?;
             let frozen = learning(&store, &machine, &lobe).await?.frozen.is_some();
-            let sheet = app.dashboard.get(&(machine.to_string(), lobe.to_string()));
+            let sheet = app.dashboard.get(&(machine.clone(), lobe.clone()));
             rows.push(OverviewRow {
                 state: state(
                     metrics.get(machine.as_str()),

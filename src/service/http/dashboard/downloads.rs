@@ -231,10 +231,7 @@ pub(super) async fn dfq(
             detail.as_ref().map(|d| d.analysis_json.as_str()),
         ));
     }
-    let sheet = d
-        .app
-        .dashboard
-        .get(&(machine.to_string(), lobe.to_string()));
+    let sheet = d.app.dashboard.get(&(machine.clone(), lobe.clone()));
     let series = DfqSeries {
         machine: machine.clone(),
         feature: lobe.clone(),

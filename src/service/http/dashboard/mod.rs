@@ -60,7 +60,7 @@ pub struct FeatureSheet {
 }
 
 /// Per (machine, feature) name.
-pub type FeatureSheets = Arc<BTreeMap<(String, String), FeatureSheet>>;
+pub type FeatureSheets = Arc<BTreeMap<(MachineName, FeatureName), FeatureSheet>>;
 
 impl FeatureSheet {
     pub fn from_setup(s: &FeatureSetup) -> Self {
@@ -179,10 +179,7 @@ async fn feature_page(
 ) -> Result<Html<String>, ApiError> {
     let store = data::store(&d.app).await?;
     let fd = data::feature(&store, &machine, &lobe).await?;
-    let sheet = d
-        .app
-        .dashboard
-        .get(&(machine.to_string(), lobe.to_string()));
+    let sheet = d.app.dashboard.get(&(machine.clone(), lobe.clone()));
     // Only on a full page: the live refresh after each part redraws the live part alone.
     let panel = match sheet {
         Some(sh) if q.fragment.is_none() => {
