@@ -28,6 +28,8 @@ pub struct AuditEntry {
     pub client: String,
     /// `rollback`, `dressing`, `acknowledge`, `signin`, `user.add`, `token.create`, …
     pub action: String,
+    /// Text, not `MachineName`/`FeatureName`: the trail is evidence, read back whatever a
+    /// row holds (one edited by hand included) so that `audit verify` can report it.
     pub machine: Option<String>,
     pub feature: Option<String>,
     pub version: Option<i64>,
