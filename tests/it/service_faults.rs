@@ -202,16 +202,17 @@ async fn a_read_only_share_does_not_wind_up_the_learning() {
     );
 }
 
-/// The wheel is dressed (part 50) late in an outage: the first parts after it carry the
-/// outage's wear from before the dressing's size step, and the error rises from the last
-/// outage part to the first one after. That rise is the outage's, not the learning
-/// diverging: the divergence guard's history restarts with the outage. (Before, the guard
-/// compared the last part before the outage with the two around the restore, took the
-/// rise for divergence, reverted to a pre-outage correction and froze: 9.4 µm and rising
-/// with the wear, for good.)
+/// The share is read-only from part 15 to part 104, and the wheel is dressed at parts 50
+/// and 100, the second time four parts before the share comes back: the last outage parts
+/// carry less wear than the first ones after the restore, so the error rises across it.
+/// That rise is the outage's, not the learning diverging: the divergence guard's history
+/// restarts with the outage. (Before, the guard compared the last part before the outage
+/// with the two around the restore, took the rise for divergence, reverted to a
+/// pre-outage correction and froze: this test saw 4.58, 5.27, then 10.65 µm rising with
+/// the wear to 12.9 µm, for good.)
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_dressing_late_in_an_outage_is_not_taken_for_divergence() {
-    let run = outage(54, 90).await;
+    let run = outage(104, 130).await;
     let after = run.after();
     eprintln!("after:  {}", show(&after));
     assert_eq!(run.frozen, None, "learning froze: {after:?}");
