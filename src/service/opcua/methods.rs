@@ -22,15 +22,19 @@ fn route(method: Method) -> Option<&'static str> {
     }
 }
 
-/// Who called, as the HTTP writes know callers: the user as stored now (a user disabled or
-/// demoted since sign-in is refused).
-async fn caller(app: &AppState, user: &str) -> Result<Principal, StatusCode> {
-    let store = app
-        .store
+/// The history store, or `BadResourceUnavailable` while the database is down.
+async fn store_of(app: &AppState) -> Result<crate::store::Store, StatusCode> {
+    app.store
         .read()
         .await
         .clone()
-        .ok_or(StatusCode::BadResourceUnavailable)?;
+        .ok_or(StatusCode::BadResourceUnavailable)
+}
+
+/// Who called, as the HTTP writes know callers: the user as stored now (a user disabled or
+/// demoted since sign-in is refused).
+async fn caller(app: &AppState, user: &str) -> Result<Principal, StatusCode> {
+    let store = store_of(app).await?;
     let user = store
         .user(user)
         .await
@@ -158,12 +162,7 @@ async fn read_method(
     method: Method,
     args: &[Variant],
 ) -> Result<Vec<Variant>, StatusCode> {
-    let store = app
-        .store
-        .read()
-        .await
-        .clone()
-        .ok_or(StatusCode::BadResourceUnavailable)?;
+    let store = store_of(app).await?;
     let unavailable = |_| StatusCode::BadResourceUnavailable;
     let summary = match (method, args.first()) {
         (Method::GetLatestResult, Some(Variant::String(feature))) => {
