@@ -279,7 +279,7 @@ async fn check_restart(dir: &Path, lobes: &[String], held: &[AtCrash], row: &mut
                 before.learned
             ));
         }
-        row.versions += a.versions.len();
+        row.versions += a.told as usize;
         row.mismatches += a.mismatches.len();
         row.problems
             .extend(a.mismatches.iter().map(|m| format!("{lobe}: {m}")));

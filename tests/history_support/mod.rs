@@ -124,10 +124,13 @@ pub async fn resumed_memory(
 /// How one feature's share, journal and store agree.
 #[derive(Debug, Default)]
 pub struct Agreement {
-    /// The manifest's versions, in order.
-    pub versions: Vec<u64>,
-    /// Versions the share pushed.
-    pub pushed: usize,
+    /// The versions the manifest tells of (the highest version number): once compacted it
+    /// holds only the recent ones, so this is not the length of `held`.
+    pub told: u64,
+    /// The versions the manifest still holds, in order.
+    pub held: Vec<u64>,
+    /// Versions the share pushed, held or compacted away.
+    pub pushed: u64,
     pub newest_pushed: Option<u64>,
     /// The stored learning state's version in force.
     pub in_force_version: Option<u64>,
@@ -145,18 +148,24 @@ pub async fn agreement(var: &Path, store: &Store, machine: &str, lobe: &str) -> 
     let path = feature_dir(var, machine, lobe).join("share/manifest.jsonl");
     let history = load_manifest(&path).unwrap().history;
     let mut a = Agreement {
-        versions: history
+        told: history.next_version() - 1,
+        held: history
             .versions()
             .iter()
             .map(|v| v.record.version)
             .collect(),
+        pushed: history.pushed_count(),
         newest_pushed: history.last_pushed().map(|v| v.record.version),
         ..Agreement::default()
     };
-    let expected: Vec<u64> = (1..=a.versions.len() as u64).collect();
-    if a.versions != expected {
-        a.mismatches
-            .push(format!("manifest versions {:?}, not 1..n once", a.versions));
+    // A long run compacts the manifest (`share::compact`): it then holds only the versions
+    // still needed, and the settled older ones are told of but forgotten. Held ones are
+    // ascending, none twice, none above the highest told.
+    if !a.held.windows(2).all(|w| w[0] < w[1]) || a.held.last().is_some_and(|&v| v > a.told) {
+        a.mismatches.push(format!(
+            "manifest versions {:?} (v{} told), not ascending once",
+            a.held, a.told
+        ));
     }
     let mut made_from: BTreeMap<&str, Vec<u64>> = BTreeMap::new();
     for v in history.versions() {
@@ -193,16 +202,25 @@ pub async fn agreement(var: &Path, store: &Store, machine: &str, lobe: &str) -> 
                 "v{version}: the store's program is not the share's"
             ));
         }
-        a.pushed += usize::from(matches!(v.status, VersionStatus::Pushed { .. }));
     }
     let stored = store
         .table_versions(&m(machine), &f(lobe), 1000)
         .await
         .unwrap();
-    for row in stored
-        .iter()
-        .filter(|r| !a.versions.contains(&(r.version as u64)))
-    {
+    // The store holds every version told of, 1..told once each; those the manifest no
+    // longer holds were compacted away, after they settled.
+    let mut numbers: Vec<u64> = stored.iter().map(|r| r.version as u64).collect();
+    numbers.sort_unstable();
+    if numbers != (1..=a.told).collect::<Vec<u64>>() {
+        a.mismatches.push(format!(
+            "store versions {numbers:?}, not 1..{} once (the share told of v{})",
+            a.told, a.told
+        ));
+    }
+    for row in stored.iter().filter(|r| {
+        let v = r.version as u64;
+        !a.held.contains(&v) && !history.is_forgotten(v)
+    }) {
         a.mismatches
             .push(format!("v{}: in the store, not on the share", row.version));
     }

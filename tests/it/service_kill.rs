@@ -90,7 +90,7 @@ fn killing_the_service_never_leaves_a_version_the_history_does_not_know() {
         // share verified and the status the share gave it.
         assert!(a.mismatches.is_empty(), "{:#?}", a.mismatches);
         assert!(
-            a.pushed >= KILLS,
+            a.pushed >= KILLS as u64,
             "only {} versions pushed: the kills came too early to test anything",
             a.pushed
         );
