@@ -1,9 +1,14 @@
 //! The integration tests, as one test binary: each former `tests/*.rs` file is a module,
-//! and the support modules are compiled once. Tests that need a process of their own
-//! (timing-bound, or driving a browser) stay separate binaries in `tests/`.
+//! and the support modules are compiled once. The three-instance takeover and the crash
+//! points run here too: they drive `camloop` processes of their own and bound times in
+//! seconds, which hold with the other tests beside them as they do with both cores kept busy
+//! from outside; running beside the rest, their waiting overlaps its work. Only the browser
+//! tests are a binary of their own (`tests/browser/`).
 
 #[path = "../cli_support/mod.rs"]
 mod cli_support;
+#[path = "../cluster_support/mod.rs"]
+mod cluster_support;
 #[path = "../common/cycloid_cam.rs"]
 mod cycloid_cam;
 #[path = "../fixture_support/mod.rs"]
@@ -49,6 +54,7 @@ mod cli_history;
 mod cli_run;
 mod cli_speed_plan;
 mod cli_table;
+mod cluster_takeover;
 mod config_check;
 mod control_coupling;
 mod crank_service;
@@ -88,6 +94,7 @@ mod program_svg;
 mod program_tables;
 mod recipe;
 mod run_rules;
+mod service_crash_points;
 mod service_disk_full;
 mod service_faults;
 mod service_gauges;

@@ -319,7 +319,7 @@ async fn the_machine_list_shows_each_configured_machines_lobes() {
     assert_eq!(machine["lobes"][0]["lobe"], "IN1", "{reply}");
     assert_eq!(machine["lobes"].as_array().unwrap().len(), 1);
 
-    // One instance alone: no cluster to show (tests/cluster_takeover.rs asks a cluster).
+    // One instance alone: no cluster to show (`cluster_takeover` asks a cluster).
     let (status, body) = exchange(
         s.addr,
         "GET /api/v1/cluster HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n",

@@ -8,12 +8,12 @@
 //! pair of steps on purpose, so a window no random kill happened to hit is tested all the
 //! same. It prints a table (step, where it crashed, what the restart found) for the record.
 
-mod history_support;
-mod process_support;
-
+use crate::history_support::{
+    self, agreement, journal_measurements, resumed_memory, stored_measurements,
+};
+use crate::process_support;
 use camloop::failpoint::{CRASH_AT_VAR, STEPS};
 use camloop::store::Store;
-use history_support::{agreement, journal_measurements, resumed_memory, stored_measurements};
 use std::collections::BTreeSet;
 use std::os::unix::process::ExitStatusExt;
 use std::path::Path;

@@ -14,13 +14,9 @@
 //!   holds versions 1..n once each, every one carries the fencing epoch of its owner, epochs
 //!   never go down, and the store holds the same versions with the same programs.
 
-mod cluster_support;
-mod gauge_drop_support;
-mod process_support;
-mod store_support;
-
-use cluster_support::{Dropped, Machine};
-use process_support::KillOnDrop;
+use crate::cluster_support::{self, Dropped, Machine};
+use crate::process_support::KillOnDrop;
+use crate::store_support;
 use sqlx::Row;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
