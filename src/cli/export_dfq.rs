@@ -111,7 +111,7 @@ fn profile_bands(config: &Path) -> BTreeMap<(String, String), FeatureLimitsDfq> 
             let sheet = crate::service::http::FeatureSheet::from_setup(&setup);
             let band = sheet.symmetric_band_um().map(|b| (-b, b));
             let limits = crate::dfq::DfqLimits::from_feature(&sheet.limits);
-            out.insert((m.name.clone(), lobe), (band, limits));
+            out.insert((m.name.to_string(), lobe), (band, limits));
         }
     }
     out

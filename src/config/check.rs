@@ -195,16 +195,12 @@ fn check_machine(
             ));
         }
     }
-    if let (Ok(name), Some(setups)) = (MachineName::new(&m.name), setups) {
-        Some(CheckedMachine {
-            name,
-            recipe_path,
-            setups,
-            sim_c_speed_explicit: config.sets(&format!("machines[{i}].gauge.grinder.c_speed_rpm")),
-        })
-    } else {
-        None
-    }
+    Some(CheckedMachine {
+        name: m.name.clone(),
+        recipe_path,
+        setups: setups?,
+        sim_c_speed_explicit: config.sets(&format!("machines[{i}].gauge.grinder.c_speed_rpm")),
+    })
 }
 
 /// Connections the kernel queues while every slot is taken (`http.max_connections`), as
@@ -226,7 +222,7 @@ fn bind(addr: std::net::SocketAddr) -> std::io::Result<std::net::TcpListener> {
 /// Two machines writing one share (or reading one drop folder) overwrite each other's
 /// programs (or steal each other's files): refused, naming both and the folder.
 fn shared_folders(config: &Config) -> Vec<ConfigProblem> {
-    let mut claims: HashMap<PathBuf, (String, &str)> = HashMap::new();
+    let mut claims: HashMap<PathBuf, (&MachineName, &str)> = HashMap::new();
     let mut problems = Vec::new();
     for (i, m) in config.machines.iter().enumerate() {
         let mut folders = vec![("share", &m.share)];
@@ -251,7 +247,7 @@ fn shared_folders(config: &Config) -> Vec<ConfigProblem> {
                     ),
                 ));
             } else {
-                claims.insert(normal, (m.name.clone(), what));
+                claims.insert(normal, (&m.name, what));
             }
         }
     }

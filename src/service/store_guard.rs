@@ -287,11 +287,8 @@ pub(crate) async fn accept_new_store(
 pub(crate) fn expectations(config: &Config) -> Vec<MachineExpectation> {
     let mut out = Vec::new();
     for m in &config.machines {
-        // The config's check refuses a name off the rule before anything runs.
-        let Ok(name) = MachineName::new(&m.name) else {
-            continue;
-        };
-        let machine_dir = config.machines_dir().join(&name);
+        let name = &m.name;
+        let machine_dir = config.machines_dir().join(name);
         for lobe in crate::config::configured_features(config, m) {
             let Ok(lobe) = FeatureName::new(&lobe) else {
                 continue;
@@ -309,7 +306,7 @@ pub(crate) fn expectations(config: &Config) -> Vec<MachineExpectation> {
                     .filter_map(|line| serde_json::from_str::<Pending>(line).ok())
                     .filter(|r| {
                         matches!(r, Pending::Table { machine, lobe: l, .. }
-                            if *machine == name && *l == lobe)
+                            if machine == name && *l == lobe)
                     })
                     .count() as u64
             });
