@@ -423,13 +423,17 @@ impl Recipe {
         self.pins.iter().find(|l| l.name == name)
     }
 
-    /// Names of all lobes or pins, for messages.
-    pub(crate) fn feature_names(&self) -> Vec<&str> {
+    /// Every lobe's or pin's name, in recipe order.
+    pub(crate) fn features(&self) -> impl Iterator<Item = &FeatureName> {
         self.lobes
             .iter()
-            .map(|l| l.name.as_str())
-            .chain(self.pins.iter().map(|p| p.name.as_str()))
-            .collect()
+            .map(|l| &l.name)
+            .chain(self.pins.iter().map(|p| &p.name))
+    }
+
+    /// Names of all lobes or pins as text, for messages.
+    pub(crate) fn feature_names(&self) -> Vec<&str> {
+        self.features().map(FeatureName::as_str).collect()
     }
 }
 

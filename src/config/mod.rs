@@ -19,7 +19,7 @@ pub use keys::Lines;
 pub use mqtt::{ENV_MQTT_PASSWORD, MqttSection};
 pub use opcua::{OpcUaSection, OpcUaSecurity};
 
-use crate::names::MachineName;
+use crate::names::{FeatureName, MachineName};
 use crate::sim::GrinderConfig;
 use serde::Deserialize;
 use std::fmt;
@@ -128,10 +128,10 @@ pub struct MachineSection {
     pub recipe: PathBuf,
     /// Grind only this lobe or pin of the recipe (default: every feature, in recipe order).
     #[serde(default)]
-    pub lobe: Option<String>,
+    pub lobe: Option<FeatureName>,
     /// Grind only these lobes or pins, in recipe order (default: every feature).
     #[serde(default)]
-    pub features: Option<Vec<String>>,
+    pub features: Option<Vec<FeatureName>>,
     /// The grinding C speed on this machine, rpm, instead of the recipe's
     /// `axis_limits.c_speed_rpm` (the main program, the guards and the simulator use it).
     #[serde(default)]

@@ -290,9 +290,6 @@ pub(crate) fn expectations(config: &Config) -> Vec<MachineExpectation> {
         let name = &m.name;
         let machine_dir = config.machines_dir().join(name);
         for lobe in crate::config::configured_features(config, m) {
-            let Ok(lobe) = FeatureName::new(&lobe) else {
-                continue;
-            };
             let state_dir = machine_dir.join(&lobe);
             let manifest = state_dir.join("share").join(crate::share::MANIFEST_FILE);
             let newest_share_version = crate::share::load_manifest(&manifest)

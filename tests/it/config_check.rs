@@ -243,11 +243,11 @@ fn a_good_config_passes_with_its_listener_bound_and_its_lobes_loaded() {
     );
 }
 
-/// A machine name is checked as the file is read (it names folders, URLs and database
-/// rows): the message names the file, the line and the character at fault, and a name with
-/// `/` never reaches the file system.
+/// Machine and feature names are checked as the file is read (they name folders, URLs and
+/// database rows): the message names the file, the line and the character at fault, and a
+/// name with `/` never reaches the file system.
 #[test]
-fn a_bad_machine_name_is_refused_naming_the_file_and_line() {
+fn a_bad_machine_or_feature_name_is_refused_naming_the_file_and_line() {
     let text = format!(
         "[[machines]]\nname = \"G1\"\nrecipe = \"{recipe}\"\nlobe = \"IN1\"\nshare = \"a\"\n\
          [machines.gauge]\nkind = \"sim\"\n\
@@ -261,6 +261,16 @@ fn a_bad_machine_name_is_refused_naming_the_file_and_line() {
         "conf/c.toml: line 9: name `../G2` has `.` at character 1: \
          only letters, digits, '-' or '_' are allowed"
     );
+    // A lobe or pin chosen in the config follows the same rule, also in a list.
+    for (chosen, at) in [
+        ("lobe = \"IN 1\"", 4),
+        ("features = [\"IN1\", \"EX/1\"]", 4),
+    ] {
+        let text = text.replacen("lobe = \"IN1\"", chosen, 1);
+        let e = config::Config::parse(&text, Path::new("c.toml"), |_| None).unwrap_err();
+        assert_problem(&e, at, &["only letters, digits, '-' or '_' are allowed"]);
+        assert_problem(&e, 9, &["name `../G2`"]);
+    }
 }
 
 #[test]
