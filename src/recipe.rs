@@ -110,7 +110,8 @@ impl TableSettings {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Lobe {
-    pub name: String,
+    /// Checked by the names' rule as the recipe is read: a bad name is an error on its line.
+    pub name: FeatureName,
     /// Lift table file, relative to the recipe file.
     pub lift: PathBuf,
     pub follower: FollowerKind,
@@ -153,7 +154,8 @@ fn default_roundness_tolerance_um() -> f64 {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Pin {
-    pub name: String,
+    /// Checked by the names' rule as the recipe is read: a bad name is an error on its line.
+    pub name: FeatureName,
     pub throw_mm: f64,
     pub pin_radius_mm: f64,
     /// Index angle of the pin on the shaft from the datum, degrees (0/180/180/0 for an
@@ -275,13 +277,14 @@ impl Recipe {
                 self.feature_names().join(", ")
             );
         };
-        let (label, nominal, feature, phase_deg, z_mm, bands, tolerances) =
+        let (name, label, nominal, feature, phase_deg, z_mm, bands, tolerances) =
             if let Some(lobe) = self.lobe(name) {
                 let lift_path = lobe.lift_path(path);
                 let lift_text = std::fs::read_to_string(&lift_path)
                     .with_context(|| format!("cannot read lift table {}", lift_path.display()))?;
                 let nominal = LiftTable::parse_csv(&lift_text, &lift_path.display().to_string())?;
                 (
+                    lobe.name.clone(),
                     format!("{} lobe {}", self.name, lobe.name),
                     nominal,
                     Feature::Cam(lobe.geometry(self.wheel.radius_mm)),
@@ -300,6 +303,7 @@ impl Recipe {
                     .expect("a feature name is a lobe's or a pin's");
                 let geometry = pin.geometry(self.wheel.radius_mm);
                 (
+                    pin.name.clone(),
                     format!("{} pin {}", self.name, pin.name),
                     pin_nominal_lift(&geometry),
                     Feature::Pin(geometry),
@@ -316,10 +320,10 @@ impl Recipe {
             };
         let mut program = self.program.clone();
         program.c_offset_deg += phase_deg;
-        program.name = self.table_program_name(name);
+        program.name = self.table_program_name(&name);
         Ok(FeatureSetup {
             part: self.name.clone(),
-            name: FeatureName::new(name)?,
+            name,
             label,
             nominal,
             feature,
@@ -419,13 +423,17 @@ impl Recipe {
         self.pins.iter().find(|l| l.name == name)
     }
 
-    /// Names of all lobes or pins, for messages.
-    pub(crate) fn feature_names(&self) -> Vec<&str> {
+    /// Every lobe's or pin's name, in recipe order.
+    pub(crate) fn features(&self) -> impl Iterator<Item = &FeatureName> {
         self.lobes
             .iter()
-            .map(|l| l.name.as_str())
-            .chain(self.pins.iter().map(|p| p.name.as_str()))
-            .collect()
+            .map(|l| &l.name)
+            .chain(self.pins.iter().map(|p| &p.name))
+    }
+
+    /// Names of all lobes or pins as text, for messages.
+    pub(crate) fn feature_names(&self) -> Vec<&str> {
+        self.features().map(FeatureName::as_str).collect()
     }
 }
 

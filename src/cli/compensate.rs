@@ -117,14 +117,7 @@ pub(crate) fn run_compensate(args: CompensateArgs) -> anyhow::Result<()> {
             (table, reason, Some(id))
         }
     };
-    let pushed = push(
-        &dirs,
-        &setup,
-        &table,
-        &reason,
-        measurement_id.map(|id| id.to_string()),
-        &saved,
-    )?;
+    let pushed = push(&dirs, &setup, &table, &reason, measurement_id, &saved)?;
     saved.last_measurement_sha256 = measurement_id.or(saved.last_measurement_sha256);
     let mut outputs = Outputs::default();
     outputs.add(&state_path, serde_json::to_string_pretty(&saved)?);
@@ -293,7 +286,7 @@ fn push(
     setup: &LobeSetup,
     table: &GuardedTable,
     reason: &str,
-    measurement_id: Option<String>,
+    measurement_id: Option<Sha256>,
     saved: &SavedState,
 ) -> anyhow::Result<(u64, u32)> {
     let file_name = args

@@ -193,8 +193,10 @@ fn feature_limits(
     let recipe = Recipe::load(&path)?;
     let features = crate::config::machine_features(&recipe, m)
         .map_err(|e| anyhow::anyhow!("{}: machine {machine}: {e}", config.display()))?;
-    let chosen: Vec<String> = match lobe {
-        Some(l) if features.iter().any(|f| f == l) => vec![l.to_string()],
+    let chosen: Vec<FeatureName> = match lobe {
+        Some(l) if features.iter().any(|f| f == l) => {
+            features.into_iter().filter(|f| f == l).collect()
+        }
         Some(l) => bail!("machine {machine} grinds {}, not {l}", features.join(", ")),
         None => features,
     };

@@ -4,7 +4,7 @@
 //! problem is reported at once, with the config line that names the file or folder.
 
 use super::{Config, ConfigError, ConfigProblem, GaugeSection, MachineSection};
-use crate::names::MachineName;
+use crate::names::{FeatureName, MachineName};
 use crate::recipe::{FeatureSetup, Recipe};
 use std::collections::HashMap;
 use std::path::{Component, Path, PathBuf};
@@ -32,31 +32,31 @@ pub struct CheckedMachine {
 
 /// The features machine `m` grinds, by name, in recipe order: every one of the recipe's,
 /// or those `lobe` / `features` name. A name the recipe lacks is an error.
-pub fn machine_features(recipe: &Recipe, m: &MachineSection) -> Result<Vec<String>, String> {
-    let all = recipe.feature_names();
-    let chosen: Vec<String> = match (&m.lobe, &m.features) {
+pub fn machine_features(recipe: &Recipe, m: &MachineSection) -> Result<Vec<FeatureName>, String> {
+    let all: Vec<&FeatureName> = recipe.features().collect();
+    let chosen: &[FeatureName] = match (&m.lobe, &m.features) {
         (Some(_), Some(_)) => return Err("give lobe or features, not both".into()),
-        (Some(one), None) => vec![one.clone()],
+        (Some(one), None) => std::slice::from_ref(one),
         (None, Some(list)) if list.is_empty() => return Err("features is empty".into()),
-        (None, Some(list)) => list.clone(),
-        (None, None) => all.iter().map(|s| s.to_string()).collect(),
+        (None, Some(list)) => list,
+        (None, None) => return Ok(all.into_iter().cloned().collect()),
     };
-    if let Some(missing) = chosen.iter().find(|c| !all.contains(&c.as_str())) {
+    if let Some(missing) = chosen.iter().find(|c| !all.contains(c)) {
         return Err(format!(
             "no lobe or pin {missing} (has: {})",
-            all.join(", ")
+            recipe.feature_names().join(", ")
         ));
     }
     Ok(all
-        .iter()
-        .filter(|n| chosen.iter().any(|c| c == *n))
-        .map(|n| n.to_string())
+        .into_iter()
+        .filter(|n| chosen.contains(n))
+        .cloned()
         .collect())
 }
 
 /// The feature names of machine `m` as its recipe gives them (empty when the recipe cannot
 /// be read: the start-up check reports that).
-pub fn configured_features(config: &Config, m: &MachineSection) -> Vec<String> {
+pub fn configured_features(config: &Config, m: &MachineSection) -> Vec<FeatureName> {
     Recipe::load(&config.resolve(&m.recipe))
         .ok()
         .and_then(|r| machine_features(&r, m).ok())
@@ -195,16 +195,12 @@ fn check_machine(
             ));
         }
     }
-    if let (Ok(name), Some(setups)) = (MachineName::new(&m.name), setups) {
-        Some(CheckedMachine {
-            name,
-            recipe_path,
-            setups,
-            sim_c_speed_explicit: config.sets(&format!("machines[{i}].gauge.grinder.c_speed_rpm")),
-        })
-    } else {
-        None
-    }
+    Some(CheckedMachine {
+        name: m.name.clone(),
+        recipe_path,
+        setups: setups?,
+        sim_c_speed_explicit: config.sets(&format!("machines[{i}].gauge.grinder.c_speed_rpm")),
+    })
 }
 
 /// Connections the kernel queues while every slot is taken (`http.max_connections`), as
@@ -226,7 +222,7 @@ fn bind(addr: std::net::SocketAddr) -> std::io::Result<std::net::TcpListener> {
 /// Two machines writing one share (or reading one drop folder) overwrite each other's
 /// programs (or steal each other's files): refused, naming both and the folder.
 fn shared_folders(config: &Config) -> Vec<ConfigProblem> {
-    let mut claims: HashMap<PathBuf, (String, &str)> = HashMap::new();
+    let mut claims: HashMap<PathBuf, (&MachineName, &str)> = HashMap::new();
     let mut problems = Vec::new();
     for (i, m) in config.machines.iter().enumerate() {
         let mut folders = vec![("share", &m.share)];
@@ -251,7 +247,7 @@ fn shared_folders(config: &Config) -> Vec<ConfigProblem> {
                     ),
                 ));
             } else {
-                claims.insert(normal, (m.name.clone(), what));
+                claims.insert(normal, (&m.name, what));
             }
         }
     }

@@ -19,7 +19,7 @@ pub use keys::Lines;
 pub use mqtt::{ENV_MQTT_PASSWORD, MqttSection};
 pub use opcua::{OpcUaSection, OpcUaSecurity};
 
-use crate::names::MachineName;
+use crate::names::{FeatureName, MachineName};
 use crate::sim::GrinderConfig;
 use serde::Deserialize;
 use std::fmt;
@@ -121,16 +121,17 @@ impl fmt::Debug for DatabaseSection {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MachineSection {
-    /// Machine name: letters, digits, '-' and '_' (it names folders and URLs).
-    pub name: String,
+    /// Machine name: letters, digits, '-' and '_' (it names folders and URLs). Checked as the
+    /// file is read: a bad name is a problem on its line, and its entry is not checked further.
+    pub name: MachineName,
     /// Part recipe (relative to the config file).
     pub recipe: PathBuf,
     /// Grind only this lobe or pin of the recipe (default: every feature, in recipe order).
     #[serde(default)]
-    pub lobe: Option<String>,
+    pub lobe: Option<FeatureName>,
     /// Grind only these lobes or pins, in recipe order (default: every feature).
     #[serde(default)]
-    pub features: Option<Vec<String>>,
+    pub features: Option<Vec<FeatureName>>,
     /// The grinding C speed on this machine, rpm, instead of the recipe's
     /// `axis_limits.c_speed_rpm` (the main program, the guards and the simulator use it).
     #[serde(default)]
@@ -329,9 +330,6 @@ impl Config {
         for (i, m) in self.machines.iter().enumerate() {
             let at = |key: &str| self.line(&format!("machines[{i}]{key}"));
             let label = format!("machines.{}", m.name);
-            if let Err(e) = MachineName::new(&m.name) {
-                p.push(ConfigProblem::at(at(".name"), format!("{label}: {e}")));
-            }
             if let Some(first) = names.insert(m.name.clone(), i) {
                 let first_line = self.line(&format!("machines[{first}].name"));
                 let first_at = first_line.map(|l| format!(" (first at line {l})"));
@@ -471,11 +469,13 @@ kind = "sim"
 
     #[test]
     fn every_problem_is_reported_at_once() {
+        // A bad name is refused as the file is read, so that entry is dropped (as any entry
+        // with a wrongly typed value); the other entries are still checked.
         let text = r#"
 [database]
 url = "mysql://x"
 [[machines]]
-name = "bad name"
+name = "G1"
 recipe = "r.toml"
 lobe = "IN1"
 share = "s"
@@ -483,22 +483,28 @@ share = "s"
 kind = "sim"
 part_interval_ms = 0
 [[machines]]
-name = "bad name"
+name = "G1"
 recipe = "r.toml"
 lobe = "IN1"
 share = "s"
 [machines.gauge]
 kind = "drop"
 folder = "in"
+[[machines]]
+name = "bad name"
+recipe = "r.toml"
+share = "s"
+[machines.gauge]
+kind = "sim"
 "#;
         let e = Config::parse(text, Path::new("c.toml"), |_| None)
             .unwrap_err()
             .to_string();
         for expected in [
             "database.url",
-            "line 5: machines.bad name: name `bad name` has ` `",
-            "line 13: machines.bad name: duplicate machine name (first at line 5)",
-            "line 11: machines.bad name.gauge.part_interval_ms = 0: must be 1 to",
+            "line 21: name `bad name` has ` ` at character 4",
+            "line 13: machines.G1: duplicate machine name (first at line 5)",
+            "line 11: machines.G1.gauge.part_interval_ms = 0: must be 1 to",
         ] {
             assert!(e.contains(expected), "`{expected}` missing from `{e}`");
         }

@@ -3,6 +3,7 @@
 //! lobes, pins), so one run reports them all.
 
 use super::{FollowerKind, Lobe, Pin, Recipe, ShaftKind};
+use crate::names::FeatureName;
 use std::collections::HashSet;
 
 /// The problems found so far, with the two number rules most fields share.
@@ -135,19 +136,19 @@ impl Recipe {
     }
 }
 
-/// A feature's name: unique among lobes and pins, and plain.
-fn check_feature_name(p: &mut Problems, names: &mut HashSet<String>, at: &str, name: &str) {
-    if !names.insert(name.to_string()) {
+/// A feature's name: unique among lobes and pins (the type holds it plain).
+fn check_feature_name<'a>(
+    p: &mut Problems,
+    names: &mut HashSet<&'a FeatureName>,
+    at: &str,
+    name: &'a FeatureName,
+) {
+    if !names.insert(name) {
         p.push(format!("{at}: duplicate name"));
-    }
-    if !valid_name(name) {
-        p.push(format!(
-            "{at}: name must be 1–32 letters, digits, '-' or '_'"
-        ));
     }
 }
 
-fn check_lobe(p: &mut Problems, names: &mut HashSet<String>, lobe: &Lobe) {
+fn check_lobe<'a>(p: &mut Problems, names: &mut HashSet<&'a FeatureName>, lobe: &'a Lobe) {
     let at = format!("lobes.{}", lobe.name);
     check_feature_name(p, names, &at, &lobe.name);
     p.positive(format!("{at}.base_radius_mm"), lobe.base_radius_mm);
@@ -175,7 +176,7 @@ fn check_lobe(p: &mut Problems, names: &mut HashSet<String>, lobe: &Lobe) {
     }
 }
 
-fn check_pin(p: &mut Problems, names: &mut HashSet<String>, pin: &Pin) {
+fn check_pin<'a>(p: &mut Problems, names: &mut HashSet<&'a FeatureName>, pin: &'a Pin) {
     let at = format!("pins.{}", pin.name);
     check_feature_name(p, names, &at, &pin.name);
     p.positive(format!("{at}.pin_radius_mm"), pin.pin_radius_mm);
@@ -197,8 +198,7 @@ fn check_pin(p: &mut Problems, names: &mut HashSet<String>, pin: &Pin) {
 }
 
 /// Names become parts of file names and URLs: keep them plain.
-/// The rule of machine names ([`crate::names::check_plain_name`]), so a recipe's feature
-/// name is always a valid [`crate::names::FeatureName`].
+/// The rule of machine names ([`crate::names::check_plain_name`]), for the part name.
 fn valid_name(name: &str) -> bool {
     crate::names::check_plain_name(name).is_ok()
 }

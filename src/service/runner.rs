@@ -18,7 +18,7 @@ use tracing::info;
 
 /// The HTTP side's way to each running machine.
 pub(crate) type CommandRoutes =
-    Arc<std::sync::RwLock<HashMap<String, mpsc::Sender<http::Command>>>>;
+    Arc<std::sync::RwLock<HashMap<MachineName, mpsc::Sender<http::Command>>>>;
 
 /// One machine's running tasks.
 struct RunningMachine {
@@ -28,7 +28,7 @@ struct RunningMachine {
 
 /// A machine whose loop is open, not yet running.
 pub(super) struct Opened {
-    name: String,
+    name: MachineName,
     machine: MachineLoop,
 }
 
@@ -38,7 +38,7 @@ pub(super) struct Runner {
     checked: HashMap<MachineName, CheckedMachine>,
     shared: Shared,
     commands: CommandRoutes,
-    running: std::sync::Mutex<HashMap<String, RunningMachine>>,
+    running: std::sync::Mutex<HashMap<MachineName, RunningMachine>>,
 }
 
 impl Runner {
@@ -103,7 +103,7 @@ impl Runner {
         .await?;
         machine.set_plant_events(self.shared.plant_events.clone());
         Ok(Opened {
-            name: name.to_string(),
+            name: checked.name.clone(),
             machine,
         })
     }
@@ -114,7 +114,7 @@ impl Runner {
         let section = self.section(&name)?;
         let checked = self
             .checked
-            .get(name.as_str())
+            .get(&name)
             .context("an opened machine is configured")?;
         let (stop, stopped) = watch::channel(false);
         let stop = Arc::new(stop);
@@ -155,7 +155,7 @@ impl Runner {
             .context("a checked machine is in the config")
     }
 
-    fn running_map(&self) -> std::sync::MutexGuard<'_, HashMap<String, RunningMachine>> {
+    fn running_map(&self) -> std::sync::MutexGuard<'_, HashMap<MachineName, RunningMachine>> {
         // A panic elsewhere cannot leave the map half-changed: every change is one call.
         self.running.lock().unwrap_or_else(|p| p.into_inner())
     }

@@ -287,15 +287,9 @@ pub(crate) async fn accept_new_store(
 pub(crate) fn expectations(config: &Config) -> Vec<MachineExpectation> {
     let mut out = Vec::new();
     for m in &config.machines {
-        // The config's check refuses a name off the rule before anything runs.
-        let Ok(name) = MachineName::new(&m.name) else {
-            continue;
-        };
-        let machine_dir = config.machines_dir().join(&name);
+        let name = &m.name;
+        let machine_dir = config.machines_dir().join(name);
         for lobe in crate::config::configured_features(config, m) {
-            let Ok(lobe) = FeatureName::new(&lobe) else {
-                continue;
-            };
             let state_dir = machine_dir.join(&lobe);
             let manifest = state_dir.join("share").join(crate::share::MANIFEST_FILE);
             let newest_share_version = crate::share::load_manifest(&manifest)
@@ -309,7 +303,7 @@ pub(crate) fn expectations(config: &Config) -> Vec<MachineExpectation> {
                     .filter_map(|line| serde_json::from_str::<Pending>(line).ok())
                     .filter(|r| {
                         matches!(r, Pending::Table { machine, lobe: l, .. }
-                            if *machine == name && *l == lobe)
+                            if machine == name && *l == lobe)
                     })
                     .count() as u64
             });

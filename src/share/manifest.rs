@@ -66,8 +66,9 @@ pub struct VersionRecord {
     pub files: Vec<FileRecord>,
     /// Why it was made (e.g. "learned from measurement 42", "rollback to v3").
     pub reason: String,
-    /// The measurement the correction was learned from, if any.
-    pub measurement_id: Option<String>,
+    /// The measurement the correction was learned from (its SHA-256, the text it always had
+    /// in the file), if any.
+    pub measurement_id: Option<Sha256>,
     /// Learning parameters, free-form.
     pub learning: serde_json::Value,
     /// The version whose text this one re-pushes.

@@ -48,7 +48,8 @@ pub struct PushRequest {
     pub table_number: u32,
     /// Why this version was made.
     pub reason: String,
-    pub measurement_id: Option<String>,
+    /// The SHA-256 of the measurement the correction was learned from, if any.
+    pub measurement_id: Option<Sha256>,
     /// Learning parameters, free-form.
     pub learning: serde_json::Value,
     /// Set for a rollback: the version whose text this re-pushes.

@@ -4,6 +4,7 @@
 
 #![allow(dead_code)]
 
+use camloop::digest::Sha256;
 use camloop::names::{FeatureName, MachineName};
 use camloop::share::{VersionStatus, load_manifest};
 use camloop::store::{HistoryFilter, MeasurementSummary, RawPool, Store};
@@ -167,10 +168,10 @@ pub async fn agreement(var: &Path, store: &Store, machine: &str, lobe: &str) -> 
             a.held, a.told
         ));
     }
-    let mut made_from: BTreeMap<&str, Vec<u64>> = BTreeMap::new();
+    let mut made_from: BTreeMap<Sha256, Vec<u64>> = BTreeMap::new();
     for v in history.versions() {
         let version = v.record.version;
-        if let Some(m) = &v.record.measurement_id {
+        if let Some(m) = v.record.measurement_id {
             made_from.entry(m).or_default().push(version);
         }
         let Some(row) = store

@@ -57,7 +57,7 @@ url = "sqlite://var/camloop.db?mode=rwc"
 listen = "127.0.0.1:{port}"
 backlog = 5
 [[machines]]
-name = "bad name"
+name = "M1"
 recipe = "missing-a.toml"
 lobe = "IN1"
 share = "share/A"
@@ -89,6 +89,12 @@ lobe = "IN1"
 share = "./share/x/../C"
 [machines.gauge]
 kind = "sim"
+[[machines]]
+name = "bad name"
+recipe = "{recipe}"
+share = "share/E"
+[machines.gauge]
+kind = "sim"
 "#
     );
     let file = dir.path().join("camloop.toml");
@@ -101,12 +107,12 @@ kind = "sim"
     assert_problem(
         &e,
         at("name = \"bad name\""),
-        &["machines.bad name", "` ` at character 4"],
+        &["name `bad name`", "` ` at character 4"],
     );
     assert_problem(
         &e,
         at("missing-a.toml"),
-        &["machines.bad name.recipe", "missing-a.toml"],
+        &["machines.M1.recipe", "missing-a.toml"],
     );
     assert_problem(
         &e,
@@ -235,6 +241,36 @@ fn a_good_config_passes_with_its_listener_bound_and_its_lobes_loaded() {
         (poll_ms, stable_ms, max_file_bytes),
         (500, 10_000, 16_777_216)
     );
+}
+
+/// Machine and feature names are checked as the file is read (they name folders, URLs and
+/// database rows): the message names the file, the line and the character at fault, and a
+/// name with `/` never reaches the file system.
+#[test]
+fn a_bad_machine_or_feature_name_is_refused_naming_the_file_and_line() {
+    let text = format!(
+        "[[machines]]\nname = \"G1\"\nrecipe = \"{recipe}\"\nlobe = \"IN1\"\nshare = \"a\"\n\
+         [machines.gauge]\nkind = \"sim\"\n\
+         [[machines]]\nname = \"../G2\"\nrecipe = \"{recipe}\"\nshare = \"b\"\n\
+         [machines.gauge]\nkind = \"sim\"\n",
+        recipe = demo_recipe()
+    );
+    let e = config::Config::parse(&text, Path::new("conf/c.toml"), |_| None).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "conf/c.toml: line 9: name `../G2` has `.` at character 1: \
+         only letters, digits, '-' or '_' are allowed"
+    );
+    // A lobe or pin chosen in the config follows the same rule, also in a list.
+    for (chosen, at) in [
+        ("lobe = \"IN 1\"", 4),
+        ("features = [\"IN1\", \"EX/1\"]", 4),
+    ] {
+        let text = text.replacen("lobe = \"IN1\"", chosen, 1);
+        let e = config::Config::parse(&text, Path::new("c.toml"), |_| None).unwrap_err();
+        assert_problem(&e, at, &["only letters, digits, '-' or '_' are allowed"]);
+        assert_problem(&e, 9, &["name `../G2`"]);
+    }
 }
 
 #[test]

@@ -136,7 +136,7 @@ table_numbers = [3, 3]
 [learning]
 gain = 1.5
 [[lobes]]
-name = "L 1"
+name = "L1"
 lift = "a.csv"
 follower = "roller"
 base_radius_mm = 20
@@ -148,11 +148,32 @@ base_radius_mm = 20
         "table.points = 10",
         "table.table_numbers",
         "learning.gain = 1.5",
-        "lobes.L 1: name must be",
-        "lobes.L 1: roller follower needs roller_radius_mm",
+        "lobes.L1: roller follower needs roller_radius_mm",
     ] {
         assert!(e.contains(expected), "`{expected}` missing from `{e}`");
     }
+}
+
+/// A lobe's or pin's name keys folders, URLs and database rows: it is checked as the recipe
+/// is read, and the message names the file, the line and the character at fault.
+#[test]
+fn a_feature_name_off_the_rule_is_refused_with_its_line() {
+    let lobe = one_lobe_recipe("").replace("name = \"L1\"", "name = \"L 1\"");
+    let e = Recipe::parse(&lobe, "bad.toml").unwrap_err().to_string();
+    assert_eq!(
+        e,
+        "bad.toml: line 6: name `L 1` has ` ` at character 2: \
+         only letters, digits, '-' or '_' are allowed"
+    );
+    let pin = "name = \"X\"\nkind = \"crankshaft\"\n[wheel]\nradius_mm = 250\n\
+               [[pins]]\nname = \"../P1\"\nthrow_mm = 40\npin_radius_mm = 25\n";
+    let e = Recipe::parse(pin, "crank.toml").unwrap_err().to_string();
+    assert!(
+        e.starts_with("crank.toml: line 6: name `../P1` has `.` at character 1"),
+        "{e}"
+    );
+    // The same text with a plain name is a sound recipe.
+    assert!(Recipe::parse(&pin.replace("../P1", "P1"), "crank.toml").is_ok());
 }
 
 #[test]

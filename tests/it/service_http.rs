@@ -89,7 +89,7 @@ async fn server(limits: HttpLimits, store: Option<camloop::store::Store>) -> Ser
         vec!["IN1".parse().unwrap()],
     );
     let mut commands = HashMap::new();
-    commands.insert("SIM1".to_string(), fake_machine());
+    commands.insert(MachineName::new("SIM1").unwrap(), fake_machine());
     let state = AppState {
         store: Arc::new(tokio::sync::RwLock::new(store)),
         metrics: Arc::default(),

@@ -9,6 +9,7 @@ use crate::store_support;
 
 use camloop::store::{NewTableVersion, Store, VersionStatus};
 use store_support::data::{ms, sha_of};
+use store_support::{f, m};
 
 /// A curve-table program whose numbers move with `v` as a learned correction moves them.
 fn program(v: i64) -> String {
@@ -45,8 +46,8 @@ async fn take_turns(url: &str) {
     for v in 1..=40_i64 {
         let store = if (v / 3) % 2 == 0 { &a } else { &b };
         let t = NewTableVersion {
-            machine: "M1".parse().unwrap(),
-            lobe: "IN1".parse().unwrap(),
+            machine: m("M1"),
+            lobe: f("IN1"),
             version: Some(v),
             parent_version: (v > 1).then_some(v - 1),
             table_number: 7,
@@ -63,18 +64,12 @@ async fn take_turns(url: &str) {
         // newest row is replaced, by whichever handle writes this part.
         let meaning = sha_of(&format!("mode {}", v / 4));
         store
-            .save_learning_snapshot(
-                &"M1".parse().unwrap(),
-                &"IN1".parse().unwrap(),
-                &state(v),
-                Some(&meaning),
-                ms(v * 10),
-            )
+            .save_learning_snapshot(&m("M1"), &f("IN1"), &state(v), Some(&meaning), ms(v * 10))
             .await
             .unwrap();
         let other = if std::ptr::eq(store, &a) { &b } else { &a };
         let newest = other
-            .load_learning_state(&"M1".parse().unwrap(), &"IN1".parse().unwrap())
+            .load_learning_state(&m("M1"), &f("IN1"))
             .await
             .unwrap()
             .unwrap();
@@ -82,7 +77,7 @@ async fn take_turns(url: &str) {
     }
     let fresh = Store::connect(url).await.unwrap();
     let versions = fresh
-        .table_versions(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), 100)
+        .table_versions(&m("M1"), &f("IN1"), 100)
         .await
         .unwrap();
     assert_eq!(versions.len(), 40);
@@ -99,12 +94,7 @@ async fn take_turns(url: &str) {
         // The snapshot of each meaning's last part is kept; the others were replaced.
         let kept = v == 40 || (v + 1) % 4 == 0;
         let exists = fresh
-            .learning_state_exists(
-                &"M1".parse().unwrap(),
-                &"IN1".parse().unwrap(),
-                &state(v),
-                ms(v * 10),
-            )
+            .learning_state_exists(&m("M1"), &f("IN1"), &state(v), ms(v * 10))
             .await
             .unwrap();
         assert_eq!(exists, kept, "learning state of part {v}");

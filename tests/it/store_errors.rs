@@ -6,6 +6,7 @@ use crate::store_support;
 
 use camloop::store::{Store, StoreError};
 use store_support::data::{measurement, ms};
+use store_support::m;
 
 #[tokio::test]
 async fn sqlite_reopens_with_its_data() {
@@ -313,7 +314,7 @@ async fn postgres_readers_stuck_behind_a_lock_never_hold_up_a_writer() {
     let started = std::time::Instant::now();
     t.store
         .insert_event(&camloop::store::NewEvent {
-            machine: "M1".parse().unwrap(),
+            machine: m("M1"),
             at_ms: ms(1),
             level: camloop::store::EventLevel::Info,
             kind: camloop::store::EventKind::MeasurementRepeated,
@@ -451,11 +452,7 @@ async fn a_stored_time_no_instant_has_is_invalid_not_a_panic() {
         assert_eq!(err.code(), "invalid", "{err}");
         assert!(err.to_string().contains("at_ms"), "{err}");
         assert!(err.to_string().contains("9223372036854775807 ms"), "{err}");
-        let err = t
-            .store
-            .dressings(&"M1".parse().unwrap(), 10)
-            .await
-            .unwrap_err();
+        let err = t.store.dressings(&m("M1"), 10).await.unwrap_err();
         assert_eq!(err.code(), "invalid", "{err}");
         assert!(err.to_string().contains("-400000000000000 ms"), "{err}");
         // The machine's own time is in range and reads.

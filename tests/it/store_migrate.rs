@@ -13,6 +13,7 @@ use std::borrow::Cow;
 use camloop::store::{NewTableVersion, REPORT_STEP, RawPool, Store, VersionStatus};
 use sqlx::migrate::{Migration, Migrator};
 use store_support::data::{measurement, ms, sha_of};
+use store_support::{f, m};
 
 /// Table versions and learning states written before the migration: more than one chain
 /// (16 rows) long, so conversion starts a second chain.
@@ -217,14 +218,14 @@ async fn check_old_rows(store: &Store) {
         }
         assert_report_close(&d.analysis_json, &report(n as u32));
     }
-    let dressings = store.dressings(&"M1".parse().unwrap(), 10).await.unwrap();
+    let dressings = store.dressings(&m("M1"), 10).await.unwrap();
     assert_eq!(dressings.len(), 1);
     assert_eq!(
         (dressings[0].new_radius_mm, dressings[0].infeed_um),
         (249.98, None)
     );
     let versions = store
-        .table_versions(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 100)
+        .table_versions(&m("M1"), &f("in1"), 100)
         .await
         .unwrap();
     assert_eq!(versions.len() as i64, OLD_ROWS);
@@ -234,30 +235,20 @@ async fn check_old_rows(store: &Store) {
         assert_eq!(t.status.name(), "pushed");
     }
     let newest = store
-        .load_learning_state(&"M1".parse().unwrap(), &"in1".parse().unwrap())
+        .load_learning_state(&m("M1"), &f("in1"))
         .await
         .unwrap()
         .unwrap();
     assert_eq!(newest.state_json, state(OLD_ROWS));
     assert!(
         store
-            .learning_state_exists(
-                &"M1".parse().unwrap(),
-                &"in1".parse().unwrap(),
-                &state(3),
-                ms(30)
-            )
+            .learning_state_exists(&m("M1"), &f("in1"), &state(3), ms(30))
             .await
             .unwrap()
     );
     assert!(
         !store
-            .learning_state_exists(
-                &"M1".parse().unwrap(),
-                &"in1".parse().unwrap(),
-                &state(3),
-                ms(31)
-            )
+            .learning_state_exists(&m("M1"), &f("in1"), &state(3), ms(31))
             .await
             .unwrap()
     );
@@ -268,8 +259,8 @@ async fn check_old_rows(store: &Store) {
 async fn check_new_rows(store: &Store) {
     for v in OLD_ROWS + 1..=OLD_ROWS + 3 {
         let t = NewTableVersion {
-            machine: "M1".parse().unwrap(),
-            lobe: "in1".parse().unwrap(),
+            machine: m("M1"),
+            lobe: f("in1"),
             version: Some(v),
             parent_version: Some(v - 1),
             table_number: 2,
@@ -284,7 +275,7 @@ async fn check_new_rows(store: &Store) {
         assert_eq!(store.insert_table_version(&t).await.unwrap(), v);
     }
     for t in store
-        .table_versions(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 100)
+        .table_versions(&m("M1"), &f("in1"), 100)
         .await
         .unwrap()
     {
@@ -301,18 +292,12 @@ async fn check_new_rows(store: &Store) {
     ];
     for (v, meaning) in saves {
         store
-            .save_learning_snapshot(
-                &"M1".parse().unwrap(),
-                &"in1".parse().unwrap(),
-                &state(v),
-                Some(meaning),
-                ms(v * 10),
-            )
+            .save_learning_snapshot(&m("M1"), &f("in1"), &state(v), Some(meaning), ms(v * 10))
             .await
             .unwrap();
         assert_eq!(
             store
-                .load_learning_state(&"M1".parse().unwrap(), &"in1".parse().unwrap())
+                .load_learning_state(&m("M1"), &f("in1"))
                 .await
                 .unwrap()
                 .unwrap()
@@ -323,56 +308,31 @@ async fn check_new_rows(store: &Store) {
     // 101 was replaced by 102 (same meaning), 103 by 104; the old rows all stay.
     assert!(
         !store
-            .learning_state_exists(
-                &"M1".parse().unwrap(),
-                &"in1".parse().unwrap(),
-                &state(101),
-                ms(1010)
-            )
+            .learning_state_exists(&m("M1"), &f("in1"), &state(101), ms(1010))
             .await
             .unwrap()
     );
     assert!(
         store
-            .learning_state_exists(
-                &"M1".parse().unwrap(),
-                &"in1".parse().unwrap(),
-                &state(102),
-                ms(1020)
-            )
+            .learning_state_exists(&m("M1"), &f("in1"), &state(102), ms(1020))
             .await
             .unwrap()
     );
     assert!(
         !store
-            .learning_state_exists(
-                &"M1".parse().unwrap(),
-                &"in1".parse().unwrap(),
-                &state(103),
-                ms(1030)
-            )
+            .learning_state_exists(&m("M1"), &f("in1"), &state(103), ms(1030))
             .await
             .unwrap()
     );
     assert!(
         store
-            .learning_state_exists(
-                &"M1".parse().unwrap(),
-                &"in1".parse().unwrap(),
-                &state(104),
-                ms(1040)
-            )
+            .learning_state_exists(&m("M1"), &f("in1"), &state(104), ms(1040))
             .await
             .unwrap()
     );
     assert!(
         store
-            .learning_state_exists(
-                &"M1".parse().unwrap(),
-                &"in1".parse().unwrap(),
-                &state(OLD_ROWS),
-                ms(OLD_ROWS * 10)
-            )
+            .learning_state_exists(&m("M1"), &f("in1"), &state(OLD_ROWS), ms(OLD_ROWS * 10))
             .await
             .unwrap()
     );
@@ -397,7 +357,7 @@ async fn after_migration(store: &Store) {
 
 async fn check_old_rows_again(store: &Store) {
     let versions = store
-        .table_versions(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 100)
+        .table_versions(&m("M1"), &f("in1"), 100)
         .await
         .unwrap();
     assert_eq!(versions.len() as i64, OLD_ROWS + 3);
@@ -447,10 +407,7 @@ async fn a_version_1_postgres_database_is_packed_in_place_and_reads_the_same() {
     let store = Store::connect(&server.url()).await.unwrap();
     after_migration(&store).await;
     // New identities continue after the copied rows' ids.
-    let next = store
-        .table_versions(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 1)
-        .await
-        .unwrap();
+    let next = store.table_versions(&m("M1"), &f("in1"), 1).await.unwrap();
     assert_eq!(next[0].version, OLD_ROWS + 3);
     store.close().await;
 }

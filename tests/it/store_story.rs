@@ -6,6 +6,7 @@
 use crate::store_support;
 
 use store_support::data::{LIFT_TOL_MM, all_pages, filter, measurement, ms, sha_of, table};
+use store_support::{f, m};
 
 use camloop::store::{
     EventFilter, EventKind, EventLevel, FeatureKind, HistoryFilter, MeasurementId,
@@ -18,9 +19,9 @@ async fn story(store: &Store) {
 
     // Recipe snapshots: unchanged JSON reuses the newest snapshot, a change appends one.
     let snap = |lobe: &str, kind, json: &str| NewRecipeSnapshot {
-        machine: "M1".parse().unwrap(),
+        machine: m("M1"),
         part: "CAM-7".into(),
-        lobe: lobe.parse().unwrap(),
+        lobe: f(lobe),
         kind,
         recipe_json: json.into(),
         created_at_ms: ms(1_000),
@@ -47,7 +48,7 @@ async fn story(store: &Store) {
         .insert_recipe_snapshot(&snap("pin1", FeatureKind::Pin, r#"{"throw_mm":45}"#))
         .await
         .unwrap();
-    let features = store.features(&"M1".parse().unwrap()).await.unwrap();
+    let features = store.features(&m("M1")).await.unwrap();
     let seen: Vec<_> = features
         .iter()
         .map(|f| (f.lobe.as_str(), f.kind, f.recipe_snapshot))
@@ -87,10 +88,7 @@ async fn story(store: &Store) {
         .collect();
     assert_eq!(
         names,
-        [
-            ("M1".parse().unwrap(), ms(1_000)),
-            ("M2".parse().unwrap(), ms(10_000 + 40_000))
-        ]
+        [(m("M1"), ms(1_000)), (m("M2"), ms(10_000 + 40_000))]
     );
 
     // Detail round trip: blobs within the quantisation, everything else exact.
@@ -138,7 +136,7 @@ async fn story(store: &Store) {
     let ids = |v: Vec<MeasurementSummary>| v.into_iter().map(|s| s.id).collect::<Vec<_>>();
 
     let lobe_in1 = HistoryFilter {
-        lobe: Some("in1".parse().unwrap()),
+        lobe: Some(f("in1")),
         ..filter("M1")
     };
     let got = ids(all_pages(store, lobe_in1.clone()).await);
@@ -196,7 +194,7 @@ async fn story(store: &Store) {
     // Table versions: numbered per lobe, status appended.
     assert!(
         store
-            .latest_table_version(&"M1".parse().unwrap(), &"in1".parse().unwrap())
+            .latest_table_version(&m("M1"), &f("in1"))
             .await
             .unwrap()
             .is_none()
@@ -208,8 +206,8 @@ async fn story(store: &Store) {
     assert_eq!(v1, 1);
     store
         .set_table_status(
-            &"M1".parse().unwrap(),
-            &"in1".parse().unwrap(),
+            &m("M1"),
+            &f("in1"),
             1,
             &VersionStatus::Pushed {
                 at_unix_ms: 6_000,
@@ -233,7 +231,7 @@ async fn story(store: &Store) {
         "numbering is per lobe"
     );
     let latest = store
-        .latest_table_version(&"M1".parse().unwrap(), &"in1".parse().unwrap())
+        .latest_table_version(&m("M1"), &f("in1"))
         .await
         .unwrap()
         .unwrap();
@@ -246,7 +244,7 @@ async fn story(store: &Store) {
     );
     assert_eq!(latest.sha256, sha_of("CTABDEF(12)\nv2"));
     let first = store
-        .table_version(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 1)
+        .table_version(&m("M1"), &f("in1"), 1)
         .await
         .unwrap()
         .unwrap();
@@ -265,7 +263,7 @@ async fn story(store: &Store) {
     assert_eq!(first.table_number, 11);
     assert_eq!(first.learning_params_json, r#"{"gain":0.6}"#);
     let listed: Vec<i64> = store
-        .table_versions(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 10)
+        .table_versions(&m("M1"), &f("in1"), 10)
         .await
         .unwrap()
         .iter()
@@ -281,8 +279,8 @@ async fn story(store: &Store) {
     assert!(matches!(
         store
             .set_table_status(
-                &"M1".parse().unwrap(),
-                &"in1".parse().unwrap(),
+                &m("M1"),
+                &f("in1"),
                 42,
                 &VersionStatus::Refused { reason: "x".into() },
                 ms(1)
@@ -291,7 +289,7 @@ async fn story(store: &Store) {
         Err(StoreError::NotFound { .. })
     ));
     // The share's own states are never the store's: refused, naming the state, nothing kept.
-    let (m1, in1) = ("M1".parse().unwrap(), "in1".parse().unwrap());
+    let (m1, in1) = (m("M1"), f("in1"));
     for share_only in [
         VersionStatus::Delivering,
         VersionStatus::Superseded { by: 2 },
@@ -310,7 +308,7 @@ async fn story(store: &Store) {
     assert_eq!(first_again.status.name(), "pushed");
     assert!(
         store
-            .table_version(&"M1".parse().unwrap(), &"in1".parse().unwrap(), 3)
+            .table_version(&m("M1"), &f("in1"), 3)
             .await
             .unwrap()
             .is_none()
@@ -319,40 +317,25 @@ async fn story(store: &Store) {
     // Learning state: newest snapshot wins.
     assert!(
         store
-            .load_learning_state(&"M1".parse().unwrap(), &"in1".parse().unwrap())
+            .load_learning_state(&m("M1"), &f("in1"))
             .await
             .unwrap()
             .is_none()
     );
     store
-        .save_learning_state(
-            &"M1".parse().unwrap(),
-            &"in1".parse().unwrap(),
-            r#"{"k":1}"#,
-            ms(7_000),
-        )
+        .save_learning_state(&m("M1"), &f("in1"), r#"{"k":1}"#, ms(7_000))
         .await
         .unwrap();
     store
-        .save_learning_state(
-            &"M1".parse().unwrap(),
-            &"in1".parse().unwrap(),
-            r#"{"k":2}"#,
-            ms(8_000),
-        )
+        .save_learning_state(&m("M1"), &f("in1"), r#"{"k":2}"#, ms(8_000))
         .await
         .unwrap();
     store
-        .save_learning_state(
-            &"M1".parse().unwrap(),
-            &"ex1".parse().unwrap(),
-            r#"{"k":9}"#,
-            ms(9_000),
-        )
+        .save_learning_state(&m("M1"), &f("ex1"), r#"{"k":9}"#, ms(9_000))
         .await
         .unwrap();
     let state = store
-        .load_learning_state(&"M1".parse().unwrap(), &"in1".parse().unwrap())
+        .load_learning_state(&m("M1"), &f("in1"))
         .await
         .unwrap()
         .unwrap();
@@ -370,7 +353,7 @@ async fn story(store: &Store) {
     ] {
         store
             .insert_dressing(&NewDressing {
-                machine: "M1".parse().unwrap(),
+                machine: m("M1"),
                 at_ms: ms(at),
                 old_radius_mm: old_mm,
                 new_radius_mm: new_mm,
@@ -380,7 +363,7 @@ async fn story(store: &Store) {
             .await
             .unwrap();
     }
-    let dressings = store.dressings(&"M1".parse().unwrap(), 10).await.unwrap();
+    let dressings = store.dressings(&m("M1"), 10).await.unwrap();
     assert_eq!(dressings.len(), 2);
     assert_eq!(dressings[0].at_ms, ms(30_000));
     // Doubles round-trip exactly through REAL / DOUBLE PRECISION.
@@ -400,7 +383,7 @@ async fn story(store: &Store) {
     ] {
         let id = store
             .insert_event(&NewEvent {
-                machine: "M1".parse().unwrap(),
+                machine: m("M1"),
                 at_ms: ms(at),
                 level,
                 kind,
@@ -412,7 +395,7 @@ async fn story(store: &Store) {
     }
     let events = store
         .events(&EventFilter {
-            machine: Some("M1".parse().unwrap()),
+            machine: Some(m("M1")),
             limit: 10,
             ..EventFilter::default()
         })

@@ -5,6 +5,7 @@
 use crate::store_support;
 
 use store_support::data::{filter, measurement, ms, table};
+use store_support::{f, m};
 
 use camloop::store::{
     EventKind, EventLevel, HistoryFilter, NewDressing, NewEvent, NewMeasurement, Store, StoreError,
@@ -84,51 +85,31 @@ async fn replay_lookups(store: &Store) {
     store.insert_table_version(&t).await.unwrap();
     assert!(
         store
-            .table_version_exists(
-                &"M1".parse().unwrap(),
-                &"in1".parse().unwrap(),
-                ms(5_000),
-                &t.program_text
-            )
+            .table_version_exists(&m("M1"), &f("in1"), ms(5_000), &t.program_text)
             .await
             .unwrap()
     );
     assert!(
         !store
-            .table_version_exists(
-                &"M1".parse().unwrap(),
-                &"in1".parse().unwrap(),
-                ms(5_001),
-                &t.program_text
-            )
+            .table_version_exists(&m("M1"), &f("in1"), ms(5_001), &t.program_text)
             .await
             .unwrap()
     );
     assert!(
         !store
-            .table_version_exists(
-                &"M1".parse().unwrap(),
-                &"in1".parse().unwrap(),
-                ms(5_000),
-                "other"
-            )
+            .table_version_exists(&m("M1"), &f("in1"), ms(5_000), "other")
             .await
             .unwrap()
     );
     assert!(
         !store
-            .table_version_exists(
-                &"M1".parse().unwrap(),
-                &"ex1".parse().unwrap(),
-                ms(5_000),
-                &t.program_text
-            )
+            .table_version_exists(&m("M1"), &f("ex1"), ms(5_000), &t.program_text)
             .await
             .unwrap()
     );
 
     let e = NewEvent {
-        machine: "M1".parse().unwrap(),
+        machine: m("M1"),
         at_ms: ms(7_000),
         level: EventLevel::Warn,
         kind: EventKind::TableRefused,
@@ -143,39 +124,24 @@ async fn replay_lookups(store: &Store) {
     assert!(!store.event_exists(&other).await.unwrap());
 
     store
-        .save_learning_state(
-            &"M1".parse().unwrap(),
-            &"in1".parse().unwrap(),
-            r#"{"i":1}"#,
-            ms(8_000),
-        )
+        .save_learning_state(&m("M1"), &f("in1"), r#"{"i":1}"#, ms(8_000))
         .await
         .unwrap();
     assert!(
         store
-            .learning_state_exists(
-                &"M1".parse().unwrap(),
-                &"in1".parse().unwrap(),
-                r#"{"i":1}"#,
-                ms(8_000)
-            )
+            .learning_state_exists(&m("M1"), &f("in1"), r#"{"i":1}"#, ms(8_000))
             .await
             .unwrap()
     );
     assert!(
         !store
-            .learning_state_exists(
-                &"M1".parse().unwrap(),
-                &"in1".parse().unwrap(),
-                r#"{"i":2}"#,
-                ms(8_000)
-            )
+            .learning_state_exists(&m("M1"), &f("in1"), r#"{"i":2}"#, ms(8_000))
             .await
             .unwrap()
     );
 
     let d = NewDressing {
-        machine: "M1".parse().unwrap(),
+        machine: m("M1"),
         at_ms: ms(9_000),
         old_radius_mm: 250.0,
         new_radius_mm: 249.98,
@@ -240,7 +206,7 @@ async fn concurrent_writers(store: &Store) {
         let store = store.clone();
         set.spawn(async move {
             let mut t = table("in1", None, &format!("v{n}"), "waiting");
-            t.machine = "MC".parse().unwrap();
+            t.machine = m("MC");
             store.insert_table_version(&t).await
         });
     }
@@ -256,7 +222,7 @@ async fn concurrent_writers(store: &Store) {
     let expected: Vec<i64> = (1..=versions.len() as i64).collect();
     assert_eq!(versions, expected, "numbers are distinct and without gaps");
     let stored = store
-        .table_versions(&"MC".parse().unwrap(), &"in1".parse().unwrap(), 100)
+        .table_versions(&m("MC"), &f("in1"), 100)
         .await
         .unwrap();
     assert_eq!(stored.len(), versions.len());

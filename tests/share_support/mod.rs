@@ -75,6 +75,11 @@ pub fn table_program(table: u32, tag: u32) -> ProgramFile {
     }
 }
 
+/// The SHA-256 standing for measurement `m<tag>`, as the service names a measurement.
+pub fn measurement(tag: u32) -> camloop::digest::Sha256 {
+    camloop::digest::Sha256::of(format!("m{tag}").as_bytes())
+}
+
 /// A request for the next version: one table program with the share's next table number.
 pub fn next_request(share: &Share, tag: u32) -> PushRequest {
     let table = share.next_table_number();
@@ -82,7 +87,7 @@ pub fn next_request(share: &Share, tag: u32) -> PushRequest {
         files: vec![table_program(table, tag)],
         table_number: table,
         reason: format!("learned from measurement m{tag}"),
-        measurement_id: Some(format!("m{tag}")),
+        measurement_id: Some(measurement(tag)),
         learning: serde_json::json!({ "gain": 0.5, "tag": tag }),
         rollback_of: None,
         created_at_unix_ms: jiff::Timestamp::from_millisecond(1_700_000_000_000 + i64::from(tag))

@@ -6,7 +6,18 @@
 pub mod data;
 pub mod pg;
 
+use camloop::names::{FeatureName, MachineName};
 use camloop::store::Store;
+
+/// A machine name for a store call, on one line (`&m("M1")`).
+pub fn m(machine: &str) -> MachineName {
+    machine.parse().expect("a plain machine name")
+}
+
+/// A feature (lobe or pin) name for a store call, on one line (`&f("in1")`).
+pub fn f(feature: &str) -> FeatureName {
+    feature.parse().expect("a plain feature name")
+}
 
 /// A store and whatever keeps it alive (tempdir, server). Dropped in field order: the store
 /// pool first, then the server.

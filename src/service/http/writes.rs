@@ -339,7 +339,7 @@ async fn command(
         .commands
         .read()
         .ok()
-        .and_then(|routes| routes.get(machine.as_str()).cloned());
+        .and_then(|routes| routes.get(machine).cloned());
     let sender = match sender {
         Some(s) => s,
         // Configured, but another instance of the cluster owns it now.

@@ -42,7 +42,7 @@ pub enum Pending {
         created_at_ms: Timestamp,
         /// The measurement it was learned from (a replay re-submits the version with it).
         #[serde(default)]
-        measurement_id: Option<String>,
+        measurement_id: Option<Sha256>,
         /// The version it re-pushes, for a rollback.
         #[serde(default)]
         rollback_of: Option<u64>,
@@ -456,6 +456,27 @@ mod tests {
         let unknown = later.replace(r#""pushed""#, r#""delivered""#);
         let e = read_line(&unknown).unwrap_err().to_string();
         assert!(e.contains("unknown value `delivered`"), "{e}");
+    }
+
+    /// A table line's measurement is the digest's text, as builds that kept it as a string
+    /// wrote it: read as the typed digest and written back byte for byte.
+    #[test]
+    fn a_table_lines_measurement_reads_as_its_digest_and_writes_back_the_same() {
+        let sha = "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad";
+        let line = format!(
+            r#"{{"record":"table","machine":"G7","lobe":"IN1","version":3,"parent_version":null,"table_number":1,"program_text":"CTABEND","learning":{{"iteration":0,"params":{{}},"wheel_radius_mm":250.0,"correction_um":[0.0],"timing_correction_deg":0.0}},"reason":"learned","status":{{"status":"waiting","reason":null}},"created_at_ms":7,"measurement_id":"{sha}","rollback_of":null}}"#
+        );
+        let record = read_line(&line).unwrap_or_else(|e| panic!("{e}: {line}"));
+        let Pending::Table { measurement_id, .. } = &record else {
+            panic!("a table record")
+        };
+        assert_eq!(measurement_id.map(|m| m.to_string()).as_deref(), Some(sha));
+        let written = serde_json::to_string(&record).unwrap();
+        let field = format!(r#""measurement_id":"{sha}""#);
+        assert!(
+            line.contains(&field) && written.contains(&field),
+            "{written}"
+        );
     }
 
     /// A measurement line as builds before the shared record wrote it (its fields flat

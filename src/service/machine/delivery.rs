@@ -8,6 +8,7 @@ use super::memory::{TableLearning, WaitingTable};
 use super::records::event;
 use crate::clock::now;
 use crate::core::compensate::GuardedTable;
+use crate::core::digest::Sha256;
 use crate::core::learn::LearningState;
 use crate::core::program::{Provenance, comment_text};
 use crate::failpoint::crash_point;
@@ -27,7 +28,7 @@ pub(super) struct Draft {
     pub(super) table_number: u32,
     pub(super) learning: TableLearning,
     pub(super) reason: String,
-    pub(super) measurement_id: Option<String>,
+    pub(super) measurement_id: Option<Sha256>,
     pub(super) rollback_of: Option<u64>,
     pub(super) at_ms: jiff::Timestamp,
 }
@@ -43,7 +44,7 @@ impl FeatureLoop {
         table: &GuardedTable,
         next: LearningState,
         reason: &str,
-        measurement: Option<String>,
+        measurement: Option<Sha256>,
     ) -> Result<Vec<Pending>, MachineError> {
         let at_ms = now();
         let parent = self.memory.in_force_version;
@@ -139,7 +140,7 @@ impl FeatureLoop {
                 reason: Some(SUBMITTED.into()),
             },
             created_at_ms: draft.at_ms,
-            measurement_id: draft.measurement_id.clone(),
+            measurement_id: draft.measurement_id,
             rollback_of: draft.rollback_of,
         }
     }

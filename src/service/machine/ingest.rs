@@ -330,10 +330,7 @@ impl FeatureLoop {
         sha: &Sha256,
         records: &mut Vec<Pending>,
     ) -> String {
-        match self
-            .deliver(table, next, reason, Some(sha.to_string()))
-            .await
-        {
+        match self.deliver(table, next, reason, Some(*sha)).await {
             Ok(mut more) => {
                 records.append(&mut more);
                 self.delivery_line()

@@ -149,7 +149,7 @@ impl FeatureLoop {
                         table_number: *table_number,
                         learning: learning.clone(),
                         reason: reason.clone(),
-                        measurement_id: measurement_id.clone(),
+                        measurement_id: *measurement_id,
                         rollback_of: *rollback_of,
                         at_ms: *created_at_ms,
                     },
