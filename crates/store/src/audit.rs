@@ -7,6 +7,7 @@
 //! `camloop audit verify` to see that.
 
 use super::{AuditResult, Role, Store, StoreError, with_read, with_write};
+use crate::BeginWrite;
 use camloop_core::digest::sha256_hex;
 
 /// The `prev_sha256` of the first row.
@@ -124,7 +125,7 @@ impl Store {
         const OP: &str = "appending to the audit trail";
         let postgres = self.backend() == "postgres";
         with_write!(self, pool => {
-            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
+            let mut tx = pool.begin_write().await.map_err(self.db_error(OP))?;
             if postgres {
                 // Several writers (and instances) may append at once: one at a time, so the
                 // chain never forks. Readers are not blocked.

@@ -9,6 +9,7 @@ use super::codec::{CODEC_PACKED, CODEC_PLAIN, sha256_hex};
 use super::measurements::{StoredData, pack_data};
 use super::pack::pack_text;
 use super::{Store, StoreError, with_write};
+use crate::BeginWrite;
 
 /// SQLite `user_version` once every version-1 row is packed.
 const PACKED_USER_VERSION: i64 = 4;
@@ -88,7 +89,7 @@ impl Store {
                 .fetch_all(pool)
                 .await
                 .map_err(self.db_error(OP))?;
-                let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
+                let mut tx = pool.begin_write().await.map_err(self.db_error(OP))?;
                 for (id, points, raw, averaged, analysis_json) in &rows {
                     after = *id;
                     let data = StoredData {
@@ -142,7 +143,7 @@ impl Store {
         let mut after = i64::MIN;
         loop {
             let more = with_write!(self, pool => {
-                let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
+                let mut tx = pool.begin_write().await.map_err(self.db_error(OP))?;
                 let rows = sqlx::query(&select)
                     .bind(after)
                     .bind(BATCH)

@@ -133,6 +133,7 @@ enum Kind {
 }
 
 /// SQLite primary result codes (the low byte of an extended code).
+const SQLITE_BUSY: i32 = 5;
 const SQLITE_READONLY: i32 = 8;
 const SQLITE_CORRUPT: i32 = 11;
 const SQLITE_FULL: i32 = 13;
@@ -170,6 +171,7 @@ fn sqlite_kind(e: &sqlx::sqlite::SqliteError) -> Kind {
         SQLITE_NOTADB => Kind::Corrupt("file is not a database"),
         SQLITE_CORRUPT => Kind::Corrupt("database disk image is malformed"),
         SQLITE_FULL => Kind::Full,
+        SQLITE_BUSY => Kind::Busy("another process holds the database's write lock".to_owned()),
         _ => Kind::Other,
     }
 }

@@ -111,6 +111,32 @@ macro_rules! with_write {
 }
 pub(crate) use with_write;
 
+/// Starts a write transaction on the writer pool.
+///
+/// On SQLite it takes the write lock at `BEGIN` (`BEGIN IMMEDIATE`). A deferred transaction
+/// that reads and then writes cannot wait for another process's writer: SQLite answers
+/// `SQLITE_BUSY` at once rather than risk a deadlock. So `camloop user add`, which reads the
+/// audit chain's newest row and then appends, failed beside a running service under load; an
+/// immediate transaction waits the busy timeout like any writer.
+pub(crate) trait BeginWrite {
+    type Db: sqlx::Database;
+    async fn begin_write(&self) -> Result<sqlx::Transaction<'static, Self::Db>, sqlx::Error>;
+}
+
+impl BeginWrite for SqlitePool {
+    type Db = sqlx::Sqlite;
+    async fn begin_write(&self) -> Result<sqlx::Transaction<'static, sqlx::Sqlite>, sqlx::Error> {
+        self.begin_with("BEGIN IMMEDIATE").await
+    }
+}
+
+impl BeginWrite for PgPool {
+    type Db = sqlx::Postgres;
+    async fn begin_write(&self) -> Result<sqlx::Transaction<'static, sqlx::Postgres>, sqlx::Error> {
+        self.begin().await
+    }
+}
+
 /// Runs `$body` with `$pool` bound to the store's reader pool once the read gate admits it;
 /// returns [`StoreError::Busy`] from the enclosing function when it waited [`READ_WAIT`].
 macro_rules! with_read {

@@ -13,6 +13,7 @@ use super::{
     LearningState, Machine, NewDressing, NewEvent, NewRecipeSnapshot, RecipeSnapshotId, Store,
     StoreError, at_col, col, with_read, with_write,
 };
+use crate::BeginWrite;
 use camloop_core::digest::Sha256;
 use camloop_core::names::{FeatureName, MachineName};
 
@@ -32,7 +33,7 @@ const ENSURE_MACHINE: &str =
 macro_rules! append_logged {
     ($store:expr, $op:expr, $machine:expr, $at_ms:expr, $sql:expr $(, $bind:expr)* $(,)?) => {
         with_write!($store, pool => {
-            let mut tx = pool.begin().await.map_err($store.db_error($op))?;
+            let mut tx = pool.begin_write().await.map_err($store.db_error($op))?;
             sqlx::query(ENSURE_MACHINE)
                 .bind($machine)
                 .bind($at_ms)
@@ -97,7 +98,7 @@ impl Store {
         let sha256 = sha256_hex(r.recipe_json.as_bytes());
         const OP: &str = "inserting a recipe snapshot";
         with_write!(self, pool => {
-            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
+            let mut tx = pool.begin_write().await.map_err(self.db_error(OP))?;
             sqlx::query(ENSURE_MACHINE)
                 .bind(r.machine.as_str())
                 .bind(r.created_at_ms.as_millisecond())
@@ -376,7 +377,7 @@ impl Store {
         let state_sha256 = sha256_hex(state_json.as_bytes());
         const OP: &str = "saving learning state";
         with_write!(self, pool => {
-            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
+            let mut tx = pool.begin_write().await.map_err(self.db_error(OP))?;
             sqlx::query(ENSURE_MACHINE)
                 .bind(machine)
                 .bind(saved_at_ms.as_millisecond())

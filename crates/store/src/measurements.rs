@@ -12,6 +12,7 @@ use super::{
     NewMeasurement, Page, RecipeSnapshotId, Store, StoreError, Verdict, at_col, col, with_read,
     with_write,
 };
+use crate::BeginWrite;
 use camloop_core::measure::MASTER_PART_PREFIX;
 use camloop_core::names::{FeatureName, MachineName};
 
@@ -264,7 +265,7 @@ impl Store {
         let (raw, averaged, analysis) = pack_data(raw.as_deref(), &averaged, &m.analysis_json)?;
         const OP: &str = "inserting a measurement";
         with_write!(self, pool => {
-            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
+            let mut tx = pool.begin_write().await.map_err(self.db_error(OP))?;
             sqlx::query(
                 "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) \
                  ON CONFLICT (name) DO NOTHING",

@@ -8,6 +8,7 @@ use super::{
     NewTableVersion, Store, StoreError, TableVersion, VersionStatus, at_col, col, with_read,
     with_write,
 };
+use crate::BeginWrite;
 use camloop_core::names::{FeatureName, MachineName};
 
 const SELECT_VERSION: &str = "SELECT t.id, t.machine, t.lobe, t.version, t.parent_version, \
@@ -113,7 +114,7 @@ impl Store {
         let sha256 = sha256_hex(t.program_text.as_bytes());
         const OP: &str = "inserting a table version";
         with_write!(self, pool => {
-            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
+            let mut tx = pool.begin_write().await.map_err(self.db_error(OP))?;
             sqlx::query(
                 "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) \
                  ON CONFLICT (name) DO NOTHING",

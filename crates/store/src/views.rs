@@ -2,6 +2,7 @@
 //! and alarms (appended, once per event), and the learning state read through the readers'
 //! gate (the machine loop reads it through the writer; a dashboard must never take that).
 
+use crate::BeginWrite;
 use jiff::Timestamp;
 
 use super::codec::check_limit;
@@ -54,7 +55,7 @@ impl Store {
         let machine = machine.as_str();
         const OP: &str = "acknowledging an event";
         with_write!(self, pool => {
-            let mut tx = pool.begin().await.map_err(self.db_error(OP))?;
+            let mut tx = pool.begin_write().await.map_err(self.db_error(OP))?;
             let found: Option<i64> =
                 sqlx::query_scalar("SELECT id FROM events WHERE id = $1 AND machine = $2")
                     .bind(id.0)
