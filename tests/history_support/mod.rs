@@ -6,8 +6,8 @@
 
 use camloop::digest::Sha256;
 use camloop::names::{FeatureName, MachineName};
-use camloop::share::{VersionStatus, load_manifest};
-use camloop::store::{HistoryFilter, MeasurementSummary, RawPool, Store};
+use camloop::share::{History, VersionState, VersionStatus, load_manifest};
+use camloop::store::{HistoryFilter, MeasurementSummary, RawPool, Store, TableVersion};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
@@ -182,49 +182,10 @@ pub async fn agreement(var: &Path, store: &Store, machine: &str, lobe: &str) -> 
             a.mismatches.push(format!("v{version}: not in the store"));
             continue;
         };
-        if row.table_number != v.record.table_number {
-            a.mismatches.push(format!(
-                "v{version}: table {} in the store, {} on the share",
-                row.table_number, v.record.table_number
-            ));
-        }
-        let expected = match &v.status {
-            VersionStatus::Pushed { .. } | VersionStatus::Refused { .. } => Some(v.status.name()),
-            _ => None,
-        };
-        if expected.is_some_and(|e| e != row.status.name()) {
-            a.mismatches.push(format!(
-                "v{version}: {:?} in the store, {:?} on the share",
-                row.status, v.status
-            ));
-        }
-        if v.text_kept && row.sha256 != v.record.files[0].sha256 {
-            a.mismatches.push(format!(
-                "v{version}: the store's program is not the share's"
-            ));
-        }
+        a.mismatches.extend(compare_version(v, &row));
     }
-    let stored = store
-        .table_versions(&m(machine), &f(lobe), 1000)
-        .await
-        .unwrap();
-    // The store holds every version told of, 1..told once each; those the manifest no
-    // longer holds were compacted away, after they settled.
-    let mut numbers: Vec<u64> = stored.iter().map(|r| r.version as u64).collect();
-    numbers.sort_unstable();
-    if numbers != (1..=a.told).collect::<Vec<u64>>() {
-        a.mismatches.push(format!(
-            "store versions {numbers:?}, not 1..{} once (the share told of v{})",
-            a.told, a.told
-        ));
-    }
-    for row in stored.iter().filter(|r| {
-        let v = r.version as u64;
-        !a.held.contains(&v) && !history.is_forgotten(v)
-    }) {
-        a.mismatches
-            .push(format!("v{}: in the store, not on the share", row.version));
-    }
+    a.mismatches
+        .extend(store_versions_told(store, machine, lobe, &history, &a.held).await);
     a.learned_twice = made_from
         .into_iter()
         .filter(|(_, versions)| versions.len() > 1)
@@ -238,6 +199,65 @@ pub async fn agreement(var: &Path, store: &Store, machine: &str, lobe: &str) -> 
         .and_then(|m| m["in_force_version"].as_u64());
     a.stuck = stuck(var, store, machine, lobe).await;
     a
+}
+
+/// How one held version differs between the share and its stored row.
+fn compare_version(v: &VersionState, row: &TableVersion) -> Vec<String> {
+    let version = v.record.version;
+    let mut out = Vec::new();
+    if row.table_number != v.record.table_number {
+        out.push(format!(
+            "v{version}: table {} in the store, {} on the share",
+            row.table_number, v.record.table_number
+        ));
+    }
+    let expected = match &v.status {
+        VersionStatus::Pushed { .. } | VersionStatus::Refused { .. } => Some(v.status.name()),
+        _ => None,
+    };
+    if expected.is_some_and(|e| e != row.status.name()) {
+        out.push(format!(
+            "v{version}: {:?} in the store, {:?} on the share",
+            row.status, v.status
+        ));
+    }
+    if v.text_kept && row.sha256 != v.record.files[0].sha256 {
+        out.push(format!(
+            "v{version}: the store's program is not the share's"
+        ));
+    }
+    out
+}
+
+/// The store holds every version the share told of, 1..told once each; those the manifest
+/// no longer holds were compacted away after they settled (`share::compact`).
+async fn store_versions_told(
+    store: &Store,
+    machine: &str,
+    lobe: &str,
+    history: &History,
+    held: &[u64],
+) -> Vec<String> {
+    let told = history.next_version() - 1;
+    let stored = store
+        .table_versions(&m(machine), &f(lobe), 1000)
+        .await
+        .unwrap();
+    let mut out = Vec::new();
+    let mut numbers: Vec<u64> = stored.iter().map(|r| r.version as u64).collect();
+    numbers.sort_unstable();
+    if numbers != (1..=told).collect::<Vec<u64>>() {
+        out.push(format!(
+            "store versions {numbers:?}, not 1..{told} once (the share told of v{told})"
+        ));
+    }
+    for row in stored.iter().filter(|r| {
+        let v = r.version as u64;
+        !held.contains(&v) && !history.is_forgotten(v)
+    }) {
+        out.push(format!("v{}: in the store, not on the share", row.version));
+    }
+    out
 }
 
 /// What the journal still holds that the store does not: a stalled feature.
