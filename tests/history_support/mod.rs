@@ -4,23 +4,14 @@
 
 #![allow(dead_code)]
 
+use super::store_support::{f, m};
 use camloop::digest::Sha256;
-use camloop::names::{FeatureName, MachineName};
 use camloop::share::{History, VersionState, VersionStatus, load_manifest};
 use camloop::store::{HistoryFilter, MeasurementSummary, RawPool, Store, TableVersion};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// A feature's state folder: `<var>/machines/<machine>/<lobe>`.
-/// The typed names of the strings the helpers take (every test uses plain names).
-fn m(machine: &str) -> MachineName {
-    machine.parse().expect("a plain machine name")
-}
-
-fn f(lobe: &str) -> FeatureName {
-    lobe.parse().expect("a plain lobe name")
-}
-
 pub fn feature_dir(var: &Path, machine: &str, lobe: &str) -> PathBuf {
     var.join("machines").join(machine).join(lobe)
 }

@@ -7,6 +7,12 @@ fn parse(text: &str, name: &str) -> Result<RawMeasurement, String> {
     parse_measurement_csv(text, name, "drop").map_err(|e| e.to_string())
 }
 
+/// Machine, part and lobe as the file named them.
+fn identity(m: &RawMeasurement) -> (&str, &str, &str) {
+    let h = &m.header;
+    (h.machine.as_str(), h.part.as_str(), h.lobe.as_str())
+}
+
 #[test]
 fn identity_from_the_file_name_and_grid_from_the_angles() {
     let m = parse(
@@ -15,14 +21,7 @@ fn identity_from_the_file_name_and_grid_from_the_angles() {
         "M3_P1234_L2_20240501.csv",
     )
     .expect("valid");
-    assert_eq!(
-        (
-            m.header.machine.as_str(),
-            m.header.part.as_str(),
-            m.header.lobe.as_str()
-        ),
-        ("M3", "P1234", "L2")
-    );
+    assert_eq!(identity(&m), ("M3", "P1234", "L2"));
     assert_eq!((m.header.revolutions, m.header.points_per_rev), (2, 4));
     let got: Vec<(u32, u32, f64)> = m
         .samples
@@ -50,14 +49,7 @@ fn metadata_comments_override_the_file_name() {
         "scan.csv",
     )
     .expect("valid");
-    assert_eq!(
-        (
-            m.header.machine.as_str(),
-            m.header.part.as_str(),
-            m.header.lobe.as_str()
-        ),
-        ("G7", "X-9", "pin.1")
-    );
+    assert_eq!(identity(&m), ("G7", "X-9", "pin.1"));
     assert_eq!((m.header.revolutions, m.header.points_per_rev), (3, 8));
     assert_eq!(m.samples[1].angle_index, 7);
 }
