@@ -357,7 +357,7 @@ impl Recipe {
     /// The table subprogram of feature `name`: the recipe's program name, with the feature's
     /// name appended when the recipe has more than one feature.
     pub(crate) fn table_program_name(&self, name: &str) -> String {
-        if self.feature_names().len() > 1 {
+        if self.features().count() > 1 {
             let suffix: String = name
                 .chars()
                 .map(|c| {
@@ -377,7 +377,7 @@ impl Recipe {
     /// How many table numbers the features need: a pair each, two with the speed plan on.
     fn table_numbers_needed(&self) -> u32 {
         let pairs = if self.speed_plan.enabled { 2 } else { 1 };
-        2 * pairs * self.feature_names().len() as u32
+        2 * pairs * self.features().count() as u32
     }
 
     /// The table numbers of the feature at `index` (from 0) in recipe order.
@@ -389,7 +389,7 @@ impl Recipe {
     /// C's table numbers of the feature at `index` with the speed plan on: after all the
     /// features' X pairs.
     fn c_table_pair(&self, index: usize) -> Option<(u32, u32)> {
-        let features = self.feature_names().len() as u32;
+        let features = self.features().count() as u32;
         let first = self.table.table_numbers.0 + 2 * features + 2 * index as u32;
         self.speed_plan.enabled.then_some((first, first + 1))
     }

@@ -86,7 +86,7 @@ impl Recipe {
             ));
         }
         let (first, last) = self.table.table_numbers;
-        let features = self.feature_names().len() as u32;
+        let features = self.features().count() as u32;
         if first == 0 || last < first {
             p.push(format!(
                 "table.table_numbers = [{first}, {last}]: must be first ≥ 1 and last ≥ first"
