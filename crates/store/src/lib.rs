@@ -126,7 +126,19 @@ pub(crate) trait BeginWrite {
 impl BeginWrite for SqlitePool {
     type Db = sqlx::Sqlite;
     async fn begin_write(&self) -> Result<sqlx::Transaction<'static, sqlx::Sqlite>, sqlx::Error> {
-        self.begin_with("BEGIN IMMEDIATE").await
+        match self.begin_with("BEGIN IMMEDIATE").await {
+            // A COMMIT refused by a full disk makes SQLite roll the transaction back itself;
+            // the driver's ROLLBACK then fails, and it goes on counting a transaction that
+            // is not there. Its own `BEGIN` would nest a savepoint, but a custom one is
+            // refused for ever: the writer would never write again once space is back.
+            // Closing that connection lets the pool open a clean one.
+            Err(sqlx::Error::InvalidSavePointStatement) => {
+                tracing::warn!("database writer left inside a failed transaction: reopened");
+                self.acquire().await?.close().await?;
+                self.begin_with("BEGIN IMMEDIATE").await
+            }
+            other => other,
+        }
     }
 }
 
