@@ -13,6 +13,7 @@ pub mod digest;
 pub mod fit;
 pub mod geometry;
 pub mod harmonics;
+pub mod ids;
 pub mod learn;
 pub mod lift;
 pub mod measure;

@@ -1,0 +1,7 @@
+//! camloop's loop as a pure state machine, in the shape of quinn-proto's `Connection`: the
+//! service hands it what happened (a measurement, a command, a completed write) and carries
+//! out the effects it asks for (journal, submit, deliver, publish). It reads no clock, touches
+//! no file and logs nothing, so every decision the loop makes is testable without I/O.
+
+pub use camloop_core::ids::{BadPartId, PartId, TableVersion, VersionOutOfRange};
+pub use camloop_core::names::{FeatureName, MachineName};
