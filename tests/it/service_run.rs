@@ -380,7 +380,7 @@ async fn a_database_that_is_down_loses_nothing() {
     // When a database is there, the journal goes into it.
     let url = format!("sqlite://{}/late.db?mode=rwc", dir.path().display());
     let store = camloop::store::Store::connect(&url).await.unwrap();
-    let written = journal.flush(&store).await.unwrap();
+    let written = journal.flush(&store).await.unwrap().written;
     assert_eq!(written, pending.len());
     assert!(journal.pending().is_empty());
     let stored = stored_counts(&store).await;
@@ -413,7 +413,7 @@ async fn a_database_that_is_down_loses_nothing() {
     // every record, and replaying it writes nothing twice.
     let mut replayed = camloop::service::journal::Journal::open(&journal_dir).unwrap();
     assert_eq!(replayed.pending().len(), pending.len());
-    assert_eq!(replayed.flush(&store).await.unwrap(), pending.len());
+    assert_eq!(replayed.flush(&store).await.unwrap().written, pending.len());
     assert_eq!(stored_counts(&store).await, stored);
     // Once the database says its copy is durable, the journal empties, on disk too, but
     // for the newest learning state, which a restart with the database down resumes from.

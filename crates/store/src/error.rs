@@ -96,6 +96,18 @@ impl StoreError {
         )
     }
 
+    /// Whether the store refuses this one record, and would refuse it again however often it
+    /// were sent: a value off its rule, a collision with what is stored, or a reference to a
+    /// row that is not there. Unlike [`Self::is_permanent`] this says nothing of the
+    /// database: the records after it may go in. A writer keeps such a record aside rather
+    /// than retry it forever in front of the others.
+    pub fn refuses_record(&self) -> bool {
+        matches!(
+            self,
+            StoreError::Invalid { .. } | StoreError::Conflict { .. } | StoreError::NotFound { .. }
+        )
+    }
+
     /// Backend detail for logging (may contain SQL error text), if any.
     pub fn detail(&self) -> Option<&str> {
         match self {

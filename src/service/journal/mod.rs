@@ -14,7 +14,7 @@ pub use reserve::RESERVE_BYTES;
 
 use crate::failpoint::crash_point;
 use crate::share::{Fence, Held};
-use crate::store::Store;
+use crate::store::{Store, StoreError};
 use anyhow::Context;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -200,14 +200,19 @@ impl Journal {
         &self.records
     }
 
-    /// Writes pending records to the store in order. Returns how many went; the rest stay
+    /// Writes pending records to the store in order. Returns how many went, and the records
+    /// the store refused for good ([`StoreError::refuses_record`]): each is moved to
+    /// [`REFUSED_FILE`] beside the journal (kept, with the store's reason) and taken out of
+    /// the journal, so one bad record never holds up the history behind it. The rest stay
     /// for the next attempt (e.g. the database is down). Records that went stay in the file
     /// until [`Journal::release_durable`] finds the store's copy durable.
-    pub async fn flush(&mut self, store: &Store) -> anyhow::Result<usize> {
+    pub async fn flush(&mut self, store: &Store) -> anyhow::Result<Flushed> {
         let _held = self.hold()?;
-        let mut done = 0;
+        let mut flushed = Flushed::default();
         let mut failure = None;
-        for (i, record) in self.records.iter().enumerate().skip(self.written) {
+        let mut i = self.written;
+        while i < self.records.len() {
+            let record = &self.records[i];
             let result = if i < self.replayed {
                 apply_once(store, record).await
             } else {
@@ -216,7 +221,13 @@ impl Journal {
             match result {
                 Ok(()) => {
                     crash_point(record.committed_step());
-                    done += 1;
+                    flushed.written += 1;
+                    self.written += 1;
+                    i += 1;
+                }
+                Err(e) if e.refuses_record() => {
+                    // Not advanced: the next record moves into this place.
+                    flushed.refused.push(self.set_aside(i, &e)?);
                 }
                 Err(e) => {
                     failure = Some(e);
@@ -224,14 +235,46 @@ impl Journal {
                 }
             }
         }
-        self.written += done;
         match failure {
-            Some(e) if done == 0 => {
+            Some(e) if flushed.written == 0 && flushed.refused.is_empty() => {
                 Err(anyhow::Error::new(e)
                     .context("database write failed, records kept in the journal"))
             }
-            _ => Ok(done),
+            _ => Ok(flushed),
         }
+    }
+
+    /// Moves record `i` (pending) out of the journal into [`REFUSED_FILE`], synced there
+    /// before the journal is rewritten without it: a crash between the two leaves it in both,
+    /// never in neither.
+    fn set_aside(&mut self, i: usize, e: &StoreError) -> anyhow::Result<Refused> {
+        let record = &self.records[i];
+        let refused = Refused {
+            kind: record.kind_name(),
+            reason: e.to_string(),
+        };
+        let line = serde_json::json!({
+            "refused": refused.reason,
+            "code": e.code(),
+            "record": record,
+        });
+        let path = self.path.with_file_name(REFUSED_FILE);
+        let mut file = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+            .with_context(|| format!("cannot open {}", path.display()))?;
+        file.write_all(format!("{line}\n").as_bytes())
+            .and_then(|()| file.sync_data())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        let mut rest = self.records.clone();
+        rest.remove(i);
+        self.rewrite(&rest)?;
+        self.records = rest;
+        if i < self.replayed {
+            self.replayed -= 1;
+        }
+        Ok(refused)
     }
 
     /// Drops the written records from the journal once the store answers that everything
@@ -301,6 +344,28 @@ impl Journal {
 
 /// The quarantine file beside the journal.
 pub(crate) const QUARANTINE_FILE: &str = "journal.quarantine.jsonl";
+
+/// Records the store refused for good, beside the journal: one JSON line each, with the
+/// store's reason and code and the record as it was journalled.
+pub(crate) const REFUSED_FILE: &str = "journal.refused.jsonl";
+
+/// What a flush did.
+#[derive(Debug, Default, PartialEq)]
+pub struct Flushed {
+    /// Records now in the store.
+    pub written: usize,
+    /// Records the store refused for good, moved to [`REFUSED_FILE`].
+    pub refused: Vec<Refused>,
+}
+
+/// A record the store refused for good (see [`Journal::flush`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Refused {
+    /// The record's kind, as the journal spells it (`measurement`, `table`, …).
+    pub kind: &'static str,
+    /// The store's reason.
+    pub reason: String,
+}
 
 /// A journal line that could not be read back.
 #[derive(Debug, Clone, PartialEq)]
@@ -383,6 +448,55 @@ mod tests {
         assert!(Journal::open(dir.path()).unwrap().quarantined().is_empty());
     }
 
+    /// A record the store refuses for good (here the status of a version it has never
+    /// heard of) is set aside with the store's reason, and the records behind it still go
+    /// in: before, the flush stopped at it on every attempt, and the history behind it
+    /// stalled for good.
+    #[tokio::test]
+    async fn a_record_the_store_refuses_is_set_aside_and_the_rest_go_in() {
+        let dir = tempfile::tempdir().unwrap();
+        let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
+        let store = Store::connect(&url).await.unwrap();
+        let orphan = Pending::VersionStatus {
+            machine: "M1".parse().unwrap(),
+            lobe: "IN1".parse().unwrap(),
+            version: 41,
+            status: VersionStatus::pushed_at(jiff::Timestamp::from_millisecond(8).unwrap(), "x"),
+            at_ms: jiff::Timestamp::from_millisecond(8).unwrap(),
+        };
+        let mut j = Journal::open(dir.path()).unwrap();
+        j.append(&[event("a"), orphan.clone(), event("b")]).unwrap();
+        let flushed = j.flush(&store).await.unwrap();
+        assert_eq!(flushed.written, 2);
+        assert_eq!(flushed.refused.len(), 1);
+        assert_eq!(flushed.refused[0].kind, "table_status");
+        assert!(
+            flushed.refused[0].reason.contains("not found"),
+            "{:?}",
+            flushed.refused
+        );
+        assert!(j.pending().is_empty());
+        let kept = std::fs::read_to_string(dir.path().join(REFUSED_FILE)).unwrap();
+        let line: serde_json::Value = serde_json::from_str(kept.trim_end()).unwrap();
+        assert_eq!(line["code"], "not_found");
+        let back: Pending = serde_json::from_value(line["record"].clone()).unwrap();
+        assert_eq!(back, orphan);
+        // The journal file no longer holds it: a restart does not meet it again.
+        assert_eq!(
+            Journal::open(dir.path()).unwrap().records(),
+            [event("a"), event("b")]
+        );
+        let filter = crate::store::EventFilter {
+            machine: Some("M1".parse().unwrap()),
+            since_ms: None,
+            until_ms: None,
+            level: None,
+            limit: 10,
+        };
+        let events = store.events(&filter).await.unwrap();
+        assert_eq!(events.len(), 2, "{events:?}");
+    }
+
     /// A journal left by a build whose table records spelled the status as the store's
     /// columns (`status` beside `status_why` or `why`) replays into the store with the same
     /// status and text, nothing quarantined.
@@ -400,7 +514,7 @@ mod tests {
         .unwrap();
         let mut j = Journal::open(dir.path()).unwrap();
         assert!(j.quarantined().is_empty(), "{:?}", j.quarantined());
-        assert_eq!(j.flush(&store).await.unwrap(), 2);
+        assert_eq!(j.flush(&store).await.unwrap().written, 2);
         let v = store
             .table_version(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), 1)
             .await
@@ -489,11 +603,11 @@ mod tests {
         let records = every_kind_of_record();
         let mut j = Journal::open(dir.path()).unwrap();
         j.append(&records).unwrap();
-        assert_eq!(j.flush(&store).await.unwrap(), 5);
+        assert_eq!(j.flush(&store).await.unwrap().written, 5);
         // The crash: the journal is read back with every record still in it.
         let mut j = Journal::open(dir.path()).unwrap();
         j.append(&[event("b")]).unwrap();
-        assert_eq!(j.flush(&store).await.unwrap(), 6);
+        assert_eq!(j.flush(&store).await.unwrap().written, 6);
         let crate::store::RawPool::Sqlite(pool) = store.raw_pool() else {
             panic!("a SQLite store")
         };

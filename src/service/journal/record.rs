@@ -118,6 +118,19 @@ impl Pending {
         })
     }
 
+    /// The record's kind as the journal spells it (its `record` tag).
+    pub(super) fn kind_name(&self) -> &'static str {
+        match self {
+            Pending::Measurement { .. } => "measurement",
+            Pending::Table { .. } => "table",
+            Pending::VersionStatus { .. } => "table_status",
+            Pending::Event { .. } => "event",
+            Pending::Learning { .. } => "learning",
+            Pending::RecipeSnapshot { .. } => "recipe_snapshot",
+            Pending::Dressing { .. } => "dressing",
+        }
+    }
+
     /// The crash point once a record of this kind is in the journal (the kinds a part's or
     /// a dressing's durability turns on; the others travel in the same appends).
     pub(super) fn journaled_step(&self) -> Option<&'static str> {

@@ -14,7 +14,7 @@ use crate::core::turn::HoldReason;
 use crate::names::{FeatureName, MachineName};
 use crate::recipe::FeatureSetup;
 use crate::share::{RealFs, Share, ShareConfig};
-use crate::store::{EventLevel, FeatureKind};
+use crate::store::{EventLevel, FeatureKind, Store};
 use anyhow::Context;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -292,14 +292,50 @@ impl FeatureLoop {
 
     pub(super) async fn flush_journal(&mut self) {
         let store = self.store.read().await.clone();
-        if let Some(store) = store
-            && let Err(e) = self.journal.flush(&store).await
-        {
-            warn!(machine = %self.name, error = format!("{e:#}"), "database unavailable: records kept in the journal");
+        if let Some(store) = store {
+            match self.journal.flush(&store).await {
+                Ok(f) if !f.refused.is_empty() => self.note_refused(&f.refused, &store).await,
+                Ok(_) => {}
+                Err(e) => {
+                    warn!(machine = %self.name, error = format!("{e:#}"), "database unavailable: records kept in the journal")
+                }
+            }
         }
         let pending = self.journal.pending().len() as u64;
         self.metrics
             .update(&self.name, |m| m.journal_pending = pending);
+    }
+
+    /// Records the store refused for good were set aside (see [`Journal::flush`]): an alarm
+    /// each, and an event in the history saying where the record is kept.
+    async fn note_refused(&mut self, refused: &[super::super::journal::Refused], store: &Store) {
+        let at_ms = now();
+        let events: Vec<Pending> = refused
+            .iter()
+            .map(|r| {
+                error!(machine = %self.name, lobe = %self.setup.name, record = r.kind, reason = %r.reason, "the database refuses a journal record: kept aside, the records after it go on");
+                records::event(
+                    &self.name,
+                    at_ms,
+                    EventLevel::Error,
+                    EventKind::JournalQuarantined,
+                    format!(
+                        "{} {} record refused by the database ({}): kept in {}",
+                        self.setup.name,
+                        r.kind,
+                        r.reason,
+                        super::super::journal::REFUSED_FILE
+                    ),
+                )
+            })
+            .collect();
+        let count = refused.len() as u64;
+        self.metrics.update(&self.name, |m| m.alarms_total += count);
+        if self.journal.append(&events).is_ok()
+            && let Err(e) = self.journal.flush(store).await
+        {
+            warn!(machine = %self.name, error = format!("{e:#}"), "database unavailable: records kept in the journal");
+        }
     }
 
     /// The loop's memory as a record; through the journal it is also what a restart resumes
