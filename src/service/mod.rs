@@ -4,6 +4,7 @@
 
 mod access_setup;
 mod cluster_task;
+pub(crate) mod command;
 mod drop_source;
 pub mod http;
 pub mod journal;
@@ -21,6 +22,7 @@ mod store_guard;
 use crate::config::{Checked, Config};
 use crate::names::FeatureName;
 use crate::store::Store;
+use camloop_loop::{CommandError, CommandOutcome, MachineCommand, TableVersion};
 use machine::{MachineLoop, SourceEvent, StoreHandle};
 use metrics::Metrics;
 use std::sync::Arc;
@@ -154,7 +156,7 @@ pub(crate) async fn start_checked(
             opcua_events,
         ),
     };
-    let commands: runner::CommandRoutes = Arc::default();
+    let commands: command::CommandRoutes = Arc::default();
     let runner = runner::Runner::new(config.clone(), checked_machines, shared, commands.clone());
     let (machines, sources_done, cluster_view) =
         startup::start_machines(&config, runner, &metrics, &shutdown_rx).await?;
@@ -274,7 +276,7 @@ enum Machines {
 async fn machine_task(
     mut machine: MachineLoop,
     mut rx: mpsc::Receiver<SourceEvent>,
-    mut commands: mpsc::Receiver<http::Command>,
+    mut commands: mpsc::Receiver<(MachineCommand, command::Reply)>,
     source_done: tokio::sync::oneshot::Sender<()>,
     mut shutdown: watch::Receiver<bool>,
 ) {
@@ -294,31 +296,9 @@ async fn machine_task(
                     }
                 }
             },
-            Some(command) = commands.recv() => match command {
-                http::Command::Rollback { lobe, version, reply } => {
-                    let _ = reply.send(rollback_result(&mut machine, &lobe, version).await);
-                }
-                http::Command::Freeze { lobe, frozen, reply } => {
-                    let done = match machine.set_frozen(&lobe, frozen.clone()).await {
-                        Some(_) => Ok(http::CommandDone {
-                            version: None,
-                            message: match frozen {
-                                Some(why) => format!("learning of {lobe} frozen: {why}"),
-                                None => format!("learning of {lobe} resumed"),
-                            },
-                        }),
-                        None => Err(http::CommandError::Refused { reason: format!("{lobe} is not ground here") }),
-                    };
-                    let _ = reply.send(done);
-                }
-                http::Command::RollbackPart { versions, reply } => {
-                    let _ = reply.send(rollback_part_result(&mut machine, &versions).await);
-                }
-                http::Command::Dressing { wheel_radius_mm, infeed_um, source, reply } => {
-                    let result = machine.dress(wheel_radius_mm, infeed_um, &source).await;
-                    let _ = reply.send(dressing_result(result));
-                }
-            },
+            Some((command, reply)) = commands.recv() => {
+                let _ = reply.send(carry_out(&mut machine, command).await);
+            }
             _ = retry.tick() => {
                 if machine.fenced_out() {
                     return fenced_out(&machine);
@@ -341,49 +321,58 @@ fn fenced_out(machine: &MachineLoop) {
     error!(machine = %machine.name, "cluster: another instance owns this machine now; stopped here without writing");
 }
 
-/// A rollback asked for through the API, its outcome as the HTTP side wants it.
-async fn rollback_result(
+/// Carries out a command an adapter sent to the machine's loop.
+async fn carry_out(
     machine: &mut MachineLoop,
-    lobe: &FeatureName,
-    version: i64,
-) -> Result<http::CommandDone, http::CommandError> {
-    let v = u64::try_from(version).map_err(|_| http::CommandError::VersionNotFound {
-        lobe: lobe.clone(),
-        version,
-    })?;
-    let done = machine.rollback(lobe, v).await?;
-    Ok(http::CommandDone {
-        version: i64::try_from(done.new_version).ok(),
-        message: done.summary,
-    })
-}
-
-/// A whole-part rollback asked for through the API.
-async fn rollback_part_result(
-    machine: &mut MachineLoop,
-    versions: &[(FeatureName, u64)],
-) -> Result<http::CommandDone, http::CommandError> {
-    let done = machine.rollback_part(versions).await?;
-    Ok(http::CommandDone {
-        version: None,
-        message: done
-            .iter()
-            .map(|d| d.summary.clone())
-            .collect::<Vec<_>>()
-            .join("; "),
-    })
-}
-
-/// A dressing reported through the API, its outcome as the HTTP side wants it.
-fn dressing_result(
-    result: Result<machine::Dressed, machine::MachineError>,
-) -> Result<http::CommandDone, http::CommandError> {
-    result
-        .map(|d| http::CommandDone {
-            version: None,
-            message: d.summary,
-        })
-        .map_err(http::CommandError::from)
+    command: MachineCommand,
+) -> Result<CommandOutcome, CommandError> {
+    match command {
+        MachineCommand::Rollback { lobe, version } => {
+            let done = machine.rollback(&lobe, version.get()).await?;
+            Ok(CommandOutcome {
+                version: TableVersion::new(done.new_version),
+                message: done.summary,
+            })
+        }
+        MachineCommand::Freeze { lobe, frozen } => {
+            match machine.set_frozen(&lobe, frozen.clone()).await {
+                Some(_) => Ok(CommandOutcome {
+                    version: None,
+                    message: match frozen {
+                        Some(why) => format!("learning of {lobe} frozen: {why}"),
+                        None => format!("learning of {lobe} resumed"),
+                    },
+                }),
+                None => Err(CommandError::Refused {
+                    reason: format!("{lobe} is not ground here"),
+                }),
+            }
+        }
+        MachineCommand::RollbackPart { versions } => {
+            let versions: Vec<(FeatureName, u64)> =
+                versions.into_iter().map(|(f, v)| (f, v.get())).collect();
+            let done = machine.rollback_part(&versions).await?;
+            Ok(CommandOutcome {
+                version: None,
+                message: done
+                    .iter()
+                    .map(|d| d.summary.clone())
+                    .collect::<Vec<_>>()
+                    .join("; "),
+            })
+        }
+        MachineCommand::Dressing {
+            wheel_radius_mm,
+            infeed_um,
+            source,
+        } => {
+            let d = machine.dress(wheel_radius_mm, infeed_um, &source).await?;
+            Ok(CommandOutcome {
+                version: None,
+                message: d.summary,
+            })
+        }
+    }
 }
 
 async fn connect_store(config: &Config, store: &StoreHandle) {

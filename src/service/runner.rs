@@ -6,8 +6,9 @@
 //! The runner is shared (`&self` everywhere): in a cluster several machines open and stop at
 //! once, beside the lease keeper, and none waits for another.
 
+use super::command::{CommandRoutes, Mailbox};
 use super::machine::{self, MachineLoop, SourceEvent};
-use super::{Shared, http, machine_task};
+use super::{Shared, machine_task};
 use crate::config::{CheckedMachine, Config};
 use crate::names::MachineName;
 use anyhow::Context;
@@ -15,10 +16,6 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use tokio::sync::{mpsc, oneshot, watch};
 use tracing::info;
-
-/// The HTTP side's way to each running machine.
-pub(crate) type CommandRoutes =
-    Arc<std::sync::RwLock<HashMap<MachineName, mpsc::Sender<http::Command>>>>;
 
 /// One machine's running tasks.
 struct RunningMachine {
@@ -127,7 +124,7 @@ impl Runner {
             }
         });
         let (tx, rx) = mpsc::channel::<SourceEvent>(16);
-        let (command_tx, command_rx) = mpsc::channel::<http::Command>(4);
+        let (command_tx, command_rx): (Mailbox, _) = mpsc::channel(4);
         super::sources::spawn(
             &self.config,
             section,

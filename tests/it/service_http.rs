@@ -6,7 +6,8 @@ use crate::service_support;
 
 use camloop::config::Secret;
 use camloop::names::MachineName;
-use camloop::service::http::{self, AppState, Command, CommandDone, CommandError, HttpLimits};
+use camloop::service::http::{self, AppState, HttpLimits};
+use camloop_loop::{CommandError, CommandOutcome, MachineCommand, TableVersion};
 use service_support::exchange;
 use std::collections::{BTreeMap, HashMap};
 use std::net::SocketAddr;
@@ -14,62 +15,54 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
-use tokio::sync::{mpsc, watch};
+use tokio::sync::{mpsc, oneshot, watch};
+
+/// Where the fake machine answers.
+type Reply = oneshot::Sender<Result<CommandOutcome, CommandError>>;
 
 const TOKEN: &str = "let-me-write";
 
 /// A fake machine loop: answers rollbacks by version (999: not found, 998: database down,
 /// 997: refused, else delivered as version 7) and dressings as version 8.
-fn fake_machine() -> mpsc::Sender<Command> {
-    let (tx, mut rx) = mpsc::channel::<Command>(4);
+fn fake_machine() -> mpsc::Sender<(MachineCommand, Reply)> {
+    let (tx, mut rx) = mpsc::channel::<(MachineCommand, Reply)>(4);
     tokio::spawn(async move {
-        while let Some(command) = rx.recv().await {
-            match command {
-                Command::Rollback {
-                    lobe,
-                    version,
-                    reply,
-                } => {
-                    let answer = match version {
-                        999 => Err(CommandError::VersionNotFound { lobe, version }),
-                        998 => Err(CommandError::StoreUnavailable {
-                            reason: "connection refused".into(),
-                        }),
-                        997 => Err(CommandError::Refused {
-                            reason: "program of v997 unreadable".into(),
-                        }),
-                        _ => Ok(CommandDone {
-                            version: Some(7),
-                            message: format!("{lobe} rolled back to v{version}"),
-                        }),
-                    };
-                    let _ = reply.send(answer);
-                }
-                Command::Freeze { lobe, reply, .. } => {
-                    let _ = reply.send(Ok(CommandDone {
-                        version: None,
-                        message: format!("learning of {lobe} frozen"),
-                    }));
-                }
-                Command::RollbackPart { versions, reply } => {
+        while let Some((command, reply)) = rx.recv().await {
+            let version = |n| TableVersion::new(n);
+            let answer = match command {
+                MachineCommand::Rollback { lobe, version: v } => match v.get() {
+                    999 => Err(CommandError::VersionNotFound { lobe, version: v }),
+                    998 => Err(CommandError::StoreUnavailable {
+                        reason: "connection refused".into(),
+                    }),
+                    997 => Err(CommandError::Refused {
+                        reason: "program of v997 unreadable".into(),
+                    }),
+                    _ => Ok(CommandOutcome {
+                        version: version(7),
+                        message: format!("{lobe} rolled back to v{v}"),
+                    }),
+                },
+                MachineCommand::Freeze { lobe, .. } => Ok(CommandOutcome {
+                    version: None,
+                    message: format!("learning of {lobe} frozen"),
+                }),
+                MachineCommand::RollbackPart { versions } => {
                     let names: Vec<String> =
                         versions.iter().map(|(l, v)| format!("{l} v{v}")).collect();
-                    let _ = reply.send(Ok(CommandDone {
+                    Ok(CommandOutcome {
                         version: None,
                         message: format!("rolled back together: {}", names.join(", ")),
-                    }));
+                    })
                 }
-                Command::Dressing {
-                    wheel_radius_mm,
-                    reply,
-                    ..
-                } => {
-                    let _ = reply.send(Ok(CommandDone {
-                        version: Some(8),
-                        message: format!("dressed to {wheel_radius_mm} mm"),
-                    }));
-                }
-            }
+                MachineCommand::Dressing {
+                    wheel_radius_mm, ..
+                } => Ok(CommandOutcome {
+                    version: version(8),
+                    message: format!("dressed to {wheel_radius_mm} mm"),
+                }),
+            };
+            let _ = reply.send(answer);
         }
     });
     tx

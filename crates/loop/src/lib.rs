@@ -5,3 +5,7 @@
 
 pub use camloop_core::ids::{BadPartId, PartId, TableVersion, VersionOutOfRange};
 pub use camloop_core::names::{FeatureName, MachineName};
+
+pub mod command;
+
+pub use command::{CommandError, CommandOutcome, MachineCommand};

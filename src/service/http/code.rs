@@ -166,39 +166,72 @@ mod tests {
         assert_eq!(json, "\"no_parent_version\"");
     }
 
+    /// Each case of a command's error answers with the code and status the API has always
+    /// given it; a refusal takes the command's own code.
     #[test]
-    fn a_commands_error_answers_with_its_codes_status() {
-        use crate::service::http::CommandError;
+    fn a_commands_error_answers_with_its_code_and_status() {
+        use crate::service::http::command_code;
+        use camloop_loop::{CommandError, TableVersion};
         let reason = String::from("x");
-        let errors = [
-            CommandError::VersionNotFound {
-                lobe: "x".parse().unwrap(),
-                version: 3,
-            },
-            CommandError::StoreUnavailable {
-                reason: reason.clone(),
-            },
-            CommandError::Refused {
-                reason: reason.clone(),
-            },
-            CommandError::JournalUnavailable {
-                reason: reason.clone(),
-            },
-            CommandError::ShareStateFailed {
-                reason: reason.clone(),
-            },
-            CommandError::Elsewhere {
-                reason: reason.clone(),
-            },
-            CommandError::Failed { reason },
+        let cases = [
+            (
+                CommandError::VersionNotFound {
+                    lobe: "x".parse().unwrap(),
+                    version: TableVersion::new(3).unwrap(),
+                },
+                Some(ApiCode::TableVersionNotFound),
+                404,
+            ),
+            (
+                CommandError::StoreUnavailable {
+                    reason: reason.clone(),
+                },
+                Some(ApiCode::StoreUnavailable),
+                503,
+            ),
+            (
+                CommandError::Refused {
+                    reason: reason.clone(),
+                },
+                None,
+                409,
+            ),
+            (
+                CommandError::JournalUnavailable {
+                    reason: reason.clone(),
+                },
+                Some(ApiCode::JournalUnavailable),
+                503,
+            ),
+            (
+                CommandError::ShareStateFailed {
+                    reason: reason.clone(),
+                },
+                Some(ApiCode::ShareStateFailed),
+                500,
+            ),
+            (
+                CommandError::Elsewhere {
+                    reason: reason.clone(),
+                },
+                Some(ApiCode::MachineElsewhere),
+                503,
+            ),
+            (
+                CommandError::Failed { reason },
+                Some(ApiCode::CommandFailed),
+                500,
+            ),
         ];
         for refused in [
             ApiCode::RollbackRefused,
             ApiCode::FreezeRefused,
             ApiCode::DressingRefused,
         ] {
-            for e in &errors {
-                assert_eq!(e.code(refused).status(), e.status(), "{e:?}");
+            for (e, code, status) in &cases {
+                let got = command_code(e, refused);
+                assert_eq!(got, code.unwrap_or(refused), "{e:?}");
+                assert_eq!(got.status().as_u16(), *status, "{e:?}");
             }
         }
     }

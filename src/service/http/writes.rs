@@ -3,14 +3,15 @@
 //! a [`Command`] to the machine's loop, which owns the loop state, so a write never races a
 //! part. Every write that reaches a machine is audited with its outcome.
 
+use super::AppState;
 use super::access::Principal;
 use super::api::{ApiError, ApiJson, ApiPath, feature_name};
-use super::{AppState, Command, CommandDone, CommandError, Reply};
 use crate::names::{FeatureName, MachineName};
 use crate::service::http::ApiCode;
 use crate::store::AuditResult;
 use axum::Json;
 use axum::extract::State;
+use camloop_loop::{CommandError, CommandOutcome, MachineCommand, TableVersion};
 use serde::{Deserialize, Serialize};
 
 /// The reply to a write that was carried out.
@@ -23,11 +24,11 @@ pub struct CommandReply {
     pub message: String,
 }
 
-impl From<CommandDone> for CommandReply {
-    fn from(done: CommandDone) -> Self {
+impl From<CommandOutcome> for CommandReply {
+    fn from(done: CommandOutcome) -> Self {
         Self {
             status: "ok",
-            version: done.version,
+            version: done.version.map(TableVersion::to_i64),
             message: done.message,
         }
     }
@@ -59,27 +60,19 @@ pub(crate) async fn rollback(
             format!("machine {machine} does not grind a lobe or pin {lobe}"),
         ));
     }
-    if body.version < 1 {
-        return Err(ApiError::new(
-            ApiCode::InvalidVersion,
-            "version must be ≥ 1".into(),
-        ));
-    }
-    let version = body.version;
+    let version = TableVersion::from_i64(body.version)
+        .map_err(|_| ApiError::new(ApiCode::InvalidVersion, "version must be ≥ 1".into()))?;
     let before = in_force(&state, &machine, std::slice::from_ref(&lobe));
     let mut entry = p.audit("rollback", AuditResult::Ok, String::new());
     entry.machine = Some(machine.to_string());
     entry.feature = Some(lobe.to_string());
-    entry.version = Some(version);
+    entry.version = Some(version.to_i64());
     entry.before = Some(before);
-    let done = command(&state, &machine, ApiCode::RollbackRefused, |reply| {
-        Command::Rollback {
-            lobe: lobe.clone(),
-            version,
-            reply,
-        }
-    })
-    .await;
+    let rollback = MachineCommand::Rollback {
+        lobe: lobe.clone(),
+        version,
+    };
+    let done = command(&state, &machine, ApiCode::RollbackRefused, rollback).await;
     audited(&state, entry, &done, || {
         in_force(&state, &machine, std::slice::from_ref(&lobe))
     })
@@ -104,7 +97,7 @@ fn in_force(state: &AppState, machine: &MachineName, features: &[FeatureName]) -
 async fn audited(
     state: &AppState,
     mut entry: crate::store::AuditEntry,
-    done: &Result<CommandDone, ApiError>,
+    done: &Result<CommandOutcome, ApiError>,
     after: impl FnOnce() -> String,
 ) {
     match done {
@@ -157,34 +150,25 @@ pub(super) async fn rollback_part(
                 format!("machine {machine} does not grind a lobe or pin {lobe}"),
             ));
         }
-        let Ok(v) = u64::try_from(version) else {
+        let Ok(v) = TableVersion::from_i64(version) else {
             return Err(ApiError::new(
                 ApiCode::InvalidVersion,
                 format!("{lobe}: version must be ≥ 1"),
             ));
         };
-        if v == 0 {
-            return Err(ApiError::new(
-                ApiCode::InvalidVersion,
-                format!("{lobe}: version must be ≥ 1"),
-            ));
-        }
         versions.push((lobe, v));
     }
     let features: Vec<FeatureName> = versions.iter().map(|(f, _)| f.clone()).collect();
     let mut entry = p.audit("rollback_part", AuditResult::Ok, String::new());
     entry.machine = Some(machine.to_string());
     entry.before = Some(in_force(&state, &machine, &features));
-    let asked: std::collections::BTreeMap<&str, u64> =
-        versions.iter().map(|(f, v)| (f.as_str(), *v)).collect();
+    let asked: std::collections::BTreeMap<&str, u64> = versions
+        .iter()
+        .map(|(f, v)| (f.as_str(), v.get()))
+        .collect();
     entry.reason = serde_json::json!({ "to": asked }).to_string();
-    let done = command(&state, &machine, ApiCode::RollbackRefused, |reply| {
-        Command::RollbackPart {
-            versions: versions.clone(),
-            reply,
-        }
-    })
-    .await;
+    let rollback = MachineCommand::RollbackPart { versions };
+    let done = command(&state, &machine, ApiCode::RollbackRefused, rollback).await;
     audited(&state, entry, &done, || {
         in_force(&state, &machine, &features)
     })
@@ -249,14 +233,11 @@ pub(super) async fn freeze(
     entry.machine = Some(machine.to_string());
     entry.feature = Some(lobe.to_string());
     entry.before = Some(status(&state));
-    let done = command(&state, &machine, ApiCode::FreezeRefused, |reply| {
-        Command::Freeze {
-            lobe: lobe.clone(),
-            frozen,
-            reply,
-        }
-    })
-    .await;
+    let freeze = MachineCommand::Freeze {
+        lobe: lobe.clone(),
+        frozen,
+    };
+    let done = command(&state, &machine, ApiCode::FreezeRefused, freeze).await;
     audited(&state, entry, &done, || status(&state)).await;
     Ok(Json(done?.into()))
 }
@@ -293,15 +274,12 @@ pub(super) async fn dress(
     let features = state.machines.get(&machine).cloned().unwrap_or_default();
     entry.before = Some(in_force(&state, &machine, &features));
     let source = format!("api:{}", p.actor);
-    let done = command(&state, &machine, ApiCode::DressingRefused, |reply| {
-        Command::Dressing {
-            wheel_radius_mm: radius,
-            infeed_um,
-            source,
-            reply,
-        }
-    })
-    .await;
+    let dressing = MachineCommand::Dressing {
+        wheel_radius_mm: radius,
+        infeed_um,
+        source,
+    };
+    let done = command(&state, &machine, ApiCode::DressingRefused, dressing).await;
     audited(&state, entry, &done, || {
         let mut after: serde_json::Value =
             serde_json::from_str(&in_force(&state, &machine, &features)).unwrap_or_default();
@@ -331,8 +309,8 @@ async fn command(
     state: &AppState,
     machine: &MachineName,
     refused: ApiCode,
-    make: impl FnOnce(Reply) -> Command,
-) -> Result<CommandDone, ApiError> {
+    command: MachineCommand,
+) -> Result<CommandOutcome, ApiError> {
     let stopped =
         |what: &str| ApiError::new(ApiCode::MachineStopped, format!("machine {machine} {what}"));
     let sender = state
@@ -360,9 +338,24 @@ async fn command(
     };
     let (reply, answer) = tokio::sync::oneshot::channel();
     sender
-        .send(make(reply))
+        .send((command, reply))
         .await
         .map_err(|_| stopped("is not running"))?;
-    let result: Result<CommandDone, CommandError> = answer.await.map_err(|_| stopped("stopped"))?;
-    result.map_err(|e| ApiError::new(e.code(refused), e.to_string()))
+    let result: Result<CommandOutcome, CommandError> =
+        answer.await.map_err(|_| stopped("stopped"))?;
+    result.map_err(|e| ApiError::new(command_code(&e, refused), e.to_string()))
+}
+
+/// The stable code of a command's error (its HTTP status is the code's); `refused` is the
+/// command's own (`rollback_refused`, …).
+pub fn command_code(e: &CommandError, refused: ApiCode) -> ApiCode {
+    match e {
+        CommandError::VersionNotFound { .. } => ApiCode::TableVersionNotFound,
+        CommandError::StoreUnavailable { .. } => ApiCode::StoreUnavailable,
+        CommandError::Refused { .. } => refused,
+        CommandError::Failed { .. } => ApiCode::CommandFailed,
+        CommandError::JournalUnavailable { .. } => ApiCode::JournalUnavailable,
+        CommandError::ShareStateFailed { .. } => ApiCode::ShareStateFailed,
+        CommandError::Elsewhere { .. } => ApiCode::MachineElsewhere,
+    }
 }

@@ -1,7 +1,8 @@
 //! Why a write of a machine's loop (a table delivery, a dressing) did not happen, typed so
-//! the API answers each case with its own code (see `http::CommandError`'s `From`): a rule
-//! that refused is the caller's to hear about (409), a journal or state folder that cannot
-//! be written is the service's fault (503, 500), never reported as a refusal.
+//! the API answers each case with its own code (see `CommandError`'s `From` in
+//! `service::command`): a rule that refused is the caller's to hear about (409), a journal
+//! or state folder that cannot be written is the service's fault (503, 500), never reported
+//! as a refusal.
 
 /// What went wrong on a machine's write path.
 #[derive(Debug, thiserror::Error)]

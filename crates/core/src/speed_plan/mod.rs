@@ -21,6 +21,7 @@
 
 mod check;
 pub mod guard;
+pub mod knots;
 pub mod plot;
 pub mod profile;
 pub mod render;
@@ -161,9 +162,35 @@ const ACCEL_MARGIN: f64 = 0.98;
 const JERK_ACCEPT: f64 = 0.98;
 /// Rounds of lowering before the plan falls back to constant speed.
 const MAX_ROUNDS: usize = 40;
-/// Control points of the time law per revolution: one per 0.5° on average, so the law's
+/// Most control points of the time law per revolution: one per 0.5° on average, so the law's
 /// averaging spans about 2° of the profile.
 pub const LAW_POINTS: usize = 720;
+/// Shortest piece of the time law, s: the control's shortest interpolation cycle (0.5 ms).
+/// A piece shorter than a cycle holds detail the control cannot run, and the B-spline's jerk
+/// (its acceleration's change over about two pieces) grows as the pieces shorten: with 720
+/// pieces in a 0.21 s revolution (0.29 ms each) the X jerk where C's acceleration turns was
+/// 2.4 times its limit, and lowering the speed round it until it held cost 12 % of the
+/// revolution. At 0.5 ms the jerk is within reach of one lowering round.
+pub const MIN_PIECE_S: f64 = 1e-3;
+/// Fewest control points of the time law per revolution.
+const MIN_LAW_POINTS: usize = 36;
+
+/// Control points of the time law of a revolution of `period_s`: as many as [`LAW_POINTS`]
+/// allows with no piece shorter than [`MIN_PIECE_S`], and a count that divides 3 600 000, so
+/// every knot of VA (360°/count) is exact in the table's four decimals (a rounded knot would
+/// change a piece's length, and with it the speed, by up to 1e-4 of the piece's own speed).
+pub fn law_points(period_s: f64) -> usize {
+    let most = (period_s / MIN_PIECE_S).floor();
+    let most = if most.is_finite() {
+        most as usize
+    } else {
+        LAW_POINTS
+    };
+    (MIN_LAW_POINTS..=most.clamp(MIN_LAW_POINTS, LAW_POINTS))
+        .rev()
+        .find(|m| 3_600_000 % m == 0)
+        .unwrap_or(MIN_LAW_POINTS)
+}
 /// Half-width of the stretch lowered round a violation, grid nodes (3°).
 const LOWER_HALF_WIDTH: usize = 30;
 
@@ -212,9 +239,10 @@ pub fn plan_samples(samples: &ProfileSamples, limits: &SpeedLimits) -> SpeedPlan
             break;
         };
         let points = evaluate(samples, limits, &law);
+        let room = Room::of(limits, law.step_s());
         let worst = points
             .iter()
-            .flat_map(|p| Constraint::ALL.map(|c| accepted_usage(c, p.usage[c as usize])))
+            .flat_map(|p| Constraint::ALL.map(|c| room.accepted(c, p.usage[c as usize])))
             .fold(0.0, f64::max);
         if worst <= 1.0 {
             if law.period_s() >= constant.revolution_s {
@@ -228,7 +256,7 @@ pub fn plan_samples(samples: &ProfileSamples, limits: &SpeedLimits) -> SpeedPlan
                 rounds: round,
             };
         }
-        lower_where_exceeded(&points, &mut omega_cap, &mut accel_scale);
+        lower_where_exceeded(&points, &room, &mut omega_cap, &mut accel_scale);
     }
     constant_plan(constant)
 }
@@ -266,7 +294,7 @@ pub fn phase_problem(
     topp::PhaseProblem { step_rad, nodes }
 }
 
-/// The time law of the profile: its C at `LAW_POINTS` equal time steps as the B-spline's
+/// The time law of the profile: its C at [`law_points`] equal time steps as the B-spline's
 /// control points. On each grid interval ω² is linear in C, so α is constant there and C(t)
 /// is a parabola, evaluated exactly. None when the profile stops somewhere (zero speed: no
 /// finite revolution).
@@ -286,10 +314,11 @@ fn time_law_of(b: &[f64], step_rad: f64) -> Option<TimeLaw> {
     if !period.is_finite() {
         return None;
     }
+    let points = law_points(period);
     let mut i = 0;
-    let c: Vec<f64> = (0..LAW_POINTS)
+    let c: Vec<f64> = (0..points)
         .map(|k| {
-            let tk = period * k as f64 / LAW_POINTS as f64;
+            let tk = period * k as f64 / points as f64;
             while i + 1 < n && t[i + 1] <= tk {
                 i += 1;
             }
@@ -304,14 +333,22 @@ fn time_law_of(b: &[f64], step_rad: f64) -> Option<TimeLaw> {
 
 /// Lowers the speed cap and the acceleration bounds round every grid node where a limit is
 /// exceeded: the cap to the speed there times the usage's own root (a speed limit scales with
-/// ω, an acceleration with ω², jerk with ω³), 1 % more, and for accelerations and jerk the
-/// acceleration bounds by the usage, 3 % more.
-fn lower_where_exceeded(points: &[PlanPoint], omega_cap: &mut [f64], accel_scale: &mut [f64]) {
+/// ω, an acceleration with ω², jerk with ω³), 1 % more (0.5 % for an acceleration), and for
+/// accelerations and jerk the acceleration bounds by the usage, 1.5 % more (accelerations)
+/// or 3 % (jerk). An acceleration is lowered less than before the rounding's room was kept
+/// (1 % and 3 %): it is now mostly exceeded by a fraction of a percent, and lowering it 3 %
+/// round ±3° cost 0.3 % of the X-bound revolution.
+fn lower_where_exceeded(
+    points: &[PlanPoint],
+    room: &Room,
+    omega_cap: &mut [f64],
+    accel_scale: &mut [f64],
+) {
     let n = points.len();
     let accel_before = accel_scale.to_vec();
     for (i, p) in points.iter().enumerate() {
         for c in Constraint::ALL {
-            let u = accepted_usage(c, p.usage[c as usize]);
+            let u = room.accepted(c, p.usage[c as usize]);
             if u <= 1.0 {
                 continue;
             }
@@ -320,7 +357,7 @@ fn lower_where_exceeded(points: &[PlanPoint], omega_cap: &mut [f64], accel_scale
                     (0.99 / u, 1.0)
                 }
                 Constraint::XAcceleration | Constraint::CAcceleration => {
-                    (0.99 / u.sqrt(), 0.97 / u)
+                    (0.995 / u.sqrt(), 0.985 / u)
                 }
                 Constraint::XJerk => (0.99 / u.cbrt(), 0.97 / u),
             };
@@ -334,14 +371,45 @@ fn lower_where_exceeded(points: &[PlanPoint], omega_cap: &mut [f64], accel_scale
     }
 }
 
-/// Usage as the acceptance test sees it: the jerk, checked at the grid angles only while it
-/// varies between them by up to about 1 % of its limit (through X‴ and the C jerk's steps at
-/// the law's knots), must stay within 98 % there.
-fn accepted_usage(c: Constraint, usage: f64) -> f64 {
-    if c == Constraint::XJerk {
-        usage / JERK_ACCEPT
-    } else {
-        usage
+/// The share of each acceleration limit left for the rounding of the written tables: the
+/// knot values are written to [`WRITTEN_RESOLUTION`], the control takes each segment's slope
+/// from them, and a slope step s at a joint shows as s/Δ in the acceleration sampled at an
+/// interpolation cycle Δ. With the knots chosen up or down so the steps are smallest
+/// ([`knots::knot_values`]), the steps stay within about one resolution step per piece
+/// (q/h for a piece of h seconds), so the plan keeps q/(h·Δ) free at the shortest cycle,
+/// [`SHORTEST_CYCLE_S`]: on the demo intake lobe (h = 1.67 ms) 120 °/s², 3.3 % of its
+/// C acceleration limit; where the X axis binds (h = 1.05 ms) 1.9 % of X's.
+struct Room {
+    x_accel: f64,
+    c_accel: f64,
+}
+
+/// Resolution of the values a speed-plan table writes: four decimals of mm and degrees (the
+/// tables' default and the CLI's, a control with `INT_INCR_PER_MM` = 10 000).
+pub const WRITTEN_RESOLUTION: f64 = 1e-4;
+/// The shortest interpolation cycle the written tables are checked at, s.
+pub const SHORTEST_CYCLE_S: f64 = 0.5e-3;
+
+impl Room {
+    fn of(limits: &SpeedLimits, piece_s: f64) -> Self {
+        let rounding = WRITTEN_RESOLUTION / (piece_s * SHORTEST_CYCLE_S);
+        Self {
+            x_accel: (rounding / limits.x_acceleration_mm_s2).min(0.5),
+            c_accel: (rounding / limits.c_max_accel_deg_s2).min(0.5),
+        }
+    }
+
+    /// Usage as the acceptance test sees it: accelerations with the rounding's share kept
+    /// free; the jerk, checked at the grid angles only while it varies between them by up
+    /// to about 1 % of its limit (through X‴ and the C jerk's steps at the law's knots),
+    /// within 98 % there.
+    fn accepted(&self, c: Constraint, usage: f64) -> f64 {
+        match c {
+            Constraint::XJerk => usage / JERK_ACCEPT,
+            Constraint::XAcceleration => usage / (1.0 - self.x_accel),
+            Constraint::CAcceleration => usage / (1.0 - self.c_accel),
+            _ => usage,
+        }
     }
 }
 
@@ -349,7 +417,7 @@ fn accepted_usage(c: Constraint, usage: f64) -> f64 {
 fn constant_plan(constant: ConstantSpeed) -> SpeedPlan {
     SpeedPlan {
         points: constant.points.clone(),
-        law: TimeLaw::constant(constant.revolution_s, LAW_POINTS),
+        law: TimeLaw::constant(constant.revolution_s, law_points(constant.revolution_s)),
         constant,
         is_constant: true,
         rounds: MAX_ROUNDS,

@@ -11,6 +11,7 @@
 //! is traced the same way. Run by the simulated control, the simulated cell and delivered by
 //! the service with `[speed_plan] enabled = true`.
 
+use super::knots::knot_values;
 use super::tables::VaTables;
 use crate::program::{
     Provenance, fmt_fixed, provenance_lines, validate_axis_name, validate_program_name,
@@ -181,7 +182,8 @@ fn printable(text: &str) -> bool {
 
 /// One periodic POLY table: the first point as `G1`, then each segment's end with its
 /// quadratic and cubic coefficients; the last closes at the first VA + 360° with the first
-/// value plus `close_gain` (0 for X, 360° for C).
+/// value plus `close_gain` (0 for X, 360° for C). The knot values are rounded up or down so
+/// that the slope steps the rounding leaves at the joints are smallest ([`knot_values`]).
 fn poly_table(
     o: &mut String,
     segments: &[PolySegment],
@@ -194,18 +196,22 @@ fn poly_table(
     let Some(first) = segments.first() else {
         return;
     };
+    let starts: Vec<f64> = segments.iter().map(|s| s.x0_mm).collect();
+    let lengths: Vec<f64> = segments
+        .iter()
+        .map(|s| s.c_end_deg - s.c_start_deg)
+        .collect();
+    let knots = knot_values(&starts, &lengths, decimals);
     let _ = writeln!(o, "CTABDEF({following},{leading},{number},{periodicity})");
     let _ = writeln!(
         o,
         "G1 {leading}={} {following}={}",
         fmt_fixed(first.c_start_deg, 4),
-        fmt_fixed(first.x0_mm, decimals)
+        fmt_fixed(knots[0], decimals)
     );
     o.push_str("POLY\n");
     for (i, seg) in segments.iter().enumerate() {
-        let end = segments
-            .get(i + 1)
-            .map_or(first.x0_mm + close_gain, |next| next.x0_mm);
+        let end = knots.get(i + 1).map_or(knots[0] + close_gain, |&next| next);
         let _ = writeln!(
             o,
             "PO[{leading}]=({}) PO[{following}]=({},{},{})",
