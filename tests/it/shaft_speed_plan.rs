@@ -220,7 +220,9 @@ async fn a_rollback_with_the_plan_makes_the_two_tables_again() {
             .map(str::to_string)
             .collect()
     };
-    assert!(blocks(&v1).len() > 1000, "{v1}");
+    // Both tables: 400 pieces each on the demo lobe (3 ms pieces, see the planner's
+    // `shortest_piece_s`), X's refined where it strays.
+    assert!(blocks(&v1).len() > 800, "{v1}");
     assert_eq!(blocks(&share), blocks(&v1));
     for line in [
         "; table version: v5",

@@ -390,11 +390,16 @@ fn the_virtual_axis_tables_run_the_plan() {
     let limits = demo_limits();
     let plan = speed_plan::plan(&part, &limits).unwrap();
     let tables = speed_plan::tables::va_tables(&part, &plan.law, 0.1).unwrap();
-    assert_eq!(tables.c_segments.len(), speed_plan::LAW_POINTS);
+    // One segment per piece of the law: no piece shorter than the demo's C acceleration
+    // limit allows (2.8 ms, see `shortest_piece_s`), and a count whose VA knots are exact.
+    let pieces = plan.law.pieces();
+    assert_eq!(tables.c_segments.len(), pieces);
+    assert!(plan.revolution_s() / pieces as f64 >= speed_plan::shortest_piece_s(&limits));
+    assert_eq!(3_600_000 % pieces, 0);
     for (k, s) in tables.c_segments.iter().enumerate() {
         let u = 0.37;
         let table_c = s.x0_mm + u * (s.a1_mm + u * (s.a2_mm + u * s.a3_mm));
-        let t = (k as f64 + u) / speed_plan::LAW_POINTS as f64 * plan.revolution_s();
+        let t = (k as f64 + u) / pieces as f64 * plan.revolution_s();
         let law_c = plan.law.at(t).c_rad.to_degrees();
         assert!(
             (table_c - law_c).abs() < 1e-9,
@@ -490,7 +495,7 @@ fn the_table_program_text_holds_the_plan() {
             ("C".into(), "VA".into(), 17, "2".into())
         ]
     );
-    assert_eq!(blocks[1].len(), speed_plan::LAW_POINTS);
+    assert_eq!(blocks[1].len(), plan.law.pieces());
     assert!((blocks[1].last().unwrap().0 - 360.0).abs() < 1e-9);
 }
 

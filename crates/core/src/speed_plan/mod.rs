@@ -165,22 +165,34 @@ const MAX_ROUNDS: usize = 40;
 /// Most control points of the time law per revolution: one per 0.5° on average, so the law's
 /// averaging spans about 2° of the profile.
 pub const LAW_POINTS: usize = 720;
-/// Shortest piece of the time law, s: the control's shortest interpolation cycle (0.5 ms).
-/// A piece shorter than a cycle holds detail the control cannot run, and the B-spline's jerk
-/// (its acceleration's change over about two pieces) grows as the pieces shorten: with 720
-/// pieces in a 0.21 s revolution (0.29 ms each) the X jerk where C's acceleration turns was
-/// 2.4 times its limit, and lowering the speed round it until it held cost 12 % of the
-/// revolution. At 0.5 ms the jerk is within reach of one lowering round.
+/// Shortest piece of the time law, s, whatever the limits. A piece shorter than the
+/// control's interpolation cycle (0.5–2 ms) holds detail the control cannot run, and the
+/// B-spline's jerk (its acceleration's change over about two pieces) grows as the pieces
+/// shorten: with 720 pieces in a 0.21 s revolution (0.29 ms each) the X jerk where C's
+/// acceleration turns was 2.4 times its limit, and lowering the speed round it until it
+/// held cost 12 % of the revolution. At 1 ms it holds at once.
 pub const MIN_PIECE_S: f64 = 1e-3;
+/// Largest share of an acceleration limit the rounding of the written tables may take
+/// (see [`Room`]); the pieces are made long enough for it.
+const ROOM_SHARE: f64 = 0.02;
 /// Fewest control points of the time law per revolution.
 const MIN_LAW_POINTS: usize = 36;
 
+/// Shortest piece of the time law under `limits`, s: [`MIN_PIECE_S`], or longer where the
+/// rounding of the written tables would otherwise take more than [`ROOM_SHARE`] of an
+/// acceleration limit (q/(h·Δ) ≤ share·a, so h ≥ q/(share·Δ·a)): 2.8 ms under the demo's
+/// 3600 °/s² for C, 5 ms under 2000 mm/s² for X.
+pub fn shortest_piece_s(limits: &SpeedLimits) -> f64 {
+    let a = limits.x_acceleration_mm_s2.min(limits.c_max_accel_deg_s2);
+    MIN_PIECE_S.max(WRITTEN_RESOLUTION / (ROOM_SHARE * SHORTEST_CYCLE_S * a))
+}
+
 /// Control points of the time law of a revolution of `period_s`: as many as [`LAW_POINTS`]
-/// allows with no piece shorter than [`MIN_PIECE_S`], and a count that divides 3 600 000, so
+/// allows with no piece shorter than `shortest_s`, and a count that divides 3 600 000, so
 /// every knot of VA (360°/count) is exact in the table's four decimals (a rounded knot would
 /// change a piece's length, and with it the speed, by up to 1e-4 of the piece's own speed).
-pub fn law_points(period_s: f64) -> usize {
-    let most = (period_s / MIN_PIECE_S).floor();
+pub fn law_points(period_s: f64, shortest_s: f64) -> usize {
+    let most = (period_s / shortest_s).floor();
     let most = if most.is_finite() {
         most as usize
     } else {
@@ -191,6 +203,7 @@ pub fn law_points(period_s: f64) -> usize {
         .find(|m| 3_600_000 % m == 0)
         .unwrap_or(MIN_LAW_POINTS)
 }
+
 /// Half-width of the stretch lowered round a violation, grid nodes (3°).
 const LOWER_HALF_WIDTH: usize = 30;
 
@@ -235,7 +248,7 @@ pub fn plan_samples(samples: &ProfileSamples, limits: &SpeedLimits) -> SpeedPlan
     for round in 1..=MAX_ROUNDS {
         let problem = phase_problem(samples, limits, &omega_cap, &accel_scale, 1);
         let b = topp::time_optimal_profile(&problem);
-        let Some(law) = time_law_of(&b, problem.step_rad) else {
+        let Some(law) = time_law_of(&b, problem.step_rad, shortest_piece_s(limits)) else {
             break;
         };
         let points = evaluate(samples, limits, &law);
@@ -298,7 +311,7 @@ pub fn phase_problem(
 /// control points. On each grid interval ω² is linear in C, so α is constant there and C(t)
 /// is a parabola, evaluated exactly. None when the profile stops somewhere (zero speed: no
 /// finite revolution).
-fn time_law_of(b: &[f64], step_rad: f64) -> Option<TimeLaw> {
+fn time_law_of(b: &[f64], step_rad: f64, shortest_s: f64) -> Option<TimeLaw> {
     let n = b.len();
     let omega: Vec<f64> = b.iter().map(|v| v.max(0.0).sqrt()).collect();
     let mut t = Vec::with_capacity(n + 1);
@@ -314,7 +327,7 @@ fn time_law_of(b: &[f64], step_rad: f64) -> Option<TimeLaw> {
     if !period.is_finite() {
         return None;
     }
-    let points = law_points(period);
+    let points = law_points(period, shortest_s);
     let mut i = 0;
     let c: Vec<f64> = (0..points)
         .map(|k| {
@@ -417,7 +430,7 @@ impl Room {
 fn constant_plan(constant: ConstantSpeed) -> SpeedPlan {
     SpeedPlan {
         points: constant.points.clone(),
-        law: TimeLaw::constant(constant.revolution_s, law_points(constant.revolution_s)),
+        law: TimeLaw::constant(constant.revolution_s, LAW_POINTS),
         constant,
         is_constant: true,
         rounds: MAX_ROUNDS,
