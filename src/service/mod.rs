@@ -3,6 +3,7 @@
 //! graceful shutdown on SIGINT/SIGTERM that lets every machine finish the part in hand.
 
 mod access_setup;
+pub(crate) mod action;
 mod cluster_task;
 pub(crate) mod command;
 mod drop_source;
