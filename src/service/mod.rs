@@ -3,6 +3,7 @@
 //! graceful shutdown on SIGINT/SIGTERM that lets every machine finish the part in hand.
 
 mod access_setup;
+pub(crate) mod action;
 mod cluster_task;
 pub(crate) mod command;
 mod drop_source;
@@ -13,6 +14,7 @@ pub mod machine;
 pub mod metrics;
 pub mod mqtt;
 pub mod opcua;
+pub mod plant;
 pub(crate) mod runner;
 pub mod sim_source;
 mod sources;
@@ -151,7 +153,7 @@ pub(crate) async fn start_checked(
         metrics: metrics.clone(),
         shutdown: shutdown_rx.clone(),
         parts: options.parts,
-        plant_events: mqtt::EventSender::joined(
+        plant_events: plant::EventSender::joined(
             publisher.as_ref().map(mqtt::Publisher::sender),
             opcua_events,
         ),
@@ -261,7 +263,7 @@ struct Shared {
     shutdown: watch::Receiver<bool>,
     parts: Option<u64>,
     /// Where the loops send plant events (MQTT), when enabled.
-    plant_events: Option<mqtt::EventSender>,
+    plant_events: Option<plant::EventSender>,
 }
 
 /// This instance's machines: all of them, or those a cluster gives it.

@@ -8,9 +8,10 @@ use std::path::Path;
 use crate::mqtt_support::{DEADLINE, Message, mosquitto, root_user_line, stop, subscribe};
 use crate::process_support::{KillOnDrop, free_port};
 use camloop::config::{Config, MqttSection};
-use camloop::service::mqtt::{PlantEvent, Progress, Publisher};
+use camloop::service::mqtt::{Progress, Publisher};
 use camloop::service::{self, RunOptions};
 use camloop::store::Verdict;
+use camloop_loop::PlantEvent;
 use rumqttc::MqttOptions;
 use tokio::sync::{mpsc, watch};
 
@@ -115,6 +116,7 @@ fn part(n: u32) -> PlantEvent {
         base_radius_error_um: -0.25,
         phase_error_deg: 0.01,
         ground_with_version: u64::from(n),
+        repeatability_um: None,
     }
 }
 

@@ -13,8 +13,9 @@ use std::time::Duration;
 
 use crate::mqtt_support::{DEADLINE, Message, mosquitto, root_user_line, subscribe};
 use camloop::config::{MqttSection, Secret};
-use camloop::service::mqtt::{PlantEvent, Publisher};
+use camloop::service::mqtt::Publisher;
 use camloop::store::Verdict;
+use camloop_loop::PlantEvent;
 use process_support::{KillOnDrop, camloop_run, free_port};
 use rumqttc::{AsyncClient, ConnectionError, MqttOptions};
 use rumqttc::{TlsConfiguration, Transport};
@@ -162,6 +163,7 @@ async fn a_wrong_password_is_refused_and_the_right_one_delivers_over_tls() {
         base_radius_error_um: 0.0,
         phase_error_deg: 0.0,
         ground_with_version: 2,
+        repeatability_um: None,
     });
     assert_eq!(
         next_on(&mut rx, "plant/camloop-tls/status").await.0,

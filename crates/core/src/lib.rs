@@ -15,6 +15,7 @@ pub mod geometry;
 pub mod harmonics;
 pub mod ids;
 pub mod learn;
+pub mod levels;
 pub mod lift;
 pub mod measure;
 pub mod names;

@@ -9,3 +9,7 @@ pub use camloop_core::names::{FeatureName, MachineName};
 pub mod command;
 
 pub use command::{CommandError, CommandOutcome, MachineCommand};
+pub mod event;
+pub mod unix_ms;
+
+pub use event::{MACHINE_LEVEL, PlantEvent};

@@ -270,3 +270,10 @@ pub(crate) fn db_error_at<'a>(
 pub(crate) fn db_error(operation: &'static str) -> impl Fn(sqlx::Error) -> StoreError {
     move |e| db_error_at("the database", operation)(e)
 }
+
+impl From<camloop_core::levels::UnknownValue> for StoreError {
+    /// A stored text that names no variant: the column's value is invalid.
+    fn from(e: camloop_core::levels::UnknownValue) -> Self {
+        StoreError::invalid(e.field, format!("unknown value `{}`", e.text))
+    }
+}

@@ -55,10 +55,9 @@ macro_rules! text_enum {
     };
 }
 
-text_enum!(
-    /// Whether a measured lobe or pin was within tolerance.
-    Verdict, "verdict" { Pass, Fail }
-);
+/// Whether a part passed and how serious an event is: the core's, so the loop's plant events
+/// carry the same words.
+pub use camloop_core::levels::{EventLevel, Verdict};
 /// Where a table version stands, from its write-ahead record to the share's verdict: the one
 /// status of a version, for the share's manifest (this tagged JSON) and the store alike.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -82,10 +81,6 @@ pub enum VersionStatus {
     Superseded { by: u64 },
 }
 
-text_enum!(
-    /// Severity of an event; `Error` means an operator must act.
-    EventLevel, "event level" { Info, Warn, Error }
-);
 /// What an event is about; stored as its snake_case name (serde, strum and the database
 /// spell it alike, as the journal did when it was text in the store).
 #[derive(

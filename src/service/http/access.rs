@@ -85,6 +85,15 @@ impl Principal {
         self.address.to_string()
     }
 
+    /// This caller as the service's write path knows callers.
+    pub(crate) fn caller(&self) -> crate::service::command::Caller {
+        crate::service::command::Caller {
+            actor: self.actor.clone(),
+            role: self.role,
+            client: self.client(),
+        }
+    }
+
     /// An audit entry by this caller now; the caller fills the target and change.
     pub fn audit(&self, action: &str, result: AuditResult, reason: String) -> AuditEntry {
         AuditEntry {

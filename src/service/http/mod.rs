@@ -35,7 +35,6 @@ mod writes;
 
 pub use access::{AuthState, Principal, ROUTES, RouteRule};
 pub use api::{ApiError, ApiJson, ApiPath, ApiQuery, Authorized};
-pub(crate) use api::{feature_name, machine_name};
 pub use audit::record as record_audit;
 pub use code::ApiCode;
 pub use dashboard::{FeatureSheet, FeatureSheets, Stopping};
@@ -44,11 +43,9 @@ pub use routes::{LobeInfo, MachineInfo, MachinesReply};
 pub use server::{HttpLimits, serve, serve_with};
 pub use tls::{Tls, self_signed};
 pub use writes::{CommandReply, command_code};
-// The writes and sign-in checks the OPC UA server goes through as well.
-pub(crate) use access::{Via, failed as auth_failed, locked as auth_locked};
-pub(crate) use dashboard::ack as ack_write;
+// The sign-in checks the OPC UA server goes through as well.
+pub(crate) use access::{failed as auth_failed, locked as auth_locked};
 pub(crate) use session::check_password;
-pub(crate) use writes::{RollbackBody, rollback as rollback_write};
 
 use super::machine::StoreHandle;
 use super::metrics::Metrics;
@@ -76,6 +73,18 @@ pub struct AppState {
     pub dashboard: FeatureSheets,
     /// In a cluster: the leases, for `GET /api/v1/cluster`.
     pub cluster: Option<crate::cluster::Leases>,
+}
+
+impl AppState {
+    /// What the service's write path needs of this state.
+    pub(crate) fn writes(&self) -> crate::service::command::Writes<'_> {
+        crate::service::command::Writes {
+            store: &self.store,
+            metrics: &self.metrics,
+            machines: &self.machines,
+            routes: &self.commands,
+        }
+    }
 }
 
 pub fn router(state: AppState) -> Router {

@@ -307,7 +307,9 @@ pub(super) async fn history(
     }
     let verdict = match q.verdict.as_deref() {
         None => None,
-        Some(v) => Some(Verdict::parse(v).map_err(ApiError::from)?),
+        Some(v) => {
+            Some(Verdict::parse(v).map_err(|e| ApiError::from(crate::store::StoreError::from(e)))?)
+        }
     };
     let filter = HistoryFilter {
         machine,

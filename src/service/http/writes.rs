@@ -1,14 +1,14 @@
-//! The write requests: rollback and dressing. The access layer has checked the caller's role
-//! (from the headers, before the body is read); each checks the machine and lobe, then hands
-//! a [`Command`] to the machine's loop, which owns the loop state, so a write never races a
-//! part. Every write that reaches a machine is audited with its outcome.
+//! The write requests: rollback, freezing learning, dressing. The access layer has checked
+//! the caller's role (from the headers, before the body is read); each checks the machine,
+//! lobe and values, then goes the service's write path (`service::command::write`, the one
+//! OPC UA takes too), which hands the command to the machine's loop and audits it.
 
 use super::AppState;
 use super::access::Principal;
 use super::api::{ApiError, ApiJson, ApiPath, feature_name};
 use crate::names::{FeatureName, MachineName};
+use crate::service::command::{self, WriteError};
 use crate::service::http::ApiCode;
-use crate::store::AuditResult;
 use axum::Json;
 use axum::extract::State;
 use camloop_loop::{CommandError, CommandOutcome, MachineCommand, TableVersion};
@@ -43,7 +43,7 @@ pub(crate) struct RollbackBody {
 
 /// Deliver a stored table version again (as a new version, under the table number not in use).
 #[utoipa::path(post, path = "/api/v1/machines/{machine}/lobes/{lobe}/rollback", tag = "writes", params(("machine" = String, Path, description = "machine name"), ("lobe" = String, Path, description = "lobe or pin name")), request_body = RollbackBody, responses((status = 200, description = "delivered as a new version", body = CommandReply)))]
-pub(crate) async fn rollback(
+pub(super) async fn rollback(
     p: Principal,
     State(state): State<AppState>,
     ApiPath((machine, lobe)): ApiPath<(MachineName, FeatureName)>,
@@ -62,58 +62,9 @@ pub(crate) async fn rollback(
     }
     let version = TableVersion::from_i64(body.version)
         .map_err(|_| ApiError::new(ApiCode::InvalidVersion, "version must be ≥ 1".into()))?;
-    let before = in_force(&state, &machine, std::slice::from_ref(&lobe));
-    let mut entry = p.audit("rollback", AuditResult::Ok, String::new());
-    entry.machine = Some(machine.to_string());
-    entry.feature = Some(lobe.to_string());
-    entry.version = Some(version.to_i64());
-    entry.before = Some(before);
-    let rollback = MachineCommand::Rollback {
-        lobe: lobe.clone(),
-        version,
-    };
-    let done = command(&state, &machine, ApiCode::RollbackRefused, rollback).await;
-    audited(&state, entry, &done, || {
-        in_force(&state, &machine, std::slice::from_ref(&lobe))
-    })
-    .await;
-    Ok(Json(done?.into()))
-}
-
-/// The table versions on the control of `features` of `machine`, as JSON.
-fn in_force(state: &AppState, machine: &MachineName, features: &[FeatureName]) -> String {
-    let statuses = state.metrics.features();
-    let versions: std::collections::BTreeMap<&str, i64> = features
-        .iter()
-        .filter_map(|f| {
-            let s = statuses.get(&(machine.clone(), f.clone()))?;
-            Some((f.as_str(), i64::try_from(s.in_force_version).ok()?))
-        })
-        .collect();
-    serde_json::json!({ "in_force": versions }).to_string()
-}
-
-/// Appends the audit row of a write that reached the machine's loop, with its outcome.
-async fn audited(
-    state: &AppState,
-    mut entry: crate::store::AuditEntry,
-    done: &Result<CommandOutcome, ApiError>,
-    after: impl FnOnce() -> String,
-) {
-    match done {
-        Ok(d) => {
-            entry.reason = d.message.clone();
-            entry.after = Some(after());
-        }
-        Err(e) => {
-            entry.result = match e.status().is_server_error() {
-                true => AuditResult::Failed,
-                false => AuditResult::Refused,
-            };
-            entry.reason = format!("{}: {}", e.code(), e.message());
-        }
-    }
-    super::audit::record(state, entry).await;
+    let rollback = MachineCommand::Rollback { lobe, version };
+    let done = command::write(state.writes(), &p.caller(), &machine, rollback).await;
+    Ok(Json(done.map_err(write_error)?.into()))
 }
 
 #[derive(Debug, Deserialize)]
@@ -158,22 +109,9 @@ pub(super) async fn rollback_part(
         };
         versions.push((lobe, v));
     }
-    let features: Vec<FeatureName> = versions.iter().map(|(f, _)| f.clone()).collect();
-    let mut entry = p.audit("rollback_part", AuditResult::Ok, String::new());
-    entry.machine = Some(machine.to_string());
-    entry.before = Some(in_force(&state, &machine, &features));
-    let asked: std::collections::BTreeMap<&str, u64> = versions
-        .iter()
-        .map(|(f, v)| (f.as_str(), v.get()))
-        .collect();
-    entry.reason = serde_json::json!({ "to": asked }).to_string();
     let rollback = MachineCommand::RollbackPart { versions };
-    let done = command(&state, &machine, ApiCode::RollbackRefused, rollback).await;
-    audited(&state, entry, &done, || {
-        in_force(&state, &machine, &features)
-    })
-    .await;
-    Ok(Json(done?.into()))
+    let done = command::write(state.writes(), &p.caller(), &machine, rollback).await;
+    Ok(Json(done.map_err(write_error)?.into()))
 }
 
 #[derive(Debug, Deserialize)]
@@ -217,29 +155,9 @@ pub(super) async fn freeze(
         true => format!("frozen by {}", p.actor),
         false => format!("frozen by {}: {reason}", p.actor),
     });
-    let status = |s: &AppState| {
-        let f = s.metrics.features();
-        let now = f
-            .get(&(machine.clone(), lobe.clone()))
-            .and_then(|f| f.frozen.clone());
-        serde_json::json!({ "frozen": now }).to_string()
-    };
-    let action = if body.frozen {
-        "learning.freeze"
-    } else {
-        "learning.resume"
-    };
-    let mut entry = p.audit(action, AuditResult::Ok, String::new());
-    entry.machine = Some(machine.to_string());
-    entry.feature = Some(lobe.to_string());
-    entry.before = Some(status(&state));
-    let freeze = MachineCommand::Freeze {
-        lobe: lobe.clone(),
-        frozen,
-    };
-    let done = command(&state, &machine, ApiCode::FreezeRefused, freeze).await;
-    audited(&state, entry, &done, || status(&state)).await;
-    Ok(Json(done?.into()))
+    let freeze = MachineCommand::Freeze { lobe, frozen };
+    let done = command::write(state.writes(), &p.caller(), &machine, freeze).await;
+    Ok(Json(done.map_err(write_error)?.into()))
 }
 
 #[derive(Debug, Deserialize)]
@@ -269,25 +187,14 @@ pub(super) async fn dress(
         .map(crate::core::learn::check_dresser_infeed)
         .transpose()
         .map_err(|e| ApiError::new(ApiCode::InvalidInfeed, e.to_string()))?;
-    let mut entry = p.audit("dressing", AuditResult::Ok, String::new());
-    entry.machine = Some(machine.to_string());
-    let features = state.machines.get(&machine).cloned().unwrap_or_default();
-    entry.before = Some(in_force(&state, &machine, &features));
     let source = format!("api:{}", p.actor);
     let dressing = MachineCommand::Dressing {
         wheel_radius_mm: radius,
         infeed_um,
         source,
     };
-    let done = command(&state, &machine, ApiCode::DressingRefused, dressing).await;
-    audited(&state, entry, &done, || {
-        let mut after: serde_json::Value =
-            serde_json::from_str(&in_force(&state, &machine, &features)).unwrap_or_default();
-        after["wheel_radius_mm"] = serde_json::json!(radius);
-        after.to_string()
-    })
-    .await;
-    Ok(Json(done?.into()))
+    let done = command::write(state.writes(), &p.caller(), &machine, dressing).await;
+    Ok(Json(done.map_err(write_error)?.into()))
 }
 
 /// A machine of this service: one that is configured, else 404 (the name's rule was checked
@@ -303,47 +210,28 @@ fn configured(state: &AppState, machine: MachineName) -> Result<MachineName, Api
     }
 }
 
-/// Hands a write request to the machine's loop and waits for its answer; `refused` is the
-/// command's code for [`CommandError::Refused`].
-async fn command(
-    state: &AppState,
-    machine: &MachineName,
-    refused: ApiCode,
-    command: MachineCommand,
-) -> Result<CommandOutcome, ApiError> {
-    let stopped =
-        |what: &str| ApiError::new(ApiCode::MachineStopped, format!("machine {machine} {what}"));
-    let sender = state
-        .commands
-        .read()
-        .ok()
-        .and_then(|routes| routes.get(machine).cloned());
-    let sender = match sender {
-        Some(s) => s,
-        // Configured, but another instance of the cluster owns it now.
-        None if state.machines.contains_key(machine) => {
-            return Err(ApiError::new(
-                ApiCode::MachineElsewhere,
-                format!(
-                    "machine {machine} does not run on this instance now: another instance of the cluster holds it; ask that one"
-                ),
-            ));
-        }
-        None => {
-            return Err(ApiError::new(
-                ApiCode::MachineNotFound,
-                format!("machine {machine} is not configured"),
-            ));
-        }
+/// The API's error for a write the service did not carry out: the write path's own code
+/// and message.
+pub(crate) fn write_error(e: WriteError) -> ApiError {
+    let code = match &e {
+        WriteError::Forbidden { .. } => ApiCode::Forbidden,
+        WriteError::NotConfigured { .. } => ApiCode::MachineNotFound,
+        WriteError::NotGround { .. } => ApiCode::LobeNotFound,
+        WriteError::Elsewhere { .. } => ApiCode::MachineElsewhere,
+        WriteError::NotRunning { .. } | WriteError::Stopped { .. } => ApiCode::MachineStopped,
+        WriteError::Command { action, error } => command_code(error, refused_code(*action)),
     };
-    let (reply, answer) = tokio::sync::oneshot::channel();
-    sender
-        .send((command, reply))
-        .await
-        .map_err(|_| stopped("is not running"))?;
-    let result: Result<CommandOutcome, CommandError> =
-        answer.await.map_err(|_| stopped("stopped"))?;
-    result.map_err(|e| ApiError::new(command_code(&e, refused), e.to_string()))
+    ApiError::new(code, e.to_string())
+}
+
+/// The code of a command the machine's loop refused: the action's own.
+fn refused_code(action: crate::service::action::Action) -> ApiCode {
+    use crate::service::action::Action;
+    match action {
+        Action::FreezeLearning => ApiCode::FreezeRefused,
+        Action::ReportDressing => ApiCode::DressingRefused,
+        _ => ApiCode::RollbackRefused,
+    }
 }
 
 /// The stable code of a command's error (its HTTP status is the code's); `refused` is the
@@ -357,5 +245,78 @@ pub fn command_code(e: &CommandError, refused: ApiCode) -> ApiCode {
         CommandError::JournalUnavailable { .. } => ApiCode::JournalUnavailable,
         CommandError::ShareStateFailed { .. } => ApiCode::ShareStateFailed,
         CommandError::Elsewhere { .. } => ApiCode::MachineElsewhere,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::service::action::Action;
+
+    /// The write path's code (the audit trail keeps it) is the one the API answers with,
+    /// and a service fault is exactly a 5xx: the audit's `failed` or `refused` agrees with
+    /// the status.
+    #[test]
+    fn the_write_paths_codes_are_the_apis() {
+        let m: MachineName = "G7".parse().unwrap();
+        let f: FeatureName = "IN1".parse().unwrap();
+        let mut errors = vec![
+            WriteError::Forbidden {
+                needed: crate::store::Role::Engineer,
+                actor: "ann".into(),
+                role: None,
+            },
+            WriteError::NotConfigured { machine: m.clone() },
+            WriteError::NotGround {
+                machine: m.clone(),
+                feature: f.clone(),
+            },
+            WriteError::Elsewhere { machine: m.clone() },
+            WriteError::NotRunning { machine: m.clone() },
+            WriteError::Stopped { machine: m },
+        ];
+        let reason = String::from("x");
+        for action in [
+            Action::Rollback,
+            Action::FreezeLearning,
+            Action::ReportDressing,
+        ] {
+            for error in [
+                CommandError::VersionNotFound {
+                    lobe: f.clone(),
+                    version: TableVersion::FIRST,
+                },
+                CommandError::StoreUnavailable {
+                    reason: reason.clone(),
+                },
+                CommandError::Refused {
+                    reason: reason.clone(),
+                },
+                CommandError::Failed {
+                    reason: reason.clone(),
+                },
+                CommandError::JournalUnavailable {
+                    reason: reason.clone(),
+                },
+                CommandError::ShareStateFailed {
+                    reason: reason.clone(),
+                },
+                CommandError::Elsewhere {
+                    reason: reason.clone(),
+                },
+            ] {
+                errors.push(WriteError::Command { action, error });
+            }
+        }
+        for e in errors {
+            let api = write_error(e.clone());
+            assert_eq!(api.code().as_str(), e.code(), "{e:?}");
+            assert_eq!(
+                api.status().is_server_error(),
+                e.is_service_fault(),
+                "{e:?}"
+            );
+            assert_eq!(api.message(), e.to_string(), "{e:?}");
+        }
     }
 }

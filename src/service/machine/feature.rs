@@ -37,7 +37,7 @@ pub struct FeatureLoop {
     pub(super) last_line: Option<super::ingest::PartLine>,
     /// PLANT EVENTS HOOK (MQTT): set by the service after `start`; every record the journal
     /// takes is offered to it (never blocks).
-    pub(super) plant_events: Option<crate::service::mqtt::EventSender>,
+    pub(super) plant_events: Option<crate::service::plant::EventSender>,
     /// Wheel radius the program on the share was made for (the simulator reads it).
     pub(super) table_wheel_radius_bits: Arc<AtomicU64>,
     /// The disk-full alarm was raised and not yet cleared.

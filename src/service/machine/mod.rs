@@ -193,7 +193,7 @@ impl MachineLoop {
     }
 
     /// Where every feature's loop sends plant events (MQTT).
-    pub fn set_plant_events(&mut self, events: Option<crate::service::mqtt::EventSender>) {
+    pub fn set_plant_events(&mut self, events: Option<crate::service::plant::EventSender>) {
         for f in &mut self.features {
             f.plant_events = events.clone();
         }

@@ -1,6 +1,6 @@
 //! Events to the plant's MQTT broker (`[mqtt]`, off by default).
 //!
-//! The machine loops hand each journal record to an [`EventSender`] (never waiting: a full
+//! The machine loops hand each journal record to an `EventSender` (`service::plant`) (never waiting: a full
 //! intake counts the event as dropped); an intake task turns it into a [`PlantEvent`] on
 //! its topic `<prefix>/<machine>/<feature>/<event>` with its sequence number, plus the
 //! retained states it changed (`<prefix>/<machine>/<feature>/state`, see [`state`]), and
@@ -15,12 +15,10 @@
 //! connection is lost without that, e.g. when the process is killed. Credentials and TLS
 //! (rustls) come from `[mqtt]`.
 
-mod event;
 mod link;
 pub mod queue;
 pub mod state;
 
-pub use event::{MACHINE_LEVEL, PlantEvent};
 pub use link::MAX_BACKOFF;
 
 use std::path::Path;
@@ -35,58 +33,12 @@ use tokio_rustls::rustls;
 use tracing::warn;
 
 use crate::config::MqttSection;
-use crate::service::journal::Pending;
+use crate::service::plant::{EventSender, payload_with_seq};
+use camloop_loop::PlantEvent;
 use queue::{DiskQueue, Message};
 
 /// Events waiting for the intake task; beyond it an event is dropped (and counted).
 const INTAKE: usize = 4096;
-
-/// Where the machine loops send events. Cheap to clone; never blocks.
-#[derive(Debug, Clone)]
-pub struct EventSender {
-    tx: mpsc::Sender<PlantEvent>,
-    refused: Arc<AtomicU64>,
-    /// Another consumer of the same events (the OPC UA server), sent to first.
-    also: Option<Arc<EventSender>>,
-}
-
-impl EventSender {
-    /// A sender into `tx`, counting what a full channel refuses in `refused`.
-    pub(crate) fn new(tx: mpsc::Sender<PlantEvent>, refused: Arc<AtomicU64>) -> Self {
-        Self {
-            tx,
-            refused,
-            also: None,
-        }
-    }
-
-    /// One sender feeding both, or whichever there is.
-    pub(crate) fn joined(a: Option<Self>, b: Option<Self>) -> Option<Self> {
-        match (a, b) {
-            (Some(mut a), Some(b)) => {
-                a.also = Some(Arc::new(b));
-                Some(a)
-            }
-            (a, b) => a.or(b),
-        }
-    }
-
-    /// Queues the event of a journal record, if it announces one.
-    pub fn record(&self, record: &Pending) {
-        if let Some(event) = PlantEvent::from_pending(record) {
-            self.send(event);
-        }
-    }
-
-    pub fn send(&self, event: PlantEvent) {
-        if let Some(other) = &self.also {
-            other.send(event.clone());
-        }
-        if self.tx.try_send(event).is_err() {
-            self.refused.fetch_add(1, Ordering::Relaxed);
-        }
-    }
-}
 
 /// What the intake, the link and the owner share.
 /// What the publisher has done, published after every change (for tests and metrics).
@@ -335,7 +287,7 @@ async fn intake(
         }
         let message = Message {
             topic: event.topic(&prefix),
-            payload: event.payload_with_seq(seq),
+            payload: payload_with_seq(&event, seq),
             state_topic: None,
             states,
         };

@@ -15,9 +15,9 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::event::{MACHINE_LEVEL, PlantEvent};
 use crate::names::{FeatureName, MachineName};
 use crate::store::Verdict;
+use camloop_loop::{MACHINE_LEVEL, PlantEvent};
 
 /// State file name in the queue folder.
 pub(crate) const STATE_FILE: &str = "state.json";
@@ -170,7 +170,7 @@ fn feature_facts(s: &mut FeatureState, event: &PlantEvent) {
             }
         }
         PlantEvent::TableDelivered { version, .. } => {
-            s.version_in_force = Some(*version);
+            s.version_in_force = Some(version.get());
             s.alarms.remove("table_refused");
         }
         PlantEvent::TableRefused { .. } => {
@@ -196,6 +196,7 @@ mod tests {
             base_radius_error_um: 0.0,
             phase_error_deg: 0.0,
             ground_with_version: 3,
+            repeatability_um: None,
         }
     }
 
@@ -241,7 +242,7 @@ mod tests {
         let delivered = PlantEvent::TableDelivered {
             machine: "M1".parse().unwrap(),
             feature: "IN1".parse().unwrap(),
-            version: 7,
+            version: camloop_loop::TableVersion::new(7).unwrap(),
             at_ms: jiff::Timestamp::from_millisecond(11).unwrap(),
         };
         let (_, s) = state(&mut t, &delivered);

@@ -3,7 +3,7 @@
 //! values and OPC UA events. Runs on its own task: the loops only `try_send` into its
 //! channel, and the OPC UA stack drops or lags a slow client without ever waiting here.
 
-use crate::names::{FeatureName, MachineName};
+use crate::names::MachineName;
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
@@ -17,16 +17,13 @@ use tokio::sync::{mpsc, watch};
 use super::methods::date_time;
 use super::nodes::CamloopNodes;
 use super::space::{FeatureValue, Ids, MachineLayout};
-use crate::service::machine::StoreHandle;
 use crate::service::metrics::{FeatureStatus, Metrics};
-use crate::service::mqtt::PlantEvent;
+use crate::service::plant::payload;
+use camloop_loop::{MACHINE_LEVEL, PlantEvent};
 
 /// How often the feature status is compared with what the address space shows; with the
 /// event path (immediate) this bounds how stale a value can be.
 pub(crate) const REFRESH_EVERY: Duration = Duration::from_millis(250);
-
-/// Parts whose repeatability is looked up in the store; beyond it a lookup is skipped.
-const REPEATABILITY_QUEUE: usize = 1024;
 
 /// The feed's state: what the address space shows now.
 pub(crate) struct Feed {
@@ -40,7 +37,6 @@ pub(crate) struct Feed {
     journal_failing: HashMap<MachineName, bool>,
     event_seq: u64,
     started_ms: i64,
-    repeatability: Option<mpsc::Sender<(MachineName, FeatureName, String)>>,
 }
 
 impl Feed {
@@ -62,22 +58,7 @@ impl Feed {
             journal_failing: HashMap::new(),
             event_seq: 0,
             started_ms: crate::clock::now().as_millisecond(),
-            repeatability: None,
         }
-    }
-
-    /// Looks each part's repeatability up in `store` once it is there (off this task).
-    pub(crate) fn with_store(mut self, store: StoreHandle) -> Self {
-        let (tx, rx) = mpsc::channel(REPEATABILITY_QUEUE);
-        tokio::spawn(repeatability_task(
-            rx,
-            store,
-            self.manager.clone(),
-            self.subscriptions.clone(),
-            self.ids,
-        ));
-        self.repeatability = Some(tx);
-        self
     }
 
     /// Applies one plant event: its values now, and its OPC UA event.
@@ -92,6 +73,7 @@ impl Feed {
                 max_profile_error_um,
                 base_radius_error_um,
                 phase_error_deg,
+                repeatability_um,
                 ..
             } => {
                 let values = [
@@ -111,8 +93,12 @@ impl Feed {
                 for (v, value) in values {
                     self.stage(self.ids.value(&machine, feature, v), value, staged);
                 }
-                if let Some(tx) = &self.repeatability {
-                    let _ = tx.try_send((e.machine().clone(), feature.clone(), part.clone()));
+                // The gauge's repeatability comes with the part's event, typed.
+                if let Some(um) = repeatability_um {
+                    let id = self
+                        .ids
+                        .value(&machine, feature, FeatureValue::RepeatabilityUm);
+                    self.stage(id, Variant::from(*um), staged);
                 }
                 let message = serde_json::json!({
                     "part": part, "feature": feature, "verdict": verdict.as_str(),
@@ -128,7 +114,7 @@ impl Feed {
                 *n += 1;
                 let n = *n;
                 self.stage(self.ids.dressing_count(&machine), Variant::from(n), staged);
-                self.alarm(&machine, e.feature(), "dressing", 100, e.payload(), *at_ms);
+                self.alarm(&machine, e.feature(), "dressing", 100, payload(e), *at_ms);
             }
             other => {
                 let severity = match other {
@@ -149,7 +135,7 @@ impl Feed {
                     other.feature(),
                     &kind,
                     severity,
-                    other.payload(),
+                    payload(other),
                     other.at_ms(),
                 );
             }
@@ -214,14 +200,7 @@ impl Feed {
                 let at = crate::clock::now();
                 let text =
                     "the journal cannot be written (disk full?): records are not kept".to_string();
-                self.alarm(
-                    &m.name,
-                    crate::service::mqtt::MACHINE_LEVEL,
-                    "journal_failing",
-                    900,
-                    text,
-                    at,
-                );
+                self.alarm(&m.name, MACHINE_LEVEL, "journal_failing", 900, text, at);
             }
             self.stage(
                 self.ids.journal_failing(&m.name),
@@ -350,51 +329,4 @@ pub(crate) async fn run(
         }
         feed.publish(&mut staged);
     }
-}
-
-/// Sets each part's repeatability (the largest per-angle spread over the revolutions, µm)
-/// once its measurement is in the store; gives up on a part after 5 s.
-async fn repeatability_task(
-    mut rx: mpsc::Receiver<(MachineName, FeatureName, String)>,
-    store: StoreHandle,
-    manager: Arc<InMemoryNodeManager<CamloopNodes>>,
-    subscriptions: Arc<SubscriptionCache>,
-    ids: Ids,
-) {
-    while let Some((machine, feature, part)) = rx.recv().await {
-        for _ in 0..25 {
-            if let Some(um) = repeatability_of(&store, &machine, &feature, &part).await {
-                let id = ids.value(&machine, &feature, FeatureValue::RepeatabilityUm);
-                let _ = manager.set_value(&subscriptions, &id, None, DataValue::new_now(um));
-                break;
-            }
-            tokio::time::sleep(Duration::from_millis(200)).await;
-        }
-    }
-}
-
-async fn repeatability_of(
-    store: &StoreHandle,
-    machine: &MachineName,
-    feature: &FeatureName,
-    part: &str,
-) -> Option<f64> {
-    let s = store.read().await.clone()?;
-    let rows = s.part_measurements(machine, part).await.ok()?;
-    let row = rows.iter().rev().find(|r| r.lobe == *feature)?;
-    let detail = s.measurement(row.id).await.ok()??;
-    let json: serde_json::Value = serde_json::from_str(&detail.analysis_json).ok()?;
-    find_number(&json, "repeatability_max_um", 3)
-}
-
-/// The number under `key` at most `depth` objects down.
-fn find_number(v: &serde_json::Value, key: &str, depth: u32) -> Option<f64> {
-    let object = v.as_object()?;
-    if let Some(n) = object.get(key).and_then(serde_json::Value::as_f64) {
-        return Some(n);
-    }
-    if depth == 0 {
-        return None;
-    }
-    object.values().find_map(|x| find_number(x, key, depth - 1))
 }

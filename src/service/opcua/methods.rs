@@ -1,65 +1,66 @@
-//! The methods: `Rollback` and `AcknowledgeEvent` go through the HTTP API's own write
-//! handlers (same checks, same command to the machine's loop, same audit row), with the
-//! role the API route needs; `GetLatestResult` and `GetResultById` read the history store.
+//! The methods: `Rollback` and `AcknowledgeEvent` go the service's own write path (the
+//! same checks, command to the machine's loop and audit row as the HTTP API's writes), for
+//! the [`Action`] each is, with its role; `GetLatestResult` and `GetResultById` read the
+//! history store.
 
 use crate::names::{FeatureName, MachineName};
-use axum::extract::State;
 use opcua::types::{DateTime, StatusCode, Variant};
 use tracing::{info, warn};
 
 use super::auth::OPCUA_CLIENT;
 use super::space::Method;
-use crate::service::http::access::{Need, rule_for};
-use crate::service::http::{self, ApiError, ApiJson, ApiPath, AppState, Principal, Via};
-use crate::store::{HistoryFilter, MeasurementId, MeasurementSummary};
+use crate::service::action::Action;
+use crate::service::command::{self, AckError, Caller, WriteError};
+use crate::service::machine::StoreHandle;
+use crate::store::{AckOutcome, HistoryFilter, MeasurementId, MeasurementSummary, StoreError};
+use camloop_loop::{CommandError, MachineCommand, TableVersion};
 
-/// The route whose role a method needs: the HTTP route doing the same write.
-fn route(method: Method) -> Option<&'static str> {
+/// The action a method is, for the writes (reads need no role beyond the session's).
+fn action(method: Method) -> Option<Action> {
     match method {
-        Method::Rollback => Some("/api/v1/machines/{machine}/lobes/{lobe}/rollback"),
-        Method::AcknowledgeEvent => Some("/api/v1/machines/{machine}/events/{id}/ack"),
+        Method::Rollback => Some(Action::Rollback),
+        Method::AcknowledgeEvent => Some(Action::Acknowledge),
         Method::GetLatestResult | Method::GetResultById => None,
     }
 }
 
 /// The history store, or `BadResourceUnavailable` while the database is down.
-async fn store_of(app: &AppState) -> Result<crate::store::Store, StatusCode> {
-    app.store
+async fn store_of(store: &StoreHandle) -> Result<crate::store::Store, StatusCode> {
+    store
         .read()
         .await
         .clone()
         .ok_or(StatusCode::BadResourceUnavailable)
 }
 
-/// Who called, as the HTTP writes know callers: the user as stored now (a user disabled or
-/// demoted since sign-in is refused).
-async fn caller(app: &AppState, user: &str) -> Result<Principal, StatusCode> {
-    let store = store_of(app).await?;
+/// Who called, as the service's writes know callers: the user as stored now (a user
+/// disabled or demoted since sign-in is refused).
+async fn caller(w: command::Writes<'_>, user: &str) -> Result<Caller, StatusCode> {
+    let store = store_of(w.store).await?;
     let user = store
         .user(user)
         .await
         .map_err(|_| StatusCode::BadResourceUnavailable)?
         .filter(|u| u.disabled_at_ms.is_none())
         .ok_or(StatusCode::BadUserAccessDenied)?;
-    Ok(Principal {
+    Ok(Caller {
         actor: user.name,
         role: Some(user.role),
-        address: OPCUA_CLIENT,
-        via: Via::Token,
+        client: OPCUA_CLIENT.to_string(),
     })
 }
 
 /// Runs `method` of `machine` for the session's user (`None`: anonymous).
 pub(crate) async fn call(
-    app: &AppState,
+    w: command::Writes<'_>,
     user: Option<&str>,
     client: &str,
     machine: &str,
     method: Method,
     args: &[Variant],
 ) -> Result<Vec<Variant>, StatusCode> {
-    let Some(path) = route(method) else {
-        return read_method(app, machine, method, args).await;
+    let Some(action) = action(method) else {
+        return read_method(w.store, machine, method, args).await;
     };
     let Some(user) = user else {
         warn!(
@@ -70,11 +71,9 @@ pub(crate) async fn call(
         );
         return Err(StatusCode::BadUserAccessDenied);
     };
-    let p = caller(app, user).await?;
-    let needed = rule_for(&axum::http::Method::POST, path).map(|r| r.need);
-    if let Some(Need::Role(needed)) = needed
-        && p.role.is_none_or(|r| r < needed)
-    {
+    let caller = caller(w, user).await?;
+    if !action.allowed(caller.role) {
+        let needed = action.role();
         warn!(user, machine, method = method.name(), client, %needed, "OPC UA: write refused, role too low");
         return Err(StatusCode::BadUserAccessDenied);
     }
@@ -86,14 +85,14 @@ pub(crate) async fn call(
         "OPC UA: write"
     );
     match method {
-        Method::Rollback => rollback(app, p, machine, args).await,
-        _ => acknowledge(app, p, machine, args).await,
+        Method::Rollback => rollback(w, &caller, machine, args).await,
+        _ => acknowledge(w, &caller, machine, args).await,
     }
 }
 
 async fn rollback(
-    app: &AppState,
-    p: Principal,
+    w: command::Writes<'_>,
+    caller: &Caller,
     machine: &str,
     args: &[Variant],
 ) -> Result<Vec<Variant>, StatusCode> {
@@ -101,24 +100,27 @@ async fn rollback(
     else {
         return Err(StatusCode::BadInvalidArgument);
     };
-    let body: http::RollbackBody =
-        serde_json::from_value(serde_json::json!({ "version": version }))
-            .map_err(|_| StatusCode::BadInvalidArgument)?;
-    let machine = http::machine_name(machine).map_err(status)?;
-    let feature = http::feature_name(feature.as_ref()).map_err(status)?;
-    let path = ApiPath((machine, feature));
-    let reply = http::rollback_write(p, State(app.clone()), path, ApiJson(body))
+    let machine = MachineName::new(machine).map_err(|_| StatusCode::BadInvalidArgument)?;
+    let lobe = FeatureName::new(feature.as_ref()).map_err(|_| StatusCode::BadInvalidArgument)?;
+    // As the API answers: an unknown machine or feature before a version out of range.
+    if !w.machines.get(&machine).is_some_and(|f| f.contains(&lobe)) {
+        warn!(machine = %machine, feature = %lobe, "OPC UA: write not carried out: no such machine or feature");
+        return Err(StatusCode::BadNotFound);
+    }
+    let version = TableVersion::from_i64(version).map_err(|_| StatusCode::BadInvalidArgument)?;
+    let rollback = MachineCommand::Rollback { lobe, version };
+    let done = command::write(w, caller, &machine, rollback)
         .await
-        .map_err(status)?;
+        .map_err(write_status)?;
     Ok(vec![
-        Variant::Int64(reply.0.version.unwrap_or(0)),
-        Variant::from(reply.0.message.clone()),
+        Variant::Int64(done.version.map_or(0, TableVersion::to_i64)),
+        Variant::from(done.message),
     ])
 }
 
 async fn acknowledge(
-    app: &AppState,
-    p: Principal,
+    w: command::Writes<'_>,
+    caller: &Caller,
     machine: &str,
     args: &[Variant],
 ) -> Result<Vec<Variant>, StatusCode> {
@@ -126,11 +128,25 @@ async fn acknowledge(
         .first()
         .and_then(int)
         .ok_or(StatusCode::BadInvalidArgument)?;
-    let path = ApiPath((http::machine_name(machine).map_err(status)?, id));
-    http::ack_write(p, State(app.clone()), path)
-        .await
-        .map_err(status)?;
-    Ok(vec![Variant::from(format!("event {id} acknowledged"))])
+    let machine = MachineName::new(machine).map_err(|_| StatusCode::BadInvalidArgument)?;
+    let outcome = command::acknowledge(w, caller, &machine, id).await;
+    match outcome {
+        Ok(AckOutcome::Acknowledged | AckOutcome::AlreadyAcknowledged) => {
+            Ok(vec![Variant::from(format!("event {id} acknowledged"))])
+        }
+        Ok(AckOutcome::NotFound) => {
+            warn!(machine = %machine, id, "OPC UA: write not carried out: no such event");
+            Err(StatusCode::BadNotFound)
+        }
+        Err(e) => {
+            warn!(machine = %machine, id, error = %e, "OPC UA: write not carried out");
+            Err(match e {
+                AckError::Forbidden { .. } => StatusCode::BadUserAccessDenied,
+                AckError::StoreUnavailable => StatusCode::BadResourceUnavailable,
+                AckError::Store(e) => store_status(&e),
+            })
+        }
+    }
 }
 
 /// An integer argument (clients send Int64, some Int32).
@@ -143,26 +159,50 @@ fn int(v: &Variant) -> Option<i64> {
     }
 }
 
-/// The OPC UA status of an API error (its code is logged: a status says less).
-fn status(e: ApiError) -> StatusCode {
-    warn!(code = e.code().as_str(), message = %e.message(), "OPC UA: write not carried out");
-    match e.status().as_u16() {
-        400 | 422 => StatusCode::BadInvalidArgument,
-        401 | 403 => StatusCode::BadUserAccessDenied,
-        404 => StatusCode::BadNotFound,
-        409 => StatusCode::BadInvalidState,
-        503 => StatusCode::BadResourceUnavailable,
-        _ => StatusCode::BadInternalError,
+/// The OPC UA status of a write the service did not carry out (its code is logged: a status
+/// says less).
+fn write_status(e: WriteError) -> StatusCode {
+    warn!(code = e.code(), message = %e, "OPC UA: write not carried out");
+    match e {
+        WriteError::Forbidden { .. } => StatusCode::BadUserAccessDenied,
+        WriteError::NotConfigured { .. } | WriteError::NotGround { .. } => StatusCode::BadNotFound,
+        WriteError::Elsewhere { .. }
+        | WriteError::NotRunning { .. }
+        | WriteError::Stopped { .. } => StatusCode::BadResourceUnavailable,
+        WriteError::Command { error, .. } => match error {
+            CommandError::VersionNotFound { .. } => StatusCode::BadNotFound,
+            CommandError::Refused { .. } => StatusCode::BadInvalidState,
+            CommandError::StoreUnavailable { .. }
+            | CommandError::JournalUnavailable { .. }
+            | CommandError::Elsewhere { .. } => StatusCode::BadResourceUnavailable,
+            CommandError::Failed { .. } | CommandError::ShareStateFailed { .. } => {
+                StatusCode::BadInternalError
+            }
+        },
+    }
+}
+
+/// The OPC UA status of a store error.
+fn store_status(e: &StoreError) -> StatusCode {
+    match e {
+        StoreError::Unavailable { .. }
+        | StoreError::Corrupt { .. }
+        | StoreError::Full { .. }
+        | StoreError::Busy { .. } => StatusCode::BadResourceUnavailable,
+        StoreError::NotFound { .. } => StatusCode::BadNotFound,
+        StoreError::Conflict { .. } => StatusCode::BadInvalidState,
+        StoreError::Invalid { .. } => StatusCode::BadInvalidArgument,
+        StoreError::Migration { .. } | StoreError::Backend { .. } => StatusCode::BadInternalError,
     }
 }
 
 async fn read_method(
-    app: &AppState,
+    store: &StoreHandle,
     machine: &str,
     method: Method,
     args: &[Variant],
 ) -> Result<Vec<Variant>, StatusCode> {
-    let store = store_of(app).await?;
+    let store = store_of(store).await?;
     let unavailable = |_| StatusCode::BadResourceUnavailable;
     let summary = match (method, args.first()) {
         (Method::GetLatestResult, Some(Variant::String(feature))) => {

@@ -29,7 +29,8 @@ use tracing::{info, warn};
 
 use crate::config::{Config, OpcUaSection, OpcUaSecurity};
 use crate::service::http::AppState;
-use crate::service::mqtt::{EventSender, PlantEvent};
+use crate::service::plant::EventSender;
+use camloop_loop::PlantEvent;
 pub(crate) use space::MachineLayout;
 
 /// The machines as the address space shows them.
@@ -177,8 +178,7 @@ async fn start_with(
         space::Ids { ns },
         app.metrics.clone(),
         layout.clone(),
-    )
-    .with_store(app.store.clone());
+    );
     feed.dressings = dressing_counts(&app, &layout).await;
     let feed = tokio::spawn(feed::run(feed, events, shutdown.clone()));
     let cancel = handle.clone();

@@ -88,9 +88,15 @@ impl InMemoryNodeManagerImpl for CamloopNodes {
                 continue;
             };
             let args = call.arguments().to_vec();
-            let done =
-                super::methods::call(&self.app, user.as_deref(), &client, &machine, method, &args)
-                    .await;
+            let done = super::methods::call(
+                self.app.writes(),
+                user.as_deref(),
+                &client,
+                &machine,
+                method,
+                &args,
+            )
+            .await;
             match done {
                 Ok(outputs) => {
                     call.set_outputs(outputs);

@@ -218,34 +218,22 @@ async fn versions_page(
 /// `POST /api/v1/machines/{machine}/events/{id}/ack`: the caller (an operator, checked by
 /// the access layer), then the event; audited.
 #[utoipa::path(post, path = "/api/v1/machines/{machine}/events/{id}/ack", tag = "writes", params(("machine" = String, Path, description = "machine name"), ("id" = i64, Path, description = "event id")), responses((status = 200, description = "acknowledged (or acknowledged before)", body = super::CommandReply)))]
-pub(crate) async fn ack(
+pub(super) async fn ack(
     p: Principal,
     State(app): State<AppState>,
     ApiPath((machine, id)): ApiPath<(MachineName, i64)>,
 ) -> Result<Response, ApiError> {
-    let store = data::store(&app).await?;
-    let at = crate::clock::now();
-    use crate::store::{AckOutcome, AuditResult};
-    let outcome = store
-        .acknowledge_event(&machine, crate::store::EventId(id), at, &p.actor)
-        .await;
-    let mut entry = p.audit("acknowledge", AuditResult::Ok, String::new());
-    entry.machine = Some(machine.to_string());
-    entry.after = Some(format!("{{\"event\":{id}}}"));
-    entry.reason = match &outcome {
-        Ok(AckOutcome::Acknowledged) => "acknowledged".into(),
-        Ok(AckOutcome::AlreadyAcknowledged) => "acknowledged before".into(),
-        Ok(AckOutcome::NotFound) => "no such event".into(),
-        Err(e) => e.to_string(),
+    use crate::service::command::{AckError, acknowledge};
+    use crate::store::AckOutcome;
+    let outcome = match acknowledge(app.writes(), &p.caller(), &machine, id).await {
+        Ok(outcome) => outcome,
+        Err(e @ AckError::Forbidden { .. }) => {
+            return Err(ApiError::new(ApiCode::Forbidden, e.to_string()));
+        }
+        Err(AckError::StoreUnavailable) => return Err(data::unavailable()),
+        Err(AckError::Store(e)) => return Err(e.into()),
     };
-    if !matches!(
-        outcome,
-        Ok(AckOutcome::Acknowledged | AckOutcome::AlreadyAcknowledged)
-    ) {
-        entry.result = AuditResult::Refused;
-    }
-    super::audit::record(&app, entry).await;
-    let (status, message) = match outcome? {
+    let (status, message) = match outcome {
         AckOutcome::Acknowledged => (StatusCode::OK, format!("event {id} acknowledged")),
         AckOutcome::AlreadyAcknowledged => (
             StatusCode::OK,

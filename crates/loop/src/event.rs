@@ -1,0 +1,140 @@
+//! What the plant hears: typed events made from the loop's records, with their topic
+//! (`<prefix>/<machine>/<feature>/<event>`) and JSON shape (units in the field names). MQTT
+//! publishes them, OPC UA shows them; neither adapter owns them.
+
+use jiff::Timestamp;
+use serde::{Deserialize, Serialize};
+
+use crate::{FeatureName, MachineName, TableVersion};
+use camloop_core::levels::{EventLevel, Verdict};
+
+/// Topic level (and a payload's `feature`) for events that concern the machine rather than
+/// one feature.
+pub const MACHINE_LEVEL: &str = "machine";
+
+/// One event for the plant (MQTT's topics, OPC UA's values and events).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
+pub enum PlantEvent {
+    PartAnalysed {
+        machine: MachineName,
+        feature: FeatureName,
+        part: String,
+        #[serde(with = "crate::unix_ms")]
+        at_ms: Timestamp,
+        verdict: Verdict,
+        max_profile_error_um: f64,
+        base_radius_error_um: f64,
+        phase_error_deg: f64,
+        /// Version of the table the part was ground with (0: none known).
+        ground_with_version: u64,
+        /// The gauge's repeatability: the largest per-angle spread (1σ) over the
+        /// revolutions, µm, when the analysis reported it. Not on the MQTT wire (its
+        /// payload stays as it was); OPC UA shows it.
+        #[serde(skip)]
+        repeatability_um: Option<f64>,
+    },
+    TableDelivered {
+        machine: MachineName,
+        feature: FeatureName,
+        version: TableVersion,
+        #[serde(with = "crate::unix_ms")]
+        at_ms: Timestamp,
+    },
+    TableRefused {
+        machine: MachineName,
+        feature: FeatureName,
+        /// The refused version, when one was recorded.
+        version: Option<TableVersion>,
+        reason: String,
+        #[serde(with = "crate::unix_ms")]
+        at_ms: Timestamp,
+    },
+    LearningFrozen {
+        machine: MachineName,
+        #[serde(with = "crate::unix_ms")]
+        at_ms: Timestamp,
+        reason: String,
+    },
+    Dressing {
+        machine: MachineName,
+        #[serde(with = "crate::unix_ms")]
+        at_ms: Timestamp,
+        old_radius_mm: f64,
+        new_radius_mm: f64,
+        /// The dresser's measured infeed, µm, when it reported one.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        infeed_um: Option<f64>,
+        source: String,
+    },
+    Alarm {
+        machine: MachineName,
+        #[serde(with = "crate::unix_ms")]
+        at_ms: Timestamp,
+        level: EventLevel,
+        kind: String,
+        message: String,
+    },
+}
+
+impl PlantEvent {
+    pub fn machine(&self) -> &MachineName {
+        match self {
+            PlantEvent::PartAnalysed { machine, .. }
+            | PlantEvent::TableDelivered { machine, .. }
+            | PlantEvent::TableRefused { machine, .. }
+            | PlantEvent::LearningFrozen { machine, .. }
+            | PlantEvent::Dressing { machine, .. }
+            | PlantEvent::Alarm { machine, .. } => machine,
+        }
+    }
+
+    /// The feature (lobe or pin) it concerns, or [`MACHINE_LEVEL`].
+    pub fn feature(&self) -> &str {
+        self.feature_name()
+            .map_or(MACHINE_LEVEL, FeatureName::as_str)
+    }
+
+    /// The feature's name, for the events that carry one.
+    pub fn feature_name(&self) -> Option<&FeatureName> {
+        match self {
+            PlantEvent::PartAnalysed { feature, .. }
+            | PlantEvent::TableDelivered { feature, .. }
+            | PlantEvent::TableRefused { feature, .. } => Some(feature),
+            _ => None,
+        }
+    }
+
+    /// The event's snake_case name, the last topic level.
+    pub fn name(&self) -> &'static str {
+        match self {
+            PlantEvent::PartAnalysed { .. } => "part_analysed",
+            PlantEvent::TableDelivered { .. } => "table_delivered",
+            PlantEvent::TableRefused { .. } => "table_refused",
+            PlantEvent::LearningFrozen { .. } => "learning_frozen",
+            PlantEvent::Dressing { .. } => "dressing",
+            PlantEvent::Alarm { .. } => "alarm",
+        }
+    }
+
+    /// `<prefix>/<machine>/<feature>/<event>`.
+    pub fn topic(&self, prefix: &str) -> String {
+        format!(
+            "{prefix}/{}/{}/{}",
+            self.machine(),
+            self.feature(),
+            self.name()
+        )
+    }
+
+    pub fn at_ms(&self) -> Timestamp {
+        match self {
+            PlantEvent::PartAnalysed { at_ms, .. }
+            | PlantEvent::TableDelivered { at_ms, .. }
+            | PlantEvent::TableRefused { at_ms, .. }
+            | PlantEvent::LearningFrozen { at_ms, .. }
+            | PlantEvent::Dressing { at_ms, .. }
+            | PlantEvent::Alarm { at_ms, .. } => *at_ms,
+        }
+    }
+}

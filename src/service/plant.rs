@@ -1,0 +1,338 @@
+//! The plant's events on their way out of the machine loops: the [`PlantEvent`] each
+//! journal record announces, its JSON payload, and the [`EventSender`] the loops hand them
+//! to (it feeds MQTT's intake and OPC UA's feed alike, so neither adapter owns it).
+
+use jiff::Timestamp;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use tokio::sync::mpsc;
+
+use crate::names::{FeatureName, MachineName};
+use crate::service::journal::{EventKind, Pending};
+use crate::store::{EventLevel, VersionStatus};
+use camloop_loop::{MACHINE_LEVEL, PlantEvent, TableVersion};
+
+/// [`MACHINE_LEVEL`] where a feature's name goes (a topic level, a payload's `feature`).
+fn machine_level() -> FeatureName {
+    FeatureName::new(MACHINE_LEVEL).expect("`machine` follows the name rule")
+}
+
+/// Where the machine loops send events. Cheap to clone; never blocks.
+#[derive(Debug, Clone)]
+pub struct EventSender {
+    tx: mpsc::Sender<PlantEvent>,
+    refused: Arc<AtomicU64>,
+    /// Another consumer of the same events (the OPC UA server), sent to first.
+    also: Option<Arc<EventSender>>,
+}
+
+impl EventSender {
+    /// A sender into `tx`, counting what a full channel refuses in `refused`.
+    pub(crate) fn new(tx: mpsc::Sender<PlantEvent>, refused: Arc<AtomicU64>) -> Self {
+        Self {
+            tx,
+            refused,
+            also: None,
+        }
+    }
+
+    /// One sender feeding both, or whichever there is.
+    pub(crate) fn joined(a: Option<Self>, b: Option<Self>) -> Option<Self> {
+        match (a, b) {
+            (Some(mut a), Some(b)) => {
+                a.also = Some(Arc::new(b));
+                Some(a)
+            }
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// Queues the event of a journal record, if it announces one.
+    pub fn record(&self, record: &Pending) {
+        if let Some(event) = of_record(record) {
+            self.send(event);
+        }
+    }
+
+    pub fn send(&self, event: PlantEvent) {
+        if let Some(other) = &self.also {
+            other.send(event.clone());
+        }
+        if self.tx.try_send(event).is_err() {
+            self.refused.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// The event a journal record announces, if any (learning snapshots and recipes are
+/// the loop's own business, and a master run is the gauge study's: a plant counts its
+/// parts from `part_analysed`, and a master is not one).
+pub(crate) fn of_record(record: &Pending) -> Option<PlantEvent> {
+    if let Pending::Measurement { measurement, .. } = record
+        && crate::core::measure::is_master_part(&measurement.part)
+    {
+        return None;
+    }
+    Some(match record.clone() {
+        // The plant's payload: the summary of the store's record (the wire names stay).
+        Pending::Measurement {
+            measurement: m,
+            ground_with_version,
+        } => PlantEvent::PartAnalysed {
+            machine: m.machine,
+            feature: m.lobe,
+            part: m.part,
+            at_ms: m.received_at_ms,
+            verdict: m.verdict,
+            max_profile_error_um: m.max_profile_error_um,
+            base_radius_error_um: m.base_radius_error_um,
+            phase_error_deg: m.phase_error_deg,
+            ground_with_version,
+            repeatability_um: repeatability_um(&m.analysis_json),
+        },
+        Pending::Table {
+            machine,
+            lobe,
+            version,
+            status,
+            created_at_ms,
+            ..
+        } => table_event(machine, lobe, version, status, created_at_ms)?,
+        Pending::VersionStatus {
+            machine,
+            lobe,
+            version,
+            status,
+            at_ms,
+        } => table_event(machine, lobe, version, status, at_ms)?,
+        Pending::Event {
+            machine,
+            at_ms,
+            level,
+            kind,
+            message,
+        } => event_of(machine, at_ms, level, kind, message)?,
+        Pending::Dressing {
+            machine,
+            at_ms,
+            old_radius_mm,
+            new_radius_mm,
+            infeed_um,
+            source,
+        } => PlantEvent::Dressing {
+            machine,
+            at_ms,
+            old_radius_mm,
+            new_radius_mm,
+            infeed_um,
+            source,
+        },
+        Pending::Learning { .. } | Pending::RecipeSnapshot { .. } => return None,
+    })
+}
+
+/// The event's JSON payload (the MQTT wire's).
+pub fn payload(event: &PlantEvent) -> String {
+    // Strings, numbers and enums only: serializing cannot fail.
+    serde_json::to_string(event).expect("a plant event serializes to JSON")
+}
+
+/// The payload with the event's sequence number (`seq`) last.
+pub(crate) fn payload_with_seq(event: &PlantEvent, seq: u64) -> String {
+    let mut value = serde_json::to_value(event).expect("a plant event serializes to JSON");
+    if let Some(fields) = value.as_object_mut() {
+        fields.insert("seq".into(), seq.into());
+    }
+    value.to_string()
+}
+
+/// The gauge's repeatability a measurement's analysis reported (`repeatability_max_um` of
+/// the core's report, which the measurement stores as JSON); `None` when it has none.
+fn repeatability_um(analysis_json: &str) -> Option<f64> {
+    #[derive(serde::Deserialize)]
+    struct Reported {
+        repeatability_max_um: f64,
+    }
+    serde_json::from_str::<Reported>(analysis_json)
+        .ok()
+        .map(|r| r.repeatability_max_um)
+}
+
+/// The plant's event for a loop event, if it has one of its own.
+fn event_of(
+    machine: MachineName,
+    at_ms: Timestamp,
+    level: EventLevel,
+    kind: EventKind,
+    message: String,
+) -> Option<PlantEvent> {
+    Some(match kind {
+        EventKind::LearningReverted => PlantEvent::LearningFrozen {
+            machine,
+            at_ms,
+            reason: message,
+        },
+        // A table refused by the loop's checks before it got a version.
+        EventKind::TableRefused => PlantEvent::TableRefused {
+            machine,
+            feature: machine_level(),
+            version: None,
+            reason: message,
+            at_ms,
+        },
+        // Told by the dressing record itself.
+        EventKind::WheelDressed => return None,
+        _ => PlantEvent::Alarm {
+            machine,
+            at_ms,
+            level,
+            kind: kind.as_str().to_owned(),
+            message,
+        },
+    })
+}
+
+fn table_event(
+    machine: MachineName,
+    feature: FeatureName,
+    version: u64,
+    status: VersionStatus,
+    at_ms: Timestamp,
+) -> Option<PlantEvent> {
+    // A journal's version is never 0 (the share numbers from 1); one that were would name
+    // no version the plant could look up.
+    let version = TableVersion::new(version)?;
+    match status {
+        VersionStatus::Pushed { .. } => Some(PlantEvent::TableDelivered {
+            machine,
+            feature,
+            version,
+            at_ms,
+        }),
+        VersionStatus::Refused { reason } => Some(PlantEvent::TableRefused {
+            machine,
+            feature,
+            version: Some(version),
+            reason,
+            at_ms,
+        }),
+        // Not the plant's news yet: the share's own states never reach the journal.
+        VersionStatus::Waiting { .. }
+        | VersionStatus::Delivering
+        | VersionStatus::Superseded { .. } => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::store::Verdict;
+
+    #[test]
+    fn records_map_to_events_with_topics_and_unit_named_fields() {
+        let status = Pending::VersionStatus {
+            machine: "G7".parse().unwrap(),
+            lobe: "IN1".parse().unwrap(),
+            version: 12,
+            status: VersionStatus::Pushed {
+                at_unix_ms: 5,
+                note: Some("pushed".into()),
+            },
+            at_ms: jiff::Timestamp::from_millisecond(5).unwrap(),
+        };
+        let e = of_record(&status).unwrap();
+        assert_eq!(e.topic("plant"), "plant/G7/IN1/table_delivered");
+        assert_eq!(
+            payload(&e),
+            r#"{"event":"table_delivered","machine":"G7","feature":"IN1","version":12,"at_ms":5}"#
+        );
+        let dressing = Pending::Dressing {
+            machine: "G7".parse().unwrap(),
+            at_ms: jiff::Timestamp::from_millisecond(9).unwrap(),
+            old_radius_mm: 250.0,
+            new_radius_mm: 249.5,
+            infeed_um: Some(500.2),
+            source: "plc".into(),
+        };
+        let d = of_record(&dressing).unwrap();
+        assert_eq!(d.topic("p"), "p/G7/machine/dressing");
+        assert!(payload(&d).contains(r#""new_radius_mm":249.5"#));
+        assert!(payload(&d).contains(r#""infeed_um":500.2"#));
+        let event = |kind| Pending::Event {
+            machine: "G7".parse().unwrap(),
+            at_ms: jiff::Timestamp::from_millisecond(1).unwrap(),
+            level: EventLevel::Warn,
+            kind,
+            message: "diverging".into(),
+        };
+        let name = |kind| of_record(&event(kind)).map(|e| e.name());
+        assert_eq!(name(EventKind::LearningReverted), Some("learning_frozen"));
+        assert_eq!(name(EventKind::TableRefused), Some("table_refused"));
+        assert_eq!(name(EventKind::LearningHeld), Some("alarm"));
+        assert_eq!(name(EventKind::RunRule), Some("alarm"));
+        assert_eq!(name(EventKind::WheelDressed), None);
+        let waiting = Pending::VersionStatus {
+            machine: "G7".parse().unwrap(),
+            lobe: "IN1".parse().unwrap(),
+            version: 13,
+            status: VersionStatus::Waiting {
+                reason: Some("share down".into()),
+            },
+            at_ms: jiff::Timestamp::from_millisecond(6).unwrap(),
+        };
+        assert_eq!(of_record(&waiting), None);
+    }
+
+    #[test]
+    fn a_master_run_is_no_part_analysed_and_a_production_part_is() {
+        let measurement = |part: &str| Pending::Measurement {
+            measurement: crate::store::NewMeasurement {
+                machine: "G7".parse().unwrap(),
+                part: part.into(),
+                lobe: "IN1".parse().unwrap(),
+                received_at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
+                verdict: Verdict::Pass,
+                max_profile_error_um: 0.4,
+                base_radius_error_um: 0.1,
+                phase_error_deg: 0.0,
+                revolutions_used: 3,
+                points_per_rev: 360,
+                origin: "gauge".into(),
+                sha256: "0".repeat(64).parse().unwrap(),
+                recipe_snapshot: None,
+                raw_lift_mm: Vec::new(),
+                averaged_lift_mm: Vec::new(),
+                analysis_json: "{}".into(),
+            },
+            ground_with_version: 0,
+        };
+        for master in ["MASTER", "master-7", "Master_B"] {
+            assert_eq!(of_record(&measurement(master)), None, "{master}");
+        }
+        let part = of_record(&measurement("S-1042")).unwrap();
+        assert_eq!(part.name(), "part_analysed");
+        // No repeatability in an analysis that has none ("{}"), and none on the wire.
+        assert!(matches!(
+            part,
+            PlantEvent::PartAnalysed {
+                repeatability_um: None,
+                ..
+            }
+        ));
+        assert!(!payload(&part).contains("repeatability"));
+    }
+
+    /// The repeatability is the report's typed field, read from what the measurement keeps.
+    #[test]
+    fn repeatability_is_the_reports_largest_spread() {
+        assert_eq!(
+            repeatability_um(r#"{"repeatability_max_um":0.8,"other":1}"#),
+            Some(0.8)
+        );
+        assert_eq!(
+            repeatability_um(r#"{"nested":{"repeatability_max_um":0.8}}"#),
+            None
+        );
+        assert_eq!(repeatability_um("not json"), None);
+    }
+}
