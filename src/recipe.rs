@@ -256,6 +256,7 @@ impl FeatureSetup {
             bands: &self.bands,
             assembly: AssemblyLimits::default(),
             phase_deg: self.phase_deg,
+            plan: None,
         }
     }
 }

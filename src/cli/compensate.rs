@@ -232,6 +232,7 @@ fn learn_from(
             outcome,
             next,
             table,
+            ..
         } => (outcome, next, table),
         Decision::Refused(refused) => {
             // Nothing is delivered; the refusal is kept with the measurement it came from.

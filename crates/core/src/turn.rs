@@ -1,15 +1,20 @@
 //! One turn of the loop, the same for the service, `camloop compensate` and the simulator:
 //! a raw measurement and the learning state of the table that ground the part go in; the
 //! checks, the analysis, the learning step and the guarded next table come out as one typed
-//! [`Turn`]. Nothing here decides whether the table reaches the control: the caller adopts
+//! [`Turn`]. With a C speed plan the new table is also guarded as it will be delivered, its
+//! X table over VA against the X limits, so a plan's refusal is the turn's like any other
+//! guard's. Nothing here decides whether the table reaches the control: the caller adopts
 //! the returned state only once the table is delivered, so a step never builds on a
 //! correction the control has not run.
 
 use super::analysis::{AnalysisError, LobeOptions, LobeReport, ToleranceBand, analyse_lobe};
-use super::compensate::{self, CycleError, GuardedTable, LobeLoop};
+use super::compensate::{self, CycleError, GuardError, GuardedTable, LobeLoop};
 use super::learn::{LearnError, LearningState, PartError, PreviousPart, StepOutcome};
 use super::lift::LiftCurve;
 use super::measure::{AssemblyLimits, AveragedMeasurement, MeasurementError, RawMeasurement};
+use super::speed_plan::TimeLaw;
+use super::speed_plan::guard::planned_tables as plan_tables;
+use super::speed_plan::tables::VaTables;
 use super::spline::PeriodicSpline;
 
 /// What stays fixed between turns of one feature's loop.
@@ -22,6 +27,9 @@ pub struct TurnSetup<'a> {
     /// Where the feature's 0° is on the shaft, degrees: the gauge reads in the shaft's frame
     /// (index 0 at the shaft datum), the nominal and the correction live in the feature's.
     pub phase_deg: f64,
+    /// The C speed plan's time law the feature is ground with (made for the nominal part on
+    /// the wheel believed), None at constant speed: a new table is then guarded over VA too.
+    pub plan: Option<&'a TimeLaw>,
 }
 
 /// Why a turn analyses but does not learn.
@@ -46,6 +54,9 @@ pub enum Decision {
         outcome: StepOutcome,
         next: Box<LearningState>,
         table: Box<GuardedTable>,
+        /// With a speed plan, the tables over VA the table is delivered as (already checked
+        /// against the X limits); None at constant speed.
+        planned: Option<Box<VaTables>>,
     },
     /// Learning or a guard refused: the table in force stays, the state is unchanged.
     Refused(CycleError),
@@ -205,14 +216,41 @@ fn learn(
         part_number: measured.part_number,
         previous,
     };
-    match compensate::learn_and_regenerate(&mut next, &part, &setup.lobe) {
-        Ok((outcome, table)) => Decision::Table {
-            outcome,
-            next: Box::new(next),
-            table: Box::new(table),
+    let (outcome, table) = match compensate::learn_and_regenerate(&mut next, &part, &setup.lobe) {
+        Ok(done) => done,
+        Err(e) => return Decision::Refused(e),
+    };
+    let planned = match setup.plan {
+        None => None,
+        // Over an X limit with the plan: refused like any guard, the table in force stays.
+        Some(law) => match planned_tables(&setup.lobe, law, &next, &table) {
+            Ok(tables) => Some(Box::new(tables)),
+            Err(e) => return Decision::Refused(CycleError::Guard(e)),
         },
-        Err(e) => Decision::Refused(e),
+    };
+    Decision::Table {
+        outcome,
+        next: Box::new(next),
+        table: Box::new(table),
+        planned,
     }
+}
+
+/// The speed plan's guard: the tables over VA that `table` (made from `state`) is delivered
+/// as with the time law `law`, made for the commanded part (the nominal plus the correction)
+/// and refused when the corrected X table exceeds an X limit of `lobe` anywhere along them.
+/// The one check every caller runs: the turn on a new table, the service and the simulated
+/// cell on a table made again (a dressing, a rollback, a restart).
+pub fn planned_tables(
+    lobe: &LobeLoop<'_>,
+    law: &TimeLaw,
+    state: &LearningState,
+    table: &GuardedTable,
+) -> Result<VaTables, GuardError> {
+    let lift = compensate::commanded_lift(lobe.nominal, &state.correction_um)?;
+    let commanded = lobe.feature.part(&lift)?;
+    let tolerance_um = lobe.request.poly_tolerance_um;
+    plan_tables(table, &commanded, law, tolerance_um, lobe.limits)
 }
 
 /// Standard error of the timing estimate, degrees: σ of the per-angle mean (the rms

@@ -15,6 +15,7 @@ use camloop_core::fit::{TableForm, fit_poly};
 use camloop_core::learn::{self, LearningParams, LearningState};
 use camloop_core::lift::{LiftCurve, LiftTable};
 use camloop_core::measure::{AssemblyLimits, AveragedMeasurement, MeasurementError};
+use camloop_core::speed_plan::tables::VaTables;
 use camloop_core::speed_plan::{self, SpeedPlanError, SpeedPlanSettings, TimeLaw};
 use camloop_core::turn::{self, Decision, TurnError, TurnSetup};
 
@@ -205,6 +206,8 @@ impl<'s> Cell<'s> {
             bands: &[],
             assembly: AssemblyLimits::default(),
             phase_deg: 0.0,
+            // The turn guards camloop's new table over VA when the cell grinds with a plan.
+            plan: self.law.as_ref(),
         };
         Ok(match self.method {
             Method::Camloop => {
@@ -217,15 +220,14 @@ impl<'s> Cell<'s> {
                         outcome,
                         next,
                         table,
-                    } => match self.deliver(&next, &table)? {
-                        Ok(commanded) => {
-                            (self.state, self.table) = (*next, commanded);
-                            outcome.to_string()
-                        }
-                        // Over an X limit with the plan: refused like any guard, never used.
-                        Err(e) => format!("refused, previous table kept: {e}"),
-                    },
-                    // A refused table is never used: the machine keeps the previous one.
+                        planned,
+                    } => {
+                        self.table = self.deliver(&next, &table, planned.as_deref())?;
+                        self.state = *next;
+                        outcome.to_string()
+                    }
+                    // A refused table is never used: the machine keeps the previous one (with
+                    // the plan, an X table over VA beyond an X limit is refused here too).
                     Decision::Refused(e) => format!("refused, previous table kept: {e}"),
                     Decision::Held(reason) => format!("held: {reason}"),
                 }
@@ -294,9 +296,16 @@ impl<'s> Cell<'s> {
         let (setup, feature) = (self.setup, self.feature);
         match self.method {
             Method::Camloop => {
-                let table = compensate::current_table(&self.state, &lobe_loop(setup, feature))?;
+                let lobe = lobe_loop(setup, feature);
+                let table = compensate::current_table(&self.state, &lobe)?;
+                // The plan's guard, as the turn runs it: a table made again (the first, or
+                // after a dressing) over an X limit is an error here, the cell has no other.
+                let tables = match &self.law {
+                    Some(law) => Some(turn::planned_tables(&lobe, law, &self.state, &table)?),
+                    None => None,
+                };
                 let state = self.state.clone();
-                Ok(self.deliver(&state, &table)??)
+                self.deliver(&state, &table, tables.as_ref())
             }
             Method::NaiveX | Method::XDomainIlc => {
                 let part = feature.part(&setup.nominal)?;
@@ -320,29 +329,22 @@ impl<'s> Cell<'s> {
     }
 
     /// Delivers camloop's guarded `table` for `state`: the constant-speed programs, or with
-    /// a plan the two-table programs of the commanded part (the inner error: the corrected
-    /// X table exceeds an X limit over VA, refused).
+    /// a plan the two-table programs of `tables` (its tables over VA, guarded by
+    /// [`turn::planned_tables`]) for the commanded part.
     fn deliver(
         &mut self,
         state: &LearningState,
         table: &GuardedTable,
-    ) -> Result<Result<CommandedTable, GuardError>, CellError> {
+        tables: Option<&VaTables>,
+    ) -> Result<CommandedTable, CellError> {
         let (setup, feature) = (self.setup, self.feature);
-        let Some(law) = &self.law else {
-            return Ok(Ok(self.control.deliver(table, feature)?));
+        let Some(tables) = tables else {
+            return Ok(self.control.deliver(table, feature)?);
         };
         let lift = compensate::commanded_lift(&setup.nominal, &state.correction_um)
             .map_err(GuardError::from)?;
         let commanded = feature.part(&lift)?;
-        let tolerance = (setup.request.poly_tolerance_um, &setup.limits);
-        match self
-            .control
-            .deliver_planned(table, &commanded, law, tolerance)
-        {
-            Ok(t) => Ok(Ok(t)),
-            Err(super::DeliveryError::Guard(e)) => Ok(Err(e)),
-            Err(e) => Err(e.into()),
-        }
+        Ok(self.control.deliver_planned(tables, &commanded)?)
     }
 }
 

@@ -5,17 +5,16 @@
 //! up in the cell's figures, as it would on the machine.
 
 use super::{CommandedTable, Control, ControlError};
-use camloop_core::compensate::{AxisLimits, Feature, GuardError, GuardedTable};
+use camloop_core::compensate::{Feature, GuardError, GuardedTable};
 use camloop_core::geometry::{GeometryError, Part};
 use camloop_core::program::{
     MainProgramSettings, ProgramSettings, SettingsErrors, TableError, next_table_number,
     render_main_program,
 };
-use camloop_core::speed_plan::TimeLaw;
-use camloop_core::speed_plan::guard::planned_tables;
 use camloop_core::speed_plan::render::{
     VaProgramError, VaProgramSettings, render_va_main_program, render_va_table_program,
 };
+use camloop_core::speed_plan::tables::VaTables;
 use std::collections::BTreeMap;
 
 const TABLE_PROGRAM: &str = "CELL_TABLE";
@@ -81,19 +80,15 @@ impl DeliveredTables {
         })
     }
 
-    /// Delivers the table of `commanded` (the part the guarded `table` was made for) with
-    /// the planned C speed `law`: the two-table program and the main program that couples C
-    /// and X to the virtual axis, run by the control. The learned timing moves C's table, as
-    /// it moves the constant-speed table's C. Refused ([`DeliveryError::Guard`]) before
-    /// anything is rendered when the corrected X table exceeds an X limit over VA.
+    /// Delivers `tables`, the tables over VA of a guarded table with the planned C speed
+    /// (already checked against the X limits, see `camloop_core::turn::planned_tables`),
+    /// made for the commanded part `commanded`: the two-table program and the main program
+    /// that couples C and X to the virtual axis, run by the control.
     pub(crate) fn deliver_planned(
         &mut self,
-        table: &GuardedTable,
+        tables: &VaTables,
         commanded: &Part,
-        law: &TimeLaw,
-        (tolerance_um, limits): (f64, &AxisLimits),
     ) -> Result<CommandedTable, DeliveryError> {
-        let tables = planned_tables(table, commanded, law, tolerance_um, limits)?;
         let defaults = ProgramSettings::default();
         let settings = VaProgramSettings {
             name: TABLE_PROGRAM.to_string(),
@@ -106,7 +101,7 @@ impl DeliveredTables {
             c_table: next_table_number(self.c_table_number, C_TABLE_PAIR),
             ..VaProgramSettings::default()
         };
-        let text = render_va_table_program(&tables, &settings)?;
+        let text = render_va_table_program(tables, &settings)?;
         let main = render_va_main_program(MAIN_PROGRAM, &settings, tables.va_speed_rpm, 1.0)?;
         self.files.insert(TABLE_PROGRAM.to_string(), text);
         (self.table_number, self.c_table_number) = (settings.x_table, settings.c_table);

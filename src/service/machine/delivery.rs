@@ -269,7 +269,7 @@ impl FeatureLoop {
         self.table_wheel_radius_bits
             .store(wheel_radius_mm.to_bits(), Ordering::SeqCst);
         // The main program pairs each feature's table with the VA speed it was made for.
-        if let Some(rpm) = self.va_speed_on_share()
+        if let Some(rpm) = self.va_speed_delivered(wheel_radius_mm)
             && let Err(e) = self.main.delivered(&self.setup.name, rpm)
         {
             error!(machine = %self.name, error = format!("{e:#}"), "main program: the plan's speed not kept");

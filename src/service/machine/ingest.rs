@@ -114,8 +114,9 @@ impl FeatureLoop {
             _ => self.disk_full_hold(at_ms).await,
         };
         let previous = self.memory.previous;
+        self.refresh_plan();
         let done = match turn::turn(
-            &self.setup.turn_setup(),
+            &self.turn_setup(),
             &self.memory.learning,
             &raw,
             hold,
@@ -144,7 +145,7 @@ impl FeatureLoop {
         let part = self.memory.parts;
         let held = matches!(done.decision, Decision::Held(_));
         let ground_with = self.memory.in_force_version;
-        let decision = self.plan_guard(done.decision);
+        let decision = self.keep_planned(done.decision);
         let (mut records, text) = self.decide(decision, &sha, part, at_ms).await;
         records.extend(self.chart_events(&raw.header.part, &done.measured, at_ms));
         if !held || !self.journal.on_reserve() {
@@ -267,6 +268,7 @@ impl FeatureLoop {
                 outcome,
                 next,
                 table,
+                ..
             } => {
                 self.note_outcome(&outcome, part, at_ms, &mut records);
                 let reason = format!("part {part}: {outcome}");

@@ -12,14 +12,13 @@
 //! the next steps as usual.
 
 use super::FeatureLoop;
-use crate::core::compensate::{self, CycleError, GuardError, GuardedTable};
+use crate::core::compensate::{GuardError, GuardedTable};
 use crate::core::learn::LearningState;
 use crate::core::program::{ProgramSettings, fmt_fixed};
-use crate::core::speed_plan::guard::planned_tables;
 use crate::core::speed_plan::render::{VaProgramSettings, render_va_table_program};
 use crate::core::speed_plan::tables::VaTables;
 use crate::core::speed_plan::{self, TimeLaw};
-use crate::core::turn::Decision;
+use crate::core::turn::{self, Decision, TurnSetup};
 use crate::recipe::FeatureSetup;
 use tracing::error;
 
@@ -67,11 +66,62 @@ impl FeatureLoop {
         {
             return Ok(law.clone());
         }
-        let part = self.setup.feature.part(&self.setup.nominal)?;
-        let limits = self.setup.speed_plan.limits(&self.setup.limits);
-        let plan = speed_plan::plan(&part, &limits)?;
-        self.plan.law = Some((radius_bits, plan.law.clone()));
-        Ok(plan.law)
+        let law = law_for(&self.setup, self.setup.feature.wheel_radius_mm())?;
+        self.plan.law = Some((radius_bits, law.clone()));
+        Ok(law)
+    }
+
+    /// Makes the plan for the wheel believed now, before a turn, so the turn guards its
+    /// table over VA ([`Self::turn_setup`]). A plan that cannot be made at all (its
+    /// geometry) is said here; the turn then decides without it and the delivery says so
+    /// and keeps the table in force.
+    pub(super) fn refresh_plan(&mut self) {
+        if !self.setup.speed_plan.enabled {
+            return;
+        }
+        if let Err(e) = self.plan_law() {
+            error!(machine = %self.name, lobe = %self.setup.name, error = format!("{e:#}"), "speed plan cannot be made");
+        }
+    }
+
+    /// The turn's setup: the recipe's, with the plan's time law for the wheel believed now
+    /// when the recipe grinds with a plan (see [`Self::refresh_plan`]).
+    pub(super) fn turn_setup(&self) -> TurnSetup<'_> {
+        let radius_bits = self.setup.feature.wheel_radius_mm().to_bits();
+        let plan = match &self.plan.law {
+            Some((bits, law)) if self.setup.speed_plan.enabled && *bits == radius_bits => Some(law),
+            _ => None,
+        };
+        TurnSetup {
+            plan,
+            ..self.setup.turn_setup()
+        }
+    }
+
+    /// Keeps the tables over VA the turn made (and guarded) for its new table, so the
+    /// delivery renders them without making them again. Returns the decision as it is.
+    pub(super) fn keep_planned(&mut self, decision: Decision) -> Decision {
+        if let Decision::Table {
+            table,
+            next,
+            planned: Some(tables),
+            ..
+        } = &decision
+        {
+            let key = self.plan_key(table, next);
+            self.plan.last = Some((key, Ok(tables.as_ref().clone())));
+        }
+        decision
+    }
+
+    /// What the tables over VA are made from: correction, timing and wheel radius.
+    fn plan_key(&self, table: &GuardedTable, next: &LearningState) -> String {
+        format!(
+            "{} {} {}",
+            crate::core::turn::correction_sha256(&next.correction_um),
+            table.timing_offset_deg.to_bits(),
+            self.setup.feature.wheel_radius_mm().to_bits()
+        )
     }
 
     /// The tables over VA of `table` (made from `next`), checked against the X limits; None
@@ -85,24 +135,13 @@ impl FeatureLoop {
             return Ok(None);
         }
         let law = self.plan_law()?;
-        let key = format!(
-            "{} {} {}",
-            crate::core::turn::correction_sha256(&next.correction_um),
-            table.timing_offset_deg.to_bits(),
-            self.setup.feature.wheel_radius_mm().to_bits()
-        );
+        let key = self.plan_key(table, next);
         if let Some((k, tables)) = &self.plan.last
             && *k == key
         {
             return Ok(Some(tables.clone()));
         }
-        let tables = compensate::commanded_lift(&self.setup.nominal, &next.correction_um)
-            .map_err(GuardError::from)
-            .and_then(|lift| Ok(self.setup.feature.part(&lift)?))
-            .and_then(|commanded| {
-                let tolerance_um = self.setup.request.poly_tolerance_um;
-                planned_tables(table, &commanded, &law, tolerance_um, &self.setup.limits)
-            });
+        let tables = turn::planned_tables(&self.setup.lobe_loop(), &law, next, table);
         self.plan.last = Some((key, tables.clone()));
         Ok(Some(tables))
     }
@@ -136,33 +175,20 @@ impl FeatureLoop {
         Ok(render_va_table_program(&tables, &va)?)
     }
 
-    /// The turn's new table refused when, with the plan, its X table over VA exceeds an X
-    /// limit: the same refusal as the turn's own guards, so it is counted, alarmed in a row
-    /// and recorded alike, and the table in force stays.
-    pub(super) fn plan_guard(&mut self, decision: Decision) -> Decision {
-        let Decision::Table { table, next, .. } = &decision else {
-            return decision;
-        };
-        match self.planned(table, next) {
-            Ok(Some(Err(e))) => Decision::Refused(CycleError::Guard(e)),
-            Ok(_) => decision,
-            Err(e) => {
-                // No plan at all (its geometry): the delivery says so and keeps the table.
-                error!(machine = %self.name, lobe = %self.setup.name, error = format!("{e:#}"), "speed plan cannot be made");
-                decision
-            }
+    /// The VA speed (rev/min) of a table program made for a wheel of `wheel_radius_mm` and
+    /// just delivered, None at constant speed. Every table is rendered with the plan for
+    /// the wheel it was made for, so that plan's speed is the program's: known here, never
+    /// read back from the share.
+    pub(super) fn va_speed_delivered(&self, wheel_radius_mm: f64) -> Option<f64> {
+        if !self.setup.speed_plan.enabled {
+            return None;
         }
-    }
-
-    /// The VA speed of the table program now on the share (rev/min), as its text says:
-    /// the exact speed of the table just rendered when it is that one, else the text's
-    /// (a waiting version delivered later). None at constant speed.
-    pub(super) fn va_speed_on_share(&self) -> Option<f64> {
-        let text = std::fs::read_to_string(self.program_path()).ok()?;
-        let written = va_speed_text(&text)?;
-        match self.plan.pending_va_rpm {
-            Some(rpm) if fmt_fixed(rpm, 4) == written => Some(rpm),
-            _ => written.parse().ok(),
+        match &self.plan.law {
+            Some((bits, law)) if *bits == wheel_radius_mm.to_bits() => Some(60.0 / law.period_s()),
+            // A waiting table made for a wheel dressed since: its own plan.
+            _ => law_for(&self.setup, wheel_radius_mm)
+                .ok()
+                .map(|law| 60.0 / law.period_s()),
         }
     }
 
@@ -186,6 +212,14 @@ impl FeatureLoop {
         }
         Ok(!same)
     }
+}
+
+/// The plan's time law for `setup`'s nominal part on a wheel of `wheel_radius_mm`.
+fn law_for(setup: &FeatureSetup, wheel_radius_mm: f64) -> anyhow::Result<TimeLaw> {
+    let feature = setup.feature.with_wheel_radius(wheel_radius_mm);
+    let part = feature.part(&setup.nominal)?;
+    let limits = setup.speed_plan.limits(&setup.limits);
+    Ok(speed_plan::plan(&part, &limits)?.law)
 }
 
 /// The VA speed a two-table program says it was made for, as written (rev/min).
