@@ -86,6 +86,13 @@ pub fn run(text: &str, linear: usize, angle: usize) -> Result<Vec<String>, EvalE
             // Only orders preparation against motion; nothing to evaluate.
             Some(Statement::Keyword("STOPRE")) => {}
             Some(Statement::Keyword("M30")) => break,
+            // The set-up and its end (radius or diameter X, coolant, spindle off): machine
+            // state with no position to evaluate.
+            Some(Statement::Keyword(
+                "DIAMON" | "DIAMOF" | "M5" | "M7" | "M8" | "M9" | "M3" | "M4",
+            )) => {}
+            // Tool, spindle, feed-mode and offset blocks (`T1 D1`, `G96 S180 LIMS=3000 M3`).
+            Some(Statement::Block(words)) if !is_motion(words) => {}
             Some(Statement::Block(words)) if words.first().is_some_and(Word::is_g_code) => {
                 if is_motion(words) {
                     out.push(motion(words, &vars, n, linear, angle)?);

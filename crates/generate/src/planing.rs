@@ -140,7 +140,7 @@ pub fn generate(job: &PlaningJob, state: &JobState) -> Result<Program, PlaningEr
     let mv = |motion, words: Vec<(Axis, f64)>, feed| Stmt::Move {
         motion,
         words: words.into_iter().map(|(a, v)| (a, n(v))).collect(),
-        feed_mm_min: feed,
+        feed,
     };
     let x_lead = job.x_start_mm - job.lead_in_mm;
     let mut body = vec![mv(Motion::Rapid, vec![(Axis::Z, job.z_lift_mm)], None)];

@@ -201,17 +201,17 @@ fn circle_stmts(job: &TurnMillJob, c: &EccentricCircle) -> Vec<Stmt> {
         Stmt::Move {
             motion: Motion::Rapid,
             words: vec![(Axis::C, v(PHI))],
-            feed_mm_min: None,
+            feed: None,
         },
         Stmt::Move {
             motion: Motion::Rapid,
             words: at(from, out_r.clone()),
-            feed_mm_min: None,
+            feed: None,
         },
         Stmt::Move {
             motion: Motion::Linear,
             words: at(from, v(RAD)),
-            feed_mm_min: Some(job.feed_mm_min),
+            feed: Some(job.feed_mm_min),
         },
     ]);
     for k in 0..pieces {
@@ -225,13 +225,13 @@ fn circle_stmts(job: &TurnMillJob, c: &EccentricCircle) -> Vec<Stmt> {
         s.push(Stmt::Move {
             motion: Motion::ArcCcw,
             words,
-            feed_mm_min: None,
+            feed: None,
         });
     }
     s.push(Stmt::Move {
         motion: Motion::Linear,
         words: at(to, out_r),
-        feed_mm_min: None,
+        feed: None,
     });
     s
 }
