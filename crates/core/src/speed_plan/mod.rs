@@ -9,15 +9,17 @@
 //!    (X velocity, C speed, Q′w, and the parts of X acceleration and jerk at constant speed)
 //!    and the acceleration-type ones (X and C acceleration), all held with a small margin.
 //! 3. C(t) is made a C² cubic B-spline in time from the profile ([`TimeLaw`]): that is the
-//!    motion the control runs, with bounded jerk.
+//!    motion the control runs, with bounded jerk. Its pieces are no shorter than 1 ms, nor
+//!    than the room for the written tables' rounding needs ([`shortest_piece_s`]).
 //! 4. Jerk (third order, outside the phase plane) and the spline's departure from the
 //!    passes' piecewise-constant acceleration are handled by iteration: every limit is
 //!    evaluated on the 0.1° grid along the spline, exactly by the chain rule
 //!    (Ẋ = X′ω, Ẍ = X″ω² + X′α, X⃛ = X‴ω³ + 3X″ωα + X′·dα/dt), and where one is exceeded
 //!    the speed cap and the acceleration bounds are lowered over ±3° and the passes run
-//!    again. A plan is returned only once every limit holds at every grid point; if that
-//!    does not happen within the rounds allowed, the plan is the fastest constant speed,
-//!    which holds them by construction.
+//!    again. Accelerations are accepted only below their limits less the room the written
+//!    tables' rounding needs (`Room`, [`knots`]). A plan is returned only once every limit
+//!    holds at every grid point; if that does not happen within the rounds allowed, the
+//!    plan is the fastest constant speed, which holds them by construction.
 
 mod check;
 pub mod guard;
@@ -390,8 +392,9 @@ fn lower_where_exceeded(
 /// interpolation cycle Δ. With the knots chosen up or down so the steps are smallest
 /// ([`knots::knot_values`]), the steps stay within about one resolution step per piece
 /// (q/h for a piece of h seconds), so the plan keeps q/(h·Δ) free at the shortest cycle,
-/// [`SHORTEST_CYCLE_S`]: on the demo intake lobe (h = 1.67 ms) 120 °/s², 3.3 % of its
-/// C acceleration limit; where the X axis binds (h = 1.05 ms) 1.9 % of X's.
+/// [`SHORTEST_CYCLE_S`]: on the demo intake lobe (h = 3 ms) 67 °/s², 1.9 % of its C
+/// acceleration limit; where the X axis binds (h = 1.05 ms) 190 mm/s², 1.9 % of X's. The
+/// pieces are made long enough that it is never above 2 % ([`shortest_piece_s`]).
 struct Room {
     x_accel: f64,
     c_accel: f64,
