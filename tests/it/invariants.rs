@@ -39,8 +39,8 @@ fn uses_of(dir: &Path, forbidden: &[&str], min_files: usize) -> Vec<String> {
     violations
 }
 
-/// The pure crates (the core, the generators, the simulator) depend on nothing that does
-/// I/O (the simulator takes the gauge crate without its `io` adapters): their
+/// The pure crates (the core, the generators, the loop, the simulator) depend on nothing that
+/// does I/O (the simulator takes the gauge crate without its `io` adapters): their
 /// manifests name only these crates, so the compiler refuses a runtime, a database or
 /// logging there, whatever the code says.
 #[test]
@@ -50,13 +50,22 @@ fn the_pure_crates_depend_on_no_io_crate() {
         "base16ct",
         "camloop-core",
         "camloop-gauge",
+        // The loop's pure state machine and decisions (the simulator runs them too).
+        "camloop-loop",
+        // Its `Timestamp` type only: the pure crates read no clock (checked below).
+        "jiff",
         "serde",
         "sha2",
         // Pure arithmetic: the capability statistics' distribution functions.
         "statrs",
         "thiserror",
     ];
-    for krate in ["crates/core", "crates/generate", "crates/sim"] {
+    for krate in [
+        "crates/core",
+        "crates/generate",
+        "crates/loop",
+        "crates/sim",
+    ] {
         let text = std::fs::read_to_string(root.join(krate).join("Cargo.toml")).unwrap();
         let manifest: toml::Table = text.parse().unwrap();
         let deps = manifest["dependencies"].as_table().unwrap();
@@ -147,12 +156,43 @@ fn sim_does_no_io_and_reads_no_clock() {
     );
 }
 
+/// The loop is pure like the core: it does no I/O, logs nothing and reads no clock (every
+/// time comes in with its input, as a `jiff::Timestamp`), so each decision it makes is
+/// fixed by its inputs.
+#[test]
+fn loop_does_no_io_and_reads_no_clock() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/loop/src");
+    let forbidden = [
+        "std::fs",
+        "std::net",
+        "std::io::",
+        "tokio",
+        "sqlx",
+        "axum",
+        "SystemTime",
+        "Instant",
+        "Timestamp::now",
+        "Zoned::now",
+        "tracing",
+        "println!",
+        "eprintln!",
+        "std::env",
+        "std::process",
+    ];
+    let violations = uses_of(&dir, &forbidden, 4);
+    assert!(
+        violations.is_empty(),
+        "I/O or a clock in the loop:\n{}",
+        violations.join("\n")
+    );
+}
+
 /// Every module says what it owns in a `//!` line at the top.
 #[test]
 fn every_module_starts_with_a_doc_line() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut files = rust_files(&root.join("src"));
-    for krate in ["core", "gauge", "generate", "sim"] {
+    for krate in ["core", "gauge", "generate", "loop", "sim"] {
         files.extend(rust_files(&root.join("crates").join(krate).join("src")));
     }
     let missing: Vec<String> = files

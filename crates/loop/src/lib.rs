@@ -3,6 +3,10 @@
 //! out the effects it asks for (journal, submit, deliver, publish). It reads no clock, touches
 //! no file and logs nothing, so every decision the loop makes is testable without I/O.
 
+pub mod coast;
+pub mod dressing;
+pub mod guards;
+
 pub use camloop_core::ids::{BadPartId, PartId, TableVersion, VersionOutOfRange};
 pub use camloop_core::names::{FeatureName, MachineName};
 

@@ -18,6 +18,7 @@ use camloop_core::measure::{AssemblyLimits, AveragedMeasurement, MeasurementErro
 use camloop_core::speed_plan::tables::VaTables;
 use camloop_core::speed_plan::{self, SpeedPlanError, SpeedPlanSettings, TimeLaw};
 use camloop_core::turn::{self, Decision, TurnError, TurnSetup};
+use camloop_loop::dressing::{self, Dressing};
 
 /// Points of the fine grid the ground part is judged on (0.1°), not only the gauge's points.
 pub const JUDGE_POINTS: usize = 3600;
@@ -274,8 +275,9 @@ impl<'s> Cell<'s> {
         self.feature = self
             .feature
             .with_wheel_radius(event.believed_wheel_radius_mm);
+        let limit_um = self.setup.params.max_correction_um;
         for s in [&mut self.state, &mut self.x_state] {
-            after_dressing(s, old_radius_mm, &event);
+            after_dressing(s, limit_um, old_radius_mm, &event);
         }
         // The correction is kept (lift domain); the plan is made for the new wheel.
         self.law = plan_law(self.setup, self.feature)?;
@@ -359,25 +361,23 @@ fn x_from_correction(state: &LearningState, dx_mm: &mut [f64]) {
     }
 }
 
-/// What the loop does with a dressing, as the service does: with the dresser's measured
-/// infeed the size step is known and the whole correction moves by it; without it the
-/// wheel's share of the size correction (here all of it: one feature) is replaced by the
-/// dressing offset.
-fn after_dressing(state: &mut LearningState, old_radius_mm: f64, event: &super::DressingEvent) {
-    match event.measured_infeed_um {
-        Some(infeed_um) => {
-            let step_um = learn::dressing_size_step_um(
-                old_radius_mm,
-                event.believed_wheel_radius_mm,
-                infeed_um,
-            );
-            learn::after_measured_dressing(state, step_um);
-        }
-        None => {
-            let own = learn::size_correction_um(state);
-            learn::after_dressing(state, own);
-        }
-    }
+/// What the loop does with a dressing: the service's policy, [`dressing::move_correction`].
+/// With the dresser's measured infeed, when the size step it tells is within the correction
+/// limit, the whole correction moves by it; otherwise the wheel's share of the size
+/// correction (here all of it: one feature) is replaced by the dressing offset.
+fn after_dressing(
+    state: &mut LearningState,
+    max_correction_um: f64,
+    old_radius_mm: f64,
+    event: &super::DressingEvent,
+) {
+    let dressed = Dressing {
+        old_radius_mm,
+        new_radius_mm: event.believed_wheel_radius_mm,
+        infeed_um: event.measured_infeed_um,
+        share_um: learn::size_correction_um(state),
+    };
+    dressing::move_correction([state], &dressed, max_correction_um);
 }
 
 fn lobe_loop(setup: &CellSetup, feature: Feature) -> LobeLoop<'_> {

@@ -1,14 +1,15 @@
-//! A wheel dressing: recorded, and the newest table regenerated for the new radius from the
-//! same correction, moved by the size step the dresser's infeed tells, or, without an
-//! infeed, with the wheel's share of the learned size dropped.
+//! A wheel dressing, the shell's half: the loop crate's [`dressing`] checks the report and
+//! moves the correction (by the size step the dresser's infeed tells, or, without a usable
+//! infeed, with the wheel's share of the learned size dropped); here it is recorded and
+//! logged, and the newest table regenerated for the new radius.
 
 use super::super::journal::{EventKind, Pending};
 use super::records::event;
 use super::{FeatureLoop, MachineError};
 use crate::clock::now;
 use crate::core::compensate;
-use crate::core::learn;
 use crate::store::EventLevel;
+use camloop_loop::dressing::{self, CorrectionMove, Dressing};
 use tracing::{error, info, warn};
 
 /// What a dressing did, for the API's answer.
@@ -28,7 +29,7 @@ pub(super) struct Wheel {
     /// The dresser's measured infeed (radius removed), µm, when it reported one.
     pub infeed_um: Option<f64>,
     /// The wheel's share of the size corrections (what all features have in common), µm:
-    /// what a dressing without an infeed replaces (see [`learn::after_dressing`]).
+    /// what a dressing without an infeed replaces (see [`dressing::Dressing`]).
     pub share_um: f64,
 }
 
@@ -42,17 +43,19 @@ impl FeatureLoop {
         source: &str,
         first: bool,
     ) -> Result<Dressed, MachineError> {
-        let wheel_radius_mm =
-            compensate::check_wheel_radius(wheel.radius_mm).map_err(MachineError::refused)?;
-        let infeed_um = wheel
-            .infeed_um
-            .map(learn::check_dresser_infeed)
-            .transpose()
-            .map_err(MachineError::refused)?;
+        let (wheel_radius_mm, infeed_um) =
+            dressing::check(wheel.radius_mm, wheel.infeed_um).map_err(MachineError::refused)?;
         let at_ms = now();
         let old = self.memory.wheel_radius_mm;
         info!(machine = %self.name, old_radius_mm = old, new_radius_mm = wheel_radius_mm, infeed_um, source, "wheel dressed: table regenerated for the new radius");
-        let how = self.move_correction(old, wheel_radius_mm, infeed_um, wheel.share_um);
+        let dressed = Dressing {
+            old_radius_mm: old,
+            new_radius_mm: wheel_radius_mm,
+            infeed_um,
+            share_um: wheel.share_um,
+        };
+        let moved = self.move_correction(&dressed);
+        let how = moved.describe();
         self.memory.wheel_radius_mm = wheel_radius_mm;
         self.setup.feature = self.setup.feature.with_wheel_radius(wheel_radius_mm);
         let mut records = Vec::new();
@@ -70,7 +73,7 @@ impl FeatureLoop {
                 at_ms,
                 EventLevel::Info,
                 EventKind::WheelDressed,
-                format!("wheel radius {old} → {wheel_radius_mm} mm ({source}); {how}"),
+                dressing::event_text(&dressed, source, &moved),
             ));
         }
         // The newest correction made (delivered or waiting) is regenerated: a dressing is not
@@ -116,38 +119,22 @@ impl FeatureLoop {
         })
     }
 
-    /// Moves the learned correction (in force and waiting) for the dressing: by the size step
-    /// when the dresser measured its infeed and the step is plausible, else by replacing the
-    /// wheel's share. Returns how, for the event.
-    fn move_correction(
-        &mut self,
-        old_radius_mm: f64,
-        new_radius_mm: f64,
-        infeed_um: Option<f64>,
-        share_um: f64,
-    ) -> String {
-        let step_um =
-            infeed_um.map(|i| learn::dressing_size_step_um(old_radius_mm, new_radius_mm, i));
+    /// Moves the learned correction (in force and waiting) for the dressing
+    /// ([`dressing::move_correction`]); warns when the infeed could not be used.
+    fn move_correction(&mut self, dressed: &Dressing) -> CorrectionMove {
         let limit_um = self.setup.params.max_correction_um;
         let states = std::iter::once(&mut self.memory.learning)
             .chain(self.memory.waiting.as_mut().map(|w| &mut w.learning));
-        match step_um {
-            Some(step) if step.abs() <= limit_um => {
-                states.for_each(|s| learn::after_measured_dressing(s, step));
-                format!(
-                    "dresser infeed {:.2} µm: size step {step:+.2} µm",
-                    infeed_um.unwrap_or(0.0)
-                )
-            }
-            _ => {
-                if let Some(step) = step_um {
-                    // A radius that moved much more than the infeed is a wheel change or a
-                    // wrong report: the infeed cannot tell the size step then.
-                    warn!(machine = %self.name, size_step_um = step, limit_um, "dresser infeed and radius change disagree beyond the correction limit: the wheel's share of the learned size is replaced instead");
-                }
-                states.for_each(|s| learn::after_dressing(s, share_um));
-                "no usable infeed: the wheel's share of the learned size replaced".to_string()
-            }
+        let moved = dressing::move_correction(states, dressed, limit_um);
+        if let CorrectionMove::ShareReplaced {
+            implausible_step_um: Some(step),
+            limit_um,
+        } = moved
+        {
+            // A radius that moved much more than the infeed is a wheel change or a wrong
+            // report: the infeed cannot tell the size step then.
+            warn!(machine = %self.name, size_step_um = step, limit_um, "dresser infeed and radius change disagree beyond the correction limit: the wheel's share of the learned size is replaced instead");
         }
+        moved
     }
 }

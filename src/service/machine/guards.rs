@@ -1,19 +1,20 @@
-//! Guards acting part after part: a streak of refusals or limited steps by the same guard
-//! becomes one alarm (said once, not per part), and the feature's status for the API and
-//! `/metrics`.
+//! Guards acting part after part, the shell's half: the loop crate's [`guards`] decides the
+//! streaks and their alarms; here they become events, logs, `/metrics` and the feature's
+//! status for the API.
 
 use super::super::journal::{EventKind, Pending};
 use super::FeatureLoop;
-use super::memory::{GuardKind, GuardStreak};
+use super::memory::GuardKind;
 use super::records::event;
 use crate::core::turn::Measured;
 use crate::store::EventLevel;
+use camloop_loop::guards;
 use tracing::{error, info};
 
 impl FeatureLoop {
     /// A guard refused or limited part `part`; returns how many parts in a row it has. At
     /// `learning.blocked_alarm_after_parts` in a row, one alarm event with the reason and
-    /// what the operator can do.
+    /// what the operator can do ([`guards::acted`] decides).
     pub(super) fn guard_acted(
         &mut self,
         kind: GuardKind,
@@ -22,31 +23,17 @@ impl FeatureLoop {
         at_ms: jiff::Timestamp,
         records: &mut Vec<Pending>,
     ) -> u32 {
-        let streak = match self.memory.guard.take() {
-            Some(s) if s.kind == kind => GuardStreak {
-                parts: s.parts + 1,
-                reason: reason.to_string(),
-                ..s
-            },
-            _ => GuardStreak {
-                kind,
-                parts: 1,
-                reason: reason.to_string(),
-                alarmed: false,
-            },
-        };
-        let in_a_row = streak.parts;
-        let alarm_now = !streak.alarmed && in_a_row >= self.setup.params.blocked_alarm_after_parts;
-        self.memory.guard = Some(GuardStreak {
-            alarmed: streak.alarmed || alarm_now,
-            ..streak
-        });
-        if alarm_now {
-            let message = format!(
-                "{} part {part}: blocked by a guard on {in_a_row} parts in a row: {reason}; {}",
-                self.setup.name,
-                kind.advice()
-            );
+        let acted = guards::acted(
+            self.memory.guard.take(),
+            kind,
+            reason,
+            part,
+            &self.setup.name,
+            self.setup.params.blocked_alarm_after_parts,
+        );
+        let in_a_row = acted.streak.parts;
+        self.memory.guard = Some(acted.streak);
+        if let Some(message) = acted.alarm {
             error!(machine = %self.name, lobe = %self.setup.name, guard = ?kind, reason = %reason, "blocked by a guard part after part: operator action needed");
             self.metrics.update(&self.name, |m| m.alarms_total += 1);
             records.push(event(
@@ -73,11 +60,7 @@ impl FeatureLoop {
         let Some(streak) = self.memory.guard.take() else {
             return;
         };
-        if streak.alarmed {
-            let message = format!(
-                "{} part {part}: learned from again; the {:?} guard no longer blocks",
-                self.setup.name, streak.kind
-            );
+        if let Some(message) = guards::cleared(Some(streak), part, &self.setup.name) {
             info!(machine = %self.name, lobe = %self.setup.name, "guard no longer blocks: alarm cleared");
             records.push(event(
                 &self.name,
@@ -95,11 +78,7 @@ impl FeatureLoop {
     /// The feature's status after a part, for the API and `/metrics`.
     pub(super) fn publish_status(&self, part: &str, measured: &Measured) {
         let m = &self.memory;
-        let blocked = m
-            .guard
-            .as_ref()
-            .filter(|g| g.alarmed)
-            .map(|g| format!("{} parts in a row: {}", g.parts, g.reason));
+        let blocked = guards::blocked_status(m.guard.as_ref());
         self.metrics
             .update_feature(&self.name, &self.setup.name, |f| {
                 f.parts += 1;
@@ -120,11 +99,7 @@ impl FeatureLoop {
     /// stands again).
     pub(super) fn publish_start_status(&self) {
         let m = &self.memory;
-        let blocked = m
-            .guard
-            .as_ref()
-            .filter(|g| g.alarmed)
-            .map(|g| format!("{} parts in a row: {}", g.parts, g.reason));
+        let blocked = guards::blocked_status(m.guard.as_ref());
         self.metrics
             .update_feature(&self.name, &self.setup.name, |f| {
                 f.in_force_version = m.in_force_version;

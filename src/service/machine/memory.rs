@@ -3,11 +3,11 @@
 //! wheel, and the identities of the newest measurements. It travels through the journal into
 //! the store, and a restart resumes from the newest copy.
 
-use crate::core::compensate::CycleError;
 use crate::core::digest::Sha256;
-use crate::core::learn::{
-    BoundedQuantity, LearnError, LearningParams, LearningState, PreviousPart,
-};
+use crate::core::learn::{LearningParams, LearningState, PreviousPart};
+/// The guards' streak lives with its logic in the loop crate; its serialized form in this
+/// record is unchanged.
+pub use camloop_loop::guards::{GuardKind, GuardStreak};
 use serde::{Deserialize, Serialize};
 
 /// Layout of [`LoopMemory`] written by this build. Records without the field are layout 1
@@ -59,77 +59,6 @@ pub struct LoopMemory {
     /// shaft program starts is derived from it.
     #[serde(default)]
     pub last_part: Option<String>,
-}
-
-/// Which guard acted on a part: parts in a row with the same kind make a streak.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum GuardKind {
-    /// `max_correction_um`: the lift correction is at or beyond its limit.
-    CorrectionLimit,
-    /// `max_timing_correction_deg`.
-    TimingLimit,
-    /// The X velocity, acceleration or jerk of the table.
-    AxisLimits,
-    /// The corrected part cannot be ground (geometry) or the table not made.
-    Geometry,
-    /// The measurement's grid or values do not fit the learning state.
-    Measurement,
-}
-
-impl GuardKind {
-    pub(crate) fn of_refusal(e: &CycleError) -> Self {
-        match e {
-            CycleError::Learn(
-                LearnError::CorrectionTooLarge { .. } | LearnError::AtLimit { .. },
-            ) => GuardKind::CorrectionLimit,
-            CycleError::Learn(LearnError::TimingTooLarge { .. }) => GuardKind::TimingLimit,
-            CycleError::Learn(LearnError::GridMismatch { .. } | LearnError::NonFinite { .. }) => {
-                GuardKind::Measurement
-            }
-            CycleError::Guard(
-                crate::core::compensate::GuardError::Motion { .. }
-                | crate::core::compensate::GuardError::PlanMotion { .. },
-            ) => GuardKind::AxisLimits,
-            CycleError::Guard(_) => GuardKind::Geometry,
-        }
-    }
-
-    pub(crate) fn of_bound(quantity: BoundedQuantity) -> Self {
-        match quantity {
-            BoundedQuantity::Correction => GuardKind::CorrectionLimit,
-            BoundedQuantity::Timing => GuardKind::TimingLimit,
-        }
-    }
-
-    /// What an operator can do about it.
-    pub(crate) fn advice(self) -> &'static str {
-        match self {
-            GuardKind::CorrectionLimit => {
-                "check the machine (servo lag, geometry, wheel), dress the wheel, or raise learning.max_correction_um in the recipe"
-            }
-            GuardKind::TimingLimit => {
-                "check the C datum and clamping of the shaft, or raise learning.max_timing_correction_deg"
-            }
-            GuardKind::AxisLimits => {
-                "lower the C speed (axis_limits.c_speed_rpm) or check the X axis limits in the recipe"
-            }
-            GuardKind::Geometry => "check the wheel radius and the recipe's geometry",
-            GuardKind::Measurement => "check the gauge: its grid or values do not fit this feature",
-        }
-    }
-}
-
-/// A guard acting on parts in a row.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct GuardStreak {
-    pub kind: GuardKind,
-    /// Parts in a row.
-    pub parts: u32,
-    /// The newest reason, as the guard said it.
-    pub reason: String,
-    /// The alarm was raised for this streak.
-    pub alarmed: bool,
 }
 
 fn layout_one() -> u32 {
