@@ -2,9 +2,10 @@
 //! audit trail, on the same store the service uses. Whoever runs these can open the
 //! database, so they act as an admin; each change is audited as `cli:<login>`.
 
-use super::history::{StoreArgs, connect, parse_time, runtime};
+use super::history::{StoreArgs, connect, runtime};
 use crate::auth::{UserName, hash_password, new_token, token_digest};
 use crate::clock::now;
+use crate::clock::parse_time;
 use crate::store::{AuditEntry, AuditResult, NewToken, Role, Store, TokenId};
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand, ValueEnum};

@@ -113,7 +113,7 @@ fn profile_bands(config: &Path) -> BTreeMap<SeriesKey, FeatureLimitsDfq> {
             let Ok(setup) = recipe.feature_setup(&path, &lobe) else {
                 continue;
             };
-            let sheet = crate::service::http::FeatureSheet::from_setup(&setup);
+            let sheet = crate::quality::FeatureSheet::from_setup(&setup);
             let band = sheet.symmetric_band_um().map(|b| (-b, b));
             let limits = crate::dfq::DfqLimits::from_feature(&sheet.limits);
             out.insert((m.name.clone(), setup.name), (band, limits));

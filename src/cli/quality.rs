@@ -1,8 +1,9 @@
 //! `camloop capability` and `camloop gauge-study`: the quality engineer's numbers from the
 //! same store the service writes, with the limits from the service configuration's recipes.
 
-use super::history::{StoreArgs, connect, parse_time, runtime};
+use super::history::{StoreArgs, connect, runtime};
 use crate::clock::now;
+use crate::clock::parse_time;
 use crate::config::Config;
 use crate::names::{FeatureName, MachineName};
 use crate::quality::{self, FeatureLimits, Window, render, study::gauge_studies};

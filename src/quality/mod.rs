@@ -8,6 +8,7 @@
 
 pub mod limits;
 pub mod render;
+mod sheet;
 pub mod study;
 
 use crate::core::capability::{
@@ -15,8 +16,9 @@ use crate::core::capability::{
 };
 use crate::core::measure::is_master_part;
 use crate::names::{FeatureName, MachineName};
-use crate::store::{MAX_PAGE, MeasurementDetail, MeasurementId, Store};
+use crate::store::{MAX_PAGE, MeasurementDetail, MeasurementId, Store, StoreError};
 pub use limits::{CharacteristicLimits, FeatureLimits};
+pub use sheet::{FeatureSheet, FeatureSheets};
 
 /// Fewer values than this and a capability figure is indicative only: shown, but marked.
 ///
@@ -67,24 +69,23 @@ pub struct PartRow {
 }
 
 impl PartRow {
-    fn from_detail(d: &MeasurementDetail) -> Self {
-        #[derive(serde::Deserialize)]
-        struct Report {
-            #[serde(default)]
-            error_um: Vec<f64>,
-        }
+    /// The part's row, its error curve read from the analysis the measurement stored. An
+    /// analysis without the field is an error naming the measurement, never an empty curve:
+    /// a renamed field would otherwise empty every study without a word.
+    fn from_detail(d: &MeasurementDetail) -> Result<Self, StoreError> {
         let s = &d.summary;
-        Self {
+        let report = StoredReport::parse(&d.analysis_json).map_err(|e| {
+            StoreError::invalid("analysis_json", format!("measurement {}: {e}", s.id.0))
+        })?;
+        Ok(Self {
             id: s.id,
             part: s.part.clone(),
             received_at_ms: s.received_at_ms,
             max_profile_error_um: s.max_profile_error_um,
             base_radius_error_um: s.base_radius_error_um,
             phase_error_deg: s.phase_error_deg,
-            error_um: serde_json::from_str::<Report>(&d.analysis_json)
-                .map(|r| r.error_um)
-                .unwrap_or_default(),
-        }
+            error_um: report.error_um,
+        })
     }
 
     /// Characteristic `c` of this part, for a feature at `phase_deg` on the shaft.
@@ -99,6 +100,21 @@ impl PartRow {
     }
 }
 
+/// What the quality module reads of the analysis a measurement stored: the fields of the
+/// core's report (`core::analysis::LobeReport`, which the measurement keeps as JSON) it uses,
+/// each required.
+#[derive(Debug, serde::Deserialize)]
+struct StoredReport {
+    /// Measured − nominal lift per angle, µm (`LobeReport::error_um`).
+    error_um: Vec<f64>,
+}
+
+impl StoredReport {
+    fn parse(analysis_json: &str) -> Result<Self, serde_json::Error> {
+        serde_json::from_str(analysis_json)
+    }
+}
+
 /// The window's parts, oldest first: production parts, or (with `masters`) master runs only.
 /// Also returns the start the window took, if any, and how many of the other kind it skipped.
 pub(crate) async fn window_rows(
@@ -107,7 +123,7 @@ pub(crate) async fn window_rows(
     lobe: &FeatureName,
     window: &Window,
     masters: bool,
-) -> Result<(Vec<PartRow>, Option<jiff::Timestamp>, usize), crate::store::StoreError> {
+) -> Result<(Vec<PartRow>, Option<jiff::Timestamp>, usize), StoreError> {
     let mut since = window.since_ms;
     if window.since_dressing
         && let Some(d) = store.dressings(machine, 1).await?.first()
@@ -138,7 +154,7 @@ pub(crate) async fn window_rows(
         for d in &batch {
             if is_master_part(&d.summary.part) == masters {
                 if rows.len() < wanted {
-                    rows.push(PartRow::from_detail(d));
+                    rows.push(PartRow::from_detail(d)?);
                 }
             } else {
                 skipped += 1;
@@ -238,4 +254,50 @@ fn chart_of(parts: &[String], values: &[f64], resolution: f64, c: Characteristic
         part: parts.to_vec(),
         points: capability::chart::evaluate(values, &limits),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::StoredReport;
+    use crate::core::analysis::{LobeOptions, analyse_lobe};
+    use crate::core::measure::AveragedMeasurement;
+
+    /// The record reads the core's own report as a measurement stores it: a field renamed
+    /// in the core fails here, not as empty studies in the field.
+    #[test]
+    fn the_record_reads_the_cores_report() {
+        let n = 360;
+        let grid: Vec<f64> = (0..n).map(|k| k as f64 * 360.0 / n as f64).collect();
+        // A smooth nominal (mm, and its slope per degree); the part measures 4 µm above it
+        // everywhere, so the unfitted error is 4 µm at every angle.
+        let nominal = |psi: f64| {
+            let r = psi.to_radians();
+            (2.0 + r.cos(), -r.sin() * std::f64::consts::PI / 180.0)
+        };
+        let avg = AveragedMeasurement {
+            origin: "test".into(),
+            points_per_rev: n as u32,
+            mean_lift_mm: grid.iter().map(|&p| nominal(p).0 + 0.004).collect(),
+            repeatability_std_um: vec![0.2; n],
+            repeatability_range_um: vec![0.5; n],
+            revolutions_used: vec![0, 1, 2],
+            dropped_revolutions: Vec::new(),
+        };
+        let report = analyse_lobe(&avg, &nominal, &LobeOptions::default()).unwrap();
+        let stored = serde_json::to_string(&report).unwrap();
+        let read = StoredReport::parse(&stored).unwrap();
+        assert_eq!(read.error_um.len(), n);
+        // 4 µm within float rounding of a 3 mm lift (1e-9 µm is far below any gauge).
+        assert!(
+            read.error_um.iter().all(|e| (e - 4.0).abs() < 1e-9),
+            "{read:?}"
+        );
+    }
+
+    /// An analysis without the field is an error that names it, never an empty curve.
+    #[test]
+    fn a_missing_field_is_an_error_naming_it() {
+        let e = StoredReport::parse(r#"{"profile_error_um":[1.0]}"#).unwrap_err();
+        assert!(e.to_string().contains("missing field `error_um`"), "{e}");
+    }
 }

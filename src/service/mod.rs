@@ -4,6 +4,7 @@
 
 mod access_setup;
 pub(crate) mod action;
+pub mod app;
 mod cluster_task;
 pub(crate) mod command;
 mod drop_source;

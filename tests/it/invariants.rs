@@ -259,3 +259,86 @@ fn no_paths_of_the_development_machine() {
     }
     assert!(offenders.is_empty(), "{offenders:?}");
 }
+
+/// The service never imports the CLI: the CLI is an edge that drives the service, and what
+/// both need lives in a neutral place (`clock`, `quality`).
+#[test]
+fn the_service_never_imports_the_cli() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let violations = uses_of(
+        &root.join("src/service"),
+        &["crate::cli", "super::cli", "camloop::cli"],
+        30,
+    );
+    assert!(
+        violations.is_empty(),
+        "the service imports the CLI:\n{}",
+        violations.join("\n")
+    );
+}
+
+/// Adapters do not reach into each other: OPC UA and MQTT import neither the HTTP adapter
+/// nor one another. What they share (the loop's types, `service::action`, `service::command`,
+/// `service::plant`, `service::app`) belongs to none of them.
+#[test]
+fn opcua_and_mqtt_never_import_http_nor_each_other() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let service = root.join("src/service");
+    // OPC UA's sign-in (`opcua/auth.rs`) still goes through the HTTP side's password check
+    // and lockout until those move to a neutral module; it is the one place allowed, and
+    // only for that.
+    let sign_in = service.join("opcua/auth.rs");
+    let mut violations: Vec<String> = uses_of(
+        &service.join("opcua"),
+        &[
+            "service::http",
+            "super::http",
+            "service::mqtt",
+            "super::mqtt",
+        ],
+        5,
+    )
+    .into_iter()
+    .filter(|v| !(v.starts_with(&sign_in.display().to_string()) && v.ends_with("service::http")))
+    .collect();
+    violations.extend(uses_of(
+        &service.join("mqtt"),
+        &[
+            "service::http",
+            "super::http",
+            "service::opcua",
+            "super::opcua",
+        ],
+        4,
+    ));
+    assert!(
+        violations.is_empty(),
+        "an adapter imports another:\n{}",
+        violations.join("\n")
+    );
+}
+
+/// The loop crate is pure: its manifest names no runtime, database, web framework or
+/// logging, so the compiler keeps them out whatever the code says.
+#[test]
+fn the_loop_crate_names_no_io_crate() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(root.join("crates/loop/Cargo.toml")).unwrap();
+    let manifest: toml::Table = text.parse().unwrap();
+    let mut named: Vec<&str> = Vec::new();
+    for section in ["dependencies", "dev-dependencies", "build-dependencies"] {
+        if let Some(deps) = manifest.get(section).and_then(|d| d.as_table()) {
+            named.extend(deps.keys().map(String::as_str));
+        }
+    }
+    assert!(
+        named.contains(&"camloop-core"),
+        "the loop crate's manifest names {named:?}: is this its manifest?"
+    );
+    for forbidden in ["tokio", "sqlx", "axum", "tracing"] {
+        assert!(
+            !named.iter().any(|n| n.starts_with(forbidden)),
+            "the loop crate depends on {forbidden}: {named:?}"
+        );
+    }
+}

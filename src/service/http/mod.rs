@@ -33,6 +33,7 @@ mod session;
 mod tls;
 mod writes;
 
+pub use crate::service::app::AppState;
 pub use access::{AuthState, Principal, ROUTES, RouteRule};
 pub use api::{ApiError, ApiJson, ApiPath, ApiQuery, Authorized};
 pub use audit::record as record_audit;
@@ -47,45 +48,8 @@ pub use writes::{CommandReply, command_code};
 pub(crate) use access::{failed as auth_failed, locked as auth_locked};
 pub(crate) use session::check_password;
 
-use super::machine::StoreHandle;
-use super::metrics::Metrics;
-use crate::names::{FeatureName, MachineName};
 use axum::Router;
 use axum::routing::{get, post};
-use std::collections::BTreeMap;
-use std::sync::Arc;
-
-#[derive(Clone)]
-pub struct AppState {
-    pub store: StoreHandle,
-    pub metrics: Arc<Metrics>,
-    /// Every configured machine with the names of the lobes or pins it grinds, in grinding
-    /// order.
-    pub machines: Arc<BTreeMap<MachineName, Vec<FeatureName>>>,
-    /// Per machine (by name), the channel to its loop for write requests.
-    /// The machines running on this instance (in a cluster, those it holds now).
-    pub commands: crate::service::command::CommandRoutes,
-    /// Access: the deprecated shared token, anonymous reading, sessions, the lockout.
-    pub auth: Arc<AuthState>,
-    /// How long a request body may take to arrive once its headers are in.
-    pub body_timeout: std::time::Duration,
-    /// The dashboard's view of each configured feature (bands, setup drawing).
-    pub dashboard: FeatureSheets,
-    /// In a cluster: the leases, for `GET /api/v1/cluster`.
-    pub cluster: Option<crate::cluster::Leases>,
-}
-
-impl AppState {
-    /// What the service's write path needs of this state.
-    pub(crate) fn writes(&self) -> crate::service::command::Writes<'_> {
-        crate::service::command::Writes {
-            store: &self.store,
-            metrics: &self.metrics,
-            machines: &self.machines,
-            routes: &self.commands,
-        }
-    }
-}
 
 pub fn router(state: AppState) -> Router {
     let m = "/api/v1/machines/{machine}";

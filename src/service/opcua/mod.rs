@@ -28,7 +28,7 @@ use tokio::sync::{mpsc, watch};
 use tracing::{info, warn};
 
 use crate::config::{Config, OpcUaSection, OpcUaSecurity};
-use crate::service::http::AppState;
+use crate::service::app::AppState;
 use crate::service::plant::EventSender;
 use camloop_loop::PlantEvent;
 pub(crate) use space::MachineLayout;
@@ -313,16 +313,7 @@ pub async fn bench_server(
             features,
         })
         .collect();
-    let app = AppState {
-        store,
-        metrics,
-        machines: Arc::default(),
-        commands: Arc::default(),
-        auth: Arc::new(crate::service::http::AuthState::new(None, false)),
-        body_timeout: std::time::Duration::from_secs(10),
-        dashboard: Arc::default(),
-        cluster: None,
-    };
+    let app = AppState::without_http(store, metrics);
     let (sender, events) = mpsc::channel(INTAKE);
     let intake = Intake {
         events,

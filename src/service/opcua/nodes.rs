@@ -12,7 +12,7 @@ use opcua::sync::RwLock;
 use opcua::types::StatusCode;
 
 use super::space::{self, Ids, MachineLayout, Method};
-use crate::service::http::AppState;
+use crate::service::app::AppState;
 
 /// What the node manager is built from.
 pub(crate) struct Builder {
