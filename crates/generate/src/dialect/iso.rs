@@ -90,14 +90,18 @@ fn stmts(out: &mut String, body: &[Stmt], d: Decimals, pending: &mut Option<Comp
                 stmts(out, body, d, pending);
                 let _ = writeln!(out, "o{} endif", 500 + label);
             }
-            Stmt::Mark { var, value, text } => {
+            Stmt::Mark {
+                var: mark,
+                value,
+                text,
+            } => {
                 // The interpreter reads ahead of motion: M66 (read input 0, no wait) makes
                 // LinuxCNC finish the queued motion first, so the mark follows the stroke.
                 out.push_str("M66 P0 L0 (the mark waits for the motion before it to end)\n");
                 let _ = writeln!(
                     out,
-                    "#{}={} ({})",
-                    var.index,
+                    "{}={} ({})",
+                    var(mark.index),
                     exact(*value),
                     paren_safe(text)
                 );

@@ -81,7 +81,7 @@ fn stmts(out: &mut String, body: &[Stmt], d: Decimals, pending: &mut Option<Comp
                 // The block preparation runs ahead of motion: without STOPRE the mark
                 // would be written before the stroke it records has ended.
                 out.push_str("STOPRE ; the mark waits for the motion before it to end\n");
-                let _ = writeln!(out, "R{}={} ; {text}", var.index, exact(*value));
+                let _ = writeln!(out, "{}={} ; {text}", var.name, exact(*value));
             }
         }
     }
