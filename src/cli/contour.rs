@@ -2,10 +2,12 @@
 //! or expanded form, with chords placed by tolerance.
 
 use super::output::Outputs;
+use super::program_args::MachineSetupArgs;
 use crate::core::generate::contour::{ContourJob, Roughing, Side, generate};
 use crate::core::generate::curve::Curve;
 use crate::core::generate::dialect::{Decimals, Dialect, Form};
 use crate::core::generate::profile::parse_profile;
+use crate::core::generate::setup::{FeedMode, Setup, XMode};
 use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 use std::path::PathBuf;
@@ -67,10 +69,23 @@ pub struct ContourArgs {
     pub allowance_mm: f64,
     #[arg(long, global = true, default_value_t = 1.0)]
     pub clearance_mm: f64,
-    #[arg(long, global = true, default_value_t = 120.0)]
-    pub finish_feed_mm_min: f64,
-    #[arg(long, global = true, default_value_t = 250.0)]
-    pub rough_feed_mm_min: f64,
+    /// Finish feed per revolution (G95, the default).
+    #[arg(long, global = true, value_name = "MM", default_value_t = 0.1)]
+    pub finish_feed_mm_rev: f64,
+    /// Roughing feed per revolution (G95).
+    #[arg(long, global = true, value_name = "MM", default_value_t = 0.25)]
+    pub rough_feed_mm_rev: f64,
+    /// Finish feed per minute: G94 instead of G95 (the rough feed then defaults to 250).
+    #[arg(long, global = true, value_name = "MM_MIN")]
+    pub finish_feed_mm_min: Option<f64>,
+    /// Roughing feed per minute: G94 instead of G95 (the finish feed then defaults to 120).
+    #[arg(long, global = true, value_name = "MM_MIN")]
+    pub rough_feed_mm_min: Option<f64>,
+    /// Program X as a diameter (SINUMERIK DIAMON, ISO G7) instead of a radius.
+    #[arg(long, global = true)]
+    pub diameter: bool,
+    #[command(flatten)]
+    pub machine: MachineSetupArgs,
 }
 
 #[derive(Debug, Subcommand)]
@@ -219,6 +234,20 @@ pub(crate) fn run_contour(args: ContourArgs) -> anyhow::Result<()> {
         depth_mm: args.depth_mm,
         allowance_mm: args.allowance_mm,
     });
+    let mut setup = args.machine.setup(Setup::turning());
+    if args.diameter {
+        setup.x_mode = Some(XMode::Diameter);
+    }
+    let per_min = args.finish_feed_mm_min.is_some() || args.rough_feed_mm_min.is_some();
+    let (finish_feed, rough_feed) = if per_min {
+        setup.feed_mode = FeedMode::PerMinute;
+        (
+            args.finish_feed_mm_min.unwrap_or(120.0),
+            args.rough_feed_mm_min.unwrap_or(250.0),
+        )
+    } else {
+        (args.finish_feed_mm_rev, args.rough_feed_mm_rev)
+    };
     let job = ContourJob {
         name: args.name.clone(),
         curve: curve(&args.curve)?,
@@ -232,8 +261,9 @@ pub(crate) fn run_contour(args: ContourArgs) -> anyhow::Result<()> {
         nose_radius_mm: args.nose_radius_mm,
         roughing,
         clearance_mm: args.clearance_mm,
-        finish_feed_mm_min: args.finish_feed_mm_min,
-        rough_feed_mm_min: args.rough_feed_mm_min,
+        finish_feed,
+        rough_feed,
+        setup,
     };
     let c = generate(&job).context("contour refused")?;
     let form = match args.form {

@@ -148,7 +148,10 @@ fn apply_options(a: &PlaningArgs, c: &mut Card) {
 
 /// The program text the card asks for.
 fn render(card: &Card) -> anyhow::Result<String> {
-    let job = card.job();
+    let job = card.job()?;
+    if card.output.dialect == "sinumerik" && job.m_codes.any_p() {
+        anyhow::bail!("a P word on an M code is LinuxCNC's: a SINUMERIK M function has none");
+    }
     let refused = "planing refused";
     match (card.output.dialect.as_str(), card.output.form.as_str()) {
         ("sinumerik", "table") => {
@@ -186,7 +189,7 @@ pub(crate) fn run_planing(args: PlaningArgs) -> anyhow::Result<()> {
     };
     apply_options(&args, &mut card);
     let text = render(&card)?;
-    let points = stroke_x_mm(&card.job()).context("planing refused")?.len();
+    let points = stroke_x_mm(&card.job()?).context("planing refused")?.len();
     let mut outputs = Outputs::default();
     outputs.add(&args.out, text);
     if let Some(path) = &args.save_job {

@@ -1,5 +1,7 @@
-//! Flags that shape the SINUMERIK programs written by `camloop table`.
+//! Flags that shape the programs camloop writes: the SINUMERIK table programs of
+//! `camloop table`, and the machine set-up shared by the other machines' generators.
 
+use crate::core::generate::setup::{Coolant, Setup, SpindleDirection, SpindleSpeed};
 use crate::core::program::{CDirection, MainProgramSettings, ProgramSettings, TableMemory};
 use clap::{Args, ValueEnum};
 use std::path::{Path, PathBuf};
@@ -108,4 +110,77 @@ impl ProgramArgs {
 
 fn stem_upper(path: &Path) -> Option<String> {
     path.file_stem().map(|s| s.to_string_lossy().to_uppercase())
+}
+
+/// Coolant as chosen on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CoolantArg {
+    Flood,
+    Mist,
+    Off,
+}
+
+/// The safe start every generated program states (turning, turn-mill, planing): work
+/// offset, tool and offset, spindle, coolant. The feed mode and the machine's defaults
+/// come from the generator that flattens these flags in.
+#[derive(Debug, Clone, Args)]
+pub struct MachineSetupArgs {
+    /// Work offset, 54 to 59 (G54 … G59).
+    #[arg(long, global = true, value_name = "G", default_value_t = 54)]
+    pub work_offset: u8,
+    /// Tool number (T).
+    #[arg(long, global = true, value_name = "T", default_value_t = 1)]
+    pub tool: u32,
+    /// Tool offset (SINUMERIK D, ISO H).
+    #[arg(long, global = true, value_name = "D", default_value_t = 1)]
+    pub tool_offset: u32,
+    /// Constant cutting speed, m/min (G96); with --max-rpm. Default on a lathe.
+    #[arg(long, global = true, value_name = "M_MIN", conflicts_with = "rpm")]
+    pub surface_speed_m_min: Option<f64>,
+    /// Spindle limit under G96, rpm (SINUMERIK LIMS, LinuxCNC G96 D).
+    #[arg(long, global = true, value_name = "RPM")]
+    pub max_rpm: Option<f64>,
+    /// Fixed spindle speed, rpm (G97).
+    #[arg(long, global = true, value_name = "RPM")]
+    pub rpm: Option<f64>,
+    /// Spindle counter-clockwise (M4) instead of clockwise (M3).
+    #[arg(long, global = true)]
+    pub spindle_ccw: bool,
+    #[arg(long, global = true, value_enum, default_value_t = CoolantArg::Flood)]
+    pub coolant: CoolantArg,
+}
+
+impl MachineSetupArgs {
+    /// `defaults` with the flags given on the command line applied.
+    pub fn setup(&self, defaults: Setup) -> Setup {
+        let mut s = defaults;
+        // Out of range stays out of range (Setup::check names it); no silent wrap.
+        s.work_offset = self.work_offset.saturating_sub(53);
+        s.tool.number = self.tool;
+        s.tool.offset = self.tool_offset;
+        let (default_speed, default_limit) = match defaults.spindle.speed {
+            SpindleSpeed::ConstantSurface {
+                speed_m_min,
+                limit_rpm,
+            } => (speed_m_min, limit_rpm),
+            SpindleSpeed::Rpm(rpm) => (180.0, rpm),
+        };
+        if let Some(rpm) = self.rpm {
+            s.spindle.speed = SpindleSpeed::Rpm(rpm);
+        } else if self.surface_speed_m_min.is_some() || self.max_rpm.is_some() {
+            s.spindle.speed = SpindleSpeed::ConstantSurface {
+                speed_m_min: self.surface_speed_m_min.unwrap_or(default_speed),
+                limit_rpm: self.max_rpm.unwrap_or(default_limit),
+            };
+        }
+        if self.spindle_ccw {
+            s.spindle.direction = SpindleDirection::Ccw;
+        }
+        s.coolant = match self.coolant {
+            CoolantArg::Flood => Coolant::Flood,
+            CoolantArg::Mist => Coolant::Mist,
+            CoolantArg::Off => Coolant::Off,
+        };
+        s
+    }
 }

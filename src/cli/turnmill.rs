@@ -4,6 +4,7 @@
 use super::contour::{DialectArg, FormArg};
 use super::output::Outputs;
 use crate::core::generate::dialect::{Dialect, Form};
+use crate::core::generate::setup::{Coolant, Setup, SpindleSpeed};
 use crate::core::generate::turnmill::path::Side;
 use crate::core::generate::turnmill::{
     Contour, ContourSeg, EccentricCircle, Feature, RadiusMode, Shape, TurnMillJob, generate, render,
@@ -44,7 +45,6 @@ struct JobFile {
     #[serde(default = "c_axis")]
     c_axis: String,
     #[serde(default)]
-    #[allow(dead_code)]
     setup: SetupFile,
     feature: Vec<FeatureFile>,
 }
@@ -129,6 +129,21 @@ struct SegmentFile {
     clockwise: bool,
 }
 
+fn setup(s: &SetupFile) -> anyhow::Result<Setup> {
+    let mut setup = Setup::milling();
+    setup.work_offset = s.work_offset;
+    setup.tool.number = s.tool;
+    setup.tool.offset = s.tool_offset;
+    setup.spindle.speed = SpindleSpeed::Rpm(s.spindle_rpm);
+    setup.coolant = match s.coolant.as_str() {
+        "flood" => Coolant::Flood,
+        "mist" => Coolant::Mist,
+        "off" => Coolant::Off,
+        other => anyhow::bail!("setup.coolant is {other:?}: \"flood\", \"mist\" or \"off\""),
+    };
+    Ok(setup)
+}
+
 fn feature(f: FeatureFile) -> anyhow::Result<Feature> {
     let shape = match (f.circle, f.contour) {
         (Some(c), None) => Shape::Circle(EccentricCircle {
@@ -194,6 +209,7 @@ fn job(file: JobFile) -> anyhow::Result<TurnMillJob> {
     };
     Ok(TurnMillJob {
         name: file.name,
+        setup: setup(&file.setup)?,
         tool_radius_mm: file.tool_radius_mm,
         radius_mode,
         clearance_mm: file.clearance_mm,

@@ -11,6 +11,7 @@ use camloop::core::generate::contour::{ContourError, ContourJob, Roughing, Side,
 use camloop::core::generate::curve::Curve;
 use camloop::core::generate::dialect::{Decimals, Dialect, Form};
 use camloop::core::generate::ir::Compensation;
+use camloop::core::generate::setup::Setup;
 use rs274_support::{Canon, run_rs274};
 
 /// The ellipse of the tests: centre z = −30, x = 10; semi-axes 30 (z) and 20 (x); from
@@ -37,8 +38,9 @@ fn ellipse_job(tolerance_mm: f64, roughing: Option<Roughing>) -> ContourJob {
         nose_radius_mm: 0.8,
         roughing,
         clearance_mm: 1.0,
-        finish_feed_mm_min: 120.0,
-        rough_feed_mm_min: 250.0,
+        finish_feed: 0.1,
+        rough_feed: 0.25,
+        setup: Setup::turning(),
     }
 }
 
@@ -205,10 +207,7 @@ fn sinumerik_loop_expands_to_exactly_the_expanded_program() {
     assert!(looped.contains("GOTOB LOOP_4"), "{looped}");
     let from_loop = sinumerik_eval::run(&looped, d.linear, d.angle).unwrap();
     let from_expanded = sinumerik_eval::run(&expanded, d.linear, d.angle).unwrap();
-    let written: Vec<&str> = expanded
-        .lines()
-        .filter(|l| l.starts_with('G') && !l.starts_with("G18"))
-        .collect();
+    let written: Vec<&str> = expanded.lines().filter(|l| is_move_line(l)).collect();
     assert_eq!(
         from_expanded, written,
         "the evaluator reads the expanded form as written"
@@ -221,6 +220,14 @@ fn sinumerik_loop_expands_to_exactly_the_expanded_program() {
     assert_eq!(c.report.pass_offsets_mm.len(), 3);
     assert_eq!(c.report.compensation, Compensation::Right);
     assert!(expanded.contains("G42 G1"), "stated side");
+}
+
+/// A motion block of the written text (`G0`…`G3`, after a `G40`…`G42`), not a mode block
+/// of the set-up (`G54`, `G95`, `G96 …`).
+fn is_move_line(l: &str) -> bool {
+    l.split_whitespace()
+        .find(|w| !matches!(*w, "G40" | "G41" | "G42"))
+        .is_some_and(|w| matches!(w, "G0" | "G1" | "G2" | "G3"))
 }
 
 /// The finish pass of the rs274 run: the feed moves between the approach and the exit.

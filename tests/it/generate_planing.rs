@@ -10,13 +10,22 @@ use crate::sinumerik_support;
 use camloop::core::generate::dialect::{Decimals, Dialect, Form};
 use camloop::core::generate::planing::coupled::render_sinumerik_table;
 use camloop::core::generate::planing::{
-    PlaningError, PlaningJob, PlaningMCodes, RotorFace, generate, stroke_x_mm,
+    MCode, PlaningError, PlaningJob, PlaningMCodes, RotorFace, generate, safety_rules, stroke_x_mm,
 };
+use camloop::core::generate::safety::{self, Violation};
+use camloop::core::generate::setup::{Coolant, ToolCall};
 use rs274_support::Canon;
 
 pub(crate) fn job() -> PlaningJob {
     PlaningJob {
         name: "ROTOR_PLANE".to_owned(),
+        work_offset: 1,
+        tool: ToolCall {
+            number: 1,
+            offset: 1,
+            change: false,
+        },
+        coolant: Coolant::Flood,
         face: RotorFace {
             segments: 6,
             pitch_radius_mm: 40.0,
@@ -105,8 +114,16 @@ pub(crate) fn check_cuts(j: &PlaningJob, feeds: &[(f64, f64, f64)]) -> (Vec<usiz
     (done, worst_um)
 }
 
+/// The program, after the shared safety check passed on it.
+fn checked(j: &PlaningJob) -> camloop::core::generate::ir::Program {
+    let p = generate(j).unwrap();
+    let report = safety::check(&p, &safety_rules(j)).unwrap();
+    assert!(report.rotary_moves > 0 && report.cutting_moves > 0);
+    p
+}
+
 fn iso(j: &PlaningJob) -> String {
-    Dialect::Iso.render(&generate(j).unwrap(), Form::Loop, Decimals::default())
+    Dialect::Iso.render(&checked(j), Form::Loop, Decimals::default())
 }
 
 /// rs274 with a var file that lists the mark parameter with `mark`; the feed moves and the
@@ -205,7 +222,7 @@ impl Lcg {
 #[test]
 fn interrupted_runs_resume_on_the_control_and_cut_each_arc_once() {
     let j = job();
-    let text = Dialect::Sinumerik.render(&generate(&j).unwrap(), Form::Loop, Decimals::default());
+    let text = Dialect::Sinumerik.render(&checked(&j), Form::Loop, Decimals::default());
     let x_rear = format!("X={:.4}", j.x_end_mm + j.over_travel_rear_mm);
     let mut rng = Lcg(0x5eed);
     for trial in 0..200 {
@@ -262,15 +279,16 @@ fn interrupted_runs_resume_on_the_control_and_cut_each_arc_once() {
 #[test]
 fn sinumerik_text_runs_as_the_program_says() {
     let mut j = job();
+    let m = |code| Some(MCode { code, p: None });
     j.m_codes = PlaningMCodes {
-        hydraulics_on: Some(60),
-        hydraulics_off: Some(61),
-        a_forward: Some(62),
-        a_reverse: Some(63),
-        lift_on: Some(64),
-        lift_off: Some(65),
+        hydraulics_on: m(60),
+        hydraulics_off: m(61),
+        a_forward: m(62),
+        a_reverse: m(63),
+        lift_on: m(64),
+        lift_off: m(65),
     };
-    let p = generate(&j).unwrap();
+    let p = checked(&j);
     let text = Dialect::Sinumerik.render(&p, Form::Loop, Decimals::default());
     let blocks = sinumerik_support::run(&text, 4, 4).unwrap();
     let feeds: Vec<(f64, f64, f64)> = blocks
@@ -294,6 +312,55 @@ fn sinumerik_text_runs_as_the_program_says() {
     let expanded = Dialect::Sinumerik.render(&p, Form::Expanded, Decimals::default());
     assert_eq!(sinumerik_support::run(&expanded, 4, 4).unwrap(), blocks);
     insta::assert_snapshot!("planing_sinumerik", text);
+}
+
+#[test]
+fn the_safety_check_knows_a_planer_has_no_spindle_and_lifts_for_the_index() {
+    let j = job();
+    let p = generate(&j).unwrap();
+    let mut rules = safety_rules(&j);
+    rules.no_spindle = false;
+    let v = safety::check(&p, &rules).unwrap_err();
+    assert!(
+        v.iter().all(|v| matches!(
+            v,
+            Violation::CutBeforeSetup {
+                missing: "the spindle start",
+                ..
+            }
+        )),
+        "{v:?}"
+    );
+    // The index of A is checked against the lift: with the lift lower than where the
+    // index happens, it is accepted; with it higher, every index is refused.
+    let mut rules = safety_rules(&j);
+    rules.clear = vec![safety::Clear::AtLeast {
+        axis: camloop::core::generate::ir::Axis::Z,
+        mm: 6.0,
+    }];
+    let v = safety::check(&p, &rules).unwrap_err();
+    assert!(
+        v.iter()
+            .any(|v| matches!(v, Violation::RotaryEngaged { axis: 'A', .. })),
+        "{v:?}"
+    );
+}
+
+#[test]
+fn iso_m_codes_with_a_p_word_run_in_rs274() {
+    let mut j = job();
+    j.m_codes.hydraulics_on = Some(MCode {
+        code: 64,
+        p: Some(0),
+    });
+    j.m_codes.hydraulics_off = Some(MCode {
+        code: 65,
+        p: Some(0),
+    });
+    let text = iso(&j);
+    assert!(text.contains("M64 P0 (hydraulics on)"), "{text}");
+    let (canon, _) = rs274_with_mark(&j, 0.0);
+    assert_eq!(check_cuts(&j, &feeds(&canon)).0.len(), 6);
 }
 
 #[test]

@@ -97,6 +97,18 @@ pub fn run_with(
             // Only orders preparation against motion; nothing to evaluate.
             Some(Statement::Keyword("STOPRE")) => {}
             Some(Statement::Keyword("M30")) => break,
+            // The set-up and its end (radius or diameter X, coolant, spindle off): machine
+            // state with no position to evaluate.
+            Some(Statement::Keyword(
+                "DIAMON" | "DIAMOF" | "M5" | "M7" | "M8" | "M9" | "M3" | "M4",
+            )) => {}
+            // A machine's own M function (a planer's hydraulics, its tool lifter).
+            Some(Statement::Keyword(k))
+                if k.len() > 1
+                    && k.starts_with('M')
+                    && k[1..].chars().all(|c| c.is_ascii_digit()) => {}
+            // Tool, spindle, feed-mode and offset blocks (`T1 D1`, `G96 S180 LIMS=3000 M3`).
+            Some(Statement::Block(words)) if !is_motion(words) => {}
             Some(Statement::Block(words)) if words.first().is_some_and(Word::is_g_code) => {
                 if is_motion(words) {
                     out.push(motion(words, &vars, n, linear, angle)?);

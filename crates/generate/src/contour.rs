@@ -12,6 +12,8 @@ use thiserror::Error;
 use super::chords::{StepLaw, fixed_step_for, round_to, walk, worst_deviation};
 use super::curve::Curve;
 use super::ir::{Compensation, Expr, Program, Var};
+use super::safety::{self, Rules, Violation};
+use super::setup::{Setup, SetupError};
 use camloop_core::program::{ProgramNameError, validate_program_name};
 
 mod program;
@@ -51,8 +53,11 @@ pub struct ContourJob {
     pub roughing: Option<Roughing>,
     /// Radial clearance of approach and retract moves, mm.
     pub clearance_mm: f64,
-    pub finish_feed_mm_min: f64,
-    pub rough_feed_mm_min: f64,
+    /// Feeds in the unit of `setup.feed_mode` (mm/rev under G95, mm/min under G94).
+    pub finish_feed: f64,
+    pub rough_feed: f64,
+    /// Work offset, X mode, tool, spindle, feed mode and coolant of the safe start.
+    pub setup: Setup,
 }
 
 /// Why a contour is refused.
@@ -93,6 +98,10 @@ pub enum ContourError {
         z_mm: f64,
         x_mm: f64,
     },
+    #[error(transparent)]
+    Setup(#[from] SetupError),
+    #[error("the program fails the safety check: {}", list(.0))]
+    Unsafe(Vec<Violation>),
     #[error("boring clearance: the retract radius {x_mm} mm would be below the axis")]
     BoreTooSmall { x_mm: f64 },
     #[error(
@@ -102,6 +111,14 @@ pub enum ContourError {
         tolerance_um: f64,
         max_chords: usize,
     },
+}
+
+/// The violations as one line.
+fn list(v: &[Violation]) -> String {
+    v.iter()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 /// What the generator proved and how it compares with a fixed step.
@@ -179,6 +196,7 @@ pub fn generate(job: &ContourJob) -> Result<Contour, ContourError> {
         &pass_offsets_mm,
         span,
     );
+    safety::check(&program, &Rules::lathe()).map_err(ContourError::Unsafe)?;
     Ok(Contour {
         program,
         report: ContourReport {
@@ -209,8 +227,9 @@ fn check_values(job: &ContourJob) -> Result<(), ContourError> {
     };
     positive("tolerance", job.tolerance_mm)?;
     positive("clearance", job.clearance_mm)?;
-    positive("finish feed", job.finish_feed_mm_min)?;
-    positive("rough feed", job.rough_feed_mm_min)?;
+    positive("finish feed", job.finish_feed)?;
+    positive("rough feed", job.rough_feed)?;
+    job.setup.check()?;
     if !(job.nose_radius_mm.is_finite() && job.nose_radius_mm >= 0.0) {
         return Err(ContourError::Value {
             field: "nose radius",

@@ -6,6 +6,8 @@
 //! numbers only, so the two forms cannot drift apart except through rendering, which the
 //! tests check by evaluating the rendered text independently.
 
+pub use crate::setup::MachineStmt;
+
 /// A variable of the program: `index` picks the ISO `#` number, `name` the SINUMERIK
 /// `DEF REAL` name.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -207,8 +209,12 @@ pub enum Stmt {
     Move {
         motion: Motion,
         words: Vec<(Axis, Expr)>,
-        feed_mm_min: Option<f64>,
+        /// F word, in the unit of the feed mode in force ([`crate::setup::FeedMode`]:
+        /// mm/min under G94, mm/rev under G95).
+        feed: Option<f64>,
     },
+    /// Machine state: work offset, X mode, tool, spindle, feed mode, coolant.
+    Machine(MachineStmt),
     /// Compensation switched on or off; takes effect with the next move.
     Comp(Compensation),
     /// Runs `body`, then again while `cond` holds (at least once). `label` names the loop
@@ -272,14 +278,14 @@ fn run(body: &[Stmt], vars: &mut Vars, out: &mut Vec<Stmt>) {
             Stmt::Move {
                 motion,
                 words,
-                feed_mm_min,
+                feed,
             } => out.push(Stmt::Move {
                 motion: *motion,
                 words: words
                     .iter()
                     .map(|(a, e)| (*a, Expr::Num(e.eval(vars))))
                     .collect(),
-                feed_mm_min: *feed_mm_min,
+                feed: *feed,
             }),
             Stmt::DoWhile { body, cond, .. } => {
                 for _ in 0..MAX_ITERATIONS {
@@ -298,7 +304,7 @@ fn run(body: &[Stmt], vars: &mut Vars, out: &mut Vec<Stmt>) {
                 vars.set(*var, *value);
                 out.push(s.clone());
             }
-            Stmt::Comment(_) | Stmt::Comp(_) => out.push(s.clone()),
+            Stmt::Comment(_) | Stmt::Comp(_) | Stmt::Machine(_) => out.push(s.clone()),
         }
     }
 }

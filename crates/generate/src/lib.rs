@@ -16,4 +16,6 @@ pub mod ir;
 pub mod open_spline;
 pub mod planing;
 pub mod profile;
+pub mod safety;
+pub mod setup;
 pub mod turnmill;

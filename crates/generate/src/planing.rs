@@ -15,28 +15,59 @@ pub mod face;
 
 use thiserror::Error;
 
-use super::ir::{Axis, Cond, Expr, Motion, Plane, Program, Stmt, Var};
+use super::ir::{Axis, Cond, Expr, MachineStmt, Motion, Plane, Program, Stmt, Var};
+use super::safety::{Clear, Rotary, Rules};
+use super::setup::{Coolant, FeedMode, ToolCall};
 use camloop_core::program::{ProgramNameError, validate_program_name};
 pub use face::RotorFace;
+
+/// An M function of the planer: `M<code>`, and on LinuxCNC a `P<n>` where the code takes
+/// one (M64/M65 switch digital output n).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MCode {
+    pub code: u16,
+    pub p: Option<u16>,
+}
 
 /// The planer's own M codes; `None` writes no block. They differ from machine to machine.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct PlaningMCodes {
     /// Hydraulics on before the first stroke, off after the last.
-    pub hydraulics_on: Option<u32>,
-    pub hydraulics_off: Option<u32>,
+    pub hydraulics_on: Option<MCode>,
+    pub hydraulics_off: Option<MCode>,
     /// A's sense for the cutting stroke, and reversed for the return.
-    pub a_forward: Option<u32>,
-    pub a_reverse: Option<u32>,
+    pub a_forward: Option<MCode>,
+    pub a_reverse: Option<MCode>,
     /// Tool lifter: lifted for the return stroke, lowered for the cut.
-    pub lift_on: Option<u32>,
-    pub lift_off: Option<u32>,
+    pub lift_on: Option<MCode>,
+    pub lift_off: Option<MCode>,
+}
+
+impl PlaningMCodes {
+    /// True when any code carries a P word (LinuxCNC only).
+    pub fn any_p(&self) -> bool {
+        [
+            self.hydraulics_on,
+            self.hydraulics_off,
+            self.a_forward,
+            self.a_reverse,
+            self.lift_on,
+            self.lift_off,
+        ]
+        .iter()
+        .flatten()
+        .any(|m| m.p.is_some())
+    }
 }
 
 /// A planing job: the rotor, the stroke and the machine.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlaningJob {
     pub name: String,
+    /// 1 … 6 for G54 … G59.
+    pub work_offset: u8,
+    pub tool: ToolCall,
+    pub coolant: Coolant,
     pub face: RotorFace,
     /// Coupling ratio K, degrees of A per mm of X; one stroke spans one arc.
     pub ratio_deg_per_mm: f64,
@@ -92,6 +123,18 @@ pub fn mark_var(job: &PlaningJob) -> Var {
 fn check(job: &PlaningJob) -> Result<(), PlaningError> {
     let bad = |field, value, rule| Err(PlaningError::Value { field, value, rule });
     job.face.check()?;
+    if !(1..=6).contains(&job.work_offset) {
+        return bad(
+            "work offset",
+            f64::from(job.work_offset),
+            "1 to 6 for G54 to G59",
+        );
+    }
+    for (field, v) in [("tool", job.tool.number), ("tool offset", job.tool.offset)] {
+        if !(1..=99).contains(&v) {
+            return bad(field, f64::from(v), "a whole number from 1 to 99");
+        }
+    }
     for (field, v) in [
         ("ratio", job.ratio_deg_per_mm),
         ("x start", job.x_start_mm),
@@ -173,13 +216,36 @@ fn mv(motion: Motion, words: &[(Axis, f64)], feed: Option<f64>) -> Stmt {
     Stmt::Move {
         motion,
         words: words.iter().map(|&(a, v)| (a, Expr::num(v))).collect(),
-        feed_mm_min: feed,
+        feed,
     }
 }
 
 /// An M code of the planer, if the machine has one for `what`.
-fn m_code(code: Option<u32>, what: &'static str) -> Option<Stmt> {
-    code.map(|c| Stmt::Comment(format!("M{c} {what}")))
+fn m_code(code: Option<MCode>, what: &'static str) -> Option<Stmt> {
+    code.map(|m| {
+        Stmt::Machine(MachineStmt::MFunction {
+            code: m.code,
+            p: m.p,
+            what,
+        })
+    })
+}
+
+/// The safety check's facts for a planer: no spindle, A turned with the tool lifted to
+/// `z_clear_mm` or in the cut it is coupled to.
+pub fn safety_rules(job: &PlaningJob) -> Rules {
+    Rules {
+        min_x_mm: None,
+        rotary: vec![Rotary {
+            axis: Axis::A,
+            coupled_cut: true,
+        }],
+        clear: vec![Clear::AtLeast {
+            axis: Axis::Z,
+            mm: job.z_clear_mm,
+        }],
+        no_spindle: true,
+    }
 }
 
 /// The whole job: every arc, each guarded by the mark so a run skips the arcs done.
@@ -188,7 +254,15 @@ pub fn generate(job: &PlaningJob) -> Result<Program, PlaningError> {
     let xs = stroke_x_mm(job)?;
     let mark = mark_var(job);
     let m = &job.m_codes;
-    let mut body = Vec::new();
+    // A planer has no spindle: offset, tool, the feed mode before any F, coolant.
+    let mut body = vec![
+        Stmt::Machine(MachineStmt::WorkOffset(job.work_offset)),
+        Stmt::Machine(MachineStmt::Tool(job.tool)),
+        Stmt::Machine(MachineStmt::FeedMode(FeedMode::PerMinute)),
+    ];
+    if job.coolant != Coolant::Off {
+        body.push(Stmt::Machine(MachineStmt::Coolant(job.coolant)));
+    }
     body.extend(m_code(m.hydraulics_on, "hydraulics on"));
     body.push(mv(Motion::Rapid, &[(Axis::Z, job.z_clear_mm)], None));
     for k in 0..job.face.segments as usize {
@@ -213,6 +287,7 @@ pub fn generate(job: &PlaningJob) -> Result<Program, PlaningError> {
         None,
     ));
     body.extend(m_code(m.hydraulics_off, "hydraulics off"));
+    body.push(Stmt::Machine(MachineStmt::Coolant(Coolant::Off)));
     Ok(Program {
         name,
         plane: Plane::Xy,

@@ -15,6 +15,7 @@ pub mod path;
 use thiserror::Error;
 
 use super::ir::{Axis, Compensation, Expr, Motion, Plane, Program, Stmt};
+use super::setup::{Setup, SetupError};
 use camloop_core::program::ProgramNameError;
 use path::{OffsetError, P, Seg, Side};
 
@@ -83,6 +84,8 @@ pub enum RadiusMode {
 #[derive(Debug, Clone, PartialEq)]
 pub struct TurnMillJob {
     pub name: String,
+    /// Tool, milling spindle, feed mode (G94) and coolant.
+    pub setup: Setup,
     pub tool_radius_mm: f64,
     pub radius_mode: RadiusMode,
     /// Distance off the surface of every approach and retract, mm.
@@ -102,6 +105,8 @@ pub struct TurnMillJob {
 pub enum TurnMillError {
     #[error(transparent)]
     Name(#[from] ProgramNameError),
+    #[error(transparent)]
+    Setup(#[from] SetupError),
     #[error("{label}: {field} is {value}: {rule}")]
     Value {
         label: String,
@@ -127,7 +132,7 @@ pub enum TurnMillError {
 
 mod build;
 
-pub use build::{cut_span_deg, generate, render};
+pub use build::{cut_span_deg, generate, park_x_mm, passes, render, safety_rules};
 
 /// The tool side of a circle: looking along travel, the part is inside a convex circle.
 fn circle_side(c: &EccentricCircle) -> Side {
@@ -239,7 +244,7 @@ fn move_xy(motion: Motion, p: P, feed: Option<f64>) -> Stmt {
     Stmt::Move {
         motion,
         words: vec![(Axis::X, Expr::num(p.0)), (Axis::Y, Expr::num(p.1))],
-        feed_mm_min: feed,
+        feed,
     }
 }
 
@@ -247,7 +252,7 @@ fn move_1(motion: Motion, axis: Axis, v: f64) -> Stmt {
     Stmt::Move {
         motion,
         words: vec![(axis, Expr::num(v))],
-        feed_mm_min: None,
+        feed: None,
     }
 }
 

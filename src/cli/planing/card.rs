@@ -2,7 +2,8 @@
 //! with `--job` and written with `--save-job`, each key under the comment that says what it
 //! is, so the card a machinist keeps beside the machine explains itself.
 
-use crate::core::generate::planing::{PlaningJob, PlaningMCodes, RotorFace};
+use crate::core::generate::planing::{MCode, PlaningJob, PlaningMCodes, RotorFace};
+use crate::core::generate::setup::{Coolant, ToolCall};
 use serde::Deserialize;
 use std::fmt::Write as _;
 
@@ -48,12 +49,12 @@ pub(crate) struct Machine {
     pub tool_offset: u32,
     pub coolant: bool,
     pub mark_parameter_iso: u16,
-    pub hydraulics_on_m: Option<u32>,
-    pub hydraulics_off_m: Option<u32>,
-    pub a_forward_m: Option<u32>,
-    pub a_reverse_m: Option<u32>,
-    pub lift_on_m: Option<u32>,
-    pub lift_off_m: Option<u32>,
+    pub hydraulics_on_m: Option<String>,
+    pub hydraulics_off_m: Option<String>,
+    pub a_forward_m: Option<String>,
+    pub a_reverse_m: Option<String>,
+    pub lift_on_m: Option<String>,
+    pub lift_off_m: Option<String>,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -67,10 +68,22 @@ pub(crate) struct Output {
 }
 
 impl Card {
-    pub fn job(&self) -> PlaningJob {
+    /// The job the card describes; an M code that does not read is named with its key.
+    pub fn job(&self) -> anyhow::Result<PlaningJob> {
         let (r, s, m) = (&self.rotor, &self.stroke, &self.machine);
-        PlaningJob {
+        Ok(PlaningJob {
             name: self.name.clone(),
+            work_offset: m.work_offset,
+            tool: ToolCall {
+                number: m.tool,
+                offset: m.tool_offset,
+                change: false,
+            },
+            coolant: if m.coolant {
+                Coolant::Flood
+            } else {
+                Coolant::Off
+            },
             face: RotorFace {
                 segments: r.segments,
                 pitch_radius_mm: r.pitch_radius_mm,
@@ -87,15 +100,15 @@ impl Card {
             tolerance_um: s.tolerance_um,
             min_points_per_arc: s.min_points_per_arc,
             m_codes: PlaningMCodes {
-                hydraulics_on: m.hydraulics_on_m,
-                hydraulics_off: m.hydraulics_off_m,
-                a_forward: m.a_forward_m,
-                a_reverse: m.a_reverse_m,
-                lift_on: m.lift_on_m,
-                lift_off: m.lift_off_m,
+                hydraulics_on: m_code("hydraulics_on_m", &m.hydraulics_on_m)?,
+                hydraulics_off: m_code("hydraulics_off_m", &m.hydraulics_off_m)?,
+                a_forward: m_code("a_forward_m", &m.a_forward_m)?,
+                a_reverse: m_code("a_reverse_m", &m.a_reverse_m)?,
+                lift_on: m_code("lift_on_m", &m.lift_on_m)?,
+                lift_off: m_code("lift_off_m", &m.lift_off_m)?,
             },
             mark_parameter_iso: m.mark_parameter_iso,
-        }
+        })
     }
 
     /// The card as TOML, every key under its comment; [`Card`] reads it back unchanged.
@@ -177,7 +190,7 @@ impl Card {
             &s.min_points_per_arc.to_string(),
             "control points per stroke at least, whatever the tolerance allows",
         );
-        w.section("machine", "the planer; M codes differ from machine to machine: leave one out and no block is written for it");
+        w.section("machine", "the planer; M codes differ from machine to machine: \"M60\", or on LinuxCNC \"M64 P0\" (digital output 0 on); leave one out and no block is written for it");
         w.key(
             "work_offset",
             &m.work_offset.to_string(),
@@ -198,37 +211,37 @@ impl Card {
         for (key, v, what) in [
             (
                 "hydraulics_on_m",
-                m.hydraulics_on_m,
+                &m.hydraulics_on_m,
                 "M code: hydraulics on, before the first stroke",
             ),
             (
                 "hydraulics_off_m",
-                m.hydraulics_off_m,
+                &m.hydraulics_off_m,
                 "M code: hydraulics off, after the last stroke",
             ),
             (
                 "a_forward_m",
-                m.a_forward_m,
+                &m.a_forward_m,
                 "M code: A's sense for the cutting stroke",
             ),
             (
                 "a_reverse_m",
-                m.a_reverse_m,
+                &m.a_reverse_m,
                 "M code: A reversed for the return",
             ),
             (
                 "lift_on_m",
-                m.lift_on_m,
+                &m.lift_on_m,
                 "M code: tool lifter up, for the return stroke",
             ),
             (
                 "lift_off_m",
-                m.lift_off_m,
+                &m.lift_off_m,
                 "M code: tool lifter down, before the cut",
             ),
         ] {
             match v {
-                Some(code) => w.key(key, &code.to_string(), what),
+                Some(code) => w.key(key, &format!("{code:?}"), what),
                 None => {
                     let _ = writeln!(w.0, "# {what}\n# {key} = (none: no block is written)");
                 }
@@ -248,6 +261,30 @@ impl Card {
         );
         w.0
     }
+}
+
+/// `M<code>` or `M<code> P<n>`.
+fn m_code(key: &str, text: &Option<String>) -> anyhow::Result<Option<MCode>> {
+    let Some(t) = text else { return Ok(None) };
+    let bad = || anyhow::anyhow!("machine.{key} is {t:?}: write \"M<code>\" or \"M<code> P<n>\"");
+    let mut words = t.split_whitespace();
+    let code = words
+        .next()
+        .and_then(|w| w.strip_prefix('M'))
+        .and_then(|n| n.parse().ok())
+        .ok_or_else(bad)?;
+    let p = match words.next() {
+        Some(w) => Some(
+            w.strip_prefix('P')
+                .and_then(|n| n.parse().ok())
+                .ok_or_else(bad)?,
+        ),
+        None => None,
+    };
+    if words.next().is_some() {
+        return Err(bad());
+    }
+    Ok(Some(MCode { code, p }))
 }
 
 /// A float as TOML reads it back to the same value (always with a decimal point).

@@ -24,7 +24,7 @@ pub(super) fn build_program(
     let mv = |motion, words: Vec<(Axis, Expr)>, feed| Stmt::Move {
         motion,
         words,
-        feed_mm_min: feed,
+        feed,
     };
     let x_far = far_x(job, points);
     let np = points.len();
@@ -68,10 +68,12 @@ pub(super) fn build_program(
         s.push(mv(Motion::Rapid, vec![(Axis::X, n(x_far))], None));
         s
     };
-    let mut body = roughing_stmts(job, offsets, &approach);
+    let mut body = job.setup.start();
+    body.extend(roughing_stmts(job, offsets, &approach));
     body.push(Stmt::Comment("finish pass".to_owned()));
     body.push(Stmt::Assign(OFS, n(0.0)));
-    body.extend(approach(FINISH_LABEL, job.finish_feed_mm_min));
+    body.extend(approach(FINISH_LABEL, job.finish_feed));
+    body.extend(job.setup.end());
     Program {
         name,
         plane: Plane::Zx,
@@ -99,7 +101,7 @@ fn roughing_stmts(
             r.allowance_mm
         )));
         body.push(Stmt::Assign(OFS, n(first)));
-        let mut pass = approach(ROUGH_LABEL, job.rough_feed_mm_min);
+        let mut pass = approach(ROUGH_LABEL, job.rough_feed);
         pass.push(Stmt::Assign(OFS, Expr::var(OFS).sub(n(dd))));
         body.push(Stmt::DoWhile {
             label: PASS_LABEL,
@@ -127,6 +129,7 @@ fn header_comments(
         _ => "G42 (tool right of the travel)",
     };
     vec![
+        job.setup.describe(),
         format!(
             "contour: {} chords within {:.2} um of the exact curve",
             points.len() - 1,
@@ -202,7 +205,7 @@ fn contour_stmts(
     let mv = |words: Vec<(Axis, Expr)>, feed| Stmt::Move {
         motion: Motion::Linear,
         words,
-        feed_mm_min: feed,
+        feed,
     };
     let (Some(e), Some(du)) = (exprs(&job.curve), du_expr(&job.curve, law)) else {
         return points

@@ -3,8 +3,11 @@
 
 use std::fmt::Write as _;
 
-use super::{Decimals, exact, fixed, is_binary};
+use super::{Decimals, RenderState, exact, fixed, is_binary};
 use crate::ir::{Axis, Compensation, Cond, Expr, Motion, Plane, Program, Stmt};
+use crate::setup::{
+    Coolant, FeedMode, MachineStmt, SpindleDirection, SpindleSpeed, ToolCall, XMode,
+};
 
 /// ISO variable numbers start here (100 and up are free for programs on both FANUC and
 /// LinuxCNC).
@@ -18,12 +21,12 @@ pub(super) fn render(p: &Program, d: Decimals) -> String {
     }
     let plane = match p.plane {
         Plane::Xy => "G17 G90 G21 G40 (X-Y plane, absolute, mm)",
-        Plane::Zx => "G18 G90 G21 G40 (Z-X plane, absolute, mm, X as a radius)",
+        Plane::Zx => "G18 G90 G21 G40 (Z-X plane, absolute, mm)",
     };
     out.push_str(plane);
     out.push('\n');
-    let mut pending = None;
-    stmts(&mut out, &p.body, d, &mut pending);
+    let mut state = RenderState::default();
+    stmts(&mut out, &p.body, d, &mut state);
     out.push_str("M30\n%\n");
     out
 }
@@ -37,7 +40,7 @@ fn var(index: u16) -> String {
     format!("#{}", FIRST_VAR + index)
 }
 
-fn stmts(out: &mut String, body: &[Stmt], d: Decimals, pending: &mut Option<Compensation>) {
+fn stmts(out: &mut String, body: &[Stmt], d: Decimals, state: &mut RenderState) {
     for s in body {
         match s {
             Stmt::Comment(c) => {
@@ -52,14 +55,18 @@ fn stmts(out: &mut String, body: &[Stmt], d: Decimals, pending: &mut Option<Comp
                 };
                 let _ = writeln!(out, "{}={value}", var(v.index));
             }
-            Stmt::Comp(c) => *pending = Some(*c),
+            Stmt::Comp(c) => state.pending = Some(*c),
+            Stmt::Machine(m) => {
+                state.note(m);
+                let _ = writeln!(out, "{}", machine(m));
+            }
             Stmt::Move {
                 motion,
                 words,
-                feed_mm_min,
+                feed,
             } => {
                 let mut line = String::new();
-                if let Some(c) = pending.take() {
+                if let Some(c) = state.pending.take() {
                     line.push_str(match c {
                         Compensation::Off => "G40 ",
                         Compensation::Left => "G41 ",
@@ -73,21 +80,22 @@ fn stmts(out: &mut String, body: &[Stmt], d: Decimals, pending: &mut Option<Comp
                     Motion::ArcCcw => "G3",
                 });
                 for (axis, e) in words {
-                    let _ = write!(line, " {}{}", axis.letter(), word(*axis, e, d));
+                    let w = word(*axis, e, d, state.doubles(*axis));
+                    let _ = write!(line, " {}{w}", axis.letter());
                 }
-                if let Some(f) = feed_mm_min {
-                    let _ = write!(line, " F{}", fixed(*f, 1));
+                if let Some(f) = feed {
+                    let _ = write!(line, " F{}", state.feed_text(*f));
                 }
                 let _ = writeln!(out, "{line}");
             }
             Stmt::DoWhile { label, body, cond } => {
                 let _ = writeln!(out, "o{} do", 100 + label);
-                stmts(out, body, d, pending);
+                stmts(out, body, d, state);
                 let _ = writeln!(out, "o{} while {}", 100 + label, cond_text(cond));
             }
             Stmt::If { label, cond, body } => {
                 let _ = writeln!(out, "o{} if {}", 500 + label, cond_text(cond));
-                stmts(out, body, d, pending);
+                stmts(out, body, d, state);
                 let _ = writeln!(out, "o{} endif", 500 + label);
             }
             Stmt::Mark {
@@ -110,11 +118,54 @@ fn stmts(out: &mut String, body: &[Stmt], d: Decimals, pending: &mut Option<Comp
     }
 }
 
-fn word(axis: Axis, e: &Expr, d: Decimals) -> String {
+/// A move word; X doubled under G7 (the program's values are radii).
+fn word(axis: Axis, e: &Expr, d: Decimals, double: bool) -> String {
     match e {
         Expr::Num(v) if axis.is_rotary() => fixed(*v, d.angle),
+        Expr::Num(v) if double => fixed(2.0 * v, d.linear),
         Expr::Num(v) => fixed(*v, d.linear),
+        other if double => format!("[2*[{}]]", expr(other)),
         other => format!("[{}]", expr(other)),
+    }
+}
+
+/// A machine-state block as LinuxCNC reads it, with a comment saying what it does.
+fn machine(m: &MachineStmt) -> String {
+    match *m {
+        MachineStmt::WorkOffset(n) => format!("G{} (work offset)", 53 + u32::from(n)),
+        MachineStmt::XMode(XMode::Radius) => "G8 (X as a radius)".to_owned(),
+        MachineStmt::XMode(XMode::Diameter) => "G7 (X as a diameter)".to_owned(),
+        // LinuxCNC loads a tool only with M6; G43 H applies the offset's length.
+        MachineStmt::Tool(ToolCall { number, offset, .. }) => {
+            format!("T{number} M6 G43 H{offset} (tool {number}, offset {offset})")
+        }
+        MachineStmt::FeedMode(FeedMode::PerRevolution) => "G95 (F in mm per revolution)".to_owned(),
+        MachineStmt::FeedMode(FeedMode::PerMinute) => "G94 (F in mm per minute)".to_owned(),
+        MachineStmt::SpindleOn(s) => {
+            let m = match s.direction {
+                SpindleDirection::Cw => "M3",
+                SpindleDirection::Ccw => "M4",
+            };
+            match s.speed {
+                SpindleSpeed::ConstantSurface {
+                    speed_m_min,
+                    limit_rpm,
+                } => format!(
+                    "G96 D{} S{} {m} (constant cutting speed in m/min, D: spindle limit in rpm)",
+                    exact(limit_rpm),
+                    exact(speed_m_min)
+                ),
+                SpindleSpeed::Rpm(rpm) => format!("G97 S{} {m} (spindle in rpm)", exact(rpm)),
+            }
+        }
+        MachineStmt::SpindleOff => "M5 (spindle off)".to_owned(),
+        MachineStmt::MFunction { code, p, what } => match p {
+            Some(p) => format!("M{code} P{p} ({what})"),
+            None => format!("M{code} ({what})"),
+        },
+        MachineStmt::Coolant(Coolant::Flood) => "M8 (coolant on)".to_owned(),
+        MachineStmt::Coolant(Coolant::Mist) => "M7 (mist coolant on)".to_owned(),
+        MachineStmt::Coolant(Coolant::Off) => "M9 (coolant off)".to_owned(),
     }
 }
 

@@ -7,7 +7,8 @@
 mod iso;
 mod sinumerik;
 
-use super::ir::{Expr, Program, expand};
+use super::ir::{Axis, Compensation, Expr, MachineStmt, Program, expand};
+use super::setup::{FeedMode, XMode};
 
 /// The controls camloop writes programs for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -78,4 +79,30 @@ pub(crate) fn is_binary(e: &Expr) -> bool {
         e,
         Expr::Add(..) | Expr::Sub(..) | Expr::Mul(..) | Expr::Div(..)
     )
+}
+
+/// What a dialect tracks while it writes: the compensation waiting for its move, whether X
+/// is written as a diameter, and the feed mode (F keeps 1 decimal in mm/min, 4 in mm/rev).
+#[derive(Debug, Default)]
+pub(crate) struct RenderState {
+    pub(crate) pending: Option<Compensation>,
+    diameter: bool,
+    per_rev: bool,
+}
+
+impl RenderState {
+    pub(crate) fn note(&mut self, m: &MachineStmt) {
+        match m {
+            MachineStmt::XMode(x) => self.diameter = *x == XMode::Diameter,
+            MachineStmt::FeedMode(f) => self.per_rev = *f == FeedMode::PerRevolution,
+            _ => {}
+        }
+    }
+    /// True when this axis's words are written doubled (X in diameter mode).
+    pub(crate) fn doubles(&self, axis: Axis) -> bool {
+        self.diameter && axis == Axis::X
+    }
+    pub(crate) fn feed_text(&self, f: f64) -> String {
+        fixed(f, if self.per_rev { 4 } else { 1 })
+    }
 }

@@ -3,8 +3,11 @@
 
 use std::fmt::Write as _;
 
-use super::{Decimals, exact, fixed, is_binary};
+use super::{Decimals, RenderState, exact, fixed, is_binary};
 use crate::ir::{Axis, Compensation, Cond, Expr, Motion, Plane, Program, Stmt};
+use crate::setup::{
+    Coolant, FeedMode, MachineStmt, SpindleDirection, SpindleSpeed, ToolCall, XMode,
+};
 
 pub(super) fn render(p: &Program, d: Decimals) -> String {
     let mut out = String::new();
@@ -20,17 +23,17 @@ pub(super) fn render(p: &Program, d: Decimals) -> String {
     }
     let plane = match p.plane {
         Plane::Xy => "G17 G90 G71 ; X-Y plane, absolute, metric",
-        Plane::Zx => "G18 G90 G71 DIAMOF ; Z-X plane, absolute, metric, X as a radius",
+        Plane::Zx => "G18 G90 G71 ; Z-X plane, absolute, metric",
     };
     out.push_str(plane);
     out.push('\n');
-    let mut pending = None;
-    stmts(&mut out, &p.body, d, &mut pending);
+    let mut state = RenderState::default();
+    stmts(&mut out, &p.body, d, &mut state);
     out.push_str("M30\n");
     out
 }
 
-fn stmts(out: &mut String, body: &[Stmt], d: Decimals, pending: &mut Option<Compensation>) {
+fn stmts(out: &mut String, body: &[Stmt], d: Decimals, state: &mut RenderState) {
     for s in body {
         match s {
             Stmt::Comment(c) => {
@@ -39,14 +42,18 @@ fn stmts(out: &mut String, body: &[Stmt], d: Decimals, pending: &mut Option<Comp
             Stmt::Assign(v, e) => {
                 let _ = writeln!(out, "{}={}", v.name, expr(e));
             }
-            Stmt::Comp(c) => *pending = Some(*c),
+            Stmt::Comp(c) => state.pending = Some(*c),
+            Stmt::Machine(m) => {
+                state.note(m);
+                let _ = writeln!(out, "{}", machine(m));
+            }
             Stmt::Move {
                 motion,
                 words,
-                feed_mm_min,
+                feed,
             } => {
                 let mut line = String::new();
-                if let Some(c) = pending.take() {
+                if let Some(c) = state.pending.take() {
                     line.push_str(match c {
                         Compensation::Off => "G40 ",
                         Compensation::Left => "G41 ",
@@ -60,21 +67,22 @@ fn stmts(out: &mut String, body: &[Stmt], d: Decimals, pending: &mut Option<Comp
                     Motion::ArcCcw => "G3",
                 });
                 for (axis, e) in words {
-                    let _ = write!(line, " {}={}", axis.letter(), word(*axis, e, d));
+                    let w = word(*axis, e, d, state.doubles(*axis));
+                    let _ = write!(line, " {}={w}", axis.letter());
                 }
-                if let Some(f) = feed_mm_min {
-                    let _ = write!(line, " F{}", fixed(*f, 1));
+                if let Some(f) = feed {
+                    let _ = write!(line, " F{}", state.feed_text(*f));
                 }
                 let _ = writeln!(out, "{line}");
             }
             Stmt::DoWhile { label, body, cond } => {
                 let _ = writeln!(out, "LOOP_{label}:");
-                stmts(out, body, d, pending);
+                stmts(out, body, d, state);
                 let _ = writeln!(out, "IF {} GOTOB LOOP_{label}", cond_text(cond, false));
             }
             Stmt::If { label, cond, body } => {
                 let _ = writeln!(out, "IF {} GOTOF SKIP_{label}", cond_text(cond, true));
-                stmts(out, body, d, pending);
+                stmts(out, body, d, state);
                 let _ = writeln!(out, "SKIP_{label}:");
             }
             Stmt::Mark { var, value, text } => {
@@ -87,12 +95,57 @@ fn stmts(out: &mut String, body: &[Stmt], d: Decimals, pending: &mut Option<Comp
     }
 }
 
-/// A move word: a fixed-decimal number, or an expression the control evaluates.
-fn word(axis: Axis, e: &Expr, d: Decimals) -> String {
+/// A move word: a fixed-decimal number, or an expression the control evaluates; doubled
+/// for X under DIAMON (the program's values are radii).
+fn word(axis: Axis, e: &Expr, d: Decimals, double: bool) -> String {
     match e {
         Expr::Num(v) if axis.is_rotary() => fixed(*v, d.angle),
+        Expr::Num(v) if double => fixed(2.0 * v, d.linear),
         Expr::Num(v) => fixed(*v, d.linear),
+        other if double => format!("2*({})", expr(other)),
         other => expr(other),
+    }
+}
+
+/// A machine-state block with a comment saying what it does.
+fn machine(m: &MachineStmt) -> String {
+    match *m {
+        MachineStmt::WorkOffset(n) => format!("G{} ; work offset", 53 + u32::from(n)),
+        MachineStmt::XMode(XMode::Radius) => "DIAMOF ; X as a radius".to_owned(),
+        MachineStmt::XMode(XMode::Diameter) => "DIAMON ; X as a diameter".to_owned(),
+        MachineStmt::Tool(ToolCall {
+            number,
+            offset,
+            change,
+        }) => format!(
+            "T{number} D{offset}{} ; tool {number}, offset {offset}",
+            if change { " M6" } else { "" }
+        ),
+        MachineStmt::FeedMode(FeedMode::PerRevolution) => "G95 ; F in mm per revolution".to_owned(),
+        MachineStmt::FeedMode(FeedMode::PerMinute) => "G94 ; F in mm per minute".to_owned(),
+        MachineStmt::SpindleOn(s) => {
+            let m = match s.direction {
+                SpindleDirection::Cw => "M3",
+                SpindleDirection::Ccw => "M4",
+            };
+            match s.speed {
+                SpindleSpeed::ConstantSurface {
+                    speed_m_min,
+                    limit_rpm,
+                } => format!(
+                    "G96 S{} LIMS={} {m} ; constant cutting speed in m/min, spindle limit in rpm",
+                    exact(speed_m_min),
+                    exact(limit_rpm)
+                ),
+                SpindleSpeed::Rpm(rpm) => format!("G97 S{} {m} ; spindle in rpm", exact(rpm)),
+            }
+        }
+        MachineStmt::SpindleOff => "M5 ; spindle off".to_owned(),
+        // SINUMERIK has no P word on an M function: the generators refuse one before this.
+        MachineStmt::MFunction { code, what, .. } => format!("M{code} ; {what}"),
+        MachineStmt::Coolant(Coolant::Flood) => "M8 ; coolant on".to_owned(),
+        MachineStmt::Coolant(Coolant::Mist) => "M7 ; mist coolant on".to_owned(),
+        MachineStmt::Coolant(Coolant::Off) => "M9 ; coolant off".to_owned(),
     }
 }
 

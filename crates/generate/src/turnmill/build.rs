@@ -8,6 +8,8 @@ use super::{
 };
 use crate::dialect::{Decimals, Dialect, Form};
 use crate::ir::{Axis, Expr, Motion, Program, Stmt};
+use crate::safety::{Clear, Rotary, Rules};
+use crate::setup::FeedMode;
 use camloop_core::program::{validate_axis_name, validate_program_name};
 
 /// The angles a circle's arc runs through, drawing angles, `from < to`: the drawing span
@@ -125,20 +127,26 @@ fn check_circle(
 /// The program for every feature, in order.
 pub fn generate(job: &TurnMillJob) -> Result<Program, TurnMillError> {
     let name = validate_program_name(&job.name)?;
+    job.setup.check()?;
+    if job.setup.feed_mode != FeedMode::PerMinute {
+        return Err(TurnMillError::Value {
+            label: "job".to_owned(),
+            field: "feed mode",
+            value: 95.0,
+            rule: "a milling feed is per minute (G94)",
+        });
+    }
     if job.features.is_empty() {
         return Err(TurnMillError::Empty);
     }
     check(job)?;
-    let mut paths = Vec::new();
-    let mut reach: f64 = 0.0;
-    for f in &job.features {
-        let p = part_path(f)?;
-        reach = reach.max(path::reach(&p) + f.stock_mm);
-        paths.push(p);
-    }
-    // Park on +X outside the swing circle of everything, tool and clearance included.
-    let park = (reach + job.tool_radius_mm + job.clearance_mm, 0.0);
-    let mut body = Vec::new(); // SETUP-START
+    let paths = job
+        .features
+        .iter()
+        .map(part_path)
+        .collect::<Result<Vec<_>, _>>()?;
+    let park = (park_x_mm(job)?, 0.0);
+    let mut body = job.setup.start();
     body.push(move_1(Motion::Rapid, Axis::Z, job.z_clear_mm));
     body.push(move_xy(Motion::Rapid, park, None));
     let mut c_now = None;
@@ -158,7 +166,7 @@ pub fn generate(job: &TurnMillJob) -> Result<Program, TurnMillError> {
         }
     }
     body.push(move_1(Motion::Rapid, Axis::Z, job.z_clear_mm));
-    // SETUP-END
+    body.extend(job.setup.end());
     Ok(program(name, header(job, park), body))
 }
 
@@ -172,6 +180,7 @@ fn header(job: &TurnMillJob, park: P) -> Vec<String> {
     };
     vec![
         format!("turn-mill: {} features, {radius}", job.features.len()),
+        job.setup.describe(),
         "centre with C at phi: X = COS(phi)*a + SIN(phi)*b, Y = -SIN(phi)*a + COS(phi)*b"
             .to_owned(),
         format!(
@@ -200,6 +209,32 @@ fn describe(f: &Feature) -> String {
         "{}: {what}; Z stations {:?}; stock {} mm in passes of at most {} mm",
         f.label, f.z_mm, f.stock_mm, f.step_mm
     )
+}
+
+/// X of the park point (Y 0): outside the swing circle of every feature with its stock,
+/// the tool and the clearance. C turns only there.
+pub fn park_x_mm(job: &TurnMillJob) -> Result<f64, TurnMillError> {
+    let mut reach: f64 = 0.0;
+    for f in &job.features {
+        reach = reach.max(path::reach(&part_path(f)?) + f.stock_mm);
+    }
+    Ok(reach + job.tool_radius_mm + job.clearance_mm)
+}
+
+/// The safety check's facts for this job: C turns only at the park point's radius or
+/// farther out; X may be negative (milling).
+pub fn safety_rules(job: &TurnMillJob) -> Result<Rules, TurnMillError> {
+    // 1 µm less: the park point as written, rounded to 4 decimals.
+    let park = park_x_mm(job)? - 1e-3;
+    Ok(Rules {
+        min_x_mm: None,
+        rotary: vec![Rotary {
+            axis: Axis::C,
+            coupled_cut: false,
+        }],
+        clear: vec![Clear::RadiusAtLeast { mm: park }],
+        no_spindle: false,
+    })
 }
 
 /// Stock left after each radial pass, last 0: equal steps no larger than `step`.
@@ -338,7 +373,7 @@ fn seg_move(s: &Seg) -> Stmt {
                     (Axis::I, Expr::num(centre.0 - a.0)),
                     (Axis::J, Expr::num(centre.1 - a.1)),
                 ],
-                feed_mm_min: None,
+                feed: None,
             }
         }
     }
