@@ -108,32 +108,62 @@ fn turnmill_job_file_to_program_and_unknown_keys_refused_with_the_line() {
 }
 
 #[test]
-fn planing_resumes_after_the_segments_done() {
+fn planing_from_a_card_and_from_options_saved_as_a_card_that_gives_the_same_program() {
     let dir = tempfile::tempdir().unwrap();
+    let card = repo("config/planing-card.toml");
+    camloop_ok(&["planing", "--job", &card, "--out", "p.mpf"], dir.path());
+    let text = std::fs::read_to_string(dir.path().join("p.mpf")).unwrap();
+    assert!(
+        text.contains("IF R50>=5 GOTOF SKIP_4") && text.contains("; arc 6 of 6"),
+        "{text}"
+    );
     camloop_ok(
         &[
             "planing",
+            "--pitch-radius-mm",
+            "40",
+            "--z-peak-mm",
+            "0",
+            "--z-valley-mm",
+            "-3",
             "--ratio-deg-per-mm",
             "0.75",
             "--x-start-mm",
             "0",
             "--x-end-mm",
             "80",
-            "--z-cut-mm",
-            "-2",
-            "--z-lift-mm",
+            "--z-clear-mm",
             "5",
-            "--done",
-            "4",
+            "--dialect",
+            "iso",
+            "--save-job",
+            "mine.toml",
             "--out",
-            "p.mpf",
+            "a.ngc",
         ],
         dir.path(),
     );
-    let text = std::fs::read_to_string(dir.path().join("p.mpf")).unwrap();
-    assert!(
-        text.contains("; segment 5 of 6") && !text.contains("; segment 4 of 6"),
-        "{text}"
+    let saved = dir.path().join("mine.toml");
+    camloop_ok(
+        &[
+            "planing",
+            "--job",
+            saved.to_str().unwrap(),
+            "--out",
+            "b.ngc",
+        ],
+        dir.path(),
     );
-    assert!(text.contains("LEADON(A,X,1)"), "{text}");
+    let (a, b) = (
+        std::fs::read_to_string(dir.path().join("a.ngc")).unwrap(),
+        std::fs::read_to_string(dir.path().join("b.ngc")).unwrap(),
+    );
+    assert!(a.contains("o500 if [#5000 LT 1]"), "{a}");
+    assert_eq!(a, b, "the saved card holds every parameter of the run");
+    let out = camloop(
+        &["planing", "--x-start-mm", "0", "--out", "c.mpf"],
+        dir.path(),
+    );
+    assert!(stderr(&out).contains("--pitch-radius-mm is required without --job"));
+    assert!(!dir.path().join("c.mpf").exists());
 }

@@ -60,6 +60,27 @@ pub fn run_rs274(
     program: &str,
     nose_radius_mm: f64,
 ) -> Result<Vec<Canon>, String> {
+    run(rs274, program, nose_radius_mm, None)
+}
+
+/// [`run_rs274`] with the parameter file `var` (`-v`): the interpreter reads the parameters
+/// listed in it before the program and writes them back when it exits, as LinuxCNC keeps
+/// persistent parameters between runs.
+pub fn run_rs274_with_var(
+    rs274: &PathBuf,
+    program: &str,
+    nose_radius_mm: f64,
+    var: &std::path::Path,
+) -> Result<Vec<Canon>, String> {
+    run(rs274, program, nose_radius_mm, Some(var))
+}
+
+fn run(
+    rs274: &PathBuf,
+    program: &str,
+    nose_radius_mm: f64,
+    var: Option<&std::path::Path>,
+) -> Result<Vec<Canon>, String> {
     let dir = tempfile::tempdir().unwrap();
     let tbl = dir.path().join("tool.tbl");
     std::fs::write(
@@ -75,7 +96,11 @@ pub fn run_rs274(
     let _turn = ONE_AT_A_TIME
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner);
-    let out = Command::new(rs274)
+    let mut cmd = Command::new(rs274);
+    if let Some(var) = var {
+        cmd.arg("-v").arg(var);
+    }
+    let out = cmd
         .arg("-t")
         .arg(&tbl)
         .arg("-g")

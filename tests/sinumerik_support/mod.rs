@@ -40,6 +40,17 @@ type Vars = HashMap<String, f64>;
 /// Runs `text` and returns every motion block as the expanded form writes it
 /// (`G1 X=… Z=…` with `linear`/`angle` decimals), in order, with the R-parameter writes.
 pub fn run(text: &str, linear: usize, angle: usize) -> Result<Vec<String>, EvalError> {
+    run_with(text, linear, angle, &[])
+}
+
+/// [`run`] on a control whose R parameters already hold `preset` (R parameters are kept over
+/// power-off: a program resumed from them reads what an earlier run wrote).
+pub fn run_with(
+    text: &str,
+    linear: usize,
+    angle: usize,
+    preset: &[(&str, f64)],
+) -> Result<Vec<String>, EvalError> {
     let lines: Vec<Line> = lines(text).collect();
     let statements = lines
         .iter()
@@ -51,7 +62,7 @@ pub fn run(text: &str, linear: usize, angle: usize) -> Result<Vec<String>, EvalE
             labels.insert(*name, i);
         }
     }
-    let mut vars = Vars::new();
+    let mut vars: Vars = preset.iter().map(|(k, v)| ((*k).to_owned(), *v)).collect();
     let mut out = Vec::new();
     let mut pc = 0;
     let mut steps = 0;
@@ -91,6 +102,11 @@ pub fn run(text: &str, linear: usize, angle: usize) -> Result<Vec<String>, EvalE
             Some(Statement::Keyword(
                 "DIAMON" | "DIAMOF" | "M5" | "M7" | "M8" | "M9" | "M3" | "M4",
             )) => {}
+            // A machine's own M function (a planer's hydraulics, its tool lifter).
+            Some(Statement::Keyword(k))
+                if k.len() > 1
+                    && k.starts_with('M')
+                    && k[1..].chars().all(|c| c.is_ascii_digit()) => {}
             // Tool, spindle, feed-mode and offset blocks (`T1 D1`, `G96 S180 LIMS=3000 M3`).
             Some(Statement::Block(words)) if !is_motion(words) => {}
             Some(Statement::Block(words)) if words.first().is_some_and(Word::is_g_code) => {
@@ -100,7 +116,7 @@ pub fn run(text: &str, linear: usize, angle: usize) -> Result<Vec<String>, EvalE
             }
             Some(Statement::Assign { target, value }) => {
                 let value = eval(value, &vars, n)?;
-                if target.starts_with('R') && target[1..].chars().all(|c| c.is_ascii_digit()) {
+                if is_r_parameter(target) {
                     out.push(format!("{target}={value}"));
                 } else if !vars.contains_key(*target) {
                     return Err(EvalError::UnknownVar {
@@ -121,6 +137,11 @@ fn is_motion(words: &[Word]) -> bool {
     words
         .iter()
         .any(|w| matches!(w, Word::Code("G0" | "G1" | "G2" | "G3")))
+}
+
+/// `R` and digits: an R parameter.
+fn is_r_parameter(name: &str) -> bool {
+    name.len() > 1 && name.starts_with('R') && name[1..].chars().all(|c| c.is_ascii_digit())
 }
 
 fn syntax(line: usize, what: &str) -> EvalError {
@@ -172,6 +193,9 @@ fn eval_cond(cond: &Cond, vars: &Vars, n: usize) -> Result<bool, EvalError> {
 fn eval(e: &Expr, vars: &Vars, n: usize) -> Result<f64, EvalError> {
     Ok(match e {
         Expr::Num(v) => *v,
+        // R parameters always exist on the control (0 until written); other names must be
+        // declared.
+        Expr::Var(name) if is_r_parameter(name) => vars.get(*name).copied().unwrap_or(0.0),
         Expr::Var(name) => *vars.get(*name).ok_or_else(|| EvalError::UnknownVar {
             line: n,
             name: (*name).to_owned(),

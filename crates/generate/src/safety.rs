@@ -42,6 +42,8 @@ pub struct Rules {
     pub rotary: Vec<Rotary>,
     /// The tool is clear where any of these holds.
     pub clear: Vec<Clear>,
+    /// A machine with no spindle (a planer): a cut needs tool and feed mode only.
+    pub no_spindle: bool,
 }
 
 impl Rules {
@@ -145,7 +147,7 @@ pub fn check(program: &Program, rules: &Rules) -> Result<SafetyReport, Vec<Viola
                 }
                 if cutting {
                     report.cutting_moves += 1;
-                    setup_before_cut(&st, block, &mut v);
+                    setup_before_cut(&st, rules, block, &mut v);
                 }
                 let before = st.pos;
                 let value = |a: Axis| {
@@ -204,14 +206,17 @@ fn machine(st: &mut State, m: &MachineStmt) {
             st.feed = false;
         }
         MachineStmt::Coolant(c) => st.coolant = *c != Coolant::Off,
-        MachineStmt::WorkOffset(_) | MachineStmt::XMode(_) => {}
+        MachineStmt::WorkOffset(_) | MachineStmt::XMode(_) | MachineStmt::MFunction { .. } => {}
     }
 }
 
-fn setup_before_cut(st: &State, block: usize, v: &mut Vec<Violation>) {
+fn setup_before_cut(st: &State, rules: &Rules, block: usize, v: &mut Vec<Violation>) {
     let missing = [
         (st.tool, "the tool call"),
-        (st.spindle || st.spindle_stopped, "the spindle start"),
+        (
+            st.spindle || st.spindle_stopped || rules.no_spindle,
+            "the spindle start",
+        ),
         (st.feed_mode, "the feed mode"),
     ];
     for (ok, what) in missing {

@@ -96,6 +96,13 @@ pub enum MachineStmt {
     SpindleOff,
     FeedMode(FeedMode),
     Coolant(Coolant),
+    /// A machine's own M function (a planer's hydraulics, A's sense, the tool lifter):
+    /// `M<code>`, with LinuxCNC's `P<n>` where the code takes one (M64/M65 outputs).
+    MFunction {
+        code: u16,
+        p: Option<u16>,
+        what: &'static str,
+    },
 }
 
 /// The set-up a program starts with.

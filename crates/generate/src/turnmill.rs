@@ -1,43 +1,103 @@
-//! Turn-mill eccentric surfaces (X/Y/C): crank pins, cheek faces and arm contours given as
-//! circles in the part frame, milled with C held at an angle φ and the tool on an X–Y arc.
+//! Turn-mill eccentric surfaces (X/Y/C): crank pins, cheek faces and arm contours milled
+//! with C held at an angle and the tool on X–Y lines and arcs, at Z stations, in radial
+//! depth passes, with the tool radius baked into the path or left to G41/G42.
 //!
-//! With the circle's centre at `(a, b) = e·(cos phase, sin phase)` in the part frame, C at
-//! φ puts it at `X = cos φ·a + sin φ·b`, `Y = −sin φ·a + cos φ·b`; the cut-in point on X is
-//! that plus the path radius. The program carries these as `DEF REAL` variables, as
-//! machinists write them, and cuts with G2/G3 arcs around the centre. The cut arc runs from
-//! `start − safety` to `end + safety` (drawing angles), so entry and exit overlap the
-//! surface by the safety angle and no further: no air cutting is programmed.
+//! A circle's centre at `(a, b) = e·(cos phase, sin phase)` in the part frame lands, with C
+//! at φ, at `X = cos φ·a + sin φ·b`, `Y = −sin φ·a + cos φ·b`. Every pass starts and ends at
+//! the park point, on +X outside the part's swing circle, where alone C turns. From there
+//! the approach is the turn-mill study's: along Y, then X, then Y at feed, tangentially onto
+//! the surface (for a cut starting on the +X side of its centre; otherwise the same three
+//! moves along the start's tangent and normal). A concave surface (a bore, an arm fillet)
+//! is entered from above, at Z clear, and radially.
+
+pub mod path;
 
 use thiserror::Error;
 
-use super::ir::{Axis, Expr, Motion, Plane, Program, Stmt, Var};
-use camloop_core::program::{ProgramNameError, validate_program_name};
+use super::ir::{Axis, Compensation, Expr, Motion, Plane, Program, Stmt};
+use super::setup::{Setup, SetupError};
+use camloop_core::program::ProgramNameError;
+use path::{OffsetError, P, Seg, Side};
 
 /// One circular surface of the drawing.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EccentricCircle {
-    pub label: String,
     pub eccentricity_mm: f64,
     pub phase_deg: f64,
     pub radius_mm: f64,
-    /// Drawing angles about the circle's own centre, part frame; end > start.
+    /// Drawing angles about the circle's own centre, part frame; end > start. A full turn
+    /// (end − start = 360) is cut from the point C puts on the +X side of the centre.
     pub start_deg: f64,
     pub end_deg: f64,
     pub safety_deg: f64,
     /// True for a concave surface (bore, arm fillet): the tool runs inside the circle.
     pub concave: bool,
-    /// C angle while cutting; `None` puts the centre on +X (φ = phase).
+    /// True to cut clockwise (G2); counter-clockwise (G3) otherwise.
+    pub clockwise: bool,
+    /// C angle while cutting; `None` puts the cut's start on the +X side of the centre.
     pub c_deg: Option<f64>,
+}
+
+/// An element of an arm contour, from the end of the one before.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ContourSeg {
+    Line { to: P },
+    Arc { to: P, centre: P, clockwise: bool },
+}
+
+/// An arm contour: lines and arcs in the part frame, cut at one C angle.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Contour {
+    pub start: P,
+    pub segments: Vec<ContourSeg>,
+    /// Side the tool runs on, looking along the contour; the part is on the other.
+    pub tool_side: Side,
+    pub c_deg: f64,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum Shape {
+    Circle(EccentricCircle),
+    Contour(Contour),
+}
+
+/// A surface with where and how deep it is cut.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Feature {
+    pub label: String,
+    pub shape: Shape,
+    /// Z stations, in order: the surface is cut at each.
+    pub z_mm: Vec<f64>,
+    /// Radial stock on the surface, removed in passes of at most `step_mm`, mm.
+    pub stock_mm: f64,
+    pub step_mm: f64,
+}
+
+/// Tool radius in the path, or G41/G42 with the control's own radius.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RadiusMode {
+    Baked,
+    Compensated,
 }
 
 /// A turn-mill job.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TurnMillJob {
     pub name: String,
+    /// Tool, milling spindle, feed mode (G94) and coolant.
+    pub setup: Setup,
     pub tool_radius_mm: f64,
+    pub radius_mode: RadiusMode,
+    /// Distance off the surface of every approach and retract, mm.
     pub clearance_mm: f64,
+    /// Tangential lead-in and lead-out, mm.
+    pub lead_mm: f64,
+    /// Z above the part: the start, the end and the entry into concave surfaces.
+    pub z_clear_mm: f64,
     pub feed_mm_min: f64,
-    pub circles: Vec<EccentricCircle>,
+    /// Name of the C axis on the control (SINUMERIK: `C1`, …; ISO: one letter).
+    pub c_axis: String,
+    pub features: Vec<Feature>,
 }
 
 /// Why a turn-mill job is refused.
@@ -45,6 +105,8 @@ pub struct TurnMillJob {
 pub enum TurnMillError {
     #[error(transparent)]
     Name(#[from] ProgramNameError),
+    #[error(transparent)]
+    Setup(#[from] SetupError),
     #[error("{label}: {field} is {value}: {rule}")]
     Value {
         label: String,
@@ -52,224 +114,162 @@ pub enum TurnMillError {
         value: f64,
         rule: &'static str,
     },
-    #[error(
-        "{label}: the tool radius {tool_radius_mm} mm does not fit the concave radius {radius_mm} mm"
-    )]
-    ToolTooLarge {
+    #[error("{label}: the path radius {radius_mm} mm leaves no room for the tool")]
+    ToolTooLarge { label: String, radius_mm: f64 },
+    #[error("{label}: segment {segment}: {what}")]
+    Segment {
         label: String,
-        tool_radius_mm: f64,
-        radius_mm: f64,
+        segment: usize,
+        what: &'static str,
     },
-    #[error("the job has no circles")]
+    #[error("{label}: {what}")]
+    Approach { label: String, what: &'static str },
+    #[error("the C axis name {0:?}: {1}")]
+    AxisName(String, &'static str),
+    #[error("the job has no features")]
     Empty,
 }
 
-const PHI: Var = Var {
-    index: 1,
-    name: "PHI",
-};
-const ECC: Var = Var {
-    index: 2,
-    name: "ECC",
-};
-const PHA: Var = Var {
-    index: 3,
-    name: "PHA",
-};
-const RAD: Var = Var {
-    index: 4,
-    name: "RAD",
-};
-const XC: Var = Var {
-    index: 5,
-    name: "XC",
-};
-const YC: Var = Var {
-    index: 6,
-    name: "YC",
-};
+mod build;
 
-/// The program for every circle, in order.
-pub fn generate(job: &TurnMillJob) -> Result<Program, TurnMillError> {
-    let name = validate_program_name(&job.name)?;
-    if job.circles.is_empty() {
-        return Err(TurnMillError::Empty);
+pub use build::{cut_span_deg, generate, park_x_mm, passes, render, safety_rules};
+
+/// The tool side of a circle: looking along travel, the part is inside a convex circle.
+fn circle_side(c: &EccentricCircle) -> Side {
+    match (c.concave, c.clockwise) {
+        (false, false) | (true, true) => Side::Right,
+        (false, true) | (true, false) => Side::Left,
     }
-    let mut body = Vec::new();
-    for c in &job.circles {
-        check(job, c)?;
-        body.extend(circle_stmts(job, c));
-    }
-    Ok(Program {
-        name,
-        plane: Plane::Xy,
-        vars: vec![PHI, ECC, PHA, RAD, XC, YC],
-        comments: vec![
-            format!(
-                "turn-mill: {} circles, tool radius {:.3} mm in the path (no G41/G42)",
-                job.circles.len(),
-                job.tool_radius_mm
-            ),
-            "XC = COS(PHI)*a + SIN(PHI)*b, YC = -SIN(PHI)*a + COS(PHI)*b, (a, b) = ECC*(COS(PHA), SIN(PHA))".to_owned(),
-        ],
-        body,
+}
+
+/// C while cutting a circle.
+pub fn circle_c_deg(c: &EccentricCircle) -> f64 {
+    c.c_deg.unwrap_or(if c.end_deg - c.start_deg >= 360.0 {
+        c.phase_deg
+    } else if c.clockwise {
+        c.end_deg + c.safety_deg
+    } else {
+        c.start_deg - c.safety_deg
     })
 }
 
-fn check(job: &TurnMillJob, c: &EccentricCircle) -> Result<(), TurnMillError> {
-    let bad = |field, value: f64, rule| TurnMillError::Value {
-        label: c.label.clone(),
-        field,
-        value,
-        rule,
-    };
-    for (field, v) in [
-        ("eccentricity", c.eccentricity_mm),
-        ("phase", c.phase_deg),
-        ("start angle", c.start_deg),
-        ("end angle", c.end_deg),
-    ] {
-        if !v.is_finite() {
-            return Err(bad(field, v, "it must be a finite number"));
+/// The feature's path in the part frame, before any offset.
+fn part_path(f: &Feature) -> Result<Vec<Seg>, TurnMillError> {
+    match &f.shape {
+        Shape::Circle(c) => {
+            let centre = path::polar_deg(c.eccentricity_mm, c.phase_deg);
+            let (from, to) = cut_span_deg(c);
+            let (start, sweep) = if c.clockwise {
+                (to, from - to)
+            } else {
+                (from, to - from)
+            };
+            Ok(vec![Seg::Arc {
+                centre,
+                radius: c.radius_mm,
+                start_deg: start,
+                sweep_deg: sweep,
+            }])
         }
+        Shape::Contour(k) => contour_path(&f.label, k),
     }
-    if !(c.radius_mm.is_finite() && c.radius_mm > 0.0) {
-        return Err(bad("radius", c.radius_mm, "it must be > 0"));
-    }
-    if c.eccentricity_mm < 0.0 {
-        return Err(bad("eccentricity", c.eccentricity_mm, "it must be >= 0"));
-    }
-    let span = c.end_deg - c.start_deg;
-    if !(span > 0.0 && span <= 360.0) {
-        return Err(bad("end - start angle", span, "it must be in (0, 360] deg"));
-    }
-    if !(c.safety_deg.is_finite() && c.safety_deg >= 0.0 && c.safety_deg <= 45.0) {
-        return Err(bad(
-            "safety angle",
-            c.safety_deg,
-            "it must be in [0, 45] deg",
-        ));
-    }
-    if !(job.tool_radius_mm.is_finite() && job.tool_radius_mm > 0.0) {
-        return Err(bad("tool radius", job.tool_radius_mm, "it must be > 0"));
-    }
-    if c.concave && job.tool_radius_mm >= c.radius_mm {
-        return Err(TurnMillError::ToolTooLarge {
-            label: c.label.clone(),
-            tool_radius_mm: job.tool_radius_mm,
-            radius_mm: c.radius_mm,
-        });
-    }
-    Ok(())
 }
 
-/// The angles the arc runs through: the drawing span widened by the safety angle at both
-/// ends, but never past one full turn (a full pin overlaps by the safety angle once).
-pub fn cut_span_deg(c: &EccentricCircle) -> (f64, f64) {
-    let from = c.start_deg - c.safety_deg;
-    let to = (c.end_deg + c.safety_deg).min(from + 360.0 + c.safety_deg);
-    (from, to)
-}
-
-fn circle_stmts(job: &TurnMillJob, c: &EccentricCircle) -> Vec<Stmt> {
-    let n = Expr::num;
-    let v = Expr::var;
-    let phi = c.c_deg.unwrap_or(c.phase_deg);
-    let path_r = if c.concave {
-        c.radius_mm - job.tool_radius_mm
-    } else {
-        c.radius_mm + job.tool_radius_mm
-    };
-    // Machine angles are drawing angles less φ (C turns the part by φ).
-    let (from, to) = cut_span_deg(c);
-    let pieces = ((to - from) / 180.0).ceil().max(1.0) as usize;
-    // On the cut the radius is the variable RAD; off it (approach, retract) RAD ± clearance.
-    let at = |ang: f64, r: Expr| {
-        let a = n(ang - phi);
-        vec![
-            (Axis::X, v(XC).add(r.clone().mul(a.clone().cos()))),
-            (Axis::Y, v(YC).add(r.mul(a.sin()))),
-        ]
-    };
-    let out_r = if c.concave {
-        v(RAD).sub(n(job.clearance_mm.min(path_r / 2.0)))
-    } else {
-        v(RAD).add(n(job.clearance_mm))
-    };
-    let mut s = centre_stmts(c, phi, path_r);
-    s.extend([
-        Stmt::Move {
-            motion: Motion::Rapid,
-            words: vec![(Axis::C, v(PHI))],
-            feed: None,
-        },
-        Stmt::Move {
-            motion: Motion::Rapid,
-            words: at(from, out_r.clone()),
-            feed: None,
-        },
-        Stmt::Move {
-            motion: Motion::Linear,
-            words: at(from, v(RAD)),
-            feed: Some(job.feed_mm_min),
-        },
-    ]);
-    for k in 0..pieces {
-        let a0 = from + (to - from) * k as f64 / pieces as f64;
-        let a1 = from + (to - from) * (k + 1) as f64 / pieces as f64;
-        let mut words = at(a1, v(RAD));
-        // Centre relative to the arc's start point.
-        let a0m = n(a0 - phi);
-        words.push((Axis::I, n(0.0).sub(v(RAD)).mul(a0m.clone().cos())));
-        words.push((Axis::J, n(0.0).sub(v(RAD)).mul(a0m.sin())));
-        s.push(Stmt::Move {
-            motion: Motion::ArcCcw,
-            words,
-            feed: None,
+fn contour_path(label: &str, k: &Contour) -> Result<Vec<Seg>, TurnMillError> {
+    let mut at = k.start;
+    let mut out = Vec::new();
+    for (i, s) in k.segments.iter().enumerate() {
+        let bad = |what| TurnMillError::Segment {
+            label: label.to_owned(),
+            segment: i + 1,
+            what,
+        };
+        let seg = match *s {
+            ContourSeg::Line { to } => {
+                if (to.0 - at.0).hypot(to.1 - at.1) < 1e-6 {
+                    return Err(bad("the line has no length"));
+                }
+                Seg::Line { from: at, to }
+            }
+            ContourSeg::Arc {
+                to,
+                centre,
+                clockwise,
+            } => {
+                let r0 = (at.0 - centre.0).hypot(at.1 - centre.1);
+                let r1 = (to.0 - centre.0).hypot(to.1 - centre.1);
+                // 1 µm: the drawing's own precision.
+                if (r0 - r1).abs() > 1e-3 || r0 < 1e-6 {
+                    return Err(bad(
+                        "the arc's start and end are not on one circle about its centre",
+                    ));
+                }
+                Seg::Arc {
+                    centre,
+                    radius: r0,
+                    start_deg: (at.1 - centre.1).atan2(at.0 - centre.0).to_degrees(),
+                    sweep_deg: path::sweep_between(centre, at, to, !clockwise),
+                }
+            }
+        };
+        at = seg.end();
+        out.push(seg);
+    }
+    if out.is_empty() {
+        return Err(TurnMillError::Segment {
+            label: label.to_owned(),
+            segment: 0,
+            what: "the contour has no segments",
         });
     }
-    s.push(Stmt::Move {
-        motion: Motion::Linear,
-        words: at(to, out_r),
+    Ok(out)
+}
+
+fn offset_error(label: &str, e: OffsetError) -> TurnMillError {
+    match e {
+        OffsetError::ArcTooSmall { segment } => TurnMillError::Segment {
+            label: label.to_owned(),
+            segment,
+            what: "the arc is smaller than the tool's offset from it",
+        },
+        OffsetError::InsideCorner { segment } => TurnMillError::Segment {
+            label: label.to_owned(),
+            segment,
+            what: "the corner after it is inside the tool's side: round it with an arc at least the offset's radius",
+        },
+    }
+}
+
+fn move_xy(motion: Motion, p: P, feed: Option<f64>) -> Stmt {
+    Stmt::Move {
+        motion,
+        words: vec![(Axis::X, Expr::num(p.0)), (Axis::Y, Expr::num(p.1))],
+        feed,
+    }
+}
+
+fn move_1(motion: Motion, axis: Axis, v: f64) -> Stmt {
+    Stmt::Move {
+        motion,
+        words: vec![(axis, Expr::num(v))],
         feed: None,
-    });
-    s
+    }
 }
 
-/// The circle's header comment and the variables the control works it out from: φ, the
-/// eccentricity and phase, the path radius, and the centre (XC, YC) turned by φ.
-fn centre_stmts(c: &EccentricCircle, phi: f64, path_r: f64) -> Vec<Stmt> {
-    let n = Expr::num;
-    let v = Expr::var;
-    vec![
-        Stmt::Comment(format!(
-            "{}: radius {} mm at e = {} mm, phase {} deg, drawing angles {} to {} deg, safety {} deg",
-            c.label,
-            c.radius_mm,
-            c.eccentricity_mm,
-            c.phase_deg,
-            c.start_deg,
-            c.end_deg,
-            c.safety_deg
-        )),
-        Stmt::Assign(PHI, n(phi)),
-        Stmt::Assign(ECC, n(c.eccentricity_mm)),
-        Stmt::Assign(PHA, n(c.phase_deg)),
-        Stmt::Assign(RAD, n(path_r)),
-        Stmt::Assign(
-            XC,
-            v(PHI)
-                .cos()
-                .mul(v(ECC).mul(v(PHA).cos()))
-                .add(v(PHI).sin().mul(v(ECC).mul(v(PHA).sin()))),
-        ),
-        Stmt::Assign(
-            YC,
-            v(ECC)
-                .mul(v(PHA).cos())
-                .mul(v(PHI).sin())
-                .mul(n(-1.0))
-                .add(v(PHI).cos().mul(v(ECC).mul(v(PHA).sin()))),
-        ),
-    ]
+/// Program header facts: plane and comments.
+fn program(name: String, comments: Vec<String>, body: Vec<Stmt>) -> Program {
+    Program {
+        name,
+        plane: Plane::Xy,
+        vars: Vec::new(),
+        comments,
+        body,
+    }
+}
+
+fn comp_for(side: Side) -> Compensation {
+    match side {
+        Side::Left => Compensation::Left,
+        Side::Right => Compensation::Right,
+    }
 }

@@ -98,14 +98,18 @@ fn stmts(out: &mut String, body: &[Stmt], d: Decimals, state: &mut RenderState) 
                 stmts(out, body, d, state);
                 let _ = writeln!(out, "o{} endif", 500 + label);
             }
-            Stmt::Mark { var, value, text } => {
+            Stmt::Mark {
+                var: mark,
+                value,
+                text,
+            } => {
                 // The interpreter reads ahead of motion: M66 (read input 0, no wait) makes
                 // LinuxCNC finish the queued motion first, so the mark follows the stroke.
                 out.push_str("M66 P0 L0 (the mark waits for the motion before it to end)\n");
                 let _ = writeln!(
                     out,
-                    "#{}={} ({})",
-                    var.index,
+                    "{}={} ({})",
+                    var(mark.index),
                     exact(*value),
                     paren_safe(text)
                 );
@@ -155,6 +159,10 @@ fn machine(m: &MachineStmt) -> String {
             }
         }
         MachineStmt::SpindleOff => "M5 (spindle off)".to_owned(),
+        MachineStmt::MFunction { code, p, what } => match p {
+            Some(p) => format!("M{code} P{p} ({what})"),
+            None => format!("M{code} ({what})"),
+        },
         MachineStmt::Coolant(Coolant::Flood) => "M8 (coolant on)".to_owned(),
         MachineStmt::Coolant(Coolant::Mist) => "M7 (mist coolant on)".to_owned(),
         MachineStmt::Coolant(Coolant::Off) => "M9 (coolant off)".to_owned(),

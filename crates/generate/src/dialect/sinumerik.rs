@@ -89,7 +89,7 @@ fn stmts(out: &mut String, body: &[Stmt], d: Decimals, state: &mut RenderState) 
                 // The block preparation runs ahead of motion: without STOPRE the mark
                 // would be written before the stroke it records has ended.
                 out.push_str("STOPRE ; the mark waits for the motion before it to end\n");
-                let _ = writeln!(out, "R{}={} ; {text}", var.index, exact(*value));
+                let _ = writeln!(out, "{}={} ; {text}", var.name, exact(*value));
             }
         }
     }
@@ -141,6 +141,8 @@ fn machine(m: &MachineStmt) -> String {
             }
         }
         MachineStmt::SpindleOff => "M5 ; spindle off".to_owned(),
+        // SINUMERIK has no P word on an M function: the generators refuse one before this.
+        MachineStmt::MFunction { code, what, .. } => format!("M{code} ; {what}"),
         MachineStmt::Coolant(Coolant::Flood) => "M8 ; coolant on".to_owned(),
         MachineStmt::Coolant(Coolant::Mist) => "M7 ; mist coolant on".to_owned(),
         MachineStmt::Coolant(Coolant::Off) => "M9 ; coolant off".to_owned(),

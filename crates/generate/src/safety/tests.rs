@@ -153,6 +153,7 @@ fn a_rotary_axis_turns_only_with_the_tool_clear_or_coupled_to_the_cut() {
             coupled_cut: false,
         }],
         clear: vec![Clear::RadiusAtLeast { mm: 60.0 }],
+        no_spindle: false,
     };
     let engaged = milling(vec![
         mv(Motion::Rapid, &[(Axis::X, 52.0), (Axis::Y, 0.0)], None),
@@ -185,6 +186,7 @@ fn a_rotary_axis_turns_only_with_the_tool_clear_or_coupled_to_the_cut() {
             axis: Axis::Z,
             mm: 5.0,
         }],
+        no_spindle: false,
     };
     let stroke = milling(vec![
         mv(Motion::Rapid, &[(Axis::Z, 5.0)], None),
