@@ -45,9 +45,9 @@ pub use server::{HttpLimits, serve, serve_with};
 pub use tls::{Tls, self_signed};
 pub use writes::CommandReply;
 // The writes and sign-in checks the OPC UA server goes through as well.
-pub(crate) use access::{Via, failed as auth_failed, locked as auth_locked};
+pub(crate) use access::Via;
 pub(crate) use dashboard::ack as ack_write;
-pub(crate) use session::check_password;
+pub(crate) use session::{SignIn, password_sign_in};
 pub(crate) use writes::{RollbackBody, rollback as rollback_write};
 
 use super::machine::StoreHandle;
