@@ -7,6 +7,7 @@
 // No unwrap() in shipped code: bad input must become an error, not a panic (tests may).
 #![warn(clippy::unwrap_used)]
 
+pub mod audit_seal;
 pub mod auth;
 pub mod cli;
 pub mod clock;
@@ -23,6 +24,7 @@ pub mod dfq;
 /// SHA-256 digests as hex: the core's, so its ids and the edges' agree.
 pub use camloop_core::digest;
 pub mod failpoint;
+pub mod private_fs;
 /// Machine and feature names: the core's one rule, shared by config, API and store.
 pub use camloop_core::names;
 /// Gauge input: the crate `camloop-gauge`, with its I/O adapters.

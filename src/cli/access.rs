@@ -3,10 +3,11 @@
 //! database, so they act as an admin; each change is audited as `cli:<login>`.
 
 use super::history::{StoreArgs, connect, runtime};
+use crate::audit_seal::AuditSeal;
 use crate::auth::{UserName, hash_password, new_token, token_digest};
 use crate::clock::now;
 use crate::clock::parse_time;
-use crate::store::{AuditEntry, AuditResult, NewToken, Role, Store, TokenId};
+use crate::store::{AuditEntry, AuditResult, HeadCheck, NewToken, Role, Store, TokenId};
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand, ValueEnum};
 use std::io::BufRead as _;
@@ -44,6 +45,11 @@ pub struct GlobalStoreArgs {
         global = true
     )]
     pub config: std::path::PathBuf,
+    /// The folder of the audit trail's key and head (`audit-key`, `audit-head`); default:
+    /// where the configuration's service keeps them (beside the first admin's password),
+    /// or `var` when the configuration cannot be read.
+    #[arg(long, value_name = "DIR", global = true)]
+    pub audit_dir: Option<std::path::PathBuf>,
 }
 
 impl GlobalStoreArgs {
@@ -52,6 +58,25 @@ impl GlobalStoreArgs {
             database: self.database.clone(),
             config: self.config.clone(),
         }
+    }
+
+    /// Where the audit key and head are.
+    fn seal_dir(&self) -> std::path::PathBuf {
+        if let Some(dir) = &self.audit_dir {
+            return dir.clone();
+        }
+        std::fs::read_to_string(&self.config)
+            .ok()
+            .and_then(|text| crate::config::Config::parse(&text, &self.config, |_| None).ok())
+            .map_or_else(
+                || std::path::PathBuf::from("var"),
+                |c| crate::service::seal_dir(&c),
+            )
+    }
+
+    /// The audit seal, its key made when there is none yet.
+    fn seal(&self) -> anyhow::Result<AuditSeal> {
+        Ok(AuditSeal::open_or_create(&self.seal_dir())?)
     }
 }
 
@@ -72,8 +97,15 @@ pub enum UserAction {
         #[arg(long, value_enum)]
         role: RoleArg,
     },
-    /// Set a user's password, read from the first line of standard input.
-    Passwd { name: String },
+    /// Set a user's password, read from the first line of standard input. The user's
+    /// dashboard sessions end at their next request; their tokens stay unless
+    /// `--revoke-tokens`.
+    Passwd {
+        name: String,
+        /// Also revoke every live token of the user (a password change after a leak).
+        #[arg(long)]
+        revoke_tokens: bool,
+    },
     /// Disable a user: its sessions and tokens stop working (users are never deleted, so
     /// the audit trail keeps its names).
     Disable { name: String },
@@ -129,11 +161,15 @@ pub enum AuditAction {
     Verify,
 }
 
-/// `cli:<login>`: who ran the command, as the audit trail names them.
+/// `cli:<account>`: who ran the command, as the audit trail names them: the account of the
+/// process's user id (not `$USER`, which whoever runs the command sets as they like), or
+/// `uid<n>` when the system has no name for it.
 fn cli_actor() -> String {
-    let login = std::env::var("USER")
-        .or_else(|_| std::env::var("LOGNAME"))
-        .unwrap_or_else(|_| "unknown".into());
+    let uid = nix::unistd::getuid();
+    let login = nix::unistd::User::from_uid(uid)
+        .ok()
+        .flatten()
+        .map_or_else(|| format!("uid{uid}"), |u| u.name);
     format!("cli:{}", login.chars().take(32).collect::<String>())
 }
 
@@ -177,14 +213,20 @@ pub(crate) fn run_user(args: UserArgs) -> anyhow::Result<()> {
     };
     let hash = password.map(|p| hash_password(&p)).transpose()?;
     runtime()?.block_on(async {
+        let seal = args.store.seal()?;
         let store = connect(&args.store.store()).await?;
-        let result = user(&store, args.action, hash.as_deref()).await;
+        let result = user(&store, &seal, args.action, hash.as_deref()).await;
         store.close().await;
         result
     })
 }
 
-async fn user(store: &Store, action: UserAction, hash: Option<&str>) -> anyhow::Result<()> {
+async fn user(
+    store: &Store,
+    seal: &AuditSeal,
+    action: UserAction,
+    hash: Option<&str>,
+) -> anyhow::Result<()> {
     let now = now();
     match action {
         UserAction::Add { name, role } => {
@@ -194,12 +236,14 @@ async fn user(store: &Store, action: UserAction, hash: Option<&str>) -> anyhow::
                 .add_user(name.as_str(), role, hash.unwrap_or_default(), now)
                 .await?;
             let after = serde_json::json!({ "user": name, "role": role.as_str() });
-            store
-                .append_audit(&entry("user.add", after, String::new()))
+            seal.append(store, &entry("user.add", after, String::new()))
                 .await?;
             println!("user {name} added ({role})");
         }
-        UserAction::Passwd { name } => {
+        UserAction::Passwd {
+            name,
+            revoke_tokens,
+        } => {
             let name = user_name(&name)?;
             if !store
                 .set_password(name.as_str(), hash.unwrap_or_default(), now)
@@ -208,10 +252,12 @@ async fn user(store: &Store, action: UserAction, hash: Option<&str>) -> anyhow::
                 bail!("no user {name}");
             }
             let after = serde_json::json!({ "user": name });
-            store
-                .append_audit(&entry("user.passwd", after, String::new()))
+            seal.append(store, &entry("user.passwd", after, String::new()))
                 .await?;
-            println!("password of {name} changed");
+            println!(
+                "password of {name} changed; its dashboard sessions end at their next request"
+            );
+            live_tokens_after_passwd(store, seal, &name, revoke_tokens).await?;
         }
         UserAction::Disable { name } => {
             let name = user_name(&name)?;
@@ -219,8 +265,7 @@ async fn user(store: &Store, action: UserAction, hash: Option<&str>) -> anyhow::
                 bail!("no enabled user {name}");
             }
             let after = serde_json::json!({ "user": name, "disabled": true });
-            store
-                .append_audit(&entry("user.disable", after, String::new()))
+            seal.append(store, &entry("user.disable", after, String::new()))
                 .await?;
             println!("user {name} disabled");
         }
@@ -240,6 +285,46 @@ async fn user(store: &Store, action: UserAction, hash: Option<&str>) -> anyhow::
                     &created[..19]
                 );
             }
+        }
+    }
+    Ok(())
+}
+
+/// After a password change: revokes the user's live tokens when asked, else names them.
+async fn live_tokens_after_passwd(
+    store: &Store,
+    seal: &AuditSeal,
+    name: &UserName,
+    revoke: bool,
+) -> anyhow::Result<()> {
+    let now = now();
+    let live: Vec<_> = store
+        .tokens()
+        .await?
+        .into_iter()
+        .filter(|t| t.user == name.as_str() && t.revoked_at_ms.is_none() && t.expires_at_ms > now)
+        .collect();
+    if live.is_empty() {
+        return Ok(());
+    }
+    if !revoke {
+        let ids: Vec<String> = live.iter().map(|t| t.id.0.to_string()).collect();
+        println!(
+            "{name} has {} live tokens ({}): revoke them with --revoke-tokens, or one by one with `camloop token revoke ID`",
+            live.len(),
+            ids.join(", ")
+        );
+        return Ok(());
+    }
+    for t in live {
+        if store.revoke_token(t.id, now).await? {
+            let after = serde_json::json!({ "token": t.id.0, "user": name });
+            seal.append(
+                store,
+                &entry("token.revoke", after, "password changed".into()),
+            )
+            .await?;
+            println!("token {} revoked", t.id.0);
         }
     }
     Ok(())
@@ -267,14 +352,15 @@ fn lifetime(text: &str) -> anyhow::Result<jiff::SignedDuration> {
 
 pub(crate) fn run_token(args: TokenArgs) -> anyhow::Result<()> {
     runtime()?.block_on(async {
+        let seal = args.store.seal()?;
         let store = connect(&args.store.store()).await?;
-        let result = token(&store, args.action).await;
+        let result = token(&store, &seal, args.action).await;
         store.close().await;
         result
     })
 }
 
-async fn token(store: &Store, action: TokenAction) -> anyhow::Result<()> {
+async fn token(store: &Store, seal: &AuditSeal, action: TokenAction) -> anyhow::Result<()> {
     let now = now();
     match action {
         TokenAction::Create {
@@ -282,18 +368,20 @@ async fn token(store: &Store, action: TokenAction) -> anyhow::Result<()> {
             role,
             expires,
             label,
-        } => create_token(store, &user, role.into(), &expires, &label).await?,
+        } => create_token(store, seal, &user, role.into(), &expires, &label).await?,
         TokenAction::Revoke { id } => {
             if !store.revoke_token(TokenId(id), now).await? {
                 bail!("no live token {id}");
             }
-            store
-                .append_audit(&entry(
+            seal.append(
+                store,
+                &entry(
                     "token.revoke",
                     serde_json::json!({ "token": id }),
                     String::new(),
-                ))
-                .await?;
+                ),
+            )
+            .await?;
             println!("token {id} revoked");
         }
         TokenAction::List => {
@@ -326,6 +414,7 @@ async fn token(store: &Store, action: TokenAction) -> anyhow::Result<()> {
 /// `token create`: prints the token once; keeps its digest.
 async fn create_token(
     store: &Store,
+    seal: &AuditSeal,
     user: &str,
     role: Role,
     expires: &str,
@@ -359,8 +448,7 @@ async fn create_token(
     };
     let id = store.add_token(&t).await?;
     let after = serde_json::json!({ "token": id.0, "user": name, "role": role.as_str(), "expires_at_ms": expires_at_ms.as_millisecond(), "label": label });
-    store
-        .append_audit(&entry("token.create", after, String::new()))
+    seal.append(store, &entry("token.create", after, String::new()))
         .await?;
     eprintln!(
         "token {} for {name} ({role}), valid until {} UTC; shown once, keep it secret:",
@@ -380,7 +468,7 @@ pub(crate) fn run_audit(args: AuditArgs) -> anyhow::Result<()> {
     runtime()?.block_on(async {
         let store = connect(&args.store.store()).await?;
         let result = match matches!(args.action, Some(AuditAction::Verify)) {
-            true => verify_trail(&store).await,
+            true => verify_trail(&store, &args.store.seal_dir()).await,
             false => print_trail(&store, since).await,
         };
         store.close().await;
@@ -388,21 +476,70 @@ pub(crate) fn run_audit(args: AuditArgs) -> anyhow::Result<()> {
     })
 }
 
-async fn verify_trail(store: &Store) -> anyhow::Result<()> {
-    let check = store.verify_audit().await?;
-    if check.broken.is_empty() {
+async fn verify_trail(store: &Store, seal_dir: &std::path::Path) -> anyhow::Result<()> {
+    let seal = AuditSeal::open(seal_dir)?;
+    let head = seal.as_ref().map(AuditSeal::head).transpose()?.flatten();
+    let key = seal.as_ref().map(AuditSeal::key);
+    let check = store.verify_audit(key, head.as_ref()).await?;
+    for line in proof_lines(&check, seal_dir) {
+        println!("{line}");
+    }
+    if check.intact() {
         println!("audit trail intact: {} rows, every link holds", check.rows);
         return Ok(());
     }
     for (id, why) in &check.broken {
         eprintln!("row {id}: {why}");
     }
+    if let HeadCheck::Broken(why) = &check.head {
+        eprintln!("head: {why}");
+    }
     bail!(
-        "audit trail broken at {} of {} rows (first: row {})",
+        "audit trail broken: {} of {} rows{}",
         check.broken.len(),
         check.rows,
-        check.broken[0].0
+        match &check.head {
+            HeadCheck::Broken(_) => ", and it no longer holds its signed head",
+            _ => "",
+        }
     )
+}
+
+/// What `verify` could prove and what not, one line each.
+fn proof_lines(check: &crate::store::AuditCheck, seal_dir: &std::path::Path) -> Vec<String> {
+    let unkeyed = check.rows - check.keyed_rows;
+    let mut lines = Vec::new();
+    match check.key_checked {
+        true => lines.push(format!(
+            "{} keyed rows checked with {}: not changed, inserted or re-chained without the key",
+            check.keyed_rows,
+            seal_dir.join(crate::audit_seal::KEY_FILE).display()
+        )),
+        false => lines.push(format!(
+            "no key in {}: {} keyed rows checked for their links only",
+            seal_dir.display(),
+            check.keyed_rows
+        )),
+    }
+    if unkeyed > 0 {
+        lines.push(format!(
+            "{unkeyed} rows from before the key: anyone who could write the database could have rewritten them"
+        ));
+    }
+    lines.push(match &check.head {
+        HeadCheck::NotGiven => {
+            "no signed head: rows removed from the end would not be seen".to_string()
+        }
+        HeadCheck::Holds => {
+            "the signed head holds: no row removed from the end since it was written".to_string()
+        }
+        HeadCheck::Broken(_) => "the signed head does not hold".to_string(),
+    });
+    lines.push(
+        "not provable here: rows forged by someone who can read the key (the service's account)"
+            .to_string(),
+    );
+    lines
 }
 
 async fn print_trail(store: &Store, since_ms: jiff::Timestamp) -> anyhow::Result<()> {

@@ -5,6 +5,7 @@
 //! and never the password. The operator signs in with it, then changes it
 //! (`camloop user passwd admin`) and deletes the file.
 
+use crate::audit_seal::AuditSeal;
 use crate::config::Config;
 use crate::service::http::AuthState;
 use crate::store::{AuditEntry, AuditResult, Role, Store};
@@ -13,10 +14,28 @@ use std::io::Write as _;
 use std::path::Path;
 use tracing::{info, warn};
 
-/// The listener's access settings from the configuration.
-pub(crate) fn access_settings(config: &Config) -> AuthState {
+/// Makes the var folder, or narrows it, to the service's account only (0700): it holds the
+/// database (password hashes, history), the audit key, the MQTT queue and the OPC UA key.
+pub(crate) fn private_var_dir(config: &Config) -> anyhow::Result<()> {
+    let var = config.var_dir();
+    crate::private_fs::create_dir_all(&var)
+        .and_then(|()| crate::private_fs::restrict(&var))
+        .with_context(|| format!("var folder {}", var.display()))
+}
+
+/// The folder of the audit trail's key and head: beside the first admin's password.
+pub(crate) fn seal_dir(config: &Config) -> std::path::PathBuf {
+    let file = config.admin_password_file();
+    file.parent()
+        .map_or_else(|| config.var_dir(), Path::to_path_buf)
+}
+
+/// The listener's access settings from the configuration (the audit key made on the first
+/// start).
+pub(crate) fn access_settings(config: &Config) -> anyhow::Result<AuthState> {
     let anonymous_read = config.auth.anonymous_read(config.http.listen);
     let mut auth = AuthState::new(config.api_token.clone(), anonymous_read);
+    auth.audit_seal = std::sync::Arc::new(AuditSeal::open_or_create(&seal_dir(config))?);
     auth.session = jiff::SignedDuration::from_mins(i64::from(config.auth.session_minutes.max(1)));
     // Under TLS the session cookie is `Secure`: a browser never sends it in clear.
     auth.secure_cookie = config.http.tls();
@@ -25,7 +44,7 @@ pub(crate) fn access_settings(config: &Config) -> AuthState {
             "CAMLOOP_API_TOKEN is deprecated: it acts as an admin; make per-user tokens with `camloop token create`"
         );
     }
-    auth
+    Ok(auth)
 }
 
 /// Makes the first `admin` when the store has no user; returns the password file written.
@@ -76,7 +95,9 @@ pub(crate) async fn ensure_admin(
         result: AuditResult::Ok,
         reason: format!("first start: password written to {}", file.display()),
     };
-    store.append_audit(&entry).await?;
+    AuditSeal::open_or_create(&seal_dir(config))?
+        .append(store, &entry)
+        .await?;
     info!(file = %file.display(), "first start: user `admin` created; its password is in this file (readable only by this account): sign in, change it with `camloop user passwd admin`, then delete the file");
     println!(
         "camloop: first start: the password of user `admin` is in {}",
@@ -91,7 +112,7 @@ pub(crate) fn write_secret_file(path: &Path, text: &str) -> std::io::Result<()> 
     if let Some(dir) = path.parent()
         && !dir.as_os_str().is_empty()
     {
-        std::fs::create_dir_all(dir)?;
+        crate::private_fs::create_dir_all(dir)?;
     }
     let _ = std::fs::remove_file(path);
     let mut options = std::fs::OpenOptions::new();

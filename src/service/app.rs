@@ -37,6 +37,7 @@ impl AppState {
             metrics: &self.metrics,
             machines: &self.machines,
             routes: &self.commands,
+            audit_seal: &self.auth.audit_seal,
         }
     }
 

@@ -109,6 +109,8 @@ pub struct Writes<'a> {
     pub metrics: &'a Metrics,
     pub machines: &'a BTreeMap<MachineName, Vec<FeatureName>>,
     pub routes: &'a CommandRoutes,
+    /// The audit trail's key and head: every row this path appends is sealed with them.
+    pub audit_seal: &'a crate::audit_seal::AuditSeal,
 }
 
 /// Why a write was not carried out. [`WriteError::code`] is the stable code every adapter
@@ -484,8 +486,9 @@ pub(crate) async fn record_audit(w: Writes<'_>, entry: AuditEntry) {
     );
     let store = w.store.read().await.clone();
     let stored = match store {
-        Some(store) => store
-            .append_audit(&entry)
+        Some(store) => w
+            .audit_seal
+            .append(&store, &entry)
             .await
             .map(|_| ())
             .map_err(|e| e.to_string()),

@@ -3,6 +3,7 @@
 //! graceful shutdown on SIGINT/SIGTERM that lets every machine finish the part in hand.
 
 mod access_setup;
+pub(crate) use access_setup::seal_dir;
 pub(crate) mod action;
 pub mod app;
 mod cluster_task;
@@ -141,6 +142,7 @@ pub(crate) async fn start_checked(
     let listener = startup::tokio_listener(listener)?;
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let metrics = Arc::new(Metrics::default());
+    access_setup::private_var_dir(&config)?;
     let (store, connector, retention) =
         startup::start_store(&config, options.accept_new_database, &shutdown_rx).await?;
 
@@ -170,7 +172,7 @@ pub(crate) async fn start_checked(
         metrics: metrics.clone(),
         machines: Arc::new(features),
         commands,
-        auth: Arc::new(access_setup::access_settings(&config)),
+        auth: Arc::new(access_setup::access_settings(&config)?),
         body_timeout: limits.body_timeout,
         dashboard: Arc::new(sheets),
         cluster: cluster_view,

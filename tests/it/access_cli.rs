@@ -9,13 +9,23 @@ use crate::store_support;
 use camloop::auth::token_digest;
 use camloop::store::{RawPool, Store};
 use std::io::Write as _;
+use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
-/// Runs `camloop args… --database url` with `stdin` as standard input.
-fn camloop(args: &[&str], url: &str, stdin: &str) -> Output {
+/// A store and the folder of its audit key and head.
+#[derive(Debug, Clone, Copy)]
+struct At<'a> {
+    url: &'a str,
+    audit_dir: &'a Path,
+}
+
+/// Runs `camloop args… --database url --audit-dir dir` with `stdin` as standard input.
+fn camloop(args: &[&str], at: At, stdin: &str) -> Output {
     let mut child = Command::new(env!("CARGO_BIN_EXE_camloop"))
         .args(args)
-        .args(["--database", url])
+        .args(["--database", at.url])
+        .arg("--audit-dir")
+        .arg(at.audit_dir)
         .env("USER", "tester")
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
@@ -40,23 +50,23 @@ fn err(o: &Output) -> String {
 }
 
 /// Users and a token through the commands; returns the token.
-async fn users_and_tokens(url: &str, store: &Store) -> String {
+async fn users_and_tokens(at: At<'_>, store: &Store) -> String {
     let short = camloop(
         &["user", "add", "ann", "--role", "operator"],
-        url,
+        at,
         "eleven-char\n",
     );
     assert!(!short.status.success());
     assert!(err(&short).contains("at least 12"), "{}", err(&short));
     let add = camloop(
         &["user", "add", "ann", "--role", "operator"],
-        url,
+        at,
         "a-long-enough-secret\n",
     );
     assert!(add.status.success(), "{}", err(&add));
     let again = camloop(
         &["user", "add", "ann", "--role", "viewer"],
-        url,
+        at,
         "a-long-enough-secret\n",
     );
     assert!(!again.status.success(), "a second ann");
@@ -73,7 +83,7 @@ async fn users_and_tokens(url: &str, store: &Store) -> String {
 
     let above = camloop(
         &["token", "create", "--user", "ann", "--role", "engineer"],
-        url,
+        at,
         "",
     );
     assert!(!above.status.success(), "a token above its user's role");
@@ -90,7 +100,7 @@ async fn users_and_tokens(url: &str, store: &Store) -> String {
             "--label",
             "cell-7",
         ],
-        url,
+        at,
         "",
     );
     assert!(create.status.success(), "{}", err(&create));
@@ -108,13 +118,13 @@ async fn users_and_tokens(url: &str, store: &Store) -> String {
     let day_ms = 86_400_000;
     let left = grant.expires_at_ms.as_millisecond() - camloop::clock::now().as_millisecond();
     assert!(left > day_ms - 60_000 && left <= day_ms, "{left}");
-    let list = camloop(&["token", "list"], url, "");
+    let list = camloop(&["token", "list"], at, "");
     assert!(
         out(&list).contains("cell-7") && !out(&list).contains(&token),
         "{}",
         out(&list)
     );
-    let revoke = camloop(&["token", "revoke", &grant.id.0.to_string()], url, "");
+    let revoke = camloop(&["token", "revoke", &grant.id.0.to_string()], at, "");
     assert!(revoke.status.success(), "{}", err(&revoke));
     assert!(
         store
@@ -126,11 +136,11 @@ async fn users_and_tokens(url: &str, store: &Store) -> String {
             .is_some()
     );
 
-    let passwd = camloop(&["user", "passwd", "ann"], url, "another-long-secret\n");
+    let passwd = camloop(&["user", "passwd", "ann"], at, "another-long-secret\n");
     assert!(passwd.status.success(), "{}", err(&passwd));
-    let disable = camloop(&["user", "disable", "ann"], url, "");
+    let disable = camloop(&["user", "disable", "ann"], at, "");
     assert!(disable.status.success(), "{}", err(&disable));
-    let list = out(&camloop(&["user", "list"], url, ""));
+    let list = out(&camloop(&["user", "list"], at, ""));
     assert!(
         list.lines()
             .any(|l| l.starts_with("ann") && l.contains("operator") && l.ends_with("disabled")),
@@ -140,8 +150,8 @@ async fn users_and_tokens(url: &str, store: &Store) -> String {
 }
 
 /// The trail as `camloop audit` prints it, and `verify` on the intact trail.
-fn trail_reads_and_verifies(url: &str) {
-    let audit = out(&camloop(&["audit", "--since", "1h"], url, ""));
+fn trail_reads_and_verifies(at: At<'_>) {
+    let audit = out(&camloop(&["audit", "--since", "1h"], at, ""));
     let actions: Vec<&str> = audit
         .lines()
         .filter_map(|l| l.split_whitespace().nth(6))
@@ -157,20 +167,24 @@ fn trail_reads_and_verifies(url: &str) {
         ],
         "{audit}"
     );
+    // The actor is the account running the command (as `id -un` names it), not the
+    // `USER=tester` the command ran with.
+    let id = Command::new("id").arg("-un").output().unwrap();
+    let account = String::from_utf8_lossy(&id.stdout).trim().to_string();
+    assert_ne!(account, "tester");
+    let actor = format!("cli:{account} (admin) from local");
     assert!(
-        audit
-            .lines()
-            .all(|l| l.contains("cli:tester (admin) from local")),
-        "{audit}"
+        audit.lines().all(|l| l.contains(&actor)),
+        "{actor}: {audit}"
     );
-    let verify = camloop(&["audit", "verify"], url, "");
+    let verify = camloop(&["audit", "verify"], at, "");
     assert!(verify.status.success(), "{}", err(&verify));
     assert!(out(&verify).contains("intact: 5 rows"), "{}", out(&verify));
 }
 
 /// `verify` fails, naming `row` and why.
-fn verify_names(url: &str, row: i64, why: &str) {
-    let verify = camloop(&["audit", "verify"], url, "");
+fn verify_names(at: At<'_>, row: i64, why: &str) {
+    let verify = camloop(&["audit", "verify"], at, "");
     assert!(!verify.status.success(), "verify passed a broken trail");
     let text = err(&verify);
     assert!(
@@ -179,61 +193,138 @@ fn verify_names(url: &str, row: i64, why: &str) {
     );
 }
 
+/// Runs `sql` on `pool`, expecting it refused with `why`.
+macro_rules! refused {
+    ($pool:expr, $sql:expr, $why:expr) => {{
+        let e = sqlx::query($sql)
+            .execute($pool)
+            .await
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains($why), "{}: {e}", $sql);
+    }};
+}
+
+/// Runs `sql` on `pool`: the forger got past the triggers.
+macro_rules! forge {
+    ($pool:expr, $sql:expr) => {
+        sqlx::query($sql).execute($pool).await.unwrap()
+    };
+}
+
+/// `verify` fails and says the signed head no longer holds.
+fn verify_finds_the_head_broken(at: At<'_>) {
+    let verify = camloop(&["audit", "verify"], at, "");
+    assert!(!verify.status.success(), "verify passed a shortened trail");
+    assert!(err(&verify).contains("no longer holds"), "{}", err(&verify));
+}
+
+/// A copy of row 5 appended as row 6, linked to row 5: a forged row after the last one.
+const APPEND_FORGED: &str = "INSERT INTO audit (id, at_ms, actor, role, client, action, result, reason, prev_sha256, row_sha256) \
+     SELECT 6, at_ms, 'mallory', role, client, action, result, reason, row_sha256, row_sha256 FROM audit WHERE id = 5";
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn users_tokens_and_a_row_edited_in_sqlite() {
+async fn users_tokens_and_a_trail_forged_in_sqlite() {
     let dir = tempfile::tempdir().unwrap();
     let url = format!("sqlite://{}/camloop.db?mode=rwc", dir.path().display());
+    let at = At {
+        url: &url,
+        audit_dir: dir.path(),
+    };
     let store = Store::connect(&url).await.unwrap();
-    users_and_tokens(&url, &store).await;
-    trail_reads_and_verifies(&url);
+    users_and_tokens(at, &store).await;
+    trail_reads_and_verifies(at);
     let RawPool::Sqlite(pool) = store.raw_pool() else {
         unreachable!()
     };
     let edit = "UPDATE audit SET reason = 'nothing happened' WHERE id = 2";
-    let refused = sqlx::query(edit).execute(pool).await;
-    assert!(
-        refused.unwrap_err().to_string().contains("append-only"),
-        "the trigger refuses"
+    refused!(pool, edit, "append-only");
+    // INSERT OR REPLACE deletes the row it replaces without firing the DELETE trigger.
+    let replace = "INSERT OR REPLACE INTO audit (id, at_ms, actor, role, client, action, result, reason, prev_sha256, row_sha256, chain) \
+         SELECT id, at_ms, 'mallory', role, client, action, result, reason, prev_sha256, row_sha256, chain FROM audit WHERE id = 5";
+    refused!(pool, replace, "only the next id");
+    refused!(
+        pool,
+        APPEND_FORGED.replace("SELECT 6", "SELECT 9").as_str(),
+        "only the next id"
     );
-    // Someone with the file drops the trigger and edits row 2.
-    sqlx::query("DROP TRIGGER audit_no_update")
-        .execute(pool)
-        .await
-        .unwrap();
-    sqlx::query(edit).execute(pool).await.unwrap();
-    verify_names(&url, 2, "content does not match");
+    // Someone with the file drops the triggers.
+    for t in ["audit_no_update", "audit_no_delete", "audit_next_id"] {
+        forge!(pool, &format!("DROP TRIGGER {t}"));
+    }
+    forge!(pool, APPEND_FORGED);
+    verify_names(at, 6, "unkeyed row after keyed ones");
+    forge!(pool, "DELETE FROM audit WHERE id = 6");
+    // The newest row removed: every link still holds; the head does not.
+    forge!(pool, "DELETE FROM audit WHERE id = 5");
+    verify_finds_the_head_broken(at);
+    // Renumbered: the key covers the id.
+    forge!(pool, "UPDATE audit SET id = id + 10");
+    verify_names(at, 11, "keyed digest does not match");
+    forge!(pool, "UPDATE audit SET id = id - 10");
+    forge!(pool, edit);
+    verify_names(at, 2, "keyed digest does not match");
     store.close().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn users_tokens_and_rows_edited_and_removed_in_postgres() {
-    let Some(pg) = store_support::postgres("users_tokens_and_rows_edited_in_postgres").await else {
+async fn users_tokens_and_a_trail_forged_in_postgres() {
+    let Some(pg) = store_support::postgres("users_tokens_and_a_trail_forged_in_postgres").await
+    else {
         return;
     };
-    let url = pg.server.as_ref().unwrap().url();
-    users_and_tokens(&url, &pg.store).await;
-    trail_reads_and_verifies(&url);
+    let server = pg.server.as_ref().unwrap();
+    let url = server.url();
+    let at = At {
+        url: &url,
+        audit_dir: pg.dir.path(),
+    };
+    users_and_tokens(at, &pg.store).await;
+    trail_reads_and_verifies(at);
     let RawPool::Postgres(pool) = pg.store.raw_pool() else {
         unreachable!()
     };
     let edit = "UPDATE audit SET after_json = '{\"user\":\"mallory\"}' WHERE id = 2";
-    let refused = sqlx::query(edit).execute(pool).await;
-    assert!(
-        refused.unwrap_err().to_string().contains("append-only"),
-        "the trigger refuses"
+    refused!(pool, edit, "append-only");
+    refused!(pool, "TRUNCATE audit", "append-only");
+    refused!(pool, "DELETE FROM audit WHERE id = 5", "append-only");
+    refused!(
+        pool,
+        APPEND_FORGED
+            .replace(") SELECT", ") OVERRIDING SYSTEM VALUE SELECT")
+            .replace("SELECT 6", "SELECT 9")
+            .as_str(),
+        "only the next id"
     );
-    sqlx::query("ALTER TABLE audit DISABLE TRIGGER audit_no_change")
-        .execute(pool)
-        .await
-        .unwrap();
-    sqlx::query(edit).execute(pool).await.unwrap();
-    verify_names(&url, 2, "content does not match");
-    // Removing a row in the middle breaks the next row's link.
-    sqlx::query("DELETE FROM audit WHERE id = 4")
-        .execute(pool)
-        .await
-        .unwrap();
-    verify_names(&url, 5, "link to the row before");
+    // The site's set-up: the tables belong to an owner; the service's role may read and
+    // append to the trail and nothing more, so it can neither empty it nor drop a trigger.
+    forge!(pool, "CREATE ROLE camloop_writer LOGIN");
+    forge!(pool, "GRANT SELECT, INSERT ON audit TO camloop_writer");
+    let writer_url = url.replace("postgres://postgres@", "postgres://camloop_writer@");
+    let writer = sqlx::PgPool::connect(&writer_url).await.unwrap();
+    refused!(&writer, "TRUNCATE audit", "permission denied");
+    refused!(&writer, "DELETE FROM audit", "permission denied");
+    refused!(
+        &writer,
+        "ALTER TABLE audit DISABLE TRIGGER audit_no_change",
+        "must be owner"
+    );
+    writer.close().await;
+    // The owner (or a superuser) gets past the triggers.
+    for t in ["audit_no_change", "audit_next_id", "audit_no_truncate"] {
+        forge!(pool, &format!("ALTER TABLE audit DISABLE TRIGGER {t}"));
+    }
+    forge!(
+        pool,
+        APPEND_FORGED
+            .replace(") SELECT", ") OVERRIDING SYSTEM VALUE SELECT")
+            .as_str()
+    );
+    verify_names(at, 6, "unkeyed row after keyed ones");
+    forge!(pool, "DELETE FROM audit WHERE id >= 5");
+    verify_finds_the_head_broken(at);
+    forge!(pool, "TRUNCATE audit");
+    verify_finds_the_head_broken(at);
 }
 
 /// The first start of the real binary makes `admin`: the password goes to a file only its

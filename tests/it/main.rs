@@ -39,6 +39,7 @@ mod store_support;
 mod support;
 
 mod access_cli;
+mod access_lockout;
 mod access_matrix;
 mod analysis_accuracy;
 mod analysis_assembly;

@@ -154,3 +154,105 @@ fn asyncua_browses_reads_subscribes_and_calls_rollback_with_users() {
     assert!(status.success(), "asyncua checks failed:\n{out}\n{err}");
     assert!(out.contains("all OPC UA checks passed"), "{out}");
 }
+
+/// On a server with `security = "Basic256Sha256+None"`, a user name and password sent over
+/// the None endpoint (in clear) are refused, and the None endpoint offers no user-name
+/// policy; the same user signs in over the secure endpoint.
+#[test]
+fn asyncua_is_refused_a_clear_text_password_over_none() {
+    if !asyncua_present() {
+        eprintln!("SKIP opcua_asyncua (clear-text password): Python asyncua not installed");
+        return;
+    }
+    let script = cli_support::repo("tests/opcua/client_checks.py");
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("client-certs");
+    std::fs::create_dir_all(&certs).unwrap();
+    let made = Command::new("python3")
+        .args([&script, "certs", &certs.display().to_string()])
+        .output()
+        .unwrap();
+    assert!(made.status.success(), "{}", cli_support::stderr(&made));
+    let (http, opcua) = (free_port(), free_port());
+    let config = config(http, opcua).replace(
+        "host_name = \"localhost\"\n",
+        "host_name = \"localhost\"\nsecurity = \"Basic256Sha256+None\"\naccept_unknown_clients = true\n",
+    );
+    std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
+    let service = KillOnDrop::spawn(&mut camloop_run(dir.path())).unwrap();
+    let password_file = dir.path().join("var/admin-password");
+    wait_for("the admin password file", START_BOUND, || {
+        password_file.exists()
+    });
+    wait_for("the OPC UA listener", START_BOUND, || {
+        TcpStream::connect(("127.0.0.1", opcua)).is_ok()
+    });
+    let params = serde_json::json!({
+        "endpoint": format!("opc.tcp://localhost:{opcua}/"),
+        "cert_dir": certs.display().to_string(),
+        "admin_password": std::fs::read_to_string(&password_file).unwrap().trim(),
+    });
+    let params_file = dir.path().join("params.json");
+    std::fs::write(&params_file, params.to_string()).unwrap();
+    let mut run = KillOnDrop::spawn(
+        Command::new("python3")
+            .args([
+                &script,
+                "clear-password",
+                &params_file.display().to_string(),
+            ])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped()),
+    )
+    .unwrap();
+    let status = run.exit_within(
+        SCRIPT_BOUND,
+        Duration::from_millis(200),
+        "the asyncua checks",
+    );
+    let mut text = String::new();
+    use std::io::Read as _;
+    run.stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut text)
+        .unwrap();
+    run.stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut text)
+        .unwrap();
+    println!("{text}");
+    assert!(status.success(), "asyncua checks failed:\n{text}");
+    assert!(text.contains("clear-text password checks passed"), "{text}");
+    drop(service);
+    owner_only_and_a_readable_key_refused(dir.path());
+}
+
+/// The var folder is the service's account's only, and so is the OPC UA private key; a key
+/// that others can read stops the next start.
+fn owner_only_and_a_readable_key_refused(dir: &Path) {
+    use std::os::unix::fs::PermissionsExt;
+    let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+    let key = dir.join("var/opcua/pki/private/private.pem");
+    assert_eq!(mode(&dir.join("var")), 0o700);
+    assert_eq!(mode(&key), 0o600);
+    for file in ["camloop.db", "audit-key", "audit-head", "admin-password"] {
+        assert_eq!(mode(&dir.join("var").join(file)), 0o600, "{file}");
+    }
+    std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let mut again = camloop_run(dir);
+    again.stderr(Stdio::piped());
+    let mut again = KillOnDrop::spawn(&mut again).unwrap();
+    let status = again.exit_within(START_BOUND, Duration::from_millis(100), "a start refused");
+    let mut err = String::new();
+    use std::io::Read as _;
+    again
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    assert!(!status.success(), "a start with a readable key");
+    assert!(err.contains("can be read by other accounts"), "{err}");
+}

@@ -131,7 +131,9 @@ async fn two_handles_appending_to_the_audit_chain_at_once_on_sqlite_both_get_thr
     const APPENDS: i64 = 150;
     let dir = tempfile::tempdir().unwrap();
     let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
+    let key = camloop::store::AuditKey::from_bytes([3; 32]);
     let appender = |store: Store, who: &'static str| {
+        let key = key.clone();
         tokio::spawn(async move {
             for i in 0..APPENDS {
                 let entry = AuditEntry {
@@ -148,7 +150,7 @@ async fn two_handles_appending_to_the_audit_chain_at_once_on_sqlite_both_get_thr
                     result: AuditResult::Ok,
                     reason: String::new(),
                 };
-                if let Err(e) = store.append_audit(&entry).await {
+                if let Err(e) = store.append_audit(&key, &entry).await {
                     return Err(format!("{who}, append {i}: {e} ({:?})", e.detail()));
                 }
             }
@@ -163,9 +165,10 @@ async fn two_handles_appending_to_the_audit_chain_at_once_on_sqlite_both_get_thr
     let check = Store::connect(&url)
         .await
         .unwrap()
-        .verify_audit()
+        .verify_audit(Some(&key), None)
         .await
         .unwrap();
     assert_eq!(check.rows, 2 * APPENDS as u64);
+    assert_eq!(check.keyed_rows, check.rows);
     assert!(check.broken.is_empty(), "{:?}", check.broken);
 }

@@ -3,6 +3,7 @@ project wrote), as the integration test `opcua_asyncua` runs it.
 
     python3 client_checks.py certs DIR        # makes trusted.der/.pem and stranger.der/.pem
     python3 client_checks.py check PARAMS.json
+    python3 client_checks.py clear-password PARAMS.json   # a Basic256Sha256+None server
 
 `check` prints one line per check passed and exits 1 at the first one failing.
 """
@@ -265,6 +266,42 @@ async def none_refused_by_server(p):
         Client.find_endpoint = real
 
 
+async def clear_password_refused(p):
+    """On a `Basic256Sha256+None` server: the None endpoint offers no user-name policy, and
+    a client that sends a user name and password over None anyway (in clear: the channel
+    neither signs nor encrypts, and the policy names no security policy for the password)
+    is refused. The same user over the secure endpoint signs in."""
+    c = Client(p["endpoint"], timeout=10)
+    c.application_uri = APP_URI
+    endpoints = await c.connect_and_get_server_endpoints()
+    none = [e for e in endpoints if e.SecurityMode == ua.MessageSecurityMode.None_]
+    if not none:
+        fail("the server offers no None endpoint to check")
+    kinds = [t.TokenType for e in none for t in e.UserIdentityTokens]
+    if ua.UserTokenType.UserName in kinds:
+        fail(f"the None endpoint offers a user-name policy: {kinds}")
+    ok(f"the None endpoint offers no user-name policy ({kinds})")
+    # A client that ignores the policies: asyncua sends the password as the policy id
+    # says, with no security policy URI that is in clear.
+    real = Client.find_endpoint
+    Client.find_endpoint = staticmethod(lambda endpoints, mode, uri: none[0])
+    c = Client(p["endpoint"], timeout=10)
+    c.application_uri = APP_URI
+    c.set_user("admin")
+    c.set_password(p["admin_password"])
+    try:
+        await c.connect()
+        await c.disconnect()
+        fail("a user name with its password in clear was accepted over None")
+    except Exception as e:  # any refusal: what matters is that no session opens
+        ok(f"a clear-text password over None refused ({type(e).__name__}: {e})")
+    finally:
+        Client.find_endpoint = real
+    c = await client(p, ("admin", p["admin_password"]))
+    async with c:
+        ok("the same user signs in over Basic256Sha256 SignAndEncrypt")
+
+
 def trust(p):
     """What an operator does: moves the refused client's certificate from the server's
     rejected folder to its trusted folder."""
@@ -300,5 +337,8 @@ async def check(params_file):
 if __name__ == "__main__":
     if sys.argv[1] == "certs":
         asyncio.run(make_certs(sys.argv[2]))
+    elif sys.argv[1] == "clear-password":
+        asyncio.run(clear_password_refused(json.loads(Path(sys.argv[2]).read_text())))
+        print("clear-text password checks passed", flush=True)
     else:
         asyncio.run(check(sys.argv[2]))

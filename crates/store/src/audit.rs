@@ -1,13 +1,15 @@
-//! The audit trail: who did what, from where, to what, with what result. Appended only
-//! (the schema's triggers refuse UPDATE and DELETE), and every row is chained to the one
-//! before: `row_sha256` is the SHA-256 of the previous row's `row_sha256` and this row's
-//! fields, so [`Store::verify_audit`] finds a row changed, inserted or removed in the middle
-//! by anyone who got past the triggers (a database owner can drop them). Removing the newest
-//! rows leaves a shorter chain that still holds: compare the row count with an earlier
-//! `camloop audit verify` to see that.
+//! The audit trail: who did what, from where, to what, with what result. Appended only:
+//! the schema's triggers refuse UPDATE, DELETE, TRUNCATE (PostgreSQL) and any id but the
+//! next (so `INSERT OR REPLACE` cannot swap a row), and every row is chained to the one
+//! before. Rows since version 7 are keyed (`chain = 'hmac-sha256'`, see `audit_key`): their
+//! digest is an HMAC under a key kept outside the database, so a database writer without
+//! the key cannot rewrite or re-chain them. Older rows (`chain = 'sha256'`) carry the
+//! unkeyed SHA-256 of the row before's digest and their fields: anyone who can write the
+//! database can re-chain those. [`Store::verify_audit`] says which rows it could prove.
 
 use super::{AuditResult, Role, Store, StoreError, with_read, with_write};
 use crate::BeginWrite;
+use crate::audit_key::{AuditHead, AuditKey};
 use camloop_core::digest::sha256_hex;
 
 /// The `prev_sha256` of the first row.
@@ -54,11 +56,40 @@ pub struct AuditRow {
 pub struct AuditCheck {
     /// Rows read.
     pub rows: u64,
+    /// Of those, rows keyed with the HMAC (checked only when the key was given).
+    pub keyed_rows: u64,
+    /// Whether the key was given, so the keyed rows' digests were checked.
+    pub key_checked: bool,
     /// The first rows that break the chain (at most 20): id and why.
     pub broken: Vec<(i64, String)>,
+    /// The signed head against the chain.
+    pub head: HeadCheck,
 }
 
+/// A signed head compared with the chain.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum HeadCheck {
+    /// No head was given: a removed tail cannot be seen.
+    NotGiven,
+    /// The chain holds the head's row, with its digest and as many rows up to it.
+    Holds,
+    /// The chain does not hold the head: rows were removed or renumbered. Why.
+    Broken(String),
+}
+
+impl AuditCheck {
+    /// Nothing found wrong.
+    pub fn intact(&self) -> bool {
+        self.broken.is_empty() && !matches!(self.head, HeadCheck::Broken(_))
+    }
+}
+
+/// The `chain` of an unkeyed row (before version 7) and of a keyed one.
+const CHAIN_SHA256: &str = "sha256";
+const CHAIN_HMAC: &str = "hmac-sha256";
+
 type AuditDbRow = (
+    String,
     i64,
     i64,
     String,
@@ -76,13 +107,18 @@ type AuditDbRow = (
     String,
 );
 
-const COLUMNS: &str = "SELECT id, at_ms, actor, role, client, action, machine, feature, version, \
+const COLUMNS: &str = "SELECT chain, id, at_ms, actor, role, client, action, machine, feature, version, \
      before_json, after_json, result, reason, prev_sha256, row_sha256 FROM audit";
 
 /// The chained digest of an entry after `prev`: SHA-256 of `prev`, a newline, and the
 /// entry's fields as a JSON array (serde_json writes it the same way every time).
 pub(crate) fn audit_digest(prev: &str, e: &AuditEntry) -> String {
-    let fields = serde_json::json!([
+    let fields = fields_json(e);
+    sha256_hex(format!("{prev}\n{fields}").as_bytes())
+}
+
+fn fields_json(e: &AuditEntry) -> serde_json::Value {
+    serde_json::json!([
         e.at_ms.as_millisecond(),
         e.actor,
         e.role.as_str(),
@@ -95,11 +131,29 @@ pub(crate) fn audit_digest(prev: &str, e: &AuditEntry) -> String {
         e.after,
         e.result.as_str(),
         e.reason,
-    ]);
-    sha256_hex(format!("{prev}\n{fields}").as_bytes())
+    ])
 }
 
-fn row_from(r: AuditDbRow) -> Result<(AuditRow, String, String), StoreError> {
+/// The keyed digest of row `id` holding `e` after `prev`: HMAC-SHA256 under `key` of the
+/// id, `prev` and the fields as [`audit_digest`] writes them, each on its line.
+pub(crate) fn audit_mac(key: &AuditKey, id: i64, prev: &str, e: &AuditEntry) -> String {
+    let fields = fields_json(e);
+    key.mac(format!("{id}\n{prev}\n{fields}").as_bytes())
+}
+
+/// A stored row: the row, its chain kind, its stored link and digest.
+struct Stored {
+    row: AuditRow,
+    chain: String,
+    prev: String,
+    digest: String,
+}
+
+fn row_from(r: AuditDbRow) -> Result<Stored, StoreError> {
+    let chain = r.0;
+    let r = (
+        r.1, r.2, r.3, r.4, r.5, r.6, r.7, r.8, r.9, r.10, r.11, r.12, r.13, r.14, r.15,
+    );
     let (id, at_ms, actor, role, client, action, machine, feature, version, before, after) =
         (r.0, r.1, r.2, r.3, r.4, r.5, r.6, r.7, r.8, r.9, r.10);
     let entry = AuditEntry {
@@ -116,55 +170,87 @@ fn row_from(r: AuditDbRow) -> Result<(AuditRow, String, String), StoreError> {
         result: AuditResult::parse(&r.11)?,
         reason: r.12,
     };
-    Ok((AuditRow { id, entry }, r.13, r.14))
+    Ok(Stored {
+        row: AuditRow { id, entry },
+        chain,
+        prev: r.13,
+        digest: r.14,
+    })
 }
 
 impl Store {
-    /// Appends `e` to the trail, chained to the newest row; returns its id.
-    pub async fn append_audit(&self, e: &AuditEntry) -> Result<i64, StoreError> {
+    /// Appends `e` to the trail under the next id, keyed with `key` and chained to the
+    /// newest row; returns the trail's new head (sign it and keep it outside the database).
+    pub async fn append_audit(
+        &self,
+        key: &AuditKey,
+        e: &AuditEntry,
+    ) -> Result<AuditHead, StoreError> {
         const OP: &str = "appending to the audit trail";
         let postgres = self.backend() == "postgres";
+        // The id is given, not drawn: the schema refuses any id but the next, and a
+        // PostgreSQL sequence leaves gaps where a transaction rolled back.
+        let insert = format!(
+            "INSERT INTO audit (id, at_ms, actor, role, client, action, machine, feature, version, \
+             before_json, after_json, result, reason, prev_sha256, row_sha256, chain) {} \
+             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16)",
+            if postgres {
+                "OVERRIDING SYSTEM VALUE"
+            } else {
+                ""
+            }
+        );
         with_write!(self, pool => {
             let mut tx = pool.begin_write().await.map_err(self.db_error(OP))?;
             if postgres {
                 // Several writers (and instances) may append at once: one at a time, so the
-                // chain never forks. Readers are not blocked.
-                sqlx::query("LOCK TABLE audit IN SHARE ROW EXCLUSIVE MODE")
+                // chain never forks. Readers are not blocked. An advisory lock needs no
+                // privilege on the table beyond INSERT (the writing role has no more).
+                sqlx::query("SELECT pg_advisory_xact_lock(7106231011)")
                     .execute(&mut *tx)
                     .await
                     .map_err(self.db_error(OP))?;
             }
-            let prev: Option<String> =
-                sqlx::query_scalar("SELECT row_sha256 FROM audit ORDER BY id DESC LIMIT 1")
+            let newest: Option<(i64, String)> =
+                sqlx::query_as("SELECT id, row_sha256 FROM audit ORDER BY id DESC LIMIT 1")
                     .fetch_optional(&mut *tx)
                     .await
                     .map_err(self.db_error(OP))?;
-            let prev = prev.unwrap_or_else(|| AUDIT_GENESIS.to_string());
-            let digest = audit_digest(&prev, e);
-            let id: i64 = sqlx::query_scalar(
-                "INSERT INTO audit (at_ms, actor, role, client, action, machine, feature, version, \
-                 before_json, after_json, result, reason, prev_sha256, row_sha256) \
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14) RETURNING id",
-            )
-            .bind(e.at_ms.as_millisecond())
-            .bind(&e.actor)
-            .bind(e.role.as_str())
-            .bind(&e.client)
-            .bind(&e.action)
-            .bind(&e.machine)
-            .bind(&e.feature)
-            .bind(e.version)
-            .bind(&e.before)
-            .bind(&e.after)
-            .bind(e.result.as_str())
-            .bind(&e.reason)
-            .bind(&prev)
-            .bind(&digest)
-            .fetch_one(&mut *tx)
-            .await
-            .map_err(self.db_error(OP))?;
+            let count: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM audit")
+                .fetch_one(&mut *tx)
+                .await
+                .map_err(self.db_error(OP))?;
+            let (id, prev) = match newest {
+                Some((id, digest)) => (id + 1, digest),
+                None => (1, AUDIT_GENESIS.to_string()),
+            };
+            let digest = audit_mac(key, id, &prev, e);
+            sqlx::query(&insert)
+                .bind(id)
+                .bind(e.at_ms.as_millisecond())
+                .bind(&e.actor)
+                .bind(e.role.as_str())
+                .bind(&e.client)
+                .bind(&e.action)
+                .bind(&e.machine)
+                .bind(&e.feature)
+                .bind(e.version)
+                .bind(&e.before)
+                .bind(&e.after)
+                .bind(e.result.as_str())
+                .bind(&e.reason)
+                .bind(&prev)
+                .bind(&digest)
+                .bind(CHAIN_HMAC)
+                .execute(&mut *tx)
+                .await
+                .map_err(self.db_error(OP))?;
             tx.commit().await.map_err(self.db_error(OP))?;
-            Ok(id)
+            Ok(AuditHead {
+                rows: u64::try_from(count).unwrap_or(0) + 1,
+                last_id: id,
+                last_digest: digest,
+            })
         })
     }
 
@@ -190,19 +276,30 @@ impl Store {
             .fetch_all(pool)
             .await
             .map_err(self.db_error(OP))?;
-            rows.into_iter().map(|r| row_from(r).map(|(row, _, _)| row)).collect()
+            rows.into_iter().map(|r| row_from(r).map(|s| s.row)).collect()
         })
     }
 
-    /// Walks the whole trail and checks every row's chain digest.
-    pub async fn verify_audit(&self) -> Result<AuditCheck, StoreError> {
+    /// Walks the whole trail and checks every row's link and digest: keyed rows with `key`
+    /// (unchecked without it), unkeyed rows by their SHA-256, and that no unkeyed row follows
+    /// a keyed one; then that the chain holds `head` (a head signed earlier, read from
+    /// outside the database).
+    pub async fn verify_audit(
+        &self,
+        key: Option<&AuditKey>,
+        head: Option<&AuditHead>,
+    ) -> Result<AuditCheck, StoreError> {
         const OP: &str = "verifying the audit trail";
         let mut check = AuditCheck {
             rows: 0,
+            keyed_rows: 0,
+            key_checked: key.is_some(),
             broken: Vec::new(),
+            head: HeadCheck::NotGiven,
         };
         let mut prev = AUDIT_GENESIS.to_string();
         let mut after = 0i64;
+        let mut head_seen: Option<(u64, String)> = None;
         loop {
             let page: Vec<AuditDbRow> = with_read!(self, pool => {
                 sqlx::query_as(&format!("{COLUMNS} WHERE id > $1 ORDER BY id LIMIT $2"))
@@ -213,28 +310,83 @@ impl Store {
                     .map_err(self.db_error(OP))?
             });
             if page.is_empty() {
+                check.head = head_check(head, head_seen, &check);
                 return Ok(check);
             }
             for r in page {
-                let (row, stored_prev, stored) = row_from(r)?;
+                let s = row_from(r)?;
                 check.rows += 1;
-                after = row.id;
-                let why = if stored_prev != prev {
-                    Some(
-                        "its link to the row before does not match: a row before it was removed or changed",
-                    )
-                } else if audit_digest(&prev, &row.entry) != stored {
-                    Some("its content does not match its digest: the row was changed")
-                } else {
-                    None
-                };
+                after = s.row.id;
+                let why = row_fault(&s, &prev, key, check.keyed_rows > 0);
+                if s.chain == CHAIN_HMAC {
+                    check.keyed_rows += 1;
+                }
                 if let Some(why) = why
                     && check.broken.len() < 20
                 {
-                    check.broken.push((row.id, why.to_string()));
+                    check.broken.push((s.row.id, why.to_string()));
                 }
-                prev = stored;
+                if head.is_some_and(|h| h.last_id == s.row.id) {
+                    head_seen = Some((check.rows, s.digest.clone()));
+                }
+                prev = s.digest;
             }
         }
+    }
+}
+
+/// What is wrong with stored row `s` after `prev`, if anything.
+fn row_fault(
+    s: &Stored,
+    prev: &str,
+    key: Option<&AuditKey>,
+    keyed_before: bool,
+) -> Option<&'static str> {
+    if s.prev != prev {
+        return Some(
+            "its link to the row before does not match: a row before it was removed or changed",
+        );
+    }
+    match s.chain.as_str() {
+        CHAIN_HMAC => match key {
+            Some(k) if audit_mac(k, s.row.id, prev, &s.row.entry) != s.digest => Some(
+                "its keyed digest does not match: the row was changed, renumbered or made without the key",
+            ),
+            _ => None,
+        },
+        CHAIN_SHA256 if keyed_before => {
+            Some("an unkeyed row after keyed ones: written without the key")
+        }
+        CHAIN_SHA256 if audit_digest(prev, &s.row.entry) != s.digest => {
+            Some("its content does not match its digest: the row was changed")
+        }
+        CHAIN_SHA256 => None,
+        _ => Some("its chain kind is unknown"),
+    }
+}
+
+/// The head against what the walk saw of its row: (rows up to it, its digest).
+fn head_check(
+    head: Option<&AuditHead>,
+    seen: Option<(u64, String)>,
+    check: &AuditCheck,
+) -> HeadCheck {
+    let Some(h) = head else {
+        return HeadCheck::NotGiven;
+    };
+    match seen {
+        None => HeadCheck::Broken(format!(
+            "the signed head names row {} ({} rows), which the trail ({} rows) no longer holds: rows were removed",
+            h.last_id, h.rows, check.rows
+        )),
+        Some((_, digest)) if digest != h.last_digest => HeadCheck::Broken(format!(
+            "row {} is not the row the signed head names: rows were replaced or renumbered",
+            h.last_id
+        )),
+        Some((rows, _)) if rows != h.rows => HeadCheck::Broken(format!(
+            "{rows} rows up to row {}, the signed head says {}: rows before it were removed or added",
+            h.last_id, h.rows
+        )),
+        Some(_) => HeadCheck::Holds,
     }
 }

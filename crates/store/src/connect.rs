@@ -77,7 +77,7 @@ impl Store {
         if let Some(parent) = path.parent()
             && !parent.as_os_str().is_empty()
         {
-            std::fs::create_dir_all(parent).map_err(|e| StoreError::Unavailable {
+            private_dirs(parent).map_err(|e| StoreError::Unavailable {
                 target: target.clone(),
                 reason: format!("cannot create folder {}: {}", parent.display(), e.kind()),
                 detail: D(e.to_string()),
@@ -85,6 +85,13 @@ impl Store {
         }
         check_sqlite_file(&path)
             .map_err(|reason| corrupt(&target, reason, format!("{}: {reason}", path.display())))?;
+        // Made owner-only before SQLite opens it: SQLite gives the WAL and shared-memory
+        // files the database file's mode, and the file holds password hashes.
+        private_file(&path).map_err(|e| StoreError::Unavailable {
+            target: target.clone(),
+            reason: format!("cannot create {}: {}", path.display(), e.kind()),
+            detail: D(e.to_string()),
+        })?;
         let write_options = options
             .clone()
             .create_if_missing(true)
@@ -246,4 +253,33 @@ pub(crate) fn sqlite_header_problem(
         return Err("file is shorter than its header says: it was cut off");
     }
     Ok(())
+}
+
+/// Creates `dir` and its missing parents, each new one 0700 (on Unix).
+fn private_dirs(dir: &std::path::Path) -> std::io::Result<()> {
+    let mut builder = std::fs::DirBuilder::new();
+    builder.recursive(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::DirBuilderExt;
+        builder.mode(0o700);
+    }
+    builder.create(dir)
+}
+
+/// Creates the empty file `path` 0600 when it does not exist (on Unix); leaves one that
+/// does as it is.
+fn private_file(path: &std::path::Path) -> std::io::Result<()> {
+    let mut options = std::fs::OpenOptions::new();
+    options.write(true).create_new(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.mode(0o600);
+    }
+    match options.open(path) {
+        Ok(_) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Ok(()),
+        Err(e) => Err(e),
+    }
 }

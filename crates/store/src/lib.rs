@@ -26,6 +26,7 @@
 #![warn(clippy::unwrap_used)]
 
 mod audit;
+mod audit_key;
 mod chain;
 mod codec;
 mod connect;
@@ -51,7 +52,8 @@ use sqlx::postgres::PgPool;
 use sqlx::sqlite::SqlitePool;
 use tokio::sync::{Semaphore, SemaphorePermit};
 
-pub use audit::{AuditCheck, AuditEntry, AuditRow, MAX_AUDIT_PAGE};
+pub use audit::{AuditCheck, AuditEntry, AuditRow, HeadCheck, MAX_AUDIT_PAGE};
+pub use audit_key::{AuditHead, AuditKey, AuditKeyError};
 pub use codec::{encode_lifts_mm, sha256_hex};
 pub use convert::Converted;
 pub use error::{Detail, StoreError};

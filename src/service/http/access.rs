@@ -10,7 +10,7 @@
 use super::AppState;
 use super::api::ApiError;
 use super::session::{SESSION_COOKIE, cookie};
-use crate::auth::{Lockout, effective_role, token_digest};
+use crate::auth::{Counted, Hasher, Lockout, effective_role, token_digest};
 use crate::config::Secret;
 use crate::service::http::ApiCode;
 use crate::store::{AuditEntry, AuditResult, Role};
@@ -37,10 +37,15 @@ pub struct AuthState {
     pub session: jiff::SignedDuration,
     pub sessions: super::session::Sessions,
     pub lockout: Lockout,
+    /// Where password hashes run: one per core at a time.
+    pub hasher: Hasher,
+    /// The audit trail's key and head (see `crate::audit_seal`).
+    pub audit_seal: std::sync::Arc<crate::audit_seal::AuditSeal>,
 }
 
 impl AuthState {
-    /// Settings with the defaults for the rest: 8-hour sessions, no `Secure` cookie.
+    /// Settings with the defaults for the rest: 8-hour sessions, no `Secure` cookie, an
+    /// audit key in memory only (the service sets the one in its var folder).
     pub fn new(legacy_token: Option<Secret>, anonymous_read: bool) -> Self {
         Self {
             legacy_token,
@@ -49,6 +54,8 @@ impl AuthState {
             session: jiff::SignedDuration::from_hours(8),
             sessions: Default::default(),
             lockout: Lockout::default(),
+            hasher: Hasher::default(),
+            audit_seal: std::sync::Arc::new(crate::audit_seal::AuditSeal::ephemeral()),
         }
     }
 }
@@ -251,10 +258,12 @@ async fn identify(
     if let Some(key) = cookie(headers, SESSION_COOKIE) {
         let now = crate::clock::now();
         if let Some(s) = auth.sessions.get(&key, now) {
-            // The user may have been disabled or changed since sign-in (by the command line).
+            // The user may have been disabled, or their password changed, since sign-in (by
+            // the command line): either ends the session.
             let store = super::routes::store(app).await?;
             if let Some(user) = store.user(&s.user).await?
                 && user.disabled_at_ms.is_none()
+                && token_digest(&user.password_hash) == s.password
             {
                 return Ok(Principal {
                     actor: user.name,
@@ -274,13 +283,11 @@ async fn identify(
     })
 }
 
-/// A bearer token: the shared one, or a user's token from the store.
+/// A bearer token: the shared one, or a user's token from the store. A valid token is
+/// never refused for failures; wrong ones count per address (see `crate::auth::Lockout`).
 async fn bearer(app: &AppState, token: &str, address: IpAddr) -> Result<Principal, ApiError> {
     let auth = &app.auth;
     let now = crate::clock::now();
-    if let Some(until) = auth.lockout.locked_until(None, address, now) {
-        return Err(locked(app, None, address, until));
-    }
     if let Some(shared) = &auth.legacy_token
         && same_secret(token.as_bytes(), shared.expose().as_bytes())
     {
@@ -312,9 +319,6 @@ async fn bearer(app: &AppState, token: &str, address: IpAddr) -> Result<Principa
         Some(g) if g.expires_at_ms <= now => "expired token",
         Some(g) if g.user_disabled_at_ms.is_some() => "the token's user is disabled",
         Some(g) => {
-            if let Some(until) = auth.lockout.locked_until(Some(&g.user), address, now) {
-                return Err(locked(app, Some(&g.user), address, until));
-            }
             return Ok(Principal {
                 actor: g.user.clone(),
                 role: Some(effective_role(g.user_role, g.role)),
@@ -324,24 +328,26 @@ async fn bearer(app: &AppState, token: &str, address: IpAddr) -> Result<Principa
         }
     };
     let user = grant.as_ref().map(|g| g.user.as_str());
-    failed(app, "token", user, address, why).await;
+    if let Some(until) = auth.lockout.token_locked_until(address, now) {
+        return Err(locked(app, user, address, until));
+    }
+    let counted = auth.lockout.fail_token(address, now);
+    failed(app, "token", user, address, why, counted).await;
     Err(ApiError::new(
         ApiCode::Unauthorized,
         "the bearer token is not valid".into(),
     ))
 }
 
-/// Counts and logs one failed sign-in or token, audits it, and locks the user and address
-/// at the fifth failure in 15 minutes.
+/// Logs one failed sign-in or token (already counted: `counted`), and audits it.
 pub(crate) async fn failed(
     app: &AppState,
     kind: &'static str,
     user: Option<&str>,
     address: IpAddr,
     why: &str,
+    counted: Counted,
 ) {
-    let now = crate::clock::now();
-    let counted = app.auth.lockout.fail(user, address, now);
     let user_text = user.unwrap_or("-");
     warn!(kind, user = user_text, client = %address, why, "authentication failed");
     app.metrics.update_access(|a| {
@@ -356,15 +362,15 @@ pub(crate) async fn failed(
         address,
         via: Via::Anonymous,
     };
-    let action = if kind == "password" {
-        "signin"
+    let (action, locked_what) = if kind == "password" {
+        ("signin", "this user from this client")
     } else {
-        "token"
+        ("token", "wrong tokens from this address")
     };
     let mut reason = why.to_string();
     if counted.locked_now {
-        warn!(user = user_text, client = %address, "locked out for 15 minutes after 5 failures");
-        reason.push_str("; user and address locked out for 15 minutes");
+        warn!(user = user_text, client = %address, kind, "locked out for 15 minutes after 5 failures");
+        reason.push_str(&format!("; {locked_what} locked out for 15 minutes"));
     }
     super::audit::record(app, anonymous.audit(action, AuditResult::Refused, reason)).await;
 }

@@ -28,8 +28,10 @@ pub async fn record(app: &AppState, entry: AuditEntry) {
         "audit"
     );
     let stored = match super::routes::store(app).await {
-        Ok(store) => store
-            .append_audit(&entry)
+        Ok(store) => app
+            .auth
+            .audit_seal
+            .append(&store, &entry)
             .await
             .map(|_| ())
             .map_err(|e| e.to_string()),

@@ -25,6 +25,8 @@ pub enum ApiCode {
     Forbidden,
     CsrfMismatch,
     LockedOut,
+    /// Too many password checks waiting for a core: try again in a moment.
+    SigninBusy,
     HostNotAllowed,
     RouteWithoutRole,
     BodyTimeout,
@@ -105,7 +107,7 @@ impl ApiCode {
             RollbackRefused | FreezeRefused | DressingRefused | Conflict => StatusCode::CONFLICT,
             // Try again later, or once an operator acted (the code says which).
             MachineStopped | MachineElsewhere | ClusterUnavailable | StoreUnavailable
-            | StoreCorrupt | StoreFull | StoreBusy | JournalUnavailable => {
+            | StoreCorrupt | StoreFull | StoreBusy | JournalUnavailable | SigninBusy => {
                 StatusCode::SERVICE_UNAVAILABLE
             }
             RouteWithoutRole | CommandFailed | ShareStateFailed | MigrationFailed | StoreFailed
@@ -144,6 +146,7 @@ mod tests {
             "unauthorized",
             "csrf_mismatch",
             "host_not_allowed",
+            "signin_busy",
             "route_without_role",
             "invalid_wheel_radius",
             "table_version_not_found",

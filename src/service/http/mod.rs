@@ -44,9 +44,8 @@ pub use routes::{LobeInfo, MachineInfo, MachinesReply};
 pub use server::{HttpLimits, serve, serve_with};
 pub use tls::{Tls, self_signed};
 pub use writes::{CommandReply, command_code};
-// The sign-in checks the OPC UA server goes through as well.
-pub(crate) use access::{failed as auth_failed, locked as auth_locked};
-pub(crate) use session::check_password;
+// The sign-in check the OPC UA server goes through as well.
+pub(crate) use session::{SignIn, password_sign_in};
 
 use axum::Router;
 use axum::routing::{get, post};

@@ -2,19 +2,21 @@
 //!
 //! - A session is a random key in an `HttpOnly`, `SameSite=Strict` cookie (`Secure` under
 //!   TLS); the service keeps only the key's SHA-256, the user and a CSRF token, in memory,
-//!   for `auth.session_minutes` (a restart signs everyone out).
+//!   for `auth.session_minutes` (a restart signs everyone out). A session ends when its user
+//!   is disabled or their password changes.
 //! - Every write a session makes must carry its CSRF token (`X-CSRF-Token`, which the page's
 //!   script reads from `GET /session`; a form field on the sign-out form). A cross-site
 //!   page can make the browser send the cookie (a sibling port is the same site) but cannot
 //!   read the token.
 //! - The sign-in form carries a one-time value that must equal a cookie set with the form
 //!   (double submit), so another site cannot sign a browser in as someone else.
-//! - Failures count towards the lockout (`crate::auth::Lockout`) and are audited.
+//! - Failures count towards the lockout (`crate::auth::Lockout`, per user and address) and
+//!   are audited; the hashes run on the bounded `crate::auth::Hasher`.
 
 use super::AppState;
 use super::access::{Principal, Via, client_address, failed, locked, same_secret};
 use super::api::ApiError;
-use crate::auth::{UserName, random_hex, token_digest, verify_password};
+use crate::auth::{Client, Refused, UserName, random_hex, token_digest};
 use crate::service::http::ApiCode;
 use crate::store::AuditResult;
 use axum::extract::{FromRequest, Request, State};
@@ -35,6 +37,9 @@ const MAX_SESSIONS: usize = 10_000;
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Session {
     pub user: String,
+    /// The SHA-256 of the user's password hash at sign-in: a password changed since (by
+    /// `camloop user passwd`) ends the session.
+    pub password: crate::digest::Sha256,
     pub csrf: String,
     pub expires_at_ms: jiff::Timestamp,
 }
@@ -46,10 +51,12 @@ pub struct Sessions {
 }
 
 impl Sessions {
-    /// A new session for `user` until `expires_at_ms`: its key (for the cookie) and itself.
+    /// A new session for `user` (whose stored password hash is `password_hash`) until
+    /// `expires_at_ms`: its key (for the cookie) and itself.
     pub fn create(
         &self,
         user: &str,
+        password_hash: &str,
         expires_at_ms: jiff::Timestamp,
     ) -> Result<(String, Session), ApiError> {
         let random =
@@ -57,6 +64,7 @@ impl Sessions {
         let key = random(32)?;
         let session = Session {
             user: user.to_string(),
+            password: token_digest(password_hash),
             csrf: random(32)?,
             expires_at_ms,
         };
@@ -186,31 +194,25 @@ pub(super) async fn signin(
             "The form was not sent from this site's sign-in page (CSRF check). Try again.";
         return signin_form(&app, form.next.as_deref(), message, StatusCode::FORBIDDEN);
     }
-    let name = UserName::new(&form.name).ok();
     let now = crate::clock::now();
-    let user_text = name.as_ref().map(UserName::as_str);
-    if let Some(until) = app.auth.lockout.locked_until(user_text, address, now) {
-        let e = locked(&app, user_text, address, until);
-        return signin_form(
-            &app,
-            form.next.as_deref(),
-            &format!("Locked out: {}.", e.message()),
-            e.status(),
-        );
-    }
-    let user = match check_password(&app, name.as_ref(), &form.password).await? {
-        Ok(user) => user,
-        Err(why) => {
-            failed(&app, "password", user_text, address, why).await;
+    let client = Client::Address(address);
+    let next = form.next.as_deref();
+    let user = match password_sign_in(&app, &form.name, &form.password, client, address).await? {
+        SignIn::Ok(user) => user,
+        SignIn::Wrong => {
             let message = "Wrong user name or password.";
-            let next = form.next.as_deref();
             return signin_form(&app, next, message, StatusCode::UNAUTHORIZED);
         }
+        SignIn::Refused(e) => {
+            let message = format!("Locked out: {}.", e.message());
+            return signin_form(&app, next, &message, e.status());
+        }
     };
-    let (key, _) = app
-        .auth
-        .sessions
-        .create(&user.name, until(now, app.auth.session))?;
+    let (key, _) = app.auth.sessions.create(
+        &user.name,
+        &user.password_hash,
+        until(now, app.auth.session),
+    )?;
     let p = Principal {
         actor: user.name.clone(),
         role: Some(user.role),
@@ -232,9 +234,64 @@ pub(super) async fn signin(
     Ok(r)
 }
 
+/// How a password sign-in ended.
+pub(crate) enum SignIn {
+    Ok(crate::store::User),
+    /// A wrong name or password: counted, logged and audited.
+    Wrong,
+    /// Not checked: locked out, or as many checks in flight as would lock (429).
+    Refused(ApiError),
+}
+
+/// A password sign-in of `name` from `client` (audited under `address`): a slot in the
+/// lockout taken in one step with its count, then the hash, then the count. A check that
+/// cannot be made (the database down, every hash slot and the queue taken) is an error and
+/// counts nothing.
+pub(crate) async fn password_sign_in(
+    app: &AppState,
+    name: &str,
+    password: &str,
+    client: Client,
+    address: std::net::IpAddr,
+) -> Result<SignIn, ApiError> {
+    let user_name = UserName::new(name).ok();
+    let user_text = user_name.as_ref().map(UserName::as_str);
+    let attempt = match app
+        .auth
+        .lockout
+        .begin_password(name, client, crate::clock::now())
+    {
+        Ok(attempt) => attempt,
+        Err(Refused::Locked { until }) => {
+            return Ok(SignIn::Refused(locked(app, user_text, address, until)));
+        }
+        Err(Refused::Busy) => {
+            app.metrics
+                .update_access(|a| *a.failures.entry("locked").or_default() += 1);
+            let message = "the attempts of this user from this client being checked now \
+                would lock it if wrong: try again in a moment";
+            return Ok(SignIn::Refused(ApiError::new(
+                ApiCode::LockedOut,
+                message.into(),
+            )));
+        }
+    };
+    match check_password(app, user_name.as_ref(), password).await? {
+        Ok(user) => {
+            attempt.succeeded();
+            Ok(SignIn::Ok(user))
+        }
+        Err(why) => {
+            let counted = attempt.failed(crate::clock::now());
+            failed(app, "password", user_text, address, why, counted).await;
+            Ok(SignIn::Wrong)
+        }
+    }
+}
+
 /// The enabled user `name` whose password is `password`, or why not. A hash is checked even
 /// for an unknown user, so the time taken does not tell which names exist.
-pub(crate) async fn check_password(
+async fn check_password(
     app: &AppState,
     name: Option<&UserName>,
     password: &str,
@@ -248,10 +305,12 @@ pub(crate) async fn check_password(
         .as_ref()
         .map_or(DUMMY_HASH, |u| u.password_hash.as_str())
         .to_string();
-    let password = password.to_string();
-    let matches = tokio::task::spawn_blocking(move || verify_password(&password, &hash))
+    let matches = app
+        .auth
+        .hasher
+        .verify(password.to_string(), hash)
         .await
-        .unwrap_or(false);
+        .map_err(|busy| ApiError::new(ApiCode::SigninBusy, busy.to_string()))?;
     Ok(match user {
         None => Err("unknown user"),
         Some(u) if u.disabled_at_ms.is_some() => Err("disabled user"),
@@ -343,6 +402,7 @@ async fn read_form<T: serde::de::DeserializeOwned>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::auth::verify_password;
 
     #[test]
     fn the_dummy_hash_parses_and_matches_nothing_typed() {

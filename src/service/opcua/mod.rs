@@ -60,6 +60,10 @@ const MAX_SESSIONS: usize = 64;
 /// every value of 50 machines × 8 features needs 5600.
 const MAX_ITEMS_PER_SUBSCRIPTION: usize = 100_000;
 
+/// The server's private key in the PKI folder: refused at start when other accounts can
+/// read it, and made owner-only when the server writes it.
+const PRIVATE_KEY: &str = "private/private.pem";
+
 /// A running OPC UA server.
 pub(crate) struct OpcUa {
     handle: ServerHandle,
@@ -150,14 +154,23 @@ async fn start_with(
         return Ok(None);
     };
     let shutdown = shutdown.clone();
-    std::fs::create_dir_all(&pki)
+    crate::private_fs::create_dir_all(&pki)
         .with_context(|| format!("opcua: PKI folder {}", pki.display()))?;
+    let key = pki.join(PRIVATE_KEY);
+    if key.exists() {
+        crate::audit_seal::refuse_readable_by_others(&key).context("opcua: the private key")?;
+    }
     let host = section.host();
     let url = format!("opc.tcp://{host}:{}/", section.listen.port());
     let builder = server_builder(section, &pki, &url, app.clone(), layout.clone());
     let (server, handle) = builder
         .build()
         .map_err(|e| anyhow::anyhow!("opcua: the server cannot be set up: {e}"))?;
+    // The stack writes a new key with the umask's mode: narrowed to the owner at once.
+    for made in [pki.join("private"), key] {
+        crate::private_fs::restrict(&made)
+            .with_context(|| format!("opcua: cannot narrow {} to its owner", made.display()))?;
+    }
     let listener = tokio::net::TcpListener::from_std(listener)
         .with_context(|| format!("opcua: cannot listen on {}", section.listen))?;
     let server = tokio::spawn(async move {
@@ -226,7 +239,7 @@ fn server_builder(
         })
         .create_sample_keypair(true)
         .certificate_path("own/cert.der")
-        .private_key_path("private/private.pem")
+        .private_key_path(PRIVATE_KEY)
         .pki_dir(pki)
         .trust_client_certs(section.accept_unknown_clients)
         .check_cert_time(true)

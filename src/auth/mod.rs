@@ -1,7 +1,7 @@
 //! Who someone is: user names, password rules and hashes (argon2id), API tokens and their
-//! digests, and the lockout after repeated failures. The HTTP side (`service::http::access`)
-//! and the commands (`camloop user`, `camloop token`) both use these; the store keeps only
-//! hashes.
+//! digests, the lockout after repeated failures (`lockout`), and where hashes run
+//! (`hasher`). The HTTP side (`service::http::access`), the OPC UA users and the commands
+//! (`camloop user`, `camloop token`) all use these; the store keeps only hashes.
 //!
 //! Passwords are hashed with argon2id (the `argon2` crate's defaults: 19 MiB, 2 passes, a
 //! random 16-byte salt per hash): slow on purpose, since a person's password may be guessable.
@@ -13,18 +13,16 @@ use crate::names::check_plain_name;
 use crate::store::Role;
 use argon2::password_hash::phc::PasswordHash;
 use argon2::password_hash::{PasswordHasher, PasswordVerifier};
-use jiff::{SignedDuration, Timestamp};
-use std::collections::HashMap;
 use std::fmt;
-use std::net::IpAddr;
-use std::sync::Mutex;
+
+mod hasher;
+mod lockout;
+
+pub use hasher::{Busy, Hasher};
+pub use lockout::{Attempt, Client, Counted, LOCKOUT_FAILURES, LOCKOUT_WINDOW, Lockout, Refused};
 
 /// Shortest password accepted, characters.
 pub(crate) const MIN_PASSWORD_CHARS: usize = 12;
-/// Failures within [`LOCKOUT_WINDOW`] that lock a user and an address.
-pub(crate) const LOCKOUT_FAILURES: usize = 5;
-/// The window failures are counted in, and how long a lock lasts: 15 minutes.
-pub(crate) const LOCKOUT_WINDOW: SignedDuration = SignedDuration::from_mins(15);
 /// API tokens start with this, so a leaked one is recognisable (secret scanners, logs).
 pub(crate) const TOKEN_PREFIX: &str = "clt_";
 
@@ -126,86 +124,6 @@ pub(crate) fn effective_role(user: Role, ceiling: Role) -> Role {
     user.min(ceiling)
 }
 
-/// Who is counted: a user name or a client address.
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
-enum Subject {
-    User(String),
-    Address(IpAddr),
-}
-
-#[derive(Debug, Default)]
-struct Record {
-    /// Times of failures within the window.
-    failures: Vec<Timestamp>,
-    /// Locked until this time.
-    locked_until: Option<Timestamp>,
-}
-
-/// Failed sign-ins and tokens per user and per client address: [`LOCKOUT_FAILURES`] within
-/// [`LOCKOUT_WINDOW`] lock both for [`LOCKOUT_WINDOW`]. Kept in memory: a restart
-/// forgets it (an attacker who can restart the service has no need to guess).
-#[derive(Debug, Default)]
-pub struct Lockout {
-    records: Mutex<HashMap<Subject, Record>>,
-}
-
-/// A failure counted: whether it locked the user and address now.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Counted {
-    pub locked_now: bool,
-}
-
-impl Lockout {
-    /// Until when `user` (when known) or `address` is locked, if either is at `now`.
-    pub(crate) fn locked_until(
-        &self,
-        user: Option<&str>,
-        address: IpAddr,
-        now: Timestamp,
-    ) -> Option<Timestamp> {
-        let records = self.records.lock().unwrap_or_else(|p| p.into_inner());
-        let subjects = subjects(user, address);
-        subjects
-            .iter()
-            .filter_map(|s| records.get(s)?.locked_until)
-            .filter(|&until| until > now)
-            .max()
-    }
-
-    /// Counts one failure of `user` (when known) from `address` at `now`.
-    pub fn fail(&self, user: Option<&str>, address: IpAddr, now: Timestamp) -> Counted {
-        let mut records = self.records.lock().unwrap_or_else(|p| p.into_inner());
-        let mut locked_now = false;
-        let recent = |t: &Timestamp| now.duration_since(*t) < LOCKOUT_WINDOW;
-        for s in subjects(user, address) {
-            let r = records.entry(s).or_default();
-            r.failures.retain(recent);
-            r.failures.push(now);
-            let locked = r.locked_until.is_some_and(|u| u > now);
-            if !locked && r.failures.len() >= LOCKOUT_FAILURES {
-                // Saturates at jiff's last instant rather than failing: a lock all the same.
-                let until = now.saturating_add(LOCKOUT_WINDOW);
-                r.locked_until = Some(until.unwrap_or(Timestamp::MAX));
-                r.failures.clear();
-                locked_now = true;
-            }
-        }
-        // Old records go, so a scan of many addresses does not grow the map for ever.
-        records.retain(|_, r| {
-            r.locked_until.is_some_and(|u| u > now) || r.failures.iter().any(recent)
-        });
-        Counted { locked_now }
-    }
-}
-
-fn subjects(user: Option<&str>, address: IpAddr) -> Vec<Subject> {
-    let mut v = vec![Subject::Address(address)];
-    if let Some(u) = user {
-        v.push(Subject::User(u.to_string()));
-    }
-    v
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -235,34 +153,6 @@ mod tests {
         let p = random_password().unwrap();
         assert_eq!(p.chars().count(), 24);
         assert!(check_password(&p).is_ok());
-    }
-
-    #[test]
-    fn five_failures_in_fifteen_minutes_lock_user_and_address_for_fifteen_minutes() {
-        let l = Lockout::default();
-        let (a, b): (IpAddr, IpAddr) = ("10.0.0.1".parse().unwrap(), "10.0.0.2".parse().unwrap());
-        let ms = SignedDuration::from_millis;
-        let t0 = Timestamp::from_millisecond(1_000_000).unwrap();
-        for i in 0..4 {
-            assert!(!l.fail(Some("ann"), a, t0 + ms(i)).locked_now);
-        }
-        assert_eq!(l.locked_until(Some("ann"), a, t0 + ms(4)), None);
-        assert!(l.fail(Some("ann"), a, t0 + ms(4)).locked_now);
-        let until = t0 + ms(4) + LOCKOUT_WINDOW;
-        // The user from elsewhere, and anyone from that address, are locked.
-        assert_eq!(l.locked_until(Some("ann"), b, t0 + ms(5)), Some(until));
-        assert_eq!(l.locked_until(Some("bob"), a, t0 + ms(5)), Some(until));
-        assert_eq!(l.locked_until(Some("bob"), b, t0 + ms(5)), None);
-        assert_eq!(
-            l.locked_until(Some("ann"), a, until),
-            None,
-            "15 minutes later"
-        );
-        // Failures spread over more than the window never lock.
-        for i in 0..10 {
-            let at = until + (LOCKOUT_WINDOW / 4 + ms(1)) * i;
-            assert!(!l.fail(Some("cy"), b, at).locked_now, "failure {i}");
-        }
     }
 
     #[test]
