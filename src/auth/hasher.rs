@@ -134,29 +134,33 @@ mod tests {
         // Held until released, so the queue fills while two run.
         let gate = Arc::new(std::sync::atomic::AtomicBool::new(false));
         let mut tasks = Vec::new();
-        for _ in 0..5 {
-            let (h, r, m, g) = (
-                Arc::clone(&hasher),
-                Arc::clone(&running),
-                Arc::clone(&most),
-                Arc::clone(&gate),
-            );
-            tasks.push(tokio::spawn(async move {
-                h.run(move || {
-                    let now = r.fetch_add(1, Ordering::SeqCst) + 1;
-                    m.fetch_max(now, Ordering::SeqCst);
-                    while !g.load(Ordering::SeqCst) {
-                        std::thread::yield_now();
-                    }
-                    r.fetch_sub(1, Ordering::SeqCst);
-                })
-                .await
-            }));
+        // Two to run first, then three to wait: a job is in the queue until a thread takes
+        // it, so all five at once could find the queue full.
+        for (count, wait_for) in [(2, (2, 0)), (3, (2, 3))] {
+            for _ in 0..count {
+                let (h, r, m, g) = (
+                    Arc::clone(&hasher),
+                    Arc::clone(&running),
+                    Arc::clone(&most),
+                    Arc::clone(&gate),
+                );
+                tasks.push(tokio::spawn(async move {
+                    h.run(move || {
+                        let now = r.fetch_add(1, Ordering::SeqCst) + 1;
+                        m.fetch_max(now, Ordering::SeqCst);
+                        while !g.load(Ordering::SeqCst) {
+                            std::thread::yield_now();
+                        }
+                        r.fetch_sub(1, Ordering::SeqCst);
+                    })
+                    .await
+                }));
+            }
+            while (hasher.running(), hasher.queued()) != wait_for {
+                tokio::task::yield_now().await;
+            }
         }
         // Two run, three wait: the sixth is refused.
-        while hasher.running() < 2 || hasher.queued() < 3 {
-            tokio::task::yield_now().await;
-        }
         assert_eq!(hasher.run(|| ()).await, Err(Busy { queued: 3 }));
         gate.store(true, Ordering::SeqCst);
         for t in tasks {
