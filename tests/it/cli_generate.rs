@@ -137,11 +137,15 @@ fn contour_file_writes_main_and_subprogram_and_refuses_cycle95_for_iso() {
 #[test]
 fn turnmill_job_file_to_program_and_unknown_keys_refused_with_the_line() {
     let dir = tempfile::tempdir().unwrap();
-    let job = repo("tests/fixtures/turnmill-crank.toml");
+    let job = repo("config/turnmill-crank.toml");
     camloop_ok(&["turnmill", "--job", &job, "--out", "c.mpf"], dir.path());
     let text = std::fs::read_to_string(dir.path().join("c.mpf")).unwrap();
-    assert!(text.contains("DEF REAL PHI,ECC,PHA,RAD,XC,YC"), "{text}");
-    assert_eq!(text.matches("G0 C=PHI").count(), 3);
+    assert!(
+        text.contains("G94 ; F in mm per minute") && text.contains("M5 ; spindle off"),
+        "{text}"
+    );
+    // One C move per feature, each at the park point.
+    assert_eq!(text.matches("\nG0 C=").count(), 4, "{text}");
     let bad = dir.path().join("bad.toml");
     let mut t = std::fs::read_to_string(&job).unwrap();
     t = t.replace("safety_deg = 3.0", "safety_deg = 3.0\nsafety = 3.0");
@@ -153,7 +157,7 @@ fn turnmill_job_file_to_program_and_unknown_keys_refused_with_the_line() {
     let err = stderr(&out);
     assert!(!out.status.success());
     assert!(
-        err.contains("bad.toml") && err.contains("line 25") && err.contains("safety"),
+        err.contains("bad.toml") && err.contains("line 73") && err.contains("safety"),
         "{err}"
     );
     assert!(!dir.path().join("d.mpf").exists());

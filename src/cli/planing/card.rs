@@ -113,7 +113,7 @@ impl Card {
 
     /// The card as TOML, every key under its comment; [`Card`] reads it back unchanged.
     pub fn to_toml(&self) -> String {
-        let (r, s, m, o) = (&self.rotor, &self.stroke, &self.machine, &self.output);
+        let (r, s) = (&self.rotor, &self.stroke);
         let mut w = Writer(String::new());
         w.0.push_str(
             "# camloop planing process card: every parameter of one planing job.\n\
@@ -190,6 +190,13 @@ impl Card {
             &s.min_points_per_arc.to_string(),
             "control points per stroke at least, whatever the tolerance allows",
         );
+        self.machine_and_output(&mut w);
+        w.0
+    }
+
+    /// The `[machine]` and `[output]` tables of [`Card::to_toml`].
+    fn machine_and_output(&self, w: &mut Writer) {
+        let (m, o) = (&self.machine, &self.output);
         w.section("machine", "the planer; M codes differ from machine to machine: \"M60\", or on LinuxCNC \"M64 P0\" (digital output 0 on); leave one out and no block is written for it");
         w.key(
             "work_offset",
@@ -259,7 +266,6 @@ impl Card {
             &o.table_number.to_string(),
             "first curve table (A); the next one is Z (form \"table\")",
         );
-        w.0
     }
 }
 

@@ -254,7 +254,9 @@ struct Pass<'a> {
 }
 
 impl Pass<'_> {
-    fn stmts(&self, part: &[Seg], c_now: &mut Option<f64>) -> Result<Vec<Stmt>, TurnMillError> {
+    /// The pass's path in the machine frame (offset, arcs split, turned by C), the tool's
+    /// side, C and whether the surface is concave.
+    fn machine_path(&self, part: &[Seg]) -> Result<(Vec<Seg>, Side, f64, bool), TurnMillError> {
         let job = self.job;
         let (side, c_deg, concave) = match &self.f.shape {
             Shape::Circle(c) => (circle_side(c), circle_c_deg(c), c.concave),
@@ -268,7 +270,6 @@ impl Pass<'_> {
             .iter()
             .map(|s| s.to_machine(c_deg))
             .collect();
-        let (first, last) = (m[0], m[m.len() - 1]);
         if !baked && let Some(Seg::Arc { radius, .. }) = m.iter().find(|s| {
             matches!(s, Seg::Arc { radius, sweep_deg, .. } if (*sweep_deg > 0.0) == (side == Side::Left) && *radius <= job.tool_radius_mm)
         }) {
@@ -277,6 +278,15 @@ impl Pass<'_> {
                 radius_mm: *radius,
             });
         }
+        Ok((m, side, c_deg, concave))
+    }
+
+    fn stmts(&self, part: &[Seg], c_now: &mut Option<f64>) -> Result<Vec<Stmt>, TurnMillError> {
+        let job = self.job;
+        let (m, side, c_deg, concave) = self.machine_path(part)?;
+        let baked = job.radius_mode == RadiusMode::Baked;
+        let label = &self.f.label;
+        let (first, last) = (m[0], m[m.len() - 1]);
         let mut s = vec![Stmt::Comment(format!(
             "{label}: Z {}, {} mm stock left after this pass",
             self.z, self.remaining
