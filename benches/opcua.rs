@@ -21,8 +21,8 @@ use support::{
 use camloop::names::{FeatureName, MachineName};
 use camloop::service::machine::StoreHandle;
 use camloop::service::metrics::Metrics;
-use camloop::service::mqtt::PlantEvent;
 use camloop::store::Verdict;
+use camloop_loop::PlantEvent;
 use criterion::{Criterion, criterion_group, criterion_main};
 use opcua::client::{ClientBuilder, DataChangeCallback, IdentityToken};
 use opcua::crypto::SecurityPolicy;
@@ -93,7 +93,7 @@ impl Publishing {
         dir: &Path,
         store: StoreHandle,
         metrics: Arc<Metrics>,
-    ) -> (Self, camloop::service::mqtt::EventSender) {
+    ) -> (Self, camloop::service::plant::EventSender) {
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
             .enable_all()
@@ -147,7 +147,7 @@ impl Publishing {
 
 /// 50 machines measuring a shaft each per second, round the clock: status and events.
 async fn drive(
-    sender: camloop::service::mqtt::EventSender,
+    sender: camloop::service::plant::EventSender,
     metrics: Arc<Metrics>,
     sent: Arc<AtomicU64>,
 ) {
@@ -173,6 +173,7 @@ async fn drive(
                 base_radius_error_um: 0.1,
                 phase_error_deg: 0.001,
                 ground_with_version: part,
+                repeatability_um: Some(0.3),
             });
             sent.fetch_add(1, Relaxed);
         }
