@@ -173,7 +173,7 @@ async fn drive(
                 base_radius_error_um: 0.1,
                 phase_error_deg: 0.001,
                 ground_with_version: part,
-                repeatability_um: Some(0.2),
+                repeatability_um: Some(0.3),
             });
             sent.fetch_add(1, Relaxed);
         }
