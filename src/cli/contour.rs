@@ -4,13 +4,16 @@
 use super::output::Outputs;
 use super::program_args::MachineSetupArgs;
 use crate::core::generate::contour::{ContourJob, Roughing, Side, generate};
+use crate::core::generate::contour_chain::ChainRoughing;
+use crate::core::generate::contour_chain::program::generate as chain_generate;
+use crate::core::generate::contour_file::parse_contour_file;
 use crate::core::generate::curve::Curve;
 use crate::core::generate::dialect::{Decimals, Dialect, Form};
 use crate::core::generate::profile::parse_profile;
 use crate::core::generate::setup::{FeedMode, Setup, XMode};
 use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum DialectArg {
@@ -158,6 +161,13 @@ pub enum CurveArgs {
         #[arg(long)]
         csv: PathBuf,
     },
+    /// A whole part from a contour file (TOML): lines, arcs, chamfers, radii and curves,
+    /// written as a contour subprogram and a main program that roughs and finishes.
+    File {
+        /// The contour file (see config/contour-802d-aa5.toml).
+        #[arg(long)]
+        contour: PathBuf,
+    },
 }
 
 fn curve(args: &CurveArgs) -> anyhow::Result<Curve> {
@@ -220,6 +230,7 @@ fn curve(args: &CurveArgs) -> anyhow::Result<Curve> {
             z_start_mm,
             z_end_mm,
         },
+        CurveArgs::File { .. } => anyhow::bail!("a contour file is not one curve"),
         CurveArgs::Profile { ref csv } => {
             let text = std::fs::read_to_string(csv)
                 .with_context(|| format!("cannot read {}", csv.display()))?;
@@ -237,6 +248,9 @@ pub(crate) fn run_contour(args: ContourArgs) -> anyhow::Result<()> {
     let mut setup = args.machine.setup(Setup::turning());
     if args.diameter {
         setup.x_mode = Some(XMode::Diameter);
+    }
+    if let CurveArgs::File { contour } = &args.curve {
+        return run_file(&args, contour, setup);
     }
     let per_min = args.finish_feed_mm_min.is_some() || args.rough_feed_mm_min.is_some();
     let (finish_feed, rough_feed) = if per_min {
@@ -285,6 +299,55 @@ pub(crate) fn run_contour(args: ContourArgs) -> anyhow::Result<()> {
             .map_or_else(|| "more than 200000".to_owned(), |n| n.to_string()),
         r.compensation,
         r.pass_offsets_mm.len()
+    );
+    Ok(())
+}
+
+/// `camloop contour file`: the chained part, main program and contour subprogram.
+fn run_file(args: &ContourArgs, path: &Path, setup: Setup) -> anyhow::Result<()> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let job = parse_contour_file(&text, &path.display().to_string(), setup)?;
+    if args.dialect == DialectArg::Iso && matches!(job.roughing, ChainRoughing::Cycle95 { .. }) {
+        anyhow::bail!(
+            "{}: roughing by CYCLE95 is SINUMERIK's; for ISO choose kind = \"passes\"",
+            path.display()
+        );
+    }
+    let p = chain_generate(&job).context("contour refused")?;
+    let diameter = job.setup.x_mode == Some(XMode::Diameter);
+    let files = Dialect::from(args.dialect).render_set(
+        &p.main,
+        std::slice::from_ref(&p.contour),
+        Form::Expanded,
+        Decimals::default(),
+        diameter,
+    );
+    let dir = args.out.parent().unwrap_or(Path::new(""));
+    let mut outputs = Outputs::default();
+    let mut written = Vec::new();
+    for f in files {
+        // The main program goes to --out; a subprogram beside it, named as the control
+        // calls it.
+        let path = if f.sub {
+            dir.join(format!("{}.spf", f.name.to_lowercase()))
+        } else {
+            args.out.clone()
+        };
+        written.push(path.display().to_string());
+        outputs.add(&path, f.text);
+    }
+    outputs.commit()?;
+    println!(
+        "{}: {} elements, worst chord deviation {:.3} um (tolerance {} um); {} roughing levels; safety check: {} moves, {} cutting, lowest x {:.4} mm",
+        written.join(", "),
+        p.resolved.prims.len(),
+        p.worst_deviation_mm * 1e3,
+        job.tolerance_mm * 1e3,
+        p.levels_mm.len(),
+        p.safety.moves,
+        p.safety.cutting_moves,
+        p.safety.min_x_mm.unwrap_or(f64::NAN)
     );
     Ok(())
 }

@@ -83,6 +83,58 @@ fn contour_refusal_is_one_line_with_the_reason_and_writes_nothing() {
 }
 
 #[test]
+fn contour_file_writes_main_and_subprogram_and_refuses_cycle95_for_iso() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = repo("config/contour-802d-aa5.toml");
+    let out = camloop_ok(
+        &[
+            "contour",
+            "file",
+            "--contour",
+            &file,
+            "--out",
+            "aa5.mpf",
+            "--diameter",
+        ],
+        dir.path(),
+    );
+    let main = std::fs::read_to_string(dir.path().join("aa5.mpf")).unwrap();
+    let sub = std::fs::read_to_string(dir.path().join("aa5_c.spf")).unwrap();
+    assert!(main.contains("DIAMON ; X as a diameter") && main.contains("AA5_C ; contour"));
+    assert!(
+        sub.starts_with("%_N_AA5_C_SPF") && sub.ends_with("RET\n"),
+        "{sub}"
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("safety check"), "{stdout}");
+    let bad = dir.path().join("c95.toml");
+    let t = std::fs::read_to_string(&file).unwrap().replace(
+        "kind = \"passes\"\n# Bar radius, mm (a 50 mm bar).\nblank_radius_mm = 25.0",
+        "kind = \"cycle95\"",
+    );
+    std::fs::write(&bad, t).unwrap();
+    let out = camloop(
+        &[
+            "contour",
+            "file",
+            "--contour",
+            bad.to_str().unwrap(),
+            "--dialect",
+            "iso",
+            "--out",
+            "x.ngc",
+        ],
+        dir.path(),
+    );
+    assert!(
+        refusal(&out).contains("roughing by CYCLE95 is SINUMERIK's"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(!dir.path().join("x.ngc").exists());
+}
+
+#[test]
 fn turnmill_job_file_to_program_and_unknown_keys_refused_with_the_line() {
     let dir = tempfile::tempdir().unwrap();
     let job = repo("config/turnmill-crank.toml");

@@ -73,6 +73,8 @@ mod gauge_proptest;
 mod gauge_serial;
 mod gauge_serial_codec;
 mod generate_contour;
+mod generate_contour_file;
+mod generate_contour_sources;
 mod generate_planing;
 mod generate_turnmill;
 mod geometry_accuracy;

@@ -227,3 +227,24 @@ fn eval(e: &Expr, vars: &Vars, n: usize) -> Result<f64, EvalError> {
         other => return Err(syntax(n, &format!("cannot evaluate {other:?}"))),
     })
 }
+
+/// `main` with every line that calls `sub_name` (the name alone, a comment after it)
+/// replaced by the subprogram's blocks, as the control runs them: the subprogram's
+/// transfer header and its `RET` are left out.
+pub fn inline_sub(main: &str, sub_name: &str, sub: &str) -> String {
+    let body: String = sub
+        .lines()
+        .filter(|l| !l.starts_with('%') && !l.starts_with(";$PATH") && l.trim() != "RET")
+        .map(|l| format!("{l}\n"))
+        .collect();
+    main.lines()
+        .map(|l| {
+            let code = l.split(';').next().unwrap_or("").trim();
+            if code == sub_name {
+                body.clone()
+            } else {
+                format!("{l}\n")
+            }
+        })
+        .collect()
+}

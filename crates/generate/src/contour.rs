@@ -16,7 +16,7 @@ use super::safety::{self, Rules, Violation};
 use super::setup::{Setup, SetupError};
 use camloop_core::program::{ProgramNameError, validate_program_name};
 
-mod program;
+pub(crate) mod program;
 use program::{build_program, far_x};
 
 /// Which side of the contour the material is on.
@@ -366,28 +366,14 @@ fn curve_fields(curve: &Curve) -> (Vec<Field>, Vec<Field>) {
                 ("z end", z_end_mm),
             ],
         ),
-        Curve::Profile { .. } => (vec![], vec![]),
+        Curve::Profile { .. } | Curve::Param(_) => (vec![], vec![]),
     }
 }
 
 /// Asymptotes, travel that turns back in z, the axis, and concave radii tighter than the
 /// nose, on a dense scan.
 fn check_geometry(job: &ContourJob) -> Result<(), ContourError> {
-    if let Curve::Tangent {
-        rate_deg_per_mm,
-        centre_z_mm,
-        z_start_mm,
-        z_end_mm,
-        ..
-    } = job.curve
-    {
-        for z in [z_start_mm, z_end_mm] {
-            let arg_deg = (z - centre_z_mm) * rate_deg_per_mm;
-            if arg_deg.is_nan() || arg_deg.abs() >= 89.0 {
-                return Err(ContourError::TangentAsymptote { z_mm: z, arg_deg });
-            }
-        }
-    }
+    check_asymptote(&job.curve)?;
     let span = job.curve.span();
     let mut direction = 0.0;
     let mut tightest = None;
@@ -430,6 +416,26 @@ fn check_geometry(job: &ContourJob) -> Result<(), ContourError> {
             z_mm,
             x_mm,
         });
+    }
+    Ok(())
+}
+
+/// A tangent curve must stay off its asymptotes.
+fn check_asymptote(curve: &Curve) -> Result<(), ContourError> {
+    if let Curve::Tangent {
+        rate_deg_per_mm,
+        centre_z_mm,
+        z_start_mm,
+        z_end_mm,
+        ..
+    } = *curve
+    {
+        for z in [z_start_mm, z_end_mm] {
+            let arg_deg = (z - centre_z_mm) * rate_deg_per_mm;
+            if arg_deg.is_nan() || arg_deg.abs() >= 89.0 {
+                return Err(ContourError::TangentAsymptote { z_mm: z, arg_deg });
+            }
+        }
     }
     Ok(())
 }
@@ -477,12 +483,23 @@ pub(super) fn du_expr(curve: &Curve, law: StepLaw) -> Option<Expr> {
 /// the parameters and the written points.
 #[allow(clippy::type_complexity)]
 fn place_chords(job: &ContourJob) -> Result<(StepLaw, Vec<f64>, Vec<(f64, f64)>), ContourError> {
-    let curve = &job.curve;
+    place_chords_for(&job.curve, job.tolerance_mm, job.decimals)
+}
+
+/// The same for any curve: its own sizes checked first (a chained contour's curve).
+#[allow(clippy::type_complexity)]
+pub(crate) fn place_chords_for(
+    curve: &Curve,
+    tolerance_mm: f64,
+    decimals: usize,
+) -> Result<(StepLaw, Vec<f64>, Vec<(f64, f64)>), ContourError> {
+    check_curve(curve)?;
+    check_asymptote(curve)?;
     let span = curve.span();
     let exprs = exprs(curve);
     let (mut k, mut cap) = (1.0, span / 2.0);
     for _ in 0..200 {
-        let kf = snap(k * (8.0 * job.tolerance_mm).sqrt());
+        let kf = snap(k * (8.0 * tolerance_mm).sqrt());
         let law = StepLaw {
             kf,
             c0: snap((kf / cap).powi(2)),
@@ -496,10 +513,10 @@ fn place_chords(job: &ContourJob) -> Result<(StepLaw, Vec<f64>, Vec<(f64, f64)>)
         };
         let points: Vec<(f64, f64)> = us
             .iter()
-            .map(|&u| written_point(curve, exprs.as_ref(), u, job.decimals))
+            .map(|&u| written_point(curve, exprs.as_ref(), u, decimals))
             .collect();
         let (i, dev) = worst_deviation(curve, &us, &points);
-        if dev <= job.tolerance_mm {
+        if dev <= tolerance_mm {
             return Ok((law, us, points));
         }
         // A failing chord at the cap is bent by more than curvature (an inflection):
@@ -511,7 +528,7 @@ fn place_chords(job: &ContourJob) -> Result<(StepLaw, Vec<f64>, Vec<(f64, f64)>)
         }
     }
     Err(ContourError::TooManyChords {
-        tolerance_um: job.tolerance_mm * 1e3,
+        tolerance_um: tolerance_mm * 1e3,
         max_chords: MAX_CHORDS,
     })
 }

@@ -7,6 +7,7 @@
 
 use super::ir::{Expr, Var};
 use super::open_spline::OpenSpline;
+use super::param_curve::ParamCurve;
 
 /// A contour. Angles in degrees, lengths in mm.
 #[derive(Debug, Clone)]
@@ -50,6 +51,9 @@ pub enum Curve {
     /// `x(z)` through the points of a profile (natural cubic spline), run from the first
     /// point to the last.
     Profile { spline: OpenSpline, reversed: bool },
+    /// `x(t)`, `z(t)` or `x(z)` typed as expressions (expanded form only: the control
+    /// does not evaluate them).
+    Param(Box<ParamCurve>),
 }
 
 /// Point and parameter derivatives (per unit of u).
@@ -118,6 +122,7 @@ impl Curve {
                 ..
             } => (z_end_mm - z_start_mm).abs(),
             Curve::Profile { spline, .. } => spline.last() - spline.first(),
+            Curve::Param(p) => p.span(),
         }
     }
 
@@ -191,6 +196,7 @@ impl Curve {
                 };
                 graph(z, d, spline.eval(z))
             }
+            Curve::Param(ref p) => p.jet(u),
         }
     }
 
@@ -271,7 +277,7 @@ impl Curve {
                 (z_start_mm, z_end_mm),
                 [u, t1, t2],
             ),
-            Curve::Profile { .. } => return None,
+            Curve::Profile { .. } | Curve::Param(_) => return None,
         })
     }
 }

@@ -215,6 +215,10 @@ pub enum Stmt {
     },
     /// Machine state: work offset, X mode, tool, spindle, feed mode, coolant.
     Machine(MachineStmt),
+    /// Calls the subprogram of that name (rendered beside the program that calls it).
+    Call(String),
+    /// The control's own stock removal from a contour subprogram (SINUMERIK `CYCLE95`).
+    StockRemoval(StockRemoval),
     /// Compensation switched on or off; takes effect with the next move.
     Comp(Compensation),
     /// Runs `body`, then again while `cond` holds (at least once). `label` names the loop
@@ -237,6 +241,44 @@ pub enum Stmt {
         value: f64,
         text: String,
     },
+}
+
+/// Roughing by the control's stock-removal cycle, longitudinal, outside: `CYCLE95` with
+/// the contour subprogram `contour`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StockRemoval {
+    pub contour: String,
+    /// Largest infeed per cut, radius, mm.
+    pub depth_mm: f64,
+    /// Finishing allowance left along the contour, mm.
+    pub allowance_mm: f64,
+    /// Roughing feed, in the unit of the feed mode in force.
+    pub feed: f64,
+}
+
+/// `program` with every [`Stmt::Call`] of one of `subs` replaced by that subprogram's body:
+/// what the control runs, for the safety check and the expanded evaluation.
+pub fn inline(program: &Program, subs: &[Program]) -> Program {
+    fn go(body: &[Stmt], subs: &[Program]) -> Vec<Stmt> {
+        body.iter()
+            .flat_map(|s| match s {
+                Stmt::Call(name) => match subs.iter().find(|p| &p.name == name) {
+                    Some(p) => go(&p.body, subs),
+                    None => vec![s.clone()],
+                },
+                other => vec![other.clone()],
+            })
+            .collect()
+    }
+    let mut vars = program.vars.clone();
+    for p in subs {
+        vars.extend(p.vars.iter().filter(|v| !program.vars.contains(v)));
+    }
+    Program {
+        vars,
+        body: go(&program.body, subs),
+        ..program.clone()
+    }
 }
 
 /// A program: its header facts and statements.
@@ -304,7 +346,11 @@ fn run(body: &[Stmt], vars: &mut Vars, out: &mut Vec<Stmt>) {
                 vars.set(*var, *value);
                 out.push(s.clone());
             }
-            Stmt::Comment(_) | Stmt::Comp(_) | Stmt::Machine(_) => out.push(s.clone()),
+            Stmt::Comment(_)
+            | Stmt::Comp(_)
+            | Stmt::Machine(_)
+            | Stmt::Call(_)
+            | Stmt::StockRemoval(_) => out.push(s.clone()),
         }
     }
 }

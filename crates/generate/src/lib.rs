@@ -10,10 +10,13 @@
 
 pub mod chords;
 pub mod contour;
+pub mod contour_chain;
+pub mod contour_file;
 pub mod curve;
 pub mod dialect;
 pub mod ir;
 pub mod open_spline;
+pub mod param_curve;
 pub mod planing;
 pub mod profile;
 pub mod safety;

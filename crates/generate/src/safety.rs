@@ -177,6 +177,14 @@ pub fn check(program: &Program, rules: &Rules) -> Result<SafetyReport, Vec<Viola
                 rotary(rules, block, *motion, words, &before, &st.pos, &mut v)
                     .then(|| report.rotary_moves += 1);
             }
+            // A call left in place (its body unknown here) or the control's stock removal:
+            // both cut, so both need the set-up.
+            Stmt::Call(_) => setup_before_cut(&st, rules, i + 1, &mut v),
+            Stmt::StockRemoval(_) => {
+                report.cutting_moves += 1;
+                st.feed = st.feed_mode;
+                setup_before_cut(&st, rules, i + 1, &mut v);
+            }
             _ => {}
         }
     }

@@ -30,13 +30,23 @@ pub(super) fn build_program(
     let np = points.len();
     // Lead-in and lead-out at 45° to the contour, on the tool's side: the compensation
     // then turns by 45° at the ends, never back on itself.
-    let lead_in = lead_point(points[1], points[0], comp, job.clearance_mm, true);
-    let lead_out = lead_point(
+    let lead_in = off_axis(
+        lead_point(points[1], points[0], comp, job.clearance_mm, true),
+        points[1],
+        points[0],
+        job.clearance_mm,
+    );
+    let lead_out = off_axis(
+        lead_point(
+            points[np - 2],
+            points[np - 1],
+            comp,
+            job.clearance_mm,
+            false,
+        ),
         points[np - 2],
         points[np - 1],
-        comp,
         job.clearance_mm,
-        false,
     );
     let approach = |feed_label: u16, feed: f64| {
         let mut s = vec![
@@ -153,7 +163,7 @@ const FINISH_LABEL: u16 = 4;
 /// The point `clearance` back along the chord from `end` (`before`) or on beyond it, and
 /// `clearance` off it on the tool's side, rounded as written. Chords run `from` → `end`
 /// in travel order for the lead-out, `end` ← `from` for the lead-in.
-fn lead_point(
+pub(crate) fn lead_point(
     from: (f64, f64),
     end: (f64, f64),
     comp: Compensation,
@@ -178,6 +188,24 @@ fn lead_point(
         round_to(end.0 + along * tz + clearance * nz, 4),
         round_to(end.1 + along * tx + clearance * nx, 4),
     )
+}
+
+/// `lead`, or, where it would be behind the axis (a contour that starts or ends on it, as
+/// the 802D study's ellipse from its tip does), the point `along` mm off `end` in z, away
+/// from the chord `from`–`end`, at `end`'s own x: the move then runs parallel to the axis
+/// and never crosses it.
+pub(crate) fn off_axis(
+    lead: (f64, f64),
+    from: (f64, f64),
+    end: (f64, f64),
+    along: f64,
+) -> (f64, f64) {
+    if lead.1 >= 0.0 {
+        return lead;
+    }
+    // The travel's sense in z at this end (the lead-in runs end ← from).
+    let sense = (from.0 - end.0).signum();
+    (round_to(end.0 - sense * along, 4), end.1)
 }
 
 /// Retract radius: clear of the blank everywhere.

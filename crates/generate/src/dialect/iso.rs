@@ -31,6 +31,24 @@ pub(super) fn render(p: &Program, d: Decimals) -> String {
     out
 }
 
+/// A subprogram as LinuxCNC reads it in the file that calls it: `o<name> sub` …
+/// `o<name> endsub`, placed before the main program's first block.
+pub(super) fn render_sub(p: &Program, d: Decimals, x_diameter: bool) -> String {
+    let mut out = String::new();
+    let name = p.name.to_lowercase();
+    let _ = writeln!(out, "o<{name}> sub");
+    for c in &p.comments {
+        let _ = writeln!(out, "({})", paren_safe(c));
+    }
+    let mut state = RenderState::default();
+    if x_diameter {
+        state.note(&MachineStmt::XMode(XMode::Diameter));
+    }
+    stmts(&mut out, &p.body, d, &mut state);
+    let _ = writeln!(out, "o<{name}> endsub");
+    out
+}
+
 /// Comments end at `)`: replace brackets inside them.
 fn paren_safe(c: &str) -> String {
     c.replace('(', "[").replace(')', "]")
@@ -56,6 +74,15 @@ fn stmts(out: &mut String, body: &[Stmt], d: Decimals, state: &mut RenderState) 
                 let _ = writeln!(out, "{}={value}", var(v.index));
             }
             Stmt::Comp(c) => state.pending = Some(*c),
+            Stmt::Call(name) => {
+                let _ = writeln!(out, "o<{}> call (contour subprogram)", name.to_lowercase());
+            }
+            Stmt::StockRemoval(_) => {
+                // No ISO form here: stop rather than let the finish pass cut the full stock.
+                out.push_str(
+                    "M0 (CYCLE95 stock removal has no ISO form: rough with camloop passes)\n",
+                );
+            }
             Stmt::Machine(m) => {
                 state.note(m);
                 let _ = writeln!(out, "{}", machine(m));

@@ -64,6 +64,68 @@ impl Dialect {
     }
 }
 
+/// One file of a rendered program set.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderedFile {
+    /// The program's name (the main program's, or a subprogram's).
+    pub name: String,
+    /// True for a subprogram file (SINUMERIK `.SPF`).
+    pub sub: bool,
+    pub text: String,
+}
+
+impl Dialect {
+    /// A main program and the subprograms it calls. SINUMERIK: one file each (the
+    /// subprograms as `.SPF` with `RET`). ISO: one file, the subprograms first, as LinuxCNC
+    /// needs a called subroutine defined before the call. `x_diameter` says whether the
+    /// caller has X in diameter when the subprograms run.
+    pub fn render_set(
+        self,
+        main: &Program,
+        subs: &[Program],
+        form: Form,
+        decimals: Decimals,
+        x_diameter: bool,
+    ) -> Vec<RenderedFile> {
+        let main_text = self.render(main, form, decimals);
+        let sub_texts = subs.iter().map(|s| {
+            let s = match form {
+                Form::Loop => s.clone(),
+                Form::Expanded => expand(s),
+            };
+            match self {
+                Dialect::Sinumerik => sinumerik::render_sub(&s, decimals, x_diameter),
+                Dialect::Iso => iso::render_sub(&s, decimals, x_diameter),
+            }
+        });
+        match self {
+            Dialect::Sinumerik => std::iter::once(RenderedFile {
+                name: main.name.clone(),
+                sub: false,
+                text: main_text,
+            })
+            .chain(subs.iter().zip(sub_texts).map(|(p, text)| RenderedFile {
+                name: p.name.clone(),
+                sub: true,
+                text,
+            }))
+            .collect(),
+            Dialect::Iso => {
+                let defs: String = sub_texts.collect();
+                let text = match main_text.strip_prefix("%\n") {
+                    Some(rest) => format!("%\n{defs}{rest}"),
+                    None => format!("{defs}{main_text}"),
+                };
+                vec![RenderedFile {
+                    name: main.name.clone(),
+                    sub: false,
+                    text,
+                }]
+            }
+        }
+    }
+}
+
 /// `v` with exactly `decimals` decimals, never `-0.000`: the curve tables' own formatter.
 pub(crate) use camloop_core::program::fmt_fixed as fixed;
 

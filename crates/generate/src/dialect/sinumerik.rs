@@ -33,6 +33,24 @@ pub(super) fn render(p: &Program, d: Decimals) -> String {
     out
 }
 
+/// A subprogram: the contour a main program calls (and `CYCLE95` reads), ended by `RET`.
+/// X words follow the caller's DIAMON/DIAMOF, stated in `x_diameter`.
+pub(super) fn render_sub(p: &Program, d: Decimals, x_diameter: bool) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "%_N_{}_SPF", p.name);
+    out.push_str(";$PATH=/_N_SPF_DIR\n");
+    for c in &p.comments {
+        let _ = writeln!(out, "; {c}");
+    }
+    let mut state = RenderState::default();
+    if x_diameter {
+        state.note(&MachineStmt::XMode(XMode::Diameter));
+    }
+    stmts(&mut out, &p.body, d, &mut state);
+    out.push_str("RET\n");
+    out
+}
+
 fn stmts(out: &mut String, body: &[Stmt], d: Decimals, state: &mut RenderState) {
     for s in body {
         match s {
@@ -43,6 +61,24 @@ fn stmts(out: &mut String, body: &[Stmt], d: Decimals, state: &mut RenderState) 
                 let _ = writeln!(out, "{}={}", v.name, expr(e));
             }
             Stmt::Comp(c) => state.pending = Some(*c),
+            Stmt::Call(name) => {
+                let _ = writeln!(out, "{name} ; contour subprogram");
+            }
+            Stmt::StockRemoval(c) => {
+                // 802D order [?]: NPP, MID, FALZ, FALX, FAL, FF1, FF2, FF3, VARI, DT, DAM,
+                // _VRT; VARI 1 = longitudinal, outside, roughing only.
+                let _ = writeln!(
+                    out,
+                    "CYCLE95(\"{}\",{},0,{},{},{},{},{},1,0,0,1) ; stock removal down to the allowance",
+                    c.contour,
+                    exact(c.depth_mm),
+                    exact(c.allowance_mm),
+                    exact(c.allowance_mm),
+                    state.feed_text(c.feed),
+                    state.feed_text(c.feed),
+                    state.feed_text(c.feed),
+                );
+            }
             Stmt::Machine(m) => {
                 state.note(m);
                 let _ = writeln!(out, "{}", machine(m));
