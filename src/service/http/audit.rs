@@ -9,39 +9,12 @@ use axum::Json;
 use axum::extract::State;
 use axum::response::Html;
 use serde::{Deserialize, Serialize};
-use tracing::{error, info};
 
-/// Appends `entry` to the trail and logs it. When the database cannot take it, the whole
-/// entry goes to the log at error level and `camloop_audit_failures_total` counts it: the
-/// action has happened and stays done, and what happened is not lost.
+/// Appends `entry` to the trail and logs it, through the service's one write path for audit
+/// rows ([`crate::service::command::record_audit`]): when the database cannot take it, the
+/// whole entry goes to the log at error level and `camloop_audit_failures_total` counts it.
 pub async fn record(app: &AppState, entry: AuditEntry) {
-    info!(
-        actor = %entry.actor,
-        role = %entry.role,
-        client = %entry.client,
-        action = %entry.action,
-        machine = entry.machine.as_deref().unwrap_or("-"),
-        feature = entry.feature.as_deref().unwrap_or("-"),
-        version = entry.version.unwrap_or(0),
-        result = entry.result.as_str(),
-        reason = %entry.reason,
-        "audit"
-    );
-    let stored = match super::routes::store(app).await {
-        Ok(store) => app
-            .auth
-            .audit_seal
-            .append(&store, &entry)
-            .await
-            .map(|_| ())
-            .map_err(|e| e.to_string()),
-        Err(e) => Err(e.message().to_string()),
-    };
-    if let Err(why) = stored {
-        app.metrics.update_access(|a| a.audit_failures_total += 1);
-        let text = serde_json::to_string(&entry).unwrap_or_default();
-        error!(entry = %text, why = %why, "audit row not stored");
-    }
+    crate::service::command::record_audit(app.writes(), entry).await;
 }
 
 #[derive(Debug, Deserialize)]
