@@ -3,7 +3,7 @@
 
 use super::output::Outputs;
 use super::program_args::MachineSetupArgs;
-use crate::core::generate::contour::{ContourJob, Roughing, Side, generate};
+use crate::core::generate::contour::{ContourJob, Roughing, Side, generate, generate_rparams};
 use crate::core::generate::contour_chain::ChainRoughing;
 use crate::core::generate::contour_chain::program::generate as chain_generate;
 use crate::core::generate::contour_file::parse_contour_file;
@@ -38,6 +38,9 @@ pub enum FormArg {
     Loop,
     /// One block per chord.
     Expanded,
+    /// The 802D study's editable form: the curve's constants as R parameters at the top, a
+    /// loop at a fixed step (no `DEF` variables).
+    RParams,
 }
 
 #[derive(Debug, Args)]
@@ -279,9 +282,13 @@ pub(crate) fn run_contour(args: ContourArgs) -> anyhow::Result<()> {
         rough_feed,
         setup,
     };
-    let c = generate(&job).context("contour refused")?;
+    let c = match args.form {
+        FormArg::RParams => generate_rparams(&job),
+        FormArg::Loop | FormArg::Expanded => generate(&job),
+    }
+    .context("contour refused")?;
     let form = match args.form {
-        FormArg::Loop => Form::Loop,
+        FormArg::Loop | FormArg::RParams => Form::Loop,
         FormArg::Expanded => Form::Expanded,
     };
     let text = Dialect::from(args.dialect).render(&c.program, form, Decimals::default());
@@ -289,14 +296,26 @@ pub(crate) fn run_contour(args: ContourArgs) -> anyhow::Result<()> {
     outputs.add(&args.out, text);
     outputs.commit()?;
     let r = &c.report;
+    let fixed = r
+        .fixed_step_chords
+        .map_or_else(|| "more than 200000".to_owned(), |n| n.to_string());
+    let placement = match args.form {
+        FormArg::RParams => format!(
+            "R-parameter form, {} chords at a fixed step, worst deviation {:.3} um (tolerance {} um)",
+            r.chords,
+            r.worst_deviation_mm * 1e3,
+            args.tolerance_um
+        ),
+        FormArg::Loop | FormArg::Expanded => format!(
+            "{} chords, worst deviation {:.3} um (tolerance {} um); a fixed step needs {fixed} chords for the same worst error",
+            r.chords,
+            r.worst_deviation_mm * 1e3,
+            args.tolerance_um
+        ),
+    };
     println!(
-        "{}: {} chords, worst deviation {:.3} um (tolerance {} um); a fixed step needs {} chords for the same worst error; {:?} compensation; {} roughing passes",
+        "{}: {placement}; {:?} compensation; {} roughing passes",
         args.out.display(),
-        r.chords,
-        r.worst_deviation_mm * 1e3,
-        args.tolerance_um,
-        r.fixed_step_chords
-            .map_or_else(|| "more than 200000".to_owned(), |n| n.to_string()),
         r.compensation,
         r.pass_offsets_mm.len()
     );
@@ -307,6 +326,12 @@ pub(crate) fn run_contour(args: ContourArgs) -> anyhow::Result<()> {
 fn run_file(args: &ContourArgs, path: &Path, setup: Setup) -> anyhow::Result<()> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    if args.form == FormArg::RParams {
+        anyhow::bail!(
+            "{}: a contour file is written as lines, arcs and chords for the control's own stock removal; the R-parameter form is for a single curve (`camloop contour ellipse|parabola|sine|tangent`)",
+            path.display()
+        );
+    }
     let job = parse_contour_file(&text, &path.display().to_string(), setup)?;
     if args.dialect == DialectArg::Iso && matches!(job.roughing, ChainRoughing::Cycle95 { .. }) {
         anyhow::bail!(

@@ -235,6 +235,9 @@ pub(crate) fn run_turnmill(args: TurnMillArgs) -> anyhow::Result<()> {
     let form = match args.form {
         FormArg::Loop => Form::Loop,
         FormArg::Expanded => Form::Expanded,
+        FormArg::RParams => anyhow::bail!(
+            "{path}: --form r-params is the single turning curves' form; a turn-mill program is written with numbers only"
+        ),
     };
     let text = render(&job, &program, Dialect::from(args.dialect), form).with_context(refused)?;
     let mut outputs = Outputs::default();

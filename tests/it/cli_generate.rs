@@ -83,6 +83,42 @@ fn contour_refusal_is_one_line_with_the_reason_and_writes_nothing() {
 }
 
 #[test]
+fn contour_r_params_form_writes_the_constants_and_refuses_a_contour_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = camloop_ok(
+        &[&SINE[..], &["--form", "r-params", "--out", "s.mpf"]].concat(),
+        dir.path(),
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("R-parameter form,"), "{stdout}");
+    let text = std::fs::read_to_string(dir.path().join("s.mpf")).unwrap();
+    assert!(
+        !text.contains("DEF ") && text.contains("\nR12=") && text.contains("GOTOB LOOP_4"),
+        "{text}"
+    );
+    let file = repo("config/contour-802d-aa5.toml");
+    let out = camloop(
+        &[
+            "contour",
+            "file",
+            "--contour",
+            &file,
+            "--form",
+            "r-params",
+            "--out",
+            "f.mpf",
+        ],
+        dir.path(),
+    );
+    assert!(
+        refusal(&out).contains("the R-parameter form is for a single curve"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(!dir.path().join("f.mpf").exists());
+}
+
+#[test]
 fn contour_file_writes_main_and_subprogram_and_refuses_cycle95_for_iso() {
     let dir = tempfile::tempdir().unwrap();
     let file = repo("config/contour-802d-aa5.toml");

@@ -13,7 +13,7 @@ use camloop::core::generate::safety::{Rules, check};
 use camloop::core::generate::setup::{Setup, SpindleSpeed, XMode};
 use proptest::prelude::*;
 
-fn job(name: &str, curve: Curve) -> ContourJob {
+pub(crate) fn job(name: &str, curve: Curve) -> ContourJob {
     ContourJob {
         name: name.to_owned(),
         curve,

@@ -75,6 +75,7 @@ mod gauge_serial;
 mod gauge_serial_codec;
 mod generate_contour;
 mod generate_contour_file;
+mod generate_contour_rparams;
 mod generate_contour_sources;
 mod generate_planing;
 mod generate_turnmill;

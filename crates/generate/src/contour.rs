@@ -17,7 +17,9 @@ use super::setup::{Setup, SetupError};
 use camloop_core::program::{ProgramNameError, validate_program_name};
 
 pub(crate) mod program;
+mod rparam;
 use program::{build_program, far_x};
+pub use rparam::generate_rparams;
 
 /// Which side of the contour the material is on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -111,6 +113,10 @@ pub enum ContourError {
         tolerance_um: f64,
         max_chords: usize,
     },
+    #[error(
+        "the R-parameter form needs a curve the control evaluates (ellipse, parabola, sine or tangent); a {kind} is written as chords: use the loop or expanded form"
+    )]
+    RParamsNeedFormula { kind: &'static str },
 }
 
 /// The violations as one line.
@@ -552,13 +558,4 @@ fn written_point(
         }
     };
     (round_to(z, decimals), round_to(x, decimals))
-}
-
-/// X of the contour shifted by the current offset (outwards from the material).
-pub(super) fn shifted(x: Expr, sign: f64) -> Expr {
-    if sign > 0.0 {
-        x.add(Expr::var(OFS))
-    } else {
-        x.sub(Expr::var(OFS))
-    }
 }

@@ -1,9 +1,19 @@
 //! The contour's program: the safe start, the roughing loop over the offset, the finish
 //! pass with compensation, lead-in and lead-out.
 
-use super::{ContourJob, DU, OFS, Side, T1, T2, U, du_expr, exprs, shifted};
+use super::{ContourJob, DU, OFS, Side, T1, T2, U, du_expr, exprs};
 use crate::chords::{StepLaw, round_to};
-use crate::ir::{Axis, Compensation, Cond, Expr, Motion, Plane, Program, Stmt};
+use crate::ir::{Axis, Compensation, Cond, Expr, Motion, Plane, Program, Stmt, Var};
+
+/// What the step-law loop and the R-parameter form do differently: the declared
+/// variables, the offset variable, the constants at the top and the contour itself (a
+/// pass at a label and a feed).
+pub(crate) struct Shape<'a> {
+    pub vars: Vec<Var>,
+    pub ofs: Var,
+    pub preamble: Vec<Stmt>,
+    pub contour: Box<dyn Fn(u16, f64) -> Vec<Stmt> + 'a>,
+}
 
 /// The job's program: safe start, roughing passes (a loop over the offset), finish pass.
 #[allow(clippy::too_many_arguments)]
@@ -16,10 +26,49 @@ pub(super) fn build_program(
     offsets: &[f64],
     span: f64,
 ) -> Program {
-    let sign = match job.side {
+    let sign = side_sign(job);
+    let shape = Shape {
+        vars: vec![U, DU, T1, T2, OFS],
+        ofs: OFS,
+        preamble: Vec::new(),
+        contour: Box::new(move |label, feed| {
+            contour_stmts(job, law, points, span, sign, label, feed)
+        }),
+    };
+    let comments = header_comments(job, law, points, comp, span);
+    assemble(job, name, points, comp, offsets, comments, shape)
+}
+
+/// +1 for outside turning (offsets grow x), −1 for boring.
+pub(crate) fn side_sign(job: &ContourJob) -> f64 {
+    match job.side {
         Side::Outside => 1.0,
         Side::Inside => -1.0,
-    };
+    }
+}
+
+/// X shifted by the offset variable `ofs`, outwards from the material.
+pub(crate) fn shifted_by(x: Expr, sign: f64, ofs: Var) -> Expr {
+    if sign > 0.0 {
+        x.add(Expr::var(ofs))
+    } else {
+        x.sub(Expr::var(ofs))
+    }
+}
+
+/// The program around the contour: safe start, constants, roughing loop, finish pass with
+/// compensation, lead-in and lead-out, safe end.
+pub(crate) fn assemble(
+    job: &ContourJob,
+    name: String,
+    points: &[(f64, f64)],
+    comp: Compensation,
+    offsets: &[f64],
+    comments: Vec<String>,
+    shape: Shape<'_>,
+) -> Program {
+    let sign = side_sign(job);
+    let ofs = shape.ofs;
     let n = Expr::num;
     let mv = |motion, words: Vec<(Axis, Expr)>, feed| Stmt::Move {
         motion,
@@ -54,23 +103,21 @@ pub(super) fn build_program(
             mv(Motion::Rapid, vec![(Axis::Z, n(lead_in.0))], None),
             mv(
                 Motion::Rapid,
-                vec![(Axis::X, shifted(n(lead_in.1), sign))],
+                vec![(Axis::X, shifted_by(n(lead_in.1), sign, ofs))],
                 None,
             ),
         ];
         if feed_label == FINISH_LABEL {
             s.push(Stmt::Comp(comp));
         }
-        s.extend(contour_stmts(
-            job, law, points, span, sign, feed_label, feed,
-        ));
+        s.extend((shape.contour)(feed_label, feed));
         if feed_label == FINISH_LABEL {
             s.push(Stmt::Comp(Compensation::Off));
         }
         s.push(mv(
             Motion::Linear,
             vec![
-                (Axis::X, shifted(n(lead_out.1), sign)),
+                (Axis::X, shifted_by(n(lead_out.1), sign, ofs)),
                 (Axis::Z, n(lead_out.0)),
             ],
             None,
@@ -78,17 +125,18 @@ pub(super) fn build_program(
         s.push(mv(Motion::Rapid, vec![(Axis::X, n(x_far))], None));
         s
     };
-    let mut body = job.setup.start();
-    body.extend(roughing_stmts(job, offsets, &approach));
+    let mut body = shape.preamble;
+    body.extend(job.setup.start());
+    body.extend(roughing_stmts(job, offsets, ofs, &approach));
     body.push(Stmt::Comment("finish pass".to_owned()));
-    body.push(Stmt::Assign(OFS, n(0.0)));
+    body.push(Stmt::Assign(ofs, n(0.0)));
     body.extend(approach(FINISH_LABEL, job.finish_feed));
     body.extend(job.setup.end());
     Program {
         name,
         plane: Plane::Zx,
-        vars: vec![U, DU, T1, T2, OFS],
-        comments: header_comments(job, law, points, comp, span),
+        vars: shape.vars,
+        comments,
         body,
     }
 }
@@ -98,6 +146,7 @@ pub(super) fn build_program(
 fn roughing_stmts(
     job: &ContourJob,
     offsets: &[f64],
+    ofs: Var,
     approach: &dyn Fn(u16, f64) -> Vec<Stmt>,
 ) -> Vec<Stmt> {
     let n = Expr::num;
@@ -110,14 +159,14 @@ fn roughing_stmts(
             dd,
             r.allowance_mm
         )));
-        body.push(Stmt::Assign(OFS, n(first)));
+        body.push(Stmt::Assign(ofs, n(first)));
         let mut pass = approach(ROUGH_LABEL, job.rough_feed);
-        pass.push(Stmt::Assign(OFS, Expr::var(OFS).sub(n(dd))));
+        pass.push(Stmt::Assign(ofs, Expr::var(ofs).sub(n(dd))));
         body.push(Stmt::DoWhile {
             label: PASS_LABEL,
             body: pass,
             cond: Cond {
-                left: Expr::var(OFS),
+                left: Expr::var(ofs),
                 less: false,
                 right: n(r.allowance_mm - dd / 2.0),
             },
@@ -134,10 +183,6 @@ fn header_comments(
     comp: Compensation,
     span: f64,
 ) -> Vec<String> {
-    let side = match comp {
-        Compensation::Left => "G41 (tool left of the travel)",
-        _ => "G42 (tool right of the travel)",
-    };
     vec![
         job.setup.describe(),
         format!(
@@ -149,11 +194,20 @@ fn header_comments(
             "step law: du = {} / sqrt(w(u) + {}), u from 0 to {}",
             law.kf, law.c0, span
         ),
-        format!(
-            "nose radius {:.3} mm, {side} in the Z-X plane seen with Z right and X up",
-            job.nose_radius_mm
-        ),
+        nose_comment(job, comp),
     ]
+}
+
+/// The nose radius and the side of the compensation, for a program's header.
+pub(crate) fn nose_comment(job: &ContourJob, comp: Compensation) -> String {
+    let side = match comp {
+        Compensation::Left => "G41 (tool left of the travel)",
+        _ => "G42 (tool right of the travel)",
+    };
+    format!(
+        "nose radius {:.3} mm, {side} in the Z-X plane seen with Z right and X up",
+        job.nose_radius_mm
+    )
 }
 
 const ROUGH_LABEL: u16 = 1;
@@ -241,7 +295,7 @@ fn contour_stmts(
             .enumerate()
             .map(|(i, &(z, x))| {
                 mv(
-                    vec![(Axis::X, shifted(n(x), sign)), (Axis::Z, n(z))],
+                    vec![(Axis::X, shifted_by(n(x), sign, OFS)), (Axis::Z, n(z))],
                     (i == 0).then_some(feed),
                 )
             })
@@ -249,7 +303,7 @@ fn contour_stmts(
     };
     let point = || {
         vec![
-            (Axis::X, shifted(e.x.clone(), sign)),
+            (Axis::X, shifted_by(e.x.clone(), sign, OFS)),
             (Axis::Z, e.z.clone()),
         ]
     };
