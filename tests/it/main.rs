@@ -78,6 +78,7 @@ mod generate_contour_file;
 mod generate_contour_rparams;
 mod generate_contour_sources;
 mod generate_planing;
+mod generate_planing_table;
 mod generate_turnmill;
 mod geometry_accuracy;
 mod geometry_oracle;
