@@ -16,53 +16,21 @@ use crate::curve::Curve;
 use crate::ir::{Axis, Cond, Expr, Motion, Program, Stmt, Var};
 use crate::safety::{self, Rules};
 
-/// The chord counter.
-const I: Var = Var {
-    index: 1,
-    name: "R1",
-};
-/// The curve's parameter at the current chord end.
-const T: Var = Var {
-    index: 2,
-    name: "R2",
-};
-/// The roughing offset.
-const OFS: Var = Var {
-    index: 3,
-    name: "R3",
-};
+/// An R parameter: its number is its ISO `#` index too (rendered `#(100 + n)`).
+const fn r(index: u16, name: &'static str) -> Var {
+    Var { index, name }
+}
+
+/// The chord counter, the curve's parameter at the chord's end, the roughing offset.
+const I: Var = r(1, "R1");
+const T: Var = r(2, "R2");
+const OFS: Var = r(3, "R3");
 /// The parameter's start, its end and the count of chords; the curve's own constants
 /// follow from R13.
-const START: Var = Var {
-    index: 10,
-    name: "R10",
-};
-const END: Var = Var {
-    index: 11,
-    name: "R11",
-};
-const CHORDS: Var = Var {
-    index: 12,
-    name: "R12",
-};
-const CONSTS: [Var; 4] = [
-    Var {
-        index: 13,
-        name: "R13",
-    },
-    Var {
-        index: 14,
-        name: "R14",
-    },
-    Var {
-        index: 15,
-        name: "R15",
-    },
-    Var {
-        index: 16,
-        name: "R16",
-    },
-];
+const START: Var = r(10, "R10");
+const END: Var = r(11, "R11");
+const CHORDS: Var = r(12, "R12");
+const CONSTS: [Var; 4] = [r(13, "R13"), r(14, "R14"), r(15, "R15"), r(16, "R16")];
 
 /// A curve family in R parameters: what its parameter is, its constants with what they
 /// mean, and the point `(z, x)` in the parameter `T` and the constants.
