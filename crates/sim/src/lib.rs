@@ -101,7 +101,9 @@ mod rng;
 mod table;
 
 pub use config::{GaugeConfig, GaugeFault, GrinderConfig, Harmonic, ShaftErrors, StationErrors};
-pub use control::{Control, ControlError, ControlFault, Coupled, table_shape};
+pub use control::{
+    Control, ControlError, ControlFault, Coupled, CycleEvent, CycleRun, table_shape,
+};
 pub use delivered::DeliveryError;
 pub use frames::measurement_frames;
 pub use gauge::PartLabels;
