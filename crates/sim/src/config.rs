@@ -44,6 +44,8 @@ pub struct GrinderConfig {
     pub gauge: GaugeConfig,
     /// Errors that differ from feature to feature of a whole shaft.
     pub shaft: ShaftErrors,
+    /// The wheel head and the grinding forces of a whole cycle (see the `stock` module).
+    pub stock: crate::stock::StockModel,
 }
 
 /// How the features of one shaft differ: the shaft bends and twists along Z under the
@@ -187,6 +189,7 @@ impl Default for GrinderConfig {
             samples_per_segment: 16,
             gauge: GaugeConfig::default(),
             shaft: ShaftErrors::default(),
+            stock: crate::stock::StockModel::default(),
         }
     }
 }
@@ -269,6 +272,7 @@ impl GrinderConfig {
             );
         }
         self.check_gauge(&mut p);
+        p.0.extend(self.stock.problems());
         p.0
     }
 

@@ -98,6 +98,7 @@ mod ground;
 mod path;
 mod plan;
 mod rng;
+pub mod stock;
 mod table;
 
 pub use config::{GaugeConfig, GaugeFault, GrinderConfig, Harmonic, ShaftErrors, StationErrors};
