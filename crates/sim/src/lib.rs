@@ -90,6 +90,7 @@
 pub mod cell;
 mod config;
 mod control;
+pub mod cycle_cell;
 mod delivered;
 mod envelope;
 pub mod frames;

@@ -51,8 +51,9 @@ pub enum FinishRefused {
 #[derive(Debug, Clone)]
 pub struct FinishTable {
     pub table: GuardedTable,
-    /// The correction the table carries, µm (the learned one plus this step).
-    pub correction_um: Vec<f64>,
+    /// The learning state the table was made from (the learned correction plus this step):
+    /// what the finished part is ground with, so the part-to-part step learns from it.
+    pub state: LearningState,
     pub outcome: StepOutcome,
     pub measured: Measured,
     /// The size the gauge read above the finished size, µm (the remaining stock removed).
@@ -118,7 +119,7 @@ pub fn finish_table(input: &InProcess<'_>, feature: &str) -> Result<FinishTable,
     let (outcome, table) = compensate::learn_and_regenerate(&mut scratch, &part, &lobe)?;
     Ok(FinishTable {
         table,
-        correction_um: scratch.correction_um,
+        state: scratch,
         outcome,
         measured,
         size_over_stock_um: size_um,
