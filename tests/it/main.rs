@@ -83,6 +83,7 @@ mod geometry_oracle;
 mod geometry_props;
 mod http_harden;
 mod http_tls;
+mod in_process;
 mod invariants;
 mod loop_plateau;
 mod loop_sim;

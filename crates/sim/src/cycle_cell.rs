@@ -38,6 +38,38 @@ pub struct CycleCellSetup {
     pub answer_polls: u32,
 }
 
+/// The in-process cell's file (`config/in-process.toml`): which recipe and feature, how many
+/// parts, and the simulated machine. Paths are relative to the file.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CycleCellConfig {
+    /// The recipe, with its `[cycle]`.
+    pub recipe: String,
+    pub feature: String,
+    #[serde(default = "default_parts")]
+    pub parts: u32,
+    #[serde(default = "default_true")]
+    pub measure_before_finish: bool,
+    /// Polls of the handshake (0.1 s each) camloop's answer takes.
+    #[serde(default = "default_answer_polls")]
+    pub answer_polls: u32,
+    #[serde(default)]
+    pub seed: u64,
+    /// The simulated grinder and gauge ([`super::GrinderConfig`], with `[grinder.stock]`).
+    #[serde(default)]
+    pub grinder: super::GrinderConfig,
+}
+
+fn default_parts() -> u32 {
+    12
+}
+fn default_true() -> bool {
+    true
+}
+fn default_answer_polls() -> u32 {
+    2
+}
+
 /// One finished part.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CyclePart {

@@ -1,0 +1,131 @@
+//! The shipped in-process configuration (`config/in-process.toml`) and its recipe: the cycle
+//! loads and passes its checks, a bad cycle is refused naming the key, the service refuses a
+//! whole-cycle recipe it cannot deliver yet, and the cell grinds as the manual says.
+
+use camloop::core::compensate::TableRequest;
+use camloop::core::cycle::limits::stage_load;
+use camloop::core::speed_plan::ProfileSamples;
+use camloop::recipe::Recipe;
+use camloop::sim::cell::CellSetup;
+use camloop::sim::cycle_cell::{self, CycleCellConfig, CycleCellSetup};
+use std::path::Path;
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn shipped() -> (CycleCellConfig, Recipe, std::path::PathBuf) {
+    let path = root().join("config/in-process.toml");
+    let config: CycleCellConfig = toml::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let recipe_path = root().join("config").join(&config.recipe);
+    (config, Recipe::load(&recipe_path).unwrap(), recipe_path)
+}
+
+#[test]
+fn the_shipped_cycle_loads_and_its_rough_stage_is_within_the_removal_limit() {
+    let (config, recipe, path) = shipped();
+    let setup = recipe.feature_setup(&path, &config.feature).unwrap();
+    let cycle = setup.cycle.as_ref().expect("[cycle]");
+    assert_eq!(cycle.stages.len(), 6);
+    // The recipe's comment: Q'w 1.77 of 2.36 at 30 rpm for 0.015 mm/rev.
+    let part = setup.feature.part(&setup.nominal).unwrap();
+    let load = stage_load(&ProfileSamples::new(&part).unwrap(), 0.015, 30.0);
+    assert!(
+        (load.q_w_mm3_mm_s - 1.77).abs() < 0.01,
+        "{}",
+        load.q_w_mm3_mm_s
+    );
+}
+
+fn with_cycle(edit: &dyn Fn(&str) -> String) -> Result<(), String> {
+    let (_, _, path) = shipped();
+    let text = edit(&std::fs::read_to_string(&path).unwrap());
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("r.toml");
+    std::fs::write(&file, text).unwrap();
+    std::fs::copy(
+        root().join("config/parts/demo-intake-lobe.csv"),
+        dir.path().join("demo-intake-lobe.csv"),
+    )
+    .unwrap();
+    let recipe = Recipe::load(&file).map_err(|e| format!("{e:#}"))?;
+    recipe
+        .feature_setup(&file, "IN1")
+        .map(|_| ())
+        .map_err(|e| format!("{e:#}"))
+}
+
+#[test]
+fn a_bad_cycle_is_refused_naming_the_key() {
+    assert_eq!(with_cycle(&|t| t.to_owned()), Ok(()));
+    let err = with_cycle(&|t| t.replace("stock_mm = 0.2 ", "stock_mm = 0.25 ")).unwrap_err();
+    assert!(
+        err.contains("cycle.stages: the infeeds add up to 0.2000 mm, cycle.stock_mm is 0.2500 mm"),
+        "{err}"
+    );
+    // 0.03 mm/rev at 30 rpm takes off 3.5 mm³/(mm·s): over the recipe's 2.36.
+    let err = with_cycle(&|t| {
+        t.replace("infeed_per_rev_mm = 0.015", "infeed_per_rev_mm = 0.03")
+            .replace("revolutions = 10", "revolutions = 5")
+    })
+    .unwrap_err();
+    assert!(
+        err.contains("feature IN1: cycle.stages[0] (rough): Q'w 3.5")
+            && err.contains("exceeds speed_plan.q_w_max_mm3_mm_s = 2.36"),
+        "{err}"
+    );
+}
+
+#[test]
+fn the_service_refuses_a_whole_cycle_it_cannot_deliver_yet() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("camloop.toml");
+    let recipe = root().join("config/parts/demo-lobe-in-process.toml");
+    let text = format!(
+        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://var/db.sqlite?mode=rwc\"\n[[machines]]\nname = \"M1\"\nrecipe = \"{}\"\nshare = \"share\"\n[machines.gauge]\nkind = \"sim\"\n",
+        recipe.display()
+    );
+    std::fs::write(&path, &text).unwrap();
+    let config = camloop::config::Config::parse(&text, &path, |_| None).unwrap();
+    let err = camloop::config::check(config).unwrap_err();
+    assert!(
+        format!("{err:#}")
+            .contains("its [cycle] program = \"whole\" is not delivered by the service yet"),
+        "{err:#}"
+    );
+}
+
+#[test]
+fn the_shipped_cell_grinds_the_first_part_right() {
+    let (config, recipe, path) = shipped();
+    let setup = recipe.feature_setup(&path, &config.feature).unwrap();
+    let cell = CellSetup {
+        nominal: setup.nominal.clone(),
+        feature: setup.feature,
+        request: TableRequest { ..setup.request },
+        params: setup.params.clone(),
+        limits: setup.limits.clone(),
+        grinder: config.grinder.clone(),
+        seed: config.seed,
+        speed_plan: setup.speed_plan,
+    };
+    let run = cycle_cell::run(
+        &CycleCellSetup {
+            cell,
+            cycle: setup.cycle.clone().unwrap(),
+            measure_before_finish: config.measure_before_finish,
+            answer_polls: config.answer_polls,
+        },
+        config.parts,
+    )
+    .unwrap();
+    for p in &run {
+        eprintln!(
+            "part {:2}: {:.2} µm ({})",
+            p.part, p.max_lift_error_um, p.in_process
+        );
+    }
+    assert_eq!(run.len(), 12);
+    assert!(run[0].max_lift_error_um <= 1.0, "{:?}", run[0]);
+    assert!(run[2..].iter().all(|p| p.max_lift_error_um <= 0.5));
+}
