@@ -55,6 +55,7 @@ fn the_demo_cycle_program_runs_every_stage_in_order_and_reads_back() {
             .unwrap_or_else(|e| panic!("line {}: {e:?}\n{text}", l.number));
     }
     let order = [
+        "G90 G94 G71 ; absolute, feed per minute, metric",
         "M1=3 S1=1336.9 ; wheel spindle on, 35 m/s",
         "M8 ; coolant on",
         "DEMO_CAM(CL_TNO)",
@@ -65,6 +66,7 @@ fn the_demo_cycle_program_runs_every_stage_in_order_and_reads_back() {
         "G91 G1 C=3600.0000 X=-0.2000 F=10800.000",
         "G91 G1 C=1080.0000 X=-0.0300 F=10800.000",
         "G91 G0 X=2.0000 ; lift off",
+        "FGROUP() ; the feed back to the path axes",
         "LEADOF(X,C)",
         "CAMLOOP_READY(CL_SEEN)",
         "M62 ; gauge in",

@@ -94,6 +94,7 @@ pub fn render_cycle_program(
         "0",
         "no output offset left from an aborted run",
     );
+    out.push_str("G90 G94 G71 ; absolute, feed per minute, metric\n");
     let first_speed = stages
         .first()
         .map_or(cycle.wheel_speed_m_s, |s| s.wheel_speed_m_s);
@@ -356,6 +357,7 @@ fn uncouple(out: &mut String, r: &Resolved<'_>, lift_off_mm: f64) {
         format_args!("G91 G0 {x}={} ; lift off", fmt_fixed(lift_off_mm, xd)),
     );
     out.push_str("G90\n");
+    out.push_str("FGROUP() ; the feed back to the path axes\n");
     line(out, format_args!("LEADOF({x},{c})"));
 }
 

@@ -54,7 +54,7 @@ impl Run<'_> {
                 name: "FGROUP",
                 args,
             } => match args.as_slice() {
-                [Expr::Var(C_AXIS)] => Ok(None),
+                [Expr::Var(C_AXIS)] | [] => Ok(None),
                 _ => Err(unsupported(code).into()),
             },
             Statement::Assign { target, value } if spindle_number(target, 'S').is_some() => {
@@ -162,6 +162,9 @@ impl Run<'_> {
                 Word::Code(_) => None,
             })
             .collect();
+        if sets.is_empty() && codes.iter().all(|c| ["G90", "G94", "G71"].contains(c)) {
+            return Some(Ok(None));
+        }
         if let [(OUTPUT_OFFSET, Some(axis), value)] = sets.as_slice() {
             return Some(self.output_offset(code, axis, value, frame));
         }
