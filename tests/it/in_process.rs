@@ -129,3 +129,78 @@ fn the_shipped_cell_grinds_the_first_part_right() {
     assert!(run[0].max_lift_error_um <= 1.0, "{:?}", run[0]);
     assert!(run[2..].iter().all(|p| p.max_lift_error_um <= 0.5));
 }
+
+/// The controller contract through every stage: ten table versions delivered to a folder,
+/// the whole-cycle program run once per version on one control, the handshake never
+/// answered. Every grind of every run (approach, rough, semi-finish, spark-out, and after
+/// the measurement the finish and spark-out) couples the version just delivered.
+#[test]
+fn every_stage_of_every_run_couples_the_newest_table() {
+    use camloop::core::program::{
+        CycleMachine, CycleStation, MainProgramSettings, ProgramSettings, READY_PROGRAM,
+        next_table_number, render_cycle_program, render_g1_table, render_ready_program,
+    };
+    use camloop::core::table::TablePoint;
+    let (_, recipe, _) = shipped();
+    let cycle = recipe.cycle.clone().unwrap();
+    let table = ProgramSettings {
+        name: "DEMO_CAM_TABLE".into(),
+        ..ProgramSettings::default()
+    };
+    let machine = CycleMachine {
+        cycle: &cycle,
+        c_speed_rpm: 30.0,
+        wheel_radius_mm: 250.0,
+        clear_x_mm: 13.0,
+    };
+    let stations = [CycleStation {
+        table: &table,
+        label: "IN1",
+        z_mm: 0.0,
+    }];
+    let main = render_cycle_program(&MainProgramSettings::default(), &machine, &stations).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join(format!("{READY_PROGRAM}.SPF")),
+        render_ready_program(0),
+    )
+    .unwrap();
+    let load = |name: &str| std::fs::read_to_string(dir.path().join(format!("{name}.SPF"))).ok();
+    let mut control = camloop::sim::Control::new();
+    control.enable_overlay();
+    let mut number = 0;
+    for version in 1..=10u32 {
+        number = next_table_number(number, (1, 2));
+        let points: Vec<TablePoint> = (0..36)
+            .map(|i| {
+                let c_deg = 10.0 * f64::from(i);
+                let x_mm = 3.0 + 2.5 * c_deg.to_radians().cos() + 0.01 * f64::from(version);
+                TablePoint {
+                    c_deg,
+                    d_mm: 250.0 + x_mm,
+                    x_mm,
+                }
+            })
+            .collect();
+        let settings = ProgramSettings {
+            table_number: number,
+            ..table.clone()
+        };
+        std::fs::write(
+            dir.path().join("DEMO_CAM_TABLE.SPF"),
+            render_g1_table(&points, &settings).unwrap(),
+        )
+        .unwrap();
+        let run = control.run_cycle(&main, &load).unwrap();
+        // Approach, rough, semi-finish, spark-out; approach, finish, spark-out.
+        assert_eq!(run.ground.len(), 7, "version {version}");
+        for g in &run.ground {
+            assert_eq!(g.table_number, number, "version {version}");
+            let camloop::sim::TableShape::G1(p) = &g.shape else {
+                panic!("a G1 table")
+            };
+            assert!((p[0].x_mm - (5.5 + 0.01 * f64::from(version))).abs() < 1e-9);
+        }
+    }
+    assert_eq!(control.defined_tables(), [1, 2]);
+}
