@@ -63,15 +63,15 @@ fn a_bad_cycle_is_refused_naming_the_key() {
         err.contains("cycle.stages: the infeeds add up to 0.2000 mm, cycle.stock_mm is 0.2500 mm"),
         "{err}"
     );
-    // 0.03 mm/rev at 30 rpm takes off 3.5 mm³/(mm·s): over the recipe's 2.36.
+    // 0.03 mm/rev at 30 rpm takes off 3.54 mm³/(mm·s): over the recipe's 2.36 (the manual
+    // quotes this message).
     let err = with_cycle(&|t| {
         t.replace("infeed_per_rev_mm = 0.015", "infeed_per_rev_mm = 0.03")
             .replace("revolutions = 10", "revolutions = 5")
     })
     .unwrap_err();
     assert!(
-        err.contains("feature IN1: cycle.stages[0] (rough): Q'w 3.5")
-            && err.contains("exceeds speed_plan.q_w_max_mm3_mm_s = 2.36"),
+        err.contains("feature IN1: cycle.stages[0] (rough): Q'w 3.539 mm³/(mm·s) at C = 120.0° (0.03 mm/rev at 30 rpm) exceeds speed_plan.q_w_max_mm3_mm_s = 2.36"),
         "{err}"
     );
 }
