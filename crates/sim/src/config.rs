@@ -45,7 +45,8 @@ pub struct GrinderConfig {
     /// Errors that differ from feature to feature of a whole shaft.
     pub shaft: ShaftErrors,
     /// The wheel head and the grinding forces of a whole cycle (see the `stock` module).
-    pub stock: crate::stock::StockModel,
+    /// Boxed: the service's gauge settings hold a `GrinderConfig` beside far smaller ones.
+    pub stock: Box<crate::stock::StockModel>,
 }
 
 /// How the features of one shaft differ: the shaft bends and twists along Z under the
@@ -189,7 +190,7 @@ impl Default for GrinderConfig {
             samples_per_segment: 16,
             gauge: GaugeConfig::default(),
             shaft: ShaftErrors::default(),
-            stock: crate::stock::StockModel::default(),
+            stock: Box::default(),
         }
     }
 }
