@@ -115,6 +115,7 @@ fn the_shipped_cell_grinds_the_first_part_right() {
             cycle: setup.cycle.clone().unwrap(),
             measure_before_finish: config.measure_before_finish,
             answer_polls: config.answer_polls,
+            station: Default::default(),
         },
         config.parts,
     )

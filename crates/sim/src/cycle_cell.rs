@@ -8,7 +8,8 @@
 use super::cell::{CellError, CellSetup, JUDGE_POINTS, after_dressing, judge};
 use super::stock::{Pass, STOCK_POINTS, Stock};
 use super::{
-    CommandedTable, Control, ControlError, CycleEvent, CycleRun, PartLabels, SimGrinder, Workpiece,
+    CommandedTable, Control, ControlError, CycleEvent, CycleRun, PartLabels, SimGrinder,
+    StationErrors, Workpiece,
 };
 use camloop_core::compensate::{self, Feature, GuardedTable, LobeLoop};
 use camloop_core::cycle::finish::{InProcess, finish_table};
@@ -36,6 +37,8 @@ pub struct CycleCellSetup {
     pub measure_before_finish: bool,
     /// Polls of the handshake camloop's answer takes (its latency over the 0.1 s poll).
     pub answer_polls: u32,
+    /// The feature's own errors on a shaft ([`super::ShaftErrors::station`]); default none.
+    pub station: StationErrors,
 }
 
 /// The in-process cell's file (`config/in-process.toml`): which recipe and feature, how many
@@ -174,7 +177,7 @@ pub fn run(setup: &CycleCellSetup, parts: u32) -> Result<Vec<CyclePart>, CycleCe
         let mut finish = None;
         if setup.measure_before_finish && setup.cycle.measure_stage().is_some() {
             let (stock, table) = stock_until_measured(setup, &dry, &surface, feature);
-            let errors = stock.as_errors(cell.grinder.stock.orders);
+            let errors = with_station(&setup.station, stock.as_errors(cell.grinder.stock.orders));
             let mid = sim.grind_station(&table, &workpiece, &errors)?;
             let raw = sim.measure(&mid, &labels);
             let input = InProcess {
@@ -228,7 +231,7 @@ pub fn run(setup: &CycleCellSetup, parts: u32) -> Result<Vec<CyclePart>, CycleCe
         let ground = sim.grind_station(
             &table,
             &workpiece,
-            &stock.as_errors(cell.grinder.stock.orders),
+            &with_station(&setup.station, stock.as_errors(cell.grinder.stock.orders)),
         )?;
         let (max_profile_error_um, max_lift_error_um, _) =
             judge(&ground.lift_on_grid(JUDGE_POINTS), &nominal).map_err(CellError::from)?;
@@ -269,6 +272,17 @@ pub fn run(setup: &CycleCellSetup, parts: u32) -> Result<Vec<CyclePart>, CycleCe
         }
     }
     Ok(out)
+}
+
+/// The feature's own errors with the stock's on top.
+fn with_station(station: &StationErrors, stock: StationErrors) -> StationErrors {
+    let mut harmonics = station.harmonics.clone();
+    harmonics.extend(stock.harmonics);
+    StationErrors {
+        size_um: station.size_um + stock.size_um,
+        lag_deg: station.lag_deg + stock.lag_deg,
+        harmonics,
+    }
 }
 
 fn main_program(setup: &CycleCellSetup, wheel_radius_mm: f64) -> Result<String, CycleProgramError> {

@@ -69,6 +69,7 @@ fn setup(measure_before_finish: bool, answer_polls: u32) -> CycleCellSetup {
         },
         measure_before_finish,
         answer_polls,
+        station: Default::default(),
     }
 }
 
