@@ -198,3 +198,61 @@ fn without_the_overlay_enabled_the_infeed_is_the_controls_alarm() {
     let line = main_program().lines().nth(err.line - 1).unwrap().to_owned();
     assert!(line.starts_with("G91 G1 C=720.0000 X=-0.1000"), "{line}");
 }
+
+/// Two features: each cycle at its station, each coupling its own table program's number.
+#[test]
+fn a_shaft_runs_the_cycle_at_each_station() {
+    let cycle = cycle();
+    let tables = [
+        ProgramSettings {
+            name: "DEMO_CAM_IN1".into(),
+            ..ProgramSettings::default()
+        },
+        ProgramSettings {
+            name: "DEMO_CAM_EX1".into(),
+            ..ProgramSettings::default()
+        },
+    ];
+    let machine = CycleMachine {
+        cycle: &cycle,
+        c_speed_rpm: 30.0,
+        wheel_radius_mm: 250.0,
+        clear_x_mm: 13.0,
+    };
+    let stations = [
+        CycleStation {
+            table: &tables[0],
+            label: "IN1",
+            z_mm: 20.0,
+        },
+        CycleStation {
+            table: &tables[1],
+            label: "EX1",
+            z_mm: 50.0,
+        },
+    ];
+    let main = render_cycle_program(&MainProgramSettings::default(), &machine, &stations).unwrap();
+    let in1 = table_program(1, 0.5).replace(TABLE, "DEMO_CAM_IN1");
+    let ex1 = table_program(3, 0.7).replace(TABLE, "DEMO_CAM_EX1");
+    let load = |name: &str| match name {
+        READY_PROGRAM => Some(render_ready_program(0)),
+        "DEMO_CAM_IN1" => Some(in1.clone()),
+        "DEMO_CAM_EX1" => Some(ex1.clone()),
+        _ => None,
+    };
+    let mut control = Control::new();
+    control.enable_overlay();
+    let run = control.run_cycle(&main, &load).unwrap();
+    assert_eq!(run.ground.len(), 12);
+    for (k, g) in run.ground.iter().enumerate() {
+        let (z, number, by) = if k < 6 {
+            (20.0, 1, "DEMO_CAM_IN1")
+        } else {
+            (50.0, 3, "DEMO_CAM_EX1")
+        };
+        assert_eq!(
+            (g.z_mm, g.table_number, g.defined_by.as_str()),
+            (z, number, by)
+        );
+    }
+}
