@@ -5,6 +5,7 @@
 use crate::core::analysis::ToleranceBand;
 use crate::core::compensate::LobeLoop;
 use crate::core::compensate::{AxisLimits, Feature, TableRequest, pin_nominal_lift};
+use crate::core::cycle::CycleSettings;
 use crate::core::fit::TableForm;
 use crate::core::geometry::{CamGeometry, CrankpinGeometry, Follower};
 use crate::core::learn::LearningParams;
@@ -60,6 +61,9 @@ pub struct Recipe {
     /// `[speed_plan]`: a planned C speed for the finish revolution (off by default).
     #[serde(default)]
     pub speed_plan: SpeedPlanSettings,
+    /// `[cycle]`: the grinding cycle's stages (none: the table-only contract).
+    #[serde(default)]
+    pub cycle: Option<CycleSettings>,
     #[serde(default)]
     pub lobes: Vec<Lobe>,
     #[serde(default)]
@@ -206,6 +210,8 @@ pub struct FeatureSetup {
     pub limits: AxisLimits,
     /// The recipe's `[speed_plan]`.
     pub speed_plan: SpeedPlanSettings,
+    /// The recipe's `[cycle]`, checked against this feature's part.
+    pub cycle: Option<CycleSettings>,
     pub request: TableRequest,
     pub table_pair: (u32, u32),
     /// With `[speed_plan] enabled`: the numbers C's table (C = f(VA)) alternates between,
@@ -322,6 +328,9 @@ impl Recipe {
         let mut program = self.program.clone();
         program.c_offset_deg += phase_deg;
         program.name = self.table_program_name(&name);
+        if let Some(cycle) = &self.cycle {
+            self.check_cycle_on(path, cycle, &feature, &nominal, &name)?;
+        }
         Ok(FeatureSetup {
             part: self.name.clone(),
             name,
@@ -332,6 +341,7 @@ impl Recipe {
             params: self.learning.clone(),
             limits: self.axis_limits.clone(),
             speed_plan: self.speed_plan,
+            cycle: self.cycle.clone(),
             request: TableRequest {
                 points: self.table.points,
                 form: self.table.form(),
@@ -345,6 +355,41 @@ impl Recipe {
             z_mm,
             tolerances,
         })
+    }
+
+    /// The cycle's checks that need the part: each stage's Q′w and the X axis with the
+    /// infeed added, on feature `name`'s finished part and the wheel of the recipe.
+    fn check_cycle_on(
+        &self,
+        path: &Path,
+        cycle: &CycleSettings,
+        feature: &Feature,
+        nominal: &LiftTable,
+        name: &str,
+    ) -> anyhow::Result<()> {
+        let part = feature
+            .part(nominal)
+            .with_context(|| format!("{}: feature {name}", path.display()))?;
+        let samples = crate::core::speed_plan::ProfileSamples::new(&part)
+            .with_context(|| format!("{}: feature {name}", path.display()))?;
+        let ctx = crate::core::cycle::limits::CycleContext {
+            samples: &samples,
+            axis: &self.axis_limits,
+            plan: &self.speed_plan,
+            x_offset_mm: self.program.x_offset_mm,
+        };
+        let problems = crate::core::cycle::limits::limit_problems(cycle, &ctx);
+        if problems.is_empty() {
+            return Ok(());
+        }
+        Err(RecipeError {
+            file: path.display().to_string(),
+            problems: problems
+                .into_iter()
+                .map(|p| format!("feature {name}: {p}"))
+                .collect(),
+        }
+        .into())
     }
 
     /// Every lobe or pin in recipe order (the grinding order).

@@ -406,6 +406,7 @@ fn flag_setup(
         params: LearningParams::default(),
         limits: AxisLimits::default(),
         speed_plan: Default::default(),
+        cycle: None,
         request: TableRequest {
             points: 360,
             form: form.unwrap_or(TableForm::G1),

@@ -165,6 +165,22 @@ fn check_machine(
     let label = format!("machines.{}", m.name);
     let recipe_path = config.resolve(&m.recipe);
     let setups = match Recipe::load(&recipe_path) {
+        // The service writes the table-only contract; the whole-cycle program and the
+        // same-part handshake are not delivered by it yet: refused rather than ignored.
+        Ok(recipe)
+            if recipe
+                .cycle
+                .as_ref()
+                .is_some_and(|c| c.program == crate::core::cycle::CycleProgram::Whole) =>
+        {
+            problems.push(ConfigProblem::at(
+                line("recipe"),
+                format!(
+                    "{label}.recipe: its [cycle] program = \"whole\" is not delivered by the service yet; set program = \"table-only\" (the cycle is checked, the machine builder's cycle grinds)"
+                ),
+            ));
+            None
+        }
         Ok(recipe) => match machine_setups(&recipe, &recipe_path, m) {
             Ok(setups) => Some(setups),
             Err(e) => {

@@ -1,6 +1,6 @@
 //! A recipe's own checks, run after parsing: every problem is collected, in the order a
 //! reader meets the sections in the file (part, wheel, table, program, learning, speed plan,
-//! lobes, pins), so one run reports them all.
+//! cycle, lobes, pins), so one run reports them all.
 
 use super::{FollowerKind, Lobe, Pin, Recipe, ShaftKind};
 use crate::names::FeatureName;
@@ -38,6 +38,9 @@ impl Recipe {
             p.0.extend(e);
         }
         self.check_speed_plan(&mut p);
+        if let Some(cycle) = &self.cycle {
+            p.0.extend(cycle.problems(self.speed_plan.enabled));
+        }
         // Lobe and pin names share one namespace: both name features in the API and store.
         let mut names = HashSet::new();
         for lobe in &self.lobes {

@@ -85,6 +85,8 @@ mod geometry_oracle;
 mod geometry_props;
 mod http_harden;
 mod http_tls;
+mod in_process;
+mod in_process_shafts;
 mod invariants;
 mod loop_plateau;
 mod loop_sim;

@@ -9,6 +9,7 @@
 pub mod analysis;
 pub mod capability;
 pub mod compensate;
+pub mod cycle;
 pub mod digest;
 pub mod fit;
 pub mod geometry;

@@ -365,7 +365,7 @@ fn x_from_correction(state: &LearningState, dx_mm: &mut [f64]) {
 /// With the dresser's measured infeed, when the size step it tells is within the correction
 /// limit, the whole correction moves by it; otherwise the wheel's share of the size
 /// correction (here all of it: one feature) is replaced by the dressing offset.
-fn after_dressing(
+pub(crate) fn after_dressing(
     state: &mut LearningState,
     max_correction_um: f64,
     old_radius_mm: f64,

@@ -44,6 +44,9 @@ pub struct GrinderConfig {
     pub gauge: GaugeConfig,
     /// Errors that differ from feature to feature of a whole shaft.
     pub shaft: ShaftErrors,
+    /// The wheel head and the grinding forces of a whole cycle (see the `stock` module).
+    /// Boxed: the service's gauge settings hold a `GrinderConfig` beside far smaller ones.
+    pub stock: Box<crate::stock::StockModel>,
 }
 
 /// How the features of one shaft differ: the shaft bends and twists along Z under the
@@ -187,6 +190,7 @@ impl Default for GrinderConfig {
             samples_per_segment: 16,
             gauge: GaugeConfig::default(),
             shaft: ShaftErrors::default(),
+            stock: Box::default(),
         }
     }
 }
@@ -269,6 +273,7 @@ impl GrinderConfig {
             );
         }
         self.check_gauge(&mut p);
+        p.0.extend(self.stock.problems());
         p.0
     }
 

@@ -12,8 +12,11 @@
 //! Not modelled: modal G states (`G90`, `G71`, `SAVE` restore), feeds and timing, the
 //! synchronising move of `LEADON`, work offsets (`$AA_IW` is the programmed setpoint).
 
+mod cycle;
 mod interpreter;
 mod statements;
+
+pub use cycle::CycleEvent;
 
 use std::collections::BTreeMap;
 
@@ -44,6 +47,21 @@ pub struct Control {
     positions: BTreeMap<String, f64>,
     /// R parameters (`R90` …), kept between runs as the NC keeps them; unset ones are 0.
     r_params: BTreeMap<u32, f64>,
+    /// The coupling's output offset of each following axis (SD43106), mm.
+    output_offset_mm: BTreeMap<String, f64>,
+    /// X's overlay while coupled (incremental X programmed on the coupled axis), mm; reset
+    /// at `LEADON`.
+    overlay_mm: f64,
+    /// The overlay is enabled for X (the PLC's DBX26.4): without it, programming the
+    /// coupled X is the control's alarm.
+    overlay_enabled: bool,
+}
+
+/// What a cycle run did: every grind, and every event in program order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CycleRun {
+    pub ground: Vec<Coupled>,
+    pub events: Vec<CycleEvent>,
 }
 
 /// The number of an R parameter written `R<n>`.
@@ -81,6 +99,11 @@ pub struct Coupled {
     /// (one revolution of C per revolution of it), rev/min.
     pub c_speed_rpm: f64,
     pub revolutions: f64,
+    /// How far X stands above the table's curve as the grind starts (the output offset plus
+    /// the overlay so far), mm; 0 in the table-only program.
+    pub x_offset_mm: f64,
+    /// X's infeed superimposed during the grind (negative: towards the part), mm.
+    pub x_infeed_mm: f64,
 }
 
 impl Coupled {
@@ -196,10 +219,28 @@ impl Control {
         main: &str,
         load: &dyn Fn(&str) -> Option<String>,
     ) -> Result<Vec<Coupled>, ControlError> {
+        Ok(self.run_cycle(main, load)?.ground)
+    }
+
+    /// Enables X's overlay (the PLC's DBX26.4), which the whole-cycle program needs to
+    /// superimpose the infeed on the coupled X.
+    pub fn enable_overlay(&mut self) {
+        self.overlay_enabled = true;
+    }
+
+    /// Runs `main` like [`Control::run_all`] and returns every grind and every event of the
+    /// cycle (spindle, coolant, measurement, dwells) in order.
+    pub fn run_cycle(
+        &mut self,
+        main: &str,
+        load: &dyn Fn(&str) -> Option<String>,
+    ) -> Result<CycleRun, ControlError> {
         let mut run = Run {
             control: self,
             load,
             ground: Vec::new(),
+            events: Vec::new(),
+            jumps: 0,
         };
         let mut frame = Frame::new(program_name(main, "MPF").unwrap_or("main"), Vec::new());
         let end_line = run.program(main, &mut frame, 0)?;
@@ -210,7 +251,10 @@ impl Control {
                 fault: ControlFault::NotGround,
             });
         }
-        Ok(run.ground)
+        Ok(CycleRun {
+            ground: run.ground,
+            events: run.events,
+        })
     }
 
     /// R parameter `n` (0 when never set).

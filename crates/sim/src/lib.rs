@@ -90,6 +90,7 @@
 pub mod cell;
 mod config;
 mod control;
+pub mod cycle_cell;
 mod delivered;
 mod envelope;
 pub mod frames;
@@ -98,10 +99,13 @@ mod ground;
 mod path;
 mod plan;
 mod rng;
+pub mod stock;
 mod table;
 
 pub use config::{GaugeConfig, GaugeFault, GrinderConfig, Harmonic, ShaftErrors, StationErrors};
-pub use control::{Control, ControlError, ControlFault, Coupled, table_shape};
+pub use control::{
+    Control, ControlError, ControlFault, Coupled, CycleEvent, CycleRun, table_shape,
+};
 pub use delivered::DeliveryError;
 pub use frames::measurement_frames;
 pub use gauge::PartLabels;

@@ -13,6 +13,7 @@
 //! single-letter axes `C12.0000` would also do, but axis names with several letters or a
 //! digit extension (`C1`, `XA`) require the `=`, and `=` is valid for both.
 
+mod cycle_program;
 mod main_program;
 mod names;
 mod parse;
@@ -22,6 +23,10 @@ mod shaft_program;
 pub mod syntax;
 mod table;
 
+pub use cycle_program::{
+    CycleMachine, CycleProgramError, CycleStation, OUTPUT_OFFSET, POLL_S, READY_PROGRAM,
+    render_cycle_program, render_ready_program, wheel_rpm,
+};
 pub use main_program::{MainProgramSettings, render_main_program};
 pub use names::{AxisNameError, ProgramNameError, validate_axis_name, validate_program_name};
 pub use parse::{ParsedShape, ParsedTable, TableBlocks, parse_table_program};

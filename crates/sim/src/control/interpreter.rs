@@ -101,6 +101,9 @@ impl Run<'_> {
             );
         }
         frame.executed |= !definition;
+        if let Some(step) = self.cycle_statement(statement, code, at.lines, frame, i) {
+            return step;
+        }
         match statement {
             Statement::Keyword("STOPRE") => Ok(None),
             Statement::Keyword("M30") => Ok(Some(End::M30)),
@@ -186,7 +189,12 @@ impl Run<'_> {
     }
 
     /// `IF <INT variable or R parameter><op><number>`.
-    fn condition(&self, code: &str, cond: &Cond<'_>, frame: &Frame) -> Result<bool, Halt> {
+    pub(super) fn condition(
+        &self,
+        code: &str,
+        cond: &Cond<'_>,
+        frame: &Frame,
+    ) -> Result<bool, Halt> {
         let (Some(left), Some(bound)) = (cond.left.name(), cond.right.number()) else {
             return Err(unsupported(code).into());
         };
@@ -270,6 +278,7 @@ impl Run<'_> {
             }
             .into());
         }
+        self.control.overlay_mm = 0.0;
         self.control.couplings.push(Coupling {
             following: following.to_owned(),
             leading: leading.to_owned(),
@@ -363,7 +372,12 @@ impl Run<'_> {
 
     /// What turning `leading` grinds: X coupled to it, and C turning, either as the leading
     /// axis itself or following it by its own table (the speed plan's virtual axis).
-    fn grind(&self, leading: &str, feed_deg_min: f64, travel_deg: f64) -> Option<Coupled> {
+    pub(super) fn grind(
+        &self,
+        leading: &str,
+        feed_deg_min: f64,
+        travel_deg: f64,
+    ) -> Option<Coupled> {
         let led = |c: &&Coupling| c.leading == leading;
         let c_table = self
             .control
@@ -398,6 +412,8 @@ impl Run<'_> {
             c_law,
             c_speed_rpm: feed_deg_min / 360.0,
             revolutions: travel_deg / 360.0,
+            x_offset_mm: 0.0,
+            x_infeed_mm: 0.0,
         })
     }
 

@@ -68,6 +68,10 @@ pub(super) struct Run<'c> {
     pub(super) load: &'c dyn Fn(&str) -> Option<String>,
     /// Every grind of the run, in order.
     pub(super) ground: Vec<Coupled>,
+    /// The cycle's events, in order.
+    pub(super) events: Vec<super::CycleEvent>,
+    /// Jumps made (`GOTOB`, `GOTOF`), bounded so a wait without end is a fault.
+    pub(super) jumps: usize,
 }
 
 /// `DEF REAL a, b` / `DEF INT a`.

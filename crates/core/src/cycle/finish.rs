@@ -1,0 +1,127 @@
+//! Measure before the finish: this part's finish table from the learned correction plus what
+//! the in-process measurement (stock still on) says, the remaining stock taken out as a
+//! known size offset. The same guards as the part-to-part loop; a refusal means the finish
+//! grinds with the table in force and nothing is learned.
+//!
+//! The learning state is never changed here: the part-to-part loop learns from the finished
+//! part's measurement, once, from the state of the table in force (so no part is learned
+//! from twice).
+
+use crate::compensate::{self, CycleError, GuardedTable};
+use crate::learn::{LearningState, PartError, StepOutcome};
+use crate::measure::RawMeasurement;
+use crate::turn::{self, Measured, TurnError, TurnSetup};
+
+/// What the finish table is made from.
+#[derive(Debug, Clone, Copy)]
+pub struct InProcess<'a> {
+    pub setup: &'a TurnSetup<'a>,
+    /// The learning state of the table in force (the one the part is being ground with).
+    pub in_force: &'a LearningState,
+    pub raw: &'a RawMeasurement,
+    /// The part the control is grinding (its id as the gauge names parts): a measurement
+    /// that names another is refused.
+    pub part: &'a str,
+    /// Radial stock still on when the gauge read, mm: a known size offset.
+    pub remaining_stock_mm: f64,
+    /// Gain of the same-part step, 0 < g < 1 (the recipe's `cycle.same_part_gain`).
+    pub gain: f64,
+}
+
+/// Why no same-part table: the finish grinds with the table in force.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FinishRefused {
+    #[error("the in-process measurement names part {got}, the control grinds {expected}")]
+    WrongPart { expected: String, got: String },
+    #[error("the in-process measurement names lobe {got}, the finish is of {expected}")]
+    WrongFeature { expected: String, got: String },
+    #[error("the in-process measurement has {got} usable revolutions, at least 3 are needed")]
+    Incomplete { got: usize },
+    #[error("the in-process measurement: {0}")]
+    Measurement(#[from] TurnError),
+    #[error("remaining stock {0} mm: must be a finite number ≥ 0")]
+    Stock(f64),
+    #[error("same-part gain {0}: must be 0 < g < 1")]
+    Gain(f64),
+    #[error("the same-part table: {0}")]
+    Guard(#[from] CycleError),
+}
+
+/// This part's finish table, with what it was made from.
+#[derive(Debug, Clone)]
+pub struct FinishTable {
+    pub table: GuardedTable,
+    /// The learning state the table was made from (the learned correction plus this step):
+    /// what the finished part is ground with, so the part-to-part step learns from it.
+    pub state: LearningState,
+    pub outcome: StepOutcome,
+    pub measured: Measured,
+    /// The size the gauge read above the finished size, µm (the remaining stock removed).
+    pub size_over_stock_um: f64,
+}
+
+/// The finish table of the part in the machine, or why the finish keeps the table in force.
+/// `feature` is the lobe or pin name the measurement must carry.
+pub fn finish_table(input: &InProcess<'_>, feature: &str) -> Result<FinishTable, FinishRefused> {
+    let raw = input.raw;
+    if raw.header.part.trim() != input.part.trim() {
+        return Err(FinishRefused::WrongPart {
+            expected: input.part.to_owned(),
+            got: raw.header.part.clone(),
+        });
+    }
+    if raw.header.lobe.trim() != feature {
+        return Err(FinishRefused::WrongFeature {
+            expected: feature.to_owned(),
+            got: raw.header.lobe.clone(),
+        });
+    }
+    if !(input.remaining_stock_mm.is_finite() && input.remaining_stock_mm >= 0.0) {
+        return Err(FinishRefused::Stock(input.remaining_stock_mm));
+    }
+    if !(input.gain > 0.0 && input.gain < 1.0) {
+        return Err(FinishRefused::Gain(input.gain));
+    }
+    let measured = turn::measure(input.setup, raw)?;
+    let used = measured.averaged.revolutions_used.len();
+    if used < 3 {
+        return Err(FinishRefused::Incomplete { got: used });
+    }
+    let report = &measured.report;
+    let stock_um = input.remaining_stock_mm * 1000.0;
+    // The stock is a uniform offset along the normal: the gauge reads it as size. What is
+    // left beyond it is the error the finish would leave.
+    let size_um = report.base_radius_error_um - stock_um;
+    let lift_error: Vec<f64> = report
+        .profile_error_um
+        .iter()
+        .map(|e| e + size_um)
+        .collect();
+    let error_um = turn::to_feature_frame(&lift_error, input.setup.phase_deg);
+    let repeatability_um = turn::to_feature_frame(&report.repeatability_um, input.setup.phase_deg);
+    let part = PartError {
+        error_um: &error_um,
+        repeatability_um: &repeatability_um,
+        revolutions: used as u32,
+        timing_error_deg: measured.timing_error_deg,
+        timing_sigma_deg: measured.timing_sigma_deg,
+        part_number: measured.part_number,
+        previous: None,
+    };
+    let mut params = input.setup.lobe.params.clone();
+    params.gain = input.gain;
+    let lobe = compensate::LobeLoop {
+        params: &params,
+        ..input.setup.lobe
+    };
+    // A copy: the state of the table in force is not touched.
+    let mut scratch = input.in_force.clone();
+    let (outcome, table) = compensate::learn_and_regenerate(&mut scratch, &part, &lobe)?;
+    Ok(FinishTable {
+        table,
+        state: scratch,
+        outcome,
+        measured,
+        size_over_stock_um: size_um,
+    })
+}

@@ -1,0 +1,418 @@
+//! The main program of the whole grinding cycle (`[cycle] program = "whole"`): wheel spindle
+//! and coolant on, then per feature the approach, the coupling, the stages with their infeed
+//! superimposed on the coupled X, the measurement before the finish with its handshake,
+//! spark-out, lift-off and uncoupling; spindle and coolant off at the end.
+//!
+//! Every coupling is made with the number the table program just returned, as in the
+//! table-only program: the finish after a measurement calls the table program again, so it
+//! couples the newest table (this part's finish table when camloop delivered it in time, the
+//! table in force otherwise).
+
+use super::ProgramSettings;
+use super::main_program::MainProgramSettings;
+use super::names::validate_axis_name;
+use super::settings::{Resolved, SettingsErrors, check_comments};
+use super::table::{NUMBER_VAR, fmt_fixed, line};
+use crate::cycle::{CycleSettings, ResolvedStage, StageKind, stage_key};
+
+/// The handshake subprogram's name (file `CAMLOOP_READY.SPF`): it returns how many same-part
+/// finish tables camloop has delivered to this machine.
+pub const READY_PROGRAM: &str = "CAMLOOP_READY";
+/// The coupling's output offset of the following axis (SD43106), written by the program.
+pub const OUTPUT_OFFSET: &str = "$SA_LEAD_OFFSET_OUT_POS";
+/// How often the control asks the handshake subprogram while it waits, s.
+pub const POLL_S: f64 = 0.1;
+
+/// One feature as the cycle grinds it.
+#[derive(Debug, Clone)]
+pub struct CycleStation<'a> {
+    pub table: &'a ProgramSettings,
+    pub label: &'a str,
+    pub z_mm: f64,
+}
+
+/// The cycle and the machine facts its program needs.
+#[derive(Debug, Clone, Copy)]
+pub struct CycleMachine<'a> {
+    pub cycle: &'a CycleSettings,
+    /// The grinding C speed of stages that name none, rpm.
+    pub c_speed_rpm: f64,
+    /// The wheel's radius, mm: turns the surface speed into spindle rpm.
+    pub wheel_radius_mm: f64,
+    /// X clear of the part before Z moves (several features), mm.
+    pub clear_x_mm: f64,
+}
+
+/// Why no cycle program was written.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CycleProgramError {
+    #[error("{0}")]
+    Settings(#[from] SettingsErrors),
+    #[error("{}", .0.join("; "))]
+    Cycle(Vec<String>),
+    #[error(
+        "{0}: a stage on the speed plan is not written by the cycle program yet; give it a c_speed_rpm"
+    )]
+    PlanStage(String),
+}
+
+/// Renders the whole-cycle main program for `stations` (one or more features in turn).
+pub fn render_cycle_program(
+    main: &MainProgramSettings,
+    machine: &CycleMachine<'_>,
+    stations: &[CycleStation<'_>],
+) -> Result<String, CycleProgramError> {
+    let (resolved, stages) = check(main, machine, stations)?;
+    let first = &resolved[0];
+    let (x, c, n) = (&first.following, &first.leading, NUMBER_VAR);
+    let cycle = machine.cycle;
+    let spindle = cycle.wheel_spindle;
+    let mut out = String::new();
+    line(&mut out, format_args!("%_N_{}_MPF", main.name));
+    out.push_str(";$PATH=/_N_MPF_DIR\n");
+    out.push_str("DEF REAL CL_C, CL_X, CL_SLOPE, CL_OFF\n");
+    line(
+        &mut out,
+        format_args!("DEF INT {n}, CL_SEEN, CL_READY, CL_NEW, CL_WAIT"),
+    );
+    line(&mut out, format_args!("EXTERN {READY_PROGRAM}(VAR INT)"));
+    for r in &resolved {
+        line(&mut out, format_args!("EXTERN {}(VAR INT)", r.name));
+    }
+    for comment in &main.comment_lines {
+        line(&mut out, format_args!("; {comment}"));
+    }
+    line(
+        &mut out,
+        format_args!("IF $AA_COUP_ACT[{x}]<>0 ; a coupling left active by an aborted run"),
+    );
+    line(&mut out, format_args!("LEADOF({x},{c})"));
+    out.push_str("ENDIF\n");
+    output_offset(
+        &mut out,
+        x,
+        "0",
+        "no output offset left from an aborted run",
+    );
+    out.push_str("G90 G94 G71 ; absolute, feed per minute, metric\n");
+    let first_speed = stages
+        .first()
+        .map_or(cycle.wheel_speed_m_s, |s| s.wheel_speed_m_s);
+    line(
+        &mut out,
+        format_args!(
+            "M{spindle}=3 S{spindle}={} ; wheel spindle on, {first_speed} m/s",
+            fmt_fixed(wheel_rpm(first_speed, machine.wheel_radius_mm), 1)
+        ),
+    );
+    out.push_str("M8 ; coolant on\n");
+    let xd = usize::from(first.settings.x_decimals);
+    let clear = fmt_fixed(machine.clear_x_mm, xd);
+    for (k, (s, r)) in stations.iter().zip(&resolved).enumerate() {
+        line(&mut out, format_args!("; feature {} {}", k + 1, s.label));
+        if stations.len() > 1 {
+            line(
+                &mut out,
+                format_args!("G90 G0 {x}={clear} ; clear of the part"),
+            );
+            line(
+                &mut out,
+                format_args!(
+                    "G0 {}={} ; station of {}",
+                    main.axial_axis,
+                    fmt_fixed(s.z_mm, 3),
+                    s.label
+                ),
+            );
+        }
+        feature_cycle(&mut out, machine, &stages, r, k + 1);
+    }
+    output_offset(&mut out, x, "0", "the output offset back to 0");
+    out.push_str("M9 ; coolant off\n");
+    line(&mut out, format_args!("M{spindle}=5 ; wheel spindle stop"));
+    out.push_str("M30\n");
+    Ok(out)
+}
+
+/// The handshake subprogram camloop writes after each same-part finish table is durable on
+/// the share: `count` such tables so far (the control waits for the count to change).
+pub fn render_ready_program(count: u64) -> String {
+    let mut out = String::new();
+    line(&mut out, format_args!("%_N_{READY_PROGRAM}_SPF"));
+    out.push_str(";$PATH=/_N_SPF_DIR\n");
+    line(
+        &mut out,
+        format_args!("PROC {READY_PROGRAM}(VAR INT CL_READY) SAVE"),
+    );
+    out.push_str("; written by camloop once a same-part finish table is on the share\n");
+    line(&mut out, format_args!("CL_READY={count}"));
+    out.push_str("RET\n");
+    out
+}
+
+/// Spindle speed for a surface speed, rpm.
+pub fn wheel_rpm(surface_m_s: f64, radius_mm: f64) -> f64 {
+    surface_m_s * 60_000.0 / (std::f64::consts::TAU * radius_mm)
+}
+
+type Checked<'a> = (Vec<Resolved<'a>>, Vec<ResolvedStage>);
+
+fn check<'a>(
+    main: &MainProgramSettings,
+    machine: &CycleMachine<'_>,
+    stations: &[CycleStation<'a>],
+) -> Result<Checked<'a>, CycleProgramError> {
+    let mut errors = Vec::new();
+    let mut resolved = Vec::new();
+    if stations.is_empty() {
+        errors.push(super::SettingError::NoFeatures);
+    }
+    for s in stations {
+        match s.table.resolve_for_main() {
+            Ok(r) => resolved.push(r),
+            Err(e) => errors.extend(e.0),
+        }
+    }
+    if let Err(e) = super::validate_program_name(&main.name) {
+        errors.push(e.into());
+    }
+    if let Err(e) = validate_axis_name("axial", &main.axial_axis) {
+        errors.push(e.into());
+    }
+    check_comments(&mut errors, &main.comment_lines);
+    if !errors.is_empty() {
+        return Err(SettingsErrors(errors).into());
+    }
+    let mut problems = machine.cycle.problems(false);
+    for (what, v) in [
+        ("wheel radius", machine.wheel_radius_mm),
+        ("c_speed_rpm", machine.c_speed_rpm),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            problems.push(format!("{what} = {v}: must be a number > 0"));
+        }
+    }
+    if !machine.clear_x_mm.is_finite() {
+        problems.push(format!("clear X = {}: must be finite", machine.clear_x_mm));
+    }
+    // A stage on the plan is refused below, by its own error; the rest must be sound.
+    problems.retain(|p| !p.contains(".speed_plan: needs [speed_plan]"));
+    if !problems.is_empty() {
+        return Err(CycleProgramError::Cycle(problems));
+    }
+    let stages = machine.cycle.resolved(machine.c_speed_rpm);
+    if let Some((i, s)) = stages
+        .iter()
+        .enumerate()
+        .find(|(_, s)| s.c_speed_rpm.is_none())
+    {
+        return Err(CycleProgramError::PlanStage(stage_key(i, s.kind)));
+    }
+    Ok((resolved, stages))
+}
+
+/// `STOPRE` then the output offset: setting data are written as the block is prepared, so
+/// the motion before it must be finished first.
+fn output_offset(out: &mut String, x: &str, value: &str, why: &str) {
+    out.push_str("STOPRE\n");
+    line(out, format_args!("{OUTPUT_OFFSET}[{x}]={value} ; {why}"));
+}
+
+/// One feature's cycle: coupled segments split at the measurement.
+fn feature_cycle(
+    out: &mut String,
+    machine: &CycleMachine<'_>,
+    stages: &[ResolvedStage],
+    r: &Resolved<'_>,
+    k: usize,
+) {
+    let cycle = machine.cycle;
+    let mut stock_left = cycle.stock_mm;
+    let mut coupled = false;
+    for s in stages {
+        if s.kind == StageKind::Measure {
+            if coupled {
+                uncouple(out, r, cycle.lift_off_mm);
+                coupled = false;
+            }
+            measure(out, machine, s, r, k, stock_left);
+            continue;
+        }
+        if !coupled {
+            couple(out, machine, r, stock_left, s);
+            coupled = true;
+        }
+        stage(out, machine, s, r);
+        stock_left -= s.infeed_mm;
+    }
+    if coupled {
+        uncouple(out, r, cycle.lift_off_mm);
+    }
+}
+
+/// Defines the newest table, stands X the stock and the air gap above its curve (the
+/// coupling's output offset), couples, and takes the air gap at the approach feed.
+fn couple(
+    out: &mut String,
+    machine: &CycleMachine<'_>,
+    r: &Resolved<'_>,
+    stock_left: f64,
+    next: &ResolvedStage,
+) {
+    let (x, c, t, n) = (&r.following, &r.leading, &r.name, NUMBER_VAR);
+    let cd = usize::from(r.settings.c_decimals);
+    let xd = usize::from(r.settings.x_decimals);
+    let cycle = machine.cycle;
+    let rpm = next.c_speed_rpm.unwrap_or(machine.c_speed_rpm);
+    line(
+        out,
+        format_args!("{t}({n}) ; defines the newest curve table, returns its number"),
+    );
+    line(
+        out,
+        format_args!(
+            "CL_OFF={} ; stock {} mm and air gap {} mm above the curve",
+            fmt_fixed(stock_left + cycle.approach_mm, xd),
+            fmt_fixed(stock_left, xd),
+            fmt_fixed(cycle.approach_mm, xd)
+        ),
+    );
+    output_offset(
+        out,
+        x,
+        "CL_OFF",
+        "SD43106: X couples this far above the curve",
+    );
+    line(out, format_args!("CL_C=$AA_IW[{c}]"));
+    line(out, format_args!("CL_X=CTAB(CL_C,{n},CL_SLOPE)"));
+    out.push_str("CL_X=CL_X+CL_OFF\n");
+    line(out, format_args!("G90 G1 {x}=CL_X F=100.000"));
+    line(out, format_args!("LEADON({x},{c},{n})"));
+    line(
+        out,
+        format_args!("FGROUP({c}) ; F is {c}'s speed, {x}'s overlay moves in proportion"),
+    );
+    let revs = cycle.approach_mm / cycle.approach_feed_mm_per_rev;
+    line(
+        out,
+        format_args!(
+            "G91 G1 {c}={} {x}=-{} F={} ; approach: the air gap",
+            fmt_fixed(360.0 * revs, cd),
+            fmt_fixed(cycle.approach_mm, xd),
+            fmt_fixed(360.0 * rpm, 3)
+        ),
+    );
+    out.push_str("G90\n");
+}
+
+/// A coupled stage: C turns its revolutions with its infeed superimposed on X.
+fn stage(out: &mut String, machine: &CycleMachine<'_>, s: &ResolvedStage, r: &Resolved<'_>) {
+    let (x, c) = (&r.following, &r.leading);
+    let cd = usize::from(r.settings.c_decimals);
+    let xd = usize::from(r.settings.x_decimals);
+    let rpm = s.c_speed_rpm.unwrap_or(machine.c_speed_rpm);
+    let spindle = machine.cycle.wheel_spindle;
+    line(
+        out,
+        format_args!(
+            "; {}: {} mm in {} rev at {rpm} rpm, wheel {} m/s",
+            s.kind.name(),
+            fmt_fixed(s.infeed_mm, xd),
+            s.revolutions,
+            s.wheel_speed_m_s
+        ),
+    );
+    line(
+        out,
+        format_args!(
+            "S{spindle}={}",
+            fmt_fixed(wheel_rpm(s.wheel_speed_m_s, machine.wheel_radius_mm), 1)
+        ),
+    );
+    let infeed = if s.infeed_mm > 0.0 {
+        format!(" {x}=-{}", fmt_fixed(s.infeed_mm, xd))
+    } else {
+        String::new()
+    };
+    line(
+        out,
+        format_args!(
+            "G91 G1 {c}={}{infeed} F={}",
+            fmt_fixed(360.0 * s.revolutions, cd),
+            fmt_fixed(360.0 * rpm, 3)
+        ),
+    );
+    out.push_str("G90\n");
+    if s.dwell_s > 0.0 {
+        line(out, format_args!("G4 F={}", fmt_fixed(s.dwell_s, 3)));
+    }
+}
+
+/// Lift-off on the overlay while still coupled, then uncouple.
+fn uncouple(out: &mut String, r: &Resolved<'_>, lift_off_mm: f64) {
+    let (x, c) = (&r.following, &r.leading);
+    let xd = usize::from(r.settings.x_decimals);
+    line(
+        out,
+        format_args!("G91 G0 {x}={} ; lift off", fmt_fixed(lift_off_mm, xd)),
+    );
+    out.push_str("G90\n");
+    out.push_str("FGROUP() ; the feed back to the path axes\n");
+    line(out, format_args!("LEADOF({x},{c})"));
+}
+
+/// The in-process measurement with stock on, then the wait for this part's finish table.
+fn measure(
+    out: &mut String,
+    machine: &CycleMachine<'_>,
+    s: &ResolvedStage,
+    r: &Resolved<'_>,
+    k: usize,
+    stock_left: f64,
+) {
+    let c = &r.leading;
+    let cd = usize::from(r.settings.c_decimals);
+    let cycle = machine.cycle;
+    let rpm = s.c_speed_rpm.unwrap_or(machine.c_speed_rpm);
+    let (gauge_in, gauge_out) = cycle.gauge_m_codes;
+    line(
+        out,
+        format_args!(
+            "; measure: {} rev at {rpm} rpm, {} mm stock on",
+            s.revolutions,
+            fmt_fixed(stock_left, 4)
+        ),
+    );
+    line(
+        out,
+        format_args!("{READY_PROGRAM}(CL_SEEN) ; same-part tables delivered before this one"),
+    );
+    line(out, format_args!("M{gauge_in} ; gauge in"));
+    line(
+        out,
+        format_args!(
+            "POS[{c}]=IC({}) FA[{c}]={}",
+            fmt_fixed(360.0 * s.revolutions, cd),
+            fmt_fixed(360.0 * rpm, 3)
+        ),
+    );
+    line(out, format_args!("WAITP({c})"));
+    line(out, format_args!("M{gauge_out} ; gauge out"));
+    let polls = (cycle.handshake_timeout_s / POLL_S).ceil().max(1.0) as u64;
+    line(
+        out,
+        format_args!(
+            "; wait for this part's finish table, at most {} s, then grind with the table in force",
+            cycle.handshake_timeout_s
+        ),
+    );
+    out.push_str("CL_WAIT=0\n");
+    line(out, format_args!("CL_HS{k}:"));
+    line(out, format_args!("{READY_PROGRAM}(CL_READY)"));
+    out.push_str("CL_NEW=CL_READY-CL_SEEN\n");
+    line(out, format_args!("IF CL_NEW<>0 GOTOF CL_GO{k}"));
+    line(out, format_args!("G4 F={}", fmt_fixed(POLL_S, 3)));
+    out.push_str("CL_WAIT=CL_WAIT+1\n");
+    line(out, format_args!("IF CL_WAIT<{polls} GOTOB CL_HS{k}"));
+    line(out, format_args!("CL_GO{k}:"));
+}
