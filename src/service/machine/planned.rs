@@ -18,7 +18,7 @@ use crate::core::program::{ProgramSettings, fmt_fixed};
 use crate::core::speed_plan::render::{VaProgramSettings, render_va_table_program};
 use crate::core::speed_plan::tables::VaTables;
 use crate::core::speed_plan::{self, TimeLaw};
-use crate::core::turn::{self, Decision, TurnSetup};
+use crate::core::turn::{self, TurnSetup};
 use crate::recipe::FeatureSetup;
 use tracing::error;
 
@@ -36,6 +36,20 @@ pub(crate) struct PlanState {
     /// VA's speed of the table being delivered, rev/min (committed to the main program once
     /// the share confirms it).
     pub(super) pending_va_rpm: Option<f64>,
+}
+
+/// The turn's setup: `setup`'s, with the plan's time law for the wheel believed now when the
+/// recipe grinds with a plan (see [`FeatureLoop::refresh_plan`]).
+pub(super) fn turn_setup<'a>(setup: &'a FeatureSetup, plan: &'a PlanState) -> TurnSetup<'a> {
+    let radius_bits = setup.feature.wheel_radius_mm().to_bits();
+    let law = match &plan.law {
+        Some((bits, law)) if setup.speed_plan.enabled && *bits == radius_bits => Some(law),
+        _ => None,
+    };
+    TurnSetup {
+        plan: law,
+        ..setup.turn_setup()
+    }
 }
 
 /// The table settings of `setup` for the two-table program, with these numbers.
@@ -72,7 +86,7 @@ impl FeatureLoop {
     }
 
     /// Makes the plan for the wheel believed now, before a turn, so the turn guards its
-    /// table over VA ([`Self::turn_setup`]). A plan that cannot be made at all (its
+    /// table over VA ([`turn_setup`]). A plan that cannot be made at all (its
     /// geometry) is said here; the turn then decides without it and the delivery says so
     /// and keeps the table in force.
     pub(super) fn refresh_plan(&mut self) {
@@ -84,34 +98,16 @@ impl FeatureLoop {
         }
     }
 
-    /// The turn's setup: the recipe's, with the plan's time law for the wheel believed now
-    /// when the recipe grinds with a plan (see [`Self::refresh_plan`]).
-    pub(super) fn turn_setup(&self) -> TurnSetup<'_> {
-        let radius_bits = self.setup.feature.wheel_radius_mm().to_bits();
-        let plan = match &self.plan.law {
-            Some((bits, law)) if self.setup.speed_plan.enabled && *bits == radius_bits => Some(law),
-            _ => None,
-        };
-        TurnSetup {
-            plan,
-            ..self.setup.turn_setup()
-        }
-    }
-
-    /// Keeps the tables over VA the turn made (and guarded) for its new table, so the
-    /// delivery renders them without making them again. Returns the decision as it is.
-    pub(super) fn keep_planned(&mut self, decision: Decision) -> Decision {
-        if let Decision::Table {
-            table,
-            next,
-            planned: Some(tables),
-            ..
-        } = &decision
-        {
-            let key = self.plan_key(table, next);
-            self.plan.last = Some((key, Ok(tables.as_ref().clone())));
-        }
-        decision
+    /// Keeps the tables over VA the turn made (and guarded) for its new `table` (made from
+    /// `next`), so the delivery renders them without making them again.
+    pub(super) fn keep_planned(
+        &mut self,
+        table: &GuardedTable,
+        next: &LearningState,
+        tables: VaTables,
+    ) {
+        let key = self.plan_key(table, next);
+        self.plan.last = Some((key, Ok(tables)));
     }
 
     /// What the tables over VA are made from: correction, timing and wheel radius.
@@ -207,7 +203,7 @@ impl FeatureLoop {
             .ok()
             .and_then(|text| va_speed_text(&text).map(str::to_string));
         let same = on_share.as_deref() == Some(fmt_fixed(va_speed_rpm, 4).as_str());
-        if same && self.memory.waiting.is_none() {
+        if same && self.machine.memory().waiting.is_none() {
             self.main.delivered(&self.setup.name, va_speed_rpm)?;
         }
         Ok(!same)

@@ -55,8 +55,8 @@ pub enum PartNote {
     Table,
     /// The table was not recorded (nothing reached the share).
     NotRecorded(DeliveryError),
-    /// A guard refused the table, this many parts in a row.
-    Refused { in_a_row: u32 },
+    /// A guard refused the table (for `reason`), this many parts in a row.
+    Refused { in_a_row: u32, reason: String },
     /// Not learned from.
     Held(String),
 }
@@ -277,7 +277,10 @@ impl FeatureMachine {
             EventKind::TableRefused,
             format!("{} ({in_a_row} in a row): {e}", self.config.feature),
         ));
-        step.note = PartNote::Refused { in_a_row };
+        step.note = PartNote::Refused {
+            in_a_row,
+            reason: e.to_string(),
+        };
     }
 
     /// A part without a table to deliver: its records and the memory it leaves, in one write
