@@ -1,31 +1,24 @@
-//! Write-ahead ordering as a property of the feature machine, held without I/O: an
-//! in-memory executor (a journal that is a list, a share that numbers, accepts and pushes
-//! versions, a grinder whose parts carry the correction in force) runs a sequence of parts;
-//! for every k it is dropped right after carrying out effect k (the effect happened, the
-//! machine never heard), the machine is rebuilt from what the journal kept and what the
-//! share holds, the source sends again what it was not told was done, and the run goes on.
-//! Every such run must end where the uninterrupted one ends: each measurement recorded once,
-//! none learned twice, the versions 1..n each once and in order, and the same memory and
-//! tables, bit for bit (the loop is deterministic, so there is no tolerance to state).
+//! Write-ahead ordering as a property of the feature machine, held without I/O: an in-memory
+//! executor (a journal that is a list, a share that numbers, accepts and pushes versions, a
+//! grinder whose parts carry the correction in force) runs a sequence of parts; for every k
+//! it is dropped right after carrying out effect k (the effect happened, the machine never
+//! heard), the machine rebuilt from the journal and the share, the part in flight sent again.
+//! Every such run must end where the uninterrupted one does: each measurement recorded once,
+//! none learned twice, versions 1..n once each and in order, the same memory and tables, bit
+//! for bit (the loop is deterministic: there is no tolerance to state).
 
-use camloop_core::compensate::{AxisLimits, Feature, LobeLoop, TableRequest};
+mod support;
+
 use camloop_core::digest::Sha256;
-use camloop_core::fit::TableForm;
-use camloop_core::geometry::{CamGeometry, Follower};
 use camloop_core::ids::{PartId, TableVersion};
-use camloop_core::learn::LearningParams;
-use camloop_core::lift::LiftTable;
-use camloop_core::measure::{AssemblyLimits, MeasurementHeader, RawMeasurement, RawSample};
-use camloop_core::turn::{TurnSetup, correction_sha256, measurement_sha256};
-use camloop_loop::machine::{
-    Effect, FeatureConfig, FeatureMachine, Finished, Gauged, Input, Program, ShareView,
-};
+use camloop_core::measure::RawMeasurement;
+use camloop_core::turn::{correction_sha256, measurement_sha256};
+use camloop_loop::machine::{Effect, FeatureMachine, Finished, Gauged, Input, Program, ShareView};
 use camloop_loop::memory::LoopMemory;
 use camloop_loop::record::{Record, TableRecord, TableStatus};
-use jiff::Timestamp;
+use support::{Recipe, WHEEL_MM, at, grind, nominal_mm};
 
 const PARTS: usize = 14;
-const WHEEL_MM: f64 = 250.0;
 /// Parts (by index) while the share cannot take a table: an outage in the middle.
 const OUTAGE: std::ops::Range<usize> = 6..9;
 /// A part whose gauge lost a revolution's samples: rejected by the checks.
@@ -33,63 +26,7 @@ const TORN: usize = 3;
 /// A part the source sends twice (a drop file copied): the second is a repeat.
 const REPEATED: usize = 10;
 
-/// The recipe: a harmonic lobe (lift 1.5 (1 − cos θ) mm on a 20 mm base circle, curvature
-/// radius 21.5 mm everywhere, so every table of a few µm of correction can be ground).
-struct Recipe {
-    nominal: LiftTable,
-    limits: AxisLimits,
-    params: LearningParams,
-}
-
-fn nominal_mm(i: u32) -> f64 {
-    1.5 * (1.0 - f64::from(i).to_radians().cos())
-}
-
-impl Recipe {
-    fn new() -> Self {
-        let angles: Vec<f64> = (0..360).map(f64::from).collect();
-        let lifts = (0..360).map(nominal_mm).collect();
-        Self {
-            nominal: LiftTable::from_points(angles, lifts, "harmonic").expect("a valid lift table"),
-            limits: AxisLimits::default(),
-            params: LearningParams::default(),
-        }
-    }
-
-    fn setup(&self) -> TurnSetup<'_> {
-        TurnSetup {
-            lobe: LobeLoop {
-                nominal: &self.nominal,
-                feature: Feature::Cam(CamGeometry {
-                    base_radius_mm: 20.0,
-                    follower: Follower::Flat,
-                    wheel_radius_mm: WHEEL_MM,
-                }),
-                request: TableRequest {
-                    points: 360,
-                    form: TableForm::G1,
-                    poly_tolerance_um: 0.1,
-                },
-                limits: &self.limits,
-                params: &self.params,
-            },
-            bands: &[],
-            assembly: AssemblyLimits::default(),
-            phase_deg: 0.0,
-            plan: None,
-        }
-    }
-
-    fn config(&self) -> FeatureConfig {
-        FeatureConfig {
-            feature: "IN1".parse().expect("a feature name"),
-            params: self.params.clone(),
-        }
-    }
-}
-
-/// The share: versions numbered 1, 2, … in the order accepted; the newest accepted is the
-/// one a delivery pushes.
+/// The share: versions numbered 1, 2, … as accepted; a delivery pushes the newest accepted.
 #[derive(Debug, Clone, Default, PartialEq)]
 struct Share {
     accepted: Vec<TableRecord>,
@@ -128,43 +65,6 @@ impl Share {
     }
 }
 
-/// The part the grinder makes with the table in force: a repeatable shape error of the
-/// process (8 µm at twice the cam's frequency, 3 µm at three times) plus the correction,
-/// and a small error of its own per part, read on three revolutions.
-fn grind(index: usize, correction_um: &[f64]) -> RawMeasurement {
-    let own_um = 0.4 * ((index * 7 % 5) as f64 - 2.0);
-    let mut samples = Vec::new();
-    for revolution in 0..3u32 {
-        for i in 0..360u32 {
-            if index == TORN && revolution == 1 && i > 100 {
-                continue;
-            }
-            let a = f64::from(i).to_radians();
-            let error_um = 8.0 * (2.0 * a).cos()
-                + 3.0 * (3.0 * a).sin()
-                + own_um
-                + correction_um[i as usize]
-                + 0.05 * f64::from(revolution);
-            samples.push(RawSample {
-                revolution,
-                angle_index: i,
-                lift_mm: nominal_mm(i) + error_um / 1000.0,
-            });
-        }
-    }
-    RawMeasurement {
-        header: MeasurementHeader {
-            machine: "G1".into(),
-            part: format!("S-{}", index + 1),
-            lobe: "IN1".into(),
-            revolutions: 3,
-            points_per_rev: 360,
-        },
-        samples,
-        origin: format!("gauge part {index}"),
-    }
-}
-
 /// The largest |lift error| of a part's first revolution, µm.
 fn worst_error_um(raw: &RawMeasurement) -> f64 {
     raw.samples
@@ -172,10 +72,6 @@ fn worst_error_um(raw: &RawMeasurement) -> f64 {
         .filter(|s| s.revolution == 0)
         .map(|s| ((s.lift_mm - nominal_mm(s.angle_index)) * 1000.0).abs())
         .fold(0.0, f64::max)
-}
-
-fn at(index: usize) -> Timestamp {
-    Timestamp::from_second(1_700_000_000 + index as i64 * 60).expect("a time")
 }
 
 /// What a run leaves: the durable journal and the share.
@@ -197,6 +93,7 @@ struct Executor<'r> {
 }
 
 /// The executor stopped (the process died) after carrying out an effect.
+#[derive(Debug)]
 struct Crashed;
 
 impl Executor<'_> {
@@ -235,7 +132,7 @@ impl Executor<'_> {
     /// Part `index`, ground now unless it was before (then the same reading again).
     fn part(&mut self, world: &mut World, index: usize) -> Result<Vec<Finished>, Crashed> {
         if world.parts.len() == index {
-            let raw = grind(index, &world.share.correction_um());
+            let raw = grind(index, &world.share.correction_um(), index == TORN);
             world.parts.push(raw);
         }
         let raw = world.parts[index].clone();
@@ -407,9 +304,9 @@ fn run(recipe: &Recipe, crash_after: Option<usize>) -> (World, LoopMemory, bool)
         effects_done: 0,
         crash_after: None,
     };
-    let resumed = exec.run(&mut world, in_flight);
-    let rest = resumed.and_then(|_| sequence(&mut exec, &mut world, in_flight));
-    assert!(rest.is_ok(), "no second stop is asked for");
+    let rest = exec.run(&mut world, in_flight);
+    rest.and_then(|_| sequence(&mut exec, &mut world, in_flight))
+        .expect("one stop a run");
     (world, exec.machine.memory().clone(), true)
 }
 
@@ -513,92 +410,4 @@ fn a_stop_after_any_effect_loses_nothing_and_learns_nothing_twice() {
         );
         k += 1;
     }
-}
-
-/// The order itself, effect by effect: the table is rendered, then one journal write holds
-/// the measurement, the table's record and the memory with it waiting; nothing is submitted
-/// until that write is reported durable, and a write that fails leaves nothing learned.
-#[test]
-fn nothing_reaches_the_share_before_its_write_is_durable() {
-    let recipe = Recipe::new();
-    let mut machine = FeatureMachine::new(recipe.config(), LoopMemory::new(WHEEL_MM));
-    let raw = grind(0, &[0.0; 360]);
-    fn gauged<'a>(recipe: &'a Recipe, raw: &'a RawMeasurement) -> Gauged<'a> {
-        Gauged {
-            setup: recipe.setup(),
-            raw,
-            sha256: measurement_sha256(raw),
-            part: PartId::new(&raw.header.part).ok(),
-            ground_with: None,
-            on_reserve: false,
-            at: at(0),
-        }
-    }
-    machine.handle(Input::Gauged(Box::new(gauged(&recipe, &raw))));
-    assert!(matches!(machine.poll_effect(), Some(Effect::Render(_))));
-    assert!(
-        machine.poll_effect().is_none(),
-        "nothing before the render's answer"
-    );
-    machine.handle(Input::Rendered {
-        version: TableVersion::FIRST,
-        table_number: 1,
-        text: "T1".into(),
-    });
-    let Some(Effect::Journal { ticket, records }) = machine.poll_effect() else {
-        panic!("the write-ahead comes next");
-    };
-    let kinds: Vec<&str> = records
-        .iter()
-        .map(|r| match r {
-            Record::Measurement { .. } => "measurement",
-            Record::Table(_) => "table",
-            Record::Learning { memory, .. } => {
-                assert_eq!(
-                    memory.waiting.as_ref().map(|w| w.version),
-                    Some(TableVersion::FIRST)
-                );
-                assert_eq!(memory.parts, 1);
-                "learning"
-            }
-            _ => "other",
-        })
-        .collect();
-    assert_eq!(kinds, ["measurement", "table", "learning"]);
-    assert!(
-        machine.poll_effect().is_none(),
-        "no submit before the write is durable"
-    );
-    assert_eq!(
-        machine.memory().parts,
-        0,
-        "nothing is the memory's before it is durable"
-    );
-    machine.handle(Input::JournalFailed {
-        ticket,
-        fenced_out: false,
-        reason: "disk full".into(),
-    });
-    let mut rest = Vec::new();
-    while let Some(e) = machine.poll_effect() {
-        rest.push(e);
-    }
-    assert!(
-        !rest
-            .iter()
-            .any(|e| matches!(e, Effect::Submit(_) | Effect::Deliver { .. })),
-        "{rest:?}"
-    );
-    assert!(matches!(
-        rest.last(),
-        Some(Effect::Finished(Finished::NotRecorded))
-    ));
-    assert_eq!(
-        machine.memory(),
-        &LoopMemory::new(WHEEL_MM),
-        "nothing learned"
-    );
-    // Sent again once the journal can be written, it is a new measurement, not a repeat.
-    machine.handle(Input::Gauged(Box::new(gauged(&recipe, &raw))));
-    assert!(matches!(machine.poll_effect(), Some(Effect::Render(_))));
 }
