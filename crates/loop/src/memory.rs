@@ -26,6 +26,9 @@ pub struct WaitingTable {
     pub learning: LearningState,
     /// Wheel radius it was made for, mm.
     pub wheel_radius_mm: f64,
+    /// With a speed plan: the virtual axis' speed its program was rendered for, rev/min.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub va_speed_rpm: Option<f64>,
 }
 
 /// The loop's memory (see the module doc).
@@ -61,6 +64,11 @@ pub struct LoopMemory {
     /// (it cannot name a shaft to resume).
     #[serde(default, deserialize_with = "lenient_part")]
     pub last_part: Option<PartId>,
+    /// With a speed plan: the virtual axis' speed the table in force was rendered for,
+    /// rev/min (a start compares it with the plan of the wheel believed, rather than read
+    /// the share's program back).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub in_force_va_speed_rpm: Option<f64>,
 }
 
 fn layout_one() -> u32 {
@@ -99,6 +107,7 @@ impl LoopMemory {
             previous: None,
             guard: None,
             last_part: None,
+            in_force_va_speed_rpm: None,
         }
     }
 
@@ -164,6 +173,7 @@ impl LoopMemory {
         self.in_force_version = Some(version);
         let w = self.waiting.take_if(|w| w.version == version)?;
         self.learning = w.learning;
+        self.in_force_va_speed_rpm = w.va_speed_rpm;
         Some(w.wheel_radius_mm)
     }
 }
@@ -267,6 +277,7 @@ mod tests {
             version: v(7),
             learning: next.clone(),
             wheel_radius_mm: 249.98,
+            va_speed_rpm: Some(49.75),
         });
         assert_eq!(m.delivered(v(6)), None);
         assert_eq!(m.in_force_version, Some(v(6)));
@@ -276,6 +287,7 @@ mod tests {
         );
         assert_eq!(m.delivered(v(7)), Some(249.98));
         assert_eq!(m.learning, next);
+        assert_eq!(m.in_force_va_speed_rpm, Some(49.75));
         assert!(m.waiting.is_none());
     }
 

@@ -40,6 +40,7 @@ fn nothing_reaches_the_share_before_its_write_is_durable() {
         version: TableVersion::FIRST,
         table_number: 1,
         text: "T1".into(),
+        va_speed_rpm: None,
     });
     let Some(Effect::Journal { ticket, records }) = machine.poll_effect() else {
         panic!("the write-ahead comes next");

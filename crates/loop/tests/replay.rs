@@ -181,6 +181,7 @@ fn carry_out(
                 version,
                 table_number,
                 text,
+                va_speed_rpm: None,
             })
         }
         Effect::Submit(record) => {

@@ -78,10 +78,16 @@ impl FeatureLoop {
         let version = version(self.share.history().next_version());
         let (table, planned) = match order.program {
             Program::Text { text, table_number } => {
+                // A rollback's program, made for the plan in force when there is one.
+                let va_speed_rpm = self
+                    .plan
+                    .pending_va_rpm
+                    .filter(|_| self.setup.speed_plan.enabled);
                 return Input::Rendered {
                     version,
                     table_number,
                     text,
+                    va_speed_rpm,
                 };
             }
             Program::Table { table, planned } => (table, planned),
@@ -107,6 +113,7 @@ impl FeatureLoop {
                     version,
                     table_number: settings.table_number,
                     text,
+                    va_speed_rpm: self.plan.pending_va_rpm,
                 }
             }
             Err(e) => Input::RenderFailed {

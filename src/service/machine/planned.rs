@@ -188,10 +188,12 @@ impl FeatureLoop {
         }
     }
 
-    /// The plan made at start for the wheel believed. The share's table program says the
-    /// VA speed it was made for; when that is this plan's, the main program takes it as on
-    /// the share. Returns true when the share's table is not this plan's (new limits, a
-    /// plan newly switched on, a program from before): it must be delivered again.
+    /// The plan made at start for the wheel believed. The memory says the VA speed the
+    /// table in force was rendered for (the feature's machine keeps it with the version, so
+    /// the share's program is never read back); when that is this plan's, the main program
+    /// takes it as on the share. Returns true when the table in force is not this plan's
+    /// (new limits, a plan newly switched on, a memory from before): it must be delivered
+    /// again.
     pub(super) fn plan_at_start(&mut self) -> anyhow::Result<bool> {
         if !self.setup.speed_plan.enabled {
             return Ok(false);
@@ -199,10 +201,9 @@ impl FeatureLoop {
         let law = self.plan_law()?;
         let va_speed_rpm = 60.0 / law.period_s();
         self.plan.pending_va_rpm = Some(va_speed_rpm);
-        let on_share = std::fs::read_to_string(self.program_path())
-            .ok()
-            .and_then(|text| va_speed_text(&text).map(str::to_string));
-        let same = on_share.as_deref() == Some(fmt_fixed(va_speed_rpm, 4).as_str());
+        let in_force = self.machine.memory().in_force_va_speed_rpm;
+        // As the programs write it: a plan made again for the same wheel is the same plan.
+        let same = in_force.map(|r| fmt_fixed(r, 4)) == Some(fmt_fixed(va_speed_rpm, 4));
         if same && self.machine.memory().waiting.is_none() {
             self.main.delivered(&self.setup.name, va_speed_rpm)?;
         }
@@ -216,30 +217,4 @@ fn law_for(setup: &FeatureSetup, wheel_radius_mm: f64) -> anyhow::Result<TimeLaw
     let part = feature.part(&setup.nominal)?;
     let limits = setup.speed_plan.limits(&setup.limits);
     Ok(speed_plan::plan(&part, &limits)?.law)
-}
-
-/// The VA speed a two-table program says it was made for, as written (rev/min).
-fn va_speed_text(text: &str) -> Option<&str> {
-    text.lines().find_map(|l| {
-        let rest = l
-            .strip_prefix("; camloop speed plan: ")?
-            .split_once(" at ")?
-            .1;
-        Some(rest.split_once(" rpm")?.0)
-    })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::va_speed_text;
-
-    #[test]
-    fn the_va_speed_is_read_from_the_table_program_as_written() {
-        let text = "PROC P(VAR INT CL_TNO, VAR INT CL_TNO_C) SAVE\n; camloop speed plan: VA at 49.7512 rpm, one revolution of C per revolution of VA\n";
-        assert_eq!(va_speed_text(text), Some("49.7512"));
-        assert_eq!(
-            va_speed_text("PROC P(VAR INT CL_TNO) SAVE\nCTABDEF(X,C,1,1)\n"),
-            None
-        );
-    }
 }

@@ -51,6 +51,8 @@ impl FeatureLoop {
                         version: version(w),
                         learning: adopt(&memory.learning, &t),
                         wheel_radius_mm: t.wheel_radius_mm,
+                        // Not known here: a start after its delivery makes it again.
+                        va_speed_rpm: None,
                     });
                 }
                 None => {

@@ -64,11 +64,13 @@ pub enum Input<'a> {
         fenced_out: bool,
         reason: String,
     },
-    /// The table of [`Effect::Render`] as the share will number it.
+    /// The table of [`Effect::Render`] as the share will number it; with a speed plan, the
+    /// virtual axis' speed its program was rendered for (rev/min).
     Rendered {
         version: TableVersion,
         table_number: u32,
         text: String,
+        va_speed_rpm: Option<f64>,
     },
     /// The table could not be rendered (a rule refused it): nothing was written.
     RenderFailed { reason: String },

@@ -179,8 +179,9 @@ impl FeatureMachine {
                     version,
                     table_number,
                     text,
+                    va_speed_rpm,
                 },
-            ) => self.rendered(d, version, table_number, text),
+            ) => self.rendered(d, version, (table_number, text), va_speed_rpm),
             (Stage::Rendering, Input::RenderFailed { reason }) => {
                 self.not_delivered(d, DeliveryError::Refused { reason })
             }
@@ -247,7 +248,13 @@ impl FeatureMachine {
 
     /// The table is rendered: its record and the memory with it waiting go to the journal
     /// in one write (with the part's records, when a part made it).
-    fn rendered(&mut self, mut d: Box<Delivery>, version: TableVersion, number: u32, text: String) {
+    fn rendered(
+        &mut self,
+        mut d: Box<Delivery>,
+        version: TableVersion,
+        (number, text): (u32, String),
+        va_speed_rpm: Option<f64>,
+    ) {
         let record = TableRecord {
             version,
             parent: d.parent,
@@ -266,6 +273,7 @@ impl FeatureMachine {
             version,
             learning: (*d.order.next).clone(),
             wheel_radius_mm: d.memory.wheel_radius_mm,
+            va_speed_rpm,
         });
         let mut records = d
             .part
