@@ -14,7 +14,7 @@ use camloop_core::ids::{PartId, TableVersion};
 use camloop_core::learn::StepOutcome;
 use camloop_core::levels::EventLevel;
 use camloop_core::measure::RawMeasurement;
-use camloop_core::turn::{self, Decision, HoldReason, Measured, TurnError, TurnSetup};
+use camloop_core::turn::{self, Decision, HoldReason, Measured, Turn, TurnError, TurnSetup};
 use jiff::Timestamp;
 
 /// A measurement routed to this feature.
@@ -131,6 +131,13 @@ impl FeatureMachine {
                 });
             }
         };
+        self.turned(&g, done);
+    }
+
+    /// The turn of a part that passed the checks: the step's memory and records, and its
+    /// table on its way when it made one.
+    fn turned(&mut self, g: &Gauged<'_>, done: Turn) {
+        let in_force = self.memory.in_force_version;
         let mut memory = self.memory.clone();
         let record = Record::Measurement {
             sha256: g.sha256,
@@ -139,7 +146,7 @@ impl FeatureMachine {
             ground_with: in_force,
             at: g.at,
         };
-        memory.measured(g.sha256, g.part);
+        memory.measured(g.sha256, g.part.clone());
         memory.previous = Some(done.measured.as_previous());
         let mut step = PartStep {
             part_no: memory.parts,
