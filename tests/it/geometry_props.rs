@@ -150,7 +150,10 @@ prop_compose! {
             nose_deg: f64::from(nose_deg) + if symmetric { 0.0 } else { nose_frac },
             rise_deg: f64::from(rise_deg),
             return_deg: f64::from(if symmetric { rise_deg } else { return_deg }),
-            nose_accel,
+            // P's x⁴ coefficient is 35 − 2.5·a: above a = 14 the lift dips below zero next to
+            // the base circle, which no cam has. The return's a grows with (β_return/β_rise)²,
+            // so a is capped to keep both sides' at most 13.
+            nose_accel: nose_accel.min(13.0 * (f64::from(rise_deg) / f64::from(if symmetric { rise_deg } else { return_deg })).powi(2)),
         };
         Draw { follower, base_radius_mm, wheel_radius_mm, roller_radius_mm, lobe }.made_valid()
     }
