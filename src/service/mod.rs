@@ -3,18 +3,21 @@
 //! graceful shutdown on SIGINT/SIGTERM that lets every machine finish the part in hand.
 
 mod access_setup;
+pub mod backlog;
 pub(crate) use access_setup::seal_dir;
 pub(crate) mod action;
 pub mod app;
 mod cluster_task;
 pub(crate) mod command;
 mod drop_source;
+pub mod health;
 pub mod http;
 pub mod journal;
 mod lease_keeper;
 pub mod machine;
 pub mod metrics;
 pub mod mqtt;
+pub(crate) mod offload;
 pub mod opcua;
 pub mod plant;
 pub(crate) mod runner;
@@ -284,6 +287,7 @@ async fn machine_task(
     mut commands: mpsc::Receiver<(MachineCommand, command::Reply)>,
     source_done: tokio::sync::oneshot::Sender<()>,
     mut shutdown: watch::Receiver<bool>,
+    metrics: &Metrics,
 ) {
     let mut retry = tokio::time::interval(RETRY_EVERY);
     // After a pause (a stopped process, a suspended VM) one retry, not one per tick missed.
@@ -294,7 +298,13 @@ async fn machine_task(
             biased;
             event = rx.recv(), if source_done.is_some() => match event {
                 Some(_) if machine.fenced_out() => return fenced_out(&machine),
-                Some(e) => machine.handle(e).await,
+                Some(e) => {
+                    let measurement = matches!(e, SourceEvent::Measurement { .. });
+                    offload::drive(machine.handle(e)).await;
+                    if measurement {
+                        metrics.backlog.recorded(&machine.name);
+                    }
+                }
                 None => {
                     if let Some(done) = source_done.take() {
                         let _ = done.send(());
@@ -302,20 +312,20 @@ async fn machine_task(
                 }
             },
             Some((command, reply)) = commands.recv() => {
-                let _ = reply.send(carry_out(&mut machine, command).await);
+                let _ = reply.send(offload::drive(carry_out(&mut machine, command)).await);
             }
             _ = retry.tick() => {
                 if machine.fenced_out() {
                     return fenced_out(&machine);
                 }
-                machine.retry().await;
+                offload::drive(machine.retry()).await;
             }
             _ = shutdown.changed() => break,
         }
     }
     // Whatever is still waiting gets one more try before the process ends.
     if !machine.fenced_out() {
-        machine.retry().await;
+        offload::drive(machine.retry()).await;
     }
 }
 

@@ -4,6 +4,7 @@
 //! says its copy is durable. Records read back after a crash may already be in the store;
 //! they are checked before being written again, so a replay never duplicates history.
 
+mod commit;
 mod record;
 mod reserve;
 
@@ -161,19 +162,14 @@ impl Journal {
         Ok(())
     }
 
-    /// Appends and syncs `bytes`; on failure the file is cut back to where it was, so a
-    /// partial line never glues itself to the next record.
+    /// Appends and syncs `bytes` through the process's group commit (see [`commit`]):
+    /// returns once they are durable, batched with whatever other journals append meanwhile;
+    /// on failure the file is cut back to where it was, so a partial line never glues itself
+    /// to the next record.
     fn write(&self, bytes: &[u8]) -> std::io::Result<()> {
-        let mut file = std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(&self.path)?;
-        let before = file.metadata()?.len();
-        let result = file.write_all(bytes).and_then(|()| file.sync_data());
-        if result.is_err() {
-            let _ = file.set_len(before);
-        }
-        result
+        commit::GroupCommit::global()
+            .submit(&self.path, bytes.to_vec())
+            .wait()
     }
 
     /// Whether the journal is running on its reserve: the disk was full, and only the space
@@ -340,6 +336,18 @@ impl Journal {
             .with_context(|| format!("cannot replace journal {}", self.path.display()))?;
         Ok(())
     }
+}
+
+/// What the process's group commit has done so far: appends made durable, syncs issued,
+/// batches written (for `/metrics`).
+pub(crate) fn commit_totals() -> (u64, u64, u64) {
+    use std::sync::atomic::Ordering::Relaxed;
+    let s = commit::GroupCommit::global().stats();
+    (
+        s.appends.load(Relaxed),
+        s.syncs.load(Relaxed),
+        s.batches.load(Relaxed),
+    )
 }
 
 /// The quarantine file beside the journal.

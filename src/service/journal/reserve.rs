@@ -38,11 +38,8 @@ impl DiskReserve {
             self.in_use = false;
             return true;
         }
-        let written = std::fs::File::create(&self.path).and_then(|mut f| {
-            let block = vec![0u8; 64 * 1024];
-            for _ in 0..RESERVE_BYTES / block.len() as u64 {
-                f.write_all(&block)?;
-            }
+        let written = std::fs::File::create(&self.path).and_then(|f| {
+            allocate(&f)?;
             f.sync_all()
         });
         if written.is_err() {
@@ -58,4 +55,25 @@ impl DiskReserve {
         self.in_use = true;
         had && std::fs::remove_file(&self.path).is_ok()
     }
+}
+
+/// Takes [`RESERVE_BYTES`] of real blocks for `f`: `fallocate` where the file system has it
+/// (no data written, so a plant's thousand journals open in moments), else zeros written.
+fn allocate(mut f: &std::fs::File) -> std::io::Result<()> {
+    #[cfg(target_os = "linux")]
+    {
+        use nix::fcntl::{FallocateFlags, fallocate};
+        let len = i64::try_from(RESERVE_BYTES).expect("the reserve size fits an off_t");
+        match fallocate(f, FallocateFlags::empty(), 0, len) {
+            Ok(()) => return Ok(()),
+            // Not supported here (some network file systems): write the zeros instead.
+            Err(nix::errno::Errno::EOPNOTSUPP) => {}
+            Err(e) => return Err(e.into()),
+        }
+    }
+    let block = vec![0u8; 64 * 1024];
+    for _ in 0..RESERVE_BYTES / block.len() as u64 {
+        f.write_all(&block)?;
+    }
+    Ok(())
 }
