@@ -62,17 +62,6 @@ impl Runner {
         names
     }
 
-    /// Starts machine `name` (fenced with `fence` in a cluster). The receiver says when its
-    /// gauge source ended (a simulated run with a part count).
-    pub(super) async fn start(
-        &self,
-        name: &str,
-        fence: Option<crate::share::Fence>,
-    ) -> anyhow::Result<oneshot::Receiver<()>> {
-        let opened = self.open(name, fence).await?;
-        self.launch(opened)
-    }
-
     /// Opens machine `name`'s loop (journal, share state, memory): the slow part of a start,
     /// which several machines may do at once.
     pub(super) async fn open(
