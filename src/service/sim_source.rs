@@ -6,6 +6,7 @@
 //! would deliver it.
 
 use super::machine::{GroundWith, MachineLoop, SourceEvent};
+use super::offload;
 use super::sources::Intake;
 use crate::core::compensate::Feature;
 use crate::gauge::{Assembled, Assembler, GaugeDbc};
@@ -112,7 +113,7 @@ impl SimSource {
             }
             // The control runs the main program, which calls the table programs: the tables
             // it couples are what gets ground, at the stations where Z stands.
-            let Some(grinds) = self.run_control(&mut control) else {
+            let Some(grinds) = offload::blocking(|| self.run_control(&mut control)) else {
                 continue;
             };
             runs += 1;
@@ -181,7 +182,10 @@ impl SimSource {
             }
             if let Some(k) = self.station_at(&coupled) {
                 *gauged += 1;
-                let event = self.grind_and_gauge(sim, run.dbc, &coupled, k, run.shaft, *gauged);
+                // The grinding is computed and the share's programs read off the async workers.
+                let event = offload::blocking(|| {
+                    self.grind_and_gauge(sim, run.dbc, &coupled, k, run.shaft, *gauged)
+                });
                 if let Some(m) = event
                     && !send_and_wait(run.tx, m, ground_with).await
                 {
