@@ -80,6 +80,8 @@ pub struct Running {
     retention: tokio::task::JoinHandle<()>,
     store: StoreHandle,
     opcua: Option<opcua::OpcUa>,
+    /// The disk reserve every journal of this service shares.
+    _reserve: journal::SharedReserve,
 }
 
 impl Running {
@@ -162,6 +164,8 @@ async fn begin(checked: Checked, options: RunOptions) -> anyhow::Result<Starting
     let metrics = Arc::new(Metrics::default());
     startup::machines_opening(&metrics, 0, config.machines.len());
     access_setup::private_var_dir(&config)?;
+    // Before any machine opens: their journals share this one reserve.
+    let reserve = journal::share_reserve_under(&config.machines_dir());
     let (store, connector, retention) =
         startup::start_store(&config, options.accept_new_database, &shutdown_rx).await?;
 
@@ -220,6 +224,7 @@ async fn begin(checked: Checked, options: RunOptions) -> anyhow::Result<Starting
         connector,
         retention,
         store,
+        reserve,
     })
 }
 
@@ -242,6 +247,7 @@ pub struct Starting {
     connector: tokio::task::JoinHandle<()>,
     retention: tokio::task::JoinHandle<()>,
     store: StoreHandle,
+    reserve: journal::SharedReserve,
 }
 
 impl Starting {
@@ -264,6 +270,7 @@ impl Starting {
             connector,
             retention,
             store,
+            reserve,
         } = self;
         let (machines, sources_done) =
             startup::start_machines(&config, runner, cluster_view, &metrics, &shutdown_rx).await?;
@@ -281,6 +288,7 @@ impl Starting {
             retention,
             store,
             opcua,
+            _reserve: reserve,
         })
     }
 }

@@ -10,8 +10,7 @@ mod reserve;
 
 pub use record::{EventKind, Pending};
 use record::{apply, apply_once};
-use reserve::DiskReserve;
-pub use reserve::RESERVE_BYTES;
+pub use reserve::{RESERVE_BYTES, SharedReserve, share_under as share_reserve_under};
 
 use crate::failpoint::crash_point;
 use crate::share::{Fence, Held};
@@ -34,7 +33,7 @@ pub struct Journal {
     written: usize,
     replayed: usize,
     quarantined: Vec<Quarantined>,
-    reserve: DiskReserve,
+    reserve: SharedReserve,
     /// With several instances: this owner's fence, held around every write (the file and the
     /// store), so an instance that lost the machine writes nothing more for it.
     fence: Option<Fence>,
@@ -75,8 +74,7 @@ impl Journal {
                 }),
             }
         }
-        let mut reserve = DiskReserve::new(dir.join(reserve::RESERVE_FILE));
-        reserve.ensure();
+        let reserve = reserve::for_journal(dir);
         let mut journal = Self {
             path,
             replayed: records.len(),
@@ -151,7 +149,9 @@ impl Journal {
             text.push('\n');
         }
         match self.write(text.as_bytes()) {
-            Err(e) if is_disk_full(&e) && self.reserve.release() => self.write(text.as_bytes()),
+            Err(e) if is_disk_full(&e) && self.reserve_lock().release() => {
+                self.write(text.as_bytes())
+            }
             other => other,
         }
         .with_context(|| format!("cannot write journal {}", self.path.display()))?;
@@ -176,13 +176,18 @@ impl Journal {
     /// given up by the reserve file keeps records durable. Bounded: the machine records
     /// measurements and stops learning until [`Self::restore_reserve`] succeeds.
     pub(crate) fn on_reserve(&self) -> bool {
-        self.reserve.in_use()
+        self.reserve_lock().in_use()
     }
 
     /// Tries to write the reserve again (space was freed); true when the journal is off its
     /// reserve.
     pub(crate) fn restore_reserve(&mut self) -> bool {
-        self.reserve.ensure()
+        self.reserve_lock().ensure()
+    }
+
+    fn reserve_lock(&self) -> std::sync::MutexGuard<'_, reserve::DiskReserve> {
+        // Every change is one flag and one file: a panic elsewhere leaves it usable.
+        self.reserve.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     /// Records not yet written to the database, oldest first.
