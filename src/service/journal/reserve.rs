@@ -136,11 +136,14 @@ mod tests {
             RESERVE_BYTES
         );
         assert!(!root.join("M1/IN1").join(RESERVE_FILE).exists());
+        // A journal's folder exists before its reserve is taken (`Journal::open` makes it).
         let elsewhere = dir.path().join("other");
+        std::fs::create_dir_all(&elsewhere).unwrap();
         let own = for_journal(&elsewhere);
         assert!(!Arc::ptr_eq(&own, &shared));
         assert!(elsewhere.join(RESERVE_FILE).exists());
         drop((shared, a, b));
+        std::fs::create_dir_all(root.join("M3/IN1")).unwrap();
         let later = for_journal(&root.join("M3/IN1"));
         assert!(root.join("M3/IN1").join(RESERVE_FILE).exists());
         drop(later);
