@@ -18,8 +18,8 @@ Prints, for one run of SECONDS (default 90) after every machine is open:
 Everything runs in a temporary folder on loopback; nothing is left behind.
 """
 
+import json
 import os
-import re
 import socket
 import sqlite3
 import subprocess
@@ -105,6 +105,11 @@ def metric_sum(text, name):
     return sum(float(l.split()[-1]) for l in text.splitlines() if l.startswith(name + "{"))
 
 
+def metric_total(text, name):
+    """A metric without labels (0 when this build does not have it)."""
+    return sum(float(l.split()[-1]) for l in text.splitlines() if l.split(" ")[0] == name)
+
+
 def stored_rows(dir):
     try:
         db = sqlite3.connect(f"file:{dir}/var/camloop.db?mode=ro", uri=True, timeout=10)
@@ -141,12 +146,14 @@ def plant(dir, machines, seconds):
                 unanswered[0] += 1 if first_answer[0] is not None else 0
             else:
                 latencies.append(ms)
-                status = re.search(r'"status":"(\w+)"', body)
-                status = status.group(1) if status else "?"
-                statuses.append(status)
+                health = json.loads(body)
+                statuses.append(health.get("status", "?"))
                 if first_answer[0] is None:
                     first_answer[0] = at
-                if status != "starting" and all_open[0] is None:
+                # Open once the machines' component is ok (a build without components: at
+                # its first answer, which came only once they were open).
+                machines = [c for c in health.get("components", []) if c["name"] == "machines"]
+                if all_open[0] is None and all(c["state"] == "ok" for c in machines):
                     all_open[0] = at
             stop.wait(1.0)
 
@@ -185,6 +192,13 @@ def plant(dir, machines, seconds):
             + metric_sum(text, "camloop_measurements_rejected_total")
         )
     stored = stored_rows(dir)
+    if text is not None:
+        print(
+            f"plant {machines}: at the end: {metric_total(text, 'camloop_measurements_waiting'):.0f} "
+            f"measurements waiting, the oldest for {metric_total(text, 'camloop_oldest_waiting_seconds'):.1f} s; "
+            f"journal: {metric_total(text, 'camloop_journal_appends_total'):.0f} appends in "
+            f"{metric_total(text, 'camloop_journal_syncs_total'):.0f} syncs"
+        )
     print(
         f"plant {machines}: start-up: first /healthz answer {first_answer[0]:.1f} s, "
         f"every machine open {all_open[0]:.1f} s"
