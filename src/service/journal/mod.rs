@@ -34,6 +34,9 @@ pub struct Journal {
     replayed: usize,
     quarantined: Vec<Quarantined>,
     reserve: SharedReserve,
+    /// When the newest record this journal wrote to the store was committed: a checkpoint
+    /// started after it covers every written record.
+    committed_by: Option<std::time::Instant>,
     /// With several instances: this owner's fence, held around every write (the file and the
     /// store), so an instance that lost the machine writes nothing more for it.
     fence: Option<Fence>,
@@ -80,6 +83,7 @@ impl Journal {
             replayed: records.len(),
             records,
             written: 0,
+            committed_by: None,
             quarantined: Vec::new(),
             fence: None,
             reserve,
@@ -222,6 +226,7 @@ impl Journal {
             match result {
                 Ok(()) => {
                     crash_point(record.committed_step());
+                    self.committed_by = Some(std::time::Instant::now());
                     flushed.written += 1;
                     self.written += 1;
                     i += 1;
@@ -283,7 +288,10 @@ impl Journal {
     pub async fn release_durable(&mut self, store: &Store) -> anyhow::Result<usize> {
         let written = self.written;
         let _held = self.hold()?;
-        if written == 0 || !store.checkpoint().await? {
+        // Shared with every other journal releasing meanwhile: one checkpoint covers all
+        // that was committed before it started.
+        let committed_by = self.committed_by.unwrap_or_else(std::time::Instant::now);
+        if written == 0 || !store.checkpoint_covering(committed_by).await? {
             return Ok(0);
         }
         self.forget(written)?;
