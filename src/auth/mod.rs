@@ -1,6 +1,6 @@
 //! Who someone is: user names, password rules and hashes (argon2id), API tokens and their
-//! digests, the lockout after repeated failures (`lockout`), and where hashes run
-//! (`hasher`). The HTTP side (`service::http::access`), the OPC UA users and the commands
+//! digests, the lockout after repeated failures (`lockout`), where hashes run (`hasher`),
+//! and the one-time values of the sign-in form (`nonce`). The HTTP side (`service::http::access`), the OPC UA users and the commands
 //! (`camloop user`, `camloop token`) all use these; the store keeps only hashes.
 //!
 //! Passwords are hashed with argon2id (the `argon2` crate's defaults: 19 MiB, 2 passes, a
@@ -17,9 +17,11 @@ use std::fmt;
 
 mod hasher;
 mod lockout;
+mod nonce;
 
 pub use hasher::{Busy, Hasher};
 pub use lockout::{Attempt, Client, Counted, LOCKOUT_FAILURES, LOCKOUT_WINDOW, Lockout, Refused};
+pub use nonce::{MAX_NONCES, NONCE_LIFETIME, NonceRefused, Nonces};
 
 /// Shortest password accepted, characters.
 pub(crate) const MIN_PASSWORD_CHARS: usize = 12;

@@ -9,7 +9,7 @@
 
 use super::AppState;
 use super::api::ApiError;
-use super::session::{SESSION_COOKIE, cookie};
+use super::session::{Binding, Listener, cookie, session_cookie_name};
 use crate::auth::{Counted, Hasher, Lockout, effective_role, token_digest};
 use crate::config::Secret;
 use crate::service::http::ApiCode;
@@ -36,6 +36,8 @@ pub struct AuthState {
     /// How long a session lasts after sign-in.
     pub session: jiff::SignedDuration,
     pub sessions: super::session::Sessions,
+    /// The sign-in form's one-time values, issued by `GET /signin`.
+    pub signin_nonces: crate::auth::Nonces,
     pub lockout: Lockout,
     /// Where password hashes run: one per core at a time.
     pub hasher: Hasher,
@@ -53,6 +55,7 @@ impl AuthState {
             secure_cookie: false,
             session: jiff::SignedDuration::from_hours(8),
             sessions: Default::default(),
+            signin_nonces: Default::default(),
             lockout: Lockout::default(),
             hasher: Hasher::default(),
             audit_seal: std::sync::Arc::new(crate::audit_seal::AuditSeal::ephemeral()),
@@ -171,7 +174,11 @@ pub async fn guard(State(app): State<AppState>, mut req: Request, next: Next) ->
         .into_response();
     };
     let address = client_address(req.extensions());
-    let principal = match identify(&app, req.headers(), address).await {
+    let at = Binding {
+        client: address,
+        listener: req.extensions().get::<Listener>().map(|l| l.0),
+    };
+    let principal = match identify(&app, req.headers(), at).await {
         Ok(p) => p,
         Err(e) => return e.into_response(),
     };
@@ -242,12 +249,9 @@ fn encode_path(path: &str) -> String {
 }
 
 /// The caller: by bearer token, else by session cookie, else anonymous.
-async fn identify(
-    app: &AppState,
-    headers: &HeaderMap,
-    address: IpAddr,
-) -> Result<Principal, ApiError> {
+async fn identify(app: &AppState, headers: &HeaderMap, at: Binding) -> Result<Principal, ApiError> {
     let auth = &app.auth;
+    let address = at.client;
     if let Some(value) = headers.get(header::AUTHORIZATION) {
         let token = value
             .as_bytes()
@@ -255,9 +259,9 @@ async fn identify(
             .unwrap_or_default();
         return bearer(app, std::str::from_utf8(token).unwrap_or(""), address).await;
     }
-    if let Some(key) = cookie(headers, SESSION_COOKIE) {
+    if let Some(key) = cookie(headers, session_cookie_name(auth.secure_cookie)) {
         let now = crate::clock::now();
-        if let Some(s) = auth.sessions.get(&key, now) {
+        if let Some(s) = auth.sessions.get(&key, now, at) {
             // The user may have been disabled, or their password changed, since sign-in (by
             // the command line): either ends the session.
             let store = super::routes::store(app).await?;
