@@ -1,6 +1,7 @@
 //! Who someone is: user names, password rules and hashes (argon2id), API tokens and their
 //! digests, the lockout after repeated failures (`lockout`), where hashes run (`hasher`),
-//! and the one-time values of the sign-in form (`nonce`). The HTTP side (`service::http::access`), the OPC UA users and the commands
+//! the one-time values of the sign-in form (`nonce`), and how many refusals the audit trail
+//! takes (`refusals`). The HTTP side (`service::http::access`), the OPC UA users and the commands
 //! (`camloop user`, `camloop token`) all use these; the store keeps only hashes.
 //!
 //! Passwords are hashed with argon2id (the `argon2` crate's defaults: 19 MiB, 2 passes, a
@@ -18,10 +19,12 @@ use std::fmt;
 mod hasher;
 mod lockout;
 mod nonce;
+mod refusals;
 
 pub use hasher::{Busy, Hasher};
 pub use lockout::{Attempt, Client, Counted, LOCKOUT_FAILURES, LOCKOUT_WINDOW, Lockout, Refused};
 pub use nonce::{MAX_NONCES, NONCE_LIFETIME, NonceRefused, Nonces};
+pub use refusals::{Admit, PER_CLIENT_PER_MINUTE, RefusalBudget, TOTAL_PER_MINUTE};
 
 /// Shortest password accepted, characters.
 pub(crate) const MIN_PASSWORD_CHARS: usize = 12;

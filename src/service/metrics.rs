@@ -199,6 +199,8 @@ pub struct AccessMetrics {
     pub lockouts_total: u64,
     /// Audit rows that could not be written (the database was unreachable).
     pub audit_failures_total: u64,
+    /// Refusals counted but not audited: their client was over the audit's budget.
+    pub refusals_unrecorded_total: u64,
 }
 
 impl Metrics {
@@ -269,6 +271,12 @@ impl Metrics {
             "# HELP {name} Audit rows that could not be stored.\n# TYPE {name} counter\n{name} {}",
             a.audit_failures_total
         );
+        let name = "camloop_audit_refusals_unrecorded_total";
+        let _ = writeln!(
+            s,
+            "# HELP {name} Refused attempts not audited: their client was over the audit's budget for refusals.\n# TYPE {name} counter\n{name} {}",
+            a.refusals_unrecorded_total
+        );
     }
 
     /// The text exposition format (version 0.0.4).
@@ -315,7 +323,7 @@ mod tests {
             text.contains("camloop_last_max_error_um{machine=\"M1\"} 0.5\n"),
             "{text}"
         );
-        assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 3);
+        assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 4);
         m.update_feature(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), |f| {
             f.last_max_error_um = Some(0.7);
             f.blocked_by_guard = Some("correction at its limit".into());

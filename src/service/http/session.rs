@@ -250,6 +250,15 @@ pub(super) async fn signin(
             |e| e.to_string(),
         );
         warn!(client = %address, why, "sign-in refused: CSRF check");
+        let p = Principal {
+            actor: "anonymous".into(),
+            role: None,
+            address,
+            via: Via::Anonymous,
+        };
+        let reason = format!("sign-in of {}: {why}", super::access::short(&form.name));
+        let entry = p.audit("csrf", AuditResult::Refused, reason);
+        super::audit::record_refusal(&app, entry).await;
         let message =
             "The form was not sent from this site's sign-in page (CSRF check). Try again.";
         let next = form.next.as_deref();
