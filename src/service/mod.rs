@@ -147,6 +147,9 @@ pub(crate) async fn start_checked(
         startup::start_store(&config, options.accept_new_database, &shutdown_rx).await?;
 
     let publisher = startup::start_mqtt(&config, &shutdown_rx)?;
+    if let Some(p) = &publisher {
+        p.report_to(metrics.clone());
+    }
 
     // OPC UA: the loops feed it from their start; the server starts with the API state.
     let (opcua_events, opcua_intake) = opcua::prepare(&config, &checked_machines)?;

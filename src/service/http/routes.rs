@@ -34,7 +34,10 @@ pub(super) struct Health {
 pub(super) async fn healthz(State(state): State<AppState>) -> Json<Health> {
     let up = state.store.read().await.is_some();
     Json(Health {
-        status: "ok",
+        status: match state.metrics.mqtt_degraded() {
+            true => "degraded",
+            false => "ok",
+        },
         database: if up { "up" } else { "down" },
         machines: state.machines.len(),
     })
