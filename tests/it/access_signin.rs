@@ -16,7 +16,12 @@ const PASSWORD: &str = "a-password-of-the-right-length";
 
 /// `POST /signin` of eng from `from` with `nonce` as both cookie and form value: the answer.
 async fn post_signin(addr: SocketAddr, from: IpAddr, nonce: &str) -> String {
-    let body = format!("name=eng&password={PASSWORD}&csrf={nonce}");
+    post_signin_to(addr, from, nonce, "%2F").await
+}
+
+/// The same, going to `next` (urlencoded) after.
+async fn post_signin_to(addr: SocketAddr, from: IpAddr, nonce: &str, next: &str) -> String {
+    let body = format!("name=eng&password={PASSWORD}&csrf={nonce}&next={next}");
     let request = format!(
         "POST /signin HTTP/1.1\r\nHost: localhost\r\nCookie: camloop_signin={nonce}\r\nContent-Type: application/x-www-form-urlencoded\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
         body.len()
@@ -79,6 +84,12 @@ async fn only_a_nonce_the_service_issued_to_this_address_signs_in_once() {
     // A value issued to another address.
     let elsewhere = issued(addr, there).await;
     assert_eq!(status(&post_signin(addr, here, &elsewhere).await), 403);
+    // A `next` with a tab or a newline is refused before anything is checked or made.
+    for next in ["%2Fa%09b", "%2Fa%0D%0ASet-Cookie:x=1"] {
+        let answer = post_signin_to(addr, here, &issued(addr, here).await, next).await;
+        assert_eq!(status(&answer), 400, "{answer}");
+        assert!(set_cookie(&answer, "camloop_session").is_none(), "{answer}");
+    }
     // The value issued here signs in, once.
     let nonce = issued(addr, here).await;
     let answer = post_signin(addr, here, &nonce).await;

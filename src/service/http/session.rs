@@ -178,6 +178,7 @@ fn local_path(next: Option<&str>) -> String {
             if p.starts_with('/')
                 && !p.starts_with("//")
                 && !p.contains('\\')
+                && !p.contains(char::is_control)
                 && p.len() <= 512 =>
         {
             p.to_string()
@@ -237,6 +238,17 @@ pub(super) async fn signin(
     let expected = cookie(req.headers(), SIGNIN_COOKIE).unwrap_or_default();
     let listener = req.extensions().get::<Listener>().map(|l| l.0);
     let Form(form) = read_form::<SigninForm>(req, &app).await?;
+    // Refused before anything is checked or made: a `Location` cannot carry it.
+    if form
+        .next
+        .as_deref()
+        .is_some_and(|n| n.contains(char::is_control))
+    {
+        return Err(ApiError::new(
+            ApiCode::InvalidBody,
+            "next: control characters (tab, newline) are not allowed in a path".into(),
+        ));
+    }
     let now = crate::clock::now();
     let issued = app.auth.signin_nonces.take(&form.csrf, address, now);
     if expected.is_empty()
@@ -492,7 +504,14 @@ mod tests {
             local_path(Some("/machines/M1/features/IN1")),
             "/machines/M1/features/IN1"
         );
-        for bad in ["//evil.example/", "https://evil.example/", "/\\evil", ""] {
+        for bad in [
+            "//evil.example/",
+            "https://evil.example/",
+            "/\\evil",
+            "",
+            "/a\tb",
+            "/a\nb",
+        ] {
             assert_eq!(local_path(Some(bad)), "/", "{bad}");
         }
         assert_eq!(local_path(None), "/");
