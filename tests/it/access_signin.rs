@@ -113,3 +113,47 @@ async fn only_a_nonce_the_service_issued_to_this_address_signs_in_once() {
     store.close().await;
     running.stop().await;
 }
+
+/// `camloop user passwd` (the command line, beside the running service) ends the user's
+/// dashboard sessions: the next request of the session is anonymous.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_password_changed_on_the_command_line_ends_the_users_sessions() {
+    let dir = tempfile::tempdir().unwrap();
+    let url = format!("sqlite://{}/var/camloop.db?mode=rwc", dir.path().display());
+    let config = sim_config(dir.path(), &url, 20, 3, |_| None);
+    let mut running = service::start(config, RunOptions::parts(1)).await.unwrap();
+    running.machines_done().await;
+    let addr = running.http_addr;
+    let store = Store::connect(&url).await.unwrap();
+    let hash = hash_password(PASSWORD).unwrap();
+    store
+        .add_user("eng", Role::Engineer, &hash, camloop::clock::now())
+        .await
+        .unwrap();
+    let here: IpAddr = "127.0.0.1".parse().unwrap();
+    let answer = post_signin(addr, here, &issued(addr, here).await).await;
+    let key = set_cookie(&answer, "camloop_session").expect("signed in");
+    assert_eq!(who(addr, here, &key).await, "eng");
+
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_camloop"))
+        .args(["user", "passwd", "eng", "--database", &url, "--audit-dir"])
+        .arg(dir.path().join("var"))
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    use std::io::Write as _;
+    let mut stdin = child.stdin.take().unwrap();
+    writeln!(stdin, "a-new-long-enough-secret").unwrap();
+    drop(stdin);
+    let done = child.wait_with_output().unwrap();
+    assert!(
+        done.status.success(),
+        "{}",
+        String::from_utf8_lossy(&done.stderr)
+    );
+    assert_eq!(who(addr, here, &key).await, serde_json::Value::Null);
+    store.close().await;
+    running.stop().await;
+}
