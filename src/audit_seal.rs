@@ -43,6 +43,8 @@ pub enum SealError {
 pub struct AuditSeal {
     key: AuditKey,
     head: Option<PathBuf>,
+    /// How many refused attempts the trail takes per client (a flood must not fill the disk).
+    refusals: crate::auth::RefusalBudget,
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> SealError + '_ {
@@ -85,6 +87,7 @@ impl AuditSeal {
         Ok(Some(Self {
             key,
             head: Some(dir.join(HEAD_FILE)),
+            refusals: Default::default(),
         }))
     }
 
@@ -97,11 +100,29 @@ impl AuditSeal {
         Self {
             key: AuditKey::from_bytes(bytes),
             head: None,
+            refusals: Default::default(),
         }
     }
 
     pub fn key(&self) -> &AuditKey {
         &self.key
+    }
+
+    /// `entry`, a refusal, if the trail takes it within the budget for refusals of its
+    /// client (see `crate::auth::RefusalBudget`), its reason saying how many of that
+    /// client's refusals before it were not recorded; `None`: count it only.
+    pub fn within_refusal_budget(&self, mut entry: AuditEntry) -> Option<AuditEntry> {
+        match self.refusals.admit(&entry.client, entry.at_ms) {
+            crate::auth::Admit::Record { unrecorded_before } => {
+                if unrecorded_before > 0 {
+                    entry.reason.push_str(&format!(
+                        "; {unrecorded_before} refusals of this client before this one were not recorded (over the audit's budget)"
+                    ));
+                }
+                Some(entry)
+            }
+            crate::auth::Admit::Skip => None,
+        }
     }
 
     /// The head kept in the seal's folder, if there is one. A head not signed by this key

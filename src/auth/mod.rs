@@ -1,6 +1,7 @@
 //! Who someone is: user names, password rules and hashes (argon2id), API tokens and their
-//! digests, the lockout after repeated failures (`lockout`), and where hashes run
-//! (`hasher`). The HTTP side (`service::http::access`), the OPC UA users and the commands
+//! digests, the lockout after repeated failures (`lockout`), where hashes run (`hasher`),
+//! the one-time values of the sign-in form (`nonce`), and how many refusals the audit trail
+//! takes (`refusals`). The HTTP side (`service::http::access`), the OPC UA users and the commands
 //! (`camloop user`, `camloop token`) all use these; the store keeps only hashes.
 //!
 //! Passwords are hashed with argon2id (the `argon2` crate's defaults: 19 MiB, 2 passes, a
@@ -17,9 +18,13 @@ use std::fmt;
 
 mod hasher;
 mod lockout;
+mod nonce;
+mod refusals;
 
 pub use hasher::{Busy, Hasher};
 pub use lockout::{Attempt, Client, Counted, LOCKOUT_FAILURES, LOCKOUT_WINDOW, Lockout, Refused};
+pub use nonce::{MAX_NONCES, NONCE_LIFETIME, NonceRefused, Nonces};
+pub use refusals::{Admit, PER_CLIENT_PER_MINUTE, RefusalBudget, TOTAL_PER_MINUTE};
 
 /// Shortest password accepted, characters.
 pub(crate) const MIN_PASSWORD_CHARS: usize = 12;
@@ -54,6 +59,14 @@ impl fmt::Display for UserName {
 pub enum AuthError {
     #[error("the password has {chars} characters; at least {MIN_PASSWORD_CHARS} are needed")]
     PasswordTooShort { chars: usize },
+    #[error("the password is only white space")]
+    PasswordBlank,
+    #[error("the password is, or contains, the user name `{user}`")]
+    PasswordHasUserName { user: String },
+    #[error(
+        "the password is too easy to guess (strength {score} of 4, at least {MIN_PASSWORD_SCORE} needed){hint}"
+    )]
+    PasswordWeak { score: u8, hint: String },
     #[error("the operating system's random source failed: {0}")]
     Random(String),
     #[error("password hashing failed: {0}")]
@@ -69,8 +82,52 @@ pub(crate) fn check_password(password: &str) -> Result<(), AuthError> {
     Ok(())
 }
 
+/// The least strength (zxcvbn's score, 0–4) a person's new password needs: 3 is "safely
+/// unguessable", about 10^10 guesses, years against argon2id at 19 MiB a check.
+pub(crate) const MIN_PASSWORD_SCORE: u8 = 3;
+
+/// The password policy for a password a person chooses for `user`: the length rule, not
+/// blank, not containing the user name (in any case), and a strength estimate (zxcvbn: its
+/// dictionaries of common passwords, names and words are the deny-list, with repeats,
+/// sequences, keyboard patterns and dates) of at least [`MIN_PASSWORD_SCORE`].
+pub(crate) fn check_new_password(password: &str, user: &UserName) -> Result<(), AuthError> {
+    check_password(password)?;
+    if password.trim().is_empty() {
+        return Err(AuthError::PasswordBlank);
+    }
+    if password
+        .to_lowercase()
+        .contains(&user.as_str().to_lowercase())
+    {
+        return Err(AuthError::PasswordHasUserName {
+            user: user.to_string(),
+        });
+    }
+    let estimate = zxcvbn::zxcvbn(password, &[user.as_str(), "camloop"]);
+    let score = u8::from(estimate.score());
+    if score < MIN_PASSWORD_SCORE {
+        let hint = estimate.feedback().map_or(String::new(), |f| {
+            let mut parts: Vec<String> = f.warning().map(|w| w.to_string()).into_iter().collect();
+            parts.extend(f.suggestions().iter().map(|s| s.to_string()));
+            match parts.is_empty() {
+                true => String::new(),
+                false => {
+                    let said: Vec<String> = parts
+                        .iter()
+                        .map(|p| p.trim_end_matches('.').to_lowercase())
+                        .collect();
+                    format!(": {}", said.join("; "))
+                }
+            }
+        });
+        return Err(AuthError::PasswordWeak { score, hint });
+    }
+    Ok(())
+}
+
 /// The argon2id hash of `password` (a PHC string with its salt and parameters), after
-/// checking the password rule.
+/// checking the length rule (a person's new password goes through [`check_new_password`]
+/// first).
 pub fn hash_password(password: &str) -> Result<String, AuthError> {
     check_password(password)?;
     argon2::Argon2::default()
@@ -141,6 +198,56 @@ mod tests {
         assert!(!verify_password("twelve-chars", "not a hash"));
         // A fresh salt each time: the same password never gives the same text.
         assert_ne!(hash, hash_password("twelve-chars").unwrap());
+    }
+
+    #[test]
+    fn easy_passwords_are_refused_with_the_reason() {
+        let ann = UserName::new("ann-marie").unwrap();
+        let refused = |p: &str| check_new_password(p, &ann).unwrap_err();
+        assert_eq!(refused("            "), AuthError::PasswordBlank);
+        assert_eq!(
+            refused("Ann-Marie-1234"),
+            AuthError::PasswordHasUserName {
+                user: "ann-marie".into()
+            }
+        );
+        for easy in [
+            "passwordpassword",
+            "123456789012",
+            "qwertyuiopasdf",
+            "aaaaaaaaaaaa",
+        ] {
+            let e = refused(easy);
+            assert!(
+                matches!(e, AuthError::PasswordWeak { score, .. } if score < 3),
+                "{easy}: {e:?}"
+            );
+            assert!(
+                e.to_string()
+                    .starts_with("the password is too easy to guess"),
+                "{e}"
+            );
+        }
+        let e = refused("passwordpassword").to_string();
+        assert!(e.contains("strength") && !e.ends_with('.'), "{e}");
+        // The user name as the whole password, in another case.
+        let eng = UserName::new("engineer-one").unwrap();
+        assert!(matches!(
+            check_new_password("ENGINEER-ONE", &eng),
+            Err(AuthError::PasswordHasUserName { .. })
+        ));
+        // Long, unrelated words pass; so does the first admin's random password.
+        for good in [
+            "a-password-of-the-right-length",
+            "another-long-secret",
+            "a-long-enough-secret",
+        ] {
+            assert_eq!(check_new_password(good, &ann), Ok(()), "{good}");
+        }
+        assert_eq!(
+            check_new_password(&random_password().unwrap(), &ann),
+            Ok(())
+        );
     }
 
     #[test]

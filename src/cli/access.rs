@@ -192,7 +192,9 @@ fn entry(action: &str, after: serde_json::Value, reason: String) -> AuditEntry {
 
 fn read_password() -> anyhow::Result<String> {
     if std::io::IsTerminal::is_terminal(&std::io::stdin()) {
-        eprintln!("password (at least 12 characters; it shows as you type), then Enter:");
+        eprintln!(
+            "password (at least 12 characters, not easy to guess, not the user name; it shows as you type), then Enter:"
+        );
     }
     let mut line = String::new();
     std::io::stdin()
@@ -208,7 +210,11 @@ fn user_name(name: &str) -> anyhow::Result<UserName> {
 
 pub(crate) fn run_user(args: UserArgs) -> anyhow::Result<()> {
     let password = match &args.action {
-        UserAction::Add { .. } | UserAction::Passwd { .. } => Some(read_password()?),
+        UserAction::Add { name, .. } | UserAction::Passwd { name, .. } => {
+            let p = read_password()?;
+            crate::auth::check_new_password(&p, &user_name(name)?)?;
+            Some(p)
+        }
         _ => None,
     };
     let hash = password.map(|p| hash_password(&p)).transpose()?;

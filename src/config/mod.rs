@@ -30,6 +30,9 @@ pub(crate) const ENV_DATABASE_URL: &str = "CAMLOOP_DATABASE_URL";
 /// Environment variable holding the shared API token (deprecated: it acts as an `admin`;
 /// use per-user tokens from `camloop token create`).
 pub const ENV_API_TOKEN: &str = "CAMLOOP_API_TOKEN";
+/// The shortest `CAMLOOP_API_TOKEN` accepted: it acts as admin, so it must be as hard to
+/// guess as a random 128-bit value written in hex.
+pub const MIN_API_TOKEN_CHARS: usize = 32;
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -322,6 +325,17 @@ impl Config {
                 "database.url: must start with sqlite: or postgres://",
             ));
         }
+        if let Some(token) = &self.api_token {
+            let chars = token.expose().chars().count();
+            if chars < MIN_API_TOKEN_CHARS {
+                p.push(ConfigProblem::at(
+                    None,
+                    format!(
+                        "{ENV_API_TOKEN} has {chars} characters; at least {MIN_API_TOKEN_CHARS} are needed, since it acts as admin (better: per-user tokens, `camloop token create`)"
+                    ),
+                ));
+            }
+        }
         p.extend(self.http.problems(&self.lines));
         p.extend(self.mqtt.problems(&self.lines));
         p.extend(self.opcua.problems(&self.lines));
@@ -439,18 +453,30 @@ kind = "sim"
 
     #[test]
     fn environment_overrides_the_url_and_supplies_the_token_which_never_shows() {
+        let token = "s3cret-s3cret-s3cret-s3cret-s3cret";
         let env = |k: &str| match k {
             ENV_DATABASE_URL => Some("postgres://camloop:hunter2@db/camloop".to_string()),
-            ENV_API_TOKEN => Some("s3cret".to_string()),
+            ENV_API_TOKEN => Some(token.to_string()),
             _ => None,
         };
         let c = Config::parse(MINIMAL, Path::new("config/camloop.toml"), env).unwrap();
         assert_eq!(c.database.url, "postgres://camloop:hunter2@db/camloop");
-        assert_eq!(c.api_token.as_ref().map(Secret::expose), Some("s3cret"));
+        assert_eq!(c.api_token.as_ref().map(Secret::expose), Some(token));
         let shown = format!("{c:?}");
         assert!(
             !shown.contains("hunter2") && !shown.contains("s3cret"),
             "{shown}"
+        );
+    }
+
+    #[test]
+    fn a_short_api_token_is_refused_naming_the_minimum() {
+        let env = |k: &str| (k == ENV_API_TOKEN).then(|| "x".to_string());
+        let e = Config::parse(MINIMAL, Path::new("config/camloop.toml"), env).unwrap_err();
+        let text = e.to_string();
+        assert!(
+            text.contains("CAMLOOP_API_TOKEN has 1 characters; at least 32 are needed"),
+            "{text}"
         );
     }
 

@@ -192,6 +192,32 @@ pub struct Metrics {
     pub backlog: super::backlog::Backlog,
     /// The components' states `/healthz` reports.
     pub health: super::health::HealthBoard,
+    /// The link to the MQTT broker, when `[mqtt]` is enabled.
+    mqtt: Mutex<Option<MqttMetrics>>,
+}
+
+/// The state of the link to the MQTT broker.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, strum::IntoStaticStr, strum::EnumIter)]
+#[strum(serialize_all = "snake_case")]
+pub enum MqttLinkState {
+    /// Not connected yet since start.
+    #[default]
+    Connecting,
+    Connected,
+    /// The broker refused the connection (credentials, client id): an operator must act.
+    Refused,
+    /// The broker cannot be reached, or the connection was lost.
+    Unreachable,
+}
+
+/// The MQTT link's series.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct MqttMetrics {
+    pub link: MqttLinkState,
+    /// Events waiting on disk.
+    pub queued: u64,
+    pub sent_total: u64,
+    pub dropped_total: u64,
 }
 
 /// Counters of the listener's access control.
@@ -203,6 +229,8 @@ pub struct AccessMetrics {
     pub lockouts_total: u64,
     /// Audit rows that could not be written (the database was unreachable).
     pub audit_failures_total: u64,
+    /// Refusals counted but not audited: their client was over the audit's budget.
+    pub refusals_unrecorded_total: u64,
 }
 
 impl Metrics {
@@ -243,6 +271,65 @@ impl Metrics {
         f(&mut self.access.lock().unwrap_or_else(|p| p.into_inner()));
     }
 
+    /// Sets the MQTT link's series.
+    pub(crate) fn set_mqtt(&self, m: MqttMetrics) {
+        *self.mqtt.lock().unwrap_or_else(|p| p.into_inner()) = Some(m);
+    }
+
+    /// The MQTT link's series (`None`: MQTT is off).
+    pub fn mqtt(&self) -> Option<MqttMetrics> {
+        *self.mqtt.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Whether the MQTT link is enabled and not up for a reason an operator should see:
+    /// refused by the broker, or the broker unreachable (for `/healthz`).
+    pub fn mqtt_degraded(&self) -> bool {
+        self.mqtt()
+            .is_some_and(|m| matches!(m.link, MqttLinkState::Refused | MqttLinkState::Unreachable))
+    }
+
+    fn render_mqtt(&self, s: &mut String) {
+        let Some(m) = self.mqtt() else { return };
+        let name = "camloop_mqtt_link_state";
+        let _ = writeln!(
+            s,
+            "# HELP {name} The link to the MQTT broker: 1 for the state it is in (refused: the broker refused the credentials).\n# TYPE {name} gauge"
+        );
+        for state in <MqttLinkState as strum::IntoEnumIterator>::iter() {
+            let label: &'static str = state.into();
+            let _ = writeln!(
+                s,
+                "{name}{{state=\"{label}\"}} {}",
+                u8::from(state == m.link)
+            );
+        }
+        for (name, kind, help, value) in [
+            (
+                "camloop_mqtt_queue_events",
+                "gauge",
+                "Events waiting on disk for the MQTT broker.",
+                m.queued,
+            ),
+            (
+                "camloop_mqtt_sent_total",
+                "counter",
+                "Events (and drop reports) the MQTT broker acknowledged.",
+                m.sent_total,
+            ),
+            (
+                "camloop_mqtt_dropped_total",
+                "counter",
+                "Events dropped since start (queue or intake full).",
+                m.dropped_total,
+            ),
+        ] {
+            let _ = writeln!(
+                s,
+                "# HELP {name} {help}\n# TYPE {name} {kind}\n{name} {value}"
+            );
+        }
+    }
+
     pub fn access(&self) -> AccessMetrics {
         self.access
             .lock()
@@ -273,6 +360,12 @@ impl Metrics {
             "# HELP {name} Audit rows that could not be stored.\n# TYPE {name} counter\n{name} {}",
             a.audit_failures_total
         );
+        let name = "camloop_audit_refusals_unrecorded_total";
+        let _ = writeln!(
+            s,
+            "# HELP {name} Refused attempts not audited: their client was over the audit's budget for refusals.\n# TYPE {name} counter\n{name} {}",
+            a.refusals_unrecorded_total
+        );
     }
 
     /// The text exposition format (version 0.0.4).
@@ -296,6 +389,7 @@ impl Metrics {
         }
         self.render_access(&mut s);
         self.render_lag(&mut s);
+        self.render_mqtt(&mut s);
         s
     }
 
@@ -359,7 +453,7 @@ mod tests {
             text.contains("camloop_last_max_error_um{machine=\"M1\"} 0.5\n"),
             "{text}"
         );
-        assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 3 + 2 + 3);
+        assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 4 + 2 + 3);
         m.update_feature(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), |f| {
             f.last_max_error_um = Some(0.7);
             f.blocked_by_guard = Some("correction at its limit".into());
@@ -377,5 +471,37 @@ mod tests {
             text.contains("camloop_learning_held{machine=\"M1\"} 0\n"),
             "{text}"
         );
+        assert!(
+            !text.contains("camloop_mqtt"),
+            "no MQTT series while MQTT is off"
+        );
+    }
+
+    #[test]
+    fn the_mqtt_link_shows_its_state_and_queue_and_a_refusal_is_degraded() {
+        let m = Metrics::default();
+        assert!(!m.mqtt_degraded());
+        m.set_mqtt(MqttMetrics {
+            link: MqttLinkState::Refused,
+            queued: 7,
+            sent_total: 2,
+            dropped_total: 1,
+        });
+        let text = m.render();
+        for line in [
+            "camloop_mqtt_link_state{state=\"refused\"} 1\n",
+            "camloop_mqtt_link_state{state=\"connected\"} 0\n",
+            "camloop_mqtt_queue_events 7\n",
+            "camloop_mqtt_sent_total 2\n",
+            "camloop_mqtt_dropped_total 1\n",
+        ] {
+            assert!(text.contains(line), "{line}{text}");
+        }
+        assert!(m.mqtt_degraded());
+        m.set_mqtt(MqttMetrics {
+            link: MqttLinkState::Connected,
+            ..MqttMetrics::default()
+        });
+        assert!(!m.mqtt_degraded());
     }
 }

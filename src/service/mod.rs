@@ -170,6 +170,9 @@ async fn begin(checked: Checked, options: RunOptions) -> anyhow::Result<Starting
         startup::start_store(&config, options.accept_new_database, &shutdown_rx).await?;
 
     let publisher = startup::start_mqtt(&config, &shutdown_rx)?;
+    if let Some(p) = &publisher {
+        p.report_to(metrics.clone());
+    }
 
     // OPC UA: the loops feed it from their start; the server starts with the API state.
     let (opcua_events, opcua_intake) = opcua::prepare(&config, &checked_machines)?;

@@ -19,7 +19,7 @@ use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-const TOKEN: &str = "let-me-write";
+const TOKEN: &str = "let-me-write-a-token-of-32-chars";
 /// The engineer `eng`'s password.
 const PASSWORD: &str = "a-long-enough-secret";
 

@@ -58,6 +58,19 @@ async fn users_and_tokens(at: At<'_>, store: &Store) -> String {
     );
     assert!(!short.status.success());
     assert!(err(&short).contains("at least 12"), "{}", err(&short));
+    // The policy: not blank, not the user name, not easy to guess; each says why.
+    for (password, why) in [
+        ("            \n", "only white space"),
+        ("ann-ann-ann-ann\n", "contains, the user name `ann`"),
+        (
+            "passwordpassword\n",
+            "too easy to guess (strength 0 of 4, at least 3 needed)",
+        ),
+    ] {
+        let weak = camloop(&["user", "add", "ann", "--role", "admin"], at, password);
+        assert!(!weak.status.success(), "{password:?} accepted");
+        assert!(err(&weak).contains(why), "{password:?}: {}", err(&weak));
+    }
     let add = camloop(
         &["user", "add", "ann", "--role", "operator"],
         at,

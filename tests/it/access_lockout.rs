@@ -18,7 +18,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 const PASSWORD: &str = "a-password-of-the-right-length";
 
 /// Sends `request` from `from` (a loopback address) and returns the whole answer.
-async fn exchange(addr: SocketAddr, from: IpAddr, request: &str) -> String {
+pub(crate) async fn exchange(addr: SocketAddr, from: IpAddr, request: &str) -> String {
     let socket = tokio::net::TcpSocket::new_v4().unwrap();
     socket.bind(SocketAddr::new(from, 0)).unwrap();
     let mut s = socket.connect(addr).await.unwrap();
@@ -31,7 +31,7 @@ async fn exchange(addr: SocketAddr, from: IpAddr, request: &str) -> String {
     String::from_utf8_lossy(&text).into_owned()
 }
 
-fn status(answer: &str) -> u16 {
+pub(crate) fn status(answer: &str) -> u16 {
     answer
         .split(' ')
         .nth(1)

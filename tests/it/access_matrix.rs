@@ -6,6 +6,9 @@
 //! — 200, 404 for a made-up id, 422 for an empty body — is the handler's business).
 //! Run twice: with anonymous reading (the loopback default) and without.
 //!
+//! Every refused write (the layer's 401/403, a handler's 400/404/422) is audited, within
+//! the trail's budget for refusals of one client.
+//!
 //! Also: per-user tokens (a ceiling below the user's role, an expired one, a revoked one),
 //! the lockout of wrong tokens after 5 (a good one still passes), and the audit trail the
 //! writes leave.
@@ -111,8 +114,45 @@ async fn tokens(store: &Store) -> Vec<(Role, String)> {
     out
 }
 
-async fn walk(addr: SocketAddr, tokens: &[(Role, String)], anonymous_read: bool) -> usize {
+/// The refusal a write's answer should leave in the audit trail, as `actor: reason`: every
+/// 4xx to a write, but for the sign-in form (its handler audits its failures itself) and
+/// the write path's own refusals (audited with their before and after).
+fn expected_refusal(
+    method: &str,
+    path: &str,
+    who: &str,
+    status: u16,
+    text: &str,
+) -> Option<String> {
+    let body = text.split("\r\n\r\n").nth(1).unwrap_or_default();
+    let code = serde_json::from_str::<serde_json::Value>(body)
+        .ok()
+        .and_then(|v| v["code"].as_str().map(str::to_string))
+        .unwrap_or_else(|| "-".into());
+    let audited_by_the_write_path = [
+        "rollback_refused",
+        "freeze_refused",
+        "dressing_refused",
+        "table_version_not_found",
+        "event_not_found",
+    ];
+    let refused = (400..500).contains(&status) && status != 429;
+    (method == "POST"
+        && path != "/signin"
+        && refused
+        && !audited_by_the_write_path.contains(&code.as_str()))
+    .then(|| format!("{who}: {method} {path}: {status} {code}"))
+}
+
+/// Every route × caller; the number of pairs, and the refusal each write's answer should
+/// have audited (in order).
+async fn walk(
+    addr: SocketAddr,
+    tokens: &[(Role, String)],
+    anonymous_read: bool,
+) -> (usize, Vec<String>) {
     let mut checked = 0;
+    let mut refusals = Vec::new();
     let mut callers: Vec<(Option<Role>, Option<&str>)> = vec![(None, None)];
     callers.extend(tokens.iter().map(|(r, t)| (Some(*r), Some(t.as_str()))));
     for route in ROUTES {
@@ -128,6 +168,8 @@ async fn walk(addr: SocketAddr, tokens: &[(Role, String)], anonymous_read: bool)
                 Need::Role(needed) => acting.is_some_and(|r| r >= needed),
             };
             let who = role.map_or("anonymous", |r| r.as_str());
+            let actor = role.map_or("anonymous".to_string(), |r| format!("matrix-{r}"));
+            refusals.extend(expected_refusal(route.method, &path, &actor, status, &text));
             let what = format!(
                 "{} {path} as {who} (anonymous read {anonymous_read}): {status}",
                 route.method
@@ -150,7 +192,43 @@ async fn walk(addr: SocketAddr, tokens: &[(Role, String)], anonymous_read: bool)
             checked += 1;
         }
     }
-    checked
+    (checked, refusals)
+}
+
+/// Every refused write is in the audit trail, in order, within the budget for refusals of
+/// one client (all the walk's calls come from 127.0.0.1): the rest are counted in
+/// `camloop_audit_refusals_unrecorded_total`, and nothing else is.
+async fn refusals_audited(store: &Store, addr: SocketAddr, viewer: &str, expected: &[String]) {
+    let rows = store
+        .audit(jiff::Timestamp::UNIX_EPOCH, 0, 1000, false)
+        .await
+        .unwrap();
+    let audited: Vec<String> = rows
+        .iter()
+        .filter(|r| r.entry.action == "refused")
+        .map(|r| format!("{}: {}", r.entry.actor, r.entry.reason))
+        .collect();
+    let (_, _, metrics) = call(addr, "GET", "/metrics", Some(viewer)).await;
+    let unrecorded: usize = metrics
+        .lines()
+        .find_map(|l| l.strip_prefix("camloop_audit_refusals_unrecorded_total "))
+        .and_then(|v| v.parse().ok())
+        .expect("the unrecorded refusals are counted");
+    let budget = camloop::auth::PER_CLIENT_PER_MINUTE as usize;
+    assert!(expected.len() > budget, "{expected:#?}");
+    assert_eq!(
+        audited.len() + unrecorded,
+        expected.len(),
+        "{audited:#?}\n{expected:#?}"
+    );
+    assert!(audited.len() >= budget, "{audited:#?}");
+    // The first minute's rows are the first refusals, in order; a walk that ran into a
+    // second minute has more, each one of the expected (the reason may add how many went
+    // unrecorded before it).
+    assert_eq!(audited[..budget], expected[..budget]);
+    for a in &audited[budget..] {
+        assert!(expected.iter().any(|e| a.starts_with(e.as_str())), "{a}");
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -164,9 +242,10 @@ async fn every_route_refuses_every_role_below_its_own_and_no_other() {
         running.machines_done().await;
         let store = Store::connect(&url).await.unwrap();
         let tokens = tokens(&store).await;
-        let checked = walk(running.http_addr, &tokens, anonymous_read).await;
+        let (checked, refusals) = walk(running.http_addr, &tokens, anonymous_read).await;
         assert_eq!(checked, ROUTES.len() * 5);
         eprintln!("{checked} route × caller pairs checked (anonymous read {anonymous_read})");
+        refusals_audited(&store, running.http_addr, &tokens[0].1, &refusals).await;
         store.close().await;
         running.stop().await;
     }

@@ -8,7 +8,7 @@ use camloop::service::{self, RunOptions};
 use service_support::{get, json, post, sim_config_with_masters};
 use std::net::SocketAddr;
 
-const TOKEN: &str = "let-me-write";
+const TOKEN: &str = "let-me-write-a-token-of-32-chars";
 const PARTS: usize = 4;
 /// Master runs the simulated gauge measures before the 3rd shaft: never a part of any
 /// listing below, only of the gauge study and of `?masters=true`.

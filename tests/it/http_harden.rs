@@ -259,3 +259,32 @@ async fn path_parameters_are_checked_and_errors_quote_at_most_64_characters() {
         (503, "store_unavailable".into())
     );
 }
+
+/// A path that exists, with a method it does not take: 405 with `Allow`, not 500.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_wrong_method_gets_405_naming_the_methods_allowed() {
+    let s = server(16, 8).await;
+    for (method, path, allow) in [
+        ("DELETE", "/healthz", "GET"),
+        ("POST", "/api/v1/machines", "GET"),
+        ("PUT", "/api/v1/machines/SIM1/dressings", "GET, POST"),
+        ("GET", "/signout", "POST"),
+    ] {
+        let request = format!(
+            "{method} {path} HTTP/1.1\r\nHost: localhost\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"
+        );
+        let mut stream = TcpStream::connect(s.addr).await.unwrap();
+        stream.write_all(request.as_bytes()).await.unwrap();
+        let mut answer = String::new();
+        let _ = stream.read_to_string(&mut answer).await;
+        let status = answer.split(' ').nth(1).unwrap_or_default();
+        assert_eq!(status, "405", "{method} {path}: {answer}");
+        let allowed = answer
+            .lines()
+            .find_map(|l| l.strip_prefix("allow: "))
+            .unwrap_or_default();
+        assert_eq!(allowed, allow, "{method} {path}: {answer}");
+        let body = answer.split_once("\r\n\r\n").map(|(_, b)| b).unwrap_or("");
+        assert_eq!(json(body)["code"], "method_not_allowed", "{answer}");
+    }
+}

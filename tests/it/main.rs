@@ -41,6 +41,7 @@ mod support;
 mod access_cli;
 mod access_lockout;
 mod access_matrix;
+mod access_signin;
 mod analysis_accuracy;
 mod analysis_assembly;
 mod analysis_fixture;

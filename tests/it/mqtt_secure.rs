@@ -13,6 +13,7 @@ use std::time::Duration;
 
 use crate::mqtt_support::{DEADLINE, Message, mosquitto, root_user_line, subscribe};
 use camloop::config::{MqttSection, Secret};
+use camloop::service::metrics::{Metrics, MqttLinkState};
 use camloop::service::mqtt::Publisher;
 use camloop::store::Verdict;
 use camloop_loop::PlantEvent;
@@ -192,6 +193,27 @@ async fn a_wrong_password_is_refused_and_the_right_one_delivers_over_tls() {
     let connected =
         tokio::time::timeout(Duration::from_secs(3), progress.wait_for(|p| p.connected)).await;
     assert!(connected.is_err(), "connected with a wrong password");
+    // The refusal is visible: the link's state, in /metrics and as degraded for /healthz.
+    let metrics = Arc::new(Metrics::default());
+    other.report_to(metrics.clone());
+    let mut link = other.progress();
+    let refused = link.wait_for(|p| p.link == MqttLinkState::Refused);
+    tokio::time::timeout(DEADLINE, refused)
+        .await
+        .expect("the link says refused")
+        .unwrap();
+    let shown = async {
+        while !metrics.mqtt_degraded() {
+            tokio::task::yield_now().await;
+        }
+    };
+    tokio::time::timeout(DEADLINE, shown).await.unwrap();
+    let text = metrics.render();
+    assert!(
+        text.contains("camloop_mqtt_link_state{state=\"refused\"} 1"),
+        "{text}"
+    );
+    assert!(text.contains("camloop_mqtt_queue_events 0"), "{text}");
 
     stop.send(true).unwrap();
     tokio::time::timeout(DEADLINE, publisher.join())

@@ -153,6 +153,28 @@ fn asyncua_browses_reads_subscribes_and_calls_rollback_with_users() {
     println!("{out}");
     assert!(status.success(), "asyncua checks failed:\n{out}\n{err}");
     assert!(out.contains("all OPC UA checks passed"), "{out}");
+    // The viewer's refused acknowledgement and rollback are in the audit trail.
+    let url = format!("sqlite://{}/var/camloop.db", dir.path().display());
+    let refused = tokio::runtime::Runtime::new().unwrap().block_on(async {
+        let store = camloop::store::Store::connect(&url).await.unwrap();
+        let rows = store
+            .audit(jiff::Timestamp::UNIX_EPOCH, 0, 1000, false)
+            .await
+            .unwrap();
+        store.close().await;
+        rows.into_iter()
+            .filter(|r| r.entry.action == "refused" && r.entry.actor == "vera")
+            .map(|r| r.entry.reason)
+            .collect::<Vec<_>>()
+    });
+    assert_eq!(
+        refused,
+        [
+            "OPC UA Rollback: BadUserAccessDenied",
+            "OPC UA AcknowledgeEvent: BadUserAccessDenied",
+        ],
+        "{refused:?}"
+    );
 }
 
 /// On a server with `security = "Basic256Sha256+None"`, a user name and password sent over

@@ -18,7 +18,7 @@ fn config(dir: &Path, database_url: &str) -> Config {
     sim_config(dir, database_url, 20, 5, env)
 }
 
-const TOKEN: &str = "let-me-write";
+const TOKEN: &str = "let-me-write-a-token-of-32-chars";
 
 /// A service with one machine `name` on the demo lobe, its database in `dir` (plus any
 /// `database_extra` keys), and the gauge section `gauge` (TOML lines).

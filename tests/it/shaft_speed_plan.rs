@@ -190,7 +190,7 @@ async fn a_rollback_with_the_plan_makes_the_two_tables_again() {
     use crate::service_support::{get, json, post};
     use camloop::config::Config;
     use camloop::service::{self, RunOptions};
-    const TOKEN: &str = "let-me-write";
+    const TOKEN: &str = "let-me-write-a-token-of-32-chars";
     let dir = tempfile::tempdir().unwrap();
     let recipe = planned_recipe(dir.path(), "demo-lobe.toml");
     let text = config(&recipe, "")

@@ -25,11 +25,22 @@ pub(crate) const WHEEL_RADIUS_RANGE_MM: std::ops::RangeInclusive<f64> = 5.0..=10
 /// A dressing report whose wheel radius cannot be right.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 #[error(
-    "wheel radius {0} mm is not a plausible dressed radius ({min}–{max} mm)",
+    "wheel radius {shown} mm is not a plausible dressed radius ({min}–{max} mm)",
+    shown = shown_mm(*.0),
     min = WHEEL_RADIUS_RANGE_MM.start(),
     max = WHEEL_RADIUS_RANGE_MM.end()
 )]
 pub struct WheelRadiusError(pub f64);
+
+/// A value as an error shows it: plainly while short, else in exponent form, so a client's
+/// `1e308` comes back as `1e308`, not 309 digits.
+fn shown_mm(v: f64) -> String {
+    if v.is_finite() && v.abs() < 1e9 {
+        v.to_string()
+    } else {
+        format!("{v:e}")
+    }
+}
 
 /// Checks a dressed wheel radius from the control's feed, a dropped file or the API. Whether
 /// the part can be ground with it is the regenerated table's guards' call.
@@ -352,6 +363,17 @@ fn sampled_acceleration_and_jerk(points: &[TablePoint], c_speed_rpm: f64) -> (f6
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_huge_wheel_radius_is_not_echoed_at_length() {
+        let e = check_wheel_radius(1e308).unwrap_err().to_string();
+        assert!(e.starts_with("wheel radius 1e308 mm"), "{e}");
+        assert!(e.len() < 80, "{} characters: {e}", e.len());
+        let small = check_wheel_radius(2.5).unwrap_err().to_string();
+        assert!(small.starts_with("wheel radius 2.5 mm"), "{small}");
+        let nan = check_wheel_radius(f64::NAN).unwrap_err().to_string();
+        assert!(nan.starts_with("wheel radius NaN mm"), "{nan}");
+    }
+
     use super::*;
     use crate::geometry::Follower;
 

@@ -5,11 +5,13 @@
 //! nobody), looks the matched route up in the table and lets the request through or answers
 //! 401 (who are you?), 403 (not allowed, or a missing CSRF token), 429 (locked out). A route
 //! missing from the table is refused for everyone (500 `route_without_role`), so a new
-//! route cannot be open by mistake. `tests/it/access_matrix.rs` walks the same table.
+//! route cannot be open by mistake; a path in the table called with another method gets
+//! 405. Every refused write is audited (`refused`, within the trail's budget for refusals
+//! of one client). `tests/it/access_matrix.rs` walks the same table.
 
 use super::AppState;
 use super::api::ApiError;
-use super::session::{SESSION_COOKIE, cookie};
+use super::session::{Binding, Listener, cookie, session_cookie_name};
 use crate::auth::{Counted, Hasher, Lockout, effective_role, token_digest};
 use crate::config::Secret;
 use crate::service::http::ApiCode;
@@ -36,6 +38,8 @@ pub struct AuthState {
     /// How long a session lasts after sign-in.
     pub session: jiff::SignedDuration,
     pub sessions: super::session::Sessions,
+    /// The sign-in form's one-time values, issued by `GET /signin`.
+    pub signin_nonces: crate::auth::Nonces,
     pub lockout: Lockout,
     /// Where password hashes run: one per core at a time.
     pub hasher: Hasher,
@@ -53,6 +57,7 @@ impl AuthState {
             secure_cookie: false,
             session: jiff::SignedDuration::from_hours(8),
             sessions: Default::default(),
+            signin_nonces: Default::default(),
             lockout: Lockout::default(),
             hasher: Hasher::default(),
             audit_seal: std::sync::Arc::new(crate::audit_seal::AuditSeal::ephemeral()),
@@ -158,26 +163,29 @@ pub(crate) fn client_address(req_extensions: &axum::http::Extensions) -> IpAddr 
 }
 
 /// The layer: identify, look the route up, check the role (and a session's CSRF token).
+/// Every refused write is audited (within the trail's budget for refusals): the access
+/// layer's own 401/403, and a handler's 4xx that the write path did not audit itself.
 pub async fn guard(State(app): State<AppState>, mut req: Request, next: Next) -> Response {
     let path = req
         .extensions()
         .get::<MatchedPath>()
         .map(|p| p.as_str().to_owned());
     let Some(rule) = path.as_deref().and_then(|p| rule_for(req.method(), p)) else {
-        return ApiError::new(
-            ApiCode::RouteWithoutRole,
-            "this route has no entry in the access table: refused for everyone".into(),
-        )
-        .into_response();
+        return no_rule(path.as_deref(), req.method());
     };
     let address = client_address(req.extensions());
-    let principal = match identify(&app, req.headers(), address).await {
+    let at = Binding {
+        client: address,
+        listener: req.extensions().get::<Listener>().map(|l| l.0),
+    };
+    let principal = match identify(&app, req.headers(), at).await {
         Ok(p) => p,
         Err(e) => return e.into_response(),
     };
-    let unsafe_method = !matches!(*req.method(), Method::GET | Method::HEAD);
+    let write = !matches!(*req.method(), Method::GET | Method::HEAD);
+    let target = format!("{} {}", req.method(), short(req.uri().path()));
     if let Via::Session { csrf, .. } = &principal.via
-        && unsafe_method
+        && write
         && rule.kind != Kind::Form
     {
         let given = req.headers().get("x-csrf-token").map(|v| v.as_bytes());
@@ -190,29 +198,124 @@ pub async fn guard(State(app): State<AppState>, mut req: Request, next: Next) ->
             .into_response();
         }
     }
-    if let Need::Role(needed) = rule.need {
-        match principal.role {
-            Some(role) if role >= needed => {}
-            Some(role) if principal.via != Via::Anonymous => {
-                return ApiError::new(
-                    ApiCode::Forbidden,
-                    format!(
-                        "this needs the role {needed}; {} has {role}",
-                        principal.actor
-                    ),
-                )
-                .into_response();
-            }
-            _ if rule.kind == Kind::Page => {
-                let next_path = req.uri().path().to_string();
-                return Redirect::to(&format!("/signin?next={}", encode_path(&next_path)))
-                    .into_response();
-            }
-            _ => return unauthorized(needed),
+    if let Some(refusal) = role_refusal(&principal, rule, req.uri().path()) {
+        let response = refusal.into_response();
+        if write {
+            refused_write(&app, &principal, &target, answer_of(&response)).await;
+        }
+        return response;
+    }
+    req.extensions_mut().insert(principal.clone());
+    let response = next.run(req).await;
+    if write && rule.path != "/signin" && handler_refusal_unaudited(&response) {
+        refused_write(&app, &principal, &target, answer_of(&response)).await;
+    }
+    response
+}
+
+/// The answer to a route missing from [`ROUTES`]: 405 when the path has rows for other
+/// methods (a wrong method is the client's mistake), else 500 `route_without_role`.
+fn no_rule(path: Option<&str>, method: &Method) -> Response {
+    let allowed: Vec<&str> = ROUTES
+        .iter()
+        .filter(|r| Some(r.path) == path)
+        .map(|r| r.method)
+        .collect();
+    if allowed.is_empty() {
+        return ApiError::new(
+            ApiCode::RouteWithoutRole,
+            "this route has no entry in the access table: refused for everyone".into(),
+        )
+        .into_response();
+    }
+    let allow = allowed.join(", ");
+    let mut r = ApiError::new(
+        ApiCode::MethodNotAllowed,
+        format!(
+            "{} is not allowed here; allowed: {allow}",
+            short(method.as_str())
+        ),
+    )
+    .into_response();
+    if let Ok(v) = header::HeaderValue::try_from(allow) {
+        r.headers_mut().insert(header::ALLOW, v);
+    }
+    r
+}
+
+/// Why `p` may not call the route of `rule` (at `path`), if it may not: 403 for a known
+/// caller below the role, a redirect to the sign-in page for an anonymous page visit, 401
+/// for the rest.
+fn role_refusal(p: &Principal, rule: &RouteRule, path: &str) -> Option<Refusal> {
+    let Need::Role(needed) = rule.need else {
+        return None;
+    };
+    match p.role {
+        Some(role) if role >= needed => None,
+        Some(role) if p.via != Via::Anonymous => Some(Refusal::Error(ApiError::new(
+            ApiCode::Forbidden,
+            format!("this needs the role {needed}; {} has {role}", p.actor),
+        ))),
+        _ if rule.kind == Kind::Page => Some(Refusal::SignIn(format!(
+            "/signin?next={}",
+            encode_path(path)
+        ))),
+        _ => Some(Refusal::Unauthorized(needed)),
+    }
+}
+
+enum Refusal {
+    Error(ApiError),
+    SignIn(String),
+    Unauthorized(Role),
+}
+
+impl IntoResponse for Refusal {
+    fn into_response(self) -> Response {
+        match self {
+            Refusal::Error(e) => e.into_response(),
+            Refusal::SignIn(to) => Redirect::to(&to).into_response(),
+            Refusal::Unauthorized(needed) => unauthorized(needed),
         }
     }
-    req.extensions_mut().insert(principal);
-    next.run(req).await
+}
+
+/// A handler's answer is a refusal the write path has not audited: a 4xx other than the
+/// write path's own refusals (which it audits with their before and after) and other than
+/// 401/429 (the sign-in checks audit those).
+fn handler_refusal_unaudited(response: &Response) -> bool {
+    let status = response.status();
+    if !status.is_client_error() || status.as_u16() == 401 || status.as_u16() == 429 {
+        return false;
+    }
+    !matches!(
+        response.extensions().get::<ApiCode>(),
+        Some(
+            ApiCode::RollbackRefused
+                | ApiCode::FreezeRefused
+                | ApiCode::DressingRefused
+                | ApiCode::TableVersionNotFound
+                | ApiCode::EventNotFound
+        )
+    )
+}
+
+/// What an answer says of a refusal: its status and code.
+fn answer_of(response: &Response) -> (u16, &'static str) {
+    let code = response
+        .extensions()
+        .get::<ApiCode>()
+        .map_or("-", |c| c.as_str());
+    (response.status().as_u16(), code)
+}
+
+/// Audits a refused write: who, what (`POST /path`) and the answer's status and code.
+async fn refused_write(app: &AppState, p: &Principal, target: &str, answer: (u16, &str)) {
+    let (status, code) = answer;
+    warn!(user = %p.actor, client = %p.address, target, status, code, "write refused");
+    let reason = format!("{target}: {status} {code}");
+    let entry = p.audit("refused", AuditResult::Refused, reason);
+    super::audit::record_refusal(app, entry).await;
 }
 
 fn unauthorized(needed: Role) -> Response {
@@ -242,12 +345,9 @@ fn encode_path(path: &str) -> String {
 }
 
 /// The caller: by bearer token, else by session cookie, else anonymous.
-async fn identify(
-    app: &AppState,
-    headers: &HeaderMap,
-    address: IpAddr,
-) -> Result<Principal, ApiError> {
+async fn identify(app: &AppState, headers: &HeaderMap, at: Binding) -> Result<Principal, ApiError> {
     let auth = &app.auth;
+    let address = at.client;
     if let Some(value) = headers.get(header::AUTHORIZATION) {
         let token = value
             .as_bytes()
@@ -255,9 +355,9 @@ async fn identify(
             .unwrap_or_default();
         return bearer(app, std::str::from_utf8(token).unwrap_or(""), address).await;
     }
-    if let Some(key) = cookie(headers, SESSION_COOKIE) {
+    if let Some(key) = cookie(headers, session_cookie_name(auth.secure_cookie)) {
         let now = crate::clock::now();
-        if let Some(s) = auth.sessions.get(&key, now) {
+        if let Some(s) = auth.sessions.get(&key, now, at) {
             // The user may have been disabled, or their password changed, since sign-in (by
             // the command line): either ends the session.
             let store = super::routes::store(app).await?;
@@ -372,7 +472,8 @@ pub(crate) async fn failed(
         warn!(user = user_text, client = %address, kind, "locked out for 15 minutes after 5 failures");
         reason.push_str(&format!("; {locked_what} locked out for 15 minutes"));
     }
-    super::audit::record(app, anonymous.audit(action, AuditResult::Refused, reason)).await;
+    let entry = anonymous.audit(action, AuditResult::Refused, reason);
+    super::audit::record_refusal(app, entry).await;
 }
 
 /// A refusal while locked out: counted and logged, not audited again (the lock was).
@@ -400,7 +501,7 @@ async fn csrf_refused(app: &AppState, p: &Principal, path: &str) {
         "a write to {} without this session's CSRF token",
         short(path)
     );
-    super::audit::record(app, p.audit("csrf", AuditResult::Refused, reason)).await;
+    super::audit::record_refusal(app, p.audit("csrf", AuditResult::Refused, reason)).await;
 }
 
 /// At most 64 characters of something a client sent.

@@ -69,7 +69,10 @@ impl IntoResponse for ApiError {
             code: self.code,
             message: &self.message,
         };
-        (self.status, Json(body)).into_response()
+        let mut r = (self.status, Json(body)).into_response();
+        // For the access layer, which audits refused writes by their code.
+        r.extensions_mut().insert(self.code);
+        r
     }
 }
 

@@ -17,6 +17,18 @@ pub async fn record(app: &AppState, entry: AuditEntry) {
     crate::service::command::record_audit(app.writes(), entry).await;
 }
 
+/// Appends `entry`, a refusal (a refused write, a failed sign-in), within the trail's budget
+/// for refusals of its client; over it, `camloop_audit_refusals_unrecorded_total` counts it
+/// and the client's next row says how many went unrecorded.
+pub async fn record_refusal(app: &AppState, entry: AuditEntry) {
+    match app.auth.audit_seal.within_refusal_budget(entry) {
+        Some(entry) => record(app, entry).await,
+        None => app
+            .metrics
+            .update_access(|a| a.refusals_unrecorded_total += 1),
+    }
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 #[derive(utoipa::IntoParams)]

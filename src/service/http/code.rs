@@ -28,6 +28,8 @@ pub enum ApiCode {
     /// Too many password checks waiting for a core: try again in a moment.
     SigninBusy,
     HostNotAllowed,
+    /// The path exists, not with this method (405, with `Allow`).
+    MethodNotAllowed,
     RouteWithoutRole,
     BodyTimeout,
     // What the client sent.
@@ -96,6 +98,7 @@ impl ApiCode {
             Forbidden | CsrfMismatch => StatusCode::FORBIDDEN,
             LockedOut => StatusCode::TOO_MANY_REQUESTS,
             HostNotAllowed => StatusCode::MISDIRECTED_REQUEST,
+            MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
             BodyTimeout => StatusCode::REQUEST_TIMEOUT,
             InvalidBody | InvalidQuery | InvalidPath | InvalidName | InvalidRange
             | InvalidReason | InvalidVersion | InvalidVersions | InvalidWheelRadius

@@ -109,7 +109,10 @@ pub fn apply(app: Router, policy: Policy) -> Router {
     app.layer(middleware::from_fn_with_state(Arc::new(policy), guard))
 }
 
-async fn guard(State(policy): State<Arc<Policy>>, req: Request, next: Next) -> Response {
+async fn guard(State(policy): State<Arc<Policy>>, mut req: Request, next: Next) -> Response {
+    // Sessions are bound to the listener they were made on (see `session.rs`).
+    req.extensions_mut()
+        .insert(super::session::Listener(policy.hosts.port));
     let host = req
         .headers()
         .get(header::HOST)

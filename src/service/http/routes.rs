@@ -45,6 +45,18 @@ pub(super) async fn healthz(State(state): State<AppState>) -> Json<Health> {
     let mut components = state.metrics.health.components();
     let lag = state.metrics.backlog.lag(std::time::Instant::now());
     components.push(health::loop_component(lag));
+    if let Some(m) = state.metrics.mqtt() {
+        let degraded = state.metrics.mqtt_degraded();
+        components.push(health::Component {
+            name: "mqtt".into(),
+            state: if degraded {
+                health::State::Degraded
+            } else {
+                health::State::Ok
+            },
+            reason: degraded.then(|| format!("the MQTT link is {}", <&str>::from(m.link))),
+        });
+    }
     Json(Health {
         status: health::status(&components),
         database: if up { "up" } else { "down" },

@@ -1,15 +1,20 @@
 //! Dashboard sign-in: the sign-in page, sessions, sign-out.
 //!
-//! - A session is a random key in an `HttpOnly`, `SameSite=Strict` cookie (`Secure` under
-//!   TLS); the service keeps only the key's SHA-256, the user and a CSRF token, in memory,
-//!   for `auth.session_minutes` (a restart signs everyone out). A session ends when its user
-//!   is disabled or their password changes.
+//! - A session is a random key in an `HttpOnly`, `SameSite=Strict` cookie (under TLS named
+//!   `__Host-camloop_session`, with `Secure`, so no other origin can set or shadow it); the
+//!   service keeps only the key's SHA-256, the user, a CSRF token, the client address and
+//!   the listener's port, in memory, for `auth.session_minutes` (a restart signs everyone
+//!   out). A session ends when its user is disabled or their password changes, and is not
+//!   honoured from another client address or on another listener: a key replayed by a
+//!   service on another port of this host (cookies ignore ports) from elsewhere is refused.
 //! - Every write a session makes must carry its CSRF token (`X-CSRF-Token`, which the page's
 //!   script reads from `GET /session`; a form field on the sign-out form). A cross-site
 //!   page can make the browser send the cookie (a sibling port is the same site) but cannot
 //!   read the token.
 //! - The sign-in form carries a one-time value that must equal a cookie set with the form
-//!   (double submit), so another site cannot sign a browser in as someone else.
+//!   (double submit) and be one this service issued to that client address and has not
+//!   taken back yet (`crate::auth::Nonces`), so no other page (another site, or another port
+//!   of this host, which can set the cookie) can sign a browser in as someone else.
 //! - Failures count towards the lockout (`crate::auth::Lockout`, per user and address) and
 //!   are audited; the hashes run on the bounded `crate::auth::Hasher`.
 
@@ -19,15 +24,21 @@ use super::api::ApiError;
 use crate::auth::{Client, Refused, UserName, random_hex, token_digest};
 use crate::service::http::ApiCode;
 use crate::store::AuditResult;
+use axum::extract::FromRequestParts;
 use axum::extract::{FromRequest, Request, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{Html, IntoResponse, Redirect, Response};
 use axum::{Form, Json};
 use std::collections::HashMap;
 use std::sync::Mutex;
+use tracing::warn;
 
-/// The session cookie's name.
+/// The session cookie's name without TLS.
 pub(crate) const SESSION_COOKIE: &str = "camloop_session";
+/// The session cookie's name under TLS: the `__Host-` prefix makes the browser take it only
+/// from a secure origin, with `Path=/` and no `Domain`, so no other host name or plain-HTTP
+/// page can set or shadow it.
+pub(crate) const SESSION_COOKIE_TLS: &str = "__Host-camloop_session";
 /// The sign-in form's double-submit cookie.
 const SIGNIN_COOKIE: &str = "camloop_signin";
 /// At most this many sessions live at once; the oldest go first.
@@ -42,6 +53,30 @@ pub struct Session {
     pub password: crate::digest::Sha256,
     pub csrf: String,
     pub expires_at_ms: jiff::Timestamp,
+    /// Where the session was made: it is honoured only from this address, on this listener.
+    pub bound: Binding,
+}
+
+/// The client address and the listener a session was made at.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Binding {
+    pub client: std::net::IpAddr,
+    /// The listener's port (`None`: not known, as behind no listener in tests).
+    pub listener: Option<u16>,
+}
+
+/// The port of the listener a request came in on, put into the request by the listener's
+/// policy layer (`harden::apply`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Listener(pub u16);
+
+/// The session cookie's name: [`SESSION_COOKIE_TLS`] under TLS.
+pub(crate) fn session_cookie_name(tls: bool) -> &'static str {
+    if tls {
+        SESSION_COOKIE_TLS
+    } else {
+        SESSION_COOKIE
+    }
 }
 
 /// Live sessions by the SHA-256 of their key.
@@ -58,6 +93,7 @@ impl Sessions {
         user: &str,
         password_hash: &str,
         expires_at_ms: jiff::Timestamp,
+        bound: Binding,
     ) -> Result<(String, Session), ApiError> {
         let random =
             |n| random_hex(n).map_err(|e| ApiError::new(ApiCode::RandomFailed, e.to_string()));
@@ -67,6 +103,7 @@ impl Sessions {
             password: token_digest(password_hash),
             csrf: random(32)?,
             expires_at_ms,
+            bound,
         };
         let mut map = self.map.lock().unwrap_or_else(|p| p.into_inner());
         let now = crate::clock::now();
@@ -83,11 +120,13 @@ impl Sessions {
         Ok((key, session))
     }
 
-    /// The live session of `key` at `now`.
-    pub fn get(&self, key: &str, now: jiff::Timestamp) -> Option<Session> {
+    /// The live session of `key` at `now`, presented at `at`: a key presented from another
+    /// client address or on another listener is not honoured (and the session lives on for
+    /// its own browser).
+    pub fn get(&self, key: &str, now: jiff::Timestamp, at: Binding) -> Option<Session> {
         let map = self.map.lock().unwrap_or_else(|p| p.into_inner());
         map.get(&token_digest(key))
-            .filter(|s| s.expires_at_ms > now)
+            .filter(|s| s.expires_at_ms > now && s.bound == at)
             .cloned()
     }
 
@@ -116,11 +155,11 @@ fn until(now: jiff::Timestamp, lasting: jiff::SignedDuration) -> jiff::Timestamp
 }
 
 fn set_cookie(app: &AppState, name: &str, value: &str, path: &str, max_age_s: i64) -> String {
-    let secure = if app.auth.secure_cookie {
-        "; Secure"
-    } else {
-        ""
-    };
+    cookie_text(app.auth.secure_cookie, name, value, path, max_age_s)
+}
+
+fn cookie_text(secure: bool, name: &str, value: &str, path: &str, max_age_s: i64) -> String {
+    let secure = if secure { "; Secure" } else { "" };
     format!("{name}={value}; Path={path}; Max-Age={max_age_s}; HttpOnly; SameSite=Strict{secure}")
 }
 
@@ -139,6 +178,7 @@ fn local_path(next: Option<&str>) -> String {
             if p.starts_with('/')
                 && !p.starts_with("//")
                 && !p.contains('\\')
+                && !p.contains(char::is_control)
                 && p.len() <= 512 =>
         {
             p.to_string()
@@ -151,18 +191,28 @@ fn local_path(next: Option<&str>) -> String {
 #[utoipa::path(get, path = "/signin", tag = "access", params(SigninQuery), responses((status = 200, description = "the sign-in form", content_type = "text/html")))]
 pub(super) async fn signin_page(
     State(app): State<AppState>,
-    super::api::ApiQuery(q): super::api::ApiQuery<SigninQuery>,
+    req: Request,
 ) -> Result<Response, ApiError> {
-    signin_form(&app, q.next.as_deref(), "", StatusCode::OK)
+    let address = client_address(req.extensions());
+    let (mut parts, _) = req.into_parts();
+    let super::api::ApiQuery(q) =
+        super::api::ApiQuery::<SigninQuery>::from_request_parts(&mut parts, &app).await?;
+    signin_form(&app, address, q.next.as_deref(), "", StatusCode::OK)
 }
 
+/// The form with a one-time value issued to `address` (see `crate::auth::Nonces`).
 fn signin_form(
     app: &AppState,
+    address: std::net::IpAddr,
     next: Option<&str>,
     message: &str,
     status: StatusCode,
 ) -> Result<Response, ApiError> {
-    let nonce = random_hex(16).map_err(|e| ApiError::new(ApiCode::RandomFailed, e.to_string()))?;
+    let nonce = app
+        .auth
+        .signin_nonces
+        .issue(address, crate::clock::now())
+        .map_err(|e| ApiError::new(ApiCode::RandomFailed, e.to_string()))?;
     let html = super::dashboard::signin_html(&nonce, &local_path(next), message);
     let cookie = set_cookie(app, SIGNIN_COOKIE, &nonce, "/signin", 600);
     Ok((status, [(header::SET_COOKIE, cookie)], Html(html)).into_response())
@@ -186,32 +236,67 @@ pub(super) async fn signin(
 ) -> Result<Response, ApiError> {
     let address = client_address(req.extensions());
     let expected = cookie(req.headers(), SIGNIN_COOKIE).unwrap_or_default();
+    let listener = req.extensions().get::<Listener>().map(|l| l.0);
     let Form(form) = read_form::<SigninForm>(req, &app).await?;
-    if expected.is_empty() || !same_secret(form.csrf.as_bytes(), expected.as_bytes()) {
-        app.metrics
-            .update_access(|a| *a.failures.entry("csrf").or_default() += 1);
-        let message =
-            "The form was not sent from this site's sign-in page (CSRF check). Try again.";
-        return signin_form(&app, form.next.as_deref(), message, StatusCode::FORBIDDEN);
+    // Refused before anything is checked or made: a `Location` cannot carry it.
+    if form
+        .next
+        .as_deref()
+        .is_some_and(|n| n.contains(char::is_control))
+    {
+        return Err(ApiError::new(
+            ApiCode::InvalidBody,
+            "next: control characters (tab, newline) are not allowed in a path".into(),
+        ));
     }
     let now = crate::clock::now();
+    let issued = app.auth.signin_nonces.take(&form.csrf, address, now);
+    if expected.is_empty()
+        || !same_secret(form.csrf.as_bytes(), expected.as_bytes())
+        || issued.is_err()
+    {
+        app.metrics
+            .update_access(|a| *a.failures.entry("csrf").or_default() += 1);
+        let why = issued.err().map_or(
+            "the form's value differs from its cookie".to_string(),
+            |e| e.to_string(),
+        );
+        warn!(client = %address, why, "sign-in refused: CSRF check");
+        let p = Principal {
+            actor: "anonymous".into(),
+            role: None,
+            address,
+            via: Via::Anonymous,
+        };
+        let reason = format!("sign-in of {}: {why}", super::access::short(&form.name));
+        let entry = p.audit("csrf", AuditResult::Refused, reason);
+        super::audit::record_refusal(&app, entry).await;
+        let message =
+            "The form was not sent from this site's sign-in page (CSRF check). Try again.";
+        let next = form.next.as_deref();
+        return signin_form(&app, address, next, message, StatusCode::FORBIDDEN);
+    }
     let client = Client::Address(address);
     let next = form.next.as_deref();
     let user = match password_sign_in(&app, &form.name, &form.password, client, address).await? {
         SignIn::Ok(user) => user,
         SignIn::Wrong => {
             let message = "Wrong user name or password.";
-            return signin_form(&app, next, message, StatusCode::UNAUTHORIZED);
+            return signin_form(&app, address, next, message, StatusCode::UNAUTHORIZED);
         }
         SignIn::Refused(e) => {
             let message = format!("Locked out: {}.", e.message());
-            return signin_form(&app, next, &message, e.status());
+            return signin_form(&app, address, next, &message, e.status());
         }
     };
     let (key, _) = app.auth.sessions.create(
         &user.name,
         &user.password_hash,
         until(now, app.auth.session),
+        Binding {
+            client: address,
+            listener,
+        },
     )?;
     let p = Principal {
         actor: user.name.clone(),
@@ -220,7 +305,8 @@ pub(super) async fn signin(
         via: Via::Anonymous,
     };
     super::audit::record(&app, p.audit("signin", AuditResult::Ok, "password".into())).await;
-    let cookie = set_cookie(&app, SESSION_COOKIE, &key, "/", app.auth.session.as_secs());
+    let name = session_cookie_name(app.auth.secure_cookie);
+    let cookie = set_cookie(&app, name, &key, "/", app.auth.session.as_secs());
     let clear = set_cookie(&app, SIGNIN_COOKIE, "", "/signin", 0);
     let mut r = Redirect::to(&local_path(form.next.as_deref())).into_response();
     r.headers_mut().append(
@@ -361,7 +447,8 @@ pub(super) async fn signout(
     }
     app.auth.sessions.remove(key);
     super::audit::record(&app, p.audit("signout", AuditResult::Ok, String::new())).await;
-    let clear = set_cookie(&app, SESSION_COOKIE, "", "/", 0);
+    let name = session_cookie_name(app.auth.secure_cookie);
+    let clear = set_cookie(&app, name, "", "/", 0);
     Ok(([(header::SET_COOKIE, clear)], Redirect::to("/signin")).into_response())
 }
 
@@ -417,10 +504,58 @@ mod tests {
             local_path(Some("/machines/M1/features/IN1")),
             "/machines/M1/features/IN1"
         );
-        for bad in ["//evil.example/", "https://evil.example/", "/\\evil", ""] {
+        for bad in [
+            "//evil.example/",
+            "https://evil.example/",
+            "/\\evil",
+            "",
+            "/a\tb",
+            "/a\nb",
+        ] {
             assert_eq!(local_path(Some(bad)), "/", "{bad}");
         }
         assert_eq!(local_path(None), "/");
+    }
+
+    #[test]
+    fn under_tls_the_session_cookie_meets_the_host_prefix_rules() {
+        // A browser takes a `__Host-` cookie only with `Secure`, `Path=/` and no `Domain`.
+        let name = session_cookie_name(true);
+        assert_eq!(name, "__Host-camloop_session");
+        let text = cookie_text(true, name, "k", "/", 60);
+        assert!(
+            text.starts_with("__Host-camloop_session=k; Path=/;"),
+            "{text}"
+        );
+        assert!(
+            text.ends_with("; Secure") && !text.contains("Domain"),
+            "{text}"
+        );
+        assert_eq!(session_cookie_name(false), SESSION_COOKIE);
+    }
+
+    #[test]
+    fn a_session_is_honoured_only_where_it_was_made() {
+        let sessions = Sessions::default();
+        let now = crate::clock::now();
+        let here = Binding {
+            client: "127.0.0.1".parse().unwrap(),
+            listener: Some(8080),
+        };
+        let until = now + jiff::SignedDuration::from_hours(1);
+        let (key, _) = sessions.create("eng", "hash", until, here).unwrap();
+        assert!(sessions.get(&key, now, here).is_some());
+        let other_client = Binding {
+            client: "127.0.0.2".parse().unwrap(),
+            ..here
+        };
+        let other_listener = Binding {
+            listener: Some(8443),
+            ..here
+        };
+        assert!(sessions.get(&key, now, other_client).is_none());
+        assert!(sessions.get(&key, now, other_listener).is_none());
+        assert!(sessions.get(&key, now, here).is_some(), "still there");
     }
 
     #[test]

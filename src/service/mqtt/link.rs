@@ -10,7 +10,9 @@ use std::time::Duration;
 
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use tokio::sync::{Notify, mpsc, watch};
-use tracing::{info, warn};
+use tracing::{error, info, warn};
+
+use crate::service::metrics::MqttLinkState;
 
 use super::Shared;
 
@@ -27,6 +29,8 @@ pub(crate) const OFFLINE: &str = "offline";
 enum Outcome {
     Shutdown,
     Lost(String),
+    /// The broker answered the connection with a refusal (credentials, client id).
+    Refused(String),
 }
 
 /// Sends the queue to the broker until shutdown.
@@ -70,14 +74,23 @@ pub(super) async fn run(
                         let _ = client.disconnect().await;
                         return;
                     }
-                    Outcome::Lost(why) => {
+                    Outcome::Lost(why) | Outcome::Refused(why) => {
                         warn!(reason = %why, queued = shared.queued(), "MQTT broker connection lost: events queue on disk");
                         was_lost = true;
                     }
                 }
             }
             Err(Outcome::Shutdown) => return,
+            Err(Outcome::Refused(why)) => {
+                // Logged when it starts; the state stays in /metrics and /healthz.
+                if !matches!(shared.link(), MqttLinkState::Refused) {
+                    error!(reason = %why, "MQTT broker refused the connection (check mqtt.username and CAMLOOP_MQTT_PASSWORD): events queue on disk");
+                }
+                shared.set_link(MqttLinkState::Refused);
+                was_lost = true;
+            }
             Err(Outcome::Lost(why)) => {
+                shared.set_link(MqttLinkState::Unreachable);
                 if !was_lost {
                     warn!(reason = %why, "MQTT broker unreachable: events queue on disk");
                     was_lost = true;
@@ -122,6 +135,7 @@ async fn next_event(
         e = tokio::time::timeout(ANSWER_TIMEOUT, events.recv()) => match e {
             Err(_elapsed) => Err(Outcome::Lost(format!("no answer within {} s", ANSWER_TIMEOUT.as_secs()))),
             Ok(None) => Err(Outcome::Lost("connection closed".into())),
+            Ok(Some(Err(e @ rumqttc::ConnectionError::ConnectionRefused(_)))) => Err(Outcome::Refused(e.to_string())),
             Ok(Some(Err(e))) => Err(Outcome::Lost(e.to_string())),
             Ok(Some(Ok(event))) => Ok(event),
         },

@@ -33,6 +33,7 @@ use tokio_rustls::rustls;
 use tracing::warn;
 
 use crate::config::MqttSection;
+use crate::service::metrics::{MqttLinkState, MqttMetrics};
 use crate::service::plant::{EventSender, payload_with_seq};
 use camloop_loop::PlantEvent;
 use queue::{DiskQueue, Message};
@@ -51,6 +52,20 @@ pub struct Progress {
     /// Events dropped since start (queue or intake full), reported or not.
     pub dropped: u64,
     pub connected: bool,
+    /// The link's state (refused: the broker refused the credentials).
+    pub link: MqttLinkState,
+}
+
+impl Progress {
+    /// As `/metrics` shows it.
+    fn metrics(&self) -> MqttMetrics {
+        MqttMetrics {
+            link: self.link,
+            queued: u64::try_from(self.queued).unwrap_or(u64::MAX),
+            sent_total: self.sent,
+            dropped_total: self.dropped,
+        }
+    }
 }
 
 #[derive(Debug)]
@@ -59,6 +74,7 @@ struct Shared {
     queue: Mutex<DiskQueue>,
     refused: Arc<AtomicU64>,
     connected: AtomicBool,
+    link: Mutex<MqttLinkState>,
     sent: AtomicU64,
     client_id: String,
     max: usize,
@@ -73,6 +89,18 @@ impl Shared {
 
     fn set_connected(&self, on: bool) {
         self.connected.store(on, Ordering::Relaxed);
+        self.set_link(match on {
+            true => MqttLinkState::Connected,
+            false => MqttLinkState::Unreachable,
+        });
+    }
+
+    fn link(&self) -> MqttLinkState {
+        *self.link.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn set_link(&self, link: MqttLinkState) {
+        *self.link.lock().unwrap_or_else(|p| p.into_inner()) = link;
         self.progress();
     }
 
@@ -85,6 +113,7 @@ impl Shared {
                 sent: self.sent.load(Ordering::Relaxed),
                 dropped: q.dropped_total() + self.refused.load(Ordering::Relaxed),
                 connected: self.connected.load(Ordering::Relaxed),
+                link: self.link(),
             }
         };
         self.progress.send_replace(p);
@@ -167,6 +196,7 @@ impl Publisher {
             queue: Mutex::new(queue),
             refused: refused.clone(),
             connected: AtomicBool::new(false),
+            link: Mutex::new(MqttLinkState::Connecting),
             sent: AtomicU64::new(0),
             client_id: settings.client_id.clone(),
             max: settings.queue_max_events,
@@ -205,6 +235,22 @@ impl Publisher {
         self.shared.progress.subscribe()
     }
 
+    /// Keeps `metrics`' MQTT series (link state, queue depth, sent, dropped) up to date
+    /// until the publisher ends; `/metrics` shows them and `/healthz` says `degraded` while
+    /// the broker refuses or cannot be reached.
+    pub fn report_to(&self, metrics: Arc<crate::service::metrics::Metrics>) {
+        let mut progress = self.progress();
+        tokio::spawn(async move {
+            loop {
+                let now = progress.borrow_and_update().metrics();
+                metrics.set_mqtt(now);
+                if progress.changed().await.is_err() {
+                    return;
+                }
+            }
+        });
+    }
+
     /// Waits for both tasks to end (after shutdown, once every sender is dropped).
     pub async fn join(self) {
         drop(self.sender);
@@ -226,6 +272,12 @@ fn options(settings: &MqttSection) -> anyhow::Result<MqttOptions> {
     options.set_clean_session(true);
     let status = status_topic(&settings.topic_prefix, &settings.client_id);
     options.set_last_will(LastWill::new(status, link::OFFLINE, QoS::AtLeastOnce, true));
+    if let Some(warning) = credentials_warning(settings) {
+        warn!(
+            user = settings.username.as_deref().unwrap_or("-"),
+            "{warning}"
+        );
+    }
     if let Some(user) = &settings.username {
         let password = settings.password.as_ref().map(|p| p.expose().to_owned());
         options.set_credentials(user, password.unwrap_or_default());
@@ -237,6 +289,14 @@ fn options(settings: &MqttSection) -> anyhow::Result<MqttOptions> {
         )));
     }
     Ok(options)
+}
+
+/// What to warn of at start about the credentials: a user name without a password (a
+/// missing `CAMLOOP_MQTT_PASSWORD`, most likely), which the broker will refuse.
+fn credentials_warning(settings: &MqttSection) -> Option<&'static str> {
+    (settings.username.is_some() && settings.password.is_none()).then_some(
+        "mqtt.username is set without a password (CAMLOOP_MQTT_PASSWORD is not set): the broker will likely refuse the connection",
+    )
 }
 
 /// A rustls client trusting `ca` (PEM), or the system's roots.
@@ -306,5 +366,25 @@ async fn intake(
         }
         shared.progress();
         wake.notify_one();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_user_name_without_a_password_is_warned_of() {
+        let mut settings = MqttSection {
+            username: Some("camloop".into()),
+            password: None,
+            ..MqttSection::default()
+        };
+        assert!(credentials_warning(&settings).is_some_and(|w| w.contains("without a password")));
+        settings.password = Some(crate::config::Secret::new("s3cret"));
+        assert_eq!(credentials_warning(&settings), None);
+        settings.username = None;
+        settings.password = None;
+        assert_eq!(credentials_warning(&settings), None);
     }
 }

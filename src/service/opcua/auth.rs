@@ -17,7 +17,9 @@ use opcua::types::{
 
 use crate::auth::Client;
 use crate::service::app::AppState;
+use crate::service::command;
 use crate::service::http;
+use crate::store::{AuditEntry, AuditResult, Role};
 
 /// The client address OPC UA failures and writes are audited under: the OPC UA stack does
 /// not tell the server its peer's address, so every OPC UA client shares this one (distinct
@@ -99,6 +101,37 @@ impl AuthManager for Users {
             });
         }
         policies
+    }
+}
+
+/// Audits a write refused `BadUserAccessDenied` (anonymous, a role too low, a user disabled
+/// since sign-in), within the trail's budget for refusals of OPC UA clients.
+pub(crate) async fn refused_write(
+    w: command::Writes<'_>,
+    user: Option<&str>,
+    machine: &str,
+    method: &str,
+) {
+    let entry = AuditEntry {
+        at_ms: crate::clock::now(),
+        actor: user.unwrap_or("anonymous").to_string(),
+        // The role the user held is not known here (it may be why): the lowest.
+        role: Role::Viewer,
+        client: OPCUA_CLIENT.to_string(),
+        action: "refused".into(),
+        machine: Some(crate::names::quote(machine)),
+        feature: None,
+        version: None,
+        before: None,
+        after: None,
+        result: AuditResult::Refused,
+        reason: format!("OPC UA {method}: BadUserAccessDenied"),
+    };
+    match w.audit_seal.within_refusal_budget(entry) {
+        Some(entry) => command::record_audit(w, entry).await,
+        None => w
+            .metrics
+            .update_access(|a| a.refusals_unrecorded_total += 1),
     }
 }
 

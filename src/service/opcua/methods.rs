@@ -50,8 +50,24 @@ async fn caller(w: command::Writes<'_>, user: &str) -> Result<Caller, StatusCode
     })
 }
 
-/// Runs `method` of `machine` for the session's user (`None`: anonymous).
+/// Runs `method` of `machine` for the session's user (`None`: anonymous); a write refused
+/// `BadUserAccessDenied` is audited (see `super::auth::refused_write`).
 pub(crate) async fn call(
+    w: command::Writes<'_>,
+    user: Option<&str>,
+    client: &str,
+    machine: &str,
+    method: Method,
+    args: &[Variant],
+) -> Result<Vec<Variant>, StatusCode> {
+    let done = call_as(w, user, client, machine, method, args).await;
+    if done == Err(StatusCode::BadUserAccessDenied) {
+        super::auth::refused_write(w, user, machine, method.name()).await;
+    }
+    done
+}
+
+async fn call_as(
     w: command::Writes<'_>,
     user: Option<&str>,
     client: &str,
