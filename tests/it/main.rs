@@ -91,6 +91,7 @@ mod machine_write_errors;
 mod mqtt_broker;
 mod mqtt_secure;
 mod opcua_asyncua;
+mod opcua_feed;
 mod program_retarget;
 mod program_settings;
 mod program_svg;

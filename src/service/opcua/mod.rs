@@ -10,6 +10,7 @@
 //! the in-process feature status: the loops never wait on it.
 
 mod auth;
+mod events;
 pub(crate) mod feed;
 mod methods;
 mod nodes;
@@ -59,6 +60,24 @@ const MAX_SESSIONS: usize = 64;
 /// Monitored items per subscription (the stack's default is 1000): a client subscribing to
 /// every value of 50 machines × 8 features needs 5600.
 const MAX_ITEMS_PER_SUBSCRIPTION: usize = 100_000;
+
+/// The largest queue a monitored item may ask for (the stack's default is 10): an event item
+/// on `Server` must hold a plant's events of one publishing interval, 500 machines × 8
+/// features' results plus their alarms, with room to spare.
+pub(crate) const MAX_ITEM_QUEUE: usize = 10_000;
+
+/// Notifications per publish message: at most a few hundred bytes each, so a message stays
+/// well under the stack's 327,675-byte message limit (beyond it a publish was dropped whole);
+/// more are sent in further messages of the same publishing interval.
+pub(crate) const MAX_NOTIFICATIONS_PER_PUBLISH: u64 = 500;
+
+/// Publish messages a subscription keeps while its client has no publish request waiting
+/// (the stack's default is 20): a plant's interval of 9,000 values is 18 messages.
+const MAX_QUEUED_MESSAGES: usize = 200;
+
+/// Elements of an array in a request (the stack's default decodes 1,000 while it advertised
+/// 10,000 nodes per read): as many as the largest advertised per-call limit.
+pub(crate) const MAX_ARRAY_LENGTH: usize = 10_000;
 
 /// The server's private key in the PKI folder: refused at start when other accounts can
 /// read it, and made owner-only when the server writes it.
@@ -162,7 +181,14 @@ async fn start_with(
     }
     let host = section.host();
     let url = format!("opc.tcp://{host}:{}/", section.listen.port());
-    let builder = server_builder(section, &pki, &url, app.clone(), layout.clone());
+    let listeners = Arc::new(events::Listeners::default());
+    let builder = server_builder(
+        section,
+        &pki,
+        &url,
+        (app.clone(), listeners.clone()),
+        layout.clone(),
+    );
     let (server, handle) = builder
         .build()
         .map_err(|e| anyhow::anyhow!("opcua: the server cannot be set up: {e}"))?;
@@ -191,6 +217,8 @@ async fn start_with(
         space::Ids { ns },
         app.metrics.clone(),
         layout.clone(),
+        listeners,
+        handle.clone(),
     );
     feed.dressings = dressing_counts(&app, &layout).await;
     let feed = tokio::spawn(feed::run(feed, events, shutdown.clone()));
@@ -217,7 +245,7 @@ fn server_builder(
     section: &OpcUaSection,
     pki: &std::path::Path,
     url: &str,
-    app: AppState,
+    (app, listeners): (AppState, Arc<events::Listeners>),
     layout: Vec<MachineLayout>,
 ) -> ServerBuilder {
     let host = section.host();
@@ -235,7 +263,7 @@ fn server_builder(
             product_name: "camloop".into(),
             software_version: env!("CARGO_PKG_VERSION").into(),
             build_number: env!("CARGO_PKG_VERSION").into(),
-            build_date: opcua::types::DateTime::now(),
+            build_date: build_date(),
         })
         .create_sample_keypair(true)
         .certificate_path("own/cert.der")
@@ -255,11 +283,16 @@ fn server_builder(
         .with_node_manager(InMemoryNodeManagerBuilder::new(nodes::Builder {
             layout,
             app,
+            listeners,
         }))
         .diagnostics_enabled(false);
     let limits = builder.limits_mut();
     limits.max_sessions = MAX_SESSIONS;
     limits.subscriptions.max_monitored_items_per_sub = MAX_ITEMS_PER_SUBSCRIPTION;
+    limits.subscriptions.max_monitored_item_queue_size = MAX_ITEM_QUEUE;
+    limits.subscriptions.max_notifications_per_publish = MAX_NOTIFICATIONS_PER_PUBLISH;
+    limits.subscriptions.max_queued_notifications = MAX_QUEUED_MESSAGES;
+    limits.max_array_length = MAX_ARRAY_LENGTH;
     if section.security == OpcUaSecurity::Basic256Sha256AndNone {
         warn!(
             "opcua.security allows an unsecured endpoint (None): messages travel in clear; passwords are still encrypted with the server's certificate"
@@ -275,6 +308,14 @@ fn server_builder(
         warn!("opcua.anonymous_read = true: clients without a user may browse, read and subscribe");
     }
     builder
+}
+
+/// When this binary was built: the commit's time (`SOURCE_DATE_EPOCH` at build, set by
+/// `build.rs`), not the process's start.
+fn build_date() -> opcua::types::DateTime {
+    let seconds: i64 = env!("CAMLOOP_BUILD_EPOCH_S").parse().unwrap_or(0);
+    let at = jiff::Timestamp::from_second(seconds).unwrap_or(jiff::Timestamp::UNIX_EPOCH);
+    methods::date_time(at)
 }
 
 /// Each machine's dressings as the store has them at start (0 while it is down).

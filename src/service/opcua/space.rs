@@ -9,8 +9,8 @@ use opcua::server::address_space::{
     VariableBuilder,
 };
 use opcua::types::{
-    Argument, DataTypeId, EUInformation, LocalizedText, NodeId, ObjectId, ObjectTypeId,
-    QualifiedName, UAString, VariableTypeId, Variant,
+    Argument, DataTypeId, DataValue, EUInformation, LocalizedText, NodeId, ObjectId, ObjectTypeId,
+    QualifiedName, ReferenceTypeId, StatusCode, UAString, VariableTypeId, Variant,
 };
 
 /// camloop's namespace.
@@ -42,6 +42,8 @@ pub(crate) enum FeatureValue {
     SizeErrorUm,
     PhaseErrorDeg,
     RepeatabilityUm,
+    /// The whole result as one JSON string (written with the scalars, in the same write).
+    LatestResult,
     TableVersionInForce,
     WaitingVersion,
     LearningFrozen,
@@ -66,7 +68,7 @@ impl FeatureValue {
     fn data_type(self) -> DataTypeId {
         use FeatureValue::*;
         match self {
-            PartId | Verdict | FrozenReason | GuardReason => DataTypeId::String,
+            PartId | Verdict | FrozenReason | GuardReason | LatestResult => DataTypeId::String,
             Time => DataTypeId::DateTime,
             MaxErrorUm | ProfileErrorUm | SizeErrorUm | PhaseErrorDeg | RepeatabilityUm => {
                 DataTypeId::Double
@@ -74,6 +76,23 @@ impl FeatureValue {
             TableVersionInForce | WaitingVersion => DataTypeId::Int64,
             LearningFrozen | BlockedByGuard => DataTypeId::Boolean,
         }
+    }
+
+    /// Whether the value is a part's result (written from its part's event only).
+    pub(crate) fn is_result(self) -> bool {
+        use FeatureValue::*;
+        matches!(
+            self,
+            PartId
+                | Time
+                | Verdict
+                | MaxErrorUm
+                | ProfileErrorUm
+                | SizeErrorUm
+                | PhaseErrorDeg
+                | RepeatabilityUm
+                | LatestResult
+        )
     }
 
     fn unit(self) -> Option<(&'static str, i32, &'static str)> {
@@ -201,8 +220,27 @@ pub(crate) fn build(space: &mut AddressSpace, ids: Ids, machines: &[MachineLayou
         .organized_by(ObjectId::ObjectsFolder)
         .event_notifier(EventNotifier::SUBSCRIBE_TO_EVENTS)
         .insert(space);
+    // The notifier hierarchy (OPC 10000-3 §7.16): Server → Machines → each machine, whose
+    // features are its event sources.
+    space.insert_reference(
+        &ObjectId::Server.into(),
+        &ids.machines(),
+        ReferenceTypeId::HasNotifier,
+    );
     for m in machines {
         machine(space, ids, m);
+        space.insert_reference(
+            &ids.machines(),
+            &ids.machine(&m.name),
+            ReferenceTypeId::HasNotifier,
+        );
+        for f in &m.features {
+            space.insert_reference(
+                &ids.machine(&m.name),
+                &ids.feature(&m.name, f),
+                ReferenceTypeId::HasEventSource,
+            );
+        }
     }
 }
 
@@ -314,10 +352,28 @@ fn feature(space: &mut AddressSpace, ids: Ids, m: &str, f: &str, parent: &NodeId
                     .insert(space);
             }
         }
+        if v.is_result() {
+            waiting_for_initial_data(space, &id);
+        }
     }
 }
 
-/// A read-only variable with no value yet (`Null` until the first part).
+/// A result variable before its feature's first part since the start: no value, and a
+/// status that says so (not `Null` with `Good`).
+fn waiting_for_initial_data(space: &mut AddressSpace, id: &NodeId) {
+    if let Some(opcua::server::address_space::NodeType::Variable(v)) = space.find_mut(id) {
+        v.set_data_value(DataValue {
+            // The stack returns a value's status only with a value: an empty one.
+            value: Some(Variant::Empty),
+            status: Some(StatusCode::BadWaitingForInitialData),
+            source_timestamp: None,
+            server_timestamp: Some(opcua::types::DateTime::now()),
+            ..DataValue::default()
+        });
+    }
+}
+
+/// A read-only variable with no value yet.
 fn read_only(id: &NodeId, name: QualifiedName, display: &str, ty: DataTypeId) -> VariableBuilder {
     VariableBuilder::new(id, name, display)
         .data_type(ty)
