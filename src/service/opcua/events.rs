@@ -90,3 +90,40 @@ impl Listeners {
         }
     }
 }
+
+/// Where a raised event came from in the history: enough to find its stored row.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct Origin {
+    pub(crate) machine: crate::names::MachineName,
+    pub(crate) at_ms: jiff::Timestamp,
+    pub(crate) message: String,
+}
+
+/// The OPC UA EventIds of the newest events that are rows of the history (alarms, freezes,
+/// refusals), so that `AcknowledgeEvent` takes the EventId a client got as well as camloop's
+/// id. Bounded: an older EventId is answered `BadNotFound`.
+#[derive(Default)]
+pub(crate) struct Recent {
+    ids: Mutex<std::collections::VecDeque<(Vec<u8>, Origin)>>,
+}
+
+/// EventIds remembered (a plant's alarms of hours).
+const RECENT: usize = 10_000;
+
+impl Recent {
+    pub(crate) fn remember(&self, event_id: Vec<u8>, origin: Origin) {
+        let mut ids = self.ids.lock();
+        if ids.len() == RECENT {
+            ids.pop_front();
+        }
+        ids.push_back((event_id, origin));
+    }
+
+    pub(crate) fn get(&self, event_id: &[u8]) -> Option<Origin> {
+        let ids = self.ids.lock();
+        ids.iter()
+            .rev()
+            .find(|(id, _)| id.as_slice() == event_id)
+            .map(|(_, o)| o.clone())
+    }
+}

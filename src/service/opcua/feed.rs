@@ -22,7 +22,7 @@ use opcua::types::{
 };
 use tokio::sync::{mpsc, watch};
 
-use super::events::Listeners;
+use super::events::{Listeners, Origin, Recent};
 use super::methods::date_time;
 use super::nodes::CamloopNodes;
 use super::space::{FeatureValue, Ids, MachineLayout};
@@ -43,6 +43,8 @@ pub(crate) struct Feed {
     pub(crate) layout: Vec<MachineLayout>,
     pub(crate) dressings: HashMap<MachineName, i64>,
     pub(crate) listeners: Arc<Listeners>,
+    /// The EventIds of raised events that are history rows, for `AcknowledgeEvent`.
+    pub(crate) recent: Arc<Recent>,
     pub(crate) handle: opcua::server::ServerHandle,
     last: HashMap<NodeId, Variant>,
     /// The part each feature shows, and its time (a part never gives way to an older one).
@@ -66,6 +68,7 @@ impl Feed {
     ) -> Self {
         Self {
             listeners,
+            recent: Arc::default(),
             handle,
             shown: HashMap::new(),
             pending: Vec::new(),
@@ -134,7 +137,7 @@ impl Feed {
                 *n += 1;
                 let n = *n;
                 self.stage(self.ids.dressing_count(&machine), Variant::from(n), staged);
-                self.alarm(&machine, e.feature(), "dressing", 100, payload(e), *at_ms);
+                let _ = self.alarm(&machine, e.feature(), "dressing", 100, payload(e), *at_ms);
             }
             other => {
                 let severity = match other {
@@ -150,7 +153,7 @@ impl Feed {
                     PlantEvent::Alarm { kind, .. } => kind.clone(),
                     _ => other.name().to_string(),
                 };
-                self.alarm(
+                let id = self.alarm(
                     &machine,
                     other.feature(),
                     &kind,
@@ -158,6 +161,14 @@ impl Feed {
                     payload(other),
                     other.at_ms(),
                 );
+                if let Some(message) = stored_message(other) {
+                    let origin = Origin {
+                        machine: other.machine().clone(),
+                        at_ms: other.at_ms(),
+                        message,
+                    };
+                    self.recent.remember(id, origin);
+                }
             }
         }
     }
@@ -170,9 +181,9 @@ impl Feed {
         sev: u16,
         body: String,
         at_ms: jiff::Timestamp,
-    ) {
+    ) -> Vec<u8> {
         let ty = self.ids.alarm_type();
-        self.raise(machine, source, ty, sev, format!("{kind}: {body}"), at_ms);
+        self.raise(machine, source, ty, sev, format!("{kind}: {body}"), at_ms)
     }
 
     /// Makes an event of the machine, raised at the next [`Feed::publish`].
@@ -184,9 +195,10 @@ impl Feed {
         severity: u16,
         message: String,
         at_ms: jiff::Timestamp,
-    ) {
+    ) -> Vec<u8> {
         self.event_seq += 1;
-        let id = ByteString::from(format!("{}-{}", self.started_ms, self.event_seq).into_bytes());
+        let bytes = format!("{}-{}", self.started_ms, self.event_seq).into_bytes();
+        let id = ByteString::from(bytes.clone());
         let node = self.ids.machine(machine);
         let event = BaseEventType::new(ty, id, LocalizedText::new("", &message), date_time(at_ms))
             .set_source_node(node.clone())
@@ -194,6 +206,7 @@ impl Feed {
             .set_severity(severity)
             .set_receive_time(DateTime::now());
         self.pending.push(Pending { node, event });
+        bytes
     }
 
     /// Raises the pending events: each reaches every monitored item on its machine, on the
@@ -239,7 +252,7 @@ impl Feed {
                 let at = crate::clock::now();
                 let text =
                     "the journal cannot be written (disk full?): records are not kept".to_string();
-                self.alarm(&m.name, MACHINE_LEVEL, "journal_failing", 900, text, at);
+                let _ = self.alarm(&m.name, MACHINE_LEVEL, "journal_failing", 900, text, at);
             }
             self.stage(
                 self.ids.journal_failing(&m.name),
@@ -300,6 +313,23 @@ impl Feed {
             }
         }
         self.emit();
+    }
+}
+
+/// The message of the history row an event is (none: the event is no row of the events
+/// list, see `plant::event_of`).
+fn stored_message(e: &PlantEvent) -> Option<String> {
+    match e {
+        PlantEvent::Alarm { message, .. }
+        | PlantEvent::LearningFrozen {
+            reason: message, ..
+        } => Some(message.clone()),
+        PlantEvent::TableRefused {
+            version: None,
+            reason,
+            ..
+        } => Some(reason.clone()),
+        _ => None,
     }
 }
 

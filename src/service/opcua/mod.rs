@@ -182,11 +182,12 @@ async fn start_with(
     let host = section.host();
     let url = format!("opc.tcp://{host}:{}/", section.listen.port());
     let listeners = Arc::new(events::Listeners::default());
+    let recent = Arc::new(events::Recent::default());
     let builder = server_builder(
         section,
         &pki,
         &url,
-        (app.clone(), listeners.clone()),
+        (app.clone(), listeners.clone(), recent.clone()),
         layout.clone(),
     );
     let (server, handle) = builder
@@ -221,6 +222,7 @@ async fn start_with(
         handle.clone(),
     );
     feed.dressings = dressing_counts(&app, &layout).await;
+    feed.recent = recent;
     let feed = tokio::spawn(feed::run(feed, events, shutdown.clone()));
     let cancel = handle.clone();
     let mut stop = shutdown;
@@ -245,7 +247,7 @@ fn server_builder(
     section: &OpcUaSection,
     pki: &std::path::Path,
     url: &str,
-    (app, listeners): (AppState, Arc<events::Listeners>),
+    (app, listeners, recent): (AppState, Arc<events::Listeners>, Arc<events::Recent>),
     layout: Vec<MachineLayout>,
 ) -> ServerBuilder {
     let host = section.host();
@@ -284,6 +286,7 @@ fn server_builder(
             layout,
             app,
             listeners,
+            recent,
         }))
         .diagnostics_enabled(false);
     let limits = builder.limits_mut();

@@ -13,7 +13,8 @@ use opcua::sync::RwLock;
 use opcua::types::{AttributeId, StatusCode};
 use std::sync::Arc;
 
-use super::events::Listeners;
+use super::events::{Listeners, Recent};
+use super::methods::ArgumentError;
 use super::space::{self, Ids, MachineLayout, Method};
 use crate::service::app::AppState;
 
@@ -22,6 +23,7 @@ pub(crate) struct Builder {
     pub(crate) layout: Vec<MachineLayout>,
     pub(crate) app: AppState,
     pub(crate) listeners: Arc<Listeners>,
+    pub(crate) recent: Arc<Recent>,
 }
 
 pub(crate) struct CamloopNodes {
@@ -30,6 +32,7 @@ pub(crate) struct CamloopNodes {
     layout: Vec<MachineLayout>,
     app: AppState,
     listeners: Arc<Listeners>,
+    recent: Arc<Recent>,
 }
 
 impl InMemoryNodeManagerImplBuilder for Builder {
@@ -52,6 +55,7 @@ impl InMemoryNodeManagerImplBuilder for Builder {
             layout: self.layout,
             app: self.app,
             listeners: self.listeners,
+            recent: self.recent,
         }
     }
 }
@@ -119,8 +123,25 @@ impl InMemoryNodeManagerImpl for CamloopNodes {
                 continue;
             };
             let args = call.arguments().to_vec();
+            match super::methods::check_arguments(method, &args) {
+                Ok(()) => {}
+                Err(ArgumentError::Missing) => {
+                    call.set_status(StatusCode::BadArgumentsMissing);
+                    continue;
+                }
+                Err(ArgumentError::TooMany) => {
+                    call.set_status(StatusCode::BadTooManyArguments);
+                    continue;
+                }
+                Err(ArgumentError::Types(results)) => {
+                    // BadInvalidArgument, with BadTypeMismatch on each argument of the wrong
+                    // type (OPC 10000-4 §5.11.2).
+                    call.set_argument_error(results);
+                    continue;
+                }
+            }
             let done = super::methods::call(
-                self.app.writes(),
+                (self.app.writes(), &self.recent),
                 user.as_deref(),
                 &client,
                 &machine,

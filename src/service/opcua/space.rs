@@ -175,8 +175,8 @@ impl Method {
     }
 
     /// In and out arguments: name and type.
-    fn arguments(self) -> (Vec<Arg>, Vec<Arg>) {
-        use DataTypeId::{DateTime, Int64, String};
+    pub(crate) fn arguments(self) -> (Vec<Arg>, Vec<Arg>) {
+        use DataTypeId::{BaseDataType, DateTime, Int64, String};
         let result_out = vec![
             ("ResultId", Int64),
             ("PartId", String),
@@ -189,7 +189,11 @@ impl Method {
                 vec![("Feature", String), ("Version", Int64)],
                 vec![("NewVersion", Int64), ("Message", String)],
             ),
-            Method::AcknowledgeEvent => (vec![("EventId", Int64)], vec![("Message", String)]),
+            // camloop's id (Int64, from the events API) or the event's OPC UA EventId
+            // (ByteString): either type is taken.
+            Method::AcknowledgeEvent => {
+                (vec![("EventId", BaseDataType)], vec![("Message", String)])
+            }
             Method::GetLatestResult => (vec![("Feature", String)], result_out),
             Method::GetResultById => (vec![("ResultId", Int64)], result_out),
         }
