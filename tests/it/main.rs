@@ -92,6 +92,7 @@ mod mqtt_broker;
 mod mqtt_secure;
 mod opcua_asyncua;
 mod opcua_feed;
+mod opcua_limits;
 mod opcua_write_audit;
 mod program_retarget;
 mod program_settings;

@@ -28,7 +28,7 @@ const BOUND: Duration = Duration::from_secs(60);
 /// Parts fed for the one feature watched.
 const PARTS: usize = 40;
 
-fn free_port() -> u16 {
+pub(crate) fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
@@ -36,7 +36,7 @@ fn free_port() -> u16 {
         .port()
 }
 
-fn name<T: std::str::FromStr>(s: &str) -> T
+pub(crate) fn name<T: std::str::FromStr>(s: &str) -> T
 where
     T::Err: std::fmt::Debug,
 {
@@ -48,7 +48,7 @@ fn part_at(k: usize) -> jiff::Timestamp {
     jiff::Timestamp::from_millisecond(1_795_773_600_000 + 1000 * k as i64).unwrap()
 }
 
-fn part(machine: &str, feature: &str, k: usize, part: &str) -> PlantEvent {
+pub(crate) fn part(machine: &str, feature: &str, k: usize, part: &str) -> PlantEvent {
     PlantEvent::PartAnalysed {
         machine: name(machine),
         feature: name(feature),
@@ -63,8 +63,17 @@ fn part(machine: &str, feature: &str, k: usize, part: &str) -> PlantEvent {
     }
 }
 
-async fn connect(url: &str, pki: std::path::PathBuf) -> Arc<Session> {
-    let mut client = ClientBuilder::new()
+pub(crate) async fn connect(url: &str, pki: std::path::PathBuf) -> Arc<Session> {
+    connect_with(url, pki, ClientBuilder::new()).await
+}
+
+/// A SignAndEncrypt anonymous session from `builder` (its limits as the caller set them).
+pub(crate) async fn connect_with(
+    url: &str,
+    pki: std::path::PathBuf,
+    builder: ClientBuilder,
+) -> Arc<Session> {
+    let mut client = builder
         .application_name("camloop feed test")
         .application_uri("urn:camloop:feed-test")
         .product_uri("urn:camloop:feed-test")
@@ -89,7 +98,7 @@ async fn connect(url: &str, pki: std::path::PathBuf) -> Arc<Session> {
     session
 }
 
-async fn namespace(session: &Session) -> u16 {
+pub(crate) async fn namespace(session: &Session) -> u16 {
     let read = session
         .read(
             &[ReadValueId::from(NodeId::from(
@@ -141,7 +150,7 @@ struct Seen {
     values: HashMap<NodeId, Vec<DataValue>>,
 }
 
-fn wait(what: &str, mut ready: impl FnMut() -> bool) {
+pub(crate) fn wait(what: &str, mut ready: impl FnMut() -> bool) {
     let start = Instant::now();
     while !ready() {
         assert!(start.elapsed() < BOUND, "{what} not within {BOUND:?}");

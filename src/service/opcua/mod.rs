@@ -79,6 +79,12 @@ const MAX_QUEUED_MESSAGES: usize = 200;
 /// 10,000 nodes per read): as many as the largest advertised per-call limit.
 pub(crate) const MAX_ARRAY_LENGTH: usize = 10_000;
 
+/// The largest message, in bytes, and in chunks of the stack's 65,535 bytes (its default is
+/// 5 chunks, 327,675 bytes): a Read of the advertised 10,000 nodes by string ids is about
+/// 0.6 MB, so the limits a client is told are limits it can use.
+const MAX_MESSAGE_SIZE: usize = 64 * 65_535;
+const MAX_CHUNK_COUNT: usize = 64;
+
 /// The server's private key in the PKI folder: refused at start when other accounts can
 /// read it, and made owner-only when the server writes it.
 const PRIVATE_KEY: &str = "private/private.pem";
@@ -296,6 +302,8 @@ fn server_builder(
     limits.subscriptions.max_notifications_per_publish = MAX_NOTIFICATIONS_PER_PUBLISH;
     limits.subscriptions.max_queued_notifications = MAX_QUEUED_MESSAGES;
     limits.max_array_length = MAX_ARRAY_LENGTH;
+    limits.max_message_size = MAX_MESSAGE_SIZE;
+    limits.max_chunk_count = MAX_CHUNK_COUNT;
     if section.security == OpcUaSecurity::Basic256Sha256AndNone {
         warn!(
             "opcua.security allows an unsecured endpoint (None): messages travel in clear; passwords are still encrypted with the server's certificate"
