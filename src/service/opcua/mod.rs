@@ -14,6 +14,7 @@ mod events;
 pub(crate) mod feed;
 mod methods;
 mod nodes;
+mod pki;
 pub(crate) mod space;
 
 use crate::names::{FeatureName, MachineName};
@@ -230,6 +231,7 @@ async fn start_with(
     feed.dressings = dressing_counts(&app, &layout).await;
     feed.recent = recent;
     let feed = tokio::spawn(feed::run(feed, events, shutdown.clone()));
+    tokio::spawn(pki::keep_rejected_bounded(pki.clone(), shutdown.clone()));
     let cancel = handle.clone();
     let mut stop = shutdown;
     tokio::spawn(async move {
