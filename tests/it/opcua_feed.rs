@@ -3,7 +3,8 @@
 //! every monitored item once (on `Server`, `Machines` and the machine at once); the notifier
 //! hierarchy is browsable; a result's variables never mix two parts, never go back to an
 //! older part while the status lags, and share their part's time as SourceTimestamp; before
-//! a feature's first part its result variables say `BadWaitingForInitialData`.
+//! a feature's first part its result variables say `BadWaitingForInitialData`. The server's
+//! certificate carries the configured subject and BuildDate is the build's.
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
@@ -216,6 +217,32 @@ fn events_come_once_per_item_and_results_are_never_torn() {
     let notifiers = [server.clone(), id("Machines"), id("Machines/M1")];
     let watched = ["PartId", "Time", "Verdict", "ProfileError", "LatestResult"]
         .map(|v| id(&format!("Machines/M1/Features/F1/{v}")));
+
+    // Identity: the certificate's subject is the config's (not the library's sample
+    // subject), and BuildDate is the build's, not the process's start.
+    let der = std::fs::read(dir.path().join("pki/own/cert.der")).unwrap();
+    let cert = opcua::crypto::X509::from_der(&der).unwrap();
+    let subject = cert.subject_name();
+    assert!(subject.contains("O=camloop"), "{subject}");
+    assert!(
+        !subject.contains("C=IE") && !subject.contains("Dublin"),
+        "{subject}"
+    );
+    assert!(cert.is_hostname_valid("localhost").is_ok(), "{subject}");
+    let valid = cert.not_after().unwrap() - cert.not_before().unwrap();
+    assert_eq!(valid.num_days(), 365, "{subject}");
+    let build = runtime
+        .block_on(session.read(
+            &[ReadValueId::from(NodeId::from(
+                opcua::types::VariableId::Server_ServerStatus_BuildInfo_BuildDate,
+            ))],
+            TimestampsToReturn::Neither,
+            0.0,
+        ))
+        .unwrap();
+    let built_s: i64 = env!("CAMLOOP_BUILD_EPOCH_S").parse().unwrap();
+    let built = opcua_time(jiff::Timestamp::from_second(built_s).unwrap());
+    assert_eq!(build[0].value, Some(Variant::from(built)), "{build:?}");
 
     // Before any part: the result says it waits for its first value.
     let before = runtime

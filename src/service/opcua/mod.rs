@@ -90,6 +90,9 @@ const MAX_CHUNK_COUNT: usize = 64;
 /// read it, and made owner-only when the server writes it.
 const PRIVATE_KEY: &str = "private/private.pem";
 
+/// The server's certificate in the PKI folder.
+const CERTIFICATE: &str = "own/cert.der";
+
 /// A running OPC UA server.
 pub(crate) struct OpcUa {
     handle: ServerHandle,
@@ -187,6 +190,7 @@ async fn start_with(
         crate::audit_seal::refuse_readable_by_others(&key).context("opcua: the private key")?;
     }
     let host = section.host();
+    make_certificate(section, &pki, &host)?;
     let url = format!("opc.tcp://{host}:{}/", section.listen.port());
     let listeners = Arc::new(events::Listeners::default());
     let recent = Arc::new(events::Recent::default());
@@ -250,6 +254,40 @@ async fn start_with(
     }))
 }
 
+/// The server's certificate and key, made on the first start (kept once there): RSA 2048,
+/// self-signed, for `urn:camloop:<host>`, the configured host name, `localhost` and this
+/// computer's names, with the subject the config gives (not the library's sample subject).
+fn make_certificate(
+    section: &OpcUaSection,
+    pki: &std::path::Path,
+    host: &str,
+) -> anyhow::Result<()> {
+    let cert = pki.join(CERTIFICATE);
+    let key = pki.join(PRIVATE_KEY);
+    if cert.exists() && key.exists() {
+        return Ok(());
+    }
+    for dir in [pki.join("own"), pki.join("private")] {
+        crate::private_fs::create_dir_all(&dir)
+            .with_context(|| format!("opcua: PKI folder {}", dir.display()))?;
+    }
+    let description = opcua::types::ApplicationDescription {
+        application_uri: format!("urn:camloop:{host}").into(),
+        application_name: opcua::types::LocalizedText::new("", "camloop"),
+        ..Default::default()
+    };
+    let mut data = opcua::crypto::X509Data::from((description, Some(vec![host.to_string()])));
+    data.organization = section.certificate_organization.clone();
+    data.organizational_unit = section.certificate_organizational_unit.clone();
+    data.country = section.certificate_country.clone();
+    data.state = section.certificate_state.clone();
+    data.certificate_duration_days = section.certificate_days;
+    opcua::crypto::CertificateStore::create_certificate_and_key(&data, false, &cert, &key)
+        .map_err(|e| anyhow::anyhow!("opcua: cannot make the server certificate: {e}"))?;
+    info!(certificate = %cert.display(), days = section.certificate_days, "OPC UA: server certificate made");
+    Ok(())
+}
+
 /// The server as configured: endpoints, certificates, users, camloop's nodes.
 fn server_builder(
     section: &OpcUaSection,
@@ -276,7 +314,7 @@ fn server_builder(
             build_date: build_date(),
         })
         .create_sample_keypair(true)
-        .certificate_path("own/cert.der")
+        .certificate_path(CERTIFICATE)
         .private_key_path(PRIVATE_KEY)
         .pki_dir(pki)
         .trust_client_certs(section.accept_unknown_clients)
