@@ -93,6 +93,7 @@ mod mqtt_secure;
 mod opcua_asyncua;
 mod opcua_feed;
 mod opcua_limits;
+mod opcua_node;
 mod opcua_write_audit;
 mod program_retarget;
 mod program_settings;

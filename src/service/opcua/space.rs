@@ -130,6 +130,9 @@ impl Ids {
     pub(crate) fn value(self, m: &str, f: &str, v: FeatureValue) -> NodeId {
         self.id(&format!("Machines/{m}/Features/{f}/{}", v.browse_name()))
     }
+    pub(crate) fn grinding_order(self, m: &str) -> NodeId {
+        self.id(&format!("Machines/{m}/Features/GrindingOrder"))
+    }
     pub(crate) fn dressing_count(self, m: &str) -> NodeId {
         self.id(&format!("Machines/{m}/DressingCount"))
     }
@@ -320,6 +323,24 @@ fn machine(space: &mut AddressSpace, ids: Ids, m: &MachineLayout) {
     for f in &m.features {
         feature(space, ids, &m.name, f, &features);
     }
+    // The library answers a Browse in its hash set's order, which changes from start to
+    // start: the recipe's order is given here.
+    let order: Vec<UAString> = m
+        .features
+        .iter()
+        .map(|f| UAString::from(f.as_str()))
+        .collect();
+    read_only(
+        &ids.grinding_order(&m.name),
+        ids.name("GrindingOrder"),
+        "GrindingOrder",
+        DataTypeId::String,
+    )
+    .value_rank(1)
+    .value(Variant::from(order))
+    .property_of(features.clone())
+    .has_type_definition(VariableTypeId::PropertyType)
+    .insert(space);
     let results = ids.id(&format!("Machines/{}/Results", m.name));
     ObjectBuilder::new(&results, ids.name("Results"), "Results")
         .is_folder()
@@ -444,9 +465,9 @@ pub(crate) fn nodes_per_machine(features: usize) -> usize {
     let analog = <FeatureValue as strum::IntoEnumIterator>::iter()
         .filter(|v| v.unit().is_some())
         .count();
-    // machine, Identification + 4, DressingCount, JournalFailing, Features, Results,
-    // 4 methods with 2 argument variables each.
-    let fixed = 1 + 5 + 2 + 2 + 4 * 3;
+    // machine, Identification + 4, DressingCount, JournalFailing, Features and its
+    // GrindingOrder, Results, 4 methods with 2 argument variables each.
+    let fixed = 1 + 5 + 2 + 3 + 4 * 3;
     fixed + features * (1 + values + analog)
 }
 
@@ -499,6 +520,23 @@ mod tests {
         for method in <Method as strum::IntoEnumIterator>::iter() {
             assert!(space.node_exists(&ids.method("G7", method)), "{method:?}");
         }
+        // The recipe's order, whatever order a Browse gives.
+        let Some(opcua::server::address_space::NodeType::Variable(order)) =
+            space.find(&ids.grinding_order("G7"))
+        else {
+            panic!("no GrindingOrder")
+        };
+        let order = order.value(
+            opcua::types::TimestampsToReturn::Neither,
+            &opcua::types::NumericRange::None,
+            &opcua::types::DataEncoding::Binary,
+            0.0,
+        );
+        let Some(Variant::Array(a)) = order.value else {
+            panic!("{order:?}")
+        };
+        let names: Vec<String> = a.values.iter().map(|v| v.to_string()).collect();
+        assert_eq!(names, ["IN1", "EX1"]);
         // UNECE Rec. 20 packs the code's characters: "4H" is the micrometre.
         let micrometre = (i32::from(b'4') << 8) | i32::from(b'H');
         let eu = NodeId::new(2, "Machines/G7/Features/IN1/ProfileError/EngineeringUnits");
