@@ -94,7 +94,7 @@ pub(crate) async fn connect_with(
         .connect_to_matching_endpoint(endpoint, IdentityToken::Anonymous)
         .await
         .unwrap();
-    let _ = event_loop.spawn();
+    let _event_loop = event_loop.spawn();
     session.wait_for_connection().await;
     session
 }
