@@ -58,7 +58,8 @@ async function connect(p) {
     securityPolicy: SecurityPolicy.Basic256Sha256,
     endpointMustExist: false,
     clientCertificateManager: certificateManager,
-    connectionStrategy: { maxRetry: 20, initialDelay: 500, maxDelay: 2000 },
+    // A service of many machines may take minutes to start serving on a loaded machine.
+    connectionStrategy: { maxRetry: 120, initialDelay: 500, maxDelay: 2000 },
   });
   await client.connect(p.endpoint);
   const session = await client.createSession({
@@ -131,25 +132,44 @@ async function watchResults(session, ns, p, publishes) {
       }
     }
   }
-  const group = ClientMonitoredItemGroup.create(
-    sub,
-    names.map((n) => ({ nodeId: n.nodeId, attributeId: AttributeIds.Value })),
-    { samplingInterval: 0, queueSize: 100, discardOldest: true },
-    TimestampsToReturn.Both,
-  );
-  await new Promise((resolve) => group.on("initialized", resolve));
   const byHandle = new Map();
-  group.monitoredItems.forEach((item, i) => byHandle.set(item.monitoringParameters.clientHandle, names[i]));
+  // Each item's first notification is its value when subscribed (read, not published
+  // with a part): left out.
+  const first = new Set();
   sub.on("raw_notification", (message) => {
     const publish = [];
     for (const data of message.notificationData || []) {
       for (const n of data.monitoredItems || []) {
         const name = byHandle.get(n.clientHandle);
-        if (name) publish.push({ ...name, value: n.value });
+        if (!name) continue;
+        if (!first.has(n.clientHandle)) {
+          first.add(n.clientHandle);
+          continue;
+        }
+        publish.push({ ...name, value: n.value });
       }
     }
     if (publish.length) publishes.push(publish);
   });
+  // As many items a call as the server advertises (MaxMonitoredItemsPerCall): node-opcua
+  // sends a group in one call.
+  // A feature's three values in the same call (a multiple of 3 a call).
+  const limit = (await session.read({ nodeId: "ns=0;i=11714", attributeId: AttributeIds.Value })).value.value;
+  const perCall = Math.max(3, limit - (limit % 3));
+  for (let start = 0; start < names.length; start += perCall) {
+    const chunk = names.slice(start, start + perCall);
+    const group = ClientMonitoredItemGroup.create(
+      sub,
+      chunk.map((n) => ({ nodeId: n.nodeId, attributeId: AttributeIds.Value })),
+      { samplingInterval: 0, queueSize: 100, discardOldest: true },
+      TimestampsToReturn.Both,
+    );
+    await new Promise((resolve, reject) => {
+      group.on("initialized", resolve);
+      group.on("err", (e) => reject(new Error(`monitored items: ${e}`)));
+    });
+    group.monitoredItems.forEach((item, i) => byHandle.set(item.monitoringParameters.clientHandle, chunk[i]));
+  }
   return sub;
 }
 

@@ -51,8 +51,8 @@ pub(crate) fn layout(machines: &[crate::config::CheckedMachine]) -> Vec<MachineL
         .collect()
 }
 
-/// Plant events waiting for the feed; beyond it an event is dropped (the values catch up at
-/// the next status refresh; only that OPC UA event is lost).
+/// Plant events waiting for the feed; beyond it an event is dropped (that part's result and
+/// OPC UA event are not shown; the feature's next part replaces it).
 const INTAKE: usize = 4096;
 
 /// Sessions served at once (the stack's default is 20: a plant has more clients).
