@@ -107,7 +107,10 @@ async def browse(c, p):
     found = sorted([(await f.read_browse_name()).Name for f in await features.get_children()])
     if found != sorted(p["features"]):
         fail(f"features browsed {found} != configured {p['features']}")
-    ok(f"browsed Machines {sorted(names)} and {m}'s features {found}")
+    order = await (await names[m].get_child([f"{ns}:GrindingOrder"])).read_value()
+    if sorted(order) != sorted(p["features"]):
+        fail(f"GrindingOrder {order} != configured {p['features']}")
+    ok(f"browsed Machines {sorted(names)} and {m}'s features {found}, GrindingOrder {order}")
     return ns, features
 
 
@@ -261,6 +264,19 @@ async def rollbacks(p, ns):
         sub = await watcher.create_subscription(100, h)
         await sub.subscribe_events(machine, queuesize=100)
         out = await rollback(p, ("admin", p["admin_password"]), ns)
+        new_version, message = out
+        # The table program on the share names its version and feature in its provenance lines;
+        # read at once, before the next part (seconds away) can deliver a newer one.
+        share = Path(p["share"])
+        wanted = (f"table version: v{new_version}", f"feature: {p['feature']}")
+        texts = [x.read_text(errors="replace") for x in share.rglob("*") if x.is_file()]
+        if not any(all(w in t for w in wanted) for t in texts):
+            fail(f"Rollback said {message!r} but no program on the share is v{new_version} of {p['feature']}")
+        tables = http_json(p["http"], f"/api/v1/machines/{p['machine']}/lobes/{p['feature']}/tables")
+        items = tables["items"]
+        row = next((t for t in items if t.get("version") == new_version), None)
+        if row is None or row.get("status") != "pushed":
+            fail(f"Rollback said {message!r} but version {new_version} is not pushed: {row}")
         deadline = time.time() + 10
         found = None
         while time.time() < deadline and found is None:
@@ -269,19 +285,6 @@ async def rollbacks(p, ns):
         if found is None:
             fail("no rollback event on the machine within 10 s")
         await sub.delete()
-    new_version, message = out
-    # The table program on the share names its version and feature in its provenance lines;
-    # read at once, before the next part (seconds away) can deliver a newer one.
-    share = Path(p["share"])
-    wanted = (f"table version: v{new_version}", f"feature: {p['feature']}")
-    texts = [x.read_text(errors="replace") for x in share.rglob("*") if x.is_file()]
-    if not any(all(w in t for w in wanted) for t in texts):
-        fail(f"Rollback said {message!r} but no program on the share is v{new_version} of {p['feature']}")
-    tables = http_json(p["http"], f"/api/v1/machines/{p['machine']}/lobes/{p['feature']}/tables")
-    items = tables["items"]
-    row = next((t for t in items if t.get("version") == new_version), None)
-    if row is None or row.get("status") != "pushed":
-        fail(f"Rollback said {message!r} but version {new_version} is not pushed: {row}")
     ok(f"Rollback by admin delivered and on the share as v{new_version}: {message}")
     return found.EventId
 

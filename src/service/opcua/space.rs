@@ -131,7 +131,7 @@ impl Ids {
         self.id(&format!("Machines/{m}/Features/{f}/{}", v.browse_name()))
     }
     pub(crate) fn grinding_order(self, m: &str) -> NodeId {
-        self.id(&format!("Machines/{m}/Features/GrindingOrder"))
+        self.id(&format!("Machines/{m}/GrindingOrder"))
     }
     pub(crate) fn dressing_count(self, m: &str) -> NodeId {
         self.id(&format!("Machines/{m}/DressingCount"))
@@ -324,7 +324,8 @@ fn machine(space: &mut AddressSpace, ids: Ids, m: &MachineLayout) {
         feature(space, ids, &m.name, f, &features);
     }
     // The library answers a Browse in its hash set's order, which changes from start to
-    // start: the recipe's order is given here.
+    // start: the recipe's order is given here (on the machine: the Features folder holds
+    // the features only).
     let order: Vec<UAString> = m
         .features
         .iter()
@@ -338,7 +339,7 @@ fn machine(space: &mut AddressSpace, ids: Ids, m: &MachineLayout) {
     )
     .value_rank(1)
     .value(Variant::from(order))
-    .property_of(features.clone())
+    .property_of(node.clone())
     .has_type_definition(VariableTypeId::PropertyType)
     .insert(space);
     let results = ids.id(&format!("Machines/{}/Results", m.name));
@@ -465,8 +466,8 @@ pub(crate) fn nodes_per_machine(features: usize) -> usize {
     let analog = <FeatureValue as strum::IntoEnumIterator>::iter()
         .filter(|v| v.unit().is_some())
         .count();
-    // machine, Identification + 4, DressingCount, JournalFailing, Features and its
-    // GrindingOrder, Results, 4 methods with 2 argument variables each.
+    // machine, Identification + 4, DressingCount, JournalFailing, GrindingOrder, Features,
+    // Results, 4 methods with 2 argument variables each.
     let fixed = 1 + 5 + 2 + 3 + 4 * 3;
     fixed + features * (1 + values + analog)
 }
