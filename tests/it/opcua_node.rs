@@ -21,6 +21,10 @@ use crate::process_support::{KillOnDrop, camloop_run, free_port};
 /// The longest the service may take to start on a loaded 2-core machine: a failure bound.
 const START_BOUND: Duration = Duration::from_secs(120);
 
+/// How long the client waits past its watching time for its first results: a failure bound
+/// for a loaded machine, not a pace.
+const WAIT_BOUND: Duration = Duration::from_secs(240);
+
 const FEATURES: [&str; 8] = ["IN1", "EX1", "IN2", "EX2", "IN3", "EX3", "IN4", "EX4"];
 
 fn node_opcua_present() -> bool {
@@ -111,6 +115,8 @@ fn node_opcua_sees_every_event_once_and_no_torn_result() {
         "features": FEATURES,
         "duration_s": seconds,
         "history_sample": 40,
+        "min_results": 10,
+        "bound_s": WAIT_BOUND.as_secs(),
     });
     let params_file = dir.path().join("params.json");
     std::fs::write(&params_file, params.to_string()).unwrap();
@@ -123,7 +129,7 @@ fn node_opcua_sees_every_event_once_and_no_torn_result() {
             .stderr(Stdio::piped()),
     )
     .unwrap();
-    let bound = START_BOUND * 2 + Duration::from_secs(seconds * 3);
+    let bound = START_BOUND * 2 + WAIT_BOUND + Duration::from_secs(seconds * 3);
     let status = run.exit_within(bound, Duration::from_millis(200), "the node-opcua checks");
     let (mut out, mut err) = (String::new(), String::new());
     use std::io::Read as _;
