@@ -38,7 +38,7 @@ const MACHINES: usize = 50;
 const FEATURES: usize = 8;
 const CLIENTS: usize = 20;
 /// The values of a feature's result object (see the address space in docs/src/opcua.md).
-const VALUES: [&str; 14] = [
+const VALUES: [&str; 15] = [
     "PartId",
     "Time",
     "Verdict",
@@ -47,6 +47,7 @@ const VALUES: [&str; 14] = [
     "SizeError",
     "PhaseError",
     "Repeatability",
+    "LatestResult",
     "TableVersionInForce",
     "WaitingVersion",
     "LearningFrozen",

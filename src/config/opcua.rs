@@ -35,6 +35,15 @@ pub struct OpcUaSection {
     /// The certificate store (own certificate, trusted and rejected clients); default:
     /// `<var>/opcua/pki`.
     pub pki_dir: Option<PathBuf>,
+    /// The subject of the server certificate made on the first start (an existing one is
+    /// kept): organisation (`O`), unit (`OU`), country (`C`, two letters) and state or
+    /// region (`ST`); empty parts are left out. The common name is `camloop`.
+    pub certificate_organization: String,
+    pub certificate_organizational_unit: String,
+    pub certificate_country: String,
+    pub certificate_state: String,
+    /// Days the certificate made on the first start is valid.
+    pub certificate_days: u32,
 }
 
 impl Default for OpcUaSection {
@@ -47,6 +56,11 @@ impl Default for OpcUaSection {
             accept_unknown_clients: false,
             anonymous_read: false,
             pki_dir: None,
+            certificate_organization: "camloop".into(),
+            certificate_organizational_unit: String::new(),
+            certificate_country: String::new(),
+            certificate_state: String::new(),
+            certificate_days: 365,
         }
     }
 }
@@ -76,11 +90,55 @@ impl OpcUaSection {
                 ));
             }
         }
+        p.extend(self.certificate_problems(lines));
         if self.listen.port() == 0 {
             p.push(ConfigProblem::at(
                 lines.of("opcua.listen"),
                 "opcua.listen: the port must not be 0 (clients find the endpoint by its URL)"
                     .to_string(),
+            ));
+        }
+        p
+    }
+
+    fn certificate_problems(&self, lines: &Lines) -> Vec<ConfigProblem> {
+        let mut p = Vec::new();
+        let parts = [
+            ("certificate_organization", &self.certificate_organization),
+            (
+                "certificate_organizational_unit",
+                &self.certificate_organizational_unit,
+            ),
+            ("certificate_state", &self.certificate_state),
+        ];
+        for (key, value) in parts {
+            // The stack writes the subject as `O=…,C=…` text: a separator would split it.
+            let ok = value.len() <= 64
+                && !value.chars().any(|c| {
+                    c.is_control()
+                        || matches!(c, ',' | '=' | '+' | '"' | '\\' | '<' | '>' | ';' | '#')
+                });
+            if !ok {
+                p.push(ConfigProblem::at(
+                    lines.of(&format!("opcua.{key}")),
+                    format!("opcua.{key}: `{value}` must be at most 64 characters without , = + \" \\ < > ; #"),
+                ));
+            }
+        }
+        let c = &self.certificate_country;
+        if !(c.is_empty() || (c.len() == 2 && c.chars().all(|x| x.is_ascii_uppercase()))) {
+            p.push(ConfigProblem::at(
+                lines.of("opcua.certificate_country"),
+                format!("opcua.certificate_country: `{c}` is not a two-letter country code (ISO 3166, e.g. DE)"),
+            ));
+        }
+        if !(1..=3650).contains(&self.certificate_days) {
+            p.push(ConfigProblem::at(
+                lines.of("opcua.certificate_days"),
+                format!(
+                    "opcua.certificate_days: {} is not between 1 and 3650",
+                    self.certificate_days
+                ),
             ));
         }
         p
@@ -120,5 +178,24 @@ mod tests {
             .to_string();
         assert!(e.contains("line 3: opcua.listen"), "{e}");
         assert!(e.contains("line 4: opcua.host_name"), "{e}");
+    }
+
+    #[test]
+    fn the_certificate_subject_is_checked_with_its_lines() {
+        let e = parse(
+            "[opcua]\nenabled = true\ncertificate_organization = \"A, B\"\ncertificate_country = \"Germany\"\ncertificate_days = 0\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("line 3: opcua.certificate_organization"), "{e}");
+        assert!(e.contains("line 4: opcua.certificate_country"), "{e}");
+        assert!(e.contains("line 5: opcua.certificate_days"), "{e}");
+        // A good subject: the only problem left is the missing machines.
+        let e = parse(
+            "[opcua]\nenabled = true\ncertificate_organization = \"Werk Süd\"\ncertificate_country = \"DE\"\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(!e.contains("opcua."), "{e}");
     }
 }

@@ -107,7 +107,10 @@ async def browse(c, p):
     found = sorted([(await f.read_browse_name()).Name for f in await features.get_children()])
     if found != sorted(p["features"]):
         fail(f"features browsed {found} != configured {p['features']}")
-    ok(f"browsed Machines {sorted(names)} and {m}'s features {found}")
+    order = await (await names[m].get_child([f"{ns}:GrindingOrder"])).read_value()
+    if sorted(order) != sorted(p["features"]):
+        fail(f"GrindingOrder {order} != configured {p['features']}")
+    ok(f"browsed Machines {sorted(names)} and {m}'s features {found}, GrindingOrder {order}")
     return ns, features
 
 
@@ -203,27 +206,49 @@ async def rollback(p, user, ns):
                                          ua.Variant(back_to, ua.VariantType.Int64))
 
 
-async def acknowledge(p, user, ns, event_id):
+async def acknowledge(p, user, ns, event_id, variant_type=ua.VariantType.Int64):
     c = await client(p, user)
     async with c:
         machine = await c.nodes.objects.get_child([f"{ns}:Machines", f"{ns}:{p['machine']}"])
         method = await machine.get_child([f"{ns}:AcknowledgeEvent"])
-        return await machine.call_method(method, ua.Variant(event_id, ua.VariantType.Int64))
+        return await machine.call_method(method, ua.Variant(event_id, variant_type))
 
 
-async def acknowledgements(p, ns):
+async def acknowledgements(p, ns, rollback_event_id):
     """The HTTP ack handler answers for the method: an operator role is needed, and an
-    event the history lacks is not found."""
+    event the history lacks is not found. The rollback's event is acknowledged by the
+    EventId the subscriber got, then by the id the events API lists for it: the second
+    answer says it was acknowledged before, as the audit row does."""
     try:
         await acknowledge(p, (p["viewer"], p["viewer_password"]), ns, 1)
         fail("AcknowledgeEvent by a viewer was carried out")
     except ua.uaerrors.BadUserAccessDenied:
         ok("AcknowledgeEvent by a viewer refused: BadUserAccessDenied")
+    admin = ("admin", p["admin_password"])
     try:
-        await acknowledge(p, ("admin", p["admin_password"]), ns, 987654321)
+        await acknowledge(p, admin, ns, 987654321)
         fail("AcknowledgeEvent of an event the history lacks succeeded")
     except ua.uaerrors.BadNotFound:
         ok("AcknowledgeEvent of an unknown event: BadNotFound")
+    try:
+        await acknowledge(p, admin, ns, 1.5, ua.VariantType.Double)
+        fail("AcknowledgeEvent with a Double id was carried out")
+    except ua.uaerrors.BadInvalidArgument:
+        ok("AcknowledgeEvent with a Double: BadInvalidArgument (its argument BadTypeMismatch)")
+    first = await acknowledge(p, admin, ns, rollback_event_id, ua.VariantType.ByteString)
+    words = first.split()
+    if len(words) != 3 or words[0] != "event" or words[2] != "acknowledged":
+        fail(f"AcknowledgeEvent by EventId answered {first!r}")
+    event_id = int(words[1])
+    listed = http_json(p["http"], f"/api/v1/machines/{p['machine']}/events?limit=100")["items"]
+    row = next((e for e in listed if e.get("id") == event_id), None)
+    if row is None or row["kind"] != "rollback":
+        fail(f"the events API lists no rollback event {event_id}: {listed[:3]}")
+    ok(f"AcknowledgeEvent by the OPC UA EventId: {first!r}, the API's event {event_id} ({row['kind']})")
+    again = await acknowledge(p, admin, ns, event_id)
+    if again != f"event {event_id} acknowledged before":
+        fail(f"a repeated AcknowledgeEvent answered {again!r}")
+    ok(f"a repeated AcknowledgeEvent by the API's id: {again!r}")
 
 
 async def rollbacks(p, ns):
@@ -232,21 +257,36 @@ async def rollbacks(p, ns):
         fail("Rollback by a viewer was carried out")
     except ua.uaerrors.BadUserAccessDenied:
         ok("Rollback by a viewer refused: BadUserAccessDenied")
-    out = await rollback(p, ("admin", p["admin_password"]), ns)
-    new_version, message = out
-    # The table program on the share names its version and feature in its provenance lines;
-    # read at once, before the next part (seconds away) can deliver a newer one.
-    share = Path(p["share"])
-    wanted = (f"table version: v{new_version}", f"feature: {p['feature']}")
-    texts = [x.read_text(errors="replace") for x in share.rglob("*") if x.is_file()]
-    if not any(all(w in t for w in wanted) for t in texts):
-        fail(f"Rollback said {message!r} but no program on the share is v{new_version} of {p['feature']}")
-    tables = http_json(p["http"], f"/api/v1/machines/{p['machine']}/lobes/{p['feature']}/tables")
-    items = tables["items"]
-    row = next((t for t in items if t.get("version") == new_version), None)
-    if row is None or row.get("status") != "pushed":
-        fail(f"Rollback said {message!r} but version {new_version} is not pushed: {row}")
+    watcher = await client(p, ("admin", p["admin_password"]))
+    async with watcher:
+        machine = await watcher.nodes.objects.get_child([f"{ns}:Machines", f"{ns}:{p['machine']}"])
+        h = Changes()
+        sub = await watcher.create_subscription(100, h)
+        await sub.subscribe_events(machine, queuesize=100)
+        out = await rollback(p, ("admin", p["admin_password"]), ns)
+        new_version, message = out
+        # The table program on the share names its version and feature in its provenance lines;
+        # read at once, before the next part (seconds away) can deliver a newer one.
+        share = Path(p["share"])
+        wanted = (f"table version: v{new_version}", f"feature: {p['feature']}")
+        texts = [x.read_text(errors="replace") for x in share.rglob("*") if x.is_file()]
+        if not any(all(w in t for w in wanted) for t in texts):
+            fail(f"Rollback said {message!r} but no program on the share is v{new_version} of {p['feature']}")
+        tables = http_json(p["http"], f"/api/v1/machines/{p['machine']}/lobes/{p['feature']}/tables")
+        items = tables["items"]
+        row = next((t for t in items if t.get("version") == new_version), None)
+        if row is None or row.get("status") != "pushed":
+            fail(f"Rollback said {message!r} but version {new_version} is not pushed: {row}")
+        deadline = time.time() + 10
+        found = None
+        while time.time() < deadline and found is None:
+            found = next((e for _, e in h.events if str(e.Message.Text).startswith("rollback:")), None)
+            await asyncio.sleep(0.05)
+        if found is None:
+            fail("no rollback event on the machine within 10 s")
+        await sub.delete()
     ok(f"Rollback by admin delivered and on the share as v{new_version}: {message}")
+    return found.EventId
 
 
 async def none_refused_by_server(p):
@@ -344,8 +384,8 @@ async def check(params_file):
         ns, features = await browse(c, p)
         await latest_matches_http(c, p, ns, features)
         await next_part_and_event(c, p, ns, features)
-    await rollbacks(p, ns)
-    await acknowledgements(p, ns)
+    rollback_event_id = await rollbacks(p, ns)
+    await acknowledgements(p, ns, rollback_event_id)
     print("all OPC UA checks passed", flush=True)
 
 

@@ -585,6 +585,8 @@ pub(super) async fn dressings(
 
 #[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct EventItem {
+    /// The event's id: what `POST …/events/{id}/ack` and OPC UA's `AcknowledgeEvent` take.
+    id: i64,
     at_ms: i64,
     level: &'static str,
     kind: String,
@@ -607,6 +609,7 @@ pub(super) async fn events(
     let items = events
         .into_iter()
         .map(|e| EventItem {
+            id: e.id.0,
             at_ms: e.at_ms.as_millisecond(),
             level: e.level.as_str(),
             kind: e.kind.as_str().to_owned(),

@@ -100,6 +100,9 @@ impl FeatureLoop {
             self.learning_record(at_ms),
         ]);
         self.record(records).await;
+        // The status (API, /metrics, OPC UA, the audit row's after) shows the table now in
+        // force, not the one before the rollback until the next part.
+        self.publish_start_status();
         Ok(RolledBack {
             to_version: version,
             new_version,

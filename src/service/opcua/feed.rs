@@ -2,6 +2,12 @@
 //! and the in-process feature status (the one `/metrics` and the API read) become variable
 //! values and OPC UA events. Runs on its own task: the loops only `try_send` into its
 //! channel, and the OPC UA stack drops or lags a slow client without ever waiting here.
+//!
+//! A part's result (`PartId`, `Time`, `Verdict`, the errors, `LatestResult`) is written only
+//! from its own `PartAnalysed` event, all of it in one write with the part's time as every
+//! value's SourceTimestamp, and never by an older part: the status refresh writes the loop's
+//! state only (and `MaxError` once the status has caught up with the shown part), so a
+//! client never sees a new part's `Time` beside an older part's `PartId`.
 
 use crate::names::MachineName;
 use std::collections::HashMap;
@@ -11,9 +17,12 @@ use std::time::Duration;
 use opcua::nodes::{BaseEventType, Event};
 use opcua::server::SubscriptionCache;
 use opcua::server::node_manager::memory::InMemoryNodeManager;
-use opcua::types::{ByteString, DataValue, DateTime, LocalizedText, NodeId, ObjectId, Variant};
+use opcua::types::{
+    ByteString, DataValue, DateTime, LocalizedText, NodeId, ObjectId, StatusCode, Variant,
+};
 use tokio::sync::{mpsc, watch};
 
+use super::events::{Listeners, Origin, Recent};
 use super::methods::date_time;
 use super::nodes::CamloopNodes;
 use super::space::{FeatureValue, Ids, MachineLayout};
@@ -33,7 +42,15 @@ pub(crate) struct Feed {
     pub(crate) metrics: Arc<Metrics>,
     pub(crate) layout: Vec<MachineLayout>,
     pub(crate) dressings: HashMap<MachineName, i64>,
+    pub(crate) listeners: Arc<Listeners>,
+    /// The EventIds of raised events that are history rows, for `AcknowledgeEvent`.
+    pub(crate) recent: Arc<Recent>,
+    pub(crate) handle: opcua::server::ServerHandle,
     last: HashMap<NodeId, Variant>,
+    /// The part each feature shows, and its time (a part never gives way to an older one).
+    shown: HashMap<(String, String), (String, jiff::Timestamp)>,
+    /// Events raised by the values staged with them: emitted once those values are written.
+    pending: Vec<Pending>,
     journal_failing: HashMap<MachineName, bool>,
     event_seq: u64,
     started_ms: i64,
@@ -46,8 +63,15 @@ impl Feed {
         ids: Ids,
         metrics: Arc<Metrics>,
         layout: Vec<MachineLayout>,
+        listeners: Arc<Listeners>,
+        handle: opcua::server::ServerHandle,
     ) -> Self {
         Self {
+            listeners,
+            recent: Arc::default(),
+            handle,
+            shown: HashMap::new(),
+            pending: Vec::new(),
             manager,
             subscriptions,
             ids,
@@ -61,8 +85,9 @@ impl Feed {
         }
     }
 
-    /// Applies one plant event: its values now, and its OPC UA event.
-    pub(crate) fn event(&mut self, e: &PlantEvent, staged: &mut Vec<(NodeId, Variant)>) {
+    /// Applies one plant event: its values (staged), and its OPC UA event (raised once the
+    /// values are written, so a client that reads on the event reads them).
+    pub(crate) fn event(&mut self, e: &PlantEvent, staged: &mut Vec<(NodeId, DataValue)>) {
         let machine = e.machine().to_string();
         match e {
             PlantEvent::PartAnalysed {
@@ -71,34 +96,32 @@ impl Feed {
                 at_ms,
                 verdict,
                 max_profile_error_um,
-                base_radius_error_um,
-                phase_error_deg,
-                repeatability_um,
                 ..
             } => {
-                let values = [
-                    (FeatureValue::PartId, Variant::from(part.clone())),
-                    (FeatureValue::Time, Variant::from(date_time(*at_ms))),
-                    (FeatureValue::Verdict, Variant::from(verdict.as_str())),
-                    (
-                        FeatureValue::ProfileErrorUm,
-                        Variant::from(*max_profile_error_um),
-                    ),
-                    (
-                        FeatureValue::SizeErrorUm,
-                        Variant::from(*base_radius_error_um),
-                    ),
-                    (FeatureValue::PhaseErrorDeg, Variant::from(*phase_error_deg)),
-                ];
-                for (v, value) in values {
-                    self.stage(self.ids.value(&machine, feature, v), value, staged);
+                let key = (machine.clone(), feature.to_string());
+                if self.shown.get(&key).is_some_and(|(_, at)| at > at_ms) {
+                    // An older part than the one shown: its values never replace the newer.
+                    return;
                 }
-                // The gauge's repeatability comes with the part's event, typed.
-                if let Some(um) = repeatability_um {
-                    let id = self
-                        .ids
-                        .value(&machine, feature, FeatureValue::RepeatabilityUm);
-                    self.stage(id, Variant::from(*um), staged);
+                self.shown.insert(key, (part.clone(), *at_ms));
+                let max_error = self
+                    .metrics
+                    .features()
+                    .get(&(e.machine().clone(), feature.clone()))
+                    .filter(|s| s.last_part.as_deref() == Some(part.as_str()))
+                    .and_then(|s| s.last_max_error_um);
+                for (v, value) in result_values(e, max_error) {
+                    let id = self.ids.value(&machine, feature, v);
+                    // The catch-up of `MaxError` compares with the last value written.
+                    match &value {
+                        Some(x) if v == FeatureValue::MaxErrorUm => {
+                            self.last.insert(id.clone(), x.clone());
+                        }
+                        _ => {
+                            self.last.remove(&id);
+                        }
+                    }
+                    staged.push((id, result_value(value, *at_ms)));
                 }
                 let message = serde_json::json!({
                     "part": part, "feature": feature, "verdict": verdict.as_str(),
@@ -107,14 +130,14 @@ impl Feed {
                 .to_string();
                 let severity = if verdict.as_str() == "pass" { 100 } else { 500 };
                 let ty = self.ids.result_ready_type();
-                self.emit(&machine, feature, ty, severity, message, *at_ms);
+                self.raise(&machine, feature, ty, severity, message, *at_ms);
             }
             PlantEvent::Dressing { at_ms, .. } => {
                 let n = self.dressings.entry(e.machine().clone()).or_default();
                 *n += 1;
                 let n = *n;
                 self.stage(self.ids.dressing_count(&machine), Variant::from(n), staged);
-                self.alarm(&machine, e.feature(), "dressing", 100, payload(e), *at_ms);
+                let _ = self.alarm(&machine, e.feature(), "dressing", 100, payload(e), *at_ms);
             }
             other => {
                 let severity = match other {
@@ -130,7 +153,7 @@ impl Feed {
                     PlantEvent::Alarm { kind, .. } => kind.clone(),
                     _ => other.name().to_string(),
                 };
-                self.alarm(
+                let id = self.alarm(
                     &machine,
                     other.feature(),
                     &kind,
@@ -138,6 +161,14 @@ impl Feed {
                     payload(other),
                     other.at_ms(),
                 );
+                if let Some(message) = stored_message(other) {
+                    let origin = Origin {
+                        machine: other.machine().clone(),
+                        at_ms: other.at_ms(),
+                        message,
+                    };
+                    self.recent.remember(id, origin);
+                }
             }
         }
     }
@@ -150,14 +181,13 @@ impl Feed {
         sev: u16,
         body: String,
         at_ms: jiff::Timestamp,
-    ) {
+    ) -> Vec<u8> {
         let ty = self.ids.alarm_type();
-        self.emit(machine, source, ty, sev, format!("{kind}: {body}"), at_ms);
+        self.raise(machine, source, ty, sev, format!("{kind}: {body}"), at_ms)
     }
 
-    /// Raises an event on the machine, the `Machines` folder and the `Server` object (where
-    /// generic clients subscribe).
-    fn emit(
+    /// Makes an event of the machine, raised at the next [`Feed::publish`].
+    fn raise(
         &mut self,
         machine: &str,
         source: &str,
@@ -165,24 +195,45 @@ impl Feed {
         severity: u16,
         message: String,
         at_ms: jiff::Timestamp,
-    ) {
+    ) -> Vec<u8> {
         self.event_seq += 1;
-        let id = ByteString::from(format!("{}-{}", self.started_ms, self.event_seq).into_bytes());
+        let bytes = format!("{}-{}", self.started_ms, self.event_seq).into_bytes();
+        let id = ByteString::from(bytes.clone());
         let node = self.ids.machine(machine);
         let event = BaseEventType::new(ty, id, LocalizedText::new("", &message), date_time(at_ms))
             .set_source_node(node.clone())
             .set_source_name(format!("{machine}/{source}").into())
             .set_severity(severity)
             .set_receive_time(DateTime::now());
-        let server: NodeId = ObjectId::Server.into();
-        let machines = self.ids.machines();
-        let targets: [(&dyn Event, &NodeId); 3] =
-            [(&event, &node), (&event, &machines), (&event, &server)];
-        self.subscriptions.notify_events(targets.into_iter());
+        self.pending.push(Pending { node, event });
+        bytes
     }
 
-    /// Compares the feature status with what is shown; stages what changed.
-    pub(crate) fn refresh(&mut self, staged: &mut Vec<(NodeId, Variant)>) {
+    /// Raises the pending events: each reaches every monitored item on its machine, on the
+    /// `Machines` folder and on the `Server` object once (the notifier hierarchy), however
+    /// many of them a client watches.
+    fn emit(&mut self) {
+        if self.pending.is_empty() {
+            return;
+        }
+        let machines = self.ids.machines();
+        let server: NodeId = ObjectId::Server.into();
+        let pending = std::mem::take(&mut self.pending);
+        // The stack's own path adds the Server object's items to any node: given the Server
+        // object alone, it reaches those and no others.
+        self.subscriptions
+            .notify_events(pending.iter().map(|p| (&p.event as &dyn Event, &server)));
+        let tree = self.handle.type_tree();
+        for p in &pending {
+            self.listeners
+                .notify(&self.subscriptions, tree, &[&p.node, &machines], &p.event);
+        }
+    }
+
+    /// Compares the feature status with what is shown; stages what changed. A part's result
+    /// is not the status's to write (see the module's notes), except `MaxError`, which the
+    /// part's event does not carry: it is written once the status shows the same part.
+    pub(crate) fn refresh(&mut self, staged: &mut Vec<(NodeId, DataValue)>) {
         let features = self.metrics.features();
         let machines = self.metrics.snapshot();
         let layout = std::mem::take(&mut self.layout);
@@ -192,6 +243,7 @@ impl Feed {
                     for (v, value) in status_values(s) {
                         self.stage(self.ids.value(&m.name, f, v), value, staged);
                     }
+                    self.catch_up_max_error(&m.name, f, s, staged);
                 }
             }
             let failing = machines.get(&m.name).is_some_and(|x| x.journal_failing > 0);
@@ -200,7 +252,7 @@ impl Feed {
                 let at = crate::clock::now();
                 let text =
                     "the journal cannot be written (disk full?): records are not kept".to_string();
-                self.alarm(&m.name, MACHINE_LEVEL, "journal_failing", 900, text, at);
+                let _ = self.alarm(&m.name, MACHINE_LEVEL, "journal_failing", 900, text, at);
             }
             self.stage(
                 self.ids.journal_failing(&m.name),
@@ -217,32 +269,162 @@ impl Feed {
         self.layout = layout;
     }
 
-    fn stage(&mut self, id: NodeId, value: Variant, staged: &mut Vec<(NodeId, Variant)>) {
+    /// `MaxError` of the shown part, once the status has it (with the part's time).
+    fn catch_up_max_error(
+        &mut self,
+        machine: &MachineName,
+        feature: &crate::names::FeatureName,
+        s: &FeatureStatus,
+        staged: &mut Vec<(NodeId, DataValue)>,
+    ) {
+        let key = (machine.to_string(), feature.to_string());
+        let Some((part, at)) = self.shown.get(&key) else {
+            return;
+        };
+        let (Some(max), Some(last)) = (s.last_max_error_um, s.last_part.as_deref()) else {
+            return;
+        };
+        if last != part.as_str() {
+            return;
+        }
+        let id = self.ids.value(machine, feature, FeatureValue::MaxErrorUm);
+        let value = Variant::from(max);
         if self.last.get(&id) != Some(&value) {
             self.last.insert(id.clone(), value.clone());
-            staged.push((id, value));
+            staged.push((id, result_value(Some(value), *at)));
         }
     }
 
-    /// Writes the staged values; subscribed clients are notified by the stack.
-    pub(crate) fn publish(&self, staged: &mut Vec<(NodeId, Variant)>) {
-        if staged.is_empty() {
-            return;
+    fn stage(&mut self, id: NodeId, value: Variant, staged: &mut Vec<(NodeId, DataValue)>) {
+        if self.last.get(&id) != Some(&value) {
+            self.last.insert(id.clone(), value.clone());
+            staged.push((id, DataValue::new_now(value)));
         }
-        let values: Vec<(NodeId, DataValue)> = staged
-            .drain(..)
-            .map(|(id, v)| (id, DataValue::new_now(v)))
-            .collect();
-        let items = values.iter().map(|(id, dv)| (id, None, dv.clone()));
-        if let Err(e) = self.manager.set_values(&self.subscriptions, items) {
-            tracing::debug!(status = %e, "OPC UA: a value could not be set");
+    }
+
+    /// Writes the staged values in one write (subscribed clients are notified by the stack,
+    /// all of them in the same publish), then raises the events they go with.
+    pub(crate) fn publish(&mut self, staged: &mut Vec<(NodeId, DataValue)>) {
+        if !staged.is_empty() {
+            let values: Vec<(NodeId, DataValue)> = std::mem::take(staged);
+            let items = values.iter().map(|(id, dv)| (id, None, dv.clone()));
+            if let Err(e) = self.manager.set_values(&self.subscriptions, items) {
+                tracing::debug!(status = %e, "OPC UA: a value could not be set");
+            }
         }
+        self.emit();
     }
 }
 
-/// The values a feature status gives (those not yet known are left out).
+/// The message of the history row an event is (none: the event is no row of the events
+/// list, see `plant::event_of`).
+fn stored_message(e: &PlantEvent) -> Option<String> {
+    match e {
+        PlantEvent::Alarm { message, .. }
+        | PlantEvent::LearningFrozen {
+            reason: message, ..
+        } => Some(message.clone()),
+        PlantEvent::TableRefused {
+            version: None,
+            reason,
+            ..
+        } => Some(reason.clone()),
+        _ => None,
+    }
+}
+
+/// An event waiting for its values to be written.
+struct Pending {
+    node: NodeId,
+    event: BaseEventType,
+}
+
+/// A result value with its part's time as SourceTimestamp; none: not known for this part
+/// yet (`BadWaitingForInitialData`, never an older part's value).
+fn result_value(value: Option<Variant>, at_ms: jiff::Timestamp) -> DataValue {
+    let source = date_time(at_ms);
+    let now = DateTime::now();
+    match value {
+        Some(v) => DataValue {
+            value: Some(v),
+            status: Some(StatusCode::Good),
+            source_timestamp: Some(source),
+            server_timestamp: Some(now),
+            ..DataValue::default()
+        },
+        None => DataValue {
+            // The stack returns a value's status only with a value: an empty one.
+            value: Some(Variant::Empty),
+            status: Some(StatusCode::BadWaitingForInitialData),
+            source_timestamp: Some(source),
+            server_timestamp: Some(now),
+            ..DataValue::default()
+        },
+    }
+}
+
+/// A part's result variables from its event (`MaxError` from the status, when it already
+/// shows the part; the repeatability when the gauge gave one).
+fn result_values(
+    e: &PlantEvent,
+    max_error_um: Option<f64>,
+) -> Vec<(FeatureValue, Option<Variant>)> {
+    let PlantEvent::PartAnalysed {
+        machine,
+        feature,
+        part,
+        at_ms,
+        verdict,
+        max_profile_error_um,
+        base_radius_error_um,
+        phase_error_deg,
+        repeatability_um,
+        ground_with_version,
+    } = e
+    else {
+        return Vec::new();
+    };
+    let latest = serde_json::json!({
+        "machine": machine, "feature": feature, "part": part,
+        "time_ms": at_ms.as_millisecond(), "verdict": verdict.as_str(),
+        "max_error_um": max_error_um,
+        "max_profile_error_um": max_profile_error_um,
+        "base_radius_error_um": base_radius_error_um,
+        "phase_error_deg": phase_error_deg,
+        "repeatability_um": repeatability_um,
+        "ground_with_version": ground_with_version,
+    });
+    vec![
+        (FeatureValue::PartId, Some(Variant::from(part.clone()))),
+        (FeatureValue::Time, Some(Variant::from(date_time(*at_ms)))),
+        (FeatureValue::Verdict, Some(Variant::from(verdict.as_str()))),
+        (FeatureValue::MaxErrorUm, max_error_um.map(Variant::from)),
+        (
+            FeatureValue::ProfileErrorUm,
+            Some(Variant::from(*max_profile_error_um)),
+        ),
+        (
+            FeatureValue::SizeErrorUm,
+            Some(Variant::from(*base_radius_error_um)),
+        ),
+        (
+            FeatureValue::PhaseErrorDeg,
+            Some(Variant::from(*phase_error_deg)),
+        ),
+        (
+            FeatureValue::RepeatabilityUm,
+            repeatability_um.map(Variant::from),
+        ),
+        (
+            FeatureValue::LatestResult,
+            Some(Variant::from(latest.to_string())),
+        ),
+    ]
+}
+
+/// The loop's state as a feature status gives it (a part's result is its event's).
 fn status_values(s: &FeatureStatus) -> Vec<(FeatureValue, Variant)> {
-    let mut v = vec![
+    let v = vec![
         (
             FeatureValue::TableVersionInForce,
             Variant::from(i64::try_from(s.in_force_version).unwrap_or(i64::MAX)),
@@ -272,31 +454,6 @@ fn status_values(s: &FeatureStatus) -> Vec<(FeatureValue, Variant)> {
             Variant::from(s.blocked_by_guard.clone().unwrap_or_default()),
         ),
     ];
-    let optional = [
-        (FeatureValue::PartId, s.last_part.clone().map(Variant::from)),
-        (
-            FeatureValue::MaxErrorUm,
-            s.last_max_error_um.map(Variant::from),
-        ),
-        (
-            FeatureValue::ProfileErrorUm,
-            s.last_profile_error_um.map(Variant::from),
-        ),
-        (
-            FeatureValue::SizeErrorUm,
-            s.last_size_error_um.map(Variant::from),
-        ),
-        (
-            FeatureValue::PhaseErrorDeg,
-            s.last_timing_error_deg.map(Variant::from),
-        ),
-        (
-            FeatureValue::Verdict,
-            s.last_pass
-                .map(|p| Variant::from(if p { "pass" } else { "fail" })),
-        ),
-    ];
-    v.extend(optional.into_iter().filter_map(|(k, x)| Some((k, x?))));
     v
 }
 

@@ -4,10 +4,11 @@
 //! history store.
 
 use crate::names::{FeatureName, MachineName};
-use opcua::types::{DateTime, StatusCode, Variant};
+use opcua::types::{DataTypeId, DateTime, StatusCode, Variant};
 use tracing::{info, warn};
 
 use super::auth::OPCUA_CLIENT;
+use super::events::Recent;
 use super::space::Method;
 use crate::service::action::Action;
 use crate::service::command::{self, AckError, Caller, WriteError};
@@ -53,7 +54,7 @@ async fn caller(w: command::Writes<'_>, user: &str) -> Result<Caller, StatusCode
 /// Runs `method` of `machine` for the session's user (`None`: anonymous); a write refused
 /// `BadUserAccessDenied` is audited (see `super::auth::refused_write`).
 pub(crate) async fn call(
-    w: command::Writes<'_>,
+    (w, recent): (command::Writes<'_>, &Recent),
     user: Option<&str>,
     client: &str,
     machine: &str,
@@ -102,7 +103,7 @@ async fn call_as(
     );
     match method {
         Method::Rollback => rollback(w, &caller, machine, args).await,
-        _ => acknowledge(w, &caller, machine, args).await,
+        _ => acknowledge(w, (&caller, recent), machine, args).await,
     }
 }
 
@@ -136,20 +137,26 @@ async fn rollback(
 
 async fn acknowledge(
     w: command::Writes<'_>,
-    caller: &Caller,
+    (caller, recent): (&Caller, &Recent),
     machine: &str,
     args: &[Variant],
 ) -> Result<Vec<Variant>, StatusCode> {
-    let id = args
-        .first()
-        .and_then(int)
-        .ok_or(StatusCode::BadInvalidArgument)?;
     let machine = MachineName::new(machine).map_err(|_| StatusCode::BadInvalidArgument)?;
+    let id = match args.first() {
+        Some(Variant::ByteString(b)) => {
+            let bytes = b.value.clone().unwrap_or_default();
+            stored_event_id(w, recent, &machine, &bytes).await?
+        }
+        Some(v) => int(v).ok_or(StatusCode::BadTypeMismatch)?,
+        None => return Err(StatusCode::BadArgumentsMissing),
+    };
     let outcome = command::acknowledge(w, caller, &machine, id).await;
     match outcome {
-        Ok(AckOutcome::Acknowledged | AckOutcome::AlreadyAcknowledged) => {
-            Ok(vec![Variant::from(format!("event {id} acknowledged"))])
-        }
+        // The same words as the audit row's reason.
+        Ok(AckOutcome::Acknowledged) => Ok(vec![Variant::from(format!("event {id} acknowledged"))]),
+        Ok(AckOutcome::AlreadyAcknowledged) => Ok(vec![Variant::from(format!(
+            "event {id} acknowledged before"
+        ))]),
         Ok(AckOutcome::NotFound) => {
             warn!(machine = %machine, id, "OPC UA: write not carried out: no such event");
             Err(StatusCode::BadNotFound)
@@ -163,6 +170,82 @@ async fn acknowledge(
             })
         }
     }
+}
+
+/// Why a call's arguments do not fit its method (OPC 10000-4 §5.11.2).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) enum ArgumentError {
+    /// Fewer arguments than the method takes: `BadArgumentsMissing`.
+    Missing,
+    /// More: `BadTooManyArguments`.
+    TooMany,
+    /// Each argument's result, `BadTypeMismatch` where its type is wrong (the call's status
+    /// is then `BadInvalidArgument`).
+    Types(Vec<StatusCode>),
+}
+
+/// Checks the arguments' number and types against the method's declared inputs (integers
+/// as Int64, Int32 or UInt32; `AcknowledgeEvent`'s id as an integer or a ByteString).
+pub(crate) fn check_arguments(method: Method, args: &[Variant]) -> Result<(), ArgumentError> {
+    let (inputs, _) = method.arguments();
+    match args.len().cmp(&inputs.len()) {
+        std::cmp::Ordering::Less => return Err(ArgumentError::Missing),
+        std::cmp::Ordering::Greater => return Err(ArgumentError::TooMany),
+        std::cmp::Ordering::Equal => {}
+    }
+    let results: Vec<StatusCode> = inputs
+        .iter()
+        .zip(args)
+        .map(|((_, ty), arg)| {
+            let fits = match ty {
+                DataTypeId::Int64 => int(arg).is_some(),
+                DataTypeId::String => matches!(arg, Variant::String(_)),
+                DataTypeId::BaseDataType => {
+                    int(arg).is_some() || matches!(arg, Variant::ByteString(_))
+                }
+                _ => false,
+            };
+            match fits {
+                true => StatusCode::Good,
+                false => StatusCode::BadTypeMismatch,
+            }
+        })
+        .collect();
+    match results.iter().all(|s| s.is_good()) {
+        true => Ok(()),
+        false => Err(ArgumentError::Types(results)),
+    }
+}
+
+/// camloop's id of the stored event an OPC UA EventId names (raised by this process on
+/// `machine`): the history's event of that machine at that time with that message.
+async fn stored_event_id(
+    w: command::Writes<'_>,
+    recent: &Recent,
+    machine: &MachineName,
+    event_id: &[u8],
+) -> Result<i64, StatusCode> {
+    let Some(origin) = recent.get(event_id).filter(|o| &o.machine == machine) else {
+        warn!(machine = %machine, "OPC UA: AcknowledgeEvent: an EventId this server did not raise for the machine, or no longer remembers");
+        return Err(StatusCode::BadNotFound);
+    };
+    let store = store_of(w.store).await?;
+    let filter = crate::store::EventFilter {
+        machine: Some(machine.clone()),
+        since_ms: Some(origin.at_ms),
+        until_ms: origin
+            .at_ms
+            .checked_add(jiff::SignedDuration::from_millis(1))
+            .ok(),
+        level: None,
+        limit: 100,
+    };
+    let events = store.events(&filter).await.map_err(|e| store_status(&e))?;
+    events
+        .into_iter()
+        .find(|e| e.message == origin.message)
+        .map(|e| e.id.0)
+        .ok_or(StatusCode::BadNotFound)
 }
 
 /// An integer argument (clients send Int64, some Int32).
@@ -292,6 +375,56 @@ pub(crate) fn date_time(at: jiff::Timestamp) -> DateTime {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn arguments_of_the_wrong_type_or_number_get_the_specs_codes() {
+        let feature = Variant::from("IN1");
+        let version = Variant::Int64(3);
+        assert_eq!(
+            check_arguments(Method::Rollback, &[feature.clone(), version.clone()]),
+            Ok(())
+        );
+        assert_eq!(
+            check_arguments(Method::Rollback, &[feature.clone(), Variant::Int32(3)]),
+            Ok(())
+        );
+        assert_eq!(
+            check_arguments(Method::Rollback, &[version.clone(), Variant::from("3")]),
+            Err(ArgumentError::Types(vec![
+                StatusCode::BadTypeMismatch,
+                StatusCode::BadTypeMismatch
+            ]))
+        );
+        assert_eq!(
+            check_arguments(Method::Rollback, &[feature.clone(), Variant::Double(3.0)]),
+            Err(ArgumentError::Types(vec![
+                StatusCode::Good,
+                StatusCode::BadTypeMismatch
+            ]))
+        );
+        assert_eq!(
+            check_arguments(Method::Rollback, std::slice::from_ref(&feature)),
+            Err(ArgumentError::Missing)
+        );
+        assert_eq!(
+            check_arguments(Method::GetLatestResult, &[feature.clone(), version.clone()]),
+            Err(ArgumentError::TooMany)
+        );
+        // AcknowledgeEvent takes camloop's id or the OPC UA EventId, nothing else.
+        let event_id = Variant::ByteString(opcua::types::ByteString::from(b"1-2".to_vec()));
+        assert_eq!(
+            check_arguments(Method::AcknowledgeEvent, &[event_id]),
+            Ok(())
+        );
+        assert_eq!(
+            check_arguments(Method::AcknowledgeEvent, &[version]),
+            Ok(())
+        );
+        assert_eq!(
+            check_arguments(Method::AcknowledgeEvent, &[feature]),
+            Err(ArgumentError::Types(vec![StatusCode::BadTypeMismatch]))
+        );
+    }
 
     #[test]
     fn unix_milliseconds_become_the_same_instant_in_opc_ua_time() {

@@ -10,9 +10,11 @@
 //! the in-process feature status: the loops never wait on it.
 
 mod auth;
+mod events;
 pub(crate) mod feed;
 mod methods;
 mod nodes;
+mod pki;
 pub(crate) mod space;
 
 use crate::names::{FeatureName, MachineName};
@@ -49,8 +51,8 @@ pub(crate) fn layout(machines: &[crate::config::CheckedMachine]) -> Vec<MachineL
         .collect()
 }
 
-/// Plant events waiting for the feed; beyond it an event is dropped (the values catch up at
-/// the next status refresh; only that OPC UA event is lost).
+/// Plant events waiting for the feed; beyond it an event is dropped (that part's result and
+/// OPC UA event are not shown; the feature's next part replaces it).
 const INTAKE: usize = 4096;
 
 /// Sessions served at once (the stack's default is 20: a plant has more clients).
@@ -60,9 +62,36 @@ const MAX_SESSIONS: usize = 64;
 /// every value of 50 machines × 8 features needs 5600.
 const MAX_ITEMS_PER_SUBSCRIPTION: usize = 100_000;
 
+/// The largest queue a monitored item may ask for (the stack's default is 10): an event item
+/// on `Server` must hold a plant's events of one publishing interval, 500 machines × 8
+/// features' results plus their alarms, with room to spare.
+pub(crate) const MAX_ITEM_QUEUE: usize = 10_000;
+
+/// Notifications per publish message: at most a few hundred bytes each, so a message stays
+/// well under the stack's 327,675-byte message limit (beyond it a publish was dropped whole);
+/// more are sent in further messages of the same publishing interval.
+pub(crate) const MAX_NOTIFICATIONS_PER_PUBLISH: u64 = 500;
+
+/// Publish messages a subscription keeps while its client has no publish request waiting
+/// (the stack's default is 20): a plant's interval of 9,000 values is 18 messages.
+const MAX_QUEUED_MESSAGES: usize = 200;
+
+/// Elements of an array in a request (the stack's default decodes 1,000 while it advertised
+/// 10,000 nodes per read): as many as the largest advertised per-call limit.
+pub(crate) const MAX_ARRAY_LENGTH: usize = 10_000;
+
+/// The largest message, in bytes, and in chunks of the stack's 65,535 bytes (its default is
+/// 5 chunks, 327,675 bytes): a Read of the advertised 10,000 nodes by string ids is about
+/// 0.6 MB, so the limits a client is told are limits it can use.
+const MAX_MESSAGE_SIZE: usize = 64 * 65_535;
+const MAX_CHUNK_COUNT: usize = 64;
+
 /// The server's private key in the PKI folder: refused at start when other accounts can
 /// read it, and made owner-only when the server writes it.
 const PRIVATE_KEY: &str = "private/private.pem";
+
+/// The server's certificate in the PKI folder.
+const CERTIFICATE: &str = "own/cert.der";
 
 /// A running OPC UA server.
 pub(crate) struct OpcUa {
@@ -161,8 +190,17 @@ async fn start_with(
         crate::audit_seal::refuse_readable_by_others(&key).context("opcua: the private key")?;
     }
     let host = section.host();
+    make_certificate(section, &pki, &host)?;
     let url = format!("opc.tcp://{host}:{}/", section.listen.port());
-    let builder = server_builder(section, &pki, &url, app.clone(), layout.clone());
+    let listeners = Arc::new(events::Listeners::default());
+    let recent = Arc::new(events::Recent::default());
+    let builder = server_builder(
+        section,
+        &pki,
+        &url,
+        (app.clone(), listeners.clone(), recent.clone()),
+        layout.clone(),
+    );
     let (server, handle) = builder
         .build()
         .map_err(|e| anyhow::anyhow!("opcua: the server cannot be set up: {e}"))?;
@@ -191,9 +229,13 @@ async fn start_with(
         space::Ids { ns },
         app.metrics.clone(),
         layout.clone(),
+        listeners,
+        handle.clone(),
     );
     feed.dressings = dressing_counts(&app, &layout).await;
+    feed.recent = recent;
     let feed = tokio::spawn(feed::run(feed, events, shutdown.clone()));
+    tokio::spawn(pki::keep_rejected_bounded(pki.clone(), shutdown.clone()));
     let cancel = handle.clone();
     let mut stop = shutdown;
     tokio::spawn(async move {
@@ -212,12 +254,46 @@ async fn start_with(
     }))
 }
 
+/// The server's certificate and key, made on the first start (kept once there): RSA 2048,
+/// self-signed, for `urn:camloop:<host>`, the configured host name, `localhost` and this
+/// computer's names, with the subject the config gives (not the library's sample subject).
+fn make_certificate(
+    section: &OpcUaSection,
+    pki: &std::path::Path,
+    host: &str,
+) -> anyhow::Result<()> {
+    let cert = pki.join(CERTIFICATE);
+    let key = pki.join(PRIVATE_KEY);
+    if cert.exists() && key.exists() {
+        return Ok(());
+    }
+    for dir in [pki.join("own"), pki.join("private")] {
+        crate::private_fs::create_dir_all(&dir)
+            .with_context(|| format!("opcua: PKI folder {}", dir.display()))?;
+    }
+    let description = opcua::types::ApplicationDescription {
+        application_uri: format!("urn:camloop:{host}").into(),
+        application_name: opcua::types::LocalizedText::new("", "camloop"),
+        ..Default::default()
+    };
+    let mut data = opcua::crypto::X509Data::from((description, Some(vec![host.to_string()])));
+    data.organization = section.certificate_organization.clone();
+    data.organizational_unit = section.certificate_organizational_unit.clone();
+    data.country = section.certificate_country.clone();
+    data.state = section.certificate_state.clone();
+    data.certificate_duration_days = section.certificate_days;
+    opcua::crypto::CertificateStore::create_certificate_and_key(&data, false, &cert, &key)
+        .map_err(|e| anyhow::anyhow!("opcua: cannot make the server certificate: {e}"))?;
+    info!(certificate = %cert.display(), days = section.certificate_days, "OPC UA: server certificate made");
+    Ok(())
+}
+
 /// The server as configured: endpoints, certificates, users, camloop's nodes.
 fn server_builder(
     section: &OpcUaSection,
     pki: &std::path::Path,
     url: &str,
-    app: AppState,
+    (app, listeners, recent): (AppState, Arc<events::Listeners>, Arc<events::Recent>),
     layout: Vec<MachineLayout>,
 ) -> ServerBuilder {
     let host = section.host();
@@ -235,10 +311,10 @@ fn server_builder(
             product_name: "camloop".into(),
             software_version: env!("CARGO_PKG_VERSION").into(),
             build_number: env!("CARGO_PKG_VERSION").into(),
-            build_date: opcua::types::DateTime::now(),
+            build_date: build_date(),
         })
         .create_sample_keypair(true)
-        .certificate_path("own/cert.der")
+        .certificate_path(CERTIFICATE)
         .private_key_path(PRIVATE_KEY)
         .pki_dir(pki)
         .trust_client_certs(section.accept_unknown_clients)
@@ -255,11 +331,19 @@ fn server_builder(
         .with_node_manager(InMemoryNodeManagerBuilder::new(nodes::Builder {
             layout,
             app,
+            listeners,
+            recent,
         }))
         .diagnostics_enabled(false);
     let limits = builder.limits_mut();
     limits.max_sessions = MAX_SESSIONS;
     limits.subscriptions.max_monitored_items_per_sub = MAX_ITEMS_PER_SUBSCRIPTION;
+    limits.subscriptions.max_monitored_item_queue_size = MAX_ITEM_QUEUE;
+    limits.subscriptions.max_notifications_per_publish = MAX_NOTIFICATIONS_PER_PUBLISH;
+    limits.subscriptions.max_queued_notifications = MAX_QUEUED_MESSAGES;
+    limits.max_array_length = MAX_ARRAY_LENGTH;
+    limits.max_message_size = MAX_MESSAGE_SIZE;
+    limits.max_chunk_count = MAX_CHUNK_COUNT;
     if section.security == OpcUaSecurity::Basic256Sha256AndNone {
         warn!(
             "opcua.security allows an unsecured endpoint (None): messages travel in clear; passwords are still encrypted with the server's certificate"
@@ -275,6 +359,14 @@ fn server_builder(
         warn!("opcua.anonymous_read = true: clients without a user may browse, read and subscribe");
     }
     builder
+}
+
+/// When this binary was built: the commit's time (`SOURCE_DATE_EPOCH` at build, set by
+/// `build.rs`), not the process's start.
+fn build_date() -> opcua::types::DateTime {
+    let seconds: i64 = env!("CAMLOOP_BUILD_EPOCH_S").parse().unwrap_or(0);
+    let at = jiff::Timestamp::from_second(seconds).unwrap_or(jiff::Timestamp::UNIX_EPOCH);
+    methods::date_time(at)
 }
 
 /// Each machine's dressings as the store has them at start (0 while it is down).

@@ -2,15 +2,19 @@
 //! [`super::feed`]) whose method calls run async with the caller's identity.
 
 use async_trait::async_trait;
+use opcua::server::CreateMonitoredItem;
 use opcua::server::address_space::AddressSpace;
 use opcua::server::diagnostics::NamespaceMetadata;
 use opcua::server::node_manager::memory::{
     InMemoryNodeManagerImpl, InMemoryNodeManagerImplBuilder,
 };
-use opcua::server::node_manager::{MethodCall, RequestContext, ServerContext};
+use opcua::server::node_manager::{MethodCall, MonitoredItemRef, RequestContext, ServerContext};
 use opcua::sync::RwLock;
-use opcua::types::StatusCode;
+use opcua::types::{AttributeId, StatusCode};
+use std::sync::Arc;
 
+use super::events::{Listeners, Recent};
+use super::methods::ArgumentError;
 use super::space::{self, Ids, MachineLayout, Method};
 use crate::service::app::AppState;
 
@@ -18,6 +22,8 @@ use crate::service::app::AppState;
 pub(crate) struct Builder {
     pub(crate) layout: Vec<MachineLayout>,
     pub(crate) app: AppState,
+    pub(crate) listeners: Arc<Listeners>,
+    pub(crate) recent: Arc<Recent>,
 }
 
 pub(crate) struct CamloopNodes {
@@ -25,6 +31,8 @@ pub(crate) struct CamloopNodes {
     ids: Ids,
     layout: Vec<MachineLayout>,
     app: AppState,
+    listeners: Arc<Listeners>,
+    recent: Arc<Recent>,
 }
 
 impl InMemoryNodeManagerImplBuilder for Builder {
@@ -46,6 +54,8 @@ impl InMemoryNodeManagerImplBuilder for Builder {
             ids: Ids { ns },
             layout: self.layout,
             app: self.app,
+            listeners: self.listeners,
+            recent: self.recent,
         }
     }
 }
@@ -64,6 +74,31 @@ impl InMemoryNodeManagerImpl for CamloopNodes {
 
     fn namespaces(&self) -> Vec<NamespaceMetadata> {
         vec![self.namespace.clone()]
+    }
+
+    /// Event monitored items on camloop's notifiers are delivered by the feed (see
+    /// [`super::events`]): recorded here.
+    async fn create_event_monitored_items(
+        &self,
+        context: &RequestContext,
+        _address_space: &RwLock<AddressSpace>,
+        items: &mut [&mut &mut CreateMonitoredItem],
+    ) {
+        for item in items.iter() {
+            if item.status_code().is_good() {
+                let node = item.item_to_monitor().node_id.clone();
+                self.listeners.add(context.session_id, node, item.handle());
+            }
+        }
+    }
+
+    async fn delete_monitored_items(&self, _context: &RequestContext, items: &[&MonitoredItemRef]) {
+        let events: Vec<&MonitoredItemRef> = items
+            .iter()
+            .copied()
+            .filter(|i| i.attribute() == AttributeId::EventNotifier)
+            .collect();
+        self.listeners.remove(&events);
     }
 
     async fn call(
@@ -88,8 +123,25 @@ impl InMemoryNodeManagerImpl for CamloopNodes {
                 continue;
             };
             let args = call.arguments().to_vec();
+            match super::methods::check_arguments(method, &args) {
+                Ok(()) => {}
+                Err(ArgumentError::Missing) => {
+                    call.set_status(StatusCode::BadArgumentsMissing);
+                    continue;
+                }
+                Err(ArgumentError::TooMany) => {
+                    call.set_status(StatusCode::BadTooManyArguments);
+                    continue;
+                }
+                Err(ArgumentError::Types(results)) => {
+                    // BadInvalidArgument, with BadTypeMismatch on each argument of the wrong
+                    // type (OPC 10000-4 §5.11.2).
+                    call.set_argument_error(results);
+                    continue;
+                }
+            }
             let done = super::methods::call(
-                self.app.writes(),
+                (self.app.writes(), &self.recent),
                 user.as_deref(),
                 &client,
                 &machine,

@@ -9,8 +9,8 @@ use opcua::server::address_space::{
     VariableBuilder,
 };
 use opcua::types::{
-    Argument, DataTypeId, EUInformation, LocalizedText, NodeId, ObjectId, ObjectTypeId,
-    QualifiedName, UAString, VariableTypeId, Variant,
+    Argument, DataTypeId, DataValue, EUInformation, LocalizedText, NodeId, ObjectId, ObjectTypeId,
+    QualifiedName, ReferenceTypeId, StatusCode, UAString, VariableTypeId, Variant,
 };
 
 /// camloop's namespace.
@@ -42,6 +42,8 @@ pub(crate) enum FeatureValue {
     SizeErrorUm,
     PhaseErrorDeg,
     RepeatabilityUm,
+    /// The whole result as one JSON string (written with the scalars, in the same write).
+    LatestResult,
     TableVersionInForce,
     WaitingVersion,
     LearningFrozen,
@@ -66,7 +68,7 @@ impl FeatureValue {
     fn data_type(self) -> DataTypeId {
         use FeatureValue::*;
         match self {
-            PartId | Verdict | FrozenReason | GuardReason => DataTypeId::String,
+            PartId | Verdict | FrozenReason | GuardReason | LatestResult => DataTypeId::String,
             Time => DataTypeId::DateTime,
             MaxErrorUm | ProfileErrorUm | SizeErrorUm | PhaseErrorDeg | RepeatabilityUm => {
                 DataTypeId::Double
@@ -74,6 +76,23 @@ impl FeatureValue {
             TableVersionInForce | WaitingVersion => DataTypeId::Int64,
             LearningFrozen | BlockedByGuard => DataTypeId::Boolean,
         }
+    }
+
+    /// Whether the value is a part's result (written from its part's event only).
+    pub(crate) fn is_result(self) -> bool {
+        use FeatureValue::*;
+        matches!(
+            self,
+            PartId
+                | Time
+                | Verdict
+                | MaxErrorUm
+                | ProfileErrorUm
+                | SizeErrorUm
+                | PhaseErrorDeg
+                | RepeatabilityUm
+                | LatestResult
+        )
     }
 
     fn unit(self) -> Option<(&'static str, i32, &'static str)> {
@@ -110,6 +129,9 @@ impl Ids {
     }
     pub(crate) fn value(self, m: &str, f: &str, v: FeatureValue) -> NodeId {
         self.id(&format!("Machines/{m}/Features/{f}/{}", v.browse_name()))
+    }
+    pub(crate) fn grinding_order(self, m: &str) -> NodeId {
+        self.id(&format!("Machines/{m}/GrindingOrder"))
     }
     pub(crate) fn dressing_count(self, m: &str) -> NodeId {
         self.id(&format!("Machines/{m}/DressingCount"))
@@ -156,8 +178,8 @@ impl Method {
     }
 
     /// In and out arguments: name and type.
-    fn arguments(self) -> (Vec<Arg>, Vec<Arg>) {
-        use DataTypeId::{DateTime, Int64, String};
+    pub(crate) fn arguments(self) -> (Vec<Arg>, Vec<Arg>) {
+        use DataTypeId::{BaseDataType, DateTime, Int64, String};
         let result_out = vec![
             ("ResultId", Int64),
             ("PartId", String),
@@ -170,7 +192,11 @@ impl Method {
                 vec![("Feature", String), ("Version", Int64)],
                 vec![("NewVersion", Int64), ("Message", String)],
             ),
-            Method::AcknowledgeEvent => (vec![("EventId", Int64)], vec![("Message", String)]),
+            // camloop's id (Int64, from the events API) or the event's OPC UA EventId
+            // (ByteString): either type is taken.
+            Method::AcknowledgeEvent => {
+                (vec![("EventId", BaseDataType)], vec![("Message", String)])
+            }
             Method::GetLatestResult => (vec![("Feature", String)], result_out),
             Method::GetResultById => (vec![("ResultId", Int64)], result_out),
         }
@@ -201,8 +227,27 @@ pub(crate) fn build(space: &mut AddressSpace, ids: Ids, machines: &[MachineLayou
         .organized_by(ObjectId::ObjectsFolder)
         .event_notifier(EventNotifier::SUBSCRIBE_TO_EVENTS)
         .insert(space);
+    // The notifier hierarchy (OPC 10000-3 §7.16): Server → Machines → each machine, whose
+    // features are its event sources.
+    space.insert_reference(
+        &ObjectId::Server.into(),
+        &ids.machines(),
+        ReferenceTypeId::HasNotifier,
+    );
     for m in machines {
         machine(space, ids, m);
+        space.insert_reference(
+            &ids.machines(),
+            &ids.machine(&m.name),
+            ReferenceTypeId::HasNotifier,
+        );
+        for f in &m.features {
+            space.insert_reference(
+                &ids.machine(&m.name),
+                &ids.feature(&m.name, f),
+                ReferenceTypeId::HasEventSource,
+            );
+        }
     }
 }
 
@@ -278,6 +323,25 @@ fn machine(space: &mut AddressSpace, ids: Ids, m: &MachineLayout) {
     for f in &m.features {
         feature(space, ids, &m.name, f, &features);
     }
+    // The library answers a Browse in its hash set's order, which changes from start to
+    // start: the recipe's order is given here (on the machine: the Features folder holds
+    // the features only).
+    let order: Vec<UAString> = m
+        .features
+        .iter()
+        .map(|f| UAString::from(f.as_str()))
+        .collect();
+    read_only(
+        &ids.grinding_order(&m.name),
+        ids.name("GrindingOrder"),
+        "GrindingOrder",
+        DataTypeId::String,
+    )
+    .value_rank(1)
+    .value(Variant::from(order))
+    .property_of(node.clone())
+    .has_type_definition(VariableTypeId::PropertyType)
+    .insert(space);
     let results = ids.id(&format!("Machines/{}/Results", m.name));
     ObjectBuilder::new(&results, ids.name("Results"), "Results")
         .is_folder()
@@ -314,10 +378,28 @@ fn feature(space: &mut AddressSpace, ids: Ids, m: &str, f: &str, parent: &NodeId
                     .insert(space);
             }
         }
+        if v.is_result() {
+            waiting_for_initial_data(space, &id);
+        }
     }
 }
 
-/// A read-only variable with no value yet (`Null` until the first part).
+/// A result variable before its feature's first part since the start: no value, and a
+/// status that says so (not `Null` with `Good`).
+fn waiting_for_initial_data(space: &mut AddressSpace, id: &NodeId) {
+    if let Some(opcua::server::address_space::NodeType::Variable(v)) = space.find_mut(id) {
+        v.set_data_value(DataValue {
+            // The stack returns a value's status only with a value: an empty one.
+            value: Some(Variant::Empty),
+            status: Some(StatusCode::BadWaitingForInitialData),
+            source_timestamp: None,
+            server_timestamp: Some(opcua::types::DateTime::now()),
+            ..DataValue::default()
+        });
+    }
+}
+
+/// A read-only variable with no value yet.
 fn read_only(id: &NodeId, name: QualifiedName, display: &str, ty: DataTypeId) -> VariableBuilder {
     VariableBuilder::new(id, name, display)
         .data_type(ty)
@@ -384,9 +466,9 @@ pub(crate) fn nodes_per_machine(features: usize) -> usize {
     let analog = <FeatureValue as strum::IntoEnumIterator>::iter()
         .filter(|v| v.unit().is_some())
         .count();
-    // machine, Identification + 4, DressingCount, JournalFailing, Features, Results,
-    // 4 methods with 2 argument variables each.
-    let fixed = 1 + 5 + 2 + 2 + 4 * 3;
+    // machine, Identification + 4, DressingCount, JournalFailing, GrindingOrder, Features,
+    // Results, 4 methods with 2 argument variables each.
+    let fixed = 1 + 5 + 2 + 3 + 4 * 3;
     fixed + features * (1 + values + analog)
 }
 
@@ -439,6 +521,23 @@ mod tests {
         for method in <Method as strum::IntoEnumIterator>::iter() {
             assert!(space.node_exists(&ids.method("G7", method)), "{method:?}");
         }
+        // The recipe's order, whatever order a Browse gives.
+        let Some(opcua::server::address_space::NodeType::Variable(order)) =
+            space.find(&ids.grinding_order("G7"))
+        else {
+            panic!("no GrindingOrder")
+        };
+        let order = order.value(
+            opcua::types::TimestampsToReturn::Neither,
+            &opcua::types::NumericRange::None,
+            &opcua::types::DataEncoding::Binary,
+            0.0,
+        );
+        let Some(Variant::Array(a)) = order.value else {
+            panic!("{order:?}")
+        };
+        let names: Vec<String> = a.values.iter().map(|v| v.to_string()).collect();
+        assert_eq!(names, ["IN1", "EX1"]);
         // UNECE Rec. 20 packs the code's characters: "4H" is the micrometre.
         let micrometre = (i32::from(b'4') << 8) | i32::from(b'H');
         let eu = NodeId::new(2, "Machines/G7/Features/IN1/ProfileError/EngineeringUnits");
