@@ -61,7 +61,7 @@ pub(crate) async fn call(
     method: Method,
     args: &[Variant],
 ) -> Result<Vec<Variant>, StatusCode> {
-    let done = call_as(w, user, client, machine, method, args).await;
+    let done = call_as((w, recent), user, client, machine, method, args).await;
     if done == Err(StatusCode::BadUserAccessDenied) {
         super::auth::refused_write(w, user, machine, method.name()).await;
     }
@@ -69,7 +69,7 @@ pub(crate) async fn call(
 }
 
 async fn call_as(
-    w: command::Writes<'_>,
+    (w, recent): (command::Writes<'_>, &Recent),
     user: Option<&str>,
     client: &str,
     machine: &str,
