@@ -91,6 +91,7 @@ mod invariants;
 mod loop_plateau;
 mod loop_sim;
 mod loop_speed_plan;
+mod machine_plan_memory;
 mod machine_write_errors;
 mod mqtt_broker;
 mod mqtt_secure;

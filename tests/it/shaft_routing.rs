@@ -143,7 +143,7 @@ async fn swapped_lobes_are_refused_or_rejected_never_learned_crosswise() {
     let versions = |m: &MachineLoop| -> Vec<u64> {
         m.features()
             .iter()
-            .map(|f| f.memory().in_force_version)
+            .map(|f| f.memory().in_force_version.map_or(0, |v| v.get()))
             .collect()
     };
     let before = versions(&m);

@@ -6,6 +6,9 @@
 pub mod coast;
 pub mod dressing;
 pub mod guards;
+pub mod machine;
+pub mod memory;
+pub mod record;
 
 pub use camloop_core::ids::{BadPartId, PartId, TableVersion, VersionOutOfRange};
 pub use camloop_core::names::{FeatureName, MachineName};
@@ -17,3 +20,5 @@ pub mod event;
 pub mod unix_ms;
 
 pub use event::{MACHINE_LEVEL, PlantEvent};
+pub use machine::{Effect, FeatureMachine, Input};
+pub use memory::LoopMemory;

@@ -4,6 +4,7 @@
 
 use super::FeatureLoop;
 use crate::clock::now;
+use camloop_loop::PartId;
 use camloop_loop::coast::{self, Coast};
 use tracing::{debug, warn};
 
@@ -12,9 +13,10 @@ impl FeatureLoop {
     /// there is none to anticipate, learning is frozen, or a table waits for the share).
     pub(super) async fn coast(&mut self, part: &str) {
         // Ground for this part: a resumed shaft does not grind it again.
-        self.memory.last_part = Some(part.to_string());
-        let waiting = self.memory.waiting.is_some();
-        let coasted = coast::coast(&self.memory.learning, waiting, part, &self.lobe_loop());
+        self.machine.memory_mut().last_part = PartId::new(part).ok();
+        let memory = self.machine.memory();
+        let waiting = memory.waiting.is_some();
+        let coasted = coast::coast(&memory.learning, waiting, part, &self.lobe_loop());
         let (next, table, reason) = match coasted {
             Coast::Noted => {
                 let record = self.learning_record(now());

@@ -1,24 +1,23 @@
-//! Tables to the control: rendering with provenance, the push, the main program beside the
-//! table program, retries, and which version is in force.
+//! Tables to the control, the shell's half: a table order handed to the feature's machine
+//! (which writes it ahead, submits and delivers it, and keeps which version is in force),
+//! the share's request with the main program beside the table program, provenance, retries.
 
 use super::super::journal::{EventKind, Pending};
 use super::FeatureLoop;
 use super::MachineError;
-use super::memory::{TableLearning, WaitingTable};
-use super::records::event;
+use super::memory::TableLearning;
+use super::records::{self, event};
 use crate::clock::now;
 use crate::core::compensate::GuardedTable;
 use crate::core::digest::Sha256;
 use crate::core::learn::LearningState;
-use crate::core::program::{Provenance, comment_text};
-use crate::failpoint::crash_point;
-use crate::share::{ProgramFile, PushError, PushRequest, Submitted};
+use crate::core::program::Provenance;
+use crate::share::{ProgramFile, PushRequest};
 use crate::store::{EventLevel, VersionStatus};
+use camloop_loop::machine::{Finished, Program, TableOrder};
+use camloop_loop::{Input, TableVersion};
 use std::sync::atomic::Ordering;
 use tracing::{error, info, warn};
-
-/// Why a version's first record says "waiting": it is written before the share hears of it.
-pub(super) const SUBMITTED: &str = "submitted to the share";
 
 /// A table version before the share numbers it: what its journal record and its push
 /// request are both made from.
@@ -34,11 +33,12 @@ pub(super) struct Draft {
 }
 
 impl FeatureLoop {
-    /// Renders `table` for the next table number with its provenance and delivers it (with
-    /// the main program when the share's copy differs). `next` is the learning state the
-    /// table was made from: it is in force once the share confirms the table, waiting
-    /// otherwise. Returns the records to keep; an error means nothing was submitted to the
-    /// share (the journal or the state folder could not be written).
+    /// Delivers `table` (made from `next`) through the feature's machine: rendered for the
+    /// next table number with its provenance, written ahead, submitted (with the main
+    /// program when the share's copy differs) and delivered. `next` is in force once the
+    /// share confirms the table, waiting otherwise. Returns the records to keep; an error
+    /// means nothing was submitted to the share (the journal or the state folder could not
+    /// be written, or the table cannot be rendered).
     pub(super) async fn deliver(
         &mut self,
         table: &GuardedTable,
@@ -46,72 +46,47 @@ impl FeatureLoop {
         reason: &str,
         measurement: Option<Sha256>,
     ) -> Result<Vec<Pending>, MachineError> {
-        let at_ms = now();
-        let parent = self.memory.in_force_version;
-        let version = self.share.history().next_version();
-        let learning = TableLearning {
-            iteration: next.iteration,
-            params: self.setup.params.clone(),
-            wheel_radius_mm: self.memory.wheel_radius_mm,
-            correction_um: next.correction_um.clone(),
-            timing_correction_deg: next.timing_correction_deg,
-        };
-        let mut settings = self.setup.program.clone();
-        settings.table_number = self.share.next_table_number();
-        settings.provenance = Some(self.provenance(version, parent, &learning));
-        settings.comment_lines = vec![
-            comment_text(&format!("reason: {reason}")),
-            comment_text(&format!(
-                "wheel radius {} mm, learning iteration {}",
-                learning.wheel_radius_mm, learning.iteration
-            )),
-        ];
-        let text = self
-            .render_table(table, &next, &settings)
-            .map_err(MachineError::refused)?;
-        crash_point("table_rendered");
-        let draft = Draft {
-            text,
-            table_number: settings.table_number,
-            learning,
+        let order = TableOrder {
+            program: Program::Table {
+                table: Box::new(table.clone()),
+                planned: None,
+            },
+            next: Box::new(next),
             reason: reason.to_string(),
-            measurement_id: measurement,
+            measurement,
             rollback_of: None,
-            at_ms,
+            learning: None,
+            at: now(),
         };
-        let (_, _, records) = self.push(draft, next)?;
+        let (_, _, records) = self.deliver_order(order).await?;
         Ok(records)
     }
 
-    /// One push attempt; the state in force follows what the share confirmed.
-    ///
-    /// Write-ahead: the version's record (status waiting) is in the journal before the
-    /// share hears of it, so whenever the process dies the version is known with the
-    /// correction it was made from ([`Self::reconcile_share`] finishes what was cut short).
-    /// The records returned hold the outcome.
-    pub(super) fn push(
+    /// A table order through the feature's machine: its version, status and the records
+    /// to keep with the caller's own.
+    pub(super) async fn deliver_order(
         &mut self,
-        draft: Draft,
-        next: LearningState,
+        order: TableOrder,
     ) -> Result<(u64, VersionStatus, Vec<Pending>), MachineError> {
-        let version = self.share.history().next_version();
-        let record = self.table_record(&draft, version);
-        if let Err(e) = self.journal.append(std::slice::from_ref(&record)) {
-            let reason =
-                format!("{e:#}; the table version's record cannot be journalled: not submitted");
-            return Err(self.journal_failed(reason));
-        }
-        let at_ms = draft.at_ms;
-        let request = self.request(draft).map_err(MachineError::failed)?;
-        let (status, mut records) = self.submit_and_deliver(request, version, next, at_ms)?;
-        records.push(Pending::VersionStatus {
-            machine: self.name.clone(),
-            lobe: self.setup.name.clone(),
-            version,
-            status: status.clone(),
-            at_ms,
-        });
-        Ok((version, status, records))
+        let at_ms = order.at;
+        self.machine.handle(Input::Table(Box::new(order)));
+        let done = self
+            .run_machine(None)
+            .await
+            .into_iter()
+            .find_map(|f| match f {
+                Finished::Table(done) => Some(done),
+                _ => None,
+            })
+            .ok_or_else(|| MachineError::Failed {
+                reason: "the feature's loop ended a table order without its outcome".into(),
+            })??;
+        let records = records::pending(&self.name, &self.setup.name, done.records, None);
+        Ok((
+            done.version.get(),
+            records::status(done.status, at_ms),
+            records,
+        ))
     }
 
     /// A write's records the journal did not keep: another instance owns the machine now
@@ -121,27 +96,6 @@ impl FeatureLoop {
             MachineError::FencedOut { reason }
         } else {
             MachineError::Journal { reason }
-        }
-    }
-
-    /// The journal record of a version not yet submitted.
-    fn table_record(&self, draft: &Draft, version: u64) -> Pending {
-        let parent = self.memory.in_force_version;
-        Pending::Table {
-            machine: self.name.clone(),
-            lobe: self.setup.name.clone(),
-            version,
-            parent_version: (parent > 0).then_some(parent),
-            table_number: draft.table_number,
-            program_text: draft.text.clone(),
-            learning: draft.learning.clone(),
-            reason: draft.reason.clone(),
-            status: VersionStatus::Waiting {
-                reason: Some(SUBMITTED.into()),
-            },
-            created_at_ms: draft.at_ms,
-            measurement_id: draft.measurement_id,
-            rollback_of: draft.rollback_of,
         }
     }
 
@@ -164,108 +118,9 @@ impl FeatureLoop {
         })
     }
 
-    /// Submits `request` as `version` and delivers it: its status (with why), and the
-    /// records of what happened on the way.
-    fn submit_and_deliver(
-        &mut self,
-        request: PushRequest,
-        version: u64,
-        next: LearningState,
-        at_ms: jiff::Timestamp,
-    ) -> Result<(VersionStatus, Vec<Pending>), MachineError> {
-        let mut records = Vec::new();
-        let submitted = self
-            .share
-            .submit(request)
-            .map_err(|e| MachineError::ShareState {
-                reason: format!("{e:#}"),
-            })?;
-        match submitted {
-            Submitted::Refused { reason, .. } => {
-                error!(machine = %self.name, version, reason = %reason, "table version refused by the share");
-                return Ok((VersionStatus::Refused { reason }, records));
-            }
-            Submitted::Accepted { version: v } if v != version => {
-                return Err(MachineError::Failed {
-                    reason: format!(
-                        "the share numbered the version {v}, its record says {version}"
-                    ),
-                });
-            }
-            Submitted::Accepted { .. } => {}
-        }
-        match self.share.deliver() {
-            Ok(Some(p)) if p.version == version => {
-                self.memory.waiting = None;
-                self.memory.learning = next;
-                self.memory.in_force_version = version;
-                self.on_delivered(self.memory.wheel_radius_mm);
-                let pushed = VersionStatus::pushed_at(at_ms, "pushed to the share");
-                Ok((pushed, records))
-            }
-            Err(PushError::Share { version, error: e }) => {
-                self.hold_for_the_share(version, next, &e, at_ms, &mut records);
-                let reason = Some(format!("waiting: {e}"));
-                Ok((VersionStatus::Waiting { reason }, records))
-            }
-            Ok(other) => Err(MachineError::Failed {
-                reason: format!(
-                    "the share delivered {:?} instead of the version just submitted, {version}",
-                    other.map(|p| p.version)
-                ),
-            }),
-            Err(PushError::Refused { reason, .. }) => {
-                Ok((VersionStatus::Refused { reason }, records))
-            }
-            Err(PushError::State(e)) => Err(MachineError::ShareState {
-                reason: format!("{e:#}"),
-            }),
-        }
-    }
-
-    /// The share cannot take `version`: it waits (with the learning state it was made from)
-    /// while parts go on being ground and learned from the table in force.
-    fn hold_for_the_share(
-        &mut self,
-        version: u64,
-        next: LearningState,
-        e: &dyn std::fmt::Display,
-        at_ms: jiff::Timestamp,
-        records: &mut Vec<Pending>,
-    ) {
-        // Parts ground while the learning's tables cannot reach the control say
-        // nothing about the learning: the divergence guard's history restarts, or
-        // the wear of the outage (and a dressing in it) would be taken for the
-        // learning diverging as soon as the share is back.
-        self.memory.learning.recent_max_error_um.clear();
-        if self.memory.waiting.is_none() {
-            // Said once per outage, not per part.
-            error!(machine = %self.name, error = %e, in_force = self.memory.in_force_version, "controller share: table not delivered; learning holds on the table in force");
-            let message = format!(
-                "{e}: parts are ground with v{} and learned from it alone until the share takes v{version} or a newer table",
-                self.memory.in_force_version
-            );
-            records.push(event(
-                &self.name,
-                at_ms,
-                EventLevel::Error,
-                EventKind::ShareUnavailable,
-                message,
-            ));
-            self.metrics.update(&self.name, |m| m.alarms_total += 1);
-        }
-        self.memory.waiting = Some(WaitingTable {
-            version,
-            learning: next,
-            wheel_radius_mm: self.memory.wheel_radius_mm,
-        });
-        self.metrics.update(&self.name, |m| {
-            m.share_waiting = 1;
-            m.learning_held = 1;
-        });
-    }
-
-    fn on_delivered(&self, wheel_radius_mm: f64) {
+    /// A table reached the control: the simulator's wheel, the main program's speed, the
+    /// metrics.
+    pub(super) fn on_delivered(&self, wheel_radius_mm: f64) {
         self.table_wheel_radius_bits
             .store(wheel_radius_mm.to_bits(), Ordering::SeqCst);
         // The main program pairs each feature's table with the VA speed it was made for.
@@ -289,18 +144,15 @@ impl FeatureLoop {
                 .get(v)
                 .map_or(String::new(), |s| format!(" (T{})", s.record.table_number))
         };
-        match &self.memory.waiting {
+        let memory = self.machine.memory();
+        let in_force = memory.in_force_version.map_or(0, |v| v.get());
+        match &memory.waiting {
             Some(w) => format!(
-                "table v{}{} waiting for the share (v{} in force)",
+                "table v{}{} waiting for the share (v{in_force} in force)",
                 w.version,
-                number(w.version),
-                self.memory.in_force_version
+                number(w.version.get()),
             ),
-            None => format!(
-                "table v{}{} pushed",
-                self.memory.in_force_version,
-                number(self.memory.in_force_version)
-            ),
+            None => format!("table v{in_force}{} pushed", number(in_force)),
         }
     }
 
@@ -309,13 +161,13 @@ impl FeatureLoop {
     pub(super) fn provenance(
         &self,
         version: u64,
-        parent: u64,
+        parent: Option<TableVersion>,
         learning: &TableLearning,
     ) -> Provenance {
         Provenance {
             camloop_version: env!("CARGO_PKG_VERSION").to_string(),
             table_version: version,
-            parent_version: (parent > 0).then_some(parent),
+            parent_version: parent.map(|v| v.get()),
             created_utc: crate::clock::utc_text(crate::clock::now()),
             recipe: self.setup.part.clone(),
             feature: self.setup.name.clone(),
@@ -377,35 +229,16 @@ impl FeatureLoop {
     }
 
     /// Delivers the version waiting for the share, if any; once it is there its learning
-    /// state is the one in force.
+    /// state is the one in force (the feature's machine records that).
     pub(super) async fn deliver_waiting(&mut self) {
         match self.share.deliver() {
             Ok(Some(p)) => {
                 info!(machine = %self.name, version = p.version, "controller share: waiting table delivered, learning resumes from it");
-                let at_ms = now();
-                let radius = self.memory.delivered(p.version);
-                self.on_delivered(radius.unwrap_or(self.memory.wheel_radius_mm));
-                let records = vec![
-                    Pending::VersionStatus {
-                        machine: self.name.clone(),
-                        lobe: self.setup.name.clone(),
-                        version: p.version,
-                        status: VersionStatus::pushed_at(at_ms, "pushed to the share on retry"),
-                        at_ms,
-                    },
-                    event(
-                        &self.name,
-                        at_ms,
-                        EventLevel::Info,
-                        EventKind::ShareBack,
-                        format!(
-                            "share back: v{} delivered, learning resumes from it",
-                            p.version
-                        ),
-                    ),
-                    self.learning_record(at_ms),
-                ];
-                self.record(records).await;
+                self.machine.handle(Input::Delivered {
+                    version: super::executor::version(p.version),
+                    at: now(),
+                });
+                self.run_machine(None).await;
             }
             Ok(None) => {}
             Err(e) => warn!(machine = %self.name, error = %e, "controller share still unavailable"),

@@ -46,7 +46,7 @@ impl FeatureLoop {
         let (wheel_radius_mm, infeed_um) =
             dressing::check(wheel.radius_mm, wheel.infeed_um).map_err(MachineError::refused)?;
         let at_ms = now();
-        let old = self.memory.wheel_radius_mm;
+        let old = self.machine.memory().wheel_radius_mm;
         info!(machine = %self.name, old_radius_mm = old, new_radius_mm = wheel_radius_mm, infeed_um, source, "wheel dressed: table regenerated for the new radius");
         let dressed = Dressing {
             old_radius_mm: old,
@@ -56,7 +56,7 @@ impl FeatureLoop {
         };
         let moved = self.move_correction(&dressed);
         let how = moved.describe();
-        self.memory.wheel_radius_mm = wheel_radius_mm;
+        self.machine.memory_mut().wheel_radius_mm = wheel_radius_mm;
         self.setup.feature = self.setup.feature.with_wheel_radius(wheel_radius_mm);
         let mut records = Vec::new();
         if first {
@@ -78,7 +78,7 @@ impl FeatureLoop {
         }
         // The newest correction made (delivered or waiting) is regenerated: a dressing is not
         // a learning step.
-        let next = self.memory.newest_learning().clone();
+        let next = self.machine.memory().newest_learning().clone();
         let summary = match compensate::current_table(&next, &self.lobe_loop()) {
             Ok(table) => {
                 let reason = format!("wheel dressed to {wheel_radius_mm} mm");
@@ -123,8 +123,9 @@ impl FeatureLoop {
     /// ([`dressing::move_correction`]); warns when the infeed could not be used.
     fn move_correction(&mut self, dressed: &Dressing) -> CorrectionMove {
         let limit_um = self.setup.params.max_correction_um;
-        let states = std::iter::once(&mut self.memory.learning)
-            .chain(self.memory.waiting.as_mut().map(|w| &mut w.learning));
+        let memory = self.machine.memory_mut();
+        let states = std::iter::once(&mut memory.learning)
+            .chain(memory.waiting.as_mut().map(|w| &mut w.learning));
         let moved = dressing::move_correction(states, dressed, limit_um);
         if let CorrectionMove::ShareReplaced {
             implausible_step_um: Some(step),

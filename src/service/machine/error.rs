@@ -34,11 +34,18 @@ impl MachineError {
             reason: format!("{:#}", e.into()),
         }
     }
+}
 
-    /// A failure of the machine's side, its text with every cause.
-    pub(super) fn failed(e: impl Into<anyhow::Error>) -> Self {
-        MachineError::Failed {
-            reason: format!("{:#}", e.into()),
+/// The feature machine's word for a table not delivered, as the API's.
+impl From<camloop_loop::machine::DeliveryError> for MachineError {
+    fn from(e: camloop_loop::machine::DeliveryError) -> Self {
+        use camloop_loop::machine::DeliveryError as D;
+        match e {
+            D::Refused { reason } => MachineError::Refused { reason },
+            D::Journal { reason } => MachineError::Journal { reason },
+            D::FencedOut { reason } => MachineError::FencedOut { reason },
+            D::ShareState { reason } => MachineError::ShareState { reason },
+            D::Failed { reason } => MachineError::Failed { reason },
         }
     }
 }

@@ -10,12 +10,12 @@ use super::{MachinePaths, MainProgram, StoreHandle, records};
 use crate::clock::now;
 use crate::core::compensate::{self, LobeLoop};
 use crate::core::digest::Sha256;
-use crate::core::turn::HoldReason;
 use crate::names::{FeatureName, MachineName};
 use crate::recipe::FeatureSetup;
 use crate::share::{RealFs, Share, ShareConfig};
 use crate::store::{EventLevel, FeatureKind, Store};
 use anyhow::Context;
+use camloop_loop::{FeatureMachine, PartId};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -26,7 +26,9 @@ pub struct FeatureLoop {
     /// The machine's name (records and metrics are the machine's, with the feature).
     pub name: MachineName,
     pub(super) setup: FeatureSetup,
-    pub(super) memory: LoopMemory,
+    /// The loop's decisions and its memory ([`camloop_loop::FeatureMachine`]); this struct
+    /// carries out its effects (`executor`).
+    pub(super) machine: FeatureMachine,
     pub(super) share: Share,
     pub(super) program_file: String,
     pub(super) journal: Journal,
@@ -89,10 +91,11 @@ impl FeatureLoop {
         let program_file = format!("{}.SPF", setup.program.name);
         let charts =
             super::charts::ChartWatch::new(&crate::quality::FeatureLimits::from_setup(&setup));
+        let feature_machine = super::executor::machine_for(&setup, memory);
         let mut machine = Self {
             name,
             setup,
-            memory,
+            machine: feature_machine,
             share,
             program_file,
             journal,
@@ -117,9 +120,11 @@ impl FeatureLoop {
         self.setup.feature = self
             .setup
             .feature
-            .with_wheel_radius(self.memory.wheel_radius_mm);
-        self.table_wheel_radius_bits
-            .store(self.memory.wheel_radius_mm.to_bits(), Ordering::SeqCst);
+            .with_wheel_radius(self.machine.memory().wheel_radius_mm);
+        self.table_wheel_radius_bits.store(
+            self.machine.memory().wheel_radius_mm.to_bits(),
+            Ordering::SeqCst,
+        );
         self.reconcile_share().await?;
         let plan_changed = self.plan_at_start()?;
         let mut records = vec![self.recipe_snapshot(at_ms)];
@@ -143,21 +148,23 @@ impl FeatureLoop {
         let _ = report;
         // The share lacks the table, or its main program is not the one this camloop writes
         // (a first start, or an upgrade): the current table goes with the main program.
-        if self.memory.waiting.is_some() {
+        if self.machine.memory().waiting.is_some() {
             self.deliver_waiting().await;
         }
         let stale = !self.program_path().exists()
             || plan_changed
             || self.main_program_if_changed()?.is_some();
-        if stale && self.memory.waiting.is_none() {
-            let table =
-                compensate::current_table(self.memory.newest_learning(), &self.lobe_loop())?;
-            let reason = if self.memory.parts == 0 {
+        if stale && self.machine.memory().waiting.is_none() {
+            let table = compensate::current_table(
+                self.machine.memory().newest_learning(),
+                &self.lobe_loop(),
+            )?;
+            let reason = if self.machine.memory().parts == 0 {
                 "nominal table"
             } else {
                 "table restored at start"
             };
-            let next = self.memory.newest_learning().clone();
+            let next = self.machine.memory().newest_learning().clone();
             let mut records = self.deliver(&table, next, reason, None).await?;
             records.push(self.learning_record(at_ms));
             self.record(records).await;
@@ -206,7 +213,7 @@ impl FeatureLoop {
 
     /// What the feature's loop remembers (for status and tests).
     pub fn memory(&self) -> &LoopMemory {
-        &self.memory
+        self.machine.memory()
     }
 
     pub fn setup(&self) -> &FeatureSetup {
@@ -234,16 +241,21 @@ impl FeatureLoop {
     /// Returns whether the journal took them: when it cannot (disk full), the records are
     /// lost to history, so the caller must not act on what they describe.
     pub(super) async fn record(&mut self, records: Vec<Pending>) -> bool {
+        self.record_or_why(records).await.is_ok()
+    }
+
+    /// [`Self::record`], with why the journal did not take them.
+    pub(super) async fn record_or_why(&mut self, records: Vec<Pending>) -> Result<(), String> {
         if records.is_empty() {
-            return true;
+            return Ok(());
         }
         let kept = match self.journal.append(&records) {
-            Ok(()) => true,
+            Ok(()) => Ok(()),
             Err(e) if self.journal.fenced_out() => {
                 // Not a fault here: the machine moved while this instance was paused; the
                 // loop stops before its next event, and the part stays with its source.
                 warn!(machine = %self.name, error = format!("{e:#}"), "cluster: another instance owns this machine now; records not written here");
-                return false;
+                return Err(format!("{e:#}"));
             }
             Err(e) => {
                 error!(machine = %self.name, error = format!("{e:#}"), "journal cannot be written: records not kept, learning holds");
@@ -251,43 +263,40 @@ impl FeatureLoop {
                     m.alarms_total += 1;
                     m.journal_failing = 1;
                 });
-                false
+                Err(format!("{e:#}"))
             }
         };
-        if let Some(events) = self.plant_events.as_ref().filter(|_| kept) {
+        if let Some(events) = self.plant_events.as_ref().filter(|_| kept.is_ok()) {
             records.iter().for_each(|r| events.record(r));
         }
-        let failing = u64::from(!kept || self.journal.on_reserve());
+        let failing = u64::from(kept.is_err() || self.journal.on_reserve());
         self.metrics
             .update(&self.name, |m| m.journal_failing = failing);
         self.flush_journal().await;
         kept
     }
 
-    /// Whether learning must hold because the disk is full: the journal runs on its reserve
-    /// (measurements are still kept), or could not write at all. Said once when it starts.
-    pub(super) async fn disk_full_hold(&mut self, at_ms: jiff::Timestamp) -> Option<HoldReason> {
-        if !self.journal.on_reserve() {
-            return None;
+    /// The disk is full (the journal runs on its reserve: measurements are still kept,
+    /// learning holds, the feature's machine decides that): said once when it starts.
+    pub(super) async fn disk_full_alarm(&mut self, at_ms: jiff::Timestamp) {
+        if self.disk_alarm {
+            return;
         }
-        if !self.disk_alarm {
-            self.disk_alarm = true;
-            error!(machine = %self.name, "disk full: the journal runs on its reserve; measurements are kept, learning stops until space is freed");
-            self.metrics.update(&self.name, |m| m.alarms_total += 1);
-            let message = format!(
-                "disk full: the journal runs on its {} MiB reserve (about 100 parts); measurements are kept, nothing is learned until space is freed",
-                super::super::journal::RESERVE_BYTES / (1024 * 1024)
-            );
-            let e = records::event(
-                &self.name,
-                at_ms,
-                EventLevel::Error,
-                EventKind::DiskFull,
-                message,
-            );
-            self.record(vec![e]).await;
-        }
-        Some(HoldReason::DiskFull)
+        self.disk_alarm = true;
+        error!(machine = %self.name, "disk full: the journal runs on its reserve; measurements are kept, learning stops until space is freed");
+        self.metrics.update(&self.name, |m| m.alarms_total += 1);
+        let message = format!(
+            "disk full: the journal runs on its {} MiB reserve (about 100 parts); measurements are kept, nothing is learned until space is freed",
+            super::super::journal::RESERVE_BYTES / (1024 * 1024)
+        );
+        let e = records::event(
+            &self.name,
+            at_ms,
+            EventLevel::Error,
+            EventKind::DiskFull,
+            message,
+        );
+        self.record(vec![e]).await;
     }
 
     pub(super) async fn flush_journal(&mut self) {
@@ -344,7 +353,7 @@ impl FeatureLoop {
         Pending::Learning {
             machine: self.name.clone(),
             lobe: self.setup.name.clone(),
-            state: Box::new(self.memory.clone()),
+            state: Box::new(self.machine.memory().clone()),
             saved_at_ms: at_ms,
         }
     }
@@ -390,9 +399,7 @@ async fn load_memory(
             if let Pending::Measurement { measurement: m, .. } = r
                 && m.lobe == setup.name
             {
-                memory.parts += 1;
-                memory.remember(m.sha256);
-                memory.last_part = Some(m.part.clone());
+                memory.measured(m.sha256, PartId::new(&m.part).ok());
             }
         }
         return Ok(*memory);

@@ -11,15 +11,16 @@ impl FeatureLoop {
     /// Sets the learning's frozen reason (`None`: learning resumes) and keeps the state as
     /// every other change is kept (journal, then store). Returns the reason before.
     pub(crate) async fn set_frozen(&mut self, frozen: Option<String>) -> Option<String> {
-        let before = self.memory.learning.frozen.clone();
+        let learning = &mut self.machine.memory_mut().learning;
+        let before = learning.frozen.clone();
         if frozen.is_none() {
-            self.memory.learning.recent_max_error_um.clear();
+            learning.recent_max_error_um.clear();
         }
-        self.memory.learning.frozen = frozen;
+        learning.frozen = frozen;
         let record = self.learning_record(now());
         self.record(vec![record]).await;
         self.publish_start_status();
-        info!(machine = %self.name, lobe = %self.setup.name, frozen = ?self.memory.learning.frozen, "learning frozen state set by hand");
+        info!(machine = %self.name, lobe = %self.setup.name, frozen = ?self.machine.memory().learning.frozen, "learning frozen state set by hand");
         before
     }
 }

@@ -1,18 +1,19 @@
-//! A measurement into the machine: whose it is, whether it was seen before, the loop turn,
-//! and its records. The measurement is recorded before anything is learned from it.
+//! A measurement into the machine: whose it is (the gauge's names routed to a feature), then
+//! the feature's machine (repeat, hold, the turn, records in write-ahead order) driven, and
+//! the part's status, charts and log line said; a master part's run is recorded for the
+//! gauge study only. The measurement is recorded before anything is learned from it.
 
 use super::super::journal::{EventKind, Pending};
-use super::memory::GuardKind;
-use super::records::{event, keep_reject, raw_revolutions};
-use super::{FeatureLoop, Ingested};
+use super::records::{self, event, keep_reject};
+use super::{FeatureLoop, Ingested, MachineError};
 use crate::clock::now;
-use crate::core::compensate::{CycleError, GuardedTable};
 use crate::core::digest::Sha256;
-use crate::core::learn::{LearningState, StepOutcome};
 use crate::core::measure::{MeasurementHeader, RawMeasurement};
-use crate::core::turn::{self, Decision, HoldReason, Measured, TurnError, measurement_sha256};
+use crate::core::turn::{self, Measured, TurnError, measurement_sha256};
 use crate::names::{FeatureName, MachineName};
-use crate::store::{EventLevel, NewMeasurement, Verdict};
+use crate::store::EventLevel;
+use camloop_loop::machine::{Finished, Gauged, PartNote, PartReport};
+use camloop_loop::{Input, PartId, TableVersion};
 use tracing::{debug, error, info, warn};
 
 /// The names a gauge may use for a machine and its features: the configured names, or the
@@ -95,100 +96,104 @@ pub(crate) struct PartLine {
 }
 
 impl FeatureLoop {
+    /// A measurement of this feature, through the feature's machine
+    /// ([`camloop_loop::FeatureMachine`]: repeat, hold, the turn, guards in a row, the
+    /// write-ahead of its records and table); here the effects are carried out and the
+    /// part's status, metrics and log line said.
     pub(crate) async fn on_measurement(
         &mut self,
         raw: RawMeasurement,
         ground_with: Option<u64>,
     ) -> anyhow::Result<Ingested> {
         let at_ms = now();
-        let sha = measurement_sha256(&raw);
-        if self.memory.has_seen(&sha) {
-            self.note_repeat(&raw, at_ms).await;
-            return Ok(Ingested::Repeated);
-        }
-        let hold = match ground_with {
-            Some(v) if v != self.memory.in_force_version => Some(HoldReason::OtherTable {
-                ground_with: v,
-                in_force: self.memory.in_force_version,
-            }),
-            _ => self.disk_full_hold(at_ms).await,
-        };
-        let previous = self.memory.previous;
         self.refresh_plan();
-        let done = match turn::turn(
-            &self.turn_setup(),
-            &self.memory.learning,
-            &raw,
-            hold,
-            previous,
-        ) {
-            Ok(t) => t,
-            Err(TurnError::Measurement(e)) => {
-                let reason = e.to_string();
-                self.reject(&raw, &sha, &reason, at_ms).await;
-                return Ok(Ingested::Rejected { reason });
-            }
-            Err(e) => return Err(e.into()),
+        let gauged = Gauged {
+            setup: super::planned::turn_setup(&self.setup, &self.plan),
+            raw: &raw,
+            sha256: measurement_sha256(&raw),
+            part: PartId::new(&raw.header.part).ok(),
+            ground_with: ground_with.and_then(TableVersion::new),
+            on_reserve: self.journal.on_reserve(),
+            at: at_ms,
         };
-        let record = self.measurement_record(&raw, &sha, &done.measured, at_ms);
-        if !self.record(vec![record]).await {
-            // Not counted and not remembered: the same reading sent again once the journal
-            // can be written is a new measurement, not a repeat.
-            warn!(machine = %self.name, origin = %raw.origin, "part not learned from: its measurement could not be recorded");
-            self.metrics.update(&self.name, |m| m.learning_held = 1);
-            return Ok(Ingested::NotRecorded);
+        self.machine.handle(Input::Gauged(Box::new(gauged)));
+        let finished = self.run_machine(Some(&raw)).await;
+        match finished.into_iter().last() {
+            Some(Finished::Recorded(report)) => {
+                self.after_part(&raw, *report, at_ms).await;
+                Ok(Ingested::Recorded)
+            }
+            Some(Finished::Repeated) => {
+                info!(machine = %self.name, part = %raw.header.part, origin = %raw.origin, "measurement already learned from: not learned again");
+                Ok(Ingested::Repeated)
+            }
+            Some(Finished::Rejected { reason }) => Ok(Ingested::Rejected { reason }),
+            Some(Finished::NotRecorded) => {
+                // Not counted and not remembered: the same reading sent again once the journal
+                // can be written is a new measurement, not a repeat.
+                warn!(machine = %self.name, origin = %raw.origin, "part not learned from: its measurement could not be recorded");
+                Ok(Ingested::NotRecorded)
+            }
+            Some(Finished::Failed { reason }) => Err(anyhow::anyhow!(reason)),
+            other => Err(anyhow::anyhow!(
+                "the feature's loop ended a measurement with {other:?}"
+            )),
         }
-        self.memory.parts += 1;
-        self.memory.remember(sha);
-        self.memory.previous = Some(done.measured.as_previous());
-        self.memory.last_part = Some(raw.header.part.clone());
-        let part = self.memory.parts;
-        let held = matches!(done.decision, Decision::Held(_));
-        let ground_with = self.memory.in_force_version;
-        let decision = self.keep_planned(done.decision);
-        let (mut records, text) = self.decide(decision, &sha, part, at_ms).await;
-        records.extend(self.chart_events(&raw.header.part, &done.measured, at_ms));
-        if !held || !self.journal.on_reserve() {
-            // On the reserve only measurements are kept: the memory did not change.
-            records.push(self.learning_record(at_ms));
+    }
+
+    /// A recorded part: its control charts, metrics, status and log line.
+    async fn after_part(
+        &mut self,
+        raw: &RawMeasurement,
+        report: PartReport,
+        at_ms: jiff::Timestamp,
+    ) {
+        let measured = &report.measured;
+        let text = match &report.note {
+            PartNote::Table => self.delivery_line(),
+            PartNote::NotRecorded(e) => {
+                let e = MachineError::from(e.clone());
+                if self.journal.fenced_out() {
+                    warn!(machine = %self.name, error = format!("{e:#}"), "cluster: another instance owns this machine now; table not recorded here");
+                } else {
+                    error!(machine = %self.name, error = format!("{e:#}"), "table not recorded: previous table stays in force");
+                }
+                format!("table not recorded: {e:#}")
+            }
+            PartNote::Refused { in_a_row, reason } => {
+                if *in_a_row == 1 {
+                    warn!(machine = %self.name, lobe = %self.setup.name, reason = %reason, "table refused, previous table stays in force");
+                }
+                format!("table refused, previous kept ({in_a_row} in a row)")
+            }
+            PartNote::Held(reason) => {
+                info!(machine = %self.name, reason = %reason, "part analysed, not learned from");
+                format!("not learned from: {reason}")
+            }
+        };
+        let charts = self.chart_events(&raw.header.part, measured, at_ms);
+        if !charts.is_empty() {
+            self.record(charts).await;
         }
-        self.record(records).await;
-        let max_error_um = done.measured.max_error_um;
+        let max_error_um = measured.max_error_um;
         self.metrics.update(&self.name, |m| {
             m.parts_total += 1;
             m.last_max_error_um = max_error_um;
         });
-        self.publish_status(&raw.header.part, &done.measured);
+        self.publish_status(&raw.header.part, measured);
         let line = PartLine {
             feature: self.setup.name.clone(),
             part: raw.header.part.clone(),
             max_error_um,
-            profile_error_um: done.measured.max_profile_error_um,
-            size_error_um: done.measured.report.base_radius_error_um,
-            timing_error_deg: done.measured.timing_error_deg,
-            pushed: self.memory.in_force_version != ground_with,
+            profile_error_um: measured.max_profile_error_um,
+            size_error_um: measured.report.base_radius_error_um,
+            timing_error_deg: measured.timing_error_deg,
+            pushed: report.pushed,
             text,
         };
-        self.log_part_line(&line, part, ground_with);
+        let ground_with = report.ground_with.map_or(0, |v| v.get());
+        self.log_part_line(&line, report.part_no, ground_with);
         self.last_line = Some(line);
-        Ok(Ingested::Recorded)
-    }
-
-    /// A measurement seen before is recorded as an event, never learned from twice.
-    async fn note_repeat(&mut self, raw: &RawMeasurement, at_ms: jiff::Timestamp) {
-        info!(machine = %self.name, part = %raw.header.part, origin = %raw.origin, "measurement already learned from: not learned again");
-        let message = format!(
-            "part {} from {} repeats a measurement already used",
-            raw.header.part, raw.origin
-        );
-        let e = event(
-            &self.name,
-            at_ms,
-            EventLevel::Info,
-            EventKind::MeasurementRepeated,
-            message,
-        );
-        self.record(vec![e]).await;
     }
 
     /// The part's line in the log: INFO for a one-feature machine, else DEBUG.
@@ -233,7 +238,7 @@ impl FeatureLoop {
     pub(crate) async fn on_master(&mut self, raw: RawMeasurement) -> anyhow::Result<Ingested> {
         let at_ms = now();
         let sha = measurement_sha256(&raw);
-        if self.memory.has_seen(&sha) {
+        if self.machine.memory().has_seen(&sha) {
             return Ok(Ingested::Repeated);
         }
         let measured = match turn::measure(&self.setup.turn_setup(), &raw) {
@@ -249,138 +254,9 @@ impl FeatureLoop {
         if !self.record(vec![record]).await {
             return Ok(Ingested::NotRecorded);
         }
-        self.memory.remember(sha);
+        self.machine.memory_mut().remember(sha);
         info!(machine = %self.name, lobe = %self.setup.name, part = %raw.header.part, size_error_um = format!("{:.3}", measured.report.base_radius_error_um), "master run recorded for the gauge study (not learned from)");
         Ok(Ingested::Master)
-    }
-
-    /// Acts on the turn's decision; returns the records and a line for the log.
-    async fn decide(
-        &mut self,
-        decision: Decision,
-        sha: &Sha256,
-        part: u64,
-        at_ms: jiff::Timestamp,
-    ) -> (Vec<Pending>, String) {
-        let mut records = Vec::new();
-        let text = match decision {
-            Decision::Table {
-                outcome,
-                next,
-                table,
-                ..
-            } => {
-                self.note_outcome(&outcome, part, at_ms, &mut records);
-                let reason = format!("part {part}: {outcome}");
-                self.deliver_table(&table, *next, &reason, sha, &mut records)
-                    .await
-            }
-            Decision::Refused(e) => self.note_refusal(&e, part, at_ms, &mut records),
-            Decision::Held(reason) => {
-                info!(machine = %self.name, reason = %reason, "part analysed, not learned from");
-                records.push(event(
-                    &self.name,
-                    at_ms,
-                    EventLevel::Info,
-                    EventKind::LearningHeld,
-                    format!("part {part} not learned from: {reason}"),
-                ));
-                format!("not learned from: {reason}")
-            }
-        };
-        (records, text)
-    }
-
-    /// What a learning step's outcome means for the alarms and the guards' streaks.
-    fn note_outcome(
-        &mut self,
-        outcome: &StepOutcome,
-        part: u64,
-        at_ms: jiff::Timestamp,
-        records: &mut Vec<Pending>,
-    ) {
-        match outcome {
-            StepOutcome::Reverted { reason, .. } => {
-                error!(machine = %self.name, lobe = %self.setup.name, reason = %reason, "learning reverted and frozen: operator action needed");
-                self.metrics.update(&self.name, |m| m.alarms_total += 1);
-                records.push(event(
-                    &self.name,
-                    at_ms,
-                    EventLevel::Error,
-                    EventKind::LearningReverted,
-                    reason.clone(),
-                ));
-            }
-            StepOutcome::Limited { bound, .. } => {
-                let kind = GuardKind::of_bound(bound.quantity);
-                self.guard_acted(kind, &bound.to_string(), part, at_ms, records);
-            }
-            StepOutcome::Updated { .. } | StepOutcome::InTolerance { .. } => {
-                self.guard_cleared(part, at_ms, records);
-            }
-            StepOutcome::Frozen { .. } => {}
-        }
-    }
-
-    /// Delivers a new table; returns the log line. A table not recorded leaves the one in
-    /// force (quietly when another instance of the cluster owns the machine now).
-    async fn deliver_table(
-        &mut self,
-        table: &GuardedTable,
-        next: LearningState,
-        reason: &str,
-        sha: &Sha256,
-        records: &mut Vec<Pending>,
-    ) -> String {
-        match self.deliver(table, next, reason, Some(*sha)).await {
-            Ok(mut more) => {
-                records.append(&mut more);
-                self.delivery_line()
-            }
-            Err(e) if self.journal.fenced_out() => {
-                warn!(machine = %self.name, error = format!("{e:#}"), "cluster: another instance owns this machine now; table not recorded here");
-                format!("table not recorded: {e:#}")
-            }
-            Err(e) => {
-                error!(machine = %self.name, error = format!("{e:#}"), "table not recorded: previous table stays in force");
-                format!("table not recorded: {e:#}")
-            }
-        }
-    }
-
-    /// A refused table: counted, its guard's streak extended, warned about once per streak.
-    fn note_refusal(
-        &mut self,
-        e: &CycleError,
-        part: u64,
-        at_ms: jiff::Timestamp,
-        records: &mut Vec<Pending>,
-    ) -> String {
-        self.metrics
-            .update(&self.name, |m| m.tables_refused_total += 1);
-        let in_a_row = self.guard_acted(
-            GuardKind::of_refusal(e),
-            &e.to_string(),
-            part,
-            at_ms,
-            records,
-        );
-        if in_a_row == 1 {
-            warn!(machine = %self.name, lobe = %self.setup.name, reason = %e, "table refused, previous table stays in force");
-        }
-        let level = if in_a_row == 1 {
-            EventLevel::Warn
-        } else {
-            EventLevel::Info
-        };
-        records.push(event(
-            &self.name,
-            at_ms,
-            level,
-            EventKind::TableRefused,
-            format!("{} ({in_a_row} in a row): {e}", self.setup.name),
-        ));
-        format!("table refused, previous kept ({in_a_row} in a row)")
     }
 
     fn measurement_record(
@@ -390,32 +266,17 @@ impl FeatureLoop {
         measured: &Measured,
         at_ms: jiff::Timestamp,
     ) -> Pending {
-        let report = &measured.report;
-        let measurement = NewMeasurement {
-            machine: self.name.clone(),
-            part: raw.header.part.clone(),
-            lobe: self.setup.name.clone(),
-            received_at_ms: at_ms,
-            verdict: if report.verdict.pass {
-                Verdict::Pass
-            } else {
-                Verdict::Fail
-            },
-            max_profile_error_um: measured.max_profile_error_um,
-            base_radius_error_um: report.base_radius_error_um,
-            phase_error_deg: report.phase_error_deg,
-            revolutions_used: measured.averaged.revolutions_used.len() as u32,
-            points_per_rev: measured.averaged.points_per_rev,
-            origin: raw.origin.clone(),
-            sha256: *sha,
-            recipe_snapshot: None,
-            raw_lift_mm: raw_revolutions(raw),
-            averaged_lift_mm: measured.averaged.mean_lift_mm.clone(),
-            analysis_json: serde_json::to_string(report).unwrap_or_default(),
-        };
+        let in_force = self.machine.memory().in_force_version;
         Pending::Measurement {
-            measurement,
-            ground_with_version: self.memory.in_force_version,
+            measurement: records::measurement(
+                &self.name,
+                &self.setup.name,
+                raw,
+                sha,
+                measured,
+                at_ms,
+            ),
+            ground_with_version: in_force.map_or(0, |v| v.get()),
         }
     }
 

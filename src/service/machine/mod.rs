@@ -4,17 +4,20 @@
 //! table, is rejected with the reason and disturbs nothing. Events of the wheel (dressing)
 //! act on every feature; a rollback on one feature or on the whole part.
 //!
-//! Each part takes one [`crate::core::turn`] in its feature's loop: checks, analysis, a
-//! learning step from the table that ground the part, the guarded next table; the loop then
-//! records it through its journal and delivers the table to the share.
+//! Each feature's decisions are its [`camloop_loop::FeatureMachine`] (the loop crate): a part
+//! takes one [`crate::core::turn`] there, and the machine asks for the journal writes, the
+//! rendering, the share's submit and delivery in write-ahead order. This module is the shell
+//! that carries those effects out and feeds back what happened.
 //!
-//! - `feature`: one feature's loop and what it owns;
-//! - `ingest`: a measurement in (identity, repeats, the turn, guards in a row, records);
-//! - `delivery`: rendering with provenance, the push, retries, the version in force;
-//! - `rollback`, `dressing`: the operator's and the wheel's events;
+//! - `feature`: one feature's loop and what it owns (journal, share, plan, metrics);
+//! - `executor`: the machine's effects carried out, its inputs fed back;
+//! - `ingest`: a measurement's routing, handed to the machine, the part's line;
+//! - `delivery`: table orders handed to the machine, the share's request, retries;
+//! - `rollback`, `dressing`, `freeze`: the operator's and the wheel's events;
 //! - `error`: why a write (a delivery, a dressing) did not happen, typed for the API;
-//! - `records`: the journal records and the reject folder;
-//! - `memory`: what a feature's loop remembers between parts;
+//! - `records`: the loop's records in the journal's format, and the reject folder;
+//! - `memory`: the loop crate's memory, re-exported where the journal finds it;
+//! - `reconcile`: journal, share and memory settled at start;
 //! - `shaft`: the main program of the whole part and the resume point;
 //! - `coast`: a part ground but not gauged moves the table on by the learned drift;
 //! - `planned`: the C speed plan's two-table program and its X check over the virtual axis.
@@ -28,6 +31,7 @@ mod coast;
 mod delivery;
 mod dressing;
 mod error;
+mod executor;
 mod feature;
 mod freeze;
 mod guards;

@@ -18,7 +18,7 @@ use crate::core::program::{ProgramSettings, fmt_fixed};
 use crate::core::speed_plan::render::{VaProgramSettings, render_va_table_program};
 use crate::core::speed_plan::tables::VaTables;
 use crate::core::speed_plan::{self, TimeLaw};
-use crate::core::turn::{self, Decision, TurnSetup};
+use crate::core::turn::{self, TurnSetup};
 use crate::recipe::FeatureSetup;
 use tracing::error;
 
@@ -36,6 +36,20 @@ pub(crate) struct PlanState {
     /// VA's speed of the table being delivered, rev/min (committed to the main program once
     /// the share confirms it).
     pub(super) pending_va_rpm: Option<f64>,
+}
+
+/// The turn's setup: `setup`'s, with the plan's time law for the wheel believed now when the
+/// recipe grinds with a plan (see [`FeatureLoop::refresh_plan`]).
+pub(super) fn turn_setup<'a>(setup: &'a FeatureSetup, plan: &'a PlanState) -> TurnSetup<'a> {
+    let radius_bits = setup.feature.wheel_radius_mm().to_bits();
+    let law = match &plan.law {
+        Some((bits, law)) if setup.speed_plan.enabled && *bits == radius_bits => Some(law),
+        _ => None,
+    };
+    TurnSetup {
+        plan: law,
+        ..setup.turn_setup()
+    }
 }
 
 /// The table settings of `setup` for the two-table program, with these numbers.
@@ -72,7 +86,7 @@ impl FeatureLoop {
     }
 
     /// Makes the plan for the wheel believed now, before a turn, so the turn guards its
-    /// table over VA ([`Self::turn_setup`]). A plan that cannot be made at all (its
+    /// table over VA ([`turn_setup`]). A plan that cannot be made at all (its
     /// geometry) is said here; the turn then decides without it and the delivery says so
     /// and keeps the table in force.
     pub(super) fn refresh_plan(&mut self) {
@@ -84,34 +98,16 @@ impl FeatureLoop {
         }
     }
 
-    /// The turn's setup: the recipe's, with the plan's time law for the wheel believed now
-    /// when the recipe grinds with a plan (see [`Self::refresh_plan`]).
-    pub(super) fn turn_setup(&self) -> TurnSetup<'_> {
-        let radius_bits = self.setup.feature.wheel_radius_mm().to_bits();
-        let plan = match &self.plan.law {
-            Some((bits, law)) if self.setup.speed_plan.enabled && *bits == radius_bits => Some(law),
-            _ => None,
-        };
-        TurnSetup {
-            plan,
-            ..self.setup.turn_setup()
-        }
-    }
-
-    /// Keeps the tables over VA the turn made (and guarded) for its new table, so the
-    /// delivery renders them without making them again. Returns the decision as it is.
-    pub(super) fn keep_planned(&mut self, decision: Decision) -> Decision {
-        if let Decision::Table {
-            table,
-            next,
-            planned: Some(tables),
-            ..
-        } = &decision
-        {
-            let key = self.plan_key(table, next);
-            self.plan.last = Some((key, Ok(tables.as_ref().clone())));
-        }
-        decision
+    /// Keeps the tables over VA the turn made (and guarded) for its new `table` (made from
+    /// `next`), so the delivery renders them without making them again.
+    pub(super) fn keep_planned(
+        &mut self,
+        table: &GuardedTable,
+        next: &LearningState,
+        tables: VaTables,
+    ) {
+        let key = self.plan_key(table, next);
+        self.plan.last = Some((key, Ok(tables)));
     }
 
     /// What the tables over VA are made from: correction, timing and wheel radius.
@@ -192,10 +188,12 @@ impl FeatureLoop {
         }
     }
 
-    /// The plan made at start for the wheel believed. The share's table program says the
-    /// VA speed it was made for; when that is this plan's, the main program takes it as on
-    /// the share. Returns true when the share's table is not this plan's (new limits, a
-    /// plan newly switched on, a program from before): it must be delivered again.
+    /// The plan made at start for the wheel believed. The memory says the VA speed the
+    /// table in force was rendered for (the feature's machine keeps it with the version, so
+    /// the share's program is never read back); when that is this plan's, the main program
+    /// takes it as on the share. Returns true when the table in force is not this plan's
+    /// (new limits, a plan newly switched on, a memory from before): it must be delivered
+    /// again.
     pub(super) fn plan_at_start(&mut self) -> anyhow::Result<bool> {
         if !self.setup.speed_plan.enabled {
             return Ok(false);
@@ -203,11 +201,10 @@ impl FeatureLoop {
         let law = self.plan_law()?;
         let va_speed_rpm = 60.0 / law.period_s();
         self.plan.pending_va_rpm = Some(va_speed_rpm);
-        let on_share = std::fs::read_to_string(self.program_path())
-            .ok()
-            .and_then(|text| va_speed_text(&text).map(str::to_string));
-        let same = on_share.as_deref() == Some(fmt_fixed(va_speed_rpm, 4).as_str());
-        if same && self.memory.waiting.is_none() {
+        let in_force = self.machine.memory().in_force_va_speed_rpm;
+        // As the programs write it: a plan made again for the same wheel is the same plan.
+        let same = in_force.map(|r| fmt_fixed(r, 4)) == Some(fmt_fixed(va_speed_rpm, 4));
+        if same && self.machine.memory().waiting.is_none() {
             self.main.delivered(&self.setup.name, va_speed_rpm)?;
         }
         Ok(!same)
@@ -220,30 +217,4 @@ fn law_for(setup: &FeatureSetup, wheel_radius_mm: f64) -> anyhow::Result<TimeLaw
     let part = feature.part(&setup.nominal)?;
     let limits = setup.speed_plan.limits(&setup.limits);
     Ok(speed_plan::plan(&part, &limits)?.law)
-}
-
-/// The VA speed a two-table program says it was made for, as written (rev/min).
-fn va_speed_text(text: &str) -> Option<&str> {
-    text.lines().find_map(|l| {
-        let rest = l
-            .strip_prefix("; camloop speed plan: ")?
-            .split_once(" at ")?
-            .1;
-        Some(rest.split_once(" rpm")?.0)
-    })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::va_speed_text;
-
-    #[test]
-    fn the_va_speed_is_read_from_the_table_program_as_written() {
-        let text = "PROC P(VAR INT CL_TNO, VAR INT CL_TNO_C) SAVE\n; camloop speed plan: VA at 49.7512 rpm, one revolution of C per revolution of VA\n";
-        assert_eq!(va_speed_text(text), Some("49.7512"));
-        assert_eq!(
-            va_speed_text("PROC P(VAR INT CL_TNO) SAVE\nCTABDEF(X,C,1,1)\n"),
-            None
-        );
-    }
 }

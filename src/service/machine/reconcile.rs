@@ -10,6 +10,7 @@
 use super::super::journal::Pending;
 use super::FeatureLoop;
 use super::delivery::Draft;
+use super::executor::version;
 use super::memory::{TableLearning, WaitingTable};
 use super::records::event;
 use crate::clock::now;
@@ -27,18 +28,31 @@ impl FeatureLoop {
         let history = self.share.history();
         let pushed = history.last_pushed().map(|v| v.record.version);
         let waiting = history.waiting().map(|v| v.record.version);
-        let known_waiting = self.memory.waiting.as_ref().map(|w| w.version);
+        let in_force = self
+            .machine
+            .memory()
+            .in_force_version
+            .map_or(0, |v| v.get());
+        let known_waiting = self
+            .machine
+            .memory()
+            .waiting
+            .as_ref()
+            .map(|w| w.version.get());
         if let Some(w) = waiting
-            && w > self.memory.in_force_version
+            && w > in_force
             && known_waiting != Some(w)
         {
             match self.made_from(w).await {
                 Some(t) => {
                     info!(machine = %self.name, feature = %self.setup.name, version = w, "a version the share holds but the memory did not: waits with the correction it was made from");
-                    self.memory.waiting = Some(WaitingTable {
-                        version: w,
-                        learning: adopt(&self.memory.learning, &t),
+                    let memory = self.machine.memory_mut();
+                    memory.waiting = Some(WaitingTable {
+                        version: version(w),
+                        learning: adopt(&memory.learning, &t),
                         wheel_radius_mm: t.wheel_radius_mm,
+                        // Not known here: a start after its delivery makes it again.
+                        va_speed_rpm: None,
                     });
                 }
                 None => {
@@ -46,23 +60,34 @@ impl FeatureLoop {
                 }
             }
         }
-        let Some(p) = pushed.filter(|p| *p != self.memory.in_force_version) else {
+        let Some(p) = pushed.filter(|p| *p != in_force) else {
             return Ok(());
         };
         // Killed between the push and the record of it: the share is the authority, and the
         // correction in force is the one that table was made from, not the one before it.
-        info!(machine = %self.name, feature = %self.setup.name, share_version = p, memory_version = self.memory.in_force_version, "version in force taken from the share's manifest");
-        if self.memory.waiting.as_ref().map(|w| w.version) != Some(p) {
+        info!(machine = %self.name, feature = %self.setup.name, share_version = p, memory_version = in_force, "version in force taken from the share's manifest");
+        let now_waiting = self
+            .machine
+            .memory()
+            .waiting
+            .as_ref()
+            .map(|w| w.version.get());
+        if now_waiting != Some(p) {
             match self.made_from(p).await {
-                Some(t) => self.memory.learning = adopt(&self.memory.learning, &t),
+                Some(t) => {
+                    let memory = self.machine.memory_mut();
+                    memory.learning = adopt(&memory.learning, &t);
+                }
                 None => {
                     warn!(machine = %self.name, feature = %self.setup.name, version = p, "the version in force has no record here: learning goes on from the memory's correction")
                 }
             }
         }
-        self.memory.delivered(p);
+        let p = version(p);
+        let memory = self.machine.memory_mut();
+        memory.delivered(p);
         // A waiting version older than the one pushed was superseded on the share.
-        self.memory.waiting.take_if(|w| w.version < p);
+        memory.waiting.take_if(|w| w.version < p);
         Ok(())
     }
 

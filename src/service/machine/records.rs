@@ -1,11 +1,14 @@
-//! The records a machine writes: events, measurements as the journal keeps them, rejects
-//! kept on disk with their reason.
+//! The records a machine writes: the loop's records ([`camloop_loop::record`]) in the
+//! journal's file format, events, measurements as the journal keeps them, rejects kept on
+//! disk with their reason.
 
 use super::super::journal::{EventKind, Pending};
 use crate::core::digest::Sha256;
 use crate::core::measure::RawMeasurement;
-use crate::names::MachineName;
-use crate::store::EventLevel;
+use crate::core::turn::Measured;
+use crate::names::{FeatureName, MachineName};
+use crate::store::{EventLevel, NewMeasurement, Verdict, VersionStatus};
+use camloop_loop::record::{self, Record, TableStatus};
 use std::path::Path;
 
 pub(super) fn event(
@@ -21,6 +24,130 @@ pub(super) fn event(
         level,
         kind,
         message,
+    }
+}
+
+/// The store's word for an event kind of the loop.
+fn kind(k: record::EventKind) -> EventKind {
+    use record::EventKind as K;
+    match k {
+        K::MeasurementRejected => EventKind::MeasurementRejected,
+        K::MeasurementRepeated => EventKind::MeasurementRepeated,
+        K::TableRefused => EventKind::TableRefused,
+        K::LearningReverted => EventKind::LearningReverted,
+        K::LearningHeld => EventKind::LearningHeld,
+        K::ShareUnavailable => EventKind::ShareUnavailable,
+        K::ShareBack => EventKind::ShareBack,
+        K::BlockedByGuard => EventKind::BlockedByGuard,
+        K::GuardCleared => EventKind::GuardCleared,
+    }
+}
+
+/// A version's status as the share and the store keep it.
+pub(super) fn status(s: TableStatus, at_ms: jiff::Timestamp) -> VersionStatus {
+    match s {
+        TableStatus::Waiting { reason } => VersionStatus::Waiting { reason },
+        TableStatus::Pushed { note } => VersionStatus::pushed_at(at_ms, &note),
+        TableStatus::Refused { reason } => VersionStatus::Refused { reason },
+    }
+}
+
+/// The loop's records of feature `lobe` of `machine` in the journal's format; `raw` is the
+/// measurement of the step, whose samples the measurement record keeps.
+pub(super) fn pending(
+    machine: &MachineName,
+    lobe: &FeatureName,
+    records: Vec<Record>,
+    raw: Option<&RawMeasurement>,
+) -> Vec<Pending> {
+    records
+        .into_iter()
+        .filter_map(|r| match r {
+            Record::Measurement {
+                sha256,
+                measured,
+                ground_with,
+                at,
+                ..
+            } => {
+                let raw = raw?;
+                Some(Pending::Measurement {
+                    measurement: measurement(machine, lobe, raw, &sha256, &measured, at),
+                    ground_with_version: ground_with.map_or(0, |v| v.get()),
+                })
+            }
+            Record::Table(t) => Some(Pending::Table {
+                machine: machine.clone(),
+                lobe: lobe.clone(),
+                version: t.version.get(),
+                parent_version: t.parent.map(|v| v.get()),
+                table_number: t.table_number,
+                program_text: t.program_text,
+                learning: t.learning,
+                reason: t.reason,
+                status: status(t.status, t.at),
+                created_at_ms: t.at,
+                measurement_id: t.measurement,
+                rollback_of: t.rollback_of.map(|v| v.get()),
+            }),
+            Record::Status {
+                version,
+                status: s,
+                at,
+            } => Some(Pending::VersionStatus {
+                machine: machine.clone(),
+                lobe: lobe.clone(),
+                version: version.get(),
+                status: status(s, at),
+                at_ms: at,
+            }),
+            Record::Event {
+                at,
+                level,
+                kind: k,
+                message,
+            } => Some(event(machine, at, level, kind(k), message)),
+            Record::Learning { memory, at } => Some(Pending::Learning {
+                machine: machine.clone(),
+                lobe: lobe.clone(),
+                state: memory,
+                saved_at_ms: at,
+            }),
+        })
+        .collect()
+}
+
+/// A measurement as the store keeps it.
+pub(super) fn measurement(
+    machine: &MachineName,
+    lobe: &FeatureName,
+    raw: &RawMeasurement,
+    sha: &Sha256,
+    measured: &Measured,
+    at_ms: jiff::Timestamp,
+) -> NewMeasurement {
+    let report = &measured.report;
+    NewMeasurement {
+        machine: machine.clone(),
+        part: raw.header.part.clone(),
+        lobe: lobe.clone(),
+        received_at_ms: at_ms,
+        verdict: if report.verdict.pass {
+            Verdict::Pass
+        } else {
+            Verdict::Fail
+        },
+        max_profile_error_um: measured.max_profile_error_um,
+        base_radius_error_um: report.base_radius_error_um,
+        phase_error_deg: report.phase_error_deg,
+        revolutions_used: measured.averaged.revolutions_used.len() as u32,
+        points_per_rev: measured.averaged.points_per_rev,
+        origin: raw.origin.clone(),
+        sha256: *sha,
+        recipe_snapshot: None,
+        raw_lift_mm: raw_revolutions(raw),
+        averaged_lift_mm: measured.averaged.mean_lift_mm.clone(),
+        analysis_json: serde_json::to_string(report).unwrap_or_default(),
     }
 }
 

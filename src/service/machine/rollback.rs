@@ -10,6 +10,8 @@ use crate::core::program::retarget_table_program;
 use crate::names::{FeatureName, MachineName};
 use crate::store::EventLevel;
 use anyhow::Context;
+use camloop_loop::TableVersion;
+use camloop_loop::machine::{Program, TableOrder};
 use tracing::info;
 
 /// Why a rollback could not be made.
@@ -66,22 +68,25 @@ impl FeatureLoop {
         let (text, learning, number) = self.rollback_program(lobe, version).await?;
         let at_ms = now();
         let reason = format!("rollback to v{version}");
-        let mut next = self.memory.learning.clone();
+        let mut next = self.machine.memory().learning.clone();
         if learning.correction_um.len() == next.correction_um.len() {
             next.correction_um = learning.correction_um.clone();
             next.timing_correction_deg = learning.timing_correction_deg;
             next.recent_max_error_um.clear();
         }
-        let draft = super::delivery::Draft {
-            text,
-            table_number: number,
-            learning,
+        let order = TableOrder {
+            program: Program::Text {
+                text,
+                table_number: number,
+            },
+            next: Box::new(next),
             reason: reason.clone(),
-            measurement_id: None,
-            rollback_of: Some(version),
-            at_ms,
+            measurement: None,
+            rollback_of: TableVersion::new(version),
+            learning: Some(learning),
+            at: at_ms,
         };
-        let (new_version, status, mut records) = self.push(draft, next)?;
+        let (new_version, status, mut records) = self.deliver_order(order).await?;
         let why = status.why();
         info!(machine = %self.name, lobe = lobe.as_str(), version, new_version, table_number = number, status = status.name(), "rollback");
         records.extend([
@@ -143,7 +148,7 @@ impl FeatureLoop {
         };
         let provenance = self.provenance(
             self.share.history().next_version(),
-            self.memory.in_force_version,
+            self.machine.memory().in_force_version,
             &learning,
         );
         let text = if self.setup.speed_plan.enabled {
@@ -166,7 +171,7 @@ impl FeatureLoop {
         number: u32,
         provenance: crate::core::program::Provenance,
     ) -> anyhow::Result<String> {
-        let mut state = self.memory.learning.clone();
+        let mut state = self.machine.memory().learning.clone();
         state.correction_um = learning.correction_um.clone();
         state.timing_correction_deg = learning.timing_correction_deg;
         let table = crate::core::compensate::current_table(&state, &self.lobe_loop())
