@@ -352,7 +352,7 @@ impl Ctx {
             Err(e) => return Err(e.into()),
         };
         let epoch = fence.epoch();
-        let opened = self.runner.open(machine, Some(fence)).await;
+        let opened = super::offload::drive(self.runner.open(machine, Some(fence))).await;
         Ok((epoch, opened.map_err(OpenError::Machine)?))
     }
 

@@ -2,10 +2,11 @@
 //! one, and each is moved by the machine's verdict (processed, or rejected with its reason).
 
 use super::machine::{Ingested, SourceEvent};
+use super::sources::Intake;
 use crate::gauge::{DropFolder, Settle};
 use crate::names::MachineName;
 use std::time::Duration;
-use tokio::sync::{mpsc, watch};
+use tokio::sync::watch;
 use tracing::{error, warn};
 
 /// Measurement files dropped into a folder (taken when complete, moved to processed/ or
@@ -15,7 +16,7 @@ pub(super) async fn run(
     folder: std::path::PathBuf,
     poll_ms: u64,
     options: crate::gauge::DropOptions,
-    tx: mpsc::Sender<SourceEvent>,
+    tx: Intake,
     mut shutdown: watch::Receiver<bool>,
 ) {
     let dbc = crate::gauge::GaugeDbc::builtin();
@@ -80,7 +81,7 @@ async fn hand_over(
     mut drop_folder: DropFolder,
     measurement: crate::core::measure::RawMeasurement,
     path: std::path::PathBuf,
-    tx: &mpsc::Sender<SourceEvent>,
+    tx: &Intake,
 ) -> Option<DropFolder> {
     let (done, verdict) = tokio::sync::oneshot::channel();
     let event = SourceEvent::Measurement {

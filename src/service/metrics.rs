@@ -188,6 +188,10 @@ pub struct Metrics {
     machines: Mutex<BTreeMap<MachineName, MachineMetrics>>,
     features: Mutex<BTreeMap<(MachineName, FeatureName), FeatureStatus>>,
     access: Mutex<AccessMetrics>,
+    /// Measurements received and not yet recorded: the loop's lag.
+    pub backlog: super::backlog::Backlog,
+    /// The components' states `/healthz` reports.
+    pub health: super::health::HealthBoard,
 }
 
 /// Counters of the listener's access control.
@@ -291,7 +295,47 @@ impl Metrics {
             }
         }
         self.render_access(&mut s);
+        self.render_lag(&mut s);
         s
+    }
+
+    fn render_lag(&self, s: &mut String) {
+        let lag = self.backlog.lag(std::time::Instant::now());
+        let name = "camloop_measurements_waiting";
+        let _ = writeln!(
+            s,
+            "# HELP {name} Measurements received and not yet recorded (journalled or rejected).\n# TYPE {name} gauge\n{name} {}",
+            lag.waiting
+        );
+        let name = "camloop_oldest_waiting_seconds";
+        let _ = writeln!(
+            s,
+            "# HELP {name} How long the oldest measurement not yet recorded has waited (0: none waits).\n# TYPE {name} gauge\n{name} {}",
+            lag.oldest.map_or(0.0, |d| d.as_secs_f64())
+        );
+        let (appends, syncs, batches) = super::journal::commit_totals();
+        for (name, help, value) in [
+            (
+                "camloop_journal_appends_total",
+                "Journal appends made durable.",
+                appends,
+            ),
+            (
+                "camloop_journal_syncs_total",
+                "Journal syncs issued (group commit: one per batch).",
+                syncs,
+            ),
+            (
+                "camloop_journal_batches_total",
+                "Journal batches written.",
+                batches,
+            ),
+        ] {
+            let _ = writeln!(
+                s,
+                "# HELP {name} {help}\n# TYPE {name} counter\n{name} {value}"
+            );
+        }
     }
 }
 
@@ -315,7 +359,7 @@ mod tests {
             text.contains("camloop_last_max_error_um{machine=\"M1\"} 0.5\n"),
             "{text}"
         );
-        assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 3);
+        assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 3 + 2 + 3);
         m.update_feature(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), |f| {
             f.last_max_error_um = Some(0.7);
             f.blocked_by_guard = Some("correction at its limit".into());

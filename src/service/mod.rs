@@ -3,18 +3,21 @@
 //! graceful shutdown on SIGINT/SIGTERM that lets every machine finish the part in hand.
 
 mod access_setup;
+pub mod backlog;
 pub(crate) use access_setup::seal_dir;
 pub(crate) mod action;
 pub mod app;
 mod cluster_task;
 pub(crate) mod command;
 mod drop_source;
+pub mod health;
 pub mod http;
 pub mod journal;
 mod lease_keeper;
 pub mod machine;
 pub mod metrics;
 pub mod mqtt;
+pub(crate) mod offload;
 pub mod opcua;
 pub mod plant;
 pub(crate) mod runner;
@@ -70,10 +73,15 @@ pub struct Running {
     machines_done: Option<tokio::task::JoinHandle<()>>,
     machines: Machines,
     server: tokio::task::JoinHandle<()>,
+    /// The runtime the listener runs on (its own threads: it answers while the machines'
+    /// work saturates the others); shut down last.
+    http_runtime: startup::HttpRuntime,
     connector: tokio::task::JoinHandle<()>,
     retention: tokio::task::JoinHandle<()>,
     store: StoreHandle,
     opcua: Option<opcua::OpcUa>,
+    /// The disk reserve every journal of this service shares.
+    _reserve: journal::SharedReserve,
 }
 
 impl Running {
@@ -106,6 +114,7 @@ impl Running {
         if let Some(s) = self.store.read().await.as_ref() {
             s.close().await;
         }
+        drop(self.http_runtime);
         info!("camloop stopped");
     }
 }
@@ -134,15 +143,29 @@ pub(crate) async fn start_checked(
     checked: Checked,
     options: RunOptions,
 ) -> anyhow::Result<Running> {
+    begin(checked, options).await?.finish().await
+}
+
+/// Checks the config (see [`crate::config::check`]) and starts the store and the HTTP
+/// listener; the machines open with [`Starting::finish`]. Meanwhile `/healthz` answers,
+/// with the status "starting".
+pub async fn start_serving(config: Config, options: RunOptions) -> anyhow::Result<Starting> {
+    begin(crate::config::check(config)?, options).await
+}
+
+/// The first half of a start: everything up to the listener serving.
+async fn begin(checked: Checked, options: RunOptions) -> anyhow::Result<Starting> {
     let Checked {
         config,
         machines: checked_machines,
         listener,
     } = checked;
-    let listener = startup::tokio_listener(listener)?;
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let metrics = Arc::new(Metrics::default());
+    startup::machines_opening(&metrics, 0, config.machines.len());
     access_setup::private_var_dir(&config)?;
+    // Before any machine opens: their journals share this one reserve.
+    let reserve = journal::share_reserve_under(&config.machines_dir());
     let (store, connector, retention) =
         startup::start_store(&config, options.accept_new_database, &shutdown_rx).await?;
 
@@ -163,9 +186,10 @@ pub(crate) async fn start_checked(
     };
     let commands: command::CommandRoutes = Arc::default();
     let runner = runner::Runner::new(config.clone(), checked_machines, shared, commands.clone());
-    let (machines, sources_done, cluster_view) =
-        startup::start_machines(&config, runner, &metrics, &shutdown_rx).await?;
+    let cluster_view = startup::cluster_leases(&config).await?;
 
+    // The listener serves from here on, on its own runtime, while the machines open:
+    // /healthz says "starting" until they are.
     let limits = http::HttpLimits::from_config(&config.http);
     let app_state = http::AppState {
         store: store.clone(),
@@ -175,34 +199,103 @@ pub(crate) async fn start_checked(
         auth: Arc::new(access_setup::access_settings(&config)?),
         body_timeout: limits.body_timeout,
         dashboard: Arc::new(sheets),
-        cluster: cluster_view,
+        cluster: cluster_view.clone(),
     };
-    let opcua = opcua::start(&config, app_state.clone(), opcua_intake, &shutdown_rx).await?;
-    let app = http::router(app_state);
+    let app = http::router(app_state.clone());
     let http_addr = listener.local_addr()?;
     let (policy, tls) = listener_policy(&config, http_addr, shutdown_rx.clone())?;
-    info!(listen = %http_addr, tls = tls.is_some(), machines = config.machines.len(), "camloop started");
-    let server = tokio::spawn(http::serve_with(
-        listener,
-        app,
-        limits,
-        policy,
-        tls,
-        shutdown_rx.clone(),
-    ));
+    let http_runtime = startup::HttpRuntime::start()?;
+    let server = http_runtime.serve(listener, app, limits, policy, tls, shutdown_rx.clone());
+    info!(listen = %http_addr, tls = tls_on(&config), machines = config.machines.len(), "camloop listening; machines opening");
 
-    let machines_done = tokio::spawn(startup::sources_ended(sources_done));
-    Ok(Running {
+    Ok(Starting {
         http_addr,
+        config,
+        runner,
+        cluster_view,
+        metrics,
+        app_state,
+        opcua_intake,
+        _publisher: publisher,
         shutdown: shutdown_tx,
-        machines_done: Some(machines_done),
-        machines,
+        shutdown_rx,
         server,
+        http_runtime,
         connector,
         retention,
         store,
-        opcua,
+        reserve,
     })
+}
+
+/// A service that serves HTTP (`/healthz` says "starting") and has not opened its machines
+/// yet: [`Starting::finish`] opens them.
+pub struct Starting {
+    /// Where the HTTP API listens (useful with port 0).
+    pub http_addr: std::net::SocketAddr,
+    config: Config,
+    runner: runner::Runner,
+    cluster_view: Option<crate::cluster::Leases>,
+    metrics: Arc<Metrics>,
+    app_state: http::AppState,
+    opcua_intake: Option<opcua::Intake>,
+    _publisher: Option<mqtt::Publisher>,
+    shutdown: watch::Sender<bool>,
+    shutdown_rx: watch::Receiver<bool>,
+    server: tokio::task::JoinHandle<()>,
+    http_runtime: startup::HttpRuntime,
+    connector: tokio::task::JoinHandle<()>,
+    retention: tokio::task::JoinHandle<()>,
+    store: StoreHandle,
+    reserve: journal::SharedReserve,
+}
+
+impl Starting {
+    /// Opens every machine (or joins the cluster's leases), starts OPC UA, and returns the
+    /// running service. An error stops what had started.
+    pub async fn finish(self) -> anyhow::Result<Running> {
+        let Starting {
+            http_addr,
+            config,
+            runner,
+            cluster_view,
+            metrics,
+            app_state,
+            opcua_intake,
+            _publisher,
+            shutdown,
+            shutdown_rx,
+            server,
+            http_runtime,
+            connector,
+            retention,
+            store,
+            reserve,
+        } = self;
+        let (machines, sources_done) =
+            startup::start_machines(&config, runner, cluster_view, &metrics, &shutdown_rx).await?;
+        let opcua = opcua::start(&config, app_state, opcua_intake, &shutdown_rx).await?;
+        info!(listen = %http_addr, machines = config.machines.len(), "camloop started");
+        let machines_done = tokio::spawn(startup::sources_ended(sources_done));
+        Ok(Running {
+            http_addr,
+            shutdown,
+            machines_done: Some(machines_done),
+            machines,
+            server,
+            http_runtime,
+            connector,
+            retention,
+            store,
+            opcua,
+            _reserve: reserve,
+        })
+    }
+}
+
+/// Whether the listener serves HTTPS.
+fn tls_on(config: &Config) -> bool {
+    config.http.tls_cert.is_some() && config.http.tls_key.is_some()
 }
 
 /// The listener's host allow-list and TLS (reloaded on SIGHUP until shutdown); logs a
@@ -271,7 +364,7 @@ struct Shared {
 
 /// This instance's machines: all of them, or those a cluster gives it.
 enum Machines {
-    Local(Box<runner::Runner>),
+    Local(Arc<runner::Runner>),
     Cluster(tokio::task::JoinHandle<()>),
 }
 
@@ -284,6 +377,7 @@ async fn machine_task(
     mut commands: mpsc::Receiver<(MachineCommand, command::Reply)>,
     source_done: tokio::sync::oneshot::Sender<()>,
     mut shutdown: watch::Receiver<bool>,
+    metrics: &Metrics,
 ) {
     let mut retry = tokio::time::interval(RETRY_EVERY);
     // After a pause (a stopped process, a suspended VM) one retry, not one per tick missed.
@@ -294,7 +388,13 @@ async fn machine_task(
             biased;
             event = rx.recv(), if source_done.is_some() => match event {
                 Some(_) if machine.fenced_out() => return fenced_out(&machine),
-                Some(e) => machine.handle(e).await,
+                Some(e) => {
+                    let measurement = matches!(e, SourceEvent::Measurement { .. });
+                    offload::drive(machine.handle(e)).await;
+                    if measurement {
+                        metrics.backlog.recorded(&machine.name);
+                    }
+                }
                 None => {
                     if let Some(done) = source_done.take() {
                         let _ = done.send(());
@@ -302,20 +402,20 @@ async fn machine_task(
                 }
             },
             Some((command, reply)) = commands.recv() => {
-                let _ = reply.send(carry_out(&mut machine, command).await);
+                let _ = reply.send(offload::drive(carry_out(&mut machine, command)).await);
             }
             _ = retry.tick() => {
                 if machine.fenced_out() {
                     return fenced_out(&machine);
                 }
-                machine.retry().await;
+                offload::drive(machine.retry()).await;
             }
             _ = shutdown.changed() => break,
         }
     }
     // Whatever is still waiting gets one more try before the process ends.
     if !machine.fenced_out() {
-        machine.retry().await;
+        offload::drive(machine.retry()).await;
     }
 }
 

@@ -62,17 +62,6 @@ impl Runner {
         names
     }
 
-    /// Starts machine `name` (fenced with `fence` in a cluster). The receiver says when its
-    /// gauge source ended (a simulated run with a part count).
-    pub(super) async fn start(
-        &self,
-        name: &str,
-        fence: Option<crate::share::Fence>,
-    ) -> anyhow::Result<oneshot::Receiver<()>> {
-        let opened = self.open(name, fence).await?;
-        self.launch(opened)
-    }
-
     /// Opens machine `name`'s loop (journal, share state, memory): the slow part of a start,
     /// which several machines may do at once.
     pub(super) async fn open(
@@ -125,17 +114,24 @@ impl Runner {
         });
         let (tx, rx) = mpsc::channel::<SourceEvent>(16);
         let (command_tx, command_rx): (Mailbox, _) = mpsc::channel(4);
+        let intake = super::sources::Intake::new(tx, name.clone(), self.shared.metrics.clone());
         super::sources::spawn(
             &self.config,
             section,
             &machine,
             checked.sim_c_speed_explicit,
-            tx,
+            intake,
             self.shared.parts,
             stopped.clone(),
         )?;
         let (done_tx, done_rx) = oneshot::channel();
-        let task = tokio::spawn(machine_task(machine, rx, command_rx, done_tx, stopped));
+        let metrics = self.shared.metrics.clone();
+        let task = tokio::spawn(async move {
+            let name = machine.name.clone();
+            machine_task(machine, rx, command_rx, done_tx, stopped, &metrics).await;
+            // What the loop did not take stays with its source.
+            metrics.backlog.forget(&name);
+        });
         if let Ok(mut routes) = self.commands.write() {
             routes.insert(name.clone(), command_tx);
         }

@@ -6,6 +6,8 @@
 //! would deliver it.
 
 use super::machine::{GroundWith, MachineLoop, SourceEvent};
+use super::offload;
+use super::sources::Intake;
 use crate::core::compensate::Feature;
 use crate::gauge::{Assembled, Assembler, GaugeDbc};
 use crate::names::{FeatureName, MachineName};
@@ -17,7 +19,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
-use tokio::sync::{mpsc, watch};
+use tokio::sync::watch;
 use tracing::{error, warn};
 
 /// The R parameter an operator sets to resume a shaft (the shaft program's default).
@@ -71,7 +73,7 @@ impl SimSource {
     }
 
     /// Runs until shutdown (or the shaft count); each feature ground goes out as one event.
-    pub async fn run(self, tx: mpsc::Sender<SourceEvent>, mut shutdown: watch::Receiver<bool>) {
+    pub async fn run(self, tx: Intake, mut shutdown: watch::Receiver<bool>) {
         let Some(first) = self.stations.first() else {
             return;
         };
@@ -111,7 +113,7 @@ impl SimSource {
             }
             // The control runs the main program, which calls the table programs: the tables
             // it couples are what gets ground, at the stations where Z stands.
-            let Some(grinds) = self.run_control(&mut control) else {
+            let Some(grinds) = offload::blocking(|| self.run_control(&mut control)) else {
                 continue;
             };
             runs += 1;
@@ -144,7 +146,7 @@ impl SimSource {
         &self,
         sim: &mut SimGrinder,
         dbc: &GaugeDbc,
-        tx: &mpsc::Sender<SourceEvent>,
+        tx: &Intake,
         shutdown: &watch::Receiver<bool>,
     ) -> bool {
         for k in 0..self.stations.len() {
@@ -180,7 +182,10 @@ impl SimSource {
             }
             if let Some(k) = self.station_at(&coupled) {
                 *gauged += 1;
-                let event = self.grind_and_gauge(sim, run.dbc, &coupled, k, run.shaft, *gauged);
+                // The grinding is computed and the share's programs read off the async workers.
+                let event = offload::blocking(|| {
+                    self.grind_and_gauge(sim, run.dbc, &coupled, k, run.shaft, *gauged)
+                });
                 if let Some(m) = event
                     && !send_and_wait(run.tx, m, ground_with).await
                 {
@@ -400,7 +405,7 @@ fn workpiece(feature: Feature) -> Workpiece {
 /// machine waits between parts. False when the machine is gone.
 /// What grinding one shaft needs from the run.
 struct ShaftRun<'a> {
-    tx: &'a mpsc::Sender<SourceEvent>,
+    tx: &'a Intake,
     shutdown: &'a watch::Receiver<bool>,
     dbc: &'a GaugeDbc,
     /// The shaft's number.
@@ -409,7 +414,7 @@ struct ShaftRun<'a> {
 
 /// A dressing after the part: the machine regenerates every table before the next shaft,
 /// as it would between parts. False when the receiver is gone.
-async fn send_dressing(tx: &mpsc::Sender<SourceEvent>, d: crate::sim::DressingEvent) -> bool {
+async fn send_dressing(tx: &Intake, d: crate::sim::DressingEvent) -> bool {
     let (done, regenerated) = tokio::sync::oneshot::channel();
     let event = SourceEvent::Dressing {
         wheel_radius_mm: d.believed_wheel_radius_mm,
@@ -425,7 +430,7 @@ async fn send_dressing(tx: &mpsc::Sender<SourceEvent>, d: crate::sim::DressingEv
 }
 
 async fn send_and_wait(
-    tx: &mpsc::Sender<SourceEvent>,
+    tx: &Intake,
     raw: crate::core::measure::RawMeasurement,
     ground_with: Option<GroundWith>,
 ) -> bool {

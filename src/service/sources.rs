@@ -6,9 +6,54 @@ use super::{drop_source, sim_source};
 use crate::config::{Config, GaugeSection, MachineSection};
 use crate::names::MachineName;
 use anyhow::Context;
+use std::sync::Arc;
 use std::time::Duration;
 use tokio::sync::{mpsc, watch};
 use tracing::{error, info, warn};
+
+/// Where a gauge source hands its events to the machine's loop: the loop's channel, with
+/// every measurement counted into the backlog (see [`super::backlog`]) from the moment it
+/// is handed over, so a loop that cannot keep up shows as lag.
+#[derive(Clone)]
+pub(crate) struct Intake {
+    tx: mpsc::Sender<SourceEvent>,
+    machine: MachineName,
+    metrics: Arc<super::metrics::Metrics>,
+}
+
+impl Intake {
+    pub(crate) fn new(
+        tx: mpsc::Sender<SourceEvent>,
+        machine: MachineName,
+        metrics: Arc<super::metrics::Metrics>,
+    ) -> Self {
+        Self {
+            tx,
+            machine,
+            metrics,
+        }
+    }
+
+    /// Hands `event` to the loop, waiting while its channel is full (backpressure).
+    pub(crate) async fn send(
+        &self,
+        event: SourceEvent,
+    ) -> Result<(), mpsc::error::SendError<SourceEvent>> {
+        let measurement = matches!(event, SourceEvent::Measurement { .. });
+        if measurement {
+            // Stamped before the wait for a slot: a full channel is lag too.
+            self.metrics
+                .backlog
+                .received(&self.machine, std::time::Instant::now());
+        }
+        let sent = self.tx.send(event).await;
+        if sent.is_err() && measurement {
+            // The loop has stopped: the event stays with its source.
+            self.metrics.backlog.forget(&self.machine);
+        }
+        sent
+    }
+}
 
 /// Starts the source of machine `m` feeding `tx`.
 pub(super) fn spawn(
@@ -16,7 +61,7 @@ pub(super) fn spawn(
     m: &MachineSection,
     machine: &MachineLoop,
     sim_c_speed_explicit: bool,
-    tx: mpsc::Sender<SourceEvent>,
+    tx: Intake,
     parts: Option<u64>,
     shutdown: watch::Receiver<bool>,
 ) -> anyhow::Result<()> {
@@ -146,7 +191,7 @@ impl LiveGauge {
 async fn live_source(
     machine: MachineName,
     spec: LiveSpec,
-    tx: mpsc::Sender<SourceEvent>,
+    tx: Intake,
     mut shutdown: watch::Receiver<bool>,
 ) {
     loop {

@@ -1,6 +1,7 @@
 //! The start-up steps of the service, in the order `start_checked` runs them: the store
 //! and its keepers, the catalogue of features, the machines (here or by lease).
 
+use super::health::State;
 use super::machine::StoreHandle;
 use super::metrics::Metrics;
 use super::{
@@ -72,39 +73,78 @@ pub(super) fn feature_catalogue(
 /// When each local machine's gauge source ended (none in a cluster).
 pub(super) type SourcesDone = Option<Vec<tokio::sync::oneshot::Receiver<()>>>;
 
-/// Starts every machine here, or, in a cluster, the task that takes machines as leases
-/// allow (and returns the leases for the API).
+/// Machines opened at once at start: their journals, shares and first tables are mostly
+/// waits on the disk, which overlap.
+const OPEN_AT_ONCE: usize = 16;
+
+/// In a cluster: the leases, joined (for the API and the machines' task).
+pub(super) async fn cluster_leases(
+    config: &Config,
+) -> anyhow::Result<Option<crate::cluster::Leases>> {
+    if !config.cluster.enabled {
+        return Ok(None);
+    }
+    let lease = Duration::from_millis(config.cluster.lease_ms);
+    let instance = config.cluster.instance_name();
+    let leases = crate::cluster::Leases::connect(&config.database_url(), &instance, lease)
+        .await
+        .context("cluster")?;
+    info!(instance = %instance, lease_ms = config.cluster.lease_ms, "cluster: joined; machines are taken as leases allow");
+    Ok(Some(leases))
+}
+
+/// `/healthz`'s "machines" component while they open.
+pub(super) fn machines_opening(metrics: &Metrics, open: usize, total: usize) {
+    let reason = format!("{open} of {total} machines open");
+    metrics
+        .health
+        .set("machines", State::Starting, Some(reason));
+}
+
+/// Starts every machine here (several opening at once, `/healthz` counting them), or, in a
+/// cluster, the task that takes machines as leases allow.
 pub(super) async fn start_machines(
     config: &Config,
     runner: runner::Runner,
+    leases: Option<crate::cluster::Leases>,
     metrics: &Arc<Metrics>,
     shutdown_rx: &watch::Receiver<bool>,
-) -> anyhow::Result<(Machines, SourcesDone, Option<crate::cluster::Leases>)> {
-    if config.cluster.enabled {
-        let lease = Duration::from_millis(config.cluster.lease_ms);
-        let instance = config.cluster.instance_name();
-        let leases = crate::cluster::Leases::connect(&config.database_url(), &instance, lease)
-            .await
-            .context("cluster")?;
-        info!(instance = %instance, lease_ms = config.cluster.lease_ms, "cluster: joined; machines are taken as leases allow");
-        let cluster_view = Some(leases.clone());
+) -> anyhow::Result<(Machines, SourcesDone)> {
+    if let Some(leases) = leases {
         let task = cluster_task::ClusterTask {
             leases,
             url: config.database_url(),
-            lease,
+            lease: Duration::from_millis(config.cluster.lease_ms),
             machines_dir: config.machines_dir(),
             runner,
             metrics: metrics.clone(),
         };
         let task = tokio::spawn(task.run(shutdown_rx.clone()));
-        Ok((Machines::Cluster(task), None, cluster_view))
-    } else {
-        let mut done = Vec::new();
-        for name in runner.names() {
-            done.push(runner.start(&name, None).await?);
-        }
-        Ok((Machines::Local(Box::new(runner)), Some(done), None))
+        // Machines come and go with the leases: none is awaited here.
+        metrics.health.set("machines", State::Ok, None);
+        return Ok((Machines::Cluster(task), None));
     }
+    let runner = Arc::new(runner);
+    let names = runner.names();
+    let total = names.len();
+    let gate = Arc::new(tokio::sync::Semaphore::new(OPEN_AT_ONCE));
+    let mut opening = tokio::task::JoinSet::new();
+    for name in names {
+        let (runner, gate) = (runner.clone(), gate.clone());
+        opening.spawn(async move {
+            let _slot = gate.acquire_owned().await;
+            super::offload::drive(runner.open(&name, None)).await
+        });
+    }
+    let mut done = Vec::with_capacity(total);
+    // A machine that cannot open ends the start (the others are aborted with the set).
+    while let Some(opened) = opening.join_next().await {
+        let opened = opened.context("a machine's opening panicked")??;
+        done.push(runner.launch(opened)?);
+        machines_opening(metrics, done.len(), total);
+    }
+    metrics.health.set("machines", State::Ok, None);
+    Ok((Machines::Local(runner), Some(done)))
 }
 
 /// Ends when every local source has ended; in a cluster the machines come and go, so the
@@ -135,10 +175,57 @@ pub(super) fn start_mqtt(
     )?))
 }
 
+/// The HTTP listener's own runtime: two threads that serve `/healthz`, the API and the
+/// dashboard whatever the machines' work does to the service's runtime. Shut down when
+/// dropped (in the order the service stops, or when a start fails half-way).
+pub(super) struct HttpRuntime(Option<tokio::runtime::Runtime>);
+
+impl HttpRuntime {
+    pub(super) fn start() -> anyhow::Result<Self> {
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .thread_name("camloop-http")
+            .enable_all()
+            .build()
+            .context("cannot start the HTTP runtime")?;
+        Ok(Self(Some(runtime)))
+    }
+
+    /// Serves `app` on the listener the config check bound until `shutdown`.
+    pub(super) fn serve(
+        &self,
+        listener: std::net::TcpListener,
+        app: axum::Router,
+        limits: http::HttpLimits,
+        policy: http::Policy,
+        tls: Option<Arc<http::Tls>>,
+        shutdown: watch::Receiver<bool>,
+    ) -> JoinHandle<()> {
+        let runtime = self.0.as_ref().expect("the runtime lives until dropped");
+        runtime.spawn(async move {
+            // Registered with this runtime's reactor, so its accepts never wait on the
+            // service's workers.
+            match tokio_listener(listener) {
+                Ok(listener) => {
+                    http::serve_with(listener, app, limits, policy, tls, shutdown).await;
+                }
+                Err(e) => tracing::error!(error = %format!("{e:#}"), "HTTP listener unusable: not serving"),
+            }
+        })
+    }
+}
+
+impl Drop for HttpRuntime {
+    fn drop(&mut self) {
+        // Dropped inside the service's runtime, where a blocking shutdown is not allowed.
+        if let Some(runtime) = self.0.take() {
+            runtime.shutdown_background();
+        }
+    }
+}
+
 /// The HTTP listener the config check bound, handed to tokio.
-pub(super) fn tokio_listener(
-    listener: std::net::TcpListener,
-) -> anyhow::Result<tokio::net::TcpListener> {
+fn tokio_listener(listener: std::net::TcpListener) -> anyhow::Result<tokio::net::TcpListener> {
     listener
         .set_nonblocking(true)
         .context("cannot set up the HTTP listener")?;

@@ -109,6 +109,7 @@ mod service_gauges;
 mod service_http;
 mod service_identity;
 mod service_kill;
+mod service_plant;
 mod service_run;
 mod shaft_routing;
 mod shaft_service;

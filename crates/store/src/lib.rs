@@ -85,6 +85,9 @@ pub struct Store {
     target: Arc<str>,
     /// Plain texts of the newest packed rows, for packing the next ones.
     chains: Arc<chain::ChainCache>,
+    /// When the newest checkpoint started and whether it was complete, held while one runs:
+    /// callers share a checkpoint (see [`Store::checkpoint_covering`]).
+    checkpoints: Arc<tokio::sync::Mutex<Option<(std::time::Instant, bool)>>>,
 }
 
 #[derive(Debug, Clone)]
@@ -187,6 +190,7 @@ impl Store {
             reads: Arc::new(Semaphore::new(readers as usize)),
             target: target.into(),
             chains: Arc::default(),
+            checkpoints: Arc::default(),
         }
     }
 
@@ -251,6 +255,34 @@ impl Store {
     /// runs it between parts, off the per-part path, and keeps journal records until it
     /// answers `true`. On PostgreSQL every commit is already durable: always `true`.
     pub async fn checkpoint(&self) -> Result<bool, StoreError> {
+        let started = std::time::Instant::now();
+        let done = self.checkpoint_now().await?;
+        *self.checkpoints.lock().await = Some((started, done));
+        Ok(done)
+    }
+
+    /// [`Self::checkpoint`] for a caller whose transactions were all committed by
+    /// `committed_by`: a complete checkpoint that started after that has made them durable
+    /// already, so it answers `true` without another. Callers wait for a checkpoint under
+    /// way rather than run their own beside it: a plant's journals, each releasing every
+    /// 2 s, share one checkpoint instead of queueing hundreds a second on the one writer.
+    pub async fn checkpoint_covering(
+        &self,
+        committed_by: std::time::Instant,
+    ) -> Result<bool, StoreError> {
+        let mut last = self.checkpoints.lock().await;
+        if let Some((started, true)) = *last
+            && started >= committed_by
+        {
+            return Ok(true);
+        }
+        let started = std::time::Instant::now();
+        let done = self.checkpoint_now().await?;
+        *last = Some((started, done));
+        Ok(done)
+    }
+
+    async fn checkpoint_now(&self) -> Result<bool, StoreError> {
         match &self.pools {
             Pools::Sqlite { write, .. } => {
                 let (busy, log, done): (i64, i64, i64) =

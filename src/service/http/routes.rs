@@ -22,21 +22,34 @@ pub(super) async fn store(state: &AppState) -> Result<Store, ApiError> {
 
 #[derive(Debug, Serialize, utoipa::ToSchema)]
 pub(super) struct Health {
-    status: &'static str,
+    /// "starting" while the machines open, "degraded" while a component is (see
+    /// `components`), else "ok".
+    #[schema(value_type = String)]
+    status: crate::service::health::State,
     /// "up" or "down".
     database: &'static str,
     /// Configured machines.
     machines: usize,
+    /// Each component's state, with the reason when it is not ok.
+    components: Vec<crate::service::health::Component>,
 }
 
-/// Service and database health.
-#[utoipa::path(get, path = "/healthz", tag = "service", responses((status = 200, description = "service up; the database up or down", body = Health)))]
+/// Service and database health. Answered on the listener's own threads, from memory only
+/// (no database query, no wait on a lock), so it answers while the machines' work saturates
+/// the service.
+#[utoipa::path(get, path = "/healthz", tag = "service", responses((status = 200, description = "service up (starting, ok or degraded, with each component's state); the database up or down", body = Health)))]
 pub(super) async fn healthz(State(state): State<AppState>) -> Json<Health> {
-    let up = state.store.read().await.is_some();
+    use crate::service::health;
+    // A connector holding the lock to put a new connection in: not up yet.
+    let up = state.store.try_read().is_ok_and(|s| s.is_some());
+    let mut components = state.metrics.health.components();
+    let lag = state.metrics.backlog.lag(std::time::Instant::now());
+    components.push(health::loop_component(lag));
     Json(Health {
-        status: "ok",
+        status: health::status(&components),
         database: if up { "up" } else { "down" },
         machines: state.machines.len(),
+        components,
     })
 }
 

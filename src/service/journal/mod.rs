@@ -4,13 +4,13 @@
 //! says its copy is durable. Records read back after a crash may already be in the store;
 //! they are checked before being written again, so a replay never duplicates history.
 
+mod commit;
 mod record;
 mod reserve;
 
 pub use record::{EventKind, Pending};
 use record::{apply, apply_once};
-use reserve::DiskReserve;
-pub use reserve::RESERVE_BYTES;
+pub use reserve::{RESERVE_BYTES, SharedReserve, share_under as share_reserve_under};
 
 use crate::failpoint::crash_point;
 use crate::share::{Fence, Held};
@@ -33,7 +33,10 @@ pub struct Journal {
     written: usize,
     replayed: usize,
     quarantined: Vec<Quarantined>,
-    reserve: DiskReserve,
+    reserve: SharedReserve,
+    /// When the newest record this journal wrote to the store was committed: a checkpoint
+    /// started after it covers every written record.
+    committed_by: Option<std::time::Instant>,
     /// With several instances: this owner's fence, held around every write (the file and the
     /// store), so an instance that lost the machine writes nothing more for it.
     fence: Option<Fence>,
@@ -74,13 +77,13 @@ impl Journal {
                 }),
             }
         }
-        let mut reserve = DiskReserve::new(dir.join(reserve::RESERVE_FILE));
-        reserve.ensure();
+        let reserve = reserve::for_journal(dir);
         let mut journal = Self {
             path,
             replayed: records.len(),
             records,
             written: 0,
+            committed_by: None,
             quarantined: Vec::new(),
             fence: None,
             reserve,
@@ -150,7 +153,9 @@ impl Journal {
             text.push('\n');
         }
         match self.write(text.as_bytes()) {
-            Err(e) if is_disk_full(&e) && self.reserve.release() => self.write(text.as_bytes()),
+            Err(e) if is_disk_full(&e) && self.reserve_lock().release() => {
+                self.write(text.as_bytes())
+            }
             other => other,
         }
         .with_context(|| format!("cannot write journal {}", self.path.display()))?;
@@ -161,32 +166,32 @@ impl Journal {
         Ok(())
     }
 
-    /// Appends and syncs `bytes`; on failure the file is cut back to where it was, so a
-    /// partial line never glues itself to the next record.
+    /// Appends and syncs `bytes` through the process's group commit (see [`commit`]):
+    /// returns once they are durable, batched with whatever other journals append meanwhile;
+    /// on failure the file is cut back to where it was, so a partial line never glues itself
+    /// to the next record.
     fn write(&self, bytes: &[u8]) -> std::io::Result<()> {
-        let mut file = std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(&self.path)?;
-        let before = file.metadata()?.len();
-        let result = file.write_all(bytes).and_then(|()| file.sync_data());
-        if result.is_err() {
-            let _ = file.set_len(before);
-        }
-        result
+        commit::GroupCommit::global()
+            .submit(&self.path, bytes.to_vec())
+            .wait()
     }
 
     /// Whether the journal is running on its reserve: the disk was full, and only the space
     /// given up by the reserve file keeps records durable. Bounded: the machine records
     /// measurements and stops learning until [`Self::restore_reserve`] succeeds.
     pub(crate) fn on_reserve(&self) -> bool {
-        self.reserve.in_use()
+        self.reserve_lock().in_use()
     }
 
     /// Tries to write the reserve again (space was freed); true when the journal is off its
     /// reserve.
     pub(crate) fn restore_reserve(&mut self) -> bool {
-        self.reserve.ensure()
+        self.reserve_lock().ensure()
+    }
+
+    fn reserve_lock(&self) -> std::sync::MutexGuard<'_, reserve::DiskReserve> {
+        // Every change is one flag and one file: a panic elsewhere leaves it usable.
+        self.reserve.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     /// Records not yet written to the database, oldest first.
@@ -221,6 +226,7 @@ impl Journal {
             match result {
                 Ok(()) => {
                     crash_point(record.committed_step());
+                    self.committed_by = Some(std::time::Instant::now());
                     flushed.written += 1;
                     self.written += 1;
                     i += 1;
@@ -282,7 +288,10 @@ impl Journal {
     pub async fn release_durable(&mut self, store: &Store) -> anyhow::Result<usize> {
         let written = self.written;
         let _held = self.hold()?;
-        if written == 0 || !store.checkpoint().await? {
+        // Shared with every other journal releasing meanwhile: one checkpoint covers all
+        // that was committed before it started.
+        let committed_by = self.committed_by.unwrap_or_else(std::time::Instant::now);
+        if written == 0 || !store.checkpoint_covering(committed_by).await? {
             return Ok(0);
         }
         self.forget(written)?;
@@ -340,6 +349,18 @@ impl Journal {
             .with_context(|| format!("cannot replace journal {}", self.path.display()))?;
         Ok(())
     }
+}
+
+/// What the process's group commit has done so far: appends made durable, syncs issued,
+/// batches written (for `/metrics`).
+pub(crate) fn commit_totals() -> (u64, u64, u64) {
+    use std::sync::atomic::Ordering::Relaxed;
+    let s = commit::GroupCommit::global().stats();
+    (
+        s.appends.load(Relaxed),
+        s.syncs.load(Relaxed),
+        s.batches.load(Relaxed),
+    )
 }
 
 /// The quarantine file beside the journal.

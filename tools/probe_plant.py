@@ -1,0 +1,237 @@
+#!/usr/bin/env python3
+"""Plant-scale load probe against the release binary: N simulated 8-lobe camshaft machines,
+each grinding a shaft every 30 s, while /healthz is asked every second.
+
+    cargo build --release && python3 tools/probe_plant.py N [SECONDS]
+
+Prints, for one run of SECONDS (default 90) after every machine is open:
+- start-up: seconds from the process start to the first /healthz answer, and to the answer
+  that says every machine is open (status no longer "starting");
+- /healthz latency p50 / p99 / max over the whole run (start-up included), and how many
+  asks went unanswered within 5 s;
+- lobe measurements demanded (each machine's first shaft is ground at once, then one every
+  30 s) against those processed (/metrics: parts + rejects) and stored (rows in the
+  database);
+- CPU of the process (per cent of one core) and its RSS (now and peak);
+- the load average of the machine, since other work on it changes every figure.
+
+Everything runs in a temporary folder on loopback; nothing is left behind.
+"""
+
+import json
+import os
+import socket
+import sqlite3
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import urllib.request
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BINARY = os.environ.get("CAMLOOP_BINARY") or os.path.join(ROOT, "target", "release", "camloop")
+RECIPE = os.path.join(ROOT, "config", "parts", "demo-camshaft.toml")
+LOBES = 8
+PART_INTERVAL_S = 30
+
+
+def free_port():
+    # The service binds the port itself at start; a port free a moment ago is good enough
+    # for a probe (a test would use port 0 and read the address back).
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def write_config(dir, machines, port):
+    parts = [
+        f"""[service]
+var_dir = "var"
+[database]
+url = "sqlite://{dir}/var/camloop.db?mode=rwc"
+[http]
+listen = "127.0.0.1:{port}"
+max_connections = 64
+"""
+    ]
+    for i in range(machines):
+        parts.append(
+            f"""[[machines]]
+name = "P{i:03}"
+recipe = "{RECIPE}"
+share = "share/P{i:03}"
+[machines.gauge]
+kind = "sim"
+part_interval_ms = {PART_INTERVAL_S * 1000}
+seed = {i + 1}
+"""
+        )
+    path = os.path.join(dir, "camloop.toml")
+    with open(path, "w") as f:
+        f.write("\n".join(parts))
+    return path
+
+
+def ask(url, timeout=5.0):
+    """(latency in ms, body) or (None, None) when no answer came in time."""
+    t0 = time.monotonic()
+    try:
+        body = urllib.request.urlopen(url, timeout=timeout).read().decode()
+        return 1000 * (time.monotonic() - t0), body
+    except Exception:
+        return None, None
+
+
+def cpu_seconds(pid):
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    ticks = os.sysconf("SC_CLK_TCK")
+    return (int(fields[11]) + int(fields[12])) / ticks
+
+
+def rss_mib(pid):
+    now = peak = 0
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                now = int(line.split()[1]) / 1024
+            elif line.startswith("VmHWM:"):
+                peak = int(line.split()[1]) / 1024
+    return now, peak
+
+
+def metric_sum(text, name):
+    return sum(float(l.split()[-1]) for l in text.splitlines() if l.startswith(name + "{"))
+
+
+def metric_total(text, name):
+    """A metric without labels (0 when this build does not have it)."""
+    return sum(float(l.split()[-1]) for l in text.splitlines() if l.split(" ")[0] == name)
+
+
+def stored_rows(dir):
+    try:
+        db = sqlite3.connect(f"file:{dir}/var/camloop.db?mode=ro", uri=True, timeout=10)
+        (n,) = db.execute("SELECT COUNT(*) FROM measurements").fetchone()
+        db.close()
+        return n
+    except sqlite3.Error:
+        return 0
+
+
+def percentile(values, q):
+    if not values:
+        return float("nan")
+    values = sorted(values)
+    return values[min(len(values) - 1, int(q * len(values)))]
+
+
+def plant(dir, machines, seconds):
+    port = free_port()
+    config = write_config(dir, machines, port)
+    log = open(os.path.join(dir, "log.txt"), "w")
+    started = time.monotonic()
+    proc = subprocess.Popen([BINARY, "run", "--config", config], cwd=dir, stdout=log, stderr=log)
+    latencies, unanswered, statuses = [], [0], []
+    first_answer, all_open = [None], [None]
+    stop = threading.Event()
+
+    def healthz():
+        while not stop.is_set() and proc.poll() is None:
+            ms, body = ask(f"http://127.0.0.1:{port}/healthz")
+            at = time.monotonic() - started
+            if ms is None:
+                # Connection refused before the listener is bound is not a slow answer.
+                unanswered[0] += 1 if first_answer[0] is not None else 0
+            else:
+                latencies.append(ms)
+                health = json.loads(body)
+                statuses.append(health.get("status", "?"))
+                if first_answer[0] is None:
+                    first_answer[0] = at
+                # Open once the machines' component is ok (a build without components: at
+                # its first answer, which came only once they were open).
+                machines = [c for c in health.get("components", []) if c["name"] == "machines"]
+                if all_open[0] is None and all(c["state"] == "ok" for c in machines):
+                    all_open[0] = at
+            stop.wait(1.0)
+
+    prober = threading.Thread(target=healthz, daemon=True)
+    prober.start()
+    try:
+        deadline = started + 300
+        while all_open[0] is None and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+        if all_open[0] is None:
+            print(f"plant {machines}: machines not open within 300 s; see {dir}/log.txt")
+            return False
+        opened = time.monotonic()
+        cpu0 = cpu_seconds(proc.pid)
+        time.sleep(seconds)
+        elapsed = time.monotonic() - opened
+        cpu = 100 * (cpu_seconds(proc.pid) - cpu0) / elapsed
+        _, text = ask(f"http://127.0.0.1:{port}/metrics", timeout=30)
+        rss_now, rss_peak = rss_mib(proc.pid)
+        load = open("/proc/loadavg").read().split()[:3]
+    finally:
+        stop.set()
+        proc.terminate()
+        try:
+            proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        prober.join(timeout=10)
+    shafts = machines * (int(elapsed // PART_INTERVAL_S) + 1)
+    demanded = shafts * LOBES
+    processed = None
+    if text is not None:
+        processed = int(
+            metric_sum(text, "camloop_parts_total")
+            + metric_sum(text, "camloop_measurements_rejected_total")
+        )
+    stored = stored_rows(dir)
+    if text is not None:
+        print(
+            f"plant {machines}: at the end: {metric_total(text, 'camloop_measurements_waiting'):.0f} "
+            f"measurements waiting, the oldest for {metric_total(text, 'camloop_oldest_waiting_seconds'):.1f} s; "
+            f"journal: {metric_total(text, 'camloop_journal_appends_total'):.0f} appends in "
+            f"{metric_total(text, 'camloop_journal_syncs_total'):.0f} syncs"
+        )
+    print(
+        f"plant {machines}: start-up: first /healthz answer {first_answer[0]:.1f} s, "
+        f"every machine open {all_open[0]:.1f} s"
+    )
+    print(
+        f"plant {machines}: /healthz over {len(latencies) + unanswered[0]} asks: "
+        f"p50 {percentile(latencies, 0.5):.1f} ms, p99 {percentile(latencies, 0.99):.1f} ms, "
+        f"max {max(latencies, default=float('nan')):.1f} ms, {unanswered[0]} unanswered within 5 s; "
+        f"statuses seen {sorted(set(statuses))}"
+    )
+    print(
+        f"plant {machines}: {elapsed:.0f} s: lobes demanded {demanded}, processed "
+        f"{processed if processed is not None else 'unknown (/metrics unanswered)'}, stored {stored} "
+        f"(stored after the stop, so parts in hand count)"
+    )
+    print(
+        f"plant {machines}: CPU {cpu:.0f} % of one core, RSS {rss_now:.0f} MiB "
+        f"(peak {rss_peak:.0f} MiB), load average {' '.join(load)}"
+    )
+    return unanswered[0] == 0 and processed is not None and processed >= demanded * 0.95
+
+
+def main():
+    if len(sys.argv) < 2:
+        print(__doc__)
+        sys.exit(2)
+    machines = int(sys.argv[1])
+    seconds = float(sys.argv[2]) if len(sys.argv) > 2 else 90.0
+    with tempfile.TemporaryDirectory() as dir:
+        good = plant(dir, machines, seconds)
+    print(f"plant {machines}: {'ok' if good else 'FAILED'}")
+    sys.exit(0 if good else 1)
+
+
+if __name__ == "__main__":
+    main()
