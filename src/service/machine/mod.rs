@@ -35,6 +35,7 @@ mod executor;
 mod feature;
 mod freeze;
 mod guards;
+mod in_process;
 mod ingest;
 pub mod memory;
 mod planned;
@@ -58,6 +59,7 @@ use tracing::{error, info, warn};
 pub use dressing::Dressed;
 pub use error::MachineError;
 pub use feature::FeatureLoop;
+pub use in_process::InProcessOutcome;
 pub use ingest::GaugeIds;
 pub use rollback::{RollbackError, RolledBack};
 pub(crate) use shaft::MainProgram;
@@ -193,6 +195,7 @@ impl MachineLoop {
             resume_failing: false,
         };
         machine.write_resume_point_from_memory();
+        machine.write_ready_at_start();
         Ok(machine)
     }
 
