@@ -3,9 +3,11 @@
 //! measurement of the part in the machine delivers this part's finish table with the count
 //! moved, written after the table in the same push; a wrong-part, wrong-lobe or incomplete
 //! one delivers nothing and moves no count; neither learns, and the finished part then learns
-//! once.
+//! once. Through the service, a drop folder's `<name>.in-process.csv` takes the same way.
 
+use crate::gauge_drop_support::measurement_csv;
 use crate::machine_support::{nominal_measurement, start_machine};
+use crate::service_support::{get, json};
 use camloop::core::measure::RawMeasurement;
 use camloop::recipe::{FeatureSetup, Recipe};
 use camloop::service::machine::{InProcessOutcome, Ingested, MachineLoop, SourceEvent};
@@ -157,4 +159,90 @@ async fn a_wrong_or_incomplete_in_process_measurement_delivers_nothing() {
         assert!(ready(dir.path()).contains("CL_READY=0"));
         assert_eq!(m.features()[0].memory().parts, 0);
     }
+}
+
+/// Drops `raw` into `inbox` as `name`: written under a temporary name and renamed, with the
+/// `# end` marker, as the drop-folder rules ask.
+fn drop_file(inbox: &Path, name: &str, raw: &RawMeasurement) {
+    let tmp = inbox.join(format!(".{name}.tmp"));
+    std::fs::write(&tmp, measurement_csv(raw)).unwrap();
+    std::fs::rename(&tmp, inbox.join(name)).unwrap();
+}
+
+/// Waits (bounded, 20 s) for `path` to exist.
+async fn appears(path: &Path) {
+    for _ in 0..400 {
+        if path.exists() {
+            return;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    panic!("{} did not appear within 20 s", path.display());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_service_takes_an_in_process_file_from_the_drop_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = format!(
+        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://{}/db.sqlite?mode=rwc\"\n\
+         [http]\nlisten = \"127.0.0.1:0\"\n\
+         [[machines]]\nname = \"DROP1\"\nrecipe = \"{}\"\nlobe = \"IN1\"\nshare = \"share\"\n\
+         [machines.gauge]\nkind = \"drop\"\nfolder = \"inbox\"\npoll_ms = 20\n",
+        dir.path().display(),
+        root.join("config/parts/demo-lobe-in-process.toml")
+            .display(),
+    );
+    let config =
+        camloop::config::Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
+    let running = camloop::service::start(config, camloop::service::RunOptions::default())
+        .await
+        .unwrap();
+    let inbox = dir.path().join("inbox");
+    std::fs::create_dir_all(&inbox).unwrap();
+    let s = setup();
+    let at = |p: &str, l: &str| PartLabels {
+        machine: "DROP1".into(),
+        ..labels(p, l)
+    };
+
+    drop_file(
+        &inbox,
+        "17-IN1.in-process.csv",
+        &with_stock(&s, &at("17", "IN1")),
+    );
+    appears(&inbox.join("processed/17-IN1.in-process.csv")).await;
+    assert!(ready(dir.path()).contains("CL_READY=1"));
+
+    let mut two_revs = with_stock(&s, &at("18", "IN1"));
+    two_revs.samples.retain(|x| x.revolution < 2);
+    two_revs.header.revolutions = 2;
+    drop_file(&inbox, "18-IN1.in-process.csv", &two_revs);
+    appears(&inbox.join("rejected/18-IN1.in-process.csv")).await;
+    let reason = std::fs::read_to_string(inbox.join("rejected/18-IN1.in-process.csv.reason.txt"))
+        .unwrap_or_default();
+    assert!(reason.contains("revolution"), "{reason}");
+    assert!(ready(dir.path()).contains("CL_READY=1"));
+
+    // The finished part is the one measurement learned from.
+    drop_file(
+        &inbox,
+        "17-IN1.csv",
+        &nominal_measurement(&s, at("17", "IN1"), 5),
+    );
+    appears(&inbox.join("processed/17-IN1.csv")).await;
+    let mut items = 0;
+    for _ in 0..200 {
+        let (_, body) = get(running.http_addr, "/api/v1/machines/DROP1/measurements").await;
+        items = json(&body)["items"].as_array().map_or(0, Vec::len);
+        if items >= 1 {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    assert_eq!(
+        items, 1,
+        "only the finished part is a measurement of the history"
+    );
+    running.stop().await;
 }

@@ -97,6 +97,15 @@ pub enum SourceEvent {
         source: String,
         done: Option<tokio::sync::oneshot::Sender<()>>,
     },
+    /// A measurement before the finish, stock still on (`[cycle] program = "whole"`): this
+    /// part's finish table, never learned from. `part` is the part the control grinds, where
+    /// the source knows it (else the measurement's own). `done` is answered once the table
+    /// and the handshake's count are on the share, or with why not.
+    InProcess {
+        raw: crate::core::measure::RawMeasurement,
+        part: Option<String>,
+        done: Option<tokio::sync::oneshot::Sender<InProcessOutcome>>,
+    },
 }
 
 /// What became of a measurement, for the source that sent it (a drop file is moved to
@@ -265,6 +274,19 @@ impl MachineLoop {
                     let _ = done.send(());
                 }
                 r
+            }
+            SourceEvent::InProcess { raw, part, done } => {
+                let part = part.unwrap_or_else(|| raw.header.part.clone());
+                let r = self.on_in_process(raw, &part).await;
+                if let Some(done) = done {
+                    let _ = done.send(match &r {
+                        Ok(o) => o.clone(),
+                        Err(e) => InProcessOutcome::Refused {
+                            reason: e.to_string(),
+                        },
+                    });
+                }
+                r.map(|_| ()).map_err(anyhow::Error::from)
             }
         };
         if let Err(e) = result {
