@@ -88,6 +88,7 @@ async fn hand_over(
         let event = SourceEvent::InProcess {
             raw: measurement,
             part: None,
+            received: std::time::Instant::now(),
             done: Some(done),
         };
         tx.send(event).await.ok()?;

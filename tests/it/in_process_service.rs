@@ -1,9 +1,10 @@
 //! Measure before the finish through the machine loop (`[cycle] program = "whole"`): the
 //! whole-cycle main program and the handshake's count 0 on the share at start; an in-process
 //! measurement of the part in the machine delivers this part's finish table with the count
-//! moved, written after the table in the same push; a wrong-part, wrong-lobe or incomplete
-//! one delivers nothing and moves no count; neither learns, and the finished part then learns
-//! once. Through the service, a drop folder's `<name>.in-process.csv` takes the same way.
+//! moved, written after the table in the same push; a wrong-part or incomplete one, or one
+//! past the control's wait, delivers nothing and moves no count; neither learns, and the
+//! finished part then learns once. Through the service, a drop folder's
+//! `<name>.in-process.csv` takes the same way.
 
 use crate::gauge_drop_support::measurement_csv;
 use crate::machine_support::{nominal_measurement, start_machine};
@@ -17,6 +18,7 @@ use camloop::sim::{
 };
 use std::path::Path;
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 fn setup() -> FeatureSetup {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe-in-process.toml");
@@ -98,7 +100,7 @@ async fn an_in_process_measurement_delivers_the_finish_table_then_the_count() {
     let before = share_file(dir.path(), &table_file);
     let parts_before = m.features()[0].memory().parts;
     let raw = with_stock(&s, &labels("17", "IN1"));
-    let outcome = m.on_in_process(raw, "17").await.unwrap();
+    let outcome = m.on_in_process(raw, "17", Instant::now()).await.unwrap();
     assert_eq!(
         outcome,
         InProcessOutcome::Delivered {
@@ -144,12 +146,16 @@ async fn a_wrong_or_incomplete_in_process_measurement_delivers_nothing() {
     let mut two_revs = with_stock(&s, &labels("17", "IN1"));
     two_revs.samples.retain(|x| x.revolution < 2);
     two_revs.header.revolutions = 2;
+    let now = Instant::now();
+    // Past the recipe's 5 s handshake timeout: the finish is already ground.
+    let six_s_ago = now.checked_sub(Duration::from_secs(6)).unwrap();
     let cases = [
-        (with_stock(&s, &labels("18", "IN1")), "names part 18"),
-        (two_revs, "revolution"),
+        (with_stock(&s, &labels("18", "IN1")), now, "names part 18"),
+        (two_revs, now, "revolution"),
+        (with_stock(&s, &labels("17", "IN1")), six_s_ago, "too late"),
     ];
-    for (raw, why) in cases {
-        let outcome = m.on_in_process(raw, "17").await.unwrap();
+    for (raw, received, why) in cases {
+        let outcome = m.on_in_process(raw, "17", received).await.unwrap();
         let InProcessOutcome::Refused { reason } = &outcome else {
             panic!("refused: {outcome:?}")
         };

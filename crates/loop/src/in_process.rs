@@ -26,6 +26,10 @@ pub struct SamePart<'a> {
     pub feature: &'a str,
     /// The part the control is grinding, as the gauge names it.
     pub part: &'a str,
+    /// How long the measurement has been with camloop, s: past the control's wait
+    /// (`handshake_timeout_s`) the finish is already ground with the table in force, and a
+    /// table delivered now would be taken for the next part's.
+    pub waited_s: f64,
 }
 
 /// Why no same-part finish table.
@@ -33,6 +37,10 @@ pub struct SamePart<'a> {
 pub enum SamePartRefused {
     #[error("the recipe has no [cycle] with program = \"whole\" and a measure stage")]
     NoCycle,
+    #[error(
+        "too late: the measurement waited {waited_s:.1} s, the control waits {timeout_s} s and grinds the finish with the table in force"
+    )]
+    TooLate { waited_s: f64, timeout_s: f64 },
     #[error("{0}")]
     Finish(#[from] FinishRefused),
 }
@@ -57,6 +65,13 @@ pub fn same_part_order(
         .filter(|c| c.program == CycleProgram::Whole)
         .ok_or(SamePartRefused::NoCycle)?;
     let remaining_stock_mm = stock_after_measure_mm(cycle).ok_or(SamePartRefused::NoCycle)?;
+    // Not `<=`: a NaN wait is refused too.
+    if !(input.waited_s < cycle.handshake_timeout_s) {
+        return Err(SamePartRefused::TooLate {
+            waited_s: input.waited_s,
+            timeout_s: cycle.handshake_timeout_s,
+        });
+    }
     let finish = finish_table(
         &InProcess {
             setup: input.setup,

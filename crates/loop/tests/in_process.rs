@@ -82,6 +82,7 @@ fn the_part_in_the_machine_gets_its_finish_table_and_nothing_is_learned() {
         memory: &memory,
         feature: raw.header.lobe.trim(),
         part: &part,
+        waited_s: 0.2,
     };
     let order = same_part_order(&input, &raw, at(0)).expect("a finish table");
     assert!(matches!(order.program, Program::Table { .. }));
@@ -126,6 +127,14 @@ fn the_part_in_the_machine_gets_its_finish_table_and_nothing_is_learned() {
     assert!(matches!(
         refused(Some(&whole), &part, "EX9", &raw),
         SamePartRefused::Finish(FinishRefused::WrongFeature { .. })
+    ));
+    let late = SamePart {
+        waited_s: 5.0,
+        ..input
+    };
+    assert!(matches!(
+        same_part_order(&late, &raw, at(0)).unwrap_err(),
+        SamePartRefused::TooLate { .. }
     ));
     let mut two = raw.clone();
     two.samples.retain(|s| s.revolution < 2);

@@ -21,6 +21,7 @@ use crate::store::{EventLevel, VersionStatus};
 use camloop_loop::in_process::{SamePart, same_part_order};
 use std::path::Path;
 use std::sync::Mutex;
+use std::time::Instant;
 use tracing::{info, warn};
 
 /// What became of an in-process measurement.
@@ -151,6 +152,7 @@ impl MachineLoop {
         &mut self,
         raw: RawMeasurement,
         part: &str,
+        received: Instant,
     ) -> Result<InProcessOutcome, MachineError> {
         let index = match self.ids.route(&raw.header, None) {
             Ok(i) => i,
@@ -159,7 +161,9 @@ impl MachineLoop {
                 return feature.refuse_in_process(&raw, reason).await;
             }
         };
-        self.features[index].on_in_process(raw, part).await
+        self.features[index]
+            .on_in_process(raw, part, received)
+            .await
     }
 }
 
@@ -169,6 +173,7 @@ impl FeatureLoop {
         &mut self,
         raw: RawMeasurement,
         part: &str,
+        received: Instant,
     ) -> Result<InProcessOutcome, MachineError> {
         let turn_setup = self.setup.turn_setup();
         let decided = same_part_order(
@@ -178,6 +183,7 @@ impl FeatureLoop {
                 memory: self.machine.memory(),
                 feature: &self.setup.name,
                 part,
+                waited_s: received.elapsed().as_secs_f64(),
             },
             &raw,
             now(),

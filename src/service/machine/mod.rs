@@ -104,6 +104,8 @@ pub enum SourceEvent {
     InProcess {
         raw: crate::core::measure::RawMeasurement,
         part: Option<String>,
+        /// When the source had it: the control's wait runs from then.
+        received: std::time::Instant,
         done: Option<tokio::sync::oneshot::Sender<InProcessOutcome>>,
     },
 }
@@ -275,9 +277,14 @@ impl MachineLoop {
                 }
                 r
             }
-            SourceEvent::InProcess { raw, part, done } => {
+            SourceEvent::InProcess {
+                raw,
+                part,
+                received,
+                done,
+            } => {
                 let part = part.unwrap_or_else(|| raw.header.part.clone());
-                let r = self.on_in_process(raw, &part).await;
+                let r = self.on_in_process(raw, &part, received).await;
                 if let Some(done) = done {
                     let _ = done.send(match &r {
                         Ok(o) => o.clone(),
