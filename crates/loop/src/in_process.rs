@@ -65,8 +65,8 @@ pub fn same_part_order(
         .filter(|c| c.program == CycleProgram::Whole)
         .ok_or(SamePartRefused::NoCycle)?;
     let remaining_stock_mm = stock_after_measure_mm(cycle).ok_or(SamePartRefused::NoCycle)?;
-    // Not `<=`: a NaN wait is refused too.
-    if !(input.waited_s < cycle.handshake_timeout_s) {
+    // A wait that is not a number is refused too.
+    if input.waited_s.is_nan() || input.waited_s >= cycle.handshake_timeout_s {
         return Err(SamePartRefused::TooLate {
             waited_s: input.waited_s,
             timeout_s: cycle.handshake_timeout_s,
