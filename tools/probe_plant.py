@@ -134,7 +134,7 @@ def plant(dir, machines, seconds):
     started = time.monotonic()
     proc = subprocess.Popen([BINARY, "run", "--config", config], cwd=dir, stdout=log, stderr=log)
     latencies, unanswered, statuses = [], [0], []
-    first_answer, all_open = [None], [None]
+    first_answer, all_open, opening = [None], [None], [None]
     stop = threading.Event()
 
     def healthz():
@@ -153,6 +153,7 @@ def plant(dir, machines, seconds):
                 # Open once the machines' component is ok (a build without components: at
                 # its first answer, which came only once they were open).
                 machines = [c for c in health.get("components", []) if c["name"] == "machines"]
+                opening[0] = next((c.get("reason") for c in machines), None) or "open"
                 if all_open[0] is None and all(c["state"] == "ok" for c in machines):
                     all_open[0] = at
             stop.wait(1.0)
@@ -164,7 +165,12 @@ def plant(dir, machines, seconds):
         while all_open[0] is None and time.monotonic() < deadline and proc.poll() is None:
             time.sleep(0.2)
         if all_open[0] is None:
-            print(f"plant {machines}: machines not open within 300 s; see {dir}/log.txt")
+            print(
+                f"plant {machines}: machines not open within 300 s ({opening[0]}); /healthz over "
+                f"{len(latencies) + unanswered[0]} asks: p50 {percentile(latencies, 0.5):.1f} ms, "
+                f"p99 {percentile(latencies, 0.99):.1f} ms, {unanswered[0]} unanswered within 5 s; "
+                f"RSS {rss_mib(proc.pid)[0]:.0f} MiB"
+            )
             return False
         opened = time.monotonic()
         cpu0 = cpu_seconds(proc.pid)
