@@ -165,18 +165,21 @@ fn check_machine(
     let label = format!("machines.{}", m.name);
     let recipe_path = config.resolve(&m.recipe);
     let setups = match Recipe::load(&recipe_path) {
-        // The service writes the table-only contract; the whole-cycle program and the
-        // same-part handshake are not delivered by it yet: refused rather than ignored.
+        // The whole cycle needs a gauge that tells a measurement before the finish from a
+        // finished part's: the drop folder does (`<name>.in-process.csv`). The simulator
+        // does not run the whole cycle through the service yet, and CAN and serial frames
+        // carry no stage: refused rather than ignored.
         Ok(recipe)
             if recipe
                 .cycle
                 .as_ref()
-                .is_some_and(|c| c.program == crate::core::cycle::CycleProgram::Whole) =>
+                .is_some_and(|c| c.program == crate::core::cycle::CycleProgram::Whole)
+                && !matches!(m.gauge, GaugeSection::Drop { .. }) =>
         {
             problems.push(ConfigProblem::at(
                 line("recipe"),
                 format!(
-                    "{label}.recipe: its [cycle] program = \"whole\" is not delivered by the service yet; set program = \"table-only\" (the cycle is checked, the machine builder's cycle grinds)"
+                    "{label}.recipe: its [cycle] program = \"whole\" is not delivered by the service yet with this gauge (only a drop folder tells a measurement before the finish, as <name>.in-process.csv); set program = \"table-only\" (the cycle is checked, the machine builder's cycle grinds) or use kind = \"drop\""
                 ),
             ));
             None

@@ -1,7 +1,7 @@
 //! The drop folder as a gauge source: complete measurement files go to the machine one by
 //! one, and each is moved by the machine's verdict (processed, or rejected with its reason).
 
-use super::machine::{Ingested, SourceEvent};
+use super::machine::{InProcessOutcome, Ingested, SourceEvent};
 use super::sources::Intake;
 use crate::gauge::{DropFolder, Settle};
 use crate::names::MachineName;
@@ -83,18 +83,37 @@ async fn hand_over(
     path: std::path::PathBuf,
     tx: &Intake,
 ) -> Option<DropFolder> {
-    let (done, verdict) = tokio::sync::oneshot::channel();
-    let event = SourceEvent::Measurement {
-        raw: measurement,
-        ground_with: None,
-        done: Some(done),
-    };
-    tx.send(event).await.ok()?;
-    let settle = match verdict.await.ok()? {
-        Ingested::Rejected { reason } | Ingested::Failed { reason } => Settle::Rejected { reason },
-        Ingested::Recorded | Ingested::Master | Ingested::Repeated => Settle::Processed,
-        // Kept where it is, claimed, and read again at the next start.
-        Ingested::NotRecorded => return Some(drop_folder),
+    let settle = if is_in_process(&path) {
+        let (done, verdict) = tokio::sync::oneshot::channel();
+        let event = SourceEvent::InProcess {
+            raw: measurement,
+            part: None,
+            received: std::time::Instant::now(),
+            done: Some(done),
+        };
+        tx.send(event).await.ok()?;
+        match verdict.await.ok()? {
+            InProcessOutcome::Refused { reason } => Settle::Rejected { reason },
+            InProcessOutcome::Delivered { .. } | InProcessOutcome::Waiting { .. } => {
+                Settle::Processed
+            }
+        }
+    } else {
+        let (done, verdict) = tokio::sync::oneshot::channel();
+        let event = SourceEvent::Measurement {
+            raw: measurement,
+            ground_with: None,
+            done: Some(done),
+        };
+        tx.send(event).await.ok()?;
+        match verdict.await.ok()? {
+            Ingested::Rejected { reason } | Ingested::Failed { reason } => {
+                Settle::Rejected { reason }
+            }
+            Ingested::Recorded | Ingested::Master | Ingested::Repeated => Settle::Processed,
+            // Kept where it is, claimed, and read again at the next start.
+            Ingested::NotRecorded => return Some(drop_folder),
+        }
     };
     let (df, settled) = tokio::task::spawn_blocking(move || {
         let settled = drop_folder.settle(&path, settle);
@@ -106,4 +125,30 @@ async fn hand_over(
         warn!(machine = %machine, error = %e, "drop file not settled");
     }
     Some(df)
+}
+
+/// A measurement before the finish (stock on) is dropped as `<name>.in-process.csv` (or
+/// `.log`); any other measurement file is of a finished part, as files always were.
+fn is_in_process(path: &std::path::Path) -> bool {
+    path.file_stem()
+        .and_then(|s| s.to_str())
+        .is_some_and(|s| s.to_ascii_lowercase().ends_with(IN_PROCESS_SUFFIX))
+}
+
+/// The end of a measurement file's stem that marks it as taken before the finish.
+pub(crate) const IN_PROCESS_SUFFIX: &str = ".in-process";
+
+#[cfg(test)]
+mod tests {
+    use super::is_in_process;
+    use std::path::Path;
+
+    #[test]
+    fn only_a_marked_file_is_an_in_process_measurement() {
+        assert!(is_in_process(Path::new("inbox/17-IN1.in-process.csv")));
+        assert!(is_in_process(Path::new("17-IN1.In-Process.log")));
+        assert!(!is_in_process(Path::new("inbox/17-IN1.csv")));
+        assert!(!is_in_process(Path::new("in-process.csv")));
+        assert!(!is_in_process(Path::new("17-in-process-IN1.csv")));
+    }
 }

@@ -6,6 +6,7 @@
 pub mod coast;
 pub mod dressing;
 pub mod guards;
+pub mod in_process;
 pub mod machine;
 pub mod memory;
 pub mod record;

@@ -107,6 +107,14 @@ impl FeatureLoop {
             text: draft.text,
         }];
         files.extend(self.main_program_if_changed()?);
+        // A same-part finish table: the handshake's count last, so the control never sees
+        // the count move before the table is there.
+        files.extend(
+            self.main
+                .ready
+                .as_ref()
+                .and_then(|r| r.file_for(&self.setup.name)),
+        );
         Ok(PushRequest {
             files,
             table_number: draft.table_number,

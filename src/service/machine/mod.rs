@@ -35,6 +35,7 @@ mod executor;
 mod feature;
 mod freeze;
 mod guards;
+mod in_process;
 mod ingest;
 pub mod memory;
 mod planned;
@@ -58,6 +59,7 @@ use tracing::{error, info, warn};
 pub use dressing::Dressed;
 pub use error::MachineError;
 pub use feature::FeatureLoop;
+pub use in_process::InProcessOutcome;
 pub use ingest::GaugeIds;
 pub use rollback::{RollbackError, RolledBack};
 pub(crate) use shaft::MainProgram;
@@ -94,6 +96,17 @@ pub enum SourceEvent {
         infeed_um: Option<f64>,
         source: String,
         done: Option<tokio::sync::oneshot::Sender<()>>,
+    },
+    /// A measurement before the finish, stock still on (`[cycle] program = "whole"`): this
+    /// part's finish table, never learned from. `part` is the part the control grinds, where
+    /// the source knows it (else the measurement's own). `done` is answered once the table
+    /// and the handshake's count are on the share, or with why not.
+    InProcess {
+        raw: crate::core::measure::RawMeasurement,
+        part: Option<String>,
+        /// When the source had it: the control's wait runs from then.
+        received: std::time::Instant,
+        done: Option<tokio::sync::oneshot::Sender<InProcessOutcome>>,
     },
 }
 
@@ -193,6 +206,7 @@ impl MachineLoop {
             resume_failing: false,
         };
         machine.write_resume_point_from_memory();
+        machine.write_ready_at_start();
         Ok(machine)
     }
 
@@ -262,6 +276,24 @@ impl MachineLoop {
                     let _ = done.send(());
                 }
                 r
+            }
+            SourceEvent::InProcess {
+                raw,
+                part,
+                received,
+                done,
+            } => {
+                let part = part.unwrap_or_else(|| raw.header.part.clone());
+                let r = self.on_in_process(raw, &part, received).await;
+                if let Some(done) = done {
+                    let _ = done.send(match &r {
+                        Ok(o) => o.clone(),
+                        Err(e) => InProcessOutcome::Refused {
+                            reason: e.to_string(),
+                        },
+                    });
+                }
+                r.map(|_| ()).map_err(anyhow::Error::from)
             }
         };
         if let Err(e) = result {

@@ -25,6 +25,8 @@ pub(crate) struct MainProgram {
     pub file: String,
     pub table_files: Vec<String>,
     kind: MainKind,
+    /// With the whole cycle (`[cycle] program = "whole"`): the handshake's count.
+    pub(super) ready: Option<super::in_process::Ready>,
 }
 
 #[derive(Debug)]
@@ -78,7 +80,15 @@ impl MainProgram {
             .flat_map(|s| s.nominal.lifts_mm().iter().copied())
             .fold(0.0f64, f64::max)
             + CLEARANCE_MM;
-        let kind = if first.speed_plan.enabled {
+        let whole = first
+            .cycle
+            .as_ref()
+            .filter(|c| c.program == crate::core::cycle::CycleProgram::Whole);
+        let kind = if let Some(cycle) = whole {
+            MainKind::Fixed(super::in_process::render_whole(
+                &main, cycle, setups, clear_x_mm,
+            )?)
+        } else if first.speed_plan.enabled {
             let stations = setups
                 .iter()
                 .map(|s| (s.name.clone(), super::planned::va_settings(s, 1, 2), s.z_mm))
@@ -109,6 +119,7 @@ impl MainProgram {
                 .iter()
                 .map(|s| format!("{}.SPF", s.program.name))
                 .collect(),
+            ready: whole.map(|_| super::in_process::Ready::default()),
         })
     }
 
