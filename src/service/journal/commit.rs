@@ -146,6 +146,9 @@ fn commit(batch: Vec<Request>, stats: &CommitStats) {
     }
     let written: Vec<&PathBuf> = order.iter().filter(|p| files[*p].result.is_ok()).collect();
     let synced = sync(&written, &files, stats);
+    // Counted before any caller hears its answer, so a reader woken by the answer sees
+    // this batch in the totals.
+    stats.batches.fetch_add(1, Ordering::Relaxed);
     for path in &order {
         let fb = files
             .remove(path)
@@ -173,7 +176,6 @@ fn commit(batch: Vec<Request>, stats: &CommitStats) {
             let _ = r.done.send(answer);
         }
     }
-    stats.batches.fetch_add(1, Ordering::Relaxed);
 }
 
 /// Appends one journal's requests with one write; on failure the file is cut back to where
