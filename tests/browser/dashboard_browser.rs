@@ -153,17 +153,22 @@ async fn overview(c: &Client, base: &str, addr: SocketAddr) {
         let row = text_of(c, &format!("tr[data-machine=\"{name}\"]")).await;
         assert!(row.contains(name), "{row}");
     }
-    // Compared for the part the page shows (a newer one may arrive in between).
-    let shown_id: i64 = attr_of(c, "tr[data-machine=\"SIM1\"]", "data-last-id")
+    // Compared for the part the page shows. The live channel may put a newer part in the
+    // row at any moment: its id, error and text are read in one script, which the page's
+    // own updates cannot interleave with.
+    let shown = c
+        .execute(
+            "const r = document.querySelector('tr[data-machine=\"SIM1\"]'); \
+             const e = r.querySelector('.err'); \
+             return [r.getAttribute('data-last-id'), e.getAttribute('data-last-error-um'), e.textContent.trim()];",
+            vec![],
+        )
         .await
-        .unwrap()
-        .parse()
         .unwrap();
-    let shown_error: f64 = attr_of(c, "tr[data-machine=\"SIM1\"] .err", "data-last-error-um")
-        .await
-        .unwrap()
-        .parse()
-        .unwrap();
+    let field = |i: usize| shown[i].as_str().unwrap().to_owned();
+    let shown_id: i64 = field(0).parse().unwrap();
+    let shown_error: f64 = field(1).parse().unwrap();
+    let shown_text = field(2);
     let (_, body) = get(addr, "/api/v1/machines/SIM1/measurements?lobe=IN1&limit=50").await;
     let items = json(&body)["items"].as_array().unwrap().clone();
     let api = items
@@ -175,8 +180,7 @@ async fn overview(c: &Client, base: &str, addr: SocketAddr) {
         shown_error, api_error,
         "the same number, not a rounding of it"
     );
-    let text = text_of(c, "tr[data-machine=\"SIM1\"] .err").await;
-    assert_eq!(text, format!("{api_error:.2}"));
+    assert_eq!(shown_text, format!("{api_error:.2}"));
     assert!(
         c.find(Locator::Css("tr[data-machine=\"SIM1\"] svg.spark polyline"))
             .await

@@ -159,7 +159,10 @@ async fn clients_verify_the_certificate_and_a_hangup_reloads_it_without_dropping
 
     // The listener serves while the machines still open: any of the service's states.
     let body = curl(port, dir.path());
-    assert!(body.as_ref().is_none_or(|b| b.contains(r#""status":""#)), "{body:?}");
+    assert!(
+        body.as_ref().is_none_or(|b| b.contains(r#""status":""#)),
+        "{body:?}"
+    );
 
     // A new pair in place, then SIGHUP: new connections get it, the open one goes on.
     let new_cert = self_signed(dir.path(), true);
