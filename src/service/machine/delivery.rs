@@ -14,7 +14,7 @@ use crate::core::learn::LearningState;
 use crate::core::program::Provenance;
 use crate::share::{ProgramFile, PushRequest};
 use crate::store::{EventLevel, VersionStatus};
-use camloop_loop::machine::{Finished, Program, TableOrder};
+use camloop_loop::machine::{DeliveryError, Finished, Program, TableDone, TableOrder};
 use camloop_loop::{Input, TableVersion};
 use std::sync::atomic::Ordering;
 use tracing::{error, info, warn};
@@ -86,6 +86,20 @@ impl FeatureLoop {
             done.version.get(),
             records::status(done.status, at_ms),
             records,
+        ))
+    }
+
+    /// The records a table's way left for the caller to keep with its own, or why it failed.
+    pub(super) fn table_records(
+        &self,
+        done: Result<TableDone, DeliveryError>,
+    ) -> Result<Vec<Pending>, MachineError> {
+        let done = done?;
+        Ok(records::pending(
+            &self.name,
+            &self.setup.name,
+            done.records,
+            None,
         ))
     }
 

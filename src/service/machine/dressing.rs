@@ -1,15 +1,17 @@
-//! A wheel dressing, the shell's half: the loop crate's [`dressing`] checks the report and
-//! moves the correction (by the size step the dresser's infeed tells, or, without a usable
-//! infeed, with the wheel's share of the learned size dropped); here it is recorded and
-//! logged, and the newest table regenerated for the new radius.
+//! A wheel dressing, the shell's half: the loop crate's [`dressing`] checks the report, and
+//! the feature's machine moves the correction (by the size step the dresser's infeed tells,
+//! or, without a usable infeed, with the wheel's share of the learned size dropped) and
+//! delivers the newest table made again for the new radius; here the dressing is recorded
+//! and logged.
 
 use super::super::journal::{EventKind, Pending};
 use super::records::event;
 use super::{FeatureLoop, MachineError};
 use crate::clock::now;
-use crate::core::compensate;
 use crate::store::EventLevel;
+use camloop_loop::Input;
 use camloop_loop::dressing::{self, CorrectionMove, Dressing};
+use camloop_loop::machine::{self, Finished};
 use tracing::{error, info, warn};
 
 /// What a dressing did, for the API's answer.
@@ -35,7 +37,7 @@ pub(super) struct Wheel {
 
 impl FeatureLoop {
     /// A wheel dressing, from the gauge/controller feed, a dropped report or the API. A
-    /// radius outside [`compensate::WHEEL_RADIUS_RANGE_MM`] changes nothing. The machine's
+    /// radius outside [`crate::core::compensate::WHEEL_RADIUS_RANGE_MM`] changes nothing. The machine's
     /// `first` feature records the dressing itself; every feature regenerates its table.
     pub(super) async fn dress(
         &mut self,
@@ -54,10 +56,29 @@ impl FeatureLoop {
             infeed_um,
             share_um: wheel.share_um,
         };
-        let moved = self.move_correction(&dressed);
-        let how = moved.describe();
-        self.machine.memory_mut().wheel_radius_mm = wheel_radius_mm;
         self.setup.feature = self.setup.feature.with_wheel_radius(wheel_radius_mm);
+        let lobe = self.setup.lobe_loop();
+        self.machine
+            .handle(Input::Dressed(Box::new(machine::Dressed {
+                dressing: dressed,
+                lobe: &lobe,
+                at: at_ms,
+            })));
+        let finished = self.run_machine(None).await;
+        let mut done = None;
+        let mut table = None;
+        for f in finished {
+            match f {
+                Finished::Dressed(d) => done = Some(d),
+                Finished::Table(t) => table = Some(t),
+                _ => {}
+            }
+        }
+        let done = done.ok_or_else(|| MachineError::Failed {
+            reason: "the feature's loop is still working on the previous input".into(),
+        })?;
+        let how = done.moved.describe();
+        self.warn_implausible(&done.moved);
         let mut records = Vec::new();
         if first {
             records.push(Pending::Dressing {
@@ -73,22 +94,19 @@ impl FeatureLoop {
                 at_ms,
                 EventLevel::Info,
                 EventKind::WheelDressed,
-                dressing::event_text(&dressed, source, &moved),
+                dressing::event_text(&dressed, source, &done.moved),
             ));
         }
-        // The newest correction made (delivered or waiting) is regenerated: a dressing is not
-        // a learning step.
-        let next = self.machine.memory().newest_learning().clone();
-        let summary = match compensate::current_table(&next, &self.lobe_loop()) {
-            Ok(table) => {
-                let reason = format!("wheel dressed to {wheel_radius_mm} mm");
-                records.extend(self.deliver(&table, next, &reason, None).await?);
+        let summary = match (done.no_table, table) {
+            (None, Some(t)) => {
+                records.extend(self.table_records(t)?);
                 format!(
                     "wheel radius {old} → {wheel_radius_mm} mm ({how}): {}",
                     self.delivery_line()
                 )
             }
-            Err(e) => {
+            (e, _) => {
+                let e = e.unwrap_or_else(|| "no table was made".into());
                 error!(machine = %self.name, reason = %e, "no table for the dressed wheel: previous table stays in force");
                 self.metrics.update(&self.name, |m| m.alarms_total += 1);
                 records.push(event(
@@ -96,7 +114,7 @@ impl FeatureLoop {
                     at_ms,
                     EventLevel::Error,
                     EventKind::TableRefused,
-                    e.to_string(),
+                    e.clone(),
                 ));
                 format!(
                     "wheel radius {old} → {wheel_radius_mm} mm ({how}) recorded; table refused, previous kept: {e}"
@@ -119,14 +137,8 @@ impl FeatureLoop {
         })
     }
 
-    /// Moves the learned correction (in force and waiting) for the dressing
-    /// ([`dressing::move_correction`]); warns when the infeed could not be used.
-    fn move_correction(&mut self, dressed: &Dressing) -> CorrectionMove {
-        let limit_um = self.setup.params.max_correction_um;
-        let memory = self.machine.memory_mut();
-        let states = std::iter::once(&mut memory.learning)
-            .chain(memory.waiting.as_mut().map(|w| &mut w.learning));
-        let moved = dressing::move_correction(states, dressed, limit_um);
+    /// Warns when the dresser's infeed could not be used ([`dressing::move_correction`]).
+    fn warn_implausible(&self, moved: &CorrectionMove) {
         if let CorrectionMove::ShareReplaced {
             implausible_step_um: Some(step),
             limit_um,
@@ -136,6 +148,5 @@ impl FeatureLoop {
             // report: the infeed cannot tell the size step then.
             warn!(machine = %self.name, size_step_um = step, limit_um, "dresser infeed and radius change disagree beyond the correction limit: the wheel's share of the learned size is replaced instead");
         }
-        moved
     }
 }

@@ -15,20 +15,24 @@
 //!
 //! - `part`: a measurement's step (repeat, hold, the turn, guards in a row, records);
 //! - `table`: a table's way to the control (render, write-ahead, submit, deliver, retry);
-//! - `resume`: a machine rebuilt from what the journal kept, the share reconciled.
+//! - `resume`: a machine rebuilt from what the journal kept, the share reconciled;
+//! - `between`: a dressing, a part not gauged, a freeze (what happens between parts).
 
+mod between;
 mod part;
 mod resume;
 mod table;
 
+pub use between::{Dressed, DressingDone, NotGaugedDone};
 pub use part::{Gauged, PartNote, PartReport};
 pub use resume::ShareView;
 pub use table::{Program, RenderOrder, TableDone, TableOrder};
 
 use crate::memory::LoopMemory;
 use crate::record::{Record, TableRecord};
+use camloop_core::compensate::LobeLoop;
 use camloop_core::digest::Sha256;
-use camloop_core::ids::TableVersion;
+use camloop_core::ids::{PartId, TableVersion};
 use camloop_core::learn::LearningParams;
 use camloop_core::names::FeatureName;
 use jiff::Timestamp;
@@ -52,9 +56,22 @@ pub struct Ticket(u64);
 pub enum Input<'a> {
     /// A measurement of this feature (routed to it by the shell).
     Gauged(Box<Gauged<'a>>),
-    /// Deliver a table the shell decided (a dressing, a part not gauged, the start, a
-    /// rollback): rendered, written ahead, submitted and delivered like a part's table.
+    /// Deliver a table the shell decided (the start, a rollback): rendered, written ahead,
+    /// submitted and delivered like a part's table.
     Table(Box<TableOrder>),
+    /// The wheel was dressed.
+    Dressed(Box<Dressed<'a>>),
+    /// A part of this feature was ground and not gauged (`lobe`: the feature as ground).
+    NotGauged {
+        part: Option<PartId>,
+        lobe: &'a LobeLoop<'a>,
+        at: Timestamp,
+    },
+    /// An engineer froze learning for this reason, or (`None`) let it learn again.
+    Freeze {
+        frozen: Option<String>,
+        at: Timestamp,
+    },
     /// The journal write `ticket` is durable.
     Journalled(Ticket),
     /// The journal write `ticket` failed; `fenced_out` when another instance owns the
@@ -177,6 +194,12 @@ pub enum Finished {
     ShareBack { version: TableVersion },
     /// A step cut short by a stop was finished at resume.
     Resumed,
+    /// A dressing moved the correction (its table's way follows, when it made one).
+    Dressed(DressingDone),
+    /// A part ground but not gauged.
+    NotGauged(NotGaugedDone),
+    /// Learning frozen or unfrozen; the reason before.
+    Frozen { before: Option<String> },
 }
 
 /// Why a table was not delivered, typed so the API answers each case with its own code.
@@ -243,8 +266,7 @@ impl FeatureMachine {
     }
 
     /// The memory for the shell's own writes that are not yet the machine's (a rollback's
-    /// adoption, freezing, the share's reconciliation at start); never while an input is in
-    /// flight.
+    /// adoption, the share's reconciliation at start); never while an input is in flight.
     pub fn memory_mut(&mut self) -> &mut LoopMemory {
         &mut self.memory
     }
@@ -269,7 +291,16 @@ impl FeatureMachine {
         match input {
             Input::Gauged(g) if !self.busy() => self.on_gauged(*g),
             Input::Table(order) if !self.busy() => self.start_table(*order, None),
-            Input::Gauged(_) | Input::Table(_) => self.finish(Finished::Failed {
+            Input::Dressed(d) if !self.busy() => self.on_dressed(*d),
+            Input::NotGauged { part, lobe, at } if !self.busy() => {
+                self.on_not_gauged(part, lobe, at)
+            }
+            Input::Freeze { frozen, at } if !self.busy() => self.on_freeze(frozen, at),
+            Input::Gauged(_)
+            | Input::Table(_)
+            | Input::Dressed(_)
+            | Input::NotGauged { .. }
+            | Input::Freeze { .. } => self.finish(Finished::Failed {
                 reason: "the feature's loop is still working on the previous input".into(),
             }),
             Input::Journalled(ticket) => self.on_journalled(ticket),
