@@ -3,6 +3,7 @@
 //! moves the table on by the learned drift (or is only noted), and freezing is the
 //! machine's write.
 
+#[allow(dead_code)]
 mod support;
 
 use camloop_core::compensate::Feature;

@@ -1,7 +1,6 @@
 //! The loop tests' world without I/O: a recipe (one harmonic lobe), the parts a grinder
 //! makes with the correction in force, and their times.
 
-#![allow(dead_code)] // each test binary uses its own part of this world
 use camloop_core::compensate::{AxisLimits, Feature, LobeLoop, TableRequest};
 use camloop_core::fit::TableForm;
 use camloop_core::geometry::{CamGeometry, Follower};
