@@ -1,9 +1,11 @@
 //! A simulated grinding cell: the grinder and gauge of this module driven part after part by
-//! camloop's loop (learning in the lift domain through the exact geometry) or by the naive
+//! camloop's loop (the service's `FeatureMachine`, run in memory: learning in the lift
+//! domain through the exact geometry, its guards and its dressing policy) or by the naive
 //! hand method (each lift error written 1:1 into X at the same table index), with the
 //! figures that judge them.
 
 use super::delivered::DeliveredTables;
+use super::in_memory::{InMemoryLoop, Outcome};
 use super::{
     CommandedTable, GrinderConfig, PartLabels, SimError, SimGrinder, TableShape, Workpiece,
 };
@@ -17,8 +19,11 @@ use camloop_core::lift::{LiftCurve, LiftTable};
 use camloop_core::measure::{AssemblyLimits, AveragedMeasurement, MeasurementError};
 use camloop_core::speed_plan::tables::VaTables;
 use camloop_core::speed_plan::{self, SpeedPlanError, SpeedPlanSettings, TimeLaw};
-use camloop_core::turn::{self, Decision, TurnError, TurnSetup};
+use camloop_core::turn::{self, TurnError, TurnSetup};
 use camloop_loop::dressing::{self, Dressing};
+use camloop_loop::machine::{Dressed, FeatureConfig, Finished, Gauged, PartNote, Program};
+use camloop_loop::{Input, LoopMemory};
+use jiff::Timestamp;
 
 /// Points of the fine grid the ground part is judged on (0.1°), not only the gauge's points.
 pub const JUDGE_POINTS: usize = 3600;
@@ -72,6 +77,9 @@ pub enum CellError {
     Geometry(#[from] camloop_core::geometry::GeometryError),
     #[error("{0}")]
     Plan(#[from] SpeedPlanError),
+    /// camloop's loop refused the part or the dressing (its own words).
+    #[error("loop: {0}")]
+    Loop(String),
 }
 
 /// The cell's fixed settings.
@@ -157,11 +165,13 @@ struct Cell<'s> {
     method: Method,
     feature: Feature,
     sim: SimGrinder,
-    state: LearningState,
+    /// camloop's loop: the service's machine, run in memory.
+    camloop: InMemoryLoop,
+    /// The parts ground so far (each input's simulated time is taken from it).
+    parts: u32,
     /// The X-domain methods' own memory: the X added at each table point, mm.
     naive_dx_mm: Vec<f64>,
     x_state: LearningState,
-    previous: Option<learn::PreviousPart>,
     // camloop's tables reach the grinder as the service delivers them: rendered, and
     // coupled by the simulated control running the main program.
     control: DeliveredTables,
@@ -177,15 +187,21 @@ impl<'s> Cell<'s> {
             Feature::Pin(g) => Workpiece::Crankpin(g),
         };
         let points_per_rev = setup.grinder.gauge.points_per_rev;
+        let mut memory = LoopMemory::new(feature.wheel_radius_mm());
+        memory.learning = LearningState::new(points_per_rev);
+        let config = FeatureConfig {
+            feature: "IN1".parse().expect("a valid feature name"),
+            params: setup.params.clone(),
+        };
         let mut cell = Cell {
             setup,
             method,
             feature,
             sim: SimGrinder::new(setup.grinder.clone(), workpiece, setup.seed)?,
-            state: LearningState::new(points_per_rev),
+            camloop: InMemoryLoop::new(config, memory),
+            parts: 0,
             naive_dx_mm: vec![0.0; setup.request.points],
             x_state: LearningState::new(points_per_rev),
-            previous: None,
             control: DeliveredTables::default(),
             law: plan_law(setup, feature)?,
             table: CommandedTable {
@@ -212,26 +228,21 @@ impl<'s> Cell<'s> {
         };
         Ok(match self.method {
             Method::Camloop => {
+                self.parts += 1;
+                let at = sim_time(self.parts);
                 // The cell delivers every table at once, so the part just measured was always
-                // ground with the table of `state`: the turn learns from it.
-                let done = turn::turn(&turn_setup, &self.state, raw, None, self.previous)?;
-                self.previous = Some(done.measured.as_previous());
-                match done.decision {
-                    Decision::Table {
-                        outcome,
-                        next,
-                        table,
-                        planned,
-                    } => {
-                        self.table = self.deliver(&next, &table, planned.as_deref())?;
-                        self.state = *next;
-                        outcome.to_string()
-                    }
-                    // A refused table is never used: the machine keeps the previous one (with
-                    // the plan, an X table over VA beyond an X limit is refused here too).
-                    Decision::Refused(e) => format!("refused, previous table kept: {e}"),
-                    Decision::Held(reason) => format!("held: {reason}"),
-                }
+                // ground with the table in force: the machine learns from it.
+                let gauged = Gauged {
+                    setup: turn_setup,
+                    raw,
+                    sha256: turn::measurement_sha256(raw),
+                    part: None,
+                    ground_with: None,
+                    on_reserve: false,
+                    at,
+                };
+                let outcome = self.camloop.run(Input::Gauged(Box::new(gauged)), at);
+                self.part_learned(outcome)?
             }
             Method::NaiveX => {
                 let report = turn::measure(&turn_setup, raw)?.report;
@@ -276,11 +287,13 @@ impl<'s> Cell<'s> {
             .feature
             .with_wheel_radius(event.believed_wheel_radius_mm);
         let limit_um = self.setup.params.max_correction_um;
-        for s in [&mut self.state, &mut self.x_state] {
-            after_dressing(s, limit_um, old_radius_mm, &event);
-        }
+        after_dressing(&mut self.x_state, limit_um, old_radius_mm, &event);
         // The correction is kept (lift domain); the plan is made for the new wheel.
         self.law = plan_law(self.setup, self.feature)?;
+        if self.method == Method::Camloop {
+            self.table = self.dressed(old_radius_mm, &event)?;
+            return Ok(true);
+        }
         if self.method == Method::XDomainIlc {
             // Its X follows its learning state, moved for the dressing like camloop's.
             x_from_correction(&self.x_state, &mut self.naive_dx_mm);
@@ -298,16 +311,9 @@ impl<'s> Cell<'s> {
         let (setup, feature) = (self.setup, self.feature);
         match self.method {
             Method::Camloop => {
-                let lobe = lobe_loop(setup, feature);
-                let table = compensate::current_table(&self.state, &lobe)?;
-                // The plan's guard, as the turn runs it: a table made again (the first, or
-                // after a dressing) over an X limit is an error here, the cell has no other.
-                let tables = match &self.law {
-                    Some(law) => Some(turn::planned_tables(&lobe, law, &self.state, &table)?),
-                    None => None,
-                };
-                let state = self.state.clone();
-                self.deliver(&state, &table, tables.as_ref())
+                let state = self.camloop.memory().learning.clone();
+                let table = compensate::current_table(&state, &lobe_loop(setup, feature))?;
+                self.deliver_guarded(&state, &table)
             }
             Method::NaiveX | Method::XDomainIlc => {
                 let part = feature.part(&setup.nominal)?;
@@ -328,6 +334,96 @@ impl<'s> Cell<'s> {
                 })
             }
         }
+    }
+
+    /// What the machine made of a part: the table it rendered goes to the control; returns
+    /// its word on the part.
+    fn part_learned(&mut self, outcome: Outcome) -> Result<String, CellError> {
+        let mut word = None;
+        for f in outcome.finished {
+            match f {
+                Finished::Recorded(report) => {
+                    word = Some(match report.note {
+                        PartNote::Table => String::new(),
+                        // A refused table is never used: the machine keeps the previous one
+                        // (with the plan, an X table over VA beyond an X limit is refused too).
+                        PartNote::Refused { reason, .. } => {
+                            format!("refused, previous table kept: {reason}")
+                        }
+                        PartNote::Held(reason) => format!("held: {reason}"),
+                        PartNote::NotRecorded(e) => format!("not recorded: {e}"),
+                    })
+                }
+                Finished::Rejected { reason } | Finished::Failed { reason } => {
+                    return Err(CellError::Loop(reason));
+                }
+                _ => {}
+            }
+        }
+        let word = word.ok_or_else(|| CellError::Loop("the part was not recorded".into()))?;
+        let Some(order) = outcome.rendered else {
+            return Ok(word);
+        };
+        let Program::Table { table, planned } = order.program else {
+            return Err(CellError::Loop("a part's table is a table".into()));
+        };
+        self.table = self.deliver(&order.next, &table, planned.as_deref())?;
+        Ok(order.reason)
+    }
+
+    /// The wheel was dressed: the machine moves the correction by the service's policy and
+    /// makes the table again for the wheel the control believes now; returns that table.
+    fn dressed(
+        &mut self,
+        old_radius_mm: f64,
+        event: &super::DressingEvent,
+    ) -> Result<CommandedTable, CellError> {
+        let at = sim_time(self.parts);
+        let dressing = Dressing {
+            old_radius_mm,
+            new_radius_mm: event.believed_wheel_radius_mm,
+            infeed_um: event.measured_infeed_um,
+            // One feature: the wheel's share of the size correction is all of it.
+            share_um: learn::size_correction_um(&self.camloop.memory().learning),
+        };
+        let lobe = lobe_loop(self.setup, self.feature);
+        let dressed = Dressed {
+            dressing,
+            lobe: &lobe,
+            at,
+        };
+        let outcome = self.camloop.run(Input::Dressed(Box::new(dressed)), at);
+        for f in &outcome.finished {
+            match f {
+                Finished::Dressed(d) if d.no_table.is_some() => {
+                    return Err(CellError::Loop(d.no_table.clone().unwrap_or_default()));
+                }
+                Finished::Table(Err(e)) => return Err(CellError::Loop(e.to_string())),
+                _ => {}
+            }
+        }
+        let order = outcome
+            .rendered
+            .ok_or_else(|| CellError::Loop("no table for the dressed wheel".into()))?;
+        let Program::Table { table, .. } = order.program else {
+            return Err(CellError::Loop("a dressing's table is a table".into()));
+        };
+        self.deliver_guarded(&order.next, &table)
+    }
+
+    /// Delivers a table made again (the first, or after a dressing) with the plan's guard
+    /// as the turn runs it: over an X limit it is an error here, the cell has no other.
+    fn deliver_guarded(
+        &mut self,
+        state: &LearningState,
+        table: &GuardedTable,
+    ) -> Result<CommandedTable, CellError> {
+        let lobe = lobe_loop(self.setup, self.feature);
+        let tables = match &self.law {
+            Some(law) => Some(turn::planned_tables(&lobe, law, state, table)?),
+            None => None,
+        };
+        self.deliver(state, table, tables.as_ref())
     }
 
     /// Delivers camloop's guarded `table` for `state`: the constant-speed programs, or with
@@ -378,6 +474,11 @@ pub(crate) fn after_dressing(
         share_um: learn::size_correction_um(state),
     };
     dressing::move_correction([state], &dressed, max_correction_um);
+}
+
+/// A part's simulated time: a part a minute (the loop reads no clock; its records want one).
+fn sim_time(part: u32) -> Timestamp {
+    Timestamp::from_second(1_700_000_000 + i64::from(part) * 60).expect("a time within range")
 }
 
 fn lobe_loop(setup: &CellSetup, feature: Feature) -> LobeLoop<'_> {

@@ -96,6 +96,7 @@ mod envelope;
 pub mod frames;
 mod gauge;
 mod ground;
+mod in_memory;
 mod path;
 mod plan;
 mod rng;
