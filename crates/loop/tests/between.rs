@@ -225,3 +225,58 @@ fn freezing_is_the_machines_write() {
     assert!(machine.memory().learning.frozen.is_none());
     assert!(machine.memory().learning.recent_max_error_um.is_empty());
 }
+
+/// The retry is the machine's: a tick delivers the version waiting for the share (nothing
+/// when none waits); while the share is down it still waits, and once delivered its
+/// correction is the one in force.
+#[test]
+fn a_tick_delivers_the_waiting_version() {
+    let recipe = Recipe::new();
+    let mut machine = FeatureMachine::new(recipe.config(), LoopMemory::new(WHEEL_MM));
+    machine.handle(Input::Tick);
+    assert!(machine.poll_effect().is_none(), "nothing waits");
+
+    let mut memory = LoopMemory::new(WHEEL_MM);
+    let mut learned = memory.learning.clone();
+    learned.correction_um = vec![1.5; 360];
+    memory.waiting = Some(camloop_loop::memory::WaitingTable {
+        version: TableVersion::FIRST,
+        learning: learned,
+        wheel_radius_mm: WHEEL_MM,
+        va_speed_rpm: None,
+    });
+    let mut machine = FeatureMachine::new(recipe.config(), memory);
+    for share_up in [false, true] {
+        machine.handle(Input::Tick);
+        let Some(Effect::Deliver { version }) = machine.poll_effect() else {
+            panic!("the waiting version is delivered");
+        };
+        assert_eq!(version, TableVersion::FIRST);
+        machine.handle(if share_up {
+            Input::Delivered { version, at: at(1) }
+        } else {
+            Input::ShareUnavailable {
+                version,
+                reason: "share folder not mounted".into(),
+                at: at(1),
+            }
+        });
+        let run = drive(&mut machine, 2);
+        if share_up {
+            assert!(matches!(
+                run.finished.as_slice(),
+                [Finished::ShareBack { version }] if *version == TableVersion::FIRST
+            ));
+        } else {
+            let [Finished::StillWaiting { reason, .. }] = run.finished.as_slice() else {
+                panic!("{:?}", run.finished);
+            };
+            assert_eq!(reason, "share folder not mounted");
+            assert!(machine.memory().waiting.is_some());
+        }
+    }
+    let memory = machine.memory();
+    assert_eq!(memory.in_force_version, Some(TableVersion::FIRST));
+    assert!(memory.waiting.is_none());
+    assert!(memory.learning.correction_um.iter().all(|u| *u == 1.5));
+}

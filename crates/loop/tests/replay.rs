@@ -113,19 +113,9 @@ impl Executor<'_> {
         Ok(finished)
     }
 
-    /// The shell's retry: a version the share took but could not push, pushed now.
+    /// The shell's retry: a tick, on which the machine delivers what waits for the share.
     fn retry(&mut self, world: &mut World, index: usize) -> Result<(), Crashed> {
-        if let Some(v) = world.share.waiting().filter(|_| world.share.available) {
-            world.share.pushed = Some(v);
-            self.effects_done += 1;
-            if Some(self.effects_done) == self.crash_after {
-                return Err(Crashed);
-            }
-            self.machine.handle(Input::Delivered {
-                version: v,
-                at: at(index),
-            });
-        }
+        self.machine.handle(Input::Tick);
         self.run(world, index).map(|_| ())
     }
 

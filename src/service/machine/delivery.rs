@@ -250,20 +250,20 @@ impl FeatureLoop {
         }
     }
 
-    /// Delivers the version waiting for the share, if any; once it is there its learning
-    /// state is the one in force (the feature's machine records that).
+    /// Delivers the version waiting for the share, if any (the machine's retry, on a tick);
+    /// once it is there its learning state is the one in force.
     pub(super) async fn deliver_waiting(&mut self) {
-        match self.share.deliver() {
-            Ok(Some(p)) => {
-                info!(machine = %self.name, version = p.version, "controller share: waiting table delivered, learning resumes from it");
-                self.machine.handle(Input::Delivered {
-                    version: super::executor::version(p.version),
-                    at: now(),
-                });
-                self.run_machine(None).await;
+        self.machine.handle(Input::Tick);
+        for f in self.run_machine(None).await {
+            match f {
+                Finished::ShareBack { version } => {
+                    info!(machine = %self.name, version = version.get(), "controller share: waiting table delivered, learning resumes from it");
+                }
+                Finished::StillWaiting { version, reason } => {
+                    warn!(machine = %self.name, version = version.get(), error = %reason, "controller share still unavailable");
+                }
+                _ => {}
             }
-            Ok(None) => {}
-            Err(e) => warn!(machine = %self.name, error = %e, "controller share still unavailable"),
         }
     }
 }

@@ -56,7 +56,16 @@ impl FeatureLoop {
                     });
                 }
                 None => {
-                    warn!(machine = %self.name, feature = %self.setup.name, version = w, "the share's waiting version has no record here: delivered with the correction in force")
+                    warn!(machine = %self.name, feature = %self.setup.name, version = w, "the share's waiting version has no record here: delivered with the correction in force");
+                    // It waits in the memory as made from the correction in force, so the
+                    // machine's retry delivers it like any other.
+                    let memory = self.machine.memory_mut();
+                    memory.waiting = Some(WaitingTable {
+                        version: version(w),
+                        learning: memory.learning.clone(),
+                        wheel_radius_mm: memory.wheel_radius_mm,
+                        va_speed_rpm: memory.in_force_va_speed_rpm,
+                    });
                 }
             }
         }

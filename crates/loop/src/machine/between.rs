@@ -1,11 +1,12 @@
 //! What happens to a feature between its parts, decided: a wheel dressing (the correction
 //! moved by the loop's dressing policy, the radius believed, the newest correction's table
 //! made again for it), a part ground but not gauged (the table moved on by the learned
-//! drift), and an engineer freezing or unfreezing learning. Each ends like a part: a table
-//! order on its way, or a record of the memory it leaves.
+//! drift), an engineer freezing or unfreezing learning, and the retry of a table waiting
+//! for the share. Each ends like a part: a table order on its way, or a record of the
+//! memory it leaves.
 
 use super::table::{Program, TableOrder};
-use super::{FeatureMachine, Finished};
+use super::{Effect, FeatureMachine, Finished, Input, Phase};
 use crate::coast::{self, Coast};
 use crate::dressing::{self, CorrectionMove, Dressing};
 use camloop_core::compensate::{self, LobeLoop};
@@ -143,5 +144,43 @@ impl FeatureMachine {
         learning.frozen = frozen;
         let record = self.learning_record(at);
         self.close(vec![record], Finished::Frozen { before });
+    }
+
+    /// Delivers the version waiting for the share, if one waits.
+    pub(super) fn on_tick(&mut self) {
+        let Some(version) = self.memory.waiting.as_ref().map(|w| w.version) else {
+            return;
+        };
+        self.phase = Phase::Retrying(version);
+        self.effects.push_back(Effect::Deliver { version });
+    }
+
+    /// The share's answer to a tick's delivery: in force once delivered, else still waiting.
+    pub(super) fn on_retry_answer(&mut self, input: Input<'_>) {
+        let Phase::Retrying(waiting) = std::mem::take(&mut self.phase) else {
+            return;
+        };
+        let reason = match input {
+            Input::Delivered { version, at } if version == waiting => {
+                return self.delivered_on_retry(version, at);
+            }
+            Input::Delivered { version, .. } => {
+                format!("the share delivered {version} while {waiting} waits")
+            }
+            Input::ShareUnavailable { reason, .. }
+            | Input::ShareRefused { reason, .. }
+            | Input::ShareFailed { reason, .. } => reason,
+            other => {
+                // Not an answer to the delivery: the retry stays in flight.
+                self.phase = Phase::Retrying(waiting);
+                return self.finish(Finished::Failed {
+                    reason: format!("not an answer to a delivery: {other:?}"),
+                });
+            }
+        };
+        self.finish(Finished::StillWaiting {
+            version: waiting,
+            reason,
+        });
     }
 }

@@ -72,6 +72,8 @@ pub enum Input<'a> {
         frozen: Option<String>,
         at: Timestamp,
     },
+    /// Time for the shell's retry: a table waiting for the share is delivered again.
+    Tick,
     /// The journal write `ticket` is durable.
     Journalled(Ticket),
     /// The journal write `ticket` failed; `fenced_out` when another instance owns the
@@ -200,6 +202,11 @@ pub enum Finished {
     NotGauged(NotGaugedDone),
     /// Learning frozen or unfrozen; the reason before.
     Frozen { before: Option<String> },
+    /// A tick's retry did not reach the control: the version still waits, for this reason.
+    StillWaiting {
+        version: TableVersion,
+        reason: String,
+    },
 }
 
 /// Why a table was not delivered, typed so the API answers each case with its own code.
@@ -235,6 +242,8 @@ enum Phase {
     },
     /// A table's way to the control.
     Table(Box<table::Delivery>),
+    /// A waiting version delivered again on a tick.
+    Retrying(TableVersion),
 }
 
 /// One feature's loop (see the module doc).
@@ -296,6 +305,9 @@ impl FeatureMachine {
                 self.on_not_gauged(part, lobe, at)
             }
             Input::Freeze { frozen, at } if !self.busy() => self.on_freeze(frozen, at),
+            Input::Tick if !self.busy() => self.on_tick(),
+            // The retry waits for the next tick: the input in flight is not disturbed.
+            Input::Tick => {}
             Input::Gauged(_)
             | Input::Table(_)
             | Input::Dressed(_)
@@ -309,9 +321,7 @@ impl FeatureMachine {
                 fenced_out,
                 reason,
             } => self.on_journal_failed(ticket, fenced_out, reason),
-            Input::Delivered { version, at } if !self.busy() => {
-                self.delivered_on_retry(version, at)
-            }
+            other if matches!(self.phase, Phase::Retrying(_)) => self.on_retry_answer(other),
             other => self.on_table_input(other),
         }
     }
