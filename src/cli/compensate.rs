@@ -338,7 +338,7 @@ fn push(
     let pushed = share
         .push_once(request)
         .context("cannot deliver the program")?;
-    Ok((pushed.version, pushed.table_number))
+    Ok((pushed.version.get(), pushed.table_number))
 }
 
 fn lobe_setup(args: &CompensateArgs) -> anyhow::Result<LobeSetup> {

@@ -10,7 +10,7 @@ use super::machine::StoreHandle;
 use super::metrics::Metrics;
 use crate::names::{FeatureName, MachineName};
 use crate::store::{AckOutcome, AuditEntry, AuditResult, EventId, Role, StoreError};
-use camloop_loop::{CommandError, CommandOutcome, MachineCommand, TableVersion};
+use camloop_loop::{CommandError, CommandOutcome, MachineCommand};
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 use tokio::sync::{mpsc, oneshot};
@@ -47,17 +47,9 @@ impl From<crate::service::machine::RollbackError> for CommandError {
     fn from(e: crate::service::machine::RollbackError) -> Self {
         use crate::service::machine::RollbackError;
         match e {
-            RollbackError::NotFound {
-                ref lobe, version, ..
-            } => match TableVersion::new(version) {
-                Some(version) => CommandError::VersionNotFound {
-                    lobe: lobe.clone(),
-                    version,
-                },
-                None => CommandError::Refused {
-                    reason: e.to_string(),
-                },
-            },
+            RollbackError::NotFound { lobe, version, .. } => {
+                CommandError::VersionNotFound { lobe, version }
+            }
             RollbackError::StoreUnavailable => CommandError::StoreUnavailable {
                 reason: e.to_string(),
             },

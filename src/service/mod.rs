@@ -27,9 +27,8 @@ mod startup;
 mod store_guard;
 
 use crate::config::{Checked, Config};
-use crate::names::FeatureName;
 use crate::store::Store;
-use camloop_loop::{CommandError, CommandOutcome, MachineCommand, TableVersion};
+use camloop_loop::{CommandError, CommandOutcome, MachineCommand};
 use machine::{MachineLoop, SourceEvent, StoreHandle};
 use metrics::Metrics;
 use std::sync::Arc;
@@ -436,9 +435,9 @@ async fn carry_out(
 ) -> Result<CommandOutcome, CommandError> {
     match command {
         MachineCommand::Rollback { lobe, version } => {
-            let done = machine.rollback(&lobe, version.get()).await?;
+            let done = machine.rollback(&lobe, version).await?;
             Ok(CommandOutcome {
-                version: TableVersion::new(done.new_version),
+                version: Some(done.new_version),
                 message: done.summary,
             })
         }
@@ -457,8 +456,6 @@ async fn carry_out(
             }
         }
         MachineCommand::RollbackPart { versions } => {
-            let versions: Vec<(FeatureName, u64)> =
-                versions.into_iter().map(|(f, v)| (f, v.get())).collect();
             let done = machine.rollback_part(&versions).await?;
             Ok(CommandOutcome {
                 version: None,

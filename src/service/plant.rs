@@ -87,7 +87,7 @@ pub(crate) fn of_record(record: &Pending) -> Option<PlantEvent> {
             max_profile_error_um: m.max_profile_error_um,
             base_radius_error_um: m.base_radius_error_um,
             phase_error_deg: m.phase_error_deg,
-            ground_with_version,
+            ground_with_version: ground_with_version.map_or(0, TableVersion::get),
             repeatability_um: repeatability_um(&m.analysis_json),
         },
         Pending::Table {
@@ -195,13 +195,10 @@ fn event_of(
 fn table_event(
     machine: MachineName,
     feature: FeatureName,
-    version: u64,
+    version: TableVersion,
     status: VersionStatus,
     at_ms: Timestamp,
 ) -> Option<PlantEvent> {
-    // A journal's version is never 0 (the share numbers from 1); one that were would name
-    // no version the plant could look up.
-    let version = TableVersion::new(version)?;
     match status {
         VersionStatus::Pushed { .. } => Some(PlantEvent::TableDelivered {
             machine,
@@ -226,6 +223,10 @@ fn table_event(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn v(n: u64) -> crate::core::ids::TableVersion {
+        crate::core::ids::TableVersion::new(n).unwrap()
+    }
     use crate::store::Verdict;
 
     #[test]
@@ -233,7 +234,7 @@ mod tests {
         let status = Pending::VersionStatus {
             machine: "G7".parse().unwrap(),
             lobe: "IN1".parse().unwrap(),
-            version: 12,
+            version: v(12),
             status: VersionStatus::Pushed {
                 at_unix_ms: 5,
                 note: Some("pushed".into()),
@@ -274,7 +275,7 @@ mod tests {
         let waiting = Pending::VersionStatus {
             machine: "G7".parse().unwrap(),
             lobe: "IN1".parse().unwrap(),
-            version: 13,
+            version: v(13),
             status: VersionStatus::Waiting {
                 reason: Some("share down".into()),
             },
@@ -304,7 +305,7 @@ mod tests {
                 averaged_lift_mm: Vec::new(),
                 analysis_json: "{}".into(),
             },
-            ground_with_version: 0,
+            ground_with_version: None,
         };
         for master in ["MASTER", "master-7", "Master_B"] {
             assert_eq!(of_record(&measurement(master)), None, "{master}");

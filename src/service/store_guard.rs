@@ -294,7 +294,7 @@ pub(crate) fn expectations(config: &Config) -> Vec<MachineExpectation> {
             let manifest = state_dir.join("share").join(crate::share::MANIFEST_FILE);
             let newest_share_version = crate::share::load_manifest(&manifest)
                 .ok()
-                .map(|loaded| loaded.history.next_version().saturating_sub(1))
+                .map(|loaded| loaded.history.next_version().get().saturating_sub(1))
                 .filter(|&v| v > 0);
             // Read only: in a cluster another instance may be appending to it right now.
             let journal = std::fs::read_to_string(state_dir.join("journal.jsonl"));

@@ -13,6 +13,7 @@
 //! manifest is either the old one, whole, or the new one; temporaries left by a kill are
 //! removed at the next start with the versions folder's.
 
+use crate::core::ids::TableVersion;
 use std::fs;
 use std::path::Path;
 
@@ -37,7 +38,7 @@ pub struct Checkpoint {
     /// Versions dropped from memory before the checkpoint.
     pub forgotten: u64,
     /// The version still to be delivered, if any.
-    pub deliverable: Option<u64>,
+    pub deliverable: Option<TableVersion>,
     /// Versions pushed so far.
     pub pushed: u64,
     /// The versions held, ascending.
@@ -55,7 +56,7 @@ impl Checkpoint {
             .versions
             .windows(2)
             .all(|w| w[0].record.version < w[1].record.version);
-        let newest = self.versions.last().map_or(0, |v| v.record.version);
+        let newest = self.versions.last().map_or(0, |v| v.record.version.get());
         if !ascending || newest > self.told {
             return Err(RecordOutOfOrder(format!(
                 "checkpoint holds versions out of order or above v{}",
@@ -144,6 +145,10 @@ pub(crate) fn compact(
 mod tests {
     use super::*;
 
+    fn v(n: u64) -> crate::core::ids::TableVersion {
+        crate::core::ids::TableVersion::new(n).unwrap()
+    }
+
     fn ms(unix_ms: u64) -> jiff::Timestamp {
         jiff::Timestamp::from_millisecond(unix_ms as i64).unwrap()
     }
@@ -151,7 +156,7 @@ mod tests {
 
     fn version(n: u64) -> Record {
         Record::Version(VersionRecord {
-            version: n,
+            version: v(n),
             created_at_unix_ms: ms(n),
             table_number: 1 + (n as u32 % 2),
             files: vec![FileRecord {
@@ -179,11 +184,11 @@ mod tests {
             text.push_str(&manifest::line(&version(n)));
             for r in [
                 Record::Delivering {
-                    version: n,
+                    version: v(n),
                     at_unix_ms: ms(n),
                 },
                 Record::Pushed {
-                    version: n,
+                    version: v(n),
                     at_unix_ms: ms(n),
                 },
             ] {
@@ -191,7 +196,7 @@ mod tests {
             }
             if n > 3 {
                 text.push_str(&manifest::line(&Record::Pruned {
-                    version: n - 3,
+                    version: v(n - 3),
                     at_unix_ms: ms(n),
                 }));
             }
@@ -217,8 +222,8 @@ mod tests {
         let short = manifest::load(&path).unwrap();
         assert_eq!(short.lines, 1);
         assert_eq!(short.history, held);
-        assert_eq!(short.history.next_version(), 52);
-        assert_eq!(short.history.waiting().unwrap().record.version, 51);
+        assert_eq!(short.history.next_version(), v(52));
+        assert_eq!(short.history.waiting().unwrap().record.version, v(51));
         assert_eq!(
             short.history.last_pushed().unwrap().status,
             VersionStatus::Pushed {
@@ -226,10 +231,10 @@ mod tests {
                 note: None
             }
         );
-        assert!(short.history.is_forgotten(10));
+        assert!(short.history.is_forgotten(v(10)));
         let mut h = short.history;
         h.apply(Record::Delivering {
-            version: 51,
+            version: v(51),
             at_unix_ms: ms(60),
         })
         .unwrap();
@@ -281,7 +286,7 @@ mod tests {
         );
         std::fs::write(&path, format!("{line}\n")).unwrap();
         let loaded = manifest::load(&path).unwrap();
-        let status = |n: u64| loaded.history.get(n).unwrap().status.clone();
+        let status = |n: u64| loaded.history.get(v(n)).unwrap().status.clone();
         assert_eq!(
             status(1),
             VersionStatus::Pushed {
@@ -289,7 +294,7 @@ mod tests {
                 note: None
             }
         );
-        assert_eq!(status(2), VersionStatus::Superseded { by: 4 });
+        assert_eq!(status(2), VersionStatus::Superseded { by: v(4) });
         assert_eq!(
             status(3),
             VersionStatus::Refused {
@@ -312,7 +317,7 @@ mod tests {
         c.told = 0;
         assert!(c.clone().into_history().is_err());
         c.told = 1;
-        c.deliverable = Some(7);
+        c.deliverable = Some(v(7));
         assert!(c.into_history().is_err());
     }
 }

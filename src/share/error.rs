@@ -4,6 +4,7 @@
 //! Each message is complete on its own (it names the path and the OS error) and no error
 //! returns a `source()`, so a chain printed with `{:#}` never repeats a cause.
 
+use crate::core::ids::TableVersion;
 use std::io;
 use std::path::{Path, PathBuf};
 
@@ -78,9 +79,9 @@ pub enum StateError {
     #[error("kept text {} does not match its manifest sha256 {expected}", path.display())]
     TextMismatch { path: PathBuf, expected: Sha256 },
     #[error("version v{0} is not in the history")]
-    UnknownVersion(u64),
+    UnknownVersion(TableVersion),
     #[error("version v{0} has no kept text (refused, or pruned beyond the kept versions)")]
-    NoText(u64),
+    NoText(TableVersion),
     #[error("invalid share settings: {0}")]
     TablePair(#[from] TablePairError),
     #[error("invalid share settings: keep_versions must be at least 1")]
@@ -116,10 +117,16 @@ impl StateError {
 pub enum PushError {
     /// The request was recorded as refused and will never be pushed.
     #[error("version v{version} refused: {reason}")]
-    Refused { version: u64, reason: String },
+    Refused {
+        version: TableVersion,
+        reason: String,
+    },
     /// The version is recorded and waiting; the share failed.
     #[error("version v{version} is waiting: {error}")]
-    Share { version: u64, error: ShareError },
+    Share {
+        version: TableVersion,
+        error: ShareError,
+    },
     #[error(transparent)]
     State(#[from] StateError),
 }

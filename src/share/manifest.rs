@@ -8,6 +8,7 @@
 //! ignored on reading and cut off when the state folder is opened for writing.
 
 use crate::core::digest::Sha256;
+use crate::core::ids::TableVersion;
 use std::path::Path;
 
 use jiff::Timestamp;
@@ -23,7 +24,7 @@ pub enum Record {
     Version(VersionRecord),
     /// A push attempt failed; the version waits. Written when the reason changes.
     Waiting {
-        version: u64,
+        version: TableVersion,
         #[serde(with = "crate::clock::unix_ms")]
         at_unix_ms: Timestamp,
         reason: String,
@@ -31,19 +32,19 @@ pub enum Record {
     /// Temporaries are on the share and the renames begin: from here on the control may
     /// see this version's files.
     Delivering {
-        version: u64,
+        version: TableVersion,
         #[serde(with = "crate::clock::unix_ms")]
         at_unix_ms: Timestamp,
     },
     /// All files renamed, the folder flushed, every file read back and verified.
     Pushed {
-        version: u64,
+        version: TableVersion,
         #[serde(with = "crate::clock::unix_ms")]
         at_unix_ms: Timestamp,
     },
     /// The kept text was removed (older than the kept versions); the record stays.
     Pruned {
-        version: u64,
+        version: TableVersion,
         #[serde(with = "crate::clock::unix_ms")]
         at_unix_ms: Timestamp,
     },
@@ -56,7 +57,7 @@ pub enum Record {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct VersionRecord {
     /// 1, 2, 3, … without gaps.
-    pub version: u64,
+    pub version: TableVersion,
     /// Given by the caller; written as Unix time in milliseconds.
     #[serde(with = "crate::clock::unix_ms")]
     pub created_at_unix_ms: Timestamp,
@@ -72,7 +73,7 @@ pub struct VersionRecord {
     /// Learning parameters, free-form.
     pub learning: serde_json::Value,
     /// The version whose text this one re-pushes.
-    pub rollback_of: Option<u64>,
+    pub rollback_of: Option<TableVersion>,
     /// Set when the version was refused; it is then never pushed and has no kept text.
     pub refused: Option<String>,
     /// The fencing epoch of the owner that made it, with several instances (see
@@ -134,7 +135,7 @@ pub struct History {
     pub(super) told: u64,
     /// The one deliverable version, if any (accepting a version supersedes the previous
     /// deliverable one, so there is never more than one).
-    pub(super) deliverable: Option<u64>,
+    pub(super) deliverable: Option<TableVersion>,
     /// Versions dropped by [`History::forget_settled`].
     pub(super) forgotten: u64,
     /// Versions pushed and verified so far, held or forgotten.
@@ -160,30 +161,30 @@ impl History {
     }
 
     /// One version, if it is held.
-    pub fn get(&self, version: u64) -> Option<&VersionState> {
+    pub fn get(&self, version: TableVersion) -> Option<&VersionState> {
         let i = self.index(version)?;
         self.versions.get(i)
     }
 
-    fn get_mut(&mut self, version: u64) -> Option<&mut VersionState> {
+    fn get_mut(&mut self, version: TableVersion) -> Option<&mut VersionState> {
         let i = self.index(version)?;
         self.versions.get_mut(i)
     }
 
-    fn index(&self, version: u64) -> Option<usize> {
+    fn index(&self, version: TableVersion) -> Option<usize> {
         self.versions
             .binary_search_by_key(&version, |v| v.record.version)
             .ok()
     }
 
     /// Whether `version` was told of but is no longer held (settled, no kept text).
-    pub fn is_forgotten(&self, version: u64) -> bool {
-        version >= 1 && version <= self.told && self.get(version).is_none()
+    pub fn is_forgotten(&self, version: TableVersion) -> bool {
+        version.get() <= self.told && self.get(version).is_none()
     }
 
     /// The number the next version gets.
-    pub fn next_version(&self) -> u64 {
-        self.told + 1
+    pub fn next_version(&self) -> TableVersion {
+        TableVersion::new(self.told.saturating_add(1)).unwrap_or(TableVersion::FIRST)
     }
 
     /// How many versions were pushed and verified so far (forgotten ones included).
@@ -263,7 +264,7 @@ impl History {
                     }
                 };
                 let text_kept = rec.refused.is_none();
-                self.told = rec.version;
+                self.told = rec.version.get();
                 self.versions.push(VersionState {
                     record: rec,
                     status,
@@ -320,7 +321,7 @@ impl History {
 
     fn deliverable_mut(
         &mut self,
-        version: u64,
+        version: TableVersion,
         what: &str,
     ) -> Result<&mut VersionState, RecordOutOfOrder> {
         let v = self.get_mut(version).ok_or_else(|| {
@@ -393,13 +394,17 @@ pub(crate) fn line(record: &Record) -> String {
 mod tests {
     use super::*;
 
+    fn v(n: u64) -> crate::core::ids::TableVersion {
+        crate::core::ids::TableVersion::new(n).unwrap()
+    }
+
     fn ms(unix_ms: u64) -> jiff::Timestamp {
         jiff::Timestamp::from_millisecond(unix_ms as i64).unwrap()
     }
 
     fn version(n: u64, refused: Option<&str>) -> Record {
         Record::Version(VersionRecord {
-            version: n,
+            version: v(n),
             created_at_unix_ms: ms(1000 * n),
             table_number: 1,
             files: vec![FileRecord {
@@ -429,18 +434,18 @@ mod tests {
     /// versions after it are forgotten. Once a newer one is pushed, the old one goes too.
     #[test]
     fn settled_versions_are_forgotten_but_not_the_one_on_the_share() {
-        let at = |version| Record::Pruned {
-            version,
+        let at = |n| Record::Pruned {
+            version: v(n),
             at_unix_ms: ms(0),
         };
         let mut h = fold(vec![
             version(1, None),
             Record::Delivering {
-                version: 1,
+                version: v(1),
                 at_unix_ms: ms(1),
             },
             Record::Pushed {
-                version: 1,
+                version: v(1),
                 at_unix_ms: ms(2),
             },
             version(2, None),
@@ -456,23 +461,23 @@ mod tests {
         let held = |h: &History| {
             h.versions()
                 .iter()
-                .map(|v| v.record.version)
+                .map(|v| v.record.version.get())
                 .collect::<Vec<_>>()
         };
         assert_eq!(held(&h), [1, 5]);
         assert_eq!(h.forgotten_count(), 3);
-        assert!(h.is_forgotten(2) && h.is_forgotten(3) && h.is_forgotten(4));
-        assert!(!h.is_forgotten(1) && !h.is_forgotten(6));
-        assert_eq!(h.on_share().map(|v| v.record.version), Some(1));
-        assert_eq!(h.waiting().map(|v| v.record.version), Some(5));
-        assert_eq!(h.next_version(), 6);
+        assert!(h.is_forgotten(v(2)) && h.is_forgotten(v(3)) && h.is_forgotten(v(4)));
+        assert!(!h.is_forgotten(v(1)) && !h.is_forgotten(v(6)));
+        assert_eq!(h.on_share().map(|v| v.record.version), Some(v(1)));
+        assert_eq!(h.waiting().map(|v| v.record.version), Some(v(5)));
+        assert_eq!(h.next_version(), v(6));
         for r in [
             Record::Delivering {
-                version: 5,
+                version: v(5),
                 at_unix_ms: ms(3),
             },
             Record::Pushed {
-                version: 5,
+                version: v(5),
                 at_unix_ms: ms(4),
             },
         ] {
@@ -480,7 +485,7 @@ mod tests {
         }
         h.forget_settled();
         assert_eq!(held(&h), [5]);
-        assert_eq!(h.last_pushed().map(|v| v.record.version), Some(5));
+        assert_eq!(h.last_pushed().map(|v| v.record.version), Some(v(5)));
     }
 
     #[test]
@@ -494,7 +499,7 @@ mod tests {
         );
         assert_eq!(serde_json::from_str::<Record>(&text).unwrap(), r);
         let w = Record::Waiting {
-            version: 1,
+            version: v(1),
             at_unix_ms: ms(7),
             reason: "share /x is missing".into(),
         };
@@ -509,11 +514,11 @@ mod tests {
         let h = fold(vec![
             version(1, None),
             Record::Delivering {
-                version: 1,
+                version: v(1),
                 at_unix_ms: ms(1),
             },
             Record::Pushed {
-                version: 1,
+                version: v(1),
                 at_unix_ms: ms(2),
             },
             version(2, None),
@@ -521,7 +526,7 @@ mod tests {
             version(4, None),
         ])
         .unwrap();
-        let status = |n| h.get(n).unwrap().status.clone();
+        let status = |n| h.get(v(n)).unwrap().status.clone();
         assert_eq!(
             status(1),
             VersionStatus::Pushed {
@@ -529,12 +534,12 @@ mod tests {
                 note: None
             }
         );
-        assert_eq!(status(2), VersionStatus::Superseded { by: 4 });
+        assert_eq!(status(2), VersionStatus::Superseded { by: v(4) });
         assert!(matches!(status(3), VersionStatus::Refused { .. }));
         assert_eq!(status(4), VersionStatus::Waiting { reason: None });
-        assert_eq!(h.waiting().unwrap().record.version, 4);
-        assert_eq!(h.on_share().unwrap().record.version, 1);
-        assert!(!h.get(3).unwrap().text_kept);
+        assert_eq!(h.waiting().unwrap().record.version, v(4));
+        assert_eq!(h.on_share().unwrap().record.version, v(1));
+        assert!(!h.get(v(3)).unwrap().text_kept);
     }
 
     #[test]
@@ -546,7 +551,7 @@ mod tests {
                 .contains("expected v1")
         );
         let pushed = Record::Pushed {
-            version: 1,
+            version: v(1),
             at_unix_ms: ms(0),
         };
         assert!(
@@ -556,7 +561,7 @@ mod tests {
                 .contains("without delivering")
         );
         let delivering = Record::Delivering {
-            version: 1,
+            version: v(1),
             at_unix_ms: ms(0),
         };
         assert!(
@@ -566,7 +571,7 @@ mod tests {
                 .contains("Refused")
         );
         let pruned = Record::Pruned {
-            version: 1,
+            version: v(1),
             at_unix_ms: ms(0),
         };
         assert!(

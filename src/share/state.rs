@@ -1,6 +1,7 @@
 //! The state folder's kept texts: one folder per version, stored atomically, read back
 //! against the manifest's checksums, and cleaned of orphans at start.
 
+use crate::core::ids::TableVersion;
 use std::fs;
 use std::path::{Path, PathBuf};
 
@@ -11,21 +12,21 @@ use super::store::ProgramFile;
 use crate::core::digest::Sha256;
 
 /// Folder of a version's kept text inside `versions_dir`: `v000042`.
-pub(crate) fn version_dir(versions_dir: &Path, version: u64) -> PathBuf {
+pub(crate) fn version_dir(versions_dir: &Path, version: TableVersion) -> PathBuf {
     versions_dir.join(version_dir_name(version))
 }
 
 /// `v000042`: six digits so that a listing sorts by version up to 999999.
-fn version_dir_name(version: u64) -> String {
-    format!("v{version:06}")
+fn version_dir_name(version: TableVersion) -> String {
+    format!("v{:06}", version.get())
 }
 
-fn parse_version_dir(name: &str) -> Option<u64> {
+fn parse_version_dir(name: &str) -> Option<TableVersion> {
     let digits = name.strip_prefix('v')?;
     if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
         return None;
     }
-    digits.parse().ok()
+    digits.parse().ok().and_then(TableVersion::new)
 }
 
 /// Store a version's files: a temporary folder, each file flushed, the folder flushed,
@@ -33,7 +34,7 @@ fn parse_version_dir(name: &str) -> Option<u64> {
 /// recorded version always has its text.
 pub(crate) fn store_text(
     versions_dir: &Path,
-    version: u64,
+    version: TableVersion,
     files: &[ProgramFile],
 ) -> Result<(), StateError> {
     let target = version_dir(versions_dir, version);
@@ -130,9 +131,11 @@ mod tests {
 
     #[test]
     fn version_folders_sort_and_parse_back() {
-        assert_eq!(version_dir_name(42), "v000042");
-        assert_eq!(parse_version_dir("v000042"), Some(42));
-        assert_eq!(parse_version_dir("v1234567"), Some(1_234_567));
+        let v = |n| TableVersion::new(n).unwrap();
+        assert_eq!(version_dir_name(v(42)), "v000042");
+        assert_eq!(parse_version_dir("v000042"), Some(v(42)));
+        assert_eq!(parse_version_dir("v1234567"), Some(v(1_234_567)));
+        assert_eq!(parse_version_dir("v000000"), None);
         assert_eq!(parse_version_dir("v"), None);
         assert_eq!(parse_version_dir("v12a"), None);
         assert_eq!(parse_version_dir("x000001"), None);
@@ -145,8 +148,9 @@ mod tests {
             name: "CAM_T1.SPF".into(),
             text: "N1 C=0 X=20\n".into(),
         }];
-        store_text(dir.path(), 3, &files).unwrap();
-        let kept = version_dir(dir.path(), 3);
+        let v3 = TableVersion::new(3).unwrap();
+        store_text(dir.path(), v3, &files).unwrap();
+        let kept = version_dir(dir.path(), v3);
         let record = |text: &str| FileRecord {
             name: "CAM_T1.SPF".into(),
             sha256: Sha256::of(text.as_bytes()),

@@ -1,6 +1,7 @@
 //! [`Share`]: the synchronous push — record a version in the state folder, deliver it to the
 //! controller share atomically, verify it, keep the history.
 
+use crate::core::ids::TableVersion;
 use std::fs;
 use std::path::PathBuf;
 
@@ -53,7 +54,7 @@ pub struct PushRequest {
     /// Learning parameters, free-form.
     pub learning: serde_json::Value,
     /// Set for a rollback: the version whose text this re-pushes.
-    pub rollback_of: Option<u64>,
+    pub rollback_of: Option<TableVersion>,
     /// From the caller's clock.
     pub created_at_unix_ms: jiff::Timestamp,
 }
@@ -62,20 +63,23 @@ pub struct PushRequest {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Submitted {
     /// Recorded and waiting to be delivered.
-    Accepted { version: u64 },
+    Accepted { version: TableVersion },
     /// Recorded as refused; it will never be pushed.
-    Refused { version: u64, reason: String },
+    Refused {
+        version: TableVersion,
+        reason: String,
+    },
 }
 
 /// A delivered version.
 #[derive(Debug)]
 pub struct Pushed {
-    pub version: u64,
+    pub version: TableVersion,
     pub table_number: u32,
     /// The files on the share, in rename order.
     pub paths: Vec<PathBuf>,
     /// Versions whose kept text was removed after this push.
-    pub pruned: Vec<u64>,
+    pub pruned: Vec<TableVersion>,
     /// Pruning failed (the push itself succeeded; pruning is retried after the next push).
     pub prune_error: Option<StateError>,
 }
@@ -306,7 +310,7 @@ impl Share {
     /// replace `files` and `table_number` before submitting.
     pub fn rollback_request(
         &self,
-        version: u64,
+        version: TableVersion,
         created_at_unix_ms: jiff::Timestamp,
     ) -> Result<PushRequest, StateError> {
         let kept = self.held(version)?;
@@ -323,7 +327,7 @@ impl Share {
     }
 
     /// The kept text of a version, each file checked against its manifest SHA-256.
-    pub fn kept_files(&self, version: u64) -> Result<Vec<ProgramFile>, StateError> {
+    pub fn kept_files(&self, version: TableVersion) -> Result<Vec<ProgramFile>, StateError> {
         let state = self.held(version)?;
         if !state.text_kept {
             return Err(StateError::NoText(version));
@@ -333,7 +337,7 @@ impl Share {
 
     /// A version the history holds; a forgotten one (settled, so without kept text) is
     /// [`StateError::NoText`].
-    fn held(&self, version: u64) -> Result<&manifest::VersionState, StateError> {
+    fn held(&self, version: TableVersion) -> Result<&manifest::VersionState, StateError> {
         match self.history.get(version) {
             Some(v) => Ok(v),
             None if self.history.is_forgotten(version) => Err(StateError::NoText(version)),
@@ -342,7 +346,7 @@ impl Share {
     }
 
     /// Folder of a version's kept text: `<state>/versions/v000042`.
-    pub(crate) fn version_dir(&self, version: u64) -> PathBuf {
+    pub(crate) fn version_dir(&self, version: TableVersion) -> PathBuf {
         version_dir(&self.config.state_dir.join(VERSIONS_DIR), version)
     }
 
@@ -462,7 +466,11 @@ impl Share {
         }
     }
 
-    fn record_waiting(&mut self, version: u64, error: &ShareError) -> Result<(), StateError> {
+    fn record_waiting(
+        &mut self,
+        version: TableVersion,
+        error: &ShareError,
+    ) -> Result<(), StateError> {
         let reason = error.to_string();
         let unchanged = self.history.get(version).is_some_and(
             |v| matches!(&v.status, VersionStatus::Waiting { reason: Some(r) } if *r == reason),
@@ -484,8 +492,8 @@ impl Share {
 
     /// Remove the kept text of accepted versions older than the newest `keep_versions`
     /// (never the waiting one, which is always the newest accepted).
-    fn prune(&mut self) -> (Vec<u64>, Option<StateError>) {
-        let kept: Vec<u64> = self
+    fn prune(&mut self) -> (Vec<TableVersion>, Option<StateError>) {
+        let kept: Vec<TableVersion> = self
             .history
             .versions()
             .iter()

@@ -26,7 +26,7 @@ pub fn manifest_versions(var: &Path, machine: &str, lobe: &str) -> Vec<u64> {
     history
         .versions()
         .iter()
-        .map(|v| v.record.version)
+        .map(|v| v.record.version.get())
         .collect()
 }
 
@@ -140,14 +140,14 @@ pub async fn agreement(var: &Path, store: &Store, machine: &str, lobe: &str) -> 
     let path = feature_dir(var, machine, lobe).join("share/manifest.jsonl");
     let history = load_manifest(&path).unwrap().history;
     let mut a = Agreement {
-        told: history.next_version() - 1,
+        told: history.next_version().get() - 1,
         held: history
             .versions()
             .iter()
-            .map(|v| v.record.version)
+            .map(|v| v.record.version.get())
             .collect(),
         pushed: history.pushed_count(),
-        newest_pushed: history.last_pushed().map(|v| v.record.version),
+        newest_pushed: history.last_pushed().map(|v| v.record.version.get()),
         ..Agreement::default()
     };
     // A long run compacts the manifest (`share::compact`): it then holds only the versions
@@ -163,10 +163,10 @@ pub async fn agreement(var: &Path, store: &Store, machine: &str, lobe: &str) -> 
     for v in history.versions() {
         let version = v.record.version;
         if let Some(m) = v.record.measurement_id {
-            made_from.entry(m).or_default().push(version);
+            made_from.entry(m).or_default().push(version.get());
         }
         let Some(row) = store
-            .table_version(&m(machine), &f(lobe), version as i64)
+            .table_version(&m(machine), &f(lobe), version.to_i64())
             .await
             .unwrap()
         else {
@@ -229,7 +229,7 @@ async fn store_versions_told(
     history: &History,
     held: &[u64],
 ) -> Vec<String> {
-    let told = history.next_version() - 1;
+    let told = history.next_version().get() - 1;
     let stored = store
         .table_versions(&m(machine), &f(lobe), 1000)
         .await
@@ -244,7 +244,8 @@ async fn store_versions_told(
     }
     for row in stored.iter().filter(|r| {
         let v = r.version as u64;
-        !held.contains(&v) && !history.is_forgotten(v)
+        !held.contains(&v)
+            && camloop::core::ids::TableVersion::new(v).is_none_or(|v| !history.is_forgotten(v))
     }) {
         out.push(format!("v{}: in the store, not on the share", row.version));
     }

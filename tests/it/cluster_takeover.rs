@@ -415,7 +415,7 @@ async fn check_history(root: &Path, url: &str, dropped: &[(String, Vec<Dropped>)
         for (i, v) in versions.iter().enumerate() {
             let version = v.record.version;
             assert_eq!(
-                version,
+                version.get(),
                 i as u64 + 1,
                 "{m}: versions are not 1..n once each"
             );
@@ -430,7 +430,11 @@ async fn check_history(root: &Path, url: &str, dropped: &[(String, Vec<Dropped>)
             );
             last_epoch = epoch;
             let row = store
-                .table_version(&m.parse().unwrap(), &"IN1".parse().unwrap(), version as i64)
+                .table_version(
+                    &m.parse().unwrap(),
+                    &"IN1".parse().unwrap(),
+                    version.to_i64(),
+                )
                 .await
                 .unwrap()
                 .unwrap_or_else(|| panic!("{m} v{version} is on the share, not in the store"));

@@ -148,7 +148,10 @@ async fn swapped_lobes_are_refused_or_rejected_never_learned_crosswise() {
     };
     let before = versions(&m);
     let e = m
-        .rollback_part(&[("IN1".parse().unwrap(), 1), ("IN2".parse().unwrap(), 99)])
+        .rollback_part(&[
+            ("IN1".parse().unwrap(), ver(1)),
+            ("IN2".parse().unwrap(), ver(99)),
+        ])
         .await
         .unwrap_err();
     assert!(e.to_string().contains("version 99"), "{e}");
@@ -158,7 +161,10 @@ async fn swapped_lobes_are_refused_or_rejected_never_learned_crosswise() {
         "nothing pushed when one version is missing"
     );
     let done = m
-        .rollback_part(&[("IN1".parse().unwrap(), 1), ("IN2".parse().unwrap(), 1)])
+        .rollback_part(&[
+            ("IN1".parse().unwrap(), ver(1)),
+            ("IN2".parse().unwrap(), ver(1)),
+        ])
         .await
         .unwrap();
     assert_eq!(done.len(), 2);
@@ -170,4 +176,8 @@ async fn swapped_lobes_are_refused_or_rejected_never_learned_crosswise() {
     for f in m.features() {
         assert!(f.memory().learning.correction_um.iter().all(|u| *u == 0.0));
     }
+}
+
+fn ver(n: u64) -> camloop::core::ids::TableVersion {
+    camloop::core::ids::TableVersion::new(n).unwrap()
 }

@@ -23,11 +23,12 @@ fn an_owner_fenced_out_can_neither_record_nor_deliver() {
     let (mut old, _) = open(&d, 5);
     old.set_fence(Fence::claim(&machine, Epoch(1), "a", WAIT).unwrap());
     let v1 = old.push_once(next_request(&old, 1)).unwrap();
-    assert_eq!(v1.version, 1);
+    assert_eq!(v1.version.get(), 1);
     // v2 is recorded by the old owner, not yet delivered, when the new owner claims.
-    let Submitted::Accepted { version: 2 } = old.submit(next_request(&old, 2)).unwrap() else {
+    let Submitted::Accepted { version } = old.submit(next_request(&old, 2)).unwrap() else {
         panic!("v2 not accepted")
     };
+    assert_eq!(version.get(), 2);
 
     let new_fence = Fence::claim(&machine, Epoch(2), "b", WAIT).unwrap();
     match old.deliver() {
@@ -45,9 +46,9 @@ fn an_owner_fenced_out_can_neither_record_nor_deliver() {
     let (mut new, _) = open(&d, 5);
     new.set_fence(new_fence);
     let v2 = new.deliver().unwrap().expect("v2 waiting");
-    assert_eq!(v2.version, 2);
+    assert_eq!(v2.version.get(), 2);
     let v3 = new.push_once(next_request(&new, 4)).unwrap();
-    assert_eq!(v3.version, 3);
+    assert_eq!(v3.version.get(), 3);
 
     let history = load_manifest(&d.state.join("manifest.jsonl"))
         .unwrap()
@@ -55,7 +56,7 @@ fn an_owner_fenced_out_can_neither_record_nor_deliver() {
     let epochs: Vec<(u64, Option<u64>)> = history
         .versions()
         .iter()
-        .map(|v| (v.record.version, v.record.epoch.map(|e| e.0)))
+        .map(|v| (v.record.version.get(), v.record.epoch.map(|e| e.0)))
         .collect();
     // v2 was recorded under epoch 1 and delivered under 2: a version keeps the epoch of the
     // owner that recorded it, and versions never go back to an older epoch.

@@ -99,7 +99,7 @@ fn pusher(root: &Path) {
             .history,
     );
     while pushed < TARGET_PUSHES {
-        let version = share.history().next_version();
+        let version = share.history().next_version().get();
         let table = share.next_table_number();
         let files = vec![
             ProgramFile {
@@ -186,7 +186,7 @@ fn check(root: &Path, seen: &mut Seen) -> History {
         let allowed = allowed_versions(&history, &name);
         let sum = sha256_hex(text.as_bytes());
         let matched = history.versions().iter().find(|v| {
-            allowed.contains(&v.record.version)
+            allowed.contains(&v.record.version.get())
                 && v.record
                     .files
                     .iter()
@@ -195,11 +195,11 @@ fn check(root: &Path, seen: &mut Seen) -> History {
         let Some(matched) = matched else {
             panic!("{name} (version {declared}) is not a version the manifest allows: {allowed:?}")
         };
-        assert_eq!(matched.record.version, declared, "{name}");
+        assert_eq!(matched.record.version.get(), declared, "{name}");
     }
     let versions_dir = config.state_dir.join(VERSIONS_DIR);
     for v in history.versions().iter().filter(|v| v.text_kept) {
-        let dir = versions_dir.join(format!("v{:06}", v.record.version));
+        let dir = versions_dir.join(format!("v{:06}", v.record.version.get()));
         for f in &v.record.files {
             let bytes = std::fs::read(dir.join(&f.name))
                 .unwrap_or_else(|e| panic!("kept text of v{} missing: {e}", v.record.version));
@@ -222,7 +222,7 @@ fn allowed_versions(history: &History, name: &str) -> BTreeSet<u64> {
         if !v.reached_share || !v.record.files.iter().any(|f| f.name == name) {
             continue;
         }
-        allowed.insert(v.record.version);
+        allowed.insert(v.record.version.get());
         if matches!(v.status, VersionStatus::Pushed { .. }) {
             break;
         }

@@ -20,7 +20,7 @@ fn a_long_run_compacts_the_manifest_and_a_restart_resumes_from_the_checkpoint() 
     let mut longest = 0;
     for tag in 1..=160 {
         let pushed = share.push_once(next_request(&share, tag)).unwrap();
-        assert_eq!(pushed.version, u64::from(tag));
+        assert_eq!(pushed.version.get(), u64::from(tag));
         longest = longest.max(lines(&manifest));
     }
     assert!(
@@ -40,21 +40,25 @@ fn a_long_run_compacts_the_manifest_and_a_restart_resumes_from_the_checkpoint() 
     let (mut share, report) = open(&d, 3);
     assert_eq!(report.torn_manifest_bytes, 0);
     assert_eq!(share.history(), &before);
-    assert_eq!(share.history().next_version(), 161);
+    assert_eq!(share.history().next_version().get(), 161);
     let last = share.history().last_pushed().unwrap();
-    assert_eq!(last.record.version, 160);
+    assert_eq!(last.record.version.get(), 160);
     assert!(matches!(last.status, VersionStatus::Pushed { .. }));
     // The kept texts of the newest versions survived compaction: a rollback finds them.
-    assert_eq!(share.kept_files(159).unwrap().len(), 1);
+    assert_eq!(share.kept_files(ver(159)).unwrap().len(), 1);
     let rollback = share
         .rollback_request(
-            158,
+            ver(158),
             jiff::Timestamp::from_millisecond(1_800_000_000_000).unwrap(),
         )
         .unwrap();
-    assert_eq!(rollback.rollback_of, Some(158));
+    assert_eq!(rollback.rollback_of, Some(ver(158)));
     assert_eq!(
         share.push_once(next_request(&share, 161)).unwrap().version,
-        161
+        ver(161)
     );
+}
+
+fn ver(n: u64) -> camloop::core::ids::TableVersion {
+    camloop::core::ids::TableVersion::new(n).unwrap()
 }

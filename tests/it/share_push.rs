@@ -39,7 +39,7 @@ fn a_push_puts_the_exact_program_on_the_share_and_records_it() {
     assert!((7_000..9_000).contains(&text.len()), "{}", text.len());
 
     let pushed = share.push_once(request).unwrap();
-    assert_eq!((pushed.version, pushed.table_number), (1, 1));
+    assert_eq!((pushed.version.get(), pushed.table_number), (1, 1));
     assert_eq!(pushed.paths, [d.share.join("CAM_T1.SPF")]);
     // Only the program: no temporary is left on the share.
     assert_eq!(names(&d.share), ["CAM_T1.SPF"]);
@@ -77,7 +77,7 @@ fn a_push_puts_the_exact_program_on_the_share_and_records_it() {
         .join("CAM_T1.SPF");
     assert_eq!(std::fs::read_to_string(kept).unwrap(), text);
     assert_eq!(
-        share.history().get(1).unwrap().status,
+        share.history().get(ver(1)).unwrap().status,
         VersionStatus::Pushed {
             at_unix_ms: 1_700_000_002_000,
             note: None
@@ -96,7 +96,7 @@ fn the_second_push_alternates_the_table_and_keeps_version_1() {
     let second = next_request(&share, 2);
     assert!(second.files[0].text.contains("CTABDEF(X,C,2,1)"));
     let pushed = share.push_once(second.clone()).unwrap();
-    assert_eq!((pushed.version, pushed.table_number), (2, 2));
+    assert_eq!((pushed.version.get(), pushed.table_number), (2, 2));
     assert_eq!(share.next_table_number(), 1);
 
     // Both tables are on the share: the previous one may be the one the control runs.
@@ -105,9 +105,9 @@ fn the_second_push_alternates_the_table_and_keeps_version_1() {
         std::fs::read_to_string(d.share.join("CAM_T2.SPF")).unwrap(),
         second.files[0].text
     );
-    assert_eq!(share.kept_files(1).unwrap()[0].text, first_text);
+    assert_eq!(share.kept_files(ver(1)).unwrap()[0].text, first_text);
     assert!(matches!(
-        share.history().get(1).unwrap().status,
+        share.history().get(ver(1)).unwrap().status,
         VersionStatus::Pushed { .. }
     ));
 
@@ -144,7 +144,7 @@ fn a_version_with_two_files_renames_them_in_order_and_verifies_each() {
             file.text
         );
     }
-    let files = &share.history().get(1).unwrap().record.files;
+    let files = &share.history().get(ver(1)).unwrap().record.files;
     assert_eq!(files[1].name, "CAMLOOP_GRIND.MPF");
     assert_eq!(files[1].sha256, sha256(&main.text));
 }
@@ -166,8 +166,8 @@ fn a_table_that_may_be_in_use_is_refused_recorded_and_never_pushed() {
     outside_pair.table_number = 7;
     assert!(matches!(
         share.submit(outside_pair).unwrap(),
-        Submitted::Refused { version: 3, ref reason }
-            if reason == "table 7 is not the next of the pair (1, 2); the next table is 2"
+        Submitted::Refused { version, ref reason }
+            if version.get() == 3 && reason == "table 7 is not the next of the pair (1, 2); the next table is 2"
     ));
     // The share still holds version 1 exactly; refused versions keep no text.
     assert_eq!(
@@ -175,10 +175,17 @@ fn a_table_that_may_be_in_use_is_refused_recorded_and_never_pushed() {
         first.files[0].text
     );
     assert_eq!(names(&d.state.join(VERSIONS_DIR)), ["v000001"]);
-    assert!(matches!(share.kept_files(2), Err(StateError::NoText(2))));
+    assert!(matches!(share.kept_files(ver(2)), Err(StateError::NoText(n)) if n.get() == 2));
     assert!(share.history().waiting().is_none());
     // The next good request goes through as v4.
-    assert_eq!(share.push_once(next_request(&share, 4)).unwrap().version, 4);
+    assert_eq!(
+        share
+            .push_once(next_request(&share, 4))
+            .unwrap()
+            .version
+            .get(),
+        4
+    );
 }
 
 #[test]
@@ -208,13 +215,13 @@ fn bad_file_names_are_refused() {
     twice.files.push(twice.files[0].clone());
     assert!(matches!(
         share.push_once(twice),
-        Err(PushError::Refused { version: 4, reason }) if reason.ends_with("appears twice")
+        Err(PushError::Refused { version, reason }) if version.get() == 4 && reason.ends_with("appears twice")
     ));
     let mut empty = next_request(&share, 1);
     empty.files.clear();
     assert!(matches!(
         share.push_once(empty),
-        Err(PushError::Refused { version: 5, reason }) if reason == "no program files"
+        Err(PushError::Refused { version, reason }) if version.get() == 5 && reason == "no program files"
     ));
     assert!(names(&d.share).is_empty());
 }
@@ -233,28 +240,28 @@ fn rollback_repushes_a_kept_text_as_a_new_version() {
     // v1: table 1, v2: table 2, v3: table 1. The next table is 2, so v2 goes back as is.
     let rollback = share
         .rollback_request(
-            2,
+            ver(2),
             jiff::Timestamp::from_millisecond(1_700_000_100_000).unwrap(),
         )
         .unwrap();
     assert_eq!(rollback.reason, "rollback to v2");
-    assert_eq!(rollback.rollback_of, Some(2));
+    assert_eq!(rollback.rollback_of, Some(ver(2)));
     assert_eq!(rollback.measurement_id, Some(share_support::measurement(2)));
     let pushed = share.push_once(rollback).unwrap();
-    assert_eq!((pushed.version, pushed.table_number), (4, 2));
+    assert_eq!((pushed.version.get(), pushed.table_number), (4, 2));
     assert_eq!(
         std::fs::read_to_string(d.share.join("CAM_T2.SPF")).unwrap(),
         texts[1]
     );
-    let v4 = &share.history().get(4).unwrap().record;
-    assert_eq!(v4.rollback_of, Some(2));
+    let v4 = &share.history().get(ver(4)).unwrap().record;
+    assert_eq!(v4.rollback_of, Some(ver(2)));
     assert_eq!(v4.files[0].sha256, sha256(&texts[1]));
 
     // v3 defines table 1, which is next now: fine. But v2 again would redefine table 2,
     // which the control may be running since v4: refused, and recorded as refused.
     let again = share
         .rollback_request(
-            2,
+            ver(2),
             jiff::Timestamp::from_millisecond(1_700_000_200_000).unwrap(),
         )
         .unwrap();
@@ -271,16 +278,16 @@ fn rollback_repushes_a_kept_text_as_a_new_version() {
         ..again
     };
     let pushed = share.push_once(rerendered).unwrap();
-    assert_eq!((pushed.version, pushed.table_number), (6, 1));
+    assert_eq!((pushed.version.get(), pushed.table_number), (6, 1));
     // History is appended, never rewritten: v1..v3 are unchanged and still kept.
     for (i, text) in texts.iter().enumerate() {
-        let v = i as u64 + 1;
+        let v = ver(i as u64 + 1);
         assert_eq!(&share.kept_files(v).unwrap()[0].text, text);
         assert!(share.history().get(v).unwrap().record.rollback_of.is_none());
     }
     assert!(matches!(
-        share.rollback_request(9, jiff::Timestamp::from_millisecond(0).unwrap()),
-        Err(StateError::UnknownVersion(9))
+        share.rollback_request(ver(9), jiff::Timestamp::from_millisecond(0).unwrap()),
+        Err(StateError::UnknownVersion(n)) if n.get() == 9
     ));
 }
 
@@ -292,24 +299,24 @@ fn only_the_newest_kept_versions_keep_their_text() {
     for tag in 1..=4 {
         pruned.extend(share.push_once(next_request(&share, tag)).unwrap().pruned);
     }
-    assert_eq!(pruned, [1, 2]);
+    assert_eq!(pruned, [ver(1), ver(2)]);
     assert_eq!(names(&d.state.join(VERSIONS_DIR)), ["v000003", "v000004"]);
-    assert!(matches!(share.kept_files(1), Err(StateError::NoText(1))));
+    assert!(matches!(share.kept_files(ver(1)), Err(StateError::NoText(n)) if n.get() == 1));
     assert!(matches!(
-        share.rollback_request(2, jiff::Timestamp::from_millisecond(0).unwrap()),
-        Err(StateError::NoText(2))
+        share.rollback_request(ver(2), jiff::Timestamp::from_millisecond(0).unwrap()),
+        Err(StateError::NoText(n)) if n.get() == 2
     ));
     // The records stay in the manifest: four versions, all pushed. In memory the share
     // holds only the two with kept text; the pruned ones are settled and forgotten.
-    assert_eq!(share.history().next_version(), 5);
+    assert_eq!(share.history().next_version().get(), 5);
     let held: Vec<u64> = share
         .history()
         .versions()
         .iter()
-        .map(|v| v.record.version)
+        .map(|v| v.record.version.get())
         .collect();
     assert_eq!(held, [3, 4]);
-    assert!(share.history().is_forgotten(1) && share.history().is_forgotten(2));
+    assert!(share.history().is_forgotten(ver(1)) && share.history().is_forgotten(ver(2)));
     assert_eq!(
         load_manifest(&d.state.join(MANIFEST_FILE))
             .unwrap()
@@ -382,7 +389,14 @@ fn a_torn_last_manifest_line_is_cut_and_the_history_goes_on() {
     let (mut share, report) = open(&d, 5);
     assert_eq!(report.torn_manifest_bytes, torn.len() as u64);
     assert_eq!(std::fs::read(&manifest).unwrap(), good);
-    assert_eq!(share.push_once(next_request(&share, 2)).unwrap().version, 2);
+    assert_eq!(
+        share
+            .push_once(next_request(&share, 2))
+            .unwrap()
+            .version
+            .get(),
+        2
+    );
     assert_eq!(manifest_lines(&d.state).len(), 6);
 }
 
@@ -394,14 +408,14 @@ fn a_recorded_version_waits_across_a_restart_and_is_delivered() {
     // Recorded, then the process stops before delivering.
     assert_eq!(
         share.submit(request.clone()).unwrap(),
-        Submitted::Accepted { version: 1 }
+        Submitted::Accepted { version: ver(1) }
     );
     drop(share);
     assert!(names(&d.share).is_empty());
     let (mut share, _) = open(&d, 5);
-    assert_eq!(share.history().waiting().unwrap().record.version, 1);
+    assert_eq!(share.history().waiting().unwrap().record.version.get(), 1);
     let pushed = share.deliver().unwrap().unwrap();
-    assert_eq!(pushed.version, 1);
+    assert_eq!(pushed.version.get(), 1);
     assert_eq!(
         std::fs::read_to_string(d.share.join("CAM_T1.SPF")).unwrap(),
         request.files[0].text
@@ -432,4 +446,8 @@ fn unusable_settings_are_refused_at_open() {
     )
     .unwrap_err();
     assert!(err.to_string().contains("must differ"), "{err}");
+}
+
+fn ver(n: u64) -> camloop::core::ids::TableVersion {
+    camloop::core::ids::TableVersion::new(n).unwrap()
 }

@@ -292,7 +292,9 @@ async fn story(store: &Store) {
     let (m1, in1) = (m("M1"), f("in1"));
     for share_only in [
         VersionStatus::Delivering,
-        VersionStatus::Superseded { by: 2 },
+        VersionStatus::Superseded {
+            by: camloop::core::ids::TableVersion::new(2).unwrap(),
+        },
     ] {
         let e = store
             .set_table_status(&m1, &in1, 1, &share_only, ms(7_000))

@@ -84,6 +84,39 @@ impl fmt::Display for TableVersion {
     }
 }
 
+/// `Option<TableVersion>` as records written before the type kept it: `null` or 0 read as
+/// none, any other number as that version. `with = "ids::lenient_version"` writes `null` for
+/// none (the form of optional fields); [`zero_for_none`] writes 0 (the form of fields that
+/// always held a number).
+pub mod lenient_version {
+    use super::TableVersion;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &Option<TableVersion>, s: S) -> Result<S::Ok, S::Error> {
+        v.map(TableVersion::get).serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<TableVersion>, D::Error> {
+        Ok(Option::<u64>::deserialize(d)?.and_then(TableVersion::new))
+    }
+
+    /// The same, written as 0 for none.
+    pub mod zero_for_none {
+        use super::TableVersion;
+        use serde::{Deserializer, Serializer};
+
+        pub fn serialize<S: Serializer>(v: &Option<TableVersion>, s: S) -> Result<S::Ok, S::Error> {
+            s.serialize_u64(v.map_or(0, TableVersion::get))
+        }
+
+        pub fn deserialize<'de, D: Deserializer<'de>>(
+            d: D,
+        ) -> Result<Option<TableVersion>, D::Error> {
+            super::deserialize(d)
+        }
+    }
+}
+
 /// A part's id (serial number) as the gauge sent it, checked by the gauges' rule
 /// ([`valid_part_ident`]): 1–32 characters of `A–Z a–z 0–9 . _ -`.
 #[derive(Clone, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize)]

@@ -8,7 +8,7 @@ use crate::record::Record;
 use camloop_core::digest::Sha256;
 use camloop_core::ids::{PartId, TableVersion};
 use camloop_core::learn::{LearningParams, LearningState, PreviousPart};
-use serde::{Deserialize, Deserializer, Serialize, Serializer};
+use serde::{Deserialize, Deserializer, Serialize};
 
 /// Layout of [`LoopMemory`] written by this build. Records without the field are layout 1
 /// (one learning state, no version attribution) and are read as such.
@@ -41,7 +41,7 @@ pub struct LoopMemory {
     pub learning: LearningState,
     /// Version of the table on the control, None before the first delivery (written as 0,
     /// the form the journal and the store have always held).
-    #[serde(default, with = "version_or_zero")]
+    #[serde(default, with = "camloop_core::ids::lenient_version::zero_for_none")]
     pub in_force_version: Option<TableVersion>,
     /// A newer table that has not reached the control.
     #[serde(default)]
@@ -73,19 +73,6 @@ pub struct LoopMemory {
 
 fn layout_one() -> u32 {
     1
-}
-
-/// `Option<TableVersion>` as the integer the records always held, 0 for none.
-mod version_or_zero {
-    use super::*;
-
-    pub fn serialize<S: Serializer>(v: &Option<TableVersion>, s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_u64(v.map_or(0, TableVersion::get))
-    }
-
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<TableVersion>, D::Error> {
-        Ok(TableVersion::new(u64::deserialize(d)?))
-    }
 }
 
 fn lenient_part<'de, D: Deserializer<'de>>(d: D) -> Result<Option<PartId>, D::Error> {

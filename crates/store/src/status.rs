@@ -157,7 +157,9 @@ mod tests {
     fn the_shares_own_states_have_no_column() {
         for status in [
             VersionStatus::Delivering,
-            VersionStatus::Superseded { by: 4 },
+            VersionStatus::Superseded {
+                by: camloop_core::ids::TableVersion::new(4).unwrap(),
+            },
         ] {
             let e = status.column().unwrap_err().to_string();
             assert!(e.contains(&format!("`{}`", status.name())), "{e}");

@@ -78,7 +78,7 @@ pub enum VersionStatus {
     /// Never pushed, for this reason.
     Refused { reason: String },
     /// Not delivered before a newer version was accepted.
-    Superseded { by: u64 },
+    Superseded { by: camloop_core::ids::TableVersion },
 }
 
 /// What an event is about; stored as its snake_case name (serde, strum and the database

@@ -400,6 +400,10 @@ pub(crate) struct Quarantined {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn v(n: u64) -> crate::core::ids::TableVersion {
+        crate::core::ids::TableVersion::new(n).unwrap()
+    }
     use crate::core::learn::LearningParams;
     use crate::service::machine::memory::{LoopMemory, TableLearning};
     use crate::store::{EventLevel, VersionStatus};
@@ -481,7 +485,7 @@ mod tests {
         let orphan = Pending::VersionStatus {
             machine: "M1".parse().unwrap(),
             lobe: "IN1".parse().unwrap(),
-            version: 41,
+            version: v(41),
             status: VersionStatus::pushed_at(jiff::Timestamp::from_millisecond(8).unwrap(), "x"),
             at_ms: jiff::Timestamp::from_millisecond(8).unwrap(),
         };
@@ -577,7 +581,7 @@ mod tests {
             Pending::Table {
                 machine: "M1".parse().unwrap(),
                 lobe: "IN1".parse().unwrap(),
-                version: 3,
+                version: v(3),
                 parent_version: None,
                 table_number: 1,
                 program_text: "CTABDEF(X,C,1,1)\nCTABEND\n".into(),
@@ -593,7 +597,7 @@ mod tests {
             Pending::VersionStatus {
                 machine: "M1".parse().unwrap(),
                 lobe: "IN1".parse().unwrap(),
-                version: 3,
+                version: v(3),
                 status: VersionStatus::Pushed {
                     at_unix_ms: 8,
                     note: Some("pushed on retry".into()),

@@ -3,6 +3,7 @@
 
 use super::super::machine::memory::{LoopMemory, TableLearning};
 use crate::core::digest::Sha256;
+use crate::core::ids::TableVersion;
 use crate::names::{FeatureName, MachineName};
 pub use crate::store::EventKind;
 use crate::store::{
@@ -21,17 +22,19 @@ pub enum Pending {
     Measurement {
         #[serde(flatten)]
         measurement: NewMeasurement,
-        /// Version of the table on the control when the part was ground (0: none known).
-        #[serde(default)]
-        ground_with_version: u64,
+        /// Version of the table on the control when the part was ground (written 0 when
+        /// none is known, as it always was).
+        #[serde(default, with = "crate::core::ids::lenient_version::zero_for_none")]
+        ground_with_version: Option<TableVersion>,
     },
     Table {
         machine: MachineName,
         lobe: FeatureName,
         /// The share's version number (the one version counter).
-        version: u64,
+        version: TableVersion,
         /// The version in force when this one was made.
-        parent_version: Option<u64>,
+        #[serde(default, with = "crate::core::ids::lenient_version")]
+        parent_version: Option<TableVersion>,
         table_number: u32,
         program_text: String,
         learning: TableLearning,
@@ -44,15 +47,15 @@ pub enum Pending {
         #[serde(default)]
         measurement_id: Option<Sha256>,
         /// The version it re-pushes, for a rollback.
-        #[serde(default)]
-        rollback_of: Option<u64>,
+        #[serde(default, with = "crate::core::ids::lenient_version")]
+        rollback_of: Option<TableVersion>,
     },
     /// A later status of a recorded version (e.g. waiting → pushed once the share is back).
     #[serde(rename = "table_status")]
     VersionStatus {
         machine: MachineName,
         lobe: FeatureName,
-        version: u64,
+        version: TableVersion,
         status: VersionStatus,
         #[serde(with = "crate::clock::unix_ms")]
         at_ms: Timestamp,
@@ -235,7 +238,7 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
             version,
             ..
         } => store
-            .table_version_status(machine, lobe, *version as i64)
+            .table_version_status(machine, lobe, version.to_i64())
             .await?
             .is_some(),
         Pending::VersionStatus {
@@ -245,7 +248,7 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
             status,
             ..
         } => store
-            .table_version_status(machine, lobe, *version as i64)
+            .table_version_status(machine, lobe, version.to_i64())
             .await?
             .is_some_and(|s| s.name() == status.name()),
         Pending::Event { .. } => match record.event()? {
@@ -317,7 +320,7 @@ pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreEr
             at_ms,
         } => {
             store
-                .set_table_status(&machine, &lobe, version as i64, &status, at_ms)
+                .set_table_status(&machine, &lobe, version.to_i64(), &status, at_ms)
                 .await
         }
         Pending::Event { .. } => match record.event()? {
@@ -371,11 +374,11 @@ async fn insert_table(store: &Store, record: Pending) -> Result<(), StoreError> 
     let parent_version = match parent_version {
         Some(p)
             if store
-                .table_version_status(&machine, &lobe, p as i64)
+                .table_version_status(&machine, &lobe, p.to_i64())
                 .await?
                 .is_some() =>
         {
-            Some(p as i64)
+            Some(p.to_i64())
         }
         _ => None,
     };
@@ -384,7 +387,7 @@ async fn insert_table(store: &Store, record: Pending) -> Result<(), StoreError> 
     let t = NewTableVersion {
         machine,
         lobe,
-        version: Some(version as i64),
+        version: Some(version.to_i64()),
         parent_version,
         table_number,
         program_text,
@@ -512,7 +515,7 @@ mod tests {
         else {
             panic!("{record:?}");
         };
-        assert_eq!(*ground_with_version, 5);
+        assert_eq!(ground_with_version.map(|v| v.get()), Some(5));
         assert_eq!((m.machine.as_str(), m.part.as_str()), ("G7", "S-1"));
         assert_eq!(
             (m.verdict, m.points_per_rev, m.recipe_snapshot),
@@ -531,7 +534,7 @@ mod tests {
         assert!(matches!(
             record,
             Pending::Measurement {
-                ground_with_version: 0,
+                ground_with_version: None,
                 ..
             }
         ));

@@ -28,7 +28,7 @@ pub(super) struct Draft {
     pub(super) learning: TableLearning,
     pub(super) reason: String,
     pub(super) measurement_id: Option<Sha256>,
-    pub(super) rollback_of: Option<u64>,
+    pub(super) rollback_of: Option<TableVersion>,
     pub(super) at_ms: jiff::Timestamp,
 }
 
@@ -67,7 +67,7 @@ impl FeatureLoop {
     pub(super) async fn deliver_order(
         &mut self,
         order: TableOrder,
-    ) -> Result<(u64, VersionStatus, Vec<Pending>), MachineError> {
+    ) -> Result<(TableVersion, VersionStatus, Vec<Pending>), MachineError> {
         let at_ms = order.at;
         self.machine.handle(Input::Table(Box::new(order)));
         let done = self
@@ -82,11 +82,7 @@ impl FeatureLoop {
                 reason: "the feature's loop ended a table order without its outcome".into(),
             })??;
         let records = records::pending(&self.name, &self.setup.name, done.records, None);
-        Ok((
-            done.version.get(),
-            records::status(done.status, at_ms),
-            records,
-        ))
+        Ok((done.version, records::status(done.status, at_ms), records))
     }
 
     /// The records a table's way left for the caller to keep with its own, or why it failed.
@@ -160,21 +156,23 @@ impl FeatureLoop {
 
     /// The log's word on the newest delivery.
     pub(super) fn delivery_line(&self) -> String {
-        let number = |v: u64| {
+        let number = |v: TableVersion| {
             self.share
                 .history()
                 .get(v)
                 .map_or(String::new(), |s| format!(" (T{})", s.record.table_number))
         };
         let memory = self.machine.memory();
-        let in_force = memory.in_force_version.map_or(0, |v| v.get());
+        let in_force = memory.in_force_version;
+        let shown = in_force.map_or(0, TableVersion::get);
+        let number_in_force = in_force.map_or(String::new(), number);
         match &memory.waiting {
             Some(w) => format!(
-                "table v{}{} waiting for the share (v{in_force} in force)",
+                "table v{}{} waiting for the share (v{shown} in force)",
                 w.version,
-                number(w.version.get()),
+                number(w.version),
             ),
-            None => format!("table v{in_force}{} pushed", number(in_force)),
+            None => format!("table v{shown}{number_in_force} pushed"),
         }
     }
 
@@ -182,13 +180,13 @@ impl FeatureLoop {
     /// C offset and direction are on its axes line).
     pub(super) fn provenance(
         &self,
-        version: u64,
+        version: TableVersion,
         parent: Option<TableVersion>,
         learning: &TableLearning,
     ) -> Provenance {
         Provenance {
             camloop_version: env!("CARGO_PKG_VERSION").to_string(),
-            table_version: version,
+            table_version: version.get(),
             parent_version: parent.map(|v| v.get()),
             created_utc: crate::clock::utc_text(crate::clock::now()),
             recipe: self.setup.part.clone(),

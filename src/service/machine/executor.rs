@@ -17,11 +17,6 @@ use camloop_loop::machine::{Alarm, Effect, Finished, Metric, Program, RenderOrde
 use camloop_loop::{FeatureMachine, Input};
 use tracing::{error, warn};
 
-/// The share's version number as the loop's id (the share counts from 1).
-pub(super) fn version(n: u64) -> TableVersion {
-    TableVersion::new(n).expect("the share numbers versions from 1")
-}
-
 impl FeatureLoop {
     /// Carries out the machine's effects until it has none; returns what its inputs came
     /// to. `raw` is the measurement being worked on, whose samples its records keep.
@@ -75,7 +70,7 @@ impl FeatureLoop {
 
     /// Renders a table for the share's next number with its provenance.
     fn render(&mut self, order: RenderOrder) -> Input<'static> {
-        let version = version(self.share.history().next_version());
+        let version = self.share.history().next_version();
         let (table, planned) = match order.program {
             Program::Text { text, table_number } => {
                 // A rollback's program, made for the plan in force when there is one.
@@ -98,7 +93,7 @@ impl FeatureLoop {
         let learning = &order.learning;
         let mut settings = self.setup.program.clone();
         settings.table_number = self.share.next_table_number();
-        settings.provenance = Some(self.provenance(version.get(), order.parent, learning));
+        settings.provenance = Some(self.provenance(version, order.parent, learning));
         settings.comment_lines = vec![
             comment_text(&format!("reason: {}", order.reason)),
             comment_text(&format!(
@@ -131,7 +126,7 @@ impl FeatureLoop {
             learning: record.learning,
             reason: record.reason,
             measurement_id: record.measurement,
-            rollback_of: record.rollback_of.map(|v| v.get()),
+            rollback_of: record.rollback_of,
             at_ms: record.at,
         };
         let request = match self.request(draft) {
@@ -145,7 +140,7 @@ impl FeatureLoop {
         };
         match self.share.submit(request) {
             Ok(Submitted::Accepted { version: v }) => Input::Submitted {
-                version: self::version(v),
+                version: v,
                 outcome: Ok(()),
             },
             Ok(Submitted::Refused { reason, .. }) => {
@@ -165,9 +160,9 @@ impl FeatureLoop {
     /// Delivers the version just submitted.
     fn deliver_to_share(&mut self, version: TableVersion) -> Input<'static> {
         match self.share.deliver() {
-            Ok(Some(p)) if p.version == version.get() => Input::Delivered { version, at: now() },
+            Ok(Some(p)) if p.version == version => Input::Delivered { version, at: now() },
             Err(PushError::Share { version: v, error }) => Input::ShareUnavailable {
-                version: self::version(v),
+                version: v,
                 reason: error.to_string(),
                 at: now(),
             },

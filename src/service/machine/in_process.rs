@@ -203,6 +203,7 @@ impl FeatureLoop {
         let pushed = matches!(delivered, Ok((_, VersionStatus::Pushed { .. }, _)));
         let count = ready.disarm(pushed);
         let (version, _, mut records) = delivered?;
+        let version = version.get();
         let at_ms = now();
         let outcome = if pushed {
             info!(machine = %self.name, part, version, ready = count, "same-part finish table on the share");

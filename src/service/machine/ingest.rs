@@ -276,7 +276,7 @@ impl FeatureLoop {
                 measured,
                 at_ms,
             ),
-            ground_with_version: in_force.map_or(0, |v| v.get()),
+            ground_with_version: in_force,
         }
     }
 

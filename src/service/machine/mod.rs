@@ -46,6 +46,7 @@ mod shaft;
 
 use super::metrics::Metrics;
 use crate::clock::now;
+use crate::core::ids::TableVersion;
 use crate::core::turn::measurement_sha256;
 use crate::names::{FeatureName, MachineName};
 use crate::recipe::FeatureSetup;
@@ -451,7 +452,7 @@ impl MachineLoop {
     pub async fn rollback(
         &mut self,
         lobe: &FeatureName,
-        version: u64,
+        version: TableVersion,
     ) -> Result<RolledBack, RollbackError> {
         let Some(feature) = self.features.iter_mut().find(|f| f.feature_name() == lobe) else {
             return Err(RollbackError::UnknownFeature {
@@ -481,7 +482,7 @@ impl MachineLoop {
     /// version is checked first; nothing is pushed unless all of them can be.
     pub async fn rollback_part(
         &mut self,
-        versions: &[(FeatureName, u64)],
+        versions: &[(FeatureName, TableVersion)],
     ) -> Result<Vec<RolledBack>, RollbackError> {
         for (lobe, version) in versions {
             let names = self.feature_names().join(", ");

@@ -10,7 +10,6 @@
 use super::super::journal::Pending;
 use super::FeatureLoop;
 use super::delivery::Draft;
-use super::executor::version;
 use super::memory::{TableLearning, WaitingTable};
 use super::records::event;
 use crate::clock::now;
@@ -18,6 +17,7 @@ use crate::core::learn::LearningState;
 use crate::share::{Submitted, VersionStatus};
 use crate::store::EventLevel;
 use anyhow::Context;
+use camloop_loop::TableVersion;
 use tracing::{error, info, warn};
 
 impl FeatureLoop {
@@ -28,27 +28,18 @@ impl FeatureLoop {
         let history = self.share.history();
         let pushed = history.last_pushed().map(|v| v.record.version);
         let waiting = history.waiting().map(|v| v.record.version);
-        let in_force = self
-            .machine
-            .memory()
-            .in_force_version
-            .map_or(0, |v| v.get());
-        let known_waiting = self
-            .machine
-            .memory()
-            .waiting
-            .as_ref()
-            .map(|w| w.version.get());
+        let in_force = self.machine.memory().in_force_version;
+        let known_waiting = self.machine.memory().waiting.as_ref().map(|w| w.version);
         if let Some(w) = waiting
-            && w > in_force
+            && Some(w) > in_force
             && known_waiting != Some(w)
         {
             match self.made_from(w).await {
                 Some(t) => {
-                    info!(machine = %self.name, feature = %self.setup.name, version = w, "a version the share holds but the memory did not: waits with the correction it was made from");
+                    info!(machine = %self.name, feature = %self.setup.name, version = w.get(), "a version the share holds but the memory did not: waits with the correction it was made from");
                     let memory = self.machine.memory_mut();
                     memory.waiting = Some(WaitingTable {
-                        version: version(w),
+                        version: w,
                         learning: adopt(&memory.learning, &t),
                         wheel_radius_mm: t.wheel_radius_mm,
                         // Not known here: a start after its delivery makes it again.
@@ -56,12 +47,12 @@ impl FeatureLoop {
                     });
                 }
                 None => {
-                    warn!(machine = %self.name, feature = %self.setup.name, version = w, "the share's waiting version has no record here: delivered with the correction in force");
+                    warn!(machine = %self.name, feature = %self.setup.name, version = w.get(), "the share's waiting version has no record here: delivered with the correction in force");
                     // It waits in the memory as made from the correction in force, so the
                     // machine's retry delivers it like any other.
                     let memory = self.machine.memory_mut();
                     memory.waiting = Some(WaitingTable {
-                        version: version(w),
+                        version: w,
                         learning: memory.learning.clone(),
                         wheel_radius_mm: memory.wheel_radius_mm,
                         va_speed_rpm: memory.in_force_va_speed_rpm,
@@ -69,18 +60,13 @@ impl FeatureLoop {
                 }
             }
         }
-        let Some(p) = pushed.filter(|p| *p != in_force) else {
+        let Some(p) = pushed.filter(|p| Some(*p) != in_force) else {
             return Ok(());
         };
         // Killed between the push and the record of it: the share is the authority, and the
         // correction in force is the one that table was made from, not the one before it.
-        info!(machine = %self.name, feature = %self.setup.name, share_version = p, memory_version = in_force, "version in force taken from the share's manifest");
-        let now_waiting = self
-            .machine
-            .memory()
-            .waiting
-            .as_ref()
-            .map(|w| w.version.get());
+        info!(machine = %self.name, feature = %self.setup.name, share_version = p.get(), memory_version = in_force.map_or(0, |v| v.get()), "version in force taken from the share's manifest");
+        let now_waiting = self.machine.memory().waiting.as_ref().map(|w| w.version);
         if now_waiting != Some(p) {
             match self.made_from(p).await {
                 Some(t) => {
@@ -88,11 +74,10 @@ impl FeatureLoop {
                     memory.learning = adopt(&memory.learning, &t);
                 }
                 None => {
-                    warn!(machine = %self.name, feature = %self.setup.name, version = p, "the version in force has no record here: learning goes on from the memory's correction")
+                    warn!(machine = %self.name, feature = %self.setup.name, version = p.get(), "the version in force has no record here: learning goes on from the memory's correction")
                 }
             }
         }
-        let p = version(p);
         let memory = self.machine.memory_mut();
         memory.delivered(p);
         // A waiting version older than the one pushed was superseded on the share.
@@ -140,7 +125,7 @@ impl FeatureLoop {
                 _ => continue,
             };
             if status.name() != said {
-                info!(machine = %self.name, feature = %mine, version, status = status.name(), "status taken from the share's manifest");
+                info!(machine = %self.name, feature = %mine, version = version.get(), status = status.name(), "status taken from the share's manifest");
                 records.push(Pending::VersionStatus {
                     machine: self.name.clone(),
                     lobe: mine.clone(),
@@ -160,7 +145,7 @@ impl FeatureLoop {
     fn submit_journalled(&mut self) -> anyhow::Result<()> {
         let first = self.share.history().next_version();
         let mine = &self.setup.name;
-        let mut drafts: Vec<(u64, Draft)> = self
+        let mut drafts: Vec<(TableVersion, Draft)> = self
             .journal
             .records()
             .iter()
@@ -200,7 +185,7 @@ impl FeatureLoop {
                     let request = self.request(draft)?;
                     match self.share.submit(request).context("share state folder")? {
                         Submitted::Accepted { .. } => {
-                            info!(machine = %self.name, feature = %mine, version, "version journalled before a stop submitted to the share");
+                            info!(machine = %self.name, feature = %mine, version = version.get(), "version journalled before a stop submitted to the share");
                             continue;
                         }
                         Submitted::Refused { reason, .. } => reason,
@@ -208,7 +193,7 @@ impl FeatureLoop {
                 }
                 next => format!("journalled as v{version} but the share is at v{next}"),
             };
-            error!(machine = %self.name, feature = %mine, version, reason = %outcome, "journalled version not submitted");
+            error!(machine = %self.name, feature = %mine, version = version.get(), reason = %outcome, "journalled version not submitted");
             records.push(Pending::VersionStatus {
                 machine: self.name.clone(),
                 lobe: mine.clone(),
@@ -233,7 +218,7 @@ impl FeatureLoop {
     }
 
     /// The correction version `version` was made from: its journal record, else the store's.
-    async fn made_from(&mut self, version: u64) -> Option<TableLearning> {
+    async fn made_from(&mut self, version: TableVersion) -> Option<TableLearning> {
         let journalled = self.journal.records().iter().rev().find_map(|r| match r {
             Pending::Table {
                 lobe,
@@ -248,13 +233,13 @@ impl FeatureLoop {
         }
         let store = self.store.read().await.clone()?;
         let stored = store
-            .table_version(&self.name, &self.setup.name, version as i64)
+            .table_version(&self.name, &self.setup.name, version.to_i64())
             .await;
         match stored {
             Ok(Some(t)) => serde_json::from_str(&t.learning_params_json).ok(),
             Ok(None) => None,
             Err(e) => {
-                warn!(machine = %self.name, version, error = %e, "stored version unreadable");
+                warn!(machine = %self.name, version = version.get(), error = %e, "stored version unreadable");
                 None
             }
         }

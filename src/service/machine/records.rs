@@ -73,14 +73,14 @@ pub(super) fn pending(
                 let raw = raw?;
                 Some(Pending::Measurement {
                     measurement: measurement(machine, lobe, raw, &sha256, &measured, at),
-                    ground_with_version: ground_with.map_or(0, |v| v.get()),
+                    ground_with_version: ground_with,
                 })
             }
             Record::Table(t) => Some(Pending::Table {
                 machine: machine.clone(),
                 lobe: lobe.clone(),
-                version: t.version.get(),
-                parent_version: t.parent.map(|v| v.get()),
+                version: t.version,
+                parent_version: t.parent,
                 table_number: t.table_number,
                 program_text: t.program_text,
                 learning: t.learning,
@@ -88,7 +88,7 @@ pub(super) fn pending(
                 status: status(t.status, t.at),
                 created_at_ms: t.at,
                 measurement_id: t.measurement,
-                rollback_of: t.rollback_of.map(|v| v.get()),
+                rollback_of: t.rollback_of,
             }),
             Record::Status {
                 version,
@@ -97,7 +97,7 @@ pub(super) fn pending(
             } => Some(Pending::VersionStatus {
                 machine: machine.clone(),
                 lobe: lobe.clone(),
-                version: version.get(),
+                version,
                 status: status(s, at),
                 at_ms: at,
             }),

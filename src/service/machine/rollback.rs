@@ -27,7 +27,7 @@ pub enum RollbackError {
     NotFound {
         machine: MachineName,
         lobe: FeatureName,
-        version: u64,
+        version: TableVersion,
     },
     #[error("history store unavailable: cannot read the stored version")]
     StoreUnavailable,
@@ -41,8 +41,8 @@ pub enum RollbackError {
 /// What a rollback delivered.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RolledBack {
-    pub to_version: u64,
-    pub new_version: u64,
+    pub to_version: TableVersion,
+    pub new_version: TableVersion,
     pub table_number: u32,
     pub summary: String,
 }
@@ -56,7 +56,7 @@ impl FeatureLoop {
     pub async fn rollback(
         &mut self,
         lobe: &FeatureName,
-        version: u64,
+        version: TableVersion,
     ) -> Result<RolledBack, RollbackError> {
         if *lobe != self.setup.name {
             return Err(RollbackError::UnknownFeature {
@@ -82,13 +82,13 @@ impl FeatureLoop {
             next: Box::new(next),
             reason: reason.clone(),
             measurement: None,
-            rollback_of: TableVersion::new(version),
+            rollback_of: Some(version),
             learning: Some(learning),
             at: at_ms,
         };
         let (new_version, status, mut records) = self.deliver_order(order).await?;
         let why = status.why();
-        info!(machine = %self.name, lobe = lobe.as_str(), version, new_version, table_number = number, status = status.name(), "rollback");
+        info!(machine = %self.name, lobe = lobe.as_str(), version = version.get(), new_version = new_version.get(), table_number = number, status = status.name(), "rollback");
         records.extend([
             event(
                 &self.name,
@@ -115,7 +115,7 @@ impl FeatureLoop {
     pub(super) async fn rollback_program(
         &mut self,
         lobe: &FeatureName,
-        version: u64,
+        version: TableVersion,
     ) -> Result<(String, TableLearning, u32), RollbackError> {
         let store = self
             .store
@@ -124,7 +124,7 @@ impl FeatureLoop {
             .clone()
             .ok_or(RollbackError::StoreUnavailable)?;
         let old = store
-            .table_version(&self.name, lobe, version as i64)
+            .table_version(&self.name, lobe, version.to_i64())
             .await
             .context("reading the stored version")?
             .ok_or_else(|| RollbackError::NotFound {
@@ -170,7 +170,7 @@ impl FeatureLoop {
     fn planned_rollback(
         &mut self,
         learning: &TableLearning,
-        version: u64,
+        version: TableVersion,
         number: u32,
         provenance: crate::core::program::Provenance,
     ) -> anyhow::Result<String> {
