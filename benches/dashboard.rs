@@ -1,13 +1,15 @@
 //! The dashboard on a large store: the plant overview and a feature page rendered by the
-//! server (over a real loopback connection, as a browser asks) with 50 machines and
-//! 1,000,000 measurements in SQLite; and the live channel with 50 open event streams: from a
-//! measurement stored to all 50 clients having it. Prints p50/p99 besides criterion's
-//! estimate.
+//! server (over a real loopback connection, as a browser asks) with 50 machines grinding one
+//! lobe and 1,000,000 measurements in SQLite, then the overview of a plant of 500 machines
+//! grinding the demo camshaft's 8 lobes (4,000 features, 1,000,000 measurements); and the
+//! live channel with 50 open event streams: from a measurement stored to all 50 clients
+//! having it. Prints p50/p99 besides criterion's estimate.
 //!
 //! The store is generated in the setup: the million summary rows by one recursive INSERT in
-//! SQLite itself (seconds), then, per machine, what the pages read besides the summaries: the
-//! newest part's profile and analysis report (360 points), 20 table versions with a
-//! 360-point program, 10 events, a learning state and a recipe snapshot.
+//! SQLite itself (seconds), then, per feature, what the pages read besides the summaries: the
+//! newest part's profile and analysis report (360 points), table versions with a 360-point
+//! program (20 per feature in the small plant, 2 in the large one, which the overview reads
+//! only the newest of), a learning state, and per machine 10 events and a recipe snapshot.
 
 use camloop::config::Secret;
 use camloop::names::MachineName;
@@ -23,14 +25,36 @@ use std::time::{Duration, Instant};
 use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
 use tokio::sync::{mpsc, watch};
 
-const MACHINES: usize = 50;
 const MEASUREMENTS: i64 = 1_000_000;
+
+/// The plant a store is seeded for and the service serves.
+#[derive(Clone, Copy)]
+struct Plant {
+    machines: usize,
+    features: &'static [&'static str],
+    /// Table versions kept per feature.
+    versions: i64,
+}
+
+/// 50 machines grinding one lobe: the figures since the dashboard was first measured.
+const SMALL: Plant = Plant {
+    machines: 50,
+    features: &["IN1"],
+    versions: 20,
+};
+
+/// The plant-scale goal: 500 machines grinding the demo camshaft's 8 lobes.
+const LARGE: Plant = Plant {
+    machines: 500,
+    features: &["IN1", "EX1", "IN2", "EX2", "IN3", "EX3", "IN4", "EX4"],
+    versions: 2,
+};
 const POINTS: usize = 360;
 /// 2026-01-01, the first part's time; one part a second across the plant.
 const T0_MS: i64 = 1_767_225_600_000;
 
 fn machine(i: usize) -> String {
-    format!("M{i:02}")
+    format!("M{i:03}")
 }
 
 async fn exec(store: &Store, sql: &str) {
@@ -70,10 +94,11 @@ fn program() -> String {
     s + "CTABEND\nM17\n"
 }
 
-/// 50 machines, 1 M measurements and what the pages read besides them.
-async fn seed(store: &Store) {
+/// `plant`'s machines, 1 M measurements spread over its features, and what the pages read
+/// besides them (in one transaction: thousands of rows, one sync).
+async fn seed(store: &Store, plant: Plant) {
     let t = Instant::now();
-    let values: Vec<String> = (0..MACHINES)
+    let values: Vec<String> = (0..plant.machines)
         .map(|i| format!("('{}', {T0_MS})", machine(i)))
         .collect();
     exec(
@@ -91,79 +116,107 @@ async fn seed(store: &Store) {
              INSERT INTO measurements (machine, part, lobe, received_at_ms, verdict, \
              max_profile_error_um, base_radius_error_um, phase_error_deg, revolutions_used, \
              points_per_rev, origin, sha256) \
-             SELECT printf('M%02d', i % {MACHINES}), CAST(i / {MACHINES} AS TEXT), 'IN1', \
-             {T0_MS} + i * 1000, CASE WHEN i % 17 = 0 THEN 'fail' ELSE 'pass' END, \
+             SELECT printf('M%03d', i % {machines}), CAST(i / {machines} AS TEXT), \
+             {feature_case}, {T0_MS} + i * 1000, CASE WHEN i % 17 = 0 THEN 'fail' ELSE 'pass' END, \
              (abs(random()) % 3000) / 1000.0, ((abs(random()) % 2000) - 1000) / 1000.0, \
              ((abs(random()) % 200) - 100) / 10000.0, 3, {POINTS}, 'can0', printf('%064x', i) \
              FROM n",
-            last = MEASUREMENTS - 1
+            last = MEASUREMENTS - 1,
+            machines = plant.machines,
+            feature_case = feature_case(plant),
         ),
     )
     .await;
     let RawPool::Sqlite(pool) = store.raw_pool() else {
         panic!("sqlite")
     };
-    let mut lift = Vec::new();
-    encode_lifts_mm(vec![1.5; POINTS], &mut lift).unwrap();
-    let text = program();
-    for i in 0..MACHINES {
+    let mut tx = pool.begin().await.unwrap();
+    for i in 0..plant.machines {
         let m = machine(i);
-        let newest: i64 = sqlx::query_scalar("SELECT MAX(id) FROM measurements WHERE machine = $1")
-            .bind(&m)
-            .fetch_one(pool)
-            .await
-            .unwrap();
-        sqlx::query("INSERT INTO measurement_data (measurement_id, averaged_profile, analysis_json) VALUES ($1, $2, $3)")
-            .bind(newest).bind(&lift).bind(report(i)).execute(pool).await.unwrap();
         sqlx::query("INSERT INTO recipe_snapshots (machine, part, lobe, kind, recipe_json, sha256, created_at_ms) VALUES ($1, 'DEMO-CAM', 'IN1', 'lobe', '{}', $2, $3)")
-            .bind(&m).bind(format!("{i:064x}")).bind(T0_MS).execute(pool).await.unwrap();
-        for v in 1..=20i64 {
-            let id: i64 = sqlx::query_scalar("INSERT INTO table_versions (machine, lobe, version, parent_version, table_number, program_text, sha256, learning_params_json, reason, created_at_ms) VALUES ($1, 'IN1', $2, $3, $4, $5, $6, '{}', $7, $8) RETURNING id")
-                .bind(&m).bind(v).bind((v > 1).then_some(v - 1)).bind(1 + v % 2).bind(&text)
-                .bind(format!("{:064x}", v)).bind(format!("part {v}: learned")).bind(T0_MS + v * 60_000)
-                .fetch_one(pool).await.unwrap();
-            sqlx::query("INSERT INTO table_version_status (table_version_id, status, why, at_ms) VALUES ($1, 'pushed', 'pushed to share', $2)")
-                .bind(id).bind(T0_MS + v * 60_000).execute(pool).await.unwrap();
-        }
+            .bind(&m).bind(format!("{i:064x}")).bind(T0_MS).execute(&mut *tx).await.unwrap();
         for k in 0..10i64 {
             sqlx::query("INSERT INTO events (machine, at_ms, level, kind, message) VALUES ($1, $2, $3, 'table_refused', 'step too large')")
                 .bind(&m).bind(T0_MS + k * 1000).bind(if k == 9 { "error" } else { "info" })
-                .execute(pool).await.unwrap();
+                .execute(&mut *tx).await.unwrap();
         }
-        let memory =
-            serde_json::json!({"learning": {"correction_um": vec![0.25; POINTS], "frozen": null}});
-        sqlx::query("INSERT INTO learning_states (machine, lobe, state_json, saved_at_ms) VALUES ($1, 'IN1', $2, $3)")
-            .bind(&m).bind(memory.to_string()).bind(T0_MS).execute(pool).await.unwrap();
+        for f in plant.features {
+            seed_feature(&mut tx, plant, i, f).await;
+        }
     }
+    tx.commit().await.unwrap();
     exec(store, "ANALYZE").await;
     eprintln!(
-        "seeded 50 machines, {MEASUREMENTS} measurements in {:.1} s",
+        "seeded {} machines × {} features, {MEASUREMENTS} measurements in {:.1} s",
+        plant.machines,
+        plant.features.len(),
         t.elapsed().as_secs_f64()
     );
 }
 
-/// The service's HTTP side on port 0 with the 50 machines configured on the demo lobe.
-async fn serve(store: Store) -> (SocketAddr, watch::Sender<bool>) {
+/// The SQL that names the feature of measurement `i` (its machine is `i % machines`): each
+/// machine's parts go round its features.
+fn feature_case(plant: Plant) -> String {
+    let n = plant.features.len();
+    let arms: String = plant
+        .features
+        .iter()
+        .enumerate()
+        .map(|(k, f)| format!(" WHEN {k} THEN '{f}'"))
+        .collect();
+    format!("CASE (i / {}) % {n}{arms} END", plant.machines)
+}
+
+/// One feature's newest part data, table versions and learning state.
+async fn seed_feature(
+    tx: &mut sqlx::Transaction<'_, sqlx::Sqlite>,
+    plant: Plant,
+    i: usize,
+    feature: &str,
+) {
+    let m = machine(i);
+    let mut lift = Vec::new();
+    encode_lifts_mm(vec![1.5; POINTS], &mut lift).unwrap();
+    let newest: i64 =
+        sqlx::query_scalar("SELECT MAX(id) FROM measurements WHERE machine = $1 AND lobe = $2")
+            .bind(&m)
+            .bind(feature)
+            .fetch_one(&mut **tx)
+            .await
+            .unwrap();
+    sqlx::query("INSERT INTO measurement_data (measurement_id, averaged_profile, analysis_json) VALUES ($1, $2, $3)")
+        .bind(newest).bind(&lift).bind(report(i)).execute(&mut **tx).await.unwrap();
+    let text = program();
+    for v in 1..=plant.versions {
+        let id: i64 = sqlx::query_scalar("INSERT INTO table_versions (machine, lobe, version, parent_version, table_number, program_text, sha256, learning_params_json, reason, created_at_ms) VALUES ($1, $2, $3, $4, $5, $6, $7, '{}', $8, $9) RETURNING id")
+            .bind(&m).bind(feature).bind(v).bind((v > 1).then_some(v - 1)).bind(1 + v % 2).bind(&text)
+            .bind(format!("{:064x}", v)).bind(format!("part {v}: learned")).bind(T0_MS + v * 60_000)
+            .fetch_one(&mut **tx).await.unwrap();
+        sqlx::query("INSERT INTO table_version_status (table_version_id, status, why, at_ms) VALUES ($1, 'pushed', 'pushed to share', $2)")
+            .bind(id).bind(T0_MS + v * 60_000).execute(&mut **tx).await.unwrap();
+    }
+    let memory =
+        serde_json::json!({"learning": {"correction_um": vec![0.25; POINTS], "frozen": null}});
+    sqlx::query("INSERT INTO learning_states (machine, lobe, state_json, saved_at_ms) VALUES ($1, $2, $3, $4)")
+        .bind(&m).bind(feature).bind(memory.to_string()).bind(T0_MS).execute(&mut **tx).await.unwrap();
+}
+
+/// The service's HTTP side on port 0 with `plant`'s machines configured on the demo
+/// camshaft's lobes.
+async fn serve(store: Store, plant: Plant) -> (SocketAddr, watch::Sender<bool>) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-camshaft.toml");
-    let setup = Recipe::load(&path)
-        .unwrap()
-        .feature_setup(&path, "IN1")
-        .unwrap();
-    let sheet = FeatureSheet::from_setup(&setup);
+    let recipe = Recipe::load(&path).unwrap();
     let mut machines = BTreeMap::new();
     let mut sheets = BTreeMap::new();
-    for i in 0..MACHINES {
-        machines.insert(
-            MachineName::new(&machine(i)).unwrap(),
-            vec!["IN1".parse().unwrap()],
-        );
-        sheets.insert(
-            (
-                MachineName::new(&machine(i)).unwrap(),
-                "IN1".parse().unwrap(),
-            ),
-            sheet.clone(),
-        );
+    for i in 0..plant.machines {
+        let name = MachineName::new(&machine(i)).unwrap();
+        let features: Vec<camloop::names::FeatureName> =
+            plant.features.iter().map(|f| f.parse().unwrap()).collect();
+        for f in &features {
+            let setup = recipe.feature_setup(&path, f.as_str()).unwrap();
+            sheets.insert((name.clone(), f.clone()), FeatureSheet::from_setup(&setup));
+        }
+        machines.insert(name, features);
     }
     let limits = HttpLimits {
         max_connections: 256,
@@ -301,44 +354,88 @@ fn bench(c: &mut Criterion) {
         .enable_all()
         .build()
         .unwrap();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    // The plant-scale overview first, on a store of its own.
+    {
+        let (dir, store) = rt.block_on(seeded(LARGE));
+        let (addr, stop) = rt.block_on(serve(store, LARGE));
+        pages(c, &rt, addr, LARGE, &[("overview", "/".to_string())], cores);
+        let _ = stop.send(true);
+        drop(dir);
+    }
+    let (_dir, store) = rt.block_on(seeded(SMALL));
+    let (addr, stop) = rt.block_on(serve(store.clone(), SMALL));
+    let small_pages = [
+        ("overview", "/".to_string()),
+        ("feature_page", "/machines/M007/features/IN1".to_string()),
+    ];
+    pages(c, &rt, addr, SMALL, &small_pages, cores);
+    live(c, &rt, addr, &store, cores);
+    let _ = stop.send(true);
+}
+
+/// A store in a temporary folder, seeded for `plant`.
+async fn seeded(plant: Plant) -> (tempfile::TempDir, Store) {
     let dir = tempfile::tempdir_in(env!("CARGO_TARGET_TMPDIR")).unwrap();
     let url = format!("sqlite://{}/bench.db?mode=rwc", dir.path().display());
-    let store = rt.block_on(Store::connect(&url)).unwrap();
-    rt.block_on(seed(&store));
-    let (addr, stop) = rt.block_on(serve(store.clone()));
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let store = Store::connect(&url).await.unwrap();
+    seed(&store, plant).await;
+    (dir, store)
+}
 
-    for (name, path) in [
-        ("overview", "/".to_string()),
-        ("feature_page", "/machines/M07/features/IN1".to_string()),
-    ] {
+/// Each page 100 times for its percentiles, then criterion's estimate.
+fn pages(
+    c: &mut Criterion,
+    rt: &tokio::runtime::Runtime,
+    addr: SocketAddr,
+    plant: Plant,
+    pages: &[(&str, String)],
+    cores: usize,
+) {
+    let size = format!(
+        "{}_machines_{}_features",
+        plant.machines,
+        plant.features.len()
+    );
+    for (name, path) in pages {
         let times: Vec<Duration> = rt.block_on(async {
             let mut v = Vec::new();
             for _ in 0..100 {
                 let t = Instant::now();
-                get(addr, &path).await;
+                get(addr, path).await;
                 v.push(t.elapsed());
             }
             v
         });
         let (p50, p99) = percentiles(times);
-        let bytes = rt.block_on(get(addr, &path));
+        let bytes = rt.block_on(get(addr, path));
         eprintln!(
-            "{name} ({bytes} bytes, 50 machines, 1 M measurements, {cores} cores): p50 {p50:.1} ms, p99 {p99:.1} ms"
+            "{name} ({bytes} bytes, {} machines × {} features, 1 M measurements, {cores} cores): p50 {p50:.1} ms, p99 {p99:.1} ms",
+            plant.machines,
+            plant.features.len()
         );
-        c.bench_function(&format!("dashboard_{name}_50_machines_1M"), |b| {
-            b.iter(|| rt.block_on(get(addr, &path)))
+        c.bench_function(&format!("dashboard_{name}_{size}_1M"), |b| {
+            b.iter(|| rt.block_on(get(addr, path)))
         });
     }
+}
 
+/// The live channel: 50 event streams, from a measurement stored to all of them having it.
+fn live(
+    c: &mut Criterion,
+    rt: &tokio::runtime::Runtime,
+    addr: SocketAddr,
+    store: &Store,
+    cores: usize,
+) {
     let mut rx = rt.block_on(clients(addr, 50));
-    rt.block_on(wait_for_clients(&store, &mut rx));
+    rt.block_on(wait_for_clients(store, &mut rx));
     let mut k = 1000;
     let times: Vec<Duration> = rt.block_on(async {
         let mut v = Vec::new();
         for _ in 0..40 {
             k += 1;
-            v.push(one_live(&store, &mut rx, k, 50).await);
+            v.push(one_live(store, &mut rx, k, 50).await);
         }
         v
     });
@@ -354,14 +451,13 @@ fn bench(c: &mut Criterion) {
                 let mut total = Duration::ZERO;
                 for _ in 0..iters {
                     k += 1;
-                    total += one_live(&store, &mut rx, k, 50).await;
+                    total += one_live(store, &mut rx, k, 50).await;
                 }
                 total
             })
         })
     });
     g.finish();
-    let _ = stop.send(true);
 }
 
 criterion_group!(benches, bench);
