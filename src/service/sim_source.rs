@@ -285,14 +285,21 @@ impl SimSource {
     /// The table station `k` was ground with, as the grinder takes it: the coupled shape on
     /// the wheel the feature's program on the share was made for.
     fn commanded(&self, coupled: &Coupled, k: usize) -> CommandedTable {
+        let mut table = self.commanded_shape(coupled.shape.clone(), k);
+        table.plan = coupled.planned_speed();
+        table
+    }
+
+    /// Table `shape` for station `k` on the wheel its program was made for, at constant C.
+    fn commanded_shape(&self, shape: crate::sim::TableShape, k: usize) -> CommandedTable {
         let station = &self.stations[k];
         let table_r = f64::from_bits(station.table_wheel_radius_bits.load(Ordering::SeqCst));
         let feature = station.feature;
         CommandedTable {
-            shape: coupled.shape.clone(),
+            shape,
             x_zero_mm: table_r + feature.x_zero_mm() - feature.wheel_radius_mm(),
             wheel_radius_mm: table_r,
-            plan: coupled.planned_speed(),
+            plan: None,
         }
     }
 

@@ -439,7 +439,7 @@ pub fn stock_after_measure(cycle: &CycleSettings) -> f64 {
 }
 
 /// Coupled grinding, measurement revolutions and dwells of a run, s.
-fn times(run: &CycleRun) -> (f64, f64, f64) {
+pub fn times(run: &CycleRun) -> (f64, f64, f64) {
     let grind = run
         .ground
         .iter()
