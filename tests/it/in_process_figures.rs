@@ -143,12 +143,12 @@ fn row(label: &str, v: &[f64]) -> String {
 
 /// Through the service, with the measurement before the finish, judged on the measured
 /// error with the gauge's noise filtered off above 50 UPR (see [`UPR`]): the first shaft is
-/// within 1.5 µm where without the measurement it is over 10 µm, and every shaft from the
-/// third within 1.0 µm. The goal (1.0 µm, then 0.5 µm) is not reached through the
-/// service yet: the figures are in the manual's controller chapter, and what stands in the
-/// way (the wheel's wear between features) is said there.
+/// within the goal's 1.0 µm where without the measurement it is over 10 µm, and every shaft
+/// from the third within 1.0 µm. The goal's 0.5 µm from the third shaft is met by the
+/// crankshaft but not by the camshaft through the service yet (0.8–0.9 µm): the figures are
+/// in the manual's controller chapter, with what stands in the way (the wheel's wear).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn the_first_shaft_is_nearly_right_through_the_service() {
+async fn the_first_shaft_is_right_through_the_service() {
     let lobes = ["IN1", "EX1", "IN2", "EX2", "IN3", "EX3", "IN4", "EX4"];
     let pins = ["P1", "P2", "P3", "P4"];
     let mut out = String::new();
@@ -175,7 +175,7 @@ async fn the_first_shaft_is_nearly_right_through_the_service() {
     println!("{out}");
     for (file, with, without) in &all {
         let f = &with.filtered_um;
-        assert!(f[0] <= 1.5, "{file}: first shaft {:.2} µm\n{out}", f[0]);
+        assert!(f[0] <= 1.0, "{file}: first shaft {:.2} µm\n{out}", f[0]);
         assert!(without.filtered_um[0] > 10.0, "{file}\n{out}");
         assert!(
             f[2..].iter().all(|&e| e <= 1.0),
