@@ -166,20 +166,23 @@ fn check_machine(
     let recipe_path = config.resolve(&m.recipe);
     let setups = match Recipe::load(&recipe_path) {
         // The whole cycle needs a gauge that tells a measurement before the finish from a
-        // finished part's: the drop folder does (`<name>.in-process.csv`). The simulator
-        // does not run the whole cycle through the service yet, and CAN and serial frames
-        // carry no stage: refused rather than ignored.
+        // finished part's: the drop folder does (`<name>.in-process.csv`), and so does the
+        // simulator (it hands the service its in-process measurements as such). CAN and
+        // serial frames carry no stage: refused rather than ignored.
         Ok(recipe)
             if recipe
                 .cycle
                 .as_ref()
                 .is_some_and(|c| c.program == crate::core::cycle::CycleProgram::Whole)
-                && !matches!(m.gauge, GaugeSection::Drop { .. }) =>
+                && matches!(
+                    m.gauge,
+                    GaugeSection::Can { .. } | GaugeSection::Serial { .. }
+                ) =>
         {
             problems.push(ConfigProblem::at(
                 line("recipe"),
                 format!(
-                    "{label}.recipe: its [cycle] program = \"whole\" is not delivered by the service yet with this gauge (only a drop folder tells a measurement before the finish, as <name>.in-process.csv); set program = \"table-only\" (the cycle is checked, the machine builder's cycle grinds) or use kind = \"drop\""
+                    "{label}.recipe: its [cycle] program = \"whole\" needs a gauge that says which measurement is taken before the finish, and CAN and serial frames carry no stage; set program = \"table-only\" (the cycle is checked, the machine builder's cycle grinds) or use kind = \"drop\" (<name>.in-process.csv) or \"sim\""
                 ),
             ));
             None

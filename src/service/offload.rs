@@ -29,3 +29,10 @@ pub(crate) async fn drive<F: Future>(work: F) -> F::Output {
         None => work.await,
     }
 }
+
+/// Waits for `work` from blocking code that [`blocking`] runs (the simulated control waiting
+/// on the service's answer). None on a single-threaded runtime, where the wait could never
+/// end: the work it waits for would need the very thread that waits.
+pub(crate) fn wait<F: Future>(work: F) -> Option<F::Output> {
+    multi_threaded().map(|handle| handle.block_on(work))
+}

@@ -5,6 +5,10 @@
 //! out as CAN frames through the real DBC decoder and assembler in memory, exactly as a bus
 //! would deliver it.
 
+mod cycle;
+
+pub(crate) use cycle::WholeCycle;
+
 use super::machine::{GroundWith, MachineLoop, SourceEvent};
 use super::offload;
 use super::sources::Intake;
@@ -52,6 +56,8 @@ pub(crate) struct SimSource {
     pub part_interval: Duration,
     /// Stop after this many shafts (None: until shutdown).
     pub parts: Option<u64>,
+    /// The recipe's whole cycle, when the main program runs it (`[cycle] program = "whole"`).
+    pub cycle: Option<WholeCycle>,
 }
 
 impl SimSource {
@@ -92,6 +98,11 @@ impl SimSource {
             .max()
             .unwrap_or(0);
         let mut control = Control::new();
+        if self.cycle.is_some() {
+            // The whole cycle superimposes the infeed on the coupled X: the PLC enables X's
+            // overlay (DBX26.4) on a machine set up for it.
+            control.enable_overlay();
+        }
         if self.resume_pending() {
             // The operator resumes the shaft a stop interrupted (see the shaft program).
             control.set_r_param(RESUME_R_PARAM, -1.0);
@@ -110,6 +121,26 @@ impl SimSource {
                 && !self.gauge_study(&mut sim, &dbc, &tx, &shutdown).await
             {
                 return;
+            }
+            if let Some(whole) = &self.cycle {
+                // The whole cycle has no resume: every run grinds a new shaft.
+                let next = shaft + 1;
+                let finished = offload::blocking(|| {
+                    self.run_whole(whole, &mut control, &mut sim, &dbc, &tx, next)
+                });
+                let Some(finished) = finished else { continue };
+                (runs, shaft) = (runs + 1, next);
+                for (raw, ground_with) in finished {
+                    if !send_and_wait(&tx, raw, ground_with).await {
+                        return;
+                    }
+                }
+                if let Some(d) = sim.after_part()
+                    && !send_dressing(&tx, d).await
+                {
+                    return;
+                }
+                continue;
             }
             // The control runs the main program, which calls the table programs: the tables
             // it couples are what gets ground, at the stations where Z stands.
@@ -239,23 +270,52 @@ impl SimSource {
         gauged: u64,
     ) -> Option<crate::core::measure::RawMeasurement> {
         let station = &self.stations[k];
-        let table_r = f64::from_bits(station.table_wheel_radius_bits.load(Ordering::SeqCst));
-        let feature = station.feature;
-        let table = CommandedTable {
-            shape: coupled.shape.clone(),
-            x_zero_mm: table_r + feature.x_zero_mm() - feature.wheel_radius_mm(),
-            wheel_radius_mm: table_r,
-            plan: coupled.planned_speed(),
-        };
+        let table = self.commanded(coupled, k);
         let errors = self.grinder.shaft.station(k + 1, station.z_mm);
-        let ground = match sim.grind_station(&table, &workpiece(feature), &errors) {
+        let ground = match sim.grind_station(&table, &workpiece(station.feature), &errors) {
             Ok(g) => g,
             Err(e) => {
                 error!(machine = %self.machine, lobe = %station.name, error = %e, "simulator: the table cannot be ground");
                 return None;
             }
         };
-        let every = |n: u32| n > 0 && gauged.is_multiple_of(u64::from(n));
+        self.gauge(sim, dbc, &ground, k, shaft, Some(gauged))
+    }
+
+    /// The table station `k` was ground with, as the grinder takes it: the coupled shape on
+    /// the wheel the feature's program on the share was made for.
+    fn commanded(&self, coupled: &Coupled, k: usize) -> CommandedTable {
+        let mut table = self.commanded_shape(coupled.shape.clone(), k);
+        table.plan = coupled.planned_speed();
+        table
+    }
+
+    /// Table `shape` for station `k` on the wheel its program was made for, at constant C.
+    fn commanded_shape(&self, shape: crate::sim::TableShape, k: usize) -> CommandedTable {
+        let station = &self.stations[k];
+        let table_r = f64::from_bits(station.table_wheel_radius_bits.load(Ordering::SeqCst));
+        let feature = station.feature;
+        CommandedTable {
+            shape,
+            x_zero_mm: table_r + feature.x_zero_mm() - feature.wheel_radius_mm(),
+            wheel_radius_mm: table_r,
+            plan: None,
+        }
+    }
+
+    /// Measures `ground` (station `k`) as part `shaft` through the bus. With `gauged` (the
+    /// count of features gauged so far), the labels go wrong now and then when the config
+    /// says so; without, they are right.
+    fn gauge(
+        &self,
+        sim: &mut SimGrinder,
+        dbc: &GaugeDbc,
+        ground: &crate::sim::GroundPart,
+        k: usize,
+        shaft: u64,
+        gauged: Option<u64>,
+    ) -> Option<crate::core::measure::RawMeasurement> {
+        let every = |n: u32| n > 0 && gauged.is_some_and(|g| g.is_multiple_of(u64::from(n)));
         let n = self.stations.len();
         let lobe = if every(self.grinder.shaft.unknown_lobe_every) {
             n + 1
@@ -270,7 +330,7 @@ impl SimSource {
             part: shaft.to_string(),
             lobe: lobe.to_string(),
         };
-        let raw = sim.measure(&ground, &labels);
+        let raw = sim.measure(ground, &labels);
         self.through_the_bus(dbc, &raw)
     }
 
@@ -333,13 +393,7 @@ impl SimSource {
     /// grind with what the control reports of its table (a control alarm is logged and the
     /// shaft skipped).
     fn run_control(&self, control: &mut Control) -> Option<Vec<(Coupled, Option<GroundWith>)>> {
-        let main = match std::fs::read_to_string(&self.main_program) {
-            Ok(t) => t,
-            Err(e) => {
-                warn!(machine = %self.machine, error = %e, "simulator: no main program on the share yet");
-                return None;
-            }
-        };
+        let main = self.main_text()?;
         let dir = self.share_dir();
         // The texts the control read, as it read them: the share may change while it grinds.
         let read = std::cell::RefCell::new(std::collections::HashMap::new());
@@ -368,6 +422,13 @@ impl SimSource {
                 None
             }
         }
+    }
+
+    /// The main program on the share, as the control loads it.
+    fn main_text(&self) -> Option<String> {
+        std::fs::read_to_string(&self.main_program)
+            .map_err(|e| warn!(machine = %self.machine, error = %e, "simulator: no main program on the share yet"))
+            .ok()
     }
 
     fn share_dir(&self) -> PathBuf {

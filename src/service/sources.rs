@@ -90,6 +90,7 @@ pub(super) fn spawn(
                 main_program: machine.main_program_path(),
                 part_interval: Duration::from_millis(*part_interval_ms),
                 parts,
+                cycle: whole_cycle(machine)?,
             };
             tokio::spawn(source.run(tx, shutdown));
         }
@@ -235,4 +236,25 @@ async fn live_source(
             _ = shutdown.changed() => return,
         }
     }
+}
+
+/// The machine's whole cycle for the simulator, when its main program runs one.
+fn whole_cycle(machine: &MachineLoop) -> anyhow::Result<Option<sim_source::WholeCycle>> {
+    let Some(cycle) = machine
+        .features()
+        .first()
+        .and_then(|f| f.setup().cycle.clone())
+        .filter(|c| c.program == crate::core::cycle::CycleProgram::Whole)
+    else {
+        return Ok(None);
+    };
+    let surfaces = machine
+        .features()
+        .iter()
+        .map(|f| {
+            crate::sim::cycle_cell::stock_surface(f.feature(), &f.setup().nominal)
+                .with_context(|| format!("machine {}: {}", machine.name, f.setup().name))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok(Some(sim_source::WholeCycle { cycle, surfaces }))
 }

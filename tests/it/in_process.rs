@@ -1,6 +1,6 @@
-//! The shipped in-process configuration (`config/in-process.toml`) and its recipe: the cycle
+//! The shipped in-process configuration (`config/in-process-cell.toml`) and its recipe: the cycle
 //! loads and passes its checks, a bad cycle is refused naming the key, the service refuses a
-//! whole-cycle recipe it cannot deliver yet, and the cell grinds as the manual says.
+//! whole-cycle recipe on a gauge whose frames carry no stage, and the cell grinds as the manual says.
 
 use camloop::core::compensate::TableRequest;
 use camloop::core::cycle::limits::stage_load;
@@ -15,7 +15,7 @@ fn root() -> &'static Path {
 }
 
 fn shipped() -> (CycleCellConfig, Recipe, std::path::PathBuf) {
-    let path = root().join("config/in-process.toml");
+    let path = root().join("config/in-process-cell.toml");
     let config: CycleCellConfig = toml::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
     let recipe_path = root().join("config").join(&config.recipe);
     (config, Recipe::load(&recipe_path).unwrap(), recipe_path)
@@ -76,23 +76,34 @@ fn a_bad_cycle_is_refused_naming_the_key() {
     );
 }
 
+/// A whole cycle needs a gauge that tells the measurement before the finish from the
+/// finished part's: CAN frames carry no stage, so such a machine is refused naming why; the
+/// simulator (which hands its in-process measurements over as such) is accepted.
 #[test]
-fn the_service_refuses_a_whole_cycle_it_cannot_deliver_yet() {
+fn the_service_refuses_a_whole_cycle_on_a_gauge_without_stages() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("camloop.toml");
     let recipe = root().join("config/parts/demo-lobe-in-process.toml");
-    let text = format!(
-        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://var/db.sqlite?mode=rwc\"\n[[machines]]\nname = \"M1\"\nrecipe = \"{}\"\nshare = \"share\"\n[machines.gauge]\nkind = \"sim\"\n",
-        recipe.display()
-    );
-    std::fs::write(&path, &text).unwrap();
-    let config = camloop::config::Config::parse(&text, &path, |_| None).unwrap();
-    let err = camloop::config::check(config).unwrap_err();
+    let config = |gauge: &str| {
+        let text = format!(
+            "[service]\nvar_dir = \"var\"\n[database]\nurl = \"sqlite://var/db.sqlite?mode=rwc\"\n[[machines]]\nname = \"M1\"\nrecipe = \"{}\"\nshare = \"share\"\n[machines.gauge]\n{gauge}\n",
+            recipe.display()
+        );
+        std::fs::write(&path, &text).unwrap();
+        camloop::config::Config::parse(&text, &path, |_| None).unwrap()
+    };
+    std::fs::write(dir.path().join("gauge.dbc"), "").unwrap();
+    let err = camloop::config::check(config(
+        "kind = \"can\"\ninterface = \"vcan0\"\ndbc = \"gauge.dbc\"",
+    ))
+    .unwrap_err();
     assert!(
-        format!("{err:#}")
-            .contains("its [cycle] program = \"whole\" is not delivered by the service yet"),
+        format!("{err:#}").contains(
+            "its [cycle] program = \"whole\" needs a gauge that says which measurement is taken before the finish, and CAN and serial frames carry no stage"
+        ),
         "{err:#}"
     );
+    camloop::config::check(config("kind = \"sim\"")).unwrap();
 }
 
 #[test]

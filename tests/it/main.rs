@@ -87,6 +87,7 @@ mod geometry_props;
 mod http_harden;
 mod http_tls;
 mod in_process;
+mod in_process_figures;
 mod in_process_service;
 mod in_process_shafts;
 mod invariants;

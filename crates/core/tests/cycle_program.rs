@@ -4,8 +4,8 @@
 use camloop_core::cycle::CycleSettings;
 use camloop_core::program::syntax::lines;
 use camloop_core::program::{
-    CycleMachine, CycleProgramError, CycleStation, MainProgramSettings, ProgramSettings,
-    render_cycle_program, render_ready_program, wheel_rpm,
+    CycleMachine, CycleProgramError, CycleStation, EndingError, MainProgramSettings,
+    ProgramSettings, check_ending, render_cycle_program, render_ready_program, wheel_rpm,
 };
 
 fn demo_cycle() -> CycleSettings {
@@ -84,6 +84,7 @@ fn the_demo_cycle_program_runs_every_stage_in_order_and_reads_back() {
         "G91 G0 X=2.0000 ; lift off",
         "LEADOF(X,C)",
         "$SA_LEAD_OFFSET_OUT_POS[X]=0 ; the output offset back to 0",
+        "G90 G0 X=13.0000 ; retract clear of the part",
         "M9 ; coolant off",
         "M1=5 ; wheel spindle stop",
         "M30",
@@ -97,6 +98,30 @@ fn the_demo_cycle_program_runs_every_stage_in_order_and_reads_back() {
     }
     // 35 m/s on a 250 mm wheel: 35 / (2π · 0.25) · 60 = 1336.9 rpm.
     assert!((wheel_rpm(35.0, 250.0) - 1336.90).abs() < 0.01);
+}
+
+/// The program does not end 2 mm off the part after the lift-off: once uncoupled, X goes
+/// back to the clear X by an absolute rapid move, and the ending check finds it there and
+/// would refuse the text without it.
+#[test]
+fn the_cycle_program_ends_retracted_to_the_clear_x() {
+    let text = render(&demo_cycle()).unwrap();
+    check_ending(&text, "X", 13.0).unwrap();
+    let tail: Vec<&str> = text.lines().rev().take(4).collect();
+    assert_eq!(
+        tail,
+        [
+            "M30",
+            "M1=5 ; wheel spindle stop",
+            "M9 ; coolant off",
+            "G90 G0 X=13.0000 ; retract clear of the part",
+        ]
+    );
+    let unretracted = text.replace("G90 G0 X=13.0000 ; retract clear of the part\n", "");
+    assert!(matches!(
+        check_ending(&unretracted, "X", 13.0),
+        Err(EndingError::NotRetracted { .. })
+    ));
 }
 
 #[test]

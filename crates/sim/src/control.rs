@@ -267,6 +267,12 @@ impl Control {
         self.r_params.insert(n, value);
     }
 
+    /// Where `axis` was last sent by an absolute move or an uncoupled incremental one, mm or
+    /// degrees (0 when never moved). While X is coupled its motion is the table's, not this.
+    pub fn position(&self, axis: &str) -> f64 {
+        self.positions.get(axis).copied().unwrap_or(0.0)
+    }
+
     /// Numbers of the curve tables in memory, ascending.
     pub fn defined_tables(&self) -> Vec<u32> {
         self.tables.keys().copied().collect()

@@ -6,20 +6,21 @@
 //! number of polls; the finished part is judged on the fine grid and learned from once.
 
 use super::cell::{CellError, CellSetup, JUDGE_POINTS, after_dressing, judge};
-use super::stock::{Pass, STOCK_POINTS, Stock};
+use super::stock::{Pass, STOCK_POINTS, Stock, StockModel};
 use super::{
-    CommandedTable, Control, ControlError, CycleEvent, CycleRun, PartLabels, SimGrinder,
+    CommandedTable, Control, ControlError, Coupled, CycleEvent, CycleRun, PartLabels, SimGrinder,
     StationErrors, Workpiece,
 };
 use camloop_core::compensate::{self, Feature, GuardedTable, LobeLoop};
 use camloop_core::cycle::finish::{InProcess, finish_table};
 use camloop_core::cycle::{CycleSettings, StageKind};
 use camloop_core::learn::LearningState;
-use camloop_core::lift::LiftCurve;
+use camloop_core::lift::{LiftCurve, LiftTable};
 use camloop_core::measure::AssemblyLimits;
 use camloop_core::program::{
     CycleMachine, CycleProgramError, CycleStation, MainProgramSettings, ProgramSettings,
-    READY_PROGRAM, TableError, next_table_number, render_cycle_program, render_ready_program,
+    READY_PROGRAM, TableError, clear_x_mm, next_table_number, render_cycle_program,
+    render_ready_program,
 };
 use camloop_core::speed_plan::ProfileSamples;
 use camloop_core::turn::{self, Decision, TurnSetup};
@@ -41,7 +42,7 @@ pub struct CycleCellSetup {
     pub station: StationErrors,
 }
 
-/// The in-process cell's file (`config/in-process.toml`): which recipe and feature, how many
+/// The in-process cell's file (`config/in-process-cell.toml`): which recipe and feature, how many
 /// parts, and the simulated machine. Paths are relative to the file.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -124,15 +125,7 @@ pub fn run(setup: &CycleCellSetup, parts: u32) -> Result<Vec<CyclePart>, CycleCe
         Feature::Pin(g) => Workpiece::Crankpin(g),
     };
     let mut sim = SimGrinder::new(cell.grinder.clone(), workpiece, cell.seed)?;
-    let part_geometry = feature.part(&cell.nominal).map_err(CellError::from)?;
-    let samples = ProfileSamples::new(&part_geometry).map_err(CellError::from)?;
-    let step = samples.samples.len() / STOCK_POINTS;
-    let surface: Vec<f64> = samples
-        .samples
-        .iter()
-        .step_by(step.max(1))
-        .map(|s| s.surface_mm_rad)
-        .collect();
+    let surface = stock_surface(feature, &cell.nominal)?;
     let mut in_force = LearningState::new(cell.grinder.gauge.points_per_rev);
     let mut previous = None;
     let mut control = Control::new();
@@ -294,7 +287,17 @@ fn main_program(setup: &CycleCellSetup, wheel_radius_mm: f64) -> Result<String, 
         cycle: &setup.cycle,
         c_speed_rpm: setup.cell.limits.c_speed_rpm,
         wheel_radius_mm,
-        clear_x_mm: 0.0,
+        // The cell's table has no X offset: its X is the lift.
+        clear_x_mm: clear_x_mm(
+            setup
+                .cell
+                .nominal
+                .lifts_mm()
+                .iter()
+                .copied()
+                .fold(0.0, f64::max),
+            setup.cycle.lift_off_mm,
+        ),
     };
     let stations = [CycleStation {
         table: &table,
@@ -346,33 +349,15 @@ fn stock_after(
     feature: Feature,
     until: usize,
 ) -> (Stock, CommandedTable) {
-    let mut stock = Stock::new(setup.cycle.stock_mm);
-    let mut wheel_m_s = setup.cycle.wheel_speed_m_s;
-    let mut c_deg = 0.0f64;
-    let mut last = None;
-    for event in run.events.iter().take(until) {
-        match event {
-            CycleEvent::Spindle { rpm, .. } if *rpm > 0.0 => {
-                wheel_m_s = rpm * std::f64::consts::TAU * feature.wheel_radius_mm() / 60_000.0;
-            }
-            CycleEvent::Turned { revolutions, .. } => c_deg += 360.0 * revolutions,
-            CycleEvent::Ground(i) => {
-                let g = &run.ground[*i];
-                let pass = Pass {
-                    x_offset_mm: g.x_offset_mm,
-                    x_infeed_mm: g.x_infeed_mm,
-                    revolutions: g.revolutions,
-                    c_speed_rpm: g.c_speed_rpm,
-                    wheel_speed_m_s: wheel_m_s,
-                };
-                let start = c_deg.rem_euclid(360.0).round() as usize % STOCK_POINTS;
-                stock.grind(&setup.cell.grinder.stock, surface, &pass, start);
-                c_deg += 360.0 * g.revolutions;
-                last = Some(g);
-            }
-            _ => {}
-        }
-    }
+    let (stock, last) = passes_stock(
+        &setup.cell.grinder.stock,
+        &setup.cycle,
+        run,
+        surface,
+        feature.wheel_radius_mm(),
+        until,
+        &|_| true,
+    );
     let shape = last
         .map(|g| g.shape.clone())
         .unwrap_or(super::TableShape::G1(Vec::new()));
@@ -385,8 +370,66 @@ fn stock_after(
     (stock, table)
 }
 
+/// The contact's arc per radian of C at each of the stock's points ([`Stock::grind`]'s
+/// `surface_mm_rad`) for `feature` with lift `nominal`.
+pub fn stock_surface(feature: Feature, nominal: &LiftTable) -> Result<Vec<f64>, CellError> {
+    let part = feature.part(nominal).map_err(CellError::from)?;
+    let samples = ProfileSamples::new(&part).map_err(CellError::from)?;
+    let step = samples.samples.len() / STOCK_POINTS;
+    Ok(samples
+        .samples
+        .iter()
+        .step_by(step.max(1))
+        .map(|s| s.surface_mm_rad)
+        .collect())
+}
+
+/// The stock that the grinds among `run`'s first `until` events which `pick` accepts leave
+/// on one feature (C turns through every event, so each pass starts where C stands), and
+/// the last of those grinds: the table the feature's outline follows under its stock.
+pub fn passes_stock<'r>(
+    model: &StockModel,
+    cycle: &CycleSettings,
+    run: &'r CycleRun,
+    surface: &[f64],
+    wheel_radius_mm: f64,
+    until: usize,
+    pick: &dyn Fn(&Coupled) -> bool,
+) -> (Stock, Option<&'r Coupled>) {
+    let mut stock = Stock::new(cycle.stock_mm);
+    let mut wheel_m_s = cycle.wheel_speed_m_s;
+    let mut c_deg = 0.0f64;
+    let mut last = None;
+    for event in run.events.iter().take(until) {
+        match event {
+            CycleEvent::Spindle { rpm, .. } if *rpm > 0.0 => {
+                wheel_m_s = rpm * std::f64::consts::TAU * wheel_radius_mm / 60_000.0;
+            }
+            CycleEvent::Turned { revolutions, .. } => c_deg += 360.0 * revolutions,
+            CycleEvent::Ground(i) => {
+                let g = &run.ground[*i];
+                if pick(g) {
+                    let pass = Pass {
+                        x_offset_mm: g.x_offset_mm,
+                        x_infeed_mm: g.x_infeed_mm,
+                        revolutions: g.revolutions,
+                        c_speed_rpm: g.c_speed_rpm,
+                        wheel_speed_m_s: wheel_m_s,
+                    };
+                    let start = c_deg.rem_euclid(360.0).round() as usize % STOCK_POINTS;
+                    stock.grind(model, surface, &pass, start);
+                    last = Some(g);
+                }
+                c_deg += 360.0 * g.revolutions;
+            }
+            _ => {}
+        }
+    }
+    (stock, last)
+}
+
 /// The infeed of the stages after the measurement: the stock on when the gauge reads, mm.
-fn stock_after_measure(cycle: &CycleSettings) -> f64 {
+pub fn stock_after_measure(cycle: &CycleSettings) -> f64 {
     let stages = cycle.resolved(1.0);
     let at = stages
         .iter()
@@ -396,7 +439,7 @@ fn stock_after_measure(cycle: &CycleSettings) -> f64 {
 }
 
 /// Coupled grinding, measurement revolutions and dwells of a run, s.
-fn times(run: &CycleRun) -> (f64, f64, f64) {
+pub fn times(run: &CycleRun) -> (f64, f64, f64) {
     let grind = run
         .ground
         .iter()

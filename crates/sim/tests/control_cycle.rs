@@ -78,6 +78,18 @@ fn run(
     answer_after: Option<u32>,
     overlay: bool,
 ) -> Result<camloop_sim::CycleRun, camloop_sim::ControlError> {
+    let mut control = Control::new();
+    if overlay {
+        control.enable_overlay();
+    }
+    run_on(&mut control, answer_after)
+}
+
+/// [`run`] on `control`, which is left as the program leaves it.
+fn run_on(
+    control: &mut Control,
+    answer_after: Option<u32>,
+) -> Result<camloop_sim::CycleRun, camloop_sim::ControlError> {
     let main = main_program();
     let polls = Cell::new(0u32);
     let answered = || answer_after.is_some_and(|k| polls.get() > k);
@@ -92,10 +104,6 @@ fn run(
             _ => None,
         }
     };
-    let mut control = Control::new();
-    if overlay {
-        control.enable_overlay();
-    }
     control.run_cycle(&main, &load)
 }
 
@@ -169,6 +177,27 @@ fn the_cycle_runs_every_stage_and_the_finish_couples_this_parts_table() {
                 rpm: 0.0
             }
         ]
+    );
+}
+
+/// The control is left with X at the clear X (13 mm here), not 2 mm off the part where the
+/// lift-off put it, and the wheel and coolant stop only once X is there.
+#[test]
+fn the_program_leaves_x_retracted_to_the_clear_x() {
+    let mut control = Control::new();
+    control.enable_overlay();
+    let run = run_on(&mut control, Some(3)).unwrap();
+    assert_eq!(control.position("X"), 13.0);
+    let main = main_program();
+    let retract = main.find("G90 G0 X=13.0000").expect("a retract");
+    let last_leadof = main.rfind("LEADOF(X,C)").unwrap();
+    assert!(last_leadof < retract && retract < main.find("M9 ;").unwrap());
+    assert_eq!(
+        run.events.last(),
+        Some(&CycleEvent::Spindle {
+            spindle: 1,
+            rpm: 0.0
+        })
     );
 }
 

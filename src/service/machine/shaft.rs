@@ -4,7 +4,7 @@
 
 use super::super::journal::Pending;
 use crate::core::program::{
-    MainProgramSettings, RESUME_PROGRAM, Station, comment_text, render_main_program,
+    MainProgramSettings, RESUME_PROGRAM, Station, clear_x_mm, comment_text, render_main_program,
     render_resume_program, render_shaft_program,
 };
 use crate::core::speed_plan::render::{
@@ -15,9 +15,6 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use tracing::{info, warn};
-
-/// X clearance above the highest nominal lift before Z moves, mm.
-const CLEARANCE_MM: f64 = 5.0;
 
 /// The machine's main program: its file name, text, and the table programs it calls.
 #[derive(Debug)]
@@ -75,15 +72,19 @@ impl MainProgram {
             "camloop {}: {what}",
             env!("CARGO_PKG_VERSION")
         ))];
-        let clear_x_mm = setups
-            .iter()
-            .flat_map(|s| s.nominal.lifts_mm().iter().copied())
-            .fold(0.0f64, f64::max)
-            + CLEARANCE_MM;
         let whole = first
             .cycle
             .as_ref()
             .filter(|c| c.program == crate::core::cycle::CycleProgram::Whole);
+        // The highest programmed X of any feature's nominal curve (its X offset added).
+        let top_x_mm = setups
+            .iter()
+            .flat_map(|s| {
+                let offset = s.program.x_offset_mm;
+                s.nominal.lifts_mm().iter().map(move |h| h + offset)
+            })
+            .fold(f64::MIN, f64::max);
+        let clear_x_mm = clear_x_mm(top_x_mm, whole.map_or(0.0, |c| c.lift_off_mm));
         let kind = if let Some(cycle) = whole {
             MainKind::Fixed(super::in_process::render_whole(
                 &main, cycle, setups, clear_x_mm,

@@ -1,7 +1,8 @@
 //! The main program of the whole grinding cycle (`[cycle] program = "whole"`): wheel spindle
 //! and coolant on, then per feature the approach, the coupling, the stages with their infeed
 //! superimposed on the coupled X, the measurement before the finish with its handshake,
-//! spark-out, lift-off and uncoupling; spindle and coolant off at the end.
+//! spark-out, lift-off and uncoupling; at the end X back clear of the part (an absolute
+//! rapid move, checked by [`super::check_ending`]), then coolant and spindle off.
 //!
 //! Every coupling is made with the number the table program just returned, as in the
 //! table-only program: the finish after a measurement calls the table program again, so it
@@ -9,7 +10,8 @@
 //! table in force otherwise).
 
 use super::ProgramSettings;
-use super::main_program::MainProgramSettings;
+use super::ending::{EndingError, check_ending};
+use super::main_program::{MainProgramSettings, Opening, define_table, opening};
 use super::names::validate_axis_name;
 use super::settings::{Resolved, SettingsErrors, check_comments};
 use super::table::{NUMBER_VAR, fmt_fixed, line};
@@ -22,6 +24,18 @@ pub const READY_PROGRAM: &str = "CAMLOOP_READY";
 pub const OUTPUT_OFFSET: &str = "$SA_LEAD_OFFSET_OUT_POS";
 /// How often the control asks the handshake subprogram while it waits, s.
 pub const POLL_S: f64 = 0.1;
+
+/// X clearance above the highest X of the finished curves where X moves freely (Z to a
+/// station, the end of a program), mm.
+pub const CLEARANCE_MM: f64 = 5.0;
+
+/// The clear X of a main program: the highest X of any feature's finished curve
+/// (`top_x_mm`, lift plus `x_offset_mm`) plus the larger of [`CLEARANCE_MM`] and the cycle's
+/// lift-off (0 without a cycle), so the retract never moves X towards the part from where
+/// the lift-off left it.
+pub fn clear_x_mm(top_x_mm: f64, lift_off_mm: f64) -> f64 {
+    top_x_mm + CLEARANCE_MM.max(lift_off_mm)
+}
 
 /// One feature as the cycle grinds it.
 #[derive(Debug, Clone)]
@@ -39,7 +53,10 @@ pub struct CycleMachine<'a> {
     pub c_speed_rpm: f64,
     /// The wheel's radius, mm: turns the surface speed into spindle rpm.
     pub wheel_radius_mm: f64,
-    /// X clear of the part before Z moves (several features), mm.
+    /// X clear of the part, absolute, mm: where X goes before Z moves (several features)
+    /// and at the end of the program, after the last uncoupling. It must lie above every
+    /// feature's finished curve plus the lift-off (the service takes the largest X of the
+    /// curves plus the larger of 5 mm and `lift_off_mm`).
     pub clear_x_mm: f64,
 }
 
@@ -50,6 +67,8 @@ pub enum CycleProgramError {
     Settings(#[from] SettingsErrors),
     #[error("{}", .0.join("; "))]
     Cycle(Vec<String>),
+    #[error("the program would be unsafe to load: {0}")]
+    Unsafe(#[from] EndingError),
     #[error(
         "{0}: a stage on the speed plan is not written by the cycle program yet; give it a c_speed_rpm"
     )]
@@ -64,30 +83,25 @@ pub fn render_cycle_program(
 ) -> Result<String, CycleProgramError> {
     let (resolved, stages) = check(main, machine, stations)?;
     let first = &resolved[0];
-    let (x, c, n) = (&first.following, &first.leading, NUMBER_VAR);
+    let (x, c) = (first.following.as_str(), first.leading.as_str());
     let cycle = machine.cycle;
     let spindle = cycle.wheel_spindle;
+    let externs: Vec<&str> = std::iter::once(READY_PROGRAM)
+        .chain(resolved.iter().map(|r| r.name.as_str()))
+        .collect();
     let mut out = String::new();
-    line(&mut out, format_args!("%_N_{}_MPF", main.name));
-    out.push_str(";$PATH=/_N_MPF_DIR\n");
-    out.push_str("DEF REAL CL_C, CL_X, CL_SLOPE, CL_OFF\n");
-    line(
+    opening(
         &mut out,
-        format_args!("DEF INT {n}, CL_SEEN, CL_READY, CL_NEW, CL_WAIT"),
+        &Opening {
+            name: &main.name,
+            reals: &["CL_OFF"],
+            ints: &["CL_SEEN", "CL_READY", "CL_NEW", "CL_WAIT"],
+            externs: &externs,
+            comments: &main.comment_lines,
+            following: x,
+            leading: c,
+        },
     );
-    line(&mut out, format_args!("EXTERN {READY_PROGRAM}(VAR INT)"));
-    for r in &resolved {
-        line(&mut out, format_args!("EXTERN {}(VAR INT)", r.name));
-    }
-    for comment in &main.comment_lines {
-        line(&mut out, format_args!("; {comment}"));
-    }
-    line(
-        &mut out,
-        format_args!("IF $AA_COUP_ACT[{x}]<>0 ; a coupling left active by an aborted run"),
-    );
-    line(&mut out, format_args!("LEADOF({x},{c})"));
-    out.push_str("ENDIF\n");
     output_offset(
         &mut out,
         x,
@@ -128,9 +142,14 @@ pub fn render_cycle_program(
         feature_cycle(&mut out, machine, &stages, r, k + 1);
     }
     output_offset(&mut out, x, "0", "the output offset back to 0");
+    line(
+        &mut out,
+        format_args!("G90 G0 {x}={clear} ; retract clear of the part"),
+    );
     out.push_str("M9 ; coolant off\n");
     line(&mut out, format_args!("M{spindle}=5 ; wheel spindle stop"));
     out.push_str("M30\n");
+    check_ending(&out, x, machine.clear_x_mm).map_err(CycleProgramError::Unsafe)?;
     Ok(out)
 }
 
@@ -264,10 +283,7 @@ fn couple(
     let xd = usize::from(r.settings.x_decimals);
     let cycle = machine.cycle;
     let rpm = next.c_speed_rpm.unwrap_or(machine.c_speed_rpm);
-    line(
-        out,
-        format_args!("{t}({n}) ; defines the newest curve table, returns its number"),
-    );
+    define_table(out, t);
     line(
         out,
         format_args!(

@@ -128,29 +128,70 @@ pub fn render_main_program(
 }
 
 fn main_text(main: &MainProgramSettings, main_name: &str, r: &Resolved<'_>) -> String {
-    let (x, c, t, n) = (&r.following, &r.leading, &r.name, NUMBER_VAR);
+    let (x, c, t) = (r.following.as_str(), r.leading.as_str(), r.name.as_str());
     let mut out = String::new();
-    line(&mut out, format_args!("%_N_{main_name}_MPF"));
-    out.push_str(";$PATH=/_N_MPF_DIR\n");
-    out.push_str("DEF REAL CL_C, CL_X, CL_SLOPE\n");
-    line(&mut out, format_args!("DEF INT {n}"));
-    line(&mut out, format_args!("EXTERN {t}(VAR INT)"));
-    for comment in &main.comment_lines {
-        line(&mut out, format_args!("; {comment}"));
-    }
-    line(
+    opening(
         &mut out,
-        format_args!("IF $AA_COUP_ACT[{x}]<>0 ; a coupling left active by an aborted run"),
+        &Opening {
+            name: main_name,
+            reals: &[],
+            ints: &[],
+            externs: &[t],
+            comments: &main.comment_lines,
+            following: x,
+            leading: c,
+        },
     );
-    line(&mut out, format_args!("LEADOF({x},{c})"));
-    out.push_str("ENDIF\n");
-    line(
-        &mut out,
-        format_args!("{t}({n}) ; defines the newest curve table, returns its number"),
-    );
+    define_table(&mut out, t);
     coupled_revolutions(&mut out, main, r, true);
     out.push_str("M30\n");
     out
+}
+
+/// The opening every main program shares: header, the coupling's variables (`CL_C, CL_X,
+/// CL_SLOPE` and the table number) with the program's own after them, one `EXTERN` per
+/// subprogram, the comment lines, and the release of a coupling an aborted run left active
+/// (the control would refuse to redefine its table under it).
+pub(crate) struct Opening<'a> {
+    pub name: &'a str,
+    pub reals: &'a [&'a str],
+    pub ints: &'a [&'a str],
+    pub externs: &'a [&'a str],
+    pub comments: &'a [String],
+    pub following: &'a str,
+    pub leading: &'a str,
+}
+
+pub(crate) fn opening(out: &mut String, o: &Opening<'_>) {
+    let (x, c) = (o.following, o.leading);
+    line(out, format_args!("%_N_{}_MPF", o.name));
+    out.push_str(";$PATH=/_N_MPF_DIR\n");
+    let more = |names: &[&str]| names.iter().map(|n| format!(", {n}")).collect::<String>();
+    line(
+        out,
+        format_args!("DEF REAL CL_C, CL_X, CL_SLOPE{}", more(o.reals)),
+    );
+    line(out, format_args!("DEF INT {NUMBER_VAR}{}", more(o.ints)));
+    for name in o.externs {
+        line(out, format_args!("EXTERN {name}(VAR INT)"));
+    }
+    for comment in o.comments {
+        line(out, format_args!("; {comment}"));
+    }
+    line(
+        out,
+        format_args!("IF $AA_COUP_ACT[{x}]<>0 ; a coupling left active by an aborted run"),
+    );
+    line(out, format_args!("LEADOF({x},{c})"));
+    out.push_str("ENDIF\n");
+}
+
+/// The table subprogram's call: it defines the newest table and returns its number.
+pub(crate) fn define_table(out: &mut String, table: &str) {
+    line(
+        out,
+        format_args!("{table}({NUMBER_VAR}) ; defines the newest curve table, returns its number"),
+    );
 }
 
 /// The coupled grind both main programs run once the table program has returned its number

@@ -14,6 +14,7 @@
 //! digit extension (`C1`, `XA`) require the `=`, and `=` is valid for both.
 
 mod cycle_program;
+mod ending;
 mod main_program;
 mod names;
 mod parse;
@@ -24,9 +25,10 @@ pub mod syntax;
 mod table;
 
 pub use cycle_program::{
-    CycleMachine, CycleProgramError, CycleStation, OUTPUT_OFFSET, POLL_S, READY_PROGRAM,
-    render_cycle_program, render_ready_program, wheel_rpm,
+    CLEARANCE_MM, CycleMachine, CycleProgramError, CycleStation, OUTPUT_OFFSET, POLL_S,
+    READY_PROGRAM, clear_x_mm, render_cycle_program, render_ready_program, wheel_rpm,
 };
+pub use ending::{EndingError, check_ending};
 pub use main_program::{MainProgramSettings, render_main_program};
 pub use names::{AxisNameError, ProgramNameError, validate_axis_name, validate_program_name};
 pub use parse::{ParsedShape, ParsedTable, TableBlocks, parse_table_program};

@@ -185,6 +185,8 @@ pub enum SettingError {
         column: usize,
         ch: char,
     },
+    #[error("the program would be unsafe to load: {0}")]
+    Unsafe(String),
     #[error("a shaft program needs at least one feature")]
     NoFeatures,
     #[error("main program name `{name}` is the same as the table subprogram's")]

@@ -3,11 +3,14 @@
 //! feature; and the small resume subprogram camloop rewrites after each gauged feature.
 
 use super::ProgramSettings;
-use super::main_program::{MainProgramSettings, coupled_revolutions};
+use super::ending::check_ending;
+use super::main_program::{
+    MainProgramSettings, Opening, coupled_revolutions, define_table, opening,
+};
 use super::names::validate_axis_name;
 use super::settings::{Resolved, SettingError, SettingsErrors, check_comments, check_positive};
 use super::syntax::{Statement, lines};
-use super::table::{NUMBER_VAR, fmt_fixed, line};
+use super::table::{fmt_fixed, line};
 
 /// The resume subprogram's name (file `CAMLOOP_RESUME.SPF`).
 pub const RESUME_PROGRAM: &str = "CAMLOOP_RESUME";
@@ -65,27 +68,25 @@ pub fn render_shaft_program(
 ) -> Result<String, SettingsErrors> {
     let resolved = check_shaft_program(main, stations, clear_x_mm)?;
     let first = &resolved[0];
-    let (x, c, n) = (&first.following, &first.leading, NUMBER_VAR);
+    let (x, c) = (first.following.as_str(), first.leading.as_str());
     let xd = usize::from(first.settings.x_decimals);
     let z = &main.axial_axis;
+    let externs: Vec<&str> = std::iter::once(RESUME_PROGRAM)
+        .chain(resolved.iter().map(|r| r.name.as_str()))
+        .collect();
     let mut out = String::new();
-    line(&mut out, format_args!("%_N_{}_MPF", main.name));
-    out.push_str(";$PATH=/_N_MPF_DIR\n");
-    out.push_str("DEF REAL CL_C, CL_X, CL_SLOPE\n");
-    line(&mut out, format_args!("DEF INT {n}, {FROM_VAR}"));
-    line(&mut out, format_args!("EXTERN {RESUME_PROGRAM}(VAR INT)"));
-    for r in &resolved {
-        line(&mut out, format_args!("EXTERN {}(VAR INT)", r.name));
-    }
-    for comment in &main.comment_lines {
-        line(&mut out, format_args!("; {comment}"));
-    }
-    line(
+    opening(
         &mut out,
-        format_args!("IF $AA_COUP_ACT[{x}]<>0 ; a coupling left active by an aborted run"),
+        &Opening {
+            name: &main.name,
+            reals: &[],
+            ints: &[FROM_VAR],
+            externs: &externs,
+            comments: &main.comment_lines,
+            following: x,
+            leading: c,
+        },
     );
-    line(&mut out, format_args!("LEADOF({x},{c})"));
-    out.push_str("ENDIF\n");
     let r = main.resume_r_param;
     line(
         &mut out,
@@ -109,7 +110,6 @@ pub fn render_shaft_program(
     );
     let clear = fmt_fixed(clear_x_mm, xd);
     for (k, (s, r)) in stations.iter().zip(&resolved).enumerate() {
-        let t = &r.name;
         line(
             &mut out,
             format_args!("IF {FROM_VAR}<={} ; feature {} {}", k + 1, k + 1, s.label),
@@ -119,15 +119,15 @@ pub fn render_shaft_program(
             &mut out,
             format_args!("G0 {z}={} ; station of {}", fmt_fixed(s.z_mm, 3), s.label),
         );
-        line(
-            &mut out,
-            format_args!("{t}({n}) ; defines the newest curve table, returns its number"),
-        );
+        define_table(&mut out, &r.name);
         coupled_revolutions(&mut out, main, r, false);
         out.push_str("ENDIF\n");
     }
     line(&mut out, format_args!("G0 {x}={clear}"));
     out.push_str("M30\n");
+    // The rule every grinding main program meets: X clear of the part at the end.
+    check_ending(&out, x, clear_x_mm)
+        .map_err(|e| SettingsErrors(vec![SettingError::Unsafe(e.to_string())]))?;
     Ok(out)
 }
 

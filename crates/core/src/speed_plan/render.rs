@@ -74,6 +74,8 @@ pub enum VaProgramError {
     Name(String),
     #[error("the X and C tables must have different numbers, both are {0}")]
     SameNumber(u32),
+    #[error("the program would be unsafe to load: {0}")]
+    Unsafe(#[from] crate::program::EndingError),
 }
 
 /// The table program (`.SPF` text) defining both tables.
@@ -376,6 +378,7 @@ pub fn render_va_shaft_program(
         o.push_str("ENDIF\n");
     }
     let _ = writeln!(o, "G0 {x}={clear}\nM30");
+    crate::program::check_ending(&o, x, clear_x_mm)?;
     Ok(o)
 }
 

@@ -1,0 +1,186 @@
+//! The whole cycle through the service on the demo camshaft and crankshaft: the simulated
+//! control runs camloop's whole-cycle program from the share, the simulated gauge measures
+//! each feature before its finish with the stock on, the service delivers that part's finish
+//! table and the handshake's count, and the finished features are learned from. Worst
+//! feature per shaft for shafts 1–12, with the measurement before the finish and without it
+//! (the same cycle less its spark-out before the measurement and the measure stage), and
+//! the cycle time per shaft from the program on the share. Printed with `--nocapture`.
+
+use crate::history_support::parts_with_reports;
+use camloop::config::Config;
+use camloop::core::program::READY_PROGRAM;
+use camloop::service::{self, RunOptions};
+use camloop::sim::Control;
+use camloop::store::Store;
+use std::path::Path;
+
+const SHAFTS: u64 = 12;
+/// Undulations per revolution kept when the measured error is judged: the gauge's noise
+/// (σ 0.3 µm a reading) is filtered off above it, as a roundness evaluation filters (ISO
+/// 12181's 50 UPR); the learning itself stops at order 40 plus its roll-off.
+const UPR: usize = 50;
+
+fn parts_dir() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts")
+}
+
+/// The recipe in `dir` (its lift files beside it), without the measurement when `measure`
+/// is false.
+fn recipe(dir: &Path, file: &str, measure: bool) -> std::path::PathBuf {
+    let mut text = std::fs::read_to_string(parts_dir().join(file)).unwrap();
+    if !measure {
+        for stage in [
+            "[[cycle.stages]]\nkind = \"spark-out\"         # the deflection decays before the gauge reads\nrevolutions = 2\n\n",
+            "[[cycle.stages]]\nkind = \"measure\"           # at least 3 revolutions, constant C speed, wheel lifted off\nrevolutions = 3\nc_speed_rpm = 10.0\n\n",
+        ] {
+            assert!(text.contains(stage), "{file}: {stage}");
+            text = text.replace(stage, "");
+        }
+    }
+    for lift in ["demo-intake-lobe.csv", "demo-exhaust-lobe.csv"] {
+        std::fs::copy(parts_dir().join(lift), dir.join(lift)).unwrap();
+    }
+    let path = dir.join(file);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// The largest error of the measured profile with the orders above [`UPR`] left out, µm.
+fn filtered_max_um(error_um: &[f64]) -> f64 {
+    let n = error_um.len();
+    let mut smooth = vec![0.0; n];
+    for k in 0..=UPR.min(n / 2 - 1) {
+        let (mut a, mut b) = (0.0, 0.0);
+        for (j, e) in error_um.iter().enumerate() {
+            let phi = std::f64::consts::TAU * (k * j) as f64 / n as f64;
+            a += e * phi.cos();
+            b += e * phi.sin();
+        }
+        let scale = if k == 0 { 1.0 } else { 2.0 } / n as f64;
+        for (j, s) in smooth.iter_mut().enumerate() {
+            let phi = std::f64::consts::TAU * (k * j) as f64 / n as f64;
+            *s += scale * (a * phi.cos() + b * phi.sin());
+        }
+    }
+    smooth.iter().fold(0.0, |m, v| m.max(v.abs()))
+}
+
+struct Figures {
+    /// Worst feature per shaft: measured max error, and with the orders above 50 left out.
+    measured_um: Vec<f64>,
+    filtered_um: Vec<f64>,
+    /// Per shaft: coupled grinding, measurement revolutions, s.
+    grind_s: f64,
+    measure_s: f64,
+}
+
+/// Runs `SHAFTS` shafts of `file` on a simulated machine through the service.
+async fn run(file: &str, features: &[&str], measure: bool) -> Figures {
+    let dir = tempfile::tempdir().unwrap();
+    let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
+    let recipe = recipe(dir.path(), file, measure);
+    let text = format!(
+        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"{url}\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
+         [[machines]]\nname = \"CELL\"\nrecipe = \"{}\"\nshare = \"share\"\n\
+         [machines.gauge]\nkind = \"sim\"\npart_interval_ms = 1\nseed = 3\n\
+         [machines.gauge.grinder]\ndress_every_parts = 0\n",
+        recipe.display()
+    );
+    let config = Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
+    let mut running = service::start(config, RunOptions::parts(SHAFTS))
+        .await
+        .unwrap();
+    running.machines_done().await;
+    let store = Store::connect(&url).await.unwrap();
+    let mut measured_um = vec![0.0f64; SHAFTS as usize];
+    let mut filtered_um = vec![0.0f64; SHAFTS as usize];
+    for f in features {
+        let parts = parts_with_reports(&store, "CELL", f).await;
+        let numbers: Vec<u64> = parts.iter().map(|(s, _)| s.part.parse().unwrap()).collect();
+        assert_eq!(numbers, (1..=SHAFTS).collect::<Vec<_>>(), "{file} {f}");
+        for (s, report) in &parts {
+            let error: Vec<f64> = report["error_um"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect();
+            let k: usize = s.part.parse::<usize>().unwrap() - 1;
+            let max = error.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            measured_um[k] = measured_um[k].max(max);
+            filtered_um[k] = filtered_um[k].max(filtered_max_um(&error));
+        }
+    }
+    // The cycle time: the program on the share as the simulated control runs it, the
+    // handshake answered at once (the count one ahead of what the control read before).
+    let share = dir.path().join("share");
+    let main = std::fs::read_to_string(share.join("CAMLOOP_GRIND.MPF")).unwrap();
+    let calls = std::cell::Cell::new(0u64);
+    let load = |name: &str| {
+        if name == READY_PROGRAM {
+            calls.set(calls.get() + 1);
+            return Some(camloop::core::program::render_ready_program(calls.get()));
+        }
+        std::fs::read_to_string(share.join(format!("{name}.SPF"))).ok()
+    };
+    let mut control = Control::new();
+    control.enable_overlay();
+    let cycle = control.run_cycle(&main, &load).unwrap();
+    let (grind_s, measure_s, _) = camloop::sim::cycle_cell::times(&cycle);
+    drop(running);
+    Figures {
+        measured_um,
+        filtered_um,
+        grind_s,
+        measure_s,
+    }
+}
+
+fn row(label: &str, v: &[f64]) -> String {
+    let cells: Vec<String> = v.iter().map(|x| format!("{x:.2}")).collect();
+    format!("| {label} | {} |\n", cells.join(" | "))
+}
+
+/// Through the service, with the measurement before the finish, judged on the measured
+/// error with the gauge's noise filtered off above 50 UPR (see [`UPR`]): the first shaft is
+/// within the goal's 1.0 µm where without the measurement it is over 10 µm, and every shaft
+/// from the third within 1.0 µm. The goal's 0.5 µm from the third shaft is met by the
+/// crankshaft but not by the camshaft through the service yet (0.8–0.9 µm): the figures are
+/// in the manual's controller chapter, with what stands in the way (the wheel's wear).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_first_shaft_is_right_through_the_service() {
+    let lobes = ["IN1", "EX1", "IN2", "EX2", "IN3", "EX3", "IN4", "EX4"];
+    let pins = ["P1", "P2", "P3", "P4"];
+    let mut out = String::new();
+    let mut all = Vec::new();
+    for (file, features) in [
+        ("demo-camshaft-in-process.toml", &lobes[..]),
+        ("demo-crankshaft-in-process.toml", &pins[..]),
+    ] {
+        let with = run(file, features, true).await;
+        let without = run(file, features, false).await;
+        out.push_str(&row(
+            &format!("{file}, measured before the finish"),
+            &with.measured_um,
+        ));
+        out.push_str(&row("  50 UPR", &with.filtered_um));
+        out.push_str(&row("  part to part only", &without.measured_um));
+        out.push_str(&row("  50 UPR", &without.filtered_um));
+        out.push_str(&format!(
+            "  cycle per shaft: {:.1} s coupled + {:.1} s measuring with; {:.1} s + {:.1} s without\n",
+            with.grind_s, with.measure_s, without.grind_s, without.measure_s
+        ));
+        all.push((file, with, without));
+    }
+    println!("{out}");
+    for (file, with, without) in &all {
+        let f = &with.filtered_um;
+        assert!(f[0] <= 1.0, "{file}: first shaft {:.2} µm\n{out}", f[0]);
+        assert!(without.filtered_um[0] > 10.0, "{file}\n{out}");
+        assert!(
+            f[2..].iter().all(|&e| e <= 1.0),
+            "{file}: from the third shaft {f:?}\n{out}"
+        );
+        assert!(with.measure_s > 0.0 && without.measure_s == 0.0, "{out}");
+    }
+}
