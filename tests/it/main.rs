@@ -136,3 +136,4 @@ mod store_migrate;
 mod store_schema;
 mod store_story;
 mod store_writes;
+mod var_private;
