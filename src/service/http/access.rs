@@ -491,6 +491,7 @@ pub(crate) fn locked(
         ApiCode::LockedOut,
         format!("too many failed attempts: try again in {left_s} s"),
     )
+    .retry_after(u64::try_from(left_s).unwrap_or(1))
 }
 
 async fn csrf_refused(app: &AppState, p: &Principal, path: &str) {

@@ -356,10 +356,9 @@ pub(crate) async fn password_sign_in(
                 .update_access(|a| *a.failures.entry("locked").or_default() += 1);
             let message = "the attempts of this user from this client being checked now \
                 would lock it if wrong: try again in a moment";
-            return Ok(SignIn::Refused(ApiError::new(
-                ApiCode::LockedOut,
-                message.into(),
-            )));
+            return Ok(SignIn::Refused(
+                ApiError::new(ApiCode::LockedOut, message.into()).retry_after(1),
+            ));
         }
     };
     match check_password(app, user_name.as_ref(), password).await? {
@@ -396,7 +395,7 @@ async fn check_password(
         .hasher
         .verify(password.to_string(), hash)
         .await
-        .map_err(|busy| ApiError::new(ApiCode::SigninBusy, busy.to_string()))?;
+        .map_err(|busy| ApiError::new(ApiCode::SigninBusy, busy.to_string()).retry_after(1))?;
     Ok(match user {
         None => Err("unknown user"),
         Some(u) if u.disabled_at_ms.is_some() => Err("disabled user"),
