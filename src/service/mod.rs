@@ -9,6 +9,7 @@ pub(crate) mod action;
 pub mod app;
 mod cluster_task;
 pub(crate) mod command;
+mod database_health;
 mod drop_source;
 pub mod health;
 pub mod http;
@@ -172,6 +173,11 @@ async fn begin(checked: Checked, options: RunOptions) -> anyhow::Result<Starting
     let reserve = journal::share_reserve_under(&config.machines_dir());
     let (store, connector, retention) =
         startup::start_store(&config, options.accept_new_database, &shutdown_rx).await?;
+    tokio::spawn(database_health::watch(
+        store.clone(),
+        metrics.clone(),
+        shutdown_rx.clone(),
+    ));
 
     let publisher = startup::start_mqtt(&config, &shutdown_rx)?;
     if let Some(p) = &publisher {

@@ -109,6 +109,7 @@ mod program_tables;
 mod recipe;
 mod run_rules;
 mod service_crash_points;
+mod service_database_health;
 mod service_disk_full;
 mod service_faults;
 mod service_gauges;

@@ -40,9 +40,14 @@ pub(super) struct Health {
 #[utoipa::path(get, path = "/healthz", tag = "service", responses((status = 200, description = "service up (starting, ok or degraded, with each component's state); the database up or down", body = Health)))]
 pub(super) async fn healthz(State(state): State<AppState>) -> Json<Health> {
     use crate::service::health;
-    // A connector holding the lock to put a new connection in: not up yet.
-    let up = state.store.try_read().is_ok_and(|s| s.is_some());
+    // A connector holding the lock to put a new connection in: not up yet. Connected, the
+    // database is up while it answers its probe (`service::database_health`).
+    let connected = state.store.try_read().is_ok_and(|s| s.is_some());
     let mut components = state.metrics.health.components();
+    let answering = !components
+        .iter()
+        .any(|c| c.name == "database" && c.state != health::State::Ok);
+    let up = connected && answering;
     let lag = state.metrics.backlog.lag(std::time::Instant::now());
     components.push(health::loop_component(lag));
     if let Some(m) = state.metrics.mqtt() {
