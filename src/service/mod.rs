@@ -23,6 +23,7 @@ pub(crate) mod offload;
 pub mod opcua;
 pub mod plant;
 pub(crate) mod runner;
+pub(crate) mod sign_in;
 pub mod sim_source;
 mod sources;
 mod startup;

@@ -46,7 +46,6 @@ pub use server::{HttpLimits, serve, serve_with};
 pub use tls::{Tls, days_left, self_signed};
 pub use writes::{CommandReply, command_code};
 // The sign-in check the OPC UA server goes through as well.
-pub(crate) use session::{SignIn, password_sign_in};
 
 use axum::Router;
 use axum::routing::{get, post};
