@@ -95,7 +95,7 @@ impl SignedIn {
             .read()
             .unwrap_or_else(|p| p.into_inner())
             .iter()
-            .map(|(n, d)| (n.clone(), d.clone()))
+            .map(|(n, d)| (n.clone(), *d))
             .collect();
         for (name, digest) in users {
             let allowed = match store.user(&name).await {
