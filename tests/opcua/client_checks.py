@@ -362,6 +362,8 @@ async def disabled_user_stopped(p):
     """A user's open session reads the machine's GrindingOrder; once the user is disabled with
     `camloop user disable` beside the running service, the same session's reads are refused
     within the service's recheck (every 2 s; the bound is 20 s, for a loaded machine)."""
+    # A listener that accepts may still be starting: wait until it answers.
+    await endpoints_once_answering(p["endpoint"])
     c = await client(p, (p["user"], p["password"]))
     async with c:
         ns = await c.get_namespace_index("urn:camloop:ua")
