@@ -42,7 +42,7 @@ pub(crate) fn status(answer: &str) -> u16 {
 }
 
 /// One sign-in of `name` with `password` from `from`, with a nonce of its own: the status.
-async fn sign_in(addr: SocketAddr, from: IpAddr, name: &str, password: &str) -> u16 {
+pub(crate) async fn sign_in(addr: SocketAddr, from: IpAddr, name: &str, password: &str) -> u16 {
     status(&sign_in_answer(addr, from, name, password).await)
 }
 
@@ -68,7 +68,7 @@ async fn sign_in_answer(addr: SocketAddr, from: IpAddr, name: &str, password: &s
     exchange(addr, from, &request).await
 }
 
-async fn with_token(addr: SocketAddr, from: IpAddr, token: &str) -> u16 {
+pub(crate) async fn with_token(addr: SocketAddr, from: IpAddr, token: &str) -> u16 {
     let request = format!(
         "GET /api/v1/machines/SIM1/dressings HTTP/1.1\r\nHost: localhost\r\nAuthorization: Bearer {token}\r\nConnection: close\r\n\r\n"
     );

@@ -394,6 +394,15 @@ async def disabled_user_stopped(p):
             await asyncio.sleep(0.2)
 
 
+async def opcua_lockout(p):
+    """Five wrong passwords for a user over OPC UA lock that user's OPC UA sign-in: the
+    right password is refused there afterwards (the caller checks HTTP is untouched)."""
+    await endpoints_once_answering(p["endpoint"])
+    for i in range(5):
+        await refused(lambda: client(p, (p["user"], "wrong-password-guess")), f"wrong password {i + 1}")
+    await refused(lambda: client(p, (p["user"], p["password"])), "the right password once locked")
+
+
 def trust(p):
     """What an operator does: moves the refused client's certificate from the server's
     rejected folder to its trusted folder."""
@@ -432,6 +441,9 @@ if __name__ == "__main__":
     elif sys.argv[1] == "disabled":
         asyncio.run(disabled_user_stopped(json.loads(Path(sys.argv[2]).read_text())))
         print("disabled user checks passed", flush=True)
+    elif sys.argv[1] == "lockout":
+        asyncio.run(opcua_lockout(json.loads(Path(sys.argv[2]).read_text())))
+        print("OPC UA lockout checks passed", flush=True)
     elif sys.argv[1] == "clear-password":
         asyncio.run(clear_password_refused(json.loads(Path(sys.argv[2]).read_text())))
         print("clear-text password checks passed", flush=True)
