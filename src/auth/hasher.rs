@@ -7,7 +7,10 @@
 //! system. The threads are the hasher's own, not tokio's blocking pool: glibc gives each
 //! thread that allocates an arena of its own and keeps freed 19 MiB blocks in it, so hashes
 //! spread over the pool's changing threads left up to one block per arena (measured: 60
-//! sign-ins kept 330 MiB); on a fixed thread per core the same block is reused.
+//! sign-ins kept 330 MiB); on a fixed thread per core the same block is reused. Each
+//! thread now keeps its argon2 memory itself (`verify_password_in`), allocated at its first
+//! check and reused for every later one, so a burst never allocates more than one block per
+//! thread and the allocator has nothing to keep.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
@@ -25,6 +28,12 @@ pub struct Busy {
 
 type Job = Box<dyn FnOnce() + Send>;
 
+thread_local! {
+    /// A hashing thread's argon2 memory, kept between checks (19 MiB once used).
+    static THREAD_BLOCKS: std::cell::RefCell<Vec<argon2::Block>> =
+        const { std::cell::RefCell::new(Vec::new()) };
+}
+
 /// Runs argon2 hashes on `parallel` threads of its own, `queue` more waiting. The threads
 /// end when the hasher is dropped.
 #[derive(Debug)]
@@ -35,6 +44,12 @@ pub struct Hasher {
     queued: Arc<AtomicUsize>,
     /// Jobs running now.
     running: Arc<AtomicUsize>,
+    /// The most jobs that ran at once since start (`/metrics`).
+    most_running: Arc<AtomicUsize>,
+    /// Checks refused because the queue was full.
+    refused: AtomicUsize,
+    /// The threads made: the most that can run at once.
+    parallel: usize,
 }
 
 impl Default for Hasher {
@@ -60,7 +75,8 @@ impl Hasher {
     pub fn new(parallel: usize, queue: usize) -> Self {
         let (jobs, rx) = sync_channel::<Job>(queue);
         let rx = Arc::new(Mutex::new(rx));
-        for i in 0..parallel.max(1) {
+        let parallel = parallel.max(1);
+        for i in 0..parallel {
             let rx = Arc::clone(&rx);
             // A thread that cannot be made leaves the others; with none, every check waits
             // in the queue and is refused once it is full, which the caller reports.
@@ -73,6 +89,9 @@ impl Hasher {
             queue,
             queued: Arc::new(AtomicUsize::new(0)),
             running: Arc::new(AtomicUsize::new(0)),
+            most_running: Arc::new(AtomicUsize::new(0)),
+            refused: AtomicUsize::new(0),
+            parallel,
         }
     }
 
@@ -84,9 +103,11 @@ impl Hasher {
     ) -> Result<Option<T>, Busy> {
         let (done, result) = tokio::sync::oneshot::channel();
         let (queued, running) = (Arc::clone(&self.queued), Arc::clone(&self.running));
+        let most = Arc::clone(&self.most_running);
         let job: Job = Box::new(move || {
             queued.fetch_sub(1, Ordering::SeqCst);
-            running.fetch_add(1, Ordering::SeqCst);
+            let now = running.fetch_add(1, Ordering::SeqCst) + 1;
+            most.fetch_max(now, Ordering::SeqCst);
             let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(work)).ok();
             running.fetch_sub(1, Ordering::SeqCst);
             // The caller may have gone (the client hung up): the hash ran all the same.
@@ -95,6 +116,7 @@ impl Hasher {
         self.queued.fetch_add(1, Ordering::SeqCst);
         if let Err(e) = self.jobs.try_send(job) {
             self.queued.fetch_sub(1, Ordering::SeqCst);
+            self.refused.fetch_add(1, Ordering::SeqCst);
             return match e {
                 TrySendError::Full(_) | TrySendError::Disconnected(_) => {
                     Err(Busy { queued: self.queue })
@@ -104,10 +126,16 @@ impl Hasher {
         Ok(result.await.ok().flatten())
     }
 
-    /// Whether `password` matches the stored `hash` (see [`super::verify_password`]).
+    /// Whether `password` matches the stored `hash` (see [`super::verify_password`]), in
+    /// the hashing thread's own argon2 memory.
     pub async fn verify(&self, password: String, hash: String) -> Result<bool, Busy> {
         let matched = self
-            .run(move || super::verify_password(&password, &hash))
+            .run(move || {
+                THREAD_BLOCKS.with(|blocks| {
+                    let mut blocks = blocks.borrow_mut();
+                    super::verify_password_in(&password, &hash, &mut blocks)
+                })
+            })
             .await?;
         Ok(matched.unwrap_or(false))
     }
@@ -120,6 +148,49 @@ impl Hasher {
     /// Checks waiting for a thread now.
     pub fn queued(&self) -> usize {
         self.queued.load(Ordering::SeqCst)
+    }
+
+    /// The hasher's series for `/metrics`: running now, the most at once since start, the
+    /// bound (its threads), waiting now, and refused since start.
+    pub fn render_metrics(&self) -> String {
+        let families: [(&str, &str, &str, usize); 5] = [
+            (
+                "camloop_password_hashes_running",
+                "gauge",
+                "Password hashes (argon2id, 19 MiB each) running now.",
+                self.running(),
+            ),
+            (
+                "camloop_password_hashes_running_max",
+                "gauge",
+                "The most password hashes that ran at once since start.",
+                self.most_running.load(Ordering::SeqCst),
+            ),
+            (
+                "camloop_password_hashes_parallel",
+                "gauge",
+                "The most password hashes that may run at once (one per core).",
+                self.parallel,
+            ),
+            (
+                "camloop_password_hashes_queued",
+                "gauge",
+                "Password checks waiting for a hashing thread now.",
+                self.queued(),
+            ),
+            (
+                "camloop_password_hashes_refused_total",
+                "counter",
+                "Password checks refused (503) because the hash queue was full.",
+                self.refused.load(Ordering::SeqCst),
+            ),
+        ];
+        families
+            .iter()
+            .map(|(name, kind, help, v)| {
+                format!("# HELP {name} {help}\n# TYPE {name} {kind}\n{name} {v}\n")
+            })
+            .collect()
     }
 }
 

@@ -146,6 +146,60 @@ pub fn verify_password(password: &str, hash: &str) -> bool {
         .is_ok()
 }
 
+/// The most argon2 memory a stored hash may ask a check for: 64 MiB (camloop's own take
+/// 19 MiB). A hash asking for more matches nothing, so a row written into the database by
+/// hand cannot make each sign-in allocate gigabytes.
+const MAX_CHECK_BLOCKS: usize = 64 * 1024;
+
+/// [`verify_password`] with the hash's memory in `blocks` (grown to the hash's cost once,
+/// then reused) instead of allocated and freed for every check: the hasher's threads each
+/// keep one, so argon2's memory is a fixed 19 MiB per core that a burst of sign-ins never
+/// adds to. The result is compared in constant time.
+pub(crate) fn verify_password_in(
+    password: &str,
+    hash: &str,
+    blocks: &mut Vec<argon2::Block>,
+) -> bool {
+    let Ok(parsed) = PasswordHash::new(hash) else {
+        return false;
+    };
+    let Ok(algorithm) = argon2::Algorithm::try_from(parsed.algorithm.as_str()) else {
+        return false;
+    };
+    let Ok(params) = argon2::Params::try_from(&parsed) else {
+        return false;
+    };
+    let version = match parsed.version.map(argon2::Version::try_from) {
+        None => argon2::Version::default(),
+        Some(Ok(v)) => v,
+        Some(Err(_)) => return false,
+    };
+    let (Some(salt), Some(expected)) = (&parsed.salt, &parsed.hash) else {
+        return false;
+    };
+    let count = params.block_count();
+    if count > MAX_CHECK_BLOCKS {
+        return false;
+    }
+    if blocks.len() < count {
+        blocks.resize(count, argon2::Block::default());
+    }
+    let mut out = vec![0u8; expected.len()];
+    let argon = argon2::Argon2::new(algorithm, version, params);
+    if argon
+        .hash_password_into_with_memory(password.as_bytes(), salt, &mut out, &mut blocks[..count])
+        .is_err()
+    {
+        return false;
+    }
+    out.len() == expected.len()
+        && out
+            .iter()
+            .zip(expected.as_bytes())
+            .fold(0u8, |acc, (a, b)| acc | (a ^ b))
+            == 0
+}
+
 /// `n` random bytes from the operating system, as lowercase hex.
 pub(crate) fn random_hex(n: usize) -> Result<String, AuthError> {
     let mut bytes = vec![0u8; n];
@@ -248,6 +302,37 @@ mod tests {
             check_new_password(&random_password().unwrap(), &ann),
             Ok(())
         );
+    }
+
+    #[test]
+    fn a_check_in_reused_memory_agrees_with_the_crate_s_own() {
+        let hash = hash_password("twelve-chars").unwrap();
+        let mut blocks = Vec::new();
+        for (password, hash) in [
+            ("twelve-chars", hash.as_str()),
+            ("twelve-charS", hash.as_str()),
+            ("twelve-chars", "not a hash"),
+            (
+                "anything-at-all",
+                "$argon2id$v=19$m=19456,t=2,p=1$c29tZXNhbHRzb21lc2FsdA$QUwJiZ3Eg4pcXfI7u8T/HWl3eo6L6VeKvzZp4RkZ+6Q",
+            ),
+        ] {
+            assert_eq!(
+                verify_password_in(password, hash, &mut blocks),
+                verify_password(password, hash),
+                "{password} {hash}"
+            );
+        }
+        assert!(verify_password_in("twelve-chars", &hash, &mut blocks));
+        // 19 MiB of 1 KiB blocks, kept for the next check.
+        assert_eq!(blocks.len(), 19 * 1024);
+        let capacity = blocks.capacity();
+        assert!(!verify_password_in("wrong-password", &hash, &mut blocks));
+        assert_eq!(blocks.capacity(), capacity, "the same memory, not more");
+        // A hash asking for 1 GiB matches nothing and takes nothing.
+        let greedy = "$argon2id$v=19$m=1048576,t=2,p=1$c29tZXNhbHRzb21lc2FsdA$QUwJiZ3Eg4pcXfI7u8T/HWl3eo6L6VeKvzZp4RkZ+6Q";
+        assert!(!verify_password_in("anything-at-all", greedy, &mut blocks));
+        assert_eq!(blocks.capacity(), capacity);
     }
 
     #[test]

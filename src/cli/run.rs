@@ -23,6 +23,9 @@ pub struct RunArgs {
 }
 
 pub fn run_service(args: RunArgs) -> anyhow::Result<()> {
+    // Everything the service makes (var/, its journals, the share's versions) is its
+    // account's only.
+    crate::private_fs::owner_only_umask();
     let text = std::fs::read_to_string(&args.config)
         .with_context(|| format!("cannot read configuration {}", args.config.display()))?;
     // Everything is checked, recipes, DBC files, folders and the listener included, before

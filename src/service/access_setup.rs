@@ -14,12 +14,13 @@ use std::io::Write as _;
 use std::path::Path;
 use tracing::{info, warn};
 
-/// Makes the var folder, or narrows it, to the service's account only (0700): it holds the
-/// database (password hashes, history), the audit key, the MQTT queue and the OPC UA key.
+/// Makes the var folder, or narrows it and what is directly in it, to the service's account
+/// only (0700, 0600): it holds the database (password hashes, history), the audit key, the
+/// MQTT queue, the OPC UA key, the machines' journals and the demo's share.
 pub(crate) fn private_var_dir(config: &Config) -> anyhow::Result<()> {
     let var = config.var_dir();
     crate::private_fs::create_dir_all(&var)
-        .and_then(|()| crate::private_fs::restrict(&var))
+        .and_then(|()| crate::private_fs::restrict_with_children(&var))
         .with_context(|| format!("var folder {}", var.display()))
 }
 

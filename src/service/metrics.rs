@@ -194,6 +194,8 @@ pub struct Metrics {
     pub health: super::health::HealthBoard,
     /// The link to the MQTT broker, when `[mqtt]` is enabled.
     mqtt: Mutex<Option<MqttMetrics>>,
+    /// When the listener's TLS certificate stops being valid, when it serves TLS.
+    tls_not_after: Mutex<Option<jiff::Timestamp>>,
 }
 
 /// The state of the link to the MQTT broker.
@@ -286,6 +288,24 @@ impl Metrics {
     pub fn mqtt_degraded(&self) -> bool {
         self.mqtt()
             .is_some_and(|m| matches!(m.link, MqttLinkState::Refused | MqttLinkState::Unreachable))
+    }
+
+    /// Sets when the listener's TLS certificate in force stops being valid.
+    pub(crate) fn set_tls_not_after(&self, at: jiff::Timestamp) {
+        *self.tls_not_after.lock().unwrap_or_else(|p| p.into_inner()) = Some(at);
+    }
+
+    /// Days to the TLS certificate's expiry, counted at each scrape (so it falls day by
+    /// day between reloads); nothing without TLS.
+    fn render_tls(&self, s: &mut String) {
+        let at = *self.tls_not_after.lock().unwrap_or_else(|p| p.into_inner());
+        let Some(at) = at else { return };
+        let days = super::http::days_left(at, jiff::Timestamp::now());
+        let name = "camloop_tls_certificate_expiry_days";
+        let _ = writeln!(
+            s,
+            "# HELP {name} Days until the listener's TLS certificate expires (negative: expired).\n# TYPE {name} gauge\n{name} {days:.3}"
+        );
     }
 
     fn render_mqtt(&self, s: &mut String) {
@@ -390,6 +410,7 @@ impl Metrics {
         self.render_access(&mut s);
         self.render_lag(&mut s);
         self.render_mqtt(&mut s);
+        self.render_tls(&mut s);
         s
     }
 

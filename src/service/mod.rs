@@ -9,11 +9,13 @@ pub(crate) mod action;
 pub mod app;
 mod cluster_task;
 pub(crate) mod command;
+mod database_health;
 mod drop_source;
 pub mod health;
 pub mod http;
 pub mod journal;
 mod lease_keeper;
+mod listener_setup;
 pub mod machine;
 pub mod metrics;
 pub mod mqtt;
@@ -21,6 +23,7 @@ pub(crate) mod offload;
 pub mod opcua;
 pub mod plant;
 pub(crate) mod runner;
+pub(crate) mod sign_in;
 pub mod sim_source;
 mod sources;
 mod startup;
@@ -162,11 +165,19 @@ async fn begin(checked: Checked, options: RunOptions) -> anyhow::Result<Starting
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let metrics = Arc::new(Metrics::default());
     startup::machines_opening(&metrics, 0, config.machines.len());
+    // The TLS pair is checked before anything is made: a bad pair leaves no database,
+    // admin or var folder behind.
+    let tls = listener_setup::load_tls(&config, &metrics)?;
     access_setup::private_var_dir(&config)?;
     // Before any machine opens: their journals share this one reserve.
     let reserve = journal::share_reserve_under(&config.machines_dir());
     let (store, connector, retention) =
         startup::start_store(&config, options.accept_new_database, &shutdown_rx).await?;
+    tokio::spawn(database_health::watch(
+        store.clone(),
+        metrics.clone(),
+        shutdown_rx.clone(),
+    ));
 
     let publisher = startup::start_mqtt(&config, &shutdown_rx)?;
     if let Some(p) = &publisher {
@@ -205,10 +216,11 @@ async fn begin(checked: Checked, options: RunOptions) -> anyhow::Result<Starting
     };
     let app = http::router(app_state.clone());
     let http_addr = listener.local_addr()?;
-    let (policy, tls) = listener_policy(&config, http_addr, shutdown_rx.clone())?;
+    let policy = listener_setup::policy(&config, http_addr, tls.as_ref(), &metrics, &shutdown_rx)?;
     let http_runtime = startup::HttpRuntime::start()?;
+    let tls_on = tls.is_some();
     let server = http_runtime.serve(listener, app, limits, policy, tls, shutdown_rx.clone());
-    info!(listen = %http_addr, tls = tls_on(&config), machines = config.machines.len(), "camloop listening; machines opening");
+    info!(listen = %http_addr, tls = tls_on, machines = config.machines.len(), "camloop listening; machines opening");
 
     Ok(Starting {
         http_addr,
@@ -293,65 +305,6 @@ impl Starting {
             _reserve: reserve,
         })
     }
-}
-
-/// Whether the listener serves HTTPS.
-fn tls_on(config: &Config) -> bool {
-    config.http.tls_cert.is_some() && config.http.tls_key.is_some()
-}
-
-/// The listener's host allow-list and TLS (reloaded on SIGHUP until shutdown); logs a
-/// warning for every insecure setting the config allowed, at every start.
-fn listener_policy(
-    config: &Config,
-    http_addr: std::net::SocketAddr,
-    shutdown: watch::Receiver<bool>,
-) -> anyhow::Result<(http::Policy, Option<Arc<http::Tls>>)> {
-    let warnings = crate::config::network_exposure(
-        &config.http,
-        config.auth.anonymous_read(config.http.listen),
-        &config.lines,
-    )
-    .map_err(|p| anyhow::anyhow!("{}: {p}", config.file.display()))?;
-    for w in warnings {
-        warn!(reason = %w, "serving insecurely because http.allow_insecure_network = true");
-    }
-    let tls = match (&config.http.tls_cert, &config.http.tls_key) {
-        (Some(cert), Some(key)) => {
-            let tls = http::Tls::load(&config.resolve(cert), &config.resolve(key))?;
-            tokio::spawn(reload_tls_on_hangup(tls.clone(), shutdown));
-            Some(tls)
-        }
-        _ => None,
-    };
-    let policy = http::Policy {
-        hosts: http::HostAllowList::new(http_addr, &config.http.allowed_hosts),
-        tls: tls.is_some(),
-    };
-    Ok((policy, tls))
-}
-
-/// Reads the TLS pair again at every SIGHUP; the accept loop goes on meanwhile.
-async fn reload_tls_on_hangup(tls: Arc<http::Tls>, mut shutdown: watch::Receiver<bool>) {
-    #[cfg(unix)]
-    {
-        use tokio::signal::unix::{SignalKind, signal};
-        let Ok(mut hangup) = signal(SignalKind::hangup()) else {
-            warn!("SIGHUP cannot be caught: the TLS certificate is not reloaded");
-            return;
-        };
-        loop {
-            tokio::select! {
-                _ = hangup.recv() => match tls.reload() {
-                    Ok(()) => info!("SIGHUP: TLS certificate and key reloaded"),
-                    Err(e) => error!(error = %format!("{e:#}"), "SIGHUP: TLS reload failed; the previous certificate stays in force"),
-                },
-                _ = shutdown.changed() => return,
-            }
-        }
-    }
-    #[cfg(not(unix))]
-    let _ = (tls, shutdown.changed().await);
 }
 
 /// What every machine's tasks share.

@@ -150,7 +150,7 @@ async fn signing_in_csrf_and_lockout_in_a_real_browser() {
     let (_, body) = get(addr, "/api/v1/machines/SIM1/dressings").await;
     let items = json(&body)["items"].as_array().unwrap().clone();
     assert_eq!(items.len(), 1, "{body}");
-    assert_eq!(items[0]["source"], "api:op");
+    assert_eq!(items[0]["source"], "api:operator");
 
     // Another port of this host is the same site: the cookie goes along, the token cannot.
     let evil = attacker_page(addr);

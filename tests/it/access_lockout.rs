@@ -3,7 +3,9 @@
 //! then even the right password is refused from there; but the lock holds that user from
 //! that address only: the same user from another loopback address signs in, another user
 //! from the same address signs in, and the user's valid API token is never refused.
-//! Also: many sign-ins at once never run more argon2 hashes than there are cores.
+//! Also: many sign-ins at once never run more argon2 hashes than there are cores (the
+//! hasher's own count of the most at once, in /metrics), and those beyond its queue get 503
+//! with Retry-After.
 
 use crate::service_support;
 
@@ -40,7 +42,12 @@ pub(crate) fn status(answer: &str) -> u16 {
 }
 
 /// One sign-in of `name` with `password` from `from`, with a nonce of its own: the status.
-async fn sign_in(addr: SocketAddr, from: IpAddr, name: &str, password: &str) -> u16 {
+pub(crate) async fn sign_in(addr: SocketAddr, from: IpAddr, name: &str, password: &str) -> u16 {
+    status(&sign_in_answer(addr, from, name, password).await)
+}
+
+/// [`sign_in`]'s whole answer.
+async fn sign_in_answer(addr: SocketAddr, from: IpAddr, name: &str, password: &str) -> String {
     let page = exchange(
         addr,
         from,
@@ -58,10 +65,10 @@ async fn sign_in(addr: SocketAddr, from: IpAddr, name: &str, password: &str) -> 
         "POST /signin HTTP/1.1\r\nHost: localhost\r\nCookie: camloop_signin={cookie}\r\nContent-Type: application/x-www-form-urlencoded\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
         body.len()
     );
-    status(&exchange(addr, from, &request).await)
+    exchange(addr, from, &request).await
 }
 
-async fn with_token(addr: SocketAddr, from: IpAddr, token: &str) -> u16 {
+pub(crate) async fn with_token(addr: SocketAddr, from: IpAddr, token: &str) -> u16 {
     let request = format!(
         "GET /api/v1/machines/SIM1/dressings HTTP/1.1\r\nHost: localhost\r\nAuthorization: Bearer {token}\r\nConnection: close\r\n\r\n"
     );
@@ -137,6 +144,57 @@ async fn sixty_wrong_sign_ins_at_once_check_five_and_lock_one_user_from_one_addr
         "op from there"
     );
     assert_eq!(with_token(addr, here, &token).await, 200, "eng's token");
+    hashes_stay_within_the_cores(addr).await;
     store.close().await;
     running.stop().await;
+}
+
+/// 60 sign-ins of 60 different names at once from one more address: none locks (one
+/// attempt each), so each takes a hash or is refused for a full queue. The hasher's count
+/// of the most hashes at once never passes its threads (one per core), and every 503 is
+/// one the hasher counted as refused, with Retry-After.
+async fn hashes_stay_within_the_cores(addr: SocketAddr) {
+    let from: IpAddr = "127.0.0.3".parse().unwrap();
+    let attempts: Vec<_> = (0..60)
+        .map(|i| {
+            let name = format!("nobody{i}");
+            tokio::spawn(
+                async move { sign_in_answer(addr, from, &name, "wrong-password-guess").await },
+            )
+        })
+        .collect();
+    let mut busy = 0;
+    for a in attempts {
+        let answer = a.await.unwrap();
+        match status(&answer) {
+            401 => {}
+            503 => {
+                busy += 1;
+                assert!(answer.contains("retry-after: 1"), "{answer}");
+            }
+            other => panic!("{other}: {answer}"),
+        }
+    }
+    let metrics = exchange(
+        addr,
+        from,
+        "GET /metrics HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n",
+    )
+    .await;
+    let value = |name: &str| -> u64 {
+        metrics
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("{name} ")))
+            .and_then(|v| v.trim().parse().ok())
+            .unwrap_or_else(|| panic!("{name} in /metrics:\n{metrics}"))
+    };
+    let cores = std::thread::available_parallelism().map_or(1, |n| u64::try_from(n.get()).unwrap());
+    assert_eq!(value("camloop_password_hashes_parallel"), cores);
+    let most = value("camloop_password_hashes_running_max");
+    assert!(
+        (1..=cores).contains(&most),
+        "{most} hashes at once on {cores} cores"
+    );
+    assert_eq!(value("camloop_password_hashes_refused_total"), busy);
+    assert_eq!(value("camloop_password_hashes_running"), 0);
 }

@@ -164,6 +164,10 @@ async fn clients_verify_the_certificate_and_a_hangup_reloads_it_without_dropping
         "{body:?}"
     );
 
+    // The certificate's days to expiry: `camloop tls self-signed` makes it valid to 4096.
+    let days = expiry_days(port, &old_cert).await;
+    assert!(days > 365.0 * 2000.0, "{days}");
+
     // A new pair in place, then SIGHUP: new connections get it, the open one goes on.
     let new_cert = self_signed(dir.path(), true);
     assert_ne!(new_cert, old_cert);
@@ -188,6 +192,42 @@ async fn clients_verify_the_certificate_and_a_hangup_reloads_it_without_dropping
         }
     }
     drop(service);
+}
+
+/// `camloop_tls_certificate_expiry_days` from /metrics, over TLS.
+async fn expiry_days(port: u16, cert: &str) -> f64 {
+    let mut s = until_trusted(port, cert).await;
+    s.write_all(b"GET /metrics HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
+        .await
+        .unwrap();
+    let mut text = Vec::new();
+    // A close_notify-less end is fine here: the whole answer came before it.
+    let _ = tokio::time::timeout(DEADLINE, s.read_to_end(&mut text)).await;
+    let text = String::from_utf8_lossy(&text);
+    text.lines()
+        .find_map(|l| l.strip_prefix("camloop_tls_certificate_expiry_days "))
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no expiry in /metrics:\n{text}"))
+}
+
+/// A key that is not the certificate's stops the start before anything is made: no var
+/// folder, no database, no first admin.
+#[test]
+fn a_mismatched_pair_is_refused_before_the_database_or_an_admin_is_made() {
+    let dir = tempfile::tempdir().unwrap();
+    self_signed(dir.path(), false);
+    let (_, other_key) = camloop::service::http::self_signed(&["localhost".into()]).unwrap();
+    std::fs::write(dir.path().join("tls/other-key.pem"), other_key).unwrap();
+    let keys = "tls_cert = \"tls/cert.pem\"\ntls_key = \"tls/other-key.pem\"";
+    let text = config("127.0.0.1:0", keys);
+    std::fs::write(dir.path().join("camloop.toml"), text).unwrap();
+    let out = cli_support::camloop(&["run", "--config", "camloop.toml"], dir.path());
+    let err = cli_support::stderr(&out);
+    assert!(!out.status.success());
+    assert!(err.contains("do not make a pair"), "{err}");
+    for left in ["var/camloop.db", "var/admin-password", "var/audit-key"] {
+        assert!(!dir.path().join(left).exists(), "{left} was made: {err}");
+    }
 }
 
 /// curl trusting `tls/cert.pem` fetches /healthz and returns the body; `None`, with a line,

@@ -287,15 +287,12 @@ fn the_service_never_imports_the_cli() {
 
 /// Adapters do not reach into each other: OPC UA and MQTT import neither the HTTP adapter
 /// nor one another. What they share (the loop's types, `service::action`, `service::command`,
-/// `service::plant`, `service::app`) belongs to none of them.
+/// `service::plant`, `service::app`, the password sign-in `service::sign_in`) belongs to none
+/// of them.
 #[test]
 fn opcua_and_mqtt_never_import_http_nor_each_other() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let service = root.join("src/service");
-    // OPC UA's sign-in (`opcua/auth.rs`) still goes through the HTTP side's password check
-    // and lockout until those move to a neutral module; it is the one place allowed, and
-    // only for that.
-    let sign_in = service.join("opcua/auth.rs");
     let mut violations: Vec<String> = uses_of(
         &service.join("opcua"),
         &[
@@ -305,10 +302,7 @@ fn opcua_and_mqtt_never_import_http_nor_each_other() {
             "super::mqtt",
         ],
         5,
-    )
-    .into_iter()
-    .filter(|v| !(v.starts_with(&sign_in.display().to_string()) && v.ends_with("service::http")))
-    .collect();
+    );
     violations.extend(uses_of(
         &service.join("mqtt"),
         &[

@@ -278,3 +278,175 @@ fn owner_only_and_a_readable_key_refused(dir: &Path) {
     assert!(!status.success(), "a start with a readable key");
     assert!(err.contains("can be read by other accounts"), "{err}");
 }
+
+/// Five wrong OPC UA passwords for a user lock that user's OPC UA sign-in only: the same
+/// user's HTTP sign-in and valid API token are never refused (429) for them.
+#[test]
+fn an_opcua_lockout_leaves_the_user_s_http_sign_in_and_token_alone() {
+    if !asyncua_present() {
+        eprintln!("SKIP opcua_asyncua (lockout): Python asyncua not installed");
+        return;
+    }
+    let script = cli_support::repo("tests/opcua/client_checks.py");
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("client-certs");
+    std::fs::create_dir_all(&certs).unwrap();
+    let made = Command::new("python3")
+        .args([&script, "certs", &certs.display().to_string()])
+        .output()
+        .unwrap();
+    assert!(made.status.success(), "{}", cli_support::stderr(&made));
+    let (http, opcua) = (free_port(), free_port());
+    let config = config(http, opcua).replace(
+        "host_name = \"localhost\"\n",
+        "host_name = \"localhost\"\naccept_unknown_clients = true\n",
+    );
+    std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
+    let _service = KillOnDrop::spawn(&mut camloop_run(dir.path())).unwrap();
+    let password_file = dir.path().join("var/admin-password");
+    wait_for("the admin password file", START_BOUND, || {
+        password_file.exists()
+    });
+    for port in [http, opcua] {
+        wait_for(&format!("a listener on port {port}"), START_BOUND, || {
+            TcpStream::connect(("127.0.0.1", port)).is_ok()
+        });
+    }
+    let password = "viewer-password-1234";
+    add_viewer(dir.path(), password);
+    let params = serde_json::json!({
+        "endpoint": format!("opc.tcp://localhost:{opcua}/"),
+        "cert_dir": certs.display().to_string(),
+        "user": "vera",
+        "password": password,
+    });
+    let params_file = dir.path().join("params.json");
+    std::fs::write(&params_file, params.to_string()).unwrap();
+    let mut run = KillOnDrop::spawn(
+        Command::new("python3")
+            .args([&script, "lockout", &params_file.display().to_string()])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped()),
+    )
+    .unwrap();
+    let status = run.exit_within(
+        SCRIPT_BOUND,
+        Duration::from_millis(200),
+        "the lockout checks",
+    );
+    let mut text = String::new();
+    use std::io::Read as _;
+    run.stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut text)
+        .unwrap();
+    run.stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut text)
+        .unwrap();
+    assert!(status.success(), "asyncua checks failed:\n{text}");
+    assert!(text.contains("OPC UA lockout checks passed"), "{text}");
+    let url = format!("sqlite://{}/var/camloop.db", dir.path().display());
+    tokio::runtime::Runtime::new().unwrap().block_on(async {
+        use crate::access_lockout::{sign_in, with_token};
+        let store = camloop::store::Store::connect(&url).await.unwrap();
+        let vera = store.user("vera").await.unwrap().unwrap();
+        let token = camloop::auth::new_token().unwrap();
+        let now = camloop::clock::now();
+        let grant = camloop::store::NewToken {
+            user: vera.id,
+            label: String::new(),
+            sha256: camloop::auth::token_digest(&token),
+            role: camloop::store::Role::Viewer,
+            created_at_ms: now,
+            expires_at_ms: now + jiff::SignedDuration::from_hours(1),
+        };
+        store.add_token(&grant).await.unwrap();
+        store.close().await;
+        let addr = std::net::SocketAddr::from(([127, 0, 0, 1], http));
+        let here = std::net::IpAddr::from([127, 0, 0, 1]);
+        assert_eq!(with_token(addr, here, &token).await, 200, "vera's token");
+        assert_eq!(
+            sign_in(addr, here, "vera", password).await,
+            303,
+            "vera over HTTP"
+        );
+    });
+}
+
+/// A viewer's open session (signed in, reading) reads nothing more once the user is disabled
+/// with `camloop user disable` beside the running service: the service rechecks its OPC UA
+/// users' state every 2 s (the script allows 20 s).
+#[test]
+fn a_disabled_user_s_open_session_stops_reading() {
+    if !asyncua_present() {
+        eprintln!("SKIP opcua_asyncua (disabled user): Python asyncua not installed");
+        return;
+    }
+    let script = cli_support::repo("tests/opcua/client_checks.py");
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("client-certs");
+    std::fs::create_dir_all(&certs).unwrap();
+    let made = Command::new("python3")
+        .args([&script, "certs", &certs.display().to_string()])
+        .output()
+        .unwrap();
+    assert!(made.status.success(), "{}", cli_support::stderr(&made));
+    let (http, opcua) = (free_port(), free_port());
+    let config = config(http, opcua).replace(
+        "host_name = \"localhost\"\n",
+        "host_name = \"localhost\"\naccept_unknown_clients = true\n",
+    );
+    std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
+    let _service = KillOnDrop::spawn(&mut camloop_run(dir.path())).unwrap();
+    let password_file = dir.path().join("var/admin-password");
+    wait_for("the admin password file", START_BOUND, || {
+        password_file.exists()
+    });
+    wait_for("the OPC UA listener", START_BOUND, || {
+        TcpStream::connect(("127.0.0.1", opcua)).is_ok()
+    });
+    let password = "viewer-password-1234";
+    add_viewer(dir.path(), password);
+    let params = serde_json::json!({
+        "endpoint": format!("opc.tcp://localhost:{opcua}/"),
+        "cert_dir": certs.display().to_string(),
+        "user": "vera",
+        "password": password,
+        "machine": "M1",
+        "camloop": env!("CARGO_BIN_EXE_camloop"),
+        "database": "sqlite://var/camloop.db",
+        "dir": dir.path().display().to_string(),
+    });
+    let params_file = dir.path().join("params.json");
+    std::fs::write(&params_file, params.to_string()).unwrap();
+    let mut run = KillOnDrop::spawn(
+        Command::new("python3")
+            .args([&script, "disabled", &params_file.display().to_string()])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped()),
+    )
+    .unwrap();
+    let status = run.exit_within(
+        SCRIPT_BOUND,
+        Duration::from_millis(200),
+        "the asyncua checks",
+    );
+    let mut text = String::new();
+    use std::io::Read as _;
+    run.stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut text)
+        .unwrap();
+    run.stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut text)
+        .unwrap();
+    println!("{text}");
+    assert!(status.success(), "asyncua checks failed:\n{text}");
+    assert!(text.contains("disabled user checks passed"), "{text}");
+}

@@ -246,7 +246,7 @@ async fn parts_flow_from_the_simulated_gauge_to_the_api() {
     assert_eq!(dressing["new_radius_mm"], 249.95, "{body}");
     assert_eq!(dressing["old_radius_mm"], 250.0, "{body}");
     // Who reported it: the caller (the deprecated shared token is named `api-token`).
-    assert_eq!(dressing["source"], "api:api-token");
+    assert_eq!(dressing["source"], "api:admin");
     let (_, body) = get(addr, "/api/v1/machines/SIM1/lobes/IN1/tables?limit=1").await;
     let dressed = json(&body)["items"][0].clone();
     assert_eq!(dressed["reason"], "wheel dressed to 249.95 mm", "{body}");

@@ -10,6 +10,7 @@ project wrote), as the integration test `opcua_asyncua` runs it.
 
 import asyncio
 import json
+import subprocess
 import sys
 import time
 import urllib.request
@@ -357,6 +358,51 @@ async def clear_password_refused(p):
         ok("the same user signs in over Basic256Sha256 SignAndEncrypt")
 
 
+async def disabled_user_stopped(p):
+    """A user's open session reads the machine's GrindingOrder; once the user is disabled with
+    `camloop user disable` beside the running service, the same session's reads are refused
+    within the service's recheck (every 2 s; the bound is 20 s, for a loaded machine)."""
+    # A listener that accepts may still be starting: wait until it answers.
+    await endpoints_once_answering(p["endpoint"])
+    c = await client(p, (p["user"], p["password"]))
+    async with c:
+        ns = await c.get_namespace_index("urn:camloop:ua")
+        machines = await c.nodes.objects.get_child([f"{ns}:Machines"])
+        order = await (await machines.get_child([f"{ns}:{p['machine']}"])).get_child(
+            [f"{ns}:GrindingOrder"]
+        )
+        await order.read_value()
+        ok(f"{p['user']}'s session reads GrindingOrder")
+        done = subprocess.run(
+            [p["camloop"], "user", "disable", p["user"], "--database", p["database"]],
+            cwd=p["dir"],
+            capture_output=True,
+            text=True,
+        )
+        if done.returncode != 0:
+            fail(f"camloop user disable: {done.stderr}")
+        disabled_at = time.monotonic()
+        while True:
+            try:
+                await order.read_value()
+            except ua.UaStatusCodeError as e:
+                waited = time.monotonic() - disabled_at
+                ok(f"refused {waited:.1f} s after the user was disabled ({type(e).__name__})")
+                break
+            if time.monotonic() - disabled_at > 20.0:
+                fail("the disabled user's session still reads 20 s later")
+            await asyncio.sleep(0.2)
+
+
+async def opcua_lockout(p):
+    """Five wrong passwords for a user over OPC UA lock that user's OPC UA sign-in: the
+    right password is refused there afterwards (the caller checks HTTP is untouched)."""
+    await endpoints_once_answering(p["endpoint"])
+    for i in range(5):
+        await refused(lambda: client(p, (p["user"], "wrong-password-guess")), f"wrong password {i + 1}")
+    await refused(lambda: client(p, (p["user"], p["password"])), "the right password once locked")
+
+
 def trust(p):
     """What an operator does: moves the refused client's certificate from the server's
     rejected folder to its trusted folder."""
@@ -392,6 +438,12 @@ async def check(params_file):
 if __name__ == "__main__":
     if sys.argv[1] == "certs":
         asyncio.run(make_certs(sys.argv[2]))
+    elif sys.argv[1] == "disabled":
+        asyncio.run(disabled_user_stopped(json.loads(Path(sys.argv[2]).read_text())))
+        print("disabled user checks passed", flush=True)
+    elif sys.argv[1] == "lockout":
+        asyncio.run(opcua_lockout(json.loads(Path(sys.argv[2]).read_text())))
+        print("OPC UA lockout checks passed", flush=True)
     elif sys.argv[1] == "clear-password":
         asyncio.run(clear_password_refused(json.loads(Path(sys.argv[2]).read_text())))
         print("clear-text password checks passed", flush=True)

@@ -160,6 +160,15 @@ impl TempPostgres {
         Ok(me)
     }
 
+    /// Stops the server now (`pg_ctl stop -m immediate`), as a crash or a pulled cable
+    /// would take it away; dropping it later is harmless.
+    pub fn stop(&self) {
+        let _ = self.run_bin(
+            "pg_ctl",
+            &["stop", "-m", "immediate", "-w", "-D", path_str(&self.data)],
+        );
+    }
+
     pub fn url(&self) -> String {
         format!("postgres://postgres@127.0.0.1:{}/camloop", self.port)
     }

@@ -296,6 +296,16 @@ impl Store {
         }
     }
 
+    /// Whether the database answers now: one `SELECT 1` on a reading connection (for the
+    /// service's health; a pool holds connections that look open after the server went).
+    pub async fn ping(&self) -> Result<(), StoreError> {
+        match &self.pools {
+            Pools::Sqlite { read, .. } => sqlx::query("SELECT 1").execute(read).await.map(drop),
+            Pools::Postgres { read, .. } => sqlx::query("SELECT 1").execute(read).await.map(drop),
+        }
+        .map_err(self.db_error("checking that the database answers"))
+    }
+
     /// Closes the pools; later calls fail with [`StoreError::Unavailable`].
     pub async fn close(&self) {
         self.reads.close();

@@ -12,7 +12,7 @@
 use super::AppState;
 use super::api::ApiError;
 use super::session::{Binding, Listener, cookie, session_cookie_name};
-use crate::auth::{Counted, Hasher, Lockout, effective_role, token_digest};
+use crate::auth::{Hasher, Lockout, effective_role, token_digest};
 use crate::config::Secret;
 use crate::service::http::ApiCode;
 use crate::store::{AuditEntry, AuditResult, Role};
@@ -432,48 +432,11 @@ async fn bearer(app: &AppState, token: &str, address: IpAddr) -> Result<Principa
         return Err(locked(app, user, address, until));
     }
     let counted = auth.lockout.fail_token(address, now);
-    failed(app, "token", user, address, why, counted).await;
+    crate::service::sign_in::record_failure(app, "token", user, address, why, counted).await;
     Err(ApiError::new(
         ApiCode::Unauthorized,
         "the bearer token is not valid".into(),
     ))
-}
-
-/// Logs one failed sign-in or token (already counted: `counted`), and audits it.
-pub(crate) async fn failed(
-    app: &AppState,
-    kind: &'static str,
-    user: Option<&str>,
-    address: IpAddr,
-    why: &str,
-    counted: Counted,
-) {
-    let user_text = user.unwrap_or("-");
-    warn!(kind, user = user_text, client = %address, why, "authentication failed");
-    app.metrics.update_access(|a| {
-        *a.failures.entry(kind).or_default() += 1;
-        if counted.locked_now {
-            a.lockouts_total += 1;
-        }
-    });
-    let anonymous = Principal {
-        actor: user.unwrap_or("anonymous").to_string(),
-        role: None,
-        address,
-        via: Via::Anonymous,
-    };
-    let (action, locked_what) = if kind == "password" {
-        ("signin", "this user from this client")
-    } else {
-        ("token", "wrong tokens from this address")
-    };
-    let mut reason = why.to_string();
-    if counted.locked_now {
-        warn!(user = user_text, client = %address, kind, "locked out for 15 minutes after 5 failures");
-        reason.push_str(&format!("; {locked_what} locked out for 15 minutes"));
-    }
-    let entry = anonymous.audit(action, AuditResult::Refused, reason);
-    super::audit::record_refusal(app, entry).await;
 }
 
 /// A refusal while locked out: counted and logged, not audited again (the lock was).
@@ -483,14 +446,8 @@ pub(crate) fn locked(
     address: IpAddr,
     until: jiff::Timestamp,
 ) -> ApiError {
-    let left_s = until.duration_since(crate::clock::now()).as_secs().max(0) + 1;
-    warn!(user = user.unwrap_or("-"), client = %address, left_s, "refused: locked out");
-    app.metrics
-        .update_access(|a| *a.failures.entry("locked").or_default() += 1);
-    ApiError::new(
-        ApiCode::LockedOut,
-        format!("too many failed attempts: try again in {left_s} s"),
-    )
+    let r = crate::service::sign_in::locked_out(app, user, address, until);
+    ApiError::new(ApiCode::LockedOut, r.to_string()).retry_after(r.retry_after_s())
 }
 
 async fn csrf_refused(app: &AppState, p: &Principal, path: &str) {

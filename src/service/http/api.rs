@@ -23,6 +23,9 @@ pub struct ApiError {
     status: StatusCode,
     code: ApiCode,
     message: String,
+    /// Seconds a client should wait before trying again (`Retry-After`), for a refusal
+    /// that passes with time (busy, locked out).
+    retry_after_s: Option<u64>,
 }
 
 impl ApiError {
@@ -31,7 +34,14 @@ impl ApiError {
             status: code.status(),
             code,
             message,
+            retry_after_s: None,
         }
+    }
+
+    /// The same error with `Retry-After: seconds`.
+    pub(crate) fn retry_after(mut self, seconds: u64) -> Self {
+        self.retry_after_s = Some(seconds.max(1));
+        self
     }
 
     /// An extractor's rejection: axum's status (415, 422, 413, …) with the API's code.
@@ -40,6 +50,7 @@ impl ApiError {
             status,
             code,
             message,
+            retry_after_s: None,
         }
     }
 
@@ -70,6 +81,10 @@ impl IntoResponse for ApiError {
             message: &self.message,
         };
         let mut r = (self.status, Json(body)).into_response();
+        if let Some(s) = self.retry_after_s {
+            r.headers_mut()
+                .insert(axum::http::header::RETRY_AFTER, s.into());
+        }
         // For the access layer, which audits refused writes by their code.
         r.extensions_mut().insert(self.code);
         r

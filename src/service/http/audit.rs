@@ -21,12 +21,7 @@ pub async fn record(app: &AppState, entry: AuditEntry) {
 /// for refusals of its client; over it, `camloop_audit_refusals_unrecorded_total` counts it
 /// and the client's next row says how many went unrecorded.
 pub async fn record_refusal(app: &AppState, entry: AuditEntry) {
-    match app.auth.audit_seal.within_refusal_budget(entry) {
-        Some(entry) => record(app, entry).await,
-        None => app
-            .metrics
-            .update_access(|a| a.refusals_unrecorded_total += 1),
-    }
+    crate::service::sign_in::record_refusal(app, entry).await;
 }
 
 #[derive(Debug, Deserialize)]

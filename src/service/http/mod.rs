@@ -30,6 +30,7 @@ mod route_roles;
 mod routes;
 mod server;
 mod session;
+mod table_routes;
 mod tls;
 mod writes;
 
@@ -42,10 +43,9 @@ pub use dashboard::{FeatureSheet, FeatureSheets, Stopping};
 pub use harden::{CONTENT_SECURITY_POLICY, HostAllowList, Policy};
 pub use routes::{LobeInfo, MachineInfo, MachinesReply};
 pub use server::{HttpLimits, serve, serve_with};
-pub use tls::{Tls, self_signed};
+pub use tls::{Tls, days_left, self_signed};
 pub use writes::{CommandReply, command_code};
 // The sign-in check the OPC UA server goes through as well.
-pub(crate) use session::{SignIn, password_sign_in};
 
 use axum::Router;
 use axum::routing::{get, post};
@@ -66,14 +66,17 @@ pub fn router(state: AppState) -> Router {
             get(capability::capability),
         )
         .route(&format!("{m}/rollback"), post(writes::rollback_part))
-        .route(&format!("{m}/lobes/{{lobe}}/tables"), get(routes::tables))
+        .route(
+            &format!("{m}/lobes/{{lobe}}/tables"),
+            get(table_routes::tables),
+        )
         .route(
             &format!("{m}/lobes/{{lobe}}/tables/{{version}}/program"),
-            get(routes::program),
+            get(table_routes::program),
         )
         .route(
             &format!("{m}/lobes/{{lobe}}/tables/{{version}}/diff"),
-            get(routes::diff),
+            get(table_routes::diff),
         )
         .route(
             &format!("{m}/lobes/{{lobe}}/rollback"),

@@ -19,9 +19,9 @@
 //!   are audited; the hashes run on the bounded `crate::auth::Hasher`.
 
 use super::AppState;
-use super::access::{Principal, Via, client_address, failed, locked, same_secret};
+use super::access::{Principal, Via, client_address, same_secret};
 use super::api::ApiError;
-use crate::auth::{Client, Refused, UserName, random_hex, token_digest};
+use crate::auth::{Client, random_hex, token_digest};
 use crate::service::http::ApiCode;
 use crate::store::AuditResult;
 use axum::extract::FromRequestParts;
@@ -279,12 +279,12 @@ pub(super) async fn signin(
     let client = Client::Address(address);
     let next = form.next.as_deref();
     let user = match password_sign_in(&app, &form.name, &form.password, client, address).await? {
-        SignIn::Ok(user) => user,
-        SignIn::Wrong => {
+        Ok(user) => user,
+        Err(None) => {
             let message = "Wrong user name or password.";
             return signin_form(&app, address, next, message, StatusCode::UNAUTHORIZED);
         }
-        SignIn::Refused(e) => {
+        Err(Some(e)) => {
             let message = format!("Locked out: {}.", e.message());
             return signin_form(&app, address, next, &message, e.status());
         }
@@ -320,97 +320,37 @@ pub(super) async fn signin(
     Ok(r)
 }
 
-/// How a password sign-in ended.
-pub(crate) enum SignIn {
-    Ok(crate::store::User),
-    /// A wrong name or password: counted, logged and audited.
-    Wrong,
-    /// Not checked: locked out, or as many checks in flight as would lock (429).
-    Refused(ApiError),
-}
-
-/// A password sign-in of `name` from `client` (audited under `address`): a slot in the
-/// lockout taken in one step with its count, then the hash, then the count. A check that
-/// cannot be made (the database down, every hash slot and the queue taken) is an error and
-/// counts nothing.
+/// A password sign-in through the shared check (`crate::service::sign_in`), its refusals and
+/// errors as the API answers them: 429 (locked out, or as many checks in flight as would
+/// lock) and 503 (the database, or every hash slot and the queue, busy), with Retry-After.
 pub(crate) async fn password_sign_in(
     app: &AppState,
     name: &str,
     password: &str,
     client: Client,
     address: std::net::IpAddr,
-) -> Result<SignIn, ApiError> {
-    let user_name = UserName::new(name).ok();
-    let user_text = user_name.as_ref().map(UserName::as_str);
-    let attempt = match app
-        .auth
-        .lockout
-        .begin_password(name, client, crate::clock::now())
-    {
-        Ok(attempt) => attempt,
-        Err(Refused::Locked { until }) => {
-            return Ok(SignIn::Refused(locked(app, user_text, address, until)));
-        }
-        Err(Refused::Busy) => {
-            app.metrics
-                .update_access(|a| *a.failures.entry("locked").or_default() += 1);
-            let message = "the attempts of this user from this client being checked now \
-                would lock it if wrong: try again in a moment";
-            return Ok(SignIn::Refused(ApiError::new(
-                ApiCode::LockedOut,
-                message.into(),
-            )));
-        }
-    };
-    match check_password(app, user_name.as_ref(), password).await? {
-        Ok(user) => {
-            attempt.succeeded();
-            Ok(SignIn::Ok(user))
-        }
-        Err(why) => {
-            let counted = attempt.failed(crate::clock::now());
-            failed(app, "password", user_text, address, why, counted).await;
-            Ok(SignIn::Wrong)
+) -> Result<Result<crate::store::User, Option<ApiError>>, ApiError> {
+    use crate::service::sign_in::{self, SignIn, SignInError};
+    match sign_in::password_sign_in(app, name, password, client, address).await {
+        Ok(SignIn::Ok(user)) => Ok(Ok(user)),
+        Ok(SignIn::Wrong) => Ok(Err(None)),
+        Ok(SignIn::Refused(r)) => Ok(Err(Some(
+            ApiError::new(ApiCode::LockedOut, r.to_string()).retry_after(r.retry_after_s()),
+        ))),
+        Err(SignInError::StoreUnavailable) => Err(ApiError::new(
+            ApiCode::StoreUnavailable,
+            SignInError::StoreUnavailable.to_string(),
+        )),
+        Err(SignInError::Store(e)) => Err(ApiError::from(e)),
+        Err(SignInError::Busy(busy)) => {
+            Err(ApiError::new(ApiCode::SigninBusy, busy.to_string()).retry_after(1))
         }
     }
-}
-
-/// The enabled user `name` whose password is `password`, or why not. A hash is checked even
-/// for an unknown user, so the time taken does not tell which names exist.
-async fn check_password(
-    app: &AppState,
-    name: Option<&UserName>,
-    password: &str,
-) -> Result<Result<crate::store::User, &'static str>, ApiError> {
-    let store = super::routes::store(app).await?;
-    let user = match name {
-        Some(n) => store.user(n.as_str()).await?,
-        None => None,
-    };
-    let hash = user
-        .as_ref()
-        .map_or(DUMMY_HASH, |u| u.password_hash.as_str())
-        .to_string();
-    let matches = app
-        .auth
-        .hasher
-        .verify(password.to_string(), hash)
-        .await
-        .map_err(|busy| ApiError::new(ApiCode::SigninBusy, busy.to_string()))?;
-    Ok(match user {
-        None => Err("unknown user"),
-        Some(u) if u.disabled_at_ms.is_some() => Err("disabled user"),
-        Some(_) if !matches => Err("wrong password"),
-        Some(u) => Ok(u),
-    })
 }
 
 fn internal(e: impl std::fmt::Display) -> ApiError {
     ApiError::new(ApiCode::Internal, e.to_string())
 }
-
-/// An argon2id hash of a password nobody has, checked for unknown users.
-const DUMMY_HASH: &str = "$argon2id$v=19$m=19456,t=2,p=1$c29tZXNhbHRzb21lc2FsdA$QUwJiZ3Eg4pcXfI7u8T/HWl3eo6L6VeKvzZp4RkZ+6Q";
 
 #[derive(Debug, Default, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -489,14 +429,6 @@ async fn read_form<T: serde::de::DeserializeOwned>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::auth::verify_password;
-
-    #[test]
-    fn the_dummy_hash_parses_and_matches_nothing_typed() {
-        assert!(!verify_password("", DUMMY_HASH));
-        assert!(!verify_password("twelve-chars", DUMMY_HASH));
-        assert!(argon2::password_hash::phc::PasswordHash::new(DUMMY_HASH).is_ok());
-    }
 
     #[test]
     fn only_local_paths_are_followed_after_sign_in() {

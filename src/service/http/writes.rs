@@ -9,6 +9,7 @@ use super::api::{ApiError, ApiJson, ApiPath, feature_name};
 use crate::names::{FeatureName, MachineName};
 use crate::service::command::{self, WriteError};
 use crate::service::http::ApiCode;
+use crate::store::Role;
 use axum::Json;
 use axum::extract::State;
 use camloop_loop::{CommandError, CommandOutcome, MachineCommand, TableVersion};
@@ -151,9 +152,13 @@ pub(super) async fn freeze(
             "reason: at most 200 characters, no control characters".into(),
         ));
     }
+    // The text every reader sees (anonymous ones too: the machines list, the dashboard,
+    // OPC UA, MQTT) names the role, not the user; the audit trail (engineers and admins)
+    // names who.
+    let by = by_role(&p);
     let frozen = body.frozen.then(|| match reason.is_empty() {
-        true => format!("frozen by {}", p.actor),
-        false => format!("frozen by {}: {reason}", p.actor),
+        true => format!("frozen by {by}"),
+        false => format!("frozen by {by}: {reason}"),
     });
     let freeze = MachineCommand::Freeze { lobe, frozen };
     let done = command::write(state.writes(), &p.caller(), &machine, freeze).await;
@@ -187,7 +192,9 @@ pub(super) async fn dress(
         .map(crate::core::learn::check_dresser_infeed)
         .transpose()
         .map_err(|e| ApiError::new(ApiCode::InvalidInfeed, e.to_string()))?;
-    let source = format!("api:{}", p.actor);
+    // The role, not the user: the dressing's source is shown to every reader; the audit
+    // trail names who.
+    let source = format!("api:{}", p.role.unwrap_or(Role::Viewer));
     let dressing = MachineCommand::Dressing {
         wheel_radius_mm: radius,
         infeed_um,
@@ -195,6 +202,17 @@ pub(super) async fn dress(
     };
     let done = command::write(state.writes(), &p.caller(), &machine, dressing).await;
     Ok(Json(done.map_err(write_error)?.into()))
+}
+
+/// "an operator", "an engineer", "an admin": who did something, as readers who may not see
+/// user names are told.
+fn by_role(p: &Principal) -> String {
+    let role = p.role.unwrap_or(Role::Viewer);
+    let article = match role.to_string().starts_with(['a', 'e', 'i', 'o', 'u']) {
+        true => "an",
+        false => "a",
+    };
+    format!("{article} {role}")
 }
 
 /// A machine of this service: one that is configured, else 404 (the name's rule was checked

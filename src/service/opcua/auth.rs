@@ -1,25 +1,32 @@
 //! Who may do what over OPC UA: users are camloop's users (argon2 hashes in the store),
-//! checked as the HTTP sign-in checks them (lockout, bounded hashing), and only on a
+//! checked by the sign-in the HTTP form uses too (`service::sign_in`: lockout, bounded
+//! hashing), and only on a
 //! signed and encrypted endpoint; anonymous clients are admitted only when
 //! `opcua.anonymous_read` allows it, and may then only browse, read and subscribe.
 
+use std::collections::{HashMap, HashSet};
 use std::net::{IpAddr, Ipv6Addr};
+use std::sync::{Arc, RwLock, Weak};
+use std::time::Duration;
 
 use async_trait::async_trait;
 use opcua::crypto::SecurityPolicy;
 use opcua::server::ServerEndpoint;
+use opcua::server::address_space::AccessLevel;
 use opcua::server::authenticator::{
     AuthManager, Password, UserToken, user_pass_security_policy_id, user_pass_security_policy_uri,
 };
 use opcua::types::{
-    Error, MessageSecurityMode, StatusCode, UAString, UserTokenPolicy, UserTokenType,
+    Error, MessageSecurityMode, NodeId, StatusCode, UAString, UserTokenPolicy, UserTokenType,
 };
 
-use crate::auth::Client;
+use crate::auth::{Client, token_digest};
+use crate::digest::Sha256;
 use crate::service::app::AppState;
 use crate::service::command;
-use crate::service::http;
-use crate::store::{AuditEntry, AuditResult, Role};
+use crate::service::machine::StoreHandle;
+use crate::service::sign_in::{self, SignIn};
+use crate::store::{AuditEntry, AuditResult, Role, Store};
 
 /// The client address OPC UA failures and writes are audited under: the OPC UA stack does
 /// not tell the server its peer's address, so every OPC UA client shares this one (distinct
@@ -27,10 +34,104 @@ use crate::store::{AuditEntry, AuditResult, Role};
 /// HTTP client (`crate::auth::Client::OpcUa`).
 pub(crate) const OPCUA_CLIENT: IpAddr = IpAddr::V6(Ipv6Addr::UNSPECIFIED);
 
-/// Checks identity tokens against camloop's users.
+/// Checks identity tokens against camloop's users, and every read and call against the
+/// user's state now (see [`SignedIn`]).
 pub(crate) struct Users {
-    pub(crate) app: AppState,
-    pub(crate) anonymous_read: bool,
+    app: AppState,
+    anonymous_read: bool,
+    signed_in: Arc<SignedIn>,
+}
+
+impl Users {
+    /// The users of `app`'s store; a task checks the signed-in users' state every
+    /// [`RECHECK_EVERY`] while these users are in use.
+    pub(crate) fn new(app: AppState, anonymous_read: bool) -> Self {
+        let signed_in = Arc::new(SignedIn::default());
+        tokio::spawn(keep_rechecking(
+            Arc::downgrade(&signed_in),
+            app.store.clone(),
+        ));
+        Self {
+            app,
+            anonymous_read,
+            signed_in,
+        }
+    }
+}
+
+/// How often the signed-in OPC UA users' state is read from the store: a user disabled,
+/// deleted or given a new password (by `camloop user`, beside the running service) reads
+/// and calls nothing within this.
+pub(crate) const RECHECK_EVERY: Duration = Duration::from_secs(2);
+
+/// The OPC UA sessions' users: the digest of the password hash each signed in with, and
+/// those no longer allowed since (disabled, deleted, or the password changed). The stack's
+/// session carries only the user name, so the digest is the one of that user's latest
+/// sign-in: a sign-in with the new password admits the user's older sessions again.
+#[derive(Debug, Default)]
+pub(crate) struct SignedIn {
+    users: RwLock<HashMap<String, Sha256>>,
+    revoked: RwLock<HashSet<String>>,
+}
+
+impl SignedIn {
+    fn signed_in(&self, name: &str, password_hash: &str) {
+        write(&self.users).insert(name.to_string(), token_digest(password_hash));
+        write(&self.revoked).remove(name);
+    }
+
+    /// Whether `name` may no longer read or call.
+    pub(crate) fn revoked(&self, name: &str) -> bool {
+        self.revoked
+            .read()
+            .unwrap_or_else(|p| p.into_inner())
+            .contains(name)
+    }
+
+    /// Reads each signed-in user's state; a store that cannot answer changes nothing.
+    async fn recheck(&self, store: &Store) {
+        let users: Vec<(String, Sha256)> = self
+            .users
+            .read()
+            .unwrap_or_else(|p| p.into_inner())
+            .iter()
+            .map(|(n, d)| (n.clone(), *d))
+            .collect();
+        for (name, digest) in users {
+            let allowed = match store.user(&name).await {
+                Ok(Some(u)) => {
+                    u.disabled_at_ms.is_none() && token_digest(&u.password_hash) == digest
+                }
+                Ok(None) => false,
+                Err(_) => continue,
+            };
+            let mut revoked = write(&self.revoked);
+            if allowed {
+                revoked.remove(&name);
+            } else if revoked.insert(name.clone()) {
+                tracing::warn!(user = %name, "OPC UA: the user was disabled, deleted or given a new password: their sessions read and call nothing more");
+            }
+        }
+    }
+}
+
+fn write<T>(lock: &RwLock<T>) -> std::sync::RwLockWriteGuard<'_, T> {
+    lock.write().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Rechecks every [`RECHECK_EVERY`] until the users are dropped (the server stopped).
+async fn keep_rechecking(signed_in: Weak<SignedIn>, store: StoreHandle) {
+    let mut tick = tokio::time::interval(RECHECK_EVERY);
+    loop {
+        tick.tick().await;
+        let Some(signed_in) = signed_in.upgrade() else {
+            return;
+        };
+        let current = store.read().await.clone();
+        if let Some(s) = current {
+            signed_in.recheck(&s).await;
+        }
+    }
 }
 
 #[async_trait]
@@ -61,7 +162,7 @@ impl AuthManager for Users {
                 "user names are refused on an unsecured endpoint: use Basic256Sha256 SignAndEncrypt",
             ));
         }
-        let signed_in = http::password_sign_in(
+        let signed_in = sign_in::password_sign_in(
             &self.app,
             username,
             password.get(),
@@ -69,15 +170,33 @@ impl AuthManager for Users {
             OPCUA_CLIENT,
         )
         .await
-        .map_err(|e| Error::new(StatusCode::BadInternalError, e.message().to_string()))?;
+        .map_err(|e| Error::new(StatusCode::BadInternalError, e.to_string()))?;
         match signed_in {
-            http::SignIn::Ok(user) => {
+            SignIn::Ok(user) => {
                 tracing::info!(user = %user.name, role = %user.role, "OPC UA: user signed in");
+                self.signed_in.signed_in(&user.name, &user.password_hash);
                 Ok(UserToken(user.name))
             }
-            http::SignIn::Wrong => Err(rejected("wrong user name or password")),
-            http::SignIn::Refused(e) => Err(rejected(e.message())),
+            SignIn::Wrong => Err(rejected("wrong user name or password")),
+            SignIn::Refused(r) => Err(rejected(&r.to_string())),
         }
+    }
+
+    /// Nothing for a user no longer allowed (see [`SignedIn`]): reads of values fail.
+    fn effective_user_access_level(
+        &self,
+        token: &UserToken,
+        user_access_level: AccessLevel,
+        _node_id: &NodeId,
+    ) -> AccessLevel {
+        match !token.is_anonymous() && self.signed_in.revoked(&token.0) {
+            true => AccessLevel::empty(),
+            false => user_access_level,
+        }
+    }
+
+    fn is_user_executable(&self, token: &UserToken, _method_id: &NodeId) -> bool {
+        token.is_anonymous() || !self.signed_in.revoked(&token.0)
     }
 
     fn user_token_policies(&self, endpoint: &ServerEndpoint) -> Vec<UserTokenPolicy> {

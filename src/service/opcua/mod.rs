@@ -297,10 +297,7 @@ fn server_builder(
     layout: Vec<MachineLayout>,
 ) -> ServerBuilder {
     let host = section.host();
-    let users = auth::Users {
-        app: app.clone(),
-        anonymous_read: section.anonymous_read,
-    };
+    let users = auth::Users::new(app.clone(), section.anonymous_read);
     let mut builder = ServerBuilder::new()
         .application_name("camloop")
         .application_uri(format!("urn:camloop:{host}"))
