@@ -40,6 +40,24 @@ pub trait ShareFs: Send {
     fn list_dir(&self, dir: &Path) -> io::Result<Vec<OsString>>;
 }
 
+/// Gives a program file on the share the read access the share folder gives: the service
+/// runs with umask 077 (its var folder is its own), but a plant's share is read by the file
+/// server's account, and the folder the plant made for it says who may read what is in it.
+/// A folder of 0755 gets files of 0644, 0750 gets 0640, and the demo's share inside the var
+/// folder (0700) gets 0600. Nobody but the owner ever gets write access.
+fn readable_as(file: &File, dir: &Path) -> io::Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let dir_mode = std::fs::metadata(dir)?.permissions().mode();
+        let mode = 0o600 | (dir_mode & 0o044);
+        file.set_permissions(std::fs::Permissions::from_mode(mode))?;
+    }
+    #[cfg(not(unix))]
+    let _ = (file, dir);
+    Ok(())
+}
+
 /// The real file system (`std::fs`), with `fsync` on files and folders.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct RealFs;
@@ -49,7 +67,8 @@ impl ShareFs for RealFs {
         let (mut file, path) = create_temp(dir, |p| File::create_new(p))?;
         // Written and flushed as two steps (not `write_synced`), so a crash point can land
         // between them.
-        let written = file.write_all(bytes).and_then(|()| {
+        let written = readable_as(&file, dir).and_then(|()| file.write_all(bytes));
+        let written = written.and_then(|()| {
             crash_point("share_temp_written");
             file.sync_all()
         });
@@ -194,6 +213,28 @@ mod tests {
         assert_eq!(std::fs::read(&path).unwrap(), b"hello");
         let again = RealFs.write_temp(dir.path(), b"hello").unwrap();
         assert_ne!(again, path);
+    }
+
+    /// A plant's share folder readable by its group and others (0755, 0750) gives its
+    /// programs that read access, whatever the process's umask; the var folder's (0700)
+    /// keeps them the owner's. Never writable by anyone else.
+    #[test]
+    #[cfg(unix)]
+    fn program_files_are_as_readable_as_the_share_folder() {
+        use std::os::unix::fs::PermissionsExt;
+        for (dir_mode, file_mode) in [
+            (0o755, 0o644),
+            (0o750, 0o640),
+            (0o700, 0o600),
+            (0o777, 0o644),
+        ] {
+            let dir = tempfile::tempdir().unwrap();
+            std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(dir_mode))
+                .unwrap();
+            let path = RealFs.write_temp(dir.path(), b"M17\n").unwrap();
+            let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
+            assert_eq!(mode, file_mode, "share folder {dir_mode:o}");
+        }
     }
 
     #[test]
