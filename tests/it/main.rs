@@ -21,6 +21,8 @@ mod history_support;
 mod machine_support;
 #[path = "../mqtt_support/mod.rs"]
 mod mqtt_support;
+#[path = "../opcua_support/mod.rs"]
+mod opcua_support;
 #[path = "../process_support/mod.rs"]
 mod process_support;
 #[path = "../rs274_support/mod.rs"]
@@ -101,6 +103,7 @@ mod opcua_asyncua;
 mod opcua_feed;
 mod opcua_limits;
 mod opcua_node;
+mod opcua_restart;
 mod opcua_write_audit;
 mod program_retarget;
 mod program_settings;

@@ -15,6 +15,7 @@ pub(crate) mod feed;
 mod methods;
 mod nodes;
 mod pki;
+mod seed;
 pub(crate) mod space;
 
 use crate::names::{FeatureName, MachineName};
@@ -193,12 +194,11 @@ async fn start_with(
     make_certificate(section, &pki, &host)?;
     let url = format!("opc.tcp://{host}:{}/", section.listen.port());
     let listeners = Arc::new(events::Listeners::default());
-    let recent = Arc::new(events::Recent::default());
     let builder = server_builder(
         section,
         &pki,
         &url,
-        (app.clone(), listeners.clone(), recent.clone()),
+        (app.clone(), listeners.clone()),
         layout.clone(),
     );
     let (server, handle) = builder
@@ -233,8 +233,13 @@ async fn start_with(
         handle.clone(),
     );
     feed.dressings = dressing_counts(&app, &layout).await;
-    feed.recent = recent;
-    let feed = tokio::spawn(feed::run(feed, events, shutdown.clone()));
+    let (seeds_tx, seeds) = mpsc::channel(16);
+    tokio::spawn(seed::send_newest(
+        app.store.clone(),
+        layout.clone(),
+        seeds_tx,
+    ));
+    let feed = tokio::spawn(feed::run(feed, (events, seeds), shutdown.clone()));
     tokio::spawn(pki::keep_rejected_bounded(pki.clone(), shutdown.clone()));
     let cancel = handle.clone();
     let mut stop = shutdown;
@@ -293,7 +298,7 @@ fn server_builder(
     section: &OpcUaSection,
     pki: &std::path::Path,
     url: &str,
-    (app, listeners, recent): (AppState, Arc<events::Listeners>, Arc<events::Recent>),
+    (app, listeners): (AppState, Arc<events::Listeners>),
     layout: Vec<MachineLayout>,
 ) -> ServerBuilder {
     let host = section.host();
@@ -332,7 +337,6 @@ fn server_builder(
             layout,
             app,
             listeners,
-            recent,
         }))
         .diagnostics_enabled(false);
     let limits = builder.limits_mut();
