@@ -100,6 +100,7 @@ mod machine_write_errors;
 mod mqtt_broker;
 mod mqtt_secure;
 mod opcua_asyncua;
+mod opcua_browse;
 mod opcua_feed;
 mod opcua_limits;
 mod opcua_node;

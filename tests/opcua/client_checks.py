@@ -104,13 +104,16 @@ async def browse(c, p):
         fail(f"machines browsed {sorted(names)} != configured {p['machines']}")
     m = p["machine"]
     features = await names[m].get_child([f"{ns}:Features"])
-    found = sorted([(await f.read_browse_name()).Name for f in await features.get_children()])
-    if found != sorted(p["features"]):
+    found = [(await f.read_browse_name()).Name for f in await features.get_children()]
+    if sorted(found) != sorted(p["features"]):
         fail(f"features browsed {found} != configured {p['features']}")
     order = await (await names[m].get_child([f"{ns}:GrindingOrder"])).read_value()
     if sorted(order) != sorted(p["features"]):
         fail(f"GrindingOrder {order} != configured {p['features']}")
-    ok(f"browsed Machines {sorted(names)} and {m}'s features {found}, GrindingOrder {order}")
+    # The browse gives the features in grinding order.
+    if found != order:
+        fail(f"features browsed in the order {found}, not the grinding order {order}")
+    ok(f"browsed Machines {sorted(names)} and {m}'s features {found}, in GrindingOrder")
     return ns, features
 
 

@@ -14,6 +14,7 @@ mod events;
 pub(crate) mod feed;
 mod methods;
 mod nodes;
+mod ordered;
 mod pki;
 mod seed;
 pub(crate) mod space;
@@ -24,6 +25,7 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicU64;
 
 use anyhow::Context;
+use opcua::server::node_manager::NodeManagerBuilder as _;
 use opcua::server::node_manager::memory::{InMemoryNodeManager, InMemoryNodeManagerBuilder};
 use opcua::server::{ServerBuilder, ServerEndpoint, ServerHandle};
 use opcua::types::BuildInfo;
@@ -218,8 +220,10 @@ async fn start_with(
     });
     let manager = handle
         .node_managers()
-        .get_of_type::<InMemoryNodeManager<nodes::CamloopNodes>>()
-        .context("opcua: camloop's node manager is missing")?;
+        .get_of_type::<ordered::Ordered>()
+        .context("opcua: camloop's node manager is missing")?
+        .inner
+        .clone();
     let ns = handle
         .get_namespace_index(space::NAMESPACE_URI)
         .context("opcua: camloop's namespace is missing")?;
@@ -333,11 +337,22 @@ fn server_builder(
         )
         .default_endpoint("basic256sha256_sign_encrypt")
         .with_authenticator(Arc::new(users))
-        .with_node_manager(InMemoryNodeManagerBuilder::new(nodes::Builder {
-            layout,
-            app,
-            listeners,
-        }))
+        .with_node_manager(move |context| {
+            let order = layout.clone();
+            let memory = InMemoryNodeManagerBuilder::new(nodes::Builder {
+                layout,
+                app,
+                listeners,
+            });
+            // The stack builds it as its own trait object: taken back as what it is.
+            let built = Box::new(memory).build(context).into_any_arc();
+            let inner = built
+                .downcast::<InMemoryNodeManager<nodes::CamloopNodes>>()
+                .unwrap_or_else(|_| {
+                    unreachable!("the in-memory builder builds an in-memory manager")
+                });
+            ordered::Ordered::new(inner, &order)
+        })
         .diagnostics_enabled(false);
     let limits = builder.limits_mut();
     limits.max_sessions = MAX_SESSIONS;

@@ -33,6 +33,13 @@ pub(crate) struct CamloopNodes {
     listeners: Arc<Listeners>,
 }
 
+impl CamloopNodes {
+    /// camloop's node ids (its namespace index).
+    pub(crate) fn ids(&self) -> Ids {
+        self.ids
+    }
+}
+
 impl InMemoryNodeManagerImplBuilder for Builder {
     type Impl = CamloopNodes;
 
