@@ -104,6 +104,7 @@ mod opcua_browse;
 mod opcua_feed;
 mod opcua_limits;
 mod opcua_node;
+mod opcua_overflow;
 mod opcua_restart;
 mod opcua_write_audit;
 mod program_retarget;

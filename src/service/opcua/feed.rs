@@ -18,7 +18,8 @@ use opcua::nodes::{BaseEventType, Event};
 use opcua::server::SubscriptionCache;
 use opcua::server::node_manager::memory::InMemoryNodeManager;
 use opcua::types::{
-    ByteString, DataValue, DateTime, LocalizedText, NodeId, ObjectId, StatusCode, Variant,
+    ByteString, DataValue, DateTime, LocalizedText, NodeId, ObjectId, ObjectTypeId, StatusCode,
+    Variant,
 };
 use tokio::sync::{mpsc, watch};
 
@@ -52,6 +53,10 @@ pub(crate) struct Feed {
     journal_failing: HashMap<MachineName, bool>,
     /// The EventIds, the same for the same event in every process (see [`EventIds`]).
     event_ids: EventIds,
+    /// Plant events the full intake refused (the loops' sender counts them), and how many
+    /// of them an overflow event has told.
+    pub(crate) dropped: Arc<std::sync::atomic::AtomicU64>,
+    dropped_told: u64,
 }
 
 impl Feed {
@@ -78,6 +83,8 @@ impl Feed {
             last: HashMap::new(),
             journal_failing: HashMap::new(),
             event_ids: EventIds::default(),
+            dropped: Arc::default(),
+            dropped_told: 0,
         }
     }
 
@@ -309,6 +316,50 @@ impl Feed {
             );
         }
         self.layout = layout;
+        self.tell_dropped();
+    }
+
+    /// An `EventQueueOverflowEventType` event on `Server` (and `Machines`) when plant events
+    /// were dropped before the server (its intake full) since the last one: those parts'
+    /// results and events are not shown, and a client is told so rather than left to
+    /// notice a gap.
+    fn tell_dropped(&mut self) {
+        let dropped = self.dropped.load(std::sync::atomic::Ordering::Relaxed);
+        if dropped <= self.dropped_told {
+            return;
+        }
+        let lost = dropped - self.dropped_told;
+        self.dropped_told = dropped;
+        tracing::warn!(
+            lost,
+            "OPC UA: plant events dropped, the server's intake was full"
+        );
+        let at = crate::clock::now();
+        let message = format!(
+            "{lost} plant events dropped before the OPC UA server (its intake was full): their results and events are not shown"
+        );
+        let server: NodeId = ObjectId::Server.into();
+        let ty: NodeId = ObjectTypeId::EventQueueOverflowEventType.into();
+        let kind = ty.to_string();
+        let id = self
+            .event_ids
+            .other(("Server", "Server", &kind), at, &message);
+        let event = BaseEventType::new(
+            ty,
+            ByteString::from(id),
+            LocalizedText::new("", &message),
+            date_time(at),
+        )
+        .set_source_node(server.clone())
+        .set_source_name("Server".into())
+        .set_severity(800)
+        .set_receive_time(DateTime::now());
+        // The Server object's listeners are the stack's; camloop's `Machines` listeners
+        // get it through the notifier list (no machine's: which one lost it is not known).
+        self.pending.push(Pending {
+            node: server,
+            event,
+        });
     }
 
     /// `MaxError` of the shown part, once the status has it (with the part's time).

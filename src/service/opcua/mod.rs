@@ -124,6 +124,8 @@ fn pki_dir(config: &Config) -> PathBuf {
 /// What the loops feed before the server starts: their events and the machines.
 pub(crate) struct Intake {
     events: mpsc::Receiver<PlantEvent>,
+    /// Events the full intake refused (counted by the loops' sender).
+    dropped: Arc<AtomicU64>,
     layout: Vec<MachineLayout>,
     /// Bound before the machines start, so a port in use stops the start before them.
     listener: std::net::TcpListener,
@@ -140,10 +142,12 @@ pub(crate) fn prepare(
     }
     let listener = bind(config.opcua.listen)?;
     let (tx, events) = mpsc::channel(INTAKE);
-    let sender = EventSender::new(tx, Arc::new(AtomicU64::new(0)));
+    let dropped = Arc::new(AtomicU64::new(0));
+    let sender = EventSender::new(tx, dropped.clone());
     let layout = layout(machines);
     let intake = Intake {
         events,
+        dropped,
         layout,
         listener,
     };
@@ -179,6 +183,7 @@ async fn start_with(
 ) -> anyhow::Result<Option<OpcUa>> {
     let Some(Intake {
         events,
+        dropped,
         layout,
         listener,
     }) = intake
@@ -237,6 +242,7 @@ async fn start_with(
         handle.clone(),
     );
     feed.dressings = dressing_counts(&app, &layout).await;
+    feed.dropped = dropped;
     let (seeds_tx, seeds) = mpsc::channel(16);
     tokio::spawn(seed::send_newest(
         app.store.clone(),
@@ -439,12 +445,14 @@ pub async fn bench_server(
         .collect();
     let app = AppState::without_http(store, metrics);
     let (sender, events) = mpsc::channel(INTAKE);
+    let dropped = Arc::new(AtomicU64::new(0));
     let intake = Intake {
         events,
+        dropped: dropped.clone(),
         layout,
         listener: bind(listen)?,
     };
     // Runs until shutdown: the server's own watcher cancels it.
     drop(start_with(&section, pki.to_path_buf(), app, Some(intake), &shutdown).await?);
-    Ok(EventSender::new(sender, Arc::new(AtomicU64::new(0))))
+    Ok(EventSender::new(sender, dropped))
 }
