@@ -106,6 +106,7 @@ mod opcua_limits;
 mod opcua_node;
 mod opcua_overflow;
 mod opcua_restart;
+mod opcua_watch;
 mod opcua_write_audit;
 mod program_retarget;
 mod program_settings;
