@@ -71,6 +71,22 @@ async def client(p, user=None, cert="trusted", secure=True):
     return c
 
 
+async def connected(p, user, bound_s=240.0):
+    """A session once the server answers: on a loaded machine a server that accepts the TCP
+    connection may leave a Hello unanswered within the client's timeout (a service of many
+    machines, or one just started). What the checks assert is what it then answers."""
+    deadline = time.monotonic() + bound_s
+    while True:
+        try:
+            c = await client(p, user)
+            await c.connect()
+            return c
+        except (asyncio.TimeoutError, OSError) as e:
+            if time.monotonic() > deadline:
+                fail(f"no session within {bound_s} s: {e!r}")
+            await asyncio.sleep(1.0)
+
+
 async def refused(make, what):
     c = await make()
     try:

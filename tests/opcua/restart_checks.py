@@ -19,13 +19,13 @@ from pathlib import Path
 
 from asyncua import ua
 
-from client_checks import Changes, acknowledge, client, fail, http_json, ok, rollback
+from client_checks import Changes, acknowledge, connected, fail, http_json, ok, rollback
 
 
 async def before(p, out):
     admin = ("admin", p["admin_password"])
-    c = await client(p, admin)
-    async with c:
+    c = await connected(p, admin)
+    try:
         ns = await c.get_namespace_index("urn:camloop:ua")
         machine = await c.nodes.objects.get_child([f"{ns}:Machines", f"{ns}:{p['machine']}"])
         h = Changes()
@@ -40,6 +40,8 @@ async def before(p, out):
         if found is None:
             fail("no rollback event on the machine within 30 s")
         await sub.delete()
+    finally:
+        await c.disconnect()
     ok(f"rolled back to v{new_version} ({message}); its event's EventId {found.EventId.hex()}")
     Path(out).write_text(json.dumps({"event_id": found.EventId.hex()}))
 
@@ -117,10 +119,12 @@ async def seeded(c, p, ns):
 async def after(p, out):
     kept = json.loads(Path(out).read_text())
     admin = ("admin", p["admin_password"])
-    c = await client(p, admin)
-    async with c:
+    c = await connected(p, admin)
+    try:
         ns = await c.get_namespace_index("urn:camloop:ua")
         await seeded(c, p, ns)
+    finally:
+        await c.disconnect()
     event_id = bytes.fromhex(kept["event_id"])
     answer = await acknowledge(p, admin, ns, event_id, ua.VariantType.ByteString)
     words = answer.split()

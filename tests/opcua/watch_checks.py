@@ -16,13 +16,12 @@ SourceTimestamp that name different parts or times.
 import asyncio
 import json
 import sys
-import time
 from collections import defaultdict
 from pathlib import Path
 
 from asyncua import ua
 
-from client_checks import client
+from client_checks import connected
 
 
 class Watch:
@@ -59,23 +58,8 @@ def ms_of(dt):
     return round(dt.timestamp() * 1000)
 
 
-async def connected(p, bound_s=240.0):
-    """A session once the server answers: a service of many machines accepts connections
-    before it serves them on a loaded machine. What is checked is what it then sends."""
-    deadline = time.monotonic() + bound_s
-    while True:
-        try:
-            c = await client(p, ("admin", p["admin_password"]))
-            await c.connect()
-            return c
-        except (asyncio.TimeoutError, OSError) as e:
-            if time.monotonic() > deadline:
-                raise RuntimeError(f"no session within {bound_s} s: {e!r}")
-            await asyncio.sleep(1.0)
-
-
 async def run(p):
-    c = await connected(p)
+    c = await connected(p, ("admin", p["admin_password"]))
     watch = Watch()
     try:
         ns = await c.get_namespace_index("urn:camloop:ua")
