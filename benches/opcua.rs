@@ -12,8 +12,11 @@
 //! own two-thread runtime, as the service's tasks run beside the machine task; the loop is
 //! timed on the bench thread. The core count is printed: they all compete for the cores.
 
+#[path = "../tests/opcua_support/mod.rs"]
+mod opcua_support;
 #[path = "support/mod.rs"]
 mod support;
+use opcua_support::{connect_with, free_port, namespace, plant, value_nodes};
 use support::{
     demo_lobe, machine_runtime, measurements, next_part, scratch_root, start_machine, time_parts,
 };
@@ -24,11 +27,8 @@ use camloop::service::metrics::Metrics;
 use camloop::store::Verdict;
 use camloop_loop::PlantEvent;
 use criterion::{Criterion, criterion_group, criterion_main};
-use opcua::client::{ClientBuilder, DataChangeCallback, IdentityToken};
-use opcua::crypto::SecurityPolicy;
-use opcua::types::{
-    MessageSecurityMode, MonitoredItemCreateRequest, NodeId, TimestampsToReturn, UserTokenPolicy,
-};
+use opcua::client::{ClientBuilder, DataChangeCallback};
+use opcua::types::{MonitoredItemCreateRequest, TimestampsToReturn};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
@@ -37,45 +37,10 @@ use std::time::{Duration, Instant};
 const MACHINES: usize = 50;
 const FEATURES: usize = 8;
 const CLIENTS: usize = 20;
-/// The values of a feature's result object (see the address space in docs/src/opcua.md).
-const VALUES: [&str; 15] = [
-    "PartId",
-    "Time",
-    "Verdict",
-    "MaxError",
-    "ProfileError",
-    "SizeError",
-    "PhaseError",
-    "Repeatability",
-    "LatestResult",
-    "TableVersionInForce",
-    "WaitingVersion",
-    "LearningFrozen",
-    "FrozenReason",
-    "BlockedByGuard",
-    "GuardReason",
-];
 
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .expect("a free port")
-        .local_addr()
-        .expect("its address")
-        .port()
-}
-
+/// The plant of 50 × 8 and the timed machine.
 fn names() -> Vec<(MachineName, Vec<FeatureName>)> {
-    let features: Vec<FeatureName> = (1..=FEATURES)
-        .map(|f| format!("F{f}").parse().expect("a bench name"))
-        .collect();
-    let mut machines: Vec<(MachineName, Vec<FeatureName>)> = (0..MACHINES)
-        .map(|m| {
-            (
-                format!("M{m:02}").parse().expect("a bench name"),
-                features.clone(),
-            )
-        })
-        .collect();
+    let mut machines = plant(MACHINES, FEATURES);
     let bench = "BENCH".parse().expect("a bench name");
     machines.push((bench, vec!["IN1".parse().expect("a bench name")]));
     machines
@@ -204,28 +169,7 @@ async fn subscriber(
     notifications: Arc<AtomicU64>,
     ready: Arc<AtomicU64>,
 ) {
-    let mut client = ClientBuilder::new()
-        .application_name("camloop bench client")
-        .application_uri("urn:camloop:bench-client")
-        .product_uri("urn:camloop:bench-client")
-        .pki_dir(dir)
-        .create_sample_keypair(true)
-        .trust_server_certs(true)
-        .session_retry_limit(3)
-        .client()
-        .expect("client");
-    let endpoint = (
-        url.as_str(),
-        SecurityPolicy::Basic256Sha256.to_str(),
-        MessageSecurityMode::SignAndEncrypt,
-        UserTokenPolicy::anonymous(),
-    );
-    let (session, event_loop) = client
-        .connect_to_matching_endpoint(endpoint, IdentityToken::Anonymous)
-        .await
-        .expect("session");
-    let _event_loop = event_loop.spawn();
-    session.wait_for_connection().await;
+    let session = connect_with(&url, dir, ClientBuilder::new()).await;
     let ns = namespace(&session).await;
     let counter = notifications.clone();
     let subscription = session
@@ -244,15 +188,9 @@ async fn subscriber(
         )
         .await
         .expect("subscription");
-    let items: Vec<MonitoredItemCreateRequest> = names()
-        .iter()
-        .flat_map(|(m, features)| {
-            features.iter().flat_map(move |f| {
-                VALUES
-                    .iter()
-                    .map(move |v| NodeId::new(ns, format!("Machines/{m}/Features/{f}/{v}")).into())
-            })
-        })
+    let items: Vec<MonitoredItemCreateRequest> = value_nodes(ns, &names())
+        .into_iter()
+        .map(Into::into)
         .collect();
     // Small calls: a reply for 1000 items outgrows the default message size.
     for chunk in items.chunks(100) {
@@ -263,29 +201,6 @@ async fn subscriber(
     }
     ready.fetch_add(1, Relaxed);
     std::future::pending::<()>().await;
-}
-
-/// camloop's namespace index, from the server's namespace array.
-async fn namespace(session: &opcua::client::Session) -> u16 {
-    let array = session
-        .read(
-            &[opcua::types::ReadValueId::from(NodeId::from(
-                opcua::types::VariableId::Server_NamespaceArray,
-            ))],
-            TimestampsToReturn::Neither,
-            0.0,
-        )
-        .await
-        .expect("namespace array");
-    let Some(opcua::types::Variant::Array(a)) = array[0].value.clone() else {
-        panic!("no namespace array")
-    };
-    a.values
-        .iter()
-        .position(
-            |v| matches!(v, opcua::types::Variant::String(s) if s.as_ref() == "urn:camloop:ua"),
-        )
-        .expect("camloop's namespace") as u16
 }
 
 fn per_part(c: &mut Criterion) {

@@ -54,6 +54,11 @@ impl EventSender {
         }
     }
 
+    /// Events this sender's own channel refused (full) so far.
+    pub fn refused(&self) -> u64 {
+        self.refused.load(Ordering::Relaxed)
+    }
+
     pub fn send(&self, event: PlantEvent) {
         if let Some(other) = &self.also {
             other.send(event.clone());

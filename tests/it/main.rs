@@ -21,6 +21,8 @@ mod history_support;
 mod machine_support;
 #[path = "../mqtt_support/mod.rs"]
 mod mqtt_support;
+#[path = "../opcua_support/mod.rs"]
+mod opcua_support;
 #[path = "../process_support/mod.rs"]
 mod process_support;
 #[path = "../rs274_support/mod.rs"]
@@ -99,9 +101,13 @@ mod machine_write_errors;
 mod mqtt_broker;
 mod mqtt_secure;
 mod opcua_asyncua;
+mod opcua_browse;
 mod opcua_feed;
 mod opcua_limits;
 mod opcua_node;
+mod opcua_overflow;
+mod opcua_restart;
+mod opcua_watch;
 mod opcua_write_audit;
 mod program_retarget;
 mod program_settings;

@@ -30,7 +30,7 @@ const SCRIPT_BOUND: Duration = Duration::from_secs(300);
 const PART_INTERVAL_S: f64 = 2.0;
 
 /// Whether the pinned client is importable; panics when CI requires it.
-fn asyncua_present() -> bool {
+pub(crate) fn asyncua_present() -> bool {
     let found = Command::new("python3")
         .args(["-c", "import asyncua, cryptography"])
         .stdout(Stdio::null())

@@ -14,13 +14,12 @@ use camloop::names::{FeatureName, MachineName};
 use camloop::service::metrics::Metrics;
 use camloop::store::Verdict;
 use camloop_loop::PlantEvent;
-use opcua::client::{ClientBuilder, DataChangeCallback, EventCallback, IdentityToken, Session};
-use opcua::crypto::SecurityPolicy;
+use opcua::client::{ClientBuilder, DataChangeCallback, EventCallback, Session};
 use opcua::types::{
     AttributeId, BrowseDescription, BrowseDirection, ContentFilter, DataValue, DateTime,
-    EventFilter, ExtensionObject, MessageSecurityMode, MonitoredItemCreateRequest, MonitoringMode,
-    MonitoringParameters, NodeId, ObjectId, ObjectTypeId, ReadValueId, ReferenceTypeId,
-    SimpleAttributeOperand, StatusCode, TimestampsToReturn, UserTokenPolicy, Variant,
+    EventFilter, ExtensionObject, MonitoredItemCreateRequest, MonitoringMode, MonitoringParameters,
+    NodeId, ObjectId, ObjectTypeId, ReadValueId, ReferenceTypeId, SimpleAttributeOperand,
+    StatusCode, TimestampsToReturn, Variant,
 };
 
 /// The longest a condition may take (a loaded 2-core machine): a failure, not a pace.
@@ -29,13 +28,7 @@ const BOUND: Duration = Duration::from_secs(60);
 /// Parts fed for the one feature watched.
 const PARTS: usize = 40;
 
-pub(crate) fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
+pub(crate) use crate::opcua_support::{connect_with, free_port, namespace};
 
 pub(crate) fn name<T: std::str::FromStr>(s: &str) -> T
 where
@@ -66,57 +59,6 @@ pub(crate) fn part(machine: &str, feature: &str, k: usize, part: &str) -> PlantE
 
 pub(crate) async fn connect(url: &str, pki: std::path::PathBuf) -> Arc<Session> {
     connect_with(url, pki, ClientBuilder::new()).await
-}
-
-/// A SignAndEncrypt anonymous session from `builder` (its limits as the caller set them).
-pub(crate) async fn connect_with(
-    url: &str,
-    pki: std::path::PathBuf,
-    builder: ClientBuilder,
-) -> Arc<Session> {
-    let mut client = builder
-        .application_name("camloop feed test")
-        .application_uri("urn:camloop:feed-test")
-        .product_uri("urn:camloop:feed-test")
-        .pki_dir(pki)
-        .create_sample_keypair(true)
-        .trust_server_certs(true)
-        .session_retry_limit(3)
-        .client()
-        .unwrap();
-    let endpoint = (
-        url,
-        SecurityPolicy::Basic256Sha256.to_str(),
-        MessageSecurityMode::SignAndEncrypt,
-        UserTokenPolicy::anonymous(),
-    );
-    let (session, event_loop) = client
-        .connect_to_matching_endpoint(endpoint, IdentityToken::Anonymous)
-        .await
-        .unwrap();
-    let _event_loop = event_loop.spawn();
-    session.wait_for_connection().await;
-    session
-}
-
-pub(crate) async fn namespace(session: &Session) -> u16 {
-    let read = session
-        .read(
-            &[ReadValueId::from(NodeId::from(
-                opcua::types::VariableId::Server_NamespaceArray,
-            ))],
-            TimestampsToReturn::Neither,
-            0.0,
-        )
-        .await
-        .unwrap();
-    let Some(Variant::Array(a)) = read[0].value.clone() else {
-        panic!("no namespace array")
-    };
-    a.values
-        .iter()
-        .position(|v| matches!(v, Variant::String(s) if s.as_ref() == "urn:camloop:ua"))
-        .unwrap() as u16
 }
 
 fn event_item(node: NodeId) -> MonitoredItemCreateRequest {

@@ -11,7 +11,8 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use crate::opcua_feed::{connect_with, free_port, name, namespace, part, wait};
+use crate::opcua_feed::{part, wait};
+use crate::opcua_support::{connect_with, free_port, namespace, plant, value_nodes};
 use camloop::names::{FeatureName, MachineName};
 use camloop::service::metrics::Metrics;
 use opcua::client::{ClientBuilder, DataChangeCallback, Session};
@@ -23,25 +24,6 @@ use opcua::types::{
 /// The plant: 50 machines × 8 features.
 const MACHINES: usize = 50;
 const FEATURES: usize = 8;
-
-/// The value variables of every feature (see the address space in docs/src/opcua.md).
-const VALUES: [&str; 15] = [
-    "PartId",
-    "Time",
-    "Verdict",
-    "MaxError",
-    "ProfileError",
-    "SizeError",
-    "PhaseError",
-    "Repeatability",
-    "LatestResult",
-    "TableVersionInForce",
-    "WaitingVersion",
-    "LearningFrozen",
-    "FrozenReason",
-    "BlockedByGuard",
-    "GuardReason",
-];
 
 /// A part id of a realistic length (48 characters).
 fn serial(m: &MachineName, f: &FeatureName) -> String {
@@ -73,10 +55,7 @@ fn the_advertised_limits_hold_and_a_large_write_reaches_the_subscriber_whole() {
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
     let listen = std::net::SocketAddr::from(([127, 0, 0, 1], port));
-    let features: Vec<FeatureName> = (1..=FEATURES).map(|f| name(&format!("F{f}"))).collect();
-    let machines: Vec<(MachineName, Vec<FeatureName>)> = (0..MACHINES)
-        .map(|m| (name(&format!("M{m:02}")), features.clone()))
-        .collect();
+    let machines = plant(MACHINES, FEATURES);
     let (stop, shutdown) = tokio::sync::watch::channel(false);
     let sender = runtime
         .block_on(camloop::service::opcua::bench_server(
@@ -100,16 +79,7 @@ fn the_advertised_limits_hold_and_a_large_write_reaches_the_subscriber_whole() {
         ClientBuilder::new(),
     ));
     let ns = runtime.block_on(namespace(&session));
-    let values: Vec<NodeId> = machines
-        .iter()
-        .flat_map(|(m, fs)| {
-            fs.iter().flat_map(move |f| {
-                VALUES
-                    .iter()
-                    .map(move |v| NodeId::new(ns, format!("Machines/{m}/Features/{f}/{v}")))
-            })
-        })
-        .collect();
+    let values = value_nodes(ns, &machines);
     let seen: Arc<Mutex<HashMap<NodeId, Vec<Variant>>>> = Arc::default();
     runtime.block_on(async {
         let per_read = limit(

@@ -9,7 +9,8 @@
 //! Skipped with a line saying so when node-opcua is not installed (`npm ci` in
 //! `tools/opcua-node`), unless `CAMLOOP_REQUIRE_NODE_OPCUA=1` (CI sets it and installs it).
 //! `CAMLOOP_OPCUA_NODE_MACHINES` and `CAMLOOP_OPCUA_NODE_SECONDS` size a longer run for the
-//! manual's figures (default: 3 machines for 12 s).
+//! manual's figures (default: 3 machines for 12 s), and `CAMLOOP_OPCUA_BIN` runs another
+//! build of camloop (a release build for a plant's size) instead of the test's own.
 
 use std::net::TcpStream;
 use std::process::{Command, Stdio};
@@ -25,7 +26,7 @@ const START_BOUND: Duration = Duration::from_secs(120);
 /// for a loaded machine, not a pace.
 const WAIT_BOUND: Duration = Duration::from_secs(240);
 
-const FEATURES: [&str; 8] = ["IN1", "EX1", "IN2", "EX2", "IN3", "EX3", "IN4", "EX4"];
+pub(crate) const FEATURES: [&str; 8] = ["IN1", "EX1", "IN2", "EX2", "IN3", "EX3", "IN4", "EX4"];
 
 fn node_opcua_present() -> bool {
     let dir = cli_support::repo("tools/opcua-node/node_modules/node-opcua-client");
@@ -44,7 +45,7 @@ fn node_opcua_present() -> bool {
     found
 }
 
-fn env_or(name: &str, default: u64) -> u64 {
+pub(crate) fn env_or(name: &str, default: u64) -> u64 {
     std::env::var(name)
         .ok()
         .and_then(|v| v.parse().ok())
@@ -80,6 +81,60 @@ fn config(http: u16, opcua: u16, machines: &[String]) -> String {
     text
 }
 
+/// The real service of simulated machines with `[opcua]` on, answering on both ports.
+pub(crate) struct Plant {
+    pub(crate) dir: tempfile::TempDir,
+    _service: KillOnDrop,
+    pub(crate) http: u16,
+    pub(crate) opcua: u16,
+    pub(crate) admin_password: String,
+    pub(crate) machines: Vec<String>,
+}
+
+/// Starts `count` simulated machines of [`FEATURES`], one part a second each, with the
+/// test's camloop or the one `CAMLOOP_OPCUA_BIN` names.
+pub(crate) fn start_plant(count: usize) -> Plant {
+    let machines: Vec<String> = (1..=count).map(|i| format!("SIM{i:02}")).collect();
+    let dir = tempfile::tempdir().unwrap();
+    let (http, opcua) = (free_port(), free_port());
+    std::fs::write(
+        dir.path().join("camloop.toml"),
+        config(http, opcua, &machines),
+    )
+    .unwrap();
+    let mut command = match std::env::var_os("CAMLOOP_OPCUA_BIN") {
+        Some(bin) => {
+            let mut c = Command::new(bin);
+            c.args(["run", "--config", "camloop.toml"])
+                .current_dir(dir.path())
+                .stdout(Stdio::null())
+                .stderr(Stdio::null());
+            c
+        }
+        None => camloop_run(dir.path()),
+    };
+    let service = KillOnDrop::spawn(&mut command).unwrap();
+    let password_file = dir.path().join("var/admin-password");
+    wait_for("the admin password file", || password_file.exists());
+    for port in [http, opcua] {
+        wait_for(&format!("a listener on port {port}"), || {
+            TcpStream::connect(("127.0.0.1", port)).is_ok()
+        });
+    }
+    let admin_password = std::fs::read_to_string(&password_file)
+        .unwrap()
+        .trim()
+        .to_string();
+    Plant {
+        dir,
+        _service: service,
+        http,
+        opcua,
+        admin_password,
+        machines,
+    }
+}
+
 #[test]
 fn node_opcua_sees_every_event_once_and_no_torn_result() {
     if !node_opcua_present() {
@@ -90,28 +145,14 @@ fn node_opcua_sees_every_event_once_and_no_torn_result() {
     }
     let count = env_or("CAMLOOP_OPCUA_NODE_MACHINES", 3) as usize;
     let seconds = env_or("CAMLOOP_OPCUA_NODE_SECONDS", 12);
-    let machines: Vec<String> = (1..=count).map(|i| format!("SIM{i:02}")).collect();
-    let dir = tempfile::tempdir().unwrap();
-    let (http, opcua) = (free_port(), free_port());
-    std::fs::write(
-        dir.path().join("camloop.toml"),
-        config(http, opcua, &machines),
-    )
-    .unwrap();
-    let _service = KillOnDrop::spawn(&mut camloop_run(dir.path())).unwrap();
-    let password_file = dir.path().join("var/admin-password");
-    wait_for("the admin password file", || password_file.exists());
-    for port in [http, opcua] {
-        wait_for(&format!("a listener on port {port}"), || {
-            TcpStream::connect(("127.0.0.1", port)).is_ok()
-        });
-    }
+    let plant = start_plant(count);
+    let dir = &plant.dir;
     let params = serde_json::json!({
-        "endpoint": format!("opc.tcp://localhost:{opcua}/"),
-        "http": format!("http://127.0.0.1:{http}"),
-        "admin_password": std::fs::read_to_string(&password_file).unwrap().trim(),
+        "endpoint": format!("opc.tcp://localhost:{}/", plant.opcua),
+        "http": format!("http://127.0.0.1:{}", plant.http),
+        "admin_password": plant.admin_password,
         "client_pki": dir.path().join("node-pki").display().to_string(),
-        "machines": machines,
+        "machines": plant.machines,
         "features": FEATURES,
         "duration_s": seconds,
         "history_sample": 40,

@@ -18,11 +18,12 @@ use opcua::nodes::{BaseEventType, Event};
 use opcua::server::SubscriptionCache;
 use opcua::server::node_manager::memory::InMemoryNodeManager;
 use opcua::types::{
-    ByteString, DataValue, DateTime, LocalizedText, NodeId, ObjectId, StatusCode, Variant,
+    ByteString, DataValue, DateTime, LocalizedText, NodeId, ObjectId, ObjectTypeId, StatusCode,
+    Variant,
 };
 use tokio::sync::{mpsc, watch};
 
-use super::events::{Listeners, Origin, Recent};
+use super::events::{EventIds, Listeners};
 use super::methods::date_time;
 use super::nodes::CamloopNodes;
 use super::space::{FeatureValue, Ids, MachineLayout};
@@ -43,8 +44,6 @@ pub(crate) struct Feed {
     pub(crate) layout: Vec<MachineLayout>,
     pub(crate) dressings: HashMap<MachineName, i64>,
     pub(crate) listeners: Arc<Listeners>,
-    /// The EventIds of raised events that are history rows, for `AcknowledgeEvent`.
-    pub(crate) recent: Arc<Recent>,
     pub(crate) handle: opcua::server::ServerHandle,
     last: HashMap<NodeId, Variant>,
     /// The part each feature shows, and its time (a part never gives way to an older one).
@@ -52,8 +51,12 @@ pub(crate) struct Feed {
     /// Events raised by the values staged with them: emitted once those values are written.
     pending: Vec<Pending>,
     journal_failing: HashMap<MachineName, bool>,
-    event_seq: u64,
-    started_ms: i64,
+    /// The EventIds, the same for the same event in every process (see [`EventIds`]).
+    event_ids: EventIds,
+    /// Plant events the full intake refused (the loops' sender counts them), and how many
+    /// of them an overflow event has told.
+    pub(crate) dropped: Arc<std::sync::atomic::AtomicU64>,
+    dropped_told: u64,
 }
 
 impl Feed {
@@ -68,7 +71,6 @@ impl Feed {
     ) -> Self {
         Self {
             listeners,
-            recent: Arc::default(),
             handle,
             shown: HashMap::new(),
             pending: Vec::new(),
@@ -80,8 +82,9 @@ impl Feed {
             dressings: HashMap::new(),
             last: HashMap::new(),
             journal_failing: HashMap::new(),
-            event_seq: 0,
-            started_ms: crate::clock::now().as_millisecond(),
+            event_ids: EventIds::default(),
+            dropped: Arc::default(),
+            dropped_told: 0,
         }
     }
 
@@ -98,30 +101,14 @@ impl Feed {
                 max_profile_error_um,
                 ..
             } => {
-                let key = (machine.clone(), feature.to_string());
-                if self.shown.get(&key).is_some_and(|(_, at)| at > at_ms) {
-                    // An older part than the one shown: its values never replace the newer.
-                    return;
-                }
-                self.shown.insert(key, (part.clone(), *at_ms));
                 let max_error = self
                     .metrics
                     .features()
                     .get(&(e.machine().clone(), feature.clone()))
                     .filter(|s| s.last_part.as_deref() == Some(part.as_str()))
                     .and_then(|s| s.last_max_error_um);
-                for (v, value) in result_values(e, max_error) {
-                    let id = self.ids.value(&machine, feature, v);
-                    // The catch-up of `MaxError` compares with the last value written.
-                    match &value {
-                        Some(x) if v == FeatureValue::MaxErrorUm => {
-                            self.last.insert(id.clone(), x.clone());
-                        }
-                        _ => {
-                            self.last.remove(&id);
-                        }
-                    }
-                    staged.push((id, result_value(value, *at_ms)));
+                if !self.show_result(e, max_error, staged) {
+                    return;
                 }
                 let message = serde_json::json!({
                     "part": part, "feature": feature, "verdict": verdict.as_str(),
@@ -130,14 +117,15 @@ impl Feed {
                 .to_string();
                 let severity = if verdict.as_str() == "pass" { 100 } else { 500 };
                 let ty = self.ids.result_ready_type();
-                self.raise(&machine, feature, ty, severity, message, *at_ms);
+                self.raise(&machine, feature, (ty, severity), message, *at_ms, None);
             }
             PlantEvent::Dressing { at_ms, .. } => {
                 let n = self.dressings.entry(e.machine().clone()).or_default();
                 *n += 1;
                 let n = *n;
                 self.stage(self.ids.dressing_count(&machine), Variant::from(n), staged);
-                let _ = self.alarm(&machine, e.feature(), "dressing", 100, payload(e), *at_ms);
+                let body = payload(e);
+                self.alarm(&machine, e.feature(), ("dressing", 100), body, *at_ms, None);
             }
             other => {
                 let severity = match other {
@@ -153,52 +141,113 @@ impl Feed {
                     PlantEvent::Alarm { kind, .. } => kind.clone(),
                     _ => other.name().to_string(),
                 };
-                let id = self.alarm(
+                let stored = stored_message(other);
+                self.alarm(
                     &machine,
                     other.feature(),
-                    &kind,
-                    severity,
+                    (&kind, severity),
                     payload(other),
                     other.at_ms(),
+                    stored.as_deref(),
                 );
-                if let Some(message) = stored_message(other) {
-                    let origin = Origin {
-                        machine: other.machine().clone(),
-                        at_ms: other.at_ms(),
-                        message,
-                    };
-                    self.recent.remember(id, origin);
-                }
             }
         }
     }
 
+    /// Stages a part's result variables, all with the part's time, unless the feature
+    /// shows a newer part (then nothing, and false).
+    fn show_result(
+        &mut self,
+        e: &PlantEvent,
+        max_error: Option<f64>,
+        staged: &mut Vec<(NodeId, DataValue)>,
+    ) -> bool {
+        let PlantEvent::PartAnalysed {
+            machine,
+            feature,
+            part,
+            at_ms,
+            ..
+        } = e
+        else {
+            return false;
+        };
+        let key = (machine.to_string(), feature.to_string());
+        if self.shown.get(&key).is_some_and(|(_, at)| at > at_ms) {
+            // An older part than the one shown: its values never replace the newer.
+            return false;
+        }
+        self.shown.insert(key, (part.clone(), *at_ms));
+        for (v, value) in result_values(e, max_error) {
+            let id = self.ids.value(machine, feature, v);
+            // The catch-up of `MaxError` compares with the last value written.
+            match &value {
+                Some(x) if v == FeatureValue::MaxErrorUm => {
+                    self.last.insert(id.clone(), x.clone());
+                }
+                _ => {
+                    self.last.remove(&id);
+                }
+            }
+            staged.push((id, result_value(value, *at_ms)));
+        }
+        true
+    }
+
+    /// A feature's newest stored result at start (see [`super::seed`]): shown as its part
+    /// would be, without an event, unless the feature already shows a part (the loops' news
+    /// is never replaced by the history's).
+    pub(crate) fn seed(&mut self, seed: &super::seed::Seed, staged: &mut Vec<(NodeId, DataValue)>) {
+        let PlantEvent::PartAnalysed {
+            machine, feature, ..
+        } = &seed.part
+        else {
+            return;
+        };
+        let key = (machine.to_string(), feature.to_string());
+        if self.shown.contains_key(&key) {
+            return;
+        }
+        self.show_result(&seed.part, seed.max_error_um, staged);
+    }
+
+    /// A `CamloopAlarmEventType` event; `stored`: the history row's message when the event
+    /// is a row of the history.
     fn alarm(
         &mut self,
         machine: &str,
         source: &str,
-        kind: &str,
-        sev: u16,
+        (kind, sev): (&str, u16),
         body: String,
         at_ms: jiff::Timestamp,
-    ) -> Vec<u8> {
+        stored: Option<&str>,
+    ) {
         let ty = self.ids.alarm_type();
-        self.raise(machine, source, ty, sev, format!("{kind}: {body}"), at_ms)
+        let message = format!("{kind}: {body}");
+        self.raise(machine, source, (ty, sev), message, at_ms, stored);
     }
 
-    /// Makes an event of the machine, raised at the next [`Feed::publish`].
+    /// Makes an event of the machine, raised at the next [`Feed::publish`]; its EventId is
+    /// made from the history row's message when it is a row (`stored`), so that
+    /// `AcknowledgeEvent` finds the row by it, in this process or a later one.
     fn raise(
         &mut self,
         machine: &str,
         source: &str,
-        ty: NodeId,
-        severity: u16,
+        (ty, severity): (NodeId, u16),
         message: String,
         at_ms: jiff::Timestamp,
-    ) -> Vec<u8> {
-        self.event_seq += 1;
-        let bytes = format!("{}-{}", self.started_ms, self.event_seq).into_bytes();
-        let id = ByteString::from(bytes.clone());
+        stored: Option<&str>,
+    ) {
+        let bytes = match stored {
+            Some(row) => self.event_ids.row(machine, at_ms, row),
+            None => {
+                let kind = ty.to_string();
+                let ids = &mut self.event_ids;
+                ids.other((machine, source, &kind), at_ms, &message)
+            }
+        };
+        let id = ByteString::from(bytes);
         let node = self.ids.machine(machine);
         let event = BaseEventType::new(ty, id, LocalizedText::new("", &message), date_time(at_ms))
             .set_source_node(node.clone())
@@ -206,7 +255,6 @@ impl Feed {
             .set_severity(severity)
             .set_receive_time(DateTime::now());
         self.pending.push(Pending { node, event });
-        bytes
     }
 
     /// Raises the pending events: each reaches every monitored item on its machine, on the
@@ -252,7 +300,8 @@ impl Feed {
                 let at = crate::clock::now();
                 let text =
                     "the journal cannot be written (disk full?): records are not kept".to_string();
-                let _ = self.alarm(&m.name, MACHINE_LEVEL, "journal_failing", 900, text, at);
+                let kind = ("journal_failing", 900);
+                self.alarm(&m.name, MACHINE_LEVEL, kind, text, at, None);
             }
             self.stage(
                 self.ids.journal_failing(&m.name),
@@ -267,6 +316,50 @@ impl Feed {
             );
         }
         self.layout = layout;
+        self.tell_dropped();
+    }
+
+    /// An `EventQueueOverflowEventType` event on `Server` (and `Machines`) when plant events
+    /// were dropped before the server (its intake full) since the last one: those parts'
+    /// results and events are not shown, and a client is told so rather than left to
+    /// notice a gap.
+    fn tell_dropped(&mut self) {
+        let dropped = self.dropped.load(std::sync::atomic::Ordering::Relaxed);
+        if dropped <= self.dropped_told {
+            return;
+        }
+        let lost = dropped - self.dropped_told;
+        self.dropped_told = dropped;
+        tracing::warn!(
+            lost,
+            "OPC UA: plant events dropped, the server's intake was full"
+        );
+        let at = crate::clock::now();
+        let message = format!(
+            "{lost} plant events dropped before the OPC UA server (its intake was full): their results and events are not shown"
+        );
+        let server: NodeId = ObjectId::Server.into();
+        let ty: NodeId = ObjectTypeId::EventQueueOverflowEventType.into();
+        let kind = ty.to_string();
+        let id = self
+            .event_ids
+            .other(("Server", "Server", &kind), at, &message);
+        let event = BaseEventType::new(
+            ty,
+            ByteString::from(id),
+            LocalizedText::new("", &message),
+            date_time(at),
+        )
+        .set_source_node(server.clone())
+        .set_source_name("Server".into())
+        .set_severity(800)
+        .set_receive_time(DateTime::now());
+        // The Server object's listeners are the stack's; camloop's `Machines` listeners
+        // get it through the notifier list (no machine's: which one lost it is not known).
+        self.pending.push(Pending {
+            node: server,
+            event,
+        });
     }
 
     /// `MaxError` of the shown part, once the status has it (with the part's time).
@@ -457,10 +550,14 @@ fn status_values(s: &FeatureStatus) -> Vec<(FeatureValue, Variant)> {
     v
 }
 
-/// Runs the feed until shutdown: every event at once, the status every [`REFRESH_EVERY`].
+/// Runs the feed until shutdown: every event at once, the stored results as they are read
+/// at start, the status every [`REFRESH_EVERY`].
 pub(crate) async fn run(
     mut feed: Feed,
-    mut rx: mpsc::Receiver<PlantEvent>,
+    (mut rx, mut seeds): (
+        mpsc::Receiver<PlantEvent>,
+        mpsc::Receiver<Vec<super::seed::Seed>>,
+    ),
     mut shutdown: watch::Receiver<bool>,
 ) {
     // The stack builds the address space when its server task starts.
@@ -480,6 +577,11 @@ pub(crate) async fn run(
                     feed.event(&more, &mut staged);
                 }
                 feed.refresh(&mut staged);
+            }
+            Some(batch) = seeds.recv() => {
+                for seed in &batch {
+                    feed.seed(seed, &mut staged);
+                }
             }
             _ = tick.tick() => feed.refresh(&mut staged),
             _ = shutdown.changed() => return,

@@ -8,7 +8,7 @@ use opcua::types::{DataTypeId, DateTime, StatusCode, Variant};
 use tracing::{info, warn};
 
 use super::auth::OPCUA_CLIENT;
-use super::events::Recent;
+use super::events::RowEventId;
 use super::space::Method;
 use crate::service::action::Action;
 use crate::service::command::{self, AckError, Caller, WriteError};
@@ -54,14 +54,14 @@ async fn caller(w: command::Writes<'_>, user: &str) -> Result<Caller, StatusCode
 /// Runs `method` of `machine` for the session's user (`None`: anonymous); a write refused
 /// `BadUserAccessDenied` is audited (see `super::auth::refused_write`).
 pub(crate) async fn call(
-    (w, recent): (command::Writes<'_>, &Recent),
+    w: command::Writes<'_>,
     user: Option<&str>,
     client: &str,
     machine: &str,
     method: Method,
     args: &[Variant],
 ) -> Result<Vec<Variant>, StatusCode> {
-    let done = call_as((w, recent), user, client, machine, method, args).await;
+    let done = call_as(w, user, client, machine, method, args).await;
     if done == Err(StatusCode::BadUserAccessDenied) {
         super::auth::refused_write(w, user, machine, method.name()).await;
     }
@@ -69,7 +69,7 @@ pub(crate) async fn call(
 }
 
 async fn call_as(
-    (w, recent): (command::Writes<'_>, &Recent),
+    w: command::Writes<'_>,
     user: Option<&str>,
     client: &str,
     machine: &str,
@@ -103,7 +103,7 @@ async fn call_as(
     );
     match method {
         Method::Rollback => rollback(w, &caller, machine, args).await,
-        _ => acknowledge(w, (&caller, recent), machine, args).await,
+        _ => acknowledge(w, &caller, machine, args).await,
     }
 }
 
@@ -137,7 +137,7 @@ async fn rollback(
 
 async fn acknowledge(
     w: command::Writes<'_>,
-    (caller, recent): (&Caller, &Recent),
+    caller: &Caller,
     machine: &str,
     args: &[Variant],
 ) -> Result<Vec<Variant>, StatusCode> {
@@ -145,7 +145,7 @@ async fn acknowledge(
     let id = match args.first() {
         Some(Variant::ByteString(b)) => {
             let bytes = b.value.clone().unwrap_or_default();
-            stored_event_id(w, recent, &machine, &bytes).await?
+            stored_event_id(w, &machine, &bytes).await?
         }
         Some(v) => int(v).ok_or(StatusCode::BadTypeMismatch)?,
         None => return Err(StatusCode::BadArgumentsMissing),
@@ -217,35 +217,42 @@ pub(crate) fn check_arguments(method: Method, args: &[Variant]) -> Result<(), Ar
     }
 }
 
-/// camloop's id of the stored event an OPC UA EventId names (raised by this process on
-/// `machine`): the history's event of that machine at that time with that message.
+/// camloop's id of the stored event an OPC UA EventId names: the history's row of
+/// `machine` at the EventId's time whose message has its digest, the occurrence-th of
+/// those (see [`super::events::EventIds`]). Needs no memory of this process: an EventId
+/// from before a restart names the same row.
 async fn stored_event_id(
     w: command::Writes<'_>,
-    recent: &Recent,
     machine: &MachineName,
     event_id: &[u8],
 ) -> Result<i64, StatusCode> {
-    let Some(origin) = recent.get(event_id).filter(|o| &o.machine == machine) else {
-        warn!(machine = %machine, "OPC UA: AcknowledgeEvent: an EventId this server did not raise for the machine, or no longer remembers");
+    let Some(named) = RowEventId::parse(event_id) else {
+        warn!(machine = %machine, "OPC UA: AcknowledgeEvent: an EventId of no history row (a result's, or not this server's)");
         return Err(StatusCode::BadNotFound);
     };
     let store = store_of(w.store).await?;
     let filter = crate::store::EventFilter {
         machine: Some(machine.clone()),
-        since_ms: Some(origin.at_ms),
-        until_ms: origin
+        since_ms: Some(named.at_ms),
+        until_ms: named
             .at_ms
             .checked_add(jiff::SignedDuration::from_millis(1))
             .ok(),
         level: None,
-        limit: 100,
+        limit: crate::store::MAX_PAGE,
     };
-    let events = store.events(&filter).await.map_err(|e| store_status(&e))?;
-    events
+    let mut events = store.events(&filter).await.map_err(|e| store_status(&e))?;
+    // Newest first from the store: the occurrence counts in the rows' order.
+    events.sort_by_key(|e| e.id.0);
+    let found = events
         .into_iter()
-        .find(|e| e.message == origin.message)
-        .map(|e| e.id.0)
-        .ok_or(StatusCode::BadNotFound)
+        .filter(|e| named.matches(machine.as_str(), &e.message))
+        .nth(usize::try_from(named.occurrence).unwrap_or(usize::MAX))
+        .map(|e| e.id.0);
+    if found.is_none() {
+        warn!(machine = %machine, at = %named.at_ms, "OPC UA: AcknowledgeEvent: no history row of the machine for the EventId");
+    }
+    found.ok_or(StatusCode::BadNotFound)
 }
 
 /// An integer argument (clients send Int64, some Int32).

@@ -14,7 +14,9 @@ mod events;
 pub(crate) mod feed;
 mod methods;
 mod nodes;
+mod ordered;
 mod pki;
+mod seed;
 pub(crate) mod space;
 
 use crate::names::{FeatureName, MachineName};
@@ -23,6 +25,7 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicU64;
 
 use anyhow::Context;
+use opcua::server::node_manager::NodeManagerBuilder as _;
 use opcua::server::node_manager::memory::{InMemoryNodeManager, InMemoryNodeManagerBuilder};
 use opcua::server::{ServerBuilder, ServerEndpoint, ServerHandle};
 use opcua::types::BuildInfo;
@@ -121,6 +124,8 @@ fn pki_dir(config: &Config) -> PathBuf {
 /// What the loops feed before the server starts: their events and the machines.
 pub(crate) struct Intake {
     events: mpsc::Receiver<PlantEvent>,
+    /// Events the full intake refused (counted by the loops' sender).
+    dropped: Arc<AtomicU64>,
     layout: Vec<MachineLayout>,
     /// Bound before the machines start, so a port in use stops the start before them.
     listener: std::net::TcpListener,
@@ -137,10 +142,12 @@ pub(crate) fn prepare(
     }
     let listener = bind(config.opcua.listen)?;
     let (tx, events) = mpsc::channel(INTAKE);
-    let sender = EventSender::new(tx, Arc::new(AtomicU64::new(0)));
+    let dropped = Arc::new(AtomicU64::new(0));
+    let sender = EventSender::new(tx, dropped.clone());
     let layout = layout(machines);
     let intake = Intake {
         events,
+        dropped,
         layout,
         listener,
     };
@@ -176,6 +183,7 @@ async fn start_with(
 ) -> anyhow::Result<Option<OpcUa>> {
     let Some(Intake {
         events,
+        dropped,
         layout,
         listener,
     }) = intake
@@ -193,12 +201,11 @@ async fn start_with(
     make_certificate(section, &pki, &host)?;
     let url = format!("opc.tcp://{host}:{}/", section.listen.port());
     let listeners = Arc::new(events::Listeners::default());
-    let recent = Arc::new(events::Recent::default());
     let builder = server_builder(
         section,
         &pki,
         &url,
-        (app.clone(), listeners.clone(), recent.clone()),
+        (app.clone(), listeners.clone()),
         layout.clone(),
     );
     let (server, handle) = builder
@@ -218,8 +225,10 @@ async fn start_with(
     });
     let manager = handle
         .node_managers()
-        .get_of_type::<InMemoryNodeManager<nodes::CamloopNodes>>()
-        .context("opcua: camloop's node manager is missing")?;
+        .get_of_type::<ordered::Ordered>()
+        .context("opcua: camloop's node manager is missing")?
+        .inner
+        .clone();
     let ns = handle
         .get_namespace_index(space::NAMESPACE_URI)
         .context("opcua: camloop's namespace is missing")?;
@@ -233,8 +242,14 @@ async fn start_with(
         handle.clone(),
     );
     feed.dressings = dressing_counts(&app, &layout).await;
-    feed.recent = recent;
-    let feed = tokio::spawn(feed::run(feed, events, shutdown.clone()));
+    feed.dropped = dropped;
+    let (seeds_tx, seeds) = mpsc::channel(16);
+    tokio::spawn(seed::send_newest(
+        app.store.clone(),
+        layout.clone(),
+        seeds_tx,
+    ));
+    let feed = tokio::spawn(feed::run(feed, (events, seeds), shutdown.clone()));
     tokio::spawn(pki::keep_rejected_bounded(pki.clone(), shutdown.clone()));
     let cancel = handle.clone();
     let mut stop = shutdown;
@@ -293,7 +308,7 @@ fn server_builder(
     section: &OpcUaSection,
     pki: &std::path::Path,
     url: &str,
-    (app, listeners, recent): (AppState, Arc<events::Listeners>, Arc<events::Recent>),
+    (app, listeners): (AppState, Arc<events::Listeners>),
     layout: Vec<MachineLayout>,
 ) -> ServerBuilder {
     let host = section.host();
@@ -325,12 +340,22 @@ fn server_builder(
         )
         .default_endpoint("basic256sha256_sign_encrypt")
         .with_authenticator(Arc::new(users))
-        .with_node_manager(InMemoryNodeManagerBuilder::new(nodes::Builder {
-            layout,
-            app,
-            listeners,
-            recent,
-        }))
+        .with_node_manager(move |context| {
+            let order = layout.clone();
+            let memory = InMemoryNodeManagerBuilder::new(nodes::Builder {
+                layout,
+                app,
+                listeners,
+            });
+            // The stack builds it as its own trait object: taken back as what it is.
+            let built = Box::new(memory).build(context).into_any_arc();
+            let inner = built
+                .downcast::<InMemoryNodeManager<nodes::CamloopNodes>>()
+                .unwrap_or_else(|_| {
+                    unreachable!("the in-memory builder builds an in-memory manager")
+                });
+            ordered::Ordered::new(inner, &order)
+        })
         .diagnostics_enabled(false);
     let limits = builder.limits_mut();
     limits.max_sessions = MAX_SESSIONS;
@@ -417,12 +442,14 @@ pub async fn bench_server(
         .collect();
     let app = AppState::without_http(store, metrics);
     let (sender, events) = mpsc::channel(INTAKE);
+    let dropped = Arc::new(AtomicU64::new(0));
     let intake = Intake {
         events,
+        dropped: dropped.clone(),
         layout,
         listener: bind(listen)?,
     };
     // Runs until shutdown: the server's own watcher cancels it.
     drop(start_with(&section, pki.to_path_buf(), app, Some(intake), &shutdown).await?);
-    Ok(EventSender::new(sender, Arc::new(AtomicU64::new(0))))
+    Ok(EventSender::new(sender, dropped))
 }

@@ -13,7 +13,7 @@ use opcua::sync::RwLock;
 use opcua::types::{AttributeId, StatusCode};
 use std::sync::Arc;
 
-use super::events::{Listeners, Recent};
+use super::events::Listeners;
 use super::methods::ArgumentError;
 use super::space::{self, Ids, MachineLayout, Method};
 use crate::service::app::AppState;
@@ -23,7 +23,6 @@ pub(crate) struct Builder {
     pub(crate) layout: Vec<MachineLayout>,
     pub(crate) app: AppState,
     pub(crate) listeners: Arc<Listeners>,
-    pub(crate) recent: Arc<Recent>,
 }
 
 pub(crate) struct CamloopNodes {
@@ -32,7 +31,13 @@ pub(crate) struct CamloopNodes {
     layout: Vec<MachineLayout>,
     app: AppState,
     listeners: Arc<Listeners>,
-    recent: Arc<Recent>,
+}
+
+impl CamloopNodes {
+    /// camloop's node ids (its namespace index).
+    pub(crate) fn ids(&self) -> Ids {
+        self.ids
+    }
 }
 
 impl InMemoryNodeManagerImplBuilder for Builder {
@@ -55,7 +60,6 @@ impl InMemoryNodeManagerImplBuilder for Builder {
             layout: self.layout,
             app: self.app,
             listeners: self.listeners,
-            recent: self.recent,
         }
     }
 }
@@ -141,7 +145,7 @@ impl InMemoryNodeManagerImpl for CamloopNodes {
                 }
             }
             let done = super::methods::call(
-                (self.app.writes(), &self.recent),
+                self.app.writes(),
                 user.as_deref(),
                 &client,
                 &machine,
