@@ -407,6 +407,7 @@ impl Metrics {
             "# HELP {name} How long the oldest measurement not yet recorded has waited (0: none waits).\n# TYPE {name} gauge\n{name} {}",
             lag.oldest.map_or(0.0, |d| d.as_secs_f64())
         );
+        render_part_seconds(s, &self.backlog.done.counts());
         let (appends, syncs, batches) = super::journal::commit_totals();
         for (name, help, value) in [
             (
@@ -431,6 +432,25 @@ impl Metrics {
             );
         }
     }
+}
+
+/// The part-time histogram in the exposition format (cumulative buckets).
+fn render_part_seconds(s: &mut String, c: &super::backlog::PartCounts) {
+    let name = "camloop_part_seconds";
+    let _ = writeln!(
+        s,
+        "# HELP {name} From a measurement received to its part done (recorded, and its table durable on the share), seconds.\n# TYPE {name} histogram"
+    );
+    let mut below = 0u64;
+    for (le, n) in super::backlog::PART_SECONDS_BUCKETS.iter().zip(&c.buckets) {
+        below += n;
+        let _ = writeln!(s, "{name}_bucket{{le=\"{le}\"}} {below}");
+    }
+    let _ = writeln!(
+        s,
+        "{name}_bucket{{le=\"+Inf\"}} {}\n{name}_sum {}\n{name}_count {}",
+        c.count, c.sum_s, c.count
+    );
 }
 
 #[cfg(test)]
