@@ -473,7 +473,26 @@ mod tests {
             text.contains("camloop_last_max_error_um{machine=\"M1\"} 0.5\n"),
             "{text}"
         );
-        assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 4 + 2 + 3);
+        assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 4 + 2 + 1 + 3);
+        // The part-time histogram: every bucket, cumulative, even before any part.
+        assert!(
+            text.contains("camloop_part_seconds_bucket{le=\"2\"} 0\n"),
+            "{text}"
+        );
+        assert!(text.contains("camloop_part_seconds_count 0\n"), "{text}");
+        let machine: MachineName = "M1".parse().unwrap();
+        m.backlog.received(&machine, std::time::Instant::now());
+        m.backlog.recorded(&machine);
+        let text = m.render();
+        assert!(
+            text.contains("camloop_part_seconds_bucket{le=\"+Inf\"} 1\n"),
+            "{text}"
+        );
+        assert!(
+            text.contains("camloop_part_seconds_bucket{le=\"30\"} 1\n"),
+            "{text}"
+        );
+        assert!(text.contains("camloop_part_seconds_count 1\n"), "{text}");
         m.update_feature(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), |f| {
             f.last_max_error_um = Some(0.7);
             f.blocked_by_guard = Some("correction at its limit".into());

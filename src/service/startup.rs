@@ -57,13 +57,14 @@ pub(super) fn feature_catalogue(
 ) -> (FeatureNames, SheetMap) {
     let mut features = BTreeMap::new();
     let mut sheets = BTreeMap::new();
+    let mut drawings = crate::quality::Drawings::default();
     for m in machines {
         features.insert(
             m.name.clone(),
             m.setups.iter().map(|s| s.name.clone()).collect(),
         );
         for setup in &m.setups {
-            let sheet = http::FeatureSheet::from_setup(setup);
+            let sheet = http::FeatureSheet::from_setup_drawn(setup, &mut drawings);
             sheets.insert((m.name.clone(), setup.name.clone()), sheet);
         }
     }
