@@ -75,10 +75,6 @@ pub static POSTGRES_MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("migratio
 /// How long a read waits for its turn before it is refused with [`StoreError::Busy`].
 pub const READ_WAIT: Duration = Duration::from_secs(2);
 
-/// The shortest time between two checkpoints [`Store::checkpoint_covering`] starts: a
-/// plant's journals each ask every 2 s, and one checkpoint covers them all.
-const CHECKPOINT_GAP: Duration = Duration::from_millis(500);
-
 /// The history store. Cheap to clone (pools and the read gate are shared handles).
 #[derive(Debug, Clone)]
 pub struct Store {
@@ -267,25 +263,18 @@ impl Store {
 
     /// [`Self::checkpoint`] for a caller whose transactions were all committed by
     /// `committed_by`: a complete checkpoint that started after that has made them durable
-    /// already, so it answers `true` without another. A caller that finds one under way, or
-    /// one started within [`CHECKPOINT_GAP`] that does not cover it, is answered `false` at
-    /// once and asks again at its next release: a plant's journals, each releasing every
-    /// 2 s, share one checkpoint, and none queues behind it (queued one by one, thousands
-    /// held every machine's loop for seconds at 500 machines).
+    /// already, so it answers `true` without another. Callers wait for a checkpoint under
+    /// way rather than run their own beside it: a plant's journals, each releasing every
+    /// 2 s, share one checkpoint instead of queueing hundreds a second on the one writer.
     pub async fn checkpoint_covering(
         &self,
         committed_by: std::time::Instant,
     ) -> Result<bool, StoreError> {
-        let Ok(mut last) = self.checkpoints.try_lock() else {
-            // One is under way: the caller's records wait for its next call rather than
-            // queue behind it (thousands of journals queueing held every loop for seconds).
-            return Ok(false);
-        };
-        match *last {
-            Some((started, true)) if started >= committed_by => return Ok(true),
-            // At most one checkpoint per gap, however many journals ask.
-            Some((started, _)) if started.elapsed() < CHECKPOINT_GAP => return Ok(false),
-            _ => {}
+        let mut last = self.checkpoints.lock().await;
+        if let Some((started, true)) = *last
+            && started >= committed_by
+        {
+            return Ok(true);
         }
         let started = std::time::Instant::now();
         let done = self.checkpoint_now().await?;
