@@ -8,7 +8,10 @@ Prints, for one run of SECONDS (default 90) after every machine is open:
 - start-up: seconds from the process start to the first /healthz answer, and to the answer
   that says every machine is open (status no longer "starting");
 - /healthz latency p50 / p99 / max over the whole run (start-up included), and how many
-  asks went unanswered within 5 s;
+  asks went unanswered within 5 s; the same for an API read (GET /api/v1/machines) asked
+  right after each;
+- from a measurement received to its part done (its table durable on the share): p50 and
+  p99 from the service's histogram (the bounds of the buckets they fall in);
 - lobe measurements demanded (each machine's first shaft is ground at once, then one every
   30 s) against those processed (/metrics: parts + rejects) and stored (rows in the
   database);
@@ -110,6 +113,20 @@ def metric_total(text, name):
     return sum(float(l.split()[-1]) for l in text.splitlines() if l.split(" ")[0] == name)
 
 
+def histogram_quantile(text, name, q):
+    """The upper bound of the bucket holding quantile q of histogram `name` (None: no
+    observations, or a build without it)."""
+    buckets = []
+    for l in text.splitlines():
+        if l.startswith(name + '_bucket{le="'):
+            le = l.split('"')[1]
+            buckets.append((float("inf") if le == "+Inf" else float(le), float(l.split()[-1])))
+    total = buckets[-1][1] if buckets else 0
+    if total == 0:
+        return None
+    return next(le for le, n in buckets if n >= q * total)
+
+
 def stored_rows(dir):
     try:
         db = sqlite3.connect(f"file:{dir}/var/camloop.db?mode=ro", uri=True, timeout=10)
@@ -133,7 +150,7 @@ def plant(dir, machines, seconds):
     log = open(os.path.join(dir, "log.txt"), "w")
     started = time.monotonic()
     proc = subprocess.Popen([BINARY, "run", "--config", config], cwd=dir, stdout=log, stderr=log)
-    latencies, unanswered, statuses = [], [0], []
+    latencies, unanswered, statuses, api = [], [0], [], []
     first_answer, all_open, opening = [None], [None], [None]
     stop = threading.Event()
 
@@ -156,6 +173,9 @@ def plant(dir, machines, seconds):
                 opening[0] = next((c.get("reason") for c in machines), None) or "open"
                 if all_open[0] is None and all(c["state"] == "ok" for c in machines):
                     all_open[0] = at
+            # An API read beside it (anonymous on loopback): the machines and their state.
+            if first_answer[0] is not None:
+                api.append(ask(f"http://127.0.0.1:{port}/api/v1/machines")[0])
             stop.wait(1.0)
 
     prober = threading.Thread(target=healthz, daemon=True)
@@ -205,6 +225,12 @@ def plant(dir, machines, seconds):
             f"journal: {metric_total(text, 'camloop_journal_appends_total'):.0f} appends in "
             f"{metric_total(text, 'camloop_journal_syncs_total'):.0f} syncs"
         )
+        p50, p99 = (histogram_quantile(text, "camloop_part_seconds", q) for q in (0.5, 0.99))
+        print(
+            f"plant {machines}: measurement received to part done (table durable on the share): "
+            f"p50 <= {p50} s, p99 <= {p99} s over "
+            f"{metric_total(text, 'camloop_part_seconds_count'):.0f} parts (bucket bounds)"
+        )
     print(
         f"plant {machines}: start-up: first /healthz answer {first_answer[0]:.1f} s, "
         f"every machine open {all_open[0]:.1f} s"
@@ -214,6 +240,12 @@ def plant(dir, machines, seconds):
         f"p50 {percentile(latencies, 0.5):.1f} ms, p99 {percentile(latencies, 0.99):.1f} ms, "
         f"max {max(latencies, default=float('nan')):.1f} ms, {unanswered[0]} unanswered within 5 s; "
         f"statuses seen {sorted(set(statuses))}"
+    )
+    answered = [ms for ms in api if ms is not None]
+    print(
+        f"plant {machines}: GET /api/v1/machines over {len(api)} asks: "
+        f"p50 {percentile(answered, 0.5):.1f} ms, p99 {percentile(answered, 0.99):.1f} ms, "
+        f"max {max(answered, default=float('nan')):.1f} ms, {len(api) - len(answered)} unanswered within 5 s"
     )
     print(
         f"plant {machines}: {elapsed:.0f} s: lobes demanded {demanded}, processed "

@@ -18,7 +18,7 @@ use crate::core::measure::is_master_part;
 use crate::names::{FeatureName, MachineName};
 use crate::store::{MAX_PAGE, MeasurementDetail, MeasurementId, Store, StoreError};
 pub use limits::{CharacteristicLimits, FeatureLimits};
-pub use sheet::{FeatureSheet, FeatureSheets};
+pub use sheet::{Drawings, FeatureSheet, FeatureSheets};
 
 /// Fewer values than this and a capability figure is indicative only: shown, but marked.
 ///

@@ -352,7 +352,9 @@ impl Ctx {
             Err(e) => return Err(e.into()),
         };
         let epoch = fence.epoch();
-        let opened = super::offload::drive(self.runner.open(machine, Some(fence))).await;
+        let opened =
+            super::offload::drive(self.runner.open(machine, Some(fence), &Default::default()))
+                .await;
         Ok((epoch, opened.map_err(OpenError::Machine)?))
     }
 

@@ -428,6 +428,7 @@ impl Metrics {
             "# HELP {name} How long the oldest measurement not yet recorded has waited (0: none waits).\n# TYPE {name} gauge\n{name} {}",
             lag.oldest.map_or(0.0, |d| d.as_secs_f64())
         );
+        render_part_seconds(s, &self.backlog.done.counts());
         let (appends, syncs, batches) = super::journal::commit_totals();
         for (name, help, value) in [
             (
@@ -454,6 +455,25 @@ impl Metrics {
     }
 }
 
+/// The part-time histogram in the exposition format (cumulative buckets).
+fn render_part_seconds(s: &mut String, c: &super::backlog::PartCounts) {
+    let name = "camloop_part_seconds";
+    let _ = writeln!(
+        s,
+        "# HELP {name} From a measurement received to its part done (recorded, and its table durable on the share), seconds.\n# TYPE {name} histogram"
+    );
+    let mut below = 0u64;
+    for (le, n) in super::backlog::PART_SECONDS_BUCKETS.iter().zip(&c.buckets) {
+        below += n;
+        let _ = writeln!(s, "{name}_bucket{{le=\"{le}\"}} {below}");
+    }
+    let _ = writeln!(
+        s,
+        "{name}_bucket{{le=\"+Inf\"}} {}\n{name}_sum {}\n{name}_count {}",
+        c.count, c.sum_s, c.count
+    );
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -474,7 +494,26 @@ mod tests {
             text.contains("camloop_last_max_error_um{machine=\"M1\"} 0.5\n"),
             "{text}"
         );
-        assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 4 + 2 + 3);
+        assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 4 + 2 + 1 + 3);
+        // The part-time histogram: every bucket, cumulative, even before any part.
+        assert!(
+            text.contains("camloop_part_seconds_bucket{le=\"2\"} 0\n"),
+            "{text}"
+        );
+        assert!(text.contains("camloop_part_seconds_count 0\n"), "{text}");
+        let machine: MachineName = "M1".parse().unwrap();
+        m.backlog.received(&machine, std::time::Instant::now());
+        m.backlog.recorded(&machine);
+        let text = m.render();
+        assert!(
+            text.contains("camloop_part_seconds_bucket{le=\"+Inf\"} 1\n"),
+            "{text}"
+        );
+        assert!(
+            text.contains("camloop_part_seconds_bucket{le=\"30\"} 1\n"),
+            "{text}"
+        );
+        assert!(text.contains("camloop_part_seconds_count 1\n"), "{text}");
         m.update_feature(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), |f| {
             f.last_max_error_um = Some(0.7);
             f.blocked_by_guard = Some("correction at its limit".into());

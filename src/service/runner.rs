@@ -68,6 +68,7 @@ impl Runner {
         &self,
         name: &str,
         fence: Option<crate::share::Fence>,
+        opening: &machine::Opening,
     ) -> anyhow::Result<Opened> {
         let checked = self
             .checked
@@ -83,6 +84,7 @@ impl Runner {
             checked.setups.clone(),
             paths,
             fence,
+            opening,
             self.shared.store.clone(),
             self.shared.metrics.clone(),
         )
@@ -92,6 +94,26 @@ impl Runner {
             name: checked.name.clone(),
             machine,
         })
+    }
+
+    /// How every machine of this instance opens at its start: the store's learning states
+    /// listed once, and the opening's records left in the journals for each machine's first
+    /// retry. Only for a start where this instance alone writes these machines (not in a
+    /// cluster, whose machines open as leases come, beside other writers).
+    pub(super) async fn plant_opening(&self) -> machine::Opening {
+        let store = self.shared.store.read().await.clone();
+        let known_states = match store {
+            Some(store) => match store.learning_state_keys().await {
+                Ok(keys) => Some(Arc::new(keys.into_iter().collect())),
+                // Each feature asks, and says what went wrong.
+                Err(_) => None,
+            },
+            None => None,
+        };
+        machine::Opening {
+            known_states,
+            defer_store: true,
+        }
     }
 
     /// Starts an opened machine's gauge source and loop.

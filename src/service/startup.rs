@@ -57,13 +57,14 @@ pub(super) fn feature_catalogue(
 ) -> (FeatureNames, SheetMap) {
     let mut features = BTreeMap::new();
     let mut sheets = BTreeMap::new();
+    let mut drawings = crate::quality::Drawings::default();
     for m in machines {
         features.insert(
             m.name.clone(),
             m.setups.iter().map(|s| s.name.clone()).collect(),
         );
         for setup in &m.setups {
-            let sheet = http::FeatureSheet::from_setup(setup);
+            let sheet = http::FeatureSheet::from_setup_drawn(setup, &mut drawings);
             sheets.insert((m.name.clone(), setup.name.clone()), sheet);
         }
     }
@@ -74,8 +75,9 @@ pub(super) fn feature_catalogue(
 pub(super) type SourcesDone = Option<Vec<tokio::sync::oneshot::Receiver<()>>>;
 
 /// Machines opened at once at start: their journals, shares and first tables are mostly
-/// waits on the disk, which overlap.
-const OPEN_AT_ONCE: usize = 16;
+/// waits on the disk, which overlap, and the more journals wait together the fewer syncs
+/// the group commit issues for them (each opening holds a thread while it waits).
+const OPEN_AT_ONCE: usize = 64;
 
 /// In a cluster: the leases, joined (for the API and the machines' task).
 pub(super) async fn cluster_leases(
@@ -128,12 +130,13 @@ pub(super) async fn start_machines(
     let names = runner.names();
     let total = names.len();
     let gate = Arc::new(tokio::sync::Semaphore::new(OPEN_AT_ONCE));
+    let plan = Arc::new(runner.plant_opening().await);
     let mut opening = tokio::task::JoinSet::new();
     for name in names {
-        let (runner, gate) = (runner.clone(), gate.clone());
+        let (runner, gate, plan) = (runner.clone(), gate.clone(), plan.clone());
         opening.spawn(async move {
             let _slot = gate.acquire_owned().await;
-            super::offload::drive(runner.open(&name, None)).await
+            super::offload::drive(runner.open(&name, None, &plan)).await
         });
     }
     let mut done = Vec::with_capacity(total);

@@ -491,6 +491,22 @@ impl Store {
         })
     }
 
+    /// Every (machine, lobe) the store holds a learning state for, in one query: a plant's
+    /// start asks this once instead of asking each of its thousands of features (a new
+    /// plant's have none). Through the writer, as [`Self::load_learning_state`] reads.
+    pub async fn learning_state_keys(&self) -> Result<Vec<(MachineName, FeatureName)>, StoreError> {
+        with_write!(self, pool => {
+            let rows: Vec<(String, String)> =
+                sqlx::query_as("SELECT DISTINCT machine, lobe FROM learning_states")
+                    .fetch_all(pool)
+                    .await
+                    .map_err(self.db_error("listing learning states"))?;
+            rows.into_iter()
+                .map(|(machine, lobe)| Ok((machine_of(machine)?, feature_of("lobe", lobe)?)))
+                .collect()
+        })
+    }
+
     /// The newest learning-state snapshot of (machine, lobe), or `None` before the first save.
     pub async fn load_learning_state(
         &self,

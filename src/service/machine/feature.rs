@@ -48,6 +48,8 @@ pub struct FeatureLoop {
     pub(super) charts: super::charts::ChartWatch,
     /// The speed plan's law, tables and the VA speed being delivered (plan on).
     pub(super) plan: super::planned::PlanState,
+    /// While a plant's start opens it: records stay in the journal for the first retry.
+    pub(super) defer_store: bool,
 }
 
 impl FeatureLoop {
@@ -58,14 +60,14 @@ impl FeatureLoop {
         name: MachineName,
         setup: FeatureSetup,
         paths: MachinePaths,
-        fence: Option<crate::share::Fence>,
+        (fence, opening): (Option<crate::share::Fence>, &super::Opening),
         store: StoreHandle,
         metrics: Arc<Metrics>,
         main: Arc<MainProgram>,
     ) -> anyhow::Result<Self> {
         let mut journal =
             Journal::open(&paths.state_dir).with_context(|| format!("machine {name}: journal"))?;
-        let memory = load_memory(&name, &setup, &journal, &store).await?;
+        let memory = load_memory(&name, &setup, &journal, &store, opening).await?;
         if let Err(e) = std::fs::create_dir_all(&paths.share_dir) {
             // Not fatal: the share may be a mount that comes back; deliveries wait for it. An
             // alarm all the same: nothing reaches the control until it is there.
@@ -108,8 +110,10 @@ impl FeatureLoop {
             table_wheel_radius_bits: Arc::new(AtomicU64::new(0)),
             disk_alarm: false,
             plan: Default::default(),
+            defer_store: opening.defer_store,
         };
         machine.after_start(&report).await?;
+        machine.defer_store = false;
         Ok(machine)
     }
 
@@ -155,10 +159,9 @@ impl FeatureLoop {
             || plan_changed
             || self.main_program_if_changed()?.is_some();
         if stale && self.machine.memory().waiting.is_none() {
-            let table = compensate::current_table(
-                self.machine.memory().newest_learning(),
-                &self.lobe_loop(),
-            )?;
+            // Machines of one recipe open with the same tables: computed once.
+            let table = super::table_memo::TableMemo::global()
+                .current_table(self.machine.memory().newest_learning(), &self.lobe_loop())?;
             let reason = if self.machine.memory().parts == 0 {
                 "nominal table"
             } else {
@@ -300,7 +303,11 @@ impl FeatureLoop {
     }
 
     pub(super) async fn flush_journal(&mut self) {
-        let store = self.store.read().await.clone();
+        let store = if self.defer_store {
+            None
+        } else {
+            self.store.read().await.clone()
+        };
         if let Some(store) = store {
             match self.journal.flush(&store).await {
                 Ok(f) if !f.refused.is_empty() => self.note_refused(&f.refused, &store).await,
@@ -384,6 +391,7 @@ async fn load_memory(
     setup: &FeatureSetup,
     journal: &Journal,
     store: &StoreHandle,
+    opening: &super::Opening,
 ) -> anyhow::Result<LoopMemory> {
     let records = journal.records();
     let newest = records.iter().rposition(|r| {
@@ -404,7 +412,11 @@ async fn load_memory(
         }
         return Ok(*memory);
     }
-    let Some(store) = store.read().await.clone() else {
+    let known_none = opening
+        .known_states
+        .as_ref()
+        .is_some_and(|k| !k.contains(&(name.clone(), setup.name.clone())));
+    let Some(store) = store.read().await.clone().filter(|_| !known_none) else {
         return Ok(LoopMemory::new(setup.feature.wheel_radius_mm()));
     };
     let stored = store

@@ -21,6 +21,8 @@
 //! - `shaft`: the main program of the whole part and the resume point;
 //! - `coast`: a part ground but not gauged moves the table on by the learned drift;
 //! - `planned`: the C speed plan's two-table program and its X check over the virtual axis.
+//! - `table_memo`: tables computed once per distinct input (a plant's machines of one recipe
+//!   open with the same nominal tables).
 //!
 //! The version in force is the newest one the share confirmed. A step always starts from its
 //! learning state: a table computed while the share refused it never becomes the base of the
@@ -43,6 +45,7 @@ mod reconcile;
 mod records;
 mod rollback;
 mod shaft;
+mod table_memo;
 
 use super::metrics::Metrics;
 use crate::clock::now;
@@ -138,6 +141,19 @@ pub struct MachinePaths {
     pub state_dir: PathBuf,
 }
 
+/// How a machine opens at a plant's start (see [`MachineLoop::start_owned`]); the default
+/// asks the store per feature and writes to it as it opens.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Opening {
+    /// The features the store holds a learning state for, read once for the whole plant
+    /// (`None`: each feature asks the store).
+    pub known_states: Option<Arc<std::collections::HashSet<(MachineName, FeatureName)>>>,
+    /// Leave the opening's store writes to the machine's first retry: its records are in
+    /// the journal (durable), and the opening does not queue on the database's writer
+    /// behind every other machine's parts.
+    pub defer_store: bool,
+}
+
 /// A machine: the loops of its features and the main program that grinds them in turn.
 pub struct MachineLoop {
     pub name: MachineName,
@@ -162,16 +178,27 @@ impl MachineLoop {
         store: StoreHandle,
         metrics: Arc<Metrics>,
     ) -> anyhow::Result<Self> {
-        Self::start_owned(name, setups, paths, None, store, metrics).await
+        Self::start_owned(
+            name,
+            setups,
+            paths,
+            None,
+            &Opening::default(),
+            store,
+            metrics,
+        )
+        .await
     }
 
     /// [`Self::start`] for an owner in a cluster: every feature's share state is fenced
-    /// with the owner's epoch (see [`crate::share::Fence`]).
+    /// with the owner's epoch (see [`crate::share::Fence`]); `opening` says what a plant's
+    /// start already knows.
     pub(crate) async fn start_owned(
         name: MachineName,
         setups: Vec<FeatureSetup>,
         paths: MachinePaths,
         fence: Option<crate::share::Fence>,
+        opening: &Opening,
         store: StoreHandle,
         metrics: Arc<Metrics>,
     ) -> anyhow::Result<Self> {
@@ -188,7 +215,7 @@ impl MachineLoop {
                 name.clone(),
                 setup,
                 feature_paths,
-                fence.clone(),
+                (fence.clone(), opening),
                 store.clone(),
                 metrics.clone(),
                 main.clone(),
