@@ -144,10 +144,7 @@ pub(crate) fn compact(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn v(n: u64) -> crate::core::ids::TableVersion {
-        crate::core::ids::TableVersion::new(n).unwrap()
-    }
+    use crate::share::test_version as v;
 
     fn ms(unix_ms: u64) -> jiff::Timestamp {
         jiff::Timestamp::from_millisecond(unix_ms as i64).unwrap()

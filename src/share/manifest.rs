@@ -393,10 +393,7 @@ pub(crate) fn line(record: &Record) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn v(n: u64) -> crate::core::ids::TableVersion {
-        crate::core::ids::TableVersion::new(n).unwrap()
-    }
+    use crate::share::test_version as v;
 
     fn ms(unix_ms: u64) -> jiff::Timestamp {
         jiff::Timestamp::from_millisecond(unix_ms as i64).unwrap()

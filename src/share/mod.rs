@@ -43,6 +43,7 @@ mod error;
 mod fence;
 mod fs;
 mod manifest;
+mod request;
 mod state;
 mod store;
 
@@ -54,8 +55,12 @@ pub use manifest::{
     FileRecord, History, Loaded, Record, VersionRecord, VersionState, VersionStatus,
     load as load_manifest,
 };
+pub use request::{OpenReport, ProgramFile, PushRequest, Pushed, Submitted};
 pub(crate) use state::version_dir;
-pub use store::{
-    Clock, MANIFEST_FILE, OpenReport, ProgramFile, PushRequest, Pushed, Share, ShareConfig,
-    Submitted, VERSIONS_DIR,
-};
+pub use store::{Clock, MANIFEST_FILE, Share, ShareConfig, VERSIONS_DIR};
+
+/// Version `n` for the share's unit tests (they count versions from 1).
+#[cfg(test)]
+fn test_version(n: u64) -> crate::core::ids::TableVersion {
+    crate::core::ids::TableVersion::new(n).expect("versions count from 1")
+}

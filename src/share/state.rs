@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use super::error::StateError;
 use super::fs::{create_temp, is_temp_name, sync_dir, write_synced};
 use super::manifest::{FileRecord, History};
-use super::store::ProgramFile;
+use super::request::ProgramFile;
 use crate::core::digest::Sha256;
 
 /// Folder of a version's kept text inside `versions_dir`: `v000042`.
