@@ -141,13 +141,19 @@ async fn poll(
             continue;
         };
         for p in &parts {
-            // A master run is the gauge study's, never a point of the live trend.
-            if !is_master_part(&p.part) {
+            // A master run is the gauge study's, an in-process one has stock on: neither is
+            // a point of the live trend.
+            if trend_point(p) {
                 let _ = tx.send(frame(p));
             }
             last = Some(p.id);
         }
     }
+}
+
+/// A finished production part: what the live trend shows.
+fn trend_point(p: &MeasurementSummary) -> bool {
+    !is_master_part(&p.part) && p.stage == crate::store::MeasurementStage::Final
 }
 
 fn frame(p: &MeasurementSummary) -> Frame {
@@ -181,7 +187,7 @@ pub(super) async fn events(
     {
         backlog = parts
             .iter()
-            .filter(|p| !is_master_part(&p.part))
+            .filter(|p| trend_point(p))
             .map(frame)
             .collect();
     }
