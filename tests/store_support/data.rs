@@ -3,8 +3,8 @@
 
 use camloop::names::MachineName;
 use camloop::store::{
-    HistoryFilter, MeasurementStage, MeasurementSummary, NewMeasurement, NewTableVersion, Store, Verdict,
-    VersionStatus,
+    HistoryFilter, MeasurementStage, MeasurementSummary, NewMeasurement, NewTableVersion, Store,
+    Verdict, VersionStatus,
 };
 use sha2::{Digest, Sha256};
 

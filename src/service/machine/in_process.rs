@@ -17,9 +17,9 @@ use crate::core::program::{
     CycleMachine, CycleStation, MainProgramSettings, READY_PROGRAM, render_cycle_program,
     render_ready_program,
 };
+use crate::core::turn::{self, measurement_sha256};
 use crate::recipe::FeatureSetup;
 use crate::share::ProgramFile;
-use crate::core::turn::{self, measurement_sha256};
 use crate::store::{EventLevel, MeasurementStage, VersionStatus};
 use camloop_loop::in_process::{SamePart, same_part_order};
 use std::path::Path;
@@ -205,7 +205,11 @@ impl FeatureLoop {
         let Some(ready) = main.ready.as_ref() else {
             let row = self.in_process_row(&raw, ground_with);
             return self
-                .refuse_in_process(&raw, "the machine's main program has no handshake".into(), row)
+                .refuse_in_process(
+                    &raw,
+                    "the machine's main program has no handshake".into(),
+                    row,
+                )
                 .await;
         };
         ready.arm(&self.setup.name);

@@ -8,8 +8,8 @@ use crate::service::http::AppState;
 use crate::service::http::api::ApiError;
 use crate::service::metrics::MachineMetrics;
 use crate::store::{
-    Dressing, Event, EventAck, EventFilter, EventId, EventLevel, HistoryFilter, MasterRuns, MeasurementStage,
-    MeasurementSummary, Store, TableVersion, TableVersionHead, VersionStatus,
+    Dressing, Event, EventAck, EventFilter, EventId, EventLevel, HistoryFilter, MasterRuns,
+    MeasurementStage, MeasurementSummary, Store, TableVersion, TableVersionHead, VersionStatus,
 };
 use std::collections::{BTreeMap, BTreeSet};
 

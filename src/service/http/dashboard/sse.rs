@@ -185,11 +185,7 @@ pub(super) async fn events(
             .measurements_after(MeasurementId(after), CATCH_UP)
             .await
     {
-        backlog = parts
-            .iter()
-            .filter(|p| trend_point(p))
-            .map(frame)
-            .collect();
+        backlog = parts.iter().filter(|p| trend_point(p)).map(frame).collect();
     }
     let sent = backlog.last().map(|f| f.0).or(resume).unwrap_or(0);
     let first = format!(
