@@ -188,8 +188,8 @@ pub struct NewMeasurement {
     pub phase_error_deg: f64,
     pub revolutions_used: u32,
     /// Final (the finished part) or in-process; journal records written before the
-    /// stage existed read as final.
-    #[serde(default)]
+    /// stage existed read as final, and a final one is written as before (no field).
+    #[serde(default, skip_serializing_if = "MeasurementStage::is_final")]
     pub stage: MeasurementStage,
     /// Readings per revolution (≥ 1); every revolution and the averaged profile have this many.
     pub points_per_rev: u32,
@@ -225,6 +225,11 @@ pub enum MeasurementStage {
 }
 
 impl MeasurementStage {
+    /// The finished part's stage.
+    pub fn is_final(&self) -> bool {
+        *self == Self::Final
+    }
+
     /// The text stored in the database and used in APIs.
     pub fn as_str(self) -> &'static str {
         match self {
