@@ -299,6 +299,7 @@ fn part(n: i64) -> NewMeasurement {
         base_radius_error_um: 0.1,
         phase_error_deg: 0.001,
         revolutions_used: 3,
+        stage: camloop::store::MeasurementStage::Final,
         points_per_rev: POINTS as u32,
         origin: "bench".into(),
         sha256: format!("{:064x}", 1u64 << 40 | n as u64).parse().unwrap(),

@@ -5,7 +5,9 @@ use super::output::Outputs;
 use crate::clock::now;
 use crate::config::{Config, ENV_DATABASE_URL};
 use crate::names::{FeatureName, MachineName};
-use crate::store::{HistoryFilter, MAX_PAGE, MasterRuns, MeasurementSummary, Store};
+use crate::store::{
+    HistoryFilter, MAX_PAGE, MasterRuns, MeasurementStage, MeasurementSummary, Store,
+};
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use std::fmt::Write as _;
@@ -48,6 +50,10 @@ pub struct HistoryArgs {
     /// List the master runs (part ids MASTER…) of gauge studies instead of production parts.
     #[arg(long)]
     pub masters: bool,
+    /// Only this stage: `final` (the finished part) or `in_process` (before the finish,
+    /// stock on); default both.
+    #[arg(long, value_name = "STAGE")]
+    pub stage: Option<MeasurementStage>,
     #[command(flatten)]
     pub store: StoreArgs,
 }
@@ -90,6 +96,7 @@ pub(crate) fn run_history(args: HistoryArgs) -> anyhow::Result<()> {
             } else {
                 MasterRuns::Excluded
             },
+            stage: args.stage,
             ..HistoryFilter::new(args.machine.clone(), 0)
         };
         let rows = newest(&store, filter, args.last, MAX_PAGE).await;
@@ -155,7 +162,11 @@ pub(crate) fn run_export(args: ExportArgs) -> anyhow::Result<()> {
         store.close().await;
         anyhow::Ok((rows, recipes?))
     })?;
-    let (rows, recipes) = rows;
+    let (mut rows, recipes) = rows;
+    if args.format == Format::Dfq {
+        // Q-DAS judges finished parts: an in-process measurement (stock on) is not one.
+        rows.retain(|d| d.summary.stage == MeasurementStage::Final);
+    }
     let count = rows.len();
     let text = if args.format == Format::Dfq {
         let export = super::export_dfq::DfqExport {
@@ -211,12 +222,13 @@ fn render(rows: &[MeasurementSummary], format: Format) -> anyhow::Result<String>
         Format::Table => {
             let _ = writeln!(
                 s,
-                "{:>8}  {:<13}  {:<8} {:<8} {:<6} {:>10} {:>10} {:>9}",
+                "{:>8}  {:<13}  {:<8} {:<8} {:<6} {:<10} {:>10} {:>10} {:>9}",
                 "id",
                 "received (UTC)",
                 "machine",
                 "lobe",
                 "verdict",
+                "stage",
                 "profile µm",
                 "size µm",
                 "phase °"
@@ -224,12 +236,13 @@ fn render(rows: &[MeasurementSummary], format: Format) -> anyhow::Result<String>
             for m in rows {
                 let _ = writeln!(
                     s,
-                    "{:>8}  {:<13}  {:<8} {:<8} {:<6} {:>10.2} {:>10.2} {:>9.4}",
+                    "{:>8}  {:<13}  {:<8} {:<8} {:<6} {:<10} {:>10.2} {:>10.2} {:>9.4}",
                     m.id.0,
                     format_time(m.received_at_ms),
                     m.machine,
                     m.lobe,
                     m.verdict.as_str(),
+                    m.stage.as_str(),
                     m.max_profile_error_um,
                     m.base_radius_error_um,
                     m.phase_error_deg
@@ -237,11 +250,11 @@ fn render(rows: &[MeasurementSummary], format: Format) -> anyhow::Result<String>
             }
         }
         Format::Csv => {
-            s.push_str("id,received_at_ms,machine,part,lobe,verdict,max_profile_error_um,base_radius_error_um,phase_error_deg,revolutions_used,points_per_rev,origin,sha256\n");
+            s.push_str("id,received_at_ms,machine,part,lobe,verdict,max_profile_error_um,base_radius_error_um,phase_error_deg,revolutions_used,points_per_rev,origin,sha256,stage\n");
             for m in rows {
                 let _ = writeln!(
                     s,
-                    "{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                    "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
                     m.id.0,
                     m.received_at_ms.as_millisecond(),
                     csv_field(&m.machine),
@@ -254,7 +267,8 @@ fn render(rows: &[MeasurementSummary], format: Format) -> anyhow::Result<String>
                     m.revolutions_used,
                     m.points_per_rev,
                     csv_field(&m.origin),
-                    m.sha256
+                    m.sha256,
+                    m.stage.as_str()
                 );
             }
         }
@@ -267,7 +281,7 @@ fn render(rows: &[MeasurementSummary], format: Format) -> anyhow::Result<String>
                         "lobe": m.lobe, "verdict": m.verdict.as_str(), "max_profile_error_um": m.max_profile_error_um,
                         "base_radius_error_um": m.base_radius_error_um, "phase_error_deg": m.phase_error_deg,
                         "revolutions_used": m.revolutions_used, "points_per_rev": m.points_per_rev,
-                        "origin": m.origin, "sha256": m.sha256,
+                        "origin": m.origin, "sha256": m.sha256, "stage": m.stage.as_str(),
                     })
                 })
                 .collect();

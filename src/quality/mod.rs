@@ -16,7 +16,9 @@ use crate::core::capability::{
 };
 use crate::core::measure::is_master_part;
 use crate::names::{FeatureName, MachineName};
-use crate::store::{MAX_PAGE, MeasurementDetail, MeasurementId, Store, StoreError};
+use crate::store::{
+    MAX_PAGE, MeasurementDetail, MeasurementId, MeasurementStage, Store, StoreError,
+};
 pub use limits::{CharacteristicLimits, FeatureLimits};
 pub use sheet::{Drawings, FeatureSheet, FeatureSheets};
 
@@ -115,7 +117,8 @@ impl StoredReport {
     }
 }
 
-/// The window's parts, oldest first: production parts, or (with `masters`) master runs only.
+/// The window's finished parts (stage `final`; in-process rows are never judged), oldest
+/// first: production parts, or (with `masters`) master runs only.
 /// Also returns the start the window took, if any, and how many of the other kind it skipped.
 pub(crate) async fn window_rows(
     store: &Store,
@@ -152,6 +155,10 @@ pub(crate) async fn window_rows(
         let Some(last) = batch.last() else { break };
         before = Some(last.summary.id);
         for d in &batch {
+            // Only finished parts are judged: an in-process measurement has stock on.
+            if d.summary.stage != MeasurementStage::Final {
+                continue;
+            }
             if is_master_part(&d.summary.part) == masters {
                 if rows.len() < wanted {
                     rows.push(PartRow::from_detail(d)?);

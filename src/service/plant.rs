@@ -71,10 +71,11 @@ impl EventSender {
 
 /// The event a journal record announces, if any (learning snapshots and recipes are
 /// the loop's own business, and a master run is the gauge study's: a plant counts its
-/// parts from `part_analysed`, and a master is not one).
+/// parts from `part_analysed`, and neither a master nor an in-process measurement is one).
 pub(crate) fn of_record(record: &Pending) -> Option<PlantEvent> {
     if let Pending::Measurement { measurement, .. } = record
-        && crate::core::measure::is_master_part(&measurement.part)
+        && (crate::core::measure::is_master_part(&measurement.part)
+            || measurement.stage != crate::store::MeasurementStage::Final)
     {
         return None;
     }
@@ -302,6 +303,7 @@ mod tests {
                 base_radius_error_um: 0.1,
                 phase_error_deg: 0.0,
                 revolutions_used: 3,
+                stage: crate::store::MeasurementStage::Final,
                 points_per_rev: 360,
                 origin: "gauge".into(),
                 sha256: "0".repeat(64).parse().unwrap(),

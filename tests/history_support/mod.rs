@@ -7,7 +7,9 @@
 use super::store_support::{f, m};
 use camloop::digest::Sha256;
 use camloop::share::{History, VersionState, VersionStatus, load_manifest};
-use camloop::store::{HistoryFilter, MeasurementSummary, RawPool, Store, TableVersion};
+use camloop::store::{
+    HistoryFilter, MeasurementStage, MeasurementSummary, RawPool, Store, TableVersion,
+};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
@@ -49,7 +51,8 @@ pub fn journal_measurements(var: &Path, machine: &str, lobe: &str) -> BTreeSet<S
         .collect()
 }
 
-/// The feature's stored parts, oldest first (up to 10,000), each with its analysis report.
+/// The feature's stored finished parts (stage `final`), oldest first (up to 10,000), each
+/// with its analysis report.
 pub async fn parts_with_reports(
     store: &Store,
     machine: &str,
@@ -57,6 +60,7 @@ pub async fn parts_with_reports(
 ) -> Vec<(MeasurementSummary, serde_json::Value)> {
     let filter = HistoryFilter {
         lobe: Some(lobe.parse().unwrap()),
+        stage: Some(MeasurementStage::Final),
         ..HistoryFilter::new(machine.parse().unwrap(), 10_000)
     };
     let page = store.measurement_history(&filter).await.unwrap();

@@ -11,7 +11,7 @@ use camloop::config::Config;
 use camloop::core::program::READY_PROGRAM;
 use camloop::service::{self, RunOptions};
 use camloop::sim::Control;
-use camloop::store::Store;
+use camloop::store::{HistoryFilter, MeasurementStage, Store};
 use std::path::Path;
 
 const SHAFTS: u64 = 12;
@@ -98,6 +98,25 @@ async fn run(file: &str, features: &[&str], measure: bool) -> Figures {
         let parts = parts_with_reports(&store, "CELL", f).await;
         let numbers: Vec<u64> = parts.iter().map(|(s, _)| s.part.parse().unwrap()).collect();
         assert_eq!(numbers, (1..=SHAFTS).collect::<Vec<_>>(), "{file} {f}");
+        // With the measurement, each shaft's in-process reading is kept beside it.
+        let in_process = HistoryFilter {
+            lobe: Some(f.parse().unwrap()),
+            stage: Some(MeasurementStage::InProcess),
+            ..HistoryFilter::new("CELL".parse().unwrap(), 10_000)
+        };
+        let page = store.measurement_history(&in_process).await.unwrap();
+        let numbers: Vec<u64> = page
+            .items
+            .iter()
+            .rev()
+            .map(|s| s.part.parse().unwrap())
+            .collect();
+        let expected: Vec<u64> = if measure {
+            (1..=SHAFTS).collect()
+        } else {
+            Vec::new()
+        };
+        assert_eq!(numbers, expected, "{file} {f}: in-process rows");
         for (s, report) in &parts {
             let error: Vec<f64> = report["error_um"]
                 .as_array()

@@ -4,7 +4,9 @@
 //! moved, written after the table in the same push; a wrong-part or incomplete one, or one
 //! past the control's wait, delivers nothing and moves no count; neither learns, and the
 //! finished part then learns once. Through the service, a drop folder's
-//! `<name>.in-process.csv` takes the same way.
+//! `<name>.in-process.csv` takes the same way and is kept in the history with its stage
+//! (`in_process`), beside the finished part's row (`final`), which alone the capability
+//! study counts.
 
 use crate::gauge_drop_support::measurement_csv;
 use crate::machine_support::{nominal_measurement, start_machine};
@@ -230,25 +232,47 @@ async fn the_service_takes_an_in_process_file_from_the_drop_folder() {
     assert!(reason.contains("revolution"), "{reason}");
     assert!(ready(dir.path()).contains("CL_READY=1"));
 
-    // The finished part is the one measurement learned from.
+    // The finished part is the one measurement learned from; the history keeps both, each
+    // with its stage, and the capability study counts the finished part only.
     drop_file(
         &inbox,
         "17-IN1.csv",
         &nominal_measurement(&s, at("17", "IN1"), 5),
     );
     appears(&inbox.join("processed/17-IN1.csv")).await;
-    let mut items = 0;
+    let history = "/api/v1/machines/DROP1/measurements";
+    let mut items = Vec::new();
     for _ in 0..200 {
-        let (_, body) = get(running.http_addr, "/api/v1/machines/DROP1/measurements").await;
-        items = json(&body)["items"].as_array().map_or(0, Vec::len);
-        if items >= 1 {
+        let (_, body) = get(running.http_addr, history).await;
+        items = json(&body)["items"].as_array().cloned().unwrap_or_default();
+        if items.len() >= 2 {
             break;
         }
         tokio::time::sleep(std::time::Duration::from_millis(50)).await;
     }
+    let stages: Vec<(&str, &str)> = items
+        .iter()
+        .map(|i| {
+            (
+                i["part"].as_str().unwrap_or(""),
+                i["stage"].as_str().unwrap_or(""),
+            )
+        })
+        .collect();
     assert_eq!(
-        items, 1,
-        "only the finished part is a measurement of the history"
+        stages,
+        [("17", "final"), ("17", "in_process")],
+        "newest first: the finished part, then its in-process measurement"
     );
+    let (_, body) = get(running.http_addr, &format!("{history}?stage=in_process")).await;
+    let only = json(&body)["items"].as_array().cloned().unwrap_or_default();
+    assert_eq!(only.len(), 1, "{body}");
+    assert_eq!(only[0]["stage"], "in_process");
+    let (_, body) = get(
+        running.http_addr,
+        "/api/v1/machines/DROP1/features/IN1/capability",
+    )
+    .await;
+    assert_eq!(json(&body)["parts"], 1, "the finished part only: {body}");
     running.stop().await;
 }

@@ -4,13 +4,16 @@
 //! state), connects with this build, and reads every row back: lifts, programs, learning
 //! parameters and states exactly, reports within half a quantisation step. Rows written
 //! after the conversion chain onto the converted ones and read back the same way. A dressing
-//! written before version 6 reads back without a dresser's infeed.
+//! written before version 6 reads back without a dresser's infeed, and a measurement
+//! written before version 8 reads back as the finished part's (stage `final`).
 
 use crate::store_support;
 
 use std::borrow::Cow;
 
-use camloop::store::{NewTableVersion, REPORT_STEP, RawPool, Store, VersionStatus};
+use camloop::store::{
+    MeasurementStage, NewTableVersion, REPORT_STEP, RawPool, Store, VersionStatus,
+};
 use sqlx::migrate::{Migration, Migrator};
 use store_support::data::{measurement, ms, sha_of};
 use store_support::{f, m};
@@ -200,6 +203,7 @@ async fn check_old_rows(store: &Store) {
         .unwrap();
     assert_eq!(export.len(), 5);
     for (n, d) in export.iter().enumerate() {
+        assert_eq!(d.summary.stage, MeasurementStage::Final, "part {n}");
         let m = measurement("M1", "in1", n as u32, 1_000 * n as i64);
         assert_eq!(
             d.averaged_lift_mm,

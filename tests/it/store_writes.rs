@@ -1,6 +1,7 @@
 //! Writing to the history store safely, on SQLite and on a throwaway PostgreSQL server: an
 //! insert is idempotent and refuses bad input, a replayed journal finds what is already
-//! stored, and concurrent writers lose nothing.
+//! stored, concurrent writers lose nothing, and a measurement's stage reads back as written
+//! and filters the history.
 
 use crate::store_support;
 
@@ -8,7 +9,8 @@ use store_support::data::{filter, measurement, ms, table};
 use store_support::{f, m};
 
 use camloop::store::{
-    EventKind, EventLevel, HistoryFilter, NewDressing, NewEvent, NewMeasurement, Store, StoreError,
+    EventKind, EventLevel, HistoryFilter, MeasurementStage, NewDressing, NewEvent, NewMeasurement,
+    Store, StoreError,
 };
 
 async fn idempotent(store: &Store) {
@@ -240,4 +242,51 @@ async fn concurrent_writers_on_postgres() {
         return;
     };
     concurrent_writers(&t.store).await;
+}
+
+/// A final and an in-process measurement of one part: each reads back with its stage, the
+/// history filters by it, and both come back without a filter.
+async fn stages(store: &Store) {
+    let done = measurement("M1", "in1", 1, 2_000);
+    let before = NewMeasurement {
+        stage: MeasurementStage::InProcess,
+        ..measurement("M1", "in1", 2, 1_000)
+    };
+    store.insert_measurement(&before).await.unwrap();
+    store.insert_measurement(&done).await.unwrap();
+    let listed = |stage| {
+        let f = HistoryFilter {
+            stage,
+            ..filter("M1")
+        };
+        async move {
+            let page = store.measurement_history(&f).await.unwrap();
+            page.items.iter().map(|s| s.stage).collect::<Vec<_>>()
+        }
+    };
+    assert_eq!(
+        listed(None).await,
+        [MeasurementStage::Final, MeasurementStage::InProcess]
+    );
+    assert_eq!(
+        listed(Some(MeasurementStage::InProcess)).await,
+        [MeasurementStage::InProcess]
+    );
+    assert_eq!(
+        listed(Some(MeasurementStage::Final)).await,
+        [MeasurementStage::Final]
+    );
+}
+
+#[tokio::test]
+async fn stages_on_sqlite() {
+    stages(&store_support::sqlite().await.store).await;
+}
+
+#[tokio::test]
+async fn stages_on_postgres() {
+    let Some(t) = store_support::postgres("stages_on_postgres").await else {
+        return;
+    };
+    stages(&t.store).await;
 }

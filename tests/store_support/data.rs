@@ -3,8 +3,8 @@
 
 use camloop::names::MachineName;
 use camloop::store::{
-    HistoryFilter, MeasurementSummary, NewMeasurement, NewTableVersion, Store, Verdict,
-    VersionStatus,
+    HistoryFilter, MeasurementStage, MeasurementSummary, NewMeasurement, NewTableVersion, Store,
+    Verdict, VersionStatus,
 };
 use sha2::{Digest, Sha256};
 
@@ -50,6 +50,7 @@ pub fn measurement(machine: &str, lobe: &str, n: u32, received_at_ms: i64) -> Ne
         base_radius_error_um: -0.5,
         phase_error_deg: 0.01 * f64::from(n),
         revolutions_used: 3,
+        stage: MeasurementStage::Final,
         points_per_rev: points,
         origin: "test".into(),
         sha256: sha_of(&format!("{machine}/{lobe}/{n}")),

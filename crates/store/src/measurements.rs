@@ -18,7 +18,7 @@ use camloop_core::names::{FeatureName, MachineName};
 
 const SUMMARY_COLUMNS: &str = "m.id, m.machine, m.part, m.lobe, m.received_at_ms, m.verdict, \
      m.max_profile_error_um, m.base_radius_error_um, m.phase_error_deg, m.revolutions_used, \
-     m.points_per_rev, m.origin, m.sha256, m.recipe_snapshot_id";
+     m.points_per_rev, m.origin, m.sha256, m.recipe_snapshot_id, m.stage";
 
 /// A value bound to a dynamically built query.
 pub(crate) enum Bind {
@@ -87,6 +87,7 @@ macro_rules! summary_from_row {
         let revolutions_used: i64 = col!(row, "revolutions_used", "reading a measurement");
         let points_per_rev: i64 = col!(row, "points_per_rev", "reading a measurement");
         let recipe: Option<i64> = col!(row, "recipe_snapshot_id", "reading a measurement");
+        let stage: String = col!(row, "stage", "reading a measurement");
         MeasurementSummary {
             id: MeasurementId(col!(row, "id", "reading a measurement")),
             machine: $crate::codec::machine_of(col!(row, "machine", "reading a measurement"))?,
@@ -105,6 +106,7 @@ macro_rules! summary_from_row {
                 col!(row, "sha256", "reading a measurement"),
             )?,
             recipe_snapshot: recipe.map(RecipeSnapshotId),
+            stage: $crate::MeasurementStage::parse(&stage)?,
         }
     }};
 }
@@ -278,8 +280,8 @@ impl Store {
             let inserted: Option<i64> = sqlx::query_scalar(
                 "INSERT INTO measurements (machine, part, lobe, received_at_ms, verdict, \
                  max_profile_error_um, base_radius_error_um, phase_error_deg, revolutions_used, \
-                 points_per_rev, origin, sha256, recipe_snapshot_id) \
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13) \
+                 points_per_rev, origin, sha256, recipe_snapshot_id, stage) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14) \
                  ON CONFLICT (sha256) DO NOTHING RETURNING id",
             )
             .bind(m.machine.as_str())
@@ -295,6 +297,7 @@ impl Store {
             .bind(&m.origin)
             .bind(m.sha256.to_string())
             .bind(m.recipe_snapshot.map(|r| r.0))
+            .bind(m.stage.as_str())
             .fetch_optional(&mut *tx)
             .await
             .map_err(self.db_error(OP))?;
@@ -347,6 +350,9 @@ impl Store {
         }
         if let Some(verdict) = filter.verdict {
             c.push("m.verdict = ?", [Bind::Text(verdict.as_str().to_owned())]);
+        }
+        if let Some(stage) = filter.stage {
+            c.push("m.stage = ?", [Bind::Text(stage.as_str().to_owned())]);
         }
         // The same test as `is_master_part`: the prefix, ASCII case ignored (PostgreSQL's LIKE
         // is case-sensitive, SQLite's is not, so both compare the upper case).

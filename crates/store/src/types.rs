@@ -187,6 +187,10 @@ pub struct NewMeasurement {
     pub base_radius_error_um: f64,
     pub phase_error_deg: f64,
     pub revolutions_used: u32,
+    /// Final (the finished part) or in-process; journal records written before the
+    /// stage existed read as final, and a final one is written as before (no field).
+    #[serde(default, skip_serializing_if = "MeasurementStage::is_final")]
+    pub stage: MeasurementStage,
     /// Readings per revolution (≥ 1); every revolution and the averaged profile have this many.
     pub points_per_rev: u32,
     /// Where the measurement came from ("can0", a file path, …).
@@ -203,6 +207,61 @@ pub struct NewMeasurement {
     pub averaged_lift_mm: Vec<f64>,
     /// The analysis report; must parse as JSON.
     pub analysis_json: String,
+}
+
+/// The stage of the part a measurement was taken at.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum MeasurementStage {
+    /// The finished part: what capability, control charts and exports judge. Every row
+    /// written before the column existed reads as final.
+    #[default]
+    Final,
+    /// Before the finish pass, stock still on: kept for the history, never learned from
+    /// and never counted as a finished part.
+    InProcess,
+}
+
+impl MeasurementStage {
+    /// The finished part's stage.
+    pub fn is_final(&self) -> bool {
+        *self == Self::Final
+    }
+
+    /// The text stored in the database and used in APIs.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Final => "final",
+            Self::InProcess => "in_process",
+        }
+    }
+
+    /// Parses the stored text.
+    pub fn parse(text: &str) -> Result<Self, camloop_core::levels::UnknownValue> {
+        match text {
+            "final" => Ok(Self::Final),
+            "in_process" => Ok(Self::InProcess),
+            _ => Err(camloop_core::levels::UnknownValue {
+                field: "stage",
+                text: text.to_string(),
+            }),
+        }
+    }
+}
+
+impl std::fmt::Display for MeasurementStage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl std::str::FromStr for MeasurementStage {
+    type Err = camloop_core::levels::UnknownValue;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::parse(s)
+    }
 }
 
 /// The summary columns of a measurement, as listed by the history query.
@@ -222,6 +281,7 @@ pub struct MeasurementSummary {
     pub origin: String,
     pub sha256: Sha256,
     pub recipe_snapshot: Option<RecipeSnapshotId>,
+    pub stage: MeasurementStage,
 }
 
 /// A measurement with its profiles and report.
@@ -244,6 +304,8 @@ pub struct HistoryFilter {
     /// Exclusive upper bound on `received_at_ms`.
     pub until_ms: Option<Timestamp>,
     pub verdict: Option<Verdict>,
+    /// One stage only; `None` lists both.
+    pub stage: Option<MeasurementStage>,
     /// Page size, 1 to [`MAX_PAGE`].
     pub limit: u32,
     /// `next_cursor` of the previous page; `None` for the first page.
@@ -262,6 +324,7 @@ impl HistoryFilter {
             since_ms: None,
             until_ms: None,
             verdict: None,
+            stage: None,
             limit,
             cursor: None,
             masters: MasterRuns::Included,

@@ -50,10 +50,12 @@ pub(super) async fn part(
             ),
         ));
     }
-    let rows = store(&state)
+    let mut rows = store(&state)
         .await?
         .part_measurements(&machine, &part)
         .await?;
+    // Whether the part passed is the finished part's answer: in-process rows have stock on.
+    rows.retain(|r| r.stage == crate::store::MeasurementStage::Final);
     // Configured features first, in grinding order; then any the history alone knows.
     let mut lobes: Vec<FeatureName> = state.machines.get(&machine).cloned().unwrap_or_default();
     for r in &rows {

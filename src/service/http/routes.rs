@@ -262,6 +262,9 @@ pub(super) struct HistoryQuery {
     until_ms: Option<jiff::Timestamp>,
     /// Only this verdict: `pass` or `fail`.
     verdict: Option<String>,
+    /// Only this stage: `final` (the finished part) or `in_process` (before the finish).
+    #[param(value_type = Option<String>)]
+    stage: Option<crate::store::MeasurementStage>,
     /// At most this many (default 100).
     limit: Option<u32>,
     /// Where the previous page ended (its `next_cursor`).
@@ -292,6 +295,8 @@ pub(super) struct MeasurementItem {
     lobe: FeatureName,
     received_at_ms: i64,
     verdict: &'static str,
+    /// `final` (the finished part) or `in_process` (before the finish, stock on).
+    stage: &'static str,
     max_profile_error_um: f64,
     base_radius_error_um: f64,
     phase_error_deg: f64,
@@ -305,6 +310,7 @@ impl From<crate::store::MeasurementSummary> for MeasurementItem {
         Self {
             id: m.id.0,
             verdict: m.verdict.as_str(),
+            stage: m.stage.as_str(),
             machine: m.machine,
             part: m.part,
             lobe: m.lobe,
@@ -347,6 +353,7 @@ pub(super) async fn history(
         since_ms: q.since_ms,
         until_ms: q.until_ms,
         verdict,
+        stage: q.stage,
         limit: q.limit.unwrap_or(100),
         cursor: q.cursor,
         masters: if q.masters {

@@ -406,6 +406,7 @@ async fn load_memory(
         for r in &records[i + 1..] {
             if let Pending::Measurement { measurement: m, .. } = r
                 && m.lobe == setup.name
+                && m.stage == crate::store::MeasurementStage::Final
             {
                 memory.measured(m.sha256, PartId::new(&m.part).ok());
             }

@@ -2,11 +2,13 @@
 //! count on the share (`CAMLOOP_READY.SPF`: 0 at start, then one more with each same-part
 //! finish table, pushed after the table in the same request), and the in-process measurement
 //! handed to the loop's decision ([`camloop_loop::in_process`]): its table order carried out,
-//! or an event saying why the finish grinds with the table in force. Nothing is learned
-//! from the in-process measurement; the finished part's measurement learns as any part's.
+//! or an event saying why the finish grinds with the table in force. The measurement is kept
+//! in the history as a row of stage `in_process` (through the journal, with the table's
+//! records), never learned from; the finished part's measurement learns as any part's.
 
 use super::super::journal::EventKind;
-use super::records::event;
+use super::super::journal::Pending;
+use super::records::{event, measurement};
 use super::{FeatureLoop, MachineError, MachineLoop};
 use crate::clock::now;
 use crate::core::cycle::CycleSettings;
@@ -15,9 +17,10 @@ use crate::core::program::{
     CycleMachine, CycleStation, MainProgramSettings, READY_PROGRAM, render_cycle_program,
     render_ready_program,
 };
+use crate::core::turn::{self, measurement_sha256};
 use crate::recipe::FeatureSetup;
 use crate::share::ProgramFile;
-use crate::store::{EventLevel, VersionStatus};
+use crate::store::{EventLevel, MeasurementStage, VersionStatus};
 use camloop_loop::in_process::{SamePart, same_part_order};
 use std::path::Path;
 use std::sync::Mutex;
@@ -157,8 +160,9 @@ impl MachineLoop {
         let index = match self.ids.route(&raw.header, None) {
             Ok(i) => i,
             Err(reason) => {
+                // No feature of this machine: an event, and no row under a feature it is not.
                 let feature = &mut self.features[0];
-                return feature.refuse_in_process(&raw, reason).await;
+                return feature.refuse_in_process(&raw, reason, Vec::new()).await;
             }
         };
         self.features[index]
@@ -175,6 +179,8 @@ impl FeatureLoop {
         part: &str,
         received: Instant,
     ) -> Result<InProcessOutcome, MachineError> {
+        // The part was ground so far with the table in force now, not with its finish table.
+        let ground_with = self.machine.memory().in_force_version;
         let turn_setup = self.setup.turn_setup();
         let decided = same_part_order(
             &SamePart {
@@ -190,12 +196,20 @@ impl FeatureLoop {
         );
         let order = match decided {
             Ok(order) => order,
-            Err(e) => return self.refuse_in_process(&raw, e.to_string()).await,
+            Err(e) => {
+                let row = self.in_process_row(&raw, ground_with);
+                return self.refuse_in_process(&raw, e.to_string(), row).await;
+            }
         };
         let main = self.main.clone();
         let Some(ready) = main.ready.as_ref() else {
+            let row = self.in_process_row(&raw, ground_with);
             return self
-                .refuse_in_process(&raw, "the machine's main program has no handshake".into())
+                .refuse_in_process(
+                    &raw,
+                    "the machine's main program has no handshake".into(),
+                    row,
+                )
                 .await;
         };
         ready.arm(&self.setup.name);
@@ -203,6 +217,8 @@ impl FeatureLoop {
         let pushed = matches!(delivered, Ok((_, VersionStatus::Pushed { .. }, _)));
         let count = ready.disarm(pushed);
         let (version, _, mut records) = delivered?;
+        // The row first: the finish table's version names this measurement.
+        records.splice(0..0, self.in_process_row(&raw, ground_with));
         let version = version.get();
         let at_ms = now();
         let outcome = if pushed {
@@ -225,11 +241,13 @@ impl FeatureLoop {
         Ok(outcome)
     }
 
-    /// No same-part table: an event says why; nothing is learned, nothing delivered.
+    /// No same-part table: an event says why, kept with `rows` (the measurement's history
+    /// row, if any); nothing is learned, nothing delivered.
     async fn refuse_in_process(
         &mut self,
         raw: &RawMeasurement,
         reason: String,
+        mut rows: Vec<Pending>,
     ) -> Result<InProcessOutcome, MachineError> {
         warn!(machine = %self.name, part = raw.header.part.as_str(), reason = reason.as_str(), "in-process measurement: no same-part finish table, the finish grinds with the table in force");
         let e = event(
@@ -242,10 +260,33 @@ impl FeatureLoop {
                 raw.header.part.trim()
             ),
         );
-        if !self.record(vec![e]).await {
+        rows.push(e);
+        if !self.record(rows).await {
             let why = format!("machine {}: the refusal's event was not kept", self.name);
             return Err(self.journal_failed(why));
         }
         Ok(InProcessOutcome::Refused { reason })
+    }
+}
+
+impl FeatureLoop {
+    /// The in-process measurement as a history row of stage `in_process`, when it reads as
+    /// a measurement of this feature (one that fails the checks has its event and no row).
+    /// The row is never learned from: the loop's memory does not take its digest.
+    fn in_process_row(
+        &self,
+        raw: &RawMeasurement,
+        ground_with: Option<crate::core::ids::TableVersion>,
+    ) -> Vec<Pending> {
+        let Ok(measured) = turn::measure(&self.setup.turn_setup(), raw) else {
+            return Vec::new();
+        };
+        let sha = measurement_sha256(raw);
+        let mut row = measurement(&self.name, &self.setup.name, raw, &sha, &measured, now());
+        row.stage = MeasurementStage::InProcess;
+        vec![Pending::Measurement {
+            measurement: row,
+            ground_with_version: ground_with,
+        }]
     }
 }

@@ -7,7 +7,7 @@ use crate::core::digest::Sha256;
 use crate::core::measure::RawMeasurement;
 use crate::core::turn::Measured;
 use crate::names::{FeatureName, MachineName};
-use crate::store::{EventLevel, NewMeasurement, Verdict, VersionStatus};
+use crate::store::{EventLevel, MeasurementStage, NewMeasurement, Verdict, VersionStatus};
 use camloop_loop::record::{self, Record, TableStatus};
 use std::path::Path;
 
@@ -117,7 +117,8 @@ pub(super) fn pending(
         .collect()
 }
 
-/// A measurement as the store keeps it.
+/// A measurement of the finished part as the store keeps it (the in-process one sets its
+/// stage after).
 pub(super) fn measurement(
     machine: &MachineName,
     lobe: &FeatureName,
@@ -141,6 +142,7 @@ pub(super) fn measurement(
         base_radius_error_um: report.base_radius_error_um,
         phase_error_deg: report.phase_error_deg,
         revolutions_used: measured.averaged.revolutions_used.len() as u32,
+        stage: MeasurementStage::Final,
         points_per_rev: measured.averaged.points_per_rev,
         origin: raw.origin.clone(),
         sha256: *sha,

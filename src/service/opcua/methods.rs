@@ -321,6 +321,7 @@ async fn read_method(
                     let filter = HistoryFilter {
                         lobe: Some(lobe),
                         masters: crate::store::MasterRuns::Excluded,
+                        stage: Some(crate::store::MeasurementStage::Final),
                         ..HistoryFilter::new(machine, 1)
                     };
                     let page = store

@@ -9,7 +9,7 @@ use crate::service::http::api::ApiError;
 use crate::service::metrics::MachineMetrics;
 use crate::store::{
     Dressing, Event, EventAck, EventFilter, EventId, EventLevel, HistoryFilter, MasterRuns,
-    MeasurementSummary, Store, TableVersion, TableVersionHead, VersionStatus,
+    MeasurementStage, MeasurementSummary, Store, TableVersion, TableVersionHead, VersionStatus,
 };
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -142,8 +142,9 @@ fn state(
     }
 }
 
-/// The newest `n` production parts of (machine, lobe), newest first: master runs are the
-/// gauge study's (the capability panel shows them), never a point of the trend.
+/// The newest `n` finished production parts of (machine, lobe), newest first: master runs
+/// are the gauge study's (the capability panel shows them), in-process measurements are
+/// taken with stock on; neither is a point of the trend or the latest result.
 pub(super) async fn history(
     store: &Store,
     machine: &MachineName,
@@ -153,6 +154,7 @@ pub(super) async fn history(
     let filter = HistoryFilter {
         lobe: Some(lobe.clone()),
         masters: MasterRuns::Excluded,
+        stage: Some(MeasurementStage::Final),
         ..HistoryFilter::new(machine.clone(), n)
     };
     Ok(store.measurement_history(&filter).await?.items)

@@ -141,13 +141,19 @@ async fn poll(
             continue;
         };
         for p in &parts {
-            // A master run is the gauge study's, never a point of the live trend.
-            if !is_master_part(&p.part) {
+            // A master run is the gauge study's, an in-process one has stock on: neither is
+            // a point of the live trend.
+            if trend_point(p) {
                 let _ = tx.send(frame(p));
             }
             last = Some(p.id);
         }
     }
+}
+
+/// A finished production part: what the live trend shows.
+fn trend_point(p: &MeasurementSummary) -> bool {
+    !is_master_part(&p.part) && p.stage == crate::store::MeasurementStage::Final
 }
 
 fn frame(p: &MeasurementSummary) -> Frame {
@@ -179,11 +185,7 @@ pub(super) async fn events(
             .measurements_after(MeasurementId(after), CATCH_UP)
             .await
     {
-        backlog = parts
-            .iter()
-            .filter(|p| !is_master_part(&p.part))
-            .map(frame)
-            .collect();
+        backlog = parts.iter().filter(|p| trend_point(p)).map(frame).collect();
     }
     let sent = backlog.last().map(|f| f.0).or(resume).unwrap_or(0);
     let first = format!(
