@@ -63,6 +63,37 @@ fn config(http: u16, opcua: u16) -> String {
     )
 }
 
+/// A temporary folder holding the client certificates the script makes (`client-certs/`).
+fn client_certs(script: &str) -> (tempfile::TempDir, std::path::PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("client-certs");
+    std::fs::create_dir_all(&certs).unwrap();
+    let made = Command::new("python3")
+        .arg(script)
+        .arg("certs")
+        .arg(&certs)
+        .output()
+        .unwrap();
+    assert!(made.status.success(), "{}", cli_support::stderr(&made));
+    (dir, certs)
+}
+
+/// The service run in `dir` (its `camloop.toml` written), once it has written the first
+/// admin's password and listens on `ports`.
+fn start(dir: &Path, ports: &[u16]) -> KillOnDrop {
+    let service = KillOnDrop::spawn(&mut camloop_run(dir)).unwrap();
+    let password_file = dir.join("var/admin-password");
+    wait_for("the admin password file", START_BOUND, || {
+        password_file.exists()
+    });
+    for &port in ports {
+        wait_for(&format!("a listener on port {port}"), START_BOUND, || {
+            TcpStream::connect(("127.0.0.1", port)).is_ok()
+        });
+    }
+    service
+}
+
 fn add_viewer(dir: &Path, password: &str) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_camloop"))
         .args(["user", "add", "vera", "--role", "viewer"])
@@ -89,26 +120,11 @@ fn asyncua_browses_reads_subscribes_and_calls_rollback_with_users() {
         return;
     }
     let script = cli_support::repo("tests/opcua/client_checks.py");
-    let dir = tempfile::tempdir().unwrap();
-    let certs = dir.path().join("client-certs");
-    std::fs::create_dir_all(&certs).unwrap();
-    let made = Command::new("python3")
-        .args([&script, "certs", &certs.display().to_string()])
-        .output()
-        .unwrap();
-    assert!(made.status.success(), "{}", cli_support::stderr(&made));
+    let (dir, certs) = client_certs(&script);
     let (http, opcua) = (free_port(), free_port());
     std::fs::write(dir.path().join("camloop.toml"), config(http, opcua)).unwrap();
-    let _service = KillOnDrop::spawn(&mut camloop_run(dir.path())).unwrap();
+    let _service = start(dir.path(), &[http, opcua]);
     let password_file = dir.path().join("var/admin-password");
-    wait_for("the admin password file", START_BOUND, || {
-        password_file.exists()
-    });
-    for port in [http, opcua] {
-        wait_for(&format!("a listener on port {port}"), START_BOUND, || {
-            TcpStream::connect(("127.0.0.1", port)).is_ok()
-        });
-    }
     let admin_password = std::fs::read_to_string(&password_file)
         .unwrap()
         .trim()
@@ -187,28 +203,15 @@ fn asyncua_is_refused_a_clear_text_password_over_none() {
         return;
     }
     let script = cli_support::repo("tests/opcua/client_checks.py");
-    let dir = tempfile::tempdir().unwrap();
-    let certs = dir.path().join("client-certs");
-    std::fs::create_dir_all(&certs).unwrap();
-    let made = Command::new("python3")
-        .args([&script, "certs", &certs.display().to_string()])
-        .output()
-        .unwrap();
-    assert!(made.status.success(), "{}", cli_support::stderr(&made));
+    let (dir, certs) = client_certs(&script);
     let (http, opcua) = (free_port(), free_port());
     let config = config(http, opcua).replace(
         "host_name = \"localhost\"\n",
         "host_name = \"localhost\"\nsecurity = \"Basic256Sha256+None\"\naccept_unknown_clients = true\n",
     );
     std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
-    let service = KillOnDrop::spawn(&mut camloop_run(dir.path())).unwrap();
+    let service = start(dir.path(), &[opcua]);
     let password_file = dir.path().join("var/admin-password");
-    wait_for("the admin password file", START_BOUND, || {
-        password_file.exists()
-    });
-    wait_for("the OPC UA listener", START_BOUND, || {
-        TcpStream::connect(("127.0.0.1", opcua)).is_ok()
-    });
     let params = serde_json::json!({
         "endpoint": format!("opc.tcp://localhost:{opcua}/"),
         "cert_dir": certs.display().to_string(),
@@ -288,30 +291,14 @@ fn an_opcua_lockout_leaves_the_user_s_http_sign_in_and_token_alone() {
         return;
     }
     let script = cli_support::repo("tests/opcua/client_checks.py");
-    let dir = tempfile::tempdir().unwrap();
-    let certs = dir.path().join("client-certs");
-    std::fs::create_dir_all(&certs).unwrap();
-    let made = Command::new("python3")
-        .args([&script, "certs", &certs.display().to_string()])
-        .output()
-        .unwrap();
-    assert!(made.status.success(), "{}", cli_support::stderr(&made));
+    let (dir, certs) = client_certs(&script);
     let (http, opcua) = (free_port(), free_port());
     let config = config(http, opcua).replace(
         "host_name = \"localhost\"\n",
         "host_name = \"localhost\"\naccept_unknown_clients = true\n",
     );
     std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
-    let _service = KillOnDrop::spawn(&mut camloop_run(dir.path())).unwrap();
-    let password_file = dir.path().join("var/admin-password");
-    wait_for("the admin password file", START_BOUND, || {
-        password_file.exists()
-    });
-    for port in [http, opcua] {
-        wait_for(&format!("a listener on port {port}"), START_BOUND, || {
-            TcpStream::connect(("127.0.0.1", port)).is_ok()
-        });
-    }
+    let _service = start(dir.path(), &[http, opcua]);
     let password = "viewer-password-1234";
     add_viewer(dir.path(), password);
     let params = serde_json::json!({
@@ -386,28 +373,14 @@ fn a_disabled_user_s_open_session_stops_reading() {
         return;
     }
     let script = cli_support::repo("tests/opcua/client_checks.py");
-    let dir = tempfile::tempdir().unwrap();
-    let certs = dir.path().join("client-certs");
-    std::fs::create_dir_all(&certs).unwrap();
-    let made = Command::new("python3")
-        .args([&script, "certs", &certs.display().to_string()])
-        .output()
-        .unwrap();
-    assert!(made.status.success(), "{}", cli_support::stderr(&made));
+    let (dir, certs) = client_certs(&script);
     let (http, opcua) = (free_port(), free_port());
     let config = config(http, opcua).replace(
         "host_name = \"localhost\"\n",
         "host_name = \"localhost\"\naccept_unknown_clients = true\n",
     );
     std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
-    let _service = KillOnDrop::spawn(&mut camloop_run(dir.path())).unwrap();
-    let password_file = dir.path().join("var/admin-password");
-    wait_for("the admin password file", START_BOUND, || {
-        password_file.exists()
-    });
-    wait_for("the OPC UA listener", START_BOUND, || {
-        TcpStream::connect(("127.0.0.1", opcua)).is_ok()
-    });
+    let _service = start(dir.path(), &[opcua]);
     let password = "viewer-password-1234";
     add_viewer(dir.path(), password);
     let params = serde_json::json!({
