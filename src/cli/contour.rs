@@ -7,7 +7,7 @@ use crate::core::generate::contour::{ContourJob, Roughing, Side, generate, gener
 use crate::core::generate::contour_chain::ChainRoughing;
 use crate::core::generate::contour_chain::program::generate as chain_generate;
 use crate::core::generate::contour_file::parse_contour_file;
-use crate::core::generate::curve::Curve;
+use crate::core::generate::curve::{Curve, Ellipse, Parabola, Sine, Tangent};
 use crate::core::generate::dialect::{Decimals, Dialect, Form};
 use crate::core::generate::profile::parse_profile;
 use crate::core::generate::setup::{FeedMode, Setup, XMode};
@@ -98,66 +98,16 @@ pub struct ContourArgs {
 pub enum CurveArgs {
     /// z = zc + a·cos θ, x = xc + b·sin θ.
     #[command(allow_negative_numbers = true)]
-    Ellipse {
-        #[arg(long)]
-        centre_z_mm: f64,
-        #[arg(long)]
-        centre_x_mm: f64,
-        #[arg(long)]
-        a_mm: f64,
-        #[arg(long)]
-        b_mm: f64,
-        #[arg(long)]
-        start_deg: f64,
-        #[arg(long)]
-        end_deg: f64,
-    },
+    Ellipse(Ellipse),
     /// (x − x0)² = 2p·(z − z0), run along x.
     #[command(allow_negative_numbers = true)]
-    Parabola {
-        #[arg(long)]
-        vertex_z_mm: f64,
-        #[arg(long)]
-        vertex_x_mm: f64,
-        #[arg(long)]
-        p_mm: f64,
-        #[arg(long)]
-        x_start_mm: f64,
-        #[arg(long)]
-        x_end_mm: f64,
-    },
+    Parabola(Parabola),
     /// x = x0 + A·sin(360·z/λ + φ), run along z.
     #[command(allow_negative_numbers = true)]
-    Sine {
-        #[arg(long)]
-        mean_x_mm: f64,
-        #[arg(long)]
-        amplitude_mm: f64,
-        #[arg(long)]
-        wavelength_mm: f64,
-        #[arg(long, default_value_t = 0.0)]
-        phase_deg: f64,
-        #[arg(long)]
-        z_start_mm: f64,
-        #[arg(long)]
-        z_end_mm: f64,
-    },
+    Sine(Sine),
     /// x = x0 + A·tan(ω·(z − zc)), run along z.
     #[command(allow_negative_numbers = true)]
-    Tangent {
-        #[arg(long)]
-        mean_x_mm: f64,
-        #[arg(long)]
-        amplitude_mm: f64,
-        #[arg(long)]
-        rate_deg_per_mm: f64,
-        #[arg(long)]
-        centre_z_mm: f64,
-        #[arg(long)]
-        z_start_mm: f64,
-        #[arg(long)]
-        z_end_mm: f64,
-    },
+    Tangent(Tangent),
     /// Points `z_mm,x_mm` from a CSV file, interpolated by a natural cubic spline.
     #[command(allow_negative_numbers = true)]
     Profile {
@@ -175,64 +125,10 @@ pub enum CurveArgs {
 
 fn curve(args: &CurveArgs) -> anyhow::Result<Curve> {
     Ok(match *args {
-        CurveArgs::Ellipse {
-            centre_z_mm,
-            centre_x_mm,
-            a_mm,
-            b_mm,
-            start_deg,
-            end_deg,
-        } => Curve::Ellipse {
-            centre_z_mm,
-            centre_x_mm,
-            a_mm,
-            b_mm,
-            start_deg,
-            end_deg,
-        },
-        CurveArgs::Parabola {
-            vertex_z_mm,
-            vertex_x_mm,
-            p_mm,
-            x_start_mm,
-            x_end_mm,
-        } => Curve::Parabola {
-            vertex_z_mm,
-            vertex_x_mm,
-            p_mm,
-            x_start_mm,
-            x_end_mm,
-        },
-        CurveArgs::Sine {
-            mean_x_mm,
-            amplitude_mm,
-            wavelength_mm,
-            phase_deg,
-            z_start_mm,
-            z_end_mm,
-        } => Curve::Sine {
-            mean_x_mm,
-            amplitude_mm,
-            wavelength_mm,
-            phase_deg,
-            z_start_mm,
-            z_end_mm,
-        },
-        CurveArgs::Tangent {
-            mean_x_mm,
-            amplitude_mm,
-            rate_deg_per_mm,
-            centre_z_mm,
-            z_start_mm,
-            z_end_mm,
-        } => Curve::Tangent {
-            mean_x_mm,
-            amplitude_mm,
-            rate_deg_per_mm,
-            centre_z_mm,
-            z_start_mm,
-            z_end_mm,
-        },
+        CurveArgs::Ellipse(e) => Curve::Ellipse(e),
+        CurveArgs::Parabola(p) => Curve::Parabola(p),
+        CurveArgs::Sine(k) => Curve::Sine(k),
+        CurveArgs::Tangent(k) => Curve::Tangent(k),
         CurveArgs::File { .. } => anyhow::bail!("a contour file is not one curve"),
         CurveArgs::Profile { ref csv } => {
             let text = std::fs::read_to_string(csv)

@@ -8,7 +8,7 @@ use sinumerik_support as sinumerik_eval;
 use crate::rs274_support;
 
 use camloop::core::generate::contour::{ContourError, ContourJob, Roughing, Side, generate};
-use camloop::core::generate::curve::Curve;
+use camloop::core::generate::curve::{Curve, Ellipse, Parabola, Sine, Tangent};
 use camloop::core::generate::dialect::{Decimals, Dialect, Form};
 use camloop::core::generate::ir::Compensation;
 use camloop::core::generate::setup::Setup;
@@ -24,14 +24,14 @@ const B: f64 = 20.0;
 fn ellipse_job(tolerance_mm: f64, roughing: Option<Roughing>) -> ContourJob {
     ContourJob {
         name: "ELLIPSE_TURN".to_owned(),
-        curve: Curve::Ellipse {
+        curve: Curve::Ellipse(Ellipse {
             centre_z_mm: ZC,
             centre_x_mm: XC,
             a_mm: A,
             b_mm: B,
             start_deg: 10.0,
             end_deg: 170.0,
-        },
+        }),
         tolerance_mm,
         decimals: 4,
         side: Side::Outside,
@@ -51,14 +51,14 @@ fn ellipse_job(tolerance_mm: f64, roughing: Option<Roughing>) -> ContourJob {
 /// A sine of 2 mm amplitude on a 20 mm wavelength about X = 20 mm, over 40 mm of Z: its
 /// concave radius is 5.066 mm.
 fn sine() -> Curve {
-    Curve::Sine {
+    Curve::Sine(Sine {
         mean_x_mm: 20.0,
         amplitude_mm: 2.0,
         wavelength_mm: 20.0,
         phase_deg: 0.0,
         z_start_mm: 0.0,
         z_end_mm: -40.0,
-    }
+    })
 }
 
 fn ellipse_chord_deviation(p: (f64, f64), q: (f64, f64)) -> f64 {
@@ -125,36 +125,36 @@ fn parabola_sine_tangent_and_a_slender_ellipse_within_the_tolerance() {
     let curves = [
         (
             "parabola",
-            Curve::Parabola {
+            Curve::Parabola(Parabola {
                 vertex_z_mm: -20.0,
                 vertex_x_mm: 5.0,
                 p_mm: 4.0,
                 x_start_mm: 5.0,
                 x_end_mm: 25.0,
-            },
+            }),
         ),
         ("sine", sine()),
         (
             "tangent",
-            Curve::Tangent {
+            Curve::Tangent(Tangent {
                 mean_x_mm: 20.0,
                 amplitude_mm: 1.0,
                 rate_deg_per_mm: 4.0,
                 centre_z_mm: -20.0,
                 z_start_mm: 0.0,
                 z_end_mm: -40.0,
-            },
+            }),
         ),
         (
             "slender ellipse",
-            Curve::Ellipse {
+            Curve::Ellipse(Ellipse {
                 centre_z_mm: -40.0,
                 centre_x_mm: 10.0,
                 a_mm: 40.0,
                 b_mm: 8.0,
                 start_deg: 5.0,
                 end_deg: 175.0,
-            },
+            }),
         ),
     ];
     for (name, curve) in curves {
@@ -386,13 +386,13 @@ fn golden_programs() {
         allowance_mm: 0.2,
     });
     let mut job = ellipse_job(10e-3, rough);
-    job.curve = Curve::Parabola {
+    job.curve = Curve::Parabola(Parabola {
         vertex_z_mm: -20.0,
         vertex_x_mm: 5.0,
         p_mm: 4.0,
         x_start_mm: 5.0,
         x_end_mm: 15.0,
-    };
+    });
     job.name = "PARABOLA_TURN".to_owned();
     let c = generate(&job).unwrap();
     let d = Decimals::default();
@@ -457,38 +457,38 @@ fn refusals_name_the_reason() {
     );
     job.nose_radius_mm = 0.8;
     assert!(generate(&job).is_ok());
-    job.curve = Curve::Tangent {
+    job.curve = Curve::Tangent(Tangent {
         mean_x_mm: 20.0,
         amplitude_mm: 1.0,
         rate_deg_per_mm: 5.0,
         centre_z_mm: -20.0,
         z_start_mm: 0.0,
         z_end_mm: -40.0,
-    };
+    });
     assert!(matches!(
         generate(&job),
         Err(ContourError::TangentAsymptote { .. })
     ));
     let mut job = ellipse_job(2e-3, None);
-    job.curve = Curve::Ellipse {
+    job.curve = Curve::Ellipse(Ellipse {
         centre_z_mm: ZC,
         centre_x_mm: XC,
         a_mm: A,
         b_mm: B,
         start_deg: 0.0,
         end_deg: 270.0,
-    };
+    });
     assert!(matches!(
         generate(&job),
         Err(ContourError::TurnsBack { .. })
     ));
-    job.curve = Curve::Parabola {
+    job.curve = Curve::Parabola(Parabola {
         vertex_z_mm: -20.0,
         vertex_x_mm: 5.0,
         p_mm: 0.0,
         x_start_mm: 5.0,
         x_end_mm: 15.0,
-    };
+    });
     let e = generate(&job).unwrap_err();
     assert!(e.to_string().starts_with("parabola p is 0"), "{e}");
 }

@@ -7,7 +7,7 @@ use crate::rs274_support::{self, Canon, run_rs274};
 use crate::sinumerik_support;
 
 use camloop::core::generate::contour::{ContourError, Roughing, generate_rparams};
-use camloop::core::generate::curve::Curve;
+use camloop::core::generate::curve::{Curve, Ellipse, Parabola, Sine, Tangent};
 use camloop::core::generate::dialect::{Decimals, Dialect, Form};
 use camloop::core::generate::safety::{Rules, check};
 
@@ -17,46 +17,46 @@ fn curves() -> Vec<(&'static str, Curve)> {
     vec![
         (
             "AA5 ellipse",
-            Curve::Ellipse {
+            Curve::Ellipse(Ellipse {
                 centre_z_mm: -10.0,
                 centre_x_mm: 0.0,
                 a_mm: 10.0,
                 b_mm: 20.0,
                 start_deg: 0.0,
                 end_deg: 180.0 - 0.9f64.asin().to_degrees(),
-            },
+            }),
         ),
         (
             "parabola",
-            Curve::Parabola {
+            Curve::Parabola(Parabola {
                 vertex_z_mm: -20.0,
                 vertex_x_mm: 5.0,
                 p_mm: 4.0,
                 x_start_mm: 5.0,
                 x_end_mm: 25.0,
-            },
+            }),
         ),
         (
             "sine",
-            Curve::Sine {
+            Curve::Sine(Sine {
                 mean_x_mm: 20.0,
                 amplitude_mm: 2.0,
                 wavelength_mm: 25.0,
                 phase_deg: 30.0,
                 z_start_mm: 0.0,
                 z_end_mm: -40.0,
-            },
+            }),
         ),
         (
             "tangent",
-            Curve::Tangent {
+            Curve::Tangent(Tangent {
                 mean_x_mm: 30.0,
                 amplitude_mm: 3.0,
                 rate_deg_per_mm: 4.0,
                 centre_z_mm: -20.0,
                 z_start_mm: -5.0,
                 z_end_mm: -35.0,
-            },
+            }),
         ),
     ]
 }

@@ -6,7 +6,7 @@
 use crate::rs274_support::{self, Canon, run_rs274};
 
 use camloop::core::generate::contour::{ContourJob, Roughing, Side, generate};
-use camloop::core::generate::curve::Curve;
+use camloop::core::generate::curve::{Curve, Ellipse, Parabola, Sine};
 use camloop::core::generate::dialect::{Decimals, Dialect, Form};
 use camloop::core::generate::param_curve::ParamCurve;
 use camloop::core::generate::safety::{Rules, check};
@@ -66,37 +66,37 @@ fn the_sources_examples_side_by_side() {
     let cases = [
         (
             "SK03 ellipse 30 x 20, tip to crown, 1 deg step",
-            Curve::Ellipse {
+            Curve::Ellipse(Ellipse {
                 centre_z_mm: -30.0,
                 centre_x_mm: 0.0,
                 a_mm: 30.0,
                 b_mm: 20.0,
                 start_deg: 0.0,
                 end_deg: 90.0,
-            },
+            }),
             1.0,
         ),
         (
             "AA5 ellipse 10 x 20 to z = -14.359, 1 deg step",
-            Curve::Ellipse {
+            Curve::Ellipse(Ellipse {
                 centre_z_mm: -10.0,
                 centre_x_mm: 0.0,
                 a_mm: 10.0,
                 b_mm: 20.0,
                 start_deg: 0.0,
                 end_deg: 180.0 - 0.9f64.asin().to_degrees(),
-            },
+            }),
             1.0,
         ),
         (
             "parabola p = 4, x 5 to 25, 0.5 mm step in x",
-            Curve::Parabola {
+            Curve::Parabola(Parabola {
                 vertex_z_mm: -20.0,
                 vertex_x_mm: 5.0,
                 p_mm: 4.0,
                 x_start_mm: 5.0,
                 x_end_mm: 25.0,
-            },
+            }),
             0.5,
         ),
         (
@@ -138,14 +138,14 @@ fn the_aa5_ellipse_lead_in_stays_in_front_of_the_axis() {
     // The curve starts on the axis at its tip: the 45° lead-in went to X = −0.98 before; the
     // generator's safety check now refuses any program behind the axis, and rs274 agrees.
     let rs = rs274_support::rs274().expect("rs274 installed (.ci/run installs it)");
-    let curve = Curve::Ellipse {
+    let curve = Curve::Ellipse(Ellipse {
         centre_z_mm: -10.0,
         centre_x_mm: 0.0,
         a_mm: 10.0,
         b_mm: 20.0,
         start_deg: 0.0,
         end_deg: 90.0,
-    };
+    });
     let mut j = job("AA5_TIP", curve);
     j.nose_radius_mm = 0.8;
     let c = generate(&j).unwrap();
@@ -171,27 +171,29 @@ fn ellipse_strategy() -> impl Strategy<Value = Curve> {
         0.0..60.0f64,
         120.0..180.0f64,
     )
-        .prop_map(
-            |(a_mm, b_mm, centre_x_mm, start_deg, end_deg)| Curve::Ellipse {
+        .prop_map(|(a_mm, b_mm, centre_x_mm, start_deg, end_deg)| {
+            Curve::Ellipse(Ellipse {
                 centre_z_mm: -a_mm,
                 centre_x_mm,
                 a_mm,
                 b_mm,
                 start_deg,
                 end_deg,
-            },
-        )
+            })
+        })
 }
 
 fn sine_strategy() -> impl Strategy<Value = Curve> {
     (0.5..3.0f64, 15.0..40.0f64, 6.0..30.0f64, 0.0..360.0f64).prop_map(
-        |(amplitude_mm, wavelength_mm, mean_x_mm, phase_deg)| Curve::Sine {
-            mean_x_mm,
-            amplitude_mm,
-            wavelength_mm,
-            phase_deg,
-            z_start_mm: 0.0,
-            z_end_mm: -40.0,
+        |(amplitude_mm, wavelength_mm, mean_x_mm, phase_deg)| {
+            Curve::Sine(Sine {
+                mean_x_mm,
+                amplitude_mm,
+                wavelength_mm,
+                phase_deg,
+                z_start_mm: 0.0,
+                z_end_mm: -40.0,
+            })
         },
     )
 }

@@ -10,7 +10,7 @@
 use thiserror::Error;
 
 use super::chords::{StepLaw, fixed_step_for, round_to, walk, worst_deviation};
-use super::curve::Curve;
+use super::curve::{Curve, Ellipse, Parabola, Sine, Tangent};
 use super::ir::{Compensation, Expr, Program, Var};
 use super::safety::{self, Rules, Violation};
 use super::setup::{Setup, SetupError};
@@ -306,14 +306,14 @@ fn check_curve(curve: &Curve) -> Result<(), ContourError> {
 /// The curve's fields that must be positive, and those that must be finite.
 fn curve_fields(curve: &Curve) -> (Vec<Field>, Vec<Field>) {
     match *curve {
-        Curve::Ellipse {
+        Curve::Ellipse(Ellipse {
             centre_z_mm,
             centre_x_mm,
             a_mm,
             b_mm,
             start_deg,
             end_deg,
-        } => (
+        }) => (
             vec![("ellipse a", a_mm), ("ellipse b", b_mm)],
             vec![
                 ("centre z", centre_z_mm),
@@ -322,13 +322,13 @@ fn curve_fields(curve: &Curve) -> (Vec<Field>, Vec<Field>) {
                 ("end", end_deg),
             ],
         ),
-        Curve::Parabola {
+        Curve::Parabola(Parabola {
             vertex_z_mm,
             vertex_x_mm,
             p_mm,
             x_start_mm,
             x_end_mm,
-        } => (
+        }) => (
             vec![("parabola p", p_mm.abs())],
             vec![
                 ("vertex z", vertex_z_mm),
@@ -337,14 +337,14 @@ fn curve_fields(curve: &Curve) -> (Vec<Field>, Vec<Field>) {
                 ("x end", x_end_mm),
             ],
         ),
-        Curve::Sine {
+        Curve::Sine(Sine {
             mean_x_mm,
             amplitude_mm,
             wavelength_mm,
             phase_deg,
             z_start_mm,
             z_end_mm,
-        } => (
+        }) => (
             vec![("wavelength", wavelength_mm)],
             vec![
                 ("mean x", mean_x_mm),
@@ -354,14 +354,14 @@ fn curve_fields(curve: &Curve) -> (Vec<Field>, Vec<Field>) {
                 ("z end", z_end_mm),
             ],
         ),
-        Curve::Tangent {
+        Curve::Tangent(Tangent {
             mean_x_mm,
             amplitude_mm,
             rate_deg_per_mm,
             centre_z_mm,
             z_start_mm,
             z_end_mm,
-        } => (
+        }) => (
             vec![],
             vec![
                 ("mean x", mean_x_mm),
@@ -428,13 +428,13 @@ fn check_geometry(job: &ContourJob) -> Result<(), ContourError> {
 
 /// A tangent curve must stay off its asymptotes.
 fn check_asymptote(curve: &Curve) -> Result<(), ContourError> {
-    if let Curve::Tangent {
+    if let Curve::Tangent(Tangent {
         rate_deg_per_mm,
         centre_z_mm,
         z_start_mm,
         z_end_mm,
         ..
-    } = *curve
+    }) = *curve
     {
         for z in [z_start_mm, z_end_mm] {
             let arg_deg = (z - centre_z_mm) * rate_deg_per_mm;

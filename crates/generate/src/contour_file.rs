@@ -7,7 +7,7 @@ use serde::Deserialize;
 use thiserror::Error;
 
 use crate::contour_chain::{ChainJob, ChainRoughing, Insert, Labeled, Segment};
-use crate::curve::Curve;
+use crate::curve::{Curve, Ellipse, Parabola, Sine, Tangent};
 use crate::param_curve::{ExprError, ParamCurve};
 use crate::profile::{ProfileError, parse_profile};
 use crate::setup::{FeedMode, Setup};
@@ -116,38 +116,10 @@ enum SegmentFile {
         radius_mm: f64,
         direction: Direction,
     },
-    Ellipse {
-        centre_z_mm: f64,
-        centre_x_mm: f64,
-        a_mm: f64,
-        b_mm: f64,
-        start_deg: f64,
-        end_deg: f64,
-    },
-    Parabola {
-        vertex_z_mm: f64,
-        vertex_x_mm: f64,
-        p_mm: f64,
-        x_start_mm: f64,
-        x_end_mm: f64,
-    },
-    Sine {
-        mean_x_mm: f64,
-        amplitude_mm: f64,
-        wavelength_mm: f64,
-        #[serde(default)]
-        phase_deg: f64,
-        z_start_mm: f64,
-        z_end_mm: f64,
-    },
-    Tangent {
-        mean_x_mm: f64,
-        amplitude_mm: f64,
-        rate_deg_per_mm: f64,
-        centre_z_mm: f64,
-        z_start_mm: f64,
-        z_end_mm: f64,
-    },
+    Ellipse(Ellipse),
+    Parabola(Parabola),
+    Sine(Sine),
+    Tangent(Tangent),
     Spline {
         points: Vec<[f64; 2]>,
     },
@@ -253,10 +225,10 @@ fn kind_of(s: &SegmentFile) -> &'static str {
     match s {
         SegmentFile::Line { .. } => "line",
         SegmentFile::Arc { .. } => "arc",
-        SegmentFile::Ellipse { .. } => "ellipse",
-        SegmentFile::Parabola { .. } => "parabola",
-        SegmentFile::Sine { .. } => "sine",
-        SegmentFile::Tangent { .. } => "tangent",
+        SegmentFile::Ellipse(_) => "ellipse",
+        SegmentFile::Parabola(_) => "parabola",
+        SegmentFile::Sine(_) => "sine",
+        SegmentFile::Tangent(_) => "tangent",
         SegmentFile::Spline { .. } => "spline",
         SegmentFile::Parametric { .. } => "parametric",
         SegmentFile::Graph { .. } => "graph",
@@ -303,64 +275,10 @@ fn to_segment(s: SegmentFile, at: (f64, f64)) -> Result<Segment, SegErr> {
             radius_mm,
             cw: matches!(direction, Direction::Cw),
         },
-        SegmentFile::Ellipse {
-            centre_z_mm,
-            centre_x_mm,
-            a_mm,
-            b_mm,
-            start_deg,
-            end_deg,
-        } => Segment::Curve(Curve::Ellipse {
-            centre_z_mm,
-            centre_x_mm,
-            a_mm,
-            b_mm,
-            start_deg,
-            end_deg,
-        }),
-        SegmentFile::Parabola {
-            vertex_z_mm,
-            vertex_x_mm,
-            p_mm,
-            x_start_mm,
-            x_end_mm,
-        } => Segment::Curve(Curve::Parabola {
-            vertex_z_mm,
-            vertex_x_mm,
-            p_mm,
-            x_start_mm,
-            x_end_mm,
-        }),
-        SegmentFile::Sine {
-            mean_x_mm,
-            amplitude_mm,
-            wavelength_mm,
-            phase_deg,
-            z_start_mm,
-            z_end_mm,
-        } => Segment::Curve(Curve::Sine {
-            mean_x_mm,
-            amplitude_mm,
-            wavelength_mm,
-            phase_deg,
-            z_start_mm,
-            z_end_mm,
-        }),
-        SegmentFile::Tangent {
-            mean_x_mm,
-            amplitude_mm,
-            rate_deg_per_mm,
-            centre_z_mm,
-            z_start_mm,
-            z_end_mm,
-        } => Segment::Curve(Curve::Tangent {
-            mean_x_mm,
-            amplitude_mm,
-            rate_deg_per_mm,
-            centre_z_mm,
-            z_start_mm,
-            z_end_mm,
-        }),
+        SegmentFile::Ellipse(e) => Segment::Curve(Curve::Ellipse(e)),
+        SegmentFile::Parabola(p) => Segment::Curve(Curve::Parabola(p)),
+        SegmentFile::Sine(k) => Segment::Curve(Curve::Sine(k)),
+        SegmentFile::Tangent(k) => Segment::Curve(Curve::Tangent(k)),
         SegmentFile::Spline { points } => {
             // The profile reader's rules (z monotone, 3 points at least); its "line n" is
             // the n-th point here.

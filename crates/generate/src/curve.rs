@@ -5,6 +5,7 @@
 //! Each analytic curve also gives its point as an [`Expr`] in the loop variable, so the
 //! control can evaluate the same curve the generator proves.
 
+pub use super::analytic::{Ellipse, Parabola, Sine, Tangent};
 use super::ir::{Expr, Var};
 use super::open_spline::OpenSpline;
 use super::param_curve::ParamCurve;
@@ -12,45 +13,16 @@ use super::param_curve::ParamCurve;
 /// A contour. Angles in degrees, lengths in mm.
 #[derive(Debug, Clone)]
 pub enum Curve {
-    /// `z = zc + a·cos θ`, `x = xc + b·sin θ`, θ from `start_deg` to `end_deg`.
-    Ellipse {
-        centre_z_mm: f64,
-        centre_x_mm: f64,
-        a_mm: f64,
-        b_mm: f64,
-        start_deg: f64,
-        end_deg: f64,
-    },
-    /// `(x − x0)² = 2p·(z − z0)`, run along x from `x_start_mm` to `x_end_mm`.
-    Parabola {
-        vertex_z_mm: f64,
-        vertex_x_mm: f64,
-        p_mm: f64,
-        x_start_mm: f64,
-        x_end_mm: f64,
-    },
-    /// `x = x0 + A·sin(360·z/λ + φ)`, run along z.
-    Sine {
-        mean_x_mm: f64,
-        amplitude_mm: f64,
-        wavelength_mm: f64,
-        phase_deg: f64,
-        z_start_mm: f64,
-        z_end_mm: f64,
-    },
-    /// `x = x0 + A·tan(ω·(z − zc))`, ω in degrees per mm, run along z; the argument must
-    /// stay inside (−90°, 90°).
-    Tangent {
-        mean_x_mm: f64,
-        amplitude_mm: f64,
-        rate_deg_per_mm: f64,
-        centre_z_mm: f64,
-        z_start_mm: f64,
-        z_end_mm: f64,
-    },
+    Ellipse(Ellipse),
+    Parabola(Parabola),
+    Sine(Sine),
+    Tangent(Tangent),
     /// `x(z)` through the points of a profile (natural cubic spline), run from the first
     /// point to the last.
-    Profile { spline: OpenSpline, reversed: bool },
+    Profile {
+        spline: OpenSpline,
+        reversed: bool,
+    },
     /// `x(t)`, `z(t)` or `x(z)` typed as expressions (expanded form only: the control
     /// does not evaluate them).
     Param(Box<ParamCurve>),
@@ -103,24 +75,18 @@ impl Curve {
     /// Parameter span: u runs from 0 to this.
     pub fn span(&self) -> f64 {
         match self {
-            Curve::Ellipse {
-                start_deg, end_deg, ..
-            } => (end_deg - start_deg).abs(),
-            Curve::Parabola {
-                x_start_mm,
-                x_end_mm,
-                ..
-            } => (x_end_mm - x_start_mm).abs(),
-            Curve::Sine {
+            Curve::Ellipse(e) => (e.end_deg - e.start_deg).abs(),
+            Curve::Parabola(p) => (p.x_end_mm - p.x_start_mm).abs(),
+            Curve::Sine(Sine {
                 z_start_mm,
                 z_end_mm,
                 ..
-            }
-            | Curve::Tangent {
+            })
+            | Curve::Tangent(Tangent {
                 z_start_mm,
                 z_end_mm,
                 ..
-            } => (z_end_mm - z_start_mm).abs(),
+            }) => (z_end_mm - z_start_mm).abs(),
             Curve::Profile { spline, .. } => spline.last() - spline.first(),
             Curve::Param(p) => p.span(),
         }
@@ -128,75 +94,20 @@ impl Curve {
 
     /// Exact point and derivatives at u.
     pub fn jet(&self, u: f64) -> Jet {
-        match *self {
-            Curve::Ellipse {
-                centre_z_mm,
-                centre_x_mm,
-                a_mm,
-                b_mm,
-                start_deg,
-                end_deg,
-            } => ellipse_jet(
-                (centre_z_mm, centre_x_mm),
-                (a_mm, b_mm),
-                (start_deg, end_deg),
-                u,
-            ),
-            Curve::Parabola {
-                vertex_z_mm,
-                vertex_x_mm,
-                p_mm,
-                x_start_mm,
-                x_end_mm,
-            } => parabola_jet((vertex_z_mm, vertex_x_mm), p_mm, (x_start_mm, x_end_mm), u),
-            Curve::Sine {
-                mean_x_mm,
-                amplitude_mm,
-                wavelength_mm,
-                phase_deg,
-                z_start_mm,
-                z_end_mm,
-            } => {
-                let d = Self::direction(z_start_mm, z_end_mm);
-                let z = z_start_mm + d * u;
-                let w = 360.0 / wavelength_mm * RAD;
-                let arg = (360.0 * z / wavelength_mm + phase_deg) * RAD;
-                let y = [
-                    mean_x_mm + amplitude_mm * arg.sin(),
-                    amplitude_mm * w * arg.cos(),
-                    -amplitude_mm * w * w * arg.sin(),
-                ];
-                graph(z, d, y)
-            }
-            Curve::Tangent {
-                mean_x_mm,
-                amplitude_mm,
-                rate_deg_per_mm,
-                centre_z_mm,
-                z_start_mm,
-                z_end_mm,
-            } => tangent_jet(
-                Tangent {
-                    mean_x_mm,
-                    amplitude_mm,
-                    rate_deg_per_mm,
-                    centre_z_mm,
-                },
-                (z_start_mm, z_end_mm),
-                u,
-            ),
-            Curve::Profile {
-                ref spline,
-                reversed,
-            } => {
-                let (z, d) = if reversed {
+        match self {
+            Curve::Ellipse(e) => ellipse_jet(e, u),
+            Curve::Parabola(p) => parabola_jet(p, u),
+            Curve::Sine(k) => sine_jet(k, u),
+            Curve::Tangent(k) => tangent_jet(k, u),
+            Curve::Profile { spline, reversed } => {
+                let (z, d) = if *reversed {
                     (spline.last() - u, -1.0)
                 } else {
                     (spline.first() + u, 1.0)
                 };
                 graph(z, d, spline.eval(z))
             }
-            Curve::Param(ref p) => p.jet(u),
+            Curve::Param(p) => p.jet(u),
         }
     }
 
@@ -205,89 +116,14 @@ impl Curve {
     /// profile, which the control cannot evaluate. The temporaries keep every block short
     /// (LinuxCNC refuses lines over 256 characters, the 802D over 200).
     pub(crate) fn exprs(&self, u: Var, t1: Var, t2: Var) -> Option<CurveExprs> {
-        let n = Expr::num;
-        let v = Expr::var;
-        let along = |start: f64, d: f64| along(start, d, u);
-        Some(match *self {
-            Curve::Ellipse {
-                centre_z_mm,
-                centre_x_mm,
-                a_mm,
-                b_mm,
-                start_deg,
-                end_deg,
-            } => ellipse_exprs(
-                (centre_z_mm, centre_x_mm),
-                (a_mm, b_mm),
-                (start_deg, end_deg),
-                [u, t1, t2],
-            ),
-            Curve::Parabola {
-                vertex_z_mm,
-                vertex_x_mm,
-                p_mm,
-                x_start_mm,
-                x_end_mm,
-            } => parabola_exprs(
-                (vertex_z_mm, vertex_x_mm),
-                p_mm,
-                (x_start_mm, x_end_mm),
-                [u, t1],
-            ),
-            Curve::Sine {
-                mean_x_mm,
-                amplitude_mm,
-                wavelength_mm,
-                phase_deg,
-                z_start_mm,
-                z_end_mm,
-            } => {
-                let d = Self::direction(z_start_mm, z_end_mm);
-                let arg = || {
-                    n(360.0 / wavelength_mm)
-                        .mul(along(z_start_mm, d))
-                        .add(n(phase_deg))
-                };
-                let w = 360.0 / wavelength_mm * RAD;
-                let slope = || n(amplitude_mm * w).mul(v(t2));
-                CurveExprs {
-                    pre: vec![(t1, arg().sin()), (t2, arg().cos())],
-                    z: along(z_start_mm, d),
-                    x: n(mean_x_mm).add(n(amplitude_mm).mul(v(t1))),
-                    weight: n(amplitude_mm * w * w)
-                        .mul(v(t1))
-                        .abs()
-                        .div(n(1.0).add(slope().mul(slope())).sqrt()),
-                }
-            }
-            Curve::Tangent {
-                mean_x_mm,
-                amplitude_mm,
-                rate_deg_per_mm,
-                centre_z_mm,
-                z_start_mm,
-                z_end_mm,
-            } => tangent_exprs(
-                Tangent {
-                    mean_x_mm,
-                    amplitude_mm,
-                    rate_deg_per_mm,
-                    centre_z_mm,
-                },
-                (z_start_mm, z_end_mm),
-                [u, t1, t2],
-            ),
+        Some(match self {
+            Curve::Ellipse(e) => ellipse_exprs(e, [u, t1, t2]),
+            Curve::Parabola(p) => parabola_exprs(p, [u, t1]),
+            Curve::Sine(k) => sine_exprs(k, [u, t1, t2]),
+            Curve::Tangent(k) => tangent_exprs(k, [u, t1, t2]),
             Curve::Profile { .. } | Curve::Param(_) => return None,
         })
     }
-}
-
-/// A tangent curve's shape: `x = mean + amplitude·tan(rate·(z − centre))`.
-struct Tangent {
-    mean_x_mm: f64,
-    amplitude_mm: f64,
-    rate_deg_per_mm: f64,
-    centre_z_mm: f64,
 }
 
 /// `start + d·u` with d = ±1, written as a sum or a difference.
@@ -299,44 +135,56 @@ fn along(start: f64, d: f64, u: Var) -> Expr {
     }
 }
 
-/// The ellipse's jet at u: centre `(z, x)`, semi-axes `(a, b)`, angles `(start, end)`.
-fn ellipse_jet(centre_mm: (f64, f64), axes_mm: (f64, f64), span_deg: (f64, f64), u: f64) -> Jet {
-    let ((centre_z_mm, centre_x_mm), (a_mm, b_mm)) = (centre_mm, axes_mm);
-    let d = Curve::direction(span_deg.0, span_deg.1);
-    let t = (span_deg.0 + d * u) * RAD;
+/// The ellipse's jet at u.
+fn ellipse_jet(e: &Ellipse, u: f64) -> Jet {
+    let d = Curve::direction(e.start_deg, e.end_deg);
+    let t = (e.start_deg + d * u) * RAD;
     let (s, c) = t.sin_cos();
     Jet {
-        z: centre_z_mm + a_mm * c,
-        x: centre_x_mm + b_mm * s,
-        dz: -a_mm * s * d * RAD,
-        dx: b_mm * c * d * RAD,
-        ddz: -a_mm * c * RAD * RAD,
-        ddx: -b_mm * s * RAD * RAD,
+        z: e.centre_z_mm + e.a_mm * c,
+        x: e.centre_x_mm + e.b_mm * s,
+        dz: -e.a_mm * s * d * RAD,
+        dx: e.b_mm * c * d * RAD,
+        ddz: -e.a_mm * c * RAD * RAD,
+        ddx: -e.b_mm * s * RAD * RAD,
     }
 }
 
-/// The parabola's jet at u: vertex `(z, x)`, x running from `x_mm.0` to `x_mm.1`.
-fn parabola_jet(vertex_mm: (f64, f64), p_mm: f64, x_mm: (f64, f64), u: f64) -> Jet {
-    let (vertex_z_mm, vertex_x_mm) = vertex_mm;
-    let d = Curve::direction(x_mm.0, x_mm.1);
-    let x = x_mm.0 + d * u;
-    let w = x - vertex_x_mm;
+/// The parabola's jet at u, x running from its start to its end.
+fn parabola_jet(p: &Parabola, u: f64) -> Jet {
+    let d = Curve::direction(p.x_start_mm, p.x_end_mm);
+    let x = p.x_start_mm + d * u;
+    let w = x - p.vertex_x_mm;
     // Along is x, across is z here: z = z0 + w²/(2p).
-    let z = vertex_z_mm + w * w / (2.0 * p_mm);
+    let z = p.vertex_z_mm + w * w / (2.0 * p.p_mm);
     Jet {
         z,
         x,
-        dz: w / p_mm * d,
+        dz: w / p.p_mm * d,
         dx: d,
-        ddz: 1.0 / p_mm,
+        ddz: 1.0 / p.p_mm,
         ddx: 0.0,
     }
 }
 
-/// The tangent curve's jet at u, z running from `z_mm.0` to `z_mm.1`.
-fn tangent_jet(k: Tangent, z_mm: (f64, f64), u: f64) -> Jet {
-    let d = Curve::direction(z_mm.0, z_mm.1);
-    let z = z_mm.0 + d * u;
+/// The sine's jet at u, z running from its start to its end.
+fn sine_jet(k: &Sine, u: f64) -> Jet {
+    let d = Curve::direction(k.z_start_mm, k.z_end_mm);
+    let z = k.z_start_mm + d * u;
+    let w = 360.0 / k.wavelength_mm * RAD;
+    let arg = (360.0 * z / k.wavelength_mm + k.phase_deg) * RAD;
+    let y = [
+        k.mean_x_mm + k.amplitude_mm * arg.sin(),
+        k.amplitude_mm * w * arg.cos(),
+        -k.amplitude_mm * w * w * arg.sin(),
+    ];
+    graph(z, d, y)
+}
+
+/// The tangent curve's jet at u, z running from its start to its end.
+fn tangent_jet(k: &Tangent, u: f64) -> Jet {
+    let d = Curve::direction(k.z_start_mm, k.z_end_mm);
+    let z = k.z_start_mm + d * u;
     let w = k.rate_deg_per_mm * RAD;
     let t = ((z - k.centre_z_mm) * k.rate_deg_per_mm * RAD).tan();
     let sec2 = 1.0 + t * t;
@@ -349,26 +197,19 @@ fn tangent_jet(k: Tangent, z_mm: (f64, f64), u: f64) -> Jet {
 }
 
 /// The ellipse for the control, in the loop variable and the temporaries `[u, t1, t2]`.
-fn ellipse_exprs(
-    centre_mm: (f64, f64),
-    axes_mm: (f64, f64),
-    span_deg: (f64, f64),
-    [u, t1, t2]: [Var; 3],
-) -> CurveExprs {
+fn ellipse_exprs(e: &Ellipse, [u, t1, t2]: [Var; 3]) -> CurveExprs {
     let (n, v) = (Expr::num, Expr::var);
-    let ((centre_z_mm, centre_x_mm), (a_mm, b_mm)) = (centre_mm, axes_mm);
-    let (start_deg, end_deg) = span_deg;
-    let d = Curve::direction(start_deg, end_deg);
-    let (ra, rb) = (a_mm * a_mm * RAD * RAD, b_mm * b_mm * RAD * RAD);
+    let d = Curve::direction(e.start_deg, e.end_deg);
+    let (ra, rb) = (e.a_mm * e.a_mm * RAD * RAD, e.b_mm * e.b_mm * RAD * RAD);
     CurveExprs {
         pre: vec![
-            (t1, along(start_deg, d, u).sin()),
-            (t2, along(start_deg, d, u).cos()),
+            (t1, along(e.start_deg, d, u).sin()),
+            (t2, along(e.start_deg, d, u).cos()),
         ],
-        z: n(centre_z_mm).add(n(a_mm).mul(v(t2))),
-        x: n(centre_x_mm).add(n(b_mm).mul(v(t1))),
+        z: n(e.centre_z_mm).add(n(e.a_mm).mul(v(t2))),
+        x: n(e.centre_x_mm).add(n(e.b_mm).mul(v(t1))),
         // ab·RAD³ / (RAD·sqrt(a² sin² + b² cos²)), as in Jet::weight.
-        weight: n(a_mm * b_mm * RAD * RAD * RAD).div(
+        weight: n(e.a_mm * e.b_mm * RAD * RAD * RAD).div(
             n(ra)
                 .mul(v(t1).mul(v(t1)))
                 .add(n(rb).mul(v(t2).mul(v(t2))))
@@ -378,28 +219,44 @@ fn ellipse_exprs(
 }
 
 /// The parabola for the control, in the loop variable and the temporary `[u, t1]`.
-fn parabola_exprs(
-    vertex_mm: (f64, f64),
-    p_mm: f64,
-    x_mm: (f64, f64),
-    [u, t1]: [Var; 2],
-) -> CurveExprs {
+fn parabola_exprs(p: &Parabola, [u, t1]: [Var; 2]) -> CurveExprs {
     let (n, v) = (Expr::num, Expr::var);
-    let (vertex_z_mm, vertex_x_mm) = vertex_mm;
-    let d = Curve::direction(x_mm.0, x_mm.1);
+    let d = Curve::direction(p.x_start_mm, p.x_end_mm);
+    let p_mm = p.p_mm;
     CurveExprs {
-        pre: vec![(t1, along(x_mm.0 - vertex_x_mm, d, u))],
-        z: n(vertex_z_mm).add(v(t1).mul(v(t1)).div(n(2.0 * p_mm))),
-        x: n(vertex_x_mm).add(v(t1)),
+        pre: vec![(t1, along(p.x_start_mm - p.vertex_x_mm, d, u))],
+        z: n(p.vertex_z_mm).add(v(t1).mul(v(t1)).div(n(2.0 * p_mm))),
+        x: n(p.vertex_x_mm).add(v(t1)),
         weight: n(1.0 / p_mm.abs()).div(n(1.0).add(v(t1).mul(v(t1)).div(n(p_mm * p_mm))).sqrt()),
     }
 }
 
-/// The tangent curve for the control, in the loop variable and the temporaries `[u, t1, t2]`.
-fn tangent_exprs(k: Tangent, z_mm: (f64, f64), [u, t1, t2]: [Var; 3]) -> CurveExprs {
+/// The sine for the control, in the loop variable and the temporaries `[u, t1, t2]`.
+fn sine_exprs(k: &Sine, [u, t1, t2]: [Var; 3]) -> CurveExprs {
     let (n, v) = (Expr::num, Expr::var);
-    let (z_start_mm, z_end_mm) = z_mm;
-    let d = Curve::direction(z_start_mm, z_end_mm);
+    let d = Curve::direction(k.z_start_mm, k.z_end_mm);
+    let arg = || {
+        n(360.0 / k.wavelength_mm)
+            .mul(along(k.z_start_mm, d, u))
+            .add(n(k.phase_deg))
+    };
+    let w = 360.0 / k.wavelength_mm * RAD;
+    let slope = || n(k.amplitude_mm * w).mul(v(t2));
+    CurveExprs {
+        pre: vec![(t1, arg().sin()), (t2, arg().cos())],
+        z: along(k.z_start_mm, d, u),
+        x: n(k.mean_x_mm).add(n(k.amplitude_mm).mul(v(t1))),
+        weight: n(k.amplitude_mm * w * w)
+            .mul(v(t1))
+            .abs()
+            .div(n(1.0).add(slope().mul(slope())).sqrt()),
+    }
+}
+
+/// The tangent curve for the control, in the loop variable and the temporaries `[u, t1, t2]`.
+fn tangent_exprs(k: &Tangent, [u, t1, t2]: [Var; 3]) -> CurveExprs {
+    let (n, v) = (Expr::num, Expr::var);
+    let d = Curve::direction(k.z_start_mm, k.z_end_mm);
     let w = k.rate_deg_per_mm * RAD;
     // t1 = tan, t2 = sec² = 1 + tan².
     let slope = || n(k.amplitude_mm * w).mul(v(t2));
@@ -407,13 +264,13 @@ fn tangent_exprs(k: Tangent, z_mm: (f64, f64), [u, t1, t2]: [Var; 3]) -> CurveEx
         pre: vec![
             (
                 t1,
-                along(z_start_mm - k.centre_z_mm, d, u)
+                along(k.z_start_mm - k.centre_z_mm, d, u)
                     .mul(n(k.rate_deg_per_mm))
                     .tan(),
             ),
             (t2, n(1.0).add(v(t1).mul(v(t1)))),
         ],
-        z: along(z_start_mm, d, u),
+        z: along(k.z_start_mm, d, u),
         x: n(k.mean_x_mm).add(n(k.amplitude_mm).mul(v(t1))),
         weight: n(2.0 * k.amplitude_mm * w * w)
             .mul(v(t2))

@@ -8,6 +8,7 @@
 // No unwrap() in shipped code: bad input must become an error, not a panic (tests may).
 #![warn(clippy::unwrap_used)]
 
+pub mod analytic;
 pub mod chords;
 pub mod contour;
 pub mod contour_chain;

@@ -12,7 +12,7 @@
 use super::program::{Shape, assemble, nose_comment, shifted_by, side_sign};
 use super::{Contour, ContourError, ContourJob, ContourReport, MAX_CHORDS, generate};
 use crate::chords::{fixed_step_for, round_to};
-use crate::curve::Curve;
+use crate::curve::{Curve, Ellipse, Parabola, Sine, Tangent};
 use crate::ir::{Axis, Cond, Expr, Motion, Program, Stmt, Var};
 use crate::safety::{self, Rules};
 
@@ -44,14 +44,14 @@ struct Family {
 
 fn family(curve: &Curve) -> Result<Family, ContourError> {
     Ok(match *curve {
-        Curve::Ellipse {
+        Curve::Ellipse(Ellipse {
             centre_z_mm,
             centre_x_mm,
             a_mm,
             b_mm,
             start_deg,
             end_deg,
-        } => Family {
+        }) => Family {
             parameter: "the ellipse's angle, deg",
             start: start_deg,
             end: end_deg,
@@ -70,13 +70,13 @@ fn family(curve: &Curve) -> Result<Family, ContourError> {
                 )
             },
         },
-        Curve::Parabola {
+        Curve::Parabola(Parabola {
             vertex_z_mm,
             vertex_x_mm,
             p_mm,
             x_start_mm,
             x_end_mm,
-        } => Family {
+        }) => Family {
             parameter: "x, mm",
             start: x_start_mm,
             end: x_end_mm,
@@ -95,14 +95,14 @@ fn family(curve: &Curve) -> Result<Family, ContourError> {
                 )
             },
         },
-        Curve::Sine {
+        Curve::Sine(Sine {
             mean_x_mm,
             amplitude_mm,
             wavelength_mm,
             phase_deg,
             z_start_mm,
             z_end_mm,
-        } => Family {
+        }) => Family {
             parameter: "z, mm",
             start: z_start_mm,
             end: z_end_mm,
@@ -121,14 +121,14 @@ fn family(curve: &Curve) -> Result<Family, ContourError> {
                 (Expr::var(T), k[0].clone().add(k[1].clone().mul(arg.sin())))
             },
         },
-        Curve::Tangent {
+        Curve::Tangent(Tangent {
             mean_x_mm,
             amplitude_mm,
             rate_deg_per_mm,
             centre_z_mm,
             z_start_mm,
             z_end_mm,
-        } => Family {
+        }) => Family {
             parameter: "z, mm",
             start: z_start_mm,
             end: z_end_mm,
