@@ -13,10 +13,10 @@ use std::io::Write as _;
 use std::net::TcpStream;
 use std::path::Path;
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use crate::cli_support;
-use crate::process_support::{KillOnDrop, camloop_run, free_port};
+use crate::process_support::{KillOnDrop, camloop_run, free_port, wait_for};
 
 /// The longest the service may take to start (a first start makes the server's RSA key and
 /// migrates the database; on a loaded 2-core machine seconds): a failure, not a pace.
@@ -41,14 +41,6 @@ pub(crate) fn asyncua_present() -> bool {
         panic!("CAMLOOP_REQUIRE_OPCUA=1 but Python's asyncua is not installed");
     }
     found
-}
-
-fn wait_for(what: &str, bound: Duration, mut ready: impl FnMut() -> bool) {
-    let start = Instant::now();
-    while !ready() {
-        assert!(start.elapsed() < bound, "{what} not within {bound:?}");
-        std::thread::sleep(Duration::from_millis(100));
-    }
 }
 
 fn config(http: u16, opcua: u16) -> String {
@@ -111,6 +103,44 @@ fn add_viewer(dir: &Path, password: &str) {
     assert!(out.status.success(), "{}", cli_support::stderr(&out));
 }
 
+/// `config` with unknown client certificates accepted (and `extra` lines) in `[opcua]`.
+fn trusting(config: String, extra: &str) -> String {
+    config.replace(
+        "host_name = \"localhost\"\n",
+        &format!("host_name = \"localhost\"\n{extra}accept_unknown_clients = true\n"),
+    )
+}
+
+/// Runs the script's `mode` with `params` (written beside the service) to its end, bounded
+/// by `SCRIPT_BOUND`; its exit status and what it printed, standard output then error.
+fn run_checks(
+    dir: &Path,
+    script: &str,
+    mode: &str,
+    params: &serde_json::Value,
+    what: &str,
+) -> (std::process::ExitStatus, String) {
+    let params_file = dir.join(format!("{mode}-params.json"));
+    std::fs::write(&params_file, params.to_string()).unwrap();
+    let mut run = KillOnDrop::spawn(
+        Command::new("python3")
+            .args([script, mode, &params_file.display().to_string()])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped()),
+    )
+    .unwrap();
+    let status = run.exit_within(SCRIPT_BOUND, Duration::from_millis(200), what);
+    let mut text = String::new();
+    use std::io::Read as _;
+    if let Some(mut out) = run.stdout.take() {
+        out.read_to_string(&mut text).unwrap();
+    }
+    if let Some(mut err) = run.stderr.take() {
+        err.read_to_string(&mut text).unwrap();
+    }
+    (status, text)
+}
+
 #[test]
 fn asyncua_browses_reads_subscribes_and_calls_rollback_with_users() {
     if !asyncua_present() {
@@ -147,27 +177,9 @@ fn asyncua_browses_reads_subscribes_and_calls_rollback_with_users() {
         "share": dir.path().join("share/M1").display().to_string(),
         "part_interval_s": PART_INTERVAL_S,
     });
-    let params_file = dir.path().join("params.json");
-    std::fs::write(&params_file, params.to_string()).unwrap();
-    let mut run = KillOnDrop::spawn(
-        Command::new("python3")
-            .args([&script, "check", &params_file.display().to_string()])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped()),
-    )
-    .unwrap();
-    let status = run.exit_within(
-        SCRIPT_BOUND,
-        Duration::from_millis(200),
-        "the asyncua checks",
-    );
-    let mut out = String::new();
-    let mut err = String::new();
-    use std::io::Read as _;
-    run.stdout.take().unwrap().read_to_string(&mut out).unwrap();
-    run.stderr.take().unwrap().read_to_string(&mut err).unwrap();
+    let (status, out) = run_checks(dir.path(), &script, "check", &params, "the asyncua checks");
     println!("{out}");
-    assert!(status.success(), "asyncua checks failed:\n{out}\n{err}");
+    assert!(status.success(), "asyncua checks failed:\n{out}");
     assert!(out.contains("all OPC UA checks passed"), "{out}");
     // The viewer's refused acknowledgement and rollback are in the audit trail.
     let url = format!("sqlite://{}/var/camloop.db", dir.path().display());
@@ -205,10 +217,7 @@ fn asyncua_is_refused_a_clear_text_password_over_none() {
     let script = cli_support::repo("tests/opcua/client_checks.py");
     let (dir, certs) = client_certs(&script);
     let (http, opcua) = (free_port(), free_port());
-    let config = config(http, opcua).replace(
-        "host_name = \"localhost\"\n",
-        "host_name = \"localhost\"\nsecurity = \"Basic256Sha256+None\"\naccept_unknown_clients = true\n",
-    );
+    let config = trusting(config(http, opcua), "security = \"Basic256Sha256+None\"\n");
     std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
     let service = start(dir.path(), &[opcua]);
     let password_file = dir.path().join("var/admin-password");
@@ -217,36 +226,13 @@ fn asyncua_is_refused_a_clear_text_password_over_none() {
         "cert_dir": certs.display().to_string(),
         "admin_password": std::fs::read_to_string(&password_file).unwrap().trim(),
     });
-    let params_file = dir.path().join("params.json");
-    std::fs::write(&params_file, params.to_string()).unwrap();
-    let mut run = KillOnDrop::spawn(
-        Command::new("python3")
-            .args([
-                &script,
-                "clear-password",
-                &params_file.display().to_string(),
-            ])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped()),
-    )
-    .unwrap();
-    let status = run.exit_within(
-        SCRIPT_BOUND,
-        Duration::from_millis(200),
+    let (status, text) = run_checks(
+        dir.path(),
+        &script,
+        "clear-password",
+        &params,
         "the asyncua checks",
     );
-    let mut text = String::new();
-    use std::io::Read as _;
-    run.stdout
-        .take()
-        .unwrap()
-        .read_to_string(&mut text)
-        .unwrap();
-    run.stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut text)
-        .unwrap();
     println!("{text}");
     assert!(status.success(), "asyncua checks failed:\n{text}");
     assert!(text.contains("clear-text password checks passed"), "{text}");
@@ -293,10 +279,7 @@ fn an_opcua_lockout_leaves_the_user_s_http_sign_in_and_token_alone() {
     let script = cli_support::repo("tests/opcua/client_checks.py");
     let (dir, certs) = client_certs(&script);
     let (http, opcua) = (free_port(), free_port());
-    let config = config(http, opcua).replace(
-        "host_name = \"localhost\"\n",
-        "host_name = \"localhost\"\naccept_unknown_clients = true\n",
-    );
+    let config = trusting(config(http, opcua), "");
     std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
     let _service = start(dir.path(), &[http, opcua]);
     let password = "viewer-password-1234";
@@ -307,32 +290,13 @@ fn an_opcua_lockout_leaves_the_user_s_http_sign_in_and_token_alone() {
         "user": "vera",
         "password": password,
     });
-    let params_file = dir.path().join("params.json");
-    std::fs::write(&params_file, params.to_string()).unwrap();
-    let mut run = KillOnDrop::spawn(
-        Command::new("python3")
-            .args([&script, "lockout", &params_file.display().to_string()])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped()),
-    )
-    .unwrap();
-    let status = run.exit_within(
-        SCRIPT_BOUND,
-        Duration::from_millis(200),
+    let (status, text) = run_checks(
+        dir.path(),
+        &script,
+        "lockout",
+        &params,
         "the lockout checks",
     );
-    let mut text = String::new();
-    use std::io::Read as _;
-    run.stdout
-        .take()
-        .unwrap()
-        .read_to_string(&mut text)
-        .unwrap();
-    run.stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut text)
-        .unwrap();
     assert!(status.success(), "asyncua checks failed:\n{text}");
     assert!(text.contains("OPC UA lockout checks passed"), "{text}");
     let url = format!("sqlite://{}/var/camloop.db", dir.path().display());
@@ -375,10 +339,7 @@ fn a_disabled_user_s_open_session_stops_reading() {
     let script = cli_support::repo("tests/opcua/client_checks.py");
     let (dir, certs) = client_certs(&script);
     let (http, opcua) = (free_port(), free_port());
-    let config = config(http, opcua).replace(
-        "host_name = \"localhost\"\n",
-        "host_name = \"localhost\"\naccept_unknown_clients = true\n",
-    );
+    let config = trusting(config(http, opcua), "");
     std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
     let _service = start(dir.path(), &[opcua]);
     let password = "viewer-password-1234";
@@ -393,32 +354,13 @@ fn a_disabled_user_s_open_session_stops_reading() {
         "database": "sqlite://var/camloop.db",
         "dir": dir.path().display().to_string(),
     });
-    let params_file = dir.path().join("params.json");
-    std::fs::write(&params_file, params.to_string()).unwrap();
-    let mut run = KillOnDrop::spawn(
-        Command::new("python3")
-            .args([&script, "disabled", &params_file.display().to_string()])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped()),
-    )
-    .unwrap();
-    let status = run.exit_within(
-        SCRIPT_BOUND,
-        Duration::from_millis(200),
+    let (status, text) = run_checks(
+        dir.path(),
+        &script,
+        "disabled",
+        &params,
         "the asyncua checks",
     );
-    let mut text = String::new();
-    use std::io::Read as _;
-    run.stdout
-        .take()
-        .unwrap()
-        .read_to_string(&mut text)
-        .unwrap();
-    run.stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut text)
-        .unwrap();
     println!("{text}");
     assert!(status.success(), "asyncua checks failed:\n{text}");
     assert!(text.contains("disabled user checks passed"), "{text}");

@@ -14,34 +14,14 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use crate::cli_support;
-use crate::process_support::{KillOnDrop, camloop_run, free_port};
+use crate::opcua_asyncua::asyncua_present;
+use crate::process_support::{KillOnDrop, camloop_run, free_port, wait_for};
 
 /// The longest a start may take on a loaded 2-core machine: a failure, not a pace.
 const START_BOUND: Duration = Duration::from_secs(90);
 
 /// The longest a script may run (each of its waits is bounded by itself too).
 const SCRIPT_BOUND: Duration = Duration::from_secs(180);
-
-fn asyncua_present() -> bool {
-    let found = Command::new("python3")
-        .args(["-c", "import asyncua, cryptography"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if !found && std::env::var("CAMLOOP_REQUIRE_OPCUA").as_deref() == Ok("1") {
-        panic!("CAMLOOP_REQUIRE_OPCUA=1 but Python's asyncua is not installed");
-    }
-    found
-}
-
-fn wait_for(what: &str, bound: Duration, mut ready: impl FnMut() -> bool) {
-    let start = Instant::now();
-    while !ready() {
-        assert!(start.elapsed() < bound, "{what} not within {bound:?}");
-        std::thread::sleep(Duration::from_millis(100));
-    }
-}
 
 /// The service's config: `gauge` is the machine's gauge section, `features` its features.
 fn config(http: u16, opcua: u16, features: &str, gauge: &str) -> String {

@@ -8,6 +8,15 @@ use std::path::Path;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
+/// Polls `ready` every 100 ms until it holds; a failure naming `what` after `bound`.
+pub fn wait_for(what: &str, bound: Duration, mut ready: impl FnMut() -> bool) {
+    let start = Instant::now();
+    while !ready() {
+        assert!(start.elapsed() < bound, "{what} not within {bound:?}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
 /// A free TCP port on localhost, for a process the test starts to listen on.
 pub fn free_port() -> u16 {
     let l = std::net::TcpListener::bind("127.0.0.1:0").expect("a free port");
