@@ -313,3 +313,27 @@ fn the_same_part_step_moves_the_correction_and_nothing_of_the_part_to_part_loop(
     };
     assert_eq!(keep(&done.state), keep(&in_force));
 }
+
+#[test]
+fn the_in_process_gauge_settings_are_checked_naming_the_key() {
+    let mut config = GrinderConfig::default();
+    config.gauge.in_process.handover_s = -1.0;
+    config.gauge.in_process.faults = vec![camloop_sim::GaugeFault::Offset {
+        revolution: 9,
+        offset_um: 30.0,
+    }];
+    let problems = config.problems();
+    assert_eq!(
+        problems,
+        [
+            "gauge.in_process.handover_s = -1 must be within 0..=3600",
+            "gauge.in_process.faults[0].revolution = 9 must be below gauge.revolutions",
+        ],
+    );
+    config.gauge.in_process.handover_s = f64::NAN;
+    config.gauge.in_process.faults.clear();
+    assert_eq!(
+        config.problems(),
+        ["gauge.in_process.handover_s = NaN must be within 0..=3600"]
+    );
+}
