@@ -31,13 +31,24 @@ struct Left {
     ready: String,
 }
 
-/// Runs `SHAFTS` shafts of the demo lobe through the whole cycle on a simulated machine
+/// Runs `SHAFTS` shafts of the demo lobe through the whole cycle, the control waiting
+/// `timeout_s` for camloop's answer, on a simulated machine
 /// whose in-process gauge settings (`[machines.gauge.grinder.gauge.in_process]`) are `gauge`.
-async fn run(gauge: &str) -> Left {
+async fn run(gauge: &str, timeout_s: f64) -> Left {
     let dir = tempfile::tempdir().unwrap();
     let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
-    let recipe =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts/demo-lobe-in-process.toml");
+    let parts = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/parts");
+    let wait = "handshake_timeout_s = 5.0";
+    let text = std::fs::read_to_string(parts.join("demo-lobe-in-process.toml")).unwrap();
+    assert!(text.contains(wait));
+    let recipe = dir.path().join("demo-lobe-in-process.toml");
+    std::fs::write(
+        &recipe,
+        text.replace(wait, &format!("handshake_timeout_s = {timeout_s:.1}")),
+    )
+    .unwrap();
+    let lift = "demo-intake-lobe.csv";
+    std::fs::copy(parts.join(lift), dir.path().join(lift)).unwrap();
     let text = format!(
         "[service]\nvar_dir = \"var\"\n[database]\nurl = \"{url}\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
          [[machines]]\nname = \"CELL\"\nrecipe = \"{}\"\nshare = \"share\"\n\
@@ -146,6 +157,8 @@ async fn a_refused_in_process_measurement_lets_the_finish_grind_with_the_table_i
     let left = run(
         "faults = [{ kind = \"offset\", revolution = 0, offset_um = 30.0 }, \
          { kind = \"offset\", revolution = 1, offset_um = 30.0 }]",
+        // Long enough that a loaded test machine cannot make it a late one instead.
+        600.0,
     )
     .await;
     finished_with_the_table_in_force(&left, "revolutions agree within");
@@ -156,7 +169,7 @@ async fn a_refused_in_process_measurement_lets_the_finish_grind_with_the_table_i
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_in_process_measurement_past_the_controls_wait_is_not_answered() {
     // The recipe's control waits 5 s; the reading reaches camloop 6 s after the wait began.
-    let left = run("handover_s = 6.0").await;
+    let left = run("handover_s = 6.0", 5.0).await;
     finished_with_the_table_in_force(&left, "too late");
     // It read as a measurement of the part: kept in the history with its stage.
     assert_eq!(left.in_process_rows, (1..=SHAFTS).collect::<Vec<_>>());
