@@ -154,9 +154,10 @@ pub enum GaugeSection {
         part_interval_ms: u64,
         #[serde(default)]
         seed: u64,
-        /// Simulator settings (defaults: about 16 µm uncompensated on the demo lobe).
+        /// Simulator settings (defaults: about 16 µm uncompensated on the demo lobe). Boxed:
+        /// the other gauges' settings are far smaller.
         #[serde(default)]
-        grinder: GrinderConfig,
+        grinder: Box<GrinderConfig>,
     },
     /// A SocketCAN interface read through the DBC.
     Can { interface: String, dbc: PathBuf },

@@ -84,7 +84,7 @@ pub(super) fn spawn(
             }
             let source = sim_source::SimSource {
                 machine: machine.name.clone(),
-                grinder,
+                grinder: *grinder,
                 seed: *seed,
                 stations: sim_source::SimSource::stations(machine),
                 main_program: machine.main_program_path(),

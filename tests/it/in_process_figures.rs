@@ -11,7 +11,7 @@ use camloop::config::Config;
 use camloop::core::program::READY_PROGRAM;
 use camloop::service::{self, RunOptions};
 use camloop::sim::Control;
-use camloop::store::{HistoryFilter, MeasurementStage, Store};
+use camloop::store::{EventFilter, HistoryFilter, MeasurementStage, Store};
 use std::path::Path;
 
 const SHAFTS: u64 = 12;
@@ -37,6 +37,13 @@ fn recipe(dir: &Path, file: &str, measure: bool) -> std::path::PathBuf {
             text = text.replace(stage, "");
         }
     }
+    // The figures are of the grinding, not of this machine's load: a wait the loaded test
+    // machine overran (the control's 5 s, in wall-clock time here) would grind that finish
+    // with the table in force, which tests/it/in_process_timeout.rs covers. The simulated
+    // control's wait is in its own time and is answered at its first poll either way.
+    let wait = "handshake_timeout_s = 5.0";
+    assert!(text.contains(wait), "{file}: {wait}");
+    text = text.replace(wait, "handshake_timeout_s = 600.0");
     for lift in ["demo-intake-lobe.csv", "demo-exhaust-lobe.csv"] {
         std::fs::copy(parts_dir().join(lift), dir.join(lift)).unwrap();
     }
@@ -69,6 +76,8 @@ struct Figures {
     /// Worst feature per shaft: measured max error, and with the orders above 50 left out.
     measured_um: Vec<f64>,
     filtered_um: Vec<f64>,
+    /// Worst feature per shaft: |mean error| (the size), µm.
+    size_um: Vec<f64>,
     /// Per shaft: coupled grinding, measurement revolutions, s.
     grind_s: f64,
     measure_s: f64,
@@ -92,8 +101,24 @@ async fn run(file: &str, features: &[&str], measure: bool) -> Figures {
         .unwrap();
     running.machines_done().await;
     let store = Store::connect(&url).await.unwrap();
+    // Every finish had its same-part table: a refusal would make these figures the table in
+    // force's, so it is named here rather than found in a figure.
+    let refused: Vec<String> = store
+        .events(&EventFilter {
+            machine: Some("CELL".parse().unwrap()),
+            limit: 1000,
+            ..EventFilter::default()
+        })
+        .await
+        .unwrap()
+        .into_iter()
+        .map(|e| e.message)
+        .filter(|m| m.contains("no same-part finish table"))
+        .collect();
+    assert_eq!(refused, Vec::<String>::new(), "{file}");
     let mut measured_um = vec![0.0f64; SHAFTS as usize];
     let mut filtered_um = vec![0.0f64; SHAFTS as usize];
+    let mut size_um = vec![0.0f64; SHAFTS as usize];
     for f in features {
         let parts = parts_with_reports(&store, "CELL", f).await;
         let numbers: Vec<u64> = parts.iter().map(|(s, _)| s.part.parse().unwrap()).collect();
@@ -128,6 +153,8 @@ async fn run(file: &str, features: &[&str], measure: bool) -> Figures {
             let max = error.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             measured_um[k] = measured_um[k].max(max);
             filtered_um[k] = filtered_um[k].max(filtered_max_um(&error));
+            let mean = error.iter().sum::<f64>() / error.len() as f64;
+            size_um[k] = size_um[k].max(mean.abs());
         }
     }
     // The cycle time: the program on the share as the simulated control runs it, the
@@ -150,6 +177,7 @@ async fn run(file: &str, features: &[&str], measure: bool) -> Figures {
     Figures {
         measured_um,
         filtered_um,
+        size_um,
         grind_s,
         measure_s,
     }
@@ -161,11 +189,16 @@ fn row(label: &str, v: &[f64]) -> String {
 }
 
 /// Through the service, with the measurement before the finish, judged on the measured
-/// error with the gauge's noise filtered off above 50 UPR (see [`UPR`]): the first shaft is
-/// within the goal's 1.0 µm where without the measurement it is over 10 µm, and every shaft
-/// from the third within 1.0 µm. The goal's 0.5 µm from the third shaft is met by the
-/// crankshaft but not by the camshaft through the service yet (0.8–0.9 µm): the figures are
-/// in the manual's controller chapter, with what stands in the way (the wheel's wear).
+/// error with the gauge's noise filtered off above 50 UPR (see [`UPR`]): the goal,
+/// the first shaft within 1.0 µm (over 10 µm without the measurement) and every shaft from
+/// the third within 0.5 µm, on the camshaft and the crankshaft.
+///
+/// The size is held too, from the third shaft within 0.2 µm: the wheel wears 0.1 µm a
+/// feature, 0.8 µm between two shafts of the camshaft, and a finish table that anticipated
+/// that wear (or learned it from its own in-process reading) ground every lobe 0.5–0.6 µm
+/// undersize, the plateau this bound keeps out. The gauge's mean over 360 angles and its
+/// revolutions is known to about 0.01 µm, so 0.2 µm is the learning's deadband and a
+/// quarter of a shaft's wear, not noise.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_first_shaft_is_right_through_the_service() {
     let lobes = ["IN1", "EX1", "IN2", "EX2", "IN3", "EX3", "IN4", "EX4"];
@@ -183,6 +216,7 @@ async fn the_first_shaft_is_right_through_the_service() {
             &with.measured_um,
         ));
         out.push_str(&row("  50 UPR", &with.filtered_um));
+        out.push_str(&row("  size", &with.size_um));
         out.push_str(&row("  part to part only", &without.measured_um));
         out.push_str(&row("  50 UPR", &without.filtered_um));
         out.push_str(&format!(
@@ -197,8 +231,13 @@ async fn the_first_shaft_is_right_through_the_service() {
         assert!(f[0] <= 1.0, "{file}: first shaft {:.2} µm\n{out}", f[0]);
         assert!(without.filtered_um[0] > 10.0, "{file}\n{out}");
         assert!(
-            f[2..].iter().all(|&e| e <= 1.0),
+            f[2..].iter().all(|&e| e <= 0.5),
             "{file}: from the third shaft {f:?}\n{out}"
+        );
+        let size = &with.size_um;
+        assert!(
+            size[2..].iter().all(|&e| e <= 0.2),
+            "{file}: size from the third shaft {size:?}\n{out}"
         );
         assert!(with.measure_s > 0.0 && without.measure_s == 0.0, "{out}");
     }

@@ -92,6 +92,7 @@ mod in_process;
 mod in_process_figures;
 mod in_process_service;
 mod in_process_shafts;
+mod in_process_timeout;
 mod invariants;
 mod loop_plateau;
 mod loop_sim;

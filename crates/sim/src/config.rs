@@ -145,6 +145,22 @@ pub struct GaugeConfig {
     pub drift_um_per_part: f64,
     /// See `drift_um_per_part`. Default 0.
     pub drift_from_part: u32,
+    /// The readings before the finish, stock on (`[gauge.in_process]`).
+    pub in_process: InProcessGauge,
+}
+
+/// What differs when the gauge reads a part before its finish.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InProcessGauge {
+    /// Faults injected into the in-process readings only (a probe that slips on a part with
+    /// its stock on), on top of the gauge's `faults`. Default none.
+    pub faults: Vec<GaugeFault>,
+    /// How long an in-process reading takes from the gauge to camloop (the gauge's own
+    /// evaluation and transfer), s: past the cycle's `handshake_timeout_s` the control has
+    /// ground the finish with the table in force before camloop has the reading. At most an
+    /// hour. Default 0.
+    pub handover_s: f64,
 }
 
 /// A deliberate gauge fault, to check that the analysis notices it.
@@ -206,6 +222,7 @@ impl Default for GaugeConfig {
             master_before_part: 0,
             drift_um_per_part: 0.0,
             drift_from_part: 0,
+            in_process: InProcessGauge::default(),
         }
     }
 }
@@ -309,6 +326,13 @@ impl GrinderConfig {
         ] {
             p.need(value.is_finite(), name, value, "must be a finite number");
         }
+        let handover_s = self.gauge.in_process.handover_s;
+        p.need(
+            (0.0..=3600.0).contains(&handover_s),
+            "gauge.in_process.handover_s",
+            handover_s,
+            "must be within 0..=3600",
+        );
         p.need(
             (2..=1000).contains(&self.samples_per_segment),
             "samples_per_segment",
@@ -332,39 +356,49 @@ impl GrinderConfig {
             g.points_per_rev as f64,
             "must be within 36..=36000",
         );
-        for (i, fault) in g.faults.iter().enumerate() {
-            let (revolution, size) = match fault {
-                GaugeFault::Spike {
-                    revolution,
-                    angle_index,
-                    size_um,
-                } => {
-                    p.need(
-                        *angle_index < g.points_per_rev,
-                        &format!("gauge.faults[{i}].angle_index"),
-                        *angle_index as f64,
-                        "must be below gauge.points_per_rev",
-                    );
-                    (*revolution, *size_um)
-                }
-                GaugeFault::Offset {
-                    revolution,
-                    offset_um,
-                } => (*revolution, *offset_um),
-            };
-            p.need(
-                revolution < g.revolutions,
-                &format!("gauge.faults[{i}].revolution"),
-                revolution as f64,
-                "must be below gauge.revolutions",
-            );
-            p.need(
-                size.is_finite(),
-                &format!("gauge.faults[{i}] size"),
-                size,
-                "must be a finite number",
-            );
+        for (list, faults) in [
+            ("faults", &g.faults),
+            ("in_process.faults", &g.in_process.faults),
+        ] {
+            check_faults(p, g, list, faults);
         }
+    }
+}
+
+/// Every fault of `gauge.<list>` falls on the gauge's revolutions and grid, with a size.
+fn check_faults(p: &mut Problems, g: &GaugeConfig, list: &str, faults: &[GaugeFault]) {
+    for (i, fault) in faults.iter().enumerate() {
+        let (revolution, size) = match fault {
+            GaugeFault::Spike {
+                revolution,
+                angle_index,
+                size_um,
+            } => {
+                p.need(
+                    *angle_index < g.points_per_rev,
+                    &format!("gauge.{list}[{i}].angle_index"),
+                    *angle_index as f64,
+                    "must be below gauge.points_per_rev",
+                );
+                (*revolution, *size_um)
+            }
+            GaugeFault::Offset {
+                revolution,
+                offset_um,
+            } => (*revolution, *offset_um),
+        };
+        p.need(
+            revolution < g.revolutions,
+            &format!("gauge.{list}[{i}].revolution"),
+            revolution as f64,
+            "must be below gauge.revolutions",
+        );
+        p.need(
+            size.is_finite(),
+            &format!("gauge.{list}[{i}] size"),
+            size,
+            "must be a finite number",
+        );
     }
 }
 

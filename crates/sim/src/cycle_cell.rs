@@ -172,7 +172,7 @@ pub fn run(setup: &CycleCellSetup, parts: u32) -> Result<Vec<CyclePart>, CycleCe
             let (stock, table) = stock_until_measured(setup, &dry, &surface, feature);
             let errors = with_station(&setup.station, stock.as_errors(cell.grinder.stock.orders));
             let mid = sim.grind_station(&table, &workpiece, &errors)?;
-            let raw = sim.measure(&mid, &labels);
+            let raw = sim.measure_in_process(&mid, &labels);
             let input = InProcess {
                 setup: &turn_setup,
                 in_force: &in_force,

@@ -36,6 +36,23 @@ pub(crate) fn measure(
     measure_truth(config, rng, &truth, labels)
 }
 
+/// Reads `ground` with its stock still on, before the finish: as [`measure`], with the
+/// in-process faults too.
+pub(crate) fn measure_in_process(
+    config: &GaugeConfig,
+    rng: &mut SimRng,
+    ground: &GroundPart,
+    labels: &PartLabels,
+) -> RawMeasurement {
+    let mut raw = measure(config, rng, ground, labels);
+    for s in &mut raw.samples {
+        for fault in &config.in_process.faults {
+            s.lift_mm += fault_mm(fault, s.revolution, s.angle_index);
+        }
+    }
+    raw
+}
+
 /// Reads a part whose true lift on the gauge grid is `truth` mm (a ground part's, or a
 /// master's: the nominal), with the gauge's noise and faults.
 pub(crate) fn measure_truth(

@@ -103,7 +103,9 @@ mod rng;
 pub mod stock;
 mod table;
 
-pub use config::{GaugeConfig, GaugeFault, GrinderConfig, Harmonic, ShaftErrors, StationErrors};
+pub use config::{
+    GaugeConfig, GaugeFault, GrinderConfig, Harmonic, InProcessGauge, ShaftErrors, StationErrors,
+};
 pub use control::{
     Control, ControlError, ControlFault, Coupled, CycleEvent, CycleRun, table_shape,
 };
@@ -357,6 +359,16 @@ impl SimGrinder {
     /// The gauge reading `ground` (see [`GaugeConfig`]); draws noise from the seeded stream.
     pub fn measure(&mut self, ground: &GroundPart, labels: &PartLabels) -> RawMeasurement {
         gauge::measure(&self.config.gauge, &mut self.gauge_rng, ground, labels)
+    }
+
+    /// The gauge reading `ground` before the finish, stock on, with the in-process faults
+    /// too ([`config::InProcessGauge::faults`]).
+    pub fn measure_in_process(
+        &mut self,
+        ground: &GroundPart,
+        labels: &PartLabels,
+    ) -> RawMeasurement {
+        gauge::measure_in_process(&self.config.gauge, &mut self.gauge_rng, ground, labels)
     }
 
     /// The gauge reading a master part whose true lift on the gauge grid is `truth_mm` (the

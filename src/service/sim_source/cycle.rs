@@ -192,12 +192,19 @@ impl SimSource {
             part: shaft.to_string(),
             lobe: self.stations[k].name.to_string(),
         };
-        let raw = sim.measure(&ground, &labels);
+        let raw = sim.measure_in_process(&ground, &labels);
         let (done, verdict) = tokio::sync::oneshot::channel();
+        // The gauge's handover: the reading reaches camloop that long after the control began
+        // its wait (the control's time runs on while the gauge evaluates and sends).
+        let now = std::time::Instant::now();
+        // Validated within 0..=3600 s with the config.
+        let handover =
+            std::time::Duration::try_from_secs_f64(self.grinder.gauge.in_process.handover_s)
+                .unwrap_or_default();
         let event = SourceEvent::InProcess {
             raw,
             part: None,
-            received: std::time::Instant::now(),
+            received: now.checked_sub(handover).unwrap_or(now),
             done: Some(done),
         };
         // The control waits at its poll while the service answers; on the service's

@@ -1,6 +1,7 @@
 //! Measure before the finish: this part's finish table from the learned correction plus what
 //! the in-process measurement (stock still on) says, the remaining stock taken out as a
-//! known size offset. The same guards as the part-to-part loop; a refusal means the finish
+//! known wheel-centre offset (read angle by angle through
+//! [`crate::geometry::Part::lift_per_x_offset`]). The same guards as the part-to-part loop; a refusal means the finish
 //! grinds with the table in force and nothing is learned.
 //!
 //! The learning state is never changed here: the part-to-part loop learns from the finished
@@ -56,7 +57,11 @@ pub struct FinishTable {
     pub state: LearningState,
     pub outcome: StepOutcome,
     pub measured: Measured,
-    /// The size the gauge read above the finished size, µm (the remaining stock removed).
+    /// The error the finish would leave, per gauge angle of the feature's frame, µm: the
+    /// in-process lift error with the remaining stock taken out (what the step learns from).
+    pub error_um: Vec<f64>,
+    /// The mean error the gauge read above the finished part, µm (the remaining stock taken
+    /// out angle by angle).
     pub size_over_stock_um: f64,
 }
 
@@ -89,15 +94,31 @@ pub fn finish_table(input: &InProcess<'_>, feature: &str) -> Result<FinishTable,
     }
     let report = &measured.report;
     let stock_um = input.remaining_stock_mm * 1000.0;
-    // The stock is a uniform offset along the normal: the gauge reads it as size. What is
-    // left beyond it is the error the finish would leave.
-    let size_um = report.base_radius_error_um - stock_um;
     let lift_error: Vec<f64> = report
         .profile_error_um
         .iter()
-        .map(|e| e + size_um)
+        .map(|e| e + report.base_radius_error_um)
         .collect();
-    let error_um = turn::to_feature_frame(&lift_error, input.setup.phase_deg);
+    // The stock is left on as a wheel-centre offset (X stops that far out), which the gauge
+    // reads as the offset times the angle's gain: 1 on a base circle, down to cos γ where
+    // the contact normal leans from the line of centres (0.5 % on the demo crankpins, so a
+    // uniform 20 µm would leave 0.1 µm of size and 0.2 µm of shape in every finish).
+    let part_geometry = input
+        .setup
+        .lobe
+        .feature
+        .part(input.setup.lobe.nominal)
+        .map_err(|e| CycleError::Guard(e.into()))?;
+    let n = lift_error.len();
+    let error_um: Vec<f64> = turn::to_feature_frame(&lift_error, input.setup.phase_deg)
+        .iter()
+        .enumerate()
+        .map(|(j, e)| {
+            let psi_rad = std::f64::consts::TAU * j as f64 / n as f64;
+            e - stock_um * part_geometry.lift_per_x_offset(psi_rad)
+        })
+        .collect();
+    let size_um = error_um.iter().sum::<f64>() / n.max(1) as f64;
     let repeatability_um = turn::to_feature_frame(&report.repeatability_um, input.setup.phase_deg);
     let part = PartError {
         error_um: &error_um,
@@ -114,14 +135,52 @@ pub fn finish_table(input: &InProcess<'_>, feature: &str) -> Result<FinishTable,
         params: &params,
         ..input.setup.lobe
     };
-    // A copy: the state of the table in force is not touched.
-    let mut scratch = input.in_force.clone();
-    let (outcome, table) = compensate::learn_and_regenerate(&mut scratch, &part, &lobe)?;
+    let (outcome, state) = same_part_step(input.in_force, &part, &params)?;
+    let table = compensate::current_table(&state, &lobe).map_err(CycleError::from)?;
     Ok(FinishTable {
         table,
-        state: scratch,
+        state,
         outcome,
         measured,
+        error_um,
         size_over_stock_um: size_um,
     })
+}
+
+/// The same-part step: the correction (lift and timing) moved by what this part's
+/// measurement says, and nothing else of the state of the table in force.
+///
+/// The rest of the state is the part-to-part loop's, and the same-part step must leave it as
+/// it was:
+/// - no drift anticipated: the wheel wears from part to part, but the finish is of the part
+///   just measured, within the same feature's grinding (a full part's drift taken off here
+///   grinds every finish undersize by it: 0.5–0.6 µm on the demo camshaft, whose lobe sees
+///   eight lobes' wear between two shafts);
+/// - no drift learned: the in-process size and the finished size are of one part, so their
+///   change is not a part's wear, and the finished part's drift must be measured against the
+///   previous finished part;
+/// - no dressing offset moved, no part counted, no divergence judged: the in-process error
+///   (stock on) is not a finished part's.
+fn same_part_step(
+    in_force: &LearningState,
+    part: &PartError<'_>,
+    params: &crate::learn::LearningParams,
+) -> Result<(StepOutcome, LearningState), CycleError> {
+    let mut scratch = LearningState {
+        size_drift_um_per_part: 0.0,
+        last_size_disturbance_um: None,
+        last_size_disturbance_part: None,
+        dressed: false,
+        dressing_measured: false,
+        recent_max_error_um: Vec::new(),
+        best: None,
+        ..in_force.clone()
+    };
+    let outcome = crate::learn::step(&mut scratch, part, params)?;
+    let state = LearningState {
+        correction_um: scratch.correction_um,
+        timing_correction_deg: scratch.timing_correction_deg,
+        ..in_force.clone()
+    };
+    Ok((outcome, state))
 }

@@ -10,6 +10,7 @@ use super::table::TablePoint;
 use std::f64::consts::{FRAC_PI_2, TAU};
 
 mod grindable;
+mod x_offset;
 
 /// Table sizes accepted per revolution.
 pub const POINTS_RANGE: std::ops::RangeInclusive<usize> = 36..=36_000;
