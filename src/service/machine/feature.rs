@@ -15,7 +15,7 @@ use crate::recipe::FeatureSetup;
 use crate::share::{RealFs, Share, ShareConfig};
 use crate::store::{EventLevel, FeatureKind, Store};
 use anyhow::Context;
-use camloop_loop::{FeatureMachine, PartId};
+use camloop_loop::FeatureMachine;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -67,7 +67,13 @@ impl FeatureLoop {
     ) -> anyhow::Result<Self> {
         let mut journal =
             Journal::open(&paths.state_dir).with_context(|| format!("machine {name}: journal"))?;
-        let memory = load_memory(&name, &setup, &journal, &store, opening).await?;
+        // The journal's newest memory (it holds what the store may not have yet), else the
+        // store's: a restart resumes where the loop was.
+        let kept = super::reconcile::kept(&name, &setup.name, journal.records());
+        let fallback = match LoopMemory::resume(&kept) {
+            Some(_) => LoopMemory::new(setup.feature.wheel_radius_mm()),
+            None => stored_memory(&name, &setup, &store, opening).await?,
+        };
         if let Err(e) = std::fs::create_dir_all(&paths.share_dir) {
             // Not fatal: the share may be a mount that comes back; deliveries wait for it. An
             // alarm all the same: nothing reaches the control until it is there.
@@ -93,7 +99,9 @@ impl FeatureLoop {
         let program_file = format!("{}.SPF", setup.program.name);
         let charts =
             super::charts::ChartWatch::new(&crate::quality::FeatureLimits::from_setup(&setup));
-        let feature_machine = super::executor::machine_for(&setup, memory);
+        let view = super::reconcile::share_view(&share);
+        let feature_machine =
+            super::reconcile::resumed_machine(&name, &setup, kept, fallback, view, &store).await;
         let mut machine = Self {
             name,
             setup,
@@ -383,36 +391,15 @@ struct RecipeRecord<'a> {
     limits: &'a compensate::AxisLimits,
 }
 
-/// The newest memory: the journal's (it holds what the store may not have yet, and always
-/// the newest learning state), else the store's. A store that answers with an error is an
-/// error here, never "no state": starting from nominal would silently forget the loop.
-async fn load_memory(
+/// The store's memory of the feature, for a journal that holds none. A store that answers
+/// with an error is an error here, never "no state": starting from nominal would silently
+/// forget the loop.
+async fn stored_memory(
     name: &MachineName,
     setup: &FeatureSetup,
-    journal: &Journal,
     store: &StoreHandle,
     opening: &super::Opening,
 ) -> anyhow::Result<LoopMemory> {
-    let records = journal.records();
-    let newest = records.iter().rposition(|r| {
-        matches!(r, Pending::Learning { machine, lobe, .. } if machine == name && *lobe == setup.name)
-    });
-    if let Some(i) = newest
-        && let Pending::Learning { state, .. } = &records[i]
-    {
-        // Measurements recorded after it (the process died before their learning record)
-        // still count, and are still known, so a replay does not learn them again.
-        let mut memory = state.clone();
-        for r in &records[i + 1..] {
-            if let Pending::Measurement { measurement: m, .. } = r
-                && m.lobe == setup.name
-                && m.stage == crate::store::MeasurementStage::Final
-            {
-                memory.measured(m.sha256, PartId::new(&m.part).ok());
-            }
-        }
-        return Ok(*memory);
-    }
     let known_none = opening
         .known_states
         .as_ref()
