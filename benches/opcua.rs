@@ -138,7 +138,7 @@ async fn drive(
                 max_profile_error_um: error_um,
                 base_radius_error_um: 0.1,
                 phase_error_deg: 0.001,
-                ground_with_version: part,
+                ground_with_version: camloop::core::ids::TableVersion::new(part),
                 repeatability_um: Some(0.3),
             });
             sent.fetch_add(1, Relaxed);

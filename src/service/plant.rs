@@ -93,7 +93,7 @@ pub(crate) fn of_record(record: &Pending) -> Option<PlantEvent> {
             max_profile_error_um: m.max_profile_error_um,
             base_radius_error_um: m.base_radius_error_um,
             phase_error_deg: m.phase_error_deg,
-            ground_with_version: ground_with_version.map_or(0, TableVersion::get),
+            ground_with_version,
             repeatability_um: repeatability_um(&m.analysis_json),
         },
         Pending::Table {
@@ -242,7 +242,7 @@ mod tests {
             lobe: "IN1".parse().unwrap(),
             version: v(12),
             status: VersionStatus::Pushed {
-                at_unix_ms: 5,
+                at: jiff::Timestamp::from_millisecond(5).expect("a time"),
                 note: Some("pushed".into()),
             },
             at_ms: jiff::Timestamp::from_millisecond(5).unwrap(),

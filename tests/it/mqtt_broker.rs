@@ -115,7 +115,7 @@ fn part(n: u32) -> PlantEvent {
         max_profile_error_um: 0.5 * f64::from(n),
         base_radius_error_um: -0.25,
         phase_error_deg: 0.01,
-        ground_with_version: u64::from(n),
+        ground_with_version: camloop::core::ids::TableVersion::new(u64::from(n)),
         repeatability_um: None,
     }
 }

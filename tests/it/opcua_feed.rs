@@ -52,7 +52,7 @@ pub(crate) fn part(machine: &str, feature: &str, k: usize, part: &str) -> PlantE
         max_profile_error_um: k as f64 * 0.5,
         base_radius_error_um: 0.1,
         phase_error_deg: 0.001,
-        ground_with_version: 1,
+        ground_with_version: camloop::core::ids::TableVersion::new(1),
         repeatability_um: Some(0.3),
     }
 }

@@ -165,8 +165,10 @@ fn feature_facts(s: &mut FeatureState, event: &PlantEvent) {
         } => {
             s.last_part = Some(part.clone());
             s.last_verdict = Some(*verdict);
-            if s.version_in_force.is_none() && *ground_with_version > 0 {
-                s.version_in_force = Some(*ground_with_version);
+            if s.version_in_force.is_none()
+                && let Some(v) = ground_with_version
+            {
+                s.version_in_force = Some(v.get());
             }
         }
         PlantEvent::TableDelivered { version, .. } => {
@@ -195,7 +197,7 @@ mod tests {
             max_profile_error_um: 1.0,
             base_radius_error_um: 0.0,
             phase_error_deg: 0.0,
-            ground_with_version: 3,
+            ground_with_version: camloop_loop::TableVersion::new(3),
             repeatability_um: None,
         }
     }
