@@ -133,7 +133,7 @@ async fn drive(
                 machine: machine.clone(),
                 feature: feature.clone(),
                 part: format!("S-{part}"),
-                at_ms: camloop::clock::now(),
+                at: camloop::clock::now(),
                 verdict: Verdict::Pass,
                 max_profile_error_um: error_um,
                 base_radius_error_um: 0.1,

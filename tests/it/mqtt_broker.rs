@@ -110,7 +110,7 @@ fn part(n: u32) -> PlantEvent {
         machine: "M1".parse().unwrap(),
         feature: "IN1".parse().unwrap(),
         part: format!("P{n}"),
-        at_ms: jiff::Timestamp::from_millisecond(1_000 * i64::from(n)).unwrap(),
+        at: jiff::Timestamp::from_millisecond(1_000 * i64::from(n)).unwrap(),
         verdict: Verdict::Pass,
         max_profile_error_um: 0.5 * f64::from(n),
         base_radius_error_um: -0.25,

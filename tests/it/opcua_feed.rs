@@ -47,7 +47,7 @@ pub(crate) fn part(machine: &str, feature: &str, k: usize, part: &str) -> PlantE
         machine: name(machine),
         feature: name(feature),
         part: part.to_string(),
-        at_ms: part_at(k),
+        at: part_at(k),
         verdict: Verdict::Pass,
         max_profile_error_um: k as f64 * 0.5,
         base_radius_error_um: 0.1,

@@ -20,8 +20,8 @@ pub enum PlantEvent {
         machine: MachineName,
         feature: FeatureName,
         part: String,
-        #[serde(with = "crate::unix_ms")]
-        at_ms: Timestamp,
+        #[serde(rename = "at_ms", with = "crate::unix_ms")]
+        at: Timestamp,
         verdict: Verdict,
         max_profile_error_um: f64,
         base_radius_error_um: f64,
@@ -40,8 +40,8 @@ pub enum PlantEvent {
         machine: MachineName,
         feature: FeatureName,
         version: TableVersion,
-        #[serde(with = "crate::unix_ms")]
-        at_ms: Timestamp,
+        #[serde(rename = "at_ms", with = "crate::unix_ms")]
+        at: Timestamp,
     },
     TableRefused {
         machine: MachineName,
@@ -49,19 +49,19 @@ pub enum PlantEvent {
         /// The refused version, when one was recorded.
         version: Option<TableVersion>,
         reason: String,
-        #[serde(with = "crate::unix_ms")]
-        at_ms: Timestamp,
+        #[serde(rename = "at_ms", with = "crate::unix_ms")]
+        at: Timestamp,
     },
     LearningFrozen {
         machine: MachineName,
-        #[serde(with = "crate::unix_ms")]
-        at_ms: Timestamp,
+        #[serde(rename = "at_ms", with = "crate::unix_ms")]
+        at: Timestamp,
         reason: String,
     },
     Dressing {
         machine: MachineName,
-        #[serde(with = "crate::unix_ms")]
-        at_ms: Timestamp,
+        #[serde(rename = "at_ms", with = "crate::unix_ms")]
+        at: Timestamp,
         old_radius_mm: f64,
         new_radius_mm: f64,
         /// The dresser's measured infeed, µm, when it reported one.
@@ -71,8 +71,8 @@ pub enum PlantEvent {
     },
     Alarm {
         machine: MachineName,
-        #[serde(with = "crate::unix_ms")]
-        at_ms: Timestamp,
+        #[serde(rename = "at_ms", with = "crate::unix_ms")]
+        at: Timestamp,
         level: EventLevel,
         kind: String,
         message: String,
@@ -129,14 +129,15 @@ impl PlantEvent {
         )
     }
 
-    pub fn at_ms(&self) -> Timestamp {
+    /// When it happened (`at_ms` on the wire, integer Unix milliseconds).
+    pub fn at(&self) -> Timestamp {
         match self {
-            PlantEvent::PartAnalysed { at_ms, .. }
-            | PlantEvent::TableDelivered { at_ms, .. }
-            | PlantEvent::TableRefused { at_ms, .. }
-            | PlantEvent::LearningFrozen { at_ms, .. }
-            | PlantEvent::Dressing { at_ms, .. }
-            | PlantEvent::Alarm { at_ms, .. } => *at_ms,
+            PlantEvent::PartAnalysed { at, .. }
+            | PlantEvent::TableDelivered { at, .. }
+            | PlantEvent::TableRefused { at, .. }
+            | PlantEvent::LearningFrozen { at, .. }
+            | PlantEvent::Dressing { at, .. }
+            | PlantEvent::Alarm { at, .. } => *at,
         }
     }
 }
@@ -150,7 +151,7 @@ mod tests {
             machine: "M1".parse().expect("a machine name"),
             feature: "IN1".parse().expect("a feature name"),
             part: "P1".into(),
-            at_ms: Timestamp::from_millisecond(1_000).expect("a time"),
+            at: Timestamp::from_millisecond(1_000).expect("a time"),
             verdict: Verdict::Pass,
             max_profile_error_um: 1.5,
             base_radius_error_um: 0.0,
@@ -168,6 +169,10 @@ mod tests {
         assert_eq!(none["ground_with_version"], serde_json::Value::Null);
         let three = serde_json::to_value(part(TableVersion::new(3))).expect("serializes");
         assert_eq!(three["ground_with_version"], 3);
+        assert_eq!(
+            three["at_ms"], 1_000,
+            "the time keeps its wire name and form"
+        );
         let mut old = three.clone();
         old["ground_with_version"] = 0.into();
         let back: PlantEvent = serde_json::from_value(old).expect("an old payload reads");

@@ -128,7 +128,7 @@ impl FeatureLoop {
     /// Reconciles the memory with the share, reports a quarantined journal, and makes sure
     /// the share holds a table.
     async fn after_start(&mut self, report: &crate::share::OpenReport) -> anyhow::Result<()> {
-        let at_ms = now();
+        let at = now();
         self.setup.feature = self
             .setup
             .feature
@@ -139,12 +139,12 @@ impl FeatureLoop {
         );
         self.reconcile_share().await?;
         let plan_changed = self.plan_at_start()?;
-        let mut records = vec![self.recipe_snapshot(at_ms)];
+        let mut records = vec![self.recipe_snapshot(at)];
         for q in self.journal.quarantined() {
             error!(machine = %self.name, line = q.line, reason = %q.reason, "journal line unreadable: moved to the quarantine file");
             records.push(records::event(
                 &self.name,
-                at_ms,
+                at,
                 EventLevel::Error,
                 EventKind::JournalQuarantined,
                 format!(
@@ -177,14 +177,14 @@ impl FeatureLoop {
             };
             let next = self.machine.memory().newest_learning().clone();
             let mut records = self.deliver(&table, next, reason, None).await?;
-            records.push(self.learning_record(at_ms));
+            records.push(self.learning_record(at));
             self.record(records).await;
         }
         Ok(())
     }
 
     /// What this machine grinds, as the store keeps it (skipped there when unchanged).
-    fn recipe_snapshot(&self, at_ms: jiff::Timestamp) -> Pending {
+    fn recipe_snapshot(&self, at: jiff::Timestamp) -> Pending {
         let s = &self.setup;
         let recipe = RecipeRecord {
             label: &s.label,
@@ -209,7 +209,7 @@ impl FeatureLoop {
             lobe: s.name.clone(),
             kind,
             recipe_json: serde_json::to_string(&recipe).unwrap_or_else(|_| "{}".into()),
-            created_at_ms: at_ms,
+            created_at_ms: at,
         }
     }
 
@@ -289,7 +289,7 @@ impl FeatureLoop {
 
     /// The disk is full (the journal runs on its reserve: measurements are still kept,
     /// learning holds, the feature's machine decides that): said once when it starts.
-    pub(super) async fn disk_full_alarm(&mut self, at_ms: jiff::Timestamp) {
+    pub(super) async fn disk_full_alarm(&mut self, at: jiff::Timestamp) {
         if self.disk_alarm {
             return;
         }
@@ -302,7 +302,7 @@ impl FeatureLoop {
         );
         let e = records::event(
             &self.name,
-            at_ms,
+            at,
             EventLevel::Error,
             EventKind::DiskFull,
             message,
@@ -333,14 +333,14 @@ impl FeatureLoop {
     /// Records the store refused for good were set aside (see [`Journal::flush`]): an alarm
     /// each, and an event in the history saying where the record is kept.
     async fn note_refused(&mut self, refused: &[super::super::journal::Refused], store: &Store) {
-        let at_ms = now();
+        let at = now();
         let events: Vec<Pending> = refused
             .iter()
             .map(|r| {
                 error!(machine = %self.name, lobe = %self.setup.name, record = r.kind, reason = %r.reason, "the database refuses a journal record: kept aside, the records after it go on");
                 records::event(
                     &self.name,
-                    at_ms,
+                    at,
                     EventLevel::Error,
                     EventKind::JournalQuarantined,
                     format!(
@@ -364,12 +364,12 @@ impl FeatureLoop {
 
     /// The loop's memory as a record; through the journal it is also what a restart resumes
     /// from.
-    pub(super) fn learning_record(&self, at_ms: jiff::Timestamp) -> Pending {
+    pub(super) fn learning_record(&self, at: jiff::Timestamp) -> Pending {
         Pending::Learning {
             machine: self.name.clone(),
             lobe: self.setup.name.clone(),
             state: Box::new(self.machine.memory().clone()),
-            saved_at_ms: at_ms,
+            saved_at_ms: at,
         }
     }
 }
