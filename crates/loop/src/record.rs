@@ -146,12 +146,6 @@ impl Record {
 }
 
 impl TableStatus {
-    /// Whether the share answered for this version (anything but the write-ahead's
-    /// "submitted").
-    pub fn settled(&self) -> bool {
-        !matches!(self, TableStatus::Waiting { reason: Some(r) } if r == SUBMITTED)
-    }
-
     /// The status's name, as the journal and the store spell it.
     pub fn name(&self) -> &'static str {
         match self {
