@@ -133,12 +133,12 @@ async fn drive(
                 machine: machine.clone(),
                 feature: feature.clone(),
                 part: format!("S-{part}"),
-                at_ms: camloop::clock::now(),
+                at: camloop::clock::now(),
                 verdict: Verdict::Pass,
                 max_profile_error_um: error_um,
                 base_radius_error_um: 0.1,
                 phase_error_deg: 0.001,
-                ground_with_version: part,
+                ground_with_version: camloop::core::ids::TableVersion::new(part),
                 repeatability_um: Some(0.3),
             });
             sent.fetch_add(1, Relaxed);

@@ -88,12 +88,12 @@ pub(crate) fn of_record(record: &Pending) -> Option<PlantEvent> {
             machine: m.machine,
             feature: m.lobe,
             part: m.part,
-            at_ms: m.received_at_ms,
+            at: m.received_at_ms,
             verdict: m.verdict,
             max_profile_error_um: m.max_profile_error_um,
             base_radius_error_um: m.base_radius_error_um,
             phase_error_deg: m.phase_error_deg,
-            ground_with_version: ground_with_version.map_or(0, TableVersion::get),
+            ground_with_version,
             repeatability_um: repeatability_um(&m.analysis_json),
         },
         Pending::Table {
@@ -127,7 +127,7 @@ pub(crate) fn of_record(record: &Pending) -> Option<PlantEvent> {
             source,
         } => PlantEvent::Dressing {
             machine,
-            at_ms,
+            at: at_ms,
             old_radius_mm,
             new_radius_mm,
             infeed_um,
@@ -175,7 +175,7 @@ fn event_of(
     Some(match kind {
         EventKind::LearningReverted => PlantEvent::LearningFrozen {
             machine,
-            at_ms,
+            at: at_ms,
             reason: message,
         },
         // A table refused by the loop's checks before it got a version.
@@ -184,13 +184,13 @@ fn event_of(
             feature: machine_level(),
             version: None,
             reason: message,
-            at_ms,
+            at: at_ms,
         },
         // Told by the dressing record itself.
         EventKind::WheelDressed => return None,
         _ => PlantEvent::Alarm {
             machine,
-            at_ms,
+            at: at_ms,
             level,
             kind: kind.as_str().to_owned(),
             message,
@@ -210,14 +210,14 @@ fn table_event(
             machine,
             feature,
             version,
-            at_ms,
+            at: at_ms,
         }),
         VersionStatus::Refused { reason } => Some(PlantEvent::TableRefused {
             machine,
             feature,
             version: Some(version),
             reason,
-            at_ms,
+            at: at_ms,
         }),
         // Not the plant's news yet: the share's own states never reach the journal.
         VersionStatus::Waiting { .. }
@@ -242,7 +242,7 @@ mod tests {
             lobe: "IN1".parse().unwrap(),
             version: v(12),
             status: VersionStatus::Pushed {
-                at_unix_ms: 5,
+                at: jiff::Timestamp::from_millisecond(5).expect("a time"),
                 note: Some("pushed".into()),
             },
             at_ms: jiff::Timestamp::from_millisecond(5).unwrap(),

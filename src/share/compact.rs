@@ -224,7 +224,7 @@ mod tests {
         assert_eq!(
             short.history.last_pushed().unwrap().status,
             VersionStatus::Pushed {
-                at_unix_ms: 50,
+                at: ms(50),
                 note: None
             }
         );
@@ -287,7 +287,7 @@ mod tests {
         assert_eq!(
             status(1),
             VersionStatus::Pushed {
-                at_unix_ms: 50,
+                at: ms(50),
                 note: None
             }
         );

@@ -295,10 +295,9 @@ impl History {
                         "v{version} pushed without delivering"
                     )));
                 }
-                // The status keeps integer milliseconds; an instant before 1970 reads as 0.
-                let at_unix_ms = u64::try_from(at_unix_ms.as_millisecond()).unwrap_or(0);
+                // The status keeps unsigned milliseconds: an instant before 1970 is 1970.
                 v.status = VersionStatus::Pushed {
-                    at_unix_ms,
+                    at: at_unix_ms.max(Timestamp::UNIX_EPOCH),
                     note: None,
                 };
                 self.deliverable = None;
@@ -527,7 +526,7 @@ mod tests {
         assert_eq!(
             status(1),
             VersionStatus::Pushed {
-                at_unix_ms: 2,
+                at: ms(2),
                 note: None
             }
         );

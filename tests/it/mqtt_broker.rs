@@ -110,12 +110,12 @@ fn part(n: u32) -> PlantEvent {
         machine: "M1".parse().unwrap(),
         feature: "IN1".parse().unwrap(),
         part: format!("P{n}"),
-        at_ms: jiff::Timestamp::from_millisecond(1_000 * i64::from(n)).unwrap(),
+        at: jiff::Timestamp::from_millisecond(1_000 * i64::from(n)).unwrap(),
         verdict: Verdict::Pass,
         max_profile_error_um: 0.5 * f64::from(n),
         base_radius_error_um: -0.25,
         phase_error_deg: 0.01,
-        ground_with_version: u64::from(n),
+        ground_with_version: camloop::core::ids::TableVersion::new(u64::from(n)),
         repeatability_um: None,
     }
 }

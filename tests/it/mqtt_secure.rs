@@ -158,12 +158,12 @@ async fn a_wrong_password_is_refused_and_the_right_one_delivers_over_tls() {
         machine: "M1".parse().unwrap(),
         feature: "IN1".parse().unwrap(),
         part: "P1".into(),
-        at_ms: jiff::Timestamp::from_millisecond(1).unwrap(),
+        at: jiff::Timestamp::from_millisecond(1).unwrap(),
         verdict: Verdict::Pass,
         max_profile_error_um: 1.5,
         base_radius_error_um: 0.0,
         phase_error_deg: 0.0,
-        ground_with_version: 2,
+        ground_with_version: camloop::core::ids::TableVersion::new(2),
         repeatability_um: None,
     });
     assert_eq!(

@@ -47,12 +47,12 @@ pub(crate) fn part(machine: &str, feature: &str, k: usize, part: &str) -> PlantE
         machine: name(machine),
         feature: name(feature),
         part: part.to_string(),
-        at_ms: part_at(k),
+        at: part_at(k),
         verdict: Verdict::Pass,
         max_profile_error_um: k as f64 * 0.5,
         base_radius_error_um: 0.1,
         phase_error_deg: 0.001,
-        ground_with_version: 1,
+        ground_with_version: camloop::core::ids::TableVersion::new(1),
         repeatability_um: Some(0.3),
     }
 }

@@ -79,7 +79,7 @@ fn a_push_puts_the_exact_program_on_the_share_and_records_it() {
     assert_eq!(
         share.history().get(ver(1)).unwrap().status,
         VersionStatus::Pushed {
-            at_unix_ms: 1_700_000_002_000,
+            at: jiff::Timestamp::from_millisecond(1_700_000_002_000).expect("a time"),
             note: None
         }
     );

@@ -210,7 +210,7 @@ async fn story(store: &Store) {
             &f("in1"),
             1,
             &VersionStatus::Pushed {
-                at_unix_ms: 6_000,
+                at: jiff::Timestamp::from_millisecond(6_000).expect("a time"),
                 note: Some("pushed to share".into()),
             },
             ms(6_000),
@@ -251,7 +251,7 @@ async fn story(store: &Store) {
     assert_eq!(
         first.status,
         VersionStatus::Pushed {
-            at_unix_ms: 6_000,
+            at: jiff::Timestamp::from_millisecond(6_000).expect("a time"),
             note: Some("pushed to share".into())
         }
     );

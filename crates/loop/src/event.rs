@@ -20,14 +20,16 @@ pub enum PlantEvent {
         machine: MachineName,
         feature: FeatureName,
         part: String,
-        #[serde(with = "crate::unix_ms")]
-        at_ms: Timestamp,
+        #[serde(rename = "at_ms", with = "crate::unix_ms")]
+        at: Timestamp,
         verdict: Verdict,
         max_profile_error_um: f64,
         base_radius_error_um: f64,
         phase_error_deg: f64,
-        /// Version of the table the part was ground with (0: none known).
-        ground_with_version: u64,
+        /// Version of the table the part was ground with, when known (null on the wire;
+        /// an older payload's 0 reads as none).
+        #[serde(default, with = "camloop_core::ids::lenient_version")]
+        ground_with_version: Option<TableVersion>,
         /// The gauge's repeatability: the largest per-angle spread (1σ) over the
         /// revolutions, µm, when the analysis reported it. Not on the MQTT wire (its
         /// payload stays as it was); OPC UA shows it.
@@ -38,8 +40,8 @@ pub enum PlantEvent {
         machine: MachineName,
         feature: FeatureName,
         version: TableVersion,
-        #[serde(with = "crate::unix_ms")]
-        at_ms: Timestamp,
+        #[serde(rename = "at_ms", with = "crate::unix_ms")]
+        at: Timestamp,
     },
     TableRefused {
         machine: MachineName,
@@ -47,19 +49,19 @@ pub enum PlantEvent {
         /// The refused version, when one was recorded.
         version: Option<TableVersion>,
         reason: String,
-        #[serde(with = "crate::unix_ms")]
-        at_ms: Timestamp,
+        #[serde(rename = "at_ms", with = "crate::unix_ms")]
+        at: Timestamp,
     },
     LearningFrozen {
         machine: MachineName,
-        #[serde(with = "crate::unix_ms")]
-        at_ms: Timestamp,
+        #[serde(rename = "at_ms", with = "crate::unix_ms")]
+        at: Timestamp,
         reason: String,
     },
     Dressing {
         machine: MachineName,
-        #[serde(with = "crate::unix_ms")]
-        at_ms: Timestamp,
+        #[serde(rename = "at_ms", with = "crate::unix_ms")]
+        at: Timestamp,
         old_radius_mm: f64,
         new_radius_mm: f64,
         /// The dresser's measured infeed, µm, when it reported one.
@@ -69,8 +71,8 @@ pub enum PlantEvent {
     },
     Alarm {
         machine: MachineName,
-        #[serde(with = "crate::unix_ms")]
-        at_ms: Timestamp,
+        #[serde(rename = "at_ms", with = "crate::unix_ms")]
+        at: Timestamp,
         level: EventLevel,
         kind: String,
         message: String,
@@ -127,14 +129,55 @@ impl PlantEvent {
         )
     }
 
-    pub fn at_ms(&self) -> Timestamp {
+    /// When it happened (`at_ms` on the wire, integer Unix milliseconds).
+    pub fn at(&self) -> Timestamp {
         match self {
-            PlantEvent::PartAnalysed { at_ms, .. }
-            | PlantEvent::TableDelivered { at_ms, .. }
-            | PlantEvent::TableRefused { at_ms, .. }
-            | PlantEvent::LearningFrozen { at_ms, .. }
-            | PlantEvent::Dressing { at_ms, .. }
-            | PlantEvent::Alarm { at_ms, .. } => *at_ms,
+            PlantEvent::PartAnalysed { at, .. }
+            | PlantEvent::TableDelivered { at, .. }
+            | PlantEvent::TableRefused { at, .. }
+            | PlantEvent::LearningFrozen { at, .. }
+            | PlantEvent::Dressing { at, .. }
+            | PlantEvent::Alarm { at, .. } => *at,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn part(ground_with_version: Option<TableVersion>) -> PlantEvent {
+        PlantEvent::PartAnalysed {
+            machine: "M1".parse().expect("a machine name"),
+            feature: "IN1".parse().expect("a feature name"),
+            part: "P1".into(),
+            at: Timestamp::from_millisecond(1_000).expect("a time"),
+            verdict: Verdict::Pass,
+            max_profile_error_um: 1.5,
+            base_radius_error_um: 0.0,
+            phase_error_deg: 0.0,
+            ground_with_version,
+            repeatability_um: None,
+        }
+    }
+
+    /// The version a part was ground with is its number on the wire, null when none is
+    /// known; a payload of a build that wrote 0 for none reads as none, not as a version.
+    #[test]
+    fn ground_with_version_is_null_when_none_is_known() {
+        let none = serde_json::to_value(part(None)).expect("serializes");
+        assert_eq!(none["ground_with_version"], serde_json::Value::Null);
+        let three = serde_json::to_value(part(TableVersion::new(3))).expect("serializes");
+        assert_eq!(three["ground_with_version"], 3);
+        assert_eq!(
+            three["at_ms"], 1_000,
+            "the time keeps its wire name and form"
+        );
+        let mut old = three.clone();
+        old["ground_with_version"] = 0.into();
+        let back: PlantEvent = serde_json::from_value(old).expect("an old payload reads");
+        assert_eq!(back, part(None));
+        let back: PlantEvent = serde_json::from_value(three).expect("reads back");
+        assert_eq!(back, part(TableVersion::new(3)));
     }
 }

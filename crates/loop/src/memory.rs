@@ -4,7 +4,7 @@
 //! the store, and a restart resumes from the newest copy ([`LoopMemory::resume`]).
 
 use crate::guards::GuardStreak;
-use crate::record::Record;
+use crate::record::Kept;
 use camloop_core::digest::Sha256;
 use camloop_core::ids::{PartId, TableVersion};
 use camloop_core::learn::{LearningParams, LearningState, PreviousPart};
@@ -102,12 +102,12 @@ impl LoopMemory {
     /// measurements recorded after it (the process died before their learning record) still
     /// counted and known, so a replay does not learn them again. None when the journal holds
     /// no learning record (the store's copy, or a new memory, is then the one to start from).
-    pub fn resume<'a>(records: impl IntoIterator<Item = &'a Record>) -> Option<Self> {
+    pub fn resume<'a>(records: impl IntoIterator<Item = &'a Kept>) -> Option<Self> {
         let mut memory: Option<LoopMemory> = None;
         for r in records {
             match r {
-                Record::Learning { memory: m, .. } => memory = Some((**m).clone()),
-                Record::Measurement { sha256, part, .. } => {
+                Kept::Learning(m) => memory = Some((**m).clone()),
+                Kept::Measurement { sha256, part } => {
                     if let Some(m) = memory.as_mut() {
                         m.measured(*sha256, part.clone());
                     }

@@ -1,6 +1,7 @@
 //! The records the loop asks to keep, in its own words: what a step decided, before the
 //! shell writes it in the journal's file format (and from there the store). A replay reads
-//! them back ([`crate::memory::LoopMemory::resume`]).
+//! back what it needs of them as [`Kept`] ([`crate::memory::LoopMemory::resume`],
+//! [`crate::machine::FeatureMachine::resume`]).
 
 use crate::memory::{LoopMemory, TableLearning};
 use camloop_core::digest::Sha256;
@@ -101,6 +102,56 @@ impl Record {
             level,
             kind,
             message,
+        }
+    }
+}
+
+/// A journalled record as a restart reads it back: what the resume needs of it (a
+/// measurement's identity, a table's write-ahead record, a status, the memory). The shell
+/// reads its journal's lines into these; [`Record::kept`] is the same for the loop's own.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Kept {
+    /// A part's measurement of the finished part (one more part, known by its identity).
+    Measurement {
+        sha256: Sha256,
+        part: Option<PartId>,
+    },
+    Table(Box<TableRecord>),
+    Status {
+        version: TableVersion,
+        status: TableStatus,
+    },
+    Learning(Box<LoopMemory>),
+}
+
+impl Record {
+    /// What a resume reads back of this record (nothing, for an event).
+    pub fn kept(&self) -> Option<Kept> {
+        Some(match self {
+            Record::Measurement { sha256, part, .. } => Kept::Measurement {
+                sha256: *sha256,
+                part: part.clone(),
+            },
+            Record::Table(t) => Kept::Table(t.clone()),
+            Record::Status {
+                version, status, ..
+            } => Kept::Status {
+                version: *version,
+                status: status.clone(),
+            },
+            Record::Learning { memory, .. } => Kept::Learning(memory.clone()),
+            Record::Event { .. } => return None,
+        })
+    }
+}
+
+impl TableStatus {
+    /// The status's name, as the journal and the store spell it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            TableStatus::Waiting { .. } => "waiting",
+            TableStatus::Pushed { .. } => "pushed",
+            TableStatus::Refused { .. } => "refused",
         }
     }
 }

@@ -13,9 +13,11 @@ use camloop_core::digest::Sha256;
 use camloop_core::ids::{PartId, TableVersion};
 use camloop_core::measure::RawMeasurement;
 use camloop_core::turn::{correction_sha256, measurement_sha256};
-use camloop_loop::machine::{Effect, FeatureMachine, Finished, Gauged, Input, Program, ShareView};
+use camloop_loop::machine::{
+    Effect, FeatureMachine, Finished, Gauged, Input, OnShare, Program, ShareView,
+};
 use camloop_loop::memory::LoopMemory;
-use camloop_loop::record::{Record, TableRecord, TableStatus};
+use camloop_loop::record::{Kept, Record, TableRecord, TableStatus};
 use support::{Recipe, WHEEL_MM, at, grind, nominal_mm};
 
 const PARTS: usize = 14;
@@ -31,6 +33,9 @@ const REPEATED: usize = 10;
 struct Share {
     accepted: Vec<TableRecord>,
     pushed: Option<TableVersion>,
+    /// Every version pushed (one accepted during an outage and superseded before it ended
+    /// never is).
+    delivered: Vec<TableVersion>,
     available: bool,
 }
 
@@ -40,9 +45,23 @@ impl Share {
     }
 
     fn view(&self) -> ShareView {
+        let versions = self
+            .accepted
+            .iter()
+            .map(|t| {
+                let on = if self.delivered.contains(&t.version) {
+                    OnShare::Pushed
+                } else {
+                    OnShare::Accepted
+                };
+                (t.version, on)
+            })
+            .collect();
         ShareView {
             next_version: self.next_version(),
             pushed: self.pushed,
+            waiting: self.waiting(),
+            versions,
         }
     }
 
@@ -212,6 +231,7 @@ fn carry_out(
             );
             Some(if share.available {
                 share.pushed = Some(version);
+                share.delivered.push(version);
                 Input::Delivered {
                     version,
                     at: at(index),
@@ -284,9 +304,10 @@ fn run(recipe: &Recipe, crash_after: Option<usize>) -> (World, LoopMemory, bool)
     world.share.available = !OUTAGE.contains(&in_flight);
     let machine = FeatureMachine::resume(
         recipe.config(),
-        &world.journal,
+        kept(&world.journal),
         LoopMemory::new(WHEEL_MM),
         world.share.view(),
+        Default::default(),
         at(in_flight),
     );
     let mut exec = Executor {
@@ -299,6 +320,10 @@ fn run(recipe: &Recipe, crash_after: Option<usize>) -> (World, LoopMemory, bool)
     rest.and_then(|_| sequence(&mut exec, &mut world, in_flight))
         .expect("one stop a run");
     (world, exec.machine.memory().clone(), true)
+}
+
+fn kept(journal: &[Record]) -> Vec<Kept> {
+    journal.iter().filter_map(Record::kept).collect()
 }
 
 fn measurements(journal: &[Record]) -> Vec<Sha256> {
@@ -395,7 +420,7 @@ fn a_stop_after_any_effect_loses_nothing_and_learns_nothing_twice() {
         // The same loop, bit for bit.
         assert_eq!(memory, clean_memory, "stop after effect {k}: the memory");
         assert_eq!(
-            LoopMemory::resume(&world.journal).as_ref(),
+            LoopMemory::resume(&kept(&world.journal)).as_ref(),
             Some(&memory),
             "stop after effect {k}: the journal's newest memory is the machine's"
         );

@@ -15,11 +15,11 @@ use super::{StoreError, VersionStatus};
 /// store refuses to write them rather than fold them into a status it would read back as
 /// another.
 impl VersionStatus {
-    /// Pushed at `at`, learned as `note` says; an instant before 1970 reads as 0, as in the
-    /// share's manifest (its times are unsigned milliseconds).
+    /// Pushed at `at`, learned as `note` says; an instant before 1970 is taken as 1970, as in
+    /// the share's manifest (its times are unsigned milliseconds).
     pub fn pushed_at(at: jiff::Timestamp, note: impl Into<String>) -> Self {
         VersionStatus::Pushed {
-            at_unix_ms: u64::try_from(at.as_millisecond()).unwrap_or(0),
+            at: at.max(jiff::Timestamp::UNIX_EPOCH),
             note: Some(note.into()),
         }
     }
@@ -67,13 +67,12 @@ impl VersionStatus {
         let text = (!why.is_empty()).then_some(why);
         match status {
             "waiting" => Ok(VersionStatus::Waiting { reason: text }),
+            "pushed" if at_ms < 0 => Err(StoreError::invalid(
+                "table status",
+                format!("pushed at {at_ms} ms, before 1970"),
+            )),
             "pushed" => Ok(VersionStatus::Pushed {
-                at_unix_ms: u64::try_from(at_ms).map_err(|_| {
-                    StoreError::invalid(
-                        "table status",
-                        format!("pushed at {at_ms} ms, before 1970"),
-                    )
-                })?,
+                at: crate::unix_ms::instant(at_ms, "table status")?,
                 note: text,
             }),
             "refused" => Ok(VersionStatus::Refused {
@@ -109,7 +108,7 @@ mod tests {
                 "pushed",
                 "pushed to the share on retry",
                 VersionStatus::Pushed {
-                    at_unix_ms: 6_000,
+                    at: jiff::Timestamp::from_millisecond(6_000).expect("a time"),
                     note: Some(why("pushed to the share on retry")),
                 },
             ),
@@ -117,7 +116,7 @@ mod tests {
                 "pushed",
                 "",
                 VersionStatus::Pushed {
-                    at_unix_ms: 6_000,
+                    at: jiff::Timestamp::from_millisecond(6_000).expect("a time"),
                     note: None,
                 },
             ),
@@ -164,5 +163,29 @@ mod tests {
             let e = status.column().unwrap_err().to_string();
             assert!(e.contains(&format!("`{}`", status.name())), "{e}");
         }
+    }
+
+    /// A pushed version's time is a `Timestamp` in the code and the manifest's unsigned
+    /// milliseconds on disk, as every build wrote it: an old manifest's status reads, and
+    /// writes back byte for byte.
+    #[test]
+    fn a_pushed_status_keeps_the_manifests_unsigned_milliseconds() {
+        let old = r#"{"status":"pushed","at_unix_ms":1795443845123}"#;
+        let read: VersionStatus = serde_json::from_str(old).expect("an old status reads");
+        let at = jiff::Timestamp::from_millisecond(1_795_443_845_123).expect("a time");
+        assert_eq!(read, VersionStatus::Pushed { at, note: None });
+        assert_eq!(serde_json::to_string(&read).expect("writes"), old);
+        let noted = r#"{"status":"pushed","at_unix_ms":50,"note":"pushed to the share on retry"}"#;
+        let read: VersionStatus = serde_json::from_str(noted).expect("a noted status reads");
+        assert_eq!(serde_json::to_string(&read).expect("writes"), noted);
+        // An instant before 1970 was written as 0, and still is.
+        let before = jiff::Timestamp::from_millisecond(-5).expect("a time");
+        let status = VersionStatus::pushed_at(before, "x");
+        let json = serde_json::to_value(&status).expect("writes");
+        assert_eq!(json["at_unix_ms"], 0);
+        // A number no time can be is an error naming it, never a clamped time.
+        let huge = r#"{"status":"pushed","at_unix_ms":18446744073709551615}"#;
+        let e = serde_json::from_str::<VersionStatus>(huge).unwrap_err();
+        assert!(e.to_string().contains("18446744073709551615 ms"), "{e}");
     }
 }

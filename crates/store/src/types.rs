@@ -69,7 +69,10 @@ pub enum VersionStatus {
     Delivering,
     /// On the share and verified.
     Pushed {
-        at_unix_ms: u64,
+        /// When it was verified on the share; written as unsigned Unix milliseconds
+        /// (`at_unix_ms`, the manifest's field since its first version).
+        #[serde(rename = "at_unix_ms", with = "crate::unix_ms::unsigned")]
+        at: jiff::Timestamp,
         /// How camloop learned it, as the store keeps it ("pushed to the share on retry");
         /// the share's manifest never writes one.
         #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -42,6 +42,25 @@ pub mod option {
     }
 }
 
+/// The same as unsigned milliseconds, the share manifest's form of a pushed version's time:
+/// an instant before 1970 is written as 0, as the manifest always wrote it.
+pub mod unsigned {
+    use jiff::Timestamp;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(at: &Timestamp, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_u64(u64::try_from(at.as_millisecond()).unwrap_or(0))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Timestamp, D::Error> {
+        let unix_ms = u64::deserialize(d)?;
+        i64::try_from(unix_ms)
+            .map_err(|_| format!("{unix_ms} ms is not a time within the years -9999 to 9999"))
+            .and_then(super::from_ms)
+            .map_err(serde::de::Error::custom)
+    }
+}
+
 /// Integer milliseconds as an instant, or why not.
 pub(crate) fn from_ms(unix_ms: i64) -> Result<Timestamp, String> {
     Timestamp::from_millisecond(unix_ms)

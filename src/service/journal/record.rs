@@ -452,7 +452,7 @@ mod tests {
         };
         let note = Some("pushed to the share on retry".to_string());
         let pushed = VersionStatus::Pushed {
-            at_unix_ms: 9,
+            at: jiff::Timestamp::from_millisecond(9).expect("a time"),
             note,
         };
         assert_eq!(

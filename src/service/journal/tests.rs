@@ -144,7 +144,7 @@ async fn a_journal_with_column_spelled_statuses_replays() {
         .unwrap()
         .unwrap();
     let pushed = VersionStatus::Pushed {
-        at_unix_ms: 9,
+        at: jiff::Timestamp::from_millisecond(9).expect("a time"),
         note: Some("pushed to the share on retry".into()),
     };
     assert_eq!(
@@ -197,7 +197,7 @@ fn every_kind_of_record() -> Vec<Pending> {
             lobe: "IN1".parse().unwrap(),
             version: v(3),
             status: VersionStatus::Pushed {
-                at_unix_ms: 8,
+                at: jiff::Timestamp::from_millisecond(8).expect("a time"),
                 note: Some("pushed on retry".into()),
             },
             at_ms: jiff::Timestamp::from_millisecond(8).unwrap(),
@@ -254,7 +254,7 @@ async fn a_replay_writes_nothing_twice() {
         .unwrap()
         .unwrap();
     let pushed = VersionStatus::Pushed {
-        at_unix_ms: 8,
+        at: jiff::Timestamp::from_millisecond(8).expect("a time"),
         note: Some("pushed on retry".into()),
     };
     assert_eq!((v.version, v.status), (3, pushed));

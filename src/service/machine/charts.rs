@@ -117,7 +117,7 @@ impl FeatureLoop {
         &mut self,
         part: &str,
         measured: &Measured,
-        at_ms: jiff::Timestamp,
+        at: jiff::Timestamp,
     ) -> Vec<Pending> {
         let report = &measured.report;
         let values = PartValues {
@@ -144,7 +144,7 @@ impl FeatureLoop {
                     f.limits.upper
                 );
                 warn!(machine = %self.name, lobe = %self.setup.name, characteristic = c.as_str(), rule = f.rule.as_str(), part, "run rule: {message}");
-                event(&self.name, at_ms, EventLevel::Warn, EventKind::RunRule, message)
+                event(&self.name, at, EventLevel::Warn, EventKind::RunRule, message)
             })
             .collect()
     }

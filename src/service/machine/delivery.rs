@@ -68,7 +68,7 @@ impl FeatureLoop {
         &mut self,
         order: TableOrder,
     ) -> Result<(TableVersion, VersionStatus, Vec<Pending>), MachineError> {
-        let at_ms = order.at;
+        let at = order.at;
         self.machine.handle(Input::Table(Box::new(order)));
         let done = self
             .run_machine(None)
@@ -82,7 +82,7 @@ impl FeatureLoop {
                 reason: "the feature's loop ended a table order without its outcome".into(),
             })??;
         let records = records::pending(&self.name, &self.setup.name, done.records, None);
-        Ok((done.version, records::status(done.status, at_ms), records))
+        Ok((done.version, records::status(done.status, at), records))
     }
 
     /// The records a table's way left for the caller to keep with its own, or why it failed.

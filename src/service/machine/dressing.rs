@@ -47,7 +47,7 @@ impl FeatureLoop {
     ) -> Result<Dressed, MachineError> {
         let (wheel_radius_mm, infeed_um) =
             dressing::check(wheel.radius_mm, wheel.infeed_um).map_err(MachineError::refused)?;
-        let at_ms = now();
+        let at = now();
         let old = self.machine.memory().wheel_radius_mm;
         info!(machine = %self.name, old_radius_mm = old, new_radius_mm = wheel_radius_mm, infeed_um, source, "wheel dressed: table regenerated for the new radius");
         let dressed = Dressing {
@@ -62,7 +62,7 @@ impl FeatureLoop {
             .handle(Input::Dressed(Box::new(machine::Dressed {
                 dressing: dressed,
                 lobe: &lobe,
-                at: at_ms,
+                at,
             })));
         let finished = self.run_machine(None).await;
         let mut done = None;
@@ -83,7 +83,7 @@ impl FeatureLoop {
         if first {
             records.push(Pending::Dressing {
                 machine: self.name.clone(),
-                at_ms,
+                at_ms: at,
                 old_radius_mm: old,
                 new_radius_mm: wheel_radius_mm,
                 infeed_um,
@@ -91,7 +91,7 @@ impl FeatureLoop {
             });
             records.push(event(
                 &self.name,
-                at_ms,
+                at,
                 EventLevel::Info,
                 EventKind::WheelDressed,
                 dressing::event_text(&dressed, source, &done.moved),
@@ -111,7 +111,7 @@ impl FeatureLoop {
                 self.metrics.update(&self.name, |m| m.alarms_total += 1);
                 records.push(event(
                     &self.name,
-                    at_ms,
+                    at,
                     EventLevel::Error,
                     EventKind::TableRefused,
                     e.clone(),
@@ -121,7 +121,7 @@ impl FeatureLoop {
                 )
             }
         };
-        records.push(self.learning_record(at_ms));
+        records.push(self.learning_record(at));
         if !self.record(records).await {
             // The dressing's own records were not kept: said so, not answered as done.
             let reason = format!(

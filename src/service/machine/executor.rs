@@ -12,9 +12,9 @@ use crate::core::measure::RawMeasurement;
 use crate::core::program::comment_text;
 use crate::failpoint::crash_point;
 use crate::share::{PushError, Submitted};
+use camloop_loop::Input;
 use camloop_loop::TableVersion;
 use camloop_loop::machine::{Alarm, Effect, Finished, Metric, Program, RenderOrder};
-use camloop_loop::{FeatureMachine, Input};
 use tracing::{error, warn};
 
 impl FeatureLoop {
@@ -226,18 +226,4 @@ impl FeatureLoop {
                 .update_feature(&machine, &feature, |f| f.blocked_by_guard = status),
         }
     }
-}
-
-/// The machine of a feature, resumed from `memory` (the journal's newest, else the store's).
-pub(super) fn machine_for(
-    setup: &crate::recipe::FeatureSetup,
-    memory: camloop_loop::LoopMemory,
-) -> FeatureMachine {
-    FeatureMachine::new(
-        camloop_loop::machine::FeatureConfig {
-            feature: setup.name.clone(),
-            params: setup.params.clone(),
-        },
-        memory,
-    )
 }

@@ -15,7 +15,7 @@ use crate::recipe::FeatureSetup;
 use crate::share::{RealFs, Share, ShareConfig};
 use crate::store::{EventLevel, FeatureKind, Store};
 use anyhow::Context;
-use camloop_loop::{FeatureMachine, PartId};
+use camloop_loop::FeatureMachine;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -67,7 +67,13 @@ impl FeatureLoop {
     ) -> anyhow::Result<Self> {
         let mut journal =
             Journal::open(&paths.state_dir).with_context(|| format!("machine {name}: journal"))?;
-        let memory = load_memory(&name, &setup, &journal, &store, opening).await?;
+        // The journal's newest memory (it holds what the store may not have yet), else the
+        // store's: a restart resumes where the loop was.
+        let kept = super::reconcile::kept(&name, &setup.name, journal.records());
+        let fallback = match LoopMemory::resume(&kept) {
+            Some(_) => LoopMemory::new(setup.feature.wheel_radius_mm()),
+            None => stored_memory(&name, &setup, &store, opening).await?,
+        };
         if let Err(e) = std::fs::create_dir_all(&paths.share_dir) {
             // Not fatal: the share may be a mount that comes back; deliveries wait for it. An
             // alarm all the same: nothing reaches the control until it is there.
@@ -93,7 +99,9 @@ impl FeatureLoop {
         let program_file = format!("{}.SPF", setup.program.name);
         let charts =
             super::charts::ChartWatch::new(&crate::quality::FeatureLimits::from_setup(&setup));
-        let feature_machine = super::executor::machine_for(&setup, memory);
+        let view = super::reconcile::share_view(&share);
+        let feature_machine =
+            super::reconcile::resumed_machine(&name, &setup, kept, fallback, view, &store).await;
         let mut machine = Self {
             name,
             setup,
@@ -120,7 +128,7 @@ impl FeatureLoop {
     /// Reconciles the memory with the share, reports a quarantined journal, and makes sure
     /// the share holds a table.
     async fn after_start(&mut self, report: &crate::share::OpenReport) -> anyhow::Result<()> {
-        let at_ms = now();
+        let at = now();
         self.setup.feature = self
             .setup
             .feature
@@ -131,12 +139,12 @@ impl FeatureLoop {
         );
         self.reconcile_share().await?;
         let plan_changed = self.plan_at_start()?;
-        let mut records = vec![self.recipe_snapshot(at_ms)];
+        let mut records = vec![self.recipe_snapshot(at)];
         for q in self.journal.quarantined() {
             error!(machine = %self.name, line = q.line, reason = %q.reason, "journal line unreadable: moved to the quarantine file");
             records.push(records::event(
                 &self.name,
-                at_ms,
+                at,
                 EventLevel::Error,
                 EventKind::JournalQuarantined,
                 format!(
@@ -169,14 +177,14 @@ impl FeatureLoop {
             };
             let next = self.machine.memory().newest_learning().clone();
             let mut records = self.deliver(&table, next, reason, None).await?;
-            records.push(self.learning_record(at_ms));
+            records.push(self.learning_record(at));
             self.record(records).await;
         }
         Ok(())
     }
 
     /// What this machine grinds, as the store keeps it (skipped there when unchanged).
-    fn recipe_snapshot(&self, at_ms: jiff::Timestamp) -> Pending {
+    fn recipe_snapshot(&self, at: jiff::Timestamp) -> Pending {
         let s = &self.setup;
         let recipe = RecipeRecord {
             label: &s.label,
@@ -201,7 +209,7 @@ impl FeatureLoop {
             lobe: s.name.clone(),
             kind,
             recipe_json: serde_json::to_string(&recipe).unwrap_or_else(|_| "{}".into()),
-            created_at_ms: at_ms,
+            created_at_ms: at,
         }
     }
 
@@ -281,7 +289,7 @@ impl FeatureLoop {
 
     /// The disk is full (the journal runs on its reserve: measurements are still kept,
     /// learning holds, the feature's machine decides that): said once when it starts.
-    pub(super) async fn disk_full_alarm(&mut self, at_ms: jiff::Timestamp) {
+    pub(super) async fn disk_full_alarm(&mut self, at: jiff::Timestamp) {
         if self.disk_alarm {
             return;
         }
@@ -294,7 +302,7 @@ impl FeatureLoop {
         );
         let e = records::event(
             &self.name,
-            at_ms,
+            at,
             EventLevel::Error,
             EventKind::DiskFull,
             message,
@@ -325,14 +333,14 @@ impl FeatureLoop {
     /// Records the store refused for good were set aside (see [`Journal::flush`]): an alarm
     /// each, and an event in the history saying where the record is kept.
     async fn note_refused(&mut self, refused: &[super::super::journal::Refused], store: &Store) {
-        let at_ms = now();
+        let at = now();
         let events: Vec<Pending> = refused
             .iter()
             .map(|r| {
                 error!(machine = %self.name, lobe = %self.setup.name, record = r.kind, reason = %r.reason, "the database refuses a journal record: kept aside, the records after it go on");
                 records::event(
                     &self.name,
-                    at_ms,
+                    at,
                     EventLevel::Error,
                     EventKind::JournalQuarantined,
                     format!(
@@ -356,12 +364,12 @@ impl FeatureLoop {
 
     /// The loop's memory as a record; through the journal it is also what a restart resumes
     /// from.
-    pub(super) fn learning_record(&self, at_ms: jiff::Timestamp) -> Pending {
+    pub(super) fn learning_record(&self, at: jiff::Timestamp) -> Pending {
         Pending::Learning {
             machine: self.name.clone(),
             lobe: self.setup.name.clone(),
             state: Box::new(self.machine.memory().clone()),
-            saved_at_ms: at_ms,
+            saved_at_ms: at,
         }
     }
 }
@@ -383,36 +391,15 @@ struct RecipeRecord<'a> {
     limits: &'a compensate::AxisLimits,
 }
 
-/// The newest memory: the journal's (it holds what the store may not have yet, and always
-/// the newest learning state), else the store's. A store that answers with an error is an
-/// error here, never "no state": starting from nominal would silently forget the loop.
-async fn load_memory(
+/// The store's memory of the feature, for a journal that holds none. A store that answers
+/// with an error is an error here, never "no state": starting from nominal would silently
+/// forget the loop.
+async fn stored_memory(
     name: &MachineName,
     setup: &FeatureSetup,
-    journal: &Journal,
     store: &StoreHandle,
     opening: &super::Opening,
 ) -> anyhow::Result<LoopMemory> {
-    let records = journal.records();
-    let newest = records.iter().rposition(|r| {
-        matches!(r, Pending::Learning { machine, lobe, .. } if machine == name && *lobe == setup.name)
-    });
-    if let Some(i) = newest
-        && let Pending::Learning { state, .. } = &records[i]
-    {
-        // Measurements recorded after it (the process died before their learning record)
-        // still count, and are still known, so a replay does not learn them again.
-        let mut memory = state.clone();
-        for r in &records[i + 1..] {
-            if let Pending::Measurement { measurement: m, .. } = r
-                && m.lobe == setup.name
-                && m.stage == crate::store::MeasurementStage::Final
-            {
-                memory.measured(m.sha256, PartId::new(&m.part).ok());
-            }
-        }
-        return Ok(*memory);
-    }
     let known_none = opening
         .known_states
         .as_ref()

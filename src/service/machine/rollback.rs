@@ -66,7 +66,7 @@ impl FeatureLoop {
             });
         }
         let (text, learning, number) = self.rollback_program(lobe, version).await?;
-        let at_ms = now();
+        let at = now();
         let reason = format!("rollback to v{version}");
         let mut next = self.machine.memory().learning.clone();
         if learning.correction_um.len() == next.correction_um.len() {
@@ -84,7 +84,7 @@ impl FeatureLoop {
             measurement: None,
             rollback_of: Some(version),
             learning: Some(learning),
-            at: at_ms,
+            at,
         };
         let (new_version, status, mut records) = self.deliver_order(order).await?;
         let why = status.why();
@@ -92,12 +92,12 @@ impl FeatureLoop {
         records.extend([
             event(
                 &self.name,
-                at_ms,
+                at,
                 EventLevel::Info,
                 EventKind::Rollback,
                 format!("{reason} as v{new_version}, table {number}: {why}"),
             ),
-            self.learning_record(at_ms),
+            self.learning_record(at),
         ]);
         self.record(records).await;
         // The status (API, /metrics, OPC UA, the audit row's after) shows the table now in

@@ -132,7 +132,7 @@ impl Tracker {
             s.machine = event.machine().clone();
             feature_facts(s, event);
             s.seq = seq;
-            s.at_ms = event.at_ms();
+            s.at_ms = event.at();
             let mut shown = s.clone();
             shown.alarms.extend(m.alarms.iter().cloned());
             shown.alarm = !shown.alarms.is_empty();
@@ -165,8 +165,10 @@ fn feature_facts(s: &mut FeatureState, event: &PlantEvent) {
         } => {
             s.last_part = Some(part.clone());
             s.last_verdict = Some(*verdict);
-            if s.version_in_force.is_none() && *ground_with_version > 0 {
-                s.version_in_force = Some(*ground_with_version);
+            if s.version_in_force.is_none()
+                && let Some(v) = ground_with_version
+            {
+                s.version_in_force = Some(v.get());
             }
         }
         PlantEvent::TableDelivered { version, .. } => {
@@ -190,12 +192,12 @@ mod tests {
             machine: "M1".parse().unwrap(),
             feature: "IN1".parse().unwrap(),
             part: format!("P{n}"),
-            at_ms: jiff::Timestamp::from_millisecond(i64::from(n)).unwrap(),
+            at: jiff::Timestamp::from_millisecond(i64::from(n)).unwrap(),
             verdict,
             max_profile_error_um: 1.0,
             base_radius_error_um: 0.0,
             phase_error_deg: 0.0,
-            ground_with_version: 3,
+            ground_with_version: camloop_loop::TableVersion::new(3),
             repeatability_um: None,
         }
     }
@@ -203,7 +205,7 @@ mod tests {
     fn alarm(kind: &str) -> PlantEvent {
         PlantEvent::Alarm {
             machine: "M1".parse().unwrap(),
-            at_ms: jiff::Timestamp::from_millisecond(9).unwrap(),
+            at: jiff::Timestamp::from_millisecond(9).unwrap(),
             level: EventLevel::Warn,
             kind: kind.into(),
             message: "m".into(),
@@ -235,7 +237,7 @@ mod tests {
         assert_eq!(s["alarms"], serde_json::json!(["blocked_by_guard"]));
         let frozen = PlantEvent::LearningFrozen {
             machine: "M1".parse().unwrap(),
-            at_ms: jiff::Timestamp::from_millisecond(10).unwrap(),
+            at: jiff::Timestamp::from_millisecond(10).unwrap(),
             reason: "diverging".into(),
         };
         assert_eq!(state(&mut t, &frozen).1["frozen"], true);
@@ -243,7 +245,7 @@ mod tests {
             machine: "M1".parse().unwrap(),
             feature: "IN1".parse().unwrap(),
             version: camloop_loop::TableVersion::new(7).unwrap(),
-            at_ms: jiff::Timestamp::from_millisecond(11).unwrap(),
+            at: jiff::Timestamp::from_millisecond(11).unwrap(),
         };
         let (_, s) = state(&mut t, &delivered);
         assert_eq!(

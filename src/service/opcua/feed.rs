@@ -96,7 +96,7 @@ impl Feed {
             PlantEvent::PartAnalysed {
                 feature,
                 part,
-                at_ms,
+                at: at_ms,
                 verdict,
                 max_profile_error_um,
                 ..
@@ -119,7 +119,7 @@ impl Feed {
                 let ty = self.ids.result_ready_type();
                 self.raise(&machine, feature, (ty, severity), message, *at_ms, None);
             }
-            PlantEvent::Dressing { at_ms, .. } => {
+            PlantEvent::Dressing { at: at_ms, .. } => {
                 let n = self.dressings.entry(e.machine().clone()).or_default();
                 *n += 1;
                 let n = *n;
@@ -147,7 +147,7 @@ impl Feed {
                     other.feature(),
                     (&kind, severity),
                     payload(other),
-                    other.at_ms(),
+                    other.at(),
                     stored.as_deref(),
                 );
             }
@@ -166,7 +166,7 @@ impl Feed {
             machine,
             feature,
             part,
-            at_ms,
+            at: at_ms,
             ..
         } = e
         else {
@@ -466,7 +466,7 @@ fn result_values(
         machine,
         feature,
         part,
-        at_ms,
+        at: at_ms,
         verdict,
         max_profile_error_um,
         base_radius_error_um,

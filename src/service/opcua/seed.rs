@@ -14,8 +14,8 @@ use crate::store::{HistoryFilter, MasterRuns, MeasurementSummary, Store};
 /// A feature's newest stored result, as the feed shows a part.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Seed {
-    /// The part as its event would carry it (`ground_with_version` 0: the history does
-    /// not keep it).
+    /// The part as its event would carry it (`ground_with_version` none: the history
+    /// does not keep it).
     pub(crate) part: PlantEvent,
     /// `max |error|` of the stored analysis, µm (the loop's `MaxError`).
     pub(crate) max_error_um: Option<f64>,
@@ -93,12 +93,12 @@ pub(crate) fn seed_of(s: MeasurementSummary, analysis_json: &str) -> Seed {
             machine: s.machine,
             feature: s.lobe,
             part: s.part,
-            at_ms: s.received_at_ms,
+            at: s.received_at_ms,
             verdict: s.verdict,
             max_profile_error_um: s.max_profile_error_um,
             base_radius_error_um: s.base_radius_error_um,
             phase_error_deg: s.phase_error_deg,
-            ground_with_version: 0,
+            ground_with_version: None,
             repeatability_um,
         },
         max_error_um,

@@ -48,7 +48,7 @@ async fn add_table(store: &Store) -> i64 {
             learning_params_json: "{}".into(),
             reason: "nominal table".into(),
             status: VersionStatus::Pushed {
-                at_unix_ms: 1_000,
+                at: jiff::Timestamp::from_millisecond(1_000).expect("a time"),
                 note: Some("pushed to the share".into()),
             },
             created_at_ms: jiff::Timestamp::from_millisecond(1_000).unwrap(),

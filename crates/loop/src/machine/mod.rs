@@ -15,7 +15,8 @@
 //!
 //! - `part`: a measurement's step (repeat, hold, the turn, guards in a row, records);
 //! - `table`: a table's way to the control (render, write-ahead, submit, deliver, retry);
-//! - `resume`: a machine rebuilt from what the journal kept, the share reconciled;
+//! - `resume`: a machine rebuilt from what the journal kept, reconciled with the share (every
+//!   decision of a start);
 //! - `between`: a dressing, a part not gauged, a freeze (what happens between parts).
 
 mod between;
@@ -25,7 +26,7 @@ mod table;
 
 pub use between::{Dressed, DressingDone, NotGaugedDone};
 pub use part::{Gauged, PartNote, PartReport};
-pub use resume::ShareView;
+pub use resume::{FROM_THE_MANIFEST, OnShare, ResumeReport, ShareView, adopt};
 pub use table::{Program, RenderOrder, TableDone, TableOrder};
 
 use crate::memory::LoopMemory;
@@ -194,8 +195,8 @@ pub enum Finished {
     Table(Result<TableDone, DeliveryError>),
     /// A waiting version reached the control on a retry.
     ShareBack { version: TableVersion },
-    /// A step cut short by a stop was finished at resume.
-    Resumed,
+    /// A start's reconciliation is done (a step cut short finished with it): what it did.
+    Resumed(Box<ResumeReport>),
     /// A dressing moved the correction (its table's way follows, when it made one).
     Dressed(DressingDone),
     /// A part ground but not gauged.
@@ -244,6 +245,8 @@ enum Phase {
     Table(Box<table::Delivery>),
     /// A waiting version delivered again on a tick.
     Retrying(TableVersion),
+    /// A start reconciling the journal with the share.
+    Resuming(Box<resume::Resuming>),
 }
 
 /// One feature's loop (see the module doc).
@@ -322,6 +325,7 @@ impl FeatureMachine {
                 reason,
             } => self.on_journal_failed(ticket, fenced_out, reason),
             other if matches!(self.phase, Phase::Retrying(_)) => self.on_retry_answer(other),
+            other if matches!(self.phase, Phase::Resuming(_)) => self.on_resume_input(other),
             other => self.on_table_input(other),
         }
     }

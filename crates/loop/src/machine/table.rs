@@ -5,6 +5,7 @@
 //! not gauged, the start, a rollback) goes it alone.
 
 use super::part::{PartNote, PartStep};
+use super::resume::ResumeReport;
 use super::{Alarm, DeliveryError, Effect, FeatureMachine, Finished, Input, Metric, Phase, Ticket};
 use crate::memory::{LoopMemory, TableLearning, WaitingTable};
 use crate::record::{EventKind, Record, SUBMITTED, TableRecord, TableStatus};
@@ -88,25 +89,16 @@ pub(super) struct Delivery {
     waiting_before: Option<WaitingTable>,
     record: Option<TableRecord>,
     part: Option<Box<PartStep>>,
-    /// A step a stop cut short, finished at resume: its records are the machine's to keep.
-    resumed: bool,
+    /// A step a stop cut short, finished at resume (with what the start did so far): its
+    /// records are the machine's to keep.
+    resumed: Option<Box<ResumeReport>>,
 }
 
 impl Delivery {
-    /// The table of a step cut short, written ahead already: to submit, or (`submitted`)
-    /// to deliver.
-    pub(super) fn resumed(
-        order: TableOrder,
-        record: TableRecord,
-        memory: LoopMemory,
-        submitted: bool,
-    ) -> Self {
+    /// The table of a step cut short, written ahead and on the share already: to deliver.
+    pub(super) fn resumed(order: TableOrder, record: TableRecord, memory: LoopMemory) -> Self {
         Self {
-            stage: if submitted {
-                Stage::Delivering
-            } else {
-                Stage::Submitting
-            },
+            stage: Stage::Delivering,
             learning: record.learning.clone(),
             parent: record.parent,
             order,
@@ -114,8 +106,14 @@ impl Delivery {
             waiting_before: None,
             record: Some(record),
             part: None,
-            resumed: true,
+            resumed: Some(Box::default()),
         }
+    }
+
+    /// With what the start did before it.
+    pub(super) fn with_report(mut self, report: Box<ResumeReport>) -> Self {
+        self.resumed = Some(report);
+        self
     }
 
     /// The effect that takes a resumed table on.
@@ -163,7 +161,7 @@ impl FeatureMachine {
             memory,
             record: None,
             part,
-            resumed: false,
+            resumed: None,
         }));
     }
 
@@ -380,9 +378,10 @@ impl FeatureMachine {
         });
         match d.part.take() {
             Some(part) => self.close_part(*part, records),
-            None if d.resumed => {
+            None if d.resumed.is_some() => {
                 records.push(self.learning_record(d.order.at));
-                self.close(records, Finished::Resumed);
+                let report = d.resumed.take().unwrap_or_default();
+                self.close(records, Finished::Resumed(report));
             }
             None => {
                 self.phase = Phase::Idle;
@@ -411,6 +410,12 @@ impl FeatureMachine {
                 part.note = PartNote::NotRecorded(e);
                 self.memory.waiting = d.waiting_before.take();
                 self.close_part(*part, Vec::new());
+            }
+            None if d.resumed.is_some() => {
+                // A start's delivery that failed: the version still waits, for the retry.
+                let mut report = d.resumed.take().unwrap_or_default();
+                report.not_delivered = Some(e.to_string());
+                self.close(Vec::new(), Finished::Resumed(report));
             }
             None => {
                 let mut records = Vec::new();
