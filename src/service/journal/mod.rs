@@ -7,6 +7,7 @@
 mod commit;
 mod record;
 mod reserve;
+mod writer;
 
 pub use record::{EventKind, Pending};
 use record::{apply, apply_once};
@@ -258,17 +259,15 @@ impl Journal {
         }
     }
 
-    /// Writes up to [`BATCH_RECORDS`] new records (none replayed) in one transaction:
-    /// one commit for a step's records (measurement, table, status, learning, events)
+    /// Writes up to [`BATCH_RECORDS`] new records (none replayed) through the store's group
+    /// commit ([`writer`]): in one transaction with whatever other journals write meanwhile,
     /// rather than one each. Returns how many went; on an error none did.
     async fn flush_batch(&mut self, store: &Store) -> Result<usize, StoreError> {
         let end = self.records.len().min(self.written + BATCH_RECORDS);
         let records = &self.records[self.written..end];
-        let mut batch = store.begin_batch().await?;
-        for record in records {
-            record::apply_in(&mut batch, record).await?;
-        }
-        batch.commit().await?;
+        writer::StoreWriter::global()
+            .write(store, records.to_vec())
+            .await?;
         for record in records {
             crash_point(record.committed_step());
         }
