@@ -430,6 +430,7 @@ impl Metrics {
         );
         render_part_seconds(s, &self.backlog.done.counts());
         let (appends, syncs, batches) = super::journal::commit_totals();
+        let (store_batches, store_records) = super::journal::store_totals();
         for (name, help, value) in [
             (
                 "camloop_journal_appends_total",
@@ -445,6 +446,16 @@ impl Metrics {
                 "camloop_journal_batches_total",
                 "Journal batches written.",
                 batches,
+            ),
+            (
+                "camloop_store_batches_total",
+                "Store transactions of journal records (group commit across machines).",
+                store_batches,
+            ),
+            (
+                "camloop_store_records_total",
+                "Journal records written to the store in them.",
+                store_records,
             ),
         ] {
             let _ = writeln!(

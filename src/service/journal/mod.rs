@@ -12,6 +12,7 @@ mod writer;
 pub use record::{EventKind, Pending};
 use record::{apply, apply_once};
 pub use reserve::{RESERVE_BYTES, SharedReserve, share_under as share_reserve_under};
+pub(crate) use writer::totals as store_totals;
 
 use crate::failpoint::crash_point;
 use crate::share::{Fence, Held};
