@@ -505,7 +505,7 @@ mod tests {
             text.contains("camloop_last_max_error_um{machine=\"M1\"} 0.5\n"),
             "{text}"
         );
-        assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 4 + 2 + 1 + 3);
+        assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 4 + 2 + 1 + 3 + 2);
         // The part-time histogram: every bucket, cumulative, even before any part.
         assert!(
             text.contains("camloop_part_seconds_bucket{le=\"2\"} 0\n"),
