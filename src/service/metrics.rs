@@ -430,6 +430,7 @@ impl Metrics {
         );
         render_part_seconds(s, &self.backlog.done.counts());
         let (appends, syncs, batches) = super::journal::commit_totals();
+        let (store_batches, store_records) = super::journal::store_totals();
         for (name, help, value) in [
             (
                 "camloop_journal_appends_total",
@@ -445,6 +446,16 @@ impl Metrics {
                 "camloop_journal_batches_total",
                 "Journal batches written.",
                 batches,
+            ),
+            (
+                "camloop_store_batches_total",
+                "Store transactions of journal records (group commit across machines).",
+                store_batches,
+            ),
+            (
+                "camloop_store_records_total",
+                "Journal records written to the store in them.",
+                store_records,
             ),
         ] {
             let _ = writeln!(
@@ -494,7 +505,7 @@ mod tests {
             text.contains("camloop_last_max_error_um{machine=\"M1\"} 0.5\n"),
             "{text}"
         );
-        assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 4 + 2 + 1 + 3);
+        assert_eq!(text.matches("# TYPE").count(), 14 + 5 + 4 + 2 + 1 + 3 + 2);
         // The part-time histogram: every bucket, cumulative, even before any part.
         assert!(
             text.contains("camloop_part_seconds_bucket{le=\"2\"} 0\n"),

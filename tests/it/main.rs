@@ -138,6 +138,7 @@ mod sim_envelope;
 mod sim_gauge;
 mod sim_machine;
 mod sim_wheel;
+mod store_batch;
 mod store_chains;
 mod store_errors;
 mod store_masters;

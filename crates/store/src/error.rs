@@ -129,6 +129,17 @@ impl StoreError {
             reason: reason.into(),
         }
     }
+
+    /// The database at `target` cannot be written now, for `reason` (the detail says the
+    /// same: it comes from camloop, not from a driver).
+    pub fn unavailable(target: &str, reason: impl Into<String>) -> Self {
+        let reason = reason.into();
+        StoreError::Unavailable {
+            target: target.to_owned(),
+            detail: Detail(reason.clone()),
+            reason,
+        }
+    }
 }
 
 /// What a driver error means for the caller, in plain words.

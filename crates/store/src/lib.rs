@@ -27,6 +27,7 @@
 
 mod audit;
 mod audit_key;
+mod batch;
 mod chain;
 mod codec;
 mod connect;
@@ -54,6 +55,7 @@ use tokio::sync::{Semaphore, SemaphorePermit};
 
 pub use audit::{AuditCheck, AuditEntry, AuditRow, HeadCheck, MAX_AUDIT_PAGE};
 pub use audit_key::{AuditHead, AuditKey, AuditKeyError};
+pub use batch::Batch;
 pub use codec::{encode_lifts_mm, sha256_hex};
 pub use convert::Converted;
 pub use error::{Detail, StoreError};

@@ -1,88 +1,16 @@
 //! Machines, recipe snapshots, wheel dressings, events and learning-state snapshots.
 
-use super::chain::{LEARNING_STATES, fetch_chain, next_link, texts_of};
-use super::codec::{
-    CODEC_PACKED, check_finite, check_json, check_limit, check_name, feature_of, machine_of,
-    sha256_hex,
-};
+use super::chain::{LEARNING_STATES, fetch_chain};
+use super::codec::{check_limit, feature_of, machine_of, sha256_hex};
 use super::measurements::{Bind, Conditions, fetch_all_dynamic};
-use super::pack::pack_text;
 use super::unix_ms::instant;
 use super::{
-    Dressing, DressingId, Event, EventFilter, EventId, EventKind, EventLevel, Feature, FeatureKind,
-    LearningState, Machine, NewDressing, NewEvent, NewRecipeSnapshot, RecipeSnapshotId, Store,
-    StoreError, at_col, col, with_read, with_write,
+    Dressing, DressingId, Event, EventFilter, EventId, EventKind, EventLevel, Feature, FeatureKey,
+    FeatureKind, LearningState, Machine, NewDressing, NewEvent, NewRecipeSnapshot,
+    RecipeSnapshotId, Store, StoreError, at_col, col, with_read, with_write,
 };
-use crate::BeginWrite;
 use camloop_core::digest::Sha256;
 use camloop_core::names::{FeatureName, MachineName};
-
-/// The newest learning state of (machine, lobe) when it has meaning `$3` and no row is
-/// packed against it: the one a snapshot with the same meaning replaces.
-const REPLACEABLE_STATE: &str = "SELECT n.id, n.base_id FROM learning_states n WHERE n.id = \
-     (SELECT MAX(id) FROM learning_states WHERE machine = $1 AND lobe = $2) \
-     AND n.meaning_sha256 = $3 AND NOT EXISTS \
-     (SELECT 1 FROM learning_states c WHERE c.base_id = n.id)";
-
-const ENSURE_MACHINE: &str =
-    "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) ON CONFLICT (name) DO NOTHING";
-
-/// Appends one row of a machine's log in one transaction with the machine's first sight:
-/// `$sql` takes the machine as `$1`, the time as `$2`, then `$bind…`, and returns the id.
-/// Dressings and events are this same transaction.
-macro_rules! append_logged {
-    ($store:expr, $op:expr, $machine:expr, $at_ms:expr, $sql:expr $(, $bind:expr)* $(,)?) => {
-        with_write!($store, pool => {
-            let mut tx = pool.begin_write().await.map_err($store.db_error($op))?;
-            sqlx::query(ENSURE_MACHINE)
-                .bind($machine)
-                .bind($at_ms)
-                .execute(&mut *tx)
-                .await
-                .map_err($store.db_error($op))?;
-            let id: i64 = sqlx::query_scalar($sql)
-                .bind($machine)
-                .bind($at_ms)
-                $(.bind($bind))*
-                .fetch_one(&mut *tx)
-                .await
-                .map_err($store.db_error($op))?;
-            tx.commit().await.map_err($store.db_error($op))?;
-            Ok::<i64, StoreError>(id)
-        })
-    };
-}
-
-/// Replaces learning state row `$id` (packed against `$base_id`) of (machine, lobe) with
-/// `$state_json` saved at `$saved_at_ms`, in transaction `$tx`: a snapshot with the same
-/// meaning as the newest, which nothing is packed against yet.
-macro_rules! replace_state {
-    ($store:expr, $tx:expr, ($machine:expr, $lobe:expr), ($id:expr, $base_id:expr),
-     $state_json:expr, $state_sha256:expr, $saved_at_ms:expr, $op:expr) => {{
-        let base = match $base_id {
-            Some(b) => texts_of!($store, $tx, LEARNING_STATES, $machine, $lobe, b).remove(0),
-            None => String::new(),
-        };
-        let packed = pack_text("state_packed", $state_json, &base)?;
-        $store.chains.put(
-            (LEARNING_STATES.table, $machine, $lobe),
-            $id,
-            vec![packed.clone()],
-            vec![$state_json.to_string()],
-        );
-        sqlx::query(
-            "UPDATE learning_states SET state_packed = $1, state_sha256 = $2, \
-             saved_at_ms = $3 WHERE id = $4",
-        )
-        .bind(packed)
-        .bind($state_sha256)
-        .bind($saved_at_ms)
-        .bind($id)
-        .execute(&mut *$tx)
-        .await
-        .map_err($store.db_error($op))?;
-    }};
-}
 
 impl Store {
     /// Keeps a recipe snapshot of one lobe or pin. When the newest snapshot of that
@@ -91,52 +19,11 @@ impl Store {
         &self,
         r: &NewRecipeSnapshot,
     ) -> Result<RecipeSnapshotId, StoreError> {
-        check_name("machine", r.machine.as_str())?;
-        check_name("part", &r.part)?;
-        check_name("lobe", &r.lobe)?;
-        check_json("recipe_json", &r.recipe_json)?;
-        let sha256 = sha256_hex(r.recipe_json.as_bytes());
         const OP: &str = "inserting a recipe snapshot";
-        with_write!(self, pool => {
-            let mut tx = pool.begin_write().await.map_err(self.db_error(OP))?;
-            sqlx::query(ENSURE_MACHINE)
-                .bind(r.machine.as_str())
-                .bind(r.created_at_ms.as_millisecond())
-                .execute(&mut *tx)
-                .await
-                .map_err(self.db_error(OP))?;
-            let newest: Option<(i64, String)> = sqlx::query_as(
-                "SELECT id, sha256 FROM recipe_snapshots WHERE machine = $1 AND part = $2 \
-                 AND lobe = $3 ORDER BY id DESC LIMIT 1",
-            )
-            .bind(r.machine.as_str())
-            .bind(&r.part)
-            .bind(r.lobe.as_str())
-            .fetch_optional(&mut *tx)
-            .await
-            .map_err(self.db_error(OP))?;
-            if let Some((id, stored)) = newest
-                && stored == sha256
-            {
-                return Ok(RecipeSnapshotId(id));
-            }
-            let id: i64 = sqlx::query_scalar(
-                "INSERT INTO recipe_snapshots (machine, part, lobe, kind, recipe_json, sha256, \
-                 created_at_ms) VALUES ($1, $2, $3, $4, $5, $6, $7) RETURNING id",
-            )
-            .bind(r.machine.as_str())
-            .bind(&r.part)
-            .bind(r.lobe.as_str())
-            .bind(r.kind.as_str())
-            .bind(&r.recipe_json)
-            .bind(&sha256)
-            .bind(r.created_at_ms.as_millisecond())
-            .fetch_one(&mut *tx)
-            .await
-            .map_err(self.db_error(OP))?;
-            tx.commit().await.map_err(self.db_error(OP))?;
-            Ok(RecipeSnapshotId(id))
-        })
+        let mut batch = self.begin_batch_for(OP).await?;
+        let id = batch.insert_recipe_snapshot(r).await?;
+        batch.commit_for(OP).await?;
+        Ok(id)
     }
 
     /// Machines seen by the store, by name.
@@ -188,27 +75,40 @@ impl Store {
         })
     }
 
+    /// Every machine's lobes and pins with their newest recipe snapshot's kind, by machine,
+    /// part then lobe: one query for a whole plant, where asking [`Self::features`] of each
+    /// machine took one round trip per machine (500 at plant scale) and read every recipe.
+    pub async fn feature_keys(&self) -> Result<Vec<FeatureKey>, StoreError> {
+        const OP: &str = "listing features";
+        with_read!(self, pool => {
+            let rows: Vec<(String, String, String, String)> = sqlx::query_as(
+                "SELECT r.machine, r.part, r.lobe, r.kind FROM recipe_snapshots r WHERE r.id = \
+                 (SELECT MAX(r2.id) FROM recipe_snapshots r2 WHERE r2.machine = r.machine \
+                  AND r2.part = r.part AND r2.lobe = r.lobe) ORDER BY r.machine, r.part, r.lobe",
+            )
+            .fetch_all(pool)
+            .await
+            .map_err(self.db_error(OP))?;
+            rows.into_iter()
+                .map(|(machine, part, lobe, kind)| {
+                    Ok(FeatureKey {
+                        machine: machine_of(machine)?,
+                        part,
+                        lobe: feature_of("lobe", lobe)?,
+                        kind: FeatureKind::parse(&kind)?,
+                    })
+                })
+                .collect()
+        })
+    }
+
     /// Appends a wheel dressing; returns its row id.
     pub async fn insert_dressing(&self, d: &NewDressing) -> Result<DressingId, StoreError> {
-        check_name("machine", d.machine.as_str())?;
-        check_finite("old_radius_mm", d.old_radius_mm)?;
-        check_finite("new_radius_mm", d.new_radius_mm)?;
-        if let Some(infeed) = d.infeed_um {
-            check_finite("infeed_um", infeed)?;
-        }
-        append_logged!(
-            self,
-            "inserting a dressing",
-            d.machine.as_str(),
-            d.at_ms.as_millisecond(),
-            "INSERT INTO dressings (machine, at_ms, old_radius_mm, new_radius_mm, source, \
-             infeed_um) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
-            d.old_radius_mm,
-            d.new_radius_mm,
-            &d.source,
-            d.infeed_um,
-        )
-        .map(DressingId)
+        const OP: &str = "inserting a dressing";
+        let mut batch = self.begin_batch_for(OP).await?;
+        let id = batch.insert_dressing(d).await?;
+        batch.commit_for(OP).await?;
+        Ok(id)
     }
 
     /// Whether this dressing (same machine, time and new radius) is stored: how a journal
@@ -266,19 +166,11 @@ impl Store {
 
     /// Appends an alarm or event; returns its row id.
     pub async fn insert_event(&self, e: &NewEvent) -> Result<EventId, StoreError> {
-        check_name("machine", e.machine.as_str())?;
-        append_logged!(
-            self,
-            "inserting an event",
-            e.machine.as_str(),
-            e.at_ms.as_millisecond(),
-            "INSERT INTO events (machine, at_ms, level, kind, message) \
-             VALUES ($1, $2, $3, $4, $5) RETURNING id",
-            e.level.as_str(),
-            e.kind.as_str(),
-            &e.message,
-        )
-        .map(EventId)
+        const OP: &str = "inserting an event";
+        let mut batch = self.begin_batch_for(OP).await?;
+        let id = batch.insert_event(e).await?;
+        batch.commit_for(OP).await?;
+        Ok(id)
     }
 
     /// Whether this event (same machine, time, kind and message) is stored: how a journal
@@ -369,66 +261,12 @@ impl Store {
         meaning_sha256: Option<&Sha256>,
         saved_at_ms: jiff::Timestamp,
     ) -> Result<(), StoreError> {
-        let (machine, lobe) = (machine.as_str(), lobe.as_str());
-        check_name("machine", machine)?;
-        check_name("lobe", lobe)?;
-        check_json("state_json", state_json)?;
-        let meaning_sha256 = meaning_sha256.map(Sha256::to_string);
-        let state_sha256 = sha256_hex(state_json.as_bytes());
         const OP: &str = "saving learning state";
-        with_write!(self, pool => {
-            let mut tx = pool.begin_write().await.map_err(self.db_error(OP))?;
-            sqlx::query(ENSURE_MACHINE)
-                .bind(machine)
-                .bind(saved_at_ms.as_millisecond())
-                .execute(&mut *tx)
-                .await
-                .map_err(self.db_error(OP))?;
-            let replace: Option<(i64, Option<i64>)> = match &meaning_sha256 {
-                None => None,
-                Some(meaning) => sqlx::query_as(REPLACEABLE_STATE)
-                    .bind(machine)
-                    .bind(lobe)
-                    .bind(meaning)
-                    .fetch_optional(&mut *tx)
-                    .await
-                    .map_err(self.db_error(OP))?,
-            };
-            match replace {
-                Some((id, base_id)) => {
-                    replace_state!(self, tx, (machine, lobe), (id, base_id), state_json, &state_sha256, saved_at_ms.as_millisecond(), OP);
-                }
-                None => {
-                    let (base_id, depth, base) = next_link!(self, tx, LEARNING_STATES, machine, lobe);
-                    let packed = pack_text("state_packed", state_json, &base[0])?;
-                    let id: i64 = sqlx::query_scalar(
-                        "INSERT INTO learning_states (machine, lobe, saved_at_ms, codec, base_id, \
-                         chain_depth, state_packed, state_sha256, meaning_sha256) \
-                         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) RETURNING id",
-                    )
-                    .bind(machine)
-                    .bind(lobe)
-                    .bind(saved_at_ms.as_millisecond())
-                    .bind(CODEC_PACKED)
-                    .bind(base_id)
-                    .bind(depth)
-                    .bind(&packed)
-                    .bind(&state_sha256)
-                    .bind(meaning_sha256)
-                    .fetch_one(&mut *tx)
-                    .await
-                    .map_err(self.db_error(OP))?;
-                    self.chains.put(
-                        (LEARNING_STATES.table, machine, lobe),
-                        id,
-                        vec![packed],
-                        vec![state_json.to_string()],
-                    );
-                }
-            }
-            tx.commit().await.map_err(self.db_error(OP))?;
-            Ok(())
-        })
+        let mut batch = self.begin_batch_for(OP).await?;
+        batch
+            .save_learning_snapshot(machine, lobe, state_json, meaning_sha256, saved_at_ms)
+            .await?;
+        batch.commit_for(OP).await
     }
 
     /// Whether this learning-state snapshot of (machine, lobe) is stored: how a journal

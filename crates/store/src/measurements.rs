@@ -3,7 +3,7 @@
 
 use super::codec::{
     CODEC_PACKED, CODEC_PLAIN, check_finite, check_json, check_limit, check_name, decode_cursor,
-    decode_units, encode_cursor, encode_units, units_to_mm,
+    decode_units, encode_cursor, units_to_mm,
 };
 use super::pack::{pack_profile, pack_revolutions, unpack_profile, unpack_revolutions};
 use super::pack_report::{pack_report, unpack_report};
@@ -12,7 +12,6 @@ use super::{
     NewMeasurement, Page, RecipeSnapshotId, Store, StoreError, Verdict, at_col, col, with_read,
     with_write,
 };
-use crate::BeginWrite;
 use camloop_core::measure::MASTER_PART_PREFIX;
 use camloop_core::names::{FeatureName, MachineName};
 
@@ -220,7 +219,7 @@ fn split_revolutions(lifts: Vec<f64>, points_per_rev: u32) -> Result<Vec<Vec<f64
     Ok(lifts.chunks_exact(n).map(<[f64]>::to_vec).collect())
 }
 
-fn check_measurement(m: &NewMeasurement) -> Result<(), StoreError> {
+pub(crate) fn check_measurement(m: &NewMeasurement) -> Result<(), StoreError> {
     check_name("machine", m.machine.as_str())?;
     check_name("part", &m.part)?;
     check_name("lobe", &m.lobe)?;
@@ -257,75 +256,11 @@ impl Store {
         &self,
         m: &NewMeasurement,
     ) -> Result<MeasurementId, StoreError> {
-        check_measurement(m)?;
-        let raw = if m.raw_lift_mm.is_empty() {
-            None
-        } else {
-            Some(encode_units(m.raw_lift_mm.iter().flatten().copied())?)
-        };
-        let averaged = encode_units(m.averaged_lift_mm.iter().copied())?;
-        let (raw, averaged, analysis) = pack_data(raw.as_deref(), &averaged, &m.analysis_json)?;
         const OP: &str = "inserting a measurement";
-        with_write!(self, pool => {
-            let mut tx = pool.begin_write().await.map_err(self.db_error(OP))?;
-            sqlx::query(
-                "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) \
-                 ON CONFLICT (name) DO NOTHING",
-            )
-            .bind(m.machine.as_str())
-            .bind(m.received_at_ms.as_millisecond())
-            .execute(&mut *tx)
-            .await
-            .map_err(self.db_error(OP))?;
-            let inserted: Option<i64> = sqlx::query_scalar(
-                "INSERT INTO measurements (machine, part, lobe, received_at_ms, verdict, \
-                 max_profile_error_um, base_radius_error_um, phase_error_deg, revolutions_used, \
-                 points_per_rev, origin, sha256, recipe_snapshot_id, stage) \
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14) \
-                 ON CONFLICT (sha256) DO NOTHING RETURNING id",
-            )
-            .bind(m.machine.as_str())
-            .bind(&m.part)
-            .bind(m.lobe.as_str())
-            .bind(m.received_at_ms.as_millisecond())
-            .bind(m.verdict.as_str())
-            .bind(m.max_profile_error_um)
-            .bind(m.base_radius_error_um)
-            .bind(m.phase_error_deg)
-            .bind(i64::from(m.revolutions_used))
-            .bind(i64::from(m.points_per_rev))
-            .bind(&m.origin)
-            .bind(m.sha256.to_string())
-            .bind(m.recipe_snapshot.map(|r| r.0))
-            .bind(m.stage.as_str())
-            .fetch_optional(&mut *tx)
-            .await
-            .map_err(self.db_error(OP))?;
-            let id = match inserted {
-                Some(id) => {
-                    sqlx::query(
-                        "INSERT INTO measurement_data (measurement_id, codec, raw_revolutions, \
-                         averaged_profile, analysis_packed) VALUES ($1, $2, $3, $4, $5)",
-                    )
-                    .bind(id)
-                    .bind(CODEC_PACKED)
-                    .bind(raw)
-                    .bind(averaged)
-                    .bind(analysis)
-                    .execute(&mut *tx)
-                    .await
-                    .map_err(self.db_error(OP))?;
-                    id
-                }
-                None => sqlx::query_scalar("SELECT id FROM measurements WHERE sha256 = $1")
-                    .bind(m.sha256.to_string())
-                    .fetch_one(&mut *tx)
-                    .await
-                    .map_err(self.db_error(OP))?,
-            };
-            tx.commit().await.map_err(self.db_error(OP))?;
-            Ok(MeasurementId(id))
-        })
+        let mut batch = self.begin_batch_for(OP).await?;
+        let id = batch.insert_measurement(m).await?;
+        batch.commit_for(OP).await?;
+        Ok(id)
     }
 
     /// Lists measurements of one machine, newest first (by `received_at_ms`, then id), one

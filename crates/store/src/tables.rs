@@ -1,14 +1,12 @@
 //! Table versions: each regenerated curve-table program, numbered per (machine, lobe), with
 //! its status kept as appended rows (the newest row is the current status).
 
-use super::chain::{TABLE_VERSIONS, fetch_chain, next_link};
-use super::codec::{CODEC_PACKED, check_json, check_limit, check_name, sha256_hex};
-use super::pack::pack_text;
+use super::chain::{TABLE_VERSIONS, fetch_chain};
+use super::codec::{check_limit, sha256_hex};
 use super::{
     NewTableVersion, Store, StoreError, TableVersion, VersionStatus, at_col, col, with_read,
     with_write,
 };
-use crate::BeginWrite;
 use camloop_core::names::{FeatureName, MachineName};
 
 const SELECT_VERSION: &str = "SELECT t.id, t.machine, t.lobe, t.version, t.parent_version, \
@@ -76,103 +74,16 @@ macro_rules! version_summary {
     }};
 }
 
-/// Returns [`StoreError::NotFound`] from the enclosing function when `$t` names a parent
-/// version that (machine, lobe) does not have: a version derives from a stored one.
-macro_rules! require_parent {
-    ($store:expr, $tx:expr, $t:expr, $op:expr) => {
-        if let Some(parent) = $t.parent_version {
-            let found: Option<i64> = sqlx::query_scalar(
-                "SELECT id FROM table_versions WHERE machine = $1 AND lobe = $2 AND version = $3",
-            )
-            .bind($t.machine.as_str())
-            .bind($t.lobe.as_str())
-            .bind(parent)
-            .fetch_optional(&mut *$tx)
-            .await
-            .map_err($store.db_error($op))?;
-            if found.is_none() {
-                return Err(StoreError::NotFound {
-                    what: format!(
-                        "parent table version {parent} of machine {} lobe {}",
-                        $t.machine, $t.lobe
-                    ),
-                });
-            }
-        }
-    };
-}
-
 impl Store {
     /// Appends a table version and its first status; returns its version number, one more
     /// than the highest stored for this (machine, lobe), starting at 1. Two writers racing
     /// for the same number get [`StoreError::Conflict`] for the loser.
     pub async fn insert_table_version(&self, t: &NewTableVersion) -> Result<i64, StoreError> {
-        check_name("machine", t.machine.as_str())?;
-        check_name("lobe", &t.lobe)?;
-        check_json("learning_params_json", &t.learning_params_json)?;
-        let (status, why) = t.status.column()?;
-        let sha256 = sha256_hex(t.program_text.as_bytes());
         const OP: &str = "inserting a table version";
-        with_write!(self, pool => {
-            let mut tx = pool.begin_write().await.map_err(self.db_error(OP))?;
-            sqlx::query(
-                "INSERT INTO machines (name, first_seen_ms) VALUES ($1, $2) \
-                 ON CONFLICT (name) DO NOTHING",
-            )
-            .bind(t.machine.as_str())
-            .bind(t.created_at_ms.as_millisecond())
-            .execute(&mut *tx)
-            .await
-            .map_err(self.db_error(OP))?;
-            require_parent!(self, tx, t, OP);
-            let (base_id, depth, base) = next_link!(self, tx, TABLE_VERSIONS, t.machine.as_str(), t.lobe.as_str());
-            let program = pack_text("program_packed", &t.program_text, &base[0])?;
-            let learning = pack_text("learning_packed", &t.learning_params_json, &base[1])?;
-            let (id, version): (i64, i64) = sqlx::query_as(
-                "INSERT INTO table_versions (machine, lobe, version, parent_version, \
-                 table_number, sha256, reason, created_at_ms, codec, base_id, chain_depth, \
-                 program_packed, learning_packed) \
-                 SELECT $1, $2, COALESCE($8, COALESCE(MAX(version), 0) + 1), $3, $4, $5, $6, $7, \
-                 $9, $10, $11, $12, $13 \
-                 FROM table_versions WHERE machine = $1 AND lobe = $2 \
-                 RETURNING id, version",
-            )
-            .bind(t.machine.as_str())
-            .bind(t.lobe.as_str())
-            .bind(t.parent_version)
-            .bind(i64::from(t.table_number))
-            .bind(&sha256)
-            .bind(&t.reason)
-            .bind(t.created_at_ms.as_millisecond())
-            .bind(t.version)
-            .bind(CODEC_PACKED)
-            .bind(base_id)
-            .bind(depth)
-            .bind(&program)
-            .bind(&learning)
-            .fetch_one(&mut *tx)
-            .await
-            .map_err(self.db_error(OP))?;
-            self.chains.put(
-                (TABLE_VERSIONS.table, t.machine.as_str(), t.lobe.as_str()),
-                id,
-                vec![program, learning],
-                vec![t.program_text.clone(), t.learning_params_json.clone()],
-            );
-            sqlx::query(
-                "INSERT INTO table_version_status (table_version_id, status, why, at_ms) \
-                 VALUES ($1, $2, $3, $4)",
-            )
-            .bind(id)
-            .bind(status)
-            .bind(why)
-            .bind(t.created_at_ms.as_millisecond())
-            .execute(&mut *tx)
-            .await
-            .map_err(self.db_error(OP))?;
-            tx.commit().await.map_err(self.db_error(OP))?;
-            Ok(version)
-        })
+        let mut batch = self.begin_batch_for(OP).await?;
+        let version = batch.insert_table_version(t).await?;
+        batch.commit_for(OP).await?;
+        Ok(version)
     }
 
     /// Appends a status for a stored table version (e.g. waiting → pushed), as of `at_ms`.
@@ -184,30 +95,12 @@ impl Store {
         status: &VersionStatus,
         at_ms: jiff::Timestamp,
     ) -> Result<(), StoreError> {
-        let (status, why) = status.column()?;
-        let (machine, lobe) = (machine.as_str(), lobe.as_str());
-        with_write!(self, pool => {
-            let done = sqlx::query(
-                "INSERT INTO table_version_status (table_version_id, status, why, at_ms) \
-                 SELECT id, $4, $5, $6 FROM table_versions \
-                 WHERE machine = $1 AND lobe = $2 AND version = $3",
-            )
-            .bind(machine)
-            .bind(lobe)
-            .bind(version)
-            .bind(status)
-            .bind(why)
-            .bind(at_ms.as_millisecond())
-            .execute(pool)
-            .await
-            .map_err(self.db_error("recording a table status"))?;
-            if done.rows_affected() == 0 {
-                return Err(StoreError::NotFound {
-                    what: format!("table version {version} of machine {machine} lobe {lobe}"),
-                });
-            }
-            Ok(())
-        })
+        const OP: &str = "recording a table status";
+        let mut batch = self.begin_batch_for(OP).await?;
+        batch
+            .set_table_status(machine, lobe, version, status, at_ms)
+            .await?;
+        batch.commit_for(OP).await
     }
 
     /// Whether a table version of (machine, lobe) made at `created_at_ms` with exactly this

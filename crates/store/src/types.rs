@@ -164,6 +164,16 @@ pub struct Feature {
     pub created_at_ms: Timestamp,
 }
 
+/// A lobe or pin known on a machine, by its latest recipe snapshot's kind: what a plant's
+/// list of machines shows, read for every machine in one query ([`super::Store::feature_keys`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FeatureKey {
+    pub machine: MachineName,
+    pub part: String,
+    pub lobe: FeatureName,
+    pub kind: FeatureKind,
+}
+
 /// A machine the store has seen (created by its first write).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Machine {

@@ -5,6 +5,7 @@ use super::super::machine::memory::{LoopMemory, TableLearning};
 use crate::core::digest::Sha256;
 use crate::core::ids::TableVersion;
 use crate::names::{FeatureName, MachineName};
+use crate::store::Batch;
 pub use crate::store::EventKind;
 use crate::store::{
     EventLevel, FeatureKind, NewDressing, NewEvent, NewMeasurement, NewRecipeSnapshot,
@@ -306,12 +307,20 @@ fn meaning_sha256(state: &LoopMemory) -> Result<Sha256, StoreError> {
         .map_err(|e| StoreError::invalid("learning state", e.to_string()))
 }
 
+/// Writes `record` to the store in a transaction of its own.
 pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreError> {
+    let mut batch = store.begin_batch().await?;
+    apply_in(&mut batch, record).await?;
+    batch.commit().await
+}
+
+/// Writes `record` in `batch`, which commits it with the batch's other records.
+pub(super) async fn apply_in(batch: &mut Batch<'_>, record: &Pending) -> Result<(), StoreError> {
     match record.clone() {
         Pending::Measurement { measurement, .. } => {
-            store.insert_measurement(&measurement).await.map(|_| ())
+            batch.insert_measurement(&measurement).await.map(|_| ())
         }
-        record @ Pending::Table { .. } => insert_table(store, record).await,
+        record @ Pending::Table { .. } => insert_table(batch, record).await,
         Pending::VersionStatus {
             machine,
             lobe,
@@ -319,12 +328,12 @@ pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreEr
             status,
             at_ms,
         } => {
-            store
+            batch
                 .set_table_status(&machine, &lobe, version.to_i64(), &status, at_ms)
                 .await
         }
         Pending::Event { .. } => match record.event()? {
-            Some(e) => store.insert_event(&e).await.map(|_| ()),
+            Some(e) => batch.insert_event(&e).await.map(|_| ()),
             None => Ok(()),
         },
         Pending::Learning {
@@ -334,7 +343,7 @@ pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreEr
             saved_at_ms,
         } => {
             let meaning = meaning_sha256(&state)?;
-            store
+            batch
                 .save_learning_snapshot(
                     &machine,
                     &lobe,
@@ -344,15 +353,32 @@ pub(super) async fn apply(store: &Store, record: &Pending) -> Result<(), StoreEr
                 )
                 .await
         }
-        record @ Pending::RecipeSnapshot { .. } => insert_snapshot(store, record).await,
+        Pending::RecipeSnapshot {
+            machine,
+            part,
+            lobe,
+            kind,
+            recipe_json,
+            created_at_ms,
+        } => {
+            let r = NewRecipeSnapshot {
+                machine,
+                part,
+                lobe,
+                kind,
+                recipe_json,
+                created_at_ms,
+            };
+            batch.insert_recipe_snapshot(&r).await.map(|_| ())
+        }
         Pending::Dressing { .. } => match record.dressing()? {
-            Some(d) => store.insert_dressing(&d).await.map(|_| ()),
+            Some(d) => batch.insert_dressing(&d).await.map(|_| ()),
             None => Ok(()),
         },
     }
 }
 
-async fn insert_table(store: &Store, record: Pending) -> Result<(), StoreError> {
+async fn insert_table(batch: &mut Batch<'_>, record: Pending) -> Result<(), StoreError> {
     let Pending::Table {
         machine,
         lobe,
@@ -370,16 +396,10 @@ async fn insert_table(store: &Store, record: Pending) -> Result<(), StoreError> 
         return Ok(());
     };
     // A parent the store never saw (history from before one version counter) is
-    // left out rather than blocking every later record.
+    // left out rather than blocking every later record. Asked in the batch: a parent
+    // written earlier in it counts.
     let parent_version = match parent_version {
-        Some(p)
-            if store
-                .table_version_status(&machine, &lobe, p.to_i64())
-                .await?
-                .is_some() =>
-        {
-            Some(p.to_i64())
-        }
+        Some(p) if batch.has_table_version(&machine, &lobe, p.to_i64()).await? => Some(p.to_i64()),
         _ => None,
     };
     let learning_params_json = serde_json::to_string(&learning)
@@ -396,30 +416,7 @@ async fn insert_table(store: &Store, record: Pending) -> Result<(), StoreError> 
         status,
         created_at_ms,
     };
-    store.insert_table_version(&t).await.map(|_| ())
-}
-
-async fn insert_snapshot(store: &Store, record: Pending) -> Result<(), StoreError> {
-    let Pending::RecipeSnapshot {
-        machine,
-        part,
-        lobe,
-        kind,
-        recipe_json,
-        created_at_ms,
-    } = record
-    else {
-        return Ok(());
-    };
-    let r = NewRecipeSnapshot {
-        machine,
-        part,
-        lobe,
-        kind,
-        recipe_json,
-        created_at_ms,
-    };
-    store.insert_recipe_snapshot(&r).await.map(|_| ())
+    batch.insert_table_version(&t).await.map(|_| ())
 }
 
 #[cfg(test)]

@@ -26,7 +26,8 @@ impl FeatureLoop {
             let answer = match effect {
                 Effect::Journal { ticket, records } => {
                     let records = records::pending(&self.name, &self.setup.name, records, raw);
-                    Some(match self.record_or_why(records).await {
+                    // Journalled (durable) now; written to the store once, after the step.
+                    Some(match self.journal_or_why(records) {
                         Ok(()) => Input::Journalled(ticket),
                         Err(reason) => Input::JournalFailed {
                             ticket,
@@ -65,6 +66,11 @@ impl FeatureLoop {
                 self.machine.handle(answer);
             }
         }
+        // The step's records (measurement, table, status, learning, events) go to the store
+        // in one write, after its table is on the share: the store is history, not the
+        // durability the step waits for (the journal is), so the part never waits on it
+        // between its journal writes.
+        self.flush_journal().await;
         finished
     }
 

@@ -257,6 +257,14 @@ impl FeatureLoop {
 
     /// [`Self::record`], with why the journal did not take them.
     pub(super) async fn record_or_why(&mut self, records: Vec<Pending>) -> Result<(), String> {
+        let kept = self.journal_or_why(records);
+        self.flush_journal().await;
+        kept
+    }
+
+    /// Appends records to the journal (durable) and tells the plant's events; the store
+    /// gets them at the next [`Self::flush_journal`].
+    pub(super) fn journal_or_why(&mut self, records: Vec<Pending>) -> Result<(), String> {
         if records.is_empty() {
             return Ok(());
         }
@@ -283,7 +291,6 @@ impl FeatureLoop {
         let failing = u64::from(kept.is_err() || self.journal.on_reserve());
         self.metrics
             .update(&self.name, |m| m.journal_failing = failing);
-        self.flush_journal().await;
         kept
     }
 
