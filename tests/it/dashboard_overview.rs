@@ -183,3 +183,118 @@ async fn overview_equals_the_feature_reads_on_postgres() {
         overview_equals_the_feature_reads(t).await;
     }
 }
+
+/// The overview page's rows as (machine, lobe, last part id, table in force), in order.
+fn page_rows(page: &str) -> Vec<(String, String, i64, String)> {
+    let attr = |row: &str, name: &str| -> String {
+        let from = row.find(&format!("{name}=\"")).unwrap() + name.len() + 2;
+        row[from..from + row[from..].find('"').unwrap()].to_string()
+    };
+    page.split("<tr data-machine=")
+        .skip(1)
+        .map(|r| {
+            let row = format!("data-machine={r}");
+            let cells: Vec<&str> = row.split("<td>").collect();
+            // The table's cell: "v2 (T11)" or "—".
+            let table = cells[5].split("</td>").next().unwrap().trim().to_string();
+            (
+                attr(&row, "data-machine"),
+                attr(&row, "data-lobe"),
+                attr(&row, "data-last-id").parse().unwrap(),
+                table,
+            )
+        })
+        .collect()
+}
+
+/// What the feature reads say each row must show.
+async fn expected_rows(
+    s: &Store,
+    keys: &[(MachineName, FeatureName)],
+) -> Vec<(String, String, i64, String)> {
+    let reference = overview_reference::features(s, keys, PARTS, VERSIONS).await;
+    keys.iter()
+        .zip(reference)
+        .map(|((m, f), (r, _))| {
+            let table = match &r.in_force {
+                Some(v) => format!("v{} (T{})", v.version, v.table_number),
+                None => "—".to_string(),
+            };
+            (
+                m.to_string(),
+                f.to_string(),
+                r.recent.last().map_or(0, |p| p.id.0),
+                table,
+            )
+        })
+        .collect()
+}
+
+/// The page served twice over a store that changes in between (a new part, a late part
+/// with an older time, a status appended): each time every row shows what the feature
+/// reads say, so what the page remembers between views never shows an old row.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_overview_page_follows_the_store_between_views() {
+    use crate::service_support::get;
+    use camloop::service::http::{self, AppState, HttpLimits};
+    use std::collections::BTreeMap;
+    use std::sync::Arc;
+    use std::time::Duration;
+    let t = store_support::sqlite().await;
+    let s = t.store.clone();
+    seed(&s).await;
+    let keys: Vec<(MachineName, FeatureName)> = [("M1", "EX1"), ("M1", "IN1"), ("M2", "IN1")]
+        .iter()
+        .map(|(a, b)| (m(a), f(b)))
+        .collect();
+    let mut machines: BTreeMap<MachineName, Vec<FeatureName>> = BTreeMap::new();
+    for (a, b) in &keys {
+        machines.entry(a.clone()).or_default().push(b.clone());
+    }
+    let limits = HttpLimits {
+        max_connections: 16,
+        max_connections_per_client: 16,
+        header_timeout: Duration::from_secs(10),
+        body_timeout: Duration::from_secs(10),
+    };
+    let state = AppState {
+        store: Arc::new(tokio::sync::RwLock::new(Some(s.clone()))),
+        metrics: Arc::default(),
+        machines: Arc::new(machines),
+        commands: Arc::default(),
+        auth: Arc::new(http::AuthState::new(None, true)),
+        body_timeout: limits.body_timeout,
+        dashboard: Arc::new(BTreeMap::new()),
+        cluster: None,
+    };
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (stop, stopped) = tokio::sync::watch::channel(false);
+    tokio::spawn(http::serve(listener, http::router(state), limits, stopped));
+
+    let (status, page) = get(addr, "/").await;
+    assert_eq!(status, 200, "{page}");
+    let first = page_rows(&page);
+    assert_eq!(first, expected_rows(&s, &keys).await);
+    assert_eq!(first[1].3, "v2 (T11)", "{first:?}");
+
+    // A new part of M1 IN1, a part of M1 EX1 stored late with the oldest time, and M1 IN1's
+    // waiting v4 pushed.
+    let new = s
+        .insert_measurement(&measurement("M1", "IN1", 70, 95_000))
+        .await
+        .unwrap();
+    s.insert_measurement(&measurement("M1", "EX1", 71, 100))
+        .await
+        .unwrap();
+    let pushed = VersionStatus::from_column("pushed", "pushed to share".into(), 9_000).unwrap();
+    s.set_table_status(&m("M1"), &f("IN1"), 4, &pushed, ms(9_000))
+        .await
+        .unwrap();
+    let (_, page) = get(addr, "/").await;
+    let second = page_rows(&page);
+    assert_eq!(second, expected_rows(&s, &keys).await);
+    assert_eq!(second[1].2, new.0, "{second:?}");
+    assert_eq!(second[1].3, "v4 (T11)", "{second:?}");
+    let _ = stop.send(true);
+}

@@ -59,7 +59,7 @@ pub use codec::{encode_lifts_mm, sha256_hex};
 pub use convert::Converted;
 pub use error::{Detail, StoreError};
 pub use identity::StoreIdentity;
-pub use overview::{FeatureOverview, OverviewPart};
+pub use overview::{FeatureOverview, OverviewChanges, OverviewPart};
 pub use pack_report::REPORT_STEP;
 pub use types::*;
 pub use users::{NewToken, TokenGrant, TokenId, TokenInfo, User, UserId};

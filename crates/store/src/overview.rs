@@ -40,6 +40,17 @@ pub struct FeatureOverview {
     pub learning: Option<(i64, Option<String>)>,
 }
 
+/// What changed since a reader last looked: the features with a measurement or a
+/// table-version status row stored after the ids it gives, and the newest ids now.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct OverviewChanges {
+    pub features: BTreeSet<(MachineName, FeatureName)>,
+    /// The newest measurement id (0 with none).
+    pub measurement: i64,
+    /// The newest table-version status id (0 with none).
+    pub status: i64,
+}
+
 /// The feature list as the query's driving rows: `f(k, machine, lobe)` with `k` the index
 /// in `features`. SQLite reads a JSON array (`$1`); PostgreSQL two text arrays (`$1`, `$2`).
 fn driver(postgres: bool) -> &'static str {
@@ -292,6 +303,62 @@ impl Store {
             out[slot(k, features.len())?].learning = Some((id, sha));
         }
         Ok(())
+    }
+
+    /// Each feature's newest learning-state row (id and SHA-256 of its text), in order.
+    pub async fn plant_learning(
+        &self,
+        features: &[(MachineName, FeatureName)],
+    ) -> Result<Vec<Option<(i64, Option<String>)>>, StoreError> {
+        let mut out = vec![FeatureOverview::default(); features.len()];
+        if !features.is_empty() {
+            self.overview_learning(features, &mut out).await?;
+        }
+        Ok(out.into_iter().map(|f| f.learning).collect())
+    }
+
+    /// The newest ids first (so a row stored meanwhile is seen now or next time), then the
+    /// features of the measurements with an id above `after_measurement` and of the status
+    /// rows above `after_status`: each a range of the primary key, as cheap as what is new.
+    pub async fn overview_changes(
+        &self,
+        after_measurement: i64,
+        after_status: i64,
+    ) -> Result<OverviewChanges, StoreError> {
+        const OP: &str = "reading what changed since the overview";
+        with_read!(self, pool => {
+            let measurement: i64 =
+                sqlx::query_scalar("SELECT COALESCE(MAX(id), 0) FROM measurements")
+                    .fetch_one(pool)
+                    .await
+                    .map_err(self.db_error(OP))?;
+            let status: i64 =
+                sqlx::query_scalar("SELECT COALESCE(MAX(id), 0) FROM table_version_status")
+                    .fetch_one(pool)
+                    .await
+                    .map_err(self.db_error(OP))?;
+            let mut rows: Vec<(String, String)> = sqlx::query_as(
+                "SELECT DISTINCT machine, lobe FROM measurements WHERE id > $1",
+            )
+            .bind(after_measurement)
+            .fetch_all(pool)
+            .await
+            .map_err(self.db_error(OP))?;
+            let versions: Vec<(String, String)> = sqlx::query_as(
+                "SELECT DISTINCT t.machine, t.lobe FROM table_version_status s \
+                 JOIN table_versions t ON t.id = s.table_version_id WHERE s.id > $1",
+            )
+            .bind(after_status)
+            .fetch_all(pool)
+            .await
+            .map_err(self.db_error(OP))?;
+            rows.extend(versions);
+            let features = rows
+                .into_iter()
+                .map(|(m, f)| Ok((machine_of(m)?, feature_of("lobe", f)?)))
+                .collect::<Result<_, StoreError>>()?;
+            Ok(OverviewChanges { features, measurement, status })
+        })
     }
 
     /// Every (machine, feature) the store knows a recipe snapshot of, and every machine it

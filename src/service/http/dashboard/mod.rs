@@ -49,6 +49,7 @@ pub(super) struct Dash {
     app: AppState,
     live: sse::Live,
     frozen: overview::FrozenMemo,
+    rows: overview::OverviewMemo,
 }
 
 /// The dashboard's routes, for the API description (`/openapi.json`).
@@ -83,6 +84,7 @@ pub(super) fn router(app: AppState) -> Router {
             app,
             live,
             frozen: overview::FrozenMemo::default(),
+            rows: overview::OverviewMemo::default(),
         })
 }
 
@@ -101,7 +103,7 @@ async fn overview(
     State(d): State<Dash>,
     ApiQuery(q): ApiQuery<PageQuery>,
 ) -> Result<Html<String>, ApiError> {
-    let rows = overview::overview(&d.app, &d.frozen).await?;
+    let rows = overview::overview(&d.app, &d.rows, &d.frozen).await?;
     Ok(Html(pages::overview(&rows, q.fragment.is_some())))
 }
 
