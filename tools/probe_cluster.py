@@ -76,6 +76,7 @@ class Postgres:
         self.data = os.path.join(dir, "data")
         self.as_postgres = os.getuid() == 0
         self.port = free_port()
+        os.makedirs(dir, exist_ok=True)
         if self.as_postgres:
             subprocess.run(["chown", "-R", "postgres:", dir], check=True)
         self.run("initdb", "-D", self.data, "-A", "trust", "-U", "postgres", "-E", "UTF8")
@@ -207,7 +208,7 @@ def wait_until(what, limit_s, check, step=0.2):
         if check():
             return time.monotonic() - t0
         time.sleep(step)
-    print(f"  {what}: not within {limit_s:.0f} s")
+    print(f"  {what}: not within {limit_s:.0f} s", flush=True)
     return None
 
 

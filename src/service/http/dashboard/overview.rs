@@ -98,7 +98,12 @@ impl OverviewMemo {
 /// Whether each feature's newest learning state is frozen, by (row id, SHA-256 of its
 /// text): a row replaced in place gets a new SHA-256, so an entry is never stale.
 #[derive(Clone, Default)]
-pub(super) struct FrozenMemo(Arc<Mutex<HashMap<(MachineName, FeatureName), (i64, String, bool)>>>);
+pub(super) struct FrozenMemo(Arc<Mutex<HashMap<FeatureKey, Unpacked>>>);
+
+type FeatureKey = (MachineName, FeatureName);
+
+/// A learning state once unpacked: its row id, the SHA-256 of its text, whether frozen.
+type Unpacked = (i64, String, bool);
 
 impl FrozenMemo {
     fn get(&self, key: &(MachineName, FeatureName), id: i64, sha: &str) -> Option<bool> {
