@@ -200,7 +200,7 @@ async fn seed_feature(
             .fetch_one(&mut **tx).await.unwrap();
         // Every fifth machine's newest version still waits for its share: the overview's
         // table in force is then the one before.
-        let status = if v == plant.versions && i % 5 == 0 {
+        let status = if v == plant.versions && i.is_multiple_of(5) {
             "waiting"
         } else {
             "pushed"
@@ -218,7 +218,7 @@ async fn learning_states(store: &Store, plant: Plant) {
         let m = MachineName::new(&machine(i)).unwrap();
         for f in plant.features {
             k += 1;
-            let frozen = (k % 97 == 0).then_some("step reverted: error grew");
+            let frozen = k.is_multiple_of(97).then_some("step reverted: error grew");
             let memory = serde_json::json!({"learning": {"correction_um": vec![0.25 + k as f64 * 1e-3; POINTS], "frozen": frozen}});
             let at = jiff::Timestamp::from_millisecond(T0_MS).unwrap();
             store
