@@ -153,9 +153,13 @@ impl Ctx {
         let live = self.leases.live_instances().await?;
         let rows = self.leases.all().await?;
         let all = self.runner.names();
+        // A set, not a scan of the rows per machine: at 1,500 machines that was 2.25 M name
+        // comparisons a round, every half second, on each instance.
+        let leased: std::collections::HashSet<&MachineName> =
+            rows.iter().filter(|r| r.live).map(|r| &r.machine).collect();
         let free: Vec<MachineName> = all
             .iter()
-            .filter(|m| !rows.iter().any(|r| r.machine == **m && r.live))
+            .filter(|m| !leased.contains(m))
             .cloned()
             .collect();
         let mine: Vec<MachineName> = self.holdings().held.keys().cloned().collect();

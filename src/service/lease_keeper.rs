@@ -133,7 +133,7 @@ impl Keeper {
     async fn connect(&self, stopped: &mut watch::Receiver<bool>) -> Option<Leases> {
         let mut said = String::new();
         loop {
-            match Leases::connect(&self.url, &self.instance, self.lease).await {
+            match Leases::connect_keeper(&self.url, &self.instance, self.lease).await {
                 Ok(l) => return Some(l),
                 Err(e) => self.say_once(&mut said, e.to_string()),
             }

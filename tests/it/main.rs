@@ -23,6 +23,8 @@ mod machine_support;
 mod mqtt_support;
 #[path = "../opcua_support/mod.rs"]
 mod opcua_support;
+#[path = "../common/overview_reference.rs"]
+mod overview_reference;
 #[path = "../process_support/mod.rs"]
 mod process_support;
 #[path = "../rs274_support/mod.rs"]
@@ -63,6 +65,7 @@ mod config_check;
 mod control_coupling;
 mod crank_service;
 mod dashboard_http;
+mod dashboard_overview;
 mod docs;
 mod docs_commands;
 mod gauge_can;

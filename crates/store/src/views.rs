@@ -6,7 +6,6 @@ use crate::BeginWrite;
 use jiff::Timestamp;
 
 use super::codec::check_limit;
-use super::unix_ms::instant;
 use super::{
     EventId, LearningState, Store, StoreError, VersionStatus, at_col, col, with_read, with_write,
 };
@@ -119,29 +118,31 @@ impl Store {
         })
     }
 
-    /// The newest learning-state snapshot of (machine, lobe), read through the readers' gate.
+    /// The newest learning-state snapshot of (machine, lobe), read through the readers' gate:
+    /// a packed row's chain resolved and checked, as the machine loop's load does (reading
+    /// the plain column alone gave an empty text for a packed row on SQLite, so a frozen
+    /// feature never showed, and an error on PostgreSQL).
     pub async fn learning_state_for_view(
         &self,
         machine: &MachineName,
         lobe: &FeatureName,
     ) -> Result<Option<LearningState>, StoreError> {
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
-        with_read!(self, pool => {
-            let row: Option<(String, i64)> = sqlx::query_as(
-                "SELECT state_json, saved_at_ms FROM learning_states \
+        let newest: Option<i64> = with_read!(self, pool => {
+            sqlx::query_scalar(
+                "SELECT id FROM learning_states \
                  WHERE machine = $1 AND lobe = $2 ORDER BY id DESC LIMIT 1",
             )
             .bind(machine)
             .bind(lobe)
             .fetch_optional(pool)
             .await
-            .map_err(self.db_error("loading learning state"))?;
-            row.map(|(state_json, saved_at_ms)| {
-                let saved_at_ms = instant(saved_at_ms, "saved_at_ms")?;
-                Ok(LearningState { state_json, saved_at_ms })
-            })
-            .transpose()
-        })
+            .map_err(self.db_error("loading learning state"))?
+        });
+        match newest {
+            None => Ok(None),
+            Some(id) => self.learning_state_row_for_view(id).await,
+        }
     }
 
     /// The newest `limit` table versions of (machine, lobe) without their programs, highest

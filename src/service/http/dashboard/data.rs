@@ -1,23 +1,22 @@
-//! What the pages show, read from the store through the readers' gate: the overview rows and
-//! a feature's trend, latest part, versions, dressings and events.
+//! What the pages show, read from the store through the readers' gate: a feature's trend,
+//! latest part, versions, dressings and events, and the state the overview gives a feature
+//! (its rows are read in `overview.rs`).
 
-use super::FeatureSheet;
 use crate::names::{FeatureName, MachineName};
 use crate::service::http::ApiCode;
 use crate::service::http::AppState;
 use crate::service::http::api::ApiError;
 use crate::service::metrics::MachineMetrics;
 use crate::store::{
-    Dressing, Event, EventAck, EventFilter, EventId, EventLevel, HistoryFilter, MasterRuns,
-    MeasurementStage, MeasurementSummary, Store, TableVersion, TableVersionHead, VersionStatus,
+    Dressing, Event, EventAck, EventFilter, EventId, HistoryFilter, LearningState, MasterRuns,
+    MeasurementStage, MeasurementSummary, Store, TableVersion, TableVersionHead,
 };
-use std::collections::{BTreeMap, BTreeSet};
 
 /// Parts in the overview's sparkline.
 pub(super) const SPARK_PARTS: u32 = 50;
 /// Parts in a feature's trend chart.
 pub(super) const TREND_PARTS: u32 = 200;
-/// Events listed (and looked at for the machine's state).
+/// Events listed.
 const EVENTS: u32 = 50;
 
 /// What a machine is doing, as the overview shows it.
@@ -46,18 +45,6 @@ impl MachineState {
     }
 }
 
-/// One (machine, feature) line of the overview.
-pub(super) struct OverviewRow {
-    pub machine: MachineName,
-    pub lobe: FeatureName,
-    pub state: MachineState,
-    /// The newest parts, oldest first.
-    pub recent: Vec<MeasurementSummary>,
-    pub band_um: Option<f64>,
-    /// The version the control has: the newest pushed.
-    pub in_force: Option<TableVersionHead>,
-}
-
 pub(super) fn unavailable() -> ApiError {
     ApiError::new(
         ApiCode::StoreUnavailable,
@@ -69,66 +56,14 @@ pub(super) async fn store(app: &AppState) -> Result<Store, ApiError> {
     app.store.read().await.clone().ok_or_else(unavailable)
 }
 
-/// Every (machine, feature): the configured ones and those only the store knows.
-pub(super) async fn features(
-    app: &AppState,
-    store: &Store,
-) -> Result<BTreeMap<MachineName, BTreeSet<FeatureName>>, ApiError> {
-    let mut out: BTreeMap<MachineName, BTreeSet<FeatureName>> = app
-        .machines
-        .iter()
-        .map(|(m, lobes)| (m.clone(), lobes.iter().cloned().collect()))
-        .collect();
-    for m in store.machines().await? {
-        let lobes = store.features(&m.name).await?;
-        out.entry(m.name)
-            .or_default()
-            .extend(lobes.into_iter().map(|f| f.lobe));
-    }
-    Ok(out)
-}
-
-pub(super) async fn overview(app: &AppState) -> Result<Vec<OverviewRow>, ApiError> {
-    let store = store(app).await?;
-    let metrics = app.metrics.snapshot();
-    let mut rows = Vec::new();
-    for (machine, lobes) in features(app, &store).await? {
-        let events = events(&store, &machine).await?;
-        for lobe in lobes {
-            let mut recent = history(&store, &machine, &lobe, SPARK_PARTS).await?;
-            recent.reverse();
-            let versions = store.table_version_heads(&machine, &lobe, 20).await?;
-            let frozen = learning(&store, &machine, &lobe).await?.frozen.is_some();
-            let sheet = app.dashboard.get(&(machine.clone(), lobe.clone()));
-            rows.push(OverviewRow {
-                state: state(
-                    metrics.get(machine.as_str()),
-                    &events,
-                    frozen,
-                    recent.is_empty(),
-                ),
-                band_um: sheet.and_then(FeatureSheet::symmetric_band_um),
-                in_force: versions
-                    .into_iter()
-                    .find(|v| matches!(v.status, VersionStatus::Pushed { .. })),
-                machine: machine.clone(),
-                lobe,
-                recent,
-            });
-        }
-    }
-    Ok(rows)
-}
-
-fn state(
+/// What a machine's feature shows as its state; `alarm`: an error event nobody acknowledged
+/// among the machine's newest.
+pub(super) fn state(
     metrics: Option<&MachineMetrics>,
-    events: &[(Event, Option<EventAck>)],
+    alarm: bool,
     frozen: bool,
     no_parts: bool,
 ) -> MachineState {
-    let alarm = events
-        .iter()
-        .any(|(e, ack)| e.level == EventLevel::Error && ack.is_none());
     if alarm || metrics.is_some_and(|m| m.journal_failing > 0) {
         MachineState::Alarm
     } else if frozen {
@@ -203,11 +138,17 @@ pub(super) async fn learning(
     machine: &MachineName,
     lobe: &FeatureName,
 ) -> Result<Learning, ApiError> {
-    let state = store.learning_state_for_view(machine, lobe).await?;
-    Ok(state
+    Ok(learning_of(
+        store.learning_state_for_view(machine, lobe).await?,
+    ))
+}
+
+/// The dashboard's part of a stored learning state (none: no correction, not frozen).
+pub(super) fn learning_of(state: Option<LearningState>) -> Learning {
+    state
         .and_then(|s| serde_json::from_str::<Memory>(&s.state_json).ok())
         .map(|m| m.learning)
-        .unwrap_or_default())
+        .unwrap_or_default()
 }
 
 /// The latest part's curves from its analysis report.

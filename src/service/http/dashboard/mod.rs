@@ -19,6 +19,7 @@ mod charts;
 mod data;
 mod downloads;
 mod feature;
+mod overview;
 mod pages;
 mod sse;
 
@@ -47,6 +48,8 @@ const ICON_SVG: &str = include_str!("assets/icon.svg");
 pub(super) struct Dash {
     app: AppState,
     live: sse::Live,
+    frozen: overview::FrozenMemo,
+    rows: overview::OverviewMemo,
 }
 
 /// The dashboard's routes, for the API description (`/openapi.json`).
@@ -77,7 +80,12 @@ pub(super) fn router(app: AppState) -> Router {
         .route("/assets/app.js", get(asset_js))
         .route("/assets/app.css", get(asset_css))
         .route("/assets/icon.svg", get(asset_icon))
-        .with_state(Dash { app, live })
+        .with_state(Dash {
+            app,
+            live,
+            frozen: overview::FrozenMemo::default(),
+            rows: overview::OverviewMemo::default(),
+        })
 }
 
 #[derive(Debug, Default, serde::Deserialize)]
@@ -95,7 +103,7 @@ async fn overview(
     State(d): State<Dash>,
     ApiQuery(q): ApiQuery<PageQuery>,
 ) -> Result<Html<String>, ApiError> {
-    let rows = data::overview(&d.app).await?;
+    let rows = overview::overview(&d.app, &d.rows, &d.frozen).await?;
     Ok(Html(pages::overview(&rows, q.fragment.is_some())))
 }
 

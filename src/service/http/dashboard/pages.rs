@@ -3,7 +3,8 @@
 //! replaces with `?fragment=1` of the same address when a part arrives.
 
 use super::charts::{Line, LineChart, sparkline};
-use super::data::{OverviewRow, diff_um};
+use super::data::diff_um;
+use super::overview::OverviewRow;
 use crate::store::TableVersion;
 use maud::{DOCTYPE, Markup, html};
 

@@ -1,0 +1,198 @@
+//! The plant overview's rows: every configured or recorded (machine, feature) with its state,
+//! newest parts, table in force and band, read in a few set queries
+//! ([`Store::plant_overview`]) rather than a handful per feature, so a plant of 500 machines
+//! × 8 features is one page. Even so, reading every feature's 50 newest parts and its
+//! version in force was seconds on a loaded 2-core machine (200,000 rows spread over a
+//! million-row table), so the rows are remembered ([`OverviewMemo`]) and a page reads again
+//! only the features with a measurement or a table-version status stored since the last
+//! page (found from two ranges of primary keys). Whether a feature's learning is frozen is
+//! in its packed learning state: each state is unpacked once and remembered by its row id
+//! and SHA-256, so a page unpacks only the states that changed since the last one.
+
+use super::FeatureSheet;
+use super::data::{MachineState, SPARK_PARTS, state, store};
+use crate::names::{FeatureName, MachineName};
+use crate::service::http::AppState;
+use crate::service::http::api::ApiError;
+use crate::store::{FeatureOverview, OverviewPart, Store, TableVersionHead, VersionStatus};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::sync::{Arc, Mutex};
+
+/// Events of a machine looked at for its alarm (as its feature page lists them).
+const EVENTS: u32 = 50;
+/// Table versions looked at for the one in force (the newest pushed among them).
+const VERSIONS: u32 = 20;
+
+/// One (machine, feature) line of the overview.
+pub(super) struct OverviewRow {
+    pub machine: MachineName,
+    pub lobe: FeatureName,
+    pub state: MachineState,
+    /// The newest finished production parts, oldest first.
+    pub recent: Vec<OverviewPart>,
+    pub band_um: Option<f64>,
+    /// The version the control has: the newest pushed.
+    pub in_force: Option<TableVersionHead>,
+}
+
+/// Ids looked at again below the newest seen: a row whose id was handed out before a higher
+/// one but committed after it (PostgreSQL's writers run side by side; SQLite's one writer
+/// cannot do this) is still found, as long as fewer than this many ids came in between.
+const LOOK_BACK_IDS: i64 = 1024;
+
+/// The overview's rows as last read, and the newest measurement and status ids they cover.
+#[derive(Default)]
+struct Remembered {
+    rows: HashMap<(MachineName, FeatureName), FeatureOverview>,
+    measurement: i64,
+    status: i64,
+}
+
+/// Each feature's newest parts and version in force as last read (see the module's doc).
+/// One page at a time brings it up to date.
+#[derive(Clone, Default)]
+pub(super) struct OverviewMemo(Arc<tokio::sync::Mutex<Remembered>>);
+
+impl OverviewMemo {
+    /// Every feature's parts and version in force, read again only where something was
+    /// stored since the last call.
+    async fn read(
+        &self,
+        store: &Store,
+        keys: &[(MachineName, FeatureName)],
+    ) -> Result<Vec<FeatureOverview>, ApiError> {
+        let mut memo = self.0.lock().await;
+        // Nothing remembered: every feature is read whole, only the newest ids are wanted.
+        let since = |id: i64| match memo.rows.is_empty() {
+            true => i64::MAX,
+            false => id - LOOK_BACK_IDS,
+        };
+        let changes = store
+            .overview_changes(since(memo.measurement), since(memo.status))
+            .await?;
+        let stale: Vec<(MachineName, FeatureName)> = keys
+            .iter()
+            .filter(|k| !memo.rows.contains_key(*k) || changes.features.contains(*k))
+            .cloned()
+            .collect();
+        if !stale.is_empty() {
+            let read = store.plant_overview(&stale, SPARK_PARTS, VERSIONS).await?;
+            for (k, f) in stale.into_iter().zip(read) {
+                memo.rows.insert(k, f);
+            }
+        }
+        memo.measurement = changes.measurement;
+        memo.status = changes.status;
+        let learning = store.plant_learning(keys).await?;
+        Ok(keys
+            .iter()
+            .zip(learning)
+            .map(|(k, learning)| FeatureOverview {
+                learning,
+                ..memo.rows.get(k).cloned().unwrap_or_default()
+            })
+            .collect())
+    }
+}
+
+/// Whether each feature's newest learning state is frozen, by (row id, SHA-256 of its
+/// text): a row replaced in place gets a new SHA-256, so an entry is never stale.
+#[derive(Clone, Default)]
+pub(super) struct FrozenMemo(Arc<Mutex<HashMap<FeatureKey, Unpacked>>>);
+
+type FeatureKey = (MachineName, FeatureName);
+
+/// A learning state once unpacked: its row id, the SHA-256 of its text, whether frozen.
+type Unpacked = (i64, String, bool);
+
+impl FrozenMemo {
+    fn get(&self, key: &(MachineName, FeatureName), id: i64, sha: &str) -> Option<bool> {
+        let memo = self.0.lock().unwrap_or_else(|p| p.into_inner());
+        memo.get(key)
+            .filter(|(i, s, _)| *i == id && s == sha)
+            .map(|x| x.2)
+    }
+
+    fn put(&self, key: (MachineName, FeatureName), id: i64, sha: String, frozen: bool) {
+        let mut memo = self.0.lock().unwrap_or_else(|p| p.into_inner());
+        memo.insert(key, (id, sha, frozen));
+    }
+}
+
+/// Every (machine, feature): the configured ones and those only the store knows, in order.
+async fn features(
+    app: &AppState,
+    store: &Store,
+) -> Result<BTreeMap<MachineName, BTreeSet<FeatureName>>, ApiError> {
+    let mut out: BTreeMap<MachineName, BTreeSet<FeatureName>> = app
+        .machines
+        .iter()
+        .map(|(m, lobes)| (m.clone(), lobes.iter().cloned().collect()))
+        .collect();
+    for (m, lobe) in store.known_features().await? {
+        let lobes = out.entry(m).or_default();
+        lobes.extend(lobe);
+    }
+    Ok(out)
+}
+
+/// Whether the learning state in row `id` is frozen: from the memo, or unpacked now.
+async fn frozen(
+    store: &Store,
+    memo: &FrozenMemo,
+    key: &(MachineName, FeatureName),
+    learning: &Option<(i64, Option<String>)>,
+) -> Result<bool, ApiError> {
+    let Some((id, sha)) = learning else {
+        return Ok(false);
+    };
+    if let Some(sha) = sha
+        && let Some(f) = memo.get(key, *id, sha)
+    {
+        return Ok(f);
+    }
+    let state = store.learning_state_row_for_view(*id).await?;
+    let frozen = super::data::learning_of(state).frozen.is_some();
+    if let Some(sha) = sha {
+        memo.put(key.clone(), *id, sha.clone(), frozen);
+    }
+    Ok(frozen)
+}
+
+pub(super) async fn overview(
+    app: &AppState,
+    rows_memo: &OverviewMemo,
+    memo: &FrozenMemo,
+) -> Result<Vec<OverviewRow>, ApiError> {
+    let store = store(app).await?;
+    let metrics = app.metrics.snapshot();
+    let features = features(app, &store).await?;
+    let keys: Vec<(MachineName, FeatureName)> = features
+        .iter()
+        .flat_map(|(m, lobes)| lobes.iter().map(|l| (m.clone(), l.clone())))
+        .collect();
+    let read = rows_memo.read(&store, &keys).await?;
+    let alarms = store.machines_in_alarm(EVENTS).await?;
+    let mut rows = Vec::with_capacity(keys.len());
+    for (key, f) in keys.into_iter().zip(read) {
+        let frozen = frozen(&store, memo, &key, &f.learning).await?;
+        let (machine, lobe) = key;
+        let sheet = app.dashboard.get(&(machine.clone(), lobe.clone()));
+        rows.push(OverviewRow {
+            state: state(
+                metrics.get(machine.as_str()),
+                alarms.contains(&machine),
+                frozen,
+                f.recent.is_empty(),
+            ),
+            band_um: sheet.and_then(FeatureSheet::symmetric_band_um),
+            in_force: f
+                .in_force
+                .filter(|v| matches!(v.status, VersionStatus::Pushed { .. })),
+            machine,
+            lobe,
+            recent: f.recent,
+        });
+    }
+    Ok(rows)
+}
