@@ -12,6 +12,22 @@ use camloop::core::program::READY_PROGRAM;
 use camloop::service::{self, RunOptions};
 use camloop::sim::Control;
 use camloop::store::{EventFilter, HistoryFilter, MeasurementStage, Store};
+
+/// The simulated cell's events that say a finish went without its same-part table.
+pub(crate) async fn finish_refusals(store: &Store) -> Vec<String> {
+    store
+        .events(&EventFilter {
+            machine: Some("CELL".parse().unwrap()),
+            limit: 1000,
+            ..EventFilter::default()
+        })
+        .await
+        .unwrap()
+        .into_iter()
+        .map(|e| e.message)
+        .filter(|m| m.contains("no same-part finish table"))
+        .collect()
+}
 use std::path::Path;
 
 const SHAFTS: u64 = 12;
@@ -103,18 +119,7 @@ async fn run(file: &str, features: &[&str], measure: bool) -> Figures {
     let store = Store::connect(&url).await.unwrap();
     // Every finish had its same-part table: a refusal would make these figures the table in
     // force's, so it is named here rather than found in a figure.
-    let refused: Vec<String> = store
-        .events(&EventFilter {
-            machine: Some("CELL".parse().unwrap()),
-            limit: 1000,
-            ..EventFilter::default()
-        })
-        .await
-        .unwrap()
-        .into_iter()
-        .map(|e| e.message)
-        .filter(|m| m.contains("no same-part finish table"))
-        .collect();
+    let refused = finish_refusals(&store).await;
     assert_eq!(refused, Vec::<String>::new(), "{file}");
     let mut measured_um = vec![0.0f64; SHAFTS as usize];
     let mut filtered_um = vec![0.0f64; SHAFTS as usize];

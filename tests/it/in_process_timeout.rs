@@ -9,9 +9,10 @@
 //! measurement before the finish.
 
 use crate::history_support::parts_with_reports;
+use crate::in_process_figures::finish_refusals;
 use camloop::config::Config;
 use camloop::service::{self, RunOptions};
-use camloop::store::{EventFilter, HistoryFilter, MeasurementStage, Store};
+use camloop::store::{HistoryFilter, MeasurementStage, Store};
 use std::path::Path;
 use std::time::Duration;
 
@@ -93,18 +94,7 @@ async fn run(gauge: &str, timeout_s: f64) -> Left {
         .map(|s| s.part.parse().unwrap())
         .collect();
     in_process_rows.sort_unstable();
-    let events = store
-        .events(&EventFilter {
-            machine: Some("CELL".parse().unwrap()),
-            limit: 100,
-            ..EventFilter::default()
-        })
-        .await
-        .unwrap()
-        .into_iter()
-        .map(|e| e.message)
-        .filter(|m| m.contains("no same-part finish table"))
-        .collect();
+    let events = finish_refusals(&store).await;
     let reasons = store
         .table_versions(&"CELL".parse().unwrap(), &"IN1".parse().unwrap(), 100)
         .await
