@@ -16,7 +16,7 @@ use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use crate::cli_support;
-use crate::process_support::{KillOnDrop, camloop_run, free_port, wait_for};
+use crate::process_support::{KillOnDrop, camloop_run, free_port, run_to_end, wait_for};
 
 /// The longest the service may take to start (a first start makes the server's RSA key and
 /// migrates the database; on a loaded 2-core machine seconds): a failure, not a pace.
@@ -122,23 +122,14 @@ fn run_checks(
 ) -> (std::process::ExitStatus, String) {
     let params_file = dir.join(format!("{mode}-params.json"));
     std::fs::write(&params_file, params.to_string()).unwrap();
-    let mut run = KillOnDrop::spawn(
-        Command::new("python3")
-            .args([script, mode, &params_file.display().to_string()])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped()),
-    )
-    .unwrap();
-    let status = run.exit_within(SCRIPT_BOUND, Duration::from_millis(200), what);
-    let mut text = String::new();
-    use std::io::Read as _;
-    if let Some(mut out) = run.stdout.take() {
-        out.read_to_string(&mut text).unwrap();
-    }
-    if let Some(mut err) = run.stderr.take() {
-        err.read_to_string(&mut text).unwrap();
-    }
-    (status, text)
+    let run = run_to_end(
+        Command::new("python3").args([script, mode, &params_file.display().to_string()]),
+        SCRIPT_BOUND,
+    );
+    let Some(status) = run.status else {
+        panic!("{what}: {}", run.report());
+    };
+    (status, format!("{}{}", run.stdout, run.stderr))
 }
 
 #[test]

@@ -17,7 +17,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use crate::cli_support;
-use crate::process_support::{KillOnDrop, camloop_run, free_port};
+use crate::process_support::{KillOnDrop, camloop_run, free_port, run_to_end};
 
 /// The longest the service may take to start on a loaded 2-core machine: a failure bound.
 const START_BOUND: Duration = Duration::from_secs(120);
@@ -161,23 +161,17 @@ fn node_opcua_sees_every_event_once_and_no_torn_result() {
     });
     let params_file = dir.path().join("params.json");
     std::fs::write(&params_file, params.to_string()).unwrap();
-    let mut run = KillOnDrop::spawn(
+    let bound = START_BOUND * 2 + WAIT_BOUND + Duration::from_secs(seconds * 3);
+    let run = run_to_end(
         Command::new("node")
             .arg(cli_support::repo("tools/opcua-node/checks.js"))
             .arg(&params_file)
-            .current_dir(cli_support::repo("tools/opcua-node"))
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped()),
-    )
-    .unwrap();
-    let bound = START_BOUND * 2 + WAIT_BOUND + Duration::from_secs(seconds * 3);
-    let status = run.exit_within(bound, Duration::from_millis(200), "the node-opcua checks");
-    let (mut out, mut err) = (String::new(), String::new());
-    use std::io::Read as _;
-    run.stdout.take().unwrap().read_to_string(&mut out).unwrap();
-    run.stderr.take().unwrap().read_to_string(&mut err).unwrap();
+            .current_dir(cli_support::repo("tools/opcua-node")),
+        bound,
+    );
+    let out = &run.stdout;
     println!("{out}");
-    assert!(status.success(), "node-opcua checks failed:\n{out}\n{err}");
+    assert!(run.success(), "node-opcua checks failed: {}", run.report());
     let summary: serde_json::Value = serde_json::from_str(out.trim().lines().last().unwrap())
         .unwrap_or_else(|e| panic!("{e}: {out}"));
     assert!(

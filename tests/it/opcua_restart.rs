@@ -10,18 +10,22 @@
 
 use std::net::TcpStream;
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use crate::cli_support;
 use crate::opcua_asyncua::asyncua_present;
-use crate::process_support::{KillOnDrop, camloop_run, free_port, wait_for};
+use crate::process_support::{KillOnDrop, camloop_run, free_port, run_to_end, wait_for};
 
 /// The longest a start may take on a loaded 2-core machine: a failure, not a pace.
 const START_BOUND: Duration = Duration::from_secs(90);
 
 /// The longest a script may run (each of its waits is bounded by itself too).
 const SCRIPT_BOUND: Duration = Duration::from_secs(180);
+
+/// When the script prints its own tasks' stacks and stops: before the bound, so a hang
+/// says where it waited.
+const SCRIPT_WATCHDOG: Duration = Duration::from_secs(170);
 
 /// The service's config: `gauge` is the machine's gauge section, `features` its features.
 fn config(http: u16, opcua: u16, features: &str, gauge: &str) -> String {
@@ -56,38 +60,30 @@ fn start(dir: &Path, ports: [u16; 2], log: &str) -> KillOnDrop {
     service
 }
 
-/// Runs `restart_checks.py <step>`; its output, or a failure with it.
-fn script(step: &str, params: &Path, out: &Path) -> String {
+/// Runs `restart_checks.py <step>`; its output, or a failure with it and the service's log.
+fn script(step: &str, params: &Path, out: &Path, service_log: &Path) -> String {
     let script = cli_support::repo("tests/opcua/restart_checks.py");
-    let mut run = KillOnDrop::spawn(
+    let run = run_to_end(
         Command::new("python3")
             .arg(&script)
             .args([
                 step,
                 &params.display().to_string(),
                 &out.display().to_string(),
+                &SCRIPT_WATCHDOG.as_secs().to_string(),
             ])
-            .current_dir(cli_support::repo("tests/opcua"))
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped()),
-    )
-    .unwrap();
-    let status = run.exit_within(SCRIPT_BOUND, Duration::from_millis(200), step);
-    let mut text = String::new();
-    use std::io::Read as _;
+            .current_dir(cli_support::repo("tests/opcua")),
+        SCRIPT_BOUND,
+    );
+    if !run.success() {
+        let log = std::fs::read_to_string(service_log).unwrap_or_default();
+        panic!(
+            "restart checks ({step}): {}\n--- the service's log\n{log}",
+            run.report()
+        );
+    }
+    println!("{}{}", run.stdout, run.stderr);
     run.stdout
-        .take()
-        .unwrap()
-        .read_to_string(&mut text)
-        .unwrap();
-    run.stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut text)
-        .unwrap();
-    println!("{text}");
-    assert!(status.success(), "restart checks ({step}) failed:\n{text}");
-    text
 }
 
 /// Parts of `feature` in the history, read from the store the service writes.
@@ -158,7 +154,7 @@ fn asyncua_keeps_event_ids_and_sees_stored_results_across_a_restart() {
     let params_file = dir.path().join("params.json");
     std::fs::write(&params_file, params.to_string()).unwrap();
     let kept = dir.path().join("kept.json");
-    script("before", &params_file, &kept);
+    script("before", &params_file, &kept, &dir.path().join("first.log"));
 
     // A real restart: the service is stopped as an operator stops it, and started again.
     service.signal("-TERM");
@@ -174,6 +170,6 @@ fn asyncua_keeps_event_ids_and_sees_stored_results_across_a_restart() {
     )
     .unwrap();
     let _again = start(dir.path(), [http, opcua], "again.log");
-    let text = script("after", &params_file, &kept);
+    let text = script("after", &params_file, &kept, &dir.path().join("again.log"));
     assert!(text.contains("after: restart checks passed"), "{text}");
 }

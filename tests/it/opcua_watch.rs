@@ -9,13 +9,13 @@
 //! `CAMLOOP_OPCUA_WATCH_SECONDS` size a longer run (default: 2 machines for 8 s), and
 //! `CAMLOOP_OPCUA_BIN` runs another build of camloop.
 
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::Duration;
 
 use crate::cli_support;
 use crate::opcua_asyncua::asyncua_present;
 use crate::opcua_node::{FEATURES, env_or, start_plant};
-use crate::process_support::KillOnDrop;
+use crate::process_support::run_to_end;
 
 #[test]
 fn asyncua_sees_every_event_once_and_no_torn_result() {
@@ -44,24 +44,18 @@ fn asyncua_sees_every_event_once_and_no_torn_result() {
     });
     let params_file = plant.dir.path().join("watch.json");
     std::fs::write(&params_file, params.to_string()).unwrap();
-    let mut run = KillOnDrop::spawn(
+    // Connecting to a loaded service and subscribing take a while: a failure bound.
+    let bound = Duration::from_secs(300 + seconds * 3);
+    let run = run_to_end(
         Command::new("python3")
             .arg(cli_support::repo("tests/opcua/watch_checks.py"))
             .arg(&params_file)
-            .current_dir(cli_support::repo("tests/opcua"))
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped()),
-    )
-    .unwrap();
-    // Connecting to a loaded service and subscribing take a while: a failure bound.
-    let bound = Duration::from_secs(300 + seconds * 3);
-    let status = run.exit_within(bound, Duration::from_millis(200), "the asyncua watch");
-    let (mut out, mut err) = (String::new(), String::new());
-    use std::io::Read as _;
-    run.stdout.take().unwrap().read_to_string(&mut out).unwrap();
-    run.stderr.take().unwrap().read_to_string(&mut err).unwrap();
+            .current_dir(cli_support::repo("tests/opcua")),
+        bound,
+    );
+    let out = &run.stdout;
     println!("{out}");
-    assert!(status.success(), "asyncua watch failed:\n{out}\n{err}");
+    assert!(run.success(), "asyncua watch failed: {}", run.report());
     let summary: serde_json::Value = serde_json::from_str(out.trim().lines().last().unwrap())
         .unwrap_or_else(|e| panic!("{e}: {out}"));
     assert!(

@@ -10,6 +10,7 @@ project wrote), as the integration test `opcua_asyncua` runs it.
 
 import asyncio
 import json
+import os
 import subprocess
 import sys
 import time
@@ -35,6 +36,24 @@ def ok(what):
 def fail(what):
     print(f"FAILED: {what}", flush=True)
     sys.exit(1)
+
+
+async def watched(main, bound_s):
+    """Awaits `main`; past `bound_s` prints where each of its tasks waits, and fails (a hang
+    then says where it hung instead of being killed silently)."""
+    async def dog():
+        await asyncio.sleep(bound_s)
+        print(f"FAILED: still running after {bound_s} s; its tasks:", flush=True)
+        for task in asyncio.all_tasks():
+            task.print_stack(file=sys.stdout)
+        sys.stdout.flush()
+        os._exit(1)
+
+    watchdog = asyncio.create_task(dog())
+    try:
+        return await main
+    finally:
+        watchdog.cancel()
 
 
 async def make_certs(folder):
@@ -83,6 +102,7 @@ async def connected(p, user, bound_s=240.0):
             await c.connect()
             return c
         except (asyncio.TimeoutError, OSError) as e:
+            print(f"no session yet ({e!r}); trying again", file=sys.stderr, flush=True)
             if time.monotonic() > deadline:
                 fail(f"no session within {bound_s} s: {e!r}")
             await asyncio.sleep(1.0)

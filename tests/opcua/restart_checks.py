@@ -1,8 +1,10 @@
 """What a client holds across a restart of camloop's OPC UA server, with Python's `asyncua`,
 as the integration test `opcua_restart` runs it:
 
-    python3 restart_checks.py before PARAMS.json OUT.json   # a rollback; its event's EventId
-    python3 restart_checks.py after PARAMS.json OUT.json    # after the restart
+    python3 restart_checks.py before PARAMS.json OUT.json BOUND_S   # a rollback; its EventId
+    python3 restart_checks.py after PARAMS.json OUT.json BOUND_S    # after the restart
+
+BOUND_S: past it the script prints where it waits and fails.
 
 `before` rolls a feature back as the admin and keeps the EventId of the rollback's event.
 `after` (the service restarted, no part since) reads every feature's result variables, which
@@ -19,7 +21,7 @@ from pathlib import Path
 
 from asyncua import ua
 
-from client_checks import Changes, acknowledge, connected, fail, http_json, ok, rollback
+from client_checks import Changes, acknowledge, connected, fail, http_json, ok, rollback, watched
 
 
 async def before(p, out):
@@ -144,5 +146,6 @@ async def after(p, out):
 
 if __name__ == "__main__":
     params = json.loads(Path(sys.argv[2]).read_text())
-    asyncio.run({"before": before, "after": after}[sys.argv[1]](params, sys.argv[3]))
+    step = {"before": before, "after": after}[sys.argv[1]](params, sys.argv[3])
+    asyncio.run(watched(step, float(sys.argv[4])))
     print(f"{sys.argv[1]}: restart checks passed", flush=True)

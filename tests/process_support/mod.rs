@@ -76,6 +76,67 @@ impl KillOnDrop {
     }
 }
 
+/// What a checking program printed, and how it ended.
+pub struct Finished {
+    /// Its exit status; `None` when it ran past its bound and was killed.
+    pub status: Option<ExitStatus>,
+    /// Its standard output.
+    pub stdout: String,
+    /// Its standard error.
+    pub stderr: String,
+}
+
+impl Finished {
+    /// Its exit was a success.
+    pub fn success(&self) -> bool {
+        self.status.is_some_and(|s| s.success())
+    }
+
+    /// Both outputs, with how it ended, for a failure message.
+    pub fn report(&self) -> String {
+        let ended = match self.status {
+            Some(status) => format!("{status}"),
+            None => "ran past its bound and was killed".to_owned(),
+        };
+        format!(
+            "{ended}\n--- stdout\n{}\n--- stderr\n{}",
+            self.stdout, self.stderr
+        )
+    }
+}
+
+/// Runs `command` to its end, bounded by `bound` (polling every 200 ms: the exit is the
+/// condition). Its output goes to files, not pipes, so a chatty program never blocks on a
+/// full pipe, and what it printed is kept when it is killed at the bound.
+pub fn run_to_end(command: &mut Command, bound: Duration) -> Finished {
+    let out = tempfile::NamedTempFile::new().expect("a file for stdout");
+    let err = tempfile::NamedTempFile::new().expect("a file for stderr");
+    command
+        .stdout(out.reopen().expect("stdout's file"))
+        .stderr(err.reopen().expect("stderr's file"));
+    let mut child = KillOnDrop::spawn(command).expect("the program starts");
+    let started = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("the child's status") {
+            break Some(status);
+        }
+        if started.elapsed() > bound {
+            let _ = child.kill();
+            let _ = child.wait();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    let read = |f: &tempfile::NamedTempFile| {
+        String::from_utf8_lossy(&std::fs::read(f.path()).unwrap_or_default()).into_owned()
+    };
+    Finished {
+        status,
+        stdout: read(&out),
+        stderr: read(&err),
+    }
+}
+
 impl std::ops::Deref for KillOnDrop {
     type Target = Child;
     fn deref(&self) -> &Child {
