@@ -27,8 +27,9 @@ pub struct EventSender {
 }
 
 impl EventSender {
-    /// A sender into `tx`, counting what a full channel refuses in `refused`.
-    pub(crate) fn new(tx: mpsc::Sender<PlantEvent>, refused: Arc<AtomicU64>) -> Self {
+    /// A sender into `tx`, counting what a full channel refuses in `refused` (public for
+    /// the tests that watch a machine's events).
+    pub fn new(tx: mpsc::Sender<PlantEvent>, refused: Arc<AtomicU64>) -> Self {
         Self {
             tx,
             refused,
@@ -44,13 +45,6 @@ impl EventSender {
                 Some(a)
             }
             (a, b) => a.or(b),
-        }
-    }
-
-    /// Queues the event of a journal record, if it announces one.
-    pub fn record(&self, record: &Pending) {
-        if let Some(event) = of_record(record) {
-            self.send(event);
         }
     }
 

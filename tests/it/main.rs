@@ -113,6 +113,7 @@ mod opcua_overflow;
 mod opcua_restart;
 mod opcua_watch;
 mod opcua_write_audit;
+mod plant_event_order;
 mod program_retarget;
 mod program_settings;
 mod program_svg;

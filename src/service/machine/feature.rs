@@ -37,9 +37,13 @@ pub struct FeatureLoop {
     pub(super) main: Arc<MainProgram>,
     /// The newest part's line, for the machine's line per shaft.
     pub(super) last_line: Option<super::ingest::PartLine>,
-    /// PLANT EVENTS HOOK (MQTT): set by the service after `start`; every record the journal
-    /// takes is offered to it (never blocks).
+    /// PLANT EVENTS HOOK (MQTT, OPC UA): set by the service after `start`; every record the
+    /// journal takes is offered to it (never blocks), once the store has had its write.
     pub(super) plant_events: Option<crate::service::plant::EventSender>,
+    /// Events of records the journal took, held until the store's write after them: an
+    /// event is sent once its part's history row is there (or the store was tried and is
+    /// down), so a client that reads the API on an event finds the part.
+    pub(super) unpublished: Vec<camloop_loop::PlantEvent>,
     /// Wheel radius the program on the share was made for (the simulator reads it).
     pub(super) table_wheel_radius_bits: Arc<AtomicU64>,
     /// The disk-full alarm was raised and not yet cleared.
@@ -115,6 +119,7 @@ impl FeatureLoop {
             last_line: None,
             charts,
             plant_events: None,
+            unpublished: Vec::new(),
             table_wheel_radius_bits: Arc::new(AtomicU64::new(0)),
             disk_alarm: false,
             plan: Default::default(),
@@ -262,8 +267,8 @@ impl FeatureLoop {
         kept
     }
 
-    /// Appends records to the journal (durable) and tells the plant's events; the store
-    /// gets them at the next [`Self::flush_journal`].
+    /// Appends records to the journal (durable); the store gets them, and the plant their
+    /// events, at the next [`Self::flush_journal`].
     pub(super) fn journal_or_why(&mut self, records: Vec<Pending>) -> Result<(), String> {
         if records.is_empty() {
             return Ok(());
@@ -285,8 +290,9 @@ impl FeatureLoop {
                 Err(format!("{e:#}"))
             }
         };
-        if let Some(events) = self.plant_events.as_ref().filter(|_| kept.is_ok()) {
-            records.iter().for_each(|r| events.record(r));
+        if self.plant_events.is_some() && kept.is_ok() {
+            let events = records.iter().filter_map(crate::service::plant::of_record);
+            self.unpublished.extend(events);
         }
         let failing = u64::from(kept.is_err() || self.journal.on_reserve());
         self.metrics
@@ -335,6 +341,11 @@ impl FeatureLoop {
         let pending = self.journal.pending().len() as u64;
         self.metrics
             .update(&self.name, |m| m.journal_pending = pending);
+        // After the store's write, whether it went or not: a store that is down delays the
+        // history, never the plant's events (their rows follow from the journal).
+        if let Some(events) = &self.plant_events {
+            self.unpublished.drain(..).for_each(|e| events.send(e));
+        }
     }
 
     /// Records the store refused for good were set aside (see [`Journal::flush`]): an alarm
