@@ -132,19 +132,64 @@ fn run_checks(
     (status, format!("{}{}", run.stdout, run.stderr))
 }
 
-#[test]
-fn asyncua_browses_reads_subscribes_and_calls_rollback_with_users() {
-    if !asyncua_present() {
+/// A skip line naming `what` when asyncua is missing (a failure when CI requires it).
+fn skipped(what: &str) -> bool {
+    let missing = !asyncua_present();
+    if missing {
         eprintln!(
-            "SKIP opcua_asyncua: Python asyncua not installed (pip install asyncua==2.1.0; CAMLOOP_REQUIRE_OPCUA=1 makes this a failure)"
+            "SKIP {what}: Python asyncua not installed (pip install asyncua==2.1.0; CAMLOOP_REQUIRE_OPCUA=1 makes this a failure)"
         );
-        return;
     }
+    missing
+}
+
+/// One test's service and what its scripts need.
+struct Served {
+    script: String,
+    dir: tempfile::TempDir,
+    certs: std::path::PathBuf,
+    http: u16,
+    opcua: u16,
+    service: KillOnDrop,
+}
+
+/// Client certificates made, the config written (`trusted`: `None` for the plain one,
+/// `Some(lines)` for one that accepts unknown clients, with those lines in `[opcua]`), the
+/// service started and listening on OPC UA (and HTTP when `http_too`).
+fn served(trusted: Option<&str>, http_too: bool) -> Served {
     let script = cli_support::repo("tests/opcua/client_checks.py");
     let (dir, certs) = client_certs(&script);
     let (http, opcua) = (free_port(), free_port());
-    std::fs::write(dir.path().join("camloop.toml"), config(http, opcua)).unwrap();
-    let _service = start(dir.path(), &[http, opcua]);
+    let text = match trusted {
+        None => config(http, opcua),
+        Some(extra) => trusting(config(http, opcua), extra),
+    };
+    std::fs::write(dir.path().join("camloop.toml"), text).unwrap();
+    let ports: &[u16] = if http_too { &[http, opcua] } else { &[opcua] };
+    let service = start(dir.path(), ports);
+    Served {
+        script,
+        dir,
+        certs,
+        http,
+        opcua,
+        service,
+    }
+}
+
+#[test]
+fn asyncua_browses_reads_subscribes_and_calls_rollback_with_users() {
+    if skipped("opcua_asyncua") {
+        return;
+    }
+    let Served {
+        script,
+        dir,
+        certs,
+        http,
+        opcua,
+        service: _service,
+    } = served(None, true);
     let password_file = dir.path().join("var/admin-password");
     let admin_password = std::fs::read_to_string(&password_file)
         .unwrap()
@@ -201,16 +246,17 @@ fn asyncua_browses_reads_subscribes_and_calls_rollback_with_users() {
 /// policy; the same user signs in over the secure endpoint.
 #[test]
 fn asyncua_is_refused_a_clear_text_password_over_none() {
-    if !asyncua_present() {
-        eprintln!("SKIP opcua_asyncua (clear-text password): Python asyncua not installed");
+    if skipped("opcua_asyncua (clear-text password)") {
         return;
     }
-    let script = cli_support::repo("tests/opcua/client_checks.py");
-    let (dir, certs) = client_certs(&script);
-    let (http, opcua) = (free_port(), free_port());
-    let config = trusting(config(http, opcua), "security = \"Basic256Sha256+None\"\n");
-    std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
-    let service = start(dir.path(), &[opcua]);
+    let Served {
+        script,
+        dir,
+        certs,
+        opcua,
+        service,
+        ..
+    } = served(Some("security = \"Basic256Sha256+None\"\n"), false);
     let password_file = dir.path().join("var/admin-password");
     let params = serde_json::json!({
         "endpoint": format!("opc.tcp://localhost:{opcua}/"),
@@ -263,16 +309,17 @@ fn owner_only_and_a_readable_key_refused(dir: &Path) {
 /// user's HTTP sign-in and valid API token are never refused (429) for them.
 #[test]
 fn an_opcua_lockout_leaves_the_user_s_http_sign_in_and_token_alone() {
-    if !asyncua_present() {
-        eprintln!("SKIP opcua_asyncua (lockout): Python asyncua not installed");
+    if skipped("opcua_asyncua (lockout)") {
         return;
     }
-    let script = cli_support::repo("tests/opcua/client_checks.py");
-    let (dir, certs) = client_certs(&script);
-    let (http, opcua) = (free_port(), free_port());
-    let config = trusting(config(http, opcua), "");
-    std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
-    let _service = start(dir.path(), &[http, opcua]);
+    let Served {
+        script,
+        dir,
+        certs,
+        http,
+        opcua,
+        service: _service,
+    } = served(Some(""), true);
     let password = "viewer-password-1234";
     add_viewer(dir.path(), password);
     let params = serde_json::json!({
@@ -323,16 +370,17 @@ fn an_opcua_lockout_leaves_the_user_s_http_sign_in_and_token_alone() {
 /// users' state every 2 s (the script allows 20 s).
 #[test]
 fn a_disabled_user_s_open_session_stops_reading() {
-    if !asyncua_present() {
-        eprintln!("SKIP opcua_asyncua (disabled user): Python asyncua not installed");
+    if skipped("opcua_asyncua (disabled user)") {
         return;
     }
-    let script = cli_support::repo("tests/opcua/client_checks.py");
-    let (dir, certs) = client_certs(&script);
-    let (http, opcua) = (free_port(), free_port());
-    let config = trusting(config(http, opcua), "");
-    std::fs::write(dir.path().join("camloop.toml"), config).unwrap();
-    let _service = start(dir.path(), &[opcua]);
+    let Served {
+        script,
+        dir,
+        certs,
+        opcua,
+        service: _service,
+        ..
+    } = served(Some(""), false);
     let password = "viewer-password-1234";
     add_viewer(dir.path(), password);
     let params = serde_json::json!({
