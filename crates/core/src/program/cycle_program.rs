@@ -4,6 +4,13 @@
 //! spark-out, lift-off and uncoupling; at the end X back clear of the part (an absolute
 //! rapid move, checked by [`super::check_ending`]), then coolant and spindle off.
 //!
+//! With several features the program resumes as the shaft program does: R parameter 90
+//! (`resume_r_param`) below 0 starts at the first feature without a gauge record (the
+//! resume subprogram camloop rewrites after every gauged feature), k > 0 at feature k, and
+//! the run resets it to 0. A feature before the start is jumped over (`IF CL_FROM>k GOTOF
+//! CL_SKIPk`) rather than wrapped in `IF … ENDIF`, so no label of its handshake lies inside
+//! a control structure.
+//!
 //! Every coupling is made with the number the table program just returned, as in the
 //! table-only program: the finish after a measurement calls the table program again, so it
 //! couples the newest table (this part's finish table when camloop delivered it in time, the
@@ -14,6 +21,7 @@ use super::ending::{EndingError, check_ending};
 use super::main_program::{MainProgramSettings, Opening, define_table, opening};
 use super::names::validate_axis_name;
 use super::settings::{Resolved, SettingsErrors, check_comments};
+use super::shaft_program::{FROM_VAR, RESUME_PROGRAM, resume_point};
 use super::table::{NUMBER_VAR, fmt_fixed, line};
 use crate::cycle::{CycleSettings, ResolvedStage, StageKind, stage_key};
 
@@ -86,22 +94,33 @@ pub fn render_cycle_program(
     let (x, c) = (first.following.as_str(), first.leading.as_str());
     let cycle = machine.cycle;
     let spindle = cycle.wheel_spindle;
+    // Several features: resumable as the shaft program is.
+    let resumable = stations.len() > 1;
     let externs: Vec<&str> = std::iter::once(READY_PROGRAM)
+        .chain(resumable.then_some(RESUME_PROGRAM))
         .chain(resolved.iter().map(|r| r.name.as_str()))
         .collect();
+    let ints: &[&str] = if resumable {
+        &["CL_SEEN", "CL_READY", "CL_NEW", "CL_WAIT", FROM_VAR]
+    } else {
+        &["CL_SEEN", "CL_READY", "CL_NEW", "CL_WAIT"]
+    };
     let mut out = String::new();
     opening(
         &mut out,
         &Opening {
             name: &main.name,
             reals: &["CL_OFF"],
-            ints: &["CL_SEEN", "CL_READY", "CL_NEW", "CL_WAIT"],
+            ints,
             externs: &externs,
             comments: &main.comment_lines,
             following: x,
             leading: c,
         },
     );
+    if resumable {
+        resume_point(&mut out, main.resume_r_param);
+    }
     output_offset(
         &mut out,
         x,
@@ -124,7 +143,15 @@ pub fn render_cycle_program(
     let clear = fmt_fixed(machine.clear_x_mm, xd);
     for (k, (s, r)) in stations.iter().zip(&resolved).enumerate() {
         line(&mut out, format_args!("; feature {} {}", k + 1, s.label));
-        if stations.len() > 1 {
+        if resumable {
+            line(
+                &mut out,
+                format_args!(
+                    "IF {FROM_VAR}>{} GOTOF CL_SKIP{} ; resumed past it",
+                    k + 1,
+                    k + 1
+                ),
+            );
             line(
                 &mut out,
                 format_args!("G90 G0 {x}={clear} ; clear of the part"),
@@ -140,6 +167,9 @@ pub fn render_cycle_program(
             );
         }
         feature_cycle(&mut out, machine, &stages, r, k + 1);
+        if resumable {
+            line(&mut out, format_args!("CL_SKIP{}:", k + 1));
+        }
     }
     output_offset(&mut out, x, "0", "the output offset back to 0");
     line(
@@ -199,6 +229,12 @@ fn check<'a>(
         errors.push(e.into());
     }
     check_comments(&mut errors, &main.comment_lines);
+    if stations.len() > 1 && !(1..=999).contains(&main.resume_r_param) {
+        errors.push(super::SettingError::NotPositive {
+            field: "resume_r_param",
+            value: f64::from(main.resume_r_param),
+        });
+    }
     if !errors.is_empty() {
         return Err(SettingsErrors(errors).into());
     }
