@@ -42,6 +42,7 @@ fn render(cycle: &CycleSettings) -> Result<String, CycleProgramError> {
         table: &table,
         label: "IN1",
         z_mm: 20.0,
+        plan: None,
     }];
     render_cycle_program(&MainProgramSettings::default(), &machine, &stations)
 }
@@ -125,13 +126,24 @@ fn the_cycle_program_ends_retracted_to_the_clear_x() {
 }
 
 #[test]
-fn a_stage_on_the_plan_is_refused_naming_it() {
+fn a_stage_on_the_plan_without_the_features_plan_is_refused_naming_both() {
     let mut cycle = demo_cycle();
     cycle.stages[3].speed_plan = true;
     let err = render(&cycle).unwrap_err();
     assert_eq!(
         err.to_string(),
-        "cycle.stages[3] (finish): a stage on the speed plan is not written by the cycle program yet; give it a c_speed_rpm"
+        "cycle.stages[3] (finish): on the speed plan, but feature IN1 has no plan tables"
+    );
+}
+
+/// One feature: no resume (as the one-feature main program); the R parameter is read only
+/// by a program of several features.
+#[test]
+fn a_one_feature_cycle_program_has_no_resume() {
+    let text = render(&demo_cycle()).unwrap();
+    assert!(
+        !text.contains("R90") && !text.contains("CAMLOOP_RESUME"),
+        "{text}"
     );
 }
 

@@ -303,6 +303,7 @@ fn main_program(setup: &CycleCellSetup, wheel_radius_mm: f64) -> Result<String, 
         table: &table,
         label: "IN1",
         z_mm: 0.0,
+        plan: None,
     }];
     render_cycle_program(&MainProgramSettings::default(), &machine, &stations)
 }

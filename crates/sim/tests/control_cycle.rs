@@ -47,6 +47,7 @@ fn main_program() -> String {
         table: &table,
         label: "IN1",
         z_mm: 20.0,
+        plan: None,
     }];
     render_cycle_program(&MainProgramSettings::default(), &machine, &stations).unwrap()
 }
@@ -253,11 +254,13 @@ fn a_shaft_runs_the_cycle_at_each_station() {
             table: &tables[0],
             label: "IN1",
             z_mm: 20.0,
+            plan: None,
         },
         CycleStation {
             table: &tables[1],
             label: "EX1",
             z_mm: 50.0,
+            plan: None,
         },
     ];
     let main = render_cycle_program(&MainProgramSettings::default(), &machine, &stations).unwrap();
@@ -315,6 +318,7 @@ fn shaft_program() -> String {
             table,
             label: &name[9..],
             z_mm,
+            plan: None,
         })
         .collect();
     render_cycle_program(&MainProgramSettings::default(), &machine, &stations).unwrap()

@@ -82,6 +82,7 @@ pub fn render_shaft_program(
             reals: &[],
             ints: &[FROM_VAR],
             externs: &externs,
+            pair_externs: &[],
             comments: &main.comment_lines,
             following: x,
             leading: c,
