@@ -14,7 +14,8 @@
 //! Every coupling is made with the number the table program just returned, as in the
 //! table-only program: the finish after a measurement calls the table program again, so it
 //! couples the newest table (this part's finish table when camloop delivered it in time, the
-//! table in force otherwise).
+//! table in force otherwise). Stages with `speed_plan = true` couple C and X to the virtual
+//! axis by the numbers the feature's plan table program returns ([`super::cycle_plan`]).
 
 use super::ProgramSettings;
 use super::cycle_plan::{self, CyclePlan, PlanResolved};
