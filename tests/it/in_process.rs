@@ -169,6 +169,7 @@ fn every_stage_of_every_run_couples_the_newest_table() {
         table: &table,
         label: "IN1",
         z_mm: 0.0,
+        plan: None,
     }];
     let main = render_cycle_program(&MainProgramSettings::default(), &machine, &stations).unwrap();
     let dir = tempfile::tempdir().unwrap();

@@ -42,6 +42,7 @@ fn render(cycle: &CycleSettings) -> Result<String, CycleProgramError> {
         table: &table,
         label: "IN1",
         z_mm: 20.0,
+        plan: None,
     }];
     render_cycle_program(&MainProgramSettings::default(), &machine, &stations)
 }
@@ -125,13 +126,24 @@ fn the_cycle_program_ends_retracted_to_the_clear_x() {
 }
 
 #[test]
-fn a_stage_on_the_plan_is_refused_naming_it() {
+fn a_stage_on_the_plan_without_the_features_plan_is_refused_naming_both() {
     let mut cycle = demo_cycle();
     cycle.stages[3].speed_plan = true;
     let err = render(&cycle).unwrap_err();
     assert_eq!(
         err.to_string(),
-        "cycle.stages[3] (finish): a stage on the speed plan is not written by the cycle program yet; give it a c_speed_rpm"
+        "cycle.stages[3] (finish): on the speed plan, but feature IN1 has no plan tables"
+    );
+}
+
+/// One feature: no resume (as the one-feature main program); the R parameter is read only
+/// by a program of several features.
+#[test]
+fn a_one_feature_cycle_program_has_no_resume() {
+    let text = render(&demo_cycle()).unwrap();
+    assert!(
+        !text.contains("R90") && !text.contains("CAMLOOP_RESUME"),
+        "{text}"
     );
 }
 
@@ -152,4 +164,66 @@ fn the_ready_program_returns_its_count() {
     assert!(text.starts_with("%_N_CAMLOOP_READY_SPF\n;$PATH=/_N_SPF_DIR\n"));
     assert!(text.contains("PROC CAMLOOP_READY(VAR INT CL_READY) SAVE\n"));
     assert!(text.contains("\nCL_READY=7\nRET\n"));
+}
+
+/// A feature's plan must be its own table program over the cycle's axes, at a real speed:
+/// each fault is refused naming the feature, and nothing is written.
+#[test]
+fn a_plan_that_does_not_fit_its_feature_is_refused_naming_it() {
+    use camloop_core::program::CyclePlan;
+    use camloop_core::speed_plan::render::VaProgramSettings;
+    let mut cycle = demo_cycle();
+    cycle.stages[3].speed_plan = true;
+    let table = table();
+    let machine = CycleMachine {
+        cycle: &cycle,
+        c_speed_rpm: 30.0,
+        wheel_radius_mm: 250.0,
+        clear_x_mm: 13.0,
+    };
+    let refused = |plan: VaProgramSettings, va_speed_rpm: f64| {
+        let stations = [CycleStation {
+            table: &table,
+            label: "IN1",
+            z_mm: 20.0,
+            plan: Some(CyclePlan {
+                table: &plan,
+                va_speed_rpm,
+            }),
+        }];
+        render_cycle_program(&MainProgramSettings::default(), &machine, &stations)
+            .unwrap_err()
+            .to_string()
+    };
+    let own = || VaProgramSettings {
+        name: "DEMO_CAM_P".into(),
+        ..VaProgramSettings::default()
+    };
+    let same_name = refused(
+        VaProgramSettings {
+            name: "DEMO_CAM".into(),
+            ..own()
+        },
+        50.0,
+    );
+    assert!(
+        same_name.contains("feature IN1: the plan's table program DEMO_CAM must differ"),
+        "{same_name}"
+    );
+    let other_axis = refused(
+        VaProgramSettings {
+            x_axis: "X2".into(),
+            ..own()
+        },
+        50.0,
+    );
+    assert!(
+        other_axis.contains("feature IN1: the plan couples X2 and C to VA"),
+        "{other_axis}"
+    );
+    let no_speed = refused(own(), f64::NAN);
+    assert!(
+        no_speed.contains("feature IN1: virtual axis speed NaN rpm"),
+        "{no_speed}"
+    );
 }

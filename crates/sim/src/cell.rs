@@ -494,7 +494,7 @@ fn lobe_loop(setup: &CellSetup, feature: Feature) -> LobeLoop<'_> {
 /// The planned C speed for `feature` (its nominal part on the wheel believed now) when the
 /// setup asks for one. It stays fixed between dressings, so the servo lag it leaves is a
 /// repeatable shape the loop learns like any other.
-fn plan_law(setup: &CellSetup, feature: Feature) -> Result<Option<TimeLaw>, CellError> {
+pub(crate) fn plan_law(setup: &CellSetup, feature: Feature) -> Result<Option<TimeLaw>, CellError> {
     if !setup.speed_plan.enabled {
         return Ok(None);
     }

@@ -55,6 +55,8 @@ pub struct Control {
     /// The overlay is enabled for X (the PLC's DBX26.4): without it, programming the
     /// coupled X is the control's alarm.
     overlay_enabled: bool,
+    /// What the last run ground before a fault stopped it (`None` after a run that ended).
+    stopped: Option<CycleRun>,
 }
 
 /// What a cycle run did: every grind, and every event in program order.
@@ -243,18 +245,34 @@ impl Control {
             jumps: 0,
         };
         let mut frame = Frame::new(program_name(main, "MPF").unwrap_or("main"), Vec::new());
-        let end_line = run.program(main, &mut frame, 0)?;
-        if run.ground.is_empty() {
+        let result = run.program(main, &mut frame, 0);
+        let done = CycleRun {
+            ground: run.ground,
+            events: run.events,
+        };
+        let end_line = match result {
+            Ok(line) => line,
+            Err(e) => {
+                // The machine keeps what it ground before the alarm: a shaft stopped mid-way.
+                self.stopped = Some(done);
+                return Err(e);
+            }
+        };
+        self.stopped = None;
+        if done.ground.is_empty() {
             return Err(ControlError {
                 program: frame.program,
                 line: end_line,
                 fault: ControlFault::NotGround,
             });
         }
-        Ok(CycleRun {
-            ground: run.ground,
-            events: run.events,
-        })
+        Ok(done)
+    }
+
+    /// What the last run ground, and its events, up to the fault that stopped it (a shaft
+    /// interrupted after some features); `None` when the last run ended normally.
+    pub fn stopped_run(&self) -> Option<&CycleRun> {
+        self.stopped.as_ref()
     }
 
     /// R parameter `n` (0 when never set).

@@ -5,8 +5,8 @@
 //! ([`camloop_core::cycle::finish::finish_table`]) and answers the handshake after a set
 //! number of polls; the finished part is judged on the fine grid and learned from once.
 
-use super::cell::{CellError, CellSetup, JUDGE_POINTS, after_dressing, judge};
-use super::stock::{Pass, STOCK_POINTS, Stock, StockModel};
+use super::cell::{CellError, CellSetup, JUDGE_POINTS, after_dressing, judge, plan_law};
+use super::stock::{Pass, PlanPass, STOCK_POINTS, Stock, StockModel};
 use super::{
     CommandedTable, Control, ControlError, Coupled, CycleEvent, CycleRun, PartLabels, SimGrinder,
     StationErrors, Workpiece,
@@ -18,16 +18,24 @@ use camloop_core::learn::LearningState;
 use camloop_core::lift::{LiftCurve, LiftTable};
 use camloop_core::measure::AssemblyLimits;
 use camloop_core::program::{
-    CycleMachine, CycleProgramError, CycleStation, MainProgramSettings, ProgramSettings,
+    CycleMachine, CyclePlan, CycleProgramError, CycleStation, MainProgramSettings, ProgramSettings,
     READY_PROGRAM, TableError, clear_x_mm, next_table_number, render_cycle_program,
     render_ready_program,
 };
 use camloop_core::speed_plan::ProfileSamples;
+use camloop_core::speed_plan::render::{
+    VaProgramError, VaProgramSettings, render_va_table_program,
+};
+use camloop_core::speed_plan::tables::VaTables;
 use camloop_core::turn::{self, Decision, TurnSetup};
 use std::cell::Cell;
 
 const TABLE_PROGRAM: &str = "CELL_TABLE";
 const TABLE_PAIR: (u32, u32) = (1, 2);
+/// With the speed plan (`cell.speed_plan.enabled`): the plan's table program and the pairs
+/// its X and C tables alternate in.
+const PLAN_PROGRAM: &str = "CELL_PLAN";
+const PLAN_PAIRS: [(u32, u32); 2] = [(3, 4), (5, 6)];
 
 /// How the in-process cell runs.
 #[derive(Debug, Clone)]
@@ -100,6 +108,8 @@ pub enum CycleCellError {
     Program(#[from] CycleProgramError),
     #[error("table program: {0}")]
     Table(#[from] TableError),
+    #[error("plan table program: {0}")]
+    Plan(#[from] VaProgramError),
     #[error("control: {0}")]
     Control(#[from] ControlError),
 }
@@ -131,6 +141,8 @@ pub fn run(setup: &CycleCellSetup, parts: u32) -> Result<Vec<CyclePart>, CycleCe
     let mut control = Control::new();
     control.enable_overlay();
     let mut number = 0;
+    let mut plan_numbers = (0, 0);
+    let mut law = plan_law(cell, feature)?;
     let mut ready = 0u64;
     let curve = LiftCurve::new(&cell.nominal);
     let nominal = |psi_deg: f64| {
@@ -151,11 +163,24 @@ pub fn run(setup: &CycleCellSetup, parts: u32) -> Result<Vec<CyclePart>, CycleCe
             bands: &[],
             assembly: AssemblyLimits::default(),
             phase_deg: 0.0,
-            plan: None,
+            plan: law.as_ref(),
         };
-        let main = main_program(setup, feature.wheel_radius_mm())?;
         number = next_table_number(number, TABLE_PAIR);
-        let in_force_text = table_text(&compensate::current_table(&in_force, &lobe)?, number)?;
+        plan_numbers = next_plan_numbers(plan_numbers);
+        let in_force_table = compensate::current_table(&in_force, &lobe)?;
+        let in_force_plan = match &law {
+            Some(l) => Some(turn::planned_tables(&lobe, l, &in_force, &in_force_table)?),
+            None => None,
+        };
+        let main = main_program(
+            setup,
+            feature.wheel_radius_mm(),
+            in_force_plan.as_ref().map(|t| t.va_speed_rpm),
+        )?;
+        let in_force_text = Texts {
+            table: table_text(&in_force_table, number)?,
+            plan: plan_text(in_force_plan.as_ref(), plan_numbers)?,
+        };
         let labels = PartLabels {
             machine: "SIM".into(),
             part: part.to_string(),
@@ -169,7 +194,7 @@ pub fn run(setup: &CycleCellSetup, parts: u32) -> Result<Vec<CyclePart>, CycleCe
         let mut in_process = "none".to_string();
         let mut finish = None;
         if setup.measure_before_finish && setup.cycle.measure_stage().is_some() {
-            let (stock, table) = stock_until_measured(setup, &dry, &surface, feature);
+            let (stock, table) = stock_until_measured(setup, &dry, &surface, feature)?;
             let errors = with_station(&setup.station, stock.as_errors(cell.grinder.stock.orders));
             let mid = sim.grind_station(&table, &workpiece, &errors)?;
             let raw = sim.measure_in_process(&mid, &labels);
@@ -185,12 +210,21 @@ pub fn run(setup: &CycleCellSetup, parts: u32) -> Result<Vec<CyclePart>, CycleCe
                 Ok(f) => {
                     in_process = format!("finish table: {}", f.outcome);
                     let n = next_table_number(number, TABLE_PAIR);
-                    finish = Some((table_text(&f.table, n)?, f.state, n));
+                    let pn = next_plan_numbers(plan_numbers);
+                    let planned = match &law {
+                        Some(l) => Some(turn::planned_tables(&lobe, l, &f.state, &f.table)?),
+                        None => None,
+                    };
+                    let texts = Texts {
+                        table: table_text(&f.table, n)?,
+                        plan: plan_text(planned.as_ref(), pn)?,
+                    };
+                    finish = Some((texts, f.state, (n, pn)));
                 }
                 Err(e) => in_process = format!("refused, table in force: {e}"),
             }
         }
-        let answer = finish.as_ref().map(|(text, _, _)| text.as_str());
+        let answer = finish.as_ref().map(|(texts, _, _)| texts);
         let polls = Cell::new(0u32);
         let answered = || answer.is_some() && polls.get() > setup.answer_polls;
         let load = |name: &str| {
@@ -207,9 +241,10 @@ pub fn run(setup: &CycleCellSetup, parts: u32) -> Result<Vec<CyclePart>, CycleCe
         };
         let run = control.run_cycle(&main, &load)?;
         let state_ground = match finish {
-            Some((_, state, n)) if answered() => {
+            Some((_, state, (n, pn))) if answered() => {
                 ready += 1;
                 number = n;
+                plan_numbers = pn;
                 state
             }
             // Made, but after the control's timeout: camloop delivers nothing late, the
@@ -220,7 +255,7 @@ pub fn run(setup: &CycleCellSetup, parts: u32) -> Result<Vec<CyclePart>, CycleCe
             }
             None => in_force.clone(),
         };
-        let (stock, table) = stock_after(setup, &run, &surface, feature, usize::MAX);
+        let (stock, table) = stock_after(setup, &run, &surface, feature, usize::MAX)?;
         let ground = sim.grind_station(
             &table,
             &workpiece,
@@ -262,6 +297,8 @@ pub fn run(setup: &CycleCellSetup, parts: u32) -> Result<Vec<CyclePart>, CycleCe
             let old = feature.wheel_radius_mm();
             feature = feature.with_wheel_radius(event.believed_wheel_radius_mm);
             after_dressing(&mut in_force, cell.params.max_correction_um, old, &event);
+            // The plan is made for the wheel the control believes.
+            law = plan_law(cell, feature)?;
         }
     }
     Ok(out)
@@ -278,11 +315,17 @@ fn with_station(station: &StationErrors, stock: StationErrors) -> StationErrors 
     }
 }
 
-fn main_program(setup: &CycleCellSetup, wheel_radius_mm: f64) -> Result<String, CycleProgramError> {
+/// The cycle program; `va_speed_rpm`: the plan's, for stages on it.
+fn main_program(
+    setup: &CycleCellSetup,
+    wheel_radius_mm: f64,
+    va_speed_rpm: Option<f64>,
+) -> Result<String, CycleProgramError> {
     let table = ProgramSettings {
         name: TABLE_PROGRAM.into(),
         ..ProgramSettings::default()
     };
+    let plan_settings = plan_settings(PLAN_PAIRS.map(|p| p.0).into());
     let machine = CycleMachine {
         cycle: &setup.cycle,
         c_speed_rpm: setup.cell.limits.c_speed_rpm,
@@ -303,8 +346,45 @@ fn main_program(setup: &CycleCellSetup, wheel_radius_mm: f64) -> Result<String, 
         table: &table,
         label: "IN1",
         z_mm: 0.0,
+        plan: va_speed_rpm.map(|va_speed_rpm| CyclePlan {
+            table: &plan_settings,
+            va_speed_rpm,
+        }),
     }];
     render_cycle_program(&MainProgramSettings::default(), &machine, &stations)
+}
+
+/// The table programs the share holds for the feature: the constant-speed one and, with the
+/// plan, the plan's.
+struct Texts {
+    table: String,
+    plan: Option<String>,
+}
+
+/// The next numbers of the plan's X and C tables (each alternating in its pair).
+fn next_plan_numbers((x, c): (u32, u32)) -> (u32, u32) {
+    (
+        next_table_number(x, PLAN_PAIRS[0]),
+        next_table_number(c, PLAN_PAIRS[1]),
+    )
+}
+
+fn plan_settings((x_table, c_table): (u32, u32)) -> VaProgramSettings {
+    VaProgramSettings {
+        name: PLAN_PROGRAM.into(),
+        x_table,
+        c_table,
+        ..VaProgramSettings::default()
+    }
+}
+
+fn plan_text(
+    tables: Option<&VaTables>,
+    numbers: (u32, u32),
+) -> Result<Option<String>, VaProgramError> {
+    tables
+        .map(|t| render_va_table_program(t, &plan_settings(numbers)))
+        .transpose()
 }
 
 fn table_text(table: &GuardedTable, number: u32) -> Result<String, TableError> {
@@ -315,12 +395,14 @@ fn table_text(table: &GuardedTable, number: u32) -> Result<String, TableError> {
     })
 }
 
-/// The share as the control reads it: the table program (this part's finish table once
+/// The share as the control reads it: the table programs (this part's finish tables once
 /// camloop answered) and the handshake's count.
-fn serve(name: &str, in_force: &str, answer: Option<&str>, ready: u64) -> Option<String> {
+fn serve(name: &str, in_force: &Texts, answer: Option<&Texts>, ready: u64) -> Option<String> {
+    let texts = answer.unwrap_or(in_force);
     match name {
         READY_PROGRAM => Some(render_ready_program(ready)),
-        TABLE_PROGRAM => Some(answer.unwrap_or(in_force).to_owned()),
+        TABLE_PROGRAM => Some(texts.table.clone()),
+        PLAN_PROGRAM => texts.plan.clone(),
         _ => None,
     }
 }
@@ -331,7 +413,7 @@ fn stock_until_measured(
     run: &CycleRun,
     surface: &[f64],
     feature: Feature,
-) -> (Stock, CommandedTable) {
+) -> Result<(Stock, CommandedTable), super::SimError> {
     let turned = run
         .events
         .iter()
@@ -348,7 +430,7 @@ fn stock_after(
     surface: &[f64],
     feature: Feature,
     until: usize,
-) -> (Stock, CommandedTable) {
+) -> Result<(Stock, CommandedTable), super::SimError> {
     let (stock, last) = passes_stock(
         &setup.cell.grinder.stock,
         &setup.cycle,
@@ -357,7 +439,7 @@ fn stock_after(
         feature.wheel_radius_mm(),
         until,
         &|_| true,
-    );
+    )?;
     let shape = last
         .map(|g| g.shape.clone())
         .unwrap_or(super::TableShape::G1(Vec::new()));
@@ -365,9 +447,10 @@ fn stock_after(
         shape,
         x_zero_mm: feature.x_zero_mm(),
         wheel_radius_mm: feature.wheel_radius_mm(),
-        plan: None,
+        // On the plan: X over VA, with C's table (the lag is the plan's).
+        plan: last.and_then(Coupled::planned_speed),
     };
-    (stock, table)
+    Ok((stock, table))
 }
 
 /// The contact's arc per radian of C at each of the stock's points ([`Stock::grind`]'s
@@ -395,7 +478,7 @@ pub fn passes_stock<'r>(
     wheel_radius_mm: f64,
     until: usize,
     pick: &dyn Fn(&Coupled) -> bool,
-) -> (Stock, Option<&'r Coupled>) {
+) -> Result<(Stock, Option<&'r Coupled>), super::SimError> {
     let mut stock = Stock::new(cycle.stock_mm);
     let mut wheel_m_s = cycle.wheel_speed_m_s;
     let mut c_deg = 0.0f64;
@@ -417,7 +500,8 @@ pub fn passes_stock<'r>(
                         wheel_speed_m_s: wheel_m_s,
                     };
                     let start = c_deg.rem_euclid(360.0).round() as usize % STOCK_POINTS;
-                    stock.grind(model, surface, &pass, start);
+                    let plan = g.planned_speed().map(|p| PlanPass::new(&p)).transpose()?;
+                    stock.grind_planned(model, surface, &pass, start, plan.as_ref());
                     last = Some(g);
                 }
                 c_deg += 360.0 * g.revolutions;
@@ -425,7 +509,7 @@ pub fn passes_stock<'r>(
             _ => {}
         }
     }
-    (stock, last)
+    Ok((stock, last))
 }
 
 /// The infeed of the stages after the measurement: the stock on when the gauge reads, mm.

@@ -99,6 +99,32 @@ pub struct Pass {
     pub wheel_speed_m_s: f64,
 }
 
+/// A pass on the speed plan: at each degree of C, where the virtual axis stands (degrees,
+/// rising with C through one turn) and C's speed there (rpm). The infeed on X's overlay is
+/// spread over VA's travel (`FGROUP(VA)`), and the deflection follows the local C speed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlanPass {
+    pub va_deg: Vec<f64>,
+    pub c_speed_rpm: Vec<f64>,
+}
+
+impl PlanPass {
+    /// The plan's law sampled at the stock's points.
+    pub fn new(plan: &super::PlannedSpeed) -> Result<Self, super::SimError> {
+        let law = super::plan::CLaw::new(plan)?;
+        let (va_deg, c_speed_rpm) = (0..STOCK_POINTS)
+            .map(|j| {
+                let [va, dva_dc, _] = law.inverse((j as f64).to_radians());
+                (va.to_degrees(), plan.va_speed_rpm / dva_dc)
+            })
+            .unzip();
+        Ok(Self {
+            va_deg,
+            c_speed_rpm,
+        })
+    }
+}
+
 impl Stock {
     /// `stock_mm` all round, no deflection.
     pub fn new(stock_mm: f64) -> Self {
@@ -117,15 +143,39 @@ impl Stock {
         pass: &Pass,
         start_deg: usize,
     ) {
+        self.grind_planned(model, surface_mm_rad, pass, start_deg, None);
+    }
+
+    /// [`Self::grind`], on the speed plan when `plan` is given: C's speed at each degree is
+    /// the plan's (`pass.c_speed_rpm` is then VA's), and the overlay follows VA's travel.
+    pub fn grind_planned(
+        &mut self,
+        model: &StockModel,
+        surface_mm_rad: &[f64],
+        pass: &Pass,
+        start_deg: usize,
+        plan: Option<&PlanPass>,
+    ) {
         let n = STOCK_POINTS;
         let steps = (pass.revolutions * n as f64).round() as usize;
+        // The leading axis' travel from the pass' start to C's `step`-th degree after it.
+        let lead_at = |step: usize| match plan {
+            None => step as f64,
+            Some(p) => {
+                let at =
+                    |s: usize| p.va_deg[(start_deg + s) % n] + 360.0 * ((start_deg + s) / n) as f64;
+                at(step) - at(0)
+            }
+        };
+        let total = lead_at(steps);
         for step in 0..steps {
             let j = (start_deg + step) % n;
-            // The overlay moves in proportion to C: where the wheel is at this degree.
-            let o = pass.x_offset_mm + pass.x_infeed_mm * (step + 1) as f64 / steps as f64;
+            // The overlay moves in proportion to the leading axis (C, or VA on the plan):
+            // where the wheel is at this degree.
+            let o = pass.x_offset_mm + pass.x_infeed_mm * lead_at(step + 1) / total;
             let k = model.compliance(
                 surface_mm_rad[j % surface_mm_rad.len()],
-                pass.c_speed_rpm,
+                plan.map_or(pass.c_speed_rpm, |p| p.c_speed_rpm[j]),
                 pass.wheel_speed_m_s,
             );
             let excess = self.stock_mm[j] - o;

@@ -47,6 +47,7 @@ fn main_program() -> String {
         table: &table,
         label: "IN1",
         z_mm: 20.0,
+        plan: None,
     }];
     render_cycle_program(&MainProgramSettings::default(), &machine, &stations).unwrap()
 }
@@ -253,11 +254,13 @@ fn a_shaft_runs_the_cycle_at_each_station() {
             table: &tables[0],
             label: "IN1",
             z_mm: 20.0,
+            plan: None,
         },
         CycleStation {
             table: &tables[1],
             label: "EX1",
             z_mm: 50.0,
+            plan: None,
         },
     ];
     let main = render_cycle_program(&MainProgramSettings::default(), &machine, &stations).unwrap();
@@ -284,4 +287,129 @@ fn a_shaft_runs_the_cycle_at_each_station() {
             (z, number, by)
         );
     }
+}
+
+const SHAFT: [(&str, f64); 3] = [
+    ("DEMO_CAM_IN1", 20.0),
+    ("DEMO_CAM_EX1", 50.0),
+    ("DEMO_CAM_IN2", 80.0),
+];
+
+/// The cycle program of the three features of [`SHAFT`].
+fn shaft_program() -> String {
+    let cycle = cycle();
+    let tables: Vec<ProgramSettings> = SHAFT
+        .iter()
+        .map(|(name, _)| ProgramSettings {
+            name: (*name).into(),
+            ..ProgramSettings::default()
+        })
+        .collect();
+    let machine = CycleMachine {
+        cycle: &cycle,
+        c_speed_rpm: 30.0,
+        wheel_radius_mm: 250.0,
+        clear_x_mm: 13.0,
+    };
+    let stations: Vec<CycleStation<'_>> = tables
+        .iter()
+        .zip(SHAFT)
+        .map(|(table, (name, z_mm))| CycleStation {
+            table,
+            label: &name[9..],
+            z_mm,
+            plan: None,
+        })
+        .collect();
+    render_cycle_program(&MainProgramSettings::default(), &machine, &stations).unwrap()
+}
+
+/// Runs the shaft's cycle program on `control`. The share holds every feature's table
+/// program (numbers 1, 3, 5) except `missing` (the run stops at its call, as a shaft
+/// interrupted there), the handshake's count 0 (every finish with the table in force), and,
+/// when given, the resume subprogram naming feature `resume_at`.
+fn run_shaft(
+    control: &mut Control,
+    missing: Option<usize>,
+    resume_at: Option<usize>,
+) -> Result<camloop_sim::CycleRun, camloop_sim::ControlError> {
+    let main = shaft_program();
+    let load = |name: &str| -> Option<String> {
+        if name == READY_PROGRAM {
+            return Some(render_ready_program(0));
+        }
+        if name == camloop_core::program::RESUME_PROGRAM {
+            return resume_at.map(camloop_core::program::render_resume_program);
+        }
+        let k = SHAFT.iter().position(|(n, _)| *n == name)?;
+        (missing != Some(k + 1)).then(|| table_program(2 * k as u32 + 1, 0.5).replace(TABLE, name))
+    };
+    control.run_cycle(&main, &load)
+}
+
+/// How many grinds each feature of [`SHAFT`] had in `runs` (by the station ground and the
+/// program that defined the coupled table, which must agree).
+fn grinds_per_feature(runs: &[&camloop_sim::CycleRun]) -> [usize; 3] {
+    let mut count = [0; 3];
+    for g in runs.iter().flat_map(|r| &r.ground) {
+        let k = SHAFT.iter().position(|(_, z)| *z == g.z_mm).unwrap();
+        assert_eq!(g.defined_by, SHAFT[k].0, "{g:?}");
+        count[k] += 1;
+    }
+    count
+}
+
+/// A shaft interrupted after feature k and resumed through R90 = -1 (the resume subprogram
+/// names feature k + 1): every feature is ground once, each with its whole cycle (6 coupled
+/// passes: approach, rough, semi-finish, approach, finish, spark-out), and the run resets
+/// R90, so the next start grinds a new shaft whole.
+#[test]
+fn an_interrupted_shaft_resumes_at_the_first_feature_without_a_gauge_record() {
+    for k in 1..=2 {
+        let mut control = Control::new();
+        control.enable_overlay();
+        let err = run_shaft(&mut control, Some(k + 1), None).unwrap_err();
+        assert_eq!(
+            err.fault,
+            ControlFault::ProgramNotFound {
+                name: SHAFT[k].0.into()
+            }
+        );
+        let stopped = control
+            .stopped_run()
+            .expect("what ground before the stop")
+            .clone();
+        let mut want = [0; 3];
+        want[..k].fill(6);
+        assert_eq!(grinds_per_feature(&[&stopped]), want, "stopped after {k}");
+        control.set_r_param(90, -1.0);
+        let resumed = run_shaft(&mut control, None, Some(k + 1)).unwrap();
+        assert!(control.stopped_run().is_none());
+        assert_eq!(
+            grinds_per_feature(&[&stopped, &resumed]),
+            [6, 6, 6],
+            "resumed at {}",
+            k + 1
+        );
+        // The resumed run starts the wheel and coolant before it grinds, and ends retracted.
+        assert!(matches!(resumed.events[0], CycleEvent::Spindle { rpm, .. } if rpm > 0.0));
+        assert_eq!(resumed.events[1], CycleEvent::Coolant(true));
+        assert_eq!(control.position("X"), 13.0);
+        // R90 was reset by the resumed run: a plain start grinds the whole shaft (and needs
+        // no resume subprogram).
+        let next = run_shaft(&mut control, None, None).unwrap();
+        assert_eq!(grinds_per_feature(&[&next]), [6, 6, 6]);
+    }
+}
+
+/// R90 = k > 0 starts at feature k without asking the resume subprogram.
+#[test]
+fn the_operator_names_the_feature_to_start_at() {
+    let mut control = Control::new();
+    control.enable_overlay();
+    control.set_r_param(90, 2.0);
+    let run = run_shaft(&mut control, None, None).unwrap();
+    assert_eq!(grinds_per_feature(&[&run]), [0, 6, 6]);
+    let plain = run_shaft(&mut control, None, None).unwrap();
+    assert_eq!(grinds_per_feature(&[&plain]), [6, 6, 6]);
 }

@@ -114,6 +114,7 @@ pub(super) fn render_whole(
             table: &s.program,
             label: &s.name,
             z_mm: s.z_mm,
+            plan: None,
         })
         .collect();
     Ok(render_cycle_program(main, &machine, &stations)?)

@@ -250,7 +250,9 @@ impl SimSource {
             station.feature.wheel_radius_mm(),
             until,
             &|g| self.station_at(g) == Some(k),
-        );
+        )
+        .map_err(|e| error!(machine = %self.machine, lobe = %station.name, error = %e, "simulator: the plan's C table cannot be run"))
+        .ok()?;
         let table = match shape {
             Some(shape) => self.commanded_shape(shape, k),
             None => self.commanded(last?, k),

@@ -4,18 +4,29 @@
 //! spark-out, lift-off and uncoupling; at the end X back clear of the part (an absolute
 //! rapid move, checked by [`super::check_ending`]), then coolant and spindle off.
 //!
+//! With several features the program resumes as the shaft program does: R parameter 90
+//! (`resume_r_param`) below 0 starts at the first feature without a gauge record (the
+//! resume subprogram camloop rewrites after every gauged feature), k > 0 at feature k, and
+//! the run resets it to 0. A feature before the start is jumped over (`IF CL_FROM>k GOTOF
+//! CL_SKIPk`) rather than wrapped in `IF … ENDIF`, so no label of its handshake lies inside
+//! a control structure.
+//!
 //! Every coupling is made with the number the table program just returned, as in the
 //! table-only program: the finish after a measurement calls the table program again, so it
 //! couples the newest table (this part's finish table when camloop delivered it in time, the
-//! table in force otherwise).
+//! table in force otherwise). Stages with `speed_plan = true` couple C and X to the virtual
+//! axis by the numbers the feature's plan table program returns ([`super::cycle_plan`]).
 
 use super::ProgramSettings;
+use super::cycle_plan::{self, CyclePlan, PlanResolved};
 use super::ending::{EndingError, check_ending};
 use super::main_program::{MainProgramSettings, Opening, define_table, opening};
 use super::names::validate_axis_name;
 use super::settings::{Resolved, SettingsErrors, check_comments};
+use super::shaft_program::{FROM_VAR, RESUME_PROGRAM, resume_point};
 use super::table::{NUMBER_VAR, fmt_fixed, line};
 use crate::cycle::{CycleSettings, ResolvedStage, StageKind, stage_key};
+use crate::speed_plan::render::C_NUMBER_VAR;
 
 /// The handshake subprogram's name (file `CAMLOOP_READY.SPF`): it returns how many same-part
 /// finish tables camloop has delivered to this machine.
@@ -43,6 +54,8 @@ pub struct CycleStation<'a> {
     pub table: &'a ProgramSettings,
     pub label: &'a str,
     pub z_mm: f64,
+    /// The feature's speed plan, for stages with `speed_plan = true` (refused without it).
+    pub plan: Option<CyclePlan<'a>>,
 }
 
 /// The cycle and the machine facts its program needs.
@@ -69,10 +82,8 @@ pub enum CycleProgramError {
     Cycle(Vec<String>),
     #[error("the program would be unsafe to load: {0}")]
     Unsafe(#[from] EndingError),
-    #[error(
-        "{0}: a stage on the speed plan is not written by the cycle program yet; give it a c_speed_rpm"
-    )]
-    PlanStage(String),
+    #[error("{0}: on the speed plan, but feature {1} has no plan tables")]
+    PlanStage(String, String),
 }
 
 /// Renders the whole-cycle main program for `stations` (one or more features in turn).
@@ -81,27 +92,44 @@ pub fn render_cycle_program(
     machine: &CycleMachine<'_>,
     stations: &[CycleStation<'_>],
 ) -> Result<String, CycleProgramError> {
-    let (resolved, stages) = check(main, machine, stations)?;
+    let (resolved, stages, plans) = check(main, machine, stations)?;
     let first = &resolved[0];
     let (x, c) = (first.following.as_str(), first.leading.as_str());
     let cycle = machine.cycle;
     let spindle = cycle.wheel_spindle;
+    // Several features: resumable as the shaft program is.
+    let resumable = stations.len() > 1;
     let externs: Vec<&str> = std::iter::once(READY_PROGRAM)
+        .chain(resumable.then_some(RESUME_PROGRAM))
         .chain(resolved.iter().map(|r| r.name.as_str()))
         .collect();
+    let planned = plans.iter().any(Option::is_some);
+    let ints: Vec<&str> = ["CL_SEEN", "CL_READY", "CL_NEW", "CL_WAIT"]
+        .into_iter()
+        .chain(resumable.then_some(FROM_VAR))
+        .chain(planned.then_some(C_NUMBER_VAR))
+        .collect();
+    let pair_externs: Vec<&str> = plans.iter().flatten().map(|p| p.name.as_str()).collect();
     let mut out = String::new();
     opening(
         &mut out,
         &Opening {
             name: &main.name,
             reals: &["CL_OFF"],
-            ints: &["CL_SEEN", "CL_READY", "CL_NEW", "CL_WAIT"],
+            ints: &ints,
             externs: &externs,
+            pair_externs: &pair_externs,
             comments: &main.comment_lines,
             following: x,
             leading: c,
         },
     );
+    if let Some(p) = plans.iter().flatten().next() {
+        cycle_plan::release(&mut out, x, c, &p.va);
+    }
+    if resumable {
+        resume_point(&mut out, main.resume_r_param);
+    }
     output_offset(
         &mut out,
         x,
@@ -122,9 +150,17 @@ pub fn render_cycle_program(
     out.push_str("M8 ; coolant on\n");
     let xd = usize::from(first.settings.x_decimals);
     let clear = fmt_fixed(machine.clear_x_mm, xd);
-    for (k, (s, r)) in stations.iter().zip(&resolved).enumerate() {
+    for (k, ((s, r), plan)) in stations.iter().zip(&resolved).zip(&plans).enumerate() {
         line(&mut out, format_args!("; feature {} {}", k + 1, s.label));
-        if stations.len() > 1 {
+        if resumable {
+            line(
+                &mut out,
+                format_args!(
+                    "IF {FROM_VAR}>{} GOTOF CL_SKIP{} ; resumed past it",
+                    k + 1,
+                    k + 1
+                ),
+            );
             line(
                 &mut out,
                 format_args!("G90 G0 {x}={clear} ; clear of the part"),
@@ -139,7 +175,10 @@ pub fn render_cycle_program(
                 ),
             );
         }
-        feature_cycle(&mut out, machine, &stages, r, k + 1);
+        feature_cycle(&mut out, machine, &stages, (r, plan.as_ref()), k + 1);
+        if resumable {
+            line(&mut out, format_args!("CL_SKIP{}:", k + 1));
+        }
     }
     output_offset(&mut out, x, "0", "the output offset back to 0");
     line(
@@ -174,7 +213,11 @@ pub fn wheel_rpm(surface_m_s: f64, radius_mm: f64) -> f64 {
     surface_m_s * 60_000.0 / (std::f64::consts::TAU * radius_mm)
 }
 
-type Checked<'a> = (Vec<Resolved<'a>>, Vec<ResolvedStage>);
+type Checked<'a> = (
+    Vec<Resolved<'a>>,
+    Vec<ResolvedStage>,
+    Vec<Option<PlanResolved>>,
+);
 
 fn check<'a>(
     main: &MainProgramSettings,
@@ -199,6 +242,12 @@ fn check<'a>(
         errors.push(e.into());
     }
     check_comments(&mut errors, &main.comment_lines);
+    if stations.len() > 1 && !(1..=999).contains(&main.resume_r_param) {
+        errors.push(super::SettingError::NotPositive {
+            field: "resume_r_param",
+            value: f64::from(main.resume_r_param),
+        });
+    }
     if !errors.is_empty() {
         return Err(SettingsErrors(errors).into());
     }
@@ -220,14 +269,28 @@ fn check<'a>(
         return Err(CycleProgramError::Cycle(problems));
     }
     let stages = machine.cycle.resolved(machine.c_speed_rpm);
-    if let Some((i, s)) = stages
-        .iter()
-        .enumerate()
-        .find(|(_, s)| s.c_speed_rpm.is_none())
-    {
-        return Err(CycleProgramError::PlanStage(stage_key(i, s.kind)));
+    let on_plan = stages.iter().position(|s| s.c_speed_rpm.is_none());
+    let mut plans = Vec::new();
+    for (s, r) in stations.iter().zip(&resolved) {
+        match (&s.plan, on_plan) {
+            (None, Some(i)) => {
+                return Err(CycleProgramError::PlanStage(
+                    stage_key(i, stages[i].kind),
+                    s.label.to_owned(),
+                ));
+            }
+            // A plan no stage runs on is not called.
+            (_, None) => plans.push(None),
+            (Some(p), Some(_)) => match cycle_plan::resolve_plan(s.label, p, r) {
+                Ok(p) => plans.push(Some(p)),
+                Err(e) => problems.push(e),
+            },
+        }
     }
-    Ok((resolved, stages))
+    if !problems.is_empty() {
+        return Err(CycleProgramError::Cycle(problems));
+    }
+    Ok((resolved, stages, plans))
 }
 
 /// `STOPRE` then the output offset: setting data are written as the block is prepared, so
@@ -237,44 +300,81 @@ fn output_offset(out: &mut String, x: &str, value: &str, why: &str) {
     line(out, format_args!("{OUTPUT_OFFSET}[{x}]={value} ; {why}"));
 }
 
-/// One feature's cycle: coupled segments split at the measurement.
+/// How X is coupled: to C by the constant-speed table, or with C to the virtual axis by the
+/// plan's tables.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Mode {
+    Constant,
+    Plan,
+}
+
+/// The axis whose travel a coupled block programs, its speed (rpm) and the stage comment's
+/// note on it.
+fn lead<'r>(
+    mode: Mode,
+    s: &ResolvedStage,
+    r: &'r Resolved<'_>,
+    plan: Option<&'r PlanResolved>,
+) -> (&'r str, f64, String) {
+    match (mode, plan, s.c_speed_rpm) {
+        (Mode::Plan, Some(p), _) => (&p.va, p.va_speed_rpm, cycle_plan::speed_note(p)),
+        (_, _, rpm) => {
+            let rpm = rpm.unwrap_or(0.0);
+            (&r.leading, rpm, format!("at {rpm} rpm"))
+        }
+    }
+}
+
+type Feature<'f, 'a> = (&'f Resolved<'a>, Option<&'f PlanResolved>);
+
+/// One feature's cycle: coupled segments split at the measurement and wherever a stage's
+/// mode (constant C speed or the plan) differs from the one before.
 fn feature_cycle(
     out: &mut String,
     machine: &CycleMachine<'_>,
     stages: &[ResolvedStage],
-    r: &Resolved<'_>,
+    (r, plan): Feature<'_, '_>,
     k: usize,
 ) {
     let cycle = machine.cycle;
     let mut stock_left = cycle.stock_mm;
-    let mut coupled = false;
+    let mut coupled: Option<Mode> = None;
     for s in stages {
         if s.kind == StageKind::Measure {
-            if coupled {
-                uncouple(out, r, cycle.lift_off_mm);
-                coupled = false;
+            if let Some(mode) = coupled.take() {
+                uncouple(out, (r, plan), mode, cycle.lift_off_mm);
             }
             measure(out, machine, s, r, k, stock_left);
             continue;
         }
-        if !coupled {
-            couple(out, machine, r, stock_left, s);
-            coupled = true;
+        let mode = if s.c_speed_rpm.is_some() {
+            Mode::Constant
+        } else {
+            Mode::Plan
+        };
+        if let Some(was) = coupled.filter(|m| *m != mode) {
+            uncouple(out, (r, plan), was, cycle.lift_off_mm);
+            coupled = None;
         }
-        stage(out, machine, s, r);
+        if coupled.is_none() {
+            couple(out, machine, (r, plan), mode, stock_left, s);
+            coupled = Some(mode);
+        }
+        stage(out, machine, s, r, lead(mode, s, r, plan));
         stock_left -= s.infeed_mm;
     }
-    if coupled {
-        uncouple(out, r, cycle.lift_off_mm);
+    if let Some(mode) = coupled {
+        uncouple(out, (r, plan), mode, cycle.lift_off_mm);
     }
 }
 
-/// Defines the newest table, stands X the stock and the air gap above its curve (the
+/// Defines the newest table(s), stands X the stock and the air gap above its curve (the
 /// coupling's output offset), couples, and takes the air gap at the approach feed.
 fn couple(
     out: &mut String,
     machine: &CycleMachine<'_>,
-    r: &Resolved<'_>,
+    (r, plan): Feature<'_, '_>,
+    mode: Mode,
     stock_left: f64,
     next: &ResolvedStage,
 ) {
@@ -282,10 +382,9 @@ fn couple(
     let cd = usize::from(r.settings.c_decimals);
     let xd = usize::from(r.settings.x_decimals);
     let cycle = machine.cycle;
-    let rpm = next.c_speed_rpm.unwrap_or(machine.c_speed_rpm);
-    define_table(out, t);
+    let mut offset = String::new();
     line(
-        out,
+        &mut offset,
         format_args!(
             "CL_OFF={} ; stock {} mm and air gap {} mm above the curve",
             fmt_fixed(stock_left + cycle.approach_mm, xd),
@@ -294,25 +393,33 @@ fn couple(
         ),
     );
     output_offset(
-        out,
+        &mut offset,
         x,
         "CL_OFF",
         "SD43106: X couples this far above the curve",
     );
-    line(out, format_args!("CL_C=$AA_IW[{c}]"));
-    line(out, format_args!("CL_X=CTAB(CL_C,{n},CL_SLOPE)"));
-    out.push_str("CL_X=CL_X+CL_OFF\n");
-    line(out, format_args!("G90 G1 {x}=CL_X F=100.000"));
-    line(out, format_args!("LEADON({x},{c},{n})"));
-    line(
-        out,
-        format_args!("FGROUP({c}) ; F is {c}'s speed, {x}'s overlay moves in proportion"),
-    );
+    match (mode, plan) {
+        (Mode::Plan, Some(p)) => cycle_plan::couple(out, r, p, &offset),
+        _ => {
+            define_table(out, t);
+            out.push_str(&offset);
+            line(out, format_args!("CL_C=$AA_IW[{c}]"));
+            line(out, format_args!("CL_X=CTAB(CL_C,{n},CL_SLOPE)"));
+            out.push_str("CL_X=CL_X+CL_OFF\n");
+            line(out, format_args!("G90 G1 {x}=CL_X F=100.000"));
+            line(out, format_args!("LEADON({x},{c},{n})"));
+            line(
+                out,
+                format_args!("FGROUP({c}) ; F is {c}'s speed, {x}'s overlay moves in proportion"),
+            );
+        }
+    }
+    let (axis, rpm, _) = lead(mode, next, r, plan);
     let revs = cycle.approach_mm / cycle.approach_feed_mm_per_rev;
     line(
         out,
         format_args!(
-            "G91 G1 {c}={} {x}=-{} F={} ; approach: the air gap",
+            "G91 G1 {axis}={} {x}=-{} F={} ; approach: the air gap",
             fmt_fixed(360.0 * revs, cd),
             fmt_fixed(cycle.approach_mm, xd),
             fmt_fixed(360.0 * rpm, 3)
@@ -321,17 +428,23 @@ fn couple(
     out.push_str("G90\n");
 }
 
-/// A coupled stage: C turns its revolutions with its infeed superimposed on X.
-fn stage(out: &mut String, machine: &CycleMachine<'_>, s: &ResolvedStage, r: &Resolved<'_>) {
-    let (x, c) = (&r.following, &r.leading);
+/// A coupled stage: the leading axis (C, or VA on the plan) turns the stage's revolutions
+/// with its infeed superimposed on X.
+fn stage(
+    out: &mut String,
+    machine: &CycleMachine<'_>,
+    s: &ResolvedStage,
+    r: &Resolved<'_>,
+    (axis, rpm, note): (&str, f64, String),
+) {
+    let x = &r.following;
     let cd = usize::from(r.settings.c_decimals);
     let xd = usize::from(r.settings.x_decimals);
-    let rpm = s.c_speed_rpm.unwrap_or(machine.c_speed_rpm);
     let spindle = machine.cycle.wheel_spindle;
     line(
         out,
         format_args!(
-            "; {}: {} mm in {} rev at {rpm} rpm, wheel {} m/s",
+            "; {}: {} mm in {} rev {note}, wheel {} m/s",
             s.kind.name(),
             fmt_fixed(s.infeed_mm, xd),
             s.revolutions,
@@ -353,7 +466,7 @@ fn stage(out: &mut String, machine: &CycleMachine<'_>, s: &ResolvedStage, r: &Re
     line(
         out,
         format_args!(
-            "G91 G1 {c}={}{infeed} F={}",
+            "G91 G1 {axis}={}{infeed} F={}",
             fmt_fixed(360.0 * s.revolutions, cd),
             fmt_fixed(360.0 * rpm, 3)
         ),
@@ -364,8 +477,9 @@ fn stage(out: &mut String, machine: &CycleMachine<'_>, s: &ResolvedStage, r: &Re
     }
 }
 
-/// Lift-off on the overlay while still coupled, then uncouple.
-fn uncouple(out: &mut String, r: &Resolved<'_>, lift_off_mm: f64) {
+/// Lift-off on the overlay while still coupled, then uncouple (X, and on the plan C, from
+/// the axis they follow).
+fn uncouple(out: &mut String, (r, plan): Feature<'_, '_>, mode: Mode, lift_off_mm: f64) {
     let (x, c) = (&r.following, &r.leading);
     let xd = usize::from(r.settings.x_decimals);
     line(
@@ -374,7 +488,13 @@ fn uncouple(out: &mut String, r: &Resolved<'_>, lift_off_mm: f64) {
     );
     out.push_str("G90\n");
     out.push_str("FGROUP() ; the feed back to the path axes\n");
-    line(out, format_args!("LEADOF({x},{c})"));
+    match (mode, plan) {
+        (Mode::Plan, Some(p)) => {
+            line(out, format_args!("LEADOF({x},{})", p.va));
+            line(out, format_args!("LEADOF({c},{})", p.va));
+        }
+        _ => line(out, format_args!("LEADOF({x},{c})")),
+    }
 }
 
 /// The in-process measurement with stock on, then the wait for this part's finish table.

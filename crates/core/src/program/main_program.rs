@@ -137,6 +137,7 @@ fn main_text(main: &MainProgramSettings, main_name: &str, r: &Resolved<'_>) -> S
             reals: &[],
             ints: &[],
             externs: &[t],
+            pair_externs: &[],
             comments: &main.comment_lines,
             following: x,
             leading: c,
@@ -157,6 +158,9 @@ pub(crate) struct Opening<'a> {
     pub reals: &'a [&'a str],
     pub ints: &'a [&'a str],
     pub externs: &'a [&'a str],
+    /// Subprograms that return two numbers (a speed plan's table program: `CL_TNO`,
+    /// `CL_TNO_C`).
+    pub pair_externs: &'a [&'a str],
     pub comments: &'a [String],
     pub following: &'a str,
     pub leading: &'a str,
@@ -174,6 +178,9 @@ pub(crate) fn opening(out: &mut String, o: &Opening<'_>) {
     line(out, format_args!("DEF INT {NUMBER_VAR}{}", more(o.ints)));
     for name in o.externs {
         line(out, format_args!("EXTERN {name}(VAR INT)"));
+    }
+    for name in o.pair_externs {
+        line(out, format_args!("EXTERN {name}(VAR INT, VAR INT)"));
     }
     for comment in o.comments {
         line(out, format_args!("; {comment}"));

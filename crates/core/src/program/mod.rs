@@ -13,6 +13,7 @@
 //! single-letter axes `C12.0000` would also do, but axis names with several letters or a
 //! digit extension (`C1`, `XA`) require the `=`, and `=` is valid for both.
 
+mod cycle_plan;
 mod cycle_program;
 mod ending;
 mod main_program;
@@ -24,6 +25,7 @@ mod shaft_program;
 pub mod syntax;
 mod table;
 
+pub use cycle_plan::CyclePlan;
 pub use cycle_program::{
     CLEARANCE_MM, CycleMachine, CycleProgramError, CycleStation, OUTPUT_OFFSET, POLL_S,
     READY_PROGRAM, clear_x_mm, render_cycle_program, render_ready_program, wheel_rpm,

@@ -82,32 +82,13 @@ pub fn render_shaft_program(
             reals: &[],
             ints: &[FROM_VAR],
             externs: &externs,
+            pair_externs: &[],
             comments: &main.comment_lines,
             following: x,
             leading: c,
         },
     );
-    let r = main.resume_r_param;
-    line(
-        &mut out,
-        format_args!("{FROM_VAR}=1 ; a new shaft: every feature"),
-    );
-    line(
-        &mut out,
-        format_args!("IF R{r}<0 ; resume: the first feature without a gauge record"),
-    );
-    line(&mut out, format_args!("{RESUME_PROGRAM}({FROM_VAR})"));
-    out.push_str("ENDIF\n");
-    line(
-        &mut out,
-        format_args!("IF R{r}>0 ; the operator names the feature to start at"),
-    );
-    line(&mut out, format_args!("{FROM_VAR}=R{r}"));
-    out.push_str("ENDIF\n");
-    line(
-        &mut out,
-        format_args!("R{r}=0 ; a resume applies to one run"),
-    );
+    resume_point(&mut out, main.resume_r_param);
     let clear = fmt_fixed(clear_x_mm, xd);
     for (k, (s, r)) in stations.iter().zip(&resolved).enumerate() {
         line(
@@ -129,6 +110,29 @@ pub fn render_shaft_program(
     check_ending(&out, x, clear_x_mm)
         .map_err(|e| SettingsErrors(vec![SettingError::Unsafe(e.to_string())]))?;
     Ok(out)
+}
+
+/// Sets `CL_FROM`, the first feature this run grinds: 1, or where the operator resumes
+/// through R parameter `r` (below 0: the resume subprogram's feature; above: that feature),
+/// which the run then resets to 0. Shared by the shaft and whole-cycle programs.
+pub(crate) fn resume_point(out: &mut String, r: u32) {
+    line(
+        out,
+        format_args!("{FROM_VAR}=1 ; a new shaft: every feature"),
+    );
+    line(
+        out,
+        format_args!("IF R{r}<0 ; resume: the first feature without a gauge record"),
+    );
+    line(out, format_args!("{RESUME_PROGRAM}({FROM_VAR})"));
+    out.push_str("ENDIF\n");
+    line(
+        out,
+        format_args!("IF R{r}>0 ; the operator names the feature to start at"),
+    );
+    line(out, format_args!("{FROM_VAR}=R{r}"));
+    out.push_str("ENDIF\n");
+    line(out, format_args!("R{r}=0 ; a resume applies to one run"));
 }
 
 /// Every problem with the settings at once; the stations' resolved tables when none.

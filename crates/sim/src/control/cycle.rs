@@ -55,6 +55,10 @@ impl Run<'_> {
                 args,
             } => match args.as_slice() {
                 [Expr::Var(C_AXIS)] | [] => Ok(None),
+                // The virtual axis that leads X on the speed plan.
+                [Expr::Var(axis)] if self.control.couplings.iter().any(|c| c.leading == *axis) => {
+                    Ok(None)
+                }
                 _ => Err(unsupported(code).into()),
             },
             Statement::Assign { target, value } if spindle_number(target, 'S').is_some() => {
@@ -225,8 +229,9 @@ impl Run<'_> {
         self.event(CycleEvent::Spindle { spindle: n, rpm })
     }
 
-    /// `G91 G1 C=<deg> [X=<mm>] F=<deg/min>` (a grind with X's infeed on the overlay) or
-    /// `G91 G0 X=<mm>` (the lift-off, on the overlay while coupled).
+    /// `G91 G1 C=<deg> [X=<mm>] F=<deg/min>` (a grind with X's infeed on the overlay; on the
+    /// speed plan the axis X follows, the virtual one, in C's place) or `G91 G0 X=<mm>` (the
+    /// lift-off, on the overlay while coupled).
     fn incremental(
         &mut self,
         code: &str,
@@ -238,9 +243,6 @@ impl Run<'_> {
                 .find(|s| s.0 == name && s.1.is_none())
                 .and_then(|s| s.2.number())
         };
-        let known = sets
-            .iter()
-            .all(|s| ["C", "X", "F"].contains(&s.0) && s.1.is_none());
         let x_mm = number("X").unwrap_or(0.0);
         let coupled = self
             .control
@@ -248,6 +250,13 @@ impl Run<'_> {
             .iter()
             .find(|c| c.following == "X")
             .cloned();
+        // The axis that leads X (C, or a virtual axis on the plan); C when X is free.
+        let lead = coupled
+            .as_ref()
+            .map_or(C_AXIS.to_owned(), |c| c.leading.clone());
+        let known = sets
+            .iter()
+            .all(|s| [lead.as_str(), "X", "F"].contains(&s.0) && s.1.is_none());
         if !known || !matches!(codes, ["G1"] | ["G0"]) {
             return Err(unsupported(code).into());
         }
@@ -267,17 +276,21 @@ impl Run<'_> {
             .copied()
             .unwrap_or(0.0)
             + self.control.overlay_mm;
-        match (codes, number("C"), number("F")) {
+        match (codes, number(&lead), number("F")) {
             (["G1"], Some(travel), Some(feed)) if travel > 0.0 && feed > 0.0 => {
-                if let Some(mut grind) = self.grind(C_AXIS, feed, travel) {
+                if let Some(mut grind) = self.grind(&lead, feed, travel) {
                     grind.x_offset_mm = start_off;
                     grind.x_infeed_mm = x_mm;
+                    // C follows a virtual axis one revolution per revolution of it.
+                    if grind.c_law.is_some() {
+                        *self.control.positions.entry(C_AXIS.to_owned()).or_default() += travel;
+                    }
                     self.ground.push(grind);
                     self.events.push(CycleEvent::Ground(self.ground.len() - 1));
                 } else if x_mm != 0.0 {
                     return Err(invalid("an X infeed with C turning needs X coupled to C").into());
                 }
-                *self.control.positions.entry(C_AXIS.to_owned()).or_default() += travel;
+                *self.control.positions.entry(lead.clone()).or_default() += travel;
             }
             (["G0"], None, None) => {}
             _ => return Err(unsupported(code).into()),
