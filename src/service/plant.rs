@@ -1,6 +1,7 @@
 //! The plant's events on their way out of the machine loops: the [`PlantEvent`] each
 //! journal record announces, its JSON payload, and the [`EventSender`] the loops hand them
-//! to (it feeds MQTT's intake and OPC UA's feed alike, so neither adapter owns it).
+//! to (it feeds MQTT's intake and OPC UA's feed alike, so neither adapter owns it). The
+//! MQTT wire's payload with its sequence number is the MQTT crate's.
 
 use jiff::Timestamp;
 use std::sync::Arc;
@@ -66,6 +67,14 @@ impl EventSender {
         if self.tx.try_send(event).is_err() {
             self.refused.fetch_add(1, Ordering::Relaxed);
         }
+    }
+}
+
+impl From<camloop_mqtt::Intake> for EventSender {
+    /// The MQTT publisher's intake, counting what it refuses where MQTT reports its drops.
+    fn from(intake: camloop_mqtt::Intake) -> Self {
+        let (tx, refused) = intake.into_parts();
+        Self::new(tx, refused)
     }
 }
 
@@ -141,15 +150,6 @@ pub(crate) fn of_record(record: &Pending) -> Option<PlantEvent> {
 pub fn payload(event: &PlantEvent) -> String {
     // Strings, numbers and enums only: serializing cannot fail.
     serde_json::to_string(event).expect("a plant event serializes to JSON")
-}
-
-/// The payload with the event's sequence number (`seq`) last.
-pub(crate) fn payload_with_seq(event: &PlantEvent, seq: u64) -> String {
-    let mut value = serde_json::to_value(event).expect("a plant event serializes to JSON");
-    if let Some(fields) = value.as_object_mut() {
-        fields.insert("seq".into(), seq.into());
-    }
-    value.to_string()
 }
 
 /// The gauge's repeatability a measurement's analysis reported (`repeatability_max_um` of

@@ -15,8 +15,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::names::{FeatureName, MachineName};
-use crate::store::Verdict;
+use camloop_core::levels::Verdict;
+use camloop_core::names::{FeatureName, MachineName};
 use camloop_loop::{MACHINE_LEVEL, PlantEvent};
 
 /// State file name in the queue folder.
@@ -38,7 +38,7 @@ pub(crate) struct FeatureState {
     pub last_verdict: Option<Verdict>,
     /// The sequence number of the event that last changed this state.
     pub seq: u64,
-    #[serde(with = "crate::clock::unix_ms")]
+    #[serde(with = "camloop_loop::unix_ms")]
     pub at_ms: jiff::Timestamp,
 }
 
@@ -185,7 +185,7 @@ fn feature_facts(s: &mut FeatureState, event: &PlantEvent) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::store::EventLevel;
+    use camloop_core::levels::EventLevel;
 
     fn part(n: u32, verdict: Verdict) -> PlantEvent {
         PlantEvent::PartAnalysed {
