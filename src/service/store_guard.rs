@@ -69,7 +69,7 @@ pub(crate) enum Problem {
         machine: MachineName,
         lobe: FeatureName,
         share_version: u64,
-        store_version: Option<i64>,
+        store_version: Option<crate::core::ids::TableVersion>,
     },
 }
 
@@ -212,7 +212,7 @@ pub(crate) async fn check_store(
                     .find(|b| b.machine == e.machine && b.lobe == e.lobe)
             })
             .map_or(0, |b| b.versions);
-        let held = newest.unwrap_or(0).max(0) as u64 + e.tables_in_journal + accepted_behind;
+        let held = newest.map_or(0, |v| v.get()) + e.tables_in_journal + accepted_behind;
         if held < share_version {
             problems.push(Problem::BehindShare {
                 machine: e.machine.clone(),
@@ -259,7 +259,7 @@ pub(crate) async fn accept_new_store(
             .latest_table_version(&e.machine, &e.lobe)
             .await
             .map_err(asked)?
-            .map_or(0, |t| t.version.max(0) as u64);
+            .map_or(0, |t| t.version.get());
         let ahead = e
             .newest_share_version
             .unwrap_or(0)

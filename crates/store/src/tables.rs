@@ -48,8 +48,14 @@ macro_rules! version_summary {
         TableVersion {
             machine: $crate::codec::machine_of(col!(row, "machine", "reading a table version"))?,
             lobe: $crate::codec::feature_of("lobe", col!(row, "lobe", "reading a table version"))?,
-            version: col!(row, "version", "reading a table version"),
-            parent_version: col!(row, "parent_version", "reading a table version"),
+            version: $crate::codec::version_of(
+                "version",
+                col!(row, "version", "reading a table version"),
+            )?,
+            parent_version: match col!(row, "parent_version", "reading a table version") {
+                Some(n) => Some($crate::codec::version_of("parent_version", n)?),
+                None => None,
+            },
             table_number: u32::try_from(table_number).map_err(|_| {
                 StoreError::invalid(
                     "table_number",
@@ -78,7 +84,10 @@ impl Store {
     /// Appends a table version and its first status; returns its version number, one more
     /// than the highest stored for this (machine, lobe), starting at 1. Two writers racing
     /// for the same number get [`StoreError::Conflict`] for the loser.
-    pub async fn insert_table_version(&self, t: &NewTableVersion) -> Result<i64, StoreError> {
+    pub async fn insert_table_version(
+        &self,
+        t: &NewTableVersion,
+    ) -> Result<camloop_core::ids::TableVersion, StoreError> {
         const OP: &str = "inserting a table version";
         let mut batch = self.begin_batch_for(OP).await?;
         let version = batch.insert_table_version(t).await?;
@@ -91,7 +100,7 @@ impl Store {
         &self,
         machine: &MachineName,
         lobe: &FeatureName,
-        version: i64,
+        version: camloop_core::ids::TableVersion,
         status: &VersionStatus,
         at_ms: jiff::Timestamp,
     ) -> Result<(), StoreError> {
@@ -138,7 +147,7 @@ impl Store {
         &self,
         machine: &MachineName,
         lobe: &FeatureName,
-        version: i64,
+        version: camloop_core::ids::TableVersion,
     ) -> Result<Option<VersionStatus>, StoreError> {
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
         with_write!(self, pool => {
@@ -149,7 +158,7 @@ impl Store {
             )
             .bind(machine)
             .bind(lobe)
-            .bind(version)
+            .bind(version.to_i64())
             .fetch_optional(pool)
             .await
             .map_err(self.db_error("looking up a table version's status"))?;
@@ -203,7 +212,7 @@ impl Store {
         &self,
         machine: &MachineName,
         lobe: &FeatureName,
-        version: i64,
+        version: camloop_core::ids::TableVersion,
     ) -> Result<Option<TableVersion>, StoreError> {
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
         let sql = format!("{SELECT_VERSION} AND t.version = $3");
@@ -211,7 +220,7 @@ impl Store {
             let row = sqlx::query(&sql)
                 .bind(machine)
                 .bind(lobe)
-                .bind(version)
+                .bind(version.to_i64())
                 .fetch_optional(pool)
                 .await
                 .map_err(self.db_error("reading a table version"))?;

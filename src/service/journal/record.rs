@@ -239,7 +239,7 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
             version,
             ..
         } => store
-            .table_version_status(machine, lobe, version.to_i64())
+            .table_version_status(machine, lobe, *version)
             .await?
             .is_some(),
         Pending::VersionStatus {
@@ -249,7 +249,7 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
             status,
             ..
         } => store
-            .table_version_status(machine, lobe, version.to_i64())
+            .table_version_status(machine, lobe, *version)
             .await?
             .is_some_and(|s| s.name() == status.name()),
         Pending::Event { .. } => match record.event()? {
@@ -329,7 +329,7 @@ pub(super) async fn apply_in(batch: &mut Batch<'_>, record: &Pending) -> Result<
             at_ms,
         } => {
             batch
-                .set_table_status(&machine, &lobe, version.to_i64(), &status, at_ms)
+                .set_table_status(&machine, &lobe, version, &status, at_ms)
                 .await
         }
         Pending::Event { .. } => match record.event()? {
@@ -399,7 +399,7 @@ async fn insert_table(batch: &mut Batch<'_>, record: Pending) -> Result<(), Stor
     // left out rather than blocking every later record. Asked in the batch: a parent
     // written earlier in it counts.
     let parent_version = match parent_version {
-        Some(p) if batch.has_table_version(&machine, &lobe, p.to_i64()).await? => Some(p.to_i64()),
+        Some(p) if batch.has_table_version(&machine, &lobe, p).await? => Some(p),
         _ => None,
     };
     let learning_params_json = serde_json::to_string(&learning)
@@ -407,7 +407,7 @@ async fn insert_table(batch: &mut Batch<'_>, record: Pending) -> Result<(), Stor
     let t = NewTableVersion {
         machine,
         lobe,
-        version: Some(version.to_i64()),
+        version: Some(version),
         parent_version,
         table_number,
         program_text,

@@ -139,7 +139,7 @@ async fn a_journal_with_column_spelled_statuses_replays() {
     assert!(j.quarantined().is_empty(), "{:?}", j.quarantined());
     assert_eq!(j.flush(&store).await.unwrap().written, 2);
     let v = store
-        .table_version(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), 1)
+        .table_version(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), v(1))
         .await
         .unwrap()
         .unwrap();
@@ -249,7 +249,7 @@ async fn a_replay_writes_nothing_twice() {
     }
     // The version keeps the share's number, and its newest status is the retry's.
     let v = store
-        .table_version(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), 3)
+        .table_version(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), v(3))
         .await
         .unwrap()
         .unwrap();
@@ -257,7 +257,10 @@ async fn a_replay_writes_nothing_twice() {
         at: jiff::Timestamp::from_millisecond(8).expect("a time"),
         note: Some("pushed on retry".into()),
     };
-    assert_eq!((v.version, v.status), (3, pushed));
+    assert_eq!(
+        (v.version, v.status),
+        (crate::core::ids::TableVersion::new(3).unwrap(), pushed)
+    );
     assert_eq!(j.release_durable(&store).await.unwrap(), 6);
     let reopened = Journal::open(dir.path()).unwrap();
     assert_eq!(reopened.records(), [learning(1)]);

@@ -204,10 +204,7 @@ async fn stored_records(
         return found;
     };
     for version in wanted {
-        match store
-            .table_version(machine, feature, version.to_i64())
-            .await
-        {
+        match store.table_version(machine, feature, version).await {
             Ok(Some(t)) => match serde_json::from_str(&t.learning_params_json) {
                 Ok(learning) => {
                     found.insert(version, learning);

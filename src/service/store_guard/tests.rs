@@ -36,7 +36,7 @@ fn share_at(version: Option<u64>, tables_in_journal: u64) -> Vec<MachineExpectat
     }]
 }
 
-async fn add_table(store: &Store) -> i64 {
+async fn add_table(store: &Store) -> crate::core::ids::TableVersion {
     store
         .insert_table_version(&NewTableVersion {
             machine: "SIM1".parse().unwrap(),
@@ -291,7 +291,7 @@ async fn the_service_refuses_to_start_on_a_truncated_database() {
         .unwrap()
         .unwrap();
     assert_eq!(
-        newest.version as u64,
+        newest.version.get(),
         expected[0].newest_share_version.unwrap()
     );
     assert!(
