@@ -110,33 +110,33 @@ pub(crate) fn of_record(record: &Pending) -> Option<PlantEvent> {
             lobe,
             version,
             status,
-            created_at_ms,
+            created_at,
             ..
-        } => table_event(machine, lobe, version, status, created_at_ms)?,
+        } => table_event(machine, lobe, version, status, created_at)?,
         Pending::VersionStatus {
             machine,
             lobe,
             version,
             status,
-            at_ms,
-        } => table_event(machine, lobe, version, status, at_ms)?,
+            at,
+        } => table_event(machine, lobe, version, status, at)?,
         Pending::Event {
             machine,
-            at_ms,
+            at,
             level,
             kind,
             message,
-        } => event_of(machine, at_ms, level, kind, message)?,
+        } => event_of(machine, at, level, kind, message)?,
         Pending::Dressing {
             machine,
-            at_ms,
+            at,
             old_radius_mm,
             new_radius_mm,
             infeed_um,
             source,
         } => PlantEvent::Dressing {
             machine,
-            at: at_ms,
+            at,
             old_radius_mm,
             new_radius_mm,
             infeed_um,
@@ -167,7 +167,7 @@ fn repeatability_um(analysis_json: &str) -> Option<f64> {
 /// The plant's event for a loop event, if it has one of its own.
 fn event_of(
     machine: MachineName,
-    at_ms: Timestamp,
+    at: Timestamp,
     level: EventLevel,
     kind: EventKind,
     message: String,
@@ -175,7 +175,7 @@ fn event_of(
     Some(match kind {
         EventKind::LearningReverted => PlantEvent::LearningFrozen {
             machine,
-            at: at_ms,
+            at,
             reason: message,
         },
         // A table refused by the loop's checks before it got a version.
@@ -184,13 +184,13 @@ fn event_of(
             feature: machine_level(),
             version: None,
             reason: message,
-            at: at_ms,
+            at,
         },
         // Told by the dressing record itself.
         EventKind::WheelDressed => return None,
         _ => PlantEvent::Alarm {
             machine,
-            at: at_ms,
+            at,
             level,
             kind: kind.as_str().to_owned(),
             message,
@@ -203,21 +203,21 @@ fn table_event(
     feature: FeatureName,
     version: TableVersion,
     status: VersionStatus,
-    at_ms: Timestamp,
+    at: Timestamp,
 ) -> Option<PlantEvent> {
     match status {
         VersionStatus::Pushed { .. } => Some(PlantEvent::TableDelivered {
             machine,
             feature,
             version,
-            at: at_ms,
+            at,
         }),
         VersionStatus::Refused { reason } => Some(PlantEvent::TableRefused {
             machine,
             feature,
             version: Some(version),
             reason,
-            at: at_ms,
+            at,
         }),
         // Not the plant's news yet: the share's own states never reach the journal.
         VersionStatus::Waiting { .. }
@@ -245,7 +245,7 @@ mod tests {
                 at: jiff::Timestamp::from_millisecond(5).expect("a time"),
                 note: Some("pushed".into()),
             },
-            at_ms: jiff::Timestamp::from_millisecond(5).unwrap(),
+            at: jiff::Timestamp::from_millisecond(5).unwrap(),
         };
         let e = of_record(&status).unwrap();
         assert_eq!(e.topic("plant"), "plant/G7/IN1/table_delivered");
@@ -255,7 +255,7 @@ mod tests {
         );
         let dressing = Pending::Dressing {
             machine: "G7".parse().unwrap(),
-            at_ms: jiff::Timestamp::from_millisecond(9).unwrap(),
+            at: jiff::Timestamp::from_millisecond(9).unwrap(),
             old_radius_mm: 250.0,
             new_radius_mm: 249.5,
             infeed_um: Some(500.2),
@@ -267,7 +267,7 @@ mod tests {
         assert!(payload(&d).contains(r#""infeed_um":500.2"#));
         let event = |kind| Pending::Event {
             machine: "G7".parse().unwrap(),
-            at_ms: jiff::Timestamp::from_millisecond(1).unwrap(),
+            at: jiff::Timestamp::from_millisecond(1).unwrap(),
             level: EventLevel::Warn,
             kind,
             message: "diverging".into(),
@@ -285,7 +285,7 @@ mod tests {
             status: VersionStatus::Waiting {
                 reason: Some("share down".into()),
             },
-            at_ms: jiff::Timestamp::from_millisecond(6).unwrap(),
+            at: jiff::Timestamp::from_millisecond(6).unwrap(),
         };
         assert_eq!(of_record(&waiting), None);
     }

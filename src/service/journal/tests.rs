@@ -9,7 +9,7 @@ use crate::store::{EventLevel, VersionStatus};
 fn event(message: &str) -> Pending {
     Pending::Event {
         machine: "M1".parse().unwrap(),
-        at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
+        at: jiff::Timestamp::from_millisecond(7).unwrap(),
         level: EventLevel::Info,
         kind: EventKind::WheelDressed,
         message: message.into(),
@@ -23,7 +23,7 @@ fn learning(parts: u64) -> Pending {
         machine: "M1".parse().unwrap(),
         lobe: "IN1".parse().unwrap(),
         state: Box::new(state),
-        saved_at_ms: jiff::Timestamp::from_millisecond(7 + parts as i64).unwrap(),
+        saved_at: jiff::Timestamp::from_millisecond(7 + parts as i64).unwrap(),
     }
 }
 
@@ -85,7 +85,7 @@ async fn a_record_the_store_refuses_is_set_aside_and_the_rest_go_in() {
         lobe: "IN1".parse().unwrap(),
         version: v(41),
         status: VersionStatus::pushed_at(jiff::Timestamp::from_millisecond(8).unwrap(), "x"),
-        at_ms: jiff::Timestamp::from_millisecond(8).unwrap(),
+        at: jiff::Timestamp::from_millisecond(8).unwrap(),
     };
     let mut j = Journal::open(dir.path()).unwrap();
     j.append(&[event("a"), orphan.clone(), event("b")]).unwrap();
@@ -188,7 +188,7 @@ fn every_kind_of_record() -> Vec<Pending> {
             status: VersionStatus::Waiting {
                 reason: Some("waiting: share full".into()),
             },
-            created_at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
+            created_at: jiff::Timestamp::from_millisecond(7).unwrap(),
             measurement_id: None,
             rollback_of: None,
         },
@@ -200,12 +200,12 @@ fn every_kind_of_record() -> Vec<Pending> {
                 at: jiff::Timestamp::from_millisecond(8).expect("a time"),
                 note: Some("pushed on retry".into()),
             },
-            at_ms: jiff::Timestamp::from_millisecond(8).unwrap(),
+            at: jiff::Timestamp::from_millisecond(8).unwrap(),
         },
         learning(1),
         Pending::Dressing {
             machine: "M1".parse().unwrap(),
-            at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
+            at: jiff::Timestamp::from_millisecond(7).unwrap(),
             old_radius_mm: 250.0,
             new_radius_mm: 249.998,
             infeed_um: Some(2.1),

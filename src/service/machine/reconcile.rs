@@ -109,7 +109,7 @@ pub(super) fn kept(machine: &MachineName, feature: &FeatureName, records: &[Pend
                 learning,
                 reason,
                 status,
-                created_at_ms,
+                created_at,
                 measurement_id,
                 rollback_of,
                 ..
@@ -121,7 +121,7 @@ pub(super) fn kept(machine: &MachineName, feature: &FeatureName, records: &[Pend
                 learning: learning.clone(),
                 reason: reason.clone(),
                 status: table_status(status),
-                at: *created_at_ms,
+                at: *created_at,
                 measurement: *measurement_id,
                 rollback_of: *rollback_of,
             }))),
