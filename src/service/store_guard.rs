@@ -151,8 +151,8 @@ fn join(problems: &[Problem]) -> String {
 #[derive(Debug, Serialize, Deserialize)]
 struct Remembered {
     store_id: String,
-    #[serde(with = "crate::clock::unix_ms")]
-    created_at_ms: jiff::Timestamp,
+    #[serde(rename = "created_at_ms", with = "crate::clock::unix_ms")]
+    created_at: jiff::Timestamp,
     /// Where the store was, for the operator reading the file (not compared).
     database: String,
     /// When the store was accepted with `--accept-new-database`: how many table versions
@@ -399,7 +399,7 @@ fn remember(
     std::fs::create_dir_all(dir).map_err(|e| bad("create its folder", e))?;
     let text = serde_json::to_string(&Remembered {
         store_id: identity.id.clone(),
-        created_at_ms: identity.created_at_ms,
+        created_at: identity.created_at_ms,
         database: database.to_owned(),
         accepted_behind,
     })

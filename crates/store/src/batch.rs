@@ -287,7 +287,7 @@ impl Batch<'_> {
         lobe: &FeatureName,
         version: camloop_core::ids::TableVersion,
         status: &VersionStatus,
-        at_ms: jiff::Timestamp,
+        at: jiff::Timestamp,
     ) -> Result<(), StoreError> {
         let (status, why) = status.column()?;
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
@@ -303,7 +303,7 @@ impl Batch<'_> {
             .bind(version.to_i64())
             .bind(status)
             .bind(why)
-            .bind(at_ms.as_millisecond())
+            .bind(at.as_millisecond())
             .execute(&mut *tx)
             .await
             .map_err(store.db_error("recording a table status"))?;
@@ -439,7 +439,7 @@ impl Batch<'_> {
         lobe: &FeatureName,
         state_json: &str,
         meaning_sha256: Option<&Sha256>,
-        saved_at_ms: jiff::Timestamp,
+        saved_at: jiff::Timestamp,
     ) -> Result<(), StoreError> {
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
         check_name("machine", machine)?;
@@ -452,7 +452,7 @@ impl Batch<'_> {
         with_tx!(self, tx => {
             sqlx::query(ENSURE_MACHINE)
                 .bind(machine)
-                .bind(saved_at_ms.as_millisecond())
+                .bind(saved_at.as_millisecond())
                 .execute(&mut *tx)
                 .await
                 .map_err(store.db_error(OP))?;
@@ -466,7 +466,7 @@ impl Batch<'_> {
                     .await
                     .map_err(store.db_error(OP))?,
             };
-            let saved_ms = saved_at_ms.as_millisecond();
+            let saved_ms = saved_at.as_millisecond();
             match replace {
                 Some((id, base_id)) => {
                     // A snapshot with the same meaning as the newest, which nothing is packed

@@ -95,31 +95,31 @@ impl Store {
         Ok(version)
     }
 
-    /// Appends a status for a stored table version (e.g. waiting → pushed), as of `at_ms`.
+    /// Appends a status for a stored table version (e.g. waiting → pushed), as of `at`.
     pub async fn set_table_status(
         &self,
         machine: &MachineName,
         lobe: &FeatureName,
         version: camloop_core::ids::TableVersion,
         status: &VersionStatus,
-        at_ms: jiff::Timestamp,
+        at: jiff::Timestamp,
     ) -> Result<(), StoreError> {
         const OP: &str = "recording a table status";
         let mut batch = self.begin_batch_for(OP).await?;
         batch
-            .set_table_status(machine, lobe, version, status, at_ms)
+            .set_table_status(machine, lobe, version, status, at)
             .await?;
         batch.commit_for(OP).await
     }
 
-    /// Whether a table version of (machine, lobe) made at `created_at_ms` with exactly this
+    /// Whether a table version of (machine, lobe) made at `created_at` with exactly this
     /// program is stored: how a journal replayed after a crash recognises what it had already
     /// written.
     pub async fn table_version_exists(
         &self,
         machine: &MachineName,
         lobe: &FeatureName,
-        created_at_ms: jiff::Timestamp,
+        created_at: jiff::Timestamp,
         program_text: &str,
     ) -> Result<bool, StoreError> {
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
@@ -131,7 +131,7 @@ impl Store {
             )
             .bind(machine)
             .bind(lobe)
-            .bind(created_at_ms.as_millisecond())
+            .bind(created_at.as_millisecond())
             .bind(&sha256)
             .fetch_optional(pool)
             .await

@@ -42,13 +42,13 @@ pub enum AckOutcome {
 }
 
 impl Store {
-    /// Acknowledges event `id` of `machine` at `at_ms`. Appended: a second acknowledgement
+    /// Acknowledges event `id` of `machine` at `at`. Appended: a second acknowledgement
     /// changes nothing and says so.
     pub async fn acknowledge_event(
         &self,
         machine: &MachineName,
         id: EventId,
-        at_ms: Timestamp,
+        at: Timestamp,
         source: &str,
     ) -> Result<AckOutcome, StoreError> {
         let machine = machine.as_str();
@@ -70,7 +70,7 @@ impl Store {
                  ON CONFLICT (event_id) DO NOTHING",
             )
             .bind(id.0)
-            .bind(at_ms.as_millisecond())
+            .bind(at.as_millisecond())
             .bind(source)
             .execute(&mut *tx)
             .await
