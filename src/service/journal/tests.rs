@@ -27,6 +27,25 @@ fn learning(parts: u64) -> Pending {
     }
 }
 
+/// A journal that cannot be opened says which file and why, as a typed error the caller
+/// can match on.
+#[test]
+fn a_journal_that_cannot_be_opened_names_its_folder_and_the_cause() {
+    let dir = tempfile::tempdir().unwrap();
+    let not_a_folder = dir.path().join("state");
+    std::fs::write(&not_a_folder, "a file where the folder should be").unwrap();
+    let e = Journal::open(&not_a_folder).unwrap_err();
+    assert!(
+        matches!(&e, JournalError::File { what: "create", path, .. } if *path == not_a_folder),
+        "{e:?}"
+    );
+    let text = e.to_string();
+    assert!(
+        text.starts_with(&format!("cannot create {}: ", not_a_folder.display())),
+        "{text}"
+    );
+}
+
 #[test]
 fn records_survive_a_torn_last_line() {
     let dir = tempfile::tempdir().unwrap();
