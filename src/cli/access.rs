@@ -548,11 +548,11 @@ fn proof_lines(check: &crate::store::AuditCheck, seal_dir: &std::path::Path) -> 
     lines
 }
 
-async fn print_trail(store: &Store, since_ms: jiff::Timestamp) -> anyhow::Result<()> {
+async fn print_trail(store: &Store, since: jiff::Timestamp) -> anyhow::Result<()> {
     let mut after = 0;
     loop {
         let rows = store
-            .audit(since_ms, after, crate::store::MAX_AUDIT_PAGE, false)
+            .audit(since, after, crate::store::MAX_AUDIT_PAGE, false)
             .await?;
         let Some(last) = rows.last() else {
             return Ok(());

@@ -237,7 +237,7 @@ fn learn_from(
         Decision::Refused(refused) => {
             // Nothing is delivered; the refusal is kept with the measurement it came from.
             let record = Refusal {
-                at_unix_ms: now(),
+                at: now(),
                 measurement: path.display().to_string(),
                 measurement_sha256: id,
                 iteration: saved.learning.iteration,
@@ -267,8 +267,8 @@ fn learn_from(
 /// A refused table as kept in `refusals.jsonl`.
 #[derive(Debug, Serialize)]
 struct Refusal {
-    #[serde(with = "crate::clock::unix_ms")]
-    at_unix_ms: jiff::Timestamp,
+    #[serde(rename = "at_unix_ms", with = "crate::clock::unix_ms")]
+    at: jiff::Timestamp,
     measurement: String,
     measurement_sha256: Sha256,
     iteration: u32,

@@ -7,16 +7,15 @@ mod check;
 mod cluster;
 mod http;
 mod keys;
-mod mqtt;
 mod opcua;
 mod values;
 
 pub use auth::AuthSection;
+pub use camloop_mqtt::{ENV_MQTT_PASSWORD, MqttSection};
 pub use check::{Checked, CheckedMachine, check, configured_features, load, machine_features};
 pub use cluster::ClusterSection;
 pub use http::{HttpSection, network_exposure};
 pub use keys::Lines;
-pub use mqtt::{ENV_MQTT_PASSWORD, MqttSection};
 pub use opcua::{OpcUaSection, OpcUaSecurity};
 
 use crate::names::{FeatureName, MachineName};
@@ -291,7 +290,9 @@ impl Config {
             config.database.url = url;
         }
         config.api_token = env(ENV_API_TOKEN).filter(|t| !t.is_empty()).map(Secret);
-        config.mqtt.password = env(ENV_MQTT_PASSWORD).filter(|t| !t.is_empty()).map(Secret);
+        config.mqtt.password = env(ENV_MQTT_PASSWORD)
+            .filter(|t| !t.is_empty())
+            .map(camloop_mqtt::Password::new);
         let machines_dropped = read.dropped.iter().any(|k| k == "machines");
         problems.extend(config.problems(machines_dropped));
         problems.sort_by_key(|p| p.line.unwrap_or(usize::MAX));
@@ -338,7 +339,12 @@ impl Config {
             }
         }
         p.extend(self.http.problems(&self.lines));
-        p.extend(self.mqtt.problems(&self.lines));
+        p.extend(
+            self.mqtt
+                .problems()
+                .into_iter()
+                .map(|problem| ConfigProblem::at(self.lines.of(&problem.key), problem.message)),
+        );
         p.extend(self.opcua.problems(&self.lines));
         p.extend(self.cluster.problems(&self.lines, url));
         let mut names = std::collections::HashMap::new();
@@ -395,7 +401,7 @@ impl Config {
 
     /// The `[mqtt]` settings as this instance uses them: in a cluster the client id is
     /// `<client_id>-<instance>`, since a broker disconnects a client whose id another takes.
-    pub(crate) fn mqtt_settings(&self) -> mqtt::MqttSection {
+    pub(crate) fn mqtt_settings(&self) -> MqttSection {
         let mut settings = self.mqtt.clone();
         settings.tls_ca = settings.tls_ca.map(|p| self.resolve(&p));
         if self.cluster.enabled {

@@ -198,29 +198,7 @@ pub struct Metrics {
     tls_not_after: Mutex<Option<jiff::Timestamp>>,
 }
 
-/// The state of the link to the MQTT broker.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, strum::IntoStaticStr, strum::EnumIter)]
-#[strum(serialize_all = "snake_case")]
-pub enum MqttLinkState {
-    /// Not connected yet since start.
-    #[default]
-    Connecting,
-    Connected,
-    /// The broker refused the connection (credentials, client id): an operator must act.
-    Refused,
-    /// The broker cannot be reached, or the connection was lost.
-    Unreachable,
-}
-
-/// The MQTT link's series.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct MqttMetrics {
-    pub link: MqttLinkState,
-    /// Events waiting on disk.
-    pub queued: u64,
-    pub sent_total: u64,
-    pub dropped_total: u64,
-}
+pub use camloop_mqtt::{MqttLinkState, MqttMetrics};
 
 /// Counters of the listener's access control.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -274,7 +252,7 @@ impl Metrics {
     }
 
     /// Sets the MQTT link's series.
-    pub(crate) fn set_mqtt(&self, m: MqttMetrics) {
+    pub fn set_mqtt(&self, m: MqttMetrics) {
         *self.mqtt.lock().unwrap_or_else(|p| p.into_inner()) = Some(m);
     }
 

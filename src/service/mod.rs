@@ -18,7 +18,6 @@ mod lease_keeper;
 mod listener_setup;
 pub mod machine;
 pub mod metrics;
-pub mod mqtt;
 pub(crate) mod offload;
 pub mod opcua;
 pub mod plant;
@@ -181,7 +180,8 @@ async fn begin(checked: Checked, options: RunOptions) -> anyhow::Result<Starting
 
     let publisher = startup::start_mqtt(&config, &shutdown_rx)?;
     if let Some(p) = &publisher {
-        p.report_to(metrics.clone());
+        let metrics = metrics.clone();
+        p.report_to(move |m| metrics.set_mqtt(m));
     }
 
     // OPC UA: the loops feed it from their start; the server starts with the API state.
@@ -193,7 +193,9 @@ async fn begin(checked: Checked, options: RunOptions) -> anyhow::Result<Starting
         shutdown: shutdown_rx.clone(),
         parts: options.parts,
         plant_events: plant::EventSender::joined(
-            publisher.as_ref().map(mqtt::Publisher::sender),
+            publisher
+                .as_ref()
+                .map(|p| plant::EventSender::from(p.sender())),
             opcua_events,
         ),
     };
@@ -253,7 +255,7 @@ pub struct Starting {
     metrics: Arc<Metrics>,
     app_state: http::AppState,
     opcua_intake: Option<opcua::Intake>,
-    _publisher: Option<mqtt::Publisher>,
+    _publisher: Option<camloop_mqtt::Publisher>,
     shutdown: watch::Sender<bool>,
     shutdown_rx: watch::Receiver<bool>,
     server: tokio::task::JoinHandle<()>,

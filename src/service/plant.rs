@@ -1,6 +1,7 @@
 //! The plant's events on their way out of the machine loops: the [`PlantEvent`] each
 //! journal record announces, its JSON payload, and the [`EventSender`] the loops hand them
-//! to (it feeds MQTT's intake and OPC UA's feed alike, so neither adapter owns it).
+//! to (it feeds MQTT's intake and OPC UA's feed alike, so neither adapter owns it). The
+//! MQTT wire's payload with its sequence number is the MQTT crate's.
 
 use jiff::Timestamp;
 use std::sync::Arc;
@@ -63,6 +64,14 @@ impl EventSender {
     }
 }
 
+impl From<camloop_mqtt::Intake> for EventSender {
+    /// The MQTT publisher's intake, counting what it refuses where MQTT reports its drops.
+    fn from(intake: camloop_mqtt::Intake) -> Self {
+        let (tx, refused) = intake.into_parts();
+        Self::new(tx, refused)
+    }
+}
+
 /// The event a journal record announces, if any (learning snapshots and recipes are
 /// the loop's own business, and a master run is the gauge study's: a plant counts its
 /// parts from `part_analysed`, and neither a master nor an in-process measurement is one).
@@ -95,33 +104,33 @@ pub(crate) fn of_record(record: &Pending) -> Option<PlantEvent> {
             lobe,
             version,
             status,
-            created_at_ms,
+            created_at,
             ..
-        } => table_event(machine, lobe, version, status, created_at_ms)?,
+        } => table_event(machine, lobe, version, status, created_at)?,
         Pending::VersionStatus {
             machine,
             lobe,
             version,
             status,
-            at_ms,
-        } => table_event(machine, lobe, version, status, at_ms)?,
+            at,
+        } => table_event(machine, lobe, version, status, at)?,
         Pending::Event {
             machine,
-            at_ms,
+            at,
             level,
             kind,
             message,
-        } => event_of(machine, at_ms, level, kind, message)?,
+        } => event_of(machine, at, level, kind, message)?,
         Pending::Dressing {
             machine,
-            at_ms,
+            at,
             old_radius_mm,
             new_radius_mm,
             infeed_um,
             source,
         } => PlantEvent::Dressing {
             machine,
-            at: at_ms,
+            at,
             old_radius_mm,
             new_radius_mm,
             infeed_um,
@@ -135,15 +144,6 @@ pub(crate) fn of_record(record: &Pending) -> Option<PlantEvent> {
 pub fn payload(event: &PlantEvent) -> String {
     // Strings, numbers and enums only: serializing cannot fail.
     serde_json::to_string(event).expect("a plant event serializes to JSON")
-}
-
-/// The payload with the event's sequence number (`seq`) last.
-pub(crate) fn payload_with_seq(event: &PlantEvent, seq: u64) -> String {
-    let mut value = serde_json::to_value(event).expect("a plant event serializes to JSON");
-    if let Some(fields) = value.as_object_mut() {
-        fields.insert("seq".into(), seq.into());
-    }
-    value.to_string()
 }
 
 /// The gauge's repeatability a measurement's analysis reported (`repeatability_max_um` of
@@ -161,7 +161,7 @@ fn repeatability_um(analysis_json: &str) -> Option<f64> {
 /// The plant's event for a loop event, if it has one of its own.
 fn event_of(
     machine: MachineName,
-    at_ms: Timestamp,
+    at: Timestamp,
     level: EventLevel,
     kind: EventKind,
     message: String,
@@ -169,7 +169,7 @@ fn event_of(
     Some(match kind {
         EventKind::LearningReverted => PlantEvent::LearningFrozen {
             machine,
-            at: at_ms,
+            at,
             reason: message,
         },
         // A table refused by the loop's checks before it got a version.
@@ -178,13 +178,13 @@ fn event_of(
             feature: machine_level(),
             version: None,
             reason: message,
-            at: at_ms,
+            at,
         },
         // Told by the dressing record itself.
         EventKind::WheelDressed => return None,
         _ => PlantEvent::Alarm {
             machine,
-            at: at_ms,
+            at,
             level,
             kind: kind.as_str().to_owned(),
             message,
@@ -197,21 +197,21 @@ fn table_event(
     feature: FeatureName,
     version: TableVersion,
     status: VersionStatus,
-    at_ms: Timestamp,
+    at: Timestamp,
 ) -> Option<PlantEvent> {
     match status {
         VersionStatus::Pushed { .. } => Some(PlantEvent::TableDelivered {
             machine,
             feature,
             version,
-            at: at_ms,
+            at,
         }),
         VersionStatus::Refused { reason } => Some(PlantEvent::TableRefused {
             machine,
             feature,
             version: Some(version),
             reason,
-            at: at_ms,
+            at,
         }),
         // Not the plant's news yet: the share's own states never reach the journal.
         VersionStatus::Waiting { .. }
@@ -239,7 +239,7 @@ mod tests {
                 at: jiff::Timestamp::from_millisecond(5).expect("a time"),
                 note: Some("pushed".into()),
             },
-            at_ms: jiff::Timestamp::from_millisecond(5).unwrap(),
+            at: jiff::Timestamp::from_millisecond(5).unwrap(),
         };
         let e = of_record(&status).unwrap();
         assert_eq!(e.topic("plant"), "plant/G7/IN1/table_delivered");
@@ -249,7 +249,7 @@ mod tests {
         );
         let dressing = Pending::Dressing {
             machine: "G7".parse().unwrap(),
-            at_ms: jiff::Timestamp::from_millisecond(9).unwrap(),
+            at: jiff::Timestamp::from_millisecond(9).unwrap(),
             old_radius_mm: 250.0,
             new_radius_mm: 249.5,
             infeed_um: Some(500.2),
@@ -261,7 +261,7 @@ mod tests {
         assert!(payload(&d).contains(r#""infeed_um":500.2"#));
         let event = |kind| Pending::Event {
             machine: "G7".parse().unwrap(),
-            at_ms: jiff::Timestamp::from_millisecond(1).unwrap(),
+            at: jiff::Timestamp::from_millisecond(1).unwrap(),
             level: EventLevel::Warn,
             kind,
             message: "diverging".into(),
@@ -279,7 +279,7 @@ mod tests {
             status: VersionStatus::Waiting {
                 reason: Some("share down".into()),
             },
-            at_ms: jiff::Timestamp::from_millisecond(6).unwrap(),
+            at: jiff::Timestamp::from_millisecond(6).unwrap(),
         };
         assert_eq!(of_record(&waiting), None);
     }

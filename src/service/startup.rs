@@ -167,11 +167,11 @@ pub(super) async fn sources_ended(sources_done: SourcesDone) {
 pub(super) fn start_mqtt(
     config: &Config,
     shutdown: &watch::Receiver<bool>,
-) -> anyhow::Result<Option<super::mqtt::Publisher>> {
+) -> anyhow::Result<Option<camloop_mqtt::Publisher>> {
     if !config.mqtt.enabled {
         return Ok(None);
     }
-    Ok(Some(super::mqtt::Publisher::start(
+    Ok(Some(camloop_mqtt::Publisher::start(
         &config.mqtt_settings(),
         &config.var_dir().join("mqtt"),
         shutdown.clone(),

@@ -69,7 +69,7 @@ pub(crate) enum Problem {
         machine: MachineName,
         lobe: FeatureName,
         share_version: u64,
-        store_version: Option<i64>,
+        store_version: Option<crate::core::ids::TableVersion>,
     },
 }
 
@@ -151,8 +151,8 @@ fn join(problems: &[Problem]) -> String {
 #[derive(Debug, Serialize, Deserialize)]
 struct Remembered {
     store_id: String,
-    #[serde(with = "crate::clock::unix_ms")]
-    created_at_ms: jiff::Timestamp,
+    #[serde(rename = "created_at_ms", with = "crate::clock::unix_ms")]
+    created_at: jiff::Timestamp,
     /// Where the store was, for the operator reading the file (not compared).
     database: String,
     /// When the store was accepted with `--accept-new-database`: how many table versions
@@ -212,7 +212,7 @@ pub(crate) async fn check_store(
                     .find(|b| b.machine == e.machine && b.lobe == e.lobe)
             })
             .map_or(0, |b| b.versions);
-        let held = newest.unwrap_or(0).max(0) as u64 + e.tables_in_journal + accepted_behind;
+        let held = newest.map_or(0, |v| v.get()) + e.tables_in_journal + accepted_behind;
         if held < share_version {
             problems.push(Problem::BehindShare {
                 machine: e.machine.clone(),
@@ -259,7 +259,7 @@ pub(crate) async fn accept_new_store(
             .latest_table_version(&e.machine, &e.lobe)
             .await
             .map_err(asked)?
-            .map_or(0, |t| t.version.max(0) as u64);
+            .map_or(0, |t| t.version.get());
         let ahead = e
             .newest_share_version
             .unwrap_or(0)
@@ -399,7 +399,7 @@ fn remember(
     std::fs::create_dir_all(dir).map_err(|e| bad("create its folder", e))?;
     let text = serde_json::to_string(&Remembered {
         store_id: identity.id.clone(),
-        created_at_ms: identity.created_at_ms,
+        created_at: identity.created_at_ms,
         database: database.to_owned(),
         accepted_behind,
     })

@@ -170,7 +170,7 @@ pub async fn agreement(var: &Path, store: &Store, machine: &str, lobe: &str) -> 
             made_from.entry(m).or_default().push(version.get());
         }
         let Some(row) = store
-            .table_version(&m(machine), &f(lobe), version.to_i64())
+            .table_version(&m(machine), &f(lobe), version)
             .await
             .unwrap()
         else {
@@ -239,7 +239,7 @@ async fn store_versions_told(
         .await
         .unwrap();
     let mut out = Vec::new();
-    let mut numbers: Vec<u64> = stored.iter().map(|r| r.version as u64).collect();
+    let mut numbers: Vec<u64> = stored.iter().map(|r| r.version.get()).collect();
     numbers.sort_unstable();
     if numbers != (1..=told).collect::<Vec<u64>>() {
         out.push(format!(
@@ -247,7 +247,7 @@ async fn store_versions_told(
         ));
     }
     for row in stored.iter().filter(|r| {
-        let v = r.version as u64;
+        let v = r.version.get();
         !held.contains(&v)
             && camloop::core::ids::TableVersion::new(v).is_none_or(|v| !history.is_forgotten(v))
     }) {
@@ -263,9 +263,11 @@ async fn stuck(var: &Path, store: &Store, machine: &str, lobe: &str) -> Vec<Stri
     for record in journal_records(var, machine, lobe) {
         match record["record"].as_str() {
             Some("table") => {
-                let v = record["version"].as_i64().unwrap();
+                let v = record["version"].as_u64().unwrap();
+                let version =
+                    camloop::core::ids::TableVersion::new(v).expect("a version is never 0");
                 if store
-                    .table_version(&m(machine), &f(lobe), v)
+                    .table_version(&m(machine), &f(lobe), version)
                     .await
                     .unwrap()
                     .is_none()

@@ -430,11 +430,7 @@ async fn check_history(root: &Path, url: &str, dropped: &[(String, Vec<Dropped>)
             );
             last_epoch = epoch;
             let row = store
-                .table_version(
-                    &m.parse().unwrap(),
-                    &"IN1".parse().unwrap(),
-                    version.to_i64(),
-                )
+                .table_version(&m.parse().unwrap(), &"IN1".parse().unwrap(), version)
                 .await
                 .unwrap()
                 .unwrap_or_else(|| panic!("{m} v{version} is on the share, not in the store"));

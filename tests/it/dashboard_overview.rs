@@ -8,7 +8,7 @@
 
 use crate::overview_reference;
 use crate::store_support::data::{measurement, ms, table};
-use crate::store_support::{self, TestStore, f, m};
+use crate::store_support::{self, TestStore, f, m, tv};
 use camloop::names::{FeatureName, MachineName};
 use camloop::store::{
     EventKind, EventLevel, FeatureKind, MeasurementStage, NewEvent, NewRecipeSnapshot, Store,
@@ -67,7 +67,7 @@ async fn seed(s: &Store) {
     // M1 IN1: v1, v2 pushed, v3 refused, v4 waiting: v2 is in force. M1 EX1: v1 waiting,
     // then pushed (a status row appended).
     for (v, status) in [(1, "pushed"), (2, "pushed"), (3, "refused"), (4, "waiting")] {
-        let parent = (v > 1).then_some(v - 1);
+        let parent = (v > 1).then(|| tv(v - 1));
         s.insert_table_version(&table("IN1", parent, &format!("; v{v}\nM17\n"), status))
             .await
             .unwrap();
@@ -76,7 +76,7 @@ async fn seed(s: &Store) {
         .await
         .unwrap();
     let pushed = VersionStatus::from_column("pushed", "pushed to share".into(), 7_000).unwrap();
-    s.set_table_status(&m("M1"), &f("EX1"), 1, &pushed, ms(7_000))
+    s.set_table_status(&m("M1"), &f("EX1"), tv(1), &pushed, ms(7_000))
         .await
         .unwrap();
 
@@ -146,9 +146,9 @@ async fn overview_equals_the_feature_reads(t: TestStore) {
     let parts: Vec<&str> = in1.recent.iter().map(|p| p.part.as_str()).collect();
     assert_eq!(parts.first(), Some(&"P-00011"), "oldest of the newest 50");
     assert_eq!(parts.last(), Some(&"P-00060"), "newest by time, not by id");
-    assert_eq!(in1.in_force.as_ref().map(|v| v.version), Some(2));
+    assert_eq!(in1.in_force.as_ref().map(|v| v.version), Some(tv(2)));
     assert_eq!(set[1].recent.len(), 3);
-    assert_eq!(set[1].in_force.as_ref().map(|v| v.version), Some(1));
+    assert_eq!(set[1].in_force.as_ref().map(|v| v.version), Some(tv(1)));
     assert!(set[2].recent.is_empty() && set[2].in_force.is_none());
     assert!(set[2].learning.is_none() && set[4] == Default::default());
     // The learning state is read whole from its packed chain: the frozen one shows frozen.
@@ -288,7 +288,7 @@ async fn the_overview_page_follows_the_store_between_views() {
         .await
         .unwrap();
     let pushed = VersionStatus::from_column("pushed", "pushed to share".into(), 9_000).unwrap();
-    s.set_table_status(&m("M1"), &f("IN1"), 4, &pushed, ms(9_000))
+    s.set_table_status(&m("M1"), &f("IN1"), tv(4), &pushed, ms(9_000))
         .await
         .unwrap();
     let (_, page) = get(addr, "/").await;

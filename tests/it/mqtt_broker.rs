@@ -8,10 +8,10 @@ use std::path::Path;
 use crate::mqtt_support::{DEADLINE, Message, mosquitto, root_user_line, stop, subscribe};
 use crate::process_support::{KillOnDrop, free_port};
 use camloop::config::{Config, MqttSection};
-use camloop::service::mqtt::{Progress, Publisher};
 use camloop::service::{self, RunOptions};
 use camloop::store::Verdict;
 use camloop_loop::PlantEvent;
+use camloop_mqtt::{Progress, Publisher};
 use rumqttc::MqttOptions;
 use tokio::sync::{mpsc, watch};
 

@@ -12,11 +12,11 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use crate::mqtt_support::{DEADLINE, Message, mosquitto, root_user_line, subscribe};
-use camloop::config::{MqttSection, Secret};
+use camloop::config::MqttSection;
 use camloop::service::metrics::{Metrics, MqttLinkState};
-use camloop::service::mqtt::Publisher;
 use camloop::store::Verdict;
 use camloop_loop::PlantEvent;
+use camloop_mqtt::{Password, Publisher};
 use process_support::{KillOnDrop, camloop_run, free_port};
 use rumqttc::{AsyncClient, ConnectionError, MqttOptions};
 use rumqttc::{TlsConfiguration, Transport};
@@ -147,7 +147,7 @@ async fn a_wrong_password_is_refused_and_the_right_one_delivers_over_tls() {
         client_id: "camloop-tls".into(),
         topic_prefix: "plant".into(),
         username: Some(USER.into()),
-        password: Some(Secret::new(PASSWORD)),
+        password: Some(Password::new(PASSWORD)),
         tls: true,
         tls_ca: Some(dir.path().join("ca.pem")),
         ..MqttSection::default()
@@ -183,7 +183,7 @@ async fn a_wrong_password_is_refused_and_the_right_one_delivers_over_tls() {
     // The same publisher with a wrong password never connects, and says why in its log.
     let wrong_settings = MqttSection {
         client_id: "camloop-wrong".into(),
-        password: Some(Secret::new("guess")),
+        password: Some(Password::new("guess")),
         ..settings.clone()
     };
     let (_stop2, shutdown2) = watch::channel(false);
@@ -195,7 +195,8 @@ async fn a_wrong_password_is_refused_and_the_right_one_delivers_over_tls() {
     assert!(connected.is_err(), "connected with a wrong password");
     // The refusal is visible: the link's state, in /metrics and as degraded for /healthz.
     let metrics = Arc::new(Metrics::default());
-    other.report_to(metrics.clone());
+    let shown_in = metrics.clone();
+    other.report_to(move |m| shown_in.set_mqtt(m));
     let mut link = other.progress();
     let refused = link.wait_for(|p| p.link == MqttLinkState::Refused);
     tokio::time::timeout(DEADLINE, refused)

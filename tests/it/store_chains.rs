@@ -9,7 +9,7 @@ use crate::store_support;
 
 use camloop::store::{AuditEntry, AuditResult, NewTableVersion, Role, Store, VersionStatus};
 use store_support::data::{ms, sha_of};
-use store_support::{f, m};
+use store_support::{f, m, tv};
 
 /// A curve-table program whose numbers move with `v` as a learned correction moves them.
 fn program(v: i64) -> String {
@@ -48,8 +48,8 @@ async fn take_turns(url: &str) {
         let t = NewTableVersion {
             machine: m("M1"),
             lobe: f("IN1"),
-            version: Some(v),
-            parent_version: (v > 1).then_some(v - 1),
+            version: Some(tv(v)),
+            parent_version: (v > 1).then(|| tv(v - 1)),
             table_number: 7,
             program_text: program(v),
             learning_params_json: learning(v),
@@ -59,7 +59,7 @@ async fn take_turns(url: &str) {
             },
             created_at_ms: ms(v * 10),
         };
-        assert_eq!(store.insert_table_version(&t).await.unwrap(), v);
+        assert_eq!(store.insert_table_version(&t).await.unwrap(), tv(v));
         // Learning snapshots: the meaning changes every 4 parts (a row is added), else the
         // newest row is replaced, by whichever handle writes this part.
         let meaning = sha_of(&format!("mode {}", v / 4));
@@ -82,13 +82,9 @@ async fn take_turns(url: &str) {
         .unwrap();
     assert_eq!(versions.len(), 40);
     for t in versions {
-        assert_eq!(t.program_text, program(t.version), "v{}", t.version);
-        assert_eq!(
-            t.learning_params_json,
-            learning(t.version),
-            "v{}",
-            t.version
-        );
+        let n = t.version.to_i64();
+        assert_eq!(t.program_text, program(n), "v{n}");
+        assert_eq!(t.learning_params_json, learning(n), "v{n}");
     }
     for v in 1..=40_i64 {
         // The snapshot of each meaning's last part is kept; the others were replaced.

@@ -16,7 +16,7 @@ use camloop::store::{
 };
 use sqlx::migrate::{Migration, Migrator};
 use store_support::data::{measurement, ms, sha_of};
-use store_support::{f, m};
+use store_support::{f, m, tv};
 
 /// Table versions and learning states written before the migration: more than one chain
 /// (16 rows) long, so conversion starts a second chain.
@@ -234,8 +234,9 @@ async fn check_old_rows(store: &Store) {
         .unwrap();
     assert_eq!(versions.len() as i64, OLD_ROWS);
     for t in &versions {
-        assert_eq!(t.program_text, program(t.version), "v{}", t.version);
-        assert_eq!(t.learning_params_json, learning(t.version));
+        let n = t.version.to_i64();
+        assert_eq!(t.program_text, program(n), "v{n}");
+        assert_eq!(t.learning_params_json, learning(n));
         assert_eq!(t.status.name(), "pushed");
     }
     let newest = store
@@ -265,8 +266,8 @@ async fn check_new_rows(store: &Store) {
         let t = NewTableVersion {
             machine: m("M1"),
             lobe: f("in1"),
-            version: Some(v),
-            parent_version: Some(v - 1),
+            version: Some(tv(v)),
+            parent_version: Some(tv(v - 1)),
             table_number: 2,
             program_text: program(v),
             learning_params_json: learning(v),
@@ -276,15 +277,15 @@ async fn check_new_rows(store: &Store) {
             },
             created_at_ms: ms(v * 10),
         };
-        assert_eq!(store.insert_table_version(&t).await.unwrap(), v);
+        assert_eq!(store.insert_table_version(&t).await.unwrap(), tv(v));
     }
     for t in store
         .table_versions(&m("M1"), &f("in1"), 100)
         .await
         .unwrap()
     {
-        assert_eq!(t.program_text, program(t.version));
-        assert_eq!(t.learning_params_json, learning(t.version));
+        assert_eq!(t.program_text, program(t.version.to_i64()));
+        assert_eq!(t.learning_params_json, learning(t.version.to_i64()));
     }
     let meaning_a = sha_of("a");
     let meaning_b = sha_of("b");
@@ -368,7 +369,7 @@ async fn check_old_rows_again(store: &Store) {
     assert!(
         versions
             .iter()
-            .all(|t| t.program_text == program(t.version))
+            .all(|t| t.program_text == program(t.version.to_i64()))
     );
 }
 
@@ -412,6 +413,6 @@ async fn a_version_1_postgres_database_is_packed_in_place_and_reads_the_same() {
     after_migration(&store).await;
     // New identities continue after the copied rows' ids.
     let next = store.table_versions(&m("M1"), &f("in1"), 1).await.unwrap();
-    assert_eq!(next[0].version, OLD_ROWS + 3);
+    assert_eq!(next[0].version, tv(OLD_ROWS + 3));
     store.close().await;
 }

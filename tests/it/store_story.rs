@@ -6,7 +6,7 @@
 use crate::store_support;
 
 use store_support::data::{LIFT_TOL_MM, all_pages, filter, measurement, ms, sha_of, table};
-use store_support::{f, m};
+use store_support::{f, m, tv};
 
 use camloop::store::{
     EventFilter, EventKind, EventLevel, FeatureKind, HistoryFilter, MeasurementId,
@@ -203,12 +203,12 @@ async fn story(store: &Store) {
         .insert_table_version(&table("in1", None, "CTABDEF(11)\nv1", "waiting"))
         .await
         .unwrap();
-    assert_eq!(v1, 1);
+    assert_eq!(v1, tv(1));
     store
         .set_table_status(
             &m("M1"),
             &f("in1"),
-            1,
+            tv(1),
             &VersionStatus::Pushed {
                 at: jiff::Timestamp::from_millisecond(6_000).expect("a time"),
                 note: Some("pushed to share".into()),
@@ -218,16 +218,16 @@ async fn story(store: &Store) {
         .await
         .unwrap();
     let v2 = store
-        .insert_table_version(&table("in1", Some(1), "CTABDEF(12)\nv2", "refused"))
+        .insert_table_version(&table("in1", Some(tv(1)), "CTABDEF(12)\nv2", "refused"))
         .await
         .unwrap();
-    assert_eq!(v2, 2);
+    assert_eq!(v2, tv(2));
     assert_eq!(
         store
             .insert_table_version(&table("ex1", None, "x", "waiting"))
             .await
             .unwrap(),
-        1,
+        tv(1),
         "numbering is per lobe"
     );
     let latest = store
@@ -235,7 +235,10 @@ async fn story(store: &Store) {
         .await
         .unwrap()
         .unwrap();
-    assert_eq!((latest.version, latest.parent_version), (2, Some(1)));
+    assert_eq!(
+        (latest.version, latest.parent_version),
+        (tv(2), Some(tv(1)))
+    );
     assert_eq!(
         latest.status,
         VersionStatus::Refused {
@@ -244,7 +247,7 @@ async fn story(store: &Store) {
     );
     assert_eq!(latest.sha256, sha_of("CTABDEF(12)\nv2"));
     let first = store
-        .table_version(&m("M1"), &f("in1"), 1)
+        .table_version(&m("M1"), &f("in1"), tv(1))
         .await
         .unwrap()
         .unwrap();
@@ -262,17 +265,17 @@ async fn story(store: &Store) {
     assert_eq!(first.program_text, "CTABDEF(11)\nv1");
     assert_eq!(first.table_number, 11);
     assert_eq!(first.learning_params_json, r#"{"gain":0.6}"#);
-    let listed: Vec<i64> = store
+    let listed: Vec<_> = store
         .table_versions(&m("M1"), &f("in1"), 10)
         .await
         .unwrap()
         .iter()
         .map(|t| t.version)
         .collect();
-    assert_eq!(listed, [2, 1]);
+    assert_eq!(listed, [tv(2), tv(1)]);
     assert!(matches!(
         store
-            .insert_table_version(&table("in1", Some(99), "y", "waiting"))
+            .insert_table_version(&table("in1", Some(tv(99)), "y", "waiting"))
             .await,
         Err(StoreError::NotFound { .. })
     ));
@@ -281,7 +284,7 @@ async fn story(store: &Store) {
             .set_table_status(
                 &m("M1"),
                 &f("in1"),
-                42,
+                tv(42),
                 &VersionStatus::Refused { reason: "x".into() },
                 ms(1)
             )
@@ -297,7 +300,7 @@ async fn story(store: &Store) {
         },
     ] {
         let e = store
-            .set_table_status(&m1, &in1, 1, &share_only, ms(7_000))
+            .set_table_status(&m1, &in1, tv(1), &share_only, ms(7_000))
             .await
             .unwrap_err();
         assert!(
@@ -306,11 +309,15 @@ async fn story(store: &Store) {
             share_only.name()
         );
     }
-    let first_again = store.table_version(&m1, &in1, 1).await.unwrap().unwrap();
+    let first_again = store
+        .table_version(&m1, &in1, tv(1))
+        .await
+        .unwrap()
+        .unwrap();
     assert_eq!(first_again.status.name(), "pushed");
     assert!(
         store
-            .table_version(&m("M1"), &f("in1"), 3)
+            .table_version(&m("M1"), &f("in1"), tv(3))
             .await
             .unwrap()
             .is_none()

@@ -6,7 +6,7 @@
 use crate::store_support;
 
 use store_support::data::{filter, measurement, ms, table};
-use store_support::{f, m};
+use store_support::{f, m, tv};
 
 use camloop::store::{
     EventKind, EventLevel, HistoryFilter, MeasurementStage, NewDressing, NewEvent, NewMeasurement,
@@ -221,7 +221,7 @@ async fn concurrent_writers(store: &Store) {
         }
     }
     versions.sort();
-    let expected: Vec<i64> = (1..=versions.len() as i64).collect();
+    let expected: Vec<_> = (1..=versions.len() as i64).map(tv).collect();
     assert_eq!(versions, expected, "numbers are distinct and without gaps");
     let stored = store
         .table_versions(&m("MC"), &f("in1"), 100)

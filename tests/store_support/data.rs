@@ -91,7 +91,12 @@ pub async fn all_pages(store: &Store, mut f: HistoryFilter) -> Vec<MeasurementSu
 
 /// A table version whose first status is `status` (the store's name: "waiting", "pushed",
 /// "refused") because "checks passed", at 5 000 ms.
-pub fn table(lobe: &str, parent: Option<i64>, text: &str, status: &str) -> NewTableVersion {
+pub fn table(
+    lobe: &str,
+    parent: Option<camloop::core::ids::TableVersion>,
+    text: &str,
+    status: &str,
+) -> NewTableVersion {
     NewTableVersion {
         version: None,
         machine: MachineName::new("M1").unwrap(),

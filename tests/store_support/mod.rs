@@ -19,6 +19,11 @@ pub fn f(feature: &str) -> FeatureName {
     feature.parse().expect("a plain feature name")
 }
 
+/// A table version for a store call, on one line (`tv(3)`).
+pub fn tv(n: i64) -> camloop::core::ids::TableVersion {
+    camloop::core::ids::TableVersion::from_i64(n).expect("a version is 1 or more")
+}
+
 /// A store and whatever keeps it alive (tempdir, server). Dropped in field order: the store
 /// pool first, then the server.
 pub struct TestStore {

@@ -254,11 +254,11 @@ impl Store {
         })
     }
 
-    /// Rows from `since_ms` on, at most `limit` (≤ [`MAX_AUDIT_PAGE`]), after row `after_id`;
+    /// Rows from `since` on, at most `limit` (≤ [`MAX_AUDIT_PAGE`]), after row `after_id`;
     /// newest first when `newest_first`, else oldest first.
     pub async fn audit(
         &self,
-        since_ms: jiff::Timestamp,
+        since: jiff::Timestamp,
         after_id: i64,
         limit: u32,
         newest_first: bool,
@@ -270,7 +270,7 @@ impl Store {
             let rows: Vec<AuditDbRow> = sqlx::query_as(&format!(
                 "{COLUMNS} WHERE at_ms >= $1 AND id > $2 ORDER BY id {order} LIMIT $3"
             ))
-            .bind(since_ms.as_millisecond())
+            .bind(since.as_millisecond())
             .bind(after_id)
             .bind(limit)
             .fetch_all(pool)

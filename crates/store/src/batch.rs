@@ -193,7 +193,10 @@ impl Batch<'_> {
     }
 
     /// [`Store::insert_table_version`] in this batch.
-    pub async fn insert_table_version(&mut self, t: &NewTableVersion) -> Result<i64, StoreError> {
+    pub async fn insert_table_version(
+        &mut self,
+        t: &NewTableVersion,
+    ) -> Result<camloop_core::ids::TableVersion, StoreError> {
         check_name("machine", t.machine.as_str())?;
         check_name("lobe", &t.lobe)?;
         check_json("learning_params_json", &t.learning_params_json)?;
@@ -214,7 +217,7 @@ impl Batch<'_> {
                 )
                 .bind(t.machine.as_str())
                 .bind(t.lobe.as_str())
-                .bind(parent)
+                .bind(parent.to_i64())
                 .fetch_optional(&mut *tx)
                 .await
                 .map_err(store.db_error(OP))?;
@@ -242,12 +245,12 @@ impl Batch<'_> {
             )
             .bind(t.machine.as_str())
             .bind(t.lobe.as_str())
-            .bind(t.parent_version)
+            .bind(t.parent_version.map(|v| v.to_i64()))
             .bind(i64::from(t.table_number))
             .bind(&sha256)
             .bind(&t.reason)
             .bind(t.created_at_ms.as_millisecond())
-            .bind(t.version)
+            .bind(t.version.map(|v| v.to_i64()))
             .bind(CODEC_PACKED)
             .bind(base_id)
             .bind(depth)
@@ -273,7 +276,7 @@ impl Batch<'_> {
             .execute(&mut *tx)
             .await
             .map_err(store.db_error(OP))?;
-            Ok(version)
+            crate::codec::version_of("version", version)
         })
     }
 
@@ -282,9 +285,9 @@ impl Batch<'_> {
         &mut self,
         machine: &MachineName,
         lobe: &FeatureName,
-        version: i64,
+        version: camloop_core::ids::TableVersion,
         status: &VersionStatus,
-        at_ms: jiff::Timestamp,
+        at: jiff::Timestamp,
     ) -> Result<(), StoreError> {
         let (status, why) = status.column()?;
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
@@ -297,10 +300,10 @@ impl Batch<'_> {
             )
             .bind(machine)
             .bind(lobe)
-            .bind(version)
+            .bind(version.to_i64())
             .bind(status)
             .bind(why)
-            .bind(at_ms.as_millisecond())
+            .bind(at.as_millisecond())
             .execute(&mut *tx)
             .await
             .map_err(store.db_error("recording a table status"))?;
@@ -319,7 +322,7 @@ impl Batch<'_> {
         &mut self,
         machine: &MachineName,
         lobe: &FeatureName,
-        version: i64,
+        version: camloop_core::ids::TableVersion,
     ) -> Result<bool, StoreError> {
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
         let store = self.store;
@@ -329,7 +332,7 @@ impl Batch<'_> {
             )
             .bind(machine)
             .bind(lobe)
-            .bind(version)
+            .bind(version.to_i64())
             .fetch_optional(&mut *tx)
             .await
             .map_err(store.db_error("looking up a table version"))?;
@@ -436,7 +439,7 @@ impl Batch<'_> {
         lobe: &FeatureName,
         state_json: &str,
         meaning_sha256: Option<&Sha256>,
-        saved_at_ms: jiff::Timestamp,
+        saved_at: jiff::Timestamp,
     ) -> Result<(), StoreError> {
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
         check_name("machine", machine)?;
@@ -449,7 +452,7 @@ impl Batch<'_> {
         with_tx!(self, tx => {
             sqlx::query(ENSURE_MACHINE)
                 .bind(machine)
-                .bind(saved_at_ms.as_millisecond())
+                .bind(saved_at.as_millisecond())
                 .execute(&mut *tx)
                 .await
                 .map_err(store.db_error(OP))?;
@@ -463,7 +466,7 @@ impl Batch<'_> {
                     .await
                     .map_err(store.db_error(OP))?,
             };
-            let saved_ms = saved_at_ms.as_millisecond();
+            let saved_ms = saved_at.as_millisecond();
             match replace {
                 Some((id, base_id)) => {
                     // A snapshot with the same meaning as the newest, which nothing is packed

@@ -103,6 +103,16 @@ pub(crate) fn machine_of(text: String) -> Result<camloop_core::names::MachineNam
         .map_err(|e| StoreError::invalid("machine", e.to_string()))
 }
 
+/// A table version read back: the columns hold integers, the records `TableVersion` (never
+/// 0); a stored value off that rule is an invalid column, named.
+pub(crate) fn version_of(
+    column: &'static str,
+    n: i64,
+) -> Result<camloop_core::ids::TableVersion, StoreError> {
+    camloop_core::ids::TableVersion::from_i64(n)
+        .map_err(|_| StoreError::invalid(column, format!("stored value {n} is not a version")))
+}
+
 /// A lobe or pin name read back, by the same rule as machines: a refusal names the column.
 pub(crate) fn feature_of(
     column: &'static str,

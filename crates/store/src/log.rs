@@ -242,9 +242,9 @@ impl Store {
         machine: &MachineName,
         lobe: &FeatureName,
         state_json: &str,
-        saved_at_ms: jiff::Timestamp,
+        saved_at: jiff::Timestamp,
     ) -> Result<(), StoreError> {
-        self.save_learning_snapshot(machine, lobe, state_json, None, saved_at_ms)
+        self.save_learning_snapshot(machine, lobe, state_json, None, saved_at)
             .await
     }
 
@@ -259,12 +259,12 @@ impl Store {
         lobe: &FeatureName,
         state_json: &str,
         meaning_sha256: Option<&Sha256>,
-        saved_at_ms: jiff::Timestamp,
+        saved_at: jiff::Timestamp,
     ) -> Result<(), StoreError> {
         const OP: &str = "saving learning state";
         let mut batch = self.begin_batch_for(OP).await?;
         batch
-            .save_learning_snapshot(machine, lobe, state_json, meaning_sha256, saved_at_ms)
+            .save_learning_snapshot(machine, lobe, state_json, meaning_sha256, saved_at)
             .await?;
         batch.commit_for(OP).await
     }
@@ -276,7 +276,7 @@ impl Store {
         machine: &MachineName,
         lobe: &FeatureName,
         state_json: &str,
-        saved_at_ms: jiff::Timestamp,
+        saved_at: jiff::Timestamp,
     ) -> Result<bool, StoreError> {
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
         let state_sha256 = sha256_hex(state_json.as_bytes());
@@ -287,7 +287,7 @@ impl Store {
             )
             .bind(machine)
             .bind(lobe)
-            .bind(saved_at_ms.as_millisecond())
+            .bind(saved_at.as_millisecond())
             .bind(&state_sha256)
             .bind(state_json)
             .fetch_optional(pool)
@@ -298,7 +298,7 @@ impl Store {
     }
 
     /// Whether the store holds this snapshot of (machine, lobe) or a later one: its newest
-    /// row was saved after `saved_at_ms`, or then with this very state. How a journal
+    /// row was saved after `saved_at`, or then with this very state. How a journal
     /// replayed after a crash recognises learning it had already written, now that a
     /// snapshot may have been replaced by a later one with the same meaning.
     pub async fn learning_state_covered(
@@ -306,7 +306,7 @@ impl Store {
         machine: &MachineName,
         lobe: &FeatureName,
         state_json: &str,
-        saved_at_ms: jiff::Timestamp,
+        saved_at: jiff::Timestamp,
     ) -> Result<bool, StoreError> {
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
         let state_sha256 = sha256_hex(state_json.as_bytes());
@@ -321,8 +321,8 @@ impl Store {
             .await
             .map_err(self.db_error("looking up a learning state"))?;
             Ok(newest.is_some_and(|(at, sha, text)| {
-                at > saved_at_ms.as_millisecond()
-                    || (at == saved_at_ms.as_millisecond()
+                at > saved_at.as_millisecond()
+                    || (at == saved_at.as_millisecond()
                         && (sha.as_deref() == Some(state_sha256.as_str())
                             || text.as_deref() == Some(state_json)))
             }))

@@ -380,12 +380,12 @@ impl Store {
         })
     }
 
-    /// Measurements received in `[since_ms, until_ms)` with their profiles, oldest id first,
+    /// Measurements received in `[since, until)` with their profiles, oldest id first,
     /// after `after` (exclusive), at most `limit`: call again with the last id to continue.
     pub async fn export(
         &self,
-        since_ms: jiff::Timestamp,
-        until_ms: jiff::Timestamp,
+        since: jiff::Timestamp,
+        until: jiff::Timestamp,
         after: Option<MeasurementId>,
         limit: u32,
     ) -> Result<Vec<MeasurementDetail>, StoreError> {
@@ -399,8 +399,8 @@ impl Store {
         );
         with_read!(self, pool => {
             let rows = sqlx::query(&sql)
-                .bind(since_ms.as_millisecond())
-                .bind(until_ms.as_millisecond())
+                .bind(since.as_millisecond())
+                .bind(until.as_millisecond())
                 .bind(after.map_or(i64::MIN, |a| a.0))
                 .bind(limit)
                 .fetch_all(pool)
@@ -410,7 +410,7 @@ impl Store {
         })
     }
 
-    /// One feature's measurements received in `[since_ms, until_ms)` with their reports,
+    /// One feature's measurements received in `[since, until)` with their reports,
     /// newest first, before id `before` (exclusive; call again with the last id to go on),
     /// at most `limit`: the window of a capability study or a control chart.
     pub async fn feature_measurements(
@@ -478,19 +478,16 @@ impl Store {
         })
     }
 
-    /// Retention: drops the raw revolutions of measurements received before `cutoff_ms`,
+    /// Retention: drops the raw revolutions of measurements received before `cutoff`,
     /// keeping their summaries, averaged profiles and reports. Returns how many were pruned.
-    pub async fn prune_raw_older_than(
-        &self,
-        cutoff_ms: jiff::Timestamp,
-    ) -> Result<u64, StoreError> {
+    pub async fn prune_raw_older_than(&self, cutoff: jiff::Timestamp) -> Result<u64, StoreError> {
         with_write!(self, pool => {
             let done = sqlx::query(
                 "UPDATE measurement_data SET raw_revolutions = NULL \
                  WHERE raw_revolutions IS NOT NULL AND measurement_id IN \
                  (SELECT id FROM measurements WHERE received_at_ms < $1)",
             )
-            .bind(cutoff_ms.as_millisecond())
+            .bind(cutoff.as_millisecond())
             .execute(pool)
             .await
             .map_err(self.db_error("pruning raw revolutions"))?;

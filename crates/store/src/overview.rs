@@ -262,7 +262,10 @@ impl Store {
             let at_ms: i64 = row_col!(row, "at_ms", "reading the versions in force");
             let created: i64 = row_col!(row, "created_at_ms", "reading the versions in force");
             out[slot(k, features.len())?].in_force = Some(TableVersionHead {
-                version: row_col!(row, "version", "reading the versions in force"),
+                version: crate::codec::version_of(
+                    "version",
+                    row_col!(row, "version", "reading the versions in force"),
+                )?,
                 table_number: u32::try_from(number).map_err(|_| {
                     StoreError::invalid(
                         "table_number",

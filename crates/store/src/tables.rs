@@ -48,8 +48,14 @@ macro_rules! version_summary {
         TableVersion {
             machine: $crate::codec::machine_of(col!(row, "machine", "reading a table version"))?,
             lobe: $crate::codec::feature_of("lobe", col!(row, "lobe", "reading a table version"))?,
-            version: col!(row, "version", "reading a table version"),
-            parent_version: col!(row, "parent_version", "reading a table version"),
+            version: $crate::codec::version_of(
+                "version",
+                col!(row, "version", "reading a table version"),
+            )?,
+            parent_version: match col!(row, "parent_version", "reading a table version") {
+                Some(n) => Some($crate::codec::version_of("parent_version", n)?),
+                None => None,
+            },
             table_number: u32::try_from(table_number).map_err(|_| {
                 StoreError::invalid(
                     "table_number",
@@ -78,7 +84,10 @@ impl Store {
     /// Appends a table version and its first status; returns its version number, one more
     /// than the highest stored for this (machine, lobe), starting at 1. Two writers racing
     /// for the same number get [`StoreError::Conflict`] for the loser.
-    pub async fn insert_table_version(&self, t: &NewTableVersion) -> Result<i64, StoreError> {
+    pub async fn insert_table_version(
+        &self,
+        t: &NewTableVersion,
+    ) -> Result<camloop_core::ids::TableVersion, StoreError> {
         const OP: &str = "inserting a table version";
         let mut batch = self.begin_batch_for(OP).await?;
         let version = batch.insert_table_version(t).await?;
@@ -86,31 +95,31 @@ impl Store {
         Ok(version)
     }
 
-    /// Appends a status for a stored table version (e.g. waiting → pushed), as of `at_ms`.
+    /// Appends a status for a stored table version (e.g. waiting → pushed), as of `at`.
     pub async fn set_table_status(
         &self,
         machine: &MachineName,
         lobe: &FeatureName,
-        version: i64,
+        version: camloop_core::ids::TableVersion,
         status: &VersionStatus,
-        at_ms: jiff::Timestamp,
+        at: jiff::Timestamp,
     ) -> Result<(), StoreError> {
         const OP: &str = "recording a table status";
         let mut batch = self.begin_batch_for(OP).await?;
         batch
-            .set_table_status(machine, lobe, version, status, at_ms)
+            .set_table_status(machine, lobe, version, status, at)
             .await?;
         batch.commit_for(OP).await
     }
 
-    /// Whether a table version of (machine, lobe) made at `created_at_ms` with exactly this
+    /// Whether a table version of (machine, lobe) made at `created_at` with exactly this
     /// program is stored: how a journal replayed after a crash recognises what it had already
     /// written.
     pub async fn table_version_exists(
         &self,
         machine: &MachineName,
         lobe: &FeatureName,
-        created_at_ms: jiff::Timestamp,
+        created_at: jiff::Timestamp,
         program_text: &str,
     ) -> Result<bool, StoreError> {
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
@@ -122,7 +131,7 @@ impl Store {
             )
             .bind(machine)
             .bind(lobe)
-            .bind(created_at_ms.as_millisecond())
+            .bind(created_at.as_millisecond())
             .bind(&sha256)
             .fetch_optional(pool)
             .await
@@ -138,7 +147,7 @@ impl Store {
         &self,
         machine: &MachineName,
         lobe: &FeatureName,
-        version: i64,
+        version: camloop_core::ids::TableVersion,
     ) -> Result<Option<VersionStatus>, StoreError> {
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
         with_write!(self, pool => {
@@ -149,7 +158,7 @@ impl Store {
             )
             .bind(machine)
             .bind(lobe)
-            .bind(version)
+            .bind(version.to_i64())
             .fetch_optional(pool)
             .await
             .map_err(self.db_error("looking up a table version's status"))?;
@@ -203,7 +212,7 @@ impl Store {
         &self,
         machine: &MachineName,
         lobe: &FeatureName,
-        version: i64,
+        version: camloop_core::ids::TableVersion,
     ) -> Result<Option<TableVersion>, StoreError> {
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
         let sql = format!("{SELECT_VERSION} AND t.version = $3");
@@ -211,7 +220,7 @@ impl Store {
             let row = sqlx::query(&sql)
                 .bind(machine)
                 .bind(lobe)
-                .bind(version)
+                .bind(version.to_i64())
                 .fetch_optional(pool)
                 .await
                 .map_err(self.db_error("reading a table version"))?;

@@ -376,9 +376,9 @@ pub struct NewTableVersion {
     pub lobe: FeatureName,
     /// Its number: the share's version (camloop keeps one version counter, the share's), or
     /// `None` for one more than the highest stored.
-    pub version: Option<i64>,
+    pub version: Option<camloop_core::ids::TableVersion>,
     /// The version it was derived from, if any; must exist for this machine and lobe.
-    pub parent_version: Option<i64>,
+    pub parent_version: Option<camloop_core::ids::TableVersion>,
     /// SINUMERIK curve-table number used by this version.
     pub table_number: u32,
     pub program_text: String,
@@ -398,8 +398,8 @@ pub struct TableVersion {
     pub machine: MachineName,
     pub lobe: FeatureName,
     /// 1, 2, 3, … per (machine, lobe).
-    pub version: i64,
-    pub parent_version: Option<i64>,
+    pub version: camloop_core::ids::TableVersion,
+    pub parent_version: Option<camloop_core::ids::TableVersion>,
     pub table_number: u32,
     pub program_text: String,
     /// SHA-256 of `program_text` (UTF-8), computed by the store.

@@ -124,7 +124,7 @@ impl Store {
         name: &str,
         role: Role,
         password_hash: &str,
-        at_ms: Timestamp,
+        at: Timestamp,
     ) -> Result<UserId, StoreError> {
         const OP: &str = "adding a user";
         if self.user(name).await?.is_some() {
@@ -141,7 +141,7 @@ impl Store {
             name,
             role.as_str(),
             password_hash,
-            at_ms.as_millisecond(),
+            at.as_millisecond(),
         )
         .map(UserId)
     }
@@ -179,27 +179,27 @@ impl Store {
         &self,
         name: &str,
         password_hash: &str,
-        at_ms: Timestamp,
+        at: Timestamp,
     ) -> Result<bool, StoreError> {
         changed_one!(
             self,
             "changing a password",
             "UPDATE users SET password_hash = $1, changed_at_ms = $2 WHERE name = $3",
             password_hash,
-            at_ms.as_millisecond(),
+            at.as_millisecond(),
             name,
         )
     }
 
     /// Disables a user (its tokens and sessions stop working); false when there is no such
     /// user or it was disabled already.
-    pub async fn disable_user(&self, name: &str, at_ms: Timestamp) -> Result<bool, StoreError> {
+    pub async fn disable_user(&self, name: &str, at: Timestamp) -> Result<bool, StoreError> {
         changed_one!(
             self,
             "disabling a user",
             "UPDATE users SET disabled_at_ms = $1, changed_at_ms = $1 \
              WHERE name = $2 AND disabled_at_ms IS NULL",
-            at_ms.as_millisecond(),
+            at.as_millisecond(),
             name,
         )
     }
@@ -254,12 +254,12 @@ impl Store {
     }
 
     /// Revokes a token; false when there is no such token or it was revoked already.
-    pub async fn revoke_token(&self, id: TokenId, at_ms: Timestamp) -> Result<bool, StoreError> {
+    pub async fn revoke_token(&self, id: TokenId, at: Timestamp) -> Result<bool, StoreError> {
         changed_one!(
             self,
             "revoking a token",
             "UPDATE api_tokens SET revoked_at_ms = $1 WHERE id = $2 AND revoked_at_ms IS NULL",
-            at_ms.as_millisecond(),
+            at.as_millisecond(),
             id.0,
         )
     }

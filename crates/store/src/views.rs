@@ -23,7 +23,7 @@ pub struct EventAck {
 /// A table version without its program: what lists and charts show.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct TableVersionHead {
-    pub version: i64,
+    pub version: camloop_core::ids::TableVersion,
     pub table_number: u32,
     pub reason: String,
     pub created_at_ms: Timestamp,
@@ -42,13 +42,13 @@ pub enum AckOutcome {
 }
 
 impl Store {
-    /// Acknowledges event `id` of `machine` at `at_ms`. Appended: a second acknowledgement
+    /// Acknowledges event `id` of `machine` at `at`. Appended: a second acknowledgement
     /// changes nothing and says so.
     pub async fn acknowledge_event(
         &self,
         machine: &MachineName,
         id: EventId,
-        at_ms: Timestamp,
+        at: Timestamp,
         source: &str,
     ) -> Result<AckOutcome, StoreError> {
         let machine = machine.as_str();
@@ -70,7 +70,7 @@ impl Store {
                  ON CONFLICT (event_id) DO NOTHING",
             )
             .bind(id.0)
-            .bind(at_ms.as_millisecond())
+            .bind(at.as_millisecond())
             .bind(source)
             .execute(&mut *tx)
             .await
@@ -174,7 +174,10 @@ impl Store {
                     let number: i64 = col!(row, "table_number", "reading a table version");
                     let at_ms: i64 = col!(row, "at_ms", "reading a table version");
                     Ok(TableVersionHead {
-                        version: col!(row, "version", "reading a table version"),
+                        version: crate::codec::version_of(
+                            "version",
+                            col!(row, "version", "reading a table version"),
+                        )?,
                         table_number: u32::try_from(number).map_err(|_| {
                             StoreError::invalid("table_number", format!("stored value {number} out of range"))
                         })?,

@@ -52,7 +52,7 @@ pub struct Session {
     /// `camloop user passwd`) ends the session.
     pub password: crate::digest::Sha256,
     pub csrf: String,
-    pub expires_at_ms: jiff::Timestamp,
+    pub expires_at: jiff::Timestamp,
     /// Where the session was made: it is honoured only from this address, on this listener.
     pub bound: Binding,
 }
@@ -87,12 +87,12 @@ pub struct Sessions {
 
 impl Sessions {
     /// A new session for `user` (whose stored password hash is `password_hash`) until
-    /// `expires_at_ms`: its key (for the cookie) and itself.
+    /// `expires_at`: its key (for the cookie) and itself.
     pub fn create(
         &self,
         user: &str,
         password_hash: &str,
-        expires_at_ms: jiff::Timestamp,
+        expires_at: jiff::Timestamp,
         bound: Binding,
     ) -> Result<(String, Session), ApiError> {
         let random =
@@ -102,16 +102,16 @@ impl Sessions {
             user: user.to_string(),
             password: token_digest(password_hash),
             csrf: random(32)?,
-            expires_at_ms,
+            expires_at,
             bound,
         };
         let mut map = self.map.lock().unwrap_or_else(|p| p.into_inner());
         let now = crate::clock::now();
-        map.retain(|_, s| s.expires_at_ms > now);
+        map.retain(|_, s| s.expires_at > now);
         if map.len() >= MAX_SESSIONS
             && let Some(oldest) = map
                 .iter()
-                .min_by_key(|(_, s)| s.expires_at_ms)
+                .min_by_key(|(_, s)| s.expires_at)
                 .map(|(k, _)| *k)
         {
             map.remove(&oldest);
@@ -126,7 +126,7 @@ impl Sessions {
     pub fn get(&self, key: &str, now: jiff::Timestamp, at: Binding) -> Option<Session> {
         let map = self.map.lock().unwrap_or_else(|p| p.into_inner());
         map.get(&token_digest(key))
-            .filter(|s| s.expires_at_ms > now && s.bound == at)
+            .filter(|s| s.expires_at > now && s.bound == at)
             .cloned()
     }
 

@@ -5,6 +5,7 @@ use super::AppState;
 use super::api::{ApiError, ApiPath, ApiQuery};
 use super::routes::{Items, LimitQuery, store};
 use crate::core::digest::Sha256;
+use crate::core::ids::TableVersion;
 use crate::names::{FeatureName, MachineName};
 use crate::service::http::ApiCode;
 use axum::Json;
@@ -40,8 +41,8 @@ pub(super) async fn tables(
     let items = versions
         .into_iter()
         .map(|t| TableItem {
-            version: t.version,
-            parent_version: t.parent_version,
+            version: t.version.to_i64(),
+            parent_version: t.parent_version.map(TableVersion::to_i64),
             table_number: t.table_number,
             sha256: t.sha256,
             reason: t.reason,
@@ -61,7 +62,7 @@ pub(super) async fn program(
 ) -> Result<Response, ApiError> {
     let t = store(&state)
         .await?
-        .table_version(&machine, &lobe, version)
+        .table_version(&machine, &lobe, path_version(version)?)
         .await?
         .ok_or_else(|| version_not_found(version))?;
     Ok((
@@ -71,7 +72,12 @@ pub(super) async fn program(
         .into_response())
 }
 
-fn version_not_found(version: i64) -> ApiError {
+/// The path's version as the store takes it; 0 or less is a version that is not there.
+fn path_version(version: i64) -> Result<TableVersion, ApiError> {
+    TableVersion::from_i64(version).map_err(|_| version_not_found(version))
+}
+
+fn version_not_found(version: impl std::fmt::Display) -> ApiError {
     ApiError::new(
         ApiCode::TableVersionNotFound,
         format!("version {version} not found"),
@@ -105,7 +111,7 @@ pub(super) async fn diff(
 ) -> Result<Json<DiffReply>, ApiError> {
     let store = store(&state).await?;
     let newer = store
-        .table_version(&machine, &lobe, version)
+        .table_version(&machine, &lobe, path_version(version)?)
         .await?
         .ok_or_else(|| version_not_found(version))?;
     let Some(parent) = newer.parent_version else {
@@ -124,7 +130,7 @@ pub(super) async fn diff(
     };
     let (new_t, old_t) = (
         parse(&newer.program_text, version)?,
-        parse(&older.program_text, parent)?,
+        parse(&older.program_text, parent.to_i64())?,
     );
     let points: Vec<DiffPoint> = new_t
         .c_knots_deg()
@@ -147,7 +153,7 @@ pub(super) async fn diff(
     let rms = (sum_sq / points.len().max(1) as f64).sqrt();
     Ok(Json(DiffReply {
         version,
-        parent_version: parent,
+        parent_version: parent.to_i64(),
         table_numbers: [older.table_number, newer.table_number],
         max_abs_delta_x_um: max,
         at_c_deg: at,

@@ -17,7 +17,6 @@ pub(crate) use writer::totals as store_totals;
 use crate::failpoint::crash_point;
 use crate::share::{Fence, Held};
 use crate::store::{Store, StoreError};
-use anyhow::Context;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -44,6 +43,45 @@ pub struct Journal {
     fence: Option<Fence>,
 }
 
+/// Why the journal could not do what was asked. Each names the file; the cause is in the
+/// message (the callers log it whole), not chained behind it.
+#[derive(Debug, thiserror::Error)]
+pub enum JournalError {
+    /// A file of the journal (the journal, its quarantine or refused file, its folder)
+    /// could not be read or written.
+    #[error("cannot {what} {}: {source}", path.display())]
+    File {
+        what: &'static str,
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    /// A record could not be encoded as a journal line.
+    #[error("cannot encode a record for journal {}: {source}", path.display())]
+    Encode {
+        path: PathBuf,
+        source: serde_json::Error,
+    },
+    /// In a cluster: the machine's fence refused the write (another instance owns it).
+    #[error("journal {}: {source}", path.display())]
+    Fence {
+        path: PathBuf,
+        source: crate::share::StateError,
+    },
+    /// No record could be written: the database refused them or could not be reached.
+    #[error("database write failed, records kept in the journal: {0}")]
+    Unwritten(StoreError),
+    /// The database could not say whether its copy is durable.
+    #[error("{0}")]
+    Checkpoint(StoreError),
+}
+
+impl JournalError {
+    fn file(what: &'static str, path: &Path) -> impl FnOnce(std::io::Error) -> Self {
+        let path = path.to_path_buf();
+        move |source| JournalError::File { what, path, source }
+    }
+}
+
 fn is_disk_full(e: &std::io::Error) -> bool {
     e.raw_os_error() == Some(28) || e.kind() == std::io::ErrorKind::StorageFull
 }
@@ -51,21 +89,21 @@ fn is_disk_full(e: &std::io::Error) -> bool {
 impl Journal {
     /// Opens the journal in `dir`, cutting off a torn last line left by a crash mid-append
     /// (otherwise the next record would be glued onto it and lost), and loads what it holds.
-    pub fn open(dir: &Path) -> anyhow::Result<Self> {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    pub fn open(dir: &Path) -> Result<Self, JournalError> {
+        std::fs::create_dir_all(dir).map_err(JournalError::file("create", dir))?;
         let path = dir.join("journal.jsonl");
         let bytes = match std::fs::read(&path) {
             Ok(b) => b,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
-            Err(e) => {
-                return Err(e).with_context(|| format!("cannot read journal {}", path.display()));
-            }
+            Err(e) => return Err(JournalError::file("read journal", &path)(e)),
         };
         let keep = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
         if keep < bytes.len() {
-            let file = std::fs::OpenOptions::new().write(true).open(&path)?;
-            file.set_len(keep as u64)?;
-            file.sync_all()?;
+            std::fs::OpenOptions::new()
+                .write(true)
+                .open(&path)
+                .and_then(|file| file.set_len(keep as u64).and_then(|()| file.sync_all()))
+                .map_err(JournalError::file("cut the torn line of journal", &path))?;
         }
         let mut records = Vec::new();
         let mut bad = Vec::new();
@@ -99,7 +137,7 @@ impl Journal {
     /// Moves lines that do not parse into `journal.quarantine.jsonl` beside the journal
     /// (kept, never dropped: a newer camloop or a person may still read them), then rewrites
     /// the journal without them, so they are reported once.
-    fn quarantine(&mut self, bad: Vec<Quarantined>) -> anyhow::Result<()> {
+    fn quarantine(&mut self, bad: Vec<Quarantined>) -> Result<(), JournalError> {
         let qpath = self.path.with_file_name(QUARANTINE_FILE);
         let mut text = String::new();
         for q in &bad {
@@ -110,10 +148,10 @@ impl Journal {
             .create(true)
             .append(true)
             .open(&qpath)
-            .with_context(|| format!("cannot open {}", qpath.display()))?;
+            .map_err(JournalError::file("open", &qpath))?;
         file.write_all(text.as_bytes())
             .and_then(|()| file.sync_data())
-            .with_context(|| format!("cannot write {}", qpath.display()))?;
+            .map_err(JournalError::file("write", &qpath))?;
         self.rewrite(&self.records)?;
         self.quarantined = bad;
         Ok(())
@@ -140,18 +178,28 @@ impl Journal {
             .is_some_and(|f| matches!(f.hold(), Err(crate::share::StateError::Fenced { .. })))
     }
 
-    fn hold(&self) -> anyhow::Result<Option<Held>> {
+    fn hold(&self) -> Result<Option<Held>, JournalError> {
         let held = self.fence.as_ref().map(Fence::hold).transpose();
-        held.with_context(|| format!("journal {}", self.path.display()))
+        held.map_err(|source| JournalError::Fence {
+            path: self.path.clone(),
+            source,
+        })
+    }
+
+    fn encode(&self, record: &Pending) -> Result<String, JournalError> {
+        serde_json::to_string(record).map_err(|source| JournalError::Encode {
+            path: self.path.clone(),
+            source,
+        })
     }
 
     /// Appends the records and flushes them to disk before returning. When the disk is
     /// full, the space of the reserve file is given up to take them (see [`Self::on_reserve`]).
-    pub fn append(&mut self, records: &[Pending]) -> anyhow::Result<()> {
+    pub fn append(&mut self, records: &[Pending]) -> Result<(), JournalError> {
         let _held = self.hold()?;
         let mut text = String::new();
         for r in records {
-            text.push_str(&serde_json::to_string(r)?);
+            text.push_str(&self.encode(r)?);
             text.push('\n');
         }
         match self.write(text.as_bytes()) {
@@ -160,7 +208,7 @@ impl Journal {
             }
             other => other,
         }
-        .with_context(|| format!("cannot write journal {}", self.path.display()))?;
+        .map_err(JournalError::file("write journal", &self.path))?;
         for step in records.iter().filter_map(Pending::journaled_step) {
             crash_point(step);
         }
@@ -213,7 +261,7 @@ impl Journal {
     /// the journal, so one bad record never holds up the history behind it. The rest stay
     /// for the next attempt (e.g. the database is down). Records that went stay in the file
     /// until [`Journal::release_durable`] finds the store's copy durable.
-    pub async fn flush(&mut self, store: &Store) -> anyhow::Result<Flushed> {
+    pub async fn flush(&mut self, store: &Store) -> Result<Flushed, JournalError> {
         let _held = self.hold()?;
         let mut flushed = Flushed::default();
         while self.written >= self.replayed && self.written < self.records.len() {
@@ -253,8 +301,7 @@ impl Journal {
         }
         match failure {
             Some(e) if flushed.written == 0 && flushed.refused.is_empty() => {
-                Err(anyhow::Error::new(e)
-                    .context("database write failed, records kept in the journal"))
+                Err(JournalError::Unwritten(e))
             }
             _ => Ok(flushed),
         }
@@ -280,7 +327,7 @@ impl Journal {
     /// Moves record `i` (pending) out of the journal into [`REFUSED_FILE`], synced there
     /// before the journal is rewritten without it: a crash between the two leaves it in both,
     /// never in neither.
-    fn set_aside(&mut self, i: usize, e: &StoreError) -> anyhow::Result<Refused> {
+    fn set_aside(&mut self, i: usize, e: &StoreError) -> Result<Refused, JournalError> {
         let record = &self.records[i];
         let refused = Refused {
             kind: record.kind_name(),
@@ -296,10 +343,10 @@ impl Journal {
             .create(true)
             .append(true)
             .open(&path)
-            .with_context(|| format!("cannot open {}", path.display()))?;
+            .map_err(JournalError::file("open", &path))?;
         file.write_all(format!("{line}\n").as_bytes())
             .and_then(|()| file.sync_data())
-            .with_context(|| format!("cannot write {}", path.display()))?;
+            .map_err(JournalError::file("write", &path))?;
         let mut rest = self.records.clone();
         rest.remove(i);
         self.rewrite(&rest)?;
@@ -312,13 +359,18 @@ impl Journal {
 
     /// Drops the written records from the journal once the store answers that everything
     /// committed so far is durable ([`Store::checkpoint`]). Returns how many were dropped.
-    pub async fn release_durable(&mut self, store: &Store) -> anyhow::Result<usize> {
+    pub async fn release_durable(&mut self, store: &Store) -> Result<usize, JournalError> {
         let written = self.written;
         let _held = self.hold()?;
         // Shared with every other journal releasing meanwhile: one checkpoint covers all
         // that was committed before it started.
         let committed_by = self.committed_by.unwrap_or_else(std::time::Instant::now);
-        if written == 0 || !store.checkpoint_covering(committed_by).await? {
+        if written == 0
+            || !store
+                .checkpoint_covering(committed_by)
+                .await
+                .map_err(JournalError::Checkpoint)?
+        {
             return Ok(0);
         }
         self.forget(written)?;
@@ -333,7 +385,7 @@ impl Journal {
     /// The newest learning state among the dropped records stays (at the front, as written)
     /// when the rest holds none: a restart then finds the loop's memory here even while the
     /// database is down, and never mistakes an unreachable database for a new machine.
-    fn forget(&mut self, done: usize) -> anyhow::Result<()> {
+    fn forget(&mut self, done: usize) -> Result<(), JournalError> {
         let rest = &self.records[done..];
         let keep = if rest.iter().any(|r| matches!(r, Pending::Learning { .. })) {
             None
@@ -350,7 +402,7 @@ impl Journal {
                 .write(true)
                 .open(&self.path)
                 .and_then(|f| f.set_len(0).and_then(|()| f.sync_data()));
-            file.with_context(|| format!("cannot empty journal {}", self.path.display()))?;
+            file.map_err(JournalError::file("empty journal", &self.path))?;
         } else {
             self.rewrite(&next)?;
         }
@@ -363,17 +415,25 @@ impl Journal {
 
     /// Replaces the journal file with `records` atomically (temporary file, rename), so a
     /// crash leaves the old or the new list.
-    fn rewrite(&self, records: &[Pending]) -> anyhow::Result<()> {
+    fn rewrite(&self, records: &[Pending]) -> Result<(), JournalError> {
         let dir = self.path.parent().unwrap_or(Path::new("."));
-        let mut tmp = tempfile::Builder::new()
-            .prefix(".journal-")
-            .tempfile_in(dir)?;
+        let mut text = String::new();
         for r in records {
-            writeln!(tmp, "{}", serde_json::to_string(r)?)?;
+            text.push_str(&self.encode(r)?);
+            text.push('\n');
         }
-        tmp.as_file().sync_all()?;
-        tmp.persist(&self.path)
-            .with_context(|| format!("cannot replace journal {}", self.path.display()))?;
+        let replace = JournalError::file("replace journal", &self.path);
+        let written = tempfile::Builder::new()
+            .prefix(".journal-")
+            .tempfile_in(dir)
+            .and_then(|mut tmp| {
+                tmp.write_all(text.as_bytes())?;
+                tmp.as_file().sync_all()?;
+                Ok(tmp)
+            });
+        written
+            .and_then(|tmp| tmp.persist(&self.path).map_err(|e| e.error))
+            .map_err(replace)?;
         Ok(())
     }
 }

@@ -42,8 +42,8 @@ pub enum Pending {
         reason: String,
         /// Its first status, with why (lines written before it was typed: see [`read_line`]).
         status: VersionStatus,
-        #[serde(with = "crate::clock::unix_ms")]
-        created_at_ms: Timestamp,
+        #[serde(rename = "created_at_ms", with = "crate::clock::unix_ms")]
+        created_at: Timestamp,
         /// The measurement it was learned from (a replay re-submits the version with it).
         #[serde(default)]
         measurement_id: Option<Sha256>,
@@ -58,13 +58,13 @@ pub enum Pending {
         lobe: FeatureName,
         version: TableVersion,
         status: VersionStatus,
-        #[serde(with = "crate::clock::unix_ms")]
-        at_ms: Timestamp,
+        #[serde(rename = "at_ms", with = "crate::clock::unix_ms")]
+        at: Timestamp,
     },
     Event {
         machine: MachineName,
-        #[serde(with = "crate::clock::unix_ms")]
-        at_ms: Timestamp,
+        #[serde(rename = "at_ms", with = "crate::clock::unix_ms")]
+        at: Timestamp,
         level: EventLevel,
         kind: EventKind,
         message: String,
@@ -73,8 +73,8 @@ pub enum Pending {
         machine: MachineName,
         lobe: FeatureName,
         state: Box<LoopMemory>,
-        #[serde(with = "crate::clock::unix_ms")]
-        saved_at_ms: Timestamp,
+        #[serde(rename = "saved_at_ms", with = "crate::clock::unix_ms")]
+        saved_at: Timestamp,
     },
     /// What the machine grinds, kept once per change (the store skips an identical one).
     RecipeSnapshot {
@@ -83,13 +83,13 @@ pub enum Pending {
         lobe: FeatureName,
         kind: FeatureKind,
         recipe_json: String,
-        #[serde(with = "crate::clock::unix_ms")]
-        created_at_ms: Timestamp,
+        #[serde(rename = "created_at_ms", with = "crate::clock::unix_ms")]
+        created_at: Timestamp,
     },
     Dressing {
         machine: MachineName,
-        #[serde(with = "crate::clock::unix_ms")]
-        at_ms: Timestamp,
+        #[serde(rename = "at_ms", with = "crate::clock::unix_ms")]
+        at: Timestamp,
         old_radius_mm: f64,
         new_radius_mm: f64,
         /// The dresser's measured infeed (radius removed), µm, when it reported one; journal
@@ -107,13 +107,13 @@ impl Pending {
         Ok(match self {
             Pending::Event {
                 machine,
-                at_ms,
+                at,
                 level,
                 kind,
                 message,
             } => Some(NewEvent {
                 machine: machine.clone(),
-                at_ms: *at_ms,
+                at_ms: *at,
                 level: *level,
                 kind: *kind,
                 message: message.clone(),
@@ -167,14 +167,14 @@ impl Pending {
         Ok(match self {
             Pending::Dressing {
                 machine,
-                at_ms,
+                at,
                 old_radius_mm,
                 new_radius_mm,
                 infeed_um,
                 source,
             } => Some(NewDressing {
                 machine: machine.clone(),
-                at_ms: *at_ms,
+                at_ms: *at,
                 old_radius_mm: *old_radius_mm,
                 new_radius_mm: *new_radius_mm,
                 infeed_um: *infeed_um,
@@ -239,7 +239,7 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
             version,
             ..
         } => store
-            .table_version_status(machine, lobe, version.to_i64())
+            .table_version_status(machine, lobe, *version)
             .await?
             .is_some(),
         Pending::VersionStatus {
@@ -249,7 +249,7 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
             status,
             ..
         } => store
-            .table_version_status(machine, lobe, version.to_i64())
+            .table_version_status(machine, lobe, *version)
             .await?
             .is_some_and(|s| s.name() == status.name()),
         Pending::Event { .. } => match record.event()? {
@@ -260,10 +260,10 @@ pub(super) async fn apply_once(store: &Store, record: &Pending) -> Result<(), St
             machine,
             lobe,
             state,
-            saved_at_ms,
+            saved_at,
         } => {
             store
-                .learning_state_covered(machine, lobe, &state_json(state)?, *saved_at_ms)
+                .learning_state_covered(machine, lobe, &state_json(state)?, *saved_at)
                 .await?
         }
         Pending::Dressing { .. } => match record.dressing()? {
@@ -326,10 +326,10 @@ pub(super) async fn apply_in(batch: &mut Batch<'_>, record: &Pending) -> Result<
             lobe,
             version,
             status,
-            at_ms,
+            at,
         } => {
             batch
-                .set_table_status(&machine, &lobe, version.to_i64(), &status, at_ms)
+                .set_table_status(&machine, &lobe, version, &status, at)
                 .await
         }
         Pending::Event { .. } => match record.event()? {
@@ -340,7 +340,7 @@ pub(super) async fn apply_in(batch: &mut Batch<'_>, record: &Pending) -> Result<
             machine,
             lobe,
             state,
-            saved_at_ms,
+            saved_at,
         } => {
             let meaning = meaning_sha256(&state)?;
             batch
@@ -349,7 +349,7 @@ pub(super) async fn apply_in(batch: &mut Batch<'_>, record: &Pending) -> Result<
                     &lobe,
                     &state_json(&state)?,
                     Some(&meaning),
-                    saved_at_ms,
+                    saved_at,
                 )
                 .await
         }
@@ -359,7 +359,7 @@ pub(super) async fn apply_in(batch: &mut Batch<'_>, record: &Pending) -> Result<
             lobe,
             kind,
             recipe_json,
-            created_at_ms,
+            created_at,
         } => {
             let r = NewRecipeSnapshot {
                 machine,
@@ -367,7 +367,7 @@ pub(super) async fn apply_in(batch: &mut Batch<'_>, record: &Pending) -> Result<
                 lobe,
                 kind,
                 recipe_json,
-                created_at_ms,
+                created_at_ms: created_at,
             };
             batch.insert_recipe_snapshot(&r).await.map(|_| ())
         }
@@ -389,7 +389,7 @@ async fn insert_table(batch: &mut Batch<'_>, record: Pending) -> Result<(), Stor
         learning,
         reason,
         status,
-        created_at_ms,
+        created_at,
         ..
     } = record
     else {
@@ -399,7 +399,7 @@ async fn insert_table(batch: &mut Batch<'_>, record: Pending) -> Result<(), Stor
     // left out rather than blocking every later record. Asked in the batch: a parent
     // written earlier in it counts.
     let parent_version = match parent_version {
-        Some(p) if batch.has_table_version(&machine, &lobe, p.to_i64()).await? => Some(p.to_i64()),
+        Some(p) if batch.has_table_version(&machine, &lobe, p).await? => Some(p),
         _ => None,
     };
     let learning_params_json = serde_json::to_string(&learning)
@@ -407,14 +407,14 @@ async fn insert_table(batch: &mut Batch<'_>, record: Pending) -> Result<(), Stor
     let t = NewTableVersion {
         machine,
         lobe,
-        version: Some(version.to_i64()),
+        version: Some(version),
         parent_version,
         table_number,
         program_text,
         learning_params_json,
         reason,
         status,
-        created_at_ms,
+        created_at_ms: created_at,
     };
     batch.insert_table_version(&t).await.map(|_| ())
 }
@@ -444,7 +444,7 @@ mod tests {
         let submitted = Some("submitted to the share".to_string());
         assert_eq!(status, VersionStatus::Waiting { reason: submitted });
         let record = read(later);
-        let Pending::VersionStatus { status, at_ms, .. } = &record else {
+        let Pending::VersionStatus { status, at, .. } = &record else {
             panic!("a status record")
         };
         let note = Some("pushed to the share on retry".to_string());
@@ -453,7 +453,7 @@ mod tests {
             note,
         };
         assert_eq!(
-            (status, *at_ms),
+            (status, *at),
             (&pushed, jiff::Timestamp::from_millisecond(9).unwrap())
         );
         let Pending::VersionStatus { status, .. } = read(&refused) else {

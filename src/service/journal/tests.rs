@@ -9,7 +9,7 @@ use crate::store::{EventLevel, VersionStatus};
 fn event(message: &str) -> Pending {
     Pending::Event {
         machine: "M1".parse().unwrap(),
-        at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
+        at: jiff::Timestamp::from_millisecond(7).unwrap(),
         level: EventLevel::Info,
         kind: EventKind::WheelDressed,
         message: message.into(),
@@ -23,8 +23,27 @@ fn learning(parts: u64) -> Pending {
         machine: "M1".parse().unwrap(),
         lobe: "IN1".parse().unwrap(),
         state: Box::new(state),
-        saved_at_ms: jiff::Timestamp::from_millisecond(7 + parts as i64).unwrap(),
+        saved_at: jiff::Timestamp::from_millisecond(7 + parts as i64).unwrap(),
     }
+}
+
+/// A journal that cannot be opened says which file and why, as a typed error the caller
+/// can match on.
+#[test]
+fn a_journal_that_cannot_be_opened_names_its_folder_and_the_cause() {
+    let dir = tempfile::tempdir().unwrap();
+    let not_a_folder = dir.path().join("state");
+    std::fs::write(&not_a_folder, "a file where the folder should be").unwrap();
+    let e = Journal::open(&not_a_folder).unwrap_err();
+    assert!(
+        matches!(&e, JournalError::File { what: "create", path, .. } if *path == not_a_folder),
+        "{e:?}"
+    );
+    let text = e.to_string();
+    assert!(
+        text.starts_with(&format!("cannot create {}: ", not_a_folder.display())),
+        "{text}"
+    );
 }
 
 #[test]
@@ -85,7 +104,7 @@ async fn a_record_the_store_refuses_is_set_aside_and_the_rest_go_in() {
         lobe: "IN1".parse().unwrap(),
         version: v(41),
         status: VersionStatus::pushed_at(jiff::Timestamp::from_millisecond(8).unwrap(), "x"),
-        at_ms: jiff::Timestamp::from_millisecond(8).unwrap(),
+        at: jiff::Timestamp::from_millisecond(8).unwrap(),
     };
     let mut j = Journal::open(dir.path()).unwrap();
     j.append(&[event("a"), orphan.clone(), event("b")]).unwrap();
@@ -139,7 +158,7 @@ async fn a_journal_with_column_spelled_statuses_replays() {
     assert!(j.quarantined().is_empty(), "{:?}", j.quarantined());
     assert_eq!(j.flush(&store).await.unwrap().written, 2);
     let v = store
-        .table_version(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), 1)
+        .table_version(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), v(1))
         .await
         .unwrap()
         .unwrap();
@@ -188,7 +207,7 @@ fn every_kind_of_record() -> Vec<Pending> {
             status: VersionStatus::Waiting {
                 reason: Some("waiting: share full".into()),
             },
-            created_at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
+            created_at: jiff::Timestamp::from_millisecond(7).unwrap(),
             measurement_id: None,
             rollback_of: None,
         },
@@ -200,12 +219,12 @@ fn every_kind_of_record() -> Vec<Pending> {
                 at: jiff::Timestamp::from_millisecond(8).expect("a time"),
                 note: Some("pushed on retry".into()),
             },
-            at_ms: jiff::Timestamp::from_millisecond(8).unwrap(),
+            at: jiff::Timestamp::from_millisecond(8).unwrap(),
         },
         learning(1),
         Pending::Dressing {
             machine: "M1".parse().unwrap(),
-            at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
+            at: jiff::Timestamp::from_millisecond(7).unwrap(),
             old_radius_mm: 250.0,
             new_radius_mm: 249.998,
             infeed_um: Some(2.1),
@@ -249,7 +268,7 @@ async fn a_replay_writes_nothing_twice() {
     }
     // The version keeps the share's number, and its newest status is the retry's.
     let v = store
-        .table_version(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), 3)
+        .table_version(&"M1".parse().unwrap(), &"IN1".parse().unwrap(), v(3))
         .await
         .unwrap()
         .unwrap();
@@ -257,7 +276,10 @@ async fn a_replay_writes_nothing_twice() {
         at: jiff::Timestamp::from_millisecond(8).expect("a time"),
         note: Some("pushed on retry".into()),
     };
-    assert_eq!((v.version, v.status), (3, pushed));
+    assert_eq!(
+        (v.version, v.status),
+        (crate::core::ids::TableVersion::new(3).unwrap(), pushed)
+    );
     assert_eq!(j.release_durable(&store).await.unwrap(), 6);
     let reopened = Journal::open(dir.path()).unwrap();
     assert_eq!(reopened.records(), [learning(1)]);

@@ -205,7 +205,7 @@ mod tests {
     fn event(machine: &str, at_ms: i64) -> Pending {
         Pending::Event {
             machine: machine.parse().unwrap(),
-            at_ms: jiff::Timestamp::from_millisecond(at_ms).unwrap(),
+            at: jiff::Timestamp::from_millisecond(at_ms).unwrap(),
             level: EventLevel::Info,
             kind: super::super::EventKind::LearningHeld,
             message: format!("held at {at_ms}"),
@@ -265,7 +265,7 @@ mod tests {
             status: VersionStatus::Refused {
                 reason: "no such version".into(),
             },
-            at_ms: jiff::Timestamp::from_millisecond(3_000).unwrap(),
+            at: jiff::Timestamp::from_millisecond(3_000).unwrap(),
         };
         let failing = writer.submit(&store, vec![event("M4", 3_000), bad]);
         let good = writer.submit(&store, vec![event("M5", 3_000)]);

@@ -29,7 +29,7 @@ pub(super) struct Draft {
     pub(super) reason: String,
     pub(super) measurement_id: Option<Sha256>,
     pub(super) rollback_of: Option<TableVersion>,
-    pub(super) at_ms: jiff::Timestamp,
+    pub(super) at: jiff::Timestamp,
 }
 
 impl FeatureLoop {
@@ -132,7 +132,7 @@ impl FeatureLoop {
             measurement_id: draft.measurement_id,
             learning: serde_json::to_value(draft.learning.summary())?,
             rollback_of: draft.rollback_of,
-            created_at_unix_ms: draft.at_ms,
+            created_at_unix_ms: draft.at,
         })
     }
 

@@ -83,7 +83,7 @@ impl FeatureLoop {
         if first {
             records.push(Pending::Dressing {
                 machine: self.name.clone(),
-                at_ms: at,
+                at,
                 old_radius_mm: old,
                 new_radius_mm: wheel_radius_mm,
                 infeed_um,

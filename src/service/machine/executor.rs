@@ -133,7 +133,7 @@ impl FeatureLoop {
             reason: record.reason,
             measurement_id: record.measurement,
             rollback_of: record.rollback_of,
-            at_ms: record.at,
+            at: record.at,
         };
         let request = match self.request(draft) {
             Ok(r) => r,

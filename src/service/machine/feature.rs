@@ -214,7 +214,7 @@ impl FeatureLoop {
             lobe: s.name.clone(),
             kind,
             recipe_json: serde_json::to_string(&recipe).unwrap_or_else(|_| "{}".into()),
-            created_at_ms: at,
+            created_at: at,
         }
     }
 
@@ -387,7 +387,7 @@ impl FeatureLoop {
             machine: self.name.clone(),
             lobe: self.setup.name.clone(),
             state: Box::new(self.machine.memory().clone()),
-            saved_at_ms: at,
+            saved_at: at,
         }
     }
 }

@@ -221,7 +221,7 @@ impl FeatureLoop {
         // The row first: the finish table's version names this measurement.
         records.splice(0..0, self.in_process_row(&raw, ground_with));
         let version = version.get();
-        let at_ms = now();
+        let at = now();
         let outcome = if pushed {
             info!(machine = %self.name, part, version, ready = count, "same-part finish table on the share");
             InProcessOutcome::Delivered {
@@ -231,7 +231,7 @@ impl FeatureLoop {
         } else {
             InProcessOutcome::Waiting { version }
         };
-        records.push(self.learning_record(at_ms));
+        records.push(self.learning_record(at));
         if !self.record(records).await {
             let reason = format!(
                 "machine {}: the finish table's records were not kept",

@@ -105,7 +105,7 @@ impl FeatureLoop {
         raw: RawMeasurement,
         ground_with: Option<u64>,
     ) -> anyhow::Result<Ingested> {
-        let at_ms = now();
+        let at = now();
         self.refresh_plan();
         let gauged = Gauged {
             setup: super::planned::turn_setup(&self.setup, &self.plan),
@@ -114,13 +114,13 @@ impl FeatureLoop {
             part: PartId::new(&raw.header.part).ok(),
             ground_with: ground_with.and_then(TableVersion::new),
             on_reserve: self.journal.on_reserve(),
-            at: at_ms,
+            at,
         };
         self.machine.handle(Input::Gauged(Box::new(gauged)));
         let finished = self.run_machine(Some(&raw)).await;
         match finished.into_iter().last() {
             Some(Finished::Recorded(report)) => {
-                self.after_part(&raw, *report, at_ms).await;
+                self.after_part(&raw, *report, at).await;
                 Ok(Ingested::Recorded)
             }
             Some(Finished::Repeated) => {
@@ -142,12 +142,7 @@ impl FeatureLoop {
     }
 
     /// A recorded part: its control charts, metrics, status and log line.
-    async fn after_part(
-        &mut self,
-        raw: &RawMeasurement,
-        report: PartReport,
-        at_ms: jiff::Timestamp,
-    ) {
+    async fn after_part(&mut self, raw: &RawMeasurement, report: PartReport, at: jiff::Timestamp) {
         let measured = &report.measured;
         let text = match &report.note {
             PartNote::Table => self.delivery_line(),
@@ -171,7 +166,7 @@ impl FeatureLoop {
                 format!("not learned from: {reason}")
             }
         };
-        let charts = self.chart_events(&raw.header.part, measured, at_ms);
+        let charts = self.chart_events(&raw.header.part, measured, at);
         if !charts.is_empty() {
             self.record(charts).await;
         }
@@ -236,7 +231,7 @@ impl FeatureLoop {
     /// and recorded for the gauge study, never a step of learning (the turn is not taken),
     /// never counted as a part, never the previous part of the next one.
     pub(crate) async fn on_master(&mut self, raw: RawMeasurement) -> anyhow::Result<Ingested> {
-        let at_ms = now();
+        let at = now();
         let sha = measurement_sha256(&raw);
         if self.machine.memory().has_seen(&sha) {
             return Ok(Ingested::Repeated);
@@ -245,12 +240,12 @@ impl FeatureLoop {
             Ok(m) => m,
             Err(TurnError::Measurement(e)) => {
                 let reason = e.to_string();
-                self.reject(&raw, &sha, &reason, at_ms).await;
+                self.reject(&raw, &sha, &reason, at).await;
                 return Ok(Ingested::Rejected { reason });
             }
             Err(e) => return Err(e.into()),
         };
-        let record = self.measurement_record(&raw, &sha, &measured, at_ms);
+        let record = self.measurement_record(&raw, &sha, &measured, at);
         if !self.record(vec![record]).await {
             return Ok(Ingested::NotRecorded);
         }
@@ -264,18 +259,11 @@ impl FeatureLoop {
         raw: &RawMeasurement,
         sha: &Sha256,
         measured: &Measured,
-        at_ms: jiff::Timestamp,
+        at: jiff::Timestamp,
     ) -> Pending {
         let in_force = self.machine.memory().in_force_version;
         Pending::Measurement {
-            measurement: records::measurement(
-                &self.name,
-                &self.setup.name,
-                raw,
-                sha,
-                measured,
-                at_ms,
-            ),
+            measurement: records::measurement(&self.name, &self.setup.name, raw, sha, measured, at),
             ground_with_version: in_force,
         }
     }
@@ -287,7 +275,7 @@ impl FeatureLoop {
         raw: &RawMeasurement,
         sha: &Sha256,
         reason: &str,
-        at_ms: jiff::Timestamp,
+        at: jiff::Timestamp,
     ) {
         warn!(machine = %self.name, lobe = %self.setup.name, origin = %raw.origin, reason = %reason, "measurement rejected");
         let dir = self.share.config().state_dir.with_file_name("rejected");
@@ -299,7 +287,7 @@ impl FeatureLoop {
         let message = format!("{} (from {})", reason, raw.origin);
         let e = event(
             &self.name,
-            at_ms,
+            at,
             EventLevel::Warn,
             EventKind::MeasurementRejected,
             message,

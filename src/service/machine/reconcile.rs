@@ -109,7 +109,7 @@ pub(super) fn kept(machine: &MachineName, feature: &FeatureName, records: &[Pend
                 learning,
                 reason,
                 status,
-                created_at_ms,
+                created_at,
                 measurement_id,
                 rollback_of,
                 ..
@@ -121,7 +121,7 @@ pub(super) fn kept(machine: &MachineName, feature: &FeatureName, records: &[Pend
                 learning: learning.clone(),
                 reason: reason.clone(),
                 status: table_status(status),
-                at: *created_at_ms,
+                at: *created_at,
                 measurement: *measurement_id,
                 rollback_of: *rollback_of,
             }))),
@@ -204,10 +204,7 @@ async fn stored_records(
         return found;
     };
     for version in wanted {
-        match store
-            .table_version(machine, feature, version.to_i64())
-            .await
-        {
+        match store.table_version(machine, feature, version).await {
             Ok(Some(t)) => match serde_json::from_str(&t.learning_params_json) {
                 Ok(learning) => {
                     found.insert(version, learning);

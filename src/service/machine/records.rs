@@ -13,14 +13,14 @@ use std::path::Path;
 
 pub(super) fn event(
     machine: &MachineName,
-    at_ms: jiff::Timestamp,
+    at: jiff::Timestamp,
     level: EventLevel,
     kind: EventKind,
     message: String,
 ) -> Pending {
     Pending::Event {
         machine: machine.clone(),
-        at_ms,
+        at,
         level,
         kind,
         message,
@@ -44,10 +44,10 @@ fn kind(k: record::EventKind) -> EventKind {
 }
 
 /// A version's status as the share and the store keep it.
-pub(super) fn status(s: TableStatus, at_ms: jiff::Timestamp) -> VersionStatus {
+pub(super) fn status(s: TableStatus, at: jiff::Timestamp) -> VersionStatus {
     match s {
         TableStatus::Waiting { reason } => VersionStatus::Waiting { reason },
-        TableStatus::Pushed { note } => VersionStatus::pushed_at(at_ms, &note),
+        TableStatus::Pushed { note } => VersionStatus::pushed_at(at, &note),
         TableStatus::Refused { reason } => VersionStatus::Refused { reason },
     }
 }
@@ -86,7 +86,7 @@ pub(super) fn pending(
                 learning: t.learning,
                 reason: t.reason,
                 status: status(t.status, t.at),
-                created_at_ms: t.at,
+                created_at: t.at,
                 measurement_id: t.measurement,
                 rollback_of: t.rollback_of,
             }),
@@ -99,7 +99,7 @@ pub(super) fn pending(
                 lobe: lobe.clone(),
                 version,
                 status: status(s, at),
-                at_ms: at,
+                at,
             }),
             Record::Event {
                 at,
@@ -111,7 +111,7 @@ pub(super) fn pending(
                 machine: machine.clone(),
                 lobe: lobe.clone(),
                 state: memory,
-                saved_at_ms: at,
+                saved_at: at,
             }),
         })
         .collect()
@@ -125,14 +125,14 @@ pub(super) fn measurement(
     raw: &RawMeasurement,
     sha: &Sha256,
     measured: &Measured,
-    at_ms: jiff::Timestamp,
+    received_at: jiff::Timestamp,
 ) -> NewMeasurement {
     let report = &measured.report;
     NewMeasurement {
         machine: machine.clone(),
         part: raw.header.part.clone(),
         lobe: lobe.clone(),
-        received_at_ms: at_ms,
+        received_at_ms: received_at,
         verdict: if report.verdict.pass {
             Verdict::Pass
         } else {

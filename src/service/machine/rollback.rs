@@ -124,7 +124,7 @@ impl FeatureLoop {
             .clone()
             .ok_or(RollbackError::StoreUnavailable)?;
         let old = store
-            .table_version(&self.name, lobe, version.to_i64())
+            .table_version(&self.name, lobe, version)
             .await
             .context("reading the stored version")?
             .ok_or_else(|| RollbackError::NotFound {

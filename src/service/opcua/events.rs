@@ -129,7 +129,7 @@ const REMEMBERED: usize = 10_000;
 /// What an EventId of a history row says.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) struct RowEventId {
-    pub(crate) at_ms: jiff::Timestamp,
+    pub(crate) at: jiff::Timestamp,
     digest: Digest,
     pub(crate) occurrence: u32,
 }
@@ -143,7 +143,7 @@ impl RowEventId {
         }
         let at_ms = i64::from_be_bytes(bytes[2..10].try_into().ok()?);
         Some(Self {
-            at_ms: jiff::Timestamp::from_millisecond(at_ms).ok()?,
+            at: jiff::Timestamp::from_millisecond(at_ms).ok()?,
             digest: bytes[10..26].try_into().ok()?,
             occurrence: u32::from_be_bytes(bytes[26..30].try_into().ok()?),
         })
@@ -170,24 +170,24 @@ fn digest(parts: &[&str]) -> Digest {
 }
 
 impl EventIds {
-    /// The EventId of a history row: `machine`'s event at `at_ms` with the history's
+    /// The EventId of a history row: `machine`'s event at `at` with the history's
     /// `message`.
-    pub(crate) fn row(&mut self, machine: &str, at_ms: jiff::Timestamp, message: &str) -> Vec<u8> {
-        self.make(ROW, at_ms, digest(&[machine, message]))
+    pub(crate) fn row(&mut self, machine: &str, at: jiff::Timestamp, message: &str) -> Vec<u8> {
+        self.make(ROW, at, digest(&[machine, message]))
     }
 
     /// The EventId of an event that is no history row (a result, a delivery, a dressing).
     pub(crate) fn other(
         &mut self,
         (machine, source, ty): (&str, &str, &str),
-        at_ms: jiff::Timestamp,
+        at: jiff::Timestamp,
         message: &str,
     ) -> Vec<u8> {
-        self.make(OTHER, at_ms, digest(&[machine, source, ty, message]))
+        self.make(OTHER, at, digest(&[machine, source, ty, message]))
     }
 
-    fn make(&mut self, kind: u8, at_ms: jiff::Timestamp, digest: Digest) -> Vec<u8> {
-        let key = (at_ms.as_millisecond(), digest);
+    fn make(&mut self, kind: u8, at: jiff::Timestamp, digest: Digest) -> Vec<u8> {
+        let key = (at.as_millisecond(), digest);
         let occurrence = match self.seen.get_mut(&key) {
             Some(n) => {
                 *n = n.saturating_add(1);
@@ -233,7 +233,7 @@ mod tests {
         );
         assert_eq!(id.len(), LEN);
         let parsed = RowEventId::parse(&id).unwrap();
-        assert_eq!(parsed.at_ms, at(1_795_773_600_250));
+        assert_eq!(parsed.at, at(1_795_773_600_250));
         assert_eq!(parsed.occurrence, 0);
         assert!(parsed.matches("M1", "rollback: IN1 to v2"));
         assert!(!parsed.matches("M2", "rollback: IN1 to v2"));

@@ -219,12 +219,12 @@ impl Feed {
         source: &str,
         (kind, sev): (&str, u16),
         body: String,
-        at_ms: jiff::Timestamp,
+        at: jiff::Timestamp,
         stored: Option<&str>,
     ) {
         let ty = self.ids.alarm_type();
         let message = format!("{kind}: {body}");
-        self.raise(machine, source, (ty, sev), message, at_ms, stored);
+        self.raise(machine, source, (ty, sev), message, at, stored);
     }
 
     /// Makes an event of the machine, raised at the next [`Feed::publish`]; its EventId is
@@ -236,20 +236,20 @@ impl Feed {
         source: &str,
         (ty, severity): (NodeId, u16),
         message: String,
-        at_ms: jiff::Timestamp,
+        at: jiff::Timestamp,
         stored: Option<&str>,
     ) {
         let bytes = match stored {
-            Some(row) => self.event_ids.row(machine, at_ms, row),
+            Some(row) => self.event_ids.row(machine, at, row),
             None => {
                 let kind = ty.to_string();
                 let ids = &mut self.event_ids;
-                ids.other((machine, source, &kind), at_ms, &message)
+                ids.other((machine, source, &kind), at, &message)
             }
         };
         let id = ByteString::from(bytes);
         let node = self.ids.machine(machine);
-        let event = BaseEventType::new(ty, id, LocalizedText::new("", &message), date_time(at_ms))
+        let event = BaseEventType::new(ty, id, LocalizedText::new("", &message), date_time(at))
             .set_source_node(node.clone())
             .set_source_name(format!("{machine}/{source}").into())
             .set_severity(severity)
@@ -434,8 +434,8 @@ struct Pending {
 
 /// A result value with its part's time as SourceTimestamp; none: not known for this part
 /// yet (`BadWaitingForInitialData`, never an older part's value).
-fn result_value(value: Option<Variant>, at_ms: jiff::Timestamp) -> DataValue {
-    let source = date_time(at_ms);
+fn result_value(value: Option<Variant>, at: jiff::Timestamp) -> DataValue {
+    let source = date_time(at);
     let now = DateTime::now();
     match value {
         Some(v) => DataValue {

@@ -233,9 +233,9 @@ async fn stored_event_id(
     let store = store_of(w.store).await?;
     let filter = crate::store::EventFilter {
         machine: Some(machine.clone()),
-        since_ms: Some(named.at_ms),
+        since_ms: Some(named.at),
         until_ms: named
-            .at_ms
+            .at
             .checked_add(jiff::SignedDuration::from_millis(1))
             .ok(),
         level: None,
@@ -250,7 +250,7 @@ async fn stored_event_id(
         .nth(usize::try_from(named.occurrence).unwrap_or(usize::MAX))
         .map(|e| e.id.0);
     if found.is_none() {
-        warn!(machine = %machine, at = %named.at_ms, "OPC UA: AcknowledgeEvent: no history row of the machine for the EventId");
+        warn!(machine = %machine, at = %named.at, "OPC UA: AcknowledgeEvent: no history row of the machine for the EventId");
     }
     found.ok_or(StatusCode::BadNotFound)
 }

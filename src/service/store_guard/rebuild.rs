@@ -21,7 +21,7 @@ pub(super) async fn rebuild_versions(
         };
         for v in loaded.history.versions().iter().filter(|v| v.text_kept) {
             let r = &v.record;
-            let version = r.version.to_i64();
+            let version = r.version;
             if store
                 .table_version(&e.machine, &e.lobe, version)
                 .await?

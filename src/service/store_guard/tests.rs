@@ -36,7 +36,7 @@ fn share_at(version: Option<u64>, tables_in_journal: u64) -> Vec<MachineExpectat
     }]
 }
 
-async fn add_table(store: &Store) -> i64 {
+async fn add_table(store: &Store) -> crate::core::ids::TableVersion {
     store
         .insert_table_version(&NewTableVersion {
             machine: "SIM1".parse().unwrap(),
@@ -75,6 +75,10 @@ async fn a_fresh_start_passes_and_is_remembered_then_the_same_store_passes() {
     assert_eq!(first, Ok(StoreCheck::Remembered(id.clone())));
     let file = std::fs::read_to_string(site.var().join(IDENTITY_FILE)).unwrap();
     assert!(file.contains(&id.id), "{file}");
+    // The file keeps its key for the store's creation time (Unix ms), as files written
+    // before the field was named `created_at` have it.
+    let kept = format!("\"created_at_ms\":{}", id.created_at_ms.as_millisecond());
+    assert!(file.contains(&kept), "{file}");
     add_table(&store).await;
     let again = check_store(&store, &site.var(), &share_at(Some(1), 0)).await;
     assert_eq!(again, Ok(StoreCheck::Same(id)));
@@ -291,7 +295,7 @@ async fn the_service_refuses_to_start_on_a_truncated_database() {
         .unwrap()
         .unwrap();
     assert_eq!(
-        newest.version as u64,
+        newest.version.get(),
         expected[0].newest_share_version.unwrap()
     );
     assert!(

@@ -146,10 +146,12 @@ async fn diff_table(
     lobe: &FeatureName,
     v: i64,
 ) -> Result<Table, ApiError> {
+    let not_there = || not_found(format!("version {v} not found"));
+    let asked = crate::core::ids::TableVersion::from_i64(v).map_err(|_| not_there())?;
     let newer = store
-        .table_version(machine, lobe, v)
+        .table_version(machine, lobe, asked)
         .await?
-        .ok_or_else(|| not_found(format!("version {v} not found")))?;
+        .ok_or_else(not_there)?;
     let parent = newer
         .parent_version
         .ok_or_else(|| not_found(format!("version {v} is the first")))?;

@@ -202,10 +202,10 @@ pub(super) fn versions(
         versions
             .iter()
             .find(|v| v.parent_version.is_some())
-            .map(|v| v.version)
+            .map(|v| v.version.to_i64())
     });
     let pair = shown.and_then(|s| {
-        let newer = versions.iter().find(|v| v.version == s)?;
+        let newer = versions.iter().find(|v| v.version.to_i64() == s)?;
         let older = versions
             .iter()
             .find(|v| Some(v.version) == newer.parent_version)?;

@@ -1,6 +1,6 @@
 //! Events to the plant's MQTT broker (`[mqtt]`, off by default).
 //!
-//! The machine loops hand each journal record to an `EventSender` (`service::plant`) (never waiting: a full
+//! The service hands each plant event to the publisher's [`Intake`] (never waiting: a full
 //! intake counts the event as dropped); an intake task turns it into a [`PlantEvent`] on
 //! its topic `<prefix>/<machine>/<feature>/<event>` with its sequence number, plus the
 //! retained states it changed (`<prefix>/<machine>/<feature>/state`, see [`state`]), and
@@ -15,26 +15,30 @@
 //! connection is lost without that, e.g. when the process is killed. Credentials and TLS
 //! (rustls) come from `[mqtt]`.
 
+//!
+//! An adapter of the service: it depends on the loop's types (`PlantEvent`) and its own
+//! config section, never on the service or another adapter; the service wires it.
+
+mod config;
 mod link;
+mod progress;
 pub mod queue;
 pub mod state;
 
+pub use config::{ENV_MQTT_PASSWORD, MqttSection, Password, SectionProblem};
 pub use link::MAX_BACKOFF;
+pub use progress::{MqttLinkState, MqttMetrics, Progress};
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
-use anyhow::Context;
 use rumqttc::{LastWill, MqttOptions, QoS, TlsConfiguration, Transport};
 use tokio::sync::{Notify, mpsc, watch};
 use tokio_rustls::rustls;
 use tracing::warn;
 
-use crate::config::MqttSection;
-use crate::service::metrics::{MqttLinkState, MqttMetrics};
-use crate::service::plant::{EventSender, payload_with_seq};
 use camloop_loop::PlantEvent;
 use queue::{DiskQueue, Message};
 
@@ -42,32 +46,6 @@ use queue::{DiskQueue, Message};
 const INTAKE: usize = 4096;
 
 /// What the intake, the link and the owner share.
-/// What the publisher has done, published after every change (for tests and metrics).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct Progress {
-    /// Events waiting on disk.
-    pub queued: usize,
-    /// Events (and drop reports) the broker acknowledged.
-    pub sent: u64,
-    /// Events dropped since start (queue or intake full), reported or not.
-    pub dropped: u64,
-    pub connected: bool,
-    /// The link's state (refused: the broker refused the credentials).
-    pub link: MqttLinkState,
-}
-
-impl Progress {
-    /// As `/metrics` shows it.
-    fn metrics(&self) -> MqttMetrics {
-        MqttMetrics {
-            link: self.link,
-            queued: u64::try_from(self.queued).unwrap_or(u64::MAX),
-            sent_total: self.sent,
-            dropped_total: self.dropped,
-        }
-    }
-}
-
 #[derive(Debug)]
 struct Shared {
     progress: watch::Sender<Progress>,
@@ -135,7 +113,7 @@ impl Shared {
                 "client_id": self.client_id,
                 "dropped_events": dropped,
                 "queue_max_events": self.max,
-                "at_ms": crate::clock::now().as_millisecond(),
+                "at_ms": jiff::Timestamp::now().as_millisecond(),
             });
             let topic = format!("{prefix}/{}/queue_dropped", self.client_id);
             warn!(
@@ -172,10 +150,59 @@ impl Shared {
     }
 }
 
+/// Why the publisher cannot start.
+#[derive(Debug, thiserror::Error)]
+pub enum StartError {
+    #[error("MQTT queue in {}", dir.display())]
+    Queue {
+        dir: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("mqtt.tls_ca {}", path.display())]
+    CaFile {
+        path: PathBuf,
+        #[source]
+        source: rustls::pki_types::pem::Error,
+    },
+    #[error("mqtt.tls_ca {}", path.display())]
+    CaCertificate {
+        path: PathBuf,
+        #[source]
+        source: rustls::Error,
+    },
+    #[error("mqtt.tls: no CA certificate to check the broker against")]
+    NoCa,
+    #[error("mqtt.tls")]
+    Tls(#[source] rustls::Error),
+}
+
+/// Where the service sends plant events: never waits, and counts what a full intake
+/// refuses as dropped. Cheap to clone.
+#[derive(Debug, Clone)]
+pub struct Intake {
+    tx: mpsc::Sender<PlantEvent>,
+    refused: Arc<AtomicU64>,
+}
+
+impl Intake {
+    /// Queues the event, or counts it dropped when the intake is full.
+    pub fn send(&self, event: PlantEvent) {
+        if self.tx.try_send(event).is_err() {
+            self.refused.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// The channel and its refusal counter, for a sender that feeds several adapters.
+    pub fn into_parts(self) -> (mpsc::Sender<PlantEvent>, Arc<AtomicU64>) {
+        (self.tx, self.refused)
+    }
+}
+
 /// A running publisher: where to send events, and what it has done.
 #[derive(Debug)]
 pub struct Publisher {
-    sender: EventSender,
+    sender: Intake,
     shared: Arc<Shared>,
     tasks: Vec<tokio::task::JoinHandle<()>>,
 }
@@ -186,9 +213,13 @@ impl Publisher {
         settings: &MqttSection,
         queue_dir: &Path,
         shutdown: watch::Receiver<bool>,
-    ) -> anyhow::Result<Self> {
-        let queue = DiskQueue::open(queue_dir, settings.queue_max_events)
-            .with_context(|| format!("MQTT queue in {}", queue_dir.display()))?;
+    ) -> Result<Self, StartError> {
+        let queue = DiskQueue::open(queue_dir, settings.queue_max_events).map_err(|source| {
+            StartError::Queue {
+                dir: queue_dir.to_owned(),
+                source,
+            }
+        })?;
         let (tx, rx) = mpsc::channel(INTAKE);
         let refused = Arc::new(AtomicU64::new(0));
         let shared = Arc::new(Shared {
@@ -220,13 +251,13 @@ impl Publisher {
             shutdown,
         ));
         Ok(Self {
-            sender: EventSender::new(tx, refused),
+            sender: Intake { tx, refused },
             shared,
             tasks: vec![intake, link],
         })
     }
 
-    pub fn sender(&self) -> EventSender {
+    pub fn sender(&self) -> Intake {
         self.sender.clone()
     }
 
@@ -235,15 +266,15 @@ impl Publisher {
         self.shared.progress.subscribe()
     }
 
-    /// Keeps `metrics`' MQTT series (link state, queue depth, sent, dropped) up to date
-    /// until the publisher ends; `/metrics` shows them and `/healthz` says `degraded` while
-    /// the broker refuses or cannot be reached.
-    pub fn report_to(&self, metrics: Arc<crate::service::metrics::Metrics>) {
+    /// Calls `report` with the link's series (state, queue depth, sent, dropped) after
+    /// every change until the publisher ends: the service's `/metrics` shows them, and
+    /// `/healthz` says `degraded` while the broker refuses or cannot be reached.
+    pub fn report_to(&self, report: impl Fn(MqttMetrics) + Send + 'static) {
         let mut progress = self.progress();
         tokio::spawn(async move {
             loop {
                 let now = progress.borrow_and_update().metrics();
-                metrics.set_mqtt(now);
+                report(now);
                 if progress.changed().await.is_err() {
                     return;
                 }
@@ -266,7 +297,7 @@ pub(crate) fn status_topic(prefix: &str, client_id: &str) -> String {
 }
 
 /// The client's options: keep-alive, the last will, credentials and TLS.
-fn options(settings: &MqttSection) -> anyhow::Result<MqttOptions> {
+fn options(settings: &MqttSection) -> Result<MqttOptions, StartError> {
     let mut options = MqttOptions::new(&settings.client_id, &settings.host, settings.port);
     options.set_keep_alive(Duration::from_secs(settings.keep_alive_s));
     options.set_clean_session(true);
@@ -300,19 +331,23 @@ fn credentials_warning(settings: &MqttSection) -> Option<&'static str> {
 }
 
 /// A rustls client trusting `ca` (PEM), or the system's roots.
-fn tls_client(ca: Option<&Path>) -> anyhow::Result<rustls::ClientConfig> {
+fn tls_client(ca: Option<&Path>) -> Result<rustls::ClientConfig, StartError> {
     use rustls::pki_types::CertificateDer;
     use rustls::pki_types::pem::PemObject;
     let mut roots = rustls::RootCertStore::empty();
     match ca {
         Some(path) => {
-            for cert in CertificateDer::pem_file_iter(path)
-                .with_context(|| format!("mqtt.tls_ca {}", path.display()))?
-            {
-                let cert = cert.with_context(|| format!("mqtt.tls_ca {}", path.display()))?;
+            let file = |source| StartError::CaFile {
+                path: path.to_owned(),
+                source,
+            };
+            for cert in CertificateDer::pem_file_iter(path).map_err(file)? {
                 roots
-                    .add(cert)
-                    .with_context(|| format!("mqtt.tls_ca {}", path.display()))?;
+                    .add(cert.map_err(file)?)
+                    .map_err(|source| StartError::CaCertificate {
+                        path: path.to_owned(),
+                        source,
+                    })?;
             }
         }
         None => {
@@ -320,15 +355,24 @@ fn tls_client(ca: Option<&Path>) -> anyhow::Result<rustls::ClientConfig> {
             roots.add_parsable_certificates(found.certs);
         }
     }
-    anyhow::ensure!(
-        !roots.is_empty(),
-        "mqtt.tls: no CA certificate to check the broker against"
-    );
+    if roots.is_empty() {
+        return Err(StartError::NoCa);
+    }
     let provider = Arc::new(rustls::crypto::ring::default_provider());
     Ok(rustls::ClientConfig::builder_with_provider(provider)
-        .with_safe_default_protocol_versions()?
+        .with_safe_default_protocol_versions()
+        .map_err(StartError::Tls)?
         .with_root_certificates(roots)
         .with_no_client_auth())
+}
+
+/// The event's JSON payload with its sequence number (`seq`) last: the MQTT wire's.
+pub fn payload_with_seq(event: &PlantEvent, seq: u64) -> String {
+    let mut value = serde_json::to_value(event).expect("a plant event serializes to JSON");
+    if let Some(fields) = value.as_object_mut() {
+        fields.insert("seq".into(), seq.into());
+    }
+    value.to_string()
 }
 
 /// Moves events from the loops to the disk queue, numbering them and tracking the states
@@ -381,7 +425,7 @@ mod tests {
             ..MqttSection::default()
         };
         assert!(credentials_warning(&settings).is_some_and(|w| w.contains("without a password")));
-        settings.password = Some(crate::config::Secret::new("s3cret"));
+        settings.password = Some(Password::new("s3cret"));
         assert_eq!(credentials_warning(&settings), None);
         settings.username = None;
         settings.password = None;

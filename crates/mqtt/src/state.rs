@@ -15,8 +15,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::names::{FeatureName, MachineName};
-use crate::store::Verdict;
+use camloop_core::levels::Verdict;
+use camloop_core::names::{FeatureName, MachineName};
 use camloop_loop::{MACHINE_LEVEL, PlantEvent};
 
 /// State file name in the queue folder.
@@ -38,8 +38,9 @@ pub(crate) struct FeatureState {
     pub last_verdict: Option<Verdict>,
     /// The sequence number of the event that last changed this state.
     pub seq: u64,
-    #[serde(with = "crate::clock::unix_ms")]
-    pub at_ms: jiff::Timestamp,
+    /// When that event happened (`at_ms` on the wire and in `state.json`, Unix ms).
+    #[serde(rename = "at_ms", with = "camloop_loop::unix_ms")]
+    pub at: jiff::Timestamp,
 }
 
 #[derive(Debug, Default, Serialize, Deserialize)]
@@ -127,12 +128,12 @@ impl Tracker {
                 last_part: None,
                 last_verdict: None,
                 seq: 0,
-                at_ms: jiff::Timestamp::UNIX_EPOCH,
+                at: jiff::Timestamp::UNIX_EPOCH,
             });
             s.machine = event.machine().clone();
             feature_facts(s, event);
             s.seq = seq;
-            s.at_ms = event.at();
+            s.at = event.at();
             let mut shown = s.clone();
             shown.alarms.extend(m.alarms.iter().cloned());
             shown.alarm = !shown.alarms.is_empty();
@@ -185,7 +186,7 @@ fn feature_facts(s: &mut FeatureState, event: &PlantEvent) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::store::EventLevel;
+    use camloop_core::levels::EventLevel;
 
     fn part(n: u32, verdict: Verdict) -> PlantEvent {
         PlantEvent::PartAnalysed {
@@ -248,6 +249,8 @@ mod tests {
             at: jiff::Timestamp::from_millisecond(11).unwrap(),
         };
         let (_, s) = state(&mut t, &delivered);
+        // The retained payload keeps its key (`at_ms`, Unix ms) whatever the field's name.
+        assert_eq!(s["at_ms"], 11);
         assert_eq!(
             (s["version_in_force"].clone(), s["frozen"].clone()),
             (7.into(), true.into())

@@ -1,7 +1,8 @@
-//! The `[mqtt]` section: events to the plant's message broker (off by default).
+//! The `[mqtt]` section: events to the plant's message broker (off by default). The
+//! service's config file holds it; its checks name the key, and the service adds the line.
 
-use super::{ConfigProblem, Lines, Secret};
 use serde::Deserialize;
+use std::fmt;
 use std::path::PathBuf;
 
 /// Environment variable holding the broker password for `mqtt.username`.
@@ -27,7 +28,7 @@ pub struct MqttSection {
     pub username: Option<String>,
     /// From the environment only.
     #[serde(skip)]
-    pub password: Option<Secret>,
+    pub password: Option<Password>,
     /// Speak MQTT over TLS (port 8883 usually); the broker's certificate is checked against
     /// `tls_ca`, or the system's roots without it.
     pub tls: bool,
@@ -53,14 +54,43 @@ impl Default for MqttSection {
     }
 }
 
+/// The broker password: never shown in Debug output or logs.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Password(String);
+
+impl Password {
+    pub fn new(password: impl Into<String>) -> Self {
+        Self(password.into())
+    }
+
+    pub(crate) fn expose(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Debug for Password {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("Password(…)")
+    }
+}
+
+/// One problem in the section: its key (`mqtt.<key>`) and what is wrong, key first.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SectionProblem {
+    /// The full key, `mqtt.host` say, for the caller to find its line.
+    pub key: String,
+    pub message: String,
+}
+
 impl MqttSection {
-    pub(super) fn problems(&self, lines: &Lines) -> Vec<ConfigProblem> {
+    /// Every problem of an enabled section at once (none when it is off).
+    pub fn problems(&self) -> Vec<SectionProblem> {
         let mut p = Vec::new();
         let mut bad = |key: &str, why: String| {
-            p.push(ConfigProblem::at(
-                lines.of(&format!("mqtt.{key}")),
-                format!("mqtt.{key}: {why}"),
-            ));
+            p.push(SectionProblem {
+                key: format!("mqtt.{key}"),
+                message: format!("mqtt.{key}: {why}"),
+            });
         };
         if !self.enabled {
             return Vec::new();

@@ -12,7 +12,7 @@ use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use tokio::sync::{Notify, mpsc, watch};
 use tracing::{error, info, warn};
 
-use crate::service::metrics::MqttLinkState;
+use crate::MqttLinkState;
 
 use super::Shared;
 
