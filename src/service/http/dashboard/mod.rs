@@ -20,6 +20,8 @@ mod data;
 mod downloads;
 mod feature;
 mod overview;
+#[cfg(test)]
+mod overview_tests;
 mod pages;
 mod sse;
 
