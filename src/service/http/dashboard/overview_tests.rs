@@ -87,3 +87,48 @@ async fn a_row_committed_below_the_look_back_shows_within_the_age_bound() {
     assert_eq!(after[0], first[0], "A unchanged");
     raw.close().await;
 }
+
+/// The overview shows one page of machines at a time, while the newest ids the memo keeps
+/// move on for the whole plant: a part stored for a feature of another page while this one
+/// is viewed shows when that page is viewed next, not a minute later.
+#[tokio::test]
+async fn a_part_stored_while_another_page_is_viewed_shows_on_its_own_page() {
+    let dir = tempfile::tempdir().unwrap();
+    let url = format!("sqlite://{}/p.db?mode=rwc", dir.path().display());
+    let store = Store::connect(&url).await.unwrap();
+    for (lobe, n) in [("A", 1), ("B", 2)] {
+        store
+            .insert_measurement(&part("M1", lobe, n, MeasurementStage::Final))
+            .await
+            .unwrap();
+    }
+    let key =
+        |f: &str| -> (MachineName, FeatureName) { ("M1".parse().unwrap(), f.parse().unwrap()) };
+    let (page_a, page_b) = ([key("A")], [key("B")]);
+    let memo = OverviewMemo::default();
+    let t0 = Instant::now();
+    memo.read_as_of(&store, &page_a, t0).await.unwrap();
+    let before = memo.read_as_of(&store, &page_b, t0).await.unwrap();
+    assert_eq!(before[0].recent.len(), 1);
+    let new = store
+        .insert_measurement(&part("M1", "B", 3, MeasurementStage::Final))
+        .await
+        .unwrap();
+    // Page A viewed after more than the look-back's worth of ids: the newest ids move far
+    // past B's new part, so only what page A's view did with it can bring it to page B.
+    let raw = sqlx::SqlitePool::connect(&url).await.unwrap();
+    sqlx::query("UPDATE sqlite_sequence SET seq = 5000 WHERE name = 'measurements'")
+        .execute(&raw)
+        .await
+        .unwrap();
+    raw.close().await;
+    store
+        .insert_measurement(&part("M1", "A", 4, MeasurementStage::Final))
+        .await
+        .unwrap();
+    memo.read_as_of(&store, &page_a, t0).await.unwrap();
+    let after = memo.read_as_of(&store, &page_b, t0).await.unwrap();
+    let ids: Vec<i64> = after[0].recent.iter().map(|p| p.id.0).collect();
+    assert_eq!(ids.last(), Some(&new.0), "{ids:?}");
+    assert_eq!(ids.len(), 2);
+}
