@@ -1,7 +1,8 @@
 //! The dashboard on a large store: the plant overview and a feature page rendered by the
 //! server (over a real loopback connection, as a browser asks) with 50 machines grinding one
 //! lobe and 1,000,000 measurements in SQLite, then the overview of a plant of 500 machines
-//! grinding the demo camshaft's 8 lobes (4,000 features, 1,000,000 measurements), with the
+//! grinding the demo camshaft's 8 lobes (4,000 features, 1,000,000 measurements; the
+//! overview's first and last page of 50 machines), with the
 //! live channel on that plant: 50 open event streams, from a measurement stored to all 50
 //! clients having it. Prints p50/p99 besides criterion's estimate. Before the pages, the
 //! overview's reads are made both ways (feature by feature, and the set queries the page
@@ -392,8 +393,10 @@ fn bench(c: &mut Criterion) {
     {
         let (dir, store) = rt.block_on(seeded(LARGE));
         let (addr, stop) = rt.block_on(serve(store.clone(), LARGE));
+        // The overview shows 50 machines a page: the first page, and the last.
         let large_pages = [
             ("overview", "/".to_string()),
+            ("overview_page_10", "/?page=10".to_string()),
             ("feature_page", "/machines/M007/features/IN1".to_string()),
         ];
         pages(c, &rt, addr, LARGE, &large_pages, cores);

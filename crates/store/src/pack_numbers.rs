@@ -202,10 +202,8 @@ pub(super) fn pack(field: &'static str, text: &str, parent: &str, level: i32) ->
         super::pack::put_varint(&mut decimals, super::pack::zigzag(d));
     }
     numbers.extend_from_slice(&decimals);
-    let template = zstd::bulk::Compressor::with_dictionary(level, &parent_t.template)
-        .and_then(|mut c| c.compress(&child.template))
-        .ok()?;
-    let numbers = zstd::bulk::compress(&numbers, level).ok()?;
+    let template = super::pack::zstd_compress(level, &child.template, &parent_t.template).ok()?;
+    let numbers = super::pack::zstd_compress(level, &numbers, &[]).ok()?;
     let mut out = vec![FORMAT_NUMBERS];
     super::pack::put_varint(&mut out, template.len() as u64);
     out.extend_from_slice(&template);

@@ -20,6 +20,8 @@ mod data;
 mod downloads;
 mod feature;
 mod overview;
+#[cfg(test)]
+mod overview_tests;
 mod pages;
 mod sse;
 
@@ -95,6 +97,8 @@ pub(super) fn router(app: AppState) -> Router {
 pub(super) struct PageQuery {
     fragment: Option<u8>,
     v: Option<i64>,
+    /// The overview's page, from 1 (50 machines each).
+    page: Option<u32>,
 }
 
 /// The plant overview page.
@@ -103,8 +107,9 @@ async fn overview(
     State(d): State<Dash>,
     ApiQuery(q): ApiQuery<PageQuery>,
 ) -> Result<Html<String>, ApiError> {
-    let rows = overview::overview(&d.app, &d.rows, &d.frozen).await?;
-    Ok(Html(pages::overview(&rows, q.fragment.is_some())))
+    let page = q.page.map_or(1, |p| p as usize);
+    let page = overview::overview(&d.app, &d.rows, &d.frozen, page).await?;
+    Ok(Html(pages::overview(&page, q.fragment.is_some())))
 }
 
 /// A feature's page.

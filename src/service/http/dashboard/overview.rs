@@ -1,11 +1,13 @@
 //! The plant overview's rows: every configured or recorded (machine, feature) with its state,
 //! newest parts, table in force and band, read in a few set queries
 //! ([`Store::plant_overview`]) rather than a handful per feature, so a plant of 500 machines
-//! × 8 features is one page. Even so, reading every feature's 50 newest parts and its
+//! × 8 features is read at once. The page shows [`MACHINES_PER_PAGE`] machines at a time
+//! (the whole plant was 4.6 MB of page). Even so, reading every feature's 50 newest parts and its
 //! version in force was seconds on a loaded 2-core machine (200,000 rows spread over a
 //! million-row table), so the rows are remembered ([`OverviewMemo`]) and a page reads again
 //! only the features with a measurement or a table-version status stored since the last
-//! page (found from two ranges of primary keys). Whether a feature's learning is frozen is
+//! page (found from two ranges of primary keys), and every row at least once a minute
+//! whatever the ids say ([`MAX_ROW_AGE`]). Whether a feature's learning is frozen is
 //! in its packed learning state: each state is unpacked once and remembered by its row id
 //! and SHA-256, so a page unpacks only the states that changed since the last one.
 
@@ -17,6 +19,7 @@ use crate::service::http::api::ApiError;
 use crate::store::{FeatureOverview, OverviewPart, Store, TableVersionHead, VersionStatus};
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 /// Events of a machine looked at for its alarm (as its feature page lists them).
 const EVENTS: u32 = 50;
@@ -37,13 +40,27 @@ pub(super) struct OverviewRow {
 
 /// Ids looked at again below the newest seen: a row whose id was handed out before a higher
 /// one but committed after it (PostgreSQL's writers run side by side; SQLite's one writer
-/// cannot do this) is still found, as long as fewer than this many ids came in between.
+/// cannot do this) is found at the next view as long as fewer than this many ids came in
+/// between. It is only a shortcut: [`MAX_ROW_AGE`] is what bounds a row's staleness.
 const LOOK_BACK_IDS: i64 = 1024;
+
+/// The longest a remembered row is shown without being read again, whatever the ids say.
+/// Three instances writing batches of 256 records can commit a row after more than
+/// [`LOOK_BACK_IDS`] higher ids; that row shows at the latest one view after this age.
+/// Every feature of a running plant stores a part about every 30 s and is read again for
+/// it anyway, so the age costs reads only for idle features.
+pub(super) const MAX_ROW_AGE: Duration = Duration::from_secs(60);
+
+/// A remembered row and the instant its read began (the store's state is at least that new).
+struct Entry {
+    row: FeatureOverview,
+    read_at: Instant,
+}
 
 /// The overview's rows as last read, and the newest measurement and status ids they cover.
 #[derive(Default)]
 struct Remembered {
-    rows: HashMap<(MachineName, FeatureName), FeatureOverview>,
+    rows: HashMap<(MachineName, FeatureName), Entry>,
     measurement: i64,
     status: i64,
 }
@@ -53,13 +70,32 @@ struct Remembered {
 #[derive(Clone, Default)]
 pub(super) struct OverviewMemo(Arc<tokio::sync::Mutex<Remembered>>);
 
+/// When a row read now, `index`-th of `count` read together, counts as read: up to half of
+/// [`MAX_ROW_AGE`] earlier, spread over the rows, so the rows of one big read (the first
+/// view: 4,000 rows) fall due over many views instead of all on one.
+fn read_at(now: Instant, index: usize, count: usize) -> Instant {
+    let fraction = index as f64 / count.max(1) as f64;
+    now.checked_sub(MAX_ROW_AGE.mul_f64(0.5 * fraction))
+        .unwrap_or(now)
+}
+
 impl OverviewMemo {
     /// Every feature's parts and version in force, read again only where something was
-    /// stored since the last call.
+    /// stored since the last call or the row is [`MAX_ROW_AGE`] old.
     async fn read(
         &self,
         store: &Store,
         keys: &[(MachineName, FeatureName)],
+    ) -> Result<Vec<FeatureOverview>, ApiError> {
+        self.read_as_of(store, keys, Instant::now()).await
+    }
+
+    /// [`OverviewMemo::read`] with the clock given: `now` is taken before anything is read.
+    pub(super) async fn read_as_of(
+        &self,
+        store: &Store,
+        keys: &[(MachineName, FeatureName)],
+        now: Instant,
     ) -> Result<Vec<FeatureOverview>, ApiError> {
         let mut memo = self.0.lock().await;
         // Nothing remembered: every feature is read whole, only the newest ids are wanted.
@@ -70,15 +106,26 @@ impl OverviewMemo {
         let changes = store
             .overview_changes(since(memo.measurement), since(memo.status))
             .await?;
-        let stale: Vec<(MachineName, FeatureName)> = keys
-            .iter()
-            .filter(|k| !memo.rows.contains_key(*k) || changes.features.contains(*k))
-            .cloned()
-            .collect();
+        let due = |k: &(MachineName, FeatureName)| match memo.rows.get(k) {
+            None => true,
+            Some(e) => {
+                changes.features.contains(k)
+                    || now.saturating_duration_since(e.read_at) >= MAX_ROW_AGE
+            }
+        };
+        let stale: Vec<(MachineName, FeatureName)> =
+            keys.iter().filter(|k| due(k)).cloned().collect();
+        // Changed features of other pages are forgotten, so their page reads them again:
+        // the newest ids below move on for the whole plant, not for this page alone.
+        for k in &changes.features {
+            memo.rows.remove(k);
+        }
         if !stale.is_empty() {
             let read = store.plant_overview(&stale, SPARK_PARTS, VERSIONS).await?;
-            for (k, f) in stale.into_iter().zip(read) {
-                memo.rows.insert(k, f);
+            let count = stale.len();
+            for (i, (k, row)) in stale.into_iter().zip(read).enumerate() {
+                let read_at = read_at(now, i, count);
+                memo.rows.insert(k, Entry { row, read_at });
             }
         }
         memo.measurement = changes.measurement;
@@ -89,7 +136,7 @@ impl OverviewMemo {
             .zip(learning)
             .map(|(k, learning)| FeatureOverview {
                 learning,
-                ..memo.rows.get(k).cloned().unwrap_or_default()
+                ..memo.rows.get(k).map(|e| e.row.clone()).unwrap_or_default()
             })
             .collect())
     }
@@ -159,16 +206,40 @@ async fn frozen(
     Ok(frozen)
 }
 
+/// Machines on one page of the overview: 50 machines (400 rows of an 8-lobe shaft) keep a
+/// page near 0.5 MB; all 500 machines of a plant on one page were 4.6 MB and over half a
+/// second to read, build and send on 2 cores.
+pub(super) const MACHINES_PER_PAGE: usize = 50;
+
+/// One page of the overview: its rows, which page of how many, and the plant's size.
+pub(super) struct OverviewPage {
+    pub rows: Vec<OverviewRow>,
+    /// From 1.
+    pub page: usize,
+    pub pages: usize,
+    pub machines: usize,
+    pub features: usize,
+    /// Every machine in alarm, on whatever page, with the page it is on.
+    pub alarms: Vec<(MachineName, usize)>,
+}
+
+/// Page `page` (from 1; past the last, the last) of the overview: the rows of its
+/// [`MACHINES_PER_PAGE`] machines, in name order.
 pub(super) async fn overview(
     app: &AppState,
     rows_memo: &OverviewMemo,
     memo: &FrozenMemo,
-) -> Result<Vec<OverviewRow>, ApiError> {
+    page: usize,
+) -> Result<OverviewPage, ApiError> {
     let store = store(app).await?;
     let metrics = app.metrics.snapshot();
     let features = features(app, &store).await?;
+    let pages = features.len().div_ceil(MACHINES_PER_PAGE).max(1);
+    let page = page.clamp(1, pages);
     let keys: Vec<(MachineName, FeatureName)> = features
         .iter()
+        .skip((page - 1) * MACHINES_PER_PAGE)
+        .take(MACHINES_PER_PAGE)
         .flat_map(|(m, lobes)| lobes.iter().map(|l| (m.clone(), l.clone())))
         .collect();
     let read = rows_memo.read(&store, &keys).await?;
@@ -194,5 +265,17 @@ pub(super) async fn overview(
             recent: f.recent,
         });
     }
-    Ok(rows)
+    Ok(OverviewPage {
+        rows,
+        page,
+        pages,
+        machines: features.len(),
+        features: features.values().map(BTreeSet::len).sum(),
+        alarms: features
+            .keys()
+            .enumerate()
+            .filter(|(_, m)| alarms.contains(*m))
+            .map(|(i, m)| (m.clone(), i / MACHINES_PER_PAGE + 1))
+            .collect(),
+    })
 }

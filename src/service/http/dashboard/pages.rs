@@ -4,7 +4,7 @@
 
 use super::charts::{Line, LineChart, sparkline};
 use super::data::diff_um;
-use super::overview::OverviewRow;
+use super::overview::{OverviewPage, OverviewRow};
 use crate::store::TableVersion;
 use maud::{DOCTYPE, Markup, html};
 
@@ -114,8 +114,36 @@ fn overview_cells(r: &OverviewRow) -> Markup {
     }
 }
 
-pub(super) fn overview(rows: &[OverviewRow], fragment: bool) -> String {
+/// The plant's size, its machines in alarm (on every page), and the links to the other
+/// pages when there is more than one.
+fn overview_pages(p: &OverviewPage) -> Markup {
+    html! {
+        p id="plant" {
+            (p.machines) " machines, " (p.features) " features"
+            @if p.pages > 1 { "; page " (p.page) " of " (p.pages) }
+            @if !p.alarms.is_empty() {
+                "; in alarm: "
+                @for (i, (m, n)) in p.alarms.iter().enumerate() {
+                    @if i > 0 { ", " }
+                    a href={ "/?page=" (n) } { (m) }
+                }
+            }
+        }
+        @if p.pages > 1 {
+            nav id="pages" aria-label="overview pages" {
+                @for n in 1..=p.pages {
+                    @if n == p.page { strong { (n) } } @else { a href={ "/?page=" (n) } { (n) } }
+                    " "
+                }
+            }
+        }
+    }
+}
+
+pub(super) fn overview(p: &OverviewPage, fragment: bool) -> String {
+    let rows = &p.rows;
     let live = html! {
+        (overview_pages(p))
         table id="machines" {
             caption { "Every machine and feature, newest part first" }
             thead { tr {
@@ -141,10 +169,14 @@ pub(super) fn overview(rows: &[OverviewRow], fragment: bool) -> String {
             p { "No machine is configured or recorded yet." }
         }
     };
+    let live_url = match p.page {
+        1 => "/".to_string(),
+        n => format!("/?page={n}"),
+    };
     page(
         "Plant overview",
         html! {},
-        "/",
+        &live_url,
         ("", ""),
         live,
         html! {},
