@@ -6,45 +6,21 @@
 //! the coupled X over VA's revolutions.
 
 use camloop_core::cycle::CycleSettings;
-use camloop_core::geometry::{CamGeometry, Follower, Part};
-use camloop_core::lift::{LiftCurve, LiftTable};
 use camloop_core::program::syntax::lines;
 use camloop_core::program::{
     CycleMachine, CyclePlan, CycleStation, MainProgramSettings, ProgramSettings, READY_PROGRAM,
     check_ending, render_cycle_program, render_g1_table, render_ready_program,
 };
 use camloop_core::speed_plan::render::{VaProgramSettings, render_va_table_program};
-use camloop_core::speed_plan::tables::{VaTables, va_tables};
-use camloop_core::speed_plan::{self, SpeedLimits};
+use camloop_core::speed_plan::tables::VaTables;
 use camloop_core::table::TablePoint;
 use camloop_sim::{Control, CycleEvent, CycleRun};
 use std::cell::Cell;
 
-const INTAKE: &str = include_str!("../../../config/parts/demo-intake-lobe.csv");
+mod demo_plan;
+
 const TABLE: &str = "DEMO_CAM_IN1";
 const PLAN: &str = "DEMO_CAM_IN1_P";
-
-/// The demo lobe's plan tables under the demo camshaft's limits.
-fn plan_tables() -> VaTables {
-    let table = LiftTable::parse_csv(INTAKE, "demo lobe").unwrap();
-    let geometry = CamGeometry {
-        base_radius_mm: 20.0,
-        follower: Follower::Flat,
-        wheel_radius_mm: 250.0,
-    };
-    let part = Part::cam(geometry, LiftCurve::new(&table)).unwrap();
-    let limits = SpeedLimits {
-        x_velocity_mm_s: 200.0,
-        x_acceleration_mm_s2: 10_000.0,
-        x_jerk_mm_s3: 10_000_000.0,
-        c_max_speed_rpm: 120.0,
-        c_max_accel_deg_s2: 3600.0,
-        q_w_max_mm3_mm_s: 2.36,
-        stock_mm: 0.02,
-    };
-    let plan = speed_plan::plan(&part, &limits).unwrap();
-    va_tables(&part, &plan.law, 0.1).unwrap()
-}
 
 fn cycle() -> CycleSettings {
     serde_json::from_str(
@@ -181,7 +157,7 @@ fn assert_grinds(got: &[Grind], want: &[Grind]) {
 
 #[test]
 fn finish_and_spark_out_couple_this_parts_plan_tables_with_the_infeed_on_x() {
-    let tables = plan_tables();
+    let tables = demo_plan::tables();
     let va = tables.va_speed_rpm;
     let run = run(&tables, Some(3));
     assert_grinds(
@@ -210,7 +186,7 @@ fn finish_and_spark_out_couple_this_parts_plan_tables_with_the_infeed_on_x() {
 
 #[test]
 fn after_the_timeout_the_plan_stages_grind_with_the_tables_in_force() {
-    let tables = plan_tables();
+    let tables = demo_plan::tables();
     let got = grinds(&run(&tables, None));
     assert_eq!(got.len(), 6);
     assert!(

@@ -3,40 +3,15 @@
 //! them, and what the run reports is what the rendered text defines (read back from the
 //! text by the control, compared here with the tables the text was rendered from).
 
-use camloop_core::geometry::{CamGeometry, Follower, Part};
-use camloop_core::lift::{LiftCurve, LiftTable};
 use camloop_core::speed_plan::render::{
     VaProgramSettings, render_va_main_program, render_va_table_program,
 };
-use camloop_core::speed_plan::tables::{VaTables, va_tables};
-use camloop_core::speed_plan::{self, SpeedLimits};
 use camloop_core::table::PolySegment;
 use camloop_sim::{Control, TableShape};
 
-const INTAKE: &str = include_str!("../../../config/parts/demo-intake-lobe.csv");
-const TABLE: &str = "DEMO_CAM_IN1_PLAN";
+mod demo_plan;
 
-fn tables() -> VaTables {
-    let table = LiftTable::parse_csv(INTAKE, "demo lobe").unwrap();
-    let geometry = CamGeometry {
-        base_radius_mm: 20.0,
-        follower: Follower::Flat,
-        wheel_radius_mm: 250.0,
-    };
-    let part = Part::cam(geometry, LiftCurve::new(&table)).unwrap();
-    // The demo camshaft's limits (config/parts/demo-camshaft.toml).
-    let limits = SpeedLimits {
-        x_velocity_mm_s: 200.0,
-        x_acceleration_mm_s2: 10_000.0,
-        x_jerk_mm_s3: 10_000_000.0,
-        c_max_speed_rpm: 120.0,
-        c_max_accel_deg_s2: 3600.0,
-        q_w_max_mm3_mm_s: 2.36,
-        stock_mm: 0.02,
-    };
-    let plan = speed_plan::plan(&part, &limits).unwrap();
-    va_tables(&part, &plan.law, 0.1).unwrap()
-}
+const TABLE: &str = "DEMO_CAM_IN1_PLAN";
 
 fn settings(x_table: u32, c_table: u32) -> VaProgramSettings {
     VaProgramSettings {
@@ -75,7 +50,7 @@ fn max_difference(read: &TableShape, rendered: &[PolySegment]) -> f64 {
 
 #[test]
 fn the_control_couples_c_and_x_to_the_virtual_axis_by_the_returned_numbers() {
-    let tables = tables();
+    let tables = demo_plan::tables();
     let mut control = Control::new();
     // Two versions with alternating numbers, as the service delivers them.
     for (x_table, c_table) in [(1, 3), (2, 4), (1, 3)] {
@@ -98,7 +73,7 @@ fn the_control_couples_c_and_x_to_the_virtual_axis_by_the_returned_numbers() {
 
 #[test]
 fn an_old_table_program_with_one_number_is_refused_by_the_plan_main_program() {
-    let tables = tables();
+    let tables = demo_plan::tables();
     let s = settings(1, 2);
     let main = render_va_main_program("CAMLOOP_GRIND", &s, tables.va_speed_rpm, 1.0).unwrap();
     // The table program's PROC takes one number where the main program hands two.
@@ -117,7 +92,7 @@ fn an_old_table_program_with_one_number_is_refused_by_the_plan_main_program() {
 
 #[test]
 fn c_cannot_be_positioned_while_it_follows_the_virtual_axis() {
-    let tables = tables();
+    let tables = demo_plan::tables();
     let s = settings(1, 2);
     let table_text = render_va_table_program(&tables, &s).unwrap();
     let main = render_va_main_program("CAMLOOP_GRIND", &s, tables.va_speed_rpm, 1.0)

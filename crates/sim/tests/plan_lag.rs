@@ -5,41 +5,13 @@
 //! law (the lag error is first order in ω·τ), not by one factor.
 
 use camloop_core::fit::TableForm;
-use camloop_core::geometry::{CamGeometry, Follower, Part};
-use camloop_core::lift::{LiftCurve, LiftTable};
 use camloop_core::speed_plan::tables::va_tables;
-use camloop_core::speed_plan::{self, SpeedLimits, SpeedPlan};
 use camloop_core::table::PolySegment;
 use camloop_sim::{CommandedTable, GrinderConfig, PlannedSpeed, SimGrinder, TableShape, Workpiece};
 
-const INTAKE: &str = include_str!("../../../config/parts/demo-intake-lobe.csv");
+mod demo_plan;
 
-fn geometry() -> CamGeometry {
-    CamGeometry {
-        base_radius_mm: 20.0,
-        follower: Follower::Flat,
-        wheel_radius_mm: 250.0,
-    }
-}
-
-fn part() -> Part {
-    let table = LiftTable::parse_csv(INTAKE, "demo lobe").unwrap();
-    Part::cam(geometry(), LiftCurve::new(&table)).unwrap()
-}
-
-/// The demo camshaft's limits (config/parts/demo-camshaft.toml).
-fn demo_plan(part: &Part) -> SpeedPlan {
-    let limits = SpeedLimits {
-        x_velocity_mm_s: 200.0,
-        x_acceleration_mm_s2: 10_000.0,
-        x_jerk_mm_s3: 10_000_000.0,
-        c_max_speed_rpm: 120.0,
-        c_max_accel_deg_s2: 3600.0,
-        q_w_max_mm3_mm_s: 2.36,
-        stock_mm: 0.02,
-    };
-    speed_plan::plan(part, &limits).unwrap()
-}
+use demo_plan::{geometry, part, plan as demo_plan};
 
 fn grind(config: &GrinderConfig, table: &CommandedTable) -> Vec<f64> {
     let sim = SimGrinder::new(config.clone(), Workpiece::Cam(geometry()), 1).unwrap();
