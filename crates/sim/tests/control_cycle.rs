@@ -190,7 +190,7 @@ fn the_program_leaves_x_retracted_to_the_clear_x() {
     let run = run_on(&mut control, Some(3)).unwrap();
     assert_eq!(control.position("X"), 13.0);
     let main = main_program();
-    let retract = main.find("G90 G0 X=13.0000").expect("a retract");
+    let retract = main.rfind("G90 G0 X=13.0000").expect("a retract");
     let last_leadof = main.rfind("LEADOF(X,C)").unwrap();
     assert!(last_leadof < retract && retract < main.find("M9 ;").unwrap());
     assert_eq!(

@@ -209,6 +209,25 @@ fn the_plan_cycle_program_reads_back_and_ends_retracted() {
             .unwrap_or_else(|e| panic!("line {}: {e:?}\n{text}", l.number));
     }
     check_ending(&text, "X", 14.0).unwrap();
+    // C turns to the plan's start only with X clear of the part: the last X move before
+    // each POS[C] is the absolute retract to the clear X.
+    let all: Vec<&str> = text.lines().collect();
+    let turns: Vec<usize> = (0..all.len())
+        .filter(|&i| all[i].starts_with("POS[C]"))
+        .collect();
+    assert!(!turns.is_empty(), "{text}");
+    for i in turns {
+        let last_x = all[..i]
+            .iter()
+            .rev()
+            .find(|l| l.contains(" X="))
+            .unwrap_or_else(|| panic!("no X move before line {}", i + 1));
+        assert!(
+            last_x.starts_with("G90 G0 X=14.0000"),
+            "C turns at line {} after {last_x:?}\n{text}",
+            i + 1
+        );
+    }
     for want in [
         "DEF INT CL_TNO, CL_SEEN, CL_READY, CL_NEW, CL_WAIT, CL_TNO_C\n",
         "EXTERN DEMO_CAM_IN1_P(VAR INT, VAR INT)\n",

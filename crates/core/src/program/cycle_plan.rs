@@ -88,8 +88,16 @@ pub(super) fn release(out: &mut String, x: &str, c: &str, va: &str) {
 }
 
 /// Defines the plan's newest tables, stands C on its curve and X the stock and air gap
-/// above its curve at VA = 0, and couples both to VA with the numbers just returned.
-pub(super) fn couple(out: &mut String, r: &Resolved<'_>, p: &PlanResolved, offset_line: &str) {
+/// above its curve at VA = 0, and couples both to VA with the numbers just returned. X goes
+/// to `clear` (absolute, above every finished curve plus the lift-off) before C turns to
+/// the plan's start: after a lift-off X is only the lift-off above the curve where C
+/// stopped, and a lobe's nose turning under it would meet the wheel.
+pub(super) fn couple(
+    out: &mut String,
+    r: &Resolved<'_>,
+    p: &PlanResolved,
+    (offset_line, clear): (&str, &str),
+) {
     let (x, c, va, n, cn) = (&r.following, &r.leading, &p.va, NUMBER_VAR, C_NUMBER_VAR);
     line(
         out,
@@ -106,6 +114,10 @@ pub(super) fn couple(out: &mut String, r: &Resolved<'_>, p: &PlanResolved, offse
     );
     line(out, format_args!("CL_X=CTAB(0,{n},CL_SLOPE)"));
     out.push_str("CL_X=CL_X+CL_OFF\n");
+    line(
+        out,
+        format_args!("G90 G0 {x}={clear} ; clear of the part before {c} turns"),
+    );
     line(out, format_args!("POS[{c}]=DC(CL_C) FA[{c}]=3600"));
     line(out, format_args!("WAITP({c})"));
     line(out, format_args!("G90 G1 {x}=CL_X F=100.000"));

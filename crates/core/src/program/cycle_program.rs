@@ -337,12 +337,13 @@ fn feature_cycle(
     k: usize,
 ) {
     let cycle = machine.cycle;
+    let clear = fmt_fixed(machine.clear_x_mm, usize::from(r.settings.x_decimals));
     let mut stock_left = cycle.stock_mm;
     let mut coupled: Option<Mode> = None;
     for s in stages {
         if s.kind == StageKind::Measure {
             if let Some(mode) = coupled.take() {
-                uncouple(out, (r, plan), mode, cycle.lift_off_mm);
+                uncouple(out, (r, plan), mode, (cycle.lift_off_mm, &clear));
             }
             measure(out, machine, s, r, k, stock_left);
             continue;
@@ -353,7 +354,7 @@ fn feature_cycle(
             Mode::Plan
         };
         if let Some(was) = coupled.filter(|m| *m != mode) {
-            uncouple(out, (r, plan), was, cycle.lift_off_mm);
+            uncouple(out, (r, plan), was, (cycle.lift_off_mm, &clear));
             coupled = None;
         }
         if coupled.is_none() {
@@ -364,7 +365,7 @@ fn feature_cycle(
         stock_left -= s.infeed_mm;
     }
     if let Some(mode) = coupled {
-        uncouple(out, (r, plan), mode, cycle.lift_off_mm);
+        uncouple(out, (r, plan), mode, (cycle.lift_off_mm, &clear));
     }
 }
 
@@ -399,7 +400,10 @@ fn couple(
         "SD43106: X couples this far above the curve",
     );
     match (mode, plan) {
-        (Mode::Plan, Some(p)) => cycle_plan::couple(out, r, p, &offset),
+        (Mode::Plan, Some(p)) => {
+            let clear = fmt_fixed(machine.clear_x_mm, xd);
+            cycle_plan::couple(out, r, p, (&offset, &clear));
+        }
         _ => {
             define_table(out, t);
             out.push_str(&offset);
@@ -478,8 +482,15 @@ fn stage(
 }
 
 /// Lift-off on the overlay while still coupled, then uncouple (X, and on the plan C, from
-/// the axis they follow).
-fn uncouple(out: &mut String, (r, plan): Feature<'_, '_>, mode: Mode, lift_off_mm: f64) {
+/// the axis they follow), then X to `clear` (absolute): C turns uncoupled next (the
+/// measurement's revolutions, the plan's start), and the lift-off alone leaves the wheel
+/// above the curve only where C stopped, below a lobe's nose turning under it.
+fn uncouple(
+    out: &mut String,
+    (r, plan): Feature<'_, '_>,
+    mode: Mode,
+    (lift_off_mm, clear): (f64, &str),
+) {
     let (x, c) = (&r.following, &r.leading);
     let xd = usize::from(r.settings.x_decimals);
     line(
@@ -495,6 +506,10 @@ fn uncouple(out: &mut String, (r, plan): Feature<'_, '_>, mode: Mode, lift_off_m
         }
         _ => line(out, format_args!("LEADOF({x},{c})")),
     }
+    line(
+        out,
+        format_args!("G90 G0 {x}={clear} ; clear of the part before {c} turns"),
+    );
 }
 
 /// The in-process measurement with stock on, then the wait for this part's finish table.
