@@ -119,7 +119,8 @@ fn overview_cells(r: &OverviewRow) -> Markup {
 fn overview_pages(p: &OverviewPage) -> Markup {
     html! {
         p id="plant" {
-            (p.machines) " machines, " (p.features) " features"
+            (p.machines) @if p.machines == 1 { " machine, " } @else { " machines, " }
+            (p.features) @if p.features == 1 { " feature" } @else { " features" }
             @if p.pages > 1 { "; page " (p.page) " of " (p.pages) }
             @if !p.alarms.is_empty() {
                 "; in alarm: "
