@@ -2,7 +2,22 @@
 """Plant-scale load probe against the release binary: N simulated 8-lobe camshaft machines,
 each grinding a shaft every 30 s, while /healthz is asked every second.
 
-    cargo build --release && python3 tools/probe_plant.py N [SECONDS]
+    cargo build --release && python3 tools/probe_plant.py N [SECONDS] [--replay]
+
+Two ways to feed it:
+- by default the simulator runs inside the service (`kind = "sim"` gauges): each machine's
+  first shaft is ground at once, then one every 30 s;
+- `--replay`: no simulator in the service, so the service's own cost is measured. First one
+  simulated machine grinds as many shafts as the run needs (a recording run of the service,
+  in its own folder); each shaft's averaged lift per lobe is read back through the API
+  (`GET /api/v1/measurements/{id}`). Then N machines with drop-folder gauges (`kind = "drop"`)
+  get those shafts, in the order they were ground, as measurement files (the averaged lift
+  for each of 3 revolutions, written beside the folder and renamed into it, with the `# end`
+  marker), one shaft every 30 s per machine, the machines' starts spread evenly over the
+  first 30 s as a plant's would be. Each machine's learning starts where the recording's did,
+  so it meets the measurements of the tables it would have made itself (up to the averaging),
+  and nearly every part makes a new table. Files the service has processed are deleted by the
+  probe 10 s later so the disk stays bounded.
 
 Prints, for one run of SECONDS (default 90) after every machine is open:
 - start-up: seconds from the process start to the first /healthz answer, and to the answer
@@ -47,7 +62,21 @@ def free_port():
         return s.getsockname()[1]
 
 
-def write_config(dir, machines, port):
+def gauge_section(i, replay):
+    if replay:
+        # The folder's default poll (500 ms), as a plant would run it.
+        return f"""[machines.gauge]
+kind = "drop"
+folder = "drop/P{i:03}"
+"""
+    return f"""[machines.gauge]
+kind = "sim"
+part_interval_ms = {PART_INTERVAL_S * 1000}
+seed = {i + 1}
+"""
+
+
+def write_config(dir, machines, port, replay=False):
     parts = [
         f"""[service]
 var_dir = "var"
@@ -64,11 +93,7 @@ max_connections = 64
 name = "P{i:03}"
 recipe = "{RECIPE}"
 share = "share/P{i:03}"
-[machines.gauge]
-kind = "sim"
-part_interval_ms = {PART_INTERVAL_S * 1000}
-seed = {i + 1}
-"""
+{gauge_section(i, replay)}"""
         )
     path = os.path.join(dir, "camloop.toml")
     with open(path, "w") as f:
@@ -137,6 +162,140 @@ def stored_rows(dir):
         return 0
 
 
+def record(dir, shafts):
+    """The averaged lift of each lobe of `shafts` shafts ground by one simulated machine, in
+    the order they were ground: [(part, [(lobe, [lift_mm per gauge angle])])]."""
+    port = free_port()
+    os.makedirs(dir)
+    config = os.path.join(dir, "camloop.toml")
+    with open(config, "w") as f:
+        f.write(
+            f"""[service]
+var_dir = "var"
+[database]
+url = "sqlite://{dir}/var/camloop.db?mode=rwc"
+[http]
+listen = "127.0.0.1:{port}"
+[[machines]]
+name = "REC"
+recipe = "{RECIPE}"
+share = "share"
+[machines.gauge]
+kind = "sim"
+part_interval_ms = 20
+seed = 1
+"""
+        )
+    log = open(os.path.join(dir, "log.txt"), "w")
+    proc = subprocess.Popen([BINARY, "run", "--config", config], cwd=dir, stdout=log, stderr=log)
+    try:
+        rows = []
+        deadline = time.monotonic() + 600
+        while len(rows) < shafts * LOBES:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                sys.exit(f"recording: the service stopped or was too slow; see {dir}/log.txt")
+            time.sleep(0.5)
+            try:
+                db = sqlite3.connect(f"file:{dir}/var/camloop.db?mode=ro", uri=True, timeout=10)
+                rows = db.execute(
+                    "SELECT id, part, lobe FROM measurements WHERE part NOT LIKE 'MASTER%' "
+                    "ORDER BY id"
+                ).fetchall()
+                db.close()
+            except sqlite3.Error:
+                rows = []
+        ground, by_part = [], {}
+        for id, part, lobe in rows:
+            if part not in by_part:
+                if len(ground) == shafts:
+                    continue
+                by_part[part] = []
+                ground.append((part, by_part[part]))
+            _, body = ask(f"http://127.0.0.1:{port}/api/v1/measurements/{id}", timeout=30)
+            if body is None:
+                sys.exit(f"recording: measurement {id} not answered")
+            by_part[part].append((lobe, json.loads(body)["averaged_lift_mm"]))
+        return ground
+    finally:
+        proc.terminate()
+        proc.wait(timeout=60)
+
+
+def measurement_text(machine, part, lobe, lift_mm, revolutions=3):
+    """A drop-folder CSV of `lift_mm` (one value per gauge angle) for each revolution."""
+    step = 360.0 / len(lift_mm)
+    rows = "".join(f"{i * step:.6f},{l:.7f}\n" for i, l in enumerate(lift_mm))
+    body = "".join(
+        "".join(f"{r}," + row + "\n" for row in rows.splitlines()) for r in range(revolutions)
+    )
+    return (
+        f"# machine={machine} part={part} lobe={lobe}\n"
+        f"# points_per_rev={len(lift_mm)} revolutions={revolutions}\n"
+        f"rev,angle_deg,lift_mm\n{body}# end\n"
+    )
+
+
+class Feeder(threading.Thread):
+    """Writes each machine's recorded shafts into its drop folder, one shaft every 30 s per
+    machine, the machines' starts spread over the first 30 s; deletes processed files 10 s
+    after they were written."""
+
+    def __init__(self, dir, machines, ground):
+        super().__init__(daemon=True)
+        self.dir, self.machines, self.ground = dir, machines, ground
+        self.stop = threading.Event()
+        self.written = 0
+        self.behind_s = 0.0
+
+    def run(self):
+        tmp = os.path.join(self.dir, "drop-tmp")
+        os.makedirs(tmp, exist_ok=True)
+        start = time.monotonic()
+        due = sorted(
+            (start + PART_INTERVAL_S * (i / self.machines + s), i, s)
+            for i in range(self.machines)
+            for s in range(len(self.ground))
+        )
+        last_clean = start
+        for at, i, s in due:
+            if self.stop.wait(max(0.0, at - time.monotonic())):
+                break
+            self.behind_s = max(self.behind_s, time.monotonic() - at)
+            machine = f"P{i:03}"
+            part, lobes = self.ground[s]
+            for lobe, lift in lobes:
+                name = f"{machine}_{part}_{lobe}.csv"
+                path = os.path.join(tmp, name)
+                with open(path, "w") as f:
+                    f.write(measurement_text(machine, part, lobe, lift))
+                os.rename(path, os.path.join(self.dir, "drop", machine, name))
+                self.written += 1
+            if time.monotonic() - last_clean > 10:
+                last_clean = time.monotonic()
+                self.clean(older_than_s=10)
+
+    def clean(self, older_than_s):
+        now = time.time()
+        for machine in range(self.machines):
+            folder = os.path.join(self.dir, "drop", f"P{machine:03}", "processed")
+            try:
+                entries = list(os.scandir(folder))
+            except FileNotFoundError:
+                continue
+            for e in entries:
+                if now - e.stat().st_mtime > older_than_s:
+                    os.unlink(e.path)
+
+    def rejected_files(self):
+        return sum(
+            len(os.listdir(f))
+            for f in (
+                os.path.join(self.dir, "drop", f"P{m:03}", "rejected") for m in range(self.machines)
+            )
+            if os.path.isdir(f)
+        )
+
+
 def percentile(values, q):
     if not values:
         return float("nan")
@@ -144,9 +303,21 @@ def percentile(values, q):
     return values[min(len(values) - 1, int(q * len(values)))]
 
 
-def plant(dir, machines, seconds):
+def plant(dir, machines, seconds, replay):
+    feeder = None
+    if replay:
+        shafts = int(seconds // PART_INTERVAL_S) + 2
+        t0 = time.monotonic()
+        ground = record(os.path.join(dir, "recording"), shafts)
+        print(
+            f"plant {machines}: recorded {len(ground)} shafts of one simulated machine in "
+            f"{time.monotonic() - t0:.0f} s"
+        )
+        for i in range(machines):
+            os.makedirs(os.path.join(dir, "drop", f"P{i:03}"))
+        feeder = Feeder(dir, machines, ground)
     port = free_port()
-    config = write_config(dir, machines, port)
+    config = write_config(dir, machines, port, replay)
     log = open(os.path.join(dir, "log.txt"), "w")
     started = time.monotonic()
     proc = subprocess.Popen([BINARY, "run", "--config", config], cwd=dir, stdout=log, stderr=log)
@@ -194,8 +365,13 @@ def plant(dir, machines, seconds):
             return False
         opened = time.monotonic()
         cpu0 = cpu_seconds(proc.pid)
+        if feeder is not None:
+            feeder.start()
         time.sleep(seconds)
         elapsed = time.monotonic() - opened
+        if feeder is not None:
+            feeder.stop.set()
+            feeder.join()
         cpu = 100 * (cpu_seconds(proc.pid) - cpu0) / elapsed
         _, text = ask(f"http://127.0.0.1:{port}/metrics", timeout=30)
         rss_now, rss_peak = rss_mib(proc.pid)
@@ -209,8 +385,14 @@ def plant(dir, machines, seconds):
             proc.kill()
             proc.wait()
         prober.join(timeout=10)
-    shafts = machines * (int(elapsed // PART_INTERVAL_S) + 1)
-    demanded = shafts * LOBES
+    if feeder is None:
+        demanded = machines * (int(elapsed // PART_INTERVAL_S) + 1) * LOBES
+    else:
+        demanded = feeder.written
+        print(
+            f"plant {machines}: replay: {feeder.written} files written, the feeder at most "
+            f"{feeder.behind_s:.2f} s behind its schedule, {feeder.rejected_files()} files rejected"
+        )
     processed = None
     if text is not None:
         processed = int(
@@ -223,7 +405,9 @@ def plant(dir, machines, seconds):
             f"plant {machines}: at the end: {metric_total(text, 'camloop_measurements_waiting'):.0f} "
             f"measurements waiting, the oldest for {metric_total(text, 'camloop_oldest_waiting_seconds'):.1f} s; "
             f"journal: {metric_total(text, 'camloop_journal_appends_total'):.0f} appends in "
-            f"{metric_total(text, 'camloop_journal_syncs_total'):.0f} syncs"
+            f"{metric_total(text, 'camloop_journal_syncs_total'):.0f} syncs; tables pushed "
+            f"{metric_sum(text, 'camloop_tables_pushed_total'):.0f}, refused "
+            f"{metric_sum(text, 'camloop_tables_refused_total'):.0f}"
         )
         p50, p99 = (histogram_quantile(text, "camloop_part_seconds", q) for q in (0.5, 0.99))
         print(
@@ -263,10 +447,12 @@ def main():
     if len(sys.argv) < 2:
         print(__doc__)
         sys.exit(2)
-    machines = int(sys.argv[1])
-    seconds = float(sys.argv[2]) if len(sys.argv) > 2 else 90.0
+    args = [a for a in sys.argv[1:] if a != "--replay"]
+    replay = len(args) < len(sys.argv) - 1
+    machines = int(args[0])
+    seconds = float(args[1]) if len(args) > 1 else 90.0
     with tempfile.TemporaryDirectory() as dir:
-        good = plant(dir, machines, seconds)
+        good = plant(dir, machines, seconds, replay)
     print(f"plant {machines}: {'ok' if good else 'FAILED'}")
     sys.exit(0 if good else 1)
 
