@@ -162,3 +162,43 @@ impl SectionProblem {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each problem names its full key first (the service finds its line by it), all at
+    /// once, and none while the section is off.
+    #[test]
+    fn every_problem_names_its_key_and_an_off_section_has_none() {
+        let bad = OpcUaSection {
+            enabled: true,
+            listen: SocketAddr::from(([127, 0, 0, 1], 0)),
+            host_name: Some("a b".into()),
+            certificate_organization: "A, B".into(),
+            certificate_country: "Germany".into(),
+            certificate_days: 0,
+            ..OpcUaSection::default()
+        };
+        let keys: Vec<String> = bad.problems().into_iter().map(|p| p.key).collect();
+        assert_eq!(
+            keys,
+            [
+                "opcua.host_name",
+                "opcua.certificate_organization",
+                "opcua.certificate_country",
+                "opcua.certificate_days",
+                "opcua.listen",
+            ]
+        );
+        for p in bad.problems() {
+            assert!(p.message.starts_with(&format!("{}: ", p.key)), "{p:?}");
+        }
+        let off = OpcUaSection {
+            enabled: false,
+            ..bad
+        };
+        assert_eq!(off.problems(), []);
+        assert_eq!(OpcUaSection::default().host(), "127.0.0.1");
+    }
+}
