@@ -55,7 +55,7 @@ impl Users {
 /// How often the signed-in OPC UA users' state is read from the store: a user disabled,
 /// deleted or given a new password (by `camloop user`, beside the running service) reads
 /// and calls nothing within this.
-pub const RECHECK_EVERY: Duration = Duration::from_secs(2);
+pub(crate) const RECHECK_EVERY: Duration = Duration::from_secs(2);
 
 /// The OPC UA sessions' users: the digest of the password hash each signed in with, and
 /// those no longer allowed since (disabled, deleted, or the password changed). The stack's

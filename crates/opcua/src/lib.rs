@@ -27,7 +27,7 @@ mod port;
 mod seed;
 pub(crate) mod space;
 
-pub use auth::{OPCUA_CLIENT, RECHECK_EVERY};
+pub use auth::OPCUA_CLIENT;
 pub use config::{OpcUaSection, OpcUaSecurity, SectionProblem};
 pub use port::{
     AckRefused, Caller, FeatureView, FileError, Refusal, Service, SignIn, SignInUnavailable,
