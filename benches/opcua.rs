@@ -70,7 +70,7 @@ impl Publishing {
         let listen = std::net::SocketAddr::from(([127, 0, 0, 1], port));
         let pki = dir.join("pki");
         let sender = runtime
-            .block_on(camloop::service::opcua::bench_server(
+            .block_on(camloop::service::opcua_port::bench_server(
                 listen,
                 &pki,
                 names(),

@@ -7,16 +7,15 @@ mod check;
 mod cluster;
 mod http;
 mod keys;
-mod opcua;
 mod values;
 
 pub use auth::AuthSection;
 pub use camloop_mqtt::{ENV_MQTT_PASSWORD, MqttSection};
+pub use camloop_opcua::{OpcUaSection, OpcUaSecurity};
 pub use check::{Checked, CheckedMachine, check, configured_features, load, machine_features};
 pub use cluster::ClusterSection;
 pub use http::{HttpSection, network_exposure};
 pub use keys::Lines;
-pub use opcua::{OpcUaSection, OpcUaSecurity};
 
 use crate::names::{FeatureName, MachineName};
 use crate::sim::GrinderConfig;
@@ -345,7 +344,12 @@ impl Config {
                 .into_iter()
                 .map(|problem| ConfigProblem::at(self.lines.of(&problem.key), problem.message)),
         );
-        p.extend(self.opcua.problems(&self.lines));
+        p.extend(
+            self.opcua
+                .problems()
+                .into_iter()
+                .map(|problem| ConfigProblem::at(self.lines.of(&problem.key), problem.message)),
+        );
         p.extend(self.cluster.problems(&self.lines, url));
         let mut names = std::collections::HashMap::new();
         for (i, m) in self.machines.iter().enumerate() {

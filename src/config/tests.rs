@@ -178,3 +178,52 @@ fn every_unknown_key_is_reported_with_its_line() {
         "{e}"
     );
 }
+
+/// The `[opcua]` section (its checks are the OPC UA crate's) in a whole config file.
+fn parse_opcua(text: &str) -> Result<Config, ConfigError> {
+    Config::parse(text, Path::new("c.toml"), |_| None)
+}
+
+#[test]
+fn opcua_is_off_by_default_secure_by_default_and_none_only_when_named() {
+    let section = |text: &str| toml::from_str::<OpcUaSection>(text);
+    let c = section("").unwrap();
+    assert!(!c.enabled);
+    assert_eq!(c.security, OpcUaSecurity::Basic256Sha256);
+    assert!(!c.accept_unknown_clients && !c.anonymous_read);
+    let c = section("enabled = true\nsecurity = \"Basic256Sha256+None\"\n").unwrap();
+    assert_eq!(c.security, OpcUaSecurity::Basic256Sha256AndNone);
+    let e = section("enabled = true\nsecurity = \"None\"\n").unwrap_err();
+    assert!(e.to_string().contains("unknown variant `None`"), "{e}");
+    // In a whole config the line is named.
+    let e = parse_opcua("[opcua]\nenabled = true\nsecurity = \"None\"\n").unwrap_err();
+    assert!(e.to_string().contains("line 3"), "{e}");
+}
+
+#[test]
+fn an_opcua_port_of_zero_and_a_bad_host_name_are_refused_with_their_lines() {
+    let e = parse_opcua("[opcua]\nenabled = true\nlisten = \"127.0.0.1:0\"\nhost_name = \"a b\"\n")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("line 3: opcua.listen"), "{e}");
+    assert!(e.contains("line 4: opcua.host_name"), "{e}");
+}
+
+#[test]
+fn the_opcua_certificate_subject_is_checked_with_its_lines() {
+    let e = parse_opcua(
+        "[opcua]\nenabled = true\ncertificate_organization = \"A, B\"\ncertificate_country = \"Germany\"\ncertificate_days = 0\n",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("line 3: opcua.certificate_organization"), "{e}");
+    assert!(e.contains("line 4: opcua.certificate_country"), "{e}");
+    assert!(e.contains("line 5: opcua.certificate_days"), "{e}");
+    // A good subject: the only problem left is the missing machines.
+    let e = parse_opcua(
+        "[opcua]\nenabled = true\ncertificate_organization = \"Werk Süd\"\ncertificate_country = \"DE\"\n",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(!e.contains("opcua."), "{e}");
+}

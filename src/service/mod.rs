@@ -19,7 +19,7 @@ mod listener_setup;
 pub mod machine;
 pub mod metrics;
 pub(crate) mod offload;
-pub mod opcua;
+pub mod opcua_port;
 pub mod plant;
 pub(crate) mod runner;
 pub(crate) mod sign_in;
@@ -80,7 +80,7 @@ pub struct Running {
     connector: tokio::task::JoinHandle<()>,
     retention: tokio::task::JoinHandle<()>,
     store: StoreHandle,
-    opcua: Option<opcua::OpcUa>,
+    opcua: Option<camloop_opcua::OpcUa>,
     /// The disk reserve every journal of this service shares.
     _reserve: journal::SharedReserve,
 }
@@ -185,7 +185,7 @@ async fn begin(checked: Checked, options: RunOptions) -> anyhow::Result<Starting
     }
 
     // OPC UA: the loops feed it from their start; the server starts with the API state.
-    let (opcua_events, opcua_intake) = opcua::prepare(&config, &checked_machines)?;
+    let (opcua_events, opcua_intake) = opcua_port::prepare(&config, &checked_machines)?;
     let (features, sheets) = startup::feature_catalogue(&checked_machines);
     let shared = Shared {
         store: store.clone(),
@@ -254,7 +254,7 @@ pub struct Starting {
     cluster_view: Option<crate::cluster::Leases>,
     metrics: Arc<Metrics>,
     app_state: http::AppState,
-    opcua_intake: Option<opcua::Intake>,
+    opcua_intake: Option<camloop_opcua::Intake>,
     _publisher: Option<camloop_mqtt::Publisher>,
     shutdown: watch::Sender<bool>,
     shutdown_rx: watch::Receiver<bool>,
@@ -290,7 +290,7 @@ impl Starting {
         } = self;
         let (machines, sources_done) =
             startup::start_machines(&config, runner, cluster_view, &metrics, &shutdown_rx).await?;
-        let opcua = opcua::start(&config, app_state, opcua_intake, &shutdown_rx).await?;
+        let opcua = opcua_port::start(&config, app_state, opcua_intake, &shutdown_rx).await?;
         info!(listen = %http_addr, machines = config.machines.len(), "camloop started");
         let machines_done = tokio::spawn(startup::sources_ended(sources_done));
         Ok(Running {

@@ -199,7 +199,7 @@ fn loop_does_no_io_and_reads_no_clock() {
 fn every_module_starts_with_a_doc_line() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut files = rust_files(&root.join("src"));
-    for krate in ["core", "gauge", "generate", "loop", "mqtt", "sim"] {
+    for krate in ["core", "gauge", "generate", "loop", "mqtt", "opcua", "sim"] {
         files.extend(rust_files(&root.join("crates").join(krate).join("src")));
     }
     let missing: Vec<String> = files
@@ -289,24 +289,19 @@ fn the_service_never_imports_the_cli() {
 }
 
 /// Adapters do not reach into each other: OPC UA and MQTT import neither the HTTP adapter
-/// nor one another. What they share (the loop's types, `service::action`, `service::command`,
-/// `service::plant`, `service::app`, the password sign-in `service::sign_in`) belongs to none
-/// of them. MQTT is a crate (`crates/mqtt`), so the compiler already keeps the service out
-/// of it; its code is searched too, in case a path to them is ever added to its manifest.
+/// nor one another, nor the service. What they share (the loop's types, `service::action`,
+/// `service::command`, `service::plant`, `service::app`, the password sign-in
+/// `service::sign_in`) belongs to none of them; both are crates (`crates/mqtt`,
+/// `crates/opcua`), so the compiler already keeps the service out of them, and their code
+/// is searched too, in case a path to them is ever added to a manifest.
 #[test]
 fn opcua_and_mqtt_never_import_http_nor_each_other() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let service = root.join("src/service");
-    let mut violations: Vec<String> = uses_of(
-        &service.join("opcua"),
-        &[
-            "service::http",
-            "super::http",
-            "camloop_mqtt",
-            "service::mqtt",
-            "super::mqtt",
-        ],
-        5,
+    // `http::`, not `http`: the OPC UA units' namespace is an `http://` URI.
+    let mut violations = uses_of(
+        &root.join("crates/opcua/src"),
+        &["http::", "axum", "mqtt", "camloop::", "crate::service"],
+        8,
     );
     violations.extend(uses_of(
         &root.join("crates/mqtt/src"),
@@ -320,30 +315,80 @@ fn opcua_and_mqtt_never_import_http_nor_each_other() {
     );
 }
 
+/// One adapter crate's manifest rule: camloop's crates it may take, each beyond the loop's
+/// types with the reason it needs it, and the stacks that are another adapter's or the
+/// store's.
+struct AdapterRule {
+    dir: &'static str,
+    camloop_allowed: &'static [&'static str],
+    /// camloop's crates beyond core and loop, each with why this adapter takes it.
+    beyond_the_loop: &'static [(&'static str, &'static str)],
+    forbidden: &'static [&'static str],
+}
+
+const ADAPTERS: [AdapterRule; 2] = [
+    AdapterRule {
+        dir: "crates/mqtt",
+        camloop_allowed: &["camloop-core", "camloop-loop"],
+        beyond_the_loop: &[],
+        forbidden: &["axum", "hyper", "async-opcua", "sqlx", "utoipa", "maud"],
+    },
+    AdapterRule {
+        dir: "crates/opcua",
+        camloop_allowed: &["camloop-core", "camloop-loop", "camloop-store"],
+        beyond_the_loop: &[(
+            "camloop-store",
+            "it reads the history itself: the newest results at start, the result methods, \
+             the event row an EventId names, the signed-in users' state",
+        )],
+        forbidden: &["axum", "hyper", "rumqttc", "sqlx", "utoipa", "maud"],
+    },
+];
+
 /// An adapter crate depends on the loop's types (and the core's names beneath them), on
-/// its own I/O crates, and never on the service that wires it, the store, or another
-/// adapter's stack: so an adapter can be read, built and tested alone.
+/// its own I/O crates, and never on the service that wires it or another adapter's stack:
+/// so an adapter can be read, built and tested alone. Only OPC UA takes the store, for the
+/// history it reads itself (its manifest says why, on the line above).
 #[test]
 fn adapter_crates_depend_on_the_loops_types_never_on_the_service_or_each_other() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let text = std::fs::read_to_string(root.join("crates/mqtt/Cargo.toml")).unwrap();
-    let manifest: toml::Table = text.parse().unwrap();
-    let deps = manifest["dependencies"].as_table().unwrap();
-    assert!(
-        deps.contains_key("camloop-loop"),
-        "the MQTT crate's manifest names {:?}: is this its manifest?",
-        deps.keys().collect::<Vec<_>>()
-    );
-    let camloop_allowed = ["camloop-core", "camloop-loop"];
-    for name in deps.keys() {
+    for rule in &ADAPTERS {
+        let text = std::fs::read_to_string(root.join(rule.dir).join("Cargo.toml")).unwrap();
+        let manifest: toml::Table = text.parse().unwrap();
+        let deps = manifest["dependencies"].as_table().unwrap();
         assert!(
-            !name.starts_with("camloop") || camloop_allowed.contains(&name.as_str()),
-            "the MQTT crate depends on {name}: an adapter takes only {camloop_allowed:?} of camloop's crates"
+            deps.contains_key("camloop-loop"),
+            "{}'s manifest names {:?}: is this its manifest?",
+            rule.dir,
+            deps.keys().collect::<Vec<_>>()
         );
-        for forbidden in ["axum", "hyper", "async-opcua", "sqlx", "utoipa", "maud"] {
+        for name in deps.keys() {
             assert!(
-                !name.starts_with(forbidden),
-                "the MQTT crate depends on {name}: another adapter's or the store's stack"
+                !name.starts_with("camloop") || rule.camloop_allowed.contains(&name.as_str()),
+                "{} depends on {name}: this adapter takes only {:?} of camloop's crates",
+                rule.dir,
+                rule.camloop_allowed
+            );
+            for forbidden in rule.forbidden {
+                assert!(
+                    !name.starts_with(forbidden),
+                    "{} depends on {name}: another adapter's or the store's stack",
+                    rule.dir
+                );
+            }
+        }
+        for (name, why) in rule.beyond_the_loop {
+            assert!(deps.contains_key(*name), "{}: {name} ({why})", rule.dir);
+            // The reason is written beside the dependency, not only here.
+            let lines: Vec<&str> = text.lines().collect();
+            let at = lines
+                .iter()
+                .position(|l| l.starts_with(&format!("{name} ")))
+                .unwrap();
+            assert!(
+                lines[at - 1].trim_start().starts_with('#'),
+                "{}: {name} needs a comment saying why ({why})",
+                rule.dir
             );
         }
     }

@@ -76,7 +76,7 @@ fn browse_gives_configured_and_grinding_order_and_unknown_nodes_are_unknown() {
         .collect();
     let (stop, shutdown) = tokio::sync::watch::channel(false);
     runtime.block_on(async {
-        let _sender = camloop::service::opcua::bench_server(
+        let _sender = camloop::service::opcua_port::bench_server(
             std::net::SocketAddr::from(([127, 0, 0, 1], port)),
             &dir.path().join("pki"),
             machines,

@@ -1,10 +1,10 @@
 //! The OPC UA feed seen by a client, in-process: the server as the bench runs it
-//! (`camloop::service::opcua::bench_server`) and the `async-opcua` client. Every event reaches
-//! every monitored item once (on `Server`, `Machines` and the machine at once); the notifier
-//! hierarchy is browsable; a result's variables never mix two parts, never go back to an
-//! older part while the status lags, and share their part's time as SourceTimestamp; before
-//! a feature's first part its result variables say `BadWaitingForInitialData`. The server's
-//! certificate carries the configured subject and BuildDate is the build's.
+//! (`camloop::service::opcua_port::bench_server`) and the `async-opcua` client. Every event
+//! reaches every monitored item once (on `Server`, `Machines` and the machine at once); the
+//! notifier hierarchy is browsable; a result's variables never mix two parts, never go back
+//! to an older part while the status lags, and share their part's time as SourceTimestamp;
+//! before a feature's first part its result variables say `BadWaitingForInitialData`. The
+//! server's certificate carries the configured subject and BuildDate is the build's.
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
@@ -142,7 +142,7 @@ fn events_come_once_per_item_and_results_are_never_torn() {
         (name("M2"), vec![name("F1")]),
     ];
     let sender = runtime
-        .block_on(camloop::service::opcua::bench_server(
+        .block_on(camloop::service::opcua_port::bench_server(
             listen,
             &dir.path().join("pki"),
             machines,

@@ -58,7 +58,7 @@ fn the_advertised_limits_hold_and_a_large_write_reaches_the_subscriber_whole() {
     let machines = plant(MACHINES, FEATURES);
     let (stop, shutdown) = tokio::sync::watch::channel(false);
     let sender = runtime
-        .block_on(camloop::service::opcua::bench_server(
+        .block_on(camloop::service::opcua_port::bench_server(
             listen,
             &dir.path().join("pki"),
             machines.clone(),

@@ -70,7 +70,7 @@ fn events_dropped_before_the_server_are_told_by_overflow_events() {
     let overflow: NodeId = ObjectTypeId::EventQueueOverflowEventType.into();
     let told: Arc<Mutex<Vec<String>>> = Arc::default();
     let sender = runtime.block_on(async {
-        let sender = camloop::service::opcua::bench_server(
+        let sender = camloop::service::opcua_port::bench_server(
             std::net::SocketAddr::from(([127, 0, 0, 1], port)),
             &dir.path().join("pki"),
             machines,

@@ -8,23 +8,38 @@
 //!
 //! The address space (see [`space`]) is fed by [`feed`] from the loops' plant events and
 //! the in-process feature status: the loops never wait on it.
+//!
+//! An adapter of the service: it depends on the loop's types, its own config section and
+//! the history store, never on the service or another adapter. What it needs of the
+//! service (sign-in, the write path, the audit trail, the feature status, owner-only
+//! files) it asks through the [`Service`] port, which the service implements and hands to
+//! [`start`].
 
 mod auth;
+mod config;
 mod events;
 pub(crate) mod feed;
 mod methods;
 mod nodes;
 mod ordered;
 mod pki;
+mod port;
 mod seed;
 pub(crate) mod space;
 
-use crate::names::{FeatureName, MachineName};
-use std::path::PathBuf;
+pub use auth::OPCUA_CLIENT;
+pub use config::{OpcUaSection, OpcUaSecurity, SectionProblem};
+pub use port::{
+    AckRefused, Caller, FeatureView, FileError, Refusal, Service, SignIn, SignInUnavailable,
+    Status, Write, WriteRefused,
+};
+pub use space::MachineLayout;
+
+use camloop_core::names::{FeatureName, MachineName};
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::AtomicU64;
 
-use anyhow::Context;
 use opcua::server::node_manager::NodeManagerBuilder as _;
 use opcua::server::node_manager::memory::{InMemoryNodeManager, InMemoryNodeManagerBuilder};
 use opcua::server::{ServerBuilder, ServerEndpoint, ServerHandle};
@@ -32,27 +47,7 @@ use opcua::types::BuildInfo;
 use tokio::sync::{mpsc, watch};
 use tracing::{info, warn};
 
-use crate::config::{Config, OpcUaSection, OpcUaSecurity};
-use crate::service::app::AppState;
-use crate::service::plant::EventSender;
 use camloop_loop::PlantEvent;
-pub(crate) use space::MachineLayout;
-
-/// The machines as the address space shows them.
-pub(crate) fn layout(machines: &[crate::config::CheckedMachine]) -> Vec<MachineLayout> {
-    machines
-        .iter()
-        .map(|m| MachineLayout {
-            name: m.name.clone(),
-            recipe: m
-                .recipe_path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default(),
-            features: m.setups.iter().map(|s| s.name.clone()).collect(),
-        })
-        .collect()
-}
 
 /// Plant events waiting for the feed; beyond it an event is dropped (that part's result and
 /// OPC UA event are not shown; the feature's next part replaces it).
@@ -97,7 +92,7 @@ const PRIVATE_KEY: &str = "private/private.pem";
 const CERTIFICATE: &str = "own/cert.der";
 
 /// A running OPC UA server.
-pub(crate) struct OpcUa {
+pub struct OpcUa {
     handle: ServerHandle,
     server: tokio::task::JoinHandle<()>,
     feed: tokio::task::JoinHandle<()>,
@@ -105,7 +100,7 @@ pub(crate) struct OpcUa {
 
 impl OpcUa {
     /// Stops the server (sessions are closed) and the feed.
-    pub(crate) async fn stop(self) {
+    pub async fn stop(self) {
         self.handle.cancel();
         let _ = self.server.await;
         self.feed.abort();
@@ -113,16 +108,54 @@ impl OpcUa {
     }
 }
 
-/// The folder of the server's certificate store.
-fn pki_dir(config: &Config) -> PathBuf {
-    match &config.opcua.pki_dir {
-        Some(dir) => config.resolve(dir),
-        None => config.var_dir().join("opcua").join("pki"),
+/// Why the server cannot start.
+#[derive(Debug, thiserror::Error)]
+pub enum StartError {
+    #[error("opcua: cannot listen on {listen}")]
+    Listen {
+        listen: std::net::SocketAddr,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("opcua: PKI folder {}", dir.display())]
+    PkiFolder {
+        dir: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("opcua: the private key")]
+    KeyReadable(#[source] FileError),
+    #[error("opcua: cannot narrow {} to its owner", path.display())]
+    Narrow {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("opcua: cannot make the server certificate: {0}")]
+    Certificate(String),
+    #[error("opcua: the server cannot be set up: {0}")]
+    Setup(String),
+    #[error("opcua: camloop's {0} is missing")]
+    Missing(&'static str),
+}
+
+/// Where the loops send plant events for the server: never waits, and counts what a full
+/// intake refuses as dropped (the server tells its clients so).
+#[derive(Debug, Clone)]
+pub struct Feeder {
+    tx: mpsc::Sender<PlantEvent>,
+    dropped: Arc<AtomicU64>,
+}
+
+impl Feeder {
+    /// The channel and its refusal counter, for a sender that feeds several adapters.
+    pub fn into_parts(self) -> (mpsc::Sender<PlantEvent>, Arc<AtomicU64>) {
+        (self.tx, self.dropped)
     }
 }
 
 /// What the loops feed before the server starts: their events and the machines.
-pub(crate) struct Intake {
+pub struct Intake {
     events: mpsc::Receiver<PlantEvent>,
     /// Events the full intake refused (counted by the loops' sender).
     dropped: Arc<AtomicU64>,
@@ -131,56 +164,61 @@ pub(crate) struct Intake {
     listener: std::net::TcpListener,
 }
 
-/// With `[opcua]` on: the sender the loops feed, and the intake [`start`] takes (made before
-/// the loops start; the server starts once the API state it shares exists).
-pub(crate) fn prepare(
-    config: &Config,
-    machines: &[crate::config::CheckedMachine],
-) -> anyhow::Result<(Option<EventSender>, Option<Intake>)> {
-    if !config.opcua.enabled {
-        return Ok((None, None));
+/// With `[opcua]` on: the feeder the loops send to, and the intake [`start`] takes (made
+/// before the loops start, with the listener bound, so a port in use stops the start before
+/// them; the server starts once the service it asks exists).
+pub fn prepare(
+    section: &OpcUaSection,
+    layout: Vec<MachineLayout>,
+) -> Result<Option<(Feeder, Intake)>, StartError> {
+    if !section.enabled {
+        return Ok(None);
     }
-    let listener = bind(config.opcua.listen)?;
+    let listener = bind(section.listen)?;
     let (tx, events) = mpsc::channel(INTAKE);
     let dropped = Arc::new(AtomicU64::new(0));
-    let sender = EventSender::new(tx, dropped.clone());
-    let layout = layout(machines);
+    let feeder = Feeder {
+        tx,
+        dropped: dropped.clone(),
+    };
     let intake = Intake {
         events,
         dropped,
         layout,
         listener,
     };
-    Ok((Some(sender), Some(intake)))
+    Ok(Some((feeder, intake)))
 }
 
-fn bind(listen: std::net::SocketAddr) -> anyhow::Result<std::net::TcpListener> {
-    let listener = std::net::TcpListener::bind(listen)
-        .with_context(|| format!("opcua: cannot listen on {listen}"))?;
-    listener
-        .set_nonblocking(true)
-        .with_context(|| format!("opcua: cannot listen on {listen}"))?;
+fn bind(listen: std::net::SocketAddr) -> Result<std::net::TcpListener, StartError> {
+    let failed = |source| StartError::Listen { listen, source };
+    let listener = std::net::TcpListener::bind(listen).map_err(failed)?;
+    listener.set_nonblocking(true).map_err(failed)?;
     Ok(listener)
 }
 
-/// Starts the server on `opcua.listen` and its feed from `intake` (none: `[opcua]` is off).
-pub(crate) async fn start(
-    config: &Config,
-    app: AppState,
-    intake: Option<Intake>,
-    shutdown: &watch::Receiver<bool>,
-) -> anyhow::Result<Option<OpcUa>> {
-    start_with(&config.opcua, pki_dir(config), app, intake, shutdown).await
+/// Where and as what the server starts: its section, its certificate store's folder and
+/// the binary's build time (BuildInfo.BuildDate).
+#[derive(Debug, Clone)]
+pub struct Setup<'a> {
+    pub section: &'a OpcUaSection,
+    pub pki: PathBuf,
+    pub built: jiff::Timestamp,
 }
 
-/// [`start`] with the section and the PKI folder given.
-async fn start_with(
-    section: &OpcUaSection,
-    pki: PathBuf,
-    app: AppState,
+/// Starts the server on `opcua.listen` and its feed from `intake` (none: `[opcua]` is off),
+/// asking `service` for what it needs; it stops when `shutdown` changes.
+pub async fn start(
+    setup: Setup<'_>,
+    service: Arc<dyn Service>,
     intake: Option<Intake>,
     shutdown: &watch::Receiver<bool>,
-) -> anyhow::Result<Option<OpcUa>> {
+) -> Result<Option<OpcUa>, StartError> {
+    let Setup {
+        section,
+        pki,
+        built,
+    } = setup;
     let Some(Intake {
         events,
         dropped,
@@ -191,33 +229,42 @@ async fn start_with(
         return Ok(None);
     };
     let shutdown = shutdown.clone();
-    crate::private_fs::create_dir_all(&pki)
-        .with_context(|| format!("opcua: PKI folder {}", pki.display()))?;
+    service
+        .create_private_dir(&pki)
+        .map_err(|source| StartError::PkiFolder {
+            dir: pki.clone(),
+            source,
+        })?;
     let key = pki.join(PRIVATE_KEY);
     if key.exists() {
-        crate::audit_seal::refuse_readable_by_others(&key).context("opcua: the private key")?;
+        service
+            .refuse_readable_by_others(&key)
+            .map_err(StartError::KeyReadable)?;
     }
     let host = section.host();
-    make_certificate(section, &pki, &host)?;
+    make_certificate(section, &pki, &host, service.as_ref())?;
     let url = format!("opc.tcp://{host}:{}/", section.listen.port());
     let listeners = Arc::new(events::Listeners::default());
     let builder = server_builder(
         section,
-        &pki,
-        &url,
-        (app.clone(), listeners.clone()),
+        (&pki, &url, built),
+        (service.clone(), listeners.clone()),
         layout.clone(),
     );
     let (server, handle) = builder
         .build()
-        .map_err(|e| anyhow::anyhow!("opcua: the server cannot be set up: {e}"))?;
+        .map_err(|e| StartError::Setup(e.to_string()))?;
     // The stack writes a new key with the umask's mode: narrowed to the owner at once.
     for made in [pki.join("private"), key] {
-        crate::private_fs::restrict(&made)
-            .with_context(|| format!("opcua: cannot narrow {} to its owner", made.display()))?;
+        service
+            .restrict_to_owner(&made)
+            .map_err(|source| StartError::Narrow { path: made, source })?;
     }
-    let listener = tokio::net::TcpListener::from_std(listener)
-        .with_context(|| format!("opcua: cannot listen on {}", section.listen))?;
+    let listener =
+        tokio::net::TcpListener::from_std(listener).map_err(|source| StartError::Listen {
+            listen: section.listen,
+            source,
+        })?;
     let server = tokio::spawn(async move {
         if let Err(e) = server.run_with(listener).await {
             tracing::error!(error = %e, "OPC UA server stopped");
@@ -226,29 +273,25 @@ async fn start_with(
     let manager = handle
         .node_managers()
         .get_of_type::<ordered::Ordered>()
-        .context("opcua: camloop's node manager is missing")?
+        .ok_or(StartError::Missing("node manager"))?
         .inner
         .clone();
     let ns = handle
         .get_namespace_index(space::NAMESPACE_URI)
-        .context("opcua: camloop's namespace is missing")?;
+        .ok_or(StartError::Missing("namespace"))?;
     let mut feed = feed::Feed::new(
         manager,
         handle.subscriptions().clone(),
         space::Ids { ns },
-        app.metrics.clone(),
+        service.clone(),
         layout.clone(),
         listeners,
         handle.clone(),
     );
-    feed.dressings = dressing_counts(&app, &layout).await;
+    feed.dressings = dressing_counts(service.as_ref(), &layout).await;
     feed.dropped = dropped;
     let (seeds_tx, seeds) = mpsc::channel(16);
-    tokio::spawn(seed::send_newest(
-        app.store.clone(),
-        layout.clone(),
-        seeds_tx,
-    ));
+    tokio::spawn(seed::send_newest(service.clone(), layout.clone(), seeds_tx));
     let feed = tokio::spawn(feed::run(feed, (events, seeds), shutdown.clone()));
     tokio::spawn(pki::keep_rejected_bounded(pki.clone(), shutdown.clone()));
     let cancel = handle.clone();
@@ -274,17 +317,19 @@ async fn start_with(
 /// computer's names, with the subject the config gives (not the library's sample subject).
 fn make_certificate(
     section: &OpcUaSection,
-    pki: &std::path::Path,
+    pki: &Path,
     host: &str,
-) -> anyhow::Result<()> {
+    service: &dyn Service,
+) -> Result<(), StartError> {
     let cert = pki.join(CERTIFICATE);
     let key = pki.join(PRIVATE_KEY);
     if cert.exists() && key.exists() {
         return Ok(());
     }
     for dir in [pki.join("own"), pki.join("private")] {
-        crate::private_fs::create_dir_all(&dir)
-            .with_context(|| format!("opcua: PKI folder {}", dir.display()))?;
+        service
+            .create_private_dir(&dir)
+            .map_err(|source| StartError::PkiFolder { dir, source })?;
     }
     let description = opcua::types::ApplicationDescription {
         application_uri: format!("urn:camloop:{host}").into(),
@@ -298,7 +343,7 @@ fn make_certificate(
     data.state = section.certificate_state.clone();
     data.certificate_duration_days = section.certificate_days;
     opcua::crypto::CertificateStore::create_certificate_and_key(&data, false, &cert, &key)
-        .map_err(|e| anyhow::anyhow!("opcua: cannot make the server certificate: {e}"))?;
+        .map_err(|e| StartError::Certificate(e.to_string()))?;
     info!(certificate = %cert.display(), days = section.certificate_days, "OPC UA: server certificate made");
     Ok(())
 }
@@ -306,13 +351,12 @@ fn make_certificate(
 /// The server as configured: endpoints, certificates, users, camloop's nodes.
 fn server_builder(
     section: &OpcUaSection,
-    pki: &std::path::Path,
-    url: &str,
-    (app, listeners): (AppState, Arc<events::Listeners>),
+    (pki, url, built): (&Path, &str, jiff::Timestamp),
+    (service, listeners): (Arc<dyn Service>, Arc<events::Listeners>),
     layout: Vec<MachineLayout>,
 ) -> ServerBuilder {
     let host = section.host();
-    let users = auth::Users::new(app.clone(), section.anonymous_read);
+    let users = auth::Users::new(service.clone(), section.anonymous_read);
     let mut builder = ServerBuilder::new()
         .application_name("camloop")
         .application_uri(format!("urn:camloop:{host}"))
@@ -323,7 +367,7 @@ fn server_builder(
             product_name: "camloop".into(),
             software_version: env!("CARGO_PKG_VERSION").into(),
             build_number: env!("CARGO_PKG_VERSION").into(),
-            build_date: build_date(),
+            build_date: methods::date_time(built),
         })
         .create_sample_keypair(true)
         .certificate_path(CERTIFICATE)
@@ -344,7 +388,7 @@ fn server_builder(
             let order = layout.clone();
             let memory = InMemoryNodeManagerBuilder::new(nodes::Builder {
                 layout,
-                app,
+                service,
                 listeners,
             });
             // The stack builds it as its own trait object: taken back as what it is.
@@ -383,21 +427,13 @@ fn server_builder(
     builder
 }
 
-/// When this binary was built: the commit's time (`SOURCE_DATE_EPOCH` at build, set by
-/// `build.rs`), not the process's start.
-fn build_date() -> opcua::types::DateTime {
-    let seconds: i64 = env!("CAMLOOP_BUILD_EPOCH_S").parse().unwrap_or(0);
-    let at = jiff::Timestamp::from_second(seconds).unwrap_or(jiff::Timestamp::UNIX_EPOCH);
-    methods::date_time(at)
-}
-
 /// Each machine's dressings as the store has them at start (0 while it is down).
 async fn dressing_counts(
-    app: &AppState,
+    service: &dyn Service,
     layout: &[MachineLayout],
 ) -> std::collections::HashMap<MachineName, i64> {
     let mut counts = std::collections::HashMap::new();
-    let Some(store) = app.store.read().await.clone() else {
+    let Some(store) = service.store().await else {
         return counts;
     };
     for m in layout {
@@ -411,19 +447,18 @@ async fn dressing_counts(
     counts
 }
 
-/// The server as `benches/opcua.rs` runs it: `machines` (name, features) on `listen`,
-/// Basic256Sha256 SignAndEncrypt, its PKI in `pki`, anonymous reading and unknown client
-/// certificates accepted (the bench's clients are anonymous and new); fed from the returned
-/// sender until `shutdown` turns true. Not part of camloop's interface.
+/// The server as `benches/opcua.rs` and the address-space tests run it: `machines` (name,
+/// features) on `listen`, Basic256Sha256 SignAndEncrypt, its PKI in `pki`, anonymous
+/// reading and unknown client certificates accepted (the bench's clients are anonymous and
+/// new); fed from the returned feeder until `shutdown` turns true. Not part of camloop's
+/// interface.
 #[doc(hidden)]
 pub async fn bench_server(
-    listen: std::net::SocketAddr,
-    pki: &std::path::Path,
+    (listen, pki, built): (std::net::SocketAddr, &Path, jiff::Timestamp),
     machines: Vec<(MachineName, Vec<FeatureName>)>,
-    metrics: Arc<crate::service::metrics::Metrics>,
-    store: crate::service::machine::StoreHandle,
+    service: Arc<dyn Service>,
     shutdown: watch::Receiver<bool>,
-) -> anyhow::Result<EventSender> {
+) -> Result<Feeder, StartError> {
     let section = OpcUaSection {
         enabled: true,
         listen,
@@ -440,8 +475,7 @@ pub async fn bench_server(
             features,
         })
         .collect();
-    let app = AppState::without_http(store, metrics);
-    let (sender, events) = mpsc::channel(INTAKE);
+    let (tx, events) = mpsc::channel(INTAKE);
     let dropped = Arc::new(AtomicU64::new(0));
     let intake = Intake {
         events,
@@ -449,7 +483,12 @@ pub async fn bench_server(
         layout,
         listener: bind(listen)?,
     };
+    let setup = Setup {
+        section: &section,
+        pki: pki.to_path_buf(),
+        built,
+    };
     // Runs until shutdown: the server's own watcher cancels it.
-    drop(start_with(&section, pki.to_path_buf(), app, Some(intake), &shutdown).await?);
-    Ok(EventSender::new(sender, dropped))
+    drop(start(setup, service, Some(intake), &shutdown).await?);
+    Ok(Feeder { tx, dropped })
 }

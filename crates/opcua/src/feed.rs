@@ -9,7 +9,7 @@
 //! state only (and `MaxError` once the status has caught up with the shown part), so a
 //! client never sees a new part's `Time` beside an older part's `PartId`.
 
-use crate::names::MachineName;
+use camloop_core::names::{FeatureName, MachineName};
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
@@ -27,9 +27,14 @@ use super::events::{EventIds, Listeners};
 use super::methods::date_time;
 use super::nodes::CamloopNodes;
 use super::space::{FeatureValue, Ids, MachineLayout};
-use crate::service::metrics::{FeatureStatus, Metrics};
-use crate::service::plant::payload;
+use crate::port::{FeatureView, Service};
 use camloop_loop::{MACHINE_LEVEL, PlantEvent};
+
+/// A plant event's JSON, the same text MQTT's payload carries without its sequence number.
+fn payload(event: &PlantEvent) -> String {
+    // Strings, numbers and enums only: serializing cannot fail.
+    serde_json::to_string(event).expect("a plant event serializes to JSON")
+}
 
 /// How often the feature status is compared with what the address space shows; with the
 /// event path (immediate) this bounds how stale a value can be.
@@ -40,7 +45,7 @@ pub(crate) struct Feed {
     pub(crate) manager: Arc<InMemoryNodeManager<CamloopNodes>>,
     pub(crate) subscriptions: Arc<SubscriptionCache>,
     pub(crate) ids: Ids,
-    pub(crate) metrics: Arc<Metrics>,
+    pub(crate) service: Arc<dyn Service>,
     pub(crate) layout: Vec<MachineLayout>,
     pub(crate) dressings: HashMap<MachineName, i64>,
     pub(crate) listeners: Arc<Listeners>,
@@ -64,7 +69,7 @@ impl Feed {
         manager: Arc<InMemoryNodeManager<CamloopNodes>>,
         subscriptions: Arc<SubscriptionCache>,
         ids: Ids,
-        metrics: Arc<Metrics>,
+        service: Arc<dyn Service>,
         layout: Vec<MachineLayout>,
         listeners: Arc<Listeners>,
         handle: opcua::server::ServerHandle,
@@ -77,7 +82,7 @@ impl Feed {
             manager,
             subscriptions,
             ids,
-            metrics,
+            service,
             layout,
             dressings: HashMap::new(),
             last: HashMap::new(),
@@ -102,9 +107,8 @@ impl Feed {
                 ..
             } => {
                 let max_error = self
-                    .metrics
-                    .features()
-                    .get(&(e.machine().clone(), feature.clone()))
+                    .service
+                    .feature(e.machine(), feature)
                     .filter(|s| s.last_part.as_deref() == Some(part.as_str()))
                     .and_then(|s| s.last_max_error_um);
                 if !self.show_result(e, max_error, staged) {
@@ -282,8 +286,8 @@ impl Feed {
     /// is not the status's to write (see the module's notes), except `MaxError`, which the
     /// part's event does not carry: it is written once the status shows the same part.
     pub(crate) fn refresh(&mut self, staged: &mut Vec<(NodeId, DataValue)>) {
-        let features = self.metrics.features();
-        let machines = self.metrics.snapshot();
+        let status = self.service.status();
+        let features = &status.features;
         let layout = std::mem::take(&mut self.layout);
         for m in &layout {
             for f in &m.features {
@@ -294,10 +298,10 @@ impl Feed {
                     self.catch_up_max_error(&m.name, f, s, staged);
                 }
             }
-            let failing = machines.get(&m.name).is_some_and(|x| x.journal_failing > 0);
+            let failing = status.journal_failing.contains(&m.name);
             let was = self.journal_failing.insert(m.name.clone(), failing);
             if failing && was != Some(true) {
-                let at = crate::clock::now();
+                let at = jiff::Timestamp::now();
                 let text =
                     "the journal cannot be written (disk full?): records are not kept".to_string();
                 let kind = ("journal_failing", 900);
@@ -334,7 +338,7 @@ impl Feed {
             lost,
             "OPC UA: plant events dropped, the server's intake was full"
         );
-        let at = crate::clock::now();
+        let at = jiff::Timestamp::now();
         let message = format!(
             "{lost} plant events dropped before the OPC UA server (its intake was full): their results and events are not shown"
         );
@@ -366,8 +370,8 @@ impl Feed {
     fn catch_up_max_error(
         &mut self,
         machine: &MachineName,
-        feature: &crate::names::FeatureName,
-        s: &FeatureStatus,
+        feature: &FeatureName,
+        s: &FeatureView,
         staged: &mut Vec<(NodeId, DataValue)>,
     ) {
         let key = (machine.to_string(), feature.to_string());
@@ -516,7 +520,7 @@ fn result_values(
 }
 
 /// The loop's state as a feature status gives it (a part's result is its event's).
-fn status_values(s: &FeatureStatus) -> Vec<(FeatureValue, Variant)> {
+fn status_values(s: &FeatureView) -> Vec<(FeatureValue, Variant)> {
     let v = vec![
         (
             FeatureValue::TableVersionInForce,

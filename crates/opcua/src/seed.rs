@@ -8,8 +8,9 @@ use camloop_loop::PlantEvent;
 use tokio::sync::mpsc;
 
 use super::space::MachineLayout;
-use crate::service::machine::StoreHandle;
-use crate::store::{HistoryFilter, MasterRuns, MeasurementSummary, Store};
+use crate::port::Service;
+use camloop_store::{HistoryFilter, MasterRuns, MeasurementSummary, Store, StoreError};
+use std::sync::Arc;
 
 /// A feature's newest stored result, as the feed shows a part.
 #[derive(Debug, Clone, PartialEq)]
@@ -24,11 +25,11 @@ pub(crate) struct Seed {
 /// Reads every configured feature's newest result and sends them, one machine's at a time;
 /// returns when done (a store that is down, or a feature with no result, gives none).
 pub(crate) async fn send_newest(
-    store: StoreHandle,
+    service: Arc<dyn Service>,
     layout: Vec<MachineLayout>,
     tx: mpsc::Sender<Vec<Seed>>,
 ) {
-    let Some(store) = store.read().await.clone() else {
+    let Some(store) = service.store().await else {
         tracing::info!("OPC UA: no history store at start: results wait for the next parts");
         return;
     };
@@ -52,8 +53,8 @@ pub(crate) async fn send_newest(
 async fn newest(
     store: &Store,
     m: &MachineLayout,
-    feature: &crate::names::FeatureName,
-) -> Result<Option<Seed>, crate::store::StoreError> {
+    feature: &camloop_core::names::FeatureName,
+) -> Result<Option<Seed>, StoreError> {
     let filter = HistoryFilter {
         lobe: Some(feature.clone()),
         masters: MasterRuns::Excluded,

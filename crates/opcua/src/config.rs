@@ -1,6 +1,6 @@
-//! The `[opcua]` section: the OPC UA server inside `camloop run` (off by default).
+//! The `[opcua]` section: the OPC UA server inside `camloop run` (off by default). The
+//! service's config file holds it; its checks name the key, and the service adds the line.
 
-use super::{ConfigProblem, Lines};
 use serde::Deserialize;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -67,13 +67,14 @@ impl Default for OpcUaSection {
 
 impl OpcUaSection {
     /// The host name clients see in the endpoint URL.
-    pub(crate) fn host(&self) -> String {
+    pub fn host(&self) -> String {
         self.host_name
             .clone()
             .unwrap_or_else(|| self.listen.ip().to_string())
     }
 
-    pub(super) fn problems(&self, lines: &Lines) -> Vec<ConfigProblem> {
+    /// Every problem of an enabled section at once (none when it is off).
+    pub fn problems(&self) -> Vec<SectionProblem> {
         let mut p = Vec::new();
         if !self.enabled {
             return p;
@@ -84,16 +85,16 @@ impl OpcUaSection {
                 && h.chars()
                     .all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | ':'));
             if !ok {
-                p.push(ConfigProblem::at(
-                    lines.of("opcua.host_name"),
+                p.push(SectionProblem::new(
+                    "opcua.host_name",
                     format!("opcua.host_name: `{h}` is not a host name"),
                 ));
             }
         }
-        p.extend(self.certificate_problems(lines));
+        p.extend(self.certificate_problems());
         if self.listen.port() == 0 {
-            p.push(ConfigProblem::at(
-                lines.of("opcua.listen"),
+            p.push(SectionProblem::new(
+                "opcua.listen",
                 "opcua.listen: the port must not be 0 (clients find the endpoint by its URL)"
                     .to_string(),
             ));
@@ -101,7 +102,7 @@ impl OpcUaSection {
         p
     }
 
-    fn certificate_problems(&self, lines: &Lines) -> Vec<ConfigProblem> {
+    fn certificate_problems(&self) -> Vec<SectionProblem> {
         let mut p = Vec::new();
         let parts = [
             ("certificate_organization", &self.certificate_organization),
@@ -119,22 +120,22 @@ impl OpcUaSection {
                         || matches!(c, ',' | '=' | '+' | '"' | '\\' | '<' | '>' | ';' | '#')
                 });
             if !ok {
-                p.push(ConfigProblem::at(
-                    lines.of(&format!("opcua.{key}")),
+                p.push(SectionProblem::new(
+                    format!("opcua.{key}"),
                     format!("opcua.{key}: `{value}` must be at most 64 characters without , = + \" \\ < > ; #"),
                 ));
             }
         }
         let c = &self.certificate_country;
         if !(c.is_empty() || (c.len() == 2 && c.chars().all(|x| x.is_ascii_uppercase()))) {
-            p.push(ConfigProblem::at(
-                lines.of("opcua.certificate_country"),
+            p.push(SectionProblem::new(
+                "opcua.certificate_country",
                 format!("opcua.certificate_country: `{c}` is not a two-letter country code (ISO 3166, e.g. DE)"),
             ));
         }
         if !(1..=3650).contains(&self.certificate_days) {
-            p.push(ConfigProblem::at(
-                lines.of("opcua.certificate_days"),
+            p.push(SectionProblem::new(
+                "opcua.certificate_days",
                 format!(
                     "opcua.certificate_days: {} is not between 1 and 3650",
                     self.certificate_days
@@ -145,57 +146,59 @@ impl OpcUaSection {
     }
 }
 
+/// One problem in the section: its key (`opcua.<key>`) and what is wrong, key first.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SectionProblem {
+    /// The full key, `opcua.listen` say, for the caller to find its line.
+    pub key: String,
+    pub message: String,
+}
+
+impl SectionProblem {
+    fn new(key: impl Into<String>, message: String) -> Self {
+        Self {
+            key: key.into(),
+            message,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
-    use crate::config::{Config, OpcUaSecurity};
+    use super::*;
 
-    use std::path::Path;
-
-    fn parse(text: &str) -> Result<Config, crate::config::ConfigError> {
-        Config::parse(text, Path::new("c.toml"), |_| None)
-    }
-
+    /// Each problem names its full key first (the service finds its line by it), all at
+    /// once, and none while the section is off.
     #[test]
-    fn off_by_default_secure_by_default_and_none_only_when_named() {
-        let section = |text: &str| toml::from_str::<super::OpcUaSection>(text);
-        let c = section("").unwrap();
-        assert!(!c.enabled);
-        assert_eq!(c.security, OpcUaSecurity::Basic256Sha256);
-        assert!(!c.accept_unknown_clients && !c.anonymous_read);
-        let c = section("enabled = true\nsecurity = \"Basic256Sha256+None\"\n").unwrap();
-        assert_eq!(c.security, OpcUaSecurity::Basic256Sha256AndNone);
-        let e = section("enabled = true\nsecurity = \"None\"\n").unwrap_err();
-        assert!(e.to_string().contains("unknown variant `None`"), "{e}");
-        // In a whole config the line is named.
-        let e = parse("[opcua]\nenabled = true\nsecurity = \"None\"\n").unwrap_err();
-        assert!(e.to_string().contains("line 3"), "{e}");
-    }
-
-    #[test]
-    fn a_port_of_zero_and_a_bad_host_name_are_refused_with_their_lines() {
-        let e = parse("[opcua]\nenabled = true\nlisten = \"127.0.0.1:0\"\nhost_name = \"a b\"\n")
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("line 3: opcua.listen"), "{e}");
-        assert!(e.contains("line 4: opcua.host_name"), "{e}");
-    }
-
-    #[test]
-    fn the_certificate_subject_is_checked_with_its_lines() {
-        let e = parse(
-            "[opcua]\nenabled = true\ncertificate_organization = \"A, B\"\ncertificate_country = \"Germany\"\ncertificate_days = 0\n",
-        )
-        .unwrap_err()
-        .to_string();
-        assert!(e.contains("line 3: opcua.certificate_organization"), "{e}");
-        assert!(e.contains("line 4: opcua.certificate_country"), "{e}");
-        assert!(e.contains("line 5: opcua.certificate_days"), "{e}");
-        // A good subject: the only problem left is the missing machines.
-        let e = parse(
-            "[opcua]\nenabled = true\ncertificate_organization = \"Werk Süd\"\ncertificate_country = \"DE\"\n",
-        )
-        .unwrap_err()
-        .to_string();
-        assert!(!e.contains("opcua."), "{e}");
+    fn every_problem_names_its_key_and_an_off_section_has_none() {
+        let bad = OpcUaSection {
+            enabled: true,
+            listen: SocketAddr::from(([127, 0, 0, 1], 0)),
+            host_name: Some("a b".into()),
+            certificate_organization: "A, B".into(),
+            certificate_country: "Germany".into(),
+            certificate_days: 0,
+            ..OpcUaSection::default()
+        };
+        let keys: Vec<String> = bad.problems().into_iter().map(|p| p.key).collect();
+        assert_eq!(
+            keys,
+            [
+                "opcua.host_name",
+                "opcua.certificate_organization",
+                "opcua.certificate_country",
+                "opcua.certificate_days",
+                "opcua.listen",
+            ]
+        );
+        for p in bad.problems() {
+            assert!(p.message.starts_with(&format!("{}: ", p.key)), "{p:?}");
+        }
+        let off = OpcUaSection {
+            enabled: false,
+            ..bad
+        };
+        assert_eq!(off.problems(), []);
+        assert_eq!(OpcUaSection::default().host(), "127.0.0.1");
     }
 }

@@ -1,43 +1,41 @@
 //! The methods: `Rollback` and `AcknowledgeEvent` go the service's own write path (the
-//! same checks, command to the machine's loop and audit row as the HTTP API's writes), for
-//! the [`Action`] each is, with its role; `GetLatestResult` and `GetResultById` read the
-//! history store.
+//! same checks, command to the machine's loop and audit row as the HTTP API's writes,
+//! through the [`Service`] port), for the [`Write`] each is, with the role the service
+//! gives it; `GetLatestResult` and `GetResultById` read the history store.
 
-use crate::names::{FeatureName, MachineName};
+use camloop_core::names::{FeatureName, MachineName};
 use opcua::types::{DataTypeId, DateTime, StatusCode, Variant};
 use tracing::{info, warn};
 
-use super::auth::OPCUA_CLIENT;
 use super::events::RowEventId;
 use super::space::Method;
-use crate::service::action::Action;
-use crate::service::command::{self, AckError, Caller, WriteError};
-use crate::service::machine::StoreHandle;
-use crate::store::{AckOutcome, HistoryFilter, MeasurementId, MeasurementSummary, StoreError};
+use crate::port::{AckRefused, Caller, Refusal, Service, Write, WriteRefused};
 use camloop_loop::{CommandError, MachineCommand, TableVersion};
+use camloop_store::{
+    AckOutcome, HistoryFilter, MeasurementId, MeasurementSummary, Store, StoreError,
+};
 
-/// The action a method is, for the writes (reads need no role beyond the session's).
-fn action(method: Method) -> Option<Action> {
+/// The write a method is (reads need no role beyond the session's).
+fn write_of(method: Method) -> Option<Write> {
     match method {
-        Method::Rollback => Some(Action::Rollback),
-        Method::AcknowledgeEvent => Some(Action::Acknowledge),
+        Method::Rollback => Some(Write::Rollback),
+        Method::AcknowledgeEvent => Some(Write::Acknowledge),
         Method::GetLatestResult | Method::GetResultById => None,
     }
 }
 
 /// The history store, or `BadResourceUnavailable` while the database is down.
-async fn store_of(store: &StoreHandle) -> Result<crate::store::Store, StatusCode> {
-    store
-        .read()
+async fn store_of(service: &dyn Service) -> Result<Store, StatusCode> {
+    service
+        .store()
         .await
-        .clone()
         .ok_or(StatusCode::BadResourceUnavailable)
 }
 
 /// Who called, as the service's writes know callers: the user as stored now (a user
 /// disabled or demoted since sign-in is refused).
-async fn caller(w: command::Writes<'_>, user: &str) -> Result<Caller, StatusCode> {
-    let store = store_of(w.store).await?;
+async fn caller(w: &dyn Service, user: &str) -> Result<Caller, StatusCode> {
+    let store = store_of(w).await?;
     let user = store
         .user(user)
         .await
@@ -45,16 +43,15 @@ async fn caller(w: command::Writes<'_>, user: &str) -> Result<Caller, StatusCode
         .filter(|u| u.disabled_at_ms.is_none())
         .ok_or(StatusCode::BadUserAccessDenied)?;
     Ok(Caller {
-        actor: user.name,
-        role: Some(user.role),
-        client: OPCUA_CLIENT.to_string(),
+        user: user.name,
+        role: user.role,
     })
 }
 
 /// Runs `method` of `machine` for the session's user (`None`: anonymous); a write refused
 /// `BadUserAccessDenied` is audited (see `super::auth::refused_write`).
 pub(crate) async fn call(
-    w: command::Writes<'_>,
+    w: &dyn Service,
     user: Option<&str>,
     client: &str,
     machine: &str,
@@ -69,15 +66,15 @@ pub(crate) async fn call(
 }
 
 async fn call_as(
-    w: command::Writes<'_>,
+    w: &dyn Service,
     user: Option<&str>,
     client: &str,
     machine: &str,
     method: Method,
     args: &[Variant],
 ) -> Result<Vec<Variant>, StatusCode> {
-    let Some(action) = action(method) else {
-        return read_method(w.store, machine, method, args).await;
+    let Some(write) = write_of(method) else {
+        return read_method(w, machine, method, args).await;
     };
     let Some(user) = user else {
         warn!(
@@ -89,8 +86,8 @@ async fn call_as(
         return Err(StatusCode::BadUserAccessDenied);
     };
     let caller = caller(w, user).await?;
-    if !action.allowed(caller.role) {
-        let needed = action.role();
+    let needed = w.needed_role(write);
+    if caller.role < needed {
         warn!(user, machine, method = method.name(), client, %needed, "OPC UA: write refused, role too low");
         return Err(StatusCode::BadUserAccessDenied);
     }
@@ -108,7 +105,7 @@ async fn call_as(
 }
 
 async fn rollback(
-    w: command::Writes<'_>,
+    w: &dyn Service,
     caller: &Caller,
     machine: &str,
     args: &[Variant],
@@ -120,13 +117,18 @@ async fn rollback(
     let machine = MachineName::new(machine).map_err(|_| StatusCode::BadInvalidArgument)?;
     let lobe = FeatureName::new(feature.as_ref()).map_err(|_| StatusCode::BadInvalidArgument)?;
     // As the API answers: an unknown machine or feature before a version out of range.
-    if !w.machines.get(&machine).is_some_and(|f| f.contains(&lobe)) {
+    if !w
+        .machines()
+        .get(&machine)
+        .is_some_and(|f| f.contains(&lobe))
+    {
         warn!(machine = %machine, feature = %lobe, "OPC UA: write not carried out: no such machine or feature");
         return Err(StatusCode::BadNotFound);
     }
     let version = TableVersion::from_i64(version).map_err(|_| StatusCode::BadInvalidArgument)?;
     let rollback = MachineCommand::Rollback { lobe, version };
-    let done = command::write(w, caller, &machine, rollback)
+    let done = w
+        .write(caller, &machine, rollback)
         .await
         .map_err(write_status)?;
     Ok(vec![
@@ -136,7 +138,7 @@ async fn rollback(
 }
 
 async fn acknowledge(
-    w: command::Writes<'_>,
+    w: &dyn Service,
     caller: &Caller,
     machine: &str,
     args: &[Variant],
@@ -150,7 +152,7 @@ async fn acknowledge(
         Some(v) => int(v).ok_or(StatusCode::BadTypeMismatch)?,
         None => return Err(StatusCode::BadArgumentsMissing),
     };
-    let outcome = command::acknowledge(w, caller, &machine, id).await;
+    let outcome = w.acknowledge(caller, &machine, id).await;
     match outcome {
         // The same words as the audit row's reason.
         Ok(AckOutcome::Acknowledged) => Ok(vec![Variant::from(format!("event {id} acknowledged"))]),
@@ -164,9 +166,9 @@ async fn acknowledge(
         Err(e) => {
             warn!(machine = %machine, id, error = %e, "OPC UA: write not carried out");
             Err(match e {
-                AckError::Forbidden { .. } => StatusCode::BadUserAccessDenied,
-                AckError::StoreUnavailable => StatusCode::BadResourceUnavailable,
-                AckError::Store(e) => store_status(&e),
+                AckRefused::Forbidden { .. } => StatusCode::BadUserAccessDenied,
+                AckRefused::StoreUnavailable => StatusCode::BadResourceUnavailable,
+                AckRefused::Store(e) => store_status(&e),
             })
         }
     }
@@ -222,7 +224,7 @@ pub(crate) fn check_arguments(method: Method, args: &[Variant]) -> Result<(), Ar
 /// those (see [`super::events::EventIds`]). Needs no memory of this process: an EventId
 /// from before a restart names the same row.
 async fn stored_event_id(
-    w: command::Writes<'_>,
+    w: &dyn Service,
     machine: &MachineName,
     event_id: &[u8],
 ) -> Result<i64, StatusCode> {
@@ -230,8 +232,8 @@ async fn stored_event_id(
         warn!(machine = %machine, "OPC UA: AcknowledgeEvent: an EventId of no history row (a result's, or not this server's)");
         return Err(StatusCode::BadNotFound);
     };
-    let store = store_of(w.store).await?;
-    let filter = crate::store::EventFilter {
+    let store = store_of(w).await?;
+    let filter = camloop_store::EventFilter {
         machine: Some(machine.clone()),
         since_ms: Some(named.at),
         until_ms: named
@@ -239,7 +241,7 @@ async fn stored_event_id(
             .checked_add(jiff::SignedDuration::from_millis(1))
             .ok(),
         level: None,
-        limit: crate::store::MAX_PAGE,
+        limit: camloop_store::MAX_PAGE,
     };
     let mut events = store.events(&filter).await.map_err(|e| store_status(&e))?;
     // Newest first from the store: the occurrence counts in the rows' order.
@@ -267,15 +269,13 @@ fn int(v: &Variant) -> Option<i64> {
 
 /// The OPC UA status of a write the service did not carry out (its code is logged: a status
 /// says less).
-fn write_status(e: WriteError) -> StatusCode {
-    warn!(code = e.code(), message = %e, "OPC UA: write not carried out");
-    match e {
-        WriteError::Forbidden { .. } => StatusCode::BadUserAccessDenied,
-        WriteError::NotConfigured { .. } | WriteError::NotGround { .. } => StatusCode::BadNotFound,
-        WriteError::Elsewhere { .. }
-        | WriteError::NotRunning { .. }
-        | WriteError::Stopped { .. } => StatusCode::BadResourceUnavailable,
-        WriteError::Command { error, .. } => match error {
+fn write_status(e: WriteRefused) -> StatusCode {
+    warn!(code = e.code, message = %e, "OPC UA: write not carried out");
+    match e.kind {
+        Refusal::Forbidden => StatusCode::BadUserAccessDenied,
+        Refusal::NotFound => StatusCode::BadNotFound,
+        Refusal::Unavailable => StatusCode::BadResourceUnavailable,
+        Refusal::Command(error) => match error {
             CommandError::VersionNotFound { .. } => StatusCode::BadNotFound,
             CommandError::Refused { .. } => StatusCode::BadInvalidState,
             CommandError::StoreUnavailable { .. }
@@ -303,12 +303,12 @@ fn store_status(e: &StoreError) -> StatusCode {
 }
 
 async fn read_method(
-    store: &StoreHandle,
+    service: &dyn Service,
     machine: &str,
     method: Method,
     args: &[Variant],
 ) -> Result<Vec<Variant>, StatusCode> {
-    let store = store_of(store).await?;
+    let store = store_of(service).await?;
     let unavailable = |_| StatusCode::BadResourceUnavailable;
     let summary = match (method, args.first()) {
         (Method::GetLatestResult, Some(Variant::String(feature))) => {
@@ -320,8 +320,8 @@ async fn read_method(
                 (Ok(machine), Ok(lobe)) => {
                     let filter = HistoryFilter {
                         lobe: Some(lobe),
-                        masters: crate::store::MasterRuns::Excluded,
-                        stage: Some(crate::store::MeasurementStage::Final),
+                        masters: camloop_store::MasterRuns::Excluded,
+                        stage: Some(camloop_store::MeasurementStage::Final),
                         ..HistoryFilter::new(machine, 1)
                     };
                     let page = store

@@ -3,7 +3,7 @@
 //! `Results` folder after the OPC 40001-101 pattern, the two write methods, and the event
 //! types camloop raises. Node ids are strings in camloop's namespace, built here only.
 
-use crate::names::{FeatureName, MachineName};
+use camloop_core::names::{FeatureName, MachineName};
 use opcua::server::address_space::{
     AccessLevel, AddressSpace, EventNotifier, MethodBuilder, ObjectBuilder, ObjectTypeBuilder,
     VariableBuilder,
@@ -23,12 +23,12 @@ const UNECE_URI: &str = "http://www.opcfoundation.org/UA/units/un/cefact";
 
 /// One machine as the address space shows it.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub(crate) struct MachineLayout {
-    pub(crate) name: MachineName,
+pub struct MachineLayout {
+    pub name: MachineName,
     /// The recipe (part) name.
-    pub(crate) recipe: String,
+    pub recipe: String,
     /// Its features in grinding order.
-    pub(crate) features: Vec<FeatureName>,
+    pub features: Vec<FeatureName>,
 }
 
 /// Which value of a feature's result object a variable holds.

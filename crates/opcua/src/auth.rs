@@ -1,5 +1,5 @@
 //! Who may do what over OPC UA: users are camloop's users (argon2 hashes in the store),
-//! checked by the sign-in the HTTP form uses too (`service::sign_in`: lockout, bounded
+//! checked by the sign-in the HTTP form uses too (the [`Service`] port's: lockout, bounded
 //! hashing), and only on a
 //! signed and encrypted endpoint; anonymous clients are admitted only when
 //! `opcua.anonymous_read` allows it, and may then only browse, read and subscribe.
@@ -20,39 +20,32 @@ use opcua::types::{
     Error, MessageSecurityMode, NodeId, StatusCode, UAString, UserTokenPolicy, UserTokenType,
 };
 
-use crate::auth::{Client, token_digest};
-use crate::digest::Sha256;
-use crate::service::app::AppState;
-use crate::service::command;
-use crate::service::machine::StoreHandle;
-use crate::service::sign_in::{self, SignIn};
-use crate::store::{AuditEntry, AuditResult, Role, Store};
+use crate::port::{Service, SignIn};
+use camloop_core::digest::Sha256;
+use camloop_store::{AuditEntry, AuditResult, Role, Store};
 
 /// The client address OPC UA failures and writes are audited under: the OPC UA stack does
 /// not tell the server its peer's address, so every OPC UA client shares this one (distinct
 /// from the HTTP side's unknown address, 0.0.0.0). The lockout counts them apart from every
-/// HTTP client (`crate::auth::Client::OpcUa`).
-pub(crate) const OPCUA_CLIENT: IpAddr = IpAddr::V6(Ipv6Addr::UNSPECIFIED);
+/// HTTP client (the service's lockout has a client of its own for OPC UA).
+pub const OPCUA_CLIENT: IpAddr = IpAddr::V6(Ipv6Addr::UNSPECIFIED);
 
 /// Checks identity tokens against camloop's users, and every read and call against the
 /// user's state now (see [`SignedIn`]).
 pub(crate) struct Users {
-    app: AppState,
+    service: Arc<dyn Service>,
     anonymous_read: bool,
     signed_in: Arc<SignedIn>,
 }
 
 impl Users {
-    /// The users of `app`'s store; a task checks the signed-in users' state every
+    /// The users of the service's store; a task checks the signed-in users' state every
     /// [`RECHECK_EVERY`] while these users are in use.
-    pub(crate) fn new(app: AppState, anonymous_read: bool) -> Self {
+    pub(crate) fn new(service: Arc<dyn Service>, anonymous_read: bool) -> Self {
         let signed_in = Arc::new(SignedIn::default());
-        tokio::spawn(keep_rechecking(
-            Arc::downgrade(&signed_in),
-            app.store.clone(),
-        ));
+        tokio::spawn(keep_rechecking(Arc::downgrade(&signed_in), service.clone()));
         Self {
-            app,
+            service,
             anonymous_read,
             signed_in,
         }
@@ -76,7 +69,7 @@ pub(crate) struct SignedIn {
 
 impl SignedIn {
     fn signed_in(&self, name: &str, password_hash: &str) {
-        write(&self.users).insert(name.to_string(), token_digest(password_hash));
+        write(&self.users).insert(name.to_string(), hash_digest(password_hash));
         write(&self.revoked).remove(name);
     }
 
@@ -100,7 +93,7 @@ impl SignedIn {
         for (name, digest) in users {
             let allowed = match store.user(&name).await {
                 Ok(Some(u)) => {
-                    u.disabled_at_ms.is_none() && token_digest(&u.password_hash) == digest
+                    u.disabled_at_ms.is_none() && hash_digest(&u.password_hash) == digest
                 }
                 Ok(None) => false,
                 Err(_) => continue,
@@ -120,15 +113,14 @@ fn write<T>(lock: &RwLock<T>) -> std::sync::RwLockWriteGuard<'_, T> {
 }
 
 /// Rechecks every [`RECHECK_EVERY`] until the users are dropped (the server stopped).
-async fn keep_rechecking(signed_in: Weak<SignedIn>, store: StoreHandle) {
+async fn keep_rechecking(signed_in: Weak<SignedIn>, service: Arc<dyn Service>) {
     let mut tick = tokio::time::interval(RECHECK_EVERY);
     loop {
         tick.tick().await;
         let Some(signed_in) = signed_in.upgrade() else {
             return;
         };
-        let current = store.read().await.clone();
-        if let Some(s) = current {
+        if let Some(s) = service.store().await {
             signed_in.recheck(&s).await;
         }
     }
@@ -162,15 +154,11 @@ impl AuthManager for Users {
                 "user names are refused on an unsecured endpoint: use Basic256Sha256 SignAndEncrypt",
             ));
         }
-        let signed_in = sign_in::password_sign_in(
-            &self.app,
-            username,
-            password.get(),
-            Client::OpcUa,
-            OPCUA_CLIENT,
-        )
-        .await
-        .map_err(|e| Error::new(StatusCode::BadInternalError, e.to_string()))?;
+        let signed_in = self
+            .service
+            .sign_in(username, password.get())
+            .await
+            .map_err(|e| Error::new(StatusCode::BadInternalError, e.to_string()))?;
         match signed_in {
             SignIn::Ok(user) => {
                 tracing::info!(user = %user.name, role = %user.role, "OPC UA: user signed in");
@@ -178,7 +166,7 @@ impl AuthManager for Users {
                 Ok(UserToken(user.name))
             }
             SignIn::Wrong => Err(rejected("wrong user name or password")),
-            SignIn::Refused(r) => Err(rejected(&r.to_string())),
+            SignIn::Refused(why) => Err(rejected(&why)),
         }
     }
 
@@ -226,19 +214,19 @@ impl AuthManager for Users {
 /// Audits a write refused `BadUserAccessDenied` (anonymous, a role too low, a user disabled
 /// since sign-in), within the trail's budget for refusals of OPC UA clients.
 pub(crate) async fn refused_write(
-    w: command::Writes<'_>,
+    service: &dyn Service,
     user: Option<&str>,
     machine: &str,
     method: &str,
 ) {
     let entry = AuditEntry {
-        at_ms: crate::clock::now(),
+        at_ms: jiff::Timestamp::now(),
         actor: user.unwrap_or("anonymous").to_string(),
         // The role the user held is not known here (it may be why): the lowest.
         role: Role::Viewer,
         client: OPCUA_CLIENT.to_string(),
         action: "refused".into(),
-        machine: Some(crate::names::quote(machine)),
+        machine: Some(camloop_core::names::quote(machine)),
         feature: None,
         version: None,
         before: None,
@@ -246,12 +234,12 @@ pub(crate) async fn refused_write(
         result: AuditResult::Refused,
         reason: format!("OPC UA {method}: BadUserAccessDenied"),
     };
-    match w.audit_seal.within_refusal_budget(entry) {
-        Some(entry) => command::record_audit(w, entry).await,
-        None => w
-            .metrics
-            .update_access(|a| a.refusals_unrecorded_total += 1),
-    }
+    service.audit_refusal(entry).await;
+}
+
+/// The digest the signed-in users are remembered by: of the password hash, never the hash.
+fn hash_digest(password_hash: &str) -> Sha256 {
+    Sha256::of(password_hash.as_bytes())
 }
 
 /// User names only where the channel itself signs and encrypts: there the password, clear

@@ -16,12 +16,12 @@ use std::sync::Arc;
 use super::events::Listeners;
 use super::methods::ArgumentError;
 use super::space::{self, Ids, MachineLayout, Method};
-use crate::service::app::AppState;
+use crate::port::Service;
 
 /// What the node manager is built from.
 pub(crate) struct Builder {
     pub(crate) layout: Vec<MachineLayout>,
-    pub(crate) app: AppState,
+    pub(crate) service: Arc<dyn Service>,
     pub(crate) listeners: Arc<Listeners>,
 }
 
@@ -29,7 +29,7 @@ pub(crate) struct CamloopNodes {
     namespace: NamespaceMetadata,
     ids: Ids,
     layout: Vec<MachineLayout>,
-    app: AppState,
+    service: Arc<dyn Service>,
     listeners: Arc<Listeners>,
 }
 
@@ -58,7 +58,7 @@ impl InMemoryNodeManagerImplBuilder for Builder {
             },
             ids: Ids { ns },
             layout: self.layout,
-            app: self.app,
+            service: self.service,
             listeners: self.listeners,
         }
     }
@@ -145,7 +145,7 @@ impl InMemoryNodeManagerImpl for CamloopNodes {
                 }
             }
             let done = super::methods::call(
-                self.app.writes(),
+                self.service.as_ref(),
                 user.as_deref(),
                 &client,
                 &machine,
