@@ -337,4 +337,33 @@ mod tests {
         );
         assert_eq!(repeatability_um("not json"), None);
     }
+
+    /// Read from the core's own report as a measurement stores it: a field renamed in the
+    /// core fails here, not as events without repeatability in the field.
+    #[test]
+    fn repeatability_is_read_from_the_cores_report() {
+        use crate::core::analysis::{LobeOptions, analyse_lobe};
+        use crate::core::measure::AveragedMeasurement;
+        let n = 360;
+        let nominal = |psi: f64| {
+            let r = psi.to_radians();
+            (2.0 + r.cos(), -r.sin() * std::f64::consts::PI / 180.0)
+        };
+        // The gauge's spread differs per angle; its largest (0.7 µm) is the one reported.
+        let spread: Vec<f64> = (0..n).map(|k| if k == 90 { 0.7 } else { 0.2 }).collect();
+        let avg = AveragedMeasurement {
+            origin: "test".into(),
+            points_per_rev: n as u32,
+            mean_lift_mm: (0..n)
+                .map(|k| nominal(k as f64 * 360.0 / n as f64).0)
+                .collect(),
+            repeatability_std_um: spread,
+            repeatability_range_um: vec![0.5; n],
+            revolutions_used: vec![0, 1, 2],
+            dropped_revolutions: Vec::new(),
+        };
+        let report = analyse_lobe(&avg, &nominal, &LobeOptions::default()).unwrap();
+        let stored = serde_json::to_string(&report).unwrap();
+        assert_eq!(repeatability_um(&stored), Some(0.7));
+    }
 }
