@@ -44,6 +44,8 @@ pub(crate) struct SimStation {
     /// The nominal lift and where the feature's 0° is on the shaft: what a master reads.
     pub nominal: crate::core::lift::LiftTable,
     pub phase_deg: f64,
+    /// The following axis' name in its programs (tells X's table from C's on the plan).
+    pub x_axis: String,
 }
 
 pub(crate) struct SimSource {
@@ -74,6 +76,7 @@ impl SimSource {
                 table_wheel_radius_bits: f.table_wheel_radius(),
                 nominal: f.setup().nominal.clone(),
                 phase_deg: f.setup().phase_deg,
+                x_axis: f.setup().program.following_axis.clone(),
             })
             .collect()
     }
