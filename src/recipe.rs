@@ -247,10 +247,10 @@ pub enum FeatureTolerances {
     },
 }
 
-/// The plan's table program in the whole cycle: the constant-speed one's name with `_V`
+/// The plan's table program in the whole cycle: the constant-speed one's name with `_P`
 /// (both are on the share at once, each defining its own tables).
 pub fn plan_program_name(table_program: &str) -> String {
-    format!("{table_program}_V")
+    format!("{table_program}_P")
 }
 
 impl FeatureSetup {
