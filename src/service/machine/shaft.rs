@@ -46,7 +46,7 @@ struct PlannedMain {
     va_speeds_rpm: Mutex<BTreeMap<String, f64>>,
     /// With the whole cycle: its stages and the features it grinds (`stations` is then
     /// empty: the cycle program is made from these).
-    whole: Option<WholePlanned>,
+    whole: Option<Box<WholePlanned>>,
 }
 
 #[derive(Debug)]
@@ -109,10 +109,10 @@ impl MainProgram {
                     stations: Vec::new(),
                     clear_x_mm,
                     va_speeds_rpm: Mutex::new(BTreeMap::new()),
-                    whole: Some(WholePlanned {
+                    whole: Some(Box::new(WholePlanned {
                         cycle: cycle.clone(),
                         setups: setups.to_vec(),
-                    }),
+                    })),
                 })
             } else {
                 MainKind::Fixed(text)
