@@ -8,13 +8,19 @@
 //! `--nocapture`.
 
 use crate::in_process_figures::{Figures, row, run, run_shafts};
+use camloop::core::program::check_ending;
+use std::collections::BTreeMap;
 
 const LOBES: [&str; 8] = ["IN1", "EX1", "IN2", "EX2", "IN3", "EX3", "IN4", "EX4"];
 const PLAN: &str = "demo-camshaft-in-process-plan.toml";
 
 /// Figures of `file` on the plan against `constant` (the same cycle at constant speed):
 /// with and without the measurement, and one shaft at constant speed for its cycle time.
-async fn figures(file: &str, constant: &str, features: &[&str]) -> (Figures, Figures, String) {
+async fn figures(
+    file: &str,
+    constant: &str,
+    (program, features): (&str, &[&str]),
+) -> (Figures, Figures, String) {
     let with = run(file, features, true).await;
     let without = run(file, features, false).await;
     // One shaft is enough for the constant-speed cycle's time (the program is the same for
@@ -45,6 +51,8 @@ async fn figures(file: &str, constant: &str, features: &[&str]) -> (Figures, Fig
     // The same measurement either way; the plan's stages are shorter.
     assert!((with.measure_s - constant.measure_s).abs() < 1e-9, "{out}");
     assert!(with.grind_s < constant.grind_s, "{out}");
+    both_programs_in_step(&with.share, program, features);
+    safe_to_load(&with.share["CAMLOOP_GRIND.MPF"]);
     (with, without, out)
 }
 
@@ -55,8 +63,7 @@ async fn figures(file: &str, constant: &str, features: &[&str]) -> (Figures, Fig
 /// binds on the demo lobes) against 30 rpm, for the finish and both spark-outs.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn on_the_speed_plan_the_first_shaft_is_right_through_the_service() {
-    let (with, _, _) = figures(PLAN, "demo-camshaft-in-process.toml", &LOBES).await;
-    both_programs_in_step(&with.share);
+    figures(PLAN, "demo-camshaft-in-process.toml", ("DEMO_CAM", &LOBES)).await;
 }
 
 /// The same on the demo crankshaft: its plan runs at 44.7 rpm where the removal limit holds
@@ -66,15 +73,16 @@ async fn on_the_speed_plan_the_first_crankshaft_is_right_through_the_service() {
     figures(
         "demo-crankshaft-in-process-plan.toml",
         "demo-crankshaft-in-process.toml",
-        &["P1", "P2", "P3", "P4"],
+        ("DEMO_CRANK", &["P1", "P2", "P3", "P4"]),
     )
     .await;
 }
 
-/// Each lobe's newest version on the share is both its programs, from the same version,
-/// their tables numbered in step in their three pairs (lobe k from 0: X over C in 1 + 2k
-/// and the next, C over VA 17 + 2k, X over VA 33 + 2k), and the main program calls both.
-fn both_programs_in_step(share: &std::collections::BTreeMap<String, String>) {
+/// Each feature's newest version on the share is both its programs, from the same version,
+/// their tables numbered in step in their three pairs (n features, feature k from 0: X over
+/// C in 1 + 2k and the next, C over VA 1 + 2n + 2k, X over VA 1 + 4n + 2k), and the main
+/// program calls both.
+fn both_programs_in_step(share: &BTreeMap<String, String>, program: &str, features: &[&str]) {
     let version = |text: &str| {
         text.lines()
             .find_map(|l| l.strip_prefix("; table version: "))
@@ -84,26 +92,62 @@ fn both_programs_in_step(share: &std::collections::BTreeMap<String, String>) {
         let at = text.find(&format!("CTABDEF({axes},")).unwrap() + axes.len() + 9;
         text[at..].split(',').next().unwrap().parse().unwrap()
     };
+    let n = features.len() as u32;
     let main = &share["CAMLOOP_GRIND.MPF"];
-    for (k, lobe) in LOBES.iter().enumerate() {
-        let constant = &share[&format!("DEMO_CAM_{lobe}.SPF")];
-        let planned = &share[&format!("DEMO_CAM_{lobe}_P.SPF")];
+    for (k, lobe) in features.iter().enumerate() {
+        let constant = &share[&format!("{program}_{lobe}.SPF")];
+        let planned = &share[&format!("{program}_{lobe}_P.SPF")];
         assert!(version(constant).is_some(), "{lobe}: {constant}");
         assert_eq!(version(constant), version(planned), "{lobe}");
         let k = k as u32;
         let in_pair = [
             number(constant, "X,C") - (1 + 2 * k),
-            number(planned, "C,VA") - (17 + 2 * k),
-            number(planned, "X,VA") - (33 + 2 * k),
+            number(planned, "C,VA") - (1 + 2 * n + 2 * k),
+            number(planned, "X,VA") - (1 + 4 * n + 2 * k),
         ];
         assert!(
             in_pair == [0, 0, 0] || in_pair == [1, 1, 1],
             "{lobe}: {in_pair:?}"
         );
-        assert!(main.contains(&format!("DEMO_CAM_{lobe}(CL_TNO)")), "{lobe}");
         assert!(
-            main.contains(&format!("DEMO_CAM_{lobe}_P(CL_TNO,CL_TNO_C)")),
+            main.contains(&format!("{program}_{lobe}(CL_TNO)")),
             "{lobe}"
+        );
+        assert!(
+            main.contains(&format!("{program}_{lobe}_P(CL_TNO,CL_TNO_C)")),
+            "{lobe}"
+        );
+    }
+}
+
+/// The main program the service wrote is safe to load as written: it ends retracted with
+/// spindle and coolant off (the core's ending check), and C turns uncoupled (the
+/// measurement's revolutions, the plan's start) only after X went back to the clear X.
+fn safe_to_load(main: &str) {
+    let clear_line = main
+        .lines()
+        .find(|l| l.contains("; retract clear of the part"))
+        .unwrap_or_else(|| panic!("no final retract\n{main}"));
+    let clear = clear_line
+        .strip_prefix("G90 G0 X=")
+        .and_then(|r| r.split_whitespace().next())
+        .unwrap_or_else(|| panic!("{clear_line}"));
+    check_ending(main, "X", clear.parse().unwrap()).unwrap();
+    let all: Vec<&str> = main.lines().collect();
+    let turns: Vec<usize> = (0..all.len())
+        .filter(|&i| all[i].starts_with("POS[C]"))
+        .collect();
+    assert!(!turns.is_empty(), "{main}");
+    for i in turns {
+        let last_x = all[..i]
+            .iter()
+            .rev()
+            .find(|l| l.contains(" X="))
+            .unwrap_or_else(|| panic!("no X move before line {}", i + 1));
+        assert!(
+            last_x.starts_with(&format!("G90 G0 X={clear}")),
+            "C turns at line {} after {last_x:?}",
+            i + 1
         );
     }
 }
