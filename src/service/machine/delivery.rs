@@ -11,7 +11,7 @@ use crate::clock::now;
 use crate::core::compensate::GuardedTable;
 use crate::core::digest::Sha256;
 use crate::core::learn::LearningState;
-use crate::core::program::{Provenance, split_program_files};
+use crate::core::program::{Provenance, expected_program_files};
 use crate::share::{ProgramFile, PushRequest};
 use crate::store::{EventLevel, VersionStatus};
 use camloop_loop::machine::{DeliveryError, Finished, Program, TableDone, TableOrder};
@@ -147,30 +147,12 @@ impl FeatureLoop {
             "{}.SPF",
             crate::recipe::plan_program_name(&self.setup.program.name)
         );
-        let files = split_program_files(&text)
+        let files = expected_program_files(&text, &[self.program_file.as_str(), &plan_file])
             .map_err(|e| anyhow::anyhow!("{}: the version's programs: {e}", self.setup.label))?;
-        let expected = [self.program_file.clone(), plan_file];
-        let names: Vec<&str> = files.iter().map(|f| f.file.as_str()).collect();
-        // Program names are case-insensitive on the control.
-        let same = names.len() == 2
-            && names
-                .iter()
-                .zip(&expected)
-                .all(|(a, b)| a.eq_ignore_ascii_case(b));
-        if !same {
-            anyhow::bail!(
-                "{}: the version's programs are {}, not {} then {}",
-                self.setup.label,
-                names.join(", "),
-                expected[0],
-                expected[1]
-            );
-        }
         Ok(files
             .into_iter()
-            .zip(expected)
-            .map(|(f, name)| ProgramFile {
-                name,
+            .map(|f| ProgramFile {
+                name: f.file,
                 text: f.text.to_string(),
             })
             .collect())

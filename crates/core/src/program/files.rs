@@ -23,6 +23,11 @@ pub enum ProgramFilesError {
     BadHeader { line: usize, header: String },
     #[error("no program in the text")]
     Empty,
+    #[error("the programs are {}, not {}", .found.join(", "), .expected.join(" then "))]
+    NotExpected {
+        found: Vec<String>,
+        expected: Vec<String>,
+    },
 }
 
 /// The programs of `text`, in order.
@@ -62,6 +67,34 @@ pub fn split_program_files(text: &str) -> Result<Vec<ProgramText<'_>>, ProgramFi
         .map(|((file, start), end)| ProgramText {
             file,
             text: &text[start..end],
+        })
+        .collect())
+}
+
+/// The programs of `text`, which must be the files `expected` in that order (program names
+/// are case-insensitive on the control): each named as `expected` names it.
+pub fn expected_program_files<'t>(
+    text: &'t str,
+    expected: &[&str],
+) -> Result<Vec<ProgramText<'t>>, ProgramFilesError> {
+    let files = split_program_files(text)?;
+    let same = files.len() == expected.len()
+        && files
+            .iter()
+            .zip(expected)
+            .all(|(f, e)| f.file.eq_ignore_ascii_case(e));
+    if !same {
+        return Err(ProgramFilesError::NotExpected {
+            found: files.into_iter().map(|f| f.file).collect(),
+            expected: expected.iter().map(|e| e.to_string()).collect(),
+        });
+    }
+    Ok(files
+        .into_iter()
+        .zip(expected)
+        .map(|(f, e)| ProgramText {
+            file: e.to_string(),
+            text: f.text,
         })
         .collect())
 }
@@ -121,6 +154,31 @@ mod tests {
             })
         );
         assert_eq!(split_program_files(""), Err(ProgramFilesError::Empty));
+    }
+
+    #[test]
+    fn only_the_files_expected_in_their_order_are_taken() {
+        let text = "%_N_cam_SPF\nPROC CAM\n%_N_CAM_P_SPF\nPROC CAM_P\n";
+        let files = expected_program_files(text, &["CAM.SPF", "CAM_P.SPF"]).unwrap();
+        assert_eq!(files[0].file, "CAM.SPF", "named as expected, case aside");
+        assert_eq!(files[1].text, "%_N_CAM_P_SPF\nPROC CAM_P\n");
+        for expected in [
+            &["CAM_P.SPF", "CAM.SPF"][..],
+            &["CAM.SPF"][..],
+            &["CAM.SPF", "CAM_P.SPF", "MAIN.MPF"][..],
+        ] {
+            let e = expected_program_files(text, expected).unwrap_err();
+            assert!(
+                matches!(&e, ProgramFilesError::NotExpected { found, .. } if found == &["cam.SPF", "CAM_P.SPF"]),
+                "{e}"
+            );
+        }
+        assert_eq!(
+            expected_program_files("%_N_CAM_SPF\n", &["CAM.SPF", "CAM_P.SPF"])
+                .unwrap_err()
+                .to_string(),
+            "the programs are CAM.SPF, not CAM.SPF then CAM_P.SPF"
+        );
     }
 
     #[test]
