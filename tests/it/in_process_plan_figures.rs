@@ -51,7 +51,7 @@ async fn figures(
     // The same measurement either way; the plan's stages are shorter.
     assert!((with.measure_s - constant.measure_s).abs() < 1e-9, "{out}");
     assert!(with.grind_s < constant.grind_s, "{out}");
-    both_programs_in_step(&with.share, program, features);
+    both_programs_in_step(&with.share, program, (features, features.len()));
     safe_to_load(&with.share["CAMLOOP_GRIND.MPF"]);
     (with, without, out)
 }
@@ -78,11 +78,15 @@ async fn on_the_speed_plan_the_first_crankshaft_is_right_through_the_service() {
     .await;
 }
 
-/// Each feature's newest version on the share is both its programs, from the same version,
-/// their tables numbered in step in their three pairs (n features, feature k from 0: X over
-/// C in 1 + 2k and the next, C over VA 1 + 2n + 2k, X over VA 1 + 4n + 2k), and the main
-/// program calls both.
-fn both_programs_in_step(share: &BTreeMap<String, String>, program: &str, features: &[&str]) {
+/// Each of the first `features` (of `n` in the recipe) has its newest version on the share
+/// as both its programs, from the same version, their tables numbered in step in their
+/// three pairs (feature k from 0: X over C in 1 + 2k and the next, C over VA 1 + 2n + 2k, X
+/// over VA 1 + 4n + 2k), and the main program calls both.
+fn both_programs_in_step(
+    share: &BTreeMap<String, String>,
+    program: &str,
+    (features, n): (&[&str], usize),
+) {
     let version = |text: &str| {
         text.lines()
             .find_map(|l| l.strip_prefix("; table version: "))
@@ -92,7 +96,7 @@ fn both_programs_in_step(share: &BTreeMap<String, String>, program: &str, featur
         let at = text.find(&format!("CTABDEF({axes},")).unwrap() + axes.len() + 9;
         text[at..].split(',').next().unwrap().parse().unwrap()
     };
-    let n = features.len() as u32;
+    let n = n as u32;
     let main = &share["CAMLOOP_GRIND.MPF"];
     for (k, lobe) in features.iter().enumerate() {
         let constant = &share[&format!("{program}_{lobe}.SPF")];
@@ -150,4 +154,52 @@ fn safe_to_load(main: &str) {
             i + 1
         );
     }
+}
+
+/// A rollback with the plan in the whole cycle: the version is made again from the old
+/// version's correction as both programs (X over C, and the plan's C and X over VA), pushed
+/// together under the free numbers of all three pairs in step, so the next part's couplings
+/// take the rolled-back tables at every stage.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_rollback_on_the_plan_delivers_both_programs() {
+    use crate::service_support::post;
+    use camloop::config::Config;
+    use camloop::service::{self, RunOptions};
+    const TOKEN: &str = "let-me-write-a-token-of-32-chars";
+    let dir = tempfile::tempdir().unwrap();
+    let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
+    let recipe = crate::in_process_figures::recipe(dir.path(), PLAN, true);
+    let text = format!(
+        "[service]\nvar_dir = \"var\"\n[database]\nurl = \"{url}\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
+         [[machines]]\nname = \"CELL\"\nrecipe = \"{}\"\nshare = \"share\"\n\
+         [machines.gauge]\nkind = \"sim\"\npart_interval_ms = 1\nseed = 3\n",
+        recipe.display()
+    );
+    let env = |k: &str| (k == camloop::config::ENV_API_TOKEN).then(|| TOKEN.to_string());
+    let config = Config::parse(&text, &dir.path().join("camloop.toml"), env).unwrap();
+    let mut running = service::start(config, RunOptions::parts(2)).await.unwrap();
+    running.machines_done().await;
+    let path = "/api/v1/machines/CELL/lobes/IN1/rollback";
+    let (status, body) = post(running.http_addr, path, r#"{"version":1}"#, Some(TOKEN)).await;
+    assert_eq!(status, 200, "{body}");
+    let version = crate::service_support::json(&body)["version"]
+        .as_u64()
+        .unwrap();
+    drop(running);
+    let read = |name: &str| std::fs::read_to_string(dir.path().join("share").join(name)).unwrap();
+    let constant = read("DEMO_CAM_IN1.SPF");
+    let planned = read("DEMO_CAM_IN1_P.SPF");
+    for text in [&constant, &planned] {
+        for line in [
+            format!("; table version: v{version}"),
+            "; reason: rollback to v1".to_string(),
+        ] {
+            assert!(text.contains(&line), "{line}\n{text}");
+        }
+    }
+    let mut share = BTreeMap::new();
+    share.insert("DEMO_CAM_IN1.SPF".to_string(), constant);
+    share.insert("DEMO_CAM_IN1_P.SPF".to_string(), planned);
+    share.insert("CAMLOOP_GRIND.MPF".to_string(), read("CAMLOOP_GRIND.MPF"));
+    both_programs_in_step(&share, "DEMO_CAM", (&LOBES[..1], LOBES.len()));
 }
