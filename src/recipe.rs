@@ -217,6 +217,10 @@ pub struct FeatureSetup {
     /// With `[speed_plan] enabled`: the numbers C's table (C = f(VA)) alternates between,
     /// placed after every feature's X pair so the X numbers stay where they are.
     pub c_table_pair: Option<(u32, u32)>,
+    /// With `[speed_plan] enabled` and the whole cycle: the numbers X's table over VA
+    /// alternates between (the constant-speed stages keep X = f(C) in `table_pair`, so the
+    /// plan's X needs a pair of its own), after every feature's C pair.
+    pub plan_x_table_pair: Option<(u32, u32)>,
     pub bands: Vec<ToleranceBand>,
     /// Position in the recipe, from 1: the gauge's numeric lobe id and the grinding order.
     pub index: usize,
@@ -243,7 +247,19 @@ pub enum FeatureTolerances {
     },
 }
 
+/// The plan's table program in the whole cycle: the constant-speed one's name with `_P`
+/// (both are on the share at once, each defining its own tables).
+pub fn plan_program_name(table_program: &str) -> String {
+    format!("{table_program}_P")
+}
+
 impl FeatureSetup {
+    /// camloop's main program runs this feature's whole cycle with stages on the speed plan:
+    /// each version is two table programs (X over C, and C and X over VA).
+    pub fn plan_in_whole_cycle(&self) -> bool {
+        self.plan_x_table_pair.is_some()
+    }
+
     /// What stays fixed in this feature's loop, with the wheel the control believes in.
     pub fn lobe_loop(&self) -> LobeLoop<'_> {
         LobeLoop {
@@ -349,6 +365,7 @@ impl Recipe {
             },
             table_pair: self.table_pair(index),
             c_table_pair: self.c_table_pair(index),
+            plan_x_table_pair: self.plan_x_table_pair(index),
             bands,
             index: index + 1,
             phase_deg,
@@ -420,10 +437,27 @@ impl Recipe {
         }
     }
 
-    /// How many table numbers the features need: a pair each, two with the speed plan on.
-    fn table_numbers_needed(&self) -> u32 {
-        let pairs = if self.speed_plan.enabled { 2 } else { 1 };
+    /// How many table numbers the features need: a pair each, two with the speed plan on,
+    /// three with the plan in camloop's whole cycle (X over C and X over VA both in use).
+    pub(crate) fn table_numbers_needed(&self) -> u32 {
+        let pairs = match (self.speed_plan.enabled, self.whole_cycle()) {
+            (false, _) => 1,
+            (true, false) => 2,
+            (true, true) => 3,
+        };
         2 * pairs * self.features().count() as u32
+    }
+
+    /// camloop's main program runs the whole cycle (`[cycle] program = "whole"`).
+    pub(crate) fn whole_cycle(&self) -> bool {
+        self.cycle
+            .as_ref()
+            .is_some_and(|c| c.program == crate::core::cycle::CycleProgram::Whole)
+    }
+
+    /// The plan's table program of feature `name` in the whole cycle.
+    pub(crate) fn plan_program_name(&self, name: &str) -> String {
+        plan_program_name(&self.table_program_name(name))
     }
 
     /// The table numbers of the feature at `index` (from 0) in recipe order.
@@ -438,6 +472,14 @@ impl Recipe {
         let features = self.features().count() as u32;
         let first = self.table.table_numbers.0 + 2 * features + 2 * index as u32;
         self.speed_plan.enabled.then_some((first, first + 1))
+    }
+
+    /// X's table numbers over VA of the feature at `index` with the plan in the whole
+    /// cycle: after all the features' C pairs.
+    fn plan_x_table_pair(&self, index: usize) -> Option<(u32, u32)> {
+        let features = self.features().count() as u32;
+        let first = self.table.table_numbers.0 + 4 * features + 2 * index as u32;
+        (self.speed_plan.enabled && self.whole_cycle()).then_some((first, first + 1))
     }
 
     /// Parses and checks a recipe; `file` names it in errors.

@@ -414,6 +414,7 @@ fn flag_setup(
         },
         table_pair: (1, 2),
         c_table_pair: None,
+        plan_x_table_pair: None,
         bands: Vec::new(),
         index: 1,
         phase_deg: 0.0,

@@ -95,10 +95,12 @@ impl Recipe {
                 "table.table_numbers = [{first}, {last}]: must be first ≥ 1 and last ≥ first"
             ));
         } else if last - first + 1 < self.table_numbers_needed() {
-            let with_plan = if self.speed_plan.enabled {
-                " (an X and a C pair each, with the speed plan on)"
-            } else {
-                ""
+            let with_plan = match (self.speed_plan.enabled, self.whole_cycle()) {
+                (true, true) => {
+                    " (an X pair over C, a C and an X pair over VA each, with the speed plan in the whole cycle)"
+                }
+                (true, false) => " (an X and a C pair each, with the speed plan on)",
+                (false, _) => "",
             };
             p.push(format!(
                 "table.table_numbers = [{first}, {last}]: {features} features need {} table numbers{with_plan}, the range holds {}",
@@ -115,6 +117,15 @@ impl Recipe {
                 crate::core::program::validate_program_name(&self.table_program_name(name))
             {
                 p.push(format!("program.name with feature {name}: {e}"));
+            }
+            if self.speed_plan.enabled
+                && self.whole_cycle()
+                && let Err(e) =
+                    crate::core::program::validate_program_name(&self.plan_program_name(name))
+            {
+                p.push(format!(
+                    "program.name with feature {name}, the plan's table program: {e}"
+                ));
             }
         }
         if let Err(e) = self.program.validate() {

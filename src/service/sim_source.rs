@@ -44,6 +44,8 @@ pub(crate) struct SimStation {
     /// The nominal lift and where the feature's 0° is on the shaft: what a master reads.
     pub nominal: crate::core::lift::LiftTable,
     pub phase_deg: f64,
+    /// The following axis' name in its programs (tells X's table from C's on the plan).
+    pub x_axis: String,
 }
 
 pub(crate) struct SimSource {
@@ -74,6 +76,7 @@ impl SimSource {
                 table_wheel_radius_bits: f.table_wheel_radius(),
                 nominal: f.setup().nominal.clone(),
                 phase_deg: f.setup().phase_deg,
+                x_axis: f.setup().program.following_axis.clone(),
             })
             .collect()
     }
@@ -103,8 +106,10 @@ impl SimSource {
             // overlay (DBX26.4) on a machine set up for it.
             control.enable_overlay();
         }
-        if self.resume_pending() {
-            // The operator resumes the shaft a stop interrupted (see the shaft program).
+        // The operator resumes the shaft a stop interrupted (see the shaft program): the
+        // first run grinds the rest of that shaft, not a new one.
+        let mut resuming = self.resume_pending();
+        if resuming {
             control.set_r_param(RESUME_R_PARAM, -1.0);
         }
         loop {
@@ -123,15 +128,18 @@ impl SimSource {
                 return;
             }
             if let Some(whole) = &self.cycle {
-                // The whole cycle has no resume: every run grinds a new shaft.
-                let next = shaft + 1;
+                // A resumed run (R90 < 0, the program starts at the resume point) finishes
+                // the shaft in the machine; every other run grinds a new one.
+                let next = if resuming { shaft.max(1) } else { shaft + 1 };
                 let finished = offload::blocking(|| {
                     self.run_whole(whole, &mut control, &mut sim, &dbc, &tx, next)
                 });
                 let Some(finished) = finished else { continue };
-                (runs, shaft) = (runs + 1, next);
+                (runs, shaft, resuming) = (runs + 1, next, false);
                 for (raw, ground_with) in finished {
-                    if !send_and_wait(&tx, raw, ground_with).await {
+                    // A stop between features interrupts the shaft: the resume point on the
+                    // share names the first feature not gauged.
+                    if *shutdown.borrow() || !send_and_wait(&tx, raw, ground_with).await {
                         return;
                     }
                 }

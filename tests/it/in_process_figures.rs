@@ -42,16 +42,19 @@ fn parts_dir() -> std::path::PathBuf {
 
 /// The recipe in `dir` (its lift files beside it), without the measurement when `measure`
 /// is false.
-fn recipe(dir: &Path, file: &str, measure: bool) -> std::path::PathBuf {
+pub(crate) fn recipe(dir: &Path, file: &str, measure: bool) -> std::path::PathBuf {
     let mut text = std::fs::read_to_string(parts_dir().join(file)).unwrap();
     if !measure {
-        for stage in [
-            "[[cycle.stages]]\nkind = \"spark-out\"         # the deflection decays before the gauge reads\nrevolutions = 2\n\n",
-            "[[cycle.stages]]\nkind = \"measure\"           # at least 3 revolutions, constant C speed, wheel lifted off\nrevolutions = 3\nc_speed_rpm = 10.0\n\n",
-        ] {
-            assert!(text.contains(stage), "{file}: {stage}");
-            text = text.replace(stage, "");
-        }
+        // The measure stage and the spark-out before it (the deflection's decay for the
+        // gauge) go; the rest of the cycle is the same.
+        let mut stages: Vec<&str> = text.split("[[cycle.stages]]").collect();
+        let at = stages
+            .iter()
+            .position(|s| s.contains("kind = \"measure\""))
+            .unwrap_or_else(|| panic!("{file}: no measure stage"));
+        assert!(stages[at - 1].contains("kind = \"spark-out\""), "{file}");
+        stages.drain(at - 1..=at);
+        text = stages.join("[[cycle.stages]]");
     }
     // The figures are of the grinding, not of this machine's load: a wait the loaded test
     // machine overran (the control's 5 s, in wall-clock time here) would grind that finish
@@ -88,19 +91,31 @@ fn filtered_max_um(error_um: &[f64]) -> f64 {
     smooth.iter().fold(0.0, |m, v| m.max(v.abs()))
 }
 
-struct Figures {
+pub(crate) struct Figures {
     /// Worst feature per shaft: measured max error, and with the orders above 50 left out.
-    measured_um: Vec<f64>,
-    filtered_um: Vec<f64>,
+    pub measured_um: Vec<f64>,
+    pub filtered_um: Vec<f64>,
     /// Worst feature per shaft: |mean error| (the size), µm.
-    size_um: Vec<f64>,
+    pub size_um: Vec<f64>,
     /// Per shaft: coupled grinding, measurement revolutions, s.
-    grind_s: f64,
-    measure_s: f64,
+    pub grind_s: f64,
+    pub measure_s: f64,
+    /// The share's program files after the run, by file name.
+    pub share: std::collections::BTreeMap<String, String>,
 }
 
 /// Runs `SHAFTS` shafts of `file` on a simulated machine through the service.
-async fn run(file: &str, features: &[&str], measure: bool) -> Figures {
+pub(crate) async fn run(file: &str, features: &[&str], measure: bool) -> Figures {
+    run_shafts(file, features, measure, SHAFTS).await
+}
+
+/// Runs `shafts` shafts of `file` on a simulated machine through the service.
+pub(crate) async fn run_shafts(
+    file: &str,
+    features: &[&str],
+    measure: bool,
+    shafts: u64,
+) -> Figures {
     let dir = tempfile::tempdir().unwrap();
     let url = format!("sqlite://{}/db.sqlite?mode=rwc", dir.path().display());
     let recipe = recipe(dir.path(), file, measure);
@@ -112,7 +127,7 @@ async fn run(file: &str, features: &[&str], measure: bool) -> Figures {
         recipe.display()
     );
     let config = Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
-    let mut running = service::start(config, RunOptions::parts(SHAFTS))
+    let mut running = service::start(config, RunOptions::parts(shafts))
         .await
         .unwrap();
     running.machines_done().await;
@@ -121,13 +136,13 @@ async fn run(file: &str, features: &[&str], measure: bool) -> Figures {
     // force's, so it is named here rather than found in a figure.
     let refused = finish_refusals(&store).await;
     assert_eq!(refused, Vec::<String>::new(), "{file}");
-    let mut measured_um = vec![0.0f64; SHAFTS as usize];
-    let mut filtered_um = vec![0.0f64; SHAFTS as usize];
-    let mut size_um = vec![0.0f64; SHAFTS as usize];
+    let mut measured_um = vec![0.0f64; shafts as usize];
+    let mut filtered_um = vec![0.0f64; shafts as usize];
+    let mut size_um = vec![0.0f64; shafts as usize];
     for f in features {
         let parts = parts_with_reports(&store, "CELL", f).await;
         let numbers: Vec<u64> = parts.iter().map(|(s, _)| s.part.parse().unwrap()).collect();
-        assert_eq!(numbers, (1..=SHAFTS).collect::<Vec<_>>(), "{file} {f}");
+        assert_eq!(numbers, (1..=shafts).collect::<Vec<_>>(), "{file} {f}");
         // With the measurement, each shaft's in-process reading is kept beside it.
         let in_process = HistoryFilter {
             lobe: Some(f.parse().unwrap()),
@@ -142,7 +157,7 @@ async fn run(file: &str, features: &[&str], measure: bool) -> Figures {
             .map(|s| s.part.parse().unwrap())
             .collect();
         let expected: Vec<u64> = if measure {
-            (1..=SHAFTS).collect()
+            (1..=shafts).collect()
         } else {
             Vec::new()
         };
@@ -179,16 +194,26 @@ async fn run(file: &str, features: &[&str], measure: bool) -> Figures {
     let cycle = control.run_cycle(&main, &load).unwrap();
     let (grind_s, measure_s, _) = camloop::sim::cycle_cell::times(&cycle);
     drop(running);
+    let share = std::fs::read_dir(&share)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "SPF" || x == "MPF"))
+        .map(|p| {
+            let name = p.file_name().unwrap().to_string_lossy().into_owned();
+            (name, std::fs::read_to_string(&p).unwrap())
+        })
+        .collect();
     Figures {
         measured_um,
         filtered_um,
         size_um,
         grind_s,
         measure_s,
+        share,
     }
 }
 
-fn row(label: &str, v: &[f64]) -> String {
+pub(crate) fn row(label: &str, v: &[f64]) -> String {
     let cells: Vec<String> = v.iter().map(|x| format!("{x:.2}")).collect();
     format!("| {label} | {} |\n", cells.join(" | "))
 }

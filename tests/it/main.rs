@@ -93,6 +93,8 @@ mod http_harden;
 mod http_tls;
 mod in_process;
 mod in_process_figures;
+mod in_process_plan_figures;
+mod in_process_resume;
 mod in_process_service;
 mod in_process_shafts;
 mod in_process_timeout;

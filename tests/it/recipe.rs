@@ -123,6 +123,47 @@ fn the_speed_plan_needs_a_c_pair_per_feature_after_the_x_pairs() {
     assert_eq!(setups[7].table_pair, (15, 16));
 }
 
+/// With the plan in camloop's whole cycle each feature needs a third pair, for X over VA
+/// (X over C stays in use for the stages at constant speed): after every C pair, and the
+/// range check counts it.
+#[test]
+fn the_plan_in_the_whole_cycle_needs_a_third_pair_per_feature() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("config/parts/demo-camshaft-in-process-plan.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let narrow = text.replace("table_numbers = [1, 48]", "table_numbers = [1, 32]");
+    assert_ne!(
+        narrow, text,
+        "the plan recipe has `table_numbers = [1, 48]`"
+    );
+    let e = Recipe::parse(&narrow, "plan.toml").unwrap_err().to_string();
+    assert!(
+        e.contains(
+            "8 features need 48 table numbers (an X pair over C, a C and an X pair over VA each"
+        ),
+        "{e}"
+    );
+    let recipe = Recipe::parse(&text, "plan.toml").unwrap();
+    let setups = recipe.feature_setups(&path).unwrap();
+    let mut used = Vec::new();
+    for s in &setups {
+        assert!(s.plan_in_whole_cycle(), "{}", s.label);
+        let (c0, c1) = s.c_table_pair.unwrap();
+        let (v0, v1) = s.plan_x_table_pair.unwrap();
+        used.extend([s.table_pair.0, s.table_pair.1, c0, c1, v0, v1]);
+    }
+    assert_eq!(setups[0].plan_x_table_pair, Some((33, 34)));
+    assert_eq!(setups[7].plan_x_table_pair, Some((47, 48)));
+    used.sort_unstable();
+    assert_eq!(used, (1..=48).collect::<Vec<u32>>(), "every number once");
+    // A table-only cycle with the plan keeps two pairs: the machine builder's cycle calls
+    // one table program.
+    let table_only = narrow.replace("program = \"whole\"", "program = \"table-only\"");
+    let recipe = Recipe::parse(&table_only, "plan.toml").unwrap();
+    let setups = recipe.feature_setups(&path).unwrap();
+    assert!(setups.iter().all(|s| s.plan_x_table_pair.is_none()));
+}
+
 #[test]
 fn a_bad_recipe_lists_every_problem() {
     let text = r#"

@@ -11,7 +11,7 @@ use crate::clock::now;
 use crate::core::compensate::GuardedTable;
 use crate::core::digest::Sha256;
 use crate::core::learn::LearningState;
-use crate::core::program::Provenance;
+use crate::core::program::{Provenance, expected_program_files};
 use crate::share::{ProgramFile, PushRequest};
 use crate::store::{EventLevel, VersionStatus};
 use camloop_loop::machine::{DeliveryError, Finished, Program, TableDone, TableOrder};
@@ -112,10 +112,7 @@ impl FeatureLoop {
     /// The share's request for a draft: the table program, then the main program when the
     /// share's copy is not this text.
     pub(super) fn request(&self, draft: Draft) -> anyhow::Result<PushRequest> {
-        let mut files = vec![ProgramFile {
-            name: self.program_file.clone(),
-            text: draft.text,
-        }];
+        let mut files = self.table_files(draft.text)?;
         files.extend(self.main_program_if_changed()?);
         // A same-part finish table: the handshake's count last, so the control never sees
         // the count move before the table is there.
@@ -134,6 +131,31 @@ impl FeatureLoop {
             rollback_of: draft.rollback_of,
             created_at_unix_ms: draft.at,
         })
+    }
+
+    /// A version's table programs: its one text, or with the plan in the whole cycle the
+    /// constant-speed program and the plan's, in that order (each must be the file its
+    /// feature's program calls: a text that says otherwise is never pushed).
+    fn table_files(&self, text: String) -> anyhow::Result<Vec<ProgramFile>> {
+        if !self.setup.plan_in_whole_cycle() {
+            return Ok(vec![ProgramFile {
+                name: self.program_file.clone(),
+                text,
+            }]);
+        }
+        let plan_file = format!(
+            "{}.SPF",
+            crate::recipe::plan_program_name(&self.setup.program.name)
+        );
+        let files = expected_program_files(&text, &[self.program_file.as_str(), &plan_file])
+            .map_err(|e| anyhow::anyhow!("{}: the version's programs: {e}", self.setup.label))?;
+        Ok(files
+            .into_iter()
+            .map(|f| ProgramFile {
+                name: f.file,
+                text: f.text.to_string(),
+            })
+            .collect())
     }
 
     /// A table reached the control: the simulator's wheel, the main program's speed, the

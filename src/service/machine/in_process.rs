@@ -14,14 +14,16 @@ use crate::clock::now;
 use crate::core::cycle::CycleSettings;
 use crate::core::measure::RawMeasurement;
 use crate::core::program::{
-    CycleMachine, CycleStation, MainProgramSettings, READY_PROGRAM, render_cycle_program,
-    render_ready_program,
+    CycleMachine, CyclePlan, CycleStation, MainProgramSettings, READY_PROGRAM,
+    render_cycle_program, render_ready_program,
 };
+use crate::core::speed_plan::render::VaProgramSettings;
 use crate::core::turn::{self, measurement_sha256};
 use crate::recipe::FeatureSetup;
 use crate::share::ProgramFile;
 use crate::store::{EventLevel, MeasurementStage, VersionStatus};
 use camloop_loop::in_process::{SamePart, same_part_order};
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Mutex;
 use std::time::Instant;
@@ -88,35 +90,55 @@ fn ready_file() -> String {
     format!("{READY_PROGRAM}.SPF")
 }
 
-/// The whole-cycle main program of `setups` (one or more features in turn).
+/// The whole-cycle main program of `setups` (one or more features in turn). With the speed
+/// plan in the whole cycle, `va_speeds_rpm` gives each feature's virtual-axis speed (the
+/// plan of the table on the share), by feature name; every such feature must have one.
 pub(super) fn render_whole(
     main: &MainProgramSettings,
     cycle: &CycleSettings,
     setups: &[FeatureSetup],
     clear_x_mm: f64,
+    va_speeds_rpm: &BTreeMap<String, f64>,
 ) -> anyhow::Result<String> {
     let first = &setups[0];
-    if first.speed_plan.enabled {
-        anyhow::bail!(
-            "{}: [cycle] program = \"whole\" with [speed_plan] enabled is not written by the service yet",
-            first.part
-        );
-    }
     let machine = CycleMachine {
         cycle,
         c_speed_rpm: first.limits.c_speed_rpm,
         wheel_radius_mm: first.feature.wheel_radius_mm(),
         clear_x_mm,
     };
-    let stations: Vec<CycleStation<'_>> = setups
+    // The plan's table programs by name and axes; their numbers come back from the call.
+    let plans: Vec<Option<VaProgramSettings>> = setups
         .iter()
-        .map(|s| CycleStation {
+        .map(|s| {
+            s.plan_in_whole_cycle().then(|| {
+                let mut va = super::planned::va_settings(s, 1, 2);
+                va.name = crate::recipe::plan_program_name(&s.program.name);
+                va
+            })
+        })
+        .collect();
+    let mut stations = Vec::with_capacity(setups.len());
+    for (s, plan) in setups.iter().zip(&plans) {
+        let plan = match plan {
+            Some(table) => {
+                let Some(&va_speed_rpm) = va_speeds_rpm.get(s.name.as_str()) else {
+                    anyhow::bail!("{}: the plan's speed is not known yet", s.label);
+                };
+                Some(CyclePlan {
+                    table,
+                    va_speed_rpm,
+                })
+            }
+            None => None,
+        };
+        stations.push(CycleStation {
             table: &s.program,
             label: &s.name,
             z_mm: s.z_mm,
-            plan: None,
-        })
-        .collect();
+            plan,
+        });
+    }
     Ok(render_cycle_program(main, &machine, &stations)?)
 }
 
@@ -182,7 +204,9 @@ impl FeatureLoop {
     ) -> Result<InProcessOutcome, MachineError> {
         // The part was ground so far with the table in force now, not with its finish table.
         let ground_with = self.machine.memory().in_force_version;
-        let turn_setup = self.setup.turn_setup();
+        // With the plan the finish table is guarded over VA, as every table of the plan is.
+        self.refresh_plan();
+        let turn_setup = super::planned::turn_setup(&self.setup, &self.plan);
         let decided = same_part_order(
             &SamePart {
                 setup: &turn_setup,

@@ -19,7 +19,7 @@ use crate::core::speed_plan::render::{VaProgramSettings, render_va_table_program
 use crate::core::speed_plan::tables::VaTables;
 use crate::core::speed_plan::{self, TimeLaw};
 use crate::core::turn::{self, TurnSetup};
-use crate::recipe::FeatureSetup;
+use crate::recipe::{FeatureSetup, plan_program_name};
 use tracing::error;
 
 /// The virtual leading axis' name in the programs.
@@ -159,16 +159,31 @@ impl FeatureLoop {
             .map_err(|e| anyhow::anyhow!("{}: table not delivered: {e}", self.setup.label))?;
         let (x_pair, c_pair) = (self.setup.table_pair, self.setup.c_table_pair);
         let c_pair = c_pair.ok_or_else(|| anyhow::anyhow!("the recipe gave C no table numbers"))?;
-        let c_table = if settings.table_number == x_pair.0 {
-            c_pair.0
-        } else {
-            c_pair.1
+        // Every pair alternates in step with X's, the number the share checks: the tables a
+        // version defines are never the ones the version before it defined.
+        let in_step = |pair: (u32, u32)| {
+            if settings.table_number == x_pair.0 {
+                pair.0
+            } else {
+                pair.1
+            }
         };
-        let mut va = va_settings(&self.setup, settings.table_number, c_table);
+        self.plan.pending_va_rpm = Some(tables.va_speed_rpm);
+        let Some(plan_x_pair) = self.setup.plan_x_table_pair else {
+            let mut va = va_settings(&self.setup, settings.table_number, in_step(c_pair));
+            va.comment_lines = settings.comment_lines.clone();
+            va.provenance = settings.provenance.clone();
+            return Ok(render_va_table_program(&tables, &va)?);
+        };
+        // The whole cycle grinds some stages at constant C speed (X over C, this number) and
+        // some on the plan (C and X over VA, their own pairs): one version is both programs,
+        // one text, pushed together (see `core::program::split_program_files`).
+        let constant = table.render(settings)?;
+        let mut va = va_settings(&self.setup, in_step(plan_x_pair), in_step(c_pair));
+        va.name = plan_program_name(&self.setup.program.name);
         va.comment_lines = settings.comment_lines.clone();
         va.provenance = settings.provenance.clone();
-        self.plan.pending_va_rpm = Some(tables.va_speed_rpm);
-        Ok(render_va_table_program(&tables, &va)?)
+        Ok(constant + &render_va_table_program(&tables, &va)?)
     }
 
     /// The VA speed (rev/min) of a table program made for a wheel of `wheel_radius_mm` and

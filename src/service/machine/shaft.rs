@@ -44,6 +44,15 @@ struct PlannedMain {
     clear_x_mm: f64,
     /// The virtual axis' speed of the table on the share, by feature name.
     va_speeds_rpm: Mutex<BTreeMap<String, f64>>,
+    /// With the whole cycle: its stages and the features it grinds (`stations` is then
+    /// empty: the cycle program is made from these).
+    whole: Option<Box<WholePlanned>>,
+}
+
+#[derive(Debug)]
+struct WholePlanned {
+    cycle: crate::core::cycle::CycleSettings,
+    setups: Vec<FeatureSetup>,
 }
 
 impl MainProgram {
@@ -86,9 +95,28 @@ impl MainProgram {
             .fold(f64::MIN, f64::max);
         let clear_x_mm = clear_x_mm(top_x_mm, whole.map_or(0.0, |c| c.lift_off_mm));
         let kind = if let Some(cycle) = whole {
-            MainKind::Fixed(super::in_process::render_whole(
-                &main, cycle, setups, clear_x_mm,
-            )?)
+            let planned = setups.iter().any(FeatureSetup::plan_in_whole_cycle);
+            // Rendered once now with every plan at the grinding C speed, so what is wrong
+            // with the cycle or the plan's names stops the start, not a later delivery.
+            let probe: BTreeMap<String, f64> = setups
+                .iter()
+                .map(|s| (s.name.to_string(), first.limits.c_speed_rpm))
+                .collect();
+            let text = super::in_process::render_whole(&main, cycle, setups, clear_x_mm, &probe)?;
+            if planned {
+                MainKind::Planned(PlannedMain {
+                    main: main.clone(),
+                    stations: Vec::new(),
+                    clear_x_mm,
+                    va_speeds_rpm: Mutex::new(BTreeMap::new()),
+                    whole: Some(Box::new(WholePlanned {
+                        cycle: cycle.clone(),
+                        setups: setups.to_vec(),
+                    })),
+                })
+            } else {
+                MainKind::Fixed(text)
+            }
         } else if first.speed_plan.enabled {
             let stations = setups
                 .iter()
@@ -99,6 +127,7 @@ impl MainProgram {
                 stations,
                 clear_x_mm,
                 va_speeds_rpm: Mutex::new(BTreeMap::new()),
+                whole: None,
             })
         } else if let [only] = setups {
             MainKind::Fixed(render_main_program(&main, &only.program)?)
@@ -143,6 +172,24 @@ impl MainProgram {
             .clone();
         if let Some(v) = va_speed_rpm {
             speeds.insert(feature.to_string(), v);
+        }
+        if let Some(w) = &planned.whole {
+            let known = w
+                .setups
+                .iter()
+                .filter(|s| s.plan_in_whole_cycle())
+                .all(|s| speeds.contains_key(s.name.as_str()));
+            if !known {
+                return Ok(None);
+            }
+            let text = super::in_process::render_whole(
+                &planned.main,
+                &w.cycle,
+                &w.setups,
+                planned.clear_x_mm,
+                &speeds,
+            )?;
+            return Ok(Some(text));
         }
         let mut stations = Vec::with_capacity(planned.stations.len());
         for (name, settings, z_mm) in &planned.stations {

@@ -158,8 +158,7 @@ impl SimSource {
         let text = p.finish_text.take();
         let shape = text
             .as_deref()
-            .and_then(|t| crate::core::program::parse_table_program(t).ok())
-            .map(|t| crate::sim::table_shape(&t.shape));
+            .and_then(|t| finish_tables(t, &self.stations[k]));
         let ground_with = text.as_deref().and_then(super::ground_with);
         let ground = self.ground_from_passes(whole, dry, usize::MAX, sim, k, shape);
         if let Some(raw) = ground.and_then(|g| self.gauge(sim, dbc, &g, k, shaft, None)) {
@@ -239,7 +238,7 @@ impl SimSource {
         until: usize,
         sim: &mut SimGrinder,
         k: usize,
-        shape: Option<crate::sim::TableShape>,
+        shape: Option<FinishTables>,
     ) -> Option<crate::sim::GroundPart> {
         let station = &self.stations[k];
         let (stock, last) = passes_stock(
@@ -254,7 +253,19 @@ impl SimSource {
         .map_err(|e| error!(machine = %self.machine, lobe = %station.name, error = %e, "simulator: the plan's C table cannot be run"))
         .ok()?;
         let table = match shape {
-            Some(shape) => self.commanded_shape(shape, k),
+            Some(loaded) => {
+                let mut table = self.commanded_shape(loaded.x, k);
+                // On the plan: C's law from the tables loaded, at the speed the run's last
+                // coupling gave the virtual axis (the main program's, not the table's).
+                table.plan = match (loaded.c_law, last.and_then(|g| g.planned_speed())) {
+                    (Some(c_law), Some(run)) => Some(crate::sim::PlannedSpeed {
+                        c_law,
+                        va_speed_rpm: run.va_speed_rpm,
+                    }),
+                    _ => None,
+                };
+                table
+            }
             None => self.commanded(last?, k),
         };
         let own = self.grinder.shaft.station(k + 1, station.z_mm);
@@ -308,4 +319,36 @@ impl SimSource {
         }
         out
     }
+}
+
+/// The finish's tables as the control loaded them: X's shape (over C, or over VA on the plan)
+/// and, on the plan, C's law over VA.
+pub(super) struct FinishTables {
+    x: crate::sim::TableShape,
+    c_law: Option<Vec<crate::core::table::PolySegment>>,
+}
+
+/// The tables of the program the finish called: the constant-speed table program (one
+/// table), or the plan's (C's table, then X's, told apart by their following axis).
+fn finish_tables(text: &str, station: &super::SimStation) -> Option<FinishTables> {
+    use crate::core::program::{ParsedShape, parse_table_program, table_definitions};
+    let tables: Vec<_> = table_definitions(text)
+        .iter()
+        .filter_map(|t| parse_table_program(t).ok())
+        .collect();
+    let x_axis = &station.x_axis;
+    let x = tables
+        .iter()
+        .find(|t| t.following_axis.eq_ignore_ascii_case(x_axis))?;
+    let c_law = tables
+        .iter()
+        .find(|t| !t.following_axis.eq_ignore_ascii_case(x_axis))
+        .and_then(|t| match &t.shape {
+            ParsedShape::Poly(segments) => Some(segments.clone()),
+            ParsedShape::G1(_) => None,
+        });
+    Some(FinishTables {
+        x: crate::sim::table_shape(&x.shape),
+        c_law,
+    })
 }

@@ -16,6 +16,7 @@
 mod cycle_plan;
 mod cycle_program;
 mod ending;
+mod files;
 mod main_program;
 mod names;
 mod parse;
@@ -31,6 +32,9 @@ pub use cycle_program::{
     READY_PROGRAM, clear_x_mm, render_cycle_program, render_ready_program, wheel_rpm,
 };
 pub use ending::{EndingError, check_ending};
+pub use files::{
+    ProgramFilesError, ProgramText, expected_program_files, split_program_files, table_definitions,
+};
 pub use main_program::{MainProgramSettings, render_main_program};
 pub use names::{AxisNameError, ProgramNameError, validate_axis_name, validate_program_name};
 pub use parse::{ParsedShape, ParsedTable, TableBlocks, parse_table_program};
