@@ -397,7 +397,7 @@ fn flag_setup(
         ..ProgramSettings::default()
     };
     LobeSetup {
-        part: "PART".to_string(),
+        part: crate::names::PartName::new("PART").expect("a plain name"),
         name: crate::names::FeatureName::new("LOBE").expect("a plain name"),
         label,
         nominal,

@@ -14,6 +14,7 @@ pub mod study;
 use crate::core::capability::{
     self, Capability, Characteristic, PartValues, chart::ChartLimits, chart::ChartPoint,
 };
+use crate::core::ids::PartId;
 use crate::core::measure::is_master_part;
 use crate::names::{FeatureName, MachineName};
 use crate::store::{
@@ -62,8 +63,8 @@ impl Default for Window {
 #[derive(Debug, Clone, PartialEq)]
 pub struct PartRow {
     pub id: MeasurementId,
-    pub part: String,
-    pub received_at_ms: jiff::Timestamp,
+    pub part: PartId,
+    pub received_at: jiff::Timestamp,
     pub max_profile_error_um: f64,
     pub base_radius_error_um: f64,
     pub phase_error_deg: f64,
@@ -82,7 +83,7 @@ impl PartRow {
         Ok(Self {
             id: s.id,
             part: s.part.clone(),
-            received_at_ms: s.received_at_ms,
+            received_at: s.received_at,
             max_profile_error_um: s.max_profile_error_um,
             base_radius_error_um: s.base_radius_error_um,
             phase_error_deg: s.phase_error_deg,
@@ -131,7 +132,7 @@ pub(crate) async fn window_rows(
     if window.since_dressing
         && let Some(d) = store.dressings(machine, 1).await?.first()
     {
-        since = since.max(Some(d.at_ms));
+        since = since.max(Some(d.at));
     }
     if window.since_recipe_change
         && let Some(f) = store
@@ -140,7 +141,7 @@ pub(crate) async fn window_rows(
             .iter()
             .find(|f| f.lobe == *lobe)
     {
-        since = since.max(Some(f.created_at_ms));
+        since = since.max(Some(f.created_at));
     }
     let (start, until) = (
         since.unwrap_or(jiff::Timestamp::MIN),
@@ -193,7 +194,7 @@ pub struct CharacteristicStudy {
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Chart {
     pub limits: ChartLimits,
-    pub part: Vec<String>,
+    pub part: Vec<PartId>,
     pub points: Vec<ChartPoint>,
 }
 
@@ -208,7 +209,7 @@ pub fn study(
         .iter()
         .map(|l| {
             let c = l.characteristic;
-            let (parts, values): (Vec<String>, Vec<f64>) = rows
+            let (parts, values): (Vec<PartId>, Vec<f64>) = rows
                 .iter()
                 .filter_map(|r| r.value(c, limits.phase_deg).map(|v| (r.part.clone(), v)))
                 .unzip();
@@ -253,7 +254,7 @@ pub(crate) fn indicative_reason(items: &[CharacteristicStudy]) -> Option<String>
     ))
 }
 
-fn chart_of(parts: &[String], values: &[f64], resolution: f64, c: Characteristic) -> Option<Chart> {
+fn chart_of(parts: &[PartId], values: &[f64], resolution: f64, c: Characteristic) -> Option<Chart> {
     let base = &values[..values.len().min(capability::chart::BASELINE_PARTS)];
     let limits = ChartLimits::from_baseline_shaped(base, resolution, c.chart_shape())?;
     Some(Chart {

@@ -157,7 +157,7 @@ pub(crate) async fn record_failure(
         reason.push_str(&format!("; {locked_what} locked out for 15 minutes"));
     }
     let entry = AuditEntry {
-        at_ms: crate::clock::now(),
+        at: crate::clock::now(),
         actor: user.unwrap_or("anonymous").to_string(),
         role: Role::Viewer,
         client: address.to_string(),

@@ -315,7 +315,7 @@ async fn postgres_readers_stuck_behind_a_lock_never_hold_up_a_writer() {
     t.store
         .insert_event(&camloop::store::NewEvent {
             machine: m("M1"),
-            at_ms: ms(1),
+            at: ms(1),
             level: camloop::store::EventLevel::Info,
             kind: camloop::store::EventKind::MeasurementRepeated,
             message: "written while every reader waits".into(),

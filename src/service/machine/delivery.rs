@@ -189,7 +189,7 @@ impl FeatureLoop {
             table_version: version.get(),
             parent_version: parent.map(|v| v.get()),
             created_utc: crate::clock::utc_text(crate::clock::now()),
-            recipe: self.setup.part.clone(),
+            recipe: self.setup.part.to_string(),
             feature: self.setup.name.clone(),
             correction_sha256: crate::core::turn::correction_sha256(&learning.correction_um),
         }

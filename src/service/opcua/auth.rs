@@ -232,7 +232,7 @@ pub(crate) async fn refused_write(
     method: &str,
 ) {
     let entry = AuditEntry {
-        at_ms: crate::clock::now(),
+        at: crate::clock::now(),
         actor: user.unwrap_or("anonymous").to_string(),
         // The role the user held is not known here (it may be why): the lowest.
         role: Role::Viewer,

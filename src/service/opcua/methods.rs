@@ -355,7 +355,7 @@ pub(crate) fn result_outputs(s: &MeasurementSummary) -> Vec<Variant> {
         "machine": s.machine,
         "part": s.part,
         "feature": s.lobe,
-        "received_at_ms": s.received_at_ms.as_millisecond(),
+        "received_at_ms": s.received_at.as_millisecond(),
         "verdict": s.verdict.as_str(),
         "max_profile_error_um": s.max_profile_error_um,
         "base_radius_error_um": s.base_radius_error_um,
@@ -365,8 +365,8 @@ pub(crate) fn result_outputs(s: &MeasurementSummary) -> Vec<Variant> {
     });
     vec![
         Variant::Int64(s.id.0),
-        Variant::from(s.part.clone()),
-        Variant::from(date_time(s.received_at_ms)),
+        Variant::from(s.part.to_string()),
+        Variant::from(date_time(s.received_at)),
         Variant::from(s.verdict.as_str().to_string()),
         Variant::from(json.to_string()),
     ]

@@ -61,7 +61,7 @@ pub(super) async fn rebuild_versions(
                 learning_params_json: r.learning.to_string(),
                 reason: format!("{} (rebuilt from the share)", r.reason),
                 status,
-                created_at_ms: r.created_at_unix_ms,
+                created_at: r.created_at_unix_ms,
             };
             store.insert_table_version(&t).await?;
             rebuilt += 1;
