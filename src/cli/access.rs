@@ -278,7 +278,7 @@ async fn user(
         UserAction::List => {
             println!("{:<32} {:<9} {:<20} state", "user", "role", "created (UTC)");
             for u in store.users().await? {
-                let state = if u.disabled_at_ms.is_some() {
+                let state = if u.disabled_at.is_some() {
                     "disabled"
                 } else {
                     "enabled"
@@ -308,7 +308,7 @@ async fn live_tokens_after_passwd(
         .tokens()
         .await?
         .into_iter()
-        .filter(|t| t.user == name.as_str() && t.revoked_at_ms.is_none() && t.expires_at > now)
+        .filter(|t| t.user == name.as_str() && t.revoked_at.is_none() && t.expires_at > now)
         .collect();
     if live.is_empty() {
         return Ok(());
@@ -396,7 +396,7 @@ async fn token(store: &Store, seal: &AuditSeal, action: TokenAction) -> anyhow::
                 "id", "user", "role", "expires (UTC)", "state"
             );
             for t in store.tokens().await? {
-                let state = match (t.revoked_at_ms, t.expires_at <= now) {
+                let state = match (t.revoked_at, t.expires_at <= now) {
                     (Some(_), _) => "revoked",
                     (None, true) => "expired",
                     (None, false) => "live",
@@ -431,7 +431,7 @@ async fn create_token(
     let Some(u) = store
         .user(name.as_str())
         .await?
-        .filter(|u| u.disabled_at_ms.is_none())
+        .filter(|u| u.disabled_at.is_none())
     else {
         bail!("no enabled user {name}");
     };
@@ -442,7 +442,7 @@ async fn create_token(
         );
     }
     let secret = new_token()?;
-    let expires_at_ms = now + lifetime(expires)?;
+    let expires_at = now + lifetime(expires)?;
     let label: String = label.chars().take(64).collect();
     let t = NewToken {
         user: u.id,
@@ -450,16 +450,16 @@ async fn create_token(
         sha256: token_digest(&secret),
         role,
         created_at: now,
-        expires_at: expires_at_ms,
+        expires_at,
     };
     let id = store.add_token(&t).await?;
-    let after = serde_json::json!({ "token": id.0, "user": name, "role": role.as_str(), "expires_at_ms": expires_at_ms.as_millisecond(), "label": label });
+    let after = serde_json::json!({ "token": id.0, "user": name, "role": role.as_str(), "expires_at_ms": expires_at.as_millisecond(), "label": label });
     seal.append(store, &entry("token.create", after, String::new()))
         .await?;
     eprintln!(
         "token {} for {name} ({role}), valid until {} UTC; shown once, keep it secret:",
         id.0,
-        crate::clock::utc_text(expires_at_ms)
+        crate::clock::utc_text(expires_at)
     );
     println!("{secret}");
     Ok(())

@@ -67,8 +67,8 @@ pub(crate) fn run_capability(args: CapabilityArgs) -> anyhow::Result<()> {
     let time = |t: &Option<String>| t.as_deref().map(|t| parse_time(t, now)).transpose();
     let window = Window {
         last: args.last,
-        since_ms: time(&args.since)?,
-        until_ms: time(&args.until)?,
+        since: time(&args.since)?,
+        until: time(&args.until)?,
         since_dressing: args.since_dressing,
         since_recipe_change: args.since_recipe_change,
     };

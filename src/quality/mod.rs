@@ -39,8 +39,8 @@ pub const MIN_CAPABILITY_VALUES: usize = 100;
 pub(crate) struct Window {
     /// The newest this many production parts (at most [`MAX_PAGE`]).
     pub last: u32,
-    pub since_ms: Option<jiff::Timestamp>,
-    pub until_ms: Option<jiff::Timestamp>,
+    pub since: Option<jiff::Timestamp>,
+    pub until: Option<jiff::Timestamp>,
     /// Only parts after the machine's newest wheel dressing.
     pub since_dressing: bool,
     /// Only parts after the feature's recipe last changed (the store's newest snapshot).
@@ -51,8 +51,8 @@ impl Default for Window {
     fn default() -> Self {
         Self {
             last: 125,
-            since_ms: None,
-            until_ms: None,
+            since: None,
+            until: None,
             since_dressing: false,
             since_recipe_change: false,
         }
@@ -128,7 +128,7 @@ pub(crate) async fn window_rows(
     window: &Window,
     masters: bool,
 ) -> Result<(Vec<PartRow>, Option<jiff::Timestamp>, usize), StoreError> {
-    let mut since = window.since_ms;
+    let mut since = window.since;
     if window.since_dressing
         && let Some(d) = store.dressings(machine, 1).await?.first()
     {
@@ -145,7 +145,7 @@ pub(crate) async fn window_rows(
     }
     let (start, until) = (
         since.unwrap_or(jiff::Timestamp::MIN),
-        window.until_ms.unwrap_or(jiff::Timestamp::MAX),
+        window.until.unwrap_or(jiff::Timestamp::MAX),
     );
     let wanted = window.last.clamp(1, MAX_PAGE) as usize;
     let (mut rows, mut skipped, mut before) = (Vec::new(), 0usize, None);

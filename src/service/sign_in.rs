@@ -119,7 +119,7 @@ async fn check_password(
     let matches = app.auth.hasher.verify(password.to_string(), hash).await?;
     Ok(match user {
         None => Err("unknown user"),
-        Some(u) if u.disabled_at_ms.is_some() => Err("disabled user"),
+        Some(u) if u.disabled_at.is_some() => Err("disabled user"),
         Some(_) if !matches => Err("wrong password"),
         Some(u) => Ok(u),
     })

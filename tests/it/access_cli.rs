@@ -145,7 +145,7 @@ async fn users_and_tokens(at: At<'_>, store: &Store) -> String {
             .await
             .unwrap()
             .unwrap()
-            .revoked_at_ms
+            .revoked_at
             .is_some()
     );
 

@@ -170,8 +170,8 @@ async fn story(store: &Store) {
     );
 
     let window = HistoryFilter {
-        since_ms: Some(ms(15_000)),
-        until_ms: Some(ms(20_000)),
+        since: Some(ms(15_000)),
+        until: Some(ms(20_000)),
         ..lobe_in1.clone()
     };
     assert_eq!(
@@ -417,7 +417,7 @@ async fn story(store: &Store) {
     let errors = store
         .events(&EventFilter {
             level: Some(EventLevel::Error),
-            since_ms: Some(ms(2)),
+            since: Some(ms(2)),
             limit: 10,
             ..EventFilter::default()
         })

@@ -390,3 +390,39 @@ fn head_check(
         Some(_) => HeadCheck::Holds,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The API's audit page serialises rows as they are: the instant is `at` in Rust and
+    /// stays `at_ms` (integer milliseconds) on the wire.
+    #[test]
+    fn a_row_keeps_its_wire_names() {
+        let row = AuditRow {
+            id: 3,
+            entry: AuditEntry {
+                at: jiff::Timestamp::from_millisecond(1_795_443_845_123).unwrap(),
+                actor: "ana".into(),
+                role: Role::Engineer,
+                client: "local".into(),
+                action: "rollback".into(),
+                machine: Some("G7".into()),
+                feature: None,
+                version: Some(4),
+                before: None,
+                after: None,
+                result: AuditResult::Ok,
+                reason: String::new(),
+            },
+        };
+        let json = serde_json::to_value(&row).unwrap();
+        assert_eq!(
+            json["at_ms"],
+            serde_json::json!(1_795_443_845_123_i64),
+            "{json}"
+        );
+        assert!(json.get("at").is_none(), "{json}");
+        assert_eq!(json["id"], 3, "{json}");
+    }
+}

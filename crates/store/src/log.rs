@@ -199,10 +199,10 @@ impl Store {
         if let Some(machine) = &filter.machine {
             c.push("machine = ?", [Bind::Text(machine.to_string())]);
         }
-        if let Some(since) = filter.since_ms {
+        if let Some(since) = filter.since {
             c.push("at_ms >= ?", [Bind::I64(since.as_millisecond())]);
         }
-        if let Some(until) = filter.until_ms {
+        if let Some(until) = filter.until {
             c.push("at_ms < ?", [Bind::I64(until.as_millisecond())]);
         }
         if let Some(level) = filter.level {
@@ -374,8 +374,8 @@ impl Store {
                             format!("learning state of machine {machine} lobe {lobe} does not match its SHA-256"),
                         ));
                     }
-                    let saved_at_ms = instant(saved_at_ms, "saved_at_ms")?;
-                    Ok(Some(LearningState { state_json, saved_at: saved_at_ms }))
+                    let saved_at = instant(saved_at_ms, "saved_at_ms")?;
+                    Ok(Some(LearningState { state_json, saved_at }))
                 }
             }
         })

@@ -277,10 +277,10 @@ impl Store {
         if let Some(lobe) = &filter.lobe {
             c.push("m.lobe = ?", [Bind::Text(lobe.to_string())]);
         }
-        if let Some(since) = filter.since_ms {
+        if let Some(since) = filter.since {
             c.push("m.received_at_ms >= ?", [Bind::I64(since.as_millisecond())]);
         }
-        if let Some(until) = filter.until_ms {
+        if let Some(until) = filter.until {
             c.push("m.received_at_ms < ?", [Bind::I64(until.as_millisecond())]);
         }
         if let Some(verdict) = filter.verdict {

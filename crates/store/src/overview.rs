@@ -433,8 +433,8 @@ impl Store {
                     format!("learning state of machine {machine} lobe {lobe} does not match its SHA-256"),
                 ));
             }
-            let saved_at_ms = instant(saved_at_ms, "saved_at_ms")?;
-            Ok(Some(LearningState { state_json, saved_at: saved_at_ms }))
+            let saved_at = instant(saved_at_ms, "saved_at_ms")?;
+            Ok(Some(LearningState { state_json, saved_at }))
         })
     }
 }

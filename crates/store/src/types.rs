@@ -314,9 +314,9 @@ pub struct HistoryFilter {
     pub machine: MachineName,
     pub lobe: Option<FeatureName>,
     /// Inclusive lower bound on `received_at_ms`.
-    pub since_ms: Option<Timestamp>,
+    pub since: Option<Timestamp>,
     /// Exclusive upper bound on `received_at_ms`.
-    pub until_ms: Option<Timestamp>,
+    pub until: Option<Timestamp>,
     pub verdict: Option<Verdict>,
     /// One stage only; `None` lists both.
     pub stage: Option<MeasurementStage>,
@@ -335,8 +335,8 @@ impl HistoryFilter {
         Self {
             machine,
             lobe: None,
-            since_ms: None,
-            until_ms: None,
+            since: None,
+            until: None,
             verdict: None,
             stage: None,
             limit,
@@ -465,9 +465,9 @@ pub struct Event {
 pub struct EventFilter {
     pub machine: Option<MachineName>,
     /// Inclusive.
-    pub since_ms: Option<Timestamp>,
+    pub since: Option<Timestamp>,
     /// Exclusive.
-    pub until_ms: Option<Timestamp>,
+    pub until: Option<Timestamp>,
     pub level: Option<EventLevel>,
     /// 1 to [`MAX_PAGE`].
     pub limit: u32,

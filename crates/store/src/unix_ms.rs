@@ -89,8 +89,8 @@ mod tests {
     struct Record {
         #[serde(rename = "at_ms", with = "super")]
         at: Timestamp,
-        #[serde(with = "super::option")]
-        until_ms: Option<Timestamp>,
+        #[serde(rename = "until_ms", with = "super::option")]
+        until: Option<Timestamp>,
     }
 
     /// The JSON text is the integer the records always had, byte for byte, and reads back

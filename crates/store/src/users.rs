@@ -24,7 +24,7 @@ pub struct User {
     /// argon2id, PHC string.
     pub password_hash: String,
     pub created_at: Timestamp,
-    pub disabled_at_ms: Option<Timestamp>,
+    pub disabled_at: Option<Timestamp>,
 }
 
 /// A token to keep: its digest, whose it is, its role ceiling and when it runs out.
@@ -47,8 +47,8 @@ pub struct TokenGrant {
     /// The token's ceiling.
     pub role: Role,
     pub expires_at: Timestamp,
-    pub revoked_at_ms: Option<Timestamp>,
-    pub user_disabled_at_ms: Option<Timestamp>,
+    pub revoked_at: Option<Timestamp>,
+    pub user_disabled_at: Option<Timestamp>,
 }
 
 /// A token as listed (no digest).
@@ -60,7 +60,7 @@ pub struct TokenInfo {
     pub role: Role,
     pub created_at: Timestamp,
     pub expires_at: Timestamp,
-    pub revoked_at_ms: Option<Timestamp>,
+    pub revoked_at: Option<Timestamp>,
 }
 
 const USER_COLUMNS: &str =
@@ -84,7 +84,7 @@ fn user_from(row: UserRow) -> Result<User, StoreError> {
         role: Role::parse(&role)?,
         password_hash,
         created_at: instant(created_at_ms, "created_at_ms")?,
-        disabled_at_ms: instant_opt(disabled_at_ms, "disabled_at_ms")?,
+        disabled_at: instant_opt(disabled_at_ms, "disabled_at_ms")?,
     })
 }
 
@@ -245,8 +245,8 @@ impl Store {
                     user_role: Role::parse(&user_role)?,
                     role: Role::parse(&role)?,
                     expires_at: instant(expires, "expires_at_ms")?,
-                    revoked_at_ms: instant_opt(revoked, "revoked_at_ms")?,
-                    user_disabled_at_ms: instant_opt(disabled, "disabled_at_ms")?,
+                    revoked_at: instant_opt(revoked, "revoked_at_ms")?,
+                    user_disabled_at: instant_opt(disabled, "disabled_at_ms")?,
                 })
             })
             .transpose()
@@ -284,7 +284,7 @@ impl Store {
                         role: Role::parse(&role)?,
                         created_at: instant(created, "created_at_ms")?,
                         expires_at: instant(expires, "expires_at_ms")?,
-                        revoked_at_ms: instant_opt(revoked, "revoked_at_ms")?,
+                        revoked_at: instant_opt(revoked, "revoked_at_ms")?,
                     })
                 })
                 .collect()

@@ -262,13 +262,13 @@ pub(super) struct HistoryQuery {
     #[param(value_type = Option<String>)]
     lobe: Option<FeatureName>,
     /// From this time, Unix ms.
-    #[serde(default, with = "crate::clock::unix_ms::option")]
+    #[serde(rename = "since_ms", default, with = "crate::clock::unix_ms::option")]
     #[param(value_type = Option<i64>)]
-    since_ms: Option<jiff::Timestamp>,
+    since: Option<jiff::Timestamp>,
     /// Before this time, Unix ms.
-    #[serde(default, with = "crate::clock::unix_ms::option")]
+    #[serde(rename = "until_ms", default, with = "crate::clock::unix_ms::option")]
     #[param(value_type = Option<i64>)]
-    until_ms: Option<jiff::Timestamp>,
+    until: Option<jiff::Timestamp>,
     /// Only this verdict: `pass` or `fail`.
     verdict: Option<String>,
     /// Only this stage: `final` (the finished part) or `in_process` (before the finish).
@@ -343,7 +343,7 @@ pub(super) async fn history(
     ApiPath(machine): ApiPath<MachineName>,
     ApiQuery(q): ApiQuery<HistoryQuery>,
 ) -> Result<Json<HistoryPage>, ApiError> {
-    if let (Some(a), Some(b)) = (q.since_ms, q.until_ms)
+    if let (Some(a), Some(b)) = (q.since, q.until)
         && a >= b
     {
         return Err(ApiError::new(
@@ -360,8 +360,8 @@ pub(super) async fn history(
     let filter = HistoryFilter {
         machine,
         lobe: q.lobe,
-        since_ms: q.since_ms,
-        until_ms: q.until_ms,
+        since: q.since,
+        until: q.until,
         verdict,
         stage: q.stage,
         limit: q.limit.unwrap_or(100),

@@ -130,8 +130,8 @@ async fn a_record_the_store_refuses_is_set_aside_and_the_rest_go_in() {
     );
     let filter = crate::store::EventFilter {
         machine: Some("M1".parse().unwrap()),
-        since_ms: None,
-        until_ms: None,
+        since: None,
+        until: None,
         level: None,
         limit: 10,
     };

@@ -317,3 +317,43 @@ impl FeatureLoop {
         self.record(vec![e]).await;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn header(machine: &str, part: &str, lobe: &str) -> MeasurementHeader {
+        MeasurementHeader {
+            machine: machine.into(),
+            part: part.into(),
+            lobe: lobe.into(),
+            revolutions: 3,
+            points_per_rev: 360,
+        }
+    }
+
+    /// The routing is where a gauge's part label becomes a `PartId`: a label off the gauges'
+    /// rule is refused there with its text, by name or by the bus's numeric ids alike.
+    #[test]
+    fn a_routed_measurement_carries_its_part_id_and_a_bad_label_is_refused() {
+        let ids = GaugeIds {
+            machine: "G7".parse().unwrap(),
+            features: vec!["IN1".parse().unwrap(), "EX1".parse().unwrap()],
+        };
+        let (index, part) = ids.route(&header("G7", "S-17.a", "EX1"), None).unwrap();
+        assert_eq!((index, part.as_str()), (1, "S-17.a"));
+        let (index, part) = ids.route(&header("1", "1234", "1"), None).unwrap();
+        assert_eq!((index, part.as_str()), (0, "1234"));
+        for bad in ["", "S 17", "../x", &"9".repeat(33)] {
+            let err = ids.route(&header("G7", bad, "IN1"), None).unwrap_err();
+            assert!(
+                err.starts_with("measurement names part id"),
+                "{bad:?}: {err}"
+            );
+            assert!(err.contains(&crate::names::quote(bad)), "{bad:?}: {err}");
+        }
+        // The machine and the feature are still judged first, as before.
+        let err = ids.route(&header("G8", "S 17", "IN1"), None).unwrap_err();
+        assert!(err.contains("this is machine"), "{err}");
+    }
+}

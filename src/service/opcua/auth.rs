@@ -99,9 +99,7 @@ impl SignedIn {
             .collect();
         for (name, digest) in users {
             let allowed = match store.user(&name).await {
-                Ok(Some(u)) => {
-                    u.disabled_at_ms.is_none() && token_digest(&u.password_hash) == digest
-                }
+                Ok(Some(u)) => u.disabled_at.is_none() && token_digest(&u.password_hash) == digest,
                 Ok(None) => false,
                 Err(_) => continue,
             };

@@ -42,7 +42,7 @@ async fn caller(w: command::Writes<'_>, user: &str) -> Result<Caller, StatusCode
         .user(user)
         .await
         .map_err(|_| StatusCode::BadResourceUnavailable)?
-        .filter(|u| u.disabled_at_ms.is_none())
+        .filter(|u| u.disabled_at.is_none())
         .ok_or(StatusCode::BadUserAccessDenied)?;
     Ok(Caller {
         actor: user.name,
@@ -233,8 +233,8 @@ async fn stored_event_id(
     let store = store_of(w.store).await?;
     let filter = crate::store::EventFilter {
         machine: Some(machine.clone()),
-        since_ms: Some(named.at),
-        until_ms: named
+        since: Some(named.at),
+        until: named
             .at
             .checked_add(jiff::SignedDuration::from_millis(1))
             .ok(),
