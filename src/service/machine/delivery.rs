@@ -132,7 +132,7 @@ impl FeatureLoop {
             measurement_id: draft.measurement_id,
             learning: serde_json::to_value(draft.learning.summary())?,
             rollback_of: draft.rollback_of,
-            created_at_unix_ms: draft.at,
+            created_at: draft.at,
         })
     }
 
