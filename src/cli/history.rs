@@ -90,7 +90,7 @@ pub(crate) fn run_history(args: HistoryArgs) -> anyhow::Result<()> {
         let store = connect(&args.store).await?;
         let filter = HistoryFilter {
             lobe: args.lobe.clone(),
-            since: since,
+            since,
             masters: if args.masters {
                 MasterRuns::Only
             } else {

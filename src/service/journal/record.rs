@@ -367,7 +367,7 @@ pub(super) async fn apply_in(batch: &mut Batch<'_>, record: &Pending) -> Result<
                 lobe,
                 kind,
                 recipe_json,
-                created_at: created_at,
+                created_at,
             };
             batch.insert_recipe_snapshot(&r).await.map(|_| ())
         }
@@ -414,7 +414,7 @@ async fn insert_table(batch: &mut Batch<'_>, record: Pending) -> Result<(), Stor
         learning_params_json,
         reason,
         status,
-        created_at: created_at,
+        created_at,
     };
     batch.insert_table_version(&t).await.map(|_| ())
 }

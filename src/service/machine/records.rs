@@ -134,7 +134,7 @@ pub(super) fn measurement(
         machine: machine.clone(),
         part,
         lobe: lobe.clone(),
-        received_at: received_at,
+        received_at,
         verdict: if report.verdict.pass {
             Verdict::Pass
         } else {
