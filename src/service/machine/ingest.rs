@@ -132,7 +132,9 @@ impl FeatureLoop {
                 info!(machine = %self.name, part = %raw.header.part, origin = %raw.origin, "measurement already learned from: not learned again");
                 Ok(Ingested::Repeated)
             }
-            Some(Finished::Rejected { reason }) => Ok(Ingested::Rejected { reason }),
+            Some(Finished::Rejected { reason }) => Ok(Ingested::Rejected {
+                reason: reason.to_string(),
+            }),
             Some(Finished::NotRecorded) => {
                 // Not counted and not remembered: the same reading sent again once the journal
                 // can be written is a new measurement, not a repeat.
