@@ -323,9 +323,9 @@ async fn clients(addr: SocketAddr, n: usize) -> mpsc::UnboundedReceiver<i64> {
 fn part(n: i64) -> NewMeasurement {
     NewMeasurement {
         machine: camloop::names::MachineName::new(&machine(7)).expect("a valid name"),
-        part: format!("live-{n}"),
+        part: format!("live-{n}").parse().expect("a part id"),
         lobe: "IN1".parse().unwrap(),
-        received_at_ms: jiff::Timestamp::from_millisecond(T0_MS + MEASUREMENTS * 1000 + n)
+        received_at: jiff::Timestamp::from_millisecond(T0_MS + MEASUREMENTS * 1000 + n)
             .expect("a time within jiff's years"),
         verdict: Verdict::Pass,
         max_profile_error_um: 0.5,

@@ -98,7 +98,7 @@ fn benches(c: &mut Criterion) {
             measurement_id: None,
             learning: serde_json::Value::Null,
             rollback_of: None,
-            created_at_unix_ms: jiff::Timestamp::UNIX_EPOCH,
+            created_at: jiff::Timestamp::UNIX_EPOCH,
         };
         share.push_once(request).expect("push")
     };

@@ -132,7 +132,7 @@ async fn drive(
             sender.send(PlantEvent::PartAnalysed {
                 machine: machine.clone(),
                 feature: feature.clone(),
-                part: format!("S-{part}"),
+                part: format!("S-{part}").parse().expect("a part id"),
                 at: camloop::clock::now(),
                 verdict: Verdict::Pass,
                 max_profile_error_um: error_um,

@@ -112,7 +112,7 @@ impl AuditSeal {
     /// client (see `crate::auth::RefusalBudget`), its reason saying how many of that
     /// client's refusals before it were not recorded; `None`: count it only.
     pub fn within_refusal_budget(&self, mut entry: AuditEntry) -> Option<AuditEntry> {
-        match self.refusals.admit(&entry.client, entry.at_ms) {
+        match self.refusals.admit(&entry.client, entry.at) {
             crate::auth::Admit::Record { unrecorded_before } => {
                 if unrecorded_before > 0 {
                     entry.reason.push_str(&format!(

@@ -12,6 +12,7 @@
 //! K-field notation (K0001 value, K0002 attribute, K0004 time, K0014 part ident), so every
 //! value names its characteristic; times are UTC.
 
+use crate::core::ids::PartId;
 use crate::names::{FeatureName, MachineName};
 use std::fmt::Write as _;
 
@@ -44,9 +45,9 @@ pub(crate) enum DfqError {
 /// One measured part of a feature.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct DfqRow {
-    pub received_at_ms: jiff::Timestamp,
+    pub received_at: jiff::Timestamp,
     /// What identifies the part (K0014): its number as the gauge reported it.
-    pub part_ident: String,
+    pub part_ident: PartId,
     /// Largest |measured − nominal| with nothing fitted, µm; `None` when unknown.
     pub max_error_um: Option<f64>,
     pub profile_error_um: f64,
@@ -106,7 +107,7 @@ pub(crate) fn row_from(
         .filter(|r| !r.error_um.is_empty())
         .map(|r| r.error_um.iter().fold(0.0f64, |a, e| a.max(e.abs())));
     DfqRow {
-        received_at_ms: m.received_at_ms,
+        received_at: m.received_at,
         part_ident: m.part.clone(),
         max_error_um,
         profile_error_um: m.max_profile_error_um,
@@ -208,7 +209,7 @@ pub(crate) fn write_dfq(
                 };
                 line(&mut values, "K0001", Some(k), &shown);
                 line(&mut values, "K0002", Some(k), &attribute.to_string());
-                line(&mut values, "K0004", Some(k), &time(r.received_at_ms));
+                line(&mut values, "K0004", Some(k), &time(r.received_at));
                 line(
                     &mut values,
                     "K0014",

@@ -14,7 +14,7 @@ use crate::core::measure::AssemblyLimits;
 use crate::core::program::ProgramSettings;
 use crate::core::speed_plan::SpeedPlanSettings;
 use crate::core::turn::TurnSetup;
-use crate::names::FeatureName;
+use crate::names::{FeatureName, PartName};
 use anyhow::{Context, bail};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -196,8 +196,8 @@ pub struct RecipeError {
 /// Everything the loop needs about one lobe or pin of a recipe, lift table loaded.
 #[derive(Debug, Clone)]
 pub struct FeatureSetup {
-    /// The recipe's part name.
-    pub part: String,
+    /// The recipe's part name (its drawing number; no one shaft's id).
+    pub part: PartName,
     /// The lobe's or pin's name in the recipe.
     pub name: FeatureName,
     /// "PART lobe NAME" or "PART pin NAME", for messages and program comments.
@@ -348,7 +348,7 @@ impl Recipe {
             self.check_cycle_on(path, cycle, &feature, &nominal, &name)?;
         }
         Ok(FeatureSetup {
-            part: self.name.clone(),
+            part: PartName::new(&self.name).with_context(|| format!("{}: name", path.display()))?,
             name,
             label,
             nominal,

@@ -175,7 +175,7 @@ fn cli_actor() -> String {
 
 fn entry(action: &str, after: serde_json::Value, reason: String) -> AuditEntry {
     AuditEntry {
-        at_ms: now(),
+        at: now(),
         actor: cli_actor(),
         role: Role::Admin,
         client: "local".into(),
@@ -278,12 +278,12 @@ async fn user(
         UserAction::List => {
             println!("{:<32} {:<9} {:<20} state", "user", "role", "created (UTC)");
             for u in store.users().await? {
-                let state = if u.disabled_at_ms.is_some() {
+                let state = if u.disabled_at.is_some() {
                     "disabled"
                 } else {
                     "enabled"
                 };
-                let created = crate::clock::utc_text(u.created_at_ms);
+                let created = crate::clock::utc_text(u.created_at);
                 println!(
                     "{:<32} {:<9} {:<20} {state}",
                     u.name,
@@ -308,7 +308,7 @@ async fn live_tokens_after_passwd(
         .tokens()
         .await?
         .into_iter()
-        .filter(|t| t.user == name.as_str() && t.revoked_at_ms.is_none() && t.expires_at_ms > now)
+        .filter(|t| t.user == name.as_str() && t.revoked_at.is_none() && t.expires_at > now)
         .collect();
     if live.is_empty() {
         return Ok(());
@@ -396,12 +396,12 @@ async fn token(store: &Store, seal: &AuditSeal, action: TokenAction) -> anyhow::
                 "id", "user", "role", "expires (UTC)", "state"
             );
             for t in store.tokens().await? {
-                let state = match (t.revoked_at_ms, t.expires_at_ms <= now) {
+                let state = match (t.revoked_at, t.expires_at <= now) {
                     (Some(_), _) => "revoked",
                     (None, true) => "expired",
                     (None, false) => "live",
                 };
-                let expires = crate::clock::utc_text(t.expires_at_ms);
+                let expires = crate::clock::utc_text(t.expires_at);
                 println!(
                     "{:>5} {:<32} {:<9} {:<20} {:<8} {}",
                     t.id.0,
@@ -431,7 +431,7 @@ async fn create_token(
     let Some(u) = store
         .user(name.as_str())
         .await?
-        .filter(|u| u.disabled_at_ms.is_none())
+        .filter(|u| u.disabled_at.is_none())
     else {
         bail!("no enabled user {name}");
     };
@@ -442,24 +442,24 @@ async fn create_token(
         );
     }
     let secret = new_token()?;
-    let expires_at_ms = now + lifetime(expires)?;
+    let expires_at = now + lifetime(expires)?;
     let label: String = label.chars().take(64).collect();
     let t = NewToken {
         user: u.id,
         label: label.clone(),
         sha256: token_digest(&secret),
         role,
-        created_at_ms: now,
-        expires_at_ms,
+        created_at: now,
+        expires_at,
     };
     let id = store.add_token(&t).await?;
-    let after = serde_json::json!({ "token": id.0, "user": name, "role": role.as_str(), "expires_at_ms": expires_at_ms.as_millisecond(), "label": label });
+    let after = serde_json::json!({ "token": id.0, "user": name, "role": role.as_str(), "expires_at_ms": expires_at.as_millisecond(), "label": label });
     seal.append(store, &entry("token.create", after, String::new()))
         .await?;
     eprintln!(
         "token {} for {name} ({role}), valid until {} UTC; shown once, keep it secret:",
         id.0,
-        crate::clock::utc_text(expires_at_ms)
+        crate::clock::utc_text(expires_at)
     );
     println!("{secret}");
     Ok(())
@@ -560,7 +560,7 @@ async fn print_trail(store: &Store, since: jiff::Timestamp) -> anyhow::Result<()
         after = last.id;
         for r in &rows {
             let e = &r.entry;
-            let t = crate::clock::utc_text(e.at_ms);
+            let t = crate::clock::utc_text(e.at);
             let target = [
                 e.machine.clone(),
                 e.feature.clone(),

@@ -333,7 +333,7 @@ fn push(
             "max_correction_um": saved.learning.correction_um.iter().fold(0.0f64, |m, u| m.max(u.abs())),
         }),
         rollback_of: None,
-        created_at_unix_ms: now(),
+        created_at: now(),
     };
     let pushed = share
         .push_once(request)
@@ -397,7 +397,7 @@ fn flag_setup(
         ..ProgramSettings::default()
     };
     LobeSetup {
-        part: "PART".to_string(),
+        part: crate::names::PartName::new("PART").expect("a plain name"),
         name: crate::names::FeatureName::new("LOBE").expect("a plain name"),
         label,
         nominal,

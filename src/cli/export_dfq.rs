@@ -25,7 +25,7 @@ pub(crate) async fn recipe_parts(
     let mut out = BTreeMap::new();
     for m in machines {
         for f in store.features(m).await? {
-            out.insert((m.clone(), f.lobe), f.part);
+            out.insert((m.clone(), f.lobe), f.part.to_string());
         }
     }
     Ok(out)

@@ -90,7 +90,7 @@ pub(crate) fn run_history(args: HistoryArgs) -> anyhow::Result<()> {
         let store = connect(&args.store).await?;
         let filter = HistoryFilter {
             lobe: args.lobe.clone(),
-            since_ms: since,
+            since,
             masters: if args.masters {
                 MasterRuns::Only
             } else {
@@ -238,7 +238,7 @@ fn render(rows: &[MeasurementSummary], format: Format) -> anyhow::Result<String>
                     s,
                     "{:>8}  {:<13}  {:<8} {:<8} {:<6} {:<10} {:>10.2} {:>10.2} {:>9.4}",
                     m.id.0,
-                    format_time(m.received_at_ms),
+                    format_time(m.received_at),
                     m.machine,
                     m.lobe,
                     m.verdict.as_str(),
@@ -256,7 +256,7 @@ fn render(rows: &[MeasurementSummary], format: Format) -> anyhow::Result<String>
                     s,
                     "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
                     m.id.0,
-                    m.received_at_ms.as_millisecond(),
+                    m.received_at.as_millisecond(),
                     csv_field(&m.machine),
                     csv_field(&m.part),
                     csv_field(&m.lobe),
@@ -277,7 +277,7 @@ fn render(rows: &[MeasurementSummary], format: Format) -> anyhow::Result<String>
                 .iter()
                 .map(|m| {
                     serde_json::json!({
-                        "id": m.id.0, "received_at_ms": m.received_at_ms.as_millisecond(), "machine": m.machine, "part": m.part,
+                        "id": m.id.0, "received_at_ms": m.received_at.as_millisecond(), "machine": m.machine, "part": m.part,
                         "lobe": m.lobe, "verdict": m.verdict.as_str(), "max_profile_error_um": m.max_profile_error_um,
                         "base_radius_error_um": m.base_radius_error_um, "phase_error_deg": m.phase_error_deg,
                         "revolutions_used": m.revolutions_used, "points_per_rev": m.points_per_rev,

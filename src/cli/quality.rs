@@ -67,8 +67,8 @@ pub(crate) fn run_capability(args: CapabilityArgs) -> anyhow::Result<()> {
     let time = |t: &Option<String>| t.as_deref().map(|t| parse_time(t, now)).transpose();
     let window = Window {
         last: args.last,
-        since_ms: time(&args.since)?,
-        until_ms: time(&args.until)?,
+        since: time(&args.since)?,
+        until: time(&args.until)?,
         since_dressing: args.since_dressing,
         since_recipe_change: args.since_recipe_change,
     };
@@ -158,8 +158,8 @@ pub(crate) fn run_gauge_study(args: GaugeStudyArgs) -> anyhow::Result<()> {
         QualityFormat::Json => {
             serde_json::to_string_pretty(&serde_json::json!({
                 "machine": args.machine, "feature": args.lobe, "runs": rows.len(),
-                "first_ms": rows.first().map(|r| r.received_at_ms.as_millisecond()),
-                "last_ms": rows.last().map(|r| r.received_at_ms.as_millisecond()), "characteristics": items,
+                "first_ms": rows.first().map(|r| r.received_at.as_millisecond()),
+                "last_ms": rows.last().map(|r| r.received_at.as_millisecond()), "characteristics": items,
             }))? + "\n"
         }
         QualityFormat::Table | QualityFormat::Csv => render::gauge_table(

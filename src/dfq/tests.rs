@@ -84,8 +84,8 @@ fn check(text: &str) -> Vec<(String, Option<usize>, String)> {
 
 fn row(id: i64, at_ms: i64, profile: f64) -> DfqRow {
     DfqRow {
-        received_at_ms: jiff::Timestamp::from_millisecond(at_ms).unwrap(),
-        part_ident: id.to_string(),
+        received_at: jiff::Timestamp::from_millisecond(at_ms).unwrap(),
+        part_ident: id.to_string().parse().unwrap(),
         max_error_um: Some(profile + 1.0),
         profile_error_um: profile,
         size_error_um: -0.25,

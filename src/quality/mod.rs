@@ -14,6 +14,7 @@ pub mod study;
 use crate::core::capability::{
     self, Capability, Characteristic, PartValues, chart::ChartLimits, chart::ChartPoint,
 };
+use crate::core::ids::PartId;
 use crate::core::measure::is_master_part;
 use crate::names::{FeatureName, MachineName};
 use crate::store::{
@@ -38,8 +39,8 @@ pub const MIN_CAPABILITY_VALUES: usize = 100;
 pub(crate) struct Window {
     /// The newest this many production parts (at most [`MAX_PAGE`]).
     pub last: u32,
-    pub since_ms: Option<jiff::Timestamp>,
-    pub until_ms: Option<jiff::Timestamp>,
+    pub since: Option<jiff::Timestamp>,
+    pub until: Option<jiff::Timestamp>,
     /// Only parts after the machine's newest wheel dressing.
     pub since_dressing: bool,
     /// Only parts after the feature's recipe last changed (the store's newest snapshot).
@@ -50,8 +51,8 @@ impl Default for Window {
     fn default() -> Self {
         Self {
             last: 125,
-            since_ms: None,
-            until_ms: None,
+            since: None,
+            until: None,
             since_dressing: false,
             since_recipe_change: false,
         }
@@ -62,8 +63,8 @@ impl Default for Window {
 #[derive(Debug, Clone, PartialEq)]
 pub struct PartRow {
     pub id: MeasurementId,
-    pub part: String,
-    pub received_at_ms: jiff::Timestamp,
+    pub part: PartId,
+    pub received_at: jiff::Timestamp,
     pub max_profile_error_um: f64,
     pub base_radius_error_um: f64,
     pub phase_error_deg: f64,
@@ -82,7 +83,7 @@ impl PartRow {
         Ok(Self {
             id: s.id,
             part: s.part.clone(),
-            received_at_ms: s.received_at_ms,
+            received_at: s.received_at,
             max_profile_error_um: s.max_profile_error_um,
             base_radius_error_um: s.base_radius_error_um,
             phase_error_deg: s.phase_error_deg,
@@ -127,11 +128,11 @@ pub(crate) async fn window_rows(
     window: &Window,
     masters: bool,
 ) -> Result<(Vec<PartRow>, Option<jiff::Timestamp>, usize), StoreError> {
-    let mut since = window.since_ms;
+    let mut since = window.since;
     if window.since_dressing
         && let Some(d) = store.dressings(machine, 1).await?.first()
     {
-        since = since.max(Some(d.at_ms));
+        since = since.max(Some(d.at));
     }
     if window.since_recipe_change
         && let Some(f) = store
@@ -140,11 +141,11 @@ pub(crate) async fn window_rows(
             .iter()
             .find(|f| f.lobe == *lobe)
     {
-        since = since.max(Some(f.created_at_ms));
+        since = since.max(Some(f.created_at));
     }
     let (start, until) = (
         since.unwrap_or(jiff::Timestamp::MIN),
-        window.until_ms.unwrap_or(jiff::Timestamp::MAX),
+        window.until.unwrap_or(jiff::Timestamp::MAX),
     );
     let wanted = window.last.clamp(1, MAX_PAGE) as usize;
     let (mut rows, mut skipped, mut before) = (Vec::new(), 0usize, None);
@@ -193,7 +194,7 @@ pub struct CharacteristicStudy {
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Chart {
     pub limits: ChartLimits,
-    pub part: Vec<String>,
+    pub part: Vec<PartId>,
     pub points: Vec<ChartPoint>,
 }
 
@@ -208,7 +209,7 @@ pub fn study(
         .iter()
         .map(|l| {
             let c = l.characteristic;
-            let (parts, values): (Vec<String>, Vec<f64>) = rows
+            let (parts, values): (Vec<PartId>, Vec<f64>) = rows
                 .iter()
                 .filter_map(|r| r.value(c, limits.phase_deg).map(|v| (r.part.clone(), v)))
                 .unzip();
@@ -253,7 +254,7 @@ pub(crate) fn indicative_reason(items: &[CharacteristicStudy]) -> Option<String>
     ))
 }
 
-fn chart_of(parts: &[String], values: &[f64], resolution: f64, c: Characteristic) -> Option<Chart> {
+fn chart_of(parts: &[PartId], values: &[f64], resolution: f64, c: Characteristic) -> Option<Chart> {
     let base = &values[..values.len().min(capability::chart::BASELINE_PARTS)];
     let limits = ChartLimits::from_baseline_shaped(base, resolution, c.chart_shape())?;
     Some(Chart {

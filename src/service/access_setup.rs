@@ -83,7 +83,7 @@ pub(crate) async fn ensure_admin(
         Err(e) => return Err(e.into()),
     }
     let entry = AuditEntry {
-        at_ms: now,
+        at: now,
         actor: "camloop".into(),
         role: Role::Admin,
         client: "local".into(),

@@ -76,7 +76,7 @@ impl Caller {
     /// An audit entry of `action` by this caller now; the write fills in the rest.
     fn audit(&self, action: &str) -> AuditEntry {
         AuditEntry {
-            at_ms: crate::clock::now(),
+            at: crate::clock::now(),
             actor: self.actor.clone(),
             role: self.role.unwrap_or(Role::Viewer),
             client: self.client.clone(),

@@ -91,7 +91,7 @@ pub(crate) fn of_record(record: &Pending) -> Option<PlantEvent> {
             machine: m.machine,
             feature: m.lobe,
             part: m.part,
-            at: m.received_at_ms,
+            at: m.received_at,
             verdict: m.verdict,
             max_profile_error_um: m.max_profile_error_um,
             base_radius_error_um: m.base_radius_error_um,
@@ -289,9 +289,9 @@ mod tests {
         let measurement = |part: &str| Pending::Measurement {
             measurement: crate::store::NewMeasurement {
                 machine: "G7".parse().unwrap(),
-                part: part.into(),
+                part: part.parse().unwrap(),
                 lobe: "IN1".parse().unwrap(),
-                received_at_ms: jiff::Timestamp::from_millisecond(7).unwrap(),
+                received_at: jiff::Timestamp::from_millisecond(7).unwrap(),
                 verdict: Verdict::Pass,
                 max_profile_error_um: 0.4,
                 base_radius_error_um: 0.1,

@@ -119,7 +119,7 @@ async fn check_password(
     let matches = app.auth.hasher.verify(password.to_string(), hash).await?;
     Ok(match user {
         None => Err("unknown user"),
-        Some(u) if u.disabled_at_ms.is_some() => Err("disabled user"),
+        Some(u) if u.disabled_at.is_some() => Err("disabled user"),
         Some(_) if !matches => Err("wrong password"),
         Some(u) => Ok(u),
     })
@@ -157,7 +157,7 @@ pub(crate) async fn record_failure(
         reason.push_str(&format!("; {locked_what} locked out for 15 minutes"));
     }
     let entry = AuditEntry {
-        at_ms: crate::clock::now(),
+        at: crate::clock::now(),
         actor: user.unwrap_or("anonymous").to_string(),
         role: Role::Viewer,
         client: address.to_string(),

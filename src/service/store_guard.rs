@@ -399,7 +399,7 @@ fn remember(
     std::fs::create_dir_all(dir).map_err(|e| bad("create its folder", e))?;
     let text = serde_json::to_string(&Remembered {
         store_id: identity.id.clone(),
-        created_at: identity.created_at_ms,
+        created_at: identity.created_at,
         database: database.to_owned(),
         accepted_behind,
     })

@@ -43,8 +43,8 @@ pub struct Checkpoint {
     pub pushed: u64,
     /// The versions held, ascending.
     pub versions: Vec<VersionState>,
-    #[serde(with = "crate::clock::unix_ms")]
-    pub at_unix_ms: Timestamp,
+    #[serde(rename = "at_unix_ms", with = "crate::clock::unix_ms")]
+    pub at: Timestamp,
     /// Lines the manifest had when it was compacted (now in the archive).
     pub archived_lines: usize,
 }
@@ -96,14 +96,14 @@ impl History {
         Ok(())
     }
 
-    fn checkpoint(&self, at_unix_ms: Timestamp, archived_lines: usize) -> Checkpoint {
+    fn checkpoint(&self, at: Timestamp, archived_lines: usize) -> Checkpoint {
         Checkpoint {
             told: self.told,
             forgotten: self.forgotten,
             deliverable: self.deliverable,
             pushed: self.pushed,
             versions: self.versions.clone(),
-            at_unix_ms,
+            at,
             archived_lines,
         }
     }
@@ -118,10 +118,10 @@ pub(crate) fn compact(
     temp_dir: &Path,
     history: &History,
     lines: usize,
-    at_unix_ms: Timestamp,
+    at: Timestamp,
 ) -> Result<(), StateError> {
     let manifest = state_dir.join(manifest_name);
-    let checkpoint = Record::Checkpoint(Box::new(history.checkpoint(at_unix_ms, lines)));
+    let checkpoint = Record::Checkpoint(Box::new(history.checkpoint(at, lines)));
     let text = manifest::line(&checkpoint);
     let (file, fresh) = create_temp(temp_dir, |p| fs::File::create_new(p))
         .map_err(StateError::io("create a temporary in", temp_dir))?;
@@ -154,7 +154,7 @@ mod tests {
     fn version(n: u64) -> Record {
         Record::Version(VersionRecord {
             version: v(n),
-            created_at_unix_ms: ms(n),
+            created_at: ms(n),
             table_number: 1 + (n as u32 % 2),
             files: vec![FileRecord {
                 name: "CAM.SPF".into(),
@@ -182,11 +182,11 @@ mod tests {
             for r in [
                 Record::Delivering {
                     version: v(n),
-                    at_unix_ms: ms(n),
+                    at: ms(n),
                 },
                 Record::Pushed {
                     version: v(n),
-                    at_unix_ms: ms(n),
+                    at: ms(n),
                 },
             ] {
                 text.push_str(&manifest::line(&r));
@@ -194,7 +194,7 @@ mod tests {
             if n > 3 {
                 text.push_str(&manifest::line(&Record::Pruned {
                     version: v(n - 3),
-                    at_unix_ms: ms(n),
+                    at: ms(n),
                 }));
             }
         }
@@ -232,7 +232,7 @@ mod tests {
         let mut h = short.history;
         h.apply(Record::Delivering {
             version: v(51),
-            at_unix_ms: ms(60),
+            at: ms(60),
         })
         .unwrap();
         h.apply(version(52)).unwrap();

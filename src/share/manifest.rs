@@ -25,28 +25,28 @@ pub enum Record {
     /// A push attempt failed; the version waits. Written when the reason changes.
     Waiting {
         version: TableVersion,
-        #[serde(with = "crate::clock::unix_ms")]
-        at_unix_ms: Timestamp,
+        #[serde(rename = "at_unix_ms", with = "crate::clock::unix_ms")]
+        at: Timestamp,
         reason: String,
     },
     /// Temporaries are on the share and the renames begin: from here on the control may
     /// see this version's files.
     Delivering {
         version: TableVersion,
-        #[serde(with = "crate::clock::unix_ms")]
-        at_unix_ms: Timestamp,
+        #[serde(rename = "at_unix_ms", with = "crate::clock::unix_ms")]
+        at: Timestamp,
     },
     /// All files renamed, the folder flushed, every file read back and verified.
     Pushed {
         version: TableVersion,
-        #[serde(with = "crate::clock::unix_ms")]
-        at_unix_ms: Timestamp,
+        #[serde(rename = "at_unix_ms", with = "crate::clock::unix_ms")]
+        at: Timestamp,
     },
     /// The kept text was removed (older than the kept versions); the record stays.
     Pruned {
         version: TableVersion,
-        #[serde(with = "crate::clock::unix_ms")]
-        at_unix_ms: Timestamp,
+        #[serde(rename = "at_unix_ms", with = "crate::clock::unix_ms")]
+        at: Timestamp,
     },
     /// The first line of a compacted manifest: the versions held when it was compacted
     /// (see [`super::compact`]); the lines before it went to the archive file.
@@ -59,8 +59,8 @@ pub struct VersionRecord {
     /// 1, 2, 3, … without gaps.
     pub version: TableVersion,
     /// Given by the caller; written as Unix time in milliseconds.
-    #[serde(with = "crate::clock::unix_ms")]
-    pub created_at_unix_ms: Timestamp,
+    #[serde(rename = "created_at_unix_ms", with = "crate::clock::unix_ms")]
+    pub created_at: Timestamp,
     /// The curve-table number the program defines.
     pub table_number: u32,
     /// The program files, in rename order.
@@ -285,10 +285,7 @@ impl History {
                 v.status = VersionStatus::Delivering;
                 v.reached_share = true;
             }
-            Record::Pushed {
-                version,
-                at_unix_ms,
-            } => {
+            Record::Pushed { version, at } => {
                 let v = self.deliverable_mut(version, "pushed")?;
                 if v.status != VersionStatus::Delivering {
                     return Err(RecordOutOfOrder(format!(
@@ -297,7 +294,7 @@ impl History {
                 }
                 // The status keeps unsigned milliseconds: an instant before 1970 is 1970.
                 v.status = VersionStatus::Pushed {
-                    at: at_unix_ms.max(Timestamp::UNIX_EPOCH),
+                    at: at.max(Timestamp::UNIX_EPOCH),
                     note: None,
                 };
                 self.deliverable = None;
@@ -401,7 +398,7 @@ mod tests {
     fn version(n: u64, refused: Option<&str>) -> Record {
         Record::Version(VersionRecord {
             version: v(n),
-            created_at_unix_ms: ms(1000 * n),
+            created_at: ms(1000 * n),
             table_number: 1,
             files: vec![FileRecord {
                 name: "CAM_T1.SPF".into(),
@@ -432,17 +429,17 @@ mod tests {
     fn settled_versions_are_forgotten_but_not_the_one_on_the_share() {
         let at = |n| Record::Pruned {
             version: v(n),
-            at_unix_ms: ms(0),
+            at: ms(0),
         };
         let mut h = fold(vec![
             version(1, None),
             Record::Delivering {
                 version: v(1),
-                at_unix_ms: ms(1),
+                at: ms(1),
             },
             Record::Pushed {
                 version: v(1),
-                at_unix_ms: ms(2),
+                at: ms(2),
             },
             version(2, None),
             version(3, Some("guard")),
@@ -470,11 +467,11 @@ mod tests {
         for r in [
             Record::Delivering {
                 version: v(5),
-                at_unix_ms: ms(3),
+                at: ms(3),
             },
             Record::Pushed {
                 version: v(5),
-                at_unix_ms: ms(4),
+                at: ms(4),
             },
         ] {
             h.apply(r).unwrap();
@@ -496,7 +493,7 @@ mod tests {
         assert_eq!(serde_json::from_str::<Record>(&text).unwrap(), r);
         let w = Record::Waiting {
             version: v(1),
-            at_unix_ms: ms(7),
+            at: ms(7),
             reason: "share /x is missing".into(),
         };
         assert_eq!(
@@ -511,11 +508,11 @@ mod tests {
             version(1, None),
             Record::Delivering {
                 version: v(1),
-                at_unix_ms: ms(1),
+                at: ms(1),
             },
             Record::Pushed {
                 version: v(1),
-                at_unix_ms: ms(2),
+                at: ms(2),
             },
             version(2, None),
             version(3, Some("table 1 is in use")),
@@ -548,7 +545,7 @@ mod tests {
         );
         let pushed = Record::Pushed {
             version: v(1),
-            at_unix_ms: ms(0),
+            at: ms(0),
         };
         assert!(
             fold(vec![version(1, None), pushed.clone()])
@@ -558,7 +555,7 @@ mod tests {
         );
         let delivering = Record::Delivering {
             version: v(1),
-            at_unix_ms: ms(0),
+            at: ms(0),
         };
         assert!(
             fold(vec![version(1, Some("no")), delivering])
@@ -568,7 +565,7 @@ mod tests {
         );
         let pruned = Record::Pruned {
             version: v(1),
-            at_unix_ms: ms(0),
+            at: ms(0),
         };
         assert!(
             fold(vec![version(1, None), pruned.clone(), pruned])

@@ -31,7 +31,7 @@ pub struct PushRequest {
     /// Set for a rollback: the version whose text this re-pushes.
     pub rollback_of: Option<TableVersion>,
     /// From the caller's clock.
-    pub created_at_unix_ms: jiff::Timestamp,
+    pub created_at: jiff::Timestamp,
 }
 
 /// Outcome of recording a request.

@@ -147,7 +147,7 @@ impl Share {
         }
         let record = VersionRecord {
             version,
-            created_at_unix_ms: request.created_at_unix_ms,
+            created_at: request.created_at,
             table_number: request.table_number,
             files: request
                 .files
@@ -200,16 +200,10 @@ impl Share {
         };
         match result {
             Ok(paths) => {
-                let at_unix_ms = (self.clock)();
+                let at = (self.clock)();
                 // Not flushed on its own: losing this line (power cut) only means one more
                 // delivery of the same version at the next start; the next flush takes it.
-                self.append(
-                    Record::Pushed {
-                        version,
-                        at_unix_ms,
-                    },
-                    Flush::WithNext,
-                )?;
+                self.append(Record::Pushed { version, at }, Flush::WithNext)?;
                 let (pruned, prune_error) = self.prune();
                 Ok(Some(Pushed {
                     version,
@@ -247,7 +241,7 @@ impl Share {
     pub fn rollback_request(
         &self,
         version: TableVersion,
-        created_at_unix_ms: jiff::Timestamp,
+        created_at: jiff::Timestamp,
     ) -> Result<PushRequest, StateError> {
         let kept = self.held(version)?;
         let record = kept.record.clone();
@@ -258,7 +252,7 @@ impl Share {
             measurement_id: record.measurement_id,
             learning: record.learning,
             rollback_of: Some(version),
-            created_at_unix_ms,
+            created_at,
         })
     }
 
@@ -352,15 +346,9 @@ impl Share {
     ) -> Result<Vec<PathBuf>, PushError> {
         let version = record.version;
         let share = self.config.share_dir.clone();
-        let at_unix_ms = (self.clock)();
+        let at = (self.clock)();
         // Flushed before the first rename: the table numbering relies on it.
-        if let Err(e) = self.append(
-            Record::Delivering {
-                version,
-                at_unix_ms,
-            },
-            Flush::Now,
-        ) {
+        if let Err(e) = self.append(Record::Delivering { version, at }, Flush::Now) {
             self.discard(&temps);
             return Err(e.into());
         }
@@ -414,12 +402,12 @@ impl Share {
         if unchanged {
             return Ok(());
         }
-        let at_unix_ms = (self.clock)();
+        let at = (self.clock)();
         // Informational: the version record itself keeps the version waiting.
         self.append(
             Record::Waiting {
                 version,
-                at_unix_ms,
+                at,
                 reason,
             },
             Flush::WithNext,
@@ -439,16 +427,10 @@ impl Share {
         let excess = kept.len().saturating_sub(self.config.keep_versions);
         let mut pruned = Vec::new();
         for &version in &kept[..excess] {
-            let at_unix_ms = (self.clock)();
+            let at = (self.clock)();
             // The record goes first: a kill after it leaves an orphan folder that the next
             // start removes, never a record pointing at a missing text.
-            if let Err(e) = self.append(
-                Record::Pruned {
-                    version,
-                    at_unix_ms,
-                },
-                Flush::Now,
-            ) {
+            if let Err(e) = self.append(Record::Pruned { version, at }, Flush::Now) {
                 return (pruned, Some(e));
             }
             let dir = self.version_dir(version);

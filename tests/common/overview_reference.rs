@@ -35,7 +35,7 @@ pub async fn features(
             .map(|s| OverviewPart {
                 id: s.id,
                 part: s.part,
-                received_at_ms: s.received_at_ms,
+                received_at: s.received_at,
                 verdict: s.verdict,
                 max_profile_error_um: s.max_profile_error_um,
             })

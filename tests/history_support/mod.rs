@@ -8,7 +8,7 @@ use super::store_support::{f, m};
 use camloop::digest::Sha256;
 use camloop::share::{History, VersionState, VersionStatus, load_manifest};
 use camloop::store::{
-    HistoryFilter, MeasurementStage, MeasurementSummary, RawPool, Store, TableVersion,
+    HistoryFilter, MeasurementStage, MeasurementSummary, RawPool, Store, StoredTableVersion,
 };
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -197,7 +197,7 @@ pub async fn agreement(var: &Path, store: &Store, machine: &str, lobe: &str) -> 
 }
 
 /// How one held version differs between the share and its stored row.
-fn compare_version(v: &VersionState, row: &TableVersion) -> Vec<String> {
+fn compare_version(v: &VersionState, row: &StoredTableVersion) -> Vec<String> {
     let version = v.record.version;
     let mut out = Vec::new();
     if row.table_number != v.record.table_number {

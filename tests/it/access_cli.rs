@@ -129,7 +129,7 @@ async fn users_and_tokens(at: At<'_>, store: &Store) -> String {
         ("ann", "viewer")
     );
     let day_ms = 86_400_000;
-    let left = grant.expires_at_ms.as_millisecond() - camloop::clock::now().as_millisecond();
+    let left = grant.expires_at.as_millisecond() - camloop::clock::now().as_millisecond();
     assert!(left > day_ms - 60_000 && left <= day_ms, "{left}");
     let list = camloop(&["token", "list"], at, "");
     assert!(
@@ -145,7 +145,7 @@ async fn users_and_tokens(at: At<'_>, store: &Store) -> String {
             .await
             .unwrap()
             .unwrap()
-            .revoked_at_ms
+            .revoked_at
             .is_some()
     );
 

@@ -104,8 +104,8 @@ async fn sixty_wrong_sign_ins_at_once_check_five_and_lock_one_user_from_one_addr
         label: String::new(),
         sha256: token_digest(&token),
         role: Role::Engineer,
-        created_at_ms: now,
-        expires_at_ms: now + jiff::SignedDuration::from_hours(1),
+        created_at: now,
+        expires_at: now + jiff::SignedDuration::from_hours(1),
     };
     store.add_token(&t).await.unwrap();
     let (here, there): (IpAddr, IpAddr) =

@@ -105,8 +105,8 @@ async fn tokens(store: &Store) -> Vec<(Role, String)> {
             label: "matrix".into(),
             sha256: token_digest(&secret),
             role,
-            created_at_ms: now,
-            expires_at_ms: now + jiff::SignedDuration::from_hours(1),
+            created_at: now,
+            expires_at: now + jiff::SignedDuration::from_hours(1),
         };
         store.add_token(&t).await.unwrap();
         out.push((role, secret));
@@ -288,8 +288,8 @@ async fn tokens_carry_a_ceiling_expire_are_revoked_and_five_wrong_ones_lock_wron
             label: String::new(),
             sha256: token_digest(&secret),
             role,
-            created_at_ms: now,
-            expires_at_ms,
+            created_at: now,
+            expires_at: expires_at_ms,
         };
         (secret, t)
     };

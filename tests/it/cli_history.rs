@@ -44,7 +44,7 @@ async fn newest_pages_through_the_store_until_it_has_n_rows() {
     let rows = newest(&store, filter.clone(), 23, 10).await.unwrap();
     let times: Vec<i64> = rows
         .iter()
-        .map(|m| m.received_at_ms.as_millisecond())
+        .map(|m| m.received_at.as_millisecond())
         .collect();
     let expected: Vec<i64> = (3..=25).rev().map(|i| i * 1000).collect();
     assert_eq!(times, expected);
@@ -104,7 +104,7 @@ fn history_leaves_master_runs_out_unless_asked_for_them() {
             (103, "Master", 7_000),
         ] {
             let mut m = store_support::data::measurement("M1", "IN1", n, at_ms);
-            m.part = part.into();
+            m.part = part.parse().unwrap();
             store.insert_measurement(&m).await.unwrap();
         }
         store.close().await;

@@ -28,7 +28,7 @@ fn state(step: u32, frozen: Option<&str>) -> String {
 async fn event(s: &Store, machine: &str, at: i64, level: EventLevel) -> i64 {
     let e = NewEvent {
         machine: m(machine),
-        at_ms: ms(at),
+        at: ms(at),
         level,
         kind: EventKind::TableRefused,
         message: format!("event at {at}"),
@@ -46,9 +46,9 @@ async fn seed(s: &Store) {
     // Newer than every part, yet never a point: master runs (either case) and an in-process
     // measurement; and a part stored last with the oldest time.
     let mut master = measurement("M1", "IN1", 61, 90_000);
-    master.part = "MASTER".into();
+    master.part = "MASTER".parse().unwrap();
     let mut lower = measurement("M1", "IN1", 62, 91_000);
-    lower.part = "master-7".into();
+    lower.part = "master-7".parse().unwrap();
     let mut in_process = measurement("M1", "IN1", 63, 92_000);
     in_process.stage = MeasurementStage::InProcess;
     let late = measurement("M1", "IN1", 64, 500);
@@ -61,7 +61,7 @@ async fn seed(s: &Store) {
             .unwrap();
     }
     let mut only_master = measurement("M2", "IN1", 200, 30_000);
-    only_master.part = "MASTER".into();
+    only_master.part = "MASTER".parse().unwrap();
     s.insert_measurement(&only_master).await.unwrap();
 
     // M1 IN1: v1, v2 pushed, v3 refused, v4 waiting: v2 is in force. M1 EX1: v1 waiting,
@@ -105,11 +105,11 @@ async fn seed(s: &Store) {
     }
     s.insert_recipe_snapshot(&NewRecipeSnapshot {
         machine: m("M1"),
-        part: "CAM".into(),
+        part: "CAM".parse().unwrap(),
         lobe: f("IN1"),
         kind: FeatureKind::Lobe,
         recipe_json: "{}".into(),
-        created_at_ms: ms(1_000),
+        created_at: ms(1_000),
     })
     .await
     .unwrap();

@@ -109,7 +109,7 @@ fn part(n: u32) -> PlantEvent {
     PlantEvent::PartAnalysed {
         machine: "M1".parse().unwrap(),
         feature: "IN1".parse().unwrap(),
-        part: format!("P{n}"),
+        part: format!("P{n}").parse().unwrap(),
         at: jiff::Timestamp::from_millisecond(1_000 * i64::from(n)).unwrap(),
         verdict: Verdict::Pass,
         max_profile_error_um: 0.5 * f64::from(n),

@@ -157,7 +157,7 @@ async fn a_wrong_password_is_refused_and_the_right_one_delivers_over_tls() {
     publisher.sender().send(PlantEvent::PartAnalysed {
         machine: "M1".parse().unwrap(),
         feature: "IN1".parse().unwrap(),
-        part: "P1".into(),
+        part: "P1".parse().unwrap(),
         at: jiff::Timestamp::from_millisecond(1).unwrap(),
         verdict: Verdict::Pass,
         max_profile_error_um: 1.5,

@@ -349,8 +349,8 @@ fn an_opcua_lockout_leaves_the_user_s_http_sign_in_and_token_alone() {
             label: String::new(),
             sha256: camloop::auth::token_digest(&token),
             role: camloop::store::Role::Viewer,
-            created_at_ms: now,
-            expires_at_ms: now + jiff::SignedDuration::from_hours(1),
+            created_at: now,
+            expires_at: now + jiff::SignedDuration::from_hours(1),
         };
         store.add_token(&grant).await.unwrap();
         store.close().await;

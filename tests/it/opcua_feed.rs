@@ -46,7 +46,7 @@ pub(crate) fn part(machine: &str, feature: &str, k: usize, part: &str) -> PlantE
     PlantEvent::PartAnalysed {
         machine: name(machine),
         feature: name(feature),
-        part: part.to_string(),
+        part: part.parse().unwrap(),
         at: part_at(k),
         verdict: Verdict::Pass,
         max_profile_error_um: k as f64 * 0.5,

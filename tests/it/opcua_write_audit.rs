@@ -21,8 +21,8 @@ async fn token(store: &Store, role: Role) -> String {
         label: "audit".into(),
         sha256: token_digest(&secret),
         role,
-        created_at_ms: now,
-        expires_at_ms: now + jiff::SignedDuration::from_hours(1),
+        created_at: now,
+        expires_at: now + jiff::SignedDuration::from_hours(1),
     };
     store.add_token(&t).await.unwrap();
     secret

@@ -70,7 +70,7 @@ async fn errors(dir: &Path) -> Vec<(i64, f64)> {
         rows.extend(
             page.into_iter()
                 .filter(|d| d.summary.machine == "SIM1")
-                .map(|d| (d.summary.received_at_ms.as_millisecond(), d.analysis_json)),
+                .map(|d| (d.summary.received_at.as_millisecond(), d.analysis_json)),
         );
     }
     rows.into_iter()

@@ -118,7 +118,7 @@ fn pusher(root: &Path) {
             measurement_id: None,
             learning: serde_json::Value::Null,
             rollback_of: None,
-            created_at_unix_ms: jiff::Timestamp::from_millisecond(version as i64).unwrap(),
+            created_at: jiff::Timestamp::from_millisecond(version as i64).unwrap(),
         };
         share.push_once(request).unwrap();
         pushed += 1;

@@ -13,7 +13,7 @@ use camloop::store::{EventKind, EventLevel, NewEvent, Store, VersionStatus};
 fn event(at_ms: i64) -> NewEvent {
     NewEvent {
         machine: m("M1"),
-        at_ms: ms(at_ms),
+        at: ms(at_ms),
         level: EventLevel::Info,
         kind: EventKind::LearningHeld,
         message: format!("pushed at {at_ms}"),

@@ -57,7 +57,7 @@ async fn take_turns(url: &str) {
             status: VersionStatus::Waiting {
                 reason: Some("waiting".into()),
             },
-            created_at_ms: ms(v * 10),
+            created_at: ms(v * 10),
         };
         assert_eq!(store.insert_table_version(&t).await.unwrap(), tv(v));
         // Learning snapshots: the meaning changes every 4 parts (a row is added), else the
@@ -133,7 +133,7 @@ async fn two_handles_appending_to_the_audit_chain_at_once_on_sqlite_both_get_thr
         tokio::spawn(async move {
             for i in 0..APPENDS {
                 let entry = AuditEntry {
-                    at_ms: ms(i),
+                    at: ms(i),
                     actor: who.into(),
                     role: Role::Admin,
                     client: "local".into(),

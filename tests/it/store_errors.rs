@@ -315,7 +315,7 @@ async fn postgres_readers_stuck_behind_a_lock_never_hold_up_a_writer() {
     t.store
         .insert_event(&camloop::store::NewEvent {
             machine: m("M1"),
-            at_ms: ms(1),
+            at: ms(1),
             level: camloop::store::EventLevel::Info,
             kind: camloop::store::EventKind::MeasurementRepeated,
             message: "written while every reader waits".into(),
@@ -460,11 +460,12 @@ async fn a_stored_time_no_instant_has_is_invalid_not_a_panic() {
     }
 }
 
-/// A measurement row whose lobe fails the name rule, or whose digest is not 64 lower-case
-/// hex digits (both written outside camloop), is an `invalid` error naming the column and
-/// the value, never a panic; put right, the row reads again.
+/// A measurement row whose lobe fails the name rule, whose part is no part id, or whose
+/// digest is not 64 lower-case hex digits (all written outside camloop), is an `invalid`
+/// error naming the column and the value, never a panic; put right, the row reads again. A
+/// recipe snapshot's part name is read by the names' rule the same way.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn rows_with_a_bad_lobe_name_or_digest_are_invalid_not_a_panic() {
+async fn rows_with_a_bad_lobe_name_part_or_digest_are_invalid_not_a_panic() {
     let mut stores = vec![store_support::sqlite().await];
     stores.extend(store_support::postgres("rows_with_a_bad_lobe").await);
     for t in &stores {
@@ -473,7 +474,8 @@ async fn rows_with_a_bad_lobe_name_or_digest_are_invalid_not_a_panic() {
         let history = store_support::data::filter("M1");
         for (set, column, value) in [
             ("lobe = 'in 1'", "lobe", "in 1"),
-            ("lobe = 'IN1', sha256 = 'ABC'", "sha256", "ABC"),
+            ("lobe = 'IN1', part = 'S 17'", "part", "S 17"),
+            ("part = 'S-17', sha256 = 'ABC'", "sha256", "ABC"),
         ] {
             raw_execute(&t.store, &[&format!("UPDATE measurements SET {set}")]).await;
             let err = t.store.measurement_history(&history).await.unwrap_err();
@@ -490,6 +492,24 @@ async fn rows_with_a_bad_lobe_name_or_digest_are_invalid_not_a_panic() {
         let page = t.store.measurement_history(&history).await.unwrap();
         assert_eq!(page.items[0].sha256, m.sha256);
         assert_eq!(page.items[0].lobe, "IN1");
+        assert_eq!(page.items[0].part, "S-17");
+        let part = "S-17".parse().unwrap();
+        let rows = t.store.part_measurements(&m.machine, &part).await.unwrap();
+        assert_eq!(rows.len(), 1);
+
+        // A part id may hold a dot; a recipe's part name (a plain name) may not.
+        raw_execute(
+            &t.store,
+            &[
+                "INSERT INTO recipe_snapshots (machine, part, lobe, kind, recipe_json, sha256, \
+               created_at_ms) VALUES ('M1', 'CAM.7', 'IN1', 'lobe', '{}', 'x', 1)",
+            ],
+        )
+        .await;
+        let err = t.store.features(&m.machine).await.unwrap_err();
+        assert_eq!(err.code(), "invalid", "{err}");
+        assert!(err.to_string().contains("part"), "{err}");
+        assert!(err.to_string().contains("CAM.7"), "{err}");
     }
 }
 

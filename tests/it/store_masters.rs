@@ -15,10 +15,10 @@ async fn masters_filter(store: &Store) {
     for n in 0..12u32 {
         let mut m = measurement("M1", "in1", n, 1_000 * i64::from(n));
         if n % 3 == 0 {
-            m.part = spellings[(n / 3) as usize].into();
+            m.part = spellings[(n / 3) as usize].parse().unwrap();
             expected_masters.push(m.part.clone());
         } else if n == 4 {
-            m.part = "P-MASTER-4".into();
+            m.part = "P-MASTER-4".parse().unwrap();
             expected_parts.push(m.part.clone());
         } else {
             expected_parts.push(m.part.clone());

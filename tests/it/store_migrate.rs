@@ -118,8 +118,8 @@ macro_rules! write_old_rows {
                  points_per_rev, origin, sha256) VALUES ('M1', $1, 'in1', $2, 'pass', 1.0, 0.0, \
                  0.0, 3, $3, 'test', $4) RETURNING id",
             )
-            .bind(&m.part)
-            .bind(m.received_at_ms.as_millisecond())
+            .bind(m.part.as_str())
+            .bind(m.received_at.as_millisecond())
             .bind(i64::from(m.points_per_rev))
             .bind(m.sha256.to_string())
             .fetch_one(pool)
@@ -275,7 +275,7 @@ async fn check_new_rows(store: &Store) {
             status: VersionStatus::Waiting {
                 reason: Some("waiting".into()),
             },
-            created_at_ms: ms(v * 10),
+            created_at: ms(v * 10),
         };
         assert_eq!(store.insert_table_version(&t).await.unwrap(), tv(v));
     }

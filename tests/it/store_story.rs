@@ -20,11 +20,11 @@ async fn story(store: &Store) {
     // Recipe snapshots: unchanged JSON reuses the newest snapshot, a change appends one.
     let snap = |lobe: &str, kind, json: &str| NewRecipeSnapshot {
         machine: m("M1"),
-        part: "CAM-7".into(),
+        part: "CAM-7".parse().unwrap(),
         lobe: f(lobe),
         kind,
         recipe_json: json.into(),
-        created_at_ms: ms(1_000),
+        created_at: ms(1_000),
     };
     let r1 = store
         .insert_recipe_snapshot(&snap("in1", FeatureKind::Lobe, r#"{"base_radius_mm":18}"#))
@@ -84,7 +84,7 @@ async fn story(store: &Store) {
         .await
         .unwrap()
         .into_iter()
-        .map(|m| (m.name, m.first_seen_ms))
+        .map(|m| (m.name, m.first_seen))
         .collect();
     assert_eq!(
         names,
@@ -128,7 +128,7 @@ async fn story(store: &Store) {
         let mut v: Vec<(jiff::Timestamp, MeasurementId)> = inserted
             .iter()
             .filter(|(_, m)| keep(m))
-            .map(|(id, m)| (m.received_at_ms, *id))
+            .map(|(id, m)| (m.received_at, *id))
             .collect();
         v.sort_by(|a, b| b.cmp(a));
         v.into_iter().map(|(_, id)| id).collect::<Vec<_>>()
@@ -170,15 +170,15 @@ async fn story(store: &Store) {
     );
 
     let window = HistoryFilter {
-        since_ms: Some(ms(15_000)),
-        until_ms: Some(ms(20_000)),
+        since: Some(ms(15_000)),
+        until: Some(ms(20_000)),
         ..lobe_in1.clone()
     };
     assert_eq!(
         ids(all_pages(store, window).await),
         expect(&|m| m.machine == "M1"
             && m.lobe == "in1"
-            && (ms(15_000)..ms(20_000)).contains(&m.received_at_ms))
+            && (ms(15_000)..ms(20_000)).contains(&m.received_at))
     );
     let empty = store.measurement_history(&filter("nobody")).await.unwrap();
     assert!(empty.items.is_empty() && empty.next_cursor.is_none());
@@ -259,7 +259,7 @@ async fn story(store: &Store) {
         }
     );
     assert_eq!(
-        (first.status.why(), first.status_at_ms),
+        (first.status.why(), first.status_at),
         ("pushed to share", ms(6_000))
     );
     assert_eq!(first.program_text, "CTABDEF(11)\nv1");
@@ -349,7 +349,7 @@ async fn story(store: &Store) {
         .unwrap()
         .unwrap();
     assert_eq!(
-        (state.state_json.as_str(), state.saved_at_ms),
+        (state.state_json.as_str(), state.saved_at),
         (r#"{"k":2}"#, ms(8_000))
     );
 
@@ -363,7 +363,7 @@ async fn story(store: &Store) {
         store
             .insert_dressing(&NewDressing {
                 machine: m("M1"),
-                at_ms: ms(at),
+                at: ms(at),
                 old_radius_mm: old_mm,
                 new_radius_mm: new_mm,
                 infeed_um: infeed,
@@ -374,7 +374,7 @@ async fn story(store: &Store) {
     }
     let dressings = store.dressings(&m("M1"), 10).await.unwrap();
     assert_eq!(dressings.len(), 2);
-    assert_eq!(dressings[0].at_ms, ms(30_000));
+    assert_eq!(dressings[0].at, ms(30_000));
     // Doubles round-trip exactly through REAL / DOUBLE PRECISION.
     assert_eq!(
         (dressings[0].old_radius_mm, dressings[0].new_radius_mm),
@@ -393,7 +393,7 @@ async fn story(store: &Store) {
         let id = store
             .insert_event(&NewEvent {
                 machine: m("M1"),
-                at_ms: ms(at),
+                at: ms(at),
                 level,
                 kind,
                 message: format!("{} at {at}", kind.as_str()),
@@ -417,7 +417,7 @@ async fn story(store: &Store) {
     let errors = store
         .events(&EventFilter {
             level: Some(EventLevel::Error),
-            since_ms: Some(ms(2)),
+            since: Some(ms(2)),
             limit: 10,
             ..EventFilter::default()
         })
@@ -449,7 +449,7 @@ async fn story(store: &Store) {
     let cutoff = ms(20_000);
     let old = inserted
         .iter()
-        .filter(|(_, m)| m.received_at_ms < cutoff)
+        .filter(|(_, m)| m.received_at < cutoff)
         .count();
     assert_eq!(
         old, 10,

@@ -20,13 +20,13 @@ async fn idempotent(store: &Store) {
     assert_eq!(a, b);
     // Same hash, later arrival: still the stored measurement, nothing new written.
     let late = NewMeasurement {
-        received_at_ms: ms(2_000),
+        received_at: ms(2_000),
         ..m.clone()
     };
     assert_eq!(store.insert_measurement(&late).await.unwrap(), a);
     let page = store.measurement_history(&filter("M9")).await.unwrap();
     assert_eq!(page.items.len(), 1);
-    assert_eq!(page.items[0].received_at_ms, ms(1_000));
+    assert_eq!(page.items[0].received_at, ms(1_000));
 
     // Refused input names the field and writes nothing.
     let mut short = measurement("M9", "in1", 2, 3_000);
@@ -112,7 +112,7 @@ async fn replay_lookups(store: &Store) {
 
     let e = NewEvent {
         machine: m("M1"),
-        at_ms: ms(7_000),
+        at: ms(7_000),
         level: EventLevel::Warn,
         kind: EventKind::TableRefused,
         message: "grindability".into(),
@@ -144,7 +144,7 @@ async fn replay_lookups(store: &Store) {
 
     let d = NewDressing {
         machine: m("M1"),
-        at_ms: ms(9_000),
+        at: ms(9_000),
         old_radius_mm: 250.0,
         new_radius_mm: 249.98,
         infeed_um: Some(20.2),
@@ -153,7 +153,7 @@ async fn replay_lookups(store: &Store) {
     store.insert_dressing(&d).await.unwrap();
     assert!(store.dressing_exists(&d).await.unwrap());
     let later = NewDressing {
-        at_ms: ms(9_001),
+        at: ms(9_001),
         ..d.clone()
     };
     assert!(!store.dressing_exists(&later).await.unwrap());

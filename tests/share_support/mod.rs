@@ -90,8 +90,7 @@ pub fn next_request(share: &Share, tag: u32) -> PushRequest {
         measurement_id: Some(measurement(tag)),
         learning: serde_json::json!({ "gain": 0.5, "tag": tag }),
         rollback_of: None,
-        created_at_unix_ms: jiff::Timestamp::from_millisecond(1_700_000_000_000 + i64::from(tag))
-            .unwrap(),
+        created_at: jiff::Timestamp::from_millisecond(1_700_000_000_000 + i64::from(tag)).unwrap(),
     }
 }
 

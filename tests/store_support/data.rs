@@ -38,9 +38,9 @@ pub fn measurement(machine: &str, lobe: &str, n: u32, received_at_ms: i64) -> Ne
     let averaged = (0..points).map(|i| lift(1, i)).collect();
     NewMeasurement {
         machine: MachineName::new(machine).unwrap(),
-        part: format!("P-{n:05}"),
+        part: format!("P-{n:05}").parse().unwrap(),
         lobe: lobe.parse().unwrap(),
-        received_at_ms: ms(received_at_ms),
+        received_at: ms(received_at_ms),
         verdict: if n.is_multiple_of(4) {
             Verdict::Fail
         } else {
@@ -107,6 +107,6 @@ pub fn table(
         learning_params_json: r#"{"gain":0.6}"#.into(),
         reason: "learned".into(),
         status: VersionStatus::from_column(status, "checks passed".into(), 5_000).unwrap(),
-        created_at_ms: ms(5_000),
+        created_at: ms(5_000),
     }
 }

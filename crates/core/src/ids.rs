@@ -191,6 +191,38 @@ impl PartialEq<str> for PartId {
     }
 }
 
+impl PartialEq<&str> for PartId {
+    fn eq(&self, other: &&str) -> bool {
+        self.0 == *other
+    }
+}
+
+impl PartialEq<String> for PartId {
+    fn eq(&self, other: &String) -> bool {
+        self.0 == *other
+    }
+}
+
+impl AsRef<str> for PartId {
+    fn as_ref(&self) -> &str {
+        &self.0
+    }
+}
+
+impl std::borrow::Borrow<str> for PartId {
+    fn borrow(&self) -> &str {
+        &self.0
+    }
+}
+
+impl std::str::FromStr for PartId {
+    type Err = BadPartId;
+
+    fn from_str(s: &str) -> Result<Self, BadPartId> {
+        Self::new(s)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -2,6 +2,11 @@
 //! checks that accept or reject them, and the per-angle average and spread over revolutions.
 
 /// Who and what a measurement belongs to, as announced by the gauge at the start.
+///
+/// The three labels are raw text, as the gauge sent them: a CAN gauge numbers machine and
+/// lobe (`1`, `3`) where the service names them, and a label is judged only where it is
+/// routed (the service's routing makes the part a [`crate::ids::PartId`], the machine and
+/// lobe its own names), so the codecs and the simulator hand over what they read.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct MeasurementHeader {
     pub machine: String,

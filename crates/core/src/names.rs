@@ -153,6 +153,12 @@ plain_name!(
     FeatureName
 );
 
+plain_name!(
+    /// A part's name in a recipe (its drawing number, `CAM-4711`), by the same rule: one
+    /// recipe's kind of shaft, not one shaft. A shaft's serial is a [`crate::ids::PartId`].
+    PartName
+);
+
 /// Why a name was refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum NameError {

@@ -42,6 +42,8 @@ pub enum HoldReason {
     #[error("part was ground with table v{ground_with}, the learning state belongs to v{in_force}")]
     OtherTable { ground_with: u64, in_force: u64 },
     /// A master part's run (a gauge study): evidence about the gauge, never about the table.
+    /// `part` is the measurement's raw label: the turn judges a master by its prefix alone, so
+    /// a master run is held even when a caller (the simulated cell) never checked its id.
     #[error("part {part} is a master part (gauge study): never learned from")]
     MasterPart { part: String },
 }

@@ -98,6 +98,7 @@ pub enum CsvError {
          name the file MACHINE_PART_LOBE[_…].csv (file name {file_name:?})"
     )]
     NoIdentity { file_name: String },
+    /// The file's two labels as written: refused before either is checked, so both stay text.
     #[error("part={part:?} and master={master:?} disagree: a master run's part is the master")]
     MasterConflict { part: String, master: String },
     #[error("metadata names {given} but not {missing}: give machine, part and lobe together")]

@@ -23,6 +23,7 @@ pub const BUILTIN_DBC: &str = include_str!("../../../config/gauge.dbc");
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct GaugeSignalNames {
     pub start_message: String,
+    /// Signal names (DBC identifiers), not the values they carry.
     pub machine: String,
     pub part: String,
     pub lobe: String,

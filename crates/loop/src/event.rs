@@ -5,7 +5,7 @@
 use jiff::Timestamp;
 use serde::{Deserialize, Serialize};
 
-use crate::{FeatureName, MachineName, TableVersion};
+use crate::{FeatureName, MachineName, PartId, TableVersion};
 use camloop_core::levels::{EventLevel, Verdict};
 
 /// Topic level (and a payload's `feature`) for events that concern the machine rather than
@@ -19,7 +19,7 @@ pub enum PlantEvent {
     PartAnalysed {
         machine: MachineName,
         feature: FeatureName,
-        part: String,
+        part: PartId,
         #[serde(rename = "at_ms", with = "crate::unix_ms")]
         at: Timestamp,
         verdict: Verdict,
@@ -150,7 +150,7 @@ mod tests {
         PlantEvent::PartAnalysed {
             machine: "M1".parse().expect("a machine name"),
             feature: "IN1".parse().expect("a feature name"),
-            part: "P1".into(),
+            part: "P1".parse().unwrap(),
             at: Timestamp::from_millisecond(1_000).expect("a time"),
             verdict: Verdict::Pass,
             max_profile_error_um: 1.5,

@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 
 use camloop_core::levels::Verdict;
 use camloop_core::names::{FeatureName, MachineName};
-use camloop_loop::{MACHINE_LEVEL, PlantEvent};
+use camloop_loop::{MACHINE_LEVEL, PartId, PlantEvent};
 
 /// State file name in the queue folder.
 pub(crate) const STATE_FILE: &str = "state.json";
@@ -34,7 +34,7 @@ pub(crate) struct FeatureState {
     /// The table version on the control (last delivered).
     pub version_in_force: Option<u64>,
     pub frozen: bool,
-    pub last_part: Option<String>,
+    pub last_part: Option<PartId>,
     pub last_verdict: Option<Verdict>,
     /// The sequence number of the event that last changed this state.
     pub seq: u64,
@@ -192,7 +192,7 @@ mod tests {
         PlantEvent::PartAnalysed {
             machine: "M1".parse().unwrap(),
             feature: "IN1".parse().unwrap(),
-            part: format!("P{n}"),
+            part: format!("P{n}").parse().unwrap(),
             at: jiff::Timestamp::from_millisecond(i64::from(n)).unwrap(),
             verdict,
             max_profile_error_um: 1.0,

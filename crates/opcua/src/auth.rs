@@ -92,9 +92,7 @@ impl SignedIn {
             .collect();
         for (name, digest) in users {
             let allowed = match store.user(&name).await {
-                Ok(Some(u)) => {
-                    u.disabled_at_ms.is_none() && hash_digest(&u.password_hash) == digest
-                }
+                Ok(Some(u)) => u.disabled_at.is_none() && hash_digest(&u.password_hash) == digest,
                 Ok(None) => false,
                 Err(_) => continue,
             };
@@ -220,7 +218,7 @@ pub(crate) async fn refused_write(
     method: &str,
 ) {
     let entry = AuditEntry {
-        at_ms: jiff::Timestamp::now(),
+        at: jiff::Timestamp::now(),
         actor: user.unwrap_or("anonymous").to_string(),
         // The role the user held is not known here (it may be why): the lowest.
         role: Role::Viewer,

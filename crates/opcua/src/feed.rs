@@ -181,7 +181,7 @@ impl Feed {
             // An older part than the one shown: its values never replace the newer.
             return false;
         }
-        self.shown.insert(key, (part.clone(), *at_ms));
+        self.shown.insert(key, (part.to_string(), *at_ms));
         for (v, value) in result_values(e, max_error) {
             let id = self.ids.value(machine, feature, v);
             // The catch-up of `MaxError` compares with the last value written.
@@ -492,7 +492,7 @@ fn result_values(
         "ground_with_version": ground_with_version,
     });
     vec![
-        (FeatureValue::PartId, Some(Variant::from(part.clone()))),
+        (FeatureValue::PartId, Some(Variant::from(part.to_string()))),
         (FeatureValue::Time, Some(Variant::from(date_time(*at_ms)))),
         (FeatureValue::Verdict, Some(Variant::from(verdict.as_str()))),
         (FeatureValue::MaxErrorUm, max_error_um.map(Variant::from)),

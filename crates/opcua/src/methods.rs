@@ -40,7 +40,7 @@ async fn caller(w: &dyn Service, user: &str) -> Result<Caller, StatusCode> {
         .user(user)
         .await
         .map_err(|_| StatusCode::BadResourceUnavailable)?
-        .filter(|u| u.disabled_at_ms.is_none())
+        .filter(|u| u.disabled_at.is_none())
         .ok_or(StatusCode::BadUserAccessDenied)?;
     Ok(Caller {
         user: user.name,
@@ -235,8 +235,8 @@ async fn stored_event_id(
     let store = store_of(w).await?;
     let filter = camloop_store::EventFilter {
         machine: Some(machine.clone()),
-        since_ms: Some(named.at),
-        until_ms: named
+        since: Some(named.at),
+        until: named
             .at
             .checked_add(jiff::SignedDuration::from_millis(1))
             .ok(),
@@ -355,7 +355,7 @@ pub(crate) fn result_outputs(s: &MeasurementSummary) -> Vec<Variant> {
         "machine": s.machine,
         "part": s.part,
         "feature": s.lobe,
-        "received_at_ms": s.received_at_ms.as_millisecond(),
+        "received_at_ms": s.received_at.as_millisecond(),
         "verdict": s.verdict.as_str(),
         "max_profile_error_um": s.max_profile_error_um,
         "base_radius_error_um": s.base_radius_error_um,
@@ -365,8 +365,8 @@ pub(crate) fn result_outputs(s: &MeasurementSummary) -> Vec<Variant> {
     });
     vec![
         Variant::Int64(s.id.0),
-        Variant::from(s.part.clone()),
-        Variant::from(date_time(s.received_at_ms)),
+        Variant::from(s.part.to_string()),
+        Variant::from(date_time(s.received_at)),
         Variant::from(s.verdict.as_str().to_string()),
         Variant::from(json.to_string()),
     ]

@@ -94,7 +94,7 @@ pub(crate) fn seed_of(s: MeasurementSummary, analysis_json: &str) -> Seed {
             machine: s.machine,
             feature: s.lobe,
             part: s.part,
-            at: s.received_at_ms,
+            at: s.received_at,
             verdict: s.verdict,
             max_profile_error_um: s.max_profile_error_um,
             base_radius_error_um: s.base_radius_error_um,

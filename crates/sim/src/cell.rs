@@ -354,9 +354,8 @@ impl<'s> Cell<'s> {
                         PartNote::NotRecorded(e) => format!("not recorded: {e}"),
                     })
                 }
-                Finished::Rejected { reason } | Finished::Failed { reason } => {
-                    return Err(CellError::Loop(reason));
-                }
+                Finished::Rejected { reason } => return Err(CellError::Loop(reason.to_string())),
+                Finished::Failed { reason } => return Err(CellError::Loop(reason)),
                 _ => {}
             }
         }

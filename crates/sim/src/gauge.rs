@@ -7,7 +7,9 @@ use super::ground::GroundPart;
 use super::rng::SimRng;
 use camloop_core::measure::{MeasurementHeader, RawMeasurement, RawSample};
 
-/// Who the measurement belongs to, as the gauge announces it.
+/// Who the measurement belongs to, as the gauge announces it: raw labels, as a real gauge's
+/// ([`camloop_core::measure::MeasurementHeader`]), so the simulator can send what a real one
+/// might and the service judges them the same way.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct PartLabels {
     pub machine: String,

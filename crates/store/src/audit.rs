@@ -22,8 +22,8 @@ pub const MAX_AUDIT_PAGE: u32 = 1000;
 /// One thing someone did (or tried to).
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
 pub struct AuditEntry {
-    #[serde(with = "crate::unix_ms")]
-    pub at_ms: jiff::Timestamp,
+    #[serde(rename = "at_ms", with = "crate::unix_ms")]
+    pub at: jiff::Timestamp,
     /// A user name, `anonymous`, `api-token` (the deprecated shared token) or `cli:<login>`.
     pub actor: String,
     pub role: Role,
@@ -119,7 +119,7 @@ pub(crate) fn audit_digest(prev: &str, e: &AuditEntry) -> String {
 
 fn fields_json(e: &AuditEntry) -> serde_json::Value {
     serde_json::json!([
-        e.at_ms.as_millisecond(),
+        e.at.as_millisecond(),
         e.actor,
         e.role.as_str(),
         e.client,
@@ -157,7 +157,7 @@ fn row_from(r: AuditDbRow) -> Result<Stored, StoreError> {
     let (id, at_ms, actor, role, client, action, machine, feature, version, before, after) =
         (r.0, r.1, r.2, r.3, r.4, r.5, r.6, r.7, r.8, r.9, r.10);
     let entry = AuditEntry {
-        at_ms: super::unix_ms::instant(at_ms, "at_ms")?,
+        at: super::unix_ms::instant(at_ms, "at_ms")?,
         actor,
         role: Role::parse(&role)?,
         client,
@@ -227,7 +227,7 @@ impl Store {
             let digest = audit_mac(key, id, &prev, e);
             sqlx::query(&insert)
                 .bind(id)
-                .bind(e.at_ms.as_millisecond())
+                .bind(e.at.as_millisecond())
                 .bind(&e.actor)
                 .bind(e.role.as_str())
                 .bind(&e.client)
@@ -388,5 +388,41 @@ fn head_check(
             h.last_id, h.rows
         )),
         Some(_) => HeadCheck::Holds,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The API's audit page serialises rows as they are: the instant is `at` in Rust and
+    /// stays `at_ms` (integer milliseconds) on the wire.
+    #[test]
+    fn a_row_keeps_its_wire_names() {
+        let row = AuditRow {
+            id: 3,
+            entry: AuditEntry {
+                at: jiff::Timestamp::from_millisecond(1_795_443_845_123).unwrap(),
+                actor: "ana".into(),
+                role: Role::Engineer,
+                client: "local".into(),
+                action: "rollback".into(),
+                machine: Some("G7".into()),
+                feature: None,
+                version: Some(4),
+                before: None,
+                after: None,
+                result: AuditResult::Ok,
+                reason: String::new(),
+            },
+        };
+        let json = serde_json::to_value(&row).unwrap();
+        assert_eq!(
+            json["at_ms"],
+            serde_json::json!(1_795_443_845_123_i64),
+            "{json}"
+        );
+        assert!(json.get("at").is_none(), "{json}");
+        assert_eq!(json["id"], 3, "{json}");
     }
 }

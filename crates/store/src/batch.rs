@@ -138,7 +138,7 @@ impl Batch<'_> {
         with_tx!(self, tx => {
             sqlx::query(ENSURE_MACHINE)
                 .bind(m.machine.as_str())
-                .bind(m.received_at_ms.as_millisecond())
+                .bind(m.received_at.as_millisecond())
                 .execute(&mut *tx)
                 .await
                 .map_err(store.db_error(OP))?;
@@ -150,9 +150,9 @@ impl Batch<'_> {
                  ON CONFLICT (sha256) DO NOTHING RETURNING id",
             )
             .bind(m.machine.as_str())
-            .bind(&m.part)
+            .bind(m.part.as_str())
             .bind(m.lobe.as_str())
-            .bind(m.received_at_ms.as_millisecond())
+            .bind(m.received_at.as_millisecond())
             .bind(m.verdict.as_str())
             .bind(m.max_profile_error_um)
             .bind(m.base_radius_error_um)
@@ -207,7 +207,7 @@ impl Batch<'_> {
         with_tx!(self, tx => {
             sqlx::query(ENSURE_MACHINE)
                 .bind(t.machine.as_str())
-                .bind(t.created_at_ms.as_millisecond())
+                .bind(t.created_at.as_millisecond())
                 .execute(&mut *tx)
                 .await
                 .map_err(store.db_error(OP))?;
@@ -249,7 +249,7 @@ impl Batch<'_> {
             .bind(i64::from(t.table_number))
             .bind(&sha256)
             .bind(&t.reason)
-            .bind(t.created_at_ms.as_millisecond())
+            .bind(t.created_at.as_millisecond())
             .bind(t.version.map(|v| v.to_i64()))
             .bind(CODEC_PACKED)
             .bind(base_id)
@@ -272,7 +272,7 @@ impl Batch<'_> {
             .bind(id)
             .bind(status)
             .bind(why)
-            .bind(t.created_at_ms.as_millisecond())
+            .bind(t.created_at.as_millisecond())
             .execute(&mut *tx)
             .await
             .map_err(store.db_error(OP))?;
@@ -347,7 +347,7 @@ impl Batch<'_> {
             self,
             "inserting an event",
             e.machine.as_str(),
-            e.at_ms.as_millisecond(),
+            e.at.as_millisecond(),
             "INSERT INTO events (machine, at_ms, level, kind, message) \
              VALUES ($1, $2, $3, $4, $5) RETURNING id",
             e.level.as_str(),
@@ -369,7 +369,7 @@ impl Batch<'_> {
             self,
             "inserting a dressing",
             d.machine.as_str(),
-            d.at_ms.as_millisecond(),
+            d.at.as_millisecond(),
             "INSERT INTO dressings (machine, at_ms, old_radius_mm, new_radius_mm, source, \
              infeed_um) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
             d.old_radius_mm,
@@ -386,7 +386,6 @@ impl Batch<'_> {
         r: &NewRecipeSnapshot,
     ) -> Result<RecipeSnapshotId, StoreError> {
         check_name("machine", r.machine.as_str())?;
-        check_name("part", &r.part)?;
         check_name("lobe", &r.lobe)?;
         check_json("recipe_json", &r.recipe_json)?;
         let sha256 = sha256_hex(r.recipe_json.as_bytes());
@@ -395,7 +394,7 @@ impl Batch<'_> {
         with_tx!(self, tx => {
             sqlx::query(ENSURE_MACHINE)
                 .bind(r.machine.as_str())
-                .bind(r.created_at_ms.as_millisecond())
+                .bind(r.created_at.as_millisecond())
                 .execute(&mut *tx)
                 .await
                 .map_err(store.db_error(OP))?;
@@ -404,7 +403,7 @@ impl Batch<'_> {
                  AND lobe = $3 ORDER BY id DESC LIMIT 1",
             )
             .bind(r.machine.as_str())
-            .bind(&r.part)
+            .bind(r.part.as_str())
             .bind(r.lobe.as_str())
             .fetch_optional(&mut *tx)
             .await
@@ -419,12 +418,12 @@ impl Batch<'_> {
                  created_at_ms) VALUES ($1, $2, $3, $4, $5, $6, $7) RETURNING id",
             )
             .bind(r.machine.as_str())
-            .bind(&r.part)
+            .bind(r.part.as_str())
             .bind(r.lobe.as_str())
             .bind(r.kind.as_str())
             .bind(&r.recipe_json)
             .bind(&sha256)
-            .bind(r.created_at_ms.as_millisecond())
+            .bind(r.created_at.as_millisecond())
             .fetch_one(&mut *tx)
             .await
             .map_err(store.db_error(OP))?;

@@ -122,6 +122,19 @@ pub(crate) fn feature_of(
         .map_err(|e| StoreError::invalid(column, e.to_string()))
 }
 
+/// A part id read back: every write holds a checked `PartId`, so a refusal names a row
+/// written outside camloop.
+pub(crate) fn part_of(text: String) -> Result<camloop_core::ids::PartId, StoreError> {
+    camloop_core::ids::PartId::try_from(text)
+        .map_err(|e| StoreError::invalid("part", e.to_string()))
+}
+
+/// A recipe's part name read back, by the names' rule.
+pub(crate) fn part_name_of(text: String) -> Result<camloop_core::names::PartName, StoreError> {
+    camloop_core::names::PartName::try_from(text)
+        .map_err(|e| StoreError::invalid("part", e.to_string()))
+}
+
 /// A digest read back (64 lower-case hex digits, as every write stores it).
 pub(crate) fn sha256_of(
     column: &'static str,

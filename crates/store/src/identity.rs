@@ -10,7 +10,7 @@ use super::{Store, StoreError, with_write};
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct StoreIdentity {
     pub id: String,
-    pub created_at_ms: jiff::Timestamp,
+    pub created_at: jiff::Timestamp,
 }
 
 impl Store {
@@ -26,7 +26,7 @@ impl Store {
         match row {
             Some((id, created_at_ms)) => Ok(StoreIdentity {
                 id,
-                created_at_ms: super::unix_ms::instant(created_at_ms, "created_at_ms")?,
+                created_at: super::unix_ms::instant(created_at_ms, "created_at_ms")?,
             }),
             None => Err(StoreError::NotFound {
                 what: format!("store identity of {}", self.target),

@@ -1,7 +1,7 @@
 //! Machines, recipe snapshots, wheel dressings, events and learning-state snapshots.
 
 use super::chain::{LEARNING_STATES, fetch_chain};
-use super::codec::{check_limit, feature_of, machine_of, sha256_hex};
+use super::codec::{check_limit, feature_of, machine_of, part_name_of, sha256_hex};
 use super::measurements::{Bind, Conditions, fetch_all_dynamic};
 use super::unix_ms::instant;
 use super::{
@@ -38,7 +38,7 @@ impl Store {
                 .map(|(name, first_seen_ms)| {
                     Ok(Machine {
                         name: machine_of(name)?,
-                        first_seen_ms: instant(first_seen_ms, "first_seen_ms")?,
+                        first_seen: instant(first_seen_ms, "first_seen_ms")?,
                     })
                 })
                 .collect()
@@ -64,11 +64,11 @@ impl Store {
                     let kind: String = col!(row, "kind", "reading a feature");
                     Ok(Feature {
                         recipe_snapshot: RecipeSnapshotId(col!(row, "id", "reading a feature")),
-                        part: col!(row, "part", "reading a feature"),
+                        part: part_name_of(col!(row, "part", "reading a feature"))?,
                         lobe: feature_of("lobe", col!(row, "lobe", "reading a feature"))?,
                         kind: FeatureKind::parse(&kind)?,
                         recipe_json: col!(row, "recipe_json", "reading a feature"),
-                        created_at_ms: at_col!(row, "created_at_ms", "reading a feature"),
+                        created_at: at_col!(row, "created_at_ms", "reading a feature"),
                     })
                 })
                 .collect()
@@ -93,7 +93,7 @@ impl Store {
                 .map(|(machine, part, lobe, kind)| {
                     Ok(FeatureKey {
                         machine: machine_of(machine)?,
-                        part,
+                        part: part_name_of(part)?,
                         lobe: feature_of("lobe", lobe)?,
                         kind: FeatureKind::parse(&kind)?,
                     })
@@ -120,7 +120,7 @@ impl Store {
                  AND new_radius_mm = $3 LIMIT 1",
             )
             .bind(d.machine.as_str())
-            .bind(d.at_ms.as_millisecond())
+            .bind(d.at.as_millisecond())
             .bind(d.new_radius_mm)
             .fetch_optional(pool)
             .await
@@ -153,7 +153,7 @@ impl Store {
                     Ok(Dressing {
                         id: DressingId(id),
                         machine: machine_of(machine)?,
-                        at_ms: instant(at_ms, "at_ms")?,
+                        at: instant(at_ms, "at_ms")?,
                         old_radius_mm,
                         new_radius_mm,
                         infeed_um,
@@ -182,7 +182,7 @@ impl Store {
                  AND message = $4 LIMIT 1",
             )
             .bind(e.machine.as_str())
-            .bind(e.at_ms.as_millisecond())
+            .bind(e.at.as_millisecond())
             .bind(e.kind.as_str())
             .bind(&e.message)
             .fetch_optional(pool)
@@ -199,10 +199,10 @@ impl Store {
         if let Some(machine) = &filter.machine {
             c.push("machine = ?", [Bind::Text(machine.to_string())]);
         }
-        if let Some(since) = filter.since_ms {
+        if let Some(since) = filter.since {
             c.push("at_ms >= ?", [Bind::I64(since.as_millisecond())]);
         }
-        if let Some(until) = filter.until_ms {
+        if let Some(until) = filter.until {
             c.push("at_ms < ?", [Bind::I64(until.as_millisecond())]);
         }
         if let Some(level) = filter.level {
@@ -225,7 +225,7 @@ impl Store {
                     Ok(Event {
                         id: EventId(col!(row, "id", "reading an event")),
                         machine: machine_of(col!(row, "machine", "reading an event"))?,
-                        at_ms: at_col!(row, "at_ms", "reading an event"),
+                        at: at_col!(row, "at_ms", "reading an event"),
                         level: EventLevel::parse(&level)?,
                         kind: EventKind::parse(&kind)?,
                         message: col!(row, "message", "reading an event"),
@@ -374,8 +374,8 @@ impl Store {
                             format!("learning state of machine {machine} lobe {lobe} does not match its SHA-256"),
                         ));
                     }
-                    let saved_at_ms = instant(saved_at_ms, "saved_at_ms")?;
-                    Ok(Some(LearningState { state_json, saved_at_ms }))
+                    let saved_at = instant(saved_at_ms, "saved_at_ms")?;
+                    Ok(Some(LearningState { state_json, saved_at }))
                 }
             }
         })

@@ -12,6 +12,7 @@ use super::{
     NewMeasurement, Page, RecipeSnapshotId, Store, StoreError, Verdict, at_col, col, with_read,
     with_write,
 };
+use camloop_core::ids::PartId;
 use camloop_core::measure::MASTER_PART_PREFIX;
 use camloop_core::names::{FeatureName, MachineName};
 
@@ -90,9 +91,9 @@ macro_rules! summary_from_row {
         MeasurementSummary {
             id: MeasurementId(col!(row, "id", "reading a measurement")),
             machine: $crate::codec::machine_of(col!(row, "machine", "reading a measurement"))?,
-            part: col!(row, "part", "reading a measurement"),
+            part: $crate::codec::part_of(col!(row, "part", "reading a measurement"))?,
             lobe: $crate::codec::feature_of("lobe", col!(row, "lobe", "reading a measurement"))?,
-            received_at_ms: at_col!(row, "received_at_ms", "reading a measurement"),
+            received_at: at_col!(row, "received_at_ms", "reading a measurement"),
             verdict: Verdict::parse(&verdict)?,
             max_profile_error_um: col!(row, "max_profile_error_um", "reading a measurement"),
             base_radius_error_um: col!(row, "base_radius_error_um", "reading a measurement"),
@@ -221,7 +222,6 @@ fn split_revolutions(lifts: Vec<f64>, points_per_rev: u32) -> Result<Vec<Vec<f64
 
 pub(crate) fn check_measurement(m: &NewMeasurement) -> Result<(), StoreError> {
     check_name("machine", m.machine.as_str())?;
-    check_name("part", &m.part)?;
     check_name("lobe", &m.lobe)?;
     check_json("analysis_json", &m.analysis_json)?;
     check_finite("max_profile_error_um", m.max_profile_error_um)?;
@@ -277,10 +277,10 @@ impl Store {
         if let Some(lobe) = &filter.lobe {
             c.push("m.lobe = ?", [Bind::Text(lobe.to_string())]);
         }
-        if let Some(since) = filter.since_ms {
+        if let Some(since) = filter.since {
             c.push("m.received_at_ms >= ?", [Bind::I64(since.as_millisecond())]);
         }
-        if let Some(until) = filter.until_ms {
+        if let Some(until) = filter.until {
             c.push("m.received_at_ms < ?", [Bind::I64(until.as_millisecond())]);
         }
         if let Some(verdict) = filter.verdict {
@@ -326,7 +326,7 @@ impl Store {
             items.truncate(filter.limit as usize);
             items
                 .last()
-                .map(|s| encode_cursor(s.received_at_ms.as_millisecond(), s.id.0))
+                .map(|s| encode_cursor(s.received_at.as_millisecond(), s.id.0))
         } else {
             None
         };
@@ -338,7 +338,7 @@ impl Store {
     pub async fn part_measurements(
         &self,
         machine: &MachineName,
-        part: &str,
+        part: &PartId,
     ) -> Result<Vec<MeasurementSummary>, StoreError> {
         check_name("machine", machine)?;
         let sql = format!(
@@ -349,7 +349,7 @@ impl Store {
         with_read!(self, pool => {
             let rows = sqlx::query(&sql)
                 .bind(machine.as_str())
-                .bind(part)
+                .bind(part.as_str())
                 .fetch_all(pool)
                 .await
                 .map_err(self.db_error("reading a part's measurements"))?;

@@ -12,6 +12,7 @@ use super::{
     LearningState, MeasurementId, Store, StoreError, TableVersionHead, Verdict, VersionStatus, col,
     with_read,
 };
+use camloop_core::ids::PartId;
 use camloop_core::measure::MASTER_PART_PREFIX;
 use camloop_core::names::{FeatureName, MachineName};
 use jiff::Timestamp;
@@ -21,8 +22,8 @@ use std::collections::BTreeSet;
 #[derive(Debug, Clone, PartialEq)]
 pub struct OverviewPart {
     pub id: MeasurementId,
-    pub part: String,
-    pub received_at_ms: Timestamp,
+    pub part: PartId,
+    pub received_at: Timestamp,
     pub verdict: Verdict,
     pub max_profile_error_um: f64,
 }
@@ -211,8 +212,8 @@ impl Store {
             let at: i64 = row_col!(row, "received_at_ms", "reading the overview's parts");
             out[slot(k, features.len())?].recent.push(OverviewPart {
                 id: MeasurementId(row_col!(row, "id", "reading the overview's parts")),
-                part: row_col!(row, "part", "reading the overview's parts"),
-                received_at_ms: instant(at, "received_at_ms")?,
+                part: super::codec::part_of(row_col!(row, "part", "reading the overview's parts"))?,
+                received_at: instant(at, "received_at_ms")?,
                 verdict: Verdict::parse(&verdict)?,
                 max_profile_error_um: row_col!(
                     row,
@@ -273,7 +274,7 @@ impl Store {
                     )
                 })?,
                 reason: row_col!(row, "reason", "reading the versions in force"),
-                created_at_ms: instant(created, "created_at_ms")?,
+                created_at: instant(created, "created_at_ms")?,
                 status: VersionStatus::from_column(
                     &status,
                     row_col!(row, "why", "reading the versions in force"),
@@ -432,8 +433,8 @@ impl Store {
                     format!("learning state of machine {machine} lobe {lobe} does not match its SHA-256"),
                 ));
             }
-            let saved_at_ms = instant(saved_at_ms, "saved_at_ms")?;
-            Ok(Some(LearningState { state_json, saved_at_ms }))
+            let saved_at = instant(saved_at_ms, "saved_at_ms")?;
+            Ok(Some(LearningState { state_json, saved_at }))
         })
     }
 }

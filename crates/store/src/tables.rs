@@ -4,7 +4,7 @@
 use super::chain::{TABLE_VERSIONS, fetch_chain};
 use super::codec::{check_limit, sha256_hex};
 use super::{
-    NewTableVersion, Store, StoreError, TableVersion, VersionStatus, at_col, col, with_read,
+    NewTableVersion, Store, StoreError, StoredTableVersion, VersionStatus, at_col, col, with_read,
     with_write,
 };
 use camloop_core::names::{FeatureName, MachineName};
@@ -45,7 +45,7 @@ macro_rules! version_summary {
         let status: String = col!(row, "status", "reading a table version");
         let status_at_ms: i64 = col!(row, "at_ms", "reading a table version");
         let table_number: i64 = col!(row, "table_number", "reading a table version");
-        TableVersion {
+        StoredTableVersion {
             machine: $crate::codec::machine_of(col!(row, "machine", "reading a table version"))?,
             lobe: $crate::codec::feature_of("lobe", col!(row, "lobe", "reading a table version"))?,
             version: $crate::codec::version_of(
@@ -69,13 +69,13 @@ macro_rules! version_summary {
             )?,
             learning_params_json: String::new(),
             reason: col!(row, "reason", "reading a table version"),
-            created_at_ms: at_col!(row, "created_at_ms", "reading a table version"),
+            created_at: at_col!(row, "created_at_ms", "reading a table version"),
             status: VersionStatus::from_column(
                 &status,
                 col!(row, "why", "reading a table version"),
                 status_at_ms,
             )?,
-            status_at_ms: $crate::unix_ms::instant(status_at_ms, "at_ms")?,
+            status_at: $crate::unix_ms::instant(status_at_ms, "at_ms")?,
         }
     }};
 }
@@ -173,7 +173,7 @@ impl Store {
         &self,
         machine: &MachineName,
         lobe: &FeatureName,
-    ) -> Result<Option<TableVersion>, StoreError> {
+    ) -> Result<Option<StoredTableVersion>, StoreError> {
         Ok(self
             .table_versions(machine, lobe, 1)
             .await?
@@ -187,7 +187,7 @@ impl Store {
         machine: &MachineName,
         lobe: &FeatureName,
         limit: u32,
-    ) -> Result<Vec<TableVersion>, StoreError> {
+    ) -> Result<Vec<StoredTableVersion>, StoreError> {
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
         let limit = check_limit(limit)?;
         let sql = format!("{SELECT_VERSION} ORDER BY t.version DESC LIMIT $3");
@@ -213,7 +213,7 @@ impl Store {
         machine: &MachineName,
         lobe: &FeatureName,
         version: camloop_core::ids::TableVersion,
-    ) -> Result<Option<TableVersion>, StoreError> {
+    ) -> Result<Option<StoredTableVersion>, StoreError> {
         let (machine, lobe) = (machine.as_str(), lobe.as_str());
         let sql = format!("{SELECT_VERSION} AND t.version = $3");
         with_read!(self, pool => {

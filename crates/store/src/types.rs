@@ -3,7 +3,8 @@
 //! milliseconds in the database and named after those columns), lifts mm, errors µm.
 
 use camloop_core::digest::Sha256;
-use camloop_core::names::{FeatureName, MachineName};
+use camloop_core::ids::PartId;
+use camloop_core::names::{FeatureName, MachineName, PartName};
 use jiff::Timestamp;
 use serde::{Deserialize, Serialize};
 
@@ -144,24 +145,24 @@ text_enum!(
 #[derive(Debug, Clone, PartialEq)]
 pub struct NewRecipeSnapshot {
     pub machine: MachineName,
-    pub part: String,
+    pub part: PartName,
     /// Lobe or pin name within the part.
     pub lobe: FeatureName,
     pub kind: FeatureKind,
     /// Must parse as JSON; kept verbatim.
     pub recipe_json: String,
-    pub created_at_ms: Timestamp,
+    pub created_at: Timestamp,
 }
 
 /// A lobe or pin known on a machine, with its latest recipe snapshot.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Feature {
-    pub part: String,
+    pub part: PartName,
     pub lobe: FeatureName,
     pub kind: FeatureKind,
     pub recipe_snapshot: RecipeSnapshotId,
     pub recipe_json: String,
-    pub created_at_ms: Timestamp,
+    pub created_at: Timestamp,
 }
 
 /// A lobe or pin known on a machine, by its latest recipe snapshot's kind: what a plant's
@@ -169,7 +170,7 @@ pub struct Feature {
 #[derive(Debug, Clone, PartialEq)]
 pub struct FeatureKey {
     pub machine: MachineName,
-    pub part: String,
+    pub part: PartName,
     pub lobe: FeatureName,
     pub kind: FeatureKind,
 }
@@ -178,7 +179,7 @@ pub struct FeatureKey {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Machine {
     pub name: MachineName,
-    pub first_seen_ms: Timestamp,
+    pub first_seen: Timestamp,
 }
 
 /// One analysed measurement to append.
@@ -191,10 +192,10 @@ pub struct Machine {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct NewMeasurement {
     pub machine: MachineName,
-    pub part: String,
+    pub part: PartId,
     pub lobe: FeatureName,
-    #[serde(with = "crate::unix_ms")]
-    pub received_at_ms: Timestamp,
+    #[serde(rename = "received_at_ms", with = "crate::unix_ms")]
+    pub received_at: Timestamp,
     pub verdict: Verdict,
     pub max_profile_error_um: f64,
     pub base_radius_error_um: f64,
@@ -282,9 +283,9 @@ impl std::str::FromStr for MeasurementStage {
 pub struct MeasurementSummary {
     pub id: MeasurementId,
     pub machine: MachineName,
-    pub part: String,
+    pub part: PartId,
     pub lobe: FeatureName,
-    pub received_at_ms: Timestamp,
+    pub received_at: Timestamp,
     pub verdict: Verdict,
     pub max_profile_error_um: f64,
     pub base_radius_error_um: f64,
@@ -313,9 +314,9 @@ pub struct HistoryFilter {
     pub machine: MachineName,
     pub lobe: Option<FeatureName>,
     /// Inclusive lower bound on `received_at_ms`.
-    pub since_ms: Option<Timestamp>,
+    pub since: Option<Timestamp>,
     /// Exclusive upper bound on `received_at_ms`.
-    pub until_ms: Option<Timestamp>,
+    pub until: Option<Timestamp>,
     pub verdict: Option<Verdict>,
     /// One stage only; `None` lists both.
     pub stage: Option<MeasurementStage>,
@@ -334,8 +335,8 @@ impl HistoryFilter {
         Self {
             machine,
             lobe: None,
-            since_ms: None,
-            until_ms: None,
+            since: None,
+            until: None,
             verdict: None,
             stage: None,
             limit,
@@ -389,12 +390,13 @@ pub struct NewTableVersion {
     /// Its first status, and why ("waiting for operator", "pushed to share", "step too
     /// large"); the store keeps `created_at_ms` as the status's time.
     pub status: VersionStatus,
-    pub created_at_ms: Timestamp,
+    pub created_at: Timestamp,
 }
 
-/// A stored table version with its latest status.
+/// A stored table version with its latest status (the row; its number is the core's
+/// [`camloop_core::ids::TableVersion`]).
 #[derive(Debug, Clone, PartialEq)]
-pub struct TableVersion {
+pub struct StoredTableVersion {
     pub machine: MachineName,
     pub lobe: FeatureName,
     /// 1, 2, 3, … per (machine, lobe).
@@ -406,16 +408,16 @@ pub struct TableVersion {
     pub sha256: Sha256,
     pub learning_params_json: String,
     pub reason: String,
-    pub created_at_ms: Timestamp,
+    pub created_at: Timestamp,
     pub status: VersionStatus,
-    pub status_at_ms: Timestamp,
+    pub status_at: Timestamp,
 }
 
 /// A wheel dressing: the wheel radius camloop believed before and after.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NewDressing {
     pub machine: MachineName,
-    pub at_ms: Timestamp,
+    pub at: Timestamp,
     pub old_radius_mm: f64,
     pub new_radius_mm: f64,
     /// The dresser's measured infeed (radius removed), µm, when it reported one.
@@ -429,7 +431,7 @@ pub struct NewDressing {
 pub struct Dressing {
     pub id: DressingId,
     pub machine: MachineName,
-    pub at_ms: Timestamp,
+    pub at: Timestamp,
     pub old_radius_mm: f64,
     pub new_radius_mm: f64,
     /// `None` for dressings reported without it, and for rows older than the column.
@@ -441,7 +443,7 @@ pub struct Dressing {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct NewEvent {
     pub machine: MachineName,
-    pub at_ms: Timestamp,
+    pub at: Timestamp,
     pub level: EventLevel,
     pub kind: EventKind,
     pub message: String,
@@ -452,7 +454,7 @@ pub struct NewEvent {
 pub struct Event {
     pub id: EventId,
     pub machine: MachineName,
-    pub at_ms: Timestamp,
+    pub at: Timestamp,
     pub level: EventLevel,
     pub kind: EventKind,
     pub message: String,
@@ -463,9 +465,9 @@ pub struct Event {
 pub struct EventFilter {
     pub machine: Option<MachineName>,
     /// Inclusive.
-    pub since_ms: Option<Timestamp>,
+    pub since: Option<Timestamp>,
     /// Exclusive.
-    pub until_ms: Option<Timestamp>,
+    pub until: Option<Timestamp>,
     pub level: Option<EventLevel>,
     /// 1 to [`MAX_PAGE`].
     pub limit: u32,
@@ -475,7 +477,7 @@ pub struct EventFilter {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct LearningState {
     pub state_json: String,
-    pub saved_at_ms: Timestamp,
+    pub saved_at: Timestamp,
 }
 
 text_enum!(

@@ -87,10 +87,10 @@ mod tests {
 
     #[derive(Debug, PartialEq, serde::Serialize, serde::Deserialize)]
     struct Record {
-        #[serde(with = "super")]
-        at_ms: Timestamp,
-        #[serde(with = "super::option")]
-        until_ms: Option<Timestamp>,
+        #[serde(rename = "at_ms", with = "super")]
+        at: Timestamp,
+        #[serde(rename = "until_ms", with = "super::option")]
+        until: Option<Timestamp>,
     }
 
     /// The JSON text is the integer the records always had, byte for byte, and reads back
@@ -99,7 +99,7 @@ mod tests {
     fn an_instant_round_trips_as_the_same_integer_text() {
         let text = r#"{"at_ms":1795443845123,"until_ms":null}"#;
         let r: Record = serde_json::from_str(text).unwrap();
-        assert_eq!(r.at_ms.to_string(), "2026-11-23T14:24:05.123Z");
+        assert_eq!(r.at.to_string(), "2026-11-23T14:24:05.123Z");
         assert_eq!(serde_json::to_string(&r).unwrap(), text);
         let before_1970 = r#"{"at_ms":-1,"until_ms":0}"#;
         let r: Record = serde_json::from_str(before_1970).unwrap();

@@ -23,8 +23,8 @@ pub struct User {
     pub role: Role,
     /// argon2id, PHC string.
     pub password_hash: String,
-    pub created_at_ms: Timestamp,
-    pub disabled_at_ms: Option<Timestamp>,
+    pub created_at: Timestamp,
+    pub disabled_at: Option<Timestamp>,
 }
 
 /// A token to keep: its digest, whose it is, its role ceiling and when it runs out.
@@ -34,8 +34,8 @@ pub struct NewToken {
     pub label: String,
     pub sha256: camloop_core::digest::Sha256,
     pub role: Role,
-    pub created_at_ms: Timestamp,
-    pub expires_at_ms: Timestamp,
+    pub created_at: Timestamp,
+    pub expires_at: Timestamp,
 }
 
 /// A token with its user, as the service checks it.
@@ -46,9 +46,9 @@ pub struct TokenGrant {
     pub user_role: Role,
     /// The token's ceiling.
     pub role: Role,
-    pub expires_at_ms: Timestamp,
-    pub revoked_at_ms: Option<Timestamp>,
-    pub user_disabled_at_ms: Option<Timestamp>,
+    pub expires_at: Timestamp,
+    pub revoked_at: Option<Timestamp>,
+    pub user_disabled_at: Option<Timestamp>,
 }
 
 /// A token as listed (no digest).
@@ -58,9 +58,9 @@ pub struct TokenInfo {
     pub user: String,
     pub label: String,
     pub role: Role,
-    pub created_at_ms: Timestamp,
-    pub expires_at_ms: Timestamp,
-    pub revoked_at_ms: Option<Timestamp>,
+    pub created_at: Timestamp,
+    pub expires_at: Timestamp,
+    pub revoked_at: Option<Timestamp>,
 }
 
 const USER_COLUMNS: &str =
@@ -83,8 +83,8 @@ fn user_from(row: UserRow) -> Result<User, StoreError> {
         name,
         role: Role::parse(&role)?,
         password_hash,
-        created_at_ms: instant(created_at_ms, "created_at_ms")?,
-        disabled_at_ms: instant_opt(disabled_at_ms, "disabled_at_ms")?,
+        created_at: instant(created_at_ms, "created_at_ms")?,
+        disabled_at: instant_opt(disabled_at_ms, "disabled_at_ms")?,
     })
 }
 
@@ -215,8 +215,8 @@ impl Store {
             &t.label,
             t.sha256.to_string(),
             t.role.as_str(),
-            t.created_at_ms.as_millisecond(),
-            t.expires_at_ms.as_millisecond(),
+            t.created_at.as_millisecond(),
+            t.expires_at.as_millisecond(),
         )
         .map(TokenId)
     }
@@ -244,9 +244,9 @@ impl Store {
                     user,
                     user_role: Role::parse(&user_role)?,
                     role: Role::parse(&role)?,
-                    expires_at_ms: instant(expires, "expires_at_ms")?,
-                    revoked_at_ms: instant_opt(revoked, "revoked_at_ms")?,
-                    user_disabled_at_ms: instant_opt(disabled, "disabled_at_ms")?,
+                    expires_at: instant(expires, "expires_at_ms")?,
+                    revoked_at: instant_opt(revoked, "revoked_at_ms")?,
+                    user_disabled_at: instant_opt(disabled, "disabled_at_ms")?,
                 })
             })
             .transpose()
@@ -282,9 +282,9 @@ impl Store {
                         user,
                         label,
                         role: Role::parse(&role)?,
-                        created_at_ms: instant(created, "created_at_ms")?,
-                        expires_at_ms: instant(expires, "expires_at_ms")?,
-                        revoked_at_ms: instant_opt(revoked, "revoked_at_ms")?,
+                        created_at: instant(created, "created_at_ms")?,
+                        expires_at: instant(expires, "expires_at_ms")?,
+                        revoked_at: instant_opt(revoked, "revoked_at_ms")?,
                     })
                 })
                 .collect()

@@ -15,7 +15,7 @@ use camloop_core::names::{FeatureName, MachineName};
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct EventAck {
     pub event: EventId,
-    pub at_ms: Timestamp,
+    pub at: Timestamp,
     /// Who acknowledged ("dashboard").
     pub source: String,
 }
@@ -26,7 +26,7 @@ pub struct TableVersionHead {
     pub version: camloop_core::ids::TableVersion,
     pub table_number: u32,
     pub reason: String,
-    pub created_at_ms: Timestamp,
+    pub created_at: Timestamp,
     pub status: VersionStatus,
 }
 
@@ -110,7 +110,7 @@ impl Store {
                 .map(|row| {
                     Ok(EventAck {
                         event: EventId(col!(row, "event_id", "reading an acknowledgement")),
-                        at_ms: at_col!(row, "at_ms", "reading an acknowledgement"),
+                        at: at_col!(row, "at_ms", "reading an acknowledgement"),
                         source: col!(row, "source", "reading an acknowledgement"),
                     })
                 })
@@ -182,7 +182,7 @@ impl Store {
                             StoreError::invalid("table_number", format!("stored value {number} out of range"))
                         })?,
                         reason: col!(row, "reason", "reading a table version"),
-                        created_at_ms: at_col!(row, "created_at_ms", "reading a table version"),
+                        created_at: at_col!(row, "created_at_ms", "reading a table version"),
                         status: VersionStatus::from_column(
                             &status,
                             col!(row, "why", "reading a table version"),

@@ -109,7 +109,7 @@ impl Principal {
     /// An audit entry by this caller now; the caller fills the target and change.
     pub fn audit(&self, action: &str, result: AuditResult, reason: String) -> AuditEntry {
         AuditEntry {
-            at_ms: crate::clock::now(),
+            at: crate::clock::now(),
             actor: self.actor.clone(),
             role: self.role.unwrap_or(Role::Viewer),
             client: self.client(),
@@ -362,7 +362,7 @@ async fn identify(app: &AppState, headers: &HeaderMap, at: Binding) -> Result<Pr
             // the command line): either ends the session.
             let store = super::routes::store(app).await?;
             if let Some(user) = store.user(&s.user).await?
-                && user.disabled_at_ms.is_none()
+                && user.disabled_at.is_none()
                 && token_digest(&user.password_hash) == s.password
             {
                 return Ok(Principal {
@@ -415,9 +415,9 @@ async fn bearer(app: &AppState, token: &str, address: IpAddr) -> Result<Principa
     };
     let why = match &grant {
         None => "unknown token",
-        Some(g) if g.revoked_at_ms.is_some() => "revoked token",
-        Some(g) if g.expires_at_ms <= now => "expired token",
-        Some(g) if g.user_disabled_at_ms.is_some() => "the token's user is disabled",
+        Some(g) if g.revoked_at.is_some() => "revoked token",
+        Some(g) if g.expires_at <= now => "expired token",
+        Some(g) if g.user_disabled_at.is_some() => "the token's user is disabled",
         Some(g) => {
             return Ok(Principal {
                 actor: g.user.clone(),

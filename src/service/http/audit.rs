@@ -30,9 +30,9 @@ pub async fn record_refusal(app: &AppState, entry: AuditEntry) {
 #[into_params(parameter_in = Query)]
 pub(super) struct AuditQuery {
     /// From this time, Unix ms.
-    #[serde(default, with = "crate::clock::unix_ms::option")]
+    #[serde(rename = "since_ms", default, with = "crate::clock::unix_ms::option")]
     #[param(value_type = Option<i64>)]
-    since_ms: Option<jiff::Timestamp>,
+    since: Option<jiff::Timestamp>,
     /// At most this many (default 200, at most 1000).
     limit: Option<u32>,
 }
@@ -53,7 +53,7 @@ pub(super) async fn audit(
     let store = super::routes::store(&app).await?;
     let items = store
         .audit(
-            q.since_ms.unwrap_or(jiff::Timestamp::UNIX_EPOCH),
+            q.since.unwrap_or(jiff::Timestamp::UNIX_EPOCH),
             0,
             q.limit.unwrap_or(200),
             true,
@@ -90,10 +90,10 @@ mod tests {
     fn a_query_time_is_read_as_an_instant_and_checked_at_the_edge() {
         let q = query("/api/v1/audit?since_ms=1795443845123").unwrap();
         assert_eq!(
-            q.since_ms.map(|t| t.to_string()),
+            q.since.map(|t| t.to_string()),
             Some("2026-11-23T14:24:05.123Z".into())
         );
-        assert_eq!(query("/api/v1/audit?limit=5").unwrap().since_ms, None);
+        assert_eq!(query("/api/v1/audit?limit=5").unwrap().since, None);
         let err = query("/api/v1/audit?since_ms=9223372036854775807").unwrap_err();
         assert!(err.contains("not a time"), "{err}");
     }

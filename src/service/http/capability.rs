@@ -72,7 +72,7 @@ pub(crate) fn parse_window(text: &str, now: jiff::Timestamp) -> Result<Window, A
         _ if text == "recipe" => w.since_recipe_change = true,
         Some(("parts", n)) => w.last = parts(n).ok_or_else(|| bad_window(text))?,
         Some(("since", t)) => {
-            w.since_ms = Some(crate::clock::parse_time(t, now).map_err(|_| bad_window(text))?);
+            w.since = Some(crate::clock::parse_time(t, now).map_err(|_| bad_window(text))?);
             w.last = crate::store::MAX_PAGE;
         }
         None => w.last = parts(text).ok_or_else(|| bad_window(text))?,

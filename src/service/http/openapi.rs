@@ -177,4 +177,35 @@ mod tests {
         assert!(rollback["responses"]["4XX"].is_object(), "{rollback}");
         assert!(rollback["requestBody"].is_object(), "{rollback}");
     }
+
+    /// The query fields that hold instants are named for what they are in Rust (`since`,
+    /// `until`) and keep their wire names: the document and a request both say `since_ms`.
+    #[test]
+    fn time_parameters_keep_their_wire_names() {
+        let json = serde_json::to_value(document()).unwrap_or_default();
+        let names = |path: &str| -> Vec<String> {
+            json["paths"][path]["get"]["parameters"]
+                .as_array()
+                .map(|a| {
+                    a.iter()
+                        .filter_map(|p| p["name"].as_str().map(str::to_string))
+                        .collect()
+                })
+                .unwrap_or_default()
+        };
+        let history = names("/api/v1/machines/{machine}/measurements");
+        for name in ["since_ms", "until_ms"] {
+            assert!(history.iter().any(|n| n == name), "{history:?}");
+        }
+        assert!(!history.iter().any(|n| n == "since"), "{history:?}");
+        let audit = names("/api/v1/audit");
+        assert!(audit.iter().any(|n| n == "since_ms"), "{audit:?}");
+        let uri: axum::http::Uri = "/x?since_ms=1000&until_ms=2000".parse().unwrap();
+        let q = axum::extract::Query::<super::super::routes::HistoryQuery>::try_from_uri(&uri)
+            .map(|q| q.0)
+            .map_err(|e| e.body_text());
+        let q = format!("{:?}", q.unwrap());
+        assert!(q.contains("since: Some(1970-01-01T00:00:01Z)"), "{q}");
+        assert!(q.contains("until: Some(1970-01-01T00:00:02Z)"), "{q}");
+    }
 }

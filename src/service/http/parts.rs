@@ -5,6 +5,7 @@
 use super::AppState;
 use super::api::{ApiError, ApiPath};
 use super::routes::{MeasurementItem, store};
+use crate::core::ids::PartId;
 use crate::names::{FeatureName, MachineName};
 use crate::service::http::ApiCode;
 use axum::Json;
@@ -16,7 +17,8 @@ use serde::Serialize;
 pub(super) struct PartReply {
     #[schema(value_type = String)]
     machine: MachineName,
-    part: String,
+    #[schema(value_type = String)]
+    part: PartId,
     /// Every feature the machine grinds was measured on this part and passed its bands.
     pass: bool,
     /// Features of the machine with no measurement of this part (not yet gauged, or lost).
@@ -41,15 +43,15 @@ pub(super) async fn part(
     State(state): State<AppState>,
     ApiPath((machine, part)): ApiPath<(MachineName, String)>,
 ) -> Result<Json<PartReply>, ApiError> {
-    if !crate::names::valid_part_ident(&part) {
-        return Err(ApiError::new(
+    let part = PartId::new(&part).map_err(|_| {
+        ApiError::new(
             ApiCode::InvalidName,
             format!(
                 "part `{}`: must be 1–32 characters of A–Z a–z 0–9 . _ -",
                 crate::names::quote(&part)
             ),
-        ));
-    }
+        )
+    })?;
     let mut rows = store(&state)
         .await?
         .part_measurements(&machine, &part)

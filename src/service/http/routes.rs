@@ -4,7 +4,8 @@
 
 use super::AppState;
 use super::api::{ApiError, ApiPath, ApiQuery};
-use crate::names::{FeatureName, MachineName};
+use crate::core::ids::PartId;
+use crate::names::{FeatureName, MachineName, PartName};
 use crate::service::http::ApiCode;
 use crate::store::{EventFilter, HistoryFilter, MasterRuns, MeasurementId, Store, Verdict};
 use axum::Json;
@@ -106,7 +107,8 @@ pub struct LobeInfo {
     #[schema(value_type = String)]
     pub lobe: FeatureName,
     /// The part (recipe) name, once the store has a record of it.
-    pub part: Option<String>,
+    #[schema(value_type = Option<String>)]
+    pub part: Option<PartName>,
     /// "lobe" or "pin", once the store has a record of it.
     pub kind: Option<&'static str>,
     /// Ground by this service's configuration (else only in the history).
@@ -221,7 +223,7 @@ pub(super) async fn machines(
                 out.len() - 1
             }
         };
-        out[i].first_seen_ms = Some(m.first_seen_ms.as_millisecond());
+        out[i].first_seen_ms = Some(m.first_seen.as_millisecond());
         for f in features.remove(&m.name).unwrap_or_default() {
             let lobes = &mut out[i].lobes;
             let j = match lobes
@@ -260,13 +262,13 @@ pub(super) struct HistoryQuery {
     #[param(value_type = Option<String>)]
     lobe: Option<FeatureName>,
     /// From this time, Unix ms.
-    #[serde(default, with = "crate::clock::unix_ms::option")]
+    #[serde(rename = "since_ms", default, with = "crate::clock::unix_ms::option")]
     #[param(value_type = Option<i64>)]
-    since_ms: Option<jiff::Timestamp>,
+    since: Option<jiff::Timestamp>,
     /// Before this time, Unix ms.
-    #[serde(default, with = "crate::clock::unix_ms::option")]
+    #[serde(rename = "until_ms", default, with = "crate::clock::unix_ms::option")]
     #[param(value_type = Option<i64>)]
-    until_ms: Option<jiff::Timestamp>,
+    until: Option<jiff::Timestamp>,
     /// Only this verdict: `pass` or `fail`.
     verdict: Option<String>,
     /// Only this stage: `final` (the finished part) or `in_process` (before the finish).
@@ -297,7 +299,8 @@ pub(super) struct MeasurementItem {
     id: i64,
     #[schema(value_type = String)]
     machine: MachineName,
-    part: String,
+    #[schema(value_type = String)]
+    part: PartId,
     #[schema(value_type = String)]
     lobe: FeatureName,
     received_at_ms: i64,
@@ -321,7 +324,7 @@ impl From<crate::store::MeasurementSummary> for MeasurementItem {
             machine: m.machine,
             part: m.part,
             lobe: m.lobe,
-            received_at_ms: m.received_at_ms.as_millisecond(),
+            received_at_ms: m.received_at.as_millisecond(),
             max_profile_error_um: m.max_profile_error_um,
             base_radius_error_um: m.base_radius_error_um,
             phase_error_deg: m.phase_error_deg,
@@ -340,7 +343,7 @@ pub(super) async fn history(
     ApiPath(machine): ApiPath<MachineName>,
     ApiQuery(q): ApiQuery<HistoryQuery>,
 ) -> Result<Json<HistoryPage>, ApiError> {
-    if let (Some(a), Some(b)) = (q.since_ms, q.until_ms)
+    if let (Some(a), Some(b)) = (q.since, q.until)
         && a >= b
     {
         return Err(ApiError::new(
@@ -357,8 +360,8 @@ pub(super) async fn history(
     let filter = HistoryFilter {
         machine,
         lobe: q.lobe,
-        since_ms: q.since_ms,
-        until_ms: q.until_ms,
+        since: q.since,
+        until: q.until,
         verdict,
         stage: q.stage,
         limit: q.limit.unwrap_or(100),
@@ -411,7 +414,7 @@ pub(super) async fn measurement(
         id,
         machine: detail.summary.machine,
         lobe: detail.summary.lobe,
-        received_at_ms: detail.summary.received_at_ms.as_millisecond(),
+        received_at_ms: detail.summary.received_at.as_millisecond(),
         averaged_lift_mm: detail.averaged_lift_mm,
         raw_kept: detail.raw_lift_mm.is_some(),
         analysis,
@@ -449,7 +452,7 @@ pub(super) async fn dressings(
     let items = dressings
         .into_iter()
         .map(|d| DressingItem {
-            at_ms: d.at_ms.as_millisecond(),
+            at_ms: d.at.as_millisecond(),
             old_radius_mm: d.old_radius_mm,
             new_radius_mm: d.new_radius_mm,
             infeed_um: d.infeed_um,
@@ -486,7 +489,7 @@ pub(super) async fn events(
         .into_iter()
         .map(|e| EventItem {
             id: e.id.0,
-            at_ms: e.at_ms.as_millisecond(),
+            at_ms: e.at.as_millisecond(),
             level: e.level.as_str(),
             kind: e.kind.as_str().to_owned(),
             message: e.message,

@@ -48,7 +48,7 @@ pub(super) async fn tables(
             reason: t.reason,
             status: t.status.name(),
             status_why: t.status.why().to_string(),
-            created_at_ms: t.created_at_ms.as_millisecond(),
+            created_at_ms: t.created_at.as_millisecond(),
         })
         .collect();
     Ok(Json(Items { items }))

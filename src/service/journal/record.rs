@@ -4,7 +4,7 @@
 use super::super::machine::memory::{LoopMemory, TableLearning};
 use crate::core::digest::Sha256;
 use crate::core::ids::TableVersion;
-use crate::names::{FeatureName, MachineName};
+use crate::names::{FeatureName, MachineName, PartName};
 use crate::store::Batch;
 pub use crate::store::EventKind;
 use crate::store::{
@@ -79,7 +79,7 @@ pub enum Pending {
     /// What the machine grinds, kept once per change (the store skips an identical one).
     RecipeSnapshot {
         machine: MachineName,
-        part: String,
+        part: PartName,
         lobe: FeatureName,
         kind: FeatureKind,
         recipe_json: String,
@@ -113,7 +113,7 @@ impl Pending {
                 message,
             } => Some(NewEvent {
                 machine: machine.clone(),
-                at_ms: *at,
+                at: *at,
                 level: *level,
                 kind: *kind,
                 message: message.clone(),
@@ -174,7 +174,7 @@ impl Pending {
                 source,
             } => Some(NewDressing {
                 machine: machine.clone(),
-                at_ms: *at,
+                at: *at,
                 old_radius_mm: *old_radius_mm,
                 new_radius_mm: *new_radius_mm,
                 infeed_um: *infeed_um,
@@ -367,7 +367,7 @@ pub(super) async fn apply_in(batch: &mut Batch<'_>, record: &Pending) -> Result<
                 lobe,
                 kind,
                 recipe_json,
-                created_at_ms: created_at,
+                created_at,
             };
             batch.insert_recipe_snapshot(&r).await.map(|_| ())
         }
@@ -414,7 +414,7 @@ async fn insert_table(batch: &mut Batch<'_>, record: Pending) -> Result<(), Stor
         learning_params_json,
         reason,
         status,
-        created_at_ms: created_at,
+        created_at,
     };
     batch.insert_table_version(&t).await.map(|_| ())
 }

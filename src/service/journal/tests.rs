@@ -130,8 +130,8 @@ async fn a_record_the_store_refuses_is_set_aside_and_the_rest_go_in() {
     );
     let filter = crate::store::EventFilter {
         machine: Some("M1".parse().unwrap()),
-        since_ms: None,
-        until_ms: None,
+        since: None,
+        until: None,
         level: None,
         limit: 10,
     };
@@ -167,7 +167,7 @@ async fn a_journal_with_column_spelled_statuses_replays() {
         note: Some("pushed to the share on retry".into()),
     };
     assert_eq!(
-        (v.status, v.status_at_ms),
+        (v.status, v.status_at),
         (pushed, jiff::Timestamp::from_millisecond(9).unwrap())
     );
     let crate::store::RawPool::Sqlite(pool) = store.raw_pool() else {

@@ -223,7 +223,7 @@ mod tests {
             .await
             .unwrap()
             .iter()
-            .map(|e| e.at_ms.as_millisecond())
+            .map(|e| e.at.as_millisecond())
             .collect();
         at.sort_unstable();
         at

@@ -129,7 +129,7 @@ impl FeatureLoop {
             measurement_id: draft.measurement_id,
             learning: serde_json::to_value(draft.learning.summary())?,
             rollback_of: draft.rollback_of,
-            created_at_unix_ms: draft.at,
+            created_at: draft.at,
         })
     }
 
@@ -211,7 +211,7 @@ impl FeatureLoop {
             table_version: version.get(),
             parent_version: parent.map(|v| v.get()),
             created_utc: crate::clock::utc_text(crate::clock::now()),
-            recipe: self.setup.part.clone(),
+            recipe: self.setup.part.to_string(),
             feature: self.setup.name.clone(),
             correction_sha256: crate::core::turn::correction_sha256(&learning.correction_um),
         }

@@ -181,7 +181,7 @@ impl MachineLoop {
         received: Instant,
     ) -> Result<InProcessOutcome, MachineError> {
         let index = match self.ids.route(&raw.header, None) {
-            Ok(i) => i,
+            Ok((i, _)) => i,
             Err(reason) => {
                 // No feature of this machine: an event, and no row under a feature it is not.
                 let feature = &mut self.features[0];
@@ -306,8 +306,13 @@ impl FeatureLoop {
         let Ok(measured) = turn::measure(&self.setup.turn_setup(), raw) else {
             return Vec::new();
         };
+        // Routed, so its part is an id (`GaugeIds::route`).
+        let Ok(part) = crate::core::ids::PartId::new(&raw.header.part) else {
+            return Vec::new();
+        };
         let sha = measurement_sha256(raw);
-        let mut row = measurement(&self.name, &self.setup.name, raw, &sha, &measured, now());
+        let whose = (&self.name, &self.setup.name, part);
+        let mut row = measurement(whose, raw, &sha, &measured, now());
         row.stage = MeasurementStage::InProcess;
         vec![Pending::Measurement {
             measurement: row,

@@ -8,12 +8,13 @@ use super::records::{self, event, keep_reject};
 use super::{FeatureLoop, Ingested, MachineError};
 use crate::clock::now;
 use crate::core::digest::Sha256;
+use crate::core::ids::PartId;
 use crate::core::measure::{MeasurementHeader, RawMeasurement};
 use crate::core::turn::{self, Measured, TurnError, measurement_sha256};
 use crate::names::{FeatureName, MachineName};
 use crate::store::EventLevel;
 use camloop_loop::machine::{Finished, Gauged, PartNote, PartReport};
-use camloop_loop::{Input, PartId, TableVersion};
+use camloop_loop::{Input, TableVersion};
 use tracing::{debug, error, info, warn};
 
 /// The names a gauge may use for a machine and its features: the configured names, or the
@@ -35,14 +36,16 @@ impl GaugeIds {
         }
     }
 
-    /// The index of the feature this measurement belongs to, or why it belongs to none of
-    /// this machine's. A control report of the table that ground the part must name the
-    /// same feature: a gauge that mixes two lobes up is caught here, never learned from.
+    /// The index of the feature this measurement belongs to and its part's id, or why it
+    /// belongs to none of this machine's. A control report of the table that ground the part
+    /// must name the same feature: a gauge that mixes two lobes up is caught here, never
+    /// learned from. The part's label becomes a [`PartId`] here, the service's one edge for
+    /// it: every gauge codec checks the same rule, so a refusal means a source that did not.
     pub fn route(
         &self,
         header: &MeasurementHeader,
         ground_with: Option<&super::GroundWith>,
-    ) -> Result<usize, String> {
+    ) -> Result<(usize, PartId), String> {
         if header.machine != self.machine && header.machine != BUS_ID {
             return Err(format!(
                 "measurement names machine {:?}, this is machine {:?}",
@@ -74,7 +77,8 @@ impl GaugeIds {
                 self.features[index], table_feature, g.version
             ));
         }
-        Ok(index)
+        let part = PartId::new(&header.part).map_err(|e| format!("measurement names {e}"))?;
+        Ok((index, part))
     }
 }
 
@@ -83,7 +87,7 @@ impl GaugeIds {
 pub(crate) struct PartLine {
     pub feature: FeatureName,
     /// The part (shaft) number the gauge gave.
-    pub part: String,
+    pub part: PartId,
     pub max_error_um: f64,
     pub profile_error_um: f64,
     /// Size (base-circle radius) error, µm, positive oversize.
@@ -103,6 +107,7 @@ impl FeatureLoop {
     pub(crate) async fn on_measurement(
         &mut self,
         raw: RawMeasurement,
+        part: PartId,
         ground_with: Option<u64>,
     ) -> anyhow::Result<Ingested> {
         let at = now();
@@ -111,7 +116,7 @@ impl FeatureLoop {
             setup: super::planned::turn_setup(&self.setup, &self.plan),
             raw: &raw,
             sha256: measurement_sha256(&raw),
-            part: PartId::new(&raw.header.part).ok(),
+            part: Some(part.clone()),
             ground_with: ground_with.and_then(TableVersion::new),
             on_reserve: self.journal.on_reserve(),
             at,
@@ -120,14 +125,16 @@ impl FeatureLoop {
         let finished = self.run_machine(Some(&raw)).await;
         match finished.into_iter().last() {
             Some(Finished::Recorded(report)) => {
-                self.after_part(&raw, *report, at).await;
+                self.after_part(&raw, part, *report, at).await;
                 Ok(Ingested::Recorded)
             }
             Some(Finished::Repeated) => {
                 info!(machine = %self.name, part = %raw.header.part, origin = %raw.origin, "measurement already learned from: not learned again");
                 Ok(Ingested::Repeated)
             }
-            Some(Finished::Rejected { reason }) => Ok(Ingested::Rejected { reason }),
+            Some(Finished::Rejected { reason }) => Ok(Ingested::Rejected {
+                reason: reason.to_string(),
+            }),
             Some(Finished::NotRecorded) => {
                 // Not counted and not remembered: the same reading sent again once the journal
                 // can be written is a new measurement, not a repeat.
@@ -142,7 +149,13 @@ impl FeatureLoop {
     }
 
     /// A recorded part: its control charts, metrics, status and log line.
-    async fn after_part(&mut self, raw: &RawMeasurement, report: PartReport, at: jiff::Timestamp) {
+    async fn after_part(
+        &mut self,
+        raw: &RawMeasurement,
+        part: PartId,
+        report: PartReport,
+        at: jiff::Timestamp,
+    ) {
         let measured = &report.measured;
         let text = match &report.note {
             PartNote::Table => self.delivery_line(),
@@ -178,7 +191,7 @@ impl FeatureLoop {
         self.publish_status(&raw.header.part, measured);
         let line = PartLine {
             feature: self.setup.name.clone(),
-            part: raw.header.part.clone(),
+            part,
             max_error_um,
             profile_error_um: measured.max_profile_error_um,
             size_error_um: measured.report.base_radius_error_um,
@@ -230,7 +243,11 @@ impl FeatureLoop {
     /// A master part's run (see [`crate::core::measure::is_master_part`]): checked, analysed
     /// and recorded for the gauge study, never a step of learning (the turn is not taken),
     /// never counted as a part, never the previous part of the next one.
-    pub(crate) async fn on_master(&mut self, raw: RawMeasurement) -> anyhow::Result<Ingested> {
+    pub(crate) async fn on_master(
+        &mut self,
+        raw: RawMeasurement,
+        part: PartId,
+    ) -> anyhow::Result<Ingested> {
         let at = now();
         let sha = measurement_sha256(&raw);
         if self.machine.memory().has_seen(&sha) {
@@ -245,7 +262,7 @@ impl FeatureLoop {
             }
             Err(e) => return Err(e.into()),
         };
-        let record = self.measurement_record(&raw, &sha, &measured, at);
+        let record = self.measurement_record(&raw, part, &sha, &measured, at);
         if !self.record(vec![record]).await {
             return Ok(Ingested::NotRecorded);
         }
@@ -257,13 +274,20 @@ impl FeatureLoop {
     fn measurement_record(
         &self,
         raw: &RawMeasurement,
+        part: PartId,
         sha: &Sha256,
         measured: &Measured,
         at: jiff::Timestamp,
     ) -> Pending {
         let in_force = self.machine.memory().in_force_version;
         Pending::Measurement {
-            measurement: records::measurement(&self.name, &self.setup.name, raw, sha, measured, at),
+            measurement: records::measurement(
+                (&self.name, &self.setup.name, part),
+                raw,
+                sha,
+                measured,
+                at,
+            ),
             ground_with_version: in_force,
         }
     }
@@ -293,5 +317,45 @@ impl FeatureLoop {
             message,
         );
         self.record(vec![e]).await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn header(machine: &str, part: &str, lobe: &str) -> MeasurementHeader {
+        MeasurementHeader {
+            machine: machine.into(),
+            part: part.into(),
+            lobe: lobe.into(),
+            revolutions: 3,
+            points_per_rev: 360,
+        }
+    }
+
+    /// The routing is where a gauge's part label becomes a `PartId`: a label off the gauges'
+    /// rule is refused there with its text, by name or by the bus's numeric ids alike.
+    #[test]
+    fn a_routed_measurement_carries_its_part_id_and_a_bad_label_is_refused() {
+        let ids = GaugeIds {
+            machine: "G7".parse().unwrap(),
+            features: vec!["IN1".parse().unwrap(), "EX1".parse().unwrap()],
+        };
+        let (index, part) = ids.route(&header("G7", "S-17.a", "EX1"), None).unwrap();
+        assert_eq!((index, part.as_str()), (1, "S-17.a"));
+        let (index, part) = ids.route(&header("1", "1234", "1"), None).unwrap();
+        assert_eq!((index, part.as_str()), (0, "1234"));
+        for bad in ["", "S 17", "../x", &"9".repeat(33)] {
+            let err = ids.route(&header("G7", bad, "IN1"), None).unwrap_err();
+            assert!(
+                err.starts_with("measurement names part id"),
+                "{bad:?}: {err}"
+            );
+            assert!(err.contains(&crate::names::quote(bad)), "{bad:?}: {err}");
+        }
+        // The machine and the feature are still judged first, as before.
+        let err = ids.route(&header("G8", "S 17", "IN1"), None).unwrap_err();
+        assert!(err.contains("this is machine"), "{err}");
     }
 }

@@ -344,8 +344,8 @@ impl MachineLoop {
         raw: crate::core::measure::RawMeasurement,
         ground_with: Option<GroundWith>,
     ) -> anyhow::Result<Ingested> {
-        let index = match self.ids.route(&raw.header, ground_with.as_ref()) {
-            Ok(i) => i,
+        let (index, part) = match self.ids.route(&raw.header, ground_with.as_ref()) {
+            Ok(routed) => routed,
             Err(reason) => {
                 // The part was ground all the same: when the control says which feature it
                 // was, the resume point moves past it.
@@ -364,12 +364,14 @@ impl MachineLoop {
                 return Ok(Ingested::Rejected { reason });
             }
         };
-        if crate::core::measure::is_master_part(&raw.header.part) {
+        if part.is_master() {
             // Nothing was ground: no resume point moves, no shaft line.
-            return self.features[index].on_master(raw).await;
+            return self.features[index].on_master(raw, part).await;
         }
         let version = ground_with.map(|g| g.version);
-        let ingested = self.features[index].on_measurement(raw, version).await;
+        let ingested = self.features[index]
+            .on_measurement(raw, part, version)
+            .await;
         // Ground and gauged, whatever the loop made of it.
         self.write_resume_point(index + 2);
         let ingested = ingested?;

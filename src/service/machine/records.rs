@@ -4,6 +4,7 @@
 
 use super::super::journal::{EventKind, Pending};
 use crate::core::digest::Sha256;
+use crate::core::ids::PartId;
 use crate::core::measure::RawMeasurement;
 use crate::core::turn::Measured;
 use crate::names::{FeatureName, MachineName};
@@ -63,16 +64,18 @@ pub(super) fn pending(
     records
         .into_iter()
         .filter_map(|r| match r {
+            // The service gives the machine every part it routed with its id; only the
+            // simulated cell's machine measures without one, and it keeps no records.
             Record::Measurement {
                 sha256,
+                part,
                 measured,
                 ground_with,
                 at,
-                ..
             } => {
-                let raw = raw?;
+                let (raw, part) = (raw?, part?);
                 Some(Pending::Measurement {
-                    measurement: measurement(machine, lobe, raw, &sha256, &measured, at),
+                    measurement: measurement((machine, lobe, part), raw, &sha256, &measured, at),
                     ground_with_version: ground_with,
                 })
             }
@@ -120,8 +123,7 @@ pub(super) fn pending(
 /// A measurement of the finished part as the store keeps it (the in-process one sets its
 /// stage after).
 pub(super) fn measurement(
-    machine: &MachineName,
-    lobe: &FeatureName,
+    (machine, lobe, part): (&MachineName, &FeatureName, PartId),
     raw: &RawMeasurement,
     sha: &Sha256,
     measured: &Measured,
@@ -130,9 +132,9 @@ pub(super) fn measurement(
     let report = &measured.report;
     NewMeasurement {
         machine: machine.clone(),
-        part: raw.header.part.clone(),
+        part,
         lobe: lobe.clone(),
-        received_at_ms: received_at,
+        received_at,
         verdict: if report.verdict.pass {
             Verdict::Pass
         } else {

@@ -39,10 +39,9 @@ pub(super) async fn rebuild_versions(
             };
             // The share's own states (delivering, superseded) are waiting to the store.
             let status = match &v.status {
-                VersionStatus::Pushed { .. } => VersionStatus::pushed_at(
-                    r.created_at_unix_ms,
-                    "pushed (from the share's manifest)",
-                ),
+                VersionStatus::Pushed { .. } => {
+                    VersionStatus::pushed_at(r.created_at, "pushed (from the share's manifest)")
+                }
                 VersionStatus::Refused { .. } => VersionStatus::Refused {
                     reason: "refused (from the share's manifest)".into(),
                 },
@@ -61,7 +60,7 @@ pub(super) async fn rebuild_versions(
                 learning_params_json: r.learning.to_string(),
                 reason: format!("{} (rebuilt from the share)", r.reason),
                 status,
-                created_at_ms: r.created_at_unix_ms,
+                created_at: r.created_at,
             };
             store.insert_table_version(&t).await?;
             rebuilt += 1;

@@ -51,7 +51,7 @@ async fn add_table(store: &Store) -> crate::core::ids::TableVersion {
                 at: jiff::Timestamp::from_millisecond(1_000).expect("a time"),
                 note: Some("pushed to the share".into()),
             },
-            created_at_ms: jiff::Timestamp::from_millisecond(1_000).unwrap(),
+            created_at: jiff::Timestamp::from_millisecond(1_000).unwrap(),
         })
         .await
         .unwrap()
@@ -77,7 +77,7 @@ async fn a_fresh_start_passes_and_is_remembered_then_the_same_store_passes() {
     assert!(file.contains(&id.id), "{file}");
     // The file keeps its key for the store's creation time (Unix ms), as files written
     // before the field was named `created_at` have it.
-    let kept = format!("\"created_at_ms\":{}", id.created_at_ms.as_millisecond());
+    let kept = format!("\"created_at_ms\":{}", id.created_at.as_millisecond());
     assert!(file.contains(&kept), "{file}");
     add_table(&store).await;
     let again = check_store(&store, &site.var(), &share_at(Some(1), 0)).await;

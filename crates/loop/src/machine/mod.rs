@@ -186,7 +186,9 @@ pub enum Finished {
     /// A reading already used: not learned again.
     Repeated,
     /// Failed the checks: never learned from.
-    Rejected { reason: String },
+    Rejected {
+        reason: camloop_core::measure::MeasurementError,
+    },
     /// Could not be recorded: the source keeps it.
     NotRecorded,
     /// Could not be analysed.

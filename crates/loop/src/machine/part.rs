@@ -56,9 +56,9 @@ pub enum PartNote {
     /// The table was not recorded (nothing reached the share).
     NotRecorded(DeliveryError),
     /// A guard refused the table (for `reason`), this many parts in a row.
-    Refused { in_a_row: u32, reason: String },
+    Refused { in_a_row: u32, reason: CycleError },
     /// Not learned from.
-    Held(String),
+    Held(HoldReason),
 }
 
 /// A part between its turn and its report.
@@ -108,11 +108,11 @@ impl FeatureMachine {
         let previous = self.memory.previous;
         let done = match turn::turn(&g.setup, &self.memory.learning, raw, hold, previous) {
             Ok(t) => t,
-            Err(TurnError::Measurement(e)) => {
-                let reason = e.to_string();
+            Err(TurnError::Measurement(reason)) => {
+                // The reject's file beside it keeps the text: that effect is I/O's.
                 self.effects.push_back(Effect::KeepReject {
                     sha256: g.sha256,
-                    reason: reason.clone(),
+                    reason: reason.to_string(),
                 });
                 self.effects
                     .push_back(Effect::Metric(Metric::MeasurementRejected));
@@ -189,7 +189,7 @@ impl FeatureMachine {
                     EventKind::LearningHeld,
                     format!("part {} not learned from: {reason}", step.part_no),
                 ));
-                step.note = PartNote::Held(reason.to_string());
+                step.note = PartNote::Held(reason);
                 self.record_part(step, memory);
             }
         }
@@ -286,7 +286,7 @@ impl FeatureMachine {
         ));
         step.note = PartNote::Refused {
             in_a_row,
-            reason: e.to_string(),
+            reason: e.clone(),
         };
     }
 

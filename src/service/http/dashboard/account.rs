@@ -55,7 +55,7 @@ fn audit_row(r: &AuditRow) -> Markup {
     };
     html! {
         tr data-id=(r.id) class=(e.result.as_str()) {
-            td { (r.id) } td { (when(e.at_ms)) } td { (e.actor) } td { (e.role.as_str()) }
+            td { (r.id) } td { (when(e.at)) } td { (e.actor) } td { (e.role.as_str()) }
             td { (e.client) } td { (e.action) } td { (target) } td { (change) }
             td { (e.result.as_str()) } td { (e.reason) }
         }

@@ -9,7 +9,7 @@ use crate::service::http::api::ApiError;
 use crate::service::metrics::MachineMetrics;
 use crate::store::{
     Dressing, Event, EventAck, EventFilter, EventId, HistoryFilter, LearningState, MasterRuns,
-    MeasurementStage, MeasurementSummary, Store, TableVersion, TableVersionHead,
+    MeasurementStage, MeasurementSummary, Store, StoredTableVersion, TableVersionHead,
 };
 
 /// Parts in the overview's sparkline.
@@ -207,7 +207,10 @@ pub(super) async fn feature(
 }
 
 /// X of `version` minus X of its parent at every C knot of `version`, µm.
-pub(super) fn diff_um(newer: &TableVersion, older: &TableVersion) -> Option<Vec<(f64, f64)>> {
+pub(super) fn diff_um(
+    newer: &StoredTableVersion,
+    older: &StoredTableVersion,
+) -> Option<Vec<(f64, f64)>> {
     let parse = crate::core::program::parse_table_program;
     let (n, o) = (
         parse(&newer.program_text).ok()?,

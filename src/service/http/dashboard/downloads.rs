@@ -105,7 +105,7 @@ pub(super) async fn chart_data(
                     .map(|p| {
                         vec![
                             p.id.0 as f64,
-                            p.received_at_ms.as_millisecond() as f64,
+                            p.received_at.as_millisecond() as f64,
                             p.max_profile_error_um,
                             p.base_radius_error_um,
                             p.phase_error_deg,
@@ -223,7 +223,7 @@ pub(super) async fn dfq(
         .await?
         .into_iter()
         .find(|f| f.lobe == lobe)
-        .map(|f| f.part)
+        .map(|f| f.part.to_string())
         .unwrap_or_default();
     let mut rows = Vec::with_capacity(parts.len());
     for p in &parts {

@@ -30,12 +30,8 @@ fn trend_chart(
     marks: &[Mark],
 ) -> Markup {
     // The chart's x axis is in milliseconds before the newest part.
-    let newest = parts
-        .last()
-        .map_or(0, |p| p.received_at_ms.as_millisecond());
-    let oldest = parts
-        .first()
-        .map_or(0, |p| p.received_at_ms.as_millisecond());
+    let newest = parts.last().map_or(0, |p| p.received_at.as_millisecond());
+    let oldest = parts.first().map_or(0, |p| p.received_at.as_millisecond());
     let (name, ms) = unit(newest - oldest);
     LineChart {
         title: title.into(),
@@ -47,7 +43,7 @@ fn trend_chart(
             points: parts
                 .iter()
                 .map(|p| {
-                    let at_ms = p.received_at_ms.as_millisecond();
+                    let at_ms = p.received_at.as_millisecond();
                     ((at_ms - newest) as f64 / ms, value(p))
                 })
                 .collect(),
@@ -69,19 +65,16 @@ fn trend(d: &FeatureData, sheet: Option<&FeatureSheet>, base: &str) -> Markup {
     let Some(first) = d.parts.first() else {
         return html! { p { "No part measured yet." } };
     };
-    let newest = d
-        .parts
-        .last()
-        .map_or(first.received_at_ms, |p| p.received_at_ms);
-    let in_range = |t: jiff::Timestamp| t >= first.received_at_ms && t <= newest;
-    let (_, ms) = unit(newest.as_millisecond() - first.received_at_ms.as_millisecond());
+    let newest = d.parts.last().map_or(first.received_at, |p| p.received_at);
+    let in_range = |t: jiff::Timestamp| t >= first.received_at && t <= newest;
+    let (_, ms) = unit(newest.as_millisecond() - first.received_at.as_millisecond());
     let x = |t: jiff::Timestamp| (t.as_millisecond() - newest.as_millisecond()) as f64 / ms;
     let mut marks: Vec<Mark> = d
         .dressings
         .iter()
-        .filter(|d| in_range(d.at_ms))
+        .filter(|d| in_range(d.at))
         .map(|d| Mark {
-            x: x(d.at_ms),
+            x: x(d.at),
             label: format!("dressed {:.3} → {:.3} mm", d.old_radius_mm, d.new_radius_mm),
             class: "dressing",
         })
@@ -89,9 +82,9 @@ fn trend(d: &FeatureData, sheet: Option<&FeatureSheet>, base: &str) -> Markup {
     marks.extend(
         d.versions
             .iter()
-            .filter(|v| in_range(v.created_at_ms))
+            .filter(|v| in_range(v.created_at))
             .map(|v| Mark {
-                x: x(v.created_at_ms),
+                x: x(v.created_at),
                 label: format!("table v{} ({})", v.version, v.reason),
                 class: "version",
             }),
@@ -179,7 +172,7 @@ fn latest(d: &FeatureData, sheet: Option<&FeatureSheet>, base: &str) -> Markup {
     html! {
         section aria-labelledby="latest-h" {
             h2 id="latest-h" {
-                "Latest part #" (l.summary.id.0) " (" (l.summary.verdict.as_str()) ", " (when(l.summary.received_at_ms)) ")"
+                "Latest part #" (l.summary.id.0) " (" (l.summary.verdict.as_str()) ", " (when(l.summary.received_at)) ")"
             }
             div class="pair" {
                 (polar(&c.angle_deg, &nominal, &c.error_um, r0))
@@ -202,13 +195,13 @@ fn events(d: &FeatureData, machine: &str) -> Markup {
                 tbody {
                     @for (e, ack) in &d.events {
                         tr class=(e.level.as_str()) {
-                            td { (when(e.at_ms)) }
+                            td { (when(e.at)) }
                             td { (e.level.as_str()) }
                             td { (e.kind.as_str()) }
                             td { (e.message) }
                             td {
                                 @match ack {
-                                    Some(a) => { (when(a.at_ms)) " (" (a.source) ")" }
+                                    Some(a) => { (when(a.at)) " (" (a.source) ")" }
                                     None => {
                                         button type="button" class="ack" data-url={ "/api/v1/machines/" (machine) "/events/" (e.id.0) "/ack" } { "Acknowledge" }
                                     }

@@ -13,9 +13,9 @@ use std::time::{Duration, Instant};
 fn part(machine: &str, lobe: &str, n: u32, stage: MeasurementStage) -> NewMeasurement {
     NewMeasurement {
         machine: machine.parse().unwrap(),
-        part: format!("P-{n}"),
+        part: format!("P-{n}").parse().unwrap(),
         lobe: lobe.parse().unwrap(),
-        received_at_ms: jiff::Timestamp::from_millisecond(1_000 * i64::from(n)).unwrap(),
+        received_at: jiff::Timestamp::from_millisecond(1_000 * i64::from(n)).unwrap(),
         verdict: Verdict::Pass,
         max_profile_error_um: 2.0,
         base_radius_error_um: 0.0,

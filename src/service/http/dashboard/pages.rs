@@ -5,7 +5,7 @@
 use super::charts::{Line, LineChart, sparkline};
 use super::data::diff_um;
 use super::overview::{OverviewPage, OverviewRow};
-use crate::store::TableVersion;
+use crate::store::StoredTableVersion;
 use maud::{DOCTYPE, Markup, html};
 
 /// `YYYY-MM-DD HH:MM:SS` UTC.
@@ -88,7 +88,7 @@ fn overview_cells(r: &OverviewRow) -> Markup {
     html! {
         td {
             @match last {
-                Some(p) => { "part " (p.part) " · #" (p.id.0) " · " (when(p.received_at_ms)) }
+                Some(p) => { "part " (p.part) " · #" (p.id.0) " · " (when(p.received_at)) }
                 None => "—",
             }
         }
@@ -186,7 +186,7 @@ pub(super) fn overview(p: &OverviewPage, fragment: bool) -> String {
 }
 
 /// The versions table of a feature's page, newest first.
-fn versions_table(lobe: &str, base: &str, api: &str, versions: &[TableVersion]) -> Markup {
+fn versions_table(lobe: &str, base: &str, api: &str, versions: &[StoredTableVersion]) -> Markup {
     html! {
         table id="versions" {
             caption { "Table versions, newest first" }
@@ -204,7 +204,7 @@ fn versions_table(lobe: &str, base: &str, api: &str, versions: &[TableVersion]) 
                         td { "T" (v.table_number) }
                         td title=(v.status.why()) { (v.status.name()) }
                         td { (v.reason) }
-                        td { (when(v.created_at_ms)) }
+                        td { (when(v.created_at)) }
                         td {
                             a href={ (api) "/tables/" (n) "/program" } download={ (lobe) "_v" (n) ".spf" } title=(v.sha256) {
                                 (v.sha256.to_string()[..12]) "…"
@@ -223,7 +223,7 @@ fn versions_table(lobe: &str, base: &str, api: &str, versions: &[TableVersion]) 
 pub(super) fn versions(
     machine: &str,
     lobe: &str,
-    versions: &[TableVersion],
+    versions: &[StoredTableVersion],
     shown: Option<i64>,
     fragment: bool,
 ) -> String {

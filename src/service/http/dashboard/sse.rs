@@ -8,6 +8,7 @@
 //! replay after an outage), and the machine loop does not change. A browser that reconnects
 //! sends `Last-Event-ID` and gets the parts it missed.
 
+use crate::core::ids::PartId;
 use crate::core::measure::is_master_part;
 use crate::names::{FeatureName, MachineName};
 use crate::service::machine::StoreHandle;
@@ -39,7 +40,7 @@ pub(super) struct PartEvent {
     pub id: i64,
     pub machine: MachineName,
     pub lobe: FeatureName,
-    pub part: String,
+    pub part: PartId,
     pub received_at_ms: i64,
     pub verdict: &'static str,
     pub max_profile_error_um: f64,
@@ -54,7 +55,7 @@ impl From<&MeasurementSummary> for PartEvent {
             machine: m.machine.clone(),
             lobe: m.lobe.clone(),
             part: m.part.clone(),
-            received_at_ms: m.received_at_ms.as_millisecond(),
+            received_at_ms: m.received_at.as_millisecond(),
             verdict: m.verdict.as_str(),
             max_profile_error_um: m.max_profile_error_um,
             base_radius_error_um: m.base_radius_error_um,
