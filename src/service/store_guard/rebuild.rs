@@ -29,12 +29,16 @@ pub(super) async fn rebuild_versions(
             {
                 continue;
             }
-            // The table program is the first file of a version (the main program goes last).
-            let Some(file) = r.files.first() else {
+            let dir = version_dir(&state.join(VERSIONS_DIR), r.version);
+            let Ok(texts) = r
+                .files
+                .iter()
+                .map(|f| std::fs::read_to_string(dir.join(&f.name)))
+                .collect::<Result<Vec<_>, _>>()
+            else {
                 continue;
             };
-            let dir = version_dir(&state.join(VERSIONS_DIR), r.version);
-            let Ok(program_text) = std::fs::read_to_string(dir.join(&file.name)) else {
+            let Some(program_text) = tables_of_version(&texts) else {
                 continue;
             };
             // The share's own states (delivering, superseded) are waiting to the store.
@@ -67,4 +71,42 @@ pub(super) async fn rebuild_versions(
         }
     }
     Ok(rebuilt)
+}
+
+/// A version's text as the store keeps it: its table programs one after another, in the
+/// order they were pushed (one, or with the speed plan in the whole cycle two: X over C,
+/// then C and X over VA); the main program and the handshake's count define no table.
+/// `None` when no file defines one.
+fn tables_of_version(texts: &[String]) -> Option<String> {
+    let tables: Vec<&str> = texts
+        .iter()
+        .filter(|t| !crate::core::program::table_definitions(t).is_empty())
+        .map(String::as_str)
+        .collect();
+    (!tables.is_empty()).then(|| tables.concat())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::tables_of_version;
+
+    /// A version on the plan keeps both table programs, as the service stored it; the main
+    /// program and the count are not part of it.
+    #[test]
+    fn a_versions_text_is_its_table_programs_in_order() {
+        let table = |name: &str, n: u32| {
+            format!("%_N_{name}_SPF\nPROC {name}\nCTABDEF(X,C,{n},1)\nC=0 X=1\nCTABEND\nM17\n")
+        };
+        let texts = vec![
+            table("CAM_IN1", 1),
+            table("CAM_IN1_P", 3),
+            "%_N_MAIN_MPF\nCTAB(1)\nLEADON(X,C,CL_TNO)\nM30\n".to_string(),
+            "%_N_CAMLOOP_READY_SPF\nPROC CAMLOOP_READY\nM17\n".to_string(),
+        ];
+        assert_eq!(
+            tables_of_version(&texts),
+            Some(format!("{}{}", texts[0], texts[1]))
+        );
+        assert_eq!(tables_of_version(&texts[2..]), None);
+    }
 }
