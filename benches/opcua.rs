@@ -155,10 +155,10 @@ fn metrics_update(
 ) {
     metrics.update_feature(machine, feature, |f| {
         f.parts += 1;
-        f.last_part = Some(format!("S-{part}"));
+        f.last_part = Some(format!("S-{part}").parse().expect("a part id"));
         f.last_max_error_um = Some(error_um);
         f.last_profile_error_um = Some(error_um);
-        f.in_force_version = part;
+        f.in_force_version = camloop::core::ids::TableVersion::new(part);
     });
 }
 

@@ -360,7 +360,8 @@ fn in_force(w: Writes<'_>, machine: &MachineName, features: &[FeatureName]) -> s
         .iter()
         .filter_map(|f| {
             let s = statuses.get(&(machine.clone(), f.clone()))?;
-            Some((f.as_str(), i64::try_from(s.in_force_version).ok()?))
+            let version = s.in_force_version.map_or(0, |v| v.get());
+            Some((f.as_str(), i64::try_from(version).ok()?))
         })
         .collect();
     serde_json::json!({ "in_force": versions })

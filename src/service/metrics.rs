@@ -131,7 +131,7 @@ pub struct FeatureStatus {
     /// Parts of this feature measured by this service since it started.
     pub parts: u64,
     /// The shaft (part number) the newest measurement came from.
-    pub last_part: Option<String>,
+    pub last_part: Option<crate::core::ids::PartId>,
     pub last_max_error_um: Option<f64>,
     pub last_profile_error_um: Option<f64>,
     pub last_timing_error_deg: Option<f64>,
@@ -139,9 +139,10 @@ pub struct FeatureStatus {
     /// The newest measurement passed its tolerance bands.
     pub last_pass: Option<bool>,
     /// Table version on the control.
-    pub in_force_version: u64,
+    #[serde(with = "crate::core::ids::lenient_version::zero_for_none")]
+    pub in_force_version: Option<crate::core::ids::TableVersion>,
     /// A newer version waits for the share.
-    pub waiting_version: Option<u64>,
+    pub waiting_version: Option<crate::core::ids::TableVersion>,
     /// Learning is frozen, and why.
     pub frozen: Option<String>,
     /// The guard that blocked several parts in a row (the alarm stands), and its reason.
@@ -169,7 +170,7 @@ const FEATURE_FAMILIES: [FeatureFamily; 5] = [
     (
         "camloop_feature_table_version",
         "Table version on the control.",
-        |f| Some(f.in_force_version as f64),
+        |f| Some(f.in_force_version.map_or(0.0, |v| v.get() as f64)),
     ),
     (
         "camloop_blocked_by_guard",

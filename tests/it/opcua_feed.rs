@@ -293,7 +293,7 @@ fn events_come_once_per_item_and_results_are_never_torn() {
     // The status lags (it still shows an older part than the events): the refresh must not
     // write it over the parts' values.
     metrics.update_feature(&name("M1"), &name("F1"), |f| {
-        f.last_part = Some("OLD".into());
+        f.last_part = Some("OLD".parse().unwrap());
         f.last_max_error_um = Some(9.0);
         f.last_profile_error_um = Some(9.0);
     });

@@ -519,20 +519,22 @@ fn result_values(
     ]
 }
 
+/// A table version as the address space's Int64 shows it: 0 for none (the node's
+/// documented value before the first table).
+fn version_value(v: Option<camloop_core::ids::TableVersion>) -> i64 {
+    v.map_or(0, |v| i64::try_from(v.get()).unwrap_or(i64::MAX))
+}
+
 /// The loop's state as a feature status gives it (a part's result is its event's).
 fn status_values(s: &FeatureView) -> Vec<(FeatureValue, Variant)> {
     let v = vec![
         (
             FeatureValue::TableVersionInForce,
-            Variant::from(i64::try_from(s.in_force_version).unwrap_or(i64::MAX)),
+            Variant::from(version_value(s.in_force_version)),
         ),
         (
             FeatureValue::WaitingVersion,
-            Variant::from(
-                s.waiting_version
-                    .and_then(|w| i64::try_from(w).ok())
-                    .unwrap_or(0),
-            ),
+            Variant::from(version_value(s.waiting_version)),
         ),
         (
             FeatureValue::LearningFrozen,

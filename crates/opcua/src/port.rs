@@ -83,12 +83,12 @@ pub enum AckRefused {
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct FeatureView {
     /// The part the newest measurement came from, and its `max |error|`, µm.
-    pub last_part: Option<String>,
+    pub last_part: Option<camloop_core::ids::PartId>,
     pub last_max_error_um: Option<f64>,
-    /// The table version on the control (0: none yet), and a newer one waiting for the
-    /// share.
-    pub in_force_version: u64,
-    pub waiting_version: Option<u64>,
+    /// The table version on the control (none yet before the first), and a newer one
+    /// waiting for the share.
+    pub in_force_version: Option<camloop_core::ids::TableVersion>,
+    pub waiting_version: Option<camloop_core::ids::TableVersion>,
     /// Learning is frozen, and why.
     pub frozen: Option<String>,
     /// The guard that blocked several parts in a row (its alarm stands), and why.

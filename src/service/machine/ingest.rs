@@ -188,7 +188,7 @@ impl FeatureLoop {
             m.parts_total += 1;
             m.last_max_error_um = max_error_um;
         });
-        self.publish_status(&raw.header.part, measured);
+        self.publish_status(&part, measured);
         let line = PartLine {
             feature: self.setup.name.clone(),
             part,
