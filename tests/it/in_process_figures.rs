@@ -123,7 +123,8 @@ pub(crate) async fn run_shafts(
         "[service]\nvar_dir = \"var\"\n[database]\nurl = \"{url}\"\n[http]\nlisten = \"127.0.0.1:0\"\n\
          [[machines]]\nname = \"CELL\"\nrecipe = \"{}\"\nshare = \"share\"\n\
          [machines.gauge]\nkind = \"sim\"\npart_interval_ms = 1\nseed = 3\n\
-         [machines.gauge.grinder]\ndress_every_parts = 0\n",
+         [machines.gauge.grinder]\ndress_every_parts = 0\ndress_at_parts = [4, 8]\n\
+         dresser_reports_infeed = true\n",
         recipe.display()
     );
     let config = Config::parse(&text, &dir.path().join("camloop.toml"), |_| None).unwrap();
