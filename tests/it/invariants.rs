@@ -288,6 +288,42 @@ fn the_service_never_imports_the_cli() {
     );
 }
 
+/// HTTP is the service's front, a leaf: the loop's shell (the machines, their journal, the
+/// command path every write takes, the plant's events, the gauge sources) never imports it,
+/// so the machines' mailbox and the write path are HTTP's and OPC UA's alike. Only the
+/// wiring (`mod.rs`, `app.rs`, the start-up and listener set-up, `/metrics`) names it.
+#[test]
+fn the_loops_shell_never_imports_http() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/service");
+    let forbidden = ["http::", "super::http", "crate::service::http"];
+    let mut violations = uses_of(&root.join("machine"), &forbidden, 15);
+    violations.extend(uses_of(&root.join("journal"), &forbidden, 4));
+    for file in [
+        "command.rs",
+        "action.rs",
+        "plant.rs",
+        "sources.rs",
+        "drop_source.rs",
+        "sim_source.rs",
+        "runner.rs",
+        "opcua_port.rs",
+        "sign_in.rs",
+    ] {
+        let text = std::fs::read_to_string(root.join(file)).unwrap();
+        for (n, line) in text.lines().enumerate() {
+            let code = line.split("//").next().unwrap_or("");
+            if forbidden.iter().any(|w| code.contains(w)) {
+                violations.push(format!("{file}:{}: {}", n + 1, line.trim()));
+            }
+        }
+    }
+    assert!(
+        violations.is_empty(),
+        "the loop's shell imports the HTTP adapter:\n{}",
+        violations.join("\n")
+    );
+}
+
 /// Adapters do not reach into each other: OPC UA and MQTT import neither the HTTP adapter
 /// nor one another, nor the service. What they share (the loop's types, `service::action`,
 /// `service::command`, `service::plant`, `service::app`, the password sign-in
