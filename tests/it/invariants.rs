@@ -324,6 +324,21 @@ fn the_loops_shell_never_imports_http() {
     );
 }
 
+/// `anyhow` carries text to a log line or an answer and is never matched: the root crate (the
+/// only one whose manifest names it) never downcasts an error to find out what it was; a
+/// caller that must tell errors apart gets a typed one (thiserror) instead.
+#[test]
+fn no_error_is_found_out_by_downcasting() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let forbidden = ["downcast", ".is::<"];
+    let violations = uses_of(&root.join("src"), &forbidden, 100);
+    assert!(
+        violations.is_empty(),
+        "an error is downcast:\n{}",
+        violations.join("\n")
+    );
+}
+
 /// Adapters do not reach into each other: OPC UA and MQTT import neither the HTTP adapter
 /// nor one another, nor the service. What they share (the loop's types, `service::action`,
 /// `service::command`, `service::plant`, `service::app`, the password sign-in
