@@ -4,7 +4,6 @@
 //! every feature's parts are gauged once each, none lost, none twice.
 
 use crate::in_process_figures::recipe;
-use crate::service_support::{get, json};
 use camloop::config::Config;
 use camloop::service::{self, RunOptions};
 use camloop::store::{HistoryFilter, MeasurementStage, Store};
@@ -50,16 +49,7 @@ async fn a_whole_cycle_stopped_mid_shaft_resumes_where_it_was() {
     let addr = running.http_addr;
     // Stop once the first lobe of shaft 2 is in: the simulator stops before the next
     // lobe's measurement goes out.
-    loop {
-        let (_, body) = get(addr, "/api/v1/machines").await;
-        let parts = json(&body)["machines"][0]["lobes"][0]["status"]["parts"]
-            .as_u64()
-            .unwrap_or(0);
-        if parts >= 2 {
-            break;
-        }
-        tokio::time::sleep(std::time::Duration::from_millis(2)).await;
-    }
+    crate::service_support::wait_for_first_feature_parts(addr, 2).await;
     running.stop().await;
     let resume = std::fs::read_to_string(dir.path().join("share/CAMLOOP_RESUME.SPF")).unwrap();
     let from = camloop::core::program::parse_resume_program(&resume).unwrap();

@@ -204,16 +204,7 @@ async fn a_stop_mid_shaft_resumes_each_lobe_where_it_was() {
         .unwrap();
     let addr = running.http_addr;
     // Stop once the first lobe of shaft 4 is in: the simulator stops before the next lobe.
-    loop {
-        let (_, body) = get(addr, "/api/v1/machines").await;
-        let parts = json(&body)["machines"][0]["lobes"][0]["status"]["parts"]
-            .as_u64()
-            .unwrap_or(0);
-        if parts >= 4 {
-            break;
-        }
-        tokio::time::sleep(std::time::Duration::from_millis(2)).await;
-    }
+    crate::service_support::wait_for_first_feature_parts(addr, 4).await;
     running.stop().await;
     let resume = std::fs::read_to_string(dir.path().join("share/SIM8/CAMLOOP_RESUME.SPF")).unwrap();
     let from = camloop::core::program::parse_resume_program(&resume).unwrap();

@@ -59,6 +59,21 @@ pub fn json(body: &str) -> serde_json::Value {
     serde_json::from_str(&body[start..=end]).unwrap()
 }
 
+/// Waits until the first feature of the first machine has `parts` parts measured (its
+/// status in `GET /api/v1/machines`), asking every 2 ms: a stop mid-shaft is timed by it.
+pub async fn wait_for_first_feature_parts(addr: std::net::SocketAddr, parts: u64) {
+    loop {
+        let (_, body) = get(addr, "/api/v1/machines").await;
+        let done = json(&body)["machines"][0]["lobes"][0]["status"]["parts"]
+            .as_u64()
+            .unwrap_or(0);
+        if done >= parts {
+            return;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(2)).await;
+    }
+}
+
 /// A service with one simulated machine SIM1 on the demo lobe: history at `database_url`,
 /// working folder `var`, share `share/SIM1`, a part every `part_interval_ms`, noise `seed`;
 /// `env` answers the environment (the API token).
