@@ -454,6 +454,59 @@ async fn reads_both_ways(store: &Store, plant: Plant) {
     );
 }
 
+/// Where a view's time goes in the store: each read one overview view makes (the
+/// plant-wide ones, then those of the first and the last page of 50 machines), 20 times
+/// each, p50 / p99 in ms.
+async fn store_calls(store: &Store, plant: Plant) {
+    let page = |n: usize| -> Vec<(MachineName, camloop::names::FeatureName)> {
+        (n * 50..((n + 1) * 50).min(plant.machines))
+            .flat_map(|i| {
+                let m = MachineName::new(&machine(i)).unwrap();
+                plant
+                    .features
+                    .iter()
+                    .map(move |f| (m.clone(), f.parse().unwrap()))
+            })
+            .collect()
+    };
+    let (first, last) = (page(0), page(plant.machines.div_ceil(50) - 1));
+    let newest = store.overview_changes(i64::MAX, i64::MAX).await.unwrap();
+    let mut line = String::new();
+    macro_rules! time {
+        ($name:literal, $call:expr) => {{
+            let mut v = Vec::new();
+            for _ in 0..20 {
+                let t = Instant::now();
+                $call.await.unwrap();
+                v.push(t.elapsed());
+            }
+            let (p50, p99) = percentiles(v);
+            line.push_str(&format!("; {} {p50:.1} / {p99:.1}", $name));
+        }};
+    }
+    time!("known_features", store.known_features());
+    time!("machines_in_alarm", store.machines_in_alarm(50));
+    time!(
+        "overview_changes (look-back 1,024 ids)",
+        store.overview_changes(newest.measurement - 1024, newest.status - 1024)
+    );
+    time!("plant_learning, first page", store.plant_learning(&first));
+    time!("plant_learning, last page", store.plant_learning(&last));
+    time!(
+        "plant_overview, first page",
+        store.plant_overview(&first, 50, 20)
+    );
+    time!(
+        "plant_overview, last page",
+        store.plant_overview(&last, 50, 20)
+    );
+    eprintln!(
+        "a view's store reads, {} machines × {} features, p50 / p99 ms{line}",
+        plant.machines,
+        plant.features.len()
+    );
+}
+
 /// A store in a temporary folder, seeded for `plant`.
 async fn seeded(plant: Plant) -> (tempfile::TempDir, Store) {
     let dir = tempfile::tempdir_in(env!("CARGO_TARGET_TMPDIR")).unwrap();
@@ -461,6 +514,7 @@ async fn seeded(plant: Plant) -> (tempfile::TempDir, Store) {
     let store = Store::connect(&url).await.unwrap();
     seed(&store, plant).await;
     reads_both_ways(&store, plant).await;
+    store_calls(&store, plant).await;
     (dir, store)
 }
 

@@ -170,6 +170,32 @@ async fn overview_equals_the_feature_reads(t: TestStore) {
         known,
         vec![(m("M1"), Some(f("IN1"))), (m("M2"), None), (m("M3"), None)]
     );
+    changes_by_id(s).await;
+}
+
+/// What changed since given ids, each row with its id and feature: nothing above the newest,
+/// a new part above them, and looking back finds the rows below again.
+async fn changes_by_id(s: &Store) {
+    let newest = s.overview_changes(i64::MAX, i64::MAX).await.unwrap();
+    assert!(newest.measurements.is_empty() && newest.statuses.is_empty());
+    let id = s
+        .insert_measurement(&measurement("M3", "EX1", 900, 99_000))
+        .await
+        .unwrap();
+    let after = s
+        .overview_changes(newest.measurement, newest.status)
+        .await
+        .unwrap();
+    assert_eq!(after.measurements, vec![(id.0, m("M3"), f("EX1"))]);
+    assert_eq!((after.measurement, after.status), (id.0, newest.status));
+    assert!(after.statuses.is_empty());
+    let back = s
+        .overview_changes(newest.measurement - 1, newest.status - 1)
+        .await
+        .unwrap();
+    let ids: Vec<i64> = back.measurements.iter().map(|r| r.0).collect();
+    assert_eq!(ids, vec![newest.measurement, id.0]);
+    assert_eq!(back.statuses, vec![(newest.status, m("M1"), f("EX1"))]);
 }
 
 #[tokio::test]

@@ -41,11 +41,16 @@ pub struct FeatureOverview {
     pub learning: Option<(i64, Option<String>)>,
 }
 
-/// What changed since a reader last looked: the features with a measurement or a
-/// table-version status row stored after the ids it gives, and the newest ids now.
+/// What changed since a reader last looked: the measurements and table-version status rows
+/// stored after the ids it gives, each with its id and feature (a reader that looks back
+/// below its last newest id tells rows it has already seen by their ids), and the newest
+/// ids now.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct OverviewChanges {
-    pub features: BTreeSet<(MachineName, FeatureName)>,
+    /// (measurement id, machine, feature), by id.
+    pub measurements: Vec<(i64, MachineName, FeatureName)>,
+    /// (status row id, machine, feature of its table version), by id.
+    pub statuses: Vec<(i64, MachineName, FeatureName)>,
     /// The newest measurement id (0 with none).
     pub measurement: i64,
     /// The newest table-version status id (0 with none).
@@ -322,8 +327,9 @@ impl Store {
     }
 
     /// The newest ids first (so a row stored meanwhile is seen now or next time), then the
-    /// features of the measurements with an id above `after_measurement` and of the status
-    /// rows above `after_status`: each a range of the primary key, as cheap as what is new.
+    /// measurements with an id above `after_measurement` and the status rows above
+    /// `after_status`, each with its feature: each a range of the primary key, as cheap as
+    /// what is new.
     pub async fn overview_changes(
         &self,
         after_measurement: i64,
@@ -341,27 +347,32 @@ impl Store {
                     .fetch_one(pool)
                     .await
                     .map_err(self.db_error(OP))?;
-            let mut rows: Vec<(String, String)> = sqlx::query_as(
-                "SELECT DISTINCT machine, lobe FROM measurements WHERE id > $1",
+            let measurements: Vec<(i64, String, String)> = sqlx::query_as(
+                "SELECT id, machine, lobe FROM measurements WHERE id > $1 ORDER BY id",
             )
             .bind(after_measurement)
             .fetch_all(pool)
             .await
             .map_err(self.db_error(OP))?;
-            let versions: Vec<(String, String)> = sqlx::query_as(
-                "SELECT DISTINCT t.machine, t.lobe FROM table_version_status s \
-                 JOIN table_versions t ON t.id = s.table_version_id WHERE s.id > $1",
+            let statuses: Vec<(i64, String, String)> = sqlx::query_as(
+                "SELECT s.id, t.machine, t.lobe FROM table_version_status s \
+                 JOIN table_versions t ON t.id = s.table_version_id WHERE s.id > $1 ORDER BY s.id",
             )
             .bind(after_status)
             .fetch_all(pool)
             .await
             .map_err(self.db_error(OP))?;
-            rows.extend(versions);
-            let features = rows
-                .into_iter()
-                .map(|(m, f)| Ok((machine_of(m)?, feature_of("lobe", f)?)))
-                .collect::<Result<_, StoreError>>()?;
-            Ok(OverviewChanges { features, measurement, status })
+            let typed = |rows: Vec<(i64, String, String)>| {
+                rows.into_iter()
+                    .map(|(id, m, f)| Ok((id, machine_of(m)?, feature_of("lobe", f)?)))
+                    .collect::<Result<Vec<_>, StoreError>>()
+            };
+            Ok(OverviewChanges {
+                measurements: typed(measurements)?,
+                statuses: typed(statuses)?,
+                measurement,
+                status,
+            })
         })
     }
 

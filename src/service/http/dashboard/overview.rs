@@ -17,7 +17,7 @@ use crate::names::{FeatureName, MachineName};
 use crate::service::http::AppState;
 use crate::service::http::api::ApiError;
 use crate::store::{FeatureOverview, OverviewPart, Store, TableVersionHead, VersionStatus};
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -57,12 +57,41 @@ struct Entry {
     read_at: Instant,
 }
 
-/// The overview's rows as last read, and the newest measurement and status ids they cover.
+/// The overview's rows as last read, the newest measurement and status ids they cover, and
+/// the ids of the look-back window already seen.
 #[derive(Default)]
 struct Remembered {
     rows: HashMap<(MachineName, FeatureName), Entry>,
     measurement: i64,
     status: i64,
+    /// Measurement ids above `measurement - LOOK_BACK_IDS` seen at the last view: looking
+    /// back finds them again, and only an id not among them is a change. Without this every
+    /// view read again the features of the last 1,024 ids as if they had changed.
+    seen_measurements: HashSet<i64>,
+    /// The same for table-version status ids.
+    seen_statuses: HashSet<i64>,
+    /// Rows the last view read from the store (all of them at the first).
+    read_last: usize,
+}
+
+/// The features of `rows` whose ids are not in `seen`, and the ids to remember as seen for
+/// the next look back (those above `newest - LOOK_BACK_IDS`, all of them now seen).
+fn unseen(
+    rows: &[(i64, MachineName, FeatureName)],
+    seen: &HashSet<i64>,
+    newest: i64,
+) -> (BTreeSet<(MachineName, FeatureName)>, HashSet<i64>) {
+    let changed = rows
+        .iter()
+        .filter(|(id, _, _)| !seen.contains(id))
+        .map(|(_, m, f)| (m.clone(), f.clone()))
+        .collect();
+    let window = rows
+        .iter()
+        .map(|(id, _, _)| *id)
+        .filter(|id| *id > newest - LOOK_BACK_IDS)
+        .collect();
+    (changed, window)
 }
 
 /// Each feature's newest parts and version in force as last read (see the module's doc).
@@ -90,6 +119,12 @@ impl OverviewMemo {
         self.read_as_of(store, keys, Instant::now()).await
     }
 
+    /// How many rows the last view read from the store rather than from memory.
+    #[cfg(test)]
+    pub(super) async fn rows_read_last(&self) -> usize {
+        self.0.lock().await.read_last
+    }
+
     /// [`OverviewMemo::read`] with the clock given: `now` is taken before anything is read.
     pub(super) async fn read_as_of(
         &self,
@@ -98,28 +133,51 @@ impl OverviewMemo {
         now: Instant,
     ) -> Result<Vec<FeatureOverview>, ApiError> {
         let mut memo = self.0.lock().await;
-        // Nothing remembered: every feature is read whole, only the newest ids are wanted.
-        let since = |id: i64| match memo.rows.is_empty() {
-            true => i64::MAX,
-            false => id - LOOK_BACK_IDS,
+        // Nothing remembered: every row is read whole after this, so the newest ids and the
+        // look-back window below them are only taken as seen.
+        let first = memo.rows.is_empty();
+        let mut changes = match first {
+            true => store.overview_changes(i64::MAX, i64::MAX).await?,
+            false => {
+                let since = |id: i64| id - LOOK_BACK_IDS;
+                store
+                    .overview_changes(since(memo.measurement), since(memo.status))
+                    .await?
+            }
         };
-        let changes = store
-            .overview_changes(since(memo.measurement), since(memo.status))
-            .await?;
+        if first {
+            changes = store
+                .overview_changes(
+                    changes.measurement - LOOK_BACK_IDS,
+                    changes.status - LOOK_BACK_IDS,
+                )
+                .await?;
+        }
+        let (mut changed, seen_measurements) = unseen(
+            &changes.measurements,
+            &memo.seen_measurements,
+            changes.measurement,
+        );
+        let (by_status, seen_statuses) =
+            unseen(&changes.statuses, &memo.seen_statuses, changes.status);
+        changed.extend(by_status);
+        if first {
+            changed.clear();
+        }
         let due = |k: &(MachineName, FeatureName)| match memo.rows.get(k) {
             None => true,
             Some(e) => {
-                changes.features.contains(k)
-                    || now.saturating_duration_since(e.read_at) >= MAX_ROW_AGE
+                changed.contains(k) || now.saturating_duration_since(e.read_at) >= MAX_ROW_AGE
             }
         };
         let stale: Vec<(MachineName, FeatureName)> =
             keys.iter().filter(|k| due(k)).cloned().collect();
         // Changed features of other pages are forgotten, so their page reads them again:
         // the newest ids below move on for the whole plant, not for this page alone.
-        for k in &changes.features {
+        for k in &changed {
             memo.rows.remove(k);
         }
+        memo.read_last = stale.len();
         if !stale.is_empty() {
             let read = store.plant_overview(&stale, SPARK_PARTS, VERSIONS).await?;
             let count = stale.len();
@@ -130,6 +188,8 @@ impl OverviewMemo {
         }
         memo.measurement = changes.measurement;
         memo.status = changes.status;
+        memo.seen_measurements = seen_measurements;
+        memo.seen_statuses = seen_statuses;
         let learning = store.plant_learning(keys).await?;
         Ok(keys
             .iter()
