@@ -62,7 +62,7 @@ def free_port():
         return s.getsockname()[1]
 
 
-def gauge_section(i, replay):
+def gauge_section(i, replay, part_interval_ms=PART_INTERVAL_S * 1000):
     if replay:
         # The folder's default poll (500 ms), as a plant would run it.
         return f"""[machines.gauge]
@@ -71,12 +71,12 @@ folder = "drop/P{i:03}"
 """
     return f"""[machines.gauge]
 kind = "sim"
-part_interval_ms = {PART_INTERVAL_S * 1000}
+part_interval_ms = {part_interval_ms}
 seed = {i + 1}
 """
 
 
-def write_config(dir, machines, port, replay=False):
+def write_config(dir, machines, port, replay=False, part_interval_ms=PART_INTERVAL_S * 1000):
     parts = [
         f"""[service]
 var_dir = "var"
@@ -93,7 +93,7 @@ max_connections = 64
 name = "P{i:03}"
 recipe = "{RECIPE}"
 share = "share/P{i:03}"
-{gauge_section(i, replay)}"""
+{gauge_section(i, replay, part_interval_ms)}"""
         )
     path = os.path.join(dir, "camloop.toml")
     with open(path, "w") as f:
@@ -167,25 +167,8 @@ def record(dir, shafts):
     the order they were ground: [(part, [(lobe, [lift_mm per gauge angle])])]."""
     port = free_port()
     os.makedirs(dir)
-    config = os.path.join(dir, "camloop.toml")
-    with open(config, "w") as f:
-        f.write(
-            f"""[service]
-var_dir = "var"
-[database]
-url = "sqlite://{dir}/var/camloop.db?mode=rwc"
-[http]
-listen = "127.0.0.1:{port}"
-[[machines]]
-name = "REC"
-recipe = "{RECIPE}"
-share = "share"
-[machines.gauge]
-kind = "sim"
-part_interval_ms = 20
-seed = 1
-"""
-        )
+    # One simulated machine grinding as fast as it goes.
+    config = write_config(dir, 1, port, part_interval_ms=20)
     log = open(os.path.join(dir, "log.txt"), "w")
     proc = subprocess.Popen([BINARY, "run", "--config", config], cwd=dir, stdout=log, stderr=log)
     try:
