@@ -7,11 +7,12 @@
 use camloop_core::cycle::CycleSettings;
 use camloop_core::program::{
     CycleMachine, CycleStation, MainProgramSettings, ProgramSettings, READY_PROGRAM,
-    render_cycle_program, render_g1_table, render_ready_program,
+    render_cycle_program, render_ready_program,
 };
-use camloop_core::table::TablePoint;
 use camloop_sim::{Control, ControlFault, CycleEvent};
 use std::cell::Cell;
+
+mod cos_table;
 
 const TABLE: &str = "DEMO_CAM";
 
@@ -54,23 +55,7 @@ fn main_program() -> String {
 
 /// A table version: X = amplitude·cos(c) over 36 points, defined as table `number`.
 fn table_program(number: u32, amplitude_mm: f64) -> String {
-    let points: Vec<TablePoint> = (0..36)
-        .map(|k| {
-            let c_deg = f64::from(k) * 10.0;
-            let x_mm = amplitude_mm * c_deg.to_radians().cos();
-            TablePoint {
-                c_deg,
-                d_mm: x_mm,
-                x_mm,
-            }
-        })
-        .collect();
-    let settings = ProgramSettings {
-        name: TABLE.into(),
-        table_number: number,
-        ..ProgramSettings::default()
-    };
-    render_g1_table(&points, &settings).unwrap()
+    cos_table::cos_table(TABLE, number, amplitude_mm)
 }
 
 /// Runs the cycle with camloop answering the handshake after `answer_after` polls (never

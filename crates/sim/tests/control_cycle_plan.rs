@@ -9,13 +9,14 @@ use camloop_core::cycle::CycleSettings;
 use camloop_core::program::syntax::lines;
 use camloop_core::program::{
     CycleMachine, CyclePlan, CycleStation, MainProgramSettings, ProgramSettings, READY_PROGRAM,
-    check_ending, render_cycle_program, render_g1_table, render_ready_program,
+    check_ending, render_cycle_program, render_ready_program,
 };
 use camloop_core::speed_plan::render::{VaProgramSettings, render_va_table_program};
 use camloop_core::speed_plan::tables::VaTables;
-use camloop_core::table::TablePoint;
 use camloop_sim::{Control, CycleEvent, CycleRun};
 use std::cell::Cell;
+
+mod cos_table;
 
 mod demo_plan;
 
@@ -74,23 +75,7 @@ fn main_program(va_speed_rpm: f64) -> String {
 
 /// A constant-speed table version `number`: X = 0.5·cos(c) over 36 points.
 fn constant_table(number: u32) -> String {
-    let points: Vec<TablePoint> = (0..36)
-        .map(|k| {
-            let c_deg = f64::from(k) * 10.0;
-            let x_mm = 0.5 * c_deg.to_radians().cos();
-            TablePoint {
-                c_deg,
-                d_mm: x_mm,
-                x_mm,
-            }
-        })
-        .collect();
-    let settings = ProgramSettings {
-        name: TABLE.into(),
-        table_number: number,
-        ..ProgramSettings::default()
-    };
-    render_g1_table(&points, &settings).unwrap()
+    cos_table::cos_table(TABLE, number, 0.5)
 }
 
 /// Runs the cycle with camloop answering after `answer_after` polls (never when `None`): the
