@@ -46,17 +46,14 @@ async fn a_whole_cycle_stopped_mid_shaft_resumes_where_it_was() {
     let running = service::start(config(dir.path(), &url), RunOptions::parts(1000))
         .await
         .unwrap();
-    let addr = running.http_addr;
     // Stop once the first lobe of shaft 2 is in: the simulator stops before the next
     // lobe's measurement goes out.
-    crate::service_support::wait_for_first_feature_parts(addr, 2).await;
-    running.stop().await;
-    let resume = std::fs::read_to_string(dir.path().join("share/CAMLOOP_RESUME.SPF")).unwrap();
-    let from = camloop::core::program::parse_resume_program(&resume).unwrap();
-    assert!(
-        (2..=8).contains(&from),
-        "stopped mid-shaft: resume at {from}\n{resume}"
-    );
+    let from = crate::service_support::stop_mid_shaft(
+        running,
+        2,
+        &dir.path().join("share/CAMLOOP_RESUME.SPF"),
+    )
+    .await;
     let store = Store::connect(&url).await.unwrap();
     let shaft = finished_parts(&store, "IN1").await.len() as u64;
     for (k, lobe) in LOBES.iter().enumerate() {

@@ -202,16 +202,13 @@ async fn a_stop_mid_shaft_resumes_each_lobe_where_it_was() {
     let running = service::start(config(), RunOptions::parts(1000))
         .await
         .unwrap();
-    let addr = running.http_addr;
     // Stop once the first lobe of shaft 4 is in: the simulator stops before the next lobe.
-    crate::service_support::wait_for_first_feature_parts(addr, 4).await;
-    running.stop().await;
-    let resume = std::fs::read_to_string(dir.path().join("share/SIM8/CAMLOOP_RESUME.SPF")).unwrap();
-    let from = camloop::core::program::parse_resume_program(&resume).unwrap();
-    assert!(
-        (2..=8).contains(&from),
-        "stopped mid-shaft: resume at {from}\n{resume}"
-    );
+    let from = crate::service_support::stop_mid_shaft(
+        running,
+        4,
+        &dir.path().join("share/SIM8/CAMLOOP_RESUME.SPF"),
+    )
+    .await;
     let store = Store::connect(&url).await.unwrap();
     let mut before = BTreeMap::new();
     for lobe in LOBES {

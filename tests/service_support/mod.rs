@@ -59,19 +59,33 @@ pub fn json(body: &str) -> serde_json::Value {
     serde_json::from_str(&body[start..=end]).unwrap()
 }
 
-/// Waits until the first feature of the first machine has `parts` parts measured (its
-/// status in `GET /api/v1/machines`), asking every 2 ms: a stop mid-shaft is timed by it.
-pub async fn wait_for_first_feature_parts(addr: std::net::SocketAddr, parts: u64) {
+/// Stops `running` once the first feature of the first machine has `parts` parts measured
+/// (its status in `GET /api/v1/machines`, asked every 2 ms), so the stop falls mid-shaft:
+/// the simulator stops before the next feature's measurement goes out. Returns the resume
+/// point the share's `resume` program then names, checked to lie inside the shaft.
+pub async fn stop_mid_shaft(
+    running: camloop::service::Running,
+    parts: u64,
+    resume: &Path,
+) -> usize {
     loop {
-        let (_, body) = get(addr, "/api/v1/machines").await;
+        let (_, body) = get(running.http_addr, "/api/v1/machines").await;
         let done = json(&body)["machines"][0]["lobes"][0]["status"]["parts"]
             .as_u64()
             .unwrap_or(0);
         if done >= parts {
-            return;
+            break;
         }
         tokio::time::sleep(std::time::Duration::from_millis(2)).await;
     }
+    running.stop().await;
+    let text = std::fs::read_to_string(resume).unwrap();
+    let from = camloop::core::program::parse_resume_program(&text).unwrap();
+    assert!(
+        (2..=8).contains(&from),
+        "stopped mid-shaft: resume at {from}\n{text}"
+    );
+    from
 }
 
 /// A service with one simulated machine SIM1 on the demo lobe: history at `database_url`,
